@@ -1,0 +1,24 @@
+"""quadfault: fault-tolerant quadrotor research toolkit.
+
+The core model lives in this package and imports neither the estimators nor the
+Gymnasium environment:
+
+* :mod:`quadfault.rotation`   -- SO(3) / quaternion helpers (batched)
+* :mod:`quadfault.vehicle`    -- vehicle parameters and thrust allocation
+* :mod:`quadfault.dynamics`   -- rigid-body dynamics and integrators (paper eqs. 1-4)
+* :mod:`quadfault.motors`     -- motor efficiency, thrust noise, saturation (eqs. 11, 13)
+* :mod:`quadfault.scenarios`  -- efficiency schedules and named scenarios
+* :mod:`quadfault.trajectory` -- reference trajectories
+* :mod:`quadfault.controller` -- geometric SE(3) tracking controller (eqs. 5-10)
+* :mod:`quadfault.plant`      -- the true vehicle: dynamics + motors + effects
+* :mod:`quadfault.simulator`  -- the explicit closed-loop simulation
+* :mod:`quadfault.recording`  -- the ``quadfault-recording/1`` file format
+
+Heavy modules are imported lazily so ``quadfault --help`` stays instant.
+"""
+
+__version__ = "0.1.0"
+
+from quadfault.errors import QuadfaultError, RecordingError  # noqa: E402  (light, no numpy)
+
+__all__ = ["__version__", "QuadfaultError", "RecordingError"]

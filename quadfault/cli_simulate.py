@@ -1,0 +1,120 @@
+"""``quadfault simulate``: fly a scenario and write a recording (CONTRACT.md sec. 3)."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+from pathlib import Path
+
+from quadfault.errors import ConfigError
+
+#: Thrust coefficient [N/(rad/s)^2] used when ``--commands u`` is asked without one.
+DEFAULT_THRUST_COEFFICIENT = 1.0e-5
+
+
+def _floats(text: str, n: int, flag: str) -> list[float]:
+    try:
+        vals = [float(x) for x in text.split(",")]
+    except ValueError:
+        raise ConfigError(f"{flag} expects {n} comma-separated numbers, got {text!r}") from None
+    if len(vals) != n or not all(math.isfinite(v) for v in vals):
+        raise ConfigError(f"{flag} expects {n} comma-separated finite numbers, got {text!r}")
+    return vals
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    from quadfault.scenarios import SCENARIO_NAMES
+
+    p.add_argument("--scenario", default="combined", choices=SCENARIO_NAMES,
+                   help="efficiency schedule and trajectory (default: combined)")
+    p.add_argument("--duration", type=float, default=None,
+                   help="flight time [s] (default 80, the reference schedule)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--out", required=True, help="output recording FILE.csv (+ FILE.json)")
+    p.add_argument("--force", action="store_true", help="overwrite existing files")
+    p.add_argument("--integrator", choices=("rk4", "reference"), default="rk4",
+                   help="rk4 (default; RKMK4 on SO(3)) or reference (the authors' Euler step "
+                        "with its one-sample input lag, no upper saturation, a_d = 0)")
+    p.add_argument("--dt", type=float, default=1e-3, help="physics step [s] (default 0.001)")
+    p.add_argument("--control-rate", type=float, default=None,
+                   help="controller rate [Hz] (default: every physics step)")
+    p.add_argument("--thrust-noise", type=float, default=None,
+                   help="sigma_f of the multiplicative thrust noise (default: scenario's, 0.07)")
+    p.add_argument("--sensor-noise", default=None, metavar="POS,VEL,ATT,GYRO[,ACC]",
+                   help="white measurement noise std: position [m], velocity [m/s], attitude "
+                        "[rad], gyro [rad/s], accelerometer [m/s^2] (default: none)")
+    p.add_argument("--no-saturation", action="store_true",
+                   help="clip rotor commands only at 0 (the reference code)")
+    p.add_argument("--max-thrust", type=float, default=None,
+                   help="per-rotor thrust limit [N] (default: thrust-to-weight 2)")
+    p.add_argument("--no-accel-feedforward", action="store_true",
+                   help="the reference's a_d = 0 in the controller")
+    p.add_argument("--frame", choices=("NED", "ENU"), default="NED", help="output world frame")
+    p.add_argument("--commands", choices=("f", "u"), default="f",
+                   help="write thrust commands f1..f4 [N] (default) or rotor speeds u1..u4 "
+                        f"[rad/s] with thrust_coefficient {DEFAULT_THRUST_COEFFICIENT:g}")
+    p.add_argument("--effect", action="append", default=[], metavar="NAME=VALUES",
+                   help="add an unmodelled effect to the true plant, e.g. drag=0.3, "
+                        "wind=2,0,0, motor_lag=0.05 (repeatable; see docs/diagnosis.md)")
+    p.add_argument("--no-truth", action="store_true",
+                   help="omit the true efficiency eta1..eta4 and effect truth")
+
+
+def run(args) -> int:
+    import numpy as np
+
+    from quadfault.controller import ControllerConfig
+    from quadfault.recording import write_recording
+    from quadfault.scenarios import named_scenario
+    from quadfault.simulator import SensorNoise, SimConfig, simulate
+    from quadfault.vehicle import Vehicle
+
+    out = Path(args.out)
+    if out.suffix != ".csv":
+        raise ConfigError(f"--out must end in .csv, got {args.out!r}")
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise ConfigError(f"--duration must be positive [s], got {args.duration}")
+    if not (math.isfinite(args.dt) and 0 < args.dt <= 0.1):
+        raise ConfigError(f"--dt must be in (0, 0.1] s, got {args.dt}")
+    if args.thrust_noise is not None and not (0 <= args.thrust_noise < 2):
+        raise ConfigError(f"--thrust-noise must be in [0, 2), got {args.thrust_noise}")
+    from quadfault.fileio import check_writable
+    from quadfault.recording import sidecar_path
+
+    check_writable([out, sidecar_path(out)], force=args.force)
+    scenario = named_scenario(args.scenario, args.duration, args.dt)
+    noise = SensorNoise()
+    if args.sensor_noise:
+        parts = args.sensor_noise.split(",")
+        vals = _floats(args.sensor_noise, len(parts), "--sensor-noise")
+        if len(vals) not in (4, 5) or min(vals) < 0:
+            raise ConfigError("--sensor-noise expects 4 or 5 non-negative numbers")
+        noise = SensorNoise(*vals)
+    vehicle = Vehicle() if args.max_thrust is None else Vehicle(max_thrust=args.max_thrust)
+    if args.integrator == "reference":
+        cfg = SimConfig.reference(dt=args.dt, sensor_noise=noise)
+    else:
+        ctrl = ControllerConfig(acceleration_feedforward=not args.no_accel_feedforward)
+        period = None if args.control_rate is None else 1.0 / args.control_rate
+        cfg = SimConfig(dt=args.dt, control_period=period, saturate=not args.no_saturation,
+                        sensor_noise=noise, controller=ctrl)
+    effects = ()
+    if args.effect:
+        from quadfault.effects import parse_effect
+
+        effects = tuple(parse_effect(spec) for spec in args.effect)
+    rec = simulate(scenario, vehicle=vehicle, config=cfg, seed=args.seed, effects=effects,
+                   thrust_noise=args.thrust_noise, progress=not args.quiet)
+    if args.commands == "u":
+        k = DEFAULT_THRUST_COEFFICIENT
+        u = np.sqrt(np.maximum(rec.thrust_cmd, 0.0) / k)
+        rec = dataclasses.replace(rec, commands_u=u, thrust_curve=(0.0, 0.0, k),
+                                  thrust_cmd=k * u * u)
+    if args.no_truth:
+        rec = rec.without_truth()
+    write_recording(rec, out, frame=args.frame, force=args.force)
+    if not args.quiet:
+        print(f"wrote {out} ({len(rec)} rows, {rec.duration:.3f} s, scenario {args.scenario}, "
+              f"seed {args.seed})")
+    return 0

@@ -1,0 +1,507 @@
+"""The ``quadfault-recording/1`` format: a CSV file plus a JSON sidecar (CONTRACT.md sec. 3).
+
+On load everything is converted to the internal convention (world NED, body FRD, rotor
+thrust commands in newtons); on save the caller chooses NED or ENU. The command in row k is
+held from ``t[k]`` until ``t[k+1]``; the state in row k is measured at ``t[k]``.
+
+Errors name the file, the column or key, and the row (1-based data rows, header excluded).
+"""
+
+from __future__ import annotations
+
+import csv
+import gzip
+import io
+import json
+import math
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from quadfault.errors import ConfigError, RecordingError
+from quadfault.fileio import atomic_write_text, check_writable
+from quadfault.rotation import ENU_TO_NED, FLU_TO_FRD, quat_multiply, quat_to_rot, rot_to_quat
+from quadfault.vehicle import Vehicle, paper_allocation
+
+FORMAT = "quadfault-recording/1"
+POSE_COLUMNS = ("px", "py", "pz", "vx", "vy", "vz", "qw", "qx", "qy", "qz")
+RATE_COLUMNS = ("wx", "wy", "wz")
+ACC_COLUMNS = ("ax", "ay", "az")
+F_COLUMNS = ("f1", "f2", "f3", "f4")
+U_COLUMNS = ("u1", "u2", "u3", "u4")
+OMEGA_COLUMNS = ("omega1", "omega2", "omega3", "omega4")
+ETA_COLUMNS = ("eta1", "eta2", "eta3", "eta4")
+QUAT_NORM_TOL = 1e-3
+
+# Quaternions of the fixed frame changes (exact matrices in rotation.py).
+_Q_ENU_TO_NED = rot_to_quat(ENU_TO_NED)
+_Q_FLU_TO_FRD = rot_to_quat(FLU_TO_FRD)
+
+
+def _conj(q):
+    return q * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+@dataclass(frozen=True, eq=False)
+class Recording:
+    """A flight, in the internal convention (world NED, body FRD).
+
+    Attributes:
+        t: sample times [s], strictly increasing, shape (N,).
+        position, velocity: world NED [m], [m/s], (N, 3), or None for an IMU-only log.
+        quaternion: body->world (w, x, y, z), (N, 4), or None.
+        omega: body rate [rad/s], (N, 3).
+        thrust_cmd: commanded rotor thrusts [N], (N, n) (from ``f`` or converted ``u``).
+        vehicle: the nominal vehicle in FRD.
+        accel: accelerometer specific force, body FRD [m/s^2], or None.
+        vbat: battery voltage [V], or None.
+        rotor_speed: measured rotor speeds [rad/s], or None.
+        eta_true: true efficiency (simulation only; never read by estimators), or None.
+        commands_u: the raw ``u`` commands when the file had them, else None.
+        thrust_curve: ``(a, b, c)`` with f = a + b u + c u^2 for ``u`` commands, else None.
+        frame: the world frame of the original file ("NED" or "ENU").
+        source: free text.
+        meta: any other sidecar keys (scenario, seed, effect truth, ...).
+        extra: unknown CSV columns, kept and ignored.
+    """
+
+    t: np.ndarray
+    omega: np.ndarray
+    thrust_cmd: np.ndarray
+    vehicle: Vehicle
+    position: np.ndarray | None = None
+    velocity: np.ndarray | None = None
+    quaternion: np.ndarray | None = None
+    accel: np.ndarray | None = None
+    vbat: np.ndarray | None = None
+    rotor_speed: np.ndarray | None = None
+    eta_true: np.ndarray | None = None
+    commands_u: np.ndarray | None = None
+    thrust_curve: tuple | None = None
+    frame: str = "NED"
+    source: str = ""
+    meta: dict = field(default_factory=dict)
+    extra: dict = field(default_factory=dict)
+    path: str | None = None
+
+    def __post_init__(self):
+        n = len(self.t)
+        for name in ("omega", "thrust_cmd", "position", "velocity", "quaternion", "accel",
+                     "vbat", "rotor_speed", "eta_true", "commands_u"):
+            value = getattr(self, name)
+            if value is not None and len(value) != n:
+                raise ConfigError(f"recording field {name} has {len(value)} rows, t has {n}")
+        if self.position is None and self.accel is None:
+            raise ConfigError("a recording needs pose columns or accelerometer columns")
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    @property
+    def has_pose(self) -> bool:
+        return self.position is not None and self.velocity is not None and self.quaternion is not None
+
+    @cached_property
+    def rotation(self) -> np.ndarray:
+        """Body->world rotation matrices (N, 3, 3)."""
+        if self.quaternion is None:
+            raise ConfigError("this recording has no attitude (IMU-only)")
+        return quat_to_rot(self.quaternion)
+
+    @property
+    def dt(self) -> np.ndarray:
+        return np.diff(self.t)
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0]) if len(self.t) > 1 else 0.0
+
+    def without_truth(self) -> "Recording":
+        """A copy with the true efficiency and any effect truth removed (what estimators and
+        the diagnosis may see)."""
+        meta = {k: v for k, v in self.meta.items() if k not in ("truth", "effects", "scenario")}
+        return replace(self, eta_true=None, meta=meta)
+
+    def slice(self, start: int, stop: int) -> "Recording":
+        """Rows ``start:stop``."""
+        sl = slice(start, stop)
+
+        def cut(a):
+            return None if a is None else a[sl]
+
+        return replace(self, t=self.t[sl], omega=self.omega[sl], thrust_cmd=self.thrust_cmd[sl],
+                       position=cut(self.position), velocity=cut(self.velocity),
+                       quaternion=cut(self.quaternion), accel=cut(self.accel),
+                       vbat=cut(self.vbat), rotor_speed=cut(self.rotor_speed),
+                       eta_true=cut(self.eta_true), commands_u=cut(self.commands_u),
+                       extra={k: v[sl] for k, v in self.extra.items()})
+
+
+# ----------------------------------------------------------------------------------------
+# frame conversion (ENU/FLU <-> NED/FRD); the maps are involutions
+def enu_flu_to_ned_frd(position, velocity, quaternion, omega, accel):
+    """Convert world ENU / body FLU quantities to world NED / body FRD (and back: the same
+    map is its own inverse)."""
+    P, B = ENU_TO_NED, FLU_TO_FRD
+    pos = None if position is None else position @ P.T
+    vel = None if velocity is None else velocity @ P.T
+    quat = None
+    if quaternion is not None:
+        quat = quat_multiply(quat_multiply(_Q_ENU_TO_NED, quaternion), _conj(_Q_FLU_TO_FRD))
+        quat = quat * np.where(quat[..., :1] < 0, -1.0, 1.0)
+    om = None if omega is None else omega @ B.T
+    acc = None if accel is None else accel @ B.T
+    return pos, vel, quat, om, acc
+
+
+def vehicle_flu_to_frd(mass, inertia, allocation, **kw) -> Vehicle:
+    """A vehicle described in FLU body axes, expressed in FRD (the map is an involution)."""
+    B = FLU_TO_FRD
+    J = np.asarray(inertia, dtype=float)
+    if J.shape == (3,):
+        J = np.diag(J)
+    A = np.asarray(allocation, dtype=float)
+    T = np.diag([1.0, 1.0, -1.0, -1.0])  # [T, Mx, My, Mz]: moments transform with B
+    return Vehicle(mass=mass, inertia=B @ J @ B, allocation=T @ A, **kw)
+
+
+# ----------------------------------------------------------------------------------------
+# reading
+def _open_text(path: Path):
+    if path.suffix == ".gz":
+        return io.TextIOWrapper(gzip.open(path, "rb"), encoding="utf-8", newline="")
+    return open(path, encoding="utf-8", newline="")
+
+
+def sidecar_path(csv_path) -> Path:
+    p = Path(csv_path)
+    name = p.name
+    for suf in (".csv.gz", ".csv"):
+        if name.endswith(suf):
+            return p.with_name(name[: -len(suf)] + ".json")
+    return p.with_suffix(".json")
+
+
+def _number(path, key, value, *, positive=False):
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise RecordingError(path, f"must be a number, got {value!r}", key=key)
+    if not math.isfinite(value):
+        raise RecordingError(path, f"must be finite, got {value!r}", key=key)
+    if positive and value <= 0:
+        raise RecordingError(path, f"must be positive, got {value!r}", key=key)
+    return float(value)
+
+
+def _matrix(path, key, value, shape_ok):
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise RecordingError(path, "must be a list of numbers", key=key) from None
+    if not shape_ok(arr.shape):
+        raise RecordingError(path, f"has the wrong shape {arr.shape}", key=key)
+    if not np.all(np.isfinite(arr)):
+        raise RecordingError(path, "contains NaN or inf", key=key)
+    return arr
+
+
+def _parse_sidecar(path: Path) -> dict:
+    if not path.exists():
+        raise RecordingError(path, "sidecar JSON not found (every recording needs FILE.json "
+                                   "beside FILE.csv)")
+    try:
+        text = path.read_text(encoding="utf-8")
+        meta = json.loads(text)
+    except UnicodeDecodeError:
+        raise RecordingError(path, "sidecar is not UTF-8 text") from None
+    except json.JSONDecodeError as exc:
+        raise RecordingError(path, f"invalid JSON at line {exc.lineno}, column {exc.colno}: "
+                                   f"{exc.msg}") from None
+    if not isinstance(meta, dict):
+        raise RecordingError(path, "sidecar must be a JSON object")
+    fmt = meta.get("format")
+    if fmt != FORMAT:
+        raise RecordingError(path, f"expected {FORMAT!r}, got {fmt!r}", key="format")
+    frame = meta.get("frame")
+    if frame not in ("NED", "ENU"):
+        raise RecordingError(path, f"must be 'NED' or 'ENU', got {frame!r}", key="frame")
+    if not isinstance(meta.get("vehicle"), dict):
+        raise RecordingError(path, "missing or not an object", key="vehicle")
+    return meta
+
+
+def _vehicle_from_sidecar(path: Path, meta: dict, has_u: bool):
+    vd = meta["vehicle"]
+    frame = meta["frame"]
+    gravity = _number(path, "gravity", meta.get("gravity", 9.81), positive=True)
+    mass = _number(path, "vehicle.mass", vd.get("mass"), positive=True) if "mass" in vd else None
+    if mass is None:
+        raise RecordingError(path, "missing", key="vehicle.mass")
+    if "inertia" not in vd:
+        raise RecordingError(path, "missing", key="vehicle.inertia")
+    J = _matrix(path, "vehicle.inertia", vd["inertia"], lambda s: s in ((3,), (3, 3)))
+    if J.shape == (3,):
+        J = np.diag(J)
+    if "allocation" in vd:
+        A = _matrix(path, "vehicle.allocation", vd["allocation"],
+                    lambda s: len(s) == 2 and s[0] == 4 and s[1] >= 4)
+    elif "arm" in vd and "torque_coefficient" in vd:
+        d = _number(path, "vehicle.arm", vd["arm"], positive=True)
+        c = _number(path, "vehicle.torque_coefficient", vd["torque_coefficient"], positive=True)
+        A = paper_allocation(d, c)
+        if frame == "ENU":
+            # the arm/torque layout is defined in FRD; express it in FLU for the common path
+            A = np.diag([1.0, 1.0, -1.0, -1.0]) @ A
+    else:
+        raise RecordingError(path, "needs 'allocation' or both 'arm' and 'torque_coefficient'",
+                             key="vehicle")
+    kw = {"gravity": gravity}
+    if "max_thrust" in vd:
+        kw["max_thrust"] = _number(path, "vehicle.max_thrust", vd["max_thrust"], positive=True)
+    try:
+        if frame == "ENU":
+            vehicle = vehicle_flu_to_frd(mass, J, A, **kw)
+        else:
+            vehicle = Vehicle(mass=mass, inertia=J, allocation=A, **kw)
+    except ConfigError as exc:
+        raise RecordingError(path, str(exc), key="vehicle") from None
+    curve = None
+    if has_u:
+        if "thrust_curve" in vd:
+            c3 = _matrix(path, "vehicle.thrust_curve", vd["thrust_curve"], lambda s: s == (3,))
+            curve = tuple(float(x) for x in c3)
+        elif "thrust_coefficient" in vd:
+            k = _number(path, "vehicle.thrust_coefficient", vd["thrust_coefficient"], positive=True)
+            curve = (0.0, 0.0, k)
+        else:
+            raise RecordingError(path, "u1..u4 commands need 'thrust_coefficient' or "
+                                       "'thrust_curve'", key="vehicle")
+    return vehicle, curve
+
+
+def _read_table(path: Path) -> tuple[list[str], np.ndarray]:
+    try:
+        with _open_text(path) as fh:
+            reader = csv.reader(fh)
+            try:
+                header = next(reader)
+            except StopIteration:
+                raise RecordingError(path, "file is empty (no header row)") from None
+            header = [h.strip() for h in header]
+            rows = list(reader)
+    except UnicodeDecodeError:
+        raise RecordingError(path, "not UTF-8 text") from None
+    except (OSError, EOFError, gzip.BadGzipFile) as exc:
+        raise RecordingError(path, f"cannot read: {exc}") from None
+    except csv.Error as exc:
+        raise RecordingError(path, f"malformed CSV: {exc}") from None
+    seen = set()
+    for h in header:
+        if not h:
+            raise RecordingError(path, "empty column name in the header")
+        if h in seen:
+            raise RecordingError(path, "duplicated column", column=h)
+        seen.add(h)
+    while rows and not any(c.strip() for c in rows[-1]):
+        rows.pop()
+    if not rows:
+        raise RecordingError(path, "no data rows")
+    width = len(header)
+    for i, r in enumerate(rows):
+        if len(r) != width:
+            raise RecordingError(path, f"has {len(r)} fields, the header has {width}", row=i + 1)
+    try:
+        data = np.array(rows, dtype=float)
+    except ValueError:
+        for i, r in enumerate(rows):
+            for j, cell in enumerate(r):
+                try:
+                    float(cell)
+                except ValueError:
+                    raise RecordingError(path, f"not a number: {cell!r}", column=header[j],
+                                         row=i + 1) from None
+        raise
+    return header, data
+
+
+def _check_finite(path, header, data, columns):
+    for name in columns:
+        col = data[:, header.index(name)]
+        bad = np.flatnonzero(~np.isfinite(col))
+        if bad.size:
+            raise RecordingError(path, f"NaN or inf value ({col[bad[0]]})", column=name,
+                                 row=int(bad[0]) + 1)
+
+
+def read_recording(csv_path) -> Recording:
+    """Load and validate a recording; returns it in the internal NED/FRD convention."""
+    path = Path(csv_path)
+    if not path.exists():
+        raise RecordingError(path, "file not found")
+    if path.is_dir():
+        raise RecordingError(path, "is a directory, expected a CSV file")
+    meta = _parse_sidecar(sidecar_path(path))
+    header, data = _read_table(path)
+    cols = {h: i for i, h in enumerate(header)}
+
+    def need(names, why):
+        missing = [c for c in names if c not in cols]
+        if missing:
+            raise RecordingError(path, f"missing ({why})", column=missing[0])
+
+    need(("t",), "time")
+    need(RATE_COLUMNS, "body rates")
+    has_pose = all(c in cols for c in POSE_COLUMNS)
+    has_acc = all(c in cols for c in ACC_COLUMNS)
+    if not has_pose:
+        if not has_acc:
+            need(POSE_COLUMNS, "pose, or accelerometer columns ax, ay, az for an IMU-only log")
+        partial = [c for c in POSE_COLUMNS if c in cols]
+        if partial:
+            need(POSE_COLUMNS, "pose columns must all be present or all absent")
+    has_f = all(c in cols for c in F_COLUMNS)
+    has_u = all(c in cols for c in U_COLUMNS)
+    if not (has_f or has_u):
+        need(F_COLUMNS, "rotor commands: f1..f4 [N] or u1..u4")
+    required = ["t", *RATE_COLUMNS]
+    required += list(POSE_COLUMNS) if has_pose else list(ACC_COLUMNS)
+    required += list(F_COLUMNS) if has_f else list(U_COLUMNS)
+    _check_finite(path, header, data, required)
+    t = data[:, cols["t"]]
+    dt = np.diff(t)
+    bad = np.flatnonzero(dt <= 0)
+    if bad.size:
+        raise RecordingError(path, f"time must be strictly increasing (t={t[bad[0] + 1]!r} "
+                                   f"after t={t[bad[0]]!r})", column="t", row=int(bad[0]) + 2)
+    if len(t) < 2:
+        raise RecordingError(path, "needs at least 2 rows")
+
+    def get(names):
+        return data[:, [cols[c] for c in names]]
+
+    vehicle, curve = _vehicle_from_sidecar(sidecar_path(path), meta, has_u and not has_f)
+    if vehicle.n_rotors != 4:
+        raise RecordingError(sidecar_path(path), f"allocation has {vehicle.n_rotors} rotor "
+                             "columns, but the CSV carries 4", key="vehicle.allocation")
+    position = velocity = quat = None
+    if has_pose:
+        position, velocity, quat = get(POSE_COLUMNS[:3]), get(POSE_COLUMNS[3:6]), get(POSE_COLUMNS[6:])
+        norm = np.linalg.norm(quat, axis=1)
+        badq = np.flatnonzero(np.abs(norm - 1.0) > QUAT_NORM_TOL)
+        if badq.size:
+            raise RecordingError(path, f"quaternion norm {norm[badq[0]]:.6g} is not within "
+                                       f"{QUAT_NORM_TOL} of 1", column="qw", row=int(badq[0]) + 1)
+        quat = quat / norm[:, None]
+    omega = get(RATE_COLUMNS)
+    accel = get(ACC_COLUMNS) if has_acc else None
+    commands_u = None
+    if has_f:
+        thrust_cmd = get(F_COLUMNS)
+    else:
+        commands_u = get(U_COLUMNS)
+        a, b, c = curve
+        thrust_cmd = a + b * commands_u + c * commands_u ** 2
+    if meta["frame"] == "ENU":
+        position, velocity, quat, omega, accel = enu_flu_to_ned_frd(position, velocity, quat,
+                                                                    omega, accel)
+    # Optional columns may hold NaN where a stream dropped out; consumers handle that.
+    optional = {}
+    for name, names in (("vbat", ("vbat",)), ("rotor_speed", OMEGA_COLUMNS), ("eta_true", ETA_COLUMNS)):
+        if all(c in cols for c in names):
+            arr = get(names)
+            optional[name] = arr[:, 0] if name == "vbat" else arr
+    known = set(required) | set(ACC_COLUMNS) | {"vbat"} | set(OMEGA_COLUMNS) | set(ETA_COLUMNS) \
+        | set(F_COLUMNS) | set(U_COLUMNS) | set(POSE_COLUMNS)
+    extra = {h: data[:, i] for h, i in cols.items() if h not in known}
+    rest = {k: v for k, v in meta.items() if k not in ("format", "frame", "gravity", "vehicle", "source")}
+    return Recording(t=t, omega=omega, thrust_cmd=thrust_cmd, vehicle=vehicle, position=position,
+                     velocity=velocity, quaternion=quat, accel=accel, commands_u=commands_u,
+                     thrust_curve=curve, frame=meta["frame"], source=str(meta.get("source", "")),
+                     meta=rest, extra=extra, path=str(path), **optional)
+
+
+# ----------------------------------------------------------------------------------------
+# writing
+def recording_columns(rec: Recording, frame: str = "NED") -> tuple[list[str], np.ndarray]:
+    """Header and data matrix of ``rec`` expressed in ``frame``."""
+    if frame not in ("NED", "ENU"):
+        raise ConfigError(f"frame must be 'NED' or 'ENU', got {frame!r}")
+    pos, vel, quat, om, acc = rec.position, rec.velocity, rec.quaternion, rec.omega, rec.accel
+    if frame == "ENU":
+        pos, vel, quat, om, acc = enu_flu_to_ned_frd(pos, vel, quat, om, acc)
+    names: list[str] = ["t"]
+    blocks = [rec.t[:, None]]
+    if rec.has_pose:
+        names += list(POSE_COLUMNS)
+        blocks += [pos, vel, quat]
+    names += list(RATE_COLUMNS)
+    blocks.append(om)
+    if acc is not None:
+        names += list(ACC_COLUMNS)
+        blocks.append(acc)
+    if rec.commands_u is not None:
+        names += list(U_COLUMNS)
+        blocks.append(rec.commands_u)
+    else:
+        names += list(F_COLUMNS)
+        blocks.append(rec.thrust_cmd)
+    if rec.vbat is not None:
+        names.append("vbat")
+        blocks.append(rec.vbat[:, None])
+    if rec.rotor_speed is not None:
+        names += list(OMEGA_COLUMNS)
+        blocks.append(rec.rotor_speed)
+    if rec.eta_true is not None:
+        names += list(ETA_COLUMNS)
+        blocks.append(rec.eta_true)
+    for k, v in rec.extra.items():
+        names.append(k)
+        blocks.append(np.asarray(v, dtype=float)[:, None])
+    return names, np.hstack(blocks)
+
+
+def recording_sidecar(rec: Recording, frame: str = "NED") -> dict:
+    veh = rec.vehicle
+    if frame == "ENU":
+        B = FLU_TO_FRD
+        J = B @ veh.inertia @ B
+        A = np.diag([1.0, 1.0, -1.0, -1.0]) @ veh.allocation
+    else:
+        J, A = veh.inertia, veh.allocation
+    vd = {"mass": veh.mass, "inertia": J.tolist(), "allocation": A.tolist()}
+    if math.isfinite(veh.rotor_max_thrust):
+        vd["max_thrust"] = veh.rotor_max_thrust
+    if rec.commands_u is not None:
+        a, b, c = rec.thrust_curve
+        if a == 0 and b == 0:
+            vd["thrust_coefficient"] = c
+        else:
+            vd["thrust_curve"] = [a, b, c]
+    out = {"format": FORMAT, "frame": frame, "gravity": veh.gravity, "vehicle": vd,
+           "source": rec.source}
+    out.update(rec.meta)
+    return out
+
+
+def _format_table(names, data) -> str:
+    buf = io.StringIO()
+    buf.write(",".join(names) + "\n")
+    # repr() of a Python float is the shortest string that round-trips exactly.
+    for row in data.tolist():
+        buf.write(",".join(map(repr, row)))
+        buf.write("\n")
+    return buf.getvalue()
+
+
+def write_recording(rec: Recording, csv_path, *, frame: str = "NED", force: bool = False) -> Path:
+    """Write ``rec`` as CSV + JSON sidecar, atomically; refuse to overwrite unless ``force``."""
+    path = Path(csv_path)
+    if path.suffix != ".csv":
+        raise ConfigError(f"{path}: a recording must be written to a .csv path")
+    side = sidecar_path(path)
+    check_writable([path, side], force=force)
+    names, data = recording_columns(rec, frame)
+    atomic_write_text(side, json.dumps(recording_sidecar(rec, frame), indent=2) + "\n", force=True)
+    atomic_write_text(path, _format_table(names, data), force=True)
+    return path
