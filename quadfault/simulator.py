@@ -131,10 +131,9 @@ def initial_state(scenario: Scenario, t0: float = 0.0,
         return RigidBodyState(p, v, np.eye(3), np.zeros(3))
     out = controller.compute(t0, p, v, np.eye(3), np.zeros(3), ref)
     Rd = out.Rd
-    w = np.zeros(3)
-    if controller.config.angular_feedforward:
-        w = Rd.T @ Rd @ controller.feedforward_rates(t0)[0]
-    return RigidBodyState(p, v, Rd, w)
+    # at R = R_d the body rate that zeroes e_Omega is Omega_d itself
+    w = controller.feedforward_rates(t0)[0] if controller.config.angular_feedforward else np.zeros(3)
+    return RigidBodyState(p, v, Rd, np.array(w, float))
 
 
 def _progress(total, enabled, desc):

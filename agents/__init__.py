@@ -1,0 +1,1 @@
+"""Agents: geometric and estimate-aware controllers, stable-baselines3 training (issue 5)."""

@@ -1,0 +1,103 @@
+"""The one estimator interface shared by IRLS, the EKF and the oracle.
+
+Online: ``est.update(sample) -> Estimate``, one measurement row at a time (the environment
+calls this). Offline: ``est.run(recording) -> EstimateSeries`` over a whole recording.
+Estimators receive the *nominal* vehicle and measurements only; they never read the
+recording's true efficiency columns.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple, Protocol, runtime_checkable
+
+import numpy as np
+
+from quadfault.errors import ConfigError
+from quadfault.recording import Recording
+
+#: Status values an estimate may carry.
+STATUS_OK = "ok"
+STATUS_WARMUP = "warmup"  # not enough samples in the window yet; previous estimate kept
+STATUS_ILL_CONDITIONED = "ill_conditioned"  # conditioning guard tripped; previous estimate kept
+STATUS_NO_EXCITATION = "no_excitation"  # data carries no information on eta (e.g. zero thrust)
+STATUS_REJECTED = "rejected"  # every segment rejected as an outlier; previous estimate kept
+STATUS_MAX_ITER = "max_iter"  # solver stopped at its iteration limit (estimate still usable)
+STATUS_BAD_SAMPLE = "bad_sample"  # non-finite measurement skipped; previous estimate kept
+STATUSES = (STATUS_OK, STATUS_WARMUP, STATUS_ILL_CONDITIONED, STATUS_NO_EXCITATION,
+            STATUS_REJECTED, STATUS_MAX_ITER, STATUS_BAD_SAMPLE)
+
+
+class Sample(NamedTuple):
+    """One measurement row (internal NED/FRD convention).
+
+    Attributes:
+        t: time [s].
+        p: position, world [m] (3,).
+        v: velocity, world [m/s] (3,).
+        R: rotation body->world (3, 3).
+        w: body rate [rad/s] (3,).
+        f: commanded rotor thrusts [N] (n,), held from ``t`` until the next sample.
+    """
+
+    t: float
+    p: np.ndarray
+    v: np.ndarray
+    R: np.ndarray
+    w: np.ndarray
+    f: np.ndarray
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """An efficiency estimate.
+
+    Attributes:
+        t: time of the newest sample the estimate used [s] (estimates are causal).
+        eta: estimated efficiency per rotor (1 = nominal).
+        sd: one-sigma uncertainty per rotor, or None.
+        status: one of :data:`STATUSES`.
+        diagnostics: estimator-specific details (iterations, KKT histories, weights, ...).
+    """
+
+    t: float
+    eta: np.ndarray
+    sd: np.ndarray | None = None
+    status: str = STATUS_OK
+    diagnostics: Any = None
+
+
+@dataclass(frozen=True)
+class EstimateSeries:
+    """Estimates over a recording: one row per update."""
+
+    t: np.ndarray
+    eta: np.ndarray
+    sd: np.ndarray | None
+    status: np.ndarray
+    estimator: str
+    config: dict = field(default_factory=dict)
+    seconds: float = float("nan")  # wall time of the run [s]
+
+
+@runtime_checkable
+class OnlineEstimator(Protocol):
+    name: str
+
+    def reset(self, eta0=None) -> None: ...
+
+    def update(self, sample: Sample) -> Estimate: ...
+
+    def run(self, recording: Recording, progress: bool = False) -> EstimateSeries: ...
+
+
+def samples(recording: Recording):
+    """Iterate the measurement rows of a recording as :class:`Sample` (no truth columns)."""
+    if not recording.has_pose:
+        raise ConfigError(f"{recording.path or 'recording'}: the estimators need position, "
+                          "velocity and attitude columns (px..pz, vx..vz, qw..qz); this "
+                          "recording is IMU-only")
+    R = recording.rotation
+    for k in range(len(recording)):
+        yield Sample(float(recording.t[k]), recording.position[k], recording.velocity[k], R[k],
+                     recording.omega[k], recording.thrust_cmd[k])

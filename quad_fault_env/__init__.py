@@ -1,0 +1,1 @@
+"""Gymnasium environments for fault-tolerant quadrotor control (placeholder; see issue 4)."""
