@@ -392,7 +392,9 @@ def read_recording(csv_path) -> Recording:
         if badq.size:
             raise RecordingError(path, f"quaternion norm {norm[badq[0]]:.6g} is not within "
                                        f"{QUAT_NORM_TOL} of 1", column="qw", row=int(badq[0]) + 1)
-        quat = quat / norm[:, None]
+        # renormalise, leaving rows already unit to the last bits untouched (exact round trip)
+        off = np.abs(norm - 1.0) > 2.0 ** -50
+        quat[off] = quat[off] / norm[off, None]
     omega = get(RATE_COLUMNS)
     accel = get(ACC_COLUMNS) if has_acc else None
     commands_u = None
