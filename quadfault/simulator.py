@@ -71,6 +71,10 @@ class SensorNoise:
         return RigidBodyState(p, v, R, w), sf
 
 
+#: ``SimConfig.backend`` values (the compiled path lives in ``quadfault._sim_numba``).
+BACKENDS = ("auto", "numpy", "numba")
+
+
 @dataclass(frozen=True)
 class SimConfig:
     """Simulation settings.
@@ -83,6 +87,9 @@ class SimConfig:
         sensor_noise: measurement noise.
         controller: geometric controller options.
         record_accel: add the accelerometer columns ``ax, ay, az``.
+        backend: ``"auto"`` (the compiled numba kernel when numba is installed and the case
+            is supported, else numpy), ``"numpy"`` (force the pure loop) or ``"numba"``
+            (require the kernel); both give the same results (docs/performance.md).
     """
 
     dt: float = 1e-3
@@ -92,8 +99,11 @@ class SimConfig:
     sensor_noise: SensorNoise = field(default_factory=SensorNoise)
     controller: ControllerConfig = field(default_factory=ControllerConfig)
     record_accel: bool = True
+    backend: str = "auto"
 
     def __post_init__(self):
+        if self.backend not in BACKENDS:
+            raise ConfigError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
         if not (math.isfinite(self.dt) and self.dt > 0):
             raise ConfigError(f"dt must be positive [s], got {self.dt!r}")
         if self.integrator not in INTEGRATORS:
@@ -134,6 +144,24 @@ def initial_state(scenario: Scenario, t0: float = 0.0,
     # at R = R_d the body rate that zeroes e_Omega is Omega_d itself
     w = controller.feedforward_rates(t0)[0] if controller.config.angular_feedforward else np.zeros(3)
     return RigidBodyState(p, v, Rd, np.array(w, float))
+
+
+def _use_compiled(cfg: SimConfig, ctrl, effects) -> bool:
+    """Whether :func:`simulate` runs the compiled kernel (``quadfault._sim_numba``)."""
+    if cfg.backend == "numpy":
+        return False
+    from quadfault import _sim_numba
+
+    why = None
+    if not _sim_numba.AVAILABLE:
+        why = "numba is not installed (pip install 'quadfault[fast]')"
+    elif effects:
+        why = "unmodelled effects run on the numpy path only"
+    elif type(ctrl) is not GeometricController:
+        why = "only the GeometricController is compiled"
+    if why is not None and cfg.backend == "numba":
+        raise ConfigError(f"backend 'numba' cannot run this simulation: {why}")
+    return why is None
 
 
 def _progress(total, enabled, desc):
@@ -193,7 +221,17 @@ def simulate(scenario: Scenario, *, vehicle: Vehicle | None = None,
     if precomputed:
         refs = ctrl.trajectory(times)
         ffs = ctrl.feedforward_rates(times) if ctrl.config.angular_feedforward else None
-    for k in range(n):
+    # Compiled fast path: the same loop in quadfault._sim_numba fills the same outputs.
+    n_pure = n
+    if _use_compiled(cfg, ctrl, effects):
+        from quadfault import _sim_numba
+
+        *outs, bad = _sim_numba.run(plant, ctrl, cfg, rng, times, refs, ffs, plant.state, bar)
+        out_p, out_v, out_R, out_w, out_f, out_eta, out_acc = outs
+        if bad >= 0:
+            raise ConfigError(f"simulation diverged at t = {times[bad]:.3f} s (non-finite state)")
+        n_pure = 0
+    for k in range(n_pure):
         t = times[k]
         if reference:
             state = plant.advance_reference()
