@@ -1,0 +1,155 @@
+"""Parameters of the environment that are not physics: actions, reward, termination, resets.
+
+The physics parameters live in the core package (:class:`quadfault.vehicle.Vehicle`,
+:class:`quadfault.motors.MotorModel`, :class:`quadfault.simulator.SensorNoise`,
+:class:`quadfault.scenarios.Scenario`); these dataclasses say how the agent sees and drives it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from quadfault.errors import ConfigError
+
+ACTION_MODES = ("motor", "residual", "wrench")
+ESTIMATOR_RATES = ("physics", "control")
+OBSERVATION_KINDS = ("flat", "dict")
+TERMINATION_REASONS = ("crash", "out_of_bounds", "excessive_tilt", "non_finite")
+
+
+def _check_nonnegative(obj, names):
+    for name in names:
+        value = getattr(obj, name)
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+            raise ConfigError(f"{type(obj).__name__}.{name} must be a finite number >= 0, "
+                              f"got {value!r}")
+
+
+@dataclass(frozen=True)
+class ActionConfig:
+    """How an action in [-1, 1]^4 becomes rotor thrust commands [N].
+
+    * ``"motor"``: ``f_i = (a_i + 1) / 2 * f_max``.
+    * ``"residual"``: ``f = f_ctrl + residual_scale * a`` where ``f_ctrl`` are the geometric
+      controller's commands (nominal allocation; divided by eta_hat when ``compensate``).
+    * ``"wrench"``: collective thrust ``T = (a_1 + 1) / 2 * n f_max`` [N] and moments
+      ``M_j = a_{j+1} * moment_scale_j`` [N m], through the nominal allocation inverse.
+
+    In every mode the result is clipped to ``[0, f_max]`` (the command the recording stores).
+
+    Attributes:
+        mode: one of :data:`ACTION_MODES`.
+        residual_scale: thrust added per unit action in residual mode [N].
+        moment_scale: moment per unit action in wrench mode (Mx, My, Mz) [N m].
+    """
+
+    mode: str = "residual"
+    residual_scale: float = 1.0
+    moment_scale: tuple = (1.0, 1.0, 0.05)
+
+    def __post_init__(self):
+        if self.mode not in ACTION_MODES:
+            raise ConfigError(f"action_mode must be one of {ACTION_MODES}, got {self.mode!r}")
+        _check_nonnegative(self, ("residual_scale",))
+        ms = tuple(float(x) for x in self.moment_scale)
+        if len(ms) != 3 or any(not (math.isfinite(x) and x > 0) for x in ms):
+            raise ConfigError(f"moment_scale must be three positive numbers [N m], "
+                              f"got {self.moment_scale!r}")
+        object.__setattr__(self, "moment_scale", ms)
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """Per-step reward, bounded in ``[-effort_weight - termination_penalty, 1]``::
+
+        r = exp(-(|e_x| + velocity_weight |e_v|) / position_scale) - effort_weight * effort
+
+    with the *true* tracking errors at the end of the step and
+    ``effort = mean((f_cmd / f_max)^2)`` in [0, 1]; ``termination_penalty`` is subtracted on
+    the step that terminates (not on truncation).
+
+    Attributes:
+        position_scale: error at which the tracking term falls to 1/e [m].
+        velocity_weight: weight of |e_v| relative to |e_x| [s].
+        effort_weight: weight of the effort term [-].
+        termination_penalty: subtracted once on termination [-].
+    """
+
+    position_scale: float = 1.0
+    velocity_weight: float = 0.1
+    effort_weight: float = 0.01
+    termination_penalty: float = 0.0
+
+    def __post_init__(self):
+        _check_nonnegative(self, ("velocity_weight", "effort_weight", "termination_penalty"))
+        if not (math.isfinite(self.position_scale) and self.position_scale > 0):
+            raise ConfigError(f"position_scale must be positive [m], got {self.position_scale!r}")
+
+    def __call__(self, pos_err, vel_err, f_cmd, f_max: float, terminated: bool) -> float:
+        track = np.linalg.norm(pos_err) + self.velocity_weight * np.linalg.norm(vel_err)
+        effort = float(np.mean((np.asarray(f_cmd) / f_max) ** 2))
+        r = math.exp(-track / self.position_scale) - self.effort_weight * effort
+        return float(r - (self.termination_penalty if terminated else 0.0))
+
+
+@dataclass(frozen=True)
+class TerminationLimits:
+    """When an episode terminates (checked on the true state after every control step).
+
+    Attributes:
+        ground_altitude: ``"crash"`` when the altitude ``-p_z`` falls below this [m].
+        max_position_error: ``"out_of_bounds"`` when ``|p - p_ref|`` exceeds this [m].
+        max_tilt: ``"excessive_tilt"`` when the angle between body z and world z exceeds this
+            [rad].
+    ``"non_finite"`` is reported when the state stops being finite.
+    """
+
+    ground_altitude: float = 0.0
+    max_position_error: float = 5.0
+    max_tilt: float = math.radians(80.0)
+
+    def __post_init__(self):
+        if not math.isfinite(self.ground_altitude):
+            raise ConfigError("ground_altitude must be finite [m]")
+        if not (self.max_position_error > 0):
+            raise ConfigError(f"max_position_error must be positive [m], "
+                              f"got {self.max_position_error!r}")
+        if not (0 < self.max_tilt <= math.pi):
+            raise ConfigError(f"max_tilt must be in (0, pi] [rad], got {self.max_tilt!r}")
+
+    def reason(self, p, R, p_ref) -> str | None:
+        """The termination reason for true position ``p``, attitude ``R``, or None."""
+        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(R))):
+            return "non_finite"
+        if -p[2] < self.ground_altitude:
+            return "crash"
+        if np.linalg.norm(p - p_ref) > self.max_position_error:
+            return "out_of_bounds"
+        if math.acos(float(np.clip(R[2, 2], -1.0, 1.0))) > self.max_tilt:
+            return "excessive_tilt"
+        return None
+
+
+@dataclass(frozen=True)
+class InitialStateSpread:
+    """Uniform perturbation of the initial state around the reference's start.
+
+    Each component is drawn from ``U(-x, x)`` with ``self.np_random``.
+
+    Attributes:
+        position: per-axis half-width [m].
+        velocity: per-axis half-width [m/s].
+        attitude: per-axis half-width of a rotation vector [rad].
+        rate: per-axis half-width of the body rate [rad/s].
+    """
+
+    position: float = 0.0
+    velocity: float = 0.0
+    attitude: float = 0.0
+    rate: float = 0.0
+
+    def __post_init__(self):
+        _check_nonnegative(self, ("position", "velocity", "attitude", "rate"))

@@ -1,0 +1,378 @@
+"""QuadFaultEnv: a quadrotor with degrading / failing motors and an efficiency estimate in the
+observation.
+
+Data flow per control step (100 Hz by default)::
+
+    action -> rotor commands (held) -> 10 x [sensors -> Sample; Plant.step] (1 kHz)
+           -> estimator.update(samples) -> observation (+ truth only in info)
+
+The physics is the core :class:`quadfault.plant.Plant` (rigid body, motor saturation,
+efficiency, thrust noise drawn per physics substep) and the baseline controller is the core
+:class:`quadfault.controller.GeometricController` on the *nominal* vehicle: a fault reaches the
+controller only through the estimator (``compensate=True``) or through the agent.
+"""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+
+from estimators.base import Estimate, Sample
+from quad_fault_env.envs.config import (ESTIMATOR_RATES, OBSERVATION_KINDS, ActionConfig,
+                                        InitialStateSpread, RewardConfig, TerminationLimits)
+from quad_fault_env.estimation import (NOMINAL_PRIOR_SD, NominalBelief, TruthOracle,
+                                       estimate_sd, make_estimator)
+from quad_fault_env.observation import SD_MAX, ObservationLayout
+from quadfault.controller import ControllerConfig, GeometricController
+from quadfault.dynamics import RigidBodyState
+from quadfault.errors import ConfigError
+from quadfault.motors import MotorModel
+from quadfault.plant import Plant
+from quadfault.rotation import expm_so3
+from quadfault.scenarios import SCENARIO_NAMES, Scenario, named_scenario, random_scenario
+from quadfault.simulator import SensorNoise, initial_state
+from quadfault.vehicle import Vehicle
+
+DEFAULT_DURATION = 20.0  # [s] episode length for named and random scenarios
+
+
+def _numba_available() -> bool:
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _fault_dict(f) -> dict:
+    return {"motor": f.motor, "onset": f.onset, "end": f.end, "level": f.level, "ramp": f.ramp}
+
+
+class QuadFaultEnv(gym.Env):
+    """Quadrotor tracking with motor faults; the observation carries an efficiency estimate.
+
+    Observation (``observation="flat"``: float32 Box; ``"dict"``: one Box per slot), names in
+    ``env.unwrapped.observation_names``:
+
+    =========== ====  =========================================================
+    slot        size  meaning
+    =========== ====  =========================================================
+    pos_err     3     p - p_ref, world NED [m] (measured), clipped to [-10, 10]
+    vel_err     3     v - v_ref, world NED [m/s], clipped to [-50, 50]
+    rot6        6     R[:, 0], R[:, 1] of body (FRD) -> world (NED)
+    omega       3     body rate [rad/s], clipped to [-50, 50]
+    eta_hat     4     estimated efficiency, clipped to [0, 2]
+    eta_sd      4     its one-sigma uncertainty, clipped to [0, 10] (10 = none given)
+    ref_acc     3     reference acceleration [m/s^2], in [-50, 50] (optional)
+    =========== ====  =========================================================
+
+    Action: Box [-1, 1]^4, see :class:`~quad_fault_env.envs.config.ActionConfig`. A wrong
+    shape, NaN/inf or a value outside [-1, 1] (beyond 1e-6) raises ``ValueError``.
+
+    Keyword arguments:
+        estimator: ``"irls" | "ekf" | "truth" | "none"`` or an estimator object.
+        estimator_kwargs: passed to the estimator's constructor.
+        scenario: a name of :data:`quadfault.scenarios.SCENARIO_NAMES`, a
+            :class:`~quadfault.scenarios.Scenario`, or ``"random"``
+            (:func:`~quadfault.scenarios.random_scenario` with ``self.np_random``).
+        random_trajectory: trajectory of random scenarios (``"random"``, ``"hover"``, ...).
+        duration: episode length [s] (default 20 s, or the Scenario's own duration).
+        thrust_noise: sigma_f overriding the scenario's (None keeps it).
+        sensor_noise: a :class:`~quadfault.simulator.SensorNoise` (default noise-free).
+        action_mode, residual_scale, moment_scale: see ``ActionConfig``.
+        control_rate: agent / controller rate [Hz] (100). physics_rate: plant rate [Hz] (1000).
+        estimator_rate: ``"physics"`` (every substep; default when numba is importable) or
+            ``"control"`` (the first substep of each control step only).
+        compensate: divide the geometric controller's commands by eta_hat (fault-tolerant
+            allocation through the estimate).
+        observation: ``"flat"`` or ``"dict"``. reference_acceleration: add the ``ref_acc`` slot.
+        reward, limits, initial_spread: ``RewardConfig``, ``TerminationLimits``,
+            ``InitialStateSpread``.
+        vehicle: the vehicle (nominal for the controller and the estimator; the plant flies it
+            with the scenario's efficiency).
+        controller: ``ControllerConfig`` of the baseline controller.
+        render_mode: ``"rgb_array"`` or ``"human"``.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
+
+    def __init__(self, estimator="irls", scenario="combined", *, estimator_kwargs=None,
+                 random_trajectory: str = "random", duration: float | None = None,
+                 thrust_noise: float | None = None, sensor_noise: SensorNoise | None = None,
+                 action_mode: str = "residual", residual_scale: float = 1.0,
+                 moment_scale: tuple = (1.0, 1.0, 0.05), control_rate: float = 100.0,
+                 physics_rate: float = 1000.0, estimator_rate: str | None = None,
+                 compensate: bool = False, observation: str = "flat",
+                 reference_acceleration: bool = True, reward: RewardConfig | None = None,
+                 limits: TerminationLimits | None = None,
+                 initial_spread: InitialStateSpread | None = None,
+                 vehicle: Vehicle | None = None, controller: ControllerConfig | None = None,
+                 render_mode: str | None = None):
+        self.vehicle = vehicle or Vehicle()
+        self.action_config = ActionConfig(action_mode, residual_scale, moment_scale)
+        self.reward_config = reward or RewardConfig()
+        self.limits = limits or TerminationLimits()
+        self.initial_spread = initial_spread or InitialStateSpread()
+        self.sensor_noise = sensor_noise or SensorNoise()
+        if not isinstance(self.sensor_noise, SensorNoise):
+            raise ConfigError(f"sensor_noise must be a SensorNoise, got {sensor_noise!r}")
+        if thrust_noise is not None and not (math.isfinite(thrust_noise) and thrust_noise >= 0):
+            raise ConfigError(f"thrust_noise must be >= 0, got {thrust_noise!r}")
+        self.thrust_noise = thrust_noise
+        if not (control_rate > 0 and physics_rate > 0):
+            raise ConfigError("control_rate and physics_rate must be positive [Hz]")
+        ratio = physics_rate / control_rate
+        if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+            raise ConfigError(f"physics_rate ({physics_rate} Hz) must be a whole multiple of "
+                              f"control_rate ({control_rate} Hz)")
+        self.substeps = int(round(ratio))
+        self.dt = 1.0 / physics_rate
+        self.control_period = 1.0 / control_rate
+        if estimator_rate is None:
+            estimator_rate = "physics" if _numba_available() else "control"
+        if estimator_rate not in ESTIMATOR_RATES:
+            raise ConfigError(f"estimator_rate must be one of {ESTIMATOR_RATES}, "
+                              f"got {estimator_rate!r}")
+        self.estimator_rate = estimator_rate
+        #: take every ``estimator_stride``-th substep sample of ``info["samples"]``
+        self.estimator_stride = 1 if estimator_rate == "physics" else self.substeps
+        if not (isinstance(scenario, (str, Scenario))):
+            raise ConfigError(f"scenario must be a name, 'random' or a Scenario, got {scenario!r}")
+        if isinstance(scenario, str) and scenario not in SCENARIO_NAMES + ("random",):
+            raise ConfigError(f"unknown scenario {scenario!r}; choose from "
+                              f"{', '.join(SCENARIO_NAMES + ('random',))}")
+        self.scenario_spec = scenario
+        self.random_trajectory = random_trajectory
+        if duration is not None and not (math.isfinite(duration) and duration > 0):
+            raise ConfigError(f"duration must be positive [s], got {duration!r}")
+        self.duration = duration
+        self.estimator = make_estimator(estimator, self.vehicle, **(estimator_kwargs or {}))
+        self.compensate = bool(compensate)
+        self.controller_config = controller or ControllerConfig()
+        if observation not in OBSERVATION_KINDS:
+            raise ConfigError(f"observation must be one of {OBSERVATION_KINDS}, "
+                              f"got {observation!r}")
+        self.observation_kind = observation
+        self.layout = ObservationLayout(reference_acceleration)
+        self.observation_space = (self.layout.flat_space() if observation == "flat"
+                                  else self.layout.dict_space())
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(self.vehicle.n_rotors,),
+                                           dtype=np.float32)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ConfigError(f"render_mode must be one of {self.metadata['render_modes']}, "
+                              f"got {render_mode!r}")
+        self.render_mode = render_mode
+        self._renderer = None
+        self.scenario: Scenario | None = None
+        self.plant: Plant | None = None
+
+    # -- public helpers ----------------------------------------------------------------------
+    @property
+    def observation_names(self) -> list[str]:
+        """One name per element of the flat observation (e.g. ``"eta_hat_1"``)."""
+        return self.layout.names
+
+    @property
+    def f_max(self) -> float:
+        return self.vehicle.rotor_max_thrust
+
+    @property
+    def time(self) -> float:
+        """Simulation time at the end of the last step [s]."""
+        return self._step_count * self.substeps * self.dt
+
+    # -- scenario and reset ------------------------------------------------------------------
+    def _make_scenario(self, spec) -> Scenario:
+        if isinstance(spec, Scenario):
+            sc = spec if self.duration is None else spec.replace(duration=self.duration)
+        elif spec == "random":
+            sc = random_scenario(self.np_random, self.duration or DEFAULT_DURATION,
+                                 trajectory=self.random_trajectory)
+        elif isinstance(spec, str) and spec in SCENARIO_NAMES:
+            sc = named_scenario(spec, self.duration or DEFAULT_DURATION, self.dt)
+        else:
+            raise ConfigError(f"options['scenario'] must be a scenario name, 'random' or a "
+                              f"Scenario, got {spec!r}")
+        if self.thrust_noise is not None:
+            sc = sc.replace(thrust_noise=self.thrust_noise)
+        return sc
+
+    def _initial_state(self, controller) -> RigidBodyState:
+        s = initial_state(self.scenario, 0.0, controller)
+        sp, rng = self.initial_spread, self.np_random
+        u = lambda w: w * rng.uniform(-1.0, 1.0, 3)  # noqa: E731
+        return RigidBodyState(s.p + u(sp.position), s.v + u(sp.velocity),
+                              s.R @ expm_so3(u(sp.attitude)), s.w + u(sp.rate))
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        options = options or {}
+        self.scenario = self._make_scenario(options.get("scenario", self.scenario_spec))
+        self.controller = GeometricController(self.vehicle, self.scenario.trajectory,
+                                              self.controller_config)
+        self.plant = Plant(self.vehicle, self.scenario.efficiency,
+                           MotorModel(self.scenario.thrust_noise), dt=self.dt,
+                           rng=self.np_random)
+        self.plant.reset(self._initial_state(self.controller))
+        self.max_steps = int(round(self.scenario.duration / self.control_period))
+        self._step_count = 0
+        self._f_cmd = np.zeros(self.vehicle.n_rotors)
+        self._terminal = False
+        if isinstance(self.estimator, TruthOracle):
+            self.estimator.bind(self.scenario.efficiency)
+        self.estimator.reset()
+        n = self.vehicle.n_rotors
+        if isinstance(self.estimator, TruthOracle):
+            self._estimate = self.estimator.update(self._sample(0.0, self.plant.state))
+        elif isinstance(self.estimator, NominalBelief):
+            self._estimate = Estimate(0.0, np.ones(n), np.full(n, NOMINAL_PRIOR_SD))
+        else:
+            self._estimate = Estimate(0.0, np.ones(n), None, "warmup")
+        self._meas = self._measure(self.plant.state)
+        self.history = [self.plant.state.p.copy()]
+        events = [dict(_fault_dict(f), kind="onset", t=f.onset)
+                  for f in self.scenario.efficiency.faults if f.onset <= 0.0]
+        info = self._info([], [], [], events, None)
+        if self.render_mode == "human":
+            self.render()
+        return self._observation(), info
+
+    # -- step --------------------------------------------------------------------------------
+    def _check_action(self, action) -> np.ndarray:
+        try:
+            a = np.asarray(action, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"action must be numeric, got {action!r}") from None
+        if a.shape != self.action_space.shape:
+            raise ValueError(f"action has shape {a.shape}, expected {self.action_space.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"action contains NaN or inf: {a.tolist()}")
+        if np.any(np.abs(a) > 1.0 + 1e-6):
+            raise ValueError(f"action outside [-1, 1]: {a.tolist()} (the agent must clip)")
+        return np.clip(a, -1.0, 1.0)
+
+    def _measure(self, state: RigidBodyState) -> RigidBodyState:
+        return self.sensor_noise.measure(state, None, self.np_random)[0]
+
+    def _sample(self, t: float, meas: RigidBodyState) -> Sample:
+        return Sample(t, meas.p.copy(), meas.v.copy(), meas.R.copy(), meas.w.copy(),
+                      self._f_cmd.copy())
+
+    def motor_commands(self, action: np.ndarray, t: float, meas: RigidBodyState) -> np.ndarray:
+        """Rotor thrust commands [N] for a checked ``action`` (see ``ActionConfig``)."""
+        cfg, f_max = self.action_config, self.f_max
+        if cfg.mode == "motor":
+            f = 0.5 * (action + 1.0) * f_max
+        elif cfg.mode == "wrench":
+            thrust = 0.5 * (action[0] + 1.0) * self.vehicle.n_rotors * f_max
+            moment = action[1:] * np.asarray(cfg.moment_scale)
+            f = self.vehicle.rotor_thrust(np.concatenate(([thrust], moment)))
+        else:
+            f_ctrl, _ = self.controller.motor_commands(t, meas.p, meas.v, meas.R, meas.w)
+            if self.compensate:
+                f_ctrl = f_ctrl / np.clip(self._estimate.eta, 0.1, None)
+            f = f_ctrl + cfg.residual_scale * action
+        return np.clip(f, 0.0, f_max)
+
+    def step(self, action):
+        if self.plant is None or self._terminal:
+            raise gym.error.ResetNeeded("call reset() before step() (the episode has ended)")
+        a = self._check_action(action)
+        k0 = self._step_count * self.substeps
+        t0 = k0 * self.dt
+        self._f_cmd = self.motor_commands(a, t0, self._meas)
+        samples, eta_true, sf = [], [], []
+        meas = self._meas
+        for j in range(self.substeps):
+            t = (k0 + j) * self.dt
+            if j > 0:
+                meas = self._measure(self.plant.state)
+            samples.append(self._sample(t, meas))
+            out = self.plant.step(self._f_cmd, t)
+            eta_true.append(out.eta)
+            sf.append(out.specific_force)
+            if not self.plant.state.is_finite():
+                break
+        self._step_count += 1
+        t1 = self.time
+        for s in samples[::self.estimator_stride]:
+            self._estimate = self.estimator.update(s)
+        state = self.plant.state
+        ref = self.scenario.trajectory(t1)
+        reason = self.limits.reason(state.p, state.R, ref.position)
+        terminated = reason is not None
+        self._terminal = terminated
+        truncated = (not terminated) and self._step_count >= self.max_steps
+        self._meas = self._measure(state) if not terminated else state
+        self.history.append(np.array(state.p, dtype=float))
+        reward = self.reward_config(state.p - ref.position, state.v - ref.velocity,
+                                    self._f_cmd, self.f_max, terminated)
+        events = []
+        for f in self.scenario.efficiency.faults:
+            for kind, tk in (("onset", f.onset), ("end", f.end)):
+                if t0 < tk <= t1:
+                    events.append(dict(_fault_dict(f), kind=kind, t=tk))
+        info = self._info(samples, eta_true, sf, events, reason)
+        if self.render_mode == "human":
+            self.render()
+        return self._observation(), (0.0 if not math.isfinite(reward) else reward), \
+            terminated, truncated, info
+
+    # -- observation and info ----------------------------------------------------------------
+    def _observation(self):
+        t = self.time
+        ref = self.scenario.trajectory(t)
+        m = self._meas
+        sd = estimate_sd(self._estimate, self.vehicle.n_rotors)
+        values = self.layout.values(pos_err=m.p - ref.position, vel_err=m.v - ref.velocity,
+                                    R=m.R, omega=m.w, eta_hat=self._estimate.eta,
+                                    eta_sd=SD_MAX if sd is None else sd,
+                                    ref_acc=ref.acceleration)
+        return values if self.observation_kind == "dict" else self.layout.flatten(values)
+
+    def _info(self, samples, eta_true, sf, events, reason) -> dict:
+        t = self.time
+        state = self.plant.state
+        ref = self.scenario.trajectory(t)
+        est = self._estimate
+        return {
+            "t": t,
+            "eta_true": np.asarray(self.scenario.efficiency(t), dtype=float),
+            "eta_hat": np.asarray(est.eta, dtype=float),
+            "eta_sd": estimate_sd(est, self.vehicle.n_rotors),
+            "estimator": getattr(self.estimator, "name", type(self.estimator).__name__),
+            "estimator_status": est.status,
+            "estimator_diagnostics": est.diagnostics,
+            "position_error": state.p - ref.position,
+            "tracking_error": float(np.linalg.norm(state.p - ref.position)),
+            "motor_command": self._f_cmd.copy(),
+            "fault_events": events,
+            "faults": [_fault_dict(f) for f in self.scenario.efficiency.faults],
+            "scenario": self.scenario.name,
+            "thrust_noise": self.scenario.thrust_noise,
+            "samples": samples,
+            "eta_true_samples": np.array(eta_true).reshape(-1, self.vehicle.n_rotors),
+            "specific_force_samples": np.array(sf).reshape(-1, 3),
+            "termination_reason": reason,
+        }
+
+    # -- rendering ---------------------------------------------------------------------------
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode= to make")
+            return None
+        if self.plant is None:
+            return None
+        if self._renderer is None:
+            from quad_fault_env.rendering import FlightRenderer
+
+            self._renderer = FlightRenderer(self.vehicle, human=self.render_mode == "human")
+        frame = self._renderer.draw(self)
+        return frame if self.render_mode == "rgb_array" else None
+
+    def close(self):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

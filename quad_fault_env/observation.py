@@ -1,0 +1,144 @@
+"""The observation: a named layout of slots, flat (float32 Box) or as a Dict.
+
+Each slot has a name, a size, bounds and a meaning; the flat vector is their concatenation
+in the order of :data:`SLOTS`. ``env.unwrapped.observation_names`` lists one name per element
+(``"pos_err_x"``, ..., ``"eta_sd_4"``) and ``layout.slice("eta_hat")`` gives where a slot sits.
+
+All quantities are in the internal frames (world NED, body FRD) and measured, i.e. they carry
+the sensor noise; only the ``eta_hat`` / ``eta_sd`` slots come from the estimator.
+
+=====================  ====  ===========================================================
+slot                   size  meaning
+=====================  ====  ===========================================================
+``pos_err``            3     p - p_ref, world NED [m], clipped to [-10, 10]
+``vel_err``            3     v - v_ref, world NED [m/s], clipped to [-50, 50]
+``rot6``               6     first two columns of R (body->world): R[:, 0], R[:, 1]
+``omega``              3     body rate, FRD [rad/s], clipped to [-50, 50]
+``eta_hat``            4     estimated motor efficiency (1 = nominal), clipped to [0, 2]
+``eta_sd``             4     one-sigma uncertainty of eta_hat, clipped to [0, 10]
+``ref_acc`` (optional) 3     reference acceleration a_ref, world NED [m/s^2], in [-50, 50]
+=====================  ====  ===========================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from gymnasium import spaces
+
+# Bounds of the Box. Values are clipped into them; with the default termination limits
+# (5 m position error) only the step that terminates can reach the position bound.
+POS_MAX = 10.0  # [m]
+VEL_MAX = 50.0  # [m/s]
+RATE_MAX = 50.0  # [rad/s]
+ACC_MAX = 50.0  # [m/s^2]
+ETA_MAX = 2.0  # upper clip of the eta_hat slot [-]
+SD_MAX = 10.0  # upper clip of the eta_sd slot [-]; also the value when the estimator gives none
+
+
+@dataclass(frozen=True)
+class Slot:
+    """One named block of the observation."""
+
+    name: str
+    labels: tuple  # element suffixes, e.g. ("x", "y", "z")
+    low: float
+    high: float
+    meaning: str
+
+    @property
+    def size(self) -> int:
+        return len(self.labels)
+
+
+_XYZ = ("x", "y", "z")
+_MOTORS = ("1", "2", "3", "4")
+SLOTS = (
+    Slot("pos_err", _XYZ, -POS_MAX, POS_MAX, "p - p_ref, world NED [m]"),
+    Slot("vel_err", _XYZ, -VEL_MAX, VEL_MAX, "v - v_ref, world NED [m/s]"),
+    Slot("rot6", ("r11", "r21", "r31", "r12", "r22", "r32"), -1.0, 1.0,
+         "first two columns of R (body FRD -> world NED)"),
+    Slot("omega", _XYZ, -RATE_MAX, RATE_MAX, "body rate, FRD [rad/s]"),
+    Slot("eta_hat", _MOTORS, 0.0, ETA_MAX, "estimated motor efficiency (1 = nominal)"),
+    Slot("eta_sd", _MOTORS, 0.0, SD_MAX, "one-sigma uncertainty of eta_hat"),
+)
+REF_ACC_SLOT = Slot("ref_acc", _XYZ, -ACC_MAX, ACC_MAX, "reference acceleration, world NED [m/s^2]")
+
+
+class ObservationLayout:
+    """The slots in use and the conversions between values, flat vectors and dicts."""
+
+    def __init__(self, reference_acceleration: bool = True):
+        self.slots = SLOTS + ((REF_ACC_SLOT,) if reference_acceleration else ())
+        self._slices = {}
+        start = 0
+        for s in self.slots:
+            self._slices[s.name] = slice(start, start + s.size)
+            start += s.size
+        self.size = start
+
+    @property
+    def names(self) -> list[str]:
+        """One name per element of the flat vector, e.g. ``"eta_hat_1"``."""
+        return [f"{s.name}_{label}" for s in self.slots for label in s.labels]
+
+    def slice(self, name: str) -> slice:
+        return self._slices[name]
+
+    def flat_space(self) -> spaces.Box:
+        low = np.concatenate([np.full(s.size, s.low) for s in self.slots]).astype(np.float32)
+        high = np.concatenate([np.full(s.size, s.high) for s in self.slots]).astype(np.float32)
+        return spaces.Box(low, high, dtype=np.float32)
+
+    def dict_space(self) -> spaces.Dict:
+        return spaces.Dict({s.name: spaces.Box(np.float32(s.low), np.float32(s.high),
+                                               shape=(s.size,), dtype=np.float32)
+                            for s in self.slots})
+
+    def values(self, *, pos_err, vel_err, R, omega, eta_hat, eta_sd, ref_acc=None) -> dict:
+        """Slot values (float32, clipped into their bounds, NaN/inf made finite)."""
+        raw = {"pos_err": pos_err, "vel_err": vel_err,
+               "rot6": np.concatenate((R[:, 0], R[:, 1])), "omega": omega,
+               "eta_hat": eta_hat, "eta_sd": SD_MAX if eta_sd is None else eta_sd,
+               "ref_acc": ref_acc}
+        out = {}
+        big = np.finfo(np.float32).max / 2
+        for s in self.slots:
+            value = np.broadcast_to(np.asarray(raw[s.name], dtype=float), (s.size,))
+            fill = SD_MAX if s.name == "eta_sd" else 0.0
+            value = np.nan_to_num(value, nan=fill, posinf=big, neginf=-big)
+            out[s.name] = np.clip(value, max(s.low, -big), min(s.high, big)).astype(np.float32)
+        return out
+
+    def flatten(self, values: dict) -> np.ndarray:
+        return np.concatenate([values[s.name] for s in self.slots]).astype(np.float32)
+
+    def replace(self, obs, name: str, value):
+        """A copy of ``obs`` (flat vector or dict) with slot ``name`` set to ``value``
+        (clipped like :meth:`values`)."""
+        slot = next(s for s in self.slots if s.name == name)
+        value = np.asarray(value, dtype=float)
+        fill = SD_MAX if name == "eta_sd" else 0.0
+        value = np.clip(np.nan_to_num(value, nan=fill), slot.low, slot.high).astype(np.float32)
+        if isinstance(obs, dict):
+            out = dict(obs)
+            out[name] = value
+            return out
+        out = np.array(obs, dtype=np.float32, copy=True)
+        out[self._slices[name]] = value
+        return out
+
+    def get(self, obs, name: str) -> np.ndarray:
+        """Slot ``name`` of ``obs`` (flat vector or dict)."""
+        if isinstance(obs, dict):
+            return np.asarray(obs[name])
+        return np.asarray(obs)[self._slices[name]]
+
+    def markdown_table(self) -> str:
+        rows = ["| slot | elements | bounds | meaning |", "|---|---|---|---|"]
+        for s in self.slots:
+            sl = self._slices[s.name]
+            rows.append(f"| `{s.name}` | {sl.start}..{sl.stop - 1} | [{s.low}, {s.high}] | "
+                        f"{s.meaning} |")
+        return "\n".join(rows)
