@@ -1,0 +1,117 @@
+"""``quadfault import``: convert a real flight log into a recording (CONTRACT.md sec. 3).
+
+    quadfault import {eschmann,nanodrone,crazypad,px4} INPUT --out FILE.csv [--force]
+                     [--keep-all] [--vehicle VEHICLE.json] [--calibration T0,T1] [--mass KG]
+
+Writes FILE.csv + FILE.json atomically (never overwriting without ``--force``) and prints one
+summary line: rows, duration, rate, gaps, dropped samples and what the log is missing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from dataclasses import replace
+from pathlib import Path
+
+from quadfault.errors import ConfigError, RecordingError
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    from quadfault.importers import IMPORTERS
+
+    p.add_argument("kind", choices=tuple(IMPORTERS), help="log format / data set")
+    p.add_argument("input", help="the raw log (CSV, CSV.gz or .ulg)")
+    p.add_argument("--out", required=True, help="output recording FILE.csv (+ FILE.json)")
+    p.add_argument("--force", action="store_true", help="overwrite existing files")
+    p.add_argument("--keep-all", action="store_true",
+                   help="keep the rows where the motors are off (default: trim to the "
+                        "motors-running span)")
+    p.add_argument("--vehicle", default=None, metavar="VEHICLE.json",
+                   help="vehicle description (the sidecar's 'vehicle' object: mass, inertia, "
+                        "allocation or arm + torque_coefficient, thrust_curve or "
+                        "thrust_coefficient; optional 'frame': NED|ENU). Required for px4")
+    p.add_argument("--calibration", default=None, metavar="T0,T1",
+                   help="calibration segment [s, in the log's clock] for constants fitted by "
+                        "the importer (default: see docs/importers.md)")
+    p.add_argument("--mass", type=float, default=None, help="take-off mass [kg]")
+    p.add_argument("--frame", choices=("NED", "ENU"), default="NED",
+                   help="world frame of the written file (default NED)")
+
+
+def load_vehicle_file(path) -> tuple:
+    """``(Vehicle in FRD, thrust curve (a, b, c) or None)`` from a vehicle JSON file."""
+    from quadfault.recording import _vehicle_from_sidecar
+
+    path = Path(path)
+    if not path.exists():
+        raise RecordingError(path, "file not found")
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise RecordingError(path, f"not valid JSON: {exc}") from None
+    if not isinstance(data, dict):
+        raise RecordingError(path, "must be a JSON object")
+    if isinstance(data.get("vehicle"), dict):  # a whole sidecar is fine too
+        data = dict(data["vehicle"], frame=data.get("frame", "NED"),
+                    gravity=data.get("gravity", 9.81))
+    frame = data.get("frame", "NED")
+    if frame not in ("NED", "ENU"):
+        raise RecordingError(path, f"must be 'NED' or 'ENU', got {frame!r}", key="frame")
+    has_curve = "thrust_curve" in data or "thrust_coefficient" in data
+    meta = {"frame": frame, "gravity": data.get("gravity", 9.81), "vehicle": data}
+    vehicle, curve = _vehicle_from_sidecar(path, meta, has_curve)
+    return vehicle, curve
+
+
+def _calibration(text):
+    if text is None:
+        return None
+    try:
+        t0, t1 = (float(x) for x in text.split(","))
+    except ValueError:
+        raise ConfigError(f"--calibration expects T0,T1 in seconds, got {text!r}") from None
+    if not (math.isfinite(t0) and math.isfinite(t1) and t1 > t0):
+        raise ConfigError(f"--calibration needs finite T0 < T1, got {text!r}")
+    return (t0, t1)
+
+
+def with_vehicle(rec, vehicle, curve, source: str):
+    """``rec`` with its nominal vehicle (and thrust curve) replaced by a user's file."""
+    from quadfault.importers.crazyflie import thrust_from_curve
+
+    changes = {"vehicle": vehicle}
+    meta = dict(rec.meta)
+    meta["constants"] = {"vehicle": f"from {source}"}
+    if curve is not None and rec.commands_u is not None:
+        changes.update(thrust_curve=curve, thrust_cmd=thrust_from_curve(rec.commands_u, curve))
+        meta.pop("calibration", None)
+    changes["meta"] = meta
+    return replace(rec, **changes)
+
+
+def run(args) -> int:
+    from quadfault.importers import get_importer, summary_line
+    from quadfault.recording import write_recording
+
+    out = Path(args.out)
+    if out.suffix != ".csv":
+        raise ConfigError(f"{out}: --out must name a .csv file")
+    if args.mass is not None and not (math.isfinite(args.mass) and args.mass > 0):
+        raise ConfigError(f"--mass must be a positive number of kg, got {args.mass}")
+    vehicle = curve = None
+    if args.vehicle is not None:
+        vehicle, curve = load_vehicle_file(args.vehicle)
+    importer = get_importer(args.kind)
+    kwargs = {"keep_all": args.keep_all, "calibration": _calibration(args.calibration),
+              "mass": args.mass}
+    if args.kind == "px4":
+        kwargs.update(vehicle=vehicle, thrust_curve=curve)
+    rec = importer(args.input, **kwargs)
+    if vehicle is not None and args.kind != "px4":
+        rec = with_vehicle(rec, vehicle, curve, args.vehicle)
+    write_recording(rec, out, frame=args.frame, force=args.force)
+    if not args.quiet:
+        print(f"{out}: {summary_line(rec)}")
+    return 0
