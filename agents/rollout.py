@@ -1,0 +1,223 @@
+"""Closed-loop flights with an estimator in the loop, without the Gymnasium environment.
+
+:func:`fly` is an explicit loop over physics steps (same order as
+:func:`quadfault.simulator.simulate`): measure, control (with the current ``eta_hat``), step
+the plant (:class:`quadfault.plant.Plant`, the one model), then feed the estimator the sample
+just sent (state at ``t_k``, command held from ``t_k``). The estimate is therefore causal:
+the command at ``t_k`` uses samples up to ``t_{k-1}``.
+
+Sources of ``eta_hat`` (the built-in ablation):
+
+* ``"irls"`` -- :class:`estimators.irls.SlidingWindowIRLS` (the paper's estimator);
+* ``"ekf"`` -- :class:`estimators.ekf.MotorEfficiencyEKF`;
+* ``"none"`` -- always nominal (1, 1, 1, 1): the estimate-aware controller then equals the
+  geometric controller with saturation-aware allocation;
+* ``"truth"`` -- **oracle ablation**: the plant's true efficiency. Labelled as such
+  everywhere; never a deployable configuration.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from agents.fault_tolerant import FaultTolerantConfig, make_controller
+from agents.metrics import CrashLimits, FlightMetrics, RecoveryConfig, flight_metrics, tilt_angle
+from estimators.base import Sample
+from quadfault.controller import ControllerConfig
+from quadfault.errors import ConfigError
+from quadfault.motors import MotorModel
+from quadfault.plant import Plant
+from quadfault.scenarios import Scenario
+from quadfault.simulator import SensorNoise, initial_state
+from quadfault.vehicle import Vehicle
+
+ESTIMATOR_SOURCES = ("irls", "ekf", "truth", "none")
+ORACLE = "truth"
+
+
+@dataclass(frozen=True)
+class FlightConfig:
+    """Settings of a closed-loop flight.
+
+    Attributes:
+        dt: physics step [s].
+        control_period: controller period [s] (``None``: every step).
+        estimator_every: feed the estimator every k-th sample (1 = every sample, 1 kHz).
+        controller: geometric controller options (acceleration feed-forward on by default).
+        fault_tolerant: estimate-aware allocation options.
+        sensor_noise: measurement noise (zero by default, as in the paper).
+        crash: crash limits (a crash ends the flight).
+        recovery: time-to-recover parameters.
+        trace_every: keep every k-th step in the returned traces (plots).
+    """
+
+    dt: float = 1e-3
+    control_period: float | None = None
+    estimator_every: int = 1
+    controller: ControllerConfig = field(default_factory=ControllerConfig)
+    fault_tolerant: FaultTolerantConfig = field(default_factory=FaultTolerantConfig)
+    sensor_noise: SensorNoise = field(default_factory=SensorNoise)
+    crash: CrashLimits = field(default_factory=CrashLimits)
+    recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
+    trace_every: int = 10
+
+    def __post_init__(self):
+        if not (math.isfinite(self.dt) and self.dt > 0):
+            raise ConfigError(f"dt must be positive [s], got {self.dt!r}")
+        if int(self.estimator_every) < 1 or int(self.trace_every) < 1:
+            raise ConfigError("estimator_every and trace_every must be >= 1")
+
+    @property
+    def control_decimation(self) -> int:
+        if self.control_period is None:
+            return 1
+        k = self.control_period / self.dt
+        if k < 1 or abs(k - round(k)) > 1e-9:
+            raise ConfigError("control_period must be a whole multiple of dt")
+        return int(round(k))
+
+
+@dataclass(frozen=True)
+class Flight:
+    """A flown episode: decimated traces (for plots) and its metrics.
+
+    Traces (every ``trace_every`` steps): ``t`` [s], ``p`` / ``p_ref`` [m] (NED),
+    ``pos_error`` [m], ``tilt_error`` [deg], ``yaw_rate`` [rad/s], ``f_cmd`` [N],
+    ``eta_hat`` (what the controller used), ``eta_true`` (scoring only).
+    """
+
+    controller: str
+    estimator: str
+    scenario: str
+    seed: int
+    metrics: FlightMetrics
+    t: np.ndarray
+    p: np.ndarray
+    p_ref: np.ndarray
+    pos_error: np.ndarray
+    tilt_error: np.ndarray
+    yaw_rate: np.ndarray
+    f_cmd: np.ndarray
+    eta_hat: np.ndarray
+    eta_true: np.ndarray
+    modes: dict = field(default_factory=dict)  # allocation mode -> number of control steps
+
+
+class _Tabulated:
+    """The efficiency schedule evaluated once on the step grid (same values, faster)."""
+
+    def __init__(self, dt: float, table: np.ndarray):
+        self.dt, self.table = dt, np.asarray(table, float)
+
+    def __call__(self, t) -> np.ndarray:
+        k = min(int(round(float(t) / self.dt)), len(self.table) - 1)
+        return self.table[k]
+
+
+def make_estimator(source: str, vehicle: Vehicle, dt: float):
+    """An online estimator for ``source`` (``None`` for ``"truth"`` and ``"none"``)."""
+    if source not in ESTIMATOR_SOURCES:
+        raise ConfigError(f"unknown estimator {source!r}; choose from "
+                          f"{', '.join(ESTIMATOR_SOURCES)}")
+    if source == "irls":
+        from estimators.irls import SlidingWindowIRLS
+
+        return SlidingWindowIRLS(vehicle)
+    if source == "ekf":
+        from estimators.ekf import MotorEfficiencyEKF
+
+        return MotorEfficiencyEKF(vehicle, dt=dt)
+    return None
+
+
+def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any = "irls",
+        seed: int = 0, *, vehicle: Vehicle | None = None, config: FlightConfig | None = None,
+        progress_bar=None) -> Flight:
+    """Fly ``scenario`` with ``controller`` (``"geometric"`` | ``"estimate-aware"``) fed by
+    ``estimator`` (a name of :data:`ESTIMATOR_SOURCES` or an ``OnlineEstimator``).
+
+    ``seed`` seeds the one generator of the plant's thrust noise and the sensor noise.
+    The controller knows the nominal ``vehicle``; the plant flies the same vehicle with the
+    scenario's efficiency schedule.
+    """
+    cfg = config or FlightConfig()
+    veh = vehicle or Vehicle()
+    rng = np.random.default_rng(seed)
+    n = int(round(scenario.duration / cfg.dt))
+    if n < 2:
+        raise ConfigError(f"scenario duration {scenario.duration} s is shorter than two steps")
+    times = cfg.dt * np.arange(n)
+    efficiency = _Tabulated(cfg.dt, scenario.efficiency(times))
+    plant = Plant(veh, efficiency, MotorModel(scenario.thrust_noise, True), (), "rk4", cfg.dt,
+                  rng)
+    ctrl = make_controller(controller, veh, scenario.trajectory, cfg.controller,
+                           cfg.fault_tolerant)
+    if isinstance(estimator, str):
+        source = estimator
+        est = make_estimator(estimator, veh, cfg.dt * cfg.estimator_every)
+    else:
+        source, est = getattr(estimator, "name", type(estimator).__name__), estimator
+    if est is not None:
+        est.reset()
+    refs = scenario.trajectory(times)
+    ffs = (ctrl.geometric.feedforward_rates(times) if cfg.controller.angular_feedforward
+           else None)
+    plant.reset(initial_state(scenario, 0.0, ctrl.geometric))
+    ctrl.reset()
+    decim = cfg.control_decimation
+    pos_err, tilt, f_hist = np.empty(n), np.empty(n), np.empty((n, 4))
+    keep = np.arange(0, n, cfg.trace_every)
+    tr_p, tr_eta_hat, tr_eta, tr_wz = (np.empty((keep.size, 3)), np.empty((keep.size, 4)),
+                                       np.empty((keep.size, 4)), np.empty(keep.size))
+    eta_hat = np.ones(4)
+    f_cmd = np.zeros(4)
+    modes: dict = {}
+    crash_time = None
+    lim = cfg.crash
+    cos_tilt = math.cos(math.radians(lim.max_tilt))
+    b3d = np.array([0.0, 0.0, 1.0])
+    k_end = n
+    for k in range(n):
+        t = times[k]
+        state = plant.state
+        p_ref = refs.position[k]
+        e = float(np.linalg.norm(state.p - p_ref)) if state.is_finite() else math.inf
+        if (not math.isfinite(e) or e > lim.max_position_error or state.R[2, 2] < cos_tilt
+                or state.p[2] > lim.ground_z):
+            crash_time, k_end = float(t), k
+            break
+        meas, _ = cfg.sensor_noise.measure(state, None, rng)
+        if source == ORACLE:
+            eta_hat = efficiency.table[k]  # oracle ablation (labelled)
+        if k % decim == 0:
+            ref_k = type(refs)(*(a[k] for a in refs))
+            ff_k = None if ffs is None else (ffs[0][k], ffs[1][k])
+            step = ctrl.command(t, meas.p, meas.v, meas.R, meas.w, eta_hat, ref_k, ff_k)
+            f_cmd = step.f
+            b3d = step.out.Rd[:, 2]
+            modes[step.mode] = modes.get(step.mode, 0) + 1
+        pos_err[k] = e
+        tilt[k] = tilt_angle(state.R[:, 2], b3d)
+        f_hist[k] = f_cmd
+        if k % cfg.trace_every == 0:
+            j = k // cfg.trace_every
+            tr_p[j], tr_eta_hat[j], tr_wz[j] = state.p, eta_hat, state.w[2]
+        plant_step = plant.step(f_cmd, t)
+        if k % cfg.trace_every == 0:
+            tr_eta[k // cfg.trace_every] = plant_step.eta
+        if est is not None and k % cfg.estimator_every == 0:
+            estimate = est.update(Sample(float(t), meas.p, meas.v, meas.R, meas.w, f_cmd.copy()))
+            eta_hat = np.asarray(estimate.eta, float)
+        if progress_bar is not None and k % 1000 == 999:
+            progress_bar.update(1000)
+    onsets = [a for _, a, _ in scenario.fault_windows()]
+    metrics = flight_metrics(times[:k_end], pos_err[:k_end], tilt[:k_end], f_hist[:k_end],
+                             veh.rotor_max_thrust, cfg.dt, crash_time, onsets, cfg.recovery)
+    m = int(np.searchsorted(keep, k_end))
+    return Flight(controller, source, scenario.name, int(seed), metrics, times[keep[:m]],
+                  tr_p[:m], refs.position[keep[:m]], pos_err[keep[:m]], tilt[keep[:m]],
+                  tr_wz[:m], f_hist[keep[:m]], tr_eta_hat[:m], tr_eta[:m], modes)
