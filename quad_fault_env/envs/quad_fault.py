@@ -292,7 +292,11 @@ class QuadFaultEnv(gym.Env):
             samples.append(self._sample(t, meas))
             out = self.plant.step(self._f_cmd, t)
             eta_true.append(out.eta)
-            sf.append(out.specific_force)
+            if self.sensor_noise.accel:
+                sf.append(out.specific_force + self.sensor_noise.accel
+                          * self.np_random.standard_normal(3))
+            else:
+                sf.append(out.specific_force)
             if not self.plant.state.is_finite():
                 break
         self._step_count += 1
