@@ -1,0 +1,447 @@
+"""The paper's sliding-window IRLS motor-efficiency estimator (Algorithm 2).
+
+Per update, over the last ``n = 10`` samples (9 segments, :mod:`estimators.residuals`)::
+
+    min_eta  1/2 sum_i w_i r_i(eta)^T G_i r_i(eta) + gamma/2 ||eta - eta_prev||^2   (eq. 24)
+    s.t.     eta_min - eps <= eta <= eta_max + eps                                   (eq. 25)
+
+solved by an outer IRLS loop (robust MAD z-score weights ``w_i``, :mod:`estimators.robust`)
+around a primal-dual interior-point method (:mod:`estimators.ipm`), warm-started from the
+previous estimate. The residuals are affine in ``eta``, so each window reduces to per-segment
+quadratic terms ``(c_i, b_i, H_i)`` computed once.
+
+Guards (the previous estimate is kept): a window with (almost) no commanded thrust
+(``no_excitation``), ``cond_1(J^T G J) > cond_max`` (``ill_conditioned``, the reference's
+``rcond < 1e-4``), every segment rejected (``rejected``), a non-finite sample (``bad_sample``).
+
+Uncertainty (``Estimate.sd``), from the window's information matrix with the final weights::
+
+    s^2 = sum_i w_i e_i(eta) / max(10 k - n, 1)        (k = segments with w_i > 0)
+    sd  = sqrt(diag(s^2 (J^T G J + gamma I)^-1))
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import deque
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from estimators.base import (STATUS_BAD_SAMPLE, STATUS_ILL_CONDITIONED, STATUS_MAX_ITER,
+                             STATUS_NO_EXCITATION, STATUS_OK, STATUS_REJECTED, STATUS_WARMUP,
+                             STATUSES, Estimate, EstimateSeries, Sample)
+from estimators.ipm import IPMSettings, solve_box_qp
+from estimators.residuals import quadratic_terms, residual_weights, segment_models
+from estimators.robust import mad_weights
+from quadfault.errors import ConfigError
+from quadfault.recording import Recording
+from quadfault.vehicle import Vehicle
+
+SCALINGS = ("reference", "paper")
+BACKENDS = ("auto", "numpy", "numba")
+_START_MARGIN = 1e-6  # the interior-point start is kept this far inside the bounds
+
+
+@dataclass(frozen=True)
+class IRLSConfig:
+    """Settings of :class:`SlidingWindowIRLS` (defaults: the authors' reference code).
+
+    Attributes:
+        window: samples per window n (n - 1 segments).
+        g_v, g_x, g_omega, g_R: diagonal of the per-segment weight G_i (eq. 23) for the
+            velocity [1/(m/s)^2], position [1/m^2], rate [1/(rad/s)^2] and rotation residuals.
+        gamma: smoothness weight (gamma/2)||eta - eta_prev||^2.
+        eta_min, eta_max: physical bounds of the efficiency; bound_eps widens them
+            (the reference's bound_safe_eps) so the box is [eta_min - eps, eta_max + eps].
+        scaling: "reference" (no 1/sqrt(n) factor, weights divided by their median, w_min
+            unused) or "paper" (residual scaled by 1/sqrt(segments), w_min floor, no median
+            normalisation).
+        z_soft, soft_power, z_hard, hard_drop, w_min, mad_eps: robust weights (eqs. 27-30).
+        max_irls: outer IRLS rounds N_IRLS; irls_tol: stop when ||x_new - x||_inf < irls_tol.
+        ipm: interior-point settings (Algorithm 1).
+        cond_max: conditioning guard on the 1-norm condition number of J^T G J.
+        min_thrust: a window whose mean commanded collective thrust is below this [N] carries
+            no information (``no_excitation``).
+        clip_commands: clip the commanded thrusts to ``[0, vehicle.rotor_max_thrust]`` before
+            use (a rotor cannot deliver more than its limit; without this a saturated weak
+            motor looks weaker than it is). ``False`` = the reference code (no clipping).
+        record_history: keep per-round KKT histories in the diagnostics (slower; uses numpy).
+        backend: "auto" (numba when importable), "numpy" or "numba"; same results.
+    """
+
+    window: int = 10
+    g_v: float = 50.0
+    g_x: float = 50.0
+    g_omega: float = 1.0
+    g_R: float = 50.0
+    gamma: float = 5e-3
+    eta_min: float = 0.0
+    eta_max: float = 1.0
+    bound_eps: float = 1e-3
+    scaling: str = "reference"
+    z_soft: float = 2.5
+    soft_power: float = 7.0
+    z_hard: float = 2.5
+    hard_drop: bool = True
+    w_min: float = 0.03
+    mad_eps: float = 1e-9
+    max_irls: int = 3
+    irls_tol: float = 1e-3
+    ipm: IPMSettings = field(default_factory=IPMSettings)
+    cond_max: float = 1e4
+    min_thrust: float = 1e-3
+    clip_commands: bool = True
+    record_history: bool = False
+    backend: str = "auto"
+
+    def __post_init__(self):
+        if not (isinstance(self.window, int) and self.window >= 3):
+            raise ConfigError(f"IRLS window must be an integer >= 3 samples, got {self.window!r}")
+        for key in ("g_v", "g_x", "g_omega", "g_R", "gamma", "bound_eps", "z_soft", "soft_power",
+                    "z_hard", "w_min", "mad_eps", "irls_tol", "cond_max", "min_thrust"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not math.isfinite(value) or value < 0:
+                raise ConfigError(f"IRLS setting {key} must be a finite number >= 0, "
+                                  f"got {value!r}")
+        if not (math.isfinite(self.eta_min) and math.isfinite(self.eta_max)
+                and self.eta_min < self.eta_max):
+            raise ConfigError(f"IRLS bounds need eta_min < eta_max, got {self.eta_min!r}, "
+                              f"{self.eta_max!r}")
+        if self.scaling not in SCALINGS:
+            raise ConfigError(f"IRLS scaling must be one of {SCALINGS}, got {self.scaling!r}")
+        if self.backend not in BACKENDS:
+            raise ConfigError(f"IRLS backend must be one of {BACKENDS}, got {self.backend!r}")
+        if not (isinstance(self.max_irls, int) and self.max_irls >= 1):
+            raise ConfigError(f"IRLS max_irls must be an integer >= 1, got {self.max_irls!r}")
+        if not isinstance(self.ipm, IPMSettings):
+            raise ConfigError("IRLS ipm must be an IPMSettings")
+
+    @property
+    def lower(self) -> float:
+        """Lower bound of the box [1]."""
+        return self.eta_min - self.bound_eps
+
+    @property
+    def upper(self) -> float:
+        """Upper bound of the box [1]."""
+        return self.eta_max + self.bound_eps
+
+    @property
+    def segment_weights(self) -> np.ndarray:
+        """Diagonal of G_i, (10,)."""
+        return residual_weights(self.g_v, self.g_x, self.g_omega, self.g_R)
+
+
+@dataclass(frozen=True)
+class IRLSDiagnostics:
+    """What happened in one window update.
+
+    Attributes:
+        status, message: outcome (see :data:`estimators.base.STATUSES`).
+        inner_iterations: interior-point iterations of each IRLS round.
+        weights: final robust segment weights (segments,), or None when no round ran.
+        rejected: indices of segments with weight 0 (0 = oldest segment of the window).
+        cond: 1-norm condition number of J^T G J in the last round.
+        dual_history, cent_history, gap_history: per round, ``||r_dual||``, ``||r_cent||``
+            and the surrogate gap after each interior-point iteration (record_history only).
+        residual_history: per round, the weighted residual norm ``sqrt(r^T G r)`` after each
+            iteration (the paper's "primal residual", record_history only).
+    """
+
+    status: str
+    message: str = ""
+    inner_iterations: tuple = ()
+    weights: np.ndarray | None = None
+    rejected: tuple = ()
+    cond: float = float("nan")
+    dual_history: tuple | None = None
+    cent_history: tuple | None = None
+    gap_history: tuple | None = None
+    residual_history: tuple | None = None
+
+
+def condition_number_1(A) -> float:
+    """``||A||_1 ||A^-1||_1`` (inf when singular); MATLAB's ``1/rcond`` up to its estimate."""
+    A = np.asarray(A, dtype=float)
+    try:
+        Ainv = np.linalg.solve(A, np.eye(len(A)))
+    except np.linalg.LinAlgError:
+        return math.inf
+    value = float(np.abs(A).sum(0).max() * np.abs(Ainv).sum(0).max())
+    return value if math.isfinite(value) else math.inf
+
+
+def window_uncertainty(c, b, H, w, x, gamma: float, scale: float = 1.0) -> np.ndarray:
+    """One-sigma uncertainty of ``x`` from the window's information matrix (module doc)."""
+    e = (c + 2.0 * (b @ x) + np.einsum("snm,n,m->s", H, x, x)) * scale
+    n = len(x)
+    active = int(np.count_nonzero(w > 0))
+    s2 = max(float(w @ e), 0.0) / max(10 * active - n, 1)
+    info = np.einsum("s,snm->nm", w, H) * scale + gamma * np.eye(n)
+    try:
+        cov = np.linalg.solve(info, np.eye(n))
+    except np.linalg.LinAlgError:
+        return np.full(n, np.nan)
+    return np.sqrt(np.maximum(np.diag(cov), 0.0) * s2)
+
+
+def solve_window(c, b, H, x_prev, config: IRLSConfig, record_history: bool = False):
+    """Algorithm 2 on one window given its per-segment quadratic terms.
+
+    Args:
+        c, b, H: ``quadratic_terms`` of the window's segments, (m,), (m, n), (m, n, n).
+        x_prev: previous estimate (warm start and smoothness anchor), (n,).
+
+    Returns:
+        ``(eta, sd, diagnostics)``; on a guard ``eta`` is ``x_prev`` and ``sd`` is None.
+    """
+    cfg = config
+    m, n = b.shape
+    lo, hi = cfg.lower, cfg.upper
+    scale = 1.0 / m if cfg.scaling == "paper" else 1.0
+    paper = cfg.scaling == "paper"
+    x_prev = np.asarray(x_prev, dtype=float)
+    x_cur = np.clip(x_prev, lo + _START_MARGIN, hi - _START_MARGIN)
+    gI = cfg.gamma * np.eye(n)
+    iters, hist = [], ([], [], [], []) if record_history else None
+    converged, cond, w = True, math.nan, None
+    for _ in range(cfg.max_irls):
+        e = (c + 2.0 * (b @ x_cur) + np.einsum("snm,n,m->s", H, x_cur, x_cur)) * scale  # eq. 26
+        w, _z = mad_weights(e, z_soft=cfg.z_soft, power=cfg.soft_power, z_hard=cfg.z_hard,
+                            hard_drop=cfg.hard_drop, w_min=cfg.w_min, mad_eps=cfg.mad_eps,
+                            median_normalize=not paper, floor=paper)
+        if not np.any(w > 0):
+            return x_prev, None, _diag(STATUS_REJECTED, "every segment rejected", iters, w,
+                                       cond, hist)
+        JGJ = np.einsum("s,snm->nm", w, H) * scale
+        cond = condition_number_1(JGJ)
+        if not cond <= cfg.cond_max:
+            return x_prev, None, _diag(STATUS_ILL_CONDITIONED, f"cond(J^T G J) = {cond:.3g} > "
+                                       f"{cfg.cond_max:g}", iters, w, cond, hist)
+        q = (w @ b) * scale - cfg.gamma * x_prev
+        res = solve_box_qp(JGJ + gI, q, lo, hi, x_cur, cfg.ipm, record_history)
+        iters.append(res.iterations)
+        converged = res.converged
+        if hist is not None:
+            rr = [math.sqrt(max(float(w @ ((c + 2.0 * (b @ xk)
+                                            + np.einsum("snm,n,m->s", H, xk, xk)) * scale)), 0.0))
+                  for xk in res.x_history]
+            for lst, arr in zip(hist, (res.dual_history, res.cent_history, res.gap_history, rr)):
+                lst.append(np.asarray(arr))
+        step = float(np.max(np.abs(res.x - x_cur)))
+        x_cur = res.x
+        if step < cfg.irls_tol:
+            break
+    sd = window_uncertainty(c, b, H, w, x_cur, cfg.gamma, scale)
+    status = STATUS_OK if converged else STATUS_MAX_ITER
+    msg = "" if converged else f"interior point stopped at {cfg.ipm.max_iter} iterations"
+    return x_cur, sd, _diag(status, msg, iters, w, cond, hist)
+
+
+def _diag(status, message, iters, w, cond, hist) -> IRLSDiagnostics:
+    rejected = () if w is None else tuple(int(i) for i in np.flatnonzero(w == 0))
+    kw = {}
+    if hist is not None:
+        kw = dict(dual_history=tuple(hist[0]), cent_history=tuple(hist[1]),
+                  gap_history=tuple(hist[2]), residual_history=tuple(hist[3]))
+    return IRLSDiagnostics(status, message, tuple(iters), w, rejected, cond, **kw)
+
+
+def numba_available() -> bool:
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+class SlidingWindowIRLS:
+    """The paper's estimator (implements :class:`estimators.base.OnlineEstimator`).
+
+    Args:
+        vehicle: the *nominal* vehicle (mass, inertia, allocation, gravity).
+        config: settings (default: the reference code's).
+    """
+
+    name = "irls"
+
+    def __init__(self, vehicle: Vehicle, config: IRLSConfig | None = None):
+        if not isinstance(vehicle, Vehicle):
+            raise ConfigError(f"SlidingWindowIRLS needs a Vehicle, got {type(vehicle).__name__}")
+        self.vehicle = vehicle
+        self.config = config or IRLSConfig()
+        if not isinstance(self.config, IRLSConfig):
+            raise ConfigError("config must be an IRLSConfig")
+        backend = self.config.backend
+        if backend == "numba" and not numba_available():
+            raise ConfigError("IRLS backend 'numba' needs numba (install the 'fast' extra)")
+        if backend == "auto":
+            backend = "numba" if numba_available() and not self.config.record_history else "numpy"
+        self.backend = "numpy" if self.config.record_history else backend
+        self._G = self.config.segment_weights
+        self.reset()
+
+    # online ---------------------------------------------------------------------------
+    def reset(self, eta0=None) -> None:
+        """Forget the window; start from ``eta0`` (default: all ones)."""
+        n = self.vehicle.n_rotors
+        if eta0 is None:
+            eta = np.ones(n)
+        else:
+            eta = np.array(eta0, dtype=float).reshape(-1)
+            if eta.shape != (n,) or not np.all(np.isfinite(eta)):
+                raise ConfigError(f"eta0 must be {n} finite numbers, got {eta0!r}")
+        self._eta = eta
+        self._sd = None
+        self._last: Sample | None = None
+        self._segments: deque = deque(maxlen=self.config.window - 1)
+
+    def _commands(self, f: np.ndarray) -> np.ndarray:
+        if not self.config.clip_commands:
+            return f
+        return np.clip(f, 0.0, self.vehicle.rotor_max_thrust)
+
+    @property
+    def eta(self) -> np.ndarray:
+        """The current estimate (a copy)."""
+        return self._eta.copy()
+
+    def _keep(self, t, status, message="") -> Estimate:
+        return Estimate(float(t), self._eta.copy(), None if self._sd is None else self._sd.copy(),
+                        status, IRLSDiagnostics(status, message))
+
+    def update(self, sample: Sample) -> Estimate:
+        """Add one measurement row; returns the estimate of the window ending at it."""
+        n = self.vehicle.n_rotors
+        try:
+            arrays = [np.asarray(a, dtype=float) for a in sample[1:]]
+            shapes_ok = [a.shape for a in arrays] == [(3,), (3,), (3, 3), (3,), (n,)]
+            finite = shapes_ok and math.isfinite(sample.t) and all(np.all(np.isfinite(a))
+                                                                   for a in arrays)
+        except (TypeError, ValueError):
+            shapes_ok = finite = False
+        t = sample.t if isinstance(sample.t, (int, float)) else math.nan
+        if not finite or (self._last is not None and not t > self._last.t):
+            self._last = None
+            self._segments.clear()
+            why = "non-finite or malformed sample" if not finite else "time not increasing"
+            return self._keep(t, STATUS_BAD_SAMPLE, f"{why}; window restarted")
+        sample = Sample(float(t), *arrays[:4], self._commands(arrays[4]))
+        if self._last is not None:
+            a, z = self._last, sample
+            seg = segment_models(self.vehicle, (a.t, z.t), (a.p, z.p), (a.v, z.v), (a.R, z.R),
+                                 (a.w, z.w), (a.f, z.f))
+            c, b, H = quadratic_terms(seg, self._G)
+            self._segments.append((c[0], b[0], H[0], seg.thrust[0]))
+        self._last = sample
+        if len(self._segments) < self.config.window - 1:
+            return self._keep(t, STATUS_WARMUP)
+        c = np.array([s[0] for s in self._segments])
+        b = np.array([s[1] for s in self._segments])
+        H = np.array([s[2] for s in self._segments])
+        if np.mean([s[3] for s in self._segments]) < self.config.min_thrust:
+            return self._keep(t, STATUS_NO_EXCITATION, "commanded thrust ~ 0 in the window")
+        if self.backend == "numba":
+            from estimators._irls_numba import solve_window_numba
+
+            eta, sd, diag = solve_window_numba(c, b, H, self._eta, self.config)
+        else:
+            eta, sd, diag = solve_window(c, b, H, self._eta, self.config,
+                                         self.config.record_history)
+        if sd is None:
+            return Estimate(float(t), self._eta.copy(), None if self._sd is None
+                            else self._sd.copy(), diag.status, diag)
+        self._eta, self._sd = eta, sd
+        return Estimate(float(t), eta.copy(), sd.copy(), diag.status, diag)
+
+    # offline --------------------------------------------------------------------------
+    def run(self, recording: Recording, progress: bool = False) -> EstimateSeries:
+        """Estimate over a whole recording, one row per sample (the first ``window - 1`` rows
+        are ``warmup``); starts from the current estimate and leaves the estimator reset."""
+        start = time.perf_counter()
+        t, p, v, R, w, f = _recording_arrays(recording, self.vehicle, self.config.window)
+        models = segment_models(self.vehicle, t, p, v, R, w, self._commands(f))
+        c, b, H = quadratic_terms(models, self._G)
+        m = self.config.window - 1
+        kernel = np.ones(m) / m
+        excited = np.convolve(models.thrust, kernel, mode="valid") >= self.config.min_thrust
+        x0 = self._eta.copy()
+        if self.backend == "numba":
+            from estimators._irls_numba import run_windows_numba
+
+            eta_w, sd_w, code_w = run_windows_numba(c, b, H, excited, x0, self.config,
+                                                    progress=progress)
+            status_w = np.asarray(STATUSES, dtype=object)[code_w]
+        else:
+            eta_w, sd_w, status_w = _run_windows_numpy(c, b, H, excited, x0, self.config, progress)
+        N, n = len(t), len(x0)
+        eta = np.empty((N, n))
+        sd = np.full((N, n), np.nan)
+        status = np.empty(N, dtype=object)
+        eta[:m], status[:m] = x0, STATUS_WARMUP
+        eta[m:], sd[m:], status[m:] = eta_w, sd_w, status_w
+        self.reset()
+        return EstimateSeries(t=t.copy(), eta=eta, sd=sd, status=status.astype(str),
+                              estimator=self.name, config=asdict(self.config),
+                              seconds=time.perf_counter() - start)
+
+
+def _run_windows_numpy(c, b, H, excited, x0, cfg: IRLSConfig, progress: bool):
+    from quadfault.progress import progress_bar
+
+    m = cfg.window - 1
+    n_win = len(c) - m + 1
+    n = len(x0)
+    eta = np.empty((n_win, n))
+    sd = np.full((n_win, n), np.nan)
+    status = np.empty(n_win, dtype=object)
+    x, s = x0.copy(), np.full(n, np.nan)
+    bar = progress_bar(total=n_win, desc="irls", unit="win", disable=None if progress else True)
+    for k in range(n_win):
+        if excited[k]:
+            xk, sk, diag = solve_window(c[k:k + m], b[k:k + m], H[k:k + m], x, cfg)
+            if sk is not None:
+                x, s = xk, sk
+            status[k] = diag.status
+        else:
+            status[k] = STATUS_NO_EXCITATION
+        eta[k], sd[k] = x, s
+        if k % 2000 == 1999:
+            bar.update(2000)
+    bar.close()
+    return eta, sd, status
+
+
+def _recording_arrays(recording: Recording, vehicle: Vehicle, window: int):
+    """Measurement arrays of a recording (never its truth columns), validated."""
+    if not isinstance(recording, Recording):
+        raise ConfigError(f"run() needs a Recording, got {type(recording).__name__}")
+    where = recording.path or "recording"
+    if not recording.has_pose:
+        raise ConfigError(f"{where}: the IRLS estimator needs position, velocity and attitude "
+                          "columns (px..pz, vx..vz, qw..qz); this recording is IMU-only")
+    N = len(recording)
+    if N == 0:
+        raise ConfigError(f"{where}: the recording is empty")
+    if N < window:
+        raise ConfigError(f"{where}: the IRLS window of {window} samples is longer than the "
+                          f"recording ({N} samples)")
+    if recording.thrust_cmd.shape[1] != vehicle.n_rotors:
+        raise ConfigError(f"{where}: {recording.thrust_cmd.shape[1]} rotor commands, the "
+                          f"vehicle has {vehicle.n_rotors} rotors")
+    t = np.asarray(recording.t, dtype=float)
+    cols = (("t", t[:, None]), ("px..pz", recording.position), ("vx..vz", recording.velocity),
+            ("qw..qz", recording.quaternion), ("wx..wz", recording.omega),
+            ("f1..f4", recording.thrust_cmd))
+    for name, arr in cols:
+        bad = np.flatnonzero(~np.all(np.isfinite(arr), axis=1))
+        if bad.size:
+            raise ConfigError(f"{where}: NaN or inf in {name} at row {bad[0] + 1}")
+    if np.any(np.diff(t) <= 0):
+        k = int(np.flatnonzero(np.diff(t) <= 0)[0])
+        raise ConfigError(f"{where}: time must be strictly increasing (row {k + 2})")
+    return (t, recording.position, recording.velocity, recording.rotation, recording.omega,
+            recording.thrust_cmd)
