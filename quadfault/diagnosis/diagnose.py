@@ -1,0 +1,164 @@
+"""The diagnosis model: replay -> residuals -> locate -> library fit -> selection -> result.
+
+``Diagnosis(config).fit(recording, vehicle=None) -> DiagnosisResult``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from quadfault.diagnosis.library import EXPLANATIONS, build_library, predict, public_params
+from quadfault.diagnosis.residuals import Replay, noise_scale, prepare
+from quadfault.diagnosis.result import DiagnosisResult, EffectFinding
+from quadfault.diagnosis.select import cross_validate, folds_of, select
+from quadfault.effects import EFFECT_NAMES
+from quadfault.errors import ConfigError
+from quadfault.recording import Recording
+
+
+@dataclass(frozen=True)
+class DiagnosisConfig:
+    """Diagnosis settings.
+
+    Attributes:
+        block_seconds: smoothing block length [s] (block means, see ``residuals``).
+        gap_factor: an interval longer than this times the median spacing is a gap.
+        folds: contiguous time folds of the cross-validation.
+        max_effects: most effects accepted.
+        min_improvement: least held-out RMS reduction (relative to the current model) for
+            accepting an effect [-].
+        bic_margin: least BIC decrease for accepting an effect.
+        screen_top: candidates cross-validated per step (best by BIC).
+        effects: restrict the library to these names (None: all).
+        horizon: open-loop prediction horizon [s].
+        saturate: clip commands to [0, max_thrust] as the nominal motor model does.
+    """
+
+    block_seconds: float = 0.02
+    gap_factor: float = 2.5
+    folds: int = 5
+    max_effects: int = 3
+    min_improvement: float = 0.05
+    bic_margin: float = 10.0
+    screen_top: int = 2
+    effects: tuple | None = None
+    horizon: float = 0.5
+    saturate: bool = True
+
+    def __post_init__(self):
+        if not (0 < self.block_seconds <= 1.0):
+            raise ConfigError(f"block_seconds must be in (0, 1] s, got {self.block_seconds!r}")
+        if not (self.gap_factor > 1):
+            raise ConfigError("gap_factor must be > 1")
+        if not (2 <= self.folds <= 20):
+            raise ConfigError(f"folds must be in [2, 20], got {self.folds!r}")
+        if not (0 <= self.max_effects <= 9):
+            raise ConfigError("max_effects must be in [0, 9]")
+        if self.effects is not None:
+            bad = [e for e in self.effects if e not in EFFECT_NAMES]
+            if bad:
+                raise ConfigError(f"unknown effect {bad[0]!r}; choose from {', '.join(EFFECT_NAMES)}")
+        if not (self.horizon > 0):
+            raise ConfigError("horizon must be positive [s]")
+
+
+def _rms(x, axis=None):
+    return np.sqrt(np.mean(np.square(x), axis=axis))
+
+
+def _explain(step, selected_names, params) -> str:
+    name = step.candidate.name
+    text = EXPLANATIONS[name] + f"; held-out residual RMS -{100 * step.improvement_step:.0f}% " \
+                                "when added."
+    partners = {"thrust_scale": "motor_efficiency", "motor_efficiency": "thrust_scale",
+                "delay": "motor_lag", "motor_lag": "delay"}
+    other = partners.get(name)
+    ratio = step.rivals.get(other)
+    if name == "thrust_scale":
+        text += " Indistinguishable from motor_efficiency with equal eta (one class)."
+    elif name == "motor_efficiency":
+        eta = np.asarray(params["eta"])
+        if np.ptp(eta) < 0.02:
+            text += " The rotors are about equal: the same as thrust_scale (one class)."
+    if other in ("delay", "motor_lag") and ratio is not None and ratio < 1.1:
+        text += (f" {other} fits almost as well (in-sample SSE ratio {ratio:.2f}): the data "
+                 "cannot separate delay from motor_lag (one timing class).")
+    if name == "wind" and "drag" not in selected_names:
+        text += " Force in the world frame; no drag identified, so no air velocity."
+    if name == "wind" and "drag" in selected_names:
+        text += " Air velocity = force / drag coefficient (horizontal mean of kx, ky)."
+    if name == "ground_effect":
+        text += " Height above the ground is taken as -z of the recording (ground at z = 0)."
+    return text
+
+
+class Diagnosis:
+    """Model-mismatch diagnosis (library + optimizer + model, PySINDy-like)."""
+
+    def __init__(self, config: DiagnosisConfig | None = None):
+        self.config = config or DiagnosisConfig()
+
+    def fit(self, recording: Recording, vehicle=None, progress=None) -> DiagnosisResult:
+        """Diagnose ``recording`` against ``vehicle`` (default: the recording's own)."""
+        from quadfault.diagnosis.locate import locate
+        from quadfault.diagnosis.prediction import open_loop_errors
+
+        t_start = time.perf_counter()
+        cfg = self.config
+        rec = recording.without_truth() if isinstance(recording, Recording) else recording
+        rp = prepare(rec, vehicle, block_seconds=cfg.block_seconds, gap_factor=cfg.gap_factor,
+                     saturate=cfg.saturate)
+        library = build_library(rp)
+        if cfg.effects is not None:
+            library = [c for c in library if c.name in cfg.effects]
+        untestable = [c.name for c in library if c.needs_pose and not rp.has_pose]
+        base_res = rp.measured - predict(rp, [])
+        scale = noise_scale(rp, base_res)
+        sel = select(rp, library, scale, folds=cfg.folds, max_effects=cfg.max_effects,
+                     min_improvement=cfg.min_improvement, bic_margin=cfg.bic_margin,
+                     screen_top=cfg.screen_top, progress=progress)
+        before = _rms(sel.baseline.residual / scale)
+        fl = folds_of(rp.n_blocks, cfg.folds)
+        selected = {s.candidate.name: x for s, x in zip(sel.steps, sel.final.x)} if sel.final else {}
+        findings = []
+        for k, step in enumerate(sel.steps):
+            c = step.candidate
+            x, sd = sel.final.x[k], sel.final.sd[k]
+            if k == 0:
+                alone = step.cv
+            else:
+                alone = cross_validate(rp, [c], scale, [x], fl)
+            imp = 1.0 - _rms(alone.residual / scale) / before
+            params, unc = public_params(c, x, sd, rp.vehicle, selected)
+            findings.append((imp, EffectFinding(c.name, params, unc, float(imp),
+                                                _explain(step, selected, params))))
+        findings.sort(key=lambda item: -item[0])
+        after = _rms(sel.final_cv.residual / scale)
+        model_imp = 1.0 - after / before if before > 0 else 0.0
+        terms = sel.final.terms if sel.final else []
+        where, regimes = locate(rp, base_res, scale)
+        unexplained = before > 3.0 and not findings and len(where) > 0
+        verdict = "mismatch" if findings or unexplained else "consistent"
+        prediction = open_loop_errors(rec, rp, terms, cfg.horizon) if rp.has_pose else {}
+        series = {"block_t": rp.block_t, "baseline": sel.baseline.residual,
+                  "model": sel.final_cv.residual, "channels": rp.channels, "regimes": regimes,
+                  "replay": rp, "prediction": prediction}
+        return DiagnosisResult(
+            verdict=verdict,
+            baseline_rmse=dict(zip(rp.channels, map(float, _rms(sel.baseline.residual, 0)))),
+            model_rmse=dict(zip(rp.channels, map(float, _rms(sel.final_cv.residual, 0)))),
+            model_improvement=float(model_imp),
+            effects=tuple(f for _, f in findings),
+            untestable=tuple(untestable),
+            where=tuple(where),
+            regimes=tuple(r for r in regimes),
+            prediction={k: v for k, v in prediction.items() if not k.startswith("_")},
+            channels=rp.channels,
+            scale=tuple(float(s) for s in scale),
+            seconds=float(time.perf_counter() - t_start),
+            series=series,
+        )

@@ -1,0 +1,213 @@
+"""Replay a recording through the nominal model and form per-channel residuals.
+
+Channels (CONTRACT.md sec. 4): ``acc_x, acc_y, acc_z`` -- translational acceleration, world
+NED [m/s^2]; ``alpha_x, alpha_y, alpha_z`` -- angular acceleration, body FRD [rad/s^2]. An
+IMU-only log (no pose) gives ``sf_x, sf_y, sf_z`` instead: accelerometer specific force,
+body FRD [m/s^2].
+
+Smoothing ("block means"): the recording is cut into contiguous blocks of about
+``block_seconds`` (default 20 ms; at least one sample interval). The measured channel of a
+block is the exact mean acceleration over it, ``(v_end - v_start) / (t_end - t_start)``
+(likewise for the body rate), which handles non-uniform sampling without approximation. The
+model channel is the duration-weighted mean over the same block of the acceleration each
+held command produces (command of row k over ``[t_k, t_k+1]``, state at the interval's
+midpoint). Both sides therefore see the same linear smoothing. Intervals longer than
+``gap_factor`` times the median spacing are gaps: no block spans one.
+
+Every channel is normalised by a robust noise scale (MAD of block differences at lag 2, with
+a floor of 1e-3 g for accelerations and 1e-3 g / arm for angular accelerations) so channels
+of different units and vehicles can be pooled.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from quadfault.dynamics import E3, angular_acceleration, translational_acceleration
+from quadfault.errors import ConfigError, RecordingError
+from quadfault.motors import MotorModel
+from quadfault.recording import Recording
+from quadfault.vehicle import Vehicle
+
+POSE_CHANNELS = ("acc_x", "acc_y", "acc_z", "alpha_x", "alpha_y", "alpha_z")
+IMU_CHANNELS = ("sf_x", "sf_y", "sf_z", "alpha_x", "alpha_y", "alpha_z")
+CHANNEL_UNITS = {"acc": "m/s^2", "sf": "m/s^2", "alpha": "rad/s^2"}
+
+
+def channel_unit(name: str) -> str:
+    return CHANNEL_UNITS[name.split("_")[0]]
+
+
+@dataclass(frozen=True, eq=False)
+class Replay:
+    """A recording prepared for the diagnosis (interval arrays have ``M = N - 1`` rows).
+
+    Attributes:
+        vehicle: nominal vehicle.
+        t: sample times [s] (N,); dt: interval lengths [s] (M,).
+        f: saturated rotor commands held over each interval [N] (M, n).
+        p, v, R, w: interval-midpoint position [m], velocity [m/s], rotation (mean of the
+            end-point matrices; only its third column enters the thrust direction) and body
+            rate [rad/s]; ``p, v, R`` are None for an IMU-only log.
+        block: block index of each interval, -1 outside any block (gaps, leftovers) (M,).
+        block_t: block centre times [s] (B,); block_dur: block durations [s] (B,).
+        measured: measured block-mean channels (B, 6).
+        channels: channel names.
+    """
+
+    vehicle: Vehicle
+    t: np.ndarray
+    dt: np.ndarray
+    f: np.ndarray
+    p: np.ndarray | None
+    v: np.ndarray | None
+    R: np.ndarray | None
+    w: np.ndarray
+    block: np.ndarray
+    block_t: np.ndarray
+    block_dur: np.ndarray
+    block_run: np.ndarray
+    measured: np.ndarray
+    channels: tuple
+
+    @property
+    def has_pose(self) -> bool:
+        return self.p is not None
+
+    @property
+    def n_blocks(self) -> int:
+        return len(self.block_t)
+
+    @property
+    def arm(self) -> float:
+        """Largest rotor distance from the centre [m] (from the allocation's moment rows)."""
+        A = self.vehicle.allocation
+        return float(np.max(np.hypot(A[1], A[2])))
+
+    def block_mean(self, x: np.ndarray) -> np.ndarray:
+        """Duration-weighted block means of interval values ``x`` (M, k) -> (B, k)."""
+        ok = self.block >= 0
+        wts = self.dt[ok]
+        out = np.empty((self.n_blocks, x.shape[1]))
+        for j in range(x.shape[1]):
+            out[:, j] = np.bincount(self.block[ok], weights=x[ok, j] * wts,
+                                    minlength=self.n_blocks)
+        return out / self.block_dur[:, None]
+
+    def floors(self) -> np.ndarray:
+        g = self.vehicle.gravity
+        return np.array([1e-3 * g] * 3 + [1e-3 * g / max(self.arm, 1e-3)] * 3)
+
+
+def _blocks(dt: np.ndarray, valid: np.ndarray, q: int):
+    """Assign intervals to blocks of ``q`` consecutive valid intervals."""
+    M = len(dt)
+    block = np.full(M, -1, dtype=int)
+    runs = []
+    k, b = 0, 0
+    run_id = []
+    while k < M:
+        if not valid[k]:
+            k += 1
+            continue
+        start = k
+        while k < M and valid[k]:
+            k += 1
+        n_full = (k - start) // q
+        if n_full:
+            block[start:start + n_full * q] = b + np.arange(n_full * q) // q
+            run_id += [len(runs)] * n_full
+            runs.append((start, start + n_full * q))
+            b += n_full
+    return block, b, np.asarray(run_id, dtype=int)
+
+
+def prepare(recording: Recording, vehicle: Vehicle | None = None, *,
+            block_seconds: float = 0.02, gap_factor: float = 2.5,
+            saturate: bool = True) -> Replay:
+    """Replay ``recording`` (truth is never read) into block-mean measured channels."""
+    if not isinstance(recording, Recording):
+        raise ConfigError(f"diagnosis needs a Recording, got {type(recording).__name__}")
+    veh = vehicle or recording.vehicle
+    where = recording.path or "recording"
+    t = np.asarray(recording.t, dtype=float)
+    if len(t) < 20:
+        raise RecordingError(where, f"too short for a diagnosis ({len(t)} rows, need >= 20)")
+    if recording.thrust_cmd.shape[1] != veh.n_rotors:
+        raise RecordingError(where, f"{recording.thrust_cmd.shape[1]} rotor commands but the "
+                                    f"vehicle has {veh.n_rotors} rotors", key="vehicle")
+    dt = np.diff(t)
+    if not np.all(dt > 0):
+        raise RecordingError(where, "time must be strictly increasing", column="t")
+    for name in ("omega", "thrust_cmd", "position", "velocity", "quaternion", "accel"):
+        arr = getattr(recording, name)
+        if arr is not None and not np.all(np.isfinite(arr)):
+            bad = int(np.flatnonzero(~np.all(np.isfinite(arr.reshape(len(t), -1)), axis=1))[0])
+            raise RecordingError(where, f"non-finite value in {name}", row=bad + 1)
+    f = MotorModel(0.0, saturate).apply(recording.thrust_cmd[:-1], 1.0, veh.rotor_max_thrust, None)
+    med = float(np.median(dt))
+    valid = dt <= gap_factor * med
+    q = max(1, int(round(block_seconds / med)))
+    block, n_blocks, run = _blocks(dt, valid, q)
+    if n_blocks < 10:
+        raise RecordingError(where, f"only {n_blocks} usable blocks of {q} samples "
+                                    "(too short or too many gaps)")
+    ok = block >= 0
+    dur = np.bincount(block[ok], weights=dt[ok], minlength=n_blocks)
+    tc = np.bincount(block[ok], weights=(t[:-1] + 0.5 * dt)[ok] * dt[ok], minlength=n_blocks) / dur
+    ok_idx = np.flatnonzero(ok)
+    first = ok_idx[np.unique(block[ok], return_index=True)[1]]
+    last = first + q  # sample index at the end of each block
+    w_mid = 0.5 * (recording.omega[:-1] + recording.omega[1:])
+    rate = (recording.omega[last] - recording.omega[first]) / dur[:, None]
+    if recording.has_pose:
+        vel = recording.velocity
+        acc = (vel[last] - vel[first]) / dur[:, None]
+        Rm = recording.rotation
+        R_mid = 0.5 * (Rm[:-1] + Rm[1:])
+        p_mid = 0.5 * (recording.position[:-1] + recording.position[1:])
+        v_mid = 0.5 * (vel[:-1] + vel[1:])
+        channels = POSE_CHANNELS
+    else:
+        sf = recording.accel[:-1]
+        acc = None
+        R_mid = p_mid = v_mid = None
+        channels = IMU_CHANNELS
+    rp = Replay(veh, t, dt, f, p_mid, v_mid, R_mid, w_mid, block, tc, dur, run,
+                np.zeros((n_blocks, 6)), channels)
+    if acc is None:
+        acc = rp.block_mean(sf)
+    object.__setattr__(rp, "measured", np.hstack((acc, rate)))
+    return rp
+
+
+def model_channels(rp: Replay, f: np.ndarray, force=None, moment_ext=None,
+                   thrust=None, moment=None) -> np.ndarray:
+    """Interval channels (M, 6) the model predicts for produced rotor thrusts ``f`` [N] and
+    external force (world) [N] / moment (body) [N m] (paper eqs. 2 and 4)."""
+    veh = rp.vehicle
+    if thrust is None or moment is None:
+        wrench = veh.wrench(f)
+        thrust, moment = wrench[:, 0], wrench[:, 1:]
+    if rp.has_pose:
+        acc = translational_acceleration(rp.R, thrust, veh, force)
+    else:  # specific force in the body frame: -T/m e3 (+ body-frame external force)
+        acc = -(thrust / veh.mass)[:, None] * E3
+        if force is not None:
+            acc = acc + force / veh.mass
+    alpha = angular_acceleration(rp.w, moment, veh, moment_ext)
+    return np.hstack((acc, alpha))
+
+
+def noise_scale(rp: Replay, residual: np.ndarray) -> np.ndarray:
+    """Robust per-channel noise scale of block residuals (B, 6): MAD of differences at lag 2
+    within each run, divided by sqrt(2), floored (see module docstring)."""
+    same = rp.block_run[2:] == rp.block_run[:-2]
+    d = (residual[2:] - residual[:-2])[same]
+    if len(d) < 5:
+        d = residual - np.median(residual, axis=0)
+    mad = 1.4826 * np.median(np.abs(d - np.median(d, axis=0)), axis=0) / math.sqrt(2.0)
+    return np.maximum(mad, rp.floors())
