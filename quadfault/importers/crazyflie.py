@@ -145,10 +145,10 @@ def scale_curve_on_segment(curve, u: np.ndarray, thrust_measured: np.ndarray,
     """
     predicted = thrust_from_curve(u[mask], curve).sum(axis=1)
     ok = np.isfinite(predicted) & np.isfinite(thrust_measured[mask])
-    if ok.sum() < 10 or np.mean(predicted[ok]) <= 0:
+    if ok.sum() < 5 or np.mean(predicted[ok]) <= 0:
         from quadfault.errors import ConfigError
 
-        raise ConfigError("calibration segment has fewer than 10 usable airborne samples; "
+        raise ConfigError("calibration segment has fewer than 5 usable airborne samples; "
                           "choose another one (--calibration T0,T1)")
     scale = float(np.mean(thrust_measured[mask][ok]) / np.mean(predicted[ok]))
     return tuple(float(scale * c) for c in curve), scale
