@@ -1,0 +1,382 @@
+"""Train a stable-baselines3 agent (PPO or SAC) on a QuadFault environment.
+
+``python -m agents.train`` or ``quadfault train``. Settings come from flags or a JSON config
+file (``--config``; the same keys as :class:`TrainConfig`, flags given explicitly win)::
+
+    quadfault train --algo ppo --env QuadFaultHover-v0 \\
+        --env-kwargs '{"estimator": "irls", "action_mode": "residual", "duration": 5}' \\
+        --timesteps 20000 --seeds 0 1 2 --n-envs 2 --out runs/ppo_residual
+
+Per seed, ``OUT/seed_<k>/`` holds ``model.zip`` + ``vecnormalize.pkl`` (final),
+``best/best_model.zip`` + ``best/vecnormalize.pkl`` (best evaluation, from ``EvalCallback``),
+``checkpoints/`` (with their normalisation statistics), ``evaluations.npz``,
+``monitor/`` and ``train_config.json``; ``--tensorboard`` adds TensorBoard logs.
+:func:`load_agent` loads a model together with its ``VecNormalize`` statistics.
+
+Needs the ``rl`` extra (stable-baselines3, torch); without it the command stops with a
+one-line error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from dataclasses import asdict, dataclass, field, fields, replace
+from pathlib import Path
+
+from quadfault.errors import ConfigError, QuadfaultError
+from quadfault.fileio import atomic_write_text
+
+ALGORITHMS = ("ppo", "sac")
+MODEL_FILE = "model.zip"
+VECNORM_FILE = "vecnormalize.pkl"
+CONFIG_FILE = "train_config.json"
+
+
+def require_sb3():
+    """Import stable-baselines3 (and torch) or raise a one-line error naming the extra."""
+    try:
+        import stable_baselines3  # noqa: F401
+        import torch  # noqa: F401
+    except ImportError as exc:
+        raise QuadfaultError(
+            f"training needs stable-baselines3 and torch ({exc.name or exc} is missing): install "
+            "a CPU torch, then pip install 'quadfault[rl]' (see the README)") from None
+    import stable_baselines3
+
+    return stable_baselines3
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """One training run per seed.
+
+    Attributes:
+        algo: ``"ppo"`` or ``"sac"``.
+        env_id: a registered Gymnasium id (``QuadFault-v0``, ``QuadFaultHover-v0``, ...).
+        env_kwargs: keywords of the environment (estimator, action_mode, duration, ...).
+        timesteps: environment steps per seed.
+        seeds: one run per seed (seeds the algorithm and the environments).
+        n_envs: parallel environments (subprocesses when > 1).
+        vec_normalize: normalise observations and rewards (``VecNormalize``).
+        eval_freq: evaluate every this many steps (per environment: divided by n_envs).
+        eval_episodes: episodes per evaluation.
+        checkpoint_freq: save a checkpoint every this many steps (0: none).
+        tensorboard: TensorBoard log folder, or None.
+        progress_bar: SB3's progress bar.
+        algo_kwargs: extra keywords of the algorithm (``learning_rate``, ``n_steps``, ...).
+        device: torch device (``"cpu"`` by default).
+    """
+
+    algo: str = "ppo"
+    env_id: str = "QuadFaultHover-v0"
+    env_kwargs: dict = field(default_factory=lambda: {"action_mode": "residual"})
+    timesteps: int = 20_000
+    seeds: tuple = (0,)
+    n_envs: int = 1
+    vec_normalize: bool = True
+    eval_freq: int = 5_000
+    eval_episodes: int = 3
+    checkpoint_freq: int = 0
+    tensorboard: str | None = None
+    progress_bar: bool = False
+    algo_kwargs: dict = field(default_factory=dict)
+    device: str = "cpu"
+
+    def __post_init__(self):
+        if self.algo not in ALGORITHMS:
+            raise ConfigError(f"algo must be one of {ALGORITHMS}, got {self.algo!r}")
+        if not isinstance(self.env_kwargs, dict) or not isinstance(self.algo_kwargs, dict):
+            raise ConfigError("env_kwargs and algo_kwargs must be JSON objects")
+        for key in ("timesteps", "n_envs", "eval_freq", "eval_episodes"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ConfigError(f"{key} must be a positive integer, got {value!r}")
+        if not isinstance(self.checkpoint_freq, int) or self.checkpoint_freq < 0:
+            raise ConfigError(f"checkpoint_freq must be an integer >= 0, got "
+                              f"{self.checkpoint_freq!r}")
+        seeds = tuple(self.seeds) if isinstance(self.seeds, (list, tuple)) else (self.seeds,)
+        if not seeds or any(isinstance(s, bool) or not isinstance(s, int) for s in seeds):
+            raise ConfigError(f"seeds must be a list of integers, got {self.seeds!r}")
+        object.__setattr__(self, "seeds", seeds)
+
+    @classmethod
+    def from_file(cls, path) -> "TrainConfig":
+        try:
+            data = json.loads(Path(path).read_text())
+        except json.JSONDecodeError as exc:
+            raise ConfigError(f"{path}: not valid JSON ({exc.msg}, line {exc.lineno})") from None
+        if not isinstance(data, dict):
+            raise ConfigError(f"{path}: the config must be a JSON object")
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ConfigError(f"{path}: unknown key(s) {', '.join(unknown)}; known: "
+                              f"{', '.join(sorted(known))}")
+        return cls(**data)
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out["seeds"] = list(self.seeds)
+        return out
+
+
+class EnvMaker:
+    """Picklable environment constructor (subprocess workers import the registrations)."""
+
+    def __init__(self, env_id: str, env_kwargs: dict):
+        self.env_id, self.env_kwargs = env_id, dict(env_kwargs)
+
+    def __call__(self):
+        import gymnasium as gym
+
+        import quad_fault_env  # noqa: F401  (registers the ids)
+
+        return gym.make(self.env_id, **self.env_kwargs)
+
+
+def _env_factory(env_id: str, env_kwargs: dict) -> EnvMaker:
+    import gymnasium as gym
+
+    make = EnvMaker(env_id, env_kwargs)
+    try:
+        make().close()
+    except gym.error.Error as exc:
+        raise ConfigError(f"environment {env_id!r}: {exc}") from None
+    except TypeError as exc:
+        raise ConfigError(f"environment {env_id!r} rejected env_kwargs: {exc}") from None
+    return make
+
+
+def make_vec_env(config: TrainConfig, seed: int, n_envs: int, monitor_dir=None):
+    """The (optionally subprocess) vectorised, monitored environment."""
+    from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    make = _env_factory(config.env_id, config.env_kwargs)
+    vec_cls = SubprocVecEnv if n_envs > 1 else DummyVecEnv
+    return sb3_make_vec_env(make, n_envs=n_envs, seed=seed, vec_env_cls=vec_cls,
+                            monitor_dir=None if monitor_dir is None else str(monitor_dir))
+
+
+def _callbacks(config: TrainConfig, run_dir: Path, eval_env):
+    from stable_baselines3.common.callbacks import (BaseCallback, CheckpointCallback,
+                                                    EvalCallback)
+
+    class SaveVecNormalize(BaseCallback):
+        """Saves the normalisation statistics next to the best model."""
+
+        def __init__(self, path: Path):
+            super().__init__()
+            self.path = path
+
+        def _on_step(self) -> bool:
+            vn = self.model.get_vec_normalize_env()
+            if vn is not None:
+                vn.save(str(self.path))
+            return True
+
+    best = run_dir / "best"
+    cbs = [EvalCallback(eval_env, best_model_save_path=str(best), log_path=str(run_dir),
+                        eval_freq=max(1, config.eval_freq // config.n_envs),
+                        n_eval_episodes=config.eval_episodes, deterministic=True,
+                        callback_on_new_best=SaveVecNormalize(best / VECNORM_FILE),
+                        verbose=0)]
+    if config.checkpoint_freq:
+        cbs.append(CheckpointCallback(max(1, config.checkpoint_freq // config.n_envs),
+                                      str(run_dir / "checkpoints"), name_prefix="model",
+                                      save_vecnormalize=config.vec_normalize))
+    return cbs
+
+
+def train_one(config: TrainConfig, seed: int, run_dir: Path, *, force: bool = False,
+              quiet: bool = False):
+    """Train one seed into ``run_dir``; returns the trained model."""
+    sb3 = require_sb3()
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    for name in (MODEL_FILE, VECNORM_FILE, CONFIG_FILE):
+        if (run_dir / name).exists() and not force:
+            raise QuadfaultError(f"{run_dir / name}: already exists; pass --force to overwrite")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    env = make_vec_env(config, seed, config.n_envs, run_dir / "monitor")
+    eval_env = make_vec_env(config, seed + 10_000, 1)
+    if config.vec_normalize:
+        env = VecNormalize(env, norm_obs=True, norm_reward=True)
+        eval_env = VecNormalize(eval_env, norm_obs=True, norm_reward=False, training=False)
+    algo_cls = {"ppo": sb3.PPO, "sac": sb3.SAC}[config.algo]
+    try:
+        model = algo_cls("MlpPolicy", env, seed=seed, device=config.device, verbose=0,
+                         tensorboard_log=config.tensorboard, **config.algo_kwargs)
+    except TypeError as exc:
+        raise ConfigError(f"algo_kwargs rejected by {config.algo.upper()}: {exc}") from None
+    try:
+        model.learn(total_timesteps=config.timesteps, callback=_callbacks(config, run_dir, eval_env),
+                    progress_bar=config.progress_bar and not quiet,
+                    tb_log_name=f"{config.algo}_seed{seed}")
+        save_agent(model, run_dir, force=force)
+        atomic_write_text(run_dir / CONFIG_FILE,
+                          json.dumps(dict(config.to_dict(), seed=seed), indent=2), force=True)
+    finally:
+        env.close()
+        eval_env.close()
+    return model
+
+
+def save_agent(model, run_dir, *, force: bool = False) -> Path:
+    """Save ``model.zip`` and, when the model trains on a ``VecNormalize``, its statistics."""
+    run_dir = Path(run_dir)
+    path = run_dir / MODEL_FILE
+    if path.exists() and not force:
+        raise QuadfaultError(f"{path}: already exists; pass --force to overwrite")
+    model.save(str(path))
+    vn = model.get_vec_normalize_env()
+    if vn is not None:
+        vn.save(str(run_dir / VECNORM_FILE))
+    return path
+
+
+def load_agent(path, env=None, device: str = "cpu"):
+    """Load a saved agent: ``path`` is a run folder or a ``.zip``.
+
+    Returns ``(model, venv)``: ``venv`` is ``env`` (a Gymnasium env or a VecEnv; ``None`` to
+    build one from the saved ``train_config.json``) wrapped in the saved ``VecNormalize``
+    statistics (frozen: ``training=False``, rewards not normalised) when there are any.
+    """
+    sb3 = require_sb3()
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecNormalize
+
+    path = Path(path)
+    zip_path = path / MODEL_FILE if path.is_dir() else path
+    if not zip_path.exists():
+        raise QuadfaultError(f"{zip_path}: no saved model there")
+    folder = zip_path.parent
+    cfg_path = folder / CONFIG_FILE if (folder / CONFIG_FILE).exists() else \
+        folder.parent / CONFIG_FILE
+    if env is None:
+        if not cfg_path.exists():
+            raise QuadfaultError(f"{folder}: no {CONFIG_FILE}; pass the environment explicitly")
+        saved = json.loads(cfg_path.read_text())
+        env = _env_factory(saved["env_id"], saved["env_kwargs"])()
+    venv = env if isinstance(env, VecEnv) else DummyVecEnv([lambda: env])
+    if (folder / VECNORM_FILE).exists():
+        venv = VecNormalize.load(str(folder / VECNORM_FILE), venv)
+        venv.training = False
+        venv.norm_reward = False
+    algo = None
+    if cfg_path.exists():
+        algo = json.loads(cfg_path.read_text()).get("algo")
+    classes = {"ppo": sb3.PPO, "sac": sb3.SAC}
+    order = [classes[algo]] if algo in classes else list(classes.values())
+    for cls in order:
+        try:
+            return cls.load(str(zip_path), env=venv, device=device), venv
+        except (KeyError, ValueError, TypeError, AttributeError):
+            continue
+    raise QuadfaultError(f"{zip_path}: not a PPO or SAC model")
+
+
+# -- command line -----------------------------------------------------------------------------
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    d = TrainConfig()
+    parser.add_argument("--config", help="JSON file with TrainConfig keys (flags override it)")
+    parser.add_argument("--algo", choices=ALGORITHMS, help=f"algorithm (default {d.algo})")
+    parser.add_argument("--env", dest="env_id", help=f"Gymnasium id (default {d.env_id})")
+    parser.add_argument("--env-kwargs", help="JSON object of environment keywords, e.g. "
+                        "'{\"estimator\": \"irls\", \"action_mode\": \"residual\"}'")
+    parser.add_argument("--estimator", choices=("irls", "ekf", "truth", "none"),
+                        help="shortcut for env_kwargs.estimator")
+    parser.add_argument("--action-mode", choices=("motor", "residual", "wrench"),
+                        help="shortcut for env_kwargs.action_mode")
+    parser.add_argument("--timesteps", type=int, help=f"steps per seed (default {d.timesteps})")
+    parser.add_argument("--seeds", type=int, nargs="+", help="one run per seed (default 0)")
+    parser.add_argument("--n-envs", type=int, help=f"parallel environments (default {d.n_envs})")
+    parser.add_argument("--no-vec-normalize", action="store_true",
+                        help="do not normalise observations and rewards")
+    parser.add_argument("--eval-freq", type=int, help=f"steps between evaluations "
+                        f"(default {d.eval_freq})")
+    parser.add_argument("--eval-episodes", type=int, help="episodes per evaluation")
+    parser.add_argument("--checkpoint-freq", type=int, help="steps between checkpoints (0: none)")
+    parser.add_argument("--algo-kwargs", help="JSON object of algorithm keywords")
+    parser.add_argument("--tensorboard", help="TensorBoard log folder")
+    parser.add_argument("--progress", action="store_true", help="SB3's progress bar")
+    parser.add_argument("--out", required=True, help="output folder (one seed_<k>/ per seed)")
+    parser.add_argument("--force", action="store_true", help="overwrite an existing run")
+
+
+def _json_arg(text: str, flag: str) -> dict:
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ConfigError(f"{flag}: not valid JSON ({exc.msg})") from None
+    if not isinstance(value, dict):
+        raise ConfigError(f"{flag}: must be a JSON object")
+    return value
+
+
+def config_from_args(args) -> TrainConfig:
+    cfg = TrainConfig.from_file(args.config) if args.config else TrainConfig()
+    changes = {k: getattr(args, k) for k in ("algo", "env_id", "timesteps", "n_envs", "eval_freq",
+                                             "eval_episodes", "checkpoint_freq", "tensorboard")
+               if getattr(args, k) is not None}
+    if args.seeds is not None:
+        changes["seeds"] = tuple(args.seeds)
+    env_kwargs = dict(cfg.env_kwargs)
+    if args.env_kwargs:
+        env_kwargs.update(_json_arg(args.env_kwargs, "--env-kwargs"))
+    if args.estimator:
+        env_kwargs["estimator"] = args.estimator
+    if args.action_mode:
+        env_kwargs["action_mode"] = args.action_mode
+    changes["env_kwargs"] = env_kwargs
+    if args.algo_kwargs:
+        changes["algo_kwargs"] = _json_arg(args.algo_kwargs, "--algo-kwargs")
+    if args.no_vec_normalize:
+        changes["vec_normalize"] = False
+    if args.progress:
+        changes["progress_bar"] = True
+    return replace(cfg, **changes)
+
+
+def run(args) -> int:
+    from quadfault.progress import enabled
+
+    config = config_from_args(args)
+    require_sb3()
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise QuadfaultError(f"{out}: exists and is not a folder")
+    quiet = getattr(args, "quiet", False)
+    for seed in config.seeds:
+        run_dir = out / f"seed_{seed}"
+        model = train_one(config, seed, run_dir, force=args.force,
+                          quiet=quiet or not enabled())
+        best = _best_mean_reward(run_dir)
+        if not quiet:
+            best_text = "n/a" if math.isnan(best) else f"{best:.3f}"
+            print(f"{config.algo} seed {seed}: {model.num_timesteps} steps, best evaluation "
+                  f"reward {best_text} -> {run_dir}")
+    return 0
+
+
+def _best_mean_reward(run_dir: Path) -> float:
+    import numpy as np
+
+    path = run_dir / "evaluations.npz"
+    if not path.exists():
+        return math.nan
+    data = np.load(path)
+    return float(np.max(data["results"].mean(axis=1))) if data["results"].size else math.nan
+
+
+def main(argv=None) -> int:
+    import sys
+
+    from quadfault.cli import main as cli_main
+
+    return cli_main(["train", *(sys.argv[1:] if argv is None else argv)])
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())
