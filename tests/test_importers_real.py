@@ -1,0 +1,182 @@
+"""Importers on the real data sets in ../shared/data/real (skipped when absent).
+
+Physical sanity: the accelerometer reads (0, 0, -g) in FRD at rest, the thrust curve fitted on
+the calibration segment predicts m g on the held-out rest, quaternions are unit, gyro rates
+are plausible, and the allocation's roll / pitch / yaw signs agree with the measured angular
+acceleration (moment from lagged commands vs d omega / dt).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+REAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
+ESCHMANN = REAL / "eschmann-cf21-sysid"
+NANODRONE = REAL / "nanodrone-cf21bl"
+CRAZYPAD = REAL / "crazypad-cf21-faults"
+G = 9.81
+
+
+def _need(folder: Path):
+    if not folder.is_dir():
+        pytest.skip(f"real data not available ({folder} is absent)")
+
+
+def _moment_alpha_correlation(rec, tau: float, smooth_n: int) -> np.ndarray:
+    """Correlation per axis between the moment of first-order-lagged commanded thrusts
+    (allocation rows Mx, My, Mz) and the body angular acceleration."""
+    dt = np.median(np.diff(rec.t))
+    a = dt / (tau + dt)
+    f = lfilter([a], [1.0, a - 1.0], rec.thrust_cmd, axis=0) if tau > 0 else rec.thrust_cmd
+    moment = f @ rec.vehicle.allocation.T
+    k = np.ones(smooth_n) / smooth_n
+    w = np.stack([np.convolve(c, k, "same") for c in rec.omega.T], axis=1)
+    alpha = np.gradient(w, rec.t, axis=0)
+    return np.array([np.corrcoef(moment[:, i + 1], alpha[:, i])[0, 1] for i in range(3)])
+
+
+def _held_out_thrust_ratio(rec, measured_thrust):
+    seg = rec.meta["calibration"]["segment"]
+    rest = (rec.t < seg[0]) | (rec.t > seg[1])
+    return float(np.mean(measured_thrust[rest]) / np.mean(rec.thrust_cmd[rest].sum(1)))
+
+
+# ----------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def eschmann():
+    _need(ESCHMANN)
+    from quadfault.importers.eschmann import import_eschmann
+
+    return {n: import_eschmann(ESCHMANN / f"{n}.csv.gz") for n in ("log10", "log15", "log16")}
+
+
+def test_eschmann_at_rest_reads_minus_g_in_frd():
+    _need(ESCHMANN)
+    from quadfault.importers.eschmann import import_eschmann
+
+    rec = import_eschmann(ESCHMANN / "log10.csv.gz", keep_all=True)
+    rest = rec.t < rec.meta["import"]["motors_running"][0] - 1.0
+    assert rest.sum() > 1000
+    np.testing.assert_allclose(rec.accel[rest].mean(0), [0, 0, -G], atol=0.3)
+    assert np.abs(rec.omega[rest]).max() < 0.05  # [rad/s], a still gyro
+
+
+def test_eschmann_thrust_curve_and_rates(eschmann):
+    scales = []
+    for name, rec in eschmann.items():
+        assert rec.meta["import"]["dropped_duplicate_times"] == 0
+        assert np.all(np.diff(rec.t) > 0)
+        t0, t1 = rec.meta["import"]["motors_running"]
+        assert rec.t[0] == pytest.approx(t0) and rec.t[-1] == pytest.approx(t1)
+        assert np.abs(rec.omega).max() < 35.0  # within the 2000 deg/s gyro range
+        flying = rec.commands_u.max(1) > 0.3
+        ratio = float(np.mean(-rec.vehicle.mass * rec.accel[flying, 2])
+                      / np.mean(rec.thrust_cmd[flying].sum(1)))
+        assert ratio == pytest.approx(1.0, abs=0.1), name
+        scales.append(rec.meta["calibration"]["fitted"]["thrust_scale"])
+    # one airframe: the fitted scale of Foerster's curve agrees between flights
+    assert 0.7 < min(scales) and max(scales) < 1.0 and np.ptp(scales) < 0.05
+
+
+def test_eschmann_allocation_signs_agree_with_the_gyro(eschmann):
+    # log15: roll/pitch inertia manoeuvres; commands lagged by the ~0.07 s motor delay
+    c15 = _moment_alpha_correlation(eschmann["log15"], 0.07, 20)
+    assert c15[0] > 0.7 and c15[1] > 0.7
+    # log16: yaw manoeuvres
+    c16 = _moment_alpha_correlation(eschmann["log16"], 0.07, 20)
+    assert c16[2] > 0.4
+
+
+# ----------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def nanodrone():
+    _need(NANODRONE)
+    from quadfault.importers.nanodrone import import_nanodrone
+
+    return {p.name.split(".")[0]: import_nanodrone(p) for p in sorted(NANODRONE.glob("*.csv.gz"))}
+
+
+def test_nanodrone_physical_sanity(nanodrone):
+    assert len(nanodrone) == 9
+    for name, rec in nanodrone.items():
+        np.testing.assert_allclose(np.linalg.norm(rec.quaternion, axis=1), 1.0, atol=1e-9)
+        assert -10.8 < rec.accel[:, 2].mean() < -9.6, name  # body FRD specific force
+        assert np.abs(rec.accel[:, :2].mean(0)).max() < 0.5, name
+        assert np.abs(rec.omega).max() < 20.0, name  # README: up to ~9 rad/s (peaks 16)
+        assert np.nanmax(rec.rotor_speed) < 3e5 * 2 * np.pi / 360  # spikes removed
+        ratio = _held_out_thrust_ratio(rec, -rec.vehicle.mass * rec.accel[:, 2])
+        assert ratio == pytest.approx(1.0, abs=0.03), name
+        assert rec.meta["calibration"]["thrust_ratio_on_rest"] == pytest.approx(ratio)
+
+
+def test_nanodrone_allocation_signs_agree_with_the_gyro(nanodrone):
+    for name, rec in nanodrone.items():
+        c = _moment_alpha_correlation(rec, 0.03, 3)
+        assert c[2] > 0.25, name  # yaw: the data README's tau_z formula has the other sign
+    for name in ("square_20251017_run3", "square_20251017_run4"):  # aggressive corners
+        c = _moment_alpha_correlation(nanodrone[name], 0.03, 3)
+        assert c[0] > 0.4 and c[1] > 0.4, name
+
+
+# ----------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def crazypad():
+    _need(CRAZYPAD)
+    from quadfault.importers.crazypad import import_crazypad
+
+    folders = ("normal_flight", "cut_propeller_M3_3mm")
+    return {f"{kind}/{p.parent.name}/{p.name}": import_crazypad(p)
+            for kind in ("motor_data", "controller_data") for c in folders
+            for p in sorted((CRAZYPAD / kind / c).glob("*.csv.gz"))}
+
+
+def _m3_share(rec):
+    air = -rec.position[:, 2] > 0.3
+    u = rec.commands_u[air]
+    return float(np.mean(u[:, 2]) / np.mean(u))
+
+
+def test_crazypad_motor_logs(crazypad):
+    motor = {k: r for k, r in crazypad.items() if k.startswith("motor_data")}
+    assert len(motor) == 18
+    for name, rec in motor.items():
+        assert rec.has_pose and rec.vbat is not None
+        assert 3.0 < rec.vbat.min() and rec.vbat.max() < 4.3, name
+        # reconstructed attitude predicts the logged roll
+        assert rec.meta["import"]["roll_check_rms_deg"] < 3.0, name
+        f_world = np.linalg.norm(np.gradient(rec.velocity, rec.t, axis=0)
+                                 - np.array([0, 0, G]), axis=1)
+        air = -rec.position[:, 2] > 0.3
+        assert np.mean(rec.thrust_cmd[air].sum(1)) == pytest.approx(
+            rec.vehicle.mass * np.mean(f_world[air]), rel=0.1), name
+    # README: the M3 command share is already > 1 in nominal flights (1.128) and grows with
+    # a cut M3 propeller (1.218 at 3 mm)
+    normal = [_m3_share(r) for k, r in motor.items() if "normal_flight" in k]
+    cut = [_m3_share(r) for k, r in motor.items() if "cut_propeller" in k]
+    assert 1.05 < np.mean(normal) < 1.2
+    assert np.mean(cut) > np.mean(normal)
+
+
+def test_crazypad_controller_logs(crazypad):
+    from quadfault.rotation import quat_to_rot
+
+    ctrl = {k: r for k, r in crazypad.items() if k.startswith("controller_data")}
+    motor_normal = [_m3_share(r) for k, r in crazypad.items()
+                    if k.startswith("motor_data/normal")]
+    ctrl_normal = [_m3_share(r) for k, r in ctrl.items() if "normal_flight" in k]
+    # the reconstructed mixer gives the same command split as the logged motor commands
+    assert abs(np.mean(ctrl_normal) - np.mean(motor_normal)) < 0.1
+    for name, rec in ctrl.items():
+        # gyro-integrated attitude: the thrust axis tilts the way the vehicle accelerates
+        # (this fails if the firmware's pitch-rate sign is not undone)
+        thrust_dir = -quat_to_rot(rec.quaternion)[:, :, 2]
+        k = np.ones(25) / 25
+        p = np.stack([np.convolve(c, k, "same") for c in rec.position.T], axis=1)
+        acc = np.gradient(np.gradient(p, rec.t, axis=0), rec.t, axis=0)
+        air = -rec.position[:, 2] > 0.3
+        c = [np.corrcoef(thrust_dir[air, i], acc[air, i])[0, 1] for i in range(2)]
+        assert min(c) > 0.0 and max(c) > 0.2, name
