@@ -163,6 +163,13 @@ def test_px4_import_reports_missing_battery(tmp_path):
     rec = import_px4_ulog(path, vehicle=_vehicle(), thrust_curve=(0.0, 0.0, 10.0))
     assert any("battery" in m for m in rec.meta["import"]["missing"])
     assert rec.thrust_curve == (0.0, 0.0, 10.0)
+    np.testing.assert_allclose(rec.thrust_cmd, 10.0 * rec.commands_u ** 2)
+    imu = import_px4_ulog(path, vehicle=_vehicle(), thrust_curve=(0.0, 0.0, 10.0),
+                          time_base="imu")
+    np.testing.assert_allclose(np.median(np.diff(imu.t)), 0.002, rtol=1e-6)
+    assert len(imu) == pytest.approx(2 * len(rec), abs=2)
+    with pytest.raises(ConfigError, match="time_base"):
+        import_px4_ulog(path, vehicle=_vehicle(), time_base="gps")
 
 
 def test_px4_import_errors(tmp_path):

@@ -36,6 +36,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="calibration segment [s, in the log's clock] for constants fitted by "
                         "the importer (default: see docs/importers.md)")
     p.add_argument("--mass", type=float, default=None, help="take-off mass [kg]")
+    p.add_argument("--time-base", choices=("attitude", "imu"), default="attitude",
+                   help="px4 only: resample every topic onto the attitude (default) or the "
+                        "IMU time stamps")
     p.add_argument("--frame", choices=("NED", "ENU"), default="NED",
                    help="world frame of the written file (default NED)")
 
@@ -107,7 +110,7 @@ def run(args) -> int:
     kwargs = {"keep_all": args.keep_all, "calibration": _calibration(args.calibration),
               "mass": args.mass}
     if args.kind == "px4":
-        kwargs.update(vehicle=vehicle, thrust_curve=curve)
+        kwargs.update(vehicle=vehicle, thrust_curve=curve, time_base=args.time_base)
     rec = importer(args.input, **kwargs)
     if vehicle is not None and args.kind != "px4":
         rec = with_vehicle(rec, vehicle, curve, args.vehicle)

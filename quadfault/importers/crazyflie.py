@@ -97,7 +97,8 @@ CF21_BRUSHED = CrazyflieSpec(
     torque_coefficient=FOERSTER_TORQUE_COEFFICIENT,
     sources={
         "mass": "Eschmann et al. 2024 notebook model (data README)",
-        "geometry": "Eschmann et al. 2024: rotors at (+-0.028, +-0.028) m, yaw signs (-1,+1,-1,+1) FLU",
+        "geometry": "Eschmann et al. 2024: rotors at (+-0.028, +-0.028) m, yaw signs "
+                    "(-1,+1,-1,+1) FLU",
         "inertia": "Foerster 2015 (Crazyflie 2.0), not fitted to these logs",
         "torque_coefficient": "Foerster 2015: 0.005964552 m",
         "thrust_curve": "Foerster 2015 PWM curve, scaled on the calibration segment",

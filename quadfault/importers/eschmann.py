@@ -118,7 +118,8 @@ def import_eschmann(path, *, keep_all: bool = False, calibration=None, mass: flo
             "commands": "u = motor.m* / 65536 (firmware motor power command)",
         },
     }
-    return Recording(t=t, omega=omega, accel=accel, thrust_cmd=thrust_from_curve(arrays["u"], curve),
+    thrust_cmd = thrust_from_curve(arrays["u"], curve)
+    return Recording(t=t, omega=omega, accel=accel, thrust_cmd=thrust_cmd,
                      commands_u=arrays["u"], thrust_curve=curve, vehicle=vehicle, frame="NED",
                      source=f"{DATASET}/{path.name}: Crazyflie 2.1 on-board log (Eschmann et al. "
                             "2024, arXiv:2404.07837), imported by quadfault",

@@ -6,7 +6,7 @@ Topics read (PX4 uses NED world and FRD body frames, like quadfault; nothing is 
 |---|---|---|
 | ``vehicle_attitude`` | ``q[0..3]`` (w, x, y, z; FRD -> NED) | attitude, and the time base |
 | ``vehicle_local_position`` | ``x, y, z, vx, vy, vz`` [m, m/s], NED | position, velocity |
-| ``vehicle_angular_velocity`` | ``xyz[0..2]`` [rad/s] FRD | body rates (else ``sensor_combined.gyro_rad``) |
+| ``vehicle_angular_velocity`` | ``xyz[0..2]`` [rad/s] FRD | body rates (or ``gyro_rad``) |
 | ``sensor_combined`` | ``accelerometer_m_s2[0..2]``, ``gyro_rad[0..2]`` | specific force FRD |
 | ``actuator_motors`` | ``control[0..3]`` normalised 0..1 | commands ``u1..u4`` |
 | ``actuator_outputs`` | ``output[0..3]`` PWM [us] | fallback: u = (pwm - 1000) / 1000 |
@@ -34,7 +34,8 @@ import numpy as np
 
 from quadfault.errors import ConfigError, QuadfaultError, RecordingError
 from quadfault.importers import gap_stats, running_span
-from quadfault.importers.crazyflie import calibration_mask, scale_curve_on_segment, thrust_from_curve
+from quadfault.importers.crazyflie import (calibration_mask, scale_curve_on_segment,
+                                           thrust_from_curve)
 from quadfault.recording import Recording
 
 TOPICS = ("vehicle_attitude", "vehicle_local_position", "vehicle_angular_velocity",
@@ -248,7 +249,8 @@ def import_px4_ulog(path, *, vehicle=None, thrust_curve=None, keep_all: bool = F
         if "acc" not in res:
             raise ConfigError(f"{path}: no thrust curve in the vehicle file and no accelerometer "
                               "to fit one on")
-        thrust_curve, scale = scale_curve_on_segment(base, res["u"], -vehicle.mass * res["acc"][:, 2],
+        measured = -vehicle.mass * res["acc"][:, 2]  # collective thrust from the IMU [N]
+        thrust_curve, scale = scale_curve_on_segment(base, res["u"], measured,
                                                      calibration_mask(t, calibration))
         meta_cal = {"segment": [float(x) for x in calibration],
                     "fitted": {"thrust_scale": scale, "thrust_curve": list(thrust_curve),
