@@ -4,5 +4,8 @@ Both implement :class:`estimators.base.OnlineEstimator`.
 """
 
 from estimators.base import Estimate, EstimateSeries, OnlineEstimator, Sample
+from estimators.ipm import IPMSettings
+from estimators.irls import IRLSConfig, IRLSDiagnostics, SlidingWindowIRLS
 
-__all__ = ["Estimate", "EstimateSeries", "OnlineEstimator", "Sample"]
+__all__ = ["Estimate", "EstimateSeries", "IPMSettings", "IRLSConfig", "IRLSDiagnostics",
+           "OnlineEstimator", "Sample", "SlidingWindowIRLS"]
