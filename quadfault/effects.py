@@ -105,8 +105,9 @@ def lag_series(f: np.ndarray, dt: np.ndarray, tau: float) -> np.ndarray:
 
 def drag_force(R: np.ndarray, v_air: np.ndarray, k) -> np.ndarray:
     """``-R diag(k) R^T v_air`` [N] for air-relative velocity ``v_air`` (world) [m/s]."""
-    vb = np.einsum("...ji,...j->...i", R, v_air)
-    return -np.einsum("...ij,...j->...i", R, vb * np.asarray(k, dtype=float))
+    R = np.asarray(R, dtype=float)
+    vb = (np.swapaxes(R, -1, -2) @ np.asarray(v_air, dtype=float)[..., None])[..., 0]
+    return -(R @ (vb * np.asarray(k, dtype=float))[..., None])[..., 0]
 
 
 def com_offset_moment(thrust, offset) -> np.ndarray:
@@ -127,7 +128,7 @@ def inertia_moment(w, moment, inertia, true_inertia) -> np.ndarray:
     """Moment [N m] that makes a body of inertia ``inertia`` move like one of
     ``true_inertia`` under ``moment`` (paper eq. 4 solved for both)."""
     w = np.asarray(w, dtype=float)
-    alpha_true = np.linalg.solve(true_inertia, (moment - cross(w, w @ true_inertia.T))[..., None])[..., 0]
+    alpha_true = (moment - cross(w, w @ true_inertia.T)) @ np.linalg.inv(true_inertia).T
     return alpha_true @ inertia.T - moment + cross(w, w @ inertia.T)
 
 

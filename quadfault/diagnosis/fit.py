@@ -38,6 +38,7 @@ class Fit:
     n: int
     status: int = 0
     message: str = ""
+    n_fixed: int = 0
 
     @property
     def terms(self) -> list:
@@ -45,7 +46,7 @@ class Fit:
 
     @property
     def n_params(self) -> int:
-        return sum(c.size for c in self.candidates)
+        return sum(c.size for c in self.candidates) + self.n_fixed
 
     def bic(self) -> float:
         """Gaussian BIC ``n ln(SSE / n) + p ln n`` (normalised residuals)."""
@@ -70,12 +71,15 @@ def residual_vector(rp: Replay, terms, scale: np.ndarray, mask) -> np.ndarray:
 
 
 def fit(rp: Replay, candidates: list[Candidate], scale: np.ndarray, mask=None, init=None,
-        loss: str = "soft_l1", f_scale: float = 2.0, max_nfev: int = 60) -> Fit:
+        loss: str = "soft_l1", f_scale: float = 2.0, max_nfev: int = 30,
+        fixed=()) -> Fit:
     """Fit ``candidates`` jointly on the blocks in ``mask`` (all by default).
 
     ``init`` gives start vectors (None entries: the candidate's own start guesses, the best
-    of which by cost is used).
+    of which by cost is used). ``fixed`` terms ``[(cand, x), ...]`` are part of the model but
+    not fitted (their parameters still count in :meth:`Fit.bic`).
     """
+    fixed = list(fixed)
     cands = list(candidates)
     mask = np.ones(rp.n_blocks, dtype=bool) if mask is None else mask
     init = list(init) if init is not None else [None] * len(cands)
@@ -91,7 +95,7 @@ def fit(rp: Replay, candidates: list[Candidate], scale: np.ndarray, mask=None, i
         best, best_cost = x[j], np.inf
         for s in c.starts:
             trial = x[:j] + [np.asarray(s, dtype=float)] + x[j + 1:]
-            r = residual_vector(rp, list(zip(cands, trial)), scale, mask)
+            r = residual_vector(rp, fixed + list(zip(cands, trial)), scale, mask)
             cost = float(np.sum(np.log1p(r * r / f_scale ** 2)))
             if cost < best_cost:
                 best, best_cost = np.asarray(s, dtype=float), cost
@@ -99,7 +103,7 @@ def fit(rp: Replay, candidates: list[Candidate], scale: np.ndarray, mask=None, i
     x0 = _clip_inside(np.concatenate(x), lo, hi)
 
     def fun(xv):
-        return residual_vector(rp, list(zip(cands, _split(xv, cands))), scale, mask)
+        return residual_vector(rp, fixed + list(zip(cands, _split(xv, cands))), scale, mask)
 
     res = least_squares(fun, x0, bounds=(lo, hi), loss=loss, f_scale=f_scale,
                         max_nfev=max_nfev * len(x0), x_scale="jac", method="trf")
@@ -113,4 +117,5 @@ def fit(rp: Replay, candidates: list[Candidate], scale: np.ndarray, mask=None, i
     except np.linalg.LinAlgError:
         sd = np.full(p, np.nan)
     return Fit(tuple(cands), tuple(_split(res.x, cands)), tuple(_split(sd, cands)),
-               float(r @ r), n, int(res.status), str(res.message))
+               float(r @ r), n, int(res.status), str(res.message),
+               sum(c.size for c, _ in fixed))

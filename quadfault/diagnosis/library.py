@@ -95,7 +95,7 @@ def build_library(rp: Replay) -> list[Candidate]:
                   tuple(((k * arm) ** 2,) for k in (0.3, 0.6, 1.0, 1.5)), "thrust", 1,
                   needs_pose=True),
         Candidate("delay", ("delay [s]",), (0.0,), (0.3,), (0.0,),
-                  tuple((d,) for d in np.unique(np.r_[np.arange(0.0, 0.2, max(dt, 0.005)), 0.25])),
+                  tuple((d,) for d in np.unique(np.r_[np.arange(0.0, 0.2, max(dt, 0.01)), 0.25])),
                   "thrust", 2),
         Candidate("motor_lag", ("tau [s]",), (1e-4,), (0.6,), (1e-4,),
                   tuple((tau,) for tau in (0.005, 0.01, 0.02, 0.04, 0.07, 0.12, 0.2, 0.35)),

@@ -89,13 +89,16 @@ class Replay:
 
     def block_mean(self, x: np.ndarray) -> np.ndarray:
         """Duration-weighted block means of interval values ``x`` (M, k) -> (B, k)."""
-        ok = self.block >= 0
-        wts = self.dt[ok]
-        out = np.empty((self.n_blocks, x.shape[1]))
-        for j in range(x.shape[1]):
-            out[:, j] = np.bincount(self.block[ok], weights=x[ok, j] * wts,
-                                    minlength=self.n_blocks)
-        return out / self.block_dur[:, None]
+        S = self.__dict__.get("_averager")
+        if S is None:
+            from scipy.sparse import csr_matrix
+
+            ok = np.flatnonzero(self.block >= 0)
+            blk = self.block[ok]
+            S = csr_matrix((self.dt[ok] / self.block_dur[blk], (blk, ok)),
+                           shape=(self.n_blocks, len(self.dt)))
+            object.__setattr__(self, "_averager", S)
+        return np.asarray(S @ x)
 
     def floors(self) -> np.ndarray:
         g = self.vehicle.gravity

@@ -101,8 +101,9 @@ def select(rp: Replay, library: list[Candidate], scale: np.ndarray, *, folds: in
         if not pool:
             break
         fits = []
-        for c in pool:
-            f = fit(rp, current + [c], scale, init=x_cur + [None])
+        fixed = list(zip(current, x_cur))
+        for c in pool:  # screening: the new effect alone on top of the current model
+            f = fit(rp, [c], scale, fixed=fixed)
             fits.append((f.bic(), c, f))
             if progress is not None:
                 progress()
@@ -110,10 +111,13 @@ def select(rp: Replay, library: list[Candidate], scale: np.ndarray, *, folds: in
         screening = tuple((c.name, b) for b, c, _ in fits)
         best = None
         for b, c, f in fits[:screen_top]:
-            cv = cross_validate(rp, current + [c], scale, list(f.x), fl)
+            cv = cross_validate(rp, current + [c], scale, x_cur + list(f.x), fl, max_nfev=15)
             if best is None or cv.sse < best[3].sse:
                 best = (b, c, f, cv)
         b, c, f, cv = best
+        if current:  # joint refit of the winner with the accepted effects
+            f = fit(rp, current + [c], scale, init=x_cur + list(f.x))
+            b = f.bic()
         gain = 1.0 - np.sqrt(cv.sse / cur_cv.sse)
         if gain < min_improvement or b > cur_bic - bic_margin:
             break

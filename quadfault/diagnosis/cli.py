@@ -1,0 +1,60 @@
+"""``quadfault diagnose FILE.csv --json OUT.json [--report DIR] [--force]``."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from quadfault.errors import ConfigError
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("recording", metavar="FILE.csv", help="recording (quadfault-recording/1)")
+    p.add_argument("--json", required=True, metavar="OUT.json",
+                   help="diagnosis result (CONTRACT.md section 4)")
+    p.add_argument("--report", metavar="DIR", default=None,
+                   help="also write DIR/report.md and PNG plots")
+    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    p.add_argument("--effects", default=None, metavar="NAME,...",
+                   help="restrict the candidate library (default: all effects)")
+    p.add_argument("--block", type=float, default=0.02,
+                   help="smoothing block length [s] (default 0.02)")
+    p.add_argument("--max-effects", type=int, default=3, help="most effects accepted (default 3)")
+
+
+def run(args) -> int:
+    from quadfault.diagnosis import Diagnosis, DiagnosisConfig
+    from quadfault.fileio import atomic_write_text, check_writable
+    from quadfault.progress import progress_bar
+    from quadfault.recording import read_recording
+
+    out = Path(args.json)
+    if out.suffix != ".json":
+        raise ConfigError(f"--json must end in .json, got {args.json!r}")
+    check_writable([out], force=args.force)
+    if args.report is not None:
+        from quadfault.diagnosis.report import FILES
+
+        rdir = Path(args.report)
+        if rdir.exists():
+            check_writable([rdir / f for f in FILES], force=args.force)
+    effects = None
+    if args.effects:
+        effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
+    cfg = DiagnosisConfig(block_seconds=args.block, max_effects=args.max_effects, effects=effects)
+    rec = read_recording(args.recording).without_truth()
+    bar = progress_bar(total=None, desc="diagnose", unit="fit", disable=None if not args.quiet else True)
+    try:
+        res = Diagnosis(cfg).fit(rec, progress=lambda: bar.update(1))
+    finally:
+        bar.close()
+    atomic_write_text(out, res.to_json(), force=args.force)
+    if args.report is not None:
+        from quadfault.diagnosis.report import write_report
+
+        write_report(res, args.report, source=Path(args.recording).name, force=args.force)
+    if not args.quiet:
+        names = ", ".join(f"{e.name} ({100 * e.improvement:.0f}%)" for e in res.effects) or "none"
+        print(f"{res.verdict}: effects {names}; held-out improvement "
+              f"{100 * res.model_improvement:.1f}%; wrote {out}")
+    return 0
