@@ -4,7 +4,8 @@
 ``human`` draws the same figure in a pyplot window and falls back silently to off-screen
 drawing when no display is available (headless machines never crash).
 
-The figure shows altitude-up (ENU-like) axes for readability: x north, y east, up = -z_NED.
+The 3-D view uses right-handed east-north-up axes for readability (x = east = p_y,
+y = north = p_x, up = -p_z of the internal NED position).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import numpy as np
 
 from quad_fault_env.observation import SD_MAX
 
-FIGSIZE = (8.0, 4.0)  # [in]
+FIGSIZE = (9.0, 4.0)  # [in]
 DPI = 80
 
 
@@ -48,14 +49,14 @@ class FlightRenderer:
 
             self.fig = Figure(figsize=FIGSIZE, dpi=DPI)
             FigureCanvasAgg(self.fig)
-        self.ax3d = self.fig.add_subplot(1, 2, 1, projection="3d")
-        self.axbar = self.fig.add_subplot(1, 2, 2)
+        self.ax3d = self.fig.add_axes([0.0, 0.02, 0.5, 0.9], projection="3d")
+        self.axbar = self.fig.add_axes([0.6, 0.12, 0.37, 0.76])
 
     @staticmethod
     def _up(p):
-        """NED -> (north, east, up) for plotting."""
+        """NED -> (east, north, up) for plotting."""
         p = np.asarray(p, dtype=float)
-        return np.stack((p[..., 0], p[..., 1], -p[..., 2]), axis=-1)
+        return np.stack((p[..., 1], p[..., 0], -p[..., 2]), axis=-1)
 
     def draw(self, env) -> np.ndarray:
         ax, bar = self.ax3d, self.axbar
@@ -66,8 +67,8 @@ class FlightRenderer:
         path = self._up(np.array(env.history))
         ts = np.linspace(0.0, max(env.scenario.duration, 1e-3), 200)
         ref = self._up(env.scenario.trajectory(ts).position)
-        ax.plot(ref[:, 0], ref[:, 1], ref[:, 2], color="0.7", lw=1, label="reference")
         ax.plot(path[:, 0], path[:, 1], path[:, 2], color="tab:blue", lw=1.5, label="flown")
+        ax.plot(ref[:, 0], ref[:, 1], ref[:, 2], color="0.5", lw=1, ls="--", label="reference")
         # the vehicle: arms from the centre to each rotor, drawn in the world frame
         p = np.asarray(state.p, dtype=float)
         scale = 2.0  # exaggerate the arms so the attitude is visible [-]
@@ -82,9 +83,10 @@ class FlightRenderer:
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
         ax.set_zlim(min(lo[2], 0.0), hi[2])
-        ax.set_xlabel("north [m]", fontsize=7)
-        ax.set_ylabel("east [m]", fontsize=7)
-        ax.set_zlabel("up [m]", fontsize=7)
+        ax.set_xlabel("east [m]", fontsize=7)
+        ax.set_ylabel("north [m]", fontsize=7)
+        ax.set_zlabel("up [m]", fontsize=7, labelpad=-2)
+        ax.legend(fontsize=6, loc="upper left")
         ax.tick_params(labelsize=6)
         ax.set_title(f"{env.scenario.name}  t = {t:5.2f} s", fontsize=9)
         # eta_hat (with one-sigma bars) vs the true efficiency
@@ -103,7 +105,6 @@ class FlightRenderer:
         bar.set_ylabel("motor efficiency [-]", fontsize=8)
         bar.legend(fontsize=7, loc="lower right")
         bar.set_title(f"estimator status: {est.status}", fontsize=9)
-        self.fig.tight_layout()
         self.fig.canvas.draw()
         frame = np.asarray(self.fig.canvas.buffer_rgba())[..., :3].copy()
         if self.human:

@@ -78,7 +78,8 @@ class QuadFaultEnv(gym.Env):
             :class:`~quadfault.scenarios.Scenario`, or ``"random"``
             (:func:`~quadfault.scenarios.random_scenario` with ``self.np_random``).
         random_trajectory: trajectory of random scenarios (``"random"``, ``"hover"``, ...).
-        duration: episode length [s] (default 20 s, or the Scenario's own duration).
+        duration: episode length [s] of named and random scenarios (default 20 s); a
+            Scenario object brings its own ``duration``.
         thrust_noise: sigma_f overriding the scenario's (None keeps it).
         sensor_noise: a :class:`~quadfault.simulator.SensorNoise` (default noise-free).
         action_mode, residual_scale, moment_scale: see ``ActionConfig``.
@@ -186,7 +187,7 @@ class QuadFaultEnv(gym.Env):
     # -- scenario and reset ------------------------------------------------------------------
     def _make_scenario(self, spec) -> Scenario:
         if isinstance(spec, Scenario):
-            sc = spec if self.duration is None else spec.replace(duration=self.duration)
+            sc = spec  # a Scenario object brings its own duration
         elif spec == "random":
             sc = random_scenario(self.np_random, self.duration or DEFAULT_DURATION,
                                  trajectory=self.random_trajectory)
