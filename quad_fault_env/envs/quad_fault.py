@@ -71,6 +71,24 @@ class QuadFaultEnv(gym.Env):
     Action: Box [-1, 1]^4, see :class:`~quad_fault_env.envs.config.ActionConfig`. A wrong
     shape, NaN/inf or a value outside [-1, 1] (beyond 1e-6) raises ``ValueError``.
 
+    Reward: :class:`~quad_fault_env.envs.config.RewardConfig` (bounded, tracking and effort).
+    Termination: :class:`~quad_fault_env.envs.config.TerminationLimits`, with the reason in
+    ``info["termination_reason"]`` (``crash``, ``out_of_bounds``, ``excessive_tilt``,
+    ``non_finite``; None otherwise). Truncation when the scenario's duration is reached (and
+    through ``max_episode_steps`` of the registration).
+
+    ``info`` (truth lives here, never in the observation unless ``estimator="truth"``):
+    ``t`` [s]; ``eta_true`` at ``t``; ``eta_hat``, ``eta_sd`` (None if not reported),
+    ``estimator``, ``estimator_status``, ``estimator_diagnostics`` of the newest estimate;
+    ``position_error`` (true, world NED [m]) and its norm ``tracking_error``;
+    ``motor_command`` [N] held over the step; ``fault_events`` (faults whose onset or end fell
+    in the step: dicts ``motor, onset, end, level, ramp, kind, t``); ``faults`` (all faults of
+    the episode); ``scenario``; ``thrust_noise``; ``samples`` (the step's measurement stream:
+    one :class:`estimators.base.Sample` per physics substep, the command held over it; the
+    env's estimator reads every ``estimator_stride``-th one); ``eta_true_samples`` and
+    ``specific_force_samples`` (accelerometer, body FRD [m/s^2]) aligned with ``samples``;
+    ``termination_reason``.
+
     Keyword arguments:
         estimator: ``"irls" | "ekf" | "truth" | "none"`` or an estimator object.
         estimator_kwargs: passed to the estimator's constructor.
