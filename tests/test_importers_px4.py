@@ -116,12 +116,18 @@ def _hover_log(path, *, n=200, with_battery=True):
 
 
 def _vehicle():
-    from quadfault.vehicle import Vehicle
+    from quadfault.importers.px4_ulog import px4_quad_x_vehicle
 
-    # PX4 quad X motor order: FR, RL, FL, RR (FRD)
-    d = 0.17
-    return Vehicle.from_rotors([(d, d), (-d, -d), (d, -d), (-d, d)], [1, 1, -1, -1], 0.016,
-                               mass=1.5, inertia=[0.03, 0.03, 0.05])
+    return px4_quad_x_vehicle(1.5, [0.03, 0.03, 0.05], 0.17, 0.016)
+
+
+def test_px4_quad_x_allocation_signs():
+    A = _vehicle().allocation  # motor order FR, RL, FL, RR
+    e = np.eye(4)
+    assert (A @ (e[2] + e[1]))[1] > 0  # left rotors up: +roll (FRD)
+    assert (A @ (e[0] + e[2]))[2] > 0  # front rotors up: +pitch (nose up)
+    assert (A @ (e[0] + e[1]))[3] > 0  # CCW rotors 1, 2 react clockwise: +yaw (FRD)
+    np.testing.assert_allclose(A @ np.ones(4), [4, 0, 0, 0], atol=1e-15)
 
 
 def test_px4_import_of_a_written_ulog(tmp_path):
@@ -203,3 +209,13 @@ def test_px4_cli_with_vehicle_file(tmp_path):
     res = subprocess.run(cmd[:-2], capture_output=True, text=True)  # no --vehicle
     assert res.returncode == 2
     assert res.stderr.count("\n") == 1 and "vehicle" in res.stderr
+    flags = ["--mass", "1.5", "--arm", "0.17", "--torque-coefficient", "0.016",
+             "--inertia", "0.03,0.03,0.05"]
+    res = subprocess.run(cmd[:-2] + ["--force"] + flags, capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    from quadfault.recording import read_recording
+
+    np.testing.assert_allclose(read_recording(tmp_path / "o.csv").vehicle.allocation,
+                               v.allocation)
+    res = subprocess.run(cmd[:-2] + ["--force"] + flags[:-2], capture_output=True, text=True)
+    assert res.returncode == 2 and "--inertia" in res.stderr

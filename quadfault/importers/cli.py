@@ -36,6 +36,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="calibration segment [s, in the log's clock] for constants fitted by "
                         "the importer (default: see docs/importers.md)")
     p.add_argument("--mass", type=float, default=None, help="take-off mass [kg]")
+    p.add_argument("--arm", type=float, default=None,
+                   help="px4 without --vehicle: per-axis rotor offset d [m] of a quad X")
+    p.add_argument("--torque-coefficient", type=float, default=None,
+                   help="px4 without --vehicle: yaw torque per newton of thrust [m]")
+    p.add_argument("--inertia", default=None, metavar="JXX,JYY,JZZ",
+                   help="px4 without --vehicle: diagonal inertia [kg m^2]")
     p.add_argument("--time-base", choices=("attitude", "imu"), default="attitude",
                    help="px4 only: resample every topic onto the attitude (default) or the "
                         "IMU time stamps")
@@ -80,6 +86,21 @@ def _calibration(text):
     return (t0, t1)
 
 
+def _vehicle_from_flags(args):
+    from quadfault.importers.px4_ulog import px4_quad_x_vehicle
+
+    if args.mass is None or args.torque_coefficient is None or args.inertia is None:
+        raise ConfigError("a vehicle from flags needs --mass, --arm, --torque-coefficient and "
+                          "--inertia (or give --vehicle VEHICLE.json)")
+    try:
+        J = [float(x) for x in args.inertia.split(",")]
+    except ValueError:
+        raise ConfigError(f"--inertia expects JXX,JYY,JZZ, got {args.inertia!r}") from None
+    if len(J) != 3:
+        raise ConfigError(f"--inertia expects 3 numbers, got {args.inertia!r}")
+    return px4_quad_x_vehicle(args.mass, J, args.arm, args.torque_coefficient)
+
+
 def with_vehicle(rec, vehicle, curve, source: str):
     """``rec`` with its nominal vehicle (and thrust curve) replaced by a user's file."""
     from quadfault.importers.crazyflie import thrust_from_curve
@@ -109,6 +130,8 @@ def run(args) -> int:
     importer = get_importer(args.kind)
     kwargs = {"keep_all": args.keep_all, "calibration": _calibration(args.calibration),
               "mass": args.mass}
+    if args.kind == "px4" and vehicle is None and args.arm is not None:
+        vehicle = _vehicle_from_flags(args)
     if args.kind == "px4":
         kwargs.update(vehicle=vehicle, thrust_curve=curve, time_base=args.time_base)
     rec = importer(args.input, **kwargs)

@@ -37,12 +37,34 @@ from quadfault.importers import gap_stats, running_span
 from quadfault.importers.crazyflie import (calibration_mask, scale_curve_on_segment,
                                            thrust_from_curve)
 from quadfault.recording import Recording
+from quadfault.vehicle import Vehicle, allocation_from_rotors
 
 TOPICS = ("vehicle_attitude", "vehicle_local_position", "vehicle_angular_velocity",
           "sensor_combined", "actuator_motors", "actuator_outputs", "battery_status")
 N_MOTORS = 4
 DEFAULT_CALIBRATION_FRACTION = (0.0, 0.3)
 PWM_MIN_US, PWM_MAX_US = 1000.0, 2000.0
+
+
+#: PX4 "quad x" geometry, motor order of actuator_motors (FRD, units of the per-axis offset):
+#: 1 front-right (CCW), 2 rear-left (CCW), 3 front-left (CW), 4 rear-right (CW). A CCW rotor
+#: (seen from above) reacts with a clockwise torque: +z in FRD.
+PX4_QUAD_X_XY = ((1.0, 1.0), (-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0))
+PX4_QUAD_X_YAW = (1.0, 1.0, -1.0, -1.0)
+
+
+def px4_quad_x_vehicle(mass: float, inertia, arm: float, torque_coefficient: float) -> Vehicle:
+    """A PX4 quad X vehicle in its actuator order.
+
+    Args:
+        mass: [kg]; inertia: (Jxx, Jyy, Jzz) [kg m^2]; arm: per-axis rotor offset d [m];
+        torque_coefficient: yaw torque per newton of thrust [m].
+    """
+    if not (arm > 0 and torque_coefficient > 0):
+        raise ConfigError("--arm and --torque-coefficient must be positive")
+    alloc = allocation_from_rotors(np.asarray(PX4_QUAD_X_XY) * arm, PX4_QUAD_X_YAW,
+                                   torque_coefficient)
+    return Vehicle(mass=mass, inertia=inertia, allocation=alloc, name="PX4 quad X")
 
 
 # ----------------------------------------------------------------------------------------
