@@ -91,6 +91,36 @@ def test_eschmann_allocation_signs_agree_with_the_gyro(eschmann):
     assert c16[2] > 0.4
 
 
+def _first_order(t, u, tau):
+    """Exact zero-order-hold discretisation of tau dx/dt = u - x on the log's own time grid."""
+    x = np.empty_like(u)
+    x[0] = u[0]
+    a = 1.0 - np.exp(-np.diff(t) / tau)
+    for k in range(1, len(u)):
+        x[k] = x[k - 1] + a[k - 1] * (u[k - 1] - x[k - 1])
+    return x
+
+
+def test_eschmann_log10_shows_the_readme_motor_lag(eschmann):
+    # README: on the thrust segment (35-65 s) the fit of m a_z to the summed thrust improves
+    # by ~63 % when the commands pass through a ~0.08 s first-order lag
+    from quadfault.importers.crazyflie import thrust_from_curve
+
+    rec = eschmann["log10"]
+    seg = (rec.t >= 35.0) & (rec.t <= 65.0)
+    measured = -rec.vehicle.mass * rec.accel[seg, 2]
+
+    def rmse(tau):
+        u = rec.commands_u if tau == 0 else _first_order(rec.t, rec.commands_u, tau)
+        return np.sqrt(np.mean((measured - thrust_from_curve(u[seg], rec.thrust_curve).sum(1))
+                               ** 2))
+
+    taus = [0.03, 0.05, 0.08, 0.11, 0.15]
+    errors = [rmse(tau) for tau in taus]
+    assert 0.05 <= taus[int(np.argmin(errors))] <= 0.11
+    assert min(errors) < 0.5 * rmse(0.0)
+
+
 # ----------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def nanodrone():
