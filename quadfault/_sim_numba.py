@@ -13,9 +13,10 @@ equations are not a second model but a transcription, guarded by
 ``tests/test_simulator_fast.py`` (compiled == pure to <= 1e-9 over a 10 s flight).
 
 Random numbers: ``Generator.standard_normal((n, m))`` yields exactly the stream of ``n * m``
-single draws taken in row order, so one block drawn up front, with the columns laid out in
-the order the pure loop draws them each step (sensor p, v, [attitude], gyro; the motors;
-the accelerometer), reproduces the pure path's noise bit for bit (see :func:`noise_layout`).
+single draws taken in row order, so blocks of rows drawn before each chunk of steps, with the
+columns laid out in the order the pure loop draws them each step (sensor p, v, [attitude],
+gyro; the motors; the accelerometer), reproduce the pure path's noise bit for bit (see
+:func:`noise_layout`).
 
 Without numba this module still imports (``AVAILABLE`` is False) and the helpers run as plain
 Python, which is how the tests check them one by one against the pure functions.
@@ -27,6 +28,8 @@ import math
 from typing import NamedTuple
 
 import numpy as np
+
+from quadfault.errors import ConfigError
 
 try:  # the optional ``fast`` extra
     from numba import njit
@@ -99,6 +102,19 @@ def matvec(A, x):
 
 
 @njit(cache=True)
+def put(dst, src):
+    """``dst[...] = src`` element by element (1-D or 2-D). Array-valued slice assignment
+    would compile numba's shape-error formatting, which costs seconds of JIT time."""
+    if dst.ndim == 1:
+        for i in range(dst.shape[0]):
+            dst[i] = src[i]
+    else:
+        for i in range(dst.shape[0]):
+            for j in range(dst.shape[1]):
+                dst[i, j] = src[i, j]
+
+
+@njit(cache=True)
 def dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
@@ -135,9 +151,9 @@ def dcm_orthonormalize_reference(R):
     yo = y - 0.5 * err * x
     zo = cross(xo, yo)
     out = np.empty((3, 3))
-    out[0] = 0.5 * (3 - dot(xo, xo)) * xo
-    out[1] = 0.5 * (3 - dot(yo, yo)) * yo
-    out[2] = 0.5 * (3 - dot(zo, zo)) * zo
+    put(out[0], 0.5 * (3 - dot(xo, xo)) * xo)
+    put(out[1], 0.5 * (3 - dot(yo, yo)) * yo)
+    put(out[2], 0.5 * (3 - dot(zo, zo)) * zo)
     return out
 
 
@@ -245,7 +261,7 @@ def reference_euler_step(p0, v0, R0, w0, lag, body, dt):
     for i in range(3):
         lag[0, i] = -lag[2, i] / body.mass
     lag[0, 2] += body.gravity
-    lag[1] = matvec(body.inertia_inverse, lag[3] - cross(w, matvec(body.inertia, w)))
+    put(lag[1], matvec(body.inertia_inverse, lag[3] - cross(w, matvec(body.inertia, w))))
     return p, v, R, w
 
 
@@ -304,9 +320,8 @@ def desired_attitude(f_n, b1d, normalize_b2d):
         b2d = b2d / math.sqrt(dot(b2d, b2d))
     b1 = cross(b2d, b3d)
     Rd = np.empty((3, 3))
-    Rd[:, 0] = b1
-    Rd[:, 1] = b2d
-    Rd[:, 2] = b3d
+    for i in range(3):
+        Rd[i, 0], Rd[i, 1], Rd[i, 2] = b1[i], b2d[i], b3d[i]
     return Rd
 
 
@@ -340,8 +355,7 @@ def motor_commands(p, v, R, w, pos_d, vel_d, acc_d, b1d, w_d, w_dot_d, gains, bo
         ff = cross(w, Jw)
     M = -gains.kR * eR - gains.kW * eW + ff
     wrench = np.empty(4)
-    wrench[0] = thrust
-    wrench[1:] = M
+    wrench[0], wrench[1], wrench[2], wrench[3] = thrust, M[0], M[1], M[2]
     return matvec(body.allocation_inverse, wrench)
 
 
@@ -371,23 +385,25 @@ def run_steps(k0, k1, reference, decimation, dt, carry, lag, f_cmd, sf_meas,
               gains, nominal, plant, saturate, thrust_noise, out):
     """Steps ``k0 .. k1-1`` of the loop in :func:`quadfault.simulator.simulate`.
 
-    ``carry`` (rows p, v, w of a (3, 3) array, then R as rows 3..5 of a (6, 3) array) the
-    plant state, ``lag`` the reference integrator's memory, ``f_cmd`` the held command and
-    ``sf_meas`` the last accelerometer reading are updated in place, so the loop can be run
-    in chunks (progress bar). Returns the first step whose new state is not finite, or -1.
+    ``carry`` (rows p, v, w, then R in rows 3..5 of a (6, 3) array) the plant state, ``lag``
+    the reference integrator's memory, ``f_cmd`` the held command and ``sf_meas`` the last
+    accelerometer reading are updated in place, so the loop runs in chunks; ``noise`` holds
+    the chunk's draws (row 0 = step ``k0``). Returns the first step whose new state is not
+    finite, or -1.
     """
     out_p, out_v, out_R, out_w, out_f, out_eta, out_acc = out
     pos_d, vel_d, acc_d, b1d, w_d, w_dot_d = refs
     p, v, w = carry[0].copy(), carry[1].copy(), carry[2].copy()
     R = carry[3:6].copy()
+    diverged = -1
     for k in range(k0, k1):
-        row = noise[k]
+        row = noise[k - k0]
         if reference:
             p, v, R, w = reference_euler_step(p, v, R, w, lag, plant, dt)
         mp, mv, mR, mw = measure(p, v, R, w, row, layout, sensor_std)
         if k % decimation == 0:
-            f_cmd[:] = motor_commands(mp, mv, mR, mw, pos_d[k], vel_d[k], acc_d[k], b1d[k],
-                                      w_d[k], w_dot_d[k], gains, nominal)
+            put(f_cmd, motor_commands(mp, mv, mR, mw, pos_d[k], vel_d[k], acc_d[k], b1d[k],
+                                      w_d[k], w_dot_d[k], gains, nominal))
         # Plant.step: produced thrust, wrench, accelerometer truth, integration
         f = motor_apply(f_cmd, eta[k], plant.max_thrust, saturate, thrust_noise,
                         row[layout[4]:] if layout[4] >= 0 else row)
@@ -400,17 +416,24 @@ def run_steps(k0, k1, reference, decimation, dt, carry, lag, f_cmd, sf_meas,
         else:
             p, v, R, w = step_rk4(p, v, R, w, thrust, moment, plant, dt)
         if record_accel:
-            sf_meas[:] = sf
+            put(sf_meas, sf)
             if accel_std != 0.0:
-                sf_meas[:] = sf + accel_std * row[layout[5]:layout[5] + 3]
-        out_p[k], out_v[k], out_w[k] = mp, mv, mw
-        out_R[k] = mR
-        out_f[k], out_eta[k], out_acc[k] = f_cmd, eta[k], sf_meas
+                put(sf_meas, sf + accel_std * row[layout[5]:layout[5] + 3])
+        put(out_p[k], mp)
+        put(out_v[k], mv)
+        put(out_w[k], mw)
+        put(out_R[k], mR)
+        put(out_f[k], f_cmd)
+        put(out_eta[k], eta[k])
+        put(out_acc[k], sf_meas)
         if not (np.isfinite(p[0]) and np.isfinite(p[1]) and np.isfinite(p[2])):
-            carry[0], carry[1], carry[2], carry[3:6] = p, v, w, R
-            return k
-    carry[0], carry[1], carry[2], carry[3:6] = p, v, w, R
-    return -1
+            diverged = k
+            break
+    put(carry[0], p)
+    put(carry[1], v)
+    put(carry[2], w)
+    put(carry[3:6], R)
+    return diverged
 
 
 # --- driver (plain Python) -------------------------------------------------------------------
@@ -440,20 +463,25 @@ def noise_layout(sensor_noise, n_rotors: int, thrust_noise: float, record_accel:
 
 
 def run(plant, controller, config, rng, times, refs, feedforward, initial, bar=None,
-        chunk: int = 2000):
+        chunk: int = 5000):
     """Run the compiled loop; returns ``(out_p, out_v, out_R, out_w, out_f, out_eta, out_acc,
     diverged_step)`` exactly as the pure loop fills them (``diverged_step`` = -1 if none).
 
     ``refs`` is the trajectory at ``times`` (a FlatOutput of arrays), ``feedforward`` the
     pair (Omega_d, Omega_d') at ``times`` or None, ``initial`` the plant's initial state.
+    The loop runs ``chunk`` steps at a time (noise drawn per chunk: the same stream, bounded
+    memory; the progress bar moves per chunk).
     """
     n = len(times)
     vehicle = plant.vehicle
     n_rot = vehicle.n_rotors
     sn = config.sensor_noise
     layout, width = noise_layout(sn, n_rot, plant.motor.thrust_noise, config.record_accel)
-    noise = rng.standard_normal((n, width)) if width else np.zeros((n, 1))
-    eta = np.ascontiguousarray(np.broadcast_to(plant.efficiency(times), (n, n_rot)), float)
+    eta = np.asarray(plant.efficiency(times), dtype=float)
+    if eta.shape != (n, n_rot):
+        raise ConfigError(f"the efficiency schedule gave shape {eta.shape} for {n} times, "
+                          f"expected ({n}, {n_rot}); use backend='numpy' for a scalar-only one")
+    eta = np.ascontiguousarray(eta)
     if feedforward is None:
         w_d = np.zeros((n, 3))
         w_dot_d = w_d
@@ -467,16 +495,17 @@ def run(plant, controller, config, rng, times, refs, feedforward, initial, bar=N
     sf_meas = np.array([0.0, 0.0, -vehicle.gravity])
     out = (np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3, 3)), np.empty((n, 3)),
            np.empty((n, n_rot)), np.empty((n, n_rot)), np.empty((n, 3)))
-    args = (config.integrator == "reference", config.control_decimation, float(config.dt),
-            carry, lag, f_cmd, sf_meas, ref_arrays, eta, noise, layout,
-            np.array([sn.position, sn.velocity, sn.attitude, sn.gyro], float), float(sn.accel),
-            bool(config.record_accel), gains_of(controller), body_of(controller.vehicle),
-            body_of(vehicle), bool(plant.motor.saturate), float(plant.motor.thrust_noise), out)
+    head = (config.integrator == "reference", config.control_decimation, float(config.dt),
+            carry, lag, f_cmd, sf_meas, ref_arrays, eta)
+    tail = (layout, np.array([sn.position, sn.velocity, sn.attitude, sn.gyro], float),
+            float(sn.accel), bool(config.record_accel), gains_of(controller),
+            body_of(controller.vehicle), body_of(vehicle), bool(plant.motor.saturate),
+            float(plant.motor.thrust_noise), out)
     diverged = -1
-    step = n if bar is None else chunk
-    for k0 in range(0, n, step):
-        k1 = min(n, k0 + step)
-        diverged = run_steps(k0, k1, *args)
+    for k0 in range(0, n, chunk):
+        k1 = min(n, k0 + chunk)
+        noise = rng.standard_normal((k1 - k0, width)) if width else np.zeros((k1 - k0, 1))
+        diverged = run_steps(k0, k1, *head, noise, *tail)
         if bar is not None:
             bar.update(k1 - k0)
         if diverged >= 0:
