@@ -118,9 +118,17 @@ class Diagnosis:
         untestable = [c.name for c in library if c.needs_pose and not rp.has_pose]
         base_res = rp.measured - predict(rp, [])
         scale = noise_scale(rp, base_res)
-        sel = select(rp, library, scale, folds=cfg.folds, max_effects=cfg.max_effects,
-                     min_improvement=cfg.min_improvement, bic_margin=cfg.bic_margin,
-                     screen_top=cfg.screen_top, progress=progress)
+        kw = dict(folds=cfg.folds, max_effects=cfg.max_effects,
+                  min_improvement=cfg.min_improvement, bic_margin=cfg.bic_margin,
+                  screen_top=cfg.screen_top, progress=progress)
+        sel = select(rp, library, scale, **kw)
+        if sel.final is not None:
+            # the first noise scale contains the effects' own fast content: re-estimate it from
+            # what the selected model leaves and select again if it changed materially
+            scale2 = noise_scale(rp, rp.measured - predict(rp, sel.final.terms))
+            if np.any(np.abs(np.log(scale2 / scale)) > np.log(1.3)):
+                scale = scale2
+                sel = select(rp, library, scale, **kw)
         before = _rms(sel.baseline.residual / scale)
         fl = folds_of(rp.n_blocks, cfg.folds)
         selected = {s.candidate.name: x for s, x in zip(sel.steps, sel.final.x)} if sel.final else {}

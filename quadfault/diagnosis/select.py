@@ -110,7 +110,9 @@ def select(rp: Replay, library: list[Candidate], scale: np.ndarray, *, folds: in
         fits.sort(key=lambda item: item[0])
         screening = tuple((c.name, b) for b, c, _ in fits)
         best = None
-        for b, c, f in fits[:screen_top]:
+        # cross-validate the best by BIC and close rivals (within 2 * bic_margin)
+        for b, c, f in [item for item in fits[:screen_top]
+                        if item[0] <= fits[0][0] + 2 * bic_margin]:
             cv = cross_validate(rp, current + [c], scale, x_cur + list(f.x), fl, max_nfev=15)
             if best is None or cv.sse < best[3].sse:
                 best = (b, c, f, cv)

@@ -1,0 +1,156 @@
+"""Effect models (quadfault.effects): physics invariants, one model for plant and diagnosis."""
+
+import numpy as np
+import pytest
+
+from quadfault import effects as fx
+from quadfault.dynamics import RigidBodyState, angular_acceleration
+from quadfault.errors import ConfigError
+from quadfault.rotation import cross, euler_zyx_to_rot
+from quadfault.vehicle import Vehicle
+
+
+def _state(rng, n=()):
+    R = euler_zyx_to_rot(*(rng.uniform(-0.5, 0.5, size=n) for _ in range(3)))
+    return RigidBodyState(rng.normal(size=n + (3,)), rng.normal(size=n + (3,)), R,
+                          rng.normal(size=n + (3,)))
+
+
+@pytest.mark.parametrize("spec, cls, attr, value", [
+    ("drag=0.3", fx.Drag, "k", (0.3, 0.3, 0.3)),
+    ("drag=0.1,0.2,0.3", fx.Drag, "k", (0.1, 0.2, 0.3)),
+    ("wind=2,0,0,gust=0.5", fx.Wind, "velocity", (2.0, 0.0, 0.0)),
+    ("motor_lag=0.05", fx.MotorLag, "tau", 0.05),
+    ("delay=0.02", fx.Delay, "delay", 0.02),
+    ("motor_efficiency=1,1,0.7,1", fx.MotorEfficiency, "eta", (1.0, 1.0, 0.7, 1.0)),
+    ("thrust_scale=0.9", fx.ThrustScale, "scale", 0.9),
+    ("ground_effect=0.12", fx.GroundEffect, "rotor_radius", 0.12),
+    ("com_offset=0.01,-0.02", fx.ComOffset, "offset", (0.01, -0.02)),
+    ("inertia=1.2", fx.Inertia, "scale", (1.2, 1.2, 1.2)),
+])
+def test_parse_effect(spec, cls, attr, value):
+    e = fx.parse_effect(spec)
+    assert isinstance(e, cls)
+    assert getattr(e, attr) == pytest.approx(value)
+    d = e.describe()
+    assert d["name"] == spec.split("=")[0] and isinstance(d["params"], dict)
+
+
+@pytest.mark.parametrize("spec, words", [
+    ("nothing=1", "unknown effect"), ("drag", "NAME=VALUES"), ("drag=1,2", "expects 1 or 3"),
+    ("wind=1,0,0,color=3", "unknown option"), ("delay=-1", "delay"), ("drag=x", "not a number"),
+    ("motor_lag=0", "tau"), ("drag=nan", "finite"),
+])
+def test_parse_effect_errors(spec, words):
+    with pytest.raises(ConfigError, match=words):
+        fx.parse_effect(spec)
+
+
+def test_drag_opposes_air_velocity_and_is_linear():
+    rng = np.random.default_rng(0)
+    s = _state(rng, (50,))
+    F = fx.drag_force(s.R, s.v, (0.2, 0.3, 0.5))
+    assert np.all(np.einsum("ij,ij->i", F, s.v) <= 1e-12)
+    F2 = fx.drag_force(s.R, 2 * s.v, (0.2, 0.3, 0.5))
+    np.testing.assert_allclose(F2, 2 * F)
+    # isotropic drag does not depend on attitude
+    np.testing.assert_allclose(fx.drag_force(s.R, s.v, 0.4), -0.4 * s.v, atol=1e-12)
+
+
+def test_ground_effect_factor_limits():
+    assert fx.ground_effect_factor(100.0, 0.1) == pytest.approx(1.0, abs=1e-6)
+    assert fx.ground_effect_factor(0.0, 0.1) == pytest.approx(4.0 / 3.0)
+    h = np.linspace(0.05, 2, 50)
+    k = fx.ground_effect_factor(h, 0.1)
+    assert np.all(np.diff(k) <= 0)  # monotone: more thrust closer to the ground
+
+
+def test_zoh_mean_matches_numerical_integration():
+    rng = np.random.default_rng(1)
+    t = np.cumsum(rng.uniform(0.5e-3, 2e-3, 200))
+    f = rng.uniform(0, 1, (200, 4))
+    c = fx.zoh_cumulative(t, f)
+    a, b = t[50] - 0.0123, t[51] - 0.0123
+    fine = np.linspace(a, b, 20001)
+    j = np.searchsorted(t, fine, side="right") - 1
+    num = f[j].mean(axis=0)
+    np.testing.assert_allclose(fx.zoh_mean(t, f, c, np.array([a]), np.array([b]))[0], num, atol=2e-3)
+
+
+def test_lag_series_uniform_and_general_paths_agree():
+    rng = np.random.default_rng(2)
+    f = rng.uniform(0, 2, (300, 4))
+    dt = np.full(300, 1e-3)
+    fast = fx.lag_series(f, dt, 0.03)
+    dt2 = dt.copy()
+    dt2[0] *= 1.0 + 1e-6  # forces the explicit loop
+    slow = fx.lag_series(f, dt2, 0.03)
+    np.testing.assert_allclose(fast, slow, rtol=1e-5)
+    # steady state: a held command is reached
+    held = fx.lag_series(np.ones((2000, 4)) * 3.0, np.full(2000, 1e-3), 0.05)
+    assert held[-1] == pytest.approx(3.0 * np.ones(4))
+
+
+@pytest.mark.parametrize("effect", [fx.MotorLag(0.04), fx.Delay(0.0123)])
+def test_plant_step_equals_series_model(effect):
+    """The plant's per-step effect and the diagnosis' series function are the same model."""
+    from quadfault.diagnosis.library import Candidate
+
+    rng = np.random.default_rng(3)
+    dt = 2e-3
+    t = dt * np.arange(400)
+    f = rng.uniform(0, 2, (400, 4))
+    effect.reset(4)
+    s = RigidBodyState.at_rest()
+    stepped = np.array([effect.rotor_thrust(f[k], t[k], dt, s) for k in range(400)])
+    if isinstance(effect, fx.MotorLag):
+        series = fx.lag_series(f, np.full(400, dt), effect.tau)
+    else:
+        c = fx.zoh_cumulative(t, f)
+        series = fx.zoh_mean(t, f, c, t - effect.delay, t + dt - effect.delay)
+    np.testing.assert_allclose(stepped, series, rtol=1e-9, atol=1e-12)
+    assert Candidate  # the library uses these same functions
+
+
+def test_inertia_moment_reproduces_true_body():
+    rng = np.random.default_rng(4)
+    veh = Vehicle()
+    Jt = fx.scaled_inertia(veh.inertia, (1.3, 0.8, 1.1))
+    w, M = rng.normal(size=(20, 3)), rng.normal(size=(20, 3))
+    Mx = fx.inertia_moment(w, M, veh.inertia, Jt)
+    nominal_with_effect = angular_acceleration(w, M, veh, Mx)
+    true = angular_acceleration(w, M, veh, inertia=Jt, inertia_inverse=np.linalg.inv(Jt))
+    np.testing.assert_allclose(nominal_with_effect, true, atol=1e-10)
+
+
+def test_com_offset_moment_is_r_cross_thrust():
+    r = np.array([0.01, -0.03, 0.0])
+    M = fx.com_offset_moment(5.0, r[:2])
+    np.testing.assert_allclose(M, cross(r, np.array([0.0, 0.0, 5.0])))
+
+
+def test_wind_gusts_are_seeded_and_steady_mean():
+    w = fx.Wind((2.0, 0.0, 0.0), gust=0.5, gust_tau=0.5, seed=3)
+    s = RigidBodyState.at_rest()
+    def run():
+        w.reset(4)
+        out = []
+        for k in range(3000):
+            w.rotor_thrust(np.ones(4), k * 1e-2, 1e-2, s)
+            out.append(w.air_velocity().copy())
+        return np.array(out)
+    a, b = run(), run()
+    np.testing.assert_array_equal(a, b)
+    assert abs(a[:, 0].mean() - 2.0) < 0.15 and 0.3 < a[:, 0].std() < 0.7
+    F, M = w.wrench(s, np.ones(4), 0.0)
+    assert F.shape == (3,) and np.allclose(M, 0)
+
+
+def test_simulated_effects_are_truth_and_stripped():
+    from quadfault.scenarios import named_scenario
+    from quadfault.simulator import SimConfig, simulate
+
+    sc = named_scenario("hover", 0.2, 4e-3)
+    rec = simulate(sc, config=SimConfig(dt=4e-3), effects=(fx.parse_effect("drag=0.2"),))
+    assert rec.meta["effects"] == [fx.parse_effect("drag=0.2").describe()]
+    assert "effects" not in rec.without_truth().meta
