@@ -29,7 +29,8 @@ import numpy as np  # noqa: E402
 import quad_fault_env  # noqa: E402,F401  (registers the ids)
 from quadfault.errors import QuadfaultError  # noqa: E402
 from quadfault.fileio import atomic_write_bytes, check_writable  # noqa: E402
-from quadfault.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario  # noqa: E402
+from quadfault.scenarios import (AbruptFault, ConstantEfficiency,  # noqa: E402
+                                 EfficiencySchedule, Scenario)
 from quadfault.trajectory import Circle  # noqa: E402
 
 

@@ -14,6 +14,7 @@ Every estimator gets the *nominal* vehicle and measurement samples only.
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 
 import numpy as np
@@ -133,5 +134,13 @@ def estimate_sd(estimate: Estimate, n: int) -> np.ndarray | None:
     return sd if sd.shape == (n,) else None
 
 
-__all__ = ["make_estimator", "estimator_class", "NominalBelief", "TruthOracle",
-           "ESTIMATOR_NAMES", "NOMINAL_PRIOR_SD", "STATUS_OK", "estimate_sd"]
+def diagnostics_dict(diagnostics):
+    """An estimate's diagnostics as a plain dict (field -> value) when it is a dataclass, so
+    ``info`` holds only dicts, arrays and scalars (Gymnasium compares infos field by field)."""
+    if dataclasses.is_dataclass(diagnostics) and not isinstance(diagnostics, type):
+        return {f.name: getattr(diagnostics, f.name) for f in dataclasses.fields(diagnostics)}
+    return diagnostics
+
+
+__all__ = ["make_estimator", "estimator_class", "NominalBelief", "TruthOracle", "ESTIMATOR_NAMES",
+           "NOMINAL_PRIOR_SD", "STATUS_OK", "estimate_sd", "diagnostics_dict"]

@@ -21,7 +21,8 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
-from quad_fault_env.estimation import TruthOracle, estimate_sd, make_estimator
+from quad_fault_env.estimation import (TruthOracle, diagnostics_dict, estimate_sd,
+                                       make_estimator)
 from quad_fault_env.observation import SD_MAX
 from quadfault.errors import ConfigError
 from quadfault.recording import Recording, write_recording
@@ -68,7 +69,8 @@ class EfficiencyEstimateObservation(gym.Wrapper):
             eta, sd, status, diag = np.ones(n), None, "warmup", None
         else:
             eta, sd = self.estimate.eta, estimate_sd(self.estimate, n)
-            status, diag = self.estimate.status, self.estimate.diagnostics
+            status = self.estimate.status
+            diag = diagnostics_dict(self.estimate.diagnostics)
         obs = self.layout.replace(obs, "eta_hat", eta)
         obs = self.layout.replace(obs, "eta_sd", SD_MAX if sd is None else sd)
         info = dict(info, eta_hat=np.asarray(eta, dtype=float), eta_sd=sd,

@@ -63,9 +63,12 @@ def run(env, actions, seed=0, options=None):
 
 
 @pytest.mark.parametrize("env_id", IDS)
-def test_check_env_every_registered_id(env_id):
-    # the oracle keeps this independent of the estimators' own tests
-    check_env(gym.make(env_id, estimator="truth", duration=0.5).unwrapped, skip_render_check=True)
+@pytest.mark.parametrize("estimator", ["default", "truth"])
+def test_check_env_every_registered_id(env_id, estimator):
+    if estimator == "default" and not _have("estimators.irls"):
+        pytest.skip("estimators.irls not available")
+    kw = {} if estimator == "default" else {"estimator": estimator}
+    check_env(gym.make(env_id, duration=0.5, **kw).unwrapped, skip_render_check=True)
 
 
 def test_check_env_dict_and_other_action_modes():

@@ -23,7 +23,7 @@ from estimators.base import Estimate, Sample
 from quad_fault_env.envs.config import (ESTIMATOR_RATES, OBSERVATION_KINDS, ActionConfig,
                                         InitialStateSpread, RewardConfig, TerminationLimits)
 from quad_fault_env.estimation import (NOMINAL_PRIOR_SD, NominalBelief, TruthOracle,
-                                       estimate_sd, make_estimator)
+                                       diagnostics_dict, estimate_sd, make_estimator)
 from quad_fault_env.observation import SD_MAX, ObservationLayout
 from quadfault.controller import ControllerConfig, GeometricController
 from quadfault.dynamics import RigidBodyState
@@ -367,7 +367,7 @@ class QuadFaultEnv(gym.Env):
             "eta_sd": estimate_sd(est, self.vehicle.n_rotors),
             "estimator": getattr(self.estimator, "name", type(self.estimator).__name__),
             "estimator_status": est.status,
-            "estimator_diagnostics": est.diagnostics,
+            "estimator_diagnostics": diagnostics_dict(est.diagnostics),
             "position_error": state.p - ref.position,
             "tracking_error": float(np.linalg.norm(state.p - ref.position)),
             "motor_command": self._f_cmd.copy(),
