@@ -1,0 +1,62 @@
+"""The compiled IRLS path gives the numpy path's results (to 1e-9)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import estimators.irls as irls_mod
+from estimators.base import samples
+from estimators.irls import IRLSConfig, SlidingWindowIRLS
+from quadfault.errors import ConfigError
+from quadfault.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
+from quadfault.simulator import simulate
+from quadfault.trajectory import Circle
+
+
+@pytest.fixture(scope="module")
+def fault_flight():
+    """A motor fault in the middle, so the window sees outliers and a step."""
+    sc = Scenario("fault", 0.5, EfficiencySchedule(
+        ConstantEfficiency((1.0, 0.9, 0.8, 0.95)), (AbruptFault(motor=2, onset=0.25, level=0.5),)),
+        Circle())
+    return simulate(sc, seed=11).without_truth()
+
+
+@pytest.mark.slow  # the first call compiles the kernels (cached afterwards)
+@pytest.mark.parametrize("scaling", ["reference", "paper"])
+def test_numba_run_equals_numpy_run(fault_flight, scaling):
+    pytest.importorskip("numba")
+    a = SlidingWindowIRLS(fault_flight.vehicle, IRLSConfig(backend="numpy", scaling=scaling))
+    b = SlidingWindowIRLS(fault_flight.vehicle, IRLSConfig(backend="numba", scaling=scaling))
+    assert b.backend == "numba"
+    ra, rb = a.run(fault_flight), b.run(fault_flight)
+    np.testing.assert_allclose(rb.eta, ra.eta, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(rb.sd, ra.sd, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(rb.status, ra.status)
+    assert np.mean(ra.status == "ok") > 0.5
+
+
+@pytest.mark.slow
+def test_numba_online_update_equals_numpy(fault_flight):
+    pytest.importorskip("numba")
+    a = SlidingWindowIRLS(fault_flight.vehicle, IRLSConfig(backend="numpy"))
+    b = SlidingWindowIRLS(fault_flight.vehicle, IRLSConfig(backend="numba"))
+    for s in samples(fault_flight.slice(240, 300)):
+        ea, eb = a.update(s), b.update(s)
+        assert ea.status == eb.status
+        np.testing.assert_allclose(eb.eta, ea.eta, rtol=0, atol=1e-9)
+        if ea.diagnostics.weights is not None:
+            np.testing.assert_allclose(eb.diagnostics.weights, ea.diagnostics.weights, atol=1e-9)
+            assert ea.diagnostics.inner_iterations == eb.diagnostics.inner_iterations
+
+
+def test_backend_choice(monkeypatch, fault_flight):
+    veh = fault_flight.vehicle
+    assert SlidingWindowIRLS(veh, IRLSConfig(backend="numpy")).backend == "numpy"
+    # histories are built by the numpy path only
+    assert SlidingWindowIRLS(veh, IRLSConfig(record_history=True)).backend == "numpy"
+    monkeypatch.setattr(irls_mod, "numba_available", lambda: False)
+    assert SlidingWindowIRLS(veh, IRLSConfig()).backend == "numpy"
+    with pytest.raises(ConfigError, match="fast"):
+        SlidingWindowIRLS(veh, IRLSConfig(backend="numba"))

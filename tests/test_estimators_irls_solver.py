@@ -1,0 +1,103 @@
+"""Interior-point solver of the IRLS estimator: SciPy cross-check, KKT convergence."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import lsq_linear
+
+from estimators.ipm import (IPMSettings, constraint_values, kkt_matrix, newton_step,
+                            solve_box_qp)
+from estimators.irls import IRLSConfig, solve_window
+from quadfault.errors import ConfigError
+
+LO, HI = -0.001, 1.001
+TIGHT = IPMSettings(tol_feas=1e-12, tol_gap=1e-12, backtrack_eps=0.0, max_iter=200)
+
+
+def _problem(seed, x_true):
+    """A weighted bounded least-squares problem shaped like one IRLS window."""
+    rng = np.random.default_rng(seed)
+    J = rng.standard_normal((90, 4)) * 0.05
+    G = rng.choice([1.0, 50.0], 90) * rng.uniform(0.5, 1.5, 90)
+    r0 = -J @ np.asarray(x_true) + 0.002 * rng.standard_normal(90)
+    gamma, x_prev = 5e-3, rng.uniform(0.2, 0.9, 4)
+    H = J.T @ (G[:, None] * J) + gamma * np.eye(4)
+    q = J.T @ (G * r0) - gamma * x_prev
+    # scipy: min ||A x - b||^2 with sqrt(G) rows and sqrt(gamma) rows for the smoothness term
+    A = np.vstack((np.sqrt(G)[:, None] * J, np.sqrt(gamma) * np.eye(4)))
+    b = np.concatenate((-np.sqrt(G) * r0, np.sqrt(gamma) * x_prev))
+    return H, q, A, b
+
+
+@pytest.mark.parametrize("seed,x_true", [(0, (0.9, 0.5, 0.7, 0.3)),   # interior
+                                          (1, (1.3, 0.5, -0.4, 0.8)),  # two active bounds
+                                          (2, (1.001, 1.2, 1.0, 0.0)),  # at / beyond the bounds
+                                          (3, (-1.0, -1.0, 2.0, 0.5))])
+def test_ipm_equals_scipy_lsq_linear(seed, x_true):
+    H, q, A, b = _problem(seed, x_true)
+    ref = lsq_linear(A, b, bounds=(LO, HI), method="bvls", tol=1e-14)
+    res = solve_box_qp(H, q, LO, HI, np.full(4, 0.5), TIGHT)
+    assert res.converged
+    np.testing.assert_allclose(res.x, ref.x, atol=1e-6)
+    # the default tolerances (1e-6 on the residual and the gap) land close to it as well
+    res_default = solve_box_qp(H, q, LO, HI, np.full(4, 0.5))
+    assert res_default.converged and np.max(np.abs(res_default.x - ref.x)) < 1e-3
+    assert np.all(res_default.x > LO) and np.all(res_default.x < HI)
+
+
+def test_kkt_convergence_histories():
+    H, q, _, _ = _problem(1, (1.3, 0.5, -0.4, 0.8))
+    res = solve_box_qp(H, q, LO, HI, np.full(4, 0.5), record_history=True)
+    assert res.converged and res.iterations == len(res.gap_history) <= 80
+    assert res.gap_history[-1] < 1e-6
+    assert np.hypot(res.dual_history[-1], res.cent_history[-1]) < 1e-6
+    assert res.gap_history[-1] < 1e-4 * res.gap_history[0]
+    assert np.all(res.lam > 0)
+    # complementary slackness: multipliers of inactive bounds vanish
+    phi = constraint_values(res.x, LO, HI)
+    assert np.max(np.abs(res.lam * phi)) < 1e-6
+
+
+def test_reduced_newton_step_equals_full_kkt_system():
+    rng = np.random.default_rng(5)
+    H, q, _, _ = _problem(4, (0.5, 0.5, 0.5, 0.5))
+    x = rng.uniform(0.0, 1.0, 4)
+    phi = constraint_values(x, LO, HI)
+    lam = rng.uniform(0.1, 3.0, 8)
+    r_dual, r_cent = rng.standard_normal(4), rng.standard_normal(8)
+    dx, dlam = newton_step(H, r_dual, r_cent, phi, lam)
+    full = np.linalg.solve(kkt_matrix(H, phi, lam), -np.concatenate((r_dual, r_cent)))
+    np.testing.assert_allclose(np.concatenate((dx, dlam)), full, rtol=1e-9, atol=1e-12)
+
+
+def test_ipm_rejects_infeasible_start_and_bad_settings():
+    H, q, _, _ = _problem(0, (0.5, 0.5, 0.5, 0.5))
+    with pytest.raises(ConfigError, match="strictly inside"):
+        solve_box_qp(H, q, LO, HI, np.array([0.5, 0.5, 1.5, 0.5]))
+    with pytest.raises(ConfigError):
+        IPMSettings(mu=0.5)
+    with pytest.raises(ConfigError):
+        IPMSettings(max_iter=0)
+
+
+def test_window_history_records_each_round():
+    """The diagnostics carry the paper's KKT figure data when record_history is on."""
+    rng = np.random.default_rng(7)
+    m = 9
+    J = rng.standard_normal((m, 10, 4)) * 0.01
+    G = np.array([50.0] * 6 + [1.0] * 3 + [50.0])
+    r0 = -J @ np.array([0.8, 0.7, 0.9, 0.6]) + 1e-4 * rng.standard_normal((m, 10))
+    c = np.einsum("si,i,si->s", r0, G, r0)
+    b = np.einsum("sin,i,si->sn", J, G, r0)
+    H = np.einsum("sin,i,sim->snm", J, G, J)
+    cfg = IRLSConfig(backend="numpy", record_history=True)
+    eta, sd, diag = solve_window(c, b, H, np.full(4, 0.5), cfg, record_history=True)
+    assert diag.status == "ok" and 1 <= len(diag.inner_iterations) <= 3
+    assert len(diag.gap_history) == len(diag.inner_iterations)
+    assert all(len(g) == n for g, n in zip(diag.gap_history, diag.inner_iterations))
+    assert diag.gap_history[-1][-1] < 1e-6 and diag.residual_history[0][-1] > 0
+    assert diag.weights.shape == (m,) and np.all(np.isfinite(sd)) and np.all(sd > 0)
+    fast = solve_window(c, b, H, np.full(4, 0.5), IRLSConfig(backend="numpy"))
+    np.testing.assert_array_equal(fast[0], eta)
+    assert fast[2].gap_history is None
