@@ -64,6 +64,9 @@ class EKFConfig:
         p0: initial covariance ``p0 * I``.
         eta0: initial efficiency (one value for all rotors, or one per rotor).
         eta_bounds: clamp of the efficiency after each update, or None for no clamp.
+        clip_commands: clip the commanded thrusts to ``[0, vehicle.rotor_max_thrust]`` before
+            use (as IRLS does: a saturated rotor cannot deliver its command); ``False`` = the
+            reference code.
         backend: ``"auto"`` (numba when installed), ``"numpy"`` or ``"numba"``; same results.
     """
 
@@ -79,6 +82,7 @@ class EKFConfig:
     p0: float = 1e-2
     eta0: float | tuple = 1.0
     eta_bounds: tuple | None = (-0.001, 1.001)
+    clip_commands: bool = True
     backend: str = "auto"
 
     def __post_init__(self):
@@ -99,7 +103,7 @@ class EKFConfig:
     @classmethod
     def reference(cls, **changes) -> "EKFConfig":
         """The reference code's settings, including its clamp ``[1e-3, 1 - 1e-3]``."""
-        return replace(cls(eta_bounds=(1e-3, 1.0 - 1e-3)), **changes)
+        return replace(cls(eta_bounds=(1e-3, 1.0 - 1e-3), clip_commands=False), **changes)
 
     def replace(self, **changes) -> "EKFConfig":
         return replace(self, **changes)
@@ -276,7 +280,7 @@ class MotorEfficiencyEKF:
             return self._estimate(sample.t, STATUS_BAD_SAMPLE)
         if self.x is None:
             self._initialise(sample)
-            self._last = (float(sample.t), np.array(sample.f, dtype=float))
+            self._last = (float(sample.t), self._commands(sample.f))
             return self._estimate(sample.t, STATUS_WARMUP)
         t_prev, f_prev = self._last
         dt = float(sample.t) - t_prev
@@ -292,8 +296,14 @@ class MotorEfficiencyEKF:
             Q = np.diag(self.q_diag * (dt / NOISE_REFERENCE_DT))
             x, P, _ = predict(self.x, self.P, f_prev, dt, self.vehicle, Q)
             self.x, self.P = measurement_update(x, P, sample, self.r_diag, self.config.eta_bounds)
-        self._last = (float(sample.t), np.array(sample.f, dtype=float))
+        self._last = (float(sample.t), self._commands(sample.f))
         return self._estimate(sample.t, STATUS_OK)
+
+    def _commands(self, f) -> np.ndarray:
+        f = np.array(f, dtype=float)
+        if self.config.clip_commands:
+            f = np.clip(f, 0.0, self.vehicle.rotor_max_thrust)
+        return f
 
     def _kernel_args(self):
         veh, b = self.vehicle, self.config.eta_bounds
@@ -340,15 +350,14 @@ class MotorEfficiencyEKF:
         R = np.ascontiguousarray(recording.rotation, dtype=float)
         args = [np.ascontiguousarray(a, dtype=float) for a in (
             recording.t, recording.position, recording.velocity, recording.omega,
-            recording.thrust_cmd)]
+            self._commands(recording.thrust_cmd))]
         x0 = np.empty(self.n_states)
         P0 = self.config.p0 * np.eye(self.n_states)
         eta, sd, ok, x, P, k_last = run_series(*args[:3], R, *args[3:], self._eta_init.copy(),
                                                x0, P0, *self._kernel_args())
         if k_last >= 0:
             self.x, self.P = x, P
-            self._last = (float(recording.t[k_last]),
-                          np.array(recording.thrust_cmd[k_last], dtype=float))
+            self._last = (float(recording.t[k_last]), args[4][k_last].copy())
         return eta, sd, ok
 
     def describe(self) -> dict:

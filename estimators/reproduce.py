@@ -1,0 +1,339 @@
+"""``quadfault reproduce``: the paper's evaluation, IRLS vs a calibrated EKF.
+
+Steps (``docs/reproduce.md``):
+
+1. calibrate the EKF's ``Q_eta`` so its RMSE matches the IRLS RMSE on a calibration flight of
+   the combined scenario with seed ``K + 1000`` (:mod:`estimators.calibration`);
+2. fly degradation, abrupt, combined and clipping (sigma_f = 0.07) with seed ``K``, run both
+   estimators, score them (:mod:`estimators.metrics`) and run the fault detector
+   (:mod:`estimators.fdi`) on both estimate streams;
+3. the same on flights of the ``reference`` integration mode (the authors' Euler step with its
+   input lag), calibrated separately, for a like-for-like table beside the paper's numbers;
+4. write ``metrics.json`` (CONTRACT.md sec. 2), ``report.md`` and PNG figures; print the table.
+
+Scenario jobs run in parallel processes (``--workers``, default 2).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from quadfault.errors import ConfigError
+
+SCENARIOS = ("degradation", "abrupt", "combined", "clipping")
+REFERENCE_SCENARIOS = ("degradation", "abrupt", "combined")
+MODES = ("rk4", "reference")
+FIGURES = ("estimates_{s}.png", "errors_{s}.png")
+STATIC_FIGURES = ("rmse_std_bars.png", "spikes_per_motor.png", "calibration_curve.png",
+                  "irls_convergence.png", "kkt_convergence.png")
+
+#: The reference code's hard-coded results (facts sec. 6): motor-averaged RMSE / std per case
+#: and the per-motor max spikes.
+PAPER = {
+    "rmse": {"irls": {"degradation": 0.023358, "abrupt": 0.0237185, "combined": 0.02357875},
+             "ekf": {"degradation": 0.02247225, "abrupt": 0.027893, "combined": 0.02250075}},
+    "std": {"irls": {"degradation": 0.0233525, "abrupt": 0.02008725, "combined": 0.0235735},
+            "ekf": {"degradation": 0.02246, "abrupt": 0.02005375, "combined": 0.022483}},
+    "spike": {"irls": {"abrupt": [0.139575, 0.123851, 0.142402, 0.130006],
+                       "combined": [0.120609, 0.102525, 0.129096, 0.150433]},
+              "ekf": {"abrupt": [0.286273, 0.263499, 0.292192, 0.274747],
+                      "combined": [0.176225, 0.155338, 0.259303, 0.220348]}},
+}
+
+
+@dataclass(frozen=True)
+class ReproduceConfig:
+    """What ``reproduce`` runs.
+
+    Attributes:
+        duration: flight time of each scored scenario [s] (fault windows scale with it).
+        seed: seed of the scored flights; the calibration flight uses ``seed + 1000``.
+        calibration_scenario, calibration_duration [s]: the calibration flight.
+        q_range, points_per_decade, bisection_steps: the Q_eta scan.
+        thrust_noise: sigma_f.
+        reference_mode: also run the ``reference`` integration mode.
+        workers: parallel processes (1 = in this process).
+        history_offset: the convergence figure's window ends this long after motor 1's fault
+            onset [s].
+    """
+
+    duration: float = 80.0
+    seed: int = 0
+    calibration_scenario: str = "combined"
+    calibration_duration: float = 40.0
+    q_range: tuple = (1e-4, 10.0)
+    points_per_decade: float = 1.0
+    bisection_steps: int = 6
+    thrust_noise: float = 0.07
+    reference_mode: bool = True
+    workers: int = 2
+    history_offset: float = 0.02
+
+    @classmethod
+    def quick(cls, **changes) -> "ReproduceConfig":
+        """~1 minute: 12 s flights (schedule scaled) and a coarser calibration."""
+        return replace(cls(duration=12.0, calibration_duration=12.0, q_range=(1e-3, 10.0),
+                           bisection_steps=4), **changes)
+
+    @property
+    def calibration_seed(self) -> int:
+        return self.seed + 1000
+
+
+def _sim_config(mode: str):
+    from quadfault.simulator import SimConfig
+
+    return SimConfig.reference() if mode == "reference" else SimConfig()
+
+
+def _fly(name: str, duration: float, seed: int, mode: str, sigma: float):
+    from quadfault.scenarios import named_scenario
+    from quadfault.simulator import simulate
+
+    return simulate(named_scenario(name, duration), config=_sim_config(mode), seed=seed,
+                    thrust_noise=sigma)
+
+
+def _calibration_job(mode: str, cfg: ReproduceConfig) -> dict:
+    """IRLS RMSE on the calibration flight, then the EKF's Q_eta matching it."""
+    from estimators.calibration import calibrate_q_eta
+    from estimators.irls import SlidingWindowIRLS
+    from estimators.metrics import score
+
+    rec = _fly(cfg.calibration_scenario, cfg.calibration_duration, cfg.calibration_seed, mode,
+               cfg.thrust_noise)
+    irls = SlidingWindowIRLS(rec.vehicle).run(rec.without_truth())
+    target = float(np.mean(score(rec, irls).rmse))
+    cal = calibrate_q_eta(rec, target, q_range=cfg.q_range,
+                          points_per_decade=cfg.points_per_decade,
+                          bisection_steps=cfg.bisection_steps)
+    return {"mode": mode, "calibration": cal}
+
+
+def _scenario_job(mode: str, name: str, cfg: ReproduceConfig, q_eta: float,
+                  keep_series: bool) -> dict:
+    from estimators.ekf import EKFConfig, MotorEfficiencyEKF
+    from estimators.fdi import detect, evaluate
+    from estimators.irls import SlidingWindowIRLS
+    from estimators.metrics import fault_windows, score
+
+    rec = _fly(name, cfg.duration, cfg.seed, mode, cfg.thrust_noise)
+    blind = rec.without_truth()
+    out = {"mode": mode, "name": name, "scores": {}, "fdi": {}}
+    series = {}
+    for est in (SlidingWindowIRLS(rec.vehicle),
+                MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_eta))):
+        s = est.run(blind)
+        out["scores"][est.name] = score(rec, s)
+        out["fdi"][est.name] = evaluate(detect(s), fault_windows(rec)).to_dict()
+        series[est.name] = s.eta
+    if keep_series:
+        out["series"] = {"t": rec.t, "truth": rec.eta_true, **series}
+        out["windows"] = fault_windows(rec)
+    return out
+
+
+def _warm_up() -> None:
+    """Compile the numba kernels once in the parent so forked workers inherit them."""
+    from estimators.ekf import MotorEfficiencyEKF
+    from estimators.irls import SlidingWindowIRLS
+
+    rec = _fly("hover", 0.05, 0, "rk4", 0.0)
+    SlidingWindowIRLS(rec.vehicle).run(rec)
+    MotorEfficiencyEKF(rec.vehicle).run(rec)
+    _fly("hover", 0.05, 0, "reference", 0.0)
+
+
+def _map(fn, jobs, workers: int, bar):
+    """Run ``fn(*job)`` for every job, in ``workers`` processes; results in job order."""
+    if workers <= 1 or len(jobs) <= 1:
+        results = []
+        for job in jobs:
+            results.append(fn(*job))
+            bar.update(1)
+        return results
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("fork")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        futures = [pool.submit(fn, *job) for job in jobs]
+        results = []
+        for fut in futures:
+            results.append(fut.result())
+            bar.update(1)
+    return results
+
+
+def reproduce(cfg: ReproduceConfig, progress: bool = False) -> dict:
+    """Run the evaluation; returns everything ``write_outputs`` needs."""
+    from quadfault.progress import progress_bar
+
+    modes = MODES if cfg.reference_mode else ("rk4",)
+    start = time.perf_counter()
+    _warm_up()
+    n_jobs = len(modes) + len(SCENARIOS) + (len(REFERENCE_SCENARIOS) if cfg.reference_mode
+                                            else 0)
+    bar = progress_bar(total=n_jobs + 1, desc="reproduce", unit="job",
+                       disable=None if progress else True)
+    try:
+        cals = _map(_calibration_job, [(m, cfg) for m in modes], cfg.workers, bar)
+        q = {c["mode"]: c["calibration"].q_eta for c in cals}
+        jobs = [("rk4", s, cfg, q["rk4"], True) for s in SCENARIOS]
+        if cfg.reference_mode:
+            jobs += [("reference", s, cfg, q["reference"], False) for s in REFERENCE_SCENARIOS]
+        results = _map(_scenario_job, jobs, cfg.workers, bar)
+        history = irls_history(cfg)
+        bar.update(1)
+    finally:
+        bar.close()
+    return {"config": cfg, "calibration": {c["mode"]: c["calibration"] for c in cals},
+            "results": results, "history": history, "seconds": time.perf_counter() - start}
+
+
+def irls_history(cfg: ReproduceConfig) -> dict:
+    """One IRLS window with ``record_history``: KKT histories of every round and the
+    interior-point iterates of the first loop started from eta = 0.5."""
+    from estimators.base import samples
+    from estimators.ipm import solve_box_qp
+    from estimators.irls import IRLSConfig, SlidingWindowIRLS
+    from estimators.residuals import quadratic_terms, segment_models
+    from estimators.robust import mad_weights
+
+    rec = _fly("combined", min(cfg.duration, 12.0), cfg.seed, "rk4", cfg.thrust_noise)
+    icfg = IRLSConfig(record_history=True)
+    onset = rec.meta["fault_windows"][0][1]
+    k_end = int(np.searchsorted(rec.t, onset + cfg.history_offset))
+    k0 = k_end - icfg.window + 1
+    est = SlidingWindowIRLS(rec.vehicle, icfg)
+    est.reset(np.full(4, 0.5))
+    last = None
+    for s in samples(rec.slice(k0, k_end + 1)):
+        last = est.update(s)
+    d = last.diagnostics
+    # the first interior-point loop again, from 0.5, keeping its iterates (x_history)
+    sl = slice(k0, k_end + 1)
+    f = np.clip(rec.thrust_cmd[sl], 0.0, rec.vehicle.rotor_max_thrust)
+    models = segment_models(rec.vehicle, rec.t[sl], rec.position[sl], rec.velocity[sl],
+                            rec.rotation[sl], rec.omega[sl], f)
+    c, b, H = quadratic_terms(models, est._G)
+    x0 = np.full(4, 0.5)
+    e = c + 2.0 * (b @ x0) + np.einsum("snm,n,m->s", H, x0, x0)
+    w, _ = mad_weights(e, z_soft=icfg.z_soft, power=icfg.soft_power, z_hard=icfg.z_hard,
+                       hard_drop=icfg.hard_drop, w_min=icfg.w_min, mad_eps=icfg.mad_eps)
+    JGJ = np.einsum("s,snm->nm", w, H) + icfg.gamma * np.eye(4)
+    qv = w @ b - icfg.gamma * x0
+    ipm = solve_box_qp(JGJ, qv, icfg.lower, icfg.upper, x0, icfg.ipm, record_history=True)
+    return {"t": float(rec.t[k_end]), "truth": rec.eta_true[k_end].tolist(),
+            "x_history": np.vstack((x0, ipm.x_history)),
+            "dual": d.dual_history, "cent": d.cent_history, "gap": d.gap_history,
+            "residual": d.residual_history, "eta": last.eta.tolist()}
+
+
+# ---------------------------------------------------------------------------------------
+# outputs
+def metrics_document(run: dict) -> dict:
+    """``metrics.json``: the contract's ``scenarios`` block plus config, reference mode, FDI."""
+    cfg: ReproduceConfig = run["config"]
+    doc = {"scenarios": {}, "reference_mode": {"scenarios": {}}, "fdi": {},
+           "reference_mode_fdi": {}}
+    for r in run["results"]:
+        scen = doc["scenarios"] if r["mode"] == "rk4" else doc["reference_mode"]["scenarios"]
+        fdi = doc["fdi"] if r["mode"] == "rk4" else doc["reference_mode_fdi"]
+        scen[r["name"]] = {k: v.to_contract() for k, v in r["scores"].items()}
+        fdi[r["name"]] = r["fdi"]
+    if not cfg.reference_mode:
+        del doc["reference_mode"], doc["reference_mode_fdi"]
+    doc["config"] = {**asdict(cfg), "q_range": list(cfg.q_range), "integrator": "rk4",
+                     "align": "end", "ekf_q_eta": run["calibration"]["rk4"].q_eta,
+                     "calibration": {m: c.to_dict() for m, c in run["calibration"].items()},
+                     "seconds_total": run["seconds"]}
+    doc["paper"] = PAPER
+    return doc
+
+
+def _fmt(x, digits=4):
+    return "-" if x is None else f"{x:.{digits}f}"
+
+
+def table(scenarios: dict) -> str:
+    """Markdown table: motor-averaged RMSE, std, spike (and excess spike), wall time."""
+    from estimators.metrics import mean_or_none
+
+    lines = ["| scenario | estimator | RMSE | std | spike | excess spike | seconds |",
+             "|---|---|---|---|---|---|---|"]
+    for name, per in scenarios.items():
+        for est in ("irls", "ekf"):
+            s = per[est]
+            lines.append(f"| {name} | {est} | {_fmt(np.mean(s['rmse']))} | "
+                         f"{_fmt(np.mean(s['std']))} | {_fmt(mean_or_none(s['spike']))} | "
+                         f"{_fmt(mean_or_none(s['excess_spike']))} | {s['seconds']:.2f} |")
+    return "\n".join(lines)
+
+
+def planned_files(out: Path) -> list[Path]:
+    names = ["metrics.json", "report.md", *STATIC_FIGURES]
+    names += [f.format(s=s) for s in SCENARIOS for f in FIGURES]
+    return [out / n for n in names]
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", default="quadfault-reproduce",
+                   help="output folder (default ./quadfault-reproduce; created if missing)")
+    p.add_argument("--quick", action="store_true",
+                   help="12 s flights and a coarser calibration (about a minute)")
+    p.add_argument("--force", action="store_true", help="overwrite existing output files")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the scored flights (calibration flight: seed + 1000)")
+    p.add_argument("--workers", type=int, default=2, help="parallel processes (default 2)")
+    p.add_argument("--no-reference-mode", action="store_true",
+                   help="skip the flights of the reference integration mode")
+
+
+def run(args) -> int:
+    from estimators.reproduce_report import write_report
+    from quadfault.fileio import atomic_write_text, check_writable
+    from quadfault.progress import enabled
+
+    if args.workers < 1:
+        raise ConfigError(f"--workers must be >= 1, got {args.workers}")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"--out {out}: exists and is not a folder")
+    if out.exists():
+        check_writable(planned_files(out), force=args.force)
+    base = ReproduceConfig.quick() if args.quick else ReproduceConfig()
+    cfg = replace(base, seed=args.seed, workers=args.workers,
+                  reference_mode=not args.no_reference_mode)
+    result = reproduce(cfg, progress=not args.quiet and enabled())
+    out.mkdir(parents=True, exist_ok=True)
+    doc = metrics_document(result)
+    atomic_write_text(out / "metrics.json", json.dumps(doc, indent=2, default=_json) + "\n",
+                      force=args.force)
+    write_report(out, doc, result, force=args.force)
+    print(f"quadfault reproduce ({'quick' if args.quick else 'full'}, seed {cfg.seed}, "
+          f"integrator rk4, EKF Q_eta = {doc['config']['ekf_q_eta']:.4g})")
+    print(table(doc["scenarios"]))
+    if cfg.reference_mode:
+        print("\nreference integration mode (the authors' Euler step):")
+        print(table(doc["reference_mode"]["scenarios"]))
+    print(f"\nwrote {out / 'metrics.json'}, {out / 'report.md'} and figures "
+          f"({result['seconds']:.0f} s)")
+    return 0
+
+
+def _json(obj):
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, (np.floating, np.integer)):
+        return obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")

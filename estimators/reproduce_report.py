@@ -1,0 +1,168 @@
+"""``report.md`` and the figures of ``quadfault reproduce``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from estimators import figures
+from estimators.metrics import mean_or_none
+from quadfault.fileio import atomic_write_text
+
+
+def _f(x, d=4):
+    return "-" if x is None else f"{x:.{d}f}"
+
+
+def _spike_rows(scenarios: dict) -> list[str]:
+    rows = ["| scenario | estimator | M1 | M2 | M3 | M4 | mean |", "|---|---|---|---|---|---|---|"]
+    for name, per in scenarios.items():
+        for est in ("irls", "ekf"):
+            sp = per[est]["spike"]
+            if sp is None:
+                continue
+            rows.append(f"| {name} | {est} | " + " | ".join(_f(v) for v in sp)
+                        + f" | {_f(mean_or_none(sp))} |")
+    return rows
+
+
+def _fdi_rows(fdi: dict) -> list[str]:
+    rows = ["| scenario | estimator | faults detected | missed | false alarms | worst latency [s] |",
+            "|---|---|---|---|---|---|"]
+    for name, per in fdi.items():
+        for est in ("irls", "ekf"):
+            s = per[est]
+            lat = [x for x in s["latencies"] if x is not None]
+            rows.append(f"| {name} | {est} | {s['detected']}/{len(s['latencies'])} | "
+                        f"{s['missed']} | {s['false_alarms']} | {_f(max(lat) if lat else None, 3)} |")
+    return rows
+
+
+def _paper_rows(scenarios: dict, paper: dict) -> list[str]:
+    rows = ["| scenario | IRLS RMSE (ours / paper) | EKF RMSE (ours / paper) | "
+            "IRLS spike (ours / paper) | EKF spike (ours / paper) |", "|---|---|---|---|---|"]
+    for name, per in scenarios.items():
+        cells = []
+        for key in ("rmse", "spike"):
+            for est in ("irls", "ekf"):
+                ours = per[est][key]
+                ours = mean_or_none(ours) if key == "spike" else float(np.mean(ours))
+                ref = paper[key][est].get(name)
+                ref = float(np.mean(ref)) if ref is not None else None
+                cells.append(f"{_f(ours)} / {_f(ref)}")
+        rows.append(f"| {name} | " + " | ".join(cells) + " |")
+    return rows
+
+
+def write_figures(out: Path, doc: dict, run: dict, force: bool) -> list[str]:
+    written = []
+    for r in run["results"]:
+        if r["mode"] != "rk4" or "series" not in r:
+            continue
+        name = r["name"]
+        for fn, stem in ((figures.plot_estimates, "estimates"), (figures.plot_errors, "errors")):
+            path = out / f"{stem}_{name}.png"
+            fn(path, r["series"], r["windows"], name, force=force)
+            written.append(path.name)
+    figures.plot_rmse_std(out / "rmse_std_bars.png", doc["scenarios"], force=force)
+    figures.plot_spikes(out / "spikes_per_motor.png", doc["scenarios"], force=force)
+    figures.plot_calibration(out / "calibration_curve.png", doc["config"]["calibration"],
+                             force=force)
+    figures.plot_convergence(out / "irls_convergence.png", run["history"], force=force)
+    figures.plot_kkt(out / "kkt_convergence.png", run["history"], force=force)
+    written += ["rmse_std_bars.png", "spikes_per_motor.png", "calibration_curve.png",
+                "irls_convergence.png", "kkt_convergence.png"]
+    return written
+
+
+def write_report(out: Path, doc: dict, run: dict, force: bool = False) -> Path:
+    from estimators.reproduce import table
+
+    cfg = doc["config"]
+    written = write_figures(out, doc, run, force)
+    cal = cfg["calibration"]
+    lines = [
+        "# quadfault reproduce: IRLS vs calibrated EKF",
+        "",
+        f"Flights of {cfg['duration']:g} s (the reference schedule scaled to this length), "
+        f"sigma_f = {cfg['thrust_noise']}, seed {cfg['seed']}; the EKF is calibrated on a "
+        f"{cfg['calibration_duration']:g} s {cfg['calibration_scenario']} flight with seed "
+        f"{cfg['seed'] + 1000}. Total time {cfg['seconds_total']:.0f} s.",
+        "",
+        "## Main results (RKMK4 integrator, our default simulator)",
+        "",
+        f"EKF calibration: {cal['rk4']['message']}.",
+        "",
+        table(doc["scenarios"]),
+        "",
+        "Motor averages. RMSE = sqrt(mean(e^2)), std = N-1 sample standard deviation of the "
+        "signed error e = eta_true - eta_hat, with the truth taken at the time of the newest "
+        "sample each estimate used. *spike* = max |e_m| while another motor is in its fault "
+        "window (extended to the +-3 % band, dilated by 0.03 s): the cross-coupling a fault "
+        "causes in healthy motors' estimates. *excess spike* = spike minus the 99.9th "
+        "percentile of |e_m| outside all fault windows (how far the transient rises above "
+        "ordinary noise). *seconds* = the estimator's wall time over the flight.",
+        "",
+        "### Spikes per motor",
+        "",
+        *_spike_rows(doc["scenarios"]),
+        "",
+        "### Fault detection and isolation (estimators/fdi.py, default settings)",
+        "",
+        *_fdi_rows(doc["fdi"]),
+        "",
+        "A detection counts when an alarm is raised on the faulted motor inside its window; "
+        "every other alarm is false. Latency is from the fault onset.",
+        "",
+    ]
+    if "reference_mode" in doc:
+        lines += [
+            "## Like for like with the paper (reference integration mode)",
+            "",
+            "Flights of `SimConfig.reference()`: the authors' Euler step with its one-sample "
+            "input lag, no upper saturation, a_d = 0. EKF calibration: "
+            f"{cal['reference']['message']}.",
+            "",
+            table(doc["reference_mode"]["scenarios"]),
+            "",
+            "Beside the reference code's hard-coded numbers (motor averages; `plot_rmse_std.m`, "
+            "`plot_spikes.m`):",
+            "",
+            *_paper_rows(doc["reference_mode"]["scenarios"], doc["paper"]),
+            "",
+            "### FDI on the reference-mode flights",
+            "",
+            *_fdi_rows(doc["reference_mode_fdi"]),
+            "",
+        ]
+    lines += [
+        "## Where and why we differ from the paper",
+        "",
+        "* **Seeds and RNG.** The paper ran one MATLAB flight (`rng(114512)`); our flights use "
+        "numpy generators, so individual spikes differ; compare magnitudes, not digits.",
+        "* **Simulator.** The main table uses RKMK4 with a zero-order-hold command and rotor "
+        "saturation at f_max; the reference integrates by semi-implicit Euler with a "
+        "one-sample input lag that neither estimator models (the reference-mode table keeps "
+        "it, like the paper).",
+        "* **EKF.** Ours fixes the reference's flaws (docs/ekf.md): a 3-row rotation-error "
+        "attitude update instead of the one-sided acos angle, exponential-map prediction, full "
+        "gyroscopic Jacobian, Joseph form. Only Q_eta is calibrated; the other noise values "
+        "are the reference's.",
+        "* **Calibration.** The reference hard-codes Q_eta = 0.5 and ships no calibration; we "
+        "match the IRLS RMSE on a separate flight and take the larger matching Q_eta, or the "
+        "minimum-RMSE Q_eta when the EKF cannot reach the IRLS RMSE (then the EKF is *less* "
+        "accurate on average and its spikes are those of its most accurate tuning).",
+        "* **Alignment.** We score each estimate against the truth at its newest sample; the "
+        "reference used the window start (9 ms earlier for IRLS), which adds a small lag "
+        "error around every change (`estimators.metrics.score(..., align='reference')`).",
+        "* **Clipping** is our addition (the reference has no upper saturation): a faster "
+        "circle and a deeper fault (0.4) so the weak motor's command saturates.",
+        "",
+        "## Figures",
+        "",
+    ]
+    lines += [f"![{name}]({name})" for name in written]
+    path = out / "report.md"
+    atomic_write_text(path, "\n".join(lines) + "\n", force=force)
+    return path
