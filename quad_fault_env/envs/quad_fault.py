@@ -253,10 +253,11 @@ class QuadFaultEnv(gym.Env):
         self.history = [self.plant.state.p.copy()]
         events = [dict(_fault_dict(f), kind="onset", t=f.onset)
                   for f in self.scenario.efficiency.faults if f.onset <= 0.0]
-        info = self._info([], [], [], events, None)
+        ref = self.scenario.trajectory(0.0)
+        info = self._info([], [], [], events, None, ref)
         if self.render_mode == "human":
             self.render()
-        return self._observation(), info
+        return self._observation(ref), info
 
     # -- step --------------------------------------------------------------------------------
     def _check_action(self, action) -> np.ndarray:
@@ -337,16 +338,15 @@ class QuadFaultEnv(gym.Env):
             for kind, tk in (("onset", f.onset), ("end", f.end)):
                 if t0 < tk <= t1:
                     events.append(dict(_fault_dict(f), kind=kind, t=tk))
-        info = self._info(samples, eta_true, sf, events, reason)
+        info = self._info(samples, eta_true, sf, events, reason, ref)
         if self.render_mode == "human":
             self.render()
-        return self._observation(), (0.0 if not math.isfinite(reward) else reward), \
+        return self._observation(ref), (0.0 if not math.isfinite(reward) else reward), \
             terminated, truncated, info
 
     # -- observation and info ----------------------------------------------------------------
-    def _observation(self):
-        t = self.time
-        ref = self.scenario.trajectory(t)
+    def _observation(self, ref):
+        """The observation at the end of the step; ``ref`` is the reference at that time."""
         m = self._meas
         sd = estimate_sd(self._estimate, self.vehicle.n_rotors)
         values = self.layout.values(pos_err=m.p - ref.position, vel_err=m.v - ref.velocity,
@@ -355,10 +355,9 @@ class QuadFaultEnv(gym.Env):
                                     ref_acc=ref.acceleration)
         return values if self.observation_kind == "dict" else self.layout.flatten(values)
 
-    def _info(self, samples, eta_true, sf, events, reason) -> dict:
+    def _info(self, samples, eta_true, sf, events, reason, ref) -> dict:
         t = self.time
         state = self.plant.state
-        ref = self.scenario.trajectory(t)
         est = self._estimate
         return {
             "t": t,
