@@ -199,8 +199,9 @@ def reproduce(cfg: ReproduceConfig, progress: bool = False) -> dict:
 
 
 def irls_history(cfg: ReproduceConfig) -> dict:
-    """One IRLS window with ``record_history``: KKT histories of every round and the
-    interior-point iterates of the first loop started from eta = 0.5."""
+    """One IRLS window just after motor 1's fault onset, with ``record_history``: the KKT
+    histories of every IRLS round (warm-started as usual) and the interior-point iterates of
+    the first round started from eta = 0.5 instead (the reference ``run.m``'s ``x0``)."""
     from estimators.base import samples
     from estimators.ipm import solve_box_qp
     from estimators.irls import IRLSConfig, SlidingWindowIRLS
@@ -212,27 +213,28 @@ def irls_history(cfg: ReproduceConfig) -> dict:
     onset = rec.meta["fault_windows"][0][1]
     k_end = int(np.searchsorted(rec.t, onset + cfg.history_offset))
     k0 = k_end - icfg.window + 1
+    x_prev = SlidingWindowIRLS(rec.vehicle).run(rec.slice(0, k_end).without_truth()).eta[-1]
     est = SlidingWindowIRLS(rec.vehicle, icfg)
-    est.reset(np.full(4, 0.5))
+    est.reset(x_prev)
     last = None
-    for s in samples(rec.slice(k0, k_end + 1)):
+    for s in samples(rec.slice(k0, k_end + 1).without_truth()):
         last = est.update(s)
     d = last.diagnostics
-    # the first interior-point loop again, from 0.5, keeping its iterates (x_history)
+    # first round of the same window, from x0 = 0.5, keeping the iterates (x_history)
     sl = slice(k0, k_end + 1)
     f = np.clip(rec.thrust_cmd[sl], 0.0, rec.vehicle.rotor_max_thrust)
     models = segment_models(rec.vehicle, rec.t[sl], rec.position[sl], rec.velocity[sl],
                             rec.rotation[sl], rec.omega[sl], f)
     c, b, H = quadratic_terms(models, est._G)
-    x0 = np.full(4, 0.5)
-    e = c + 2.0 * (b @ x0) + np.einsum("snm,n,m->s", H, x0, x0)
+    e = c + 2.0 * (b @ x_prev) + np.einsum("snm,n,m->s", H, x_prev, x_prev)  # eq. 26
     w, _ = mad_weights(e, z_soft=icfg.z_soft, power=icfg.soft_power, z_hard=icfg.z_hard,
                        hard_drop=icfg.hard_drop, w_min=icfg.w_min, mad_eps=icfg.mad_eps)
     JGJ = np.einsum("s,snm->nm", w, H) + icfg.gamma * np.eye(4)
-    qv = w @ b - icfg.gamma * x0
-    ipm = solve_box_qp(JGJ, qv, icfg.lower, icfg.upper, x0, icfg.ipm, record_history=True)
+    x0 = np.full(4, 0.5)
+    ipm = solve_box_qp(JGJ, w @ b - icfg.gamma * x_prev, icfg.lower, icfg.upper, x0, icfg.ipm,
+                       record_history=True)
     return {"t": float(rec.t[k_end]), "truth": rec.eta_true[k_end].tolist(),
-            "x_history": np.vstack((x0, ipm.x_history)),
+            "x_history": np.vstack((x0, ipm.x_history)), "x_prev": x_prev.tolist(),
             "dual": d.dual_history, "cent": d.cent_history, "gap": d.gap_history,
             "residual": d.residual_history, "eta": last.eta.tolist()}
 
