@@ -10,6 +10,9 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 
 import quad_fault_env
 from estimators.base import Estimate
@@ -324,3 +327,40 @@ def test_scenario_object_keeps_its_duration():
     sc = Scenario("short", 0.05, named_scenario("hover").efficiency, Hover(), thrust_noise=0.0)
     out = run(QuadFaultEnv("none", sc), [np.zeros(4)] * 20)
     assert len(out) == 6 and out[-1][3]
+
+
+_PROPERTY_ENVS = {}
+
+
+def _property_env(mode="motor"):
+    """One env per action mode, reused across hypothesis examples (reset each time)."""
+    if mode not in _PROPERTY_ENVS:
+        _PROPERTY_ENVS[mode] = QuadFaultEnv("none", "hover_fault", action_mode=mode,
+                                            duration=100.0, sensor_noise=SensorNoise(gyro=0.01))
+    return _PROPERTY_ENVS[mode]
+
+
+@settings(max_examples=25, deadline=None)
+@given(action=hnp.arrays(np.float64, 4, elements=st.floats(-1.0, 1.0)),
+       seed=st.integers(0, 2**16), mode=st.sampled_from(["motor", "residual", "wrench"]))
+def test_any_valid_action_gives_an_observation_in_the_box(action, seed, mode):
+    env = _property_env(mode)
+    obs, _ = env.reset(seed=seed)
+    for _ in range(3):
+        obs, r, terminated, truncated, info = env.step(action)
+        assert env.observation_space.contains(obs)
+        assert -0.02 <= r <= 1.0
+        assert np.all((info["motor_command"] >= 0) & (info["motor_command"] <= env.f_max))
+        if terminated:
+            break
+
+
+@settings(max_examples=25, deadline=None)
+@given(action=hnp.arrays(np.float64, 4, elements=st.floats(allow_nan=True,
+                                                           allow_infinity=True, width=32)))
+def test_out_of_range_actions_always_raise(action):
+    assume(not np.all(np.abs(action) <= 1.0 + 1e-6))
+    env = _property_env()
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="NaN|outside"):
+        env.step(action)
