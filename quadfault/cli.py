@@ -26,10 +26,17 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+class OneLineErrorParser(argparse.ArgumentParser):
+    """An ArgumentParser whose usage errors are one line (``prog: error: ...``), exit 2."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
 def _top_parser() -> argparse.ArgumentParser:
     from quadfault import __version__
 
-    p = argparse.ArgumentParser(
+    p = OneLineErrorParser(
         prog="quadfault",
         description="Fault-tolerant quadrotor research toolkit.",
         epilog="Run 'quadfault <command> --help' for the options of a command.",
@@ -69,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
         missing = getattr(exc, "name", None) or str(exc)
         return _error(prog, f"this command needs a package that is not installed ({missing}); "
                             "see the README's install extras")
-    parser = argparse.ArgumentParser(prog=prog, description=help_text)
+    parser = OneLineErrorParser(prog=prog, description=help_text)
     module.add_arguments(parser)
     add_common_arguments(parser)
     args = parser.parse_args(rest)
