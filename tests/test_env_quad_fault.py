@@ -300,7 +300,15 @@ def test_bad_actions_raise(action, message):
     ({"estimator_rate": "fast"}, "estimator_rate"),
     ({"observation": "image"}, "observation"),
     ({"thrust_noise": -0.1}, "thrust_noise"),
+    ({"thrust_noise": "high"}, "thrust_noise"),
     ({"duration": 0.0}, "duration"),
+    ({"duration": "long"}, "duration"),
+    ({"control_rate": None}, "control_rate"),
+    ({"random_trajectory": "spiral"}, "random_trajectory"),
+    ({"sensor_noise": 0.1}, "sensor_noise"),
+    ({"render_mode": "ascii"}, "render_mode"),
+    ({"residual_scale": -1.0}, "residual_scale"),
+    ({"moment_scale": (1.0, 0.0, 1.0)}, "moment_scale"),
 ])
 def test_bad_configuration_raises_config_error(kwargs, message):
     kw = {"estimator": "none", "scenario": "hover"}

@@ -36,6 +36,14 @@ from quadfault.simulator import SensorNoise, initial_state
 from quadfault.vehicle import Vehicle
 
 DEFAULT_DURATION = 20.0  # [s] episode length for named and random scenarios
+#: trajectories of random scenarios (``quadfault.scenarios.random_scenario``)
+RANDOM_TRAJECTORIES = ("random", "circle", "hover", "lissajous")
+
+
+def _number_at_least(value, low: float) -> bool:
+    """Whether ``value`` is a finite real number >= ``low``."""
+    return (isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+            and math.isfinite(value) and value >= low)
 
 
 def _numba_available() -> bool:
@@ -137,11 +145,13 @@ class QuadFaultEnv(gym.Env):
         self.sensor_noise = sensor_noise or SensorNoise()
         if not isinstance(self.sensor_noise, SensorNoise):
             raise ConfigError(f"sensor_noise must be a SensorNoise, got {sensor_noise!r}")
-        if thrust_noise is not None and not (math.isfinite(thrust_noise) and thrust_noise >= 0):
-            raise ConfigError(f"thrust_noise must be >= 0, got {thrust_noise!r}")
+        if thrust_noise is not None and not _number_at_least(thrust_noise, 0.0):
+            raise ConfigError(f"thrust_noise must be a number >= 0, got {thrust_noise!r}")
         self.thrust_noise = thrust_noise
-        if not (control_rate > 0 and physics_rate > 0):
-            raise ConfigError("control_rate and physics_rate must be positive [Hz]")
+        if not (_number_at_least(control_rate, 0.0) and _number_at_least(physics_rate, 0.0)
+                and control_rate > 0 and physics_rate > 0):
+            raise ConfigError(f"control_rate and physics_rate must be positive [Hz], got "
+                              f"{control_rate!r} and {physics_rate!r}")
         ratio = physics_rate / control_rate
         if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
             raise ConfigError(f"physics_rate ({physics_rate} Hz) must be a whole multiple of "
@@ -163,8 +173,11 @@ class QuadFaultEnv(gym.Env):
             raise ConfigError(f"unknown scenario {scenario!r}; choose from "
                               f"{', '.join(SCENARIO_NAMES + ('random',))}")
         self.scenario_spec = scenario
+        if random_trajectory not in RANDOM_TRAJECTORIES:
+            raise ConfigError(f"random_trajectory must be one of {RANDOM_TRAJECTORIES}, "
+                              f"got {random_trajectory!r}")
         self.random_trajectory = random_trajectory
-        if duration is not None and not (math.isfinite(duration) and duration > 0):
+        if duration is not None and not (_number_at_least(duration, 0.0) and duration > 0):
             raise ConfigError(f"duration must be positive [s], got {duration!r}")
         self.duration = duration
         self.estimator = make_estimator(estimator, self.vehicle, **(estimator_kwargs or {}))
