@@ -17,7 +17,7 @@ import numpy as np
 
 from estimators.base import EstimateSeries
 from quadfault.errors import ConfigError
-from quadfault.fileio import atomic_write_text, check_writable
+from quadfault.fileio import atomic_write_files, check_writable
 
 FORMAT = "quadfault-estimate/1"
 
@@ -88,8 +88,7 @@ def write_estimate_series(series: EstimateSeries, csv_path, *, input_path=None,
     if extra:
         meta.update(extra)
     text = json.dumps(_clean(json.loads(json.dumps(meta, default=_json_default))), indent=2)
-    atomic_write_text(side, text + "\n", force=True)
-    atomic_write_text(path, format_series(series), force=True)
+    atomic_write_files({side: text + "\n", path: format_series(series)}, force=True)
     return path
 
 

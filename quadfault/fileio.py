@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 import tempfile
 from pathlib import Path
 
@@ -20,25 +22,74 @@ def check_writable(paths, *, force: bool = False) -> None:
             raise QuadfaultError(f"{p.parent}: folder does not exist")
 
 
-def atomic_write_bytes(path, data: bytes, *, force: bool = False) -> Path:
-    """Write ``data`` to ``path`` through a temporary file in the same folder and a rename,
-    so an interrupted run never leaves a half-written file."""
-    path = Path(path)
-    check_writable([path], force=force)
+def _write_temp(path: Path, data: bytes) -> str:
+    """``data`` in a synced temporary file beside ``path``; returns its name."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
-        os.replace(tmp, path)
     except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
+        _unlink(tmp)
         raise
-    return path
+    return tmp
+
+
+def _unlink(name) -> None:
+    try:
+        os.unlink(name)
+    except FileNotFoundError:
+        pass
+
+
+@contextlib.contextmanager
+def _sigint_deferred():
+    """Hold Ctrl-C (SIGINT) back for the duration; it takes effect on exit. (A Python-level
+    handler, not a signal mask: the signal may land on any thread of the process.)"""
+    caught = []
+    try:
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    except ValueError:  # not the main thread: signals are not delivered here anyway
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if caught and previous != signal.SIG_IGN:
+            if callable(previous):
+                previous(signal.SIGINT, None)
+            else:
+                raise KeyboardInterrupt
+
+
+def atomic_write_bytes(path, data: bytes, *, force: bool = False) -> Path:
+    """Write ``data`` to ``path`` through a temporary file in the same folder and a rename,
+    so an interrupted run never leaves a half-written file."""
+    return atomic_write_files({path: data}, force=force)[0]
+
+
+def atomic_write_files(contents: dict, *, force: bool = False) -> list[Path]:
+    """Write several files as one unit (e.g. a CSV and its JSON sidecar): every temporary file
+    is written first, then the renames run back to back with Ctrl-C held, so an interrupted
+    run leaves either all the new files or none of them (never a new sidecar beside an old or
+    missing CSV). ``contents`` maps path -> bytes (or str, written as UTF-8)."""
+    paths = [Path(p) for p in contents]
+    check_writable(paths, force=force)
+    temps = []
+    try:
+        for path, data in zip(paths, contents.values()):
+            temps.append(_write_temp(path, data.encode("utf-8") if isinstance(data, str)
+                                     else data))
+        with _sigint_deferred():
+            for tmp, path in zip(temps, paths):
+                os.replace(tmp, path)
+    except BaseException:
+        for tmp in temps:
+            _unlink(tmp)
+        raise
+    return paths
 
 
 def atomic_write_text(path, text: str, *, force: bool = False) -> Path:

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from quadfault.errors import ConfigError, RecordingError
-from quadfault.fileio import atomic_write_text, check_writable
+from quadfault.fileio import atomic_write_files, check_writable
 from quadfault.rotation import ENU_TO_NED, FLU_TO_FRD, quat_multiply, quat_to_rot, rot_to_quat
 from quadfault.vehicle import Vehicle, paper_allocation
 
@@ -504,6 +504,6 @@ def write_recording(rec: Recording, csv_path, *, frame: str = "NED", force: bool
     side = sidecar_path(path)
     check_writable([path, side], force=force)
     names, data = recording_columns(rec, frame)
-    atomic_write_text(side, json.dumps(recording_sidecar(rec, frame), indent=2) + "\n", force=True)
-    atomic_write_text(path, _format_table(names, data), force=True)
+    atomic_write_files({side: json.dumps(recording_sidecar(rec, frame), indent=2) + "\n",
+                        path: _format_table(names, data)}, force=True)
     return path
