@@ -171,8 +171,8 @@ def vehicle_flu_to_frd(mass, inertia, allocation, **kw) -> Vehicle:
 # reading
 def _open_text(path: Path):
     if path.suffix == ".gz":
-        return io.TextIOWrapper(gzip.open(path, "rb"), encoding="utf-8", newline="")
-    return open(path, encoding="utf-8", newline="")
+        return io.TextIOWrapper(gzip.open(path, "rb"), encoding="utf-8-sig", newline="")
+    return open(path, encoding="utf-8-sig", newline="")  # a BOM (Excel) is not a column name
 
 
 def sidecar_path(csv_path) -> Path:
