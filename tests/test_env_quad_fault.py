@@ -134,6 +134,8 @@ def test_reset_options_fix_the_scenario_and_random_scenarios_vary():
     assert info["scenario"] == "mine" and info["thrust_noise"] == 0.0
     with pytest.raises(ConfigError, match="options\\['scenario'\\]"):
         env.reset(options={"scenario": 42})
+    with pytest.raises(ConfigError, match="unknown reset option"):
+        env.reset(options={"senario": "hover"})
 
 
 def test_hover_residual_zero_action_stays_up_for_5_s_through_a_fault():

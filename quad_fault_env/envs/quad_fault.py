@@ -138,6 +138,9 @@ class QuadFaultEnv(gym.Env):
                  vehicle: Vehicle | None = None, controller: ControllerConfig | None = None,
                  render_mode: str | None = None):
         self.vehicle = vehicle or Vehicle()
+        if not isinstance(self.vehicle, Vehicle) or self.vehicle.n_rotors != 4:
+            raise ConfigError("vehicle must be a quadfault Vehicle with 4 rotors (the scenarios "
+                              "and the observation have four motors)")
         self.action_config = ActionConfig(action_mode, residual_scale, moment_scale)
         self.reward_config = reward or RewardConfig()
         self.limits = limits or TerminationLimits()
@@ -241,6 +244,9 @@ class QuadFaultEnv(gym.Env):
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
         options = options or {}
+        unknown = set(options) - {"scenario"}
+        if unknown:
+            raise ConfigError(f"unknown reset option(s) {sorted(unknown)}; only 'scenario'")
         self.scenario = self._make_scenario(options.get("scenario", self.scenario_spec))
         self.controller = GeometricController(self.vehicle, self.scenario.trajectory,
                                               self.controller_config)
