@@ -218,6 +218,8 @@ def _parse_sidecar(path: Path) -> dict:
     except json.JSONDecodeError as exc:
         raise RecordingError(path, f"invalid JSON at line {exc.lineno}, column {exc.colno}: "
                                    f"{exc.msg}") from None
+    except RecursionError:
+        raise RecordingError(path, "invalid JSON: nested too deeply") from None
     if not isinstance(meta, dict):
         raise RecordingError(path, "sidecar must be a JSON object")
     fmt = meta.get("format")

@@ -60,6 +60,8 @@ def load_vehicle_file(path) -> tuple:
         data = json.loads(path.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise RecordingError(path, f"not valid JSON: {exc}") from None
+    except RecursionError:
+        raise RecordingError(path, "not valid JSON: nested too deeply") from None
     if not isinstance(data, dict):
         raise RecordingError(path, "must be a JSON object")
     if isinstance(data.get("vehicle"), dict):  # a whole sidecar is fine too
