@@ -42,35 +42,33 @@ def kernel_parameters(cfg, m: int):
 
 
 @njit(cache=True)
-def _cholesky_solve(A, rhs):
-    """Solve ``A x = rhs`` for symmetric positive definite ``A``; NaN if not positive."""
+def _cholesky_solve_into(A, rhs, L, out):
+    """Solve ``A out = rhs`` for symmetric positive definite ``A`` (``L`` is scratch);
+    returns False (``out`` undefined) when ``A`` is not positive definite."""
     n = A.shape[0]
-    L = np.zeros((n, n))
     for j in range(n):
         s = A[j, j]
         for k in range(j):
             s -= L[j, k] * L[j, k]
         if not s > 0.0:
-            return np.full(n, np.nan)
+            return False
         L[j, j] = math.sqrt(s)
         for i in range(j + 1, n):
             s = A[i, j]
             for k in range(j):
                 s -= L[i, k] * L[j, k]
             L[i, j] = s / L[j, j]
-    y = np.empty(n)
-    for i in range(n):
+    for i in range(n):  # forward: L y = rhs (y stored in out)
         s = rhs[i]
         for k in range(i):
-            s -= L[i, k] * y[k]
-        y[i] = s / L[i, i]
-    x = np.empty(n)
-    for i in range(n - 1, -1, -1):
-        s = y[i]
+            s -= L[i, k] * out[k]
+        out[i] = s / L[i, i]
+    for i in range(n - 1, -1, -1):  # back: L^T out = y
+        s = out[i]
         for k in range(i + 1, n):
-            s -= L[k, i] * x[k]
-        x[i] = s / L[i, i]
-    return x
+            s -= L[k, i] * out[k]
+        out[i] = s / L[i, i]
+    return True
 
 
 @njit(cache=True)
@@ -170,6 +168,8 @@ def _ipm(H, q, x0, fp, max_iter):
     dlu = np.empty(n)
     dll = np.empty(n)
     x_t, lu_t, ll_t = np.empty(n), np.empty(n), np.empty(n)
+    L = np.empty((n, n))
+    dx = np.empty(n)
     for it in range(1, max_iter + 1):
         gap = 0.0
         for i in range(n):
@@ -188,8 +188,7 @@ def _ipm(H, q, x0, fp, max_iter):
                 K[i, k] = H[i, k]
             K[i, i] -= lu[i] / pu[i] + ll[i] / pl[i]
         r_norm = math.sqrt(r2)
-        dx = _cholesky_solve(K, rhs)
-        if not np.all(np.isfinite(dx)):
+        if not _cholesky_solve_into(K, rhs, L, dx):
             return x, it, False
         smax = 1.0
         for i in range(n):
@@ -291,11 +290,15 @@ def _solve_window(c, b, H, x_prev, fp, ip, x_out, sd_out, iters_out):
     for j in range(n):
         info[j, j] += gamma
     unit = np.zeros(n)
+    col = np.empty(n)
+    L = np.empty((n, n))
     for j in range(n):
         unit[:] = 0.0
         unit[j] = 1.0
-        col = _cholesky_solve(info, unit)
-        sd_out[j] = math.sqrt(max(col[j], 0.0) * s2)
+        if _cholesky_solve_into(info, unit, L, col):
+            sd_out[j] = math.sqrt(max(col[j], 0.0) * s2)
+        else:
+            sd_out[j] = np.nan
     x_out[:] = x_cur
     return (_OK if converged else _MAXIT), rounds, cond, w
 

@@ -89,7 +89,6 @@ def segment_models(vehicle: Vehicle, t, p, v, R, w, f) -> SegmentModels:
     dtc = dt[:, None]
     b3 = Ri[:, :, 2]  # R_i e3
     thrust_gain = fi * A[0]  # dT / d eta_j  (S, n)
-    moment_gain = fi[:, None, :] * A[1:4][None]  # dM / d eta  (S, 3, n)
     r0 = np.empty((S, RESIDUAL_ROWS))
     J = np.empty((S, RESIDUAL_ROWS, n))
     # velocity and position (eqs. 13, 14, 17, 18): a = g e3 - T R e3 / m
@@ -101,7 +100,8 @@ def segment_models(vehicle: Vehicle, t, p, v, R, w, f) -> SegmentModels:
     # angular rate (eqs. 15, 19): W_hat = W + J^-1 (M - W x J W) dt
     gyro = cross(wi, wi @ Jmat.T) @ Jinv.T
     w_hat0 = wi - gyro * dtc  # predicted rate at eta = 0
-    dw = (Jinv @ moment_gain) * dt[:, None, None]  # d W_hat / d eta  (S, 3, n)
+    # d W_hat / d eta = dt J^-1 A_M diag(f_i)  (S, 3, n), A_M = moment rows of the allocation
+    dw = (Jinv @ A[1:4])[None] * (fi * dtc)[:, None, :]
     r0[:, 6:9] = w[1:] - w_hat0
     J[:, 6:9] = -dw
     # rotation (eqs. 20-22): r_R = 1/2 (3 - tr dR) - dt vee(dR) . W_hat
