@@ -40,6 +40,8 @@ from multiprocessing import Pool
 import numpy as np
 
 from quadfault import effects as fx
+import quadfault.diagnosis.locate  # noqa: F401  (imported before forking the workers)
+import quadfault.diagnosis.prediction  # noqa: F401
 from quadfault.diagnosis import Diagnosis
 from quadfault.diagnosis.library import EQUIVALENT, build_library, predict
 from quadfault.diagnosis.residuals import noise_scale, prepare

@@ -36,6 +36,7 @@ class DiagnosisConfig:
         effects: restrict the library to these names (None: all).
         horizon: open-loop prediction horizon [s].
         saturate: clip commands to [0, max_thrust] as the nominal motor model does.
+        internal_step: faster logs are merged to about this step [s] (see ``residuals``).
     """
 
     block_seconds: float = 0.02
@@ -48,6 +49,7 @@ class DiagnosisConfig:
     effects: tuple | None = None
     horizon: float = 0.5
     saturate: bool = True
+    internal_step: float = 0.004
 
     def __post_init__(self):
         if not (0 < self.block_seconds <= 1.0):
@@ -111,7 +113,7 @@ class Diagnosis:
         cfg = self.config
         rec = recording.without_truth() if isinstance(recording, Recording) else recording
         rp = prepare(rec, vehicle, block_seconds=cfg.block_seconds, gap_factor=cfg.gap_factor,
-                     saturate=cfg.saturate)
+                     saturate=cfg.saturate, internal_step=cfg.internal_step)
         library = build_library(rp)
         if cfg.effects is not None:
             library = [c for c in library if c.name in cfg.effects]

@@ -22,9 +22,9 @@ from quadfault.rotation import rotation_angle
 def _rollout(rec, rp: Replay, terms, starts, nh, max_steps=100):
     veh = rp.vehicle
     f = thrust_series(rp, terms)
-    Rm = rec.rotation
-    s = RigidBodyState(rec.position[starts].copy(), rec.velocity[starts].copy(),
-                       Rm[starts].copy(), rec.omega[starts].copy())
+    kn = rp.knots
+    P, V, Rm, W0 = rec.position[kn], rec.velocity[kn], rec.rotation[kn], rec.omega[kn]
+    s = RigidBodyState(P[starts].copy(), V[starts].copy(), Rm[starts].copy(), W0[starts].copy())
     wterms = [(c, np.asarray(x, float)) for c, x in terms if c.stage == "wrench"]
     sub = max(1, -(-nh // max_steps))  # intervals merged per integration step
     n_steps = nh // sub
@@ -50,10 +50,10 @@ def _rollout(rec, rp: Replay, terms, starts, nh, max_steps=100):
             return F, Mx
 
         s = step_rk4(s, T, M, veh, dt[:, None], external if wterms else None)
-        curve[j] = np.sqrt(np.mean(np.sum((s.p - rec.position[idx + 1]) ** 2, axis=1)))
+        curve[j] = np.sqrt(np.mean(np.sum((s.p - P[idx + 1]) ** 2, axis=1)))
     end = starts + n_steps * sub
-    ep = np.linalg.norm(s.p - rec.position[end], axis=1)
-    ev = np.linalg.norm(s.v - rec.velocity[end], axis=1)
+    ep = np.linalg.norm(s.p - P[end], axis=1)
+    ev = np.linalg.norm(s.v - V[end], axis=1)
     ea = np.degrees(rotation_angle(np.swapaxes(s.R, -1, -2) @ Rm[end]))
     return ep, ev, ea, curve
 

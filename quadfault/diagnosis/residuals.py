@@ -6,7 +6,10 @@ IMU-only log (no pose) gives ``sf_x, sf_y, sf_z`` instead: accelerometer specifi
 body FRD [m/s^2].
 
 Smoothing ("block means"): the recording is cut into contiguous blocks of about
-``block_seconds`` (default 20 ms; at least one sample interval). The measured channel of a
+``block_seconds`` (default 20 ms; at least one sample interval). Logs faster than
+``internal_step`` (4 ms) are first merged to that step: the held commands and midpoint states
+of consecutive intervals are averaged (weighted by duration), which keeps 1 kHz logs cheap and
+changes the model only at time scales below 4 ms. The measured channel of a
 block is the exact mean acceleration over it, ``(v_end - v_start) / (t_end - t_start)``
 (likewise for the body rate), which handles non-uniform sampling without approximation. The
 model channel is the duration-weighted mean over the same block of the acceleration each
@@ -56,6 +59,9 @@ class Replay:
         block_t: block centre times [s] (B,); block_dur: block durations [s] (B,).
         measured: measured block-mean channels (B, 6).
         channels: channel names.
+        knots: recording row of each interval boundary (N_k,): fast logs are merged to an
+            internal step of about ``internal_step`` [s] (duration-weighted means of the held
+            commands and midpoint states), so ``t = recording.t[knots]``.
     """
 
     vehicle: Vehicle
@@ -72,6 +78,7 @@ class Replay:
     block_run: np.ndarray
     measured: np.ndarray
     channels: tuple
+    knots: np.ndarray
 
     @property
     def has_pose(self) -> bool:
@@ -105,6 +112,24 @@ class Replay:
         return np.array([1e-3 * g] * 3 + [1e-3 * g / max(self.arm, 1e-3)] * 3)
 
 
+def _knots(valid: np.ndarray, r: int) -> np.ndarray:
+    """Rows bounding merged intervals: every ``r``-th row inside runs of valid intervals,
+    plus both ends of every invalid interval (gap)."""
+    knots = [0]
+    pos = 0
+    M = len(valid)
+    for k in range(M):
+        if valid[k]:
+            pos += 1
+            if pos == r or k == M - 1 or not valid[k + 1]:
+                knots.append(k + 1)
+                pos = 0
+        else:
+            knots.append(k + 1)
+            pos = 0
+    return np.asarray(knots, dtype=int)
+
+
 def _blocks(dt: np.ndarray, valid: np.ndarray, q: int):
     """Assign intervals to blocks of ``q`` consecutive valid intervals."""
     M = len(dt)
@@ -130,7 +155,7 @@ def _blocks(dt: np.ndarray, valid: np.ndarray, q: int):
 
 def prepare(recording: Recording, vehicle: Vehicle | None = None, *,
             block_seconds: float = 0.02, gap_factor: float = 2.5,
-            saturate: bool = True) -> Replay:
+            saturate: bool = True, internal_step: float = 0.004) -> Replay:
     """Replay ``recording`` (truth is never read) into block-mean measured channels."""
     if not isinstance(recording, Recording):
         raise ConfigError(f"diagnosis needs a Recording, got {type(recording).__name__}")
@@ -153,34 +178,52 @@ def prepare(recording: Recording, vehicle: Vehicle | None = None, *,
     f = MotorModel(0.0, saturate).apply(recording.thrust_cmd[:-1], 1.0, veh.rotor_max_thrust, None)
     med = float(np.median(dt))
     valid = dt <= gap_factor * med
-    q = max(1, int(round(block_seconds / med)))
-    block, n_blocks, run = _blocks(dt, valid, q)
+    # internal step: merge consecutive intervals of fast logs (duration-weighted means)
+    r = max(1, int(internal_step / med + 1e-9))
+    q = max(1, int(round(block_seconds / (r * med))))
+    knots = _knots(valid, r)
+    tk = t[knots]
+    dtk = np.diff(tk)
+    bad = np.r_[0, np.cumsum(~valid)]
+    validk = bad[knots[1:]] == bad[knots[:-1]]
+    M = len(dt)
+    seg = np.searchsorted(knots, np.arange(M), side="right") - 1
+    from scipy.sparse import csr_matrix
+
+    merge = csr_matrix((dt / dtk[seg], (seg, np.arange(M))), shape=(len(dtk), M))
+
+    def mean(x):
+        return np.asarray(merge @ x.reshape(M, -1)).reshape((len(dtk),) + x.shape[1:])
+
+    block, n_blocks, run = _blocks(dtk, validk, q)
     if n_blocks < 10:
-        raise RecordingError(where, f"only {n_blocks} usable blocks of {q} samples "
+        raise RecordingError(where, f"only {n_blocks} usable blocks of {q * r} samples "
                                     "(too short or too many gaps)")
     ok = block >= 0
-    dur = np.bincount(block[ok], weights=dt[ok], minlength=n_blocks)
-    tc = np.bincount(block[ok], weights=(t[:-1] + 0.5 * dt)[ok] * dt[ok], minlength=n_blocks) / dur
+    dur = np.bincount(block[ok], weights=dtk[ok], minlength=n_blocks)
+    tc = np.bincount(block[ok], weights=(tk[:-1] + 0.5 * dtk)[ok] * dtk[ok],
+                     minlength=n_blocks) / dur
     ok_idx = np.flatnonzero(ok)
-    first = ok_idx[np.unique(block[ok], return_index=True)[1]]
-    last = first + q  # sample index at the end of each block
-    w_mid = 0.5 * (recording.omega[:-1] + recording.omega[1:])
+    first_k = ok_idx[np.unique(block[ok], return_index=True)[1]]
+    first, last = knots[first_k], knots[first_k + q]  # sample indices at the block ends
+    f = mean(f)
+    w_mid = mean(0.5 * (recording.omega[:-1] + recording.omega[1:]))
     rate = (recording.omega[last] - recording.omega[first]) / dur[:, None]
     if recording.has_pose:
         vel = recording.velocity
         acc = (vel[last] - vel[first]) / dur[:, None]
         Rm = recording.rotation
-        R_mid = 0.5 * (Rm[:-1] + Rm[1:])
-        p_mid = 0.5 * (recording.position[:-1] + recording.position[1:])
-        v_mid = 0.5 * (vel[:-1] + vel[1:])
+        R_mid = mean(0.5 * (Rm[:-1] + Rm[1:]))
+        p_mid = mean(0.5 * (recording.position[:-1] + recording.position[1:]))
+        v_mid = mean(0.5 * (vel[:-1] + vel[1:]))
         channels = POSE_CHANNELS
     else:
-        sf = recording.accel[:-1]
+        sf = mean(recording.accel[:-1])
         acc = None
         R_mid = p_mid = v_mid = None
         channels = IMU_CHANNELS
-    rp = Replay(veh, t, dt, f, p_mid, v_mid, R_mid, w_mid, block, tc, dur, run,
-                np.zeros((n_blocks, 6)), channels)
+    rp = Replay(veh, tk, dtk, f, p_mid, v_mid, R_mid, w_mid, block, tc, dur, run,
+                np.zeros((n_blocks, 6)), channels, knots)
     if acc is None:
         acc = rp.block_mean(sf)
     object.__setattr__(rp, "measured", np.hstack((acc, rate)))
