@@ -38,10 +38,12 @@ class CrashLimits:
         max_tilt: [deg] angle between body z and world z.
         ground_z: world NED z of the ground [m]; ``p_z > ground_z`` is a crash
             (``math.inf`` disables it).
+
+    The defaults equal the environment's ``TerminationLimits`` (5 m, 80 deg, altitude 0).
     """
 
-    max_position_error: float = 3.0
-    max_tilt: float = 90.0
+    max_position_error: float = 5.0
+    max_tilt: float = 80.0
     ground_z: float = 0.0
 
     def __post_init__(self):

@@ -36,7 +36,6 @@ from quadfault.simulator import SensorNoise, initial_state
 from quadfault.vehicle import Vehicle
 
 ESTIMATOR_SOURCES = ("irls", "ekf", "truth", "none")
-ORACLE = "truth"
 
 
 @dataclass(frozen=True)
@@ -118,20 +117,20 @@ class _Tabulated:
         return self.table[k]
 
 
-def make_estimator(source: str, vehicle: Vehicle, dt: float):
-    """An online estimator for ``source`` (``None`` for ``"truth"`` and ``"none"``)."""
-    if source not in ESTIMATOR_SOURCES:
+def make_estimator(source, vehicle: Vehicle, efficiency=None):
+    """An online estimator for ``source`` through the environment's factory
+    (:func:`quad_fault_env.estimation.make_estimator`); ``"truth"`` is bound to
+    ``efficiency`` (the oracle ablation)."""
+    from quad_fault_env.estimation import TruthOracle
+    from quad_fault_env.estimation import make_estimator as env_make_estimator
+
+    if isinstance(source, str) and source not in ESTIMATOR_SOURCES:
         raise ConfigError(f"unknown estimator {source!r}; choose from "
                           f"{', '.join(ESTIMATOR_SOURCES)}")
-    if source == "irls":
-        from estimators.irls import SlidingWindowIRLS
-
-        return SlidingWindowIRLS(vehicle)
-    if source == "ekf":
-        from estimators.ekf import MotorEfficiencyEKF
-
-        return MotorEfficiencyEKF(vehicle, dt=dt)
-    return None
+    est = env_make_estimator(source, vehicle)
+    if isinstance(est, TruthOracle):
+        est.bind(efficiency)
+    return est
 
 
 def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any = "irls",
@@ -156,13 +155,9 @@ def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any =
                   rng)
     ctrl = make_controller(controller, veh, scenario.trajectory, cfg.controller,
                            cfg.fault_tolerant)
-    if isinstance(estimator, str):
-        source = estimator
-        est = make_estimator(estimator, veh, cfg.dt * cfg.estimator_every)
-    else:
-        source, est = getattr(estimator, "name", type(estimator).__name__), estimator
-    if est is not None:
-        est.reset()
+    est = make_estimator(estimator, veh, efficiency)
+    source = estimator if isinstance(estimator, str) else getattr(est, "name", type(est).__name__)
+    est.reset()
     refs = scenario.trajectory(times)
     ffs = (ctrl.geometric.feedforward_rates(times) if cfg.controller.angular_feedforward
            else None)
@@ -191,8 +186,6 @@ def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any =
             crash_time, k_end = float(t), k
             break
         meas, _ = cfg.sensor_noise.measure(state, None, rng)
-        if source == ORACLE:
-            eta_hat = efficiency.table[k]  # oracle ablation (labelled)
         if k % decim == 0:
             ref_k = type(refs)(*(a[k] for a in refs))
             ff_k = None if ffs is None else (ffs[0][k], ffs[1][k])
@@ -209,7 +202,7 @@ def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any =
         plant_step = plant.step(f_cmd, t)
         if k % cfg.trace_every == 0:
             tr_eta[k // cfg.trace_every] = plant_step.eta
-        if est is not None and k % cfg.estimator_every == 0:
+        if k % cfg.estimator_every == 0:
             estimate = est.update(Sample(float(t), meas.p, meas.v, meas.R, meas.w, f_cmd.copy()))
             eta_hat = np.asarray(estimate.eta, float)
         if progress_bar is not None and k % 1000 == 999:

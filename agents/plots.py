@@ -1,0 +1,90 @@
+"""Figures comparing agents through a fault (matplotlib, Agg backend)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from quadfault.fileio import atomic_savefig
+
+
+def _figure(nrows: int):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(nrows, 1, figsize=(8, 2.6 * nrows), sharex=True)
+    return plt, fig, np.atleast_1d(axes)
+
+
+def plot_through_fault(flights, path, *, force: bool = False, before: float = 1.0,
+                       after: float = 5.0):
+    """Position error, tilt error and eta_hat of the faulted motor for each flight around
+    the first fault onset of their (common) scenario; the whole flight without a fault."""
+    if not flights:
+        return None
+    onsets = _onsets(flights)
+    t0, t1 = -math.inf, math.inf
+    motor = 0
+    if onsets:
+        tf, motor = onsets[0]
+        t0, t1 = tf - before, tf + after
+    plt, fig, (ax_e, ax_tilt, ax_eta) = _figure(3)
+    for f in flights:
+        sel = (f.t >= t0) & (f.t <= t1)
+        label = f.controller + (" (crashed)" if f.metrics.crashed else "")
+        ax_e.plot(f.t[sel], f.pos_error[sel], label=label)
+        ax_tilt.plot(f.t[sel], f.tilt_error[sel], label=label)
+        ax_eta.plot(f.t[sel], f.eta_hat[sel, motor], label=label)
+    ref = flights[0]
+    sel = (ref.t >= t0) & (ref.t <= t1)
+    ax_eta.plot(ref.t[sel], ref.eta_true[sel, motor], "k--", label="true (scoring only)")
+    for ax in (ax_e, ax_tilt, ax_eta):
+        if onsets:
+            ax.axvline(onsets[0][0], color="grey", lw=0.8)
+        ax.grid(alpha=0.3)
+    ax_e.set_ylabel("|p - p_ref| [m]")
+    ax_tilt.set_ylabel("tilt error [deg]")
+    ax_eta.set_ylabel(f"eta_hat motor {motor + 1}")
+    ax_eta.set_xlabel("t [s]")
+    ax_e.legend(fontsize=7, loc="upper right")
+    ax_e.set_title(f"{ref.scenario}, seed {ref.seed}: through the first fault")
+    fig.tight_layout()
+    out = atomic_savefig(fig, path, force=force, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def _onsets(flights):
+    """(onset [s], motor index) of the first fault, from the true-efficiency trace (scoring)."""
+    f = flights[0]
+    if f.eta_true.size == 0:
+        return []
+    drop = np.diff(f.eta_true, axis=0) < -0.05
+    idx = np.argwhere(drop)
+    if idx.size == 0:
+        return []
+    k, motor = idx[0]
+    return [(float(f.t[k + 1]), int(motor))]
+
+
+def plot_learning_curve(timesteps, rewards, path, *, labels=None, force: bool = False,
+                        title: str = "learning curve"):
+    """Mean evaluation reward against environment steps, one line per run."""
+    plt, fig, (ax,) = _figure(1)
+    for i, (ts, r) in enumerate(zip(timesteps, rewards)):
+        r = np.asarray(r, float)
+        mean = r.mean(axis=1) if r.ndim == 2 else r
+        ax.plot(ts, mean, marker="o", label=None if labels is None else labels[i])
+    ax.set_xlabel("environment steps")
+    ax.set_ylabel("mean evaluation return")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    if labels:
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    out = atomic_savefig(fig, path, force=force, dpi=110)
+    plt.close(fig)
+    return out
