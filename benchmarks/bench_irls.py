@@ -77,7 +77,8 @@ def accuracy(args) -> None:
         rec = cached_flight(name, 80.0, args.integrator, args.cache, args.seed)
         series = SlidingWindowIRLS(rec.vehicle).run(rec.without_truth())
         sc = score(rec, series)
-        spike = "-" if sc.spike is None else f"{np.mean([s for s in sc.spike if s is not None]):.4f}"
+        spikes = [s for s in (sc.spike or ()) if s is not None]
+        spike = f"{np.mean(spikes):.4f}" if spikes else "-"
         ok = 100 * np.mean(series.status == "ok")
         print(f"{name:12s} {np.mean(sc.rmse):7.4f} {np.mean(sc.std):7.4f} {spike:>7s} "
               f"{ok:6.1f} {series.seconds:6.2f}")

@@ -78,7 +78,8 @@ class IPMSettings:
             raise ConfigError("IPM settings need 0 < beta < 1, 0 < step_fraction < 1, "
                               "0 <= alpha < 1")
         if not (isinstance(self.max_iter, int) and self.max_iter >= 1):
-            raise ConfigError(f"IPM setting max_iter must be an integer >= 1, got {self.max_iter!r}")
+            raise ConfigError(f"IPM setting max_iter must be an integer >= 1, "
+                              f"got {self.max_iter!r}")
 
 
 @dataclass(frozen=True)

@@ -54,7 +54,8 @@ def _direct_residuals(veh, t, p, v, R, w, f, eta):
         a = veh.gravity * np.array([0, 0, 1.0]) - T * R[i][:, 2] / veh.mass
         pred_v = v[i] + a * dt
         pred_p = p[i] + v[i] * dt + a * dt ** 2 / 2
-        pred_w = w[i] + veh.inertia_inverse @ (np.array(M) - np.cross(w[i], veh.inertia @ w[i])) * dt
+        gyro = np.cross(w[i], veh.inertia @ w[i])
+        pred_w = w[i] + veh.inertia_inverse @ (np.array(M) - gyro) * dt
         pred_R = R[i] @ (np.eye(3) + hat(pred_w * dt))
         dR, dRh = R[i].T @ R[i + 1], R[i].T @ pred_R
         rR = np.trace(np.eye(3) - dR.T @ dRh) / 2

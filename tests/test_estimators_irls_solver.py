@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.optimize import lsq_linear
 
-from estimators.ipm import (IPMSettings, constraint_values, kkt_matrix, newton_step,
-                            solve_box_qp)
+from estimators.ipm import (IPMSettings, constraint_values, kkt_matrix, kkt_residual,
+                            newton_step, solve_box_qp)
 from estimators.irls import IRLSConfig, solve_window
 from quadfault.errors import ConfigError
 
@@ -57,6 +57,8 @@ def test_kkt_convergence_histories():
     # complementary slackness: multipliers of inactive bounds vanish
     phi = constraint_values(res.x, LO, HI)
     assert np.max(np.abs(res.lam * phi)) < 1e-6
+    r_dual, _ = kkt_residual(H, q, res.x, res.lam, LO, HI, t=1e12)
+    assert np.linalg.norm(r_dual) < 1e-6
 
 
 def test_reduced_newton_step_equals_full_kkt_system():
