@@ -54,9 +54,10 @@ def rss_mib() -> float:
 class EnvPool:
     """One environment per (action mode, estimator, observation kind), made on first use."""
 
-    def __init__(self, max_episode_steps: int | None):
+    def __init__(self, max_episode_steps: int | None, env_kwargs: dict | None = None):
         self.envs = {}
         self.max_episode_steps = max_episode_steps
+        self.env_kwargs = env_kwargs or {}
 
     def get(self, mode, estimator, observation):
         key = (mode, estimator, observation)
@@ -64,7 +65,8 @@ class EnvPool:
             self.envs[key] = gym.make("QuadFaultHover-v0" if mode == "motor" else "QuadFault-v0",
                                       action_mode=mode, estimator=estimator,
                                       observation=observation, scenario="random",
-                                      max_episode_steps=self.max_episode_steps)
+                                      max_episode_steps=self.max_episode_steps,
+                                      **self.env_kwargs)
         return self.envs[key]
 
     def close(self):
@@ -79,11 +81,13 @@ def _flat(obs) -> np.ndarray:
 
 
 def soak(steps: int, seed: int, *, max_episode_steps: int | None = 300, progress: bool = True,
-         digest: bool = False, on_warm=None) -> dict:
+         digest: bool = False, on_warm=None, env_kwargs: dict | None = None,
+         corner_actions: float = 0.0) -> dict:
     """Run ``steps`` random-action steps; returns counts (and a SHA-256 of the run if
-    ``digest``)."""
+    ``digest``). ``env_kwargs`` go to every environment (e.g. a lower ``physics_rate`` for a
+    quick run); a fraction ``corner_actions`` of the actions are corners of [-1, 1]^4."""
     rng = np.random.default_rng(seed)
-    pool = EnvPool(max_episode_steps)
+    pool = EnvPool(max_episode_steps, env_kwargs)
     est_names, est_p = list(ESTIMATORS), np.array(list(ESTIMATORS.values()))
     h = hashlib.sha256() if digest else None
     stats = {"steps": 0, "episodes": 0, "nonfinite_obs": 0, "nonfinite_reward": 0,
@@ -103,6 +107,8 @@ def soak(steps: int, seed: int, *, max_episode_steps: int | None = 300, progress
             stats["episodes"] += 1
             done = False
         action = rng.uniform(-1.0, 1.0, 4).astype(np.float32)
+        if corner_actions and rng.uniform() < corner_actions:
+            action = np.sign(action).astype(np.float32)
         obs, reward, terminated, truncated, info = env.step(action)
         stats["steps"] += 1
         flat = _flat(obs)
@@ -158,9 +164,9 @@ def main(argv=None) -> int:
     if args.repeat_steps:
         t0 = time.perf_counter()
         a = soak(args.repeat_steps, args.seed + 1, max_episode_steps=args.episode_steps,
-                 progress=False, digest=True)
+                 progress=False, digest=True, corner_actions=0.1)
         b = soak(args.repeat_steps, args.seed + 1, max_episode_steps=args.episode_steps,
-                 progress=False, digest=True)
+                 progress=False, digest=True, corner_actions=0.1)
         same = a["sha256"] == b["sha256"]
         ok &= same
         print(f"determinism: two runs of {args.repeat_steps} steps (seed {args.seed + 1}, "
@@ -170,7 +176,8 @@ def main(argv=None) -> int:
     rss = {}
     t0 = time.perf_counter()
     stats = soak(args.steps, args.seed, max_episode_steps=args.episode_steps,
-                 progress=not args.quiet, on_warm=lambda: rss.setdefault("start", rss_mib()))
+                 progress=not args.quiet, on_warm=lambda: rss.setdefault("start", rss_mib()),
+                 corner_actions=0.1)
     seconds = time.perf_counter() - t0
     rss_end = rss_mib()
     bad = {k: stats[k] for k in ("nonfinite_obs", "nonfinite_reward", "outside_space",
