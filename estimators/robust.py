@@ -23,6 +23,13 @@ import numpy as np
 MAD_SCALE = 1.4826  # MAD -> standard deviation for Gaussian data
 
 
+def _median(a: np.ndarray) -> float:
+    """Median (``np.median`` gives the same value at ~10x the cost on a 9-vector)."""
+    s = np.sort(a)
+    k = len(s)
+    return float(s[k // 2]) if k % 2 else 0.5 * float(s[k // 2 - 1] + s[k // 2])
+
+
 def mad_weights(e, *, z_soft: float = 2.5, power: float = 7.0, z_hard: float = 2.5,
                 hard_drop: bool = True, w_min: float = 0.03, mad_eps: float = 1e-9,
                 median_normalize: bool = True, floor: bool = False):
@@ -36,8 +43,8 @@ def mad_weights(e, *, z_soft: float = 2.5, power: float = 7.0, z_hard: float = 2
         ``(w, z)``: weights (m,) and z-scores (m,).
     """
     e = np.asarray(e, dtype=float)
-    med = np.median(e)
-    mad = MAD_SCALE * np.median(np.abs(e - med))
+    med = _median(e)
+    mad = MAD_SCALE * _median(np.abs(e - med))
     if mad < mad_eps:
         return np.ones_like(e), np.zeros_like(e)
     z = np.abs(e - med) / max(mad, mad_eps)
@@ -47,7 +54,7 @@ def mad_weights(e, *, z_soft: float = 2.5, power: float = 7.0, z_hard: float = 2
     if hard_drop:
         w[z > z_hard] = 0.0
     if median_normalize:
-        medw = np.median(w)
+        medw = _median(w)
         if medw > 0:
             w = w / medw
     return w, z
