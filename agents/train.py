@@ -67,6 +67,8 @@ class TrainConfig:
         progress_bar: SB3's progress bar.
         algo_kwargs: extra keywords of the algorithm (``learning_rate``, ``n_steps``, ...).
         device: torch device (``"cpu"`` by default).
+        torch_threads: CPU threads torch may use (1 is fastest for these small networks and
+            leaves the other cores to the environments).
     """
 
     algo: str = "ppo"
@@ -83,13 +85,14 @@ class TrainConfig:
     progress_bar: bool = False
     algo_kwargs: dict = field(default_factory=dict)
     device: str = "cpu"
+    torch_threads: int = 1
 
     def __post_init__(self):
         if self.algo not in ALGORITHMS:
             raise ConfigError(f"algo must be one of {ALGORITHMS}, got {self.algo!r}")
         if not isinstance(self.env_kwargs, dict) or not isinstance(self.algo_kwargs, dict):
             raise ConfigError("env_kwargs and algo_kwargs must be JSON objects")
-        for key in ("timesteps", "n_envs", "eval_freq", "eval_episodes"):
+        for key in ("timesteps", "n_envs", "eval_freq", "eval_episodes", "torch_threads"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ConfigError(f"{key} must be a positive integer, got {value!r}")
@@ -194,8 +197,10 @@ def train_one(config: TrainConfig, seed: int, run_dir: Path, *, force: bool = Fa
               quiet: bool = False):
     """Train one seed into ``run_dir``; returns the trained model."""
     sb3 = require_sb3()
+    import torch
     from stable_baselines3.common.vec_env import VecNormalize
 
+    torch.set_num_threads(config.torch_threads)
     for name in (MODEL_FILE, VECNORM_FILE, CONFIG_FILE):
         if (run_dir / name).exists() and not force:
             raise QuadfaultError(f"{run_dir / name}: already exists; pass --force to overwrite")

@@ -1,0 +1,74 @@
+"""SB3 training: smoke runs with tiny budgets, save/load round trip with VecNormalize."""
+
+import json
+
+import numpy as np
+import pytest
+
+from agents.train import TrainConfig
+from quadfault.errors import ConfigError
+
+TINY_ENV = {"estimator": "none", "action_mode": "residual", "duration": 0.5}
+
+
+def test_config_validation_and_file(tmp_path):
+    with pytest.raises(ConfigError, match="algo"):
+        TrainConfig(algo="dqn")
+    with pytest.raises(ConfigError, match="timesteps"):
+        TrainConfig(timesteps=0)
+    path = tmp_path / "cfg.json"
+    path.write_text(json.dumps({"algo": "sac", "seeds": [1, 2], "bogus": 1}))
+    with pytest.raises(ConfigError, match="unknown key"):
+        TrainConfig.from_file(path)
+    path.write_text(json.dumps({"algo": "sac", "seeds": [1, 2]}))
+    cfg = TrainConfig.from_file(path)
+    assert cfg.algo == "sac" and cfg.seeds == (1, 2)
+    path.write_text("{not json")
+    with pytest.raises(ConfigError, match="not valid JSON"):
+        TrainConfig.from_file(path)
+
+
+def _tiny(algo):
+    kwargs = ({"n_steps": 32, "batch_size": 32, "n_epochs": 1} if algo == "ppo"
+              else {"learning_starts": 16, "batch_size": 16, "buffer_size": 1000})
+    return TrainConfig(algo=algo, env_kwargs=TINY_ENV, timesteps=64, eval_freq=32,
+                       eval_episodes=1, checkpoint_freq=32, algo_kwargs=kwargs)
+
+
+@pytest.mark.parametrize("algo", ["ppo", "sac"])
+def test_smoke_training_and_round_trip(algo, tmp_path):
+    pytest.importorskip("torch")
+    pytest.importorskip("stable_baselines3")
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from agents.train import load_agent, train_one
+
+    model = train_one(_tiny(algo), 0, tmp_path / "run", quiet=True)
+    assert model.num_timesteps >= 64
+    for name in ("model.zip", "vecnormalize.pkl", "train_config.json", "evaluations.npz",
+                 "best/best_model.zip", "best/vecnormalize.pkl"):
+        assert (tmp_path / "run" / name).exists(), name
+    assert list((tmp_path / "run" / "checkpoints").glob("*vecnormalize*"))
+    loaded, venv = load_agent(tmp_path / "run")
+    assert isinstance(venv, VecNormalize) and not venv.training
+    trained_vn = model.get_vec_normalize_env()
+    np.testing.assert_allclose(venv.obs_rms.mean, trained_vn.obs_rms.mean)
+    np.testing.assert_allclose(venv.obs_rms.var, trained_vn.obs_rms.var)
+    obs = trained_vn.normalize_obs(np.linspace(-1, 1, venv.observation_space.shape[0],
+                                               dtype=np.float32))
+    a1, _ = model.predict(obs, deterministic=True)
+    a2, _ = loaded.predict(obs, deterministic=True)
+    np.testing.assert_allclose(a1, a2, atol=1e-6)
+    # no silent overwrite
+    from quadfault.errors import QuadfaultError
+
+    with pytest.raises(QuadfaultError, match="already exists"):
+        train_one(_tiny(algo), 0, tmp_path / "run", quiet=True)
+
+
+def test_cli_bad_json_is_one_line(capsys):
+    from quadfault.cli import main
+
+    assert main(["train", "--env-kwargs", "{oops", "--out", "x"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--env-kwargs" in err[0]
