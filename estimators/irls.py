@@ -317,13 +317,13 @@ class SlidingWindowIRLS:
         """Add one measurement row; returns the estimate of the window ending at it."""
         n = self.vehicle.n_rotors
         try:
+            t = float(sample.t)
             arrays = [np.asarray(a, dtype=float) for a in sample[1:]]
             shapes_ok = [a.shape for a in arrays] == [(3,), (3,), (3, 3), (3,), (n,)]
-            finite = shapes_ok and math.isfinite(sample.t) and all(np.all(np.isfinite(a))
-                                                                   for a in arrays)
-        except (TypeError, ValueError):
-            shapes_ok = finite = False
-        t = sample.t if isinstance(sample.t, (int, float)) else math.nan
+            finite = shapes_ok and math.isfinite(t) and all(np.all(np.isfinite(a))
+                                                            for a in arrays)
+        except (TypeError, ValueError, IndexError):
+            t, finite = math.nan, False
         if not finite or (self._last is not None and not t > self._last.t):
             self._last = None
             self._segments.clear()
