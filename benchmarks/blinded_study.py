@@ -74,6 +74,12 @@ def random_vehicle(rng):
 
 def random_trajectory(rng, scale, low=None):
     alt = float(rng.uniform(1.0, 2.0)) if low is None else low
+    if low is not None:  # ground effect needs the height to vary (else it is a thrust scale)
+        return Lissajous(amplitude=(float(rng.uniform(0.5, 1.5) * scale),
+                                    float(rng.uniform(0.5, 1.5) * scale),
+                                    float(rng.uniform(0.3, 0.5) * low)),
+                         frequency=float(rng.uniform(0.12, 0.22)), altitude=alt,
+                         yaw_rate=float(rng.uniform(-0.2, 0.2)))
     if rng.random() < 0.5:
         return Circle(radius=float(rng.uniform(0.8, 2.0) * scale), frequency=float(rng.uniform(0.12, 0.25)),
                       altitude=alt, yaw_frequency=float(rng.uniform(0.0, 0.05)))

@@ -32,7 +32,7 @@ class DiagnosisConfig:
         min_improvement: least held-out RMS reduction (relative to the current model) for
             accepting an effect [-].
         bic_margin: least BIC decrease for accepting an effect.
-        screen_top: candidates cross-validated per step (best by BIC).
+        screen_top: most candidates cross-validated per step (in BIC order).
         effects: restrict the library to these names (None: all).
         horizon: open-loop prediction horizon [s].
         saturate: clip commands to [0, max_thrust] as the nominal motor model does.
@@ -45,7 +45,7 @@ class DiagnosisConfig:
     max_effects: int = 3
     min_improvement: float = 0.05
     bic_margin: float = 10.0
-    screen_top: int = 2
+    screen_top: int = 3
     effects: tuple | None = None
     horizon: float = 0.5
     saturate: bool = True

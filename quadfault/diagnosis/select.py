@@ -4,8 +4,10 @@ At each step every remaining candidate is fitted jointly with the effects accept
 all blocks and ranked by BIC; the best ``screen_top`` are cross-validated on ``folds``
 contiguous time segments (fit on the other segments, predict the held-out one). The best is
 accepted only if it lowers the held-out residual RMS by at least ``min_improvement``
-(relative to the current model) *and* lowers BIC by more than ``bic_margin``; otherwise the
-search stops. Equivalent pairs (``thrust_scale`` / ``motor_efficiency``) are never both
+(relative to the current model) -- or by three times that in one of the channels it acts on
+(fitted signal above the noise), so that an effect is still found when other, unexplained
+channels dominate the total -- *and* lowers BIC by more than ``bic_margin``. Up to
+``screen_top`` candidates are tried in BIC order; the search stops when none passes. Equivalent pairs (``thrust_scale`` / ``motor_efficiency``) are never both
 accepted.
 """
 
@@ -58,6 +60,10 @@ class Selection:
     screening: tuple  # (name, bic) of the last screening round
 
 
+def x_terms(cands, xs) -> list:
+    return list(zip(cands, xs))
+
+
 def folds_of(n_blocks: int, k: int) -> list[np.ndarray]:
     k = max(2, min(k, n_blocks // 5))
     return np.array_split(np.arange(n_blocks), k)
@@ -83,7 +89,7 @@ def cross_validate(rp: Replay, cands, scale, x_init, folds, **kw) -> CrossValida
 
 def select(rp: Replay, library: list[Candidate], scale: np.ndarray, *, folds: int = 5,
            max_effects: int = 3, min_improvement: float = 0.05, bic_margin: float = 10.0,
-           screen_top: int = 2, progress=None) -> Selection:
+           screen_top: int = 3, progress=None) -> Selection:
     fl = folds_of(rp.n_blocks, folds)
     baseline = cross_validate(rp, [], scale, [], fl)
     n = rp.measured.size
@@ -110,19 +116,33 @@ def select(rp: Replay, library: list[Candidate], scale: np.ndarray, *, folds: in
         fits.sort(key=lambda item: item[0])
         screening = tuple((c.name, b) for b, c, _ in fits)
         best = None
-        # cross-validate the best by BIC and close rivals (within 2 * bic_margin)
-        for b, c, f in [item for item in fits[:screen_top]
-                        if item[0] <= fits[0][0] + 2 * bic_margin]:
+        # cross-validate, in BIC order, the candidates that lower BIC enough; keep the one
+        # with the lowest held-out error among those that pass the acceptance test
+        for b, c, f in [item for item in fits if item[0] < cur_bic - bic_margin][:screen_top]:
             cv = cross_validate(rp, current + [c], scale, x_cur + list(f.x), fl, max_nfev=15)
+            if current:  # joint refit of the candidate with the accepted effects
+                f = fit(rp, current + [c], scale, init=x_cur + list(f.x))
+                b = f.bic()
+            if b > cur_bic - bic_margin:
+                continue
+            gain = 1.0 - np.sqrt(cv.sse / cur_cv.sse)
+            # channels the effect acts on (fitted signal above the noise): a real effect must
+            # clearly improve those, even when unexplained channels dominate the total
+            sig = (predict(rp, x_terms(current, x_cur) + list(f.terms)[-1:])
+                   - predict(rp, x_terms(current, x_cur))) / scale
+            touched = np.sqrt(np.mean(sig ** 2, axis=0)) >= 1.0
+            gain_touched = 0.0
+            if touched.any():  # best held-out gain among the channels the effect acts on
+                before = np.sum((cur_cv.residual / scale)[:, touched] ** 2, axis=0)
+                after = np.sum((cv.residual / scale)[:, touched] ** 2, axis=0)
+                gain_touched = float(np.max(1.0 - np.sqrt(after / before)))
+            if gain < min_improvement and gain_touched < 3 * min_improvement:
+                continue
             if best is None or cv.sse < best[3].sse:
-                best = (b, c, f, cv)
-        b, c, f, cv = best
-        if current:  # joint refit of the winner with the accepted effects
-            f = fit(rp, current + [c], scale, init=x_cur + list(f.x))
-            b = f.bic()
-        gain = 1.0 - np.sqrt(cv.sse / cur_cv.sse)
-        if gain < min_improvement or b > cur_bic - bic_margin:
+                best = (b, c, f, cv, gain)
+        if best is None:
             break
+        b, c, f, cv, gain = best
         rivals = {rc.name: rf.sse / max(f.sse, 1e-300) for _, rc, rf in fits if rc is not c}
         steps.append(Step(c, f, cv, float(gain), rivals))
         current.append(c)
