@@ -70,8 +70,16 @@ def run(env, actions, seed=0, options=None):
 def test_check_env_every_registered_id(env_id, estimator):
     if estimator == "default" and not _have("estimators.irls"):
         pytest.skip("estimators.irls not available")
-    kw = {} if estimator == "default" else {"estimator": estimator}
-    check_env(gym.make(env_id, duration=0.5, **kw).unwrapped, skip_render_check=True)
+    if estimator == "default":
+        from estimators.irls import IRLSConfig
+
+        # the registered estimator (IRLS) on its numpy backend: same results, no numba compile
+        kw = {"estimator_kwargs": {"config": IRLSConfig(backend="numpy")}}
+    else:
+        kw = {"estimator": estimator}
+    env = gym.make(env_id, duration=0.5, **kw)
+    assert env.unwrapped.estimator.name == ("irls" if estimator == "default" else estimator)
+    check_env(env.unwrapped, skip_render_check=True)
 
 
 def test_check_env_dict_and_other_action_modes():
@@ -85,7 +93,10 @@ def test_check_env_dict_and_other_action_modes():
 def test_make_with_namespace_prefix_and_default_estimator(env_id):
     if not _have("estimators.irls"):
         pytest.skip("estimators.irls not available yet")
-    env = gym.make(f"quad_fault_env:{env_id}", duration=0.2)
+    from estimators.irls import IRLSConfig
+
+    env = gym.make(f"quad_fault_env:{env_id}", duration=0.2,
+                   estimator_kwargs={"config": IRLSConfig(backend="numpy")})
     obs, info = env.reset(seed=0)
     assert env.unwrapped.estimator.name == "irls"
     assert env.spec.max_episode_steps == quad_fault_env.ENVIRONMENTS[env_id][0]

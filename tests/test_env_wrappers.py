@@ -121,15 +121,26 @@ def test_estimator_comparison_no_faults_gives_null_spike_and_latency():
 @pytest.mark.skipif(importlib.util.find_spec("estimators.ekf") is None
                     or importlib.util.find_spec("estimators.irls") is None,
                     reason="IRLS / EKF not available")
-def test_estimator_comparison_runs_irls_and_ekf_by_default():
-    env = EstimatorComparison(QuadFaultEnv("none", "hover_fault", duration=0.6,
-                                           estimator_rate="control"))
+def test_estimator_comparison_runs_irls_and_ekf():
+    from estimators.ekf import EKFConfig, MotorEfficiencyEKF
+    from estimators.irls import IRLSConfig, SlidingWindowIRLS
+
+    base = QuadFaultEnv("none", "hover_fault", duration=0.6, estimator_rate="control")
+    default = EstimatorComparison(base)
+    assert {n: e.name for n, e in default.estimators.items()} == {"irls": "irls", "ekf": "ekf"}
+    # the numpy backends: same results, and no numba compilation inside this test
+    v = base.vehicle
+    env = EstimatorComparison(base, {
+        "irls": SlidingWindowIRLS(v, IRLSConfig(backend="numpy")),
+        "ekf": MotorEfficiencyEKF(v, EKFConfig(backend="numpy"))})
     steps = _episode(env, 60)
     assert set(steps[-1][1]["comparison"]) == {"irls", "ekf"}
     cur = env.summary()["current"]
     for name in ("irls", "ekf"):
         assert cur[name]["n_updates"] == 60
         assert all(np.isfinite(cur[name]["rmse"]))
+        # motor 1 drops to 50 % at 0.18 s: both estimators see it
+        assert steps[-1][1]["comparison"][name]["eta"][0] < 0.75
 
 
 def test_record_flight_writes_loadable_recordings(tmp_path):
