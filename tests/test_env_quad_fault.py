@@ -385,3 +385,17 @@ def test_out_of_range_actions_always_raise(action):
     env.reset(seed=0)
     with pytest.raises(ValueError, match="NaN|outside"):
         env.step(action)
+
+
+def test_fault_events_are_reported_in_the_step_they_happen():
+    # abrupt, 1.2 s: motor 1 at 50 % on [0.1, 0.15] s, motor 2 from 0.4 s, ...
+    env = QuadFaultEnv("none", named_scenario("abrupt", 1.2).replace(thrust_noise=0.0))
+    out = run(env, [np.zeros(4)] * 20)
+    events = [(k, e["motor"], e["kind"]) for k, s in enumerate(out) for e in s[4]["fault_events"]]
+    # step k covers [(k - 1) / 100, k / 100) s; out[0] is the reset
+    assert events == [(11, 1, "onset"), (16, 1, "end")]
+    onset = out[11][4]["fault_events"][0]
+    assert onset["t"] == pytest.approx(0.1) and onset["level"] == 0.5
+    np.testing.assert_array_equal(out[10][4]["eta_true_samples"][:, 0], 1.0)
+    np.testing.assert_array_equal(out[11][4]["eta_true_samples"][:, 0], 0.5)
+    assert out[16][4]["eta_true_samples"][-1, 0] == 1.0

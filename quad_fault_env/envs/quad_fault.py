@@ -36,6 +36,9 @@ from quadfault.simulator import SensorNoise, initial_state
 from quadfault.vehicle import Vehicle
 
 DEFAULT_DURATION = 20.0  # [s] episode length for named and random scenarios
+#: a fault event at time t_k belongs to the step whose interval [t0, t1) holds it (same
+#: tolerance as the fault windows of quadfault.scenarios) [s]
+EVENT_TOL = 1e-9
 #: trajectories of random scenarios (``quadfault.scenarios.random_scenario``)
 RANDOM_TRAJECTORIES = ("random", "circle", "hover", "lissajous")
 
@@ -89,8 +92,8 @@ class QuadFaultEnv(gym.Env):
     ``t`` [s]; ``eta_true`` at ``t``; ``eta_hat``, ``eta_sd`` (None if not reported),
     ``estimator``, ``estimator_status``, ``estimator_diagnostics`` of the newest estimate;
     ``position_error`` (true, world NED [m]) and its norm ``tracking_error``;
-    ``motor_command`` [N] held over the step; ``fault_events`` (faults whose onset or end fell
-    in the step: dicts ``motor, onset, end, level, ramp, kind, t``); ``faults`` (all faults of
+    ``motor_command`` [N] held over the step; ``fault_events`` (faults whose onset or end lies
+    in the step's interval [t0, t1): dicts ``motor, onset, end, level, ramp, kind, t``); ``faults`` (all faults of
     the episode); ``scenario``; ``thrust_noise``; ``samples`` (the step's measurement stream:
     one :class:`estimators.base.Sample` per physics substep, the command held over it; the
     env's estimator reads every ``estimator_stride``-th one); ``eta_true_samples`` and
@@ -271,7 +274,7 @@ class QuadFaultEnv(gym.Env):
         self._meas = self._measure(self.plant.state)
         self.history = [self.plant.state.p.copy()]
         events = [dict(_fault_dict(f), kind="onset", t=f.onset)
-                  for f in self.scenario.efficiency.faults if f.onset <= 0.0]
+                  for f in self.scenario.efficiency.faults if f.onset < -EVENT_TOL]
         ref = self.scenario.trajectory(0.0)
         info = self._info([], [], [], events, None, ref)
         if self.render_mode == "human":
@@ -355,7 +358,7 @@ class QuadFaultEnv(gym.Env):
         events = []
         for f in self.scenario.efficiency.faults:
             for kind, tk in (("onset", f.onset), ("end", f.end)):
-                if t0 < tk <= t1:
+                if t0 - EVENT_TOL <= tk < t1 - EVENT_TOL:
                     events.append(dict(_fault_dict(f), kind=kind, t=tk))
         info = self._info(samples, eta_true, sf, events, reason, ref)
         if self.render_mode == "human":
