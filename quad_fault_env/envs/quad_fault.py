@@ -93,8 +93,8 @@ class QuadFaultEnv(gym.Env):
     ``estimator``, ``estimator_status``, ``estimator_diagnostics`` of the newest estimate;
     ``position_error`` (true, world NED [m]) and its norm ``tracking_error``;
     ``motor_command`` [N] held over the step; ``fault_events`` (faults whose onset or end lies
-    in the step's interval [t0, t1): dicts ``motor, onset, end, level, ramp, kind, t``); ``faults`` (all faults of
-    the episode); ``scenario``; ``thrust_noise``; ``samples`` (the step's measurement stream:
+    in the step's interval [t0, t1): dicts ``motor, onset, end, level, ramp, kind, t``);
+    ``faults`` (all faults of the episode); ``scenario``; ``thrust_noise``; ``samples`` (the step's measurement stream:
     one :class:`estimators.base.Sample` per physics substep, the command held over it; the
     env's estimator reads every ``estimator_stride``-th one); ``eta_true_samples`` and
     ``specific_force_samples`` (accelerometer, body FRD [m/s^2]) aligned with ``samples``;
