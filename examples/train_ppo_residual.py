@@ -1,0 +1,65 @@
+"""Train a PPO residual policy on top of the geometric controller and plot its learning curve.
+
+The policy adds up to ``residual_scale`` newtons per rotor to the geometric controller's
+commands, sees the IRLS efficiency estimate in its observation and learns on the hover task
+with random motor faults (``QuadFaultHover-v0``, episodes shortened to 5 s). With the defaults
+it finishes in a few minutes on a 2-core CPU without GPU::
+
+    python examples/train_ppo_residual.py --out runs/ppo_residual
+
+Writes ``OUT/seed_0/`` (model, VecNormalize statistics, best model, evaluations) and
+``OUT/learning_curve.png``. Needs the ``rl`` extra (stable-baselines3, torch).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", default="runs/ppo_residual", help="output folder")
+    parser.add_argument("--timesteps", type=int, default=20_000)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--n-envs", type=int, default=2)
+    parser.add_argument("--estimator", default="irls", choices=("irls", "ekf", "truth", "none"))
+    parser.add_argument("--duration", type=float, default=5.0, help="episode length [s]")
+    parser.add_argument("--force", action="store_true")
+    args = parser.parse_args(argv)
+
+    from agents.plots import plot_learning_curve
+    from agents.train import TrainConfig, train_one
+    from quadfault.errors import QuadfaultError
+
+    config = TrainConfig(
+        algo="ppo", env_id="QuadFaultHover-v0",
+        env_kwargs={"estimator": args.estimator, "estimator_rate": "control",
+                    "action_mode": "residual", "duration": args.duration},
+        timesteps=args.timesteps, seeds=(args.seed,), n_envs=args.n_envs,
+        eval_freq=max(args.timesteps // 8, 500), eval_episodes=3,
+        algo_kwargs={"n_steps": 512, "batch_size": 128, "learning_rate": 3e-4,
+                     "policy_kwargs": {"net_arch": [64, 64]}})
+    out = Path(args.out)
+    run_dir = out / f"seed_{args.seed}"
+    try:
+        train_one(config, args.seed, run_dir, force=args.force)
+        data = np.load(run_dir / "evaluations.npz")
+        png = plot_learning_curve([data["timesteps"]], [data["results"]],
+                                  out / "learning_curve.png", force=True,
+                                  labels=[f"PPO residual, eta_hat from {args.estimator}"],
+                                  title="QuadFaultHover-v0 (5 s episodes, random faults)")
+    except QuadfaultError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    best = data["results"].mean(axis=1)
+    print(f"evaluation return: first {best[0]:.1f}, last {best[-1]:.1f}, best {best.max():.1f}"
+          f" (max possible {args.duration * 100:.0f}); curve -> {png}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
