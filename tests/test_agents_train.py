@@ -35,6 +35,7 @@ def _tiny(algo):
                        eval_episodes=1, checkpoint_freq=32, algo_kwargs=kwargs)
 
 
+@pytest.mark.rl
 @pytest.mark.parametrize("algo", ["ppo", "sac"])
 def test_smoke_training_and_round_trip(algo, tmp_path):
     pytest.importorskip("torch")
@@ -72,3 +73,15 @@ def test_cli_bad_json_is_one_line(capsys):
     assert main(["train", "--env-kwargs", "{oops", "--out", "x"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--env-kwargs" in err[0]
+
+
+def test_missing_sb3_is_one_clean_error(monkeypatch, tmp_path, capsys):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "stable_baselines3", None)  # import now fails
+    from quadfault.cli import main
+
+    assert main(["train", "--env-kwargs", '{"estimator": "none"}', "--out",
+                 str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "rl" in err[0] and "stable-baselines3" in err[0]
