@@ -351,12 +351,13 @@ def run_windows_numba(c, b, H, excited, x0, cfg, progress: bool = False):
     return eta, sd, status
 
 
-def solve_window_numba(c, b, H, x_prev, cfg):
-    """Compiled :func:`estimators.irls.solve_window` (no histories)."""
+def solve_window_numba(c, b, H, x_prev, cfg, params=None):
+    """Compiled :func:`estimators.irls.solve_window` (no histories); ``params`` are the
+    cached :func:`kernel_parameters` of ``cfg``."""
     from estimators.irls import _diag
 
     m, n = np.shape(b)
-    fp, ip = kernel_parameters(cfg, m)
+    fp, ip = kernel_parameters(cfg, m) if params is None else params
     x_out = np.empty(n)
     sd_out = np.empty(n)
     iters = np.zeros(cfg.max_irls, dtype=np.int64)
@@ -366,10 +367,14 @@ def solve_window_numba(c, b, H, x_prev, cfg):
                                           np.asarray(x_prev, dtype=float), fp, ip, x_out,
                                           sd_out, iters)
     status = STATUSES[code]
-    messages = {_REJ: "every segment rejected", _MAXIT: "interior point stopped at "
-                f"{cfg.ipm.max_iter} iterations",
-                _ILL: f"cond(J^T G J) = {cond:.3g} > {cfg.cond_max:g}"}
-    diag = _diag(status, messages.get(code, ""), [int(i) for i in iters[:rounds]], w, cond, None)
+    message = ""
+    if code == _REJ:
+        message = "every segment rejected"
+    elif code == _MAXIT:
+        message = f"interior point stopped at {cfg.ipm.max_iter} iterations"
+    elif code == _ILL:
+        message = f"cond(J^T G J) = {cond:.3g} > {cfg.cond_max:g}"
+    diag = _diag(status, message, [int(i) for i in iters[:rounds]], w, cond, None)
     if code in (_OK, _MAXIT):
         return x_out, sd_out, diag
     return np.asarray(x_prev, dtype=float), None, diag

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections import deque
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -282,6 +281,7 @@ class SlidingWindowIRLS:
             backend = "numba" if numba_available() and not self.config.record_history else "numpy"
         self.backend = "numpy" if self.config.record_history else backend
         self._G = self.config.segment_weights
+        self._kernel_params = None
         self.reset()
 
     # online ---------------------------------------------------------------------------
@@ -297,7 +297,10 @@ class SlidingWindowIRLS:
         self._eta = eta
         self._sd = None
         self._last: Sample | None = None
-        self._segments: deque = deque(maxlen=self.config.window - 1)
+        m = self.config.window - 1  # ring of the window's segment terms, oldest first
+        self._c, self._b = np.zeros(m), np.zeros((m, n))
+        self._H, self._thrust = np.zeros((m, n, n)), np.zeros(m)
+        self._count = 0
 
     def _commands(self, f: np.ndarray) -> np.ndarray:
         if not self.config.clip_commands:
@@ -326,7 +329,7 @@ class SlidingWindowIRLS:
             t, finite = math.nan, False
         if not finite or (self._last is not None and not t > self._last.t):
             self._last = None
-            self._segments.clear()
+            self._count = 0
             why = "non-finite or malformed sample" if not finite else "time not increasing"
             return self._keep(t, STATUS_BAD_SAMPLE, f"{why}; window restarted")
         sample = Sample(float(t), *arrays[:4], self._commands(arrays[4]))
@@ -335,19 +338,24 @@ class SlidingWindowIRLS:
             seg = segment_models(self.vehicle, (a.t, z.t), (a.p, z.p), (a.v, z.v), (a.R, z.R),
                                  (a.w, z.w), (a.f, z.f))
             c, b, H = quadratic_terms(seg, self._G)
-            self._segments.append((c[0], b[0], H[0], seg.thrust[0]))
+            for ring, new in ((self._c, c), (self._b, b), (self._H, H),
+                              (self._thrust, seg.thrust)):
+                ring[:-1] = ring[1:]
+                ring[-1] = new[0]
+            self._count = min(self._count + 1, len(self._c))
         self._last = sample
-        if len(self._segments) < self.config.window - 1:
+        if self._count < len(self._c):
             return self._keep(t, STATUS_WARMUP)
-        c = np.array([s[0] for s in self._segments])
-        b = np.array([s[1] for s in self._segments])
-        H = np.array([s[2] for s in self._segments])
-        if np.mean([s[3] for s in self._segments]) < self.config.min_thrust:
+        c, b, H = self._c, self._b, self._H
+        if self._thrust.mean() < self.config.min_thrust:
             return self._keep(t, STATUS_NO_EXCITATION, "commanded thrust ~ 0 in the window")
         if self.backend == "numba":
-            from estimators._irls_numba import solve_window_numba
+            from estimators._irls_numba import kernel_parameters, solve_window_numba
 
-            eta, sd, diag = solve_window_numba(c, b, H, self._eta, self.config)
+            if self._kernel_params is None:
+                self._kernel_params = kernel_parameters(self.config, len(c))
+            eta, sd, diag = solve_window_numba(c, b, H, self._eta, self.config,
+                                               self._kernel_params)
         else:
             eta, sd, diag = solve_window(c, b, H, self._eta, self.config,
                                          self.config.record_history)
