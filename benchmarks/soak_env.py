@@ -82,64 +82,76 @@ def _flat(obs) -> np.ndarray:
 
 def soak(steps: int, seed: int, *, max_episode_steps: int | None = 300, progress: bool = True,
          digest: bool = False, on_warm=None, env_kwargs: dict | None = None,
-         corner_actions: float = 0.0) -> dict:
+         corner_actions: float = 0.0, report_every: int = 0) -> dict:
     """Run ``steps`` random-action steps; returns counts (and a SHA-256 of the run if
     ``digest``). ``env_kwargs`` go to every environment (e.g. a lower ``physics_rate`` for a
-    quick run); a fraction ``corner_actions`` of the actions are corners of [-1, 1]^4."""
+    quick run); a fraction ``corner_actions`` of the actions are corners of [-1, 1]^4; every
+    ``report_every`` steps one checkpoint line is printed (counts so far and RSS)."""
     rng = np.random.default_rng(seed)
     pool = EnvPool(max_episode_steps, env_kwargs)
     est_names, est_p = list(ESTIMATORS), np.array(list(ESTIMATORS.values()))
     h = hashlib.sha256() if digest else None
     stats = {"steps": 0, "episodes": 0, "nonfinite_obs": 0, "nonfinite_reward": 0,
              "outside_space": 0, "missing_reason": 0, "spurious_reason": 0,
-             "nonfinite_truth": 0, "terminations": {}, "truncations": 0, "combos": set()}
+             "nonfinite_truth": 0, "terminations": {}, "truncations": 0, "combos": set(),
+             "interrupted": False}
     bar = progress_bar(total=steps, desc="soak", unit="step", disable=None if progress else True)
     env, done = None, True
-    while stats["steps"] < steps:
-        if done:
-            combo = (ACTION_MODES[int(rng.integers(len(ACTION_MODES)))],
-                     est_names[int(rng.choice(len(est_names), p=est_p))],
-                     OBSERVATIONS[int(rng.integers(len(OBSERVATIONS)))])
-            stats["combos"].add(combo)
-            env = pool.get(*combo)
-            env.action_space.seed(int(rng.integers(2**31)))
-            obs, info = env.reset(seed=int(rng.integers(2**31)))
-            stats["episodes"] += 1
-            done = False
-        action = rng.uniform(-1.0, 1.0, 4).astype(np.float32)
-        if corner_actions and rng.uniform() < corner_actions:
-            action = np.sign(action).astype(np.float32)
-        obs, reward, terminated, truncated, info = env.step(action)
-        stats["steps"] += 1
-        flat = _flat(obs)
-        if not np.all(np.isfinite(flat)):
-            stats["nonfinite_obs"] += 1
-        if not env.observation_space.contains(obs):
-            stats["outside_space"] += 1
-        if not math.isfinite(reward):
-            stats["nonfinite_reward"] += 1
-        reason = info.get("termination_reason")
-        if terminated:
-            if reason not in TERMINATION_REASONS:
-                stats["missing_reason"] += 1
-            stats["terminations"][reason] = stats["terminations"].get(reason, 0) + 1
-        elif reason is not None:
-            stats["spurious_reason"] += 1
-        if truncated and not terminated:
-            stats["truncations"] += 1
-        if reason != "non_finite" and not (np.all(np.isfinite(info["position_error"]))
-                                           and np.all(np.isfinite(info["eta_hat"]))):
-            stats["nonfinite_truth"] += 1
-        if h is not None:
-            h.update(flat.tobytes())
-            h.update(np.float64(reward).tobytes())
-            h.update(bytes([terminated, truncated]))
-            h.update(str(reason).encode())
-        done = terminated or truncated
-        if on_warm is not None and stats["steps"] == min(1000, steps):
-            on_warm()
-        if stats["steps"] % 100 == 0:
-            bar.update(100)
+    started = time.perf_counter()
+    try:
+        while stats["steps"] < steps:
+            if done:
+                combo = (ACTION_MODES[int(rng.integers(len(ACTION_MODES)))],
+                         est_names[int(rng.choice(len(est_names), p=est_p))],
+                         OBSERVATIONS[int(rng.integers(len(OBSERVATIONS)))])
+                stats["combos"].add(combo)
+                env = pool.get(*combo)
+                env.action_space.seed(int(rng.integers(2**31)))
+                obs, info = env.reset(seed=int(rng.integers(2**31)))
+                stats["episodes"] += 1
+                done = False
+            action = rng.uniform(-1.0, 1.0, 4).astype(np.float32)
+            if corner_actions and rng.uniform() < corner_actions:
+                action = np.sign(action).astype(np.float32)
+            obs, reward, terminated, truncated, info = env.step(action)
+            stats["steps"] += 1
+            flat = _flat(obs)
+            if not np.all(np.isfinite(flat)):
+                stats["nonfinite_obs"] += 1
+            if not env.observation_space.contains(obs):
+                stats["outside_space"] += 1
+            if not math.isfinite(reward):
+                stats["nonfinite_reward"] += 1
+            reason = info.get("termination_reason")
+            if terminated:
+                if reason not in TERMINATION_REASONS:
+                    stats["missing_reason"] += 1
+                stats["terminations"][reason] = stats["terminations"].get(reason, 0) + 1
+            elif reason is not None:
+                stats["spurious_reason"] += 1
+            if truncated and not terminated:
+                stats["truncations"] += 1
+            if reason != "non_finite" and not (np.all(np.isfinite(info["position_error"]))
+                                               and np.all(np.isfinite(info["eta_hat"]))):
+                stats["nonfinite_truth"] += 1
+            if h is not None:
+                h.update(flat.tobytes())
+                h.update(np.float64(reward).tobytes())
+                h.update(bytes([terminated, truncated]))
+                h.update(str(reason).encode())
+            done = terminated or truncated
+            if on_warm is not None and stats["steps"] == min(1000, steps):
+                on_warm()
+            if stats["steps"] % 100 == 0:
+                bar.update(100)
+            if report_every and stats["steps"] % report_every == 0:
+                bad = sum(stats[k] for k in ("nonfinite_obs", "nonfinite_reward", "outside_space",
+                                             "missing_reason", "spurious_reason", "nonfinite_truth"))
+                print(f"  checkpoint: {stats['steps']} steps, {stats['episodes']} episodes, "
+                      f"{len(stats['combos'])} configurations, {bad} failed checks, "
+                      f"RSS {rss_mib():.1f} MiB, {time.perf_counter() - started:.0f} s", flush=True)
+    except KeyboardInterrupt:  # Ctrl-C ends the soak early; the summary says so
+        stats["interrupted"] = True
     bar.close()
     pool.close()
     stats["combos"] = len(stats["combos"])
@@ -156,6 +168,8 @@ def main(argv=None) -> int:
                    help="steps of each of the two determinism runs (0: skip)")
     p.add_argument("--episode-steps", type=int, default=300,
                    help="truncate episodes after this many steps (more resets, more scenarios)")
+    p.add_argument("--report-every", type=int, default=0,
+                   help="print a checkpoint line every this many steps (0: none)")
     p.add_argument("--quiet", action="store_true")
     args = p.parse_args(argv)
     if args.steps < 1:
@@ -177,7 +191,7 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     stats = soak(args.steps, args.seed, max_episode_steps=args.episode_steps,
                  progress=not args.quiet, on_warm=lambda: rss.setdefault("start", rss_mib()),
-                 corner_actions=0.1)
+                 corner_actions=0.1, report_every=args.report_every)
     seconds = time.perf_counter() - t0
     rss_end = rss_mib()
     bad = {k: stats[k] for k in ("nonfinite_obs", "nonfinite_reward", "outside_space",
@@ -185,7 +199,8 @@ def main(argv=None) -> int:
     ok &= not any(bad.values())
     print(f"soak: {stats['steps']} steps, {stats['episodes']} episodes, {stats['combos']} "
           f"configurations (mode x estimator x observation) in {seconds:.0f} s "
-          f"({stats['steps'] / seconds:.0f} steps/s), seed {args.seed}")
+          f"({stats['steps'] / seconds:.0f} steps/s), seed {args.seed}"
+          + (" [stopped early by Ctrl-C]" if stats["interrupted"] else ""))
     print("  " + ", ".join(f"{k} {v}" for k, v in bad.items()))
     print(f"  terminations {stats['terminations']}, truncations {stats['truncations']}")
     print(f"  RSS after warm-up {rss.get('start', math.nan):.1f} MiB, at the end {rss_end:.1f} MiB")
