@@ -2,10 +2,8 @@
 
 The same algorithm as :func:`estimators.irls.solve_window` (MAD weights, conditioning guard,
 interior-point rounds, uncertainty), written as scalar loops over the per-segment quadratic
-terms so a whole recording runs in one compiled call. The only numerical difference is the
-linear solver: the reduced KKT matrix and the information matrix are symmetric positive
-definite, so they are solved by Cholesky here and by LU (``numpy.linalg.solve``) in the numpy
-path; results agree to rounding (tested to 1e-9).
+terms so a whole recording runs in one compiled call. Results agree with the numpy path to
+rounding (summation order, LU vs Cholesky for the information matrix; tested to 1e-9).
 """
 
 from __future__ import annotations
