@@ -173,13 +173,18 @@ def condition_number_1(A) -> float:
     return value if math.isfinite(value) else math.inf
 
 
+def segment_energies(c, b, H, x, scale: float = 1.0) -> np.ndarray:
+    """``e_i = r_i^T G_i r_i = c_i + 2 b_i . x + x^T H_i x`` (eq. 26), times ``scale``."""
+    return (c + 2.0 * (b @ x) + (H @ x) @ x) * scale
+
+
 def window_uncertainty(c, b, H, w, x, gamma: float, scale: float = 1.0) -> np.ndarray:
     """One-sigma uncertainty of ``x`` from the window's information matrix (module doc)."""
-    e = (c + 2.0 * (b @ x) + np.einsum("snm,n,m->s", H, x, x)) * scale
+    e = segment_energies(c, b, H, x, scale)
     n = len(x)
     active = int(np.count_nonzero(w > 0))
     s2 = max(float(w @ e), 0.0) / max(10 * active - n, 1)
-    info = np.einsum("s,snm->nm", w, H) * scale + gamma * np.eye(n)
+    info = np.tensordot(w, H, 1) * scale + gamma * np.eye(n)
     try:
         cov = np.linalg.solve(info, np.eye(n))
     except np.linalg.LinAlgError:
@@ -208,14 +213,14 @@ def solve_window(c, b, H, x_prev, config: IRLSConfig, record_history: bool = Fal
     iters, hist = [], ([], [], [], []) if record_history else None
     converged, cond, w = True, math.nan, None
     for _ in range(cfg.max_irls):
-        e = (c + 2.0 * (b @ x_cur) + np.einsum("snm,n,m->s", H, x_cur, x_cur)) * scale  # eq. 26
+        e = segment_energies(c, b, H, x_cur, scale)  # eq. 26
         w, _z = mad_weights(e, z_soft=cfg.z_soft, power=cfg.soft_power, z_hard=cfg.z_hard,
                             hard_drop=cfg.hard_drop, w_min=cfg.w_min, mad_eps=cfg.mad_eps,
                             median_normalize=not paper, floor=paper)
         if not np.any(w > 0):
             return x_prev, None, _diag(STATUS_REJECTED, "every segment rejected", iters, w,
                                        cond, hist)
-        JGJ = np.einsum("s,snm->nm", w, H) * scale
+        JGJ = np.tensordot(w, H, 1) * scale
         cond = condition_number_1(JGJ)
         if not cond <= cfg.cond_max:
             return x_prev, None, _diag(STATUS_ILL_CONDITIONED, f"cond(J^T G J) = {cond:.3g} > "
@@ -225,8 +230,7 @@ def solve_window(c, b, H, x_prev, config: IRLSConfig, record_history: bool = Fal
         iters.append(res.iterations)
         converged = res.converged
         if hist is not None:
-            rr = [math.sqrt(max(float(w @ ((c + 2.0 * (b @ xk)
-                                            + np.einsum("snm,n,m->s", H, xk, xk)) * scale)), 0.0))
+            rr = [math.sqrt(max(float(w @ segment_energies(c, b, H, xk, scale)), 0.0))
                   for xk in res.x_history]
             for lst, arr in zip(hist, (res.dual_history, res.cent_history, res.gap_history, rr)):
                 lst.append(np.asarray(arr))
