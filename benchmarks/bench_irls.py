@@ -18,6 +18,7 @@ flight takes a while on the numpy simulator.
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -39,28 +40,34 @@ def cached_flight(scenario: str, duration: float, integrator: str, cache: Path, 
     return read_recording(path)
 
 
+def _timed(fn):
+    """``(result, wall seconds, CPU seconds of this process)``."""
+    w0, c0 = time.perf_counter(), time.process_time()
+    out = fn()
+    return out, time.perf_counter() - w0, time.process_time() - c0
+
+
 def speed(rec, numpy_windows: int) -> None:
-    print(f"recording: {len(rec)} samples ({rec.duration:.1f} s)")
+    print(f"recording: {len(rec)} samples ({rec.duration:.1f} s); load average "
+          f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs (CPU-time rates are less "
+          "affected by a busy machine)")
     sub = rec.slice(0, numpy_windows + 9)
     est = SlidingWindowIRLS(rec.vehicle, IRLSConfig(backend="numpy"))
-    t0 = time.perf_counter()
-    est.run(sub)
-    numpy_rate = numpy_windows / (time.perf_counter() - t0)
-    print(f"numpy : {numpy_rate:10.0f} window updates/s  ({numpy_windows} windows)")
+    _, wall, cpu = _timed(lambda: est.run(sub))
+    numpy_rate = numpy_windows / wall
+    print(f"numpy : {numpy_rate:10.0f} window updates/s wall, {numpy_windows / cpu:10.0f} per "
+          f"CPU-s  ({numpy_windows} windows)")
     if not numba_available():
         print("numba : not installed (pip install -e '.[fast]')")
         return
     est = SlidingWindowIRLS(rec.vehicle, IRLSConfig(backend="numba"))
-    t0 = time.perf_counter()
-    est.run(rec.slice(0, 30))
-    print(f"numba : compile / cache load {time.perf_counter() - t0:.2f} s")
-    t0 = time.perf_counter()
-    series = est.run(rec)
-    wall = time.perf_counter() - t0
+    _, wall, _ = _timed(lambda: est.run(rec.slice(0, 30)))
+    print(f"numba : compile / cache load {wall:.2f} s")
+    series, wall, cpu = _timed(lambda: est.run(rec))
     n_win = len(rec) - 9
     rate = n_win / wall
-    print(f"numba : {rate:10.0f} window updates/s  ({n_win} windows in {wall:.2f} s, "
-          f"including residual set-up)")
+    print(f"numba : {rate:10.0f} window updates/s wall, {n_win / cpu:10.0f} per CPU-s  "
+          f"({n_win} windows in {wall:.2f} s, including residual set-up)")
     print(f"ratio numba / numpy: {rate / numpy_rate:.0f}x")
     same = SlidingWindowIRLS(rec.vehicle, IRLSConfig(backend="numpy")).run(sub)
     diff = np.max(np.abs(same.eta - series.eta[:len(sub)]))
