@@ -90,6 +90,8 @@ def main(argv: list[str] | None = None) -> int:
         return _error(prog, str(exc))
     except (FileNotFoundError, IsADirectoryError, PermissionError) as exc:
         return _error(prog, f"{exc.filename}: {exc.strerror}")
+    except MemoryError:
+        return _error(prog, "out of memory: the input or the requested run is too large")
     except KeyboardInterrupt:
         return _error(prog, "interrupted", 130)
 

@@ -77,6 +77,11 @@ def run(args) -> int:
         raise ConfigError(f"--duration must be positive [s], got {args.duration}")
     if not (math.isfinite(args.dt) and 0 < args.dt <= 0.1):
         raise ConfigError(f"--dt must be in (0, 0.1] s, got {args.dt}")
+    if args.control_rate is not None and not (math.isfinite(args.control_rate)
+                                              and args.control_rate > 0):
+        raise ConfigError(f"--control-rate must be positive [Hz], got {args.control_rate}")
+    if args.seed < 0:
+        raise ConfigError(f"--seed must be >= 0, got {args.seed}")
     if args.thrust_noise is not None and not (0 <= args.thrust_noise < 2):
         raise ConfigError(f"--thrust-noise must be in [0, 2), got {args.thrust_noise}")
     from quadfault.fileio import check_writable

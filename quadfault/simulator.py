@@ -196,6 +196,9 @@ def simulate(scenario: Scenario, *, vehicle: Vehicle | None = None,
     nominal = nominal or true_vehicle
     if not cfg.saturate:
         true_vehicle = true_vehicle.replace(max_thrust=math.inf)
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer))
+                             or seed < 0):
+        raise ConfigError(f"seed must be a non-negative integer, got {seed!r}")
     rng = np.random.default_rng(seed)
     sigma = scenario.thrust_noise if thrust_noise is None else thrust_noise
     plant = Plant(true_vehicle, scenario.efficiency, MotorModel(sigma, cfg.saturate), effects,
