@@ -100,8 +100,8 @@ class TrainConfig:
             raise ConfigError(f"checkpoint_freq must be an integer >= 0, got "
                               f"{self.checkpoint_freq!r}")
         seeds = tuple(self.seeds) if isinstance(self.seeds, (list, tuple)) else (self.seeds,)
-        if not seeds or any(isinstance(s, bool) or not isinstance(s, int) for s in seeds):
-            raise ConfigError(f"seeds must be a list of integers, got {self.seeds!r}")
+        if not seeds or any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in seeds):
+            raise ConfigError(f"seeds must be a list of integers >= 0, got {self.seeds!r}")
         object.__setattr__(self, "seeds", seeds)
 
     @classmethod
