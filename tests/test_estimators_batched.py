@@ -1,0 +1,114 @@
+"""Batched estimators: row i of a batch gives the single estimator's estimates on vehicle i."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimators.base import STATUSES, samples
+from estimators.batched import BatchedEKF, BatchedIRLS, make_batched_estimator
+from estimators.ekf import EKFConfig, MotorEfficiencyEKF
+from estimators.irls import IRLSConfig, SlidingWindowIRLS
+from quadfault.errors import ConfigError
+from quadfault.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
+from quadfault.simulator import simulate
+from quadfault.trajectory import Circle, Hover
+
+N_VEHICLES = 3
+
+
+@pytest.fixture(scope="module")
+def flights():
+    """Three flights of equal length: different faults, noise and trajectories."""
+    out = []
+    for k in range(N_VEHICLES):
+        sched = EfficiencySchedule(ConstantEfficiency((1.0, 0.9 - 0.1 * k, 0.8, 0.95)),
+                                   (AbruptFault(motor=k + 1, onset=0.1, level=0.5),))
+        traj = Circle() if k != 1 else Hover()
+        sc = Scenario(f"v{k}", 0.2, sched, traj, thrust_noise=0.03 * k)
+        out.append(simulate(sc, seed=20 + k).without_truth())
+    return out
+
+
+def _stack(flights):
+    rows = [list(samples(rec)) for rec in flights]
+    T = min(len(r) for r in rows)
+    for k in range(T):
+        batch = [r[k] for r in rows]
+        yield tuple(np.array([getattr(s, name) for s in batch])
+                    for name in ("t", "p", "v", "R", "w", "f"))
+
+
+def _compare(flights, single_factory, batched, corrupt=None):
+    singles = [single_factory() for _ in flights]
+    n_ok = 0
+    for k, sample in enumerate(_stack(flights)):
+        if corrupt is not None and k == corrupt:
+            sample = list(sample)
+            sample[1] = sample[1].copy()
+            sample[1][1] = np.nan  # vehicle 1 gets a bad sample
+            sample = tuple(sample)
+        out = batched.update(*sample)
+        for i, est in enumerate(singles):
+            from estimators.base import Sample
+
+            e = est.update(Sample(*(a[i] for a in sample)))
+            assert STATUSES[out.status[i]] == e.status, (k, i)
+            np.testing.assert_allclose(out.eta[i], e.eta, rtol=0, atol=1e-6)
+            if e.sd is None:
+                assert np.all(np.isnan(out.sd[i]))
+            else:
+                np.testing.assert_allclose(out.sd[i], e.sd, rtol=0, atol=1e-6)
+            n_ok += e.status == "ok"
+    return n_ok
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_batched_irls_matches_single(flights, backend):
+    if backend == "numba":
+        pytest.importorskip("numba")
+    veh = flights[0].vehicle
+    cfg = IRLSConfig(backend=backend)
+    batched = BatchedIRLS(veh, N_VEHICLES, cfg)
+    assert batched.backend == backend
+    n_ok = _compare(flights, lambda: SlidingWindowIRLS(veh, cfg), batched, corrupt=40)
+    assert n_ok > 100  # the windows were really solved, not held by a guard
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_batched_ekf_matches_single(flights, backend):
+    if backend == "numba":
+        pytest.importorskip("numba")
+    veh = flights[0].vehicle
+    cfg = EKFConfig(backend=backend)
+    batched = BatchedEKF(veh, N_VEHICLES, cfg)
+    n_ok = _compare(flights, lambda: MotorEfficiencyEKF(veh, cfg), batched, corrupt=40)
+    assert n_ok > 100
+
+
+def test_batched_irls_reset_restarts_only_masked_rows(flights):
+    veh = flights[0].vehicle
+    est = BatchedIRLS(veh, N_VEHICLES, IRLSConfig(backend="numpy"))
+    for k, sample in enumerate(_stack(flights)):
+        out = est.update(*sample)
+        if k == 12:
+            break
+    assert np.all(out.status_names == "ok")
+    est.reset(np.array([False, True, False]))
+    out = est.update(*next(iter(_stack([f for f in flights]))))  # earlier time: bad for 0, 2
+    assert list(out.status_names) == ["bad_sample", "warmup", "bad_sample"]
+    np.testing.assert_array_equal(out.eta[1], np.ones(4))
+
+
+def test_bad_shapes_and_names_raise_config_errors(flights):
+    veh = flights[0].vehicle
+    est = BatchedIRLS(veh, 2)
+    with pytest.raises(ConfigError, match="batched sample"):
+        est.update(np.zeros(3), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3, 3)),
+                   np.zeros((3, 3)), np.zeros((3, 4)))
+    with pytest.raises(ConfigError, match="reset mask"):
+        est.reset(np.ones(5, dtype=bool))
+    with pytest.raises(ConfigError, match="integer >= 1"):
+        BatchedEKF(veh, 0)
+    with pytest.raises(ConfigError, match="no batched estimator"):
+        make_batched_estimator("kalman", veh, 2)
