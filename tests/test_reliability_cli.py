@@ -105,6 +105,10 @@ BAD_ARGUMENTS = [
     ("simulate", ["--scenario", "nope", "--out", "a.csv"], "--scenario"),
     ("simulate", ["--seed", "x", "--out", "a.csv"], "--seed"),
     ("simulate", ["--out", "nodir/a.csv", "--duration", "0.05"], "nodir"),
+    ("simulate", ["--control-rate", "0", "--out", "a.csv", "--duration", "0.05"],
+     "--control-rate"),
+    ("simulate", ["--seed", "-1", "--out", "a.csv", "--duration", "0.05"], "--seed"),
+    ("simulate", ["--dt", "1e-12", "--duration", "1", "--out", "a.csv"], "memory"),
     ("estimate", ["missing.csv", "--out", "e.csv"], "missing.csv"),
     ("estimate", [".", "--out", "e.csv"], "directory"),
     ("estimate", ["{hover}", "--out", "e.txt"], ".csv"),
@@ -129,18 +133,28 @@ BAD_ARGUMENTS = [
     ("train", ["--timesteps", "-5", "--out", "tr"], "timesteps"),
     ("train", ["--env-kwargs", "{{bad", "--out", "tr"], "--env-kwargs"),
     ("train", ["--config", "missing.json", "--out", "tr"], "missing.json"),
+    ("train", ["--seeds", "-1", "--out", "tr"], "seeds"),
     ("evaluate", ["--agents", "bogus", "--out", "ev"], "bogus"),
     ("evaluate", ["--duration", "-1", "--out", "ev"], "--duration"),
     ("evaluate", ["--seeds", "--out", "ev"], "--seeds"),
+    pytest.param("evaluate", ["--seeds", "-1", "--duration", "0.05", "--no-plots", "--out", "ev"],
+                 "seed", marks=pytest.mark.xfail(
+                     strict=True, reason="agents.rollout.fly passes a negative seed to "
+                     "numpy.random.default_rng: ValueError traceback (reported to agents)")),
 ]
 
 
+def _values(case):
+    return case.values if hasattr(case, "values") else case
+
+
 def test_every_subcommand_has_bad_argument_cases():
-    assert {c for c, _, _ in BAD_ARGUMENTS} == set(SUBCOMMANDS)
+    assert {_values(c)[0] for c in BAD_ARGUMENTS} == set(SUBCOMMANDS)
 
 
 @pytest.mark.parametrize("command,args,mentions", BAD_ARGUMENTS,
-                         ids=[f"{c}-{'_'.join(a)[:40]}" for c, a, _ in BAD_ARGUMENTS])
+                         ids=[f"{_values(c)[0]}-{'_'.join(_values(c)[1])[:40]}"
+                              for c in BAD_ARGUMENTS])
 def test_bad_arguments_give_one_line_error(command, args, mentions, hover, monkeypatch):
     if command == "train":
         pytest.importorskip("stable_baselines3")
@@ -156,6 +170,49 @@ def test_bad_arguments_give_one_line_error(command, args, mentions, hover, monke
 def test_unknown_subcommand_is_one_line():
     code, _, err = run_cli(["fly"])
     assert code == 2 and len(err.strip().splitlines()) == 1 and "invalid choice" in err
+
+
+# -- fuzzed raw logs through quadfault import -----------------------------------------------------
+IMPORT_FIXTURES = {"eschmann": "eschmann_log.csv", "nanodrone": "nanodrone_flight.csv",
+                   "crazypad": "crazypad_motor_log.csv"}
+JUNK = ("abc", "", "nan", "inf", "-inf", "1e999", "-1", "0", "1e300")
+
+
+@FUZZ
+@given(kind=st.sampled_from(sorted(IMPORT_FIXTURES)), how=st.integers(0, 3),
+       seed=st.integers(0, 2**32 - 1))
+def test_fuzzed_raw_logs_through_import(kind, how, seed):
+    """A raw log with a junk cell, cut anywhere, missing a column or with time going back:
+    a valid recording comes out, or one line and exit 2."""
+    from quadfault.recording import read_recording
+
+    rng = np.random.default_rng(seed)
+    lines = (FIXTURES / IMPORT_FIXTURES[kind]).read_text().splitlines()
+    k = int(rng.integers(2, len(lines)))
+    if how == 0:
+        cells = lines[k].split(",")
+        cells[int(rng.integers(len(cells)))] = JUNK[int(rng.integers(len(JUNK)))]
+        lines[k] = ",".join(cells)
+    elif how == 1:
+        text = "\n".join(lines)
+        lines = text[:int(rng.integers(len(text)))].split("\n")
+    elif how == 2:
+        j = int(rng.integers(len(lines[0].split(","))))
+        lines = [",".join(c for i, c in enumerate(ln.split(",")) if i != j) for ln in lines]
+    else:
+        cells, prev = lines[k].split(","), lines[k - 1].split(",")
+        cells[0] = prev[0] if rng.uniform() < 0.5 else str(float(prev[0]) - 5)
+        lines[k] = ",".join(cells)
+    with tempfile.TemporaryDirectory() as folder:
+        src, out = Path(folder) / "log.csv", Path(folder) / "rec.csv"
+        src.write_text("\n".join(lines) + "\n")
+        code, _, err = run_cli(["import", kind, src, "--out", out, "--quiet"])
+        if code == 0:
+            rec = read_recording(out)  # what import writes must read back
+            assert np.all(np.isfinite(rec.t)) and np.all(np.diff(rec.t) > 0)
+        else:
+            assert_one_line_error(code, err, "import")
+            assert not out.exists()
 
 
 # -- no overwrite without --force -----------------------------------------------------------------
