@@ -70,6 +70,75 @@ def _cholesky_solve_into(A, rhs, L, out):
 
 
 @njit(cache=True)
+def segment_terms(dt, p0, p1, v0, v1, R0, R1, w0, w1, f, mass, g, Jmat, Jinv, A, G):
+    """One segment's quadratic terms ``(c, b, H, thrust)``: the compiled twin of
+    :func:`estimators.residuals.segment_models` + :func:`~estimators.residuals.quadratic_terms`
+    for a single segment (used by the online ``update``)."""
+    n = f.size
+    r0 = np.empty(10)
+    J = np.empty((10, n))
+    b3 = R0[:, 2]
+    thrust = 0.0
+    for j in range(n):
+        thrust += A[0, j] * f[j]
+    # velocity / position (eqs. 13, 14, 17, 18)
+    for a in range(3):
+        ge = g if a == 2 else 0.0
+        r0[a] = v1[a] - v0[a] - ge * dt
+        r0[3 + a] = p1[a] - p0[a] - v0[a] * dt - ge * 0.5 * dt * dt
+        for j in range(n):
+            dv = b3[a] * f[j] * A[0, j] / mass
+            J[a, j] = dv * dt
+            J[3 + a, j] = dv * (0.5 * dt * dt)
+    # rate (eqs. 15, 19)
+    Jw = np.zeros(3)
+    for a in range(3):
+        for k in range(3):
+            Jw[a] += Jmat[a, k] * w0[k]
+    gyro = np.empty(3)
+    gyro[0] = w0[1] * Jw[2] - w0[2] * Jw[1]
+    gyro[1] = w0[2] * Jw[0] - w0[0] * Jw[2]
+    gyro[2] = w0[0] * Jw[1] - w0[1] * Jw[0]
+    w_hat0 = np.empty(3)
+    for a in range(3):
+        s = 0.0
+        for k in range(3):
+            s += Jinv[a, k] * gyro[k]
+        w_hat0[a] = w0[a] - s * dt
+        r0[6 + a] = w1[a] - w_hat0[a]
+        for j in range(n):
+            ja = 0.0
+            for k in range(3):
+                ja += Jinv[a, k] * A[1 + k, j]
+            J[6 + a, j] = -ja * f[j] * dt
+    # rotation (eqs. 20-22): r_R = 1/2 (3 - tr dR) - dt vee(dR) . W_hat
+    dR = np.zeros((3, 3))
+    for a in range(3):
+        for k in range(3):
+            for i in range(3):
+                dR[a, k] += R0[i, a] * R1[i, k]
+    u = np.empty(3)
+    u[0] = 0.5 * (dR[2, 1] - dR[1, 2]) * dt
+    u[1] = 0.5 * (dR[0, 2] - dR[2, 0]) * dt
+    u[2] = 0.5 * (dR[1, 0] - dR[0, 1]) * dt
+    r0[9] = 0.5 * (3.0 - (dR[0, 0] + dR[1, 1] + dR[2, 2])) - (u[0] * w_hat0[0] + u[1] * w_hat0[1]
+                                                                + u[2] * w_hat0[2])
+    for j in range(n):
+        J[9, j] = u[0] * J[6, j] + u[1] * J[7, j] + u[2] * J[8, j]
+    c = 0.0
+    b = np.zeros(n)
+    H = np.zeros((n, n))
+    for r in range(10):
+        c += r0[r] * G[r] * r0[r]
+        for j in range(n):
+            gj = G[r] * J[r, j]
+            b[j] += gj * r0[r]
+            for k in range(n):
+                H[j, k] += gj * J[r, k]
+    return c, b, H, thrust
+
+
+@njit(cache=True)
 def _cond1(A):
     """1-norm condition number (Gauss-Jordan inverse with partial pivoting); inf if singular."""
     n = A.shape[0]

@@ -306,6 +306,20 @@ class SlidingWindowIRLS:
         self._H, self._thrust = np.zeros((m, n, n)), np.zeros(m)
         self._count = 0
 
+    def _segment_terms(self, a: Sample, z: Sample):
+        """``(c, b, H, thrust)`` of the segment from sample ``a`` to ``z``."""
+        if self.backend == "numba":
+            from estimators._irls_numba import segment_terms
+
+            v = self.vehicle
+            return segment_terms(z.t - a.t, a.p, z.p, a.v, z.v, a.R, z.R, a.w, z.w, a.f,
+                                 v.mass, v.gravity, v.inertia, v.inertia_inverse, v.allocation,
+                                 self._G)
+        seg = segment_models(self.vehicle, (a.t, z.t), (a.p, z.p), (a.v, z.v), (a.R, z.R),
+                             (a.w, z.w), (a.f, z.f))
+        c, b, H = quadratic_terms(seg, self._G)
+        return c[0], b[0], H[0], seg.thrust[0]
+
     def _commands(self, f: np.ndarray) -> np.ndarray:
         if not self.config.clip_commands:
             return f
@@ -338,14 +352,10 @@ class SlidingWindowIRLS:
             return self._keep(t, STATUS_BAD_SAMPLE, f"{why}; window restarted")
         sample = Sample(float(t), *arrays[:4], self._commands(arrays[4]))
         if self._last is not None:
-            a, z = self._last, sample
-            seg = segment_models(self.vehicle, (a.t, z.t), (a.p, z.p), (a.v, z.v), (a.R, z.R),
-                                 (a.w, z.w), (a.f, z.f))
-            c, b, H = quadratic_terms(seg, self._G)
-            for ring, new in ((self._c, c), (self._b, b), (self._H, H),
-                              (self._thrust, seg.thrust)):
+            for ring, new in zip((self._c, self._b, self._H, self._thrust),
+                                 self._segment_terms(self._last, sample)):
                 ring[:-1] = ring[1:]
-                ring[-1] = new[0]
+                ring[-1] = new
             self._count = min(self._count + 1, len(self._c))
         self._last = sample
         if self._count < len(self._c):

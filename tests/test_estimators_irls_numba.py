@@ -60,3 +60,28 @@ def test_backend_choice(monkeypatch, fault_flight):
     assert SlidingWindowIRLS(veh, IRLSConfig()).backend == "numpy"
     with pytest.raises(ConfigError, match="fast"):
         SlidingWindowIRLS(veh, IRLSConfig(backend="numba"))
+
+
+@pytest.mark.slow
+def test_compiled_segment_terms_equal_numpy(fault_flight):
+    pytest.importorskip("numba")
+    from estimators._irls_numba import segment_terms
+    from estimators.residuals import quadratic_terms, residual_weights, segment_models
+
+    rec, veh = fault_flight, fault_flight.vehicle
+    G = residual_weights(50, 50, 1, 50)
+    sl = slice(100, 140)
+    models = segment_models(veh, rec.t[sl], rec.position[sl], rec.velocity[sl],
+                            rec.rotation[sl], rec.omega[sl], rec.thrust_cmd[sl])
+    c, b, H = quadratic_terms(models, G)
+    R = rec.rotation
+    for i, k in enumerate(range(100, 139)):
+        ci, bi, Hi, Ti = segment_terms(rec.t[k + 1] - rec.t[k], rec.position[k],
+                                       rec.position[k + 1], rec.velocity[k], rec.velocity[k + 1],
+                                       R[k], R[k + 1], rec.omega[k], rec.omega[k + 1],
+                                       rec.thrust_cmd[k], veh.mass, veh.gravity, veh.inertia,
+                                       veh.inertia_inverse, veh.allocation, G)
+        assert ci == pytest.approx(c[i], rel=1e-9)
+        np.testing.assert_allclose(bi, b[i], rtol=1e-9, atol=1e-18)
+        np.testing.assert_allclose(Hi, H[i], rtol=1e-9, atol=1e-18)
+        assert Ti == pytest.approx(models.thrust[i], rel=1e-12)
