@@ -110,7 +110,9 @@ def main(argv=None) -> int:
                 cfg = TrainConfig(algo="ppo", env_id=env_id, env_kwargs=kwargs,
                                   timesteps=args.timesteps, seeds=(seed,), n_envs=args.n_envs,
                                   eval_freq=max(args.timesteps // 5, 1000), eval_episodes=2,
-                                  algo_kwargs={"n_steps": 512, "batch_size": 128})
+                                  algo_kwargs={"n_steps": 512, "batch_size": 128,
+                                               "learning_rate": 1e-4,
+                                               "policy_kwargs": {"log_std_init": -1.5}})
                 ts = time.time()
                 train_one(cfg, seed, run_dir, force=True, quiet=True)
                 train_seconds[f"{arm}/seed_{seed}"] = time.time() - ts

@@ -60,6 +60,16 @@ def test_smoke_training_and_round_trip(algo, tmp_path):
     a1, _ = model.predict(obs, deterministic=True)
     a2, _ = loaded.predict(obs, deterministic=True)
     np.testing.assert_allclose(a1, a2, atol=1e-6)
+    # a saved model flies an evaluation scenario deterministically, with its statistics
+    if algo == "ppo":
+        from agents.evaluate import AgentSpec, fly_agent
+        from agents.rollout import FlightConfig
+        from agents.suite import get_suite
+
+        spec = AgentSpec.parse(f"sb3:{tmp_path / 'run'}")
+        sc = get_suite("smoke")[0].scenario(0).replace(duration=0.3)
+        a, b = (fly_agent(spec, sc, 3, FlightConfig()) for _ in range(2))
+        assert a.metrics == b.metrics and len(a.t) == 30
     # no silent overwrite
     from quadfault.errors import QuadfaultError
 
