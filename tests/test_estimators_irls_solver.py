@@ -103,3 +103,18 @@ def test_window_history_records_each_round():
     fast = solve_window(c, b, H, np.full(4, 0.5), IRLSConfig(backend="numpy"))
     np.testing.assert_array_equal(fast[0], eta)
     assert fast[2].gap_history is None
+
+
+def test_iteration_limit_gives_usable_max_iter_estimate():
+    rng = np.random.default_rng(8)
+    J = rng.standard_normal((9, 10, 4)) * 0.01
+    G = np.array([50.0] * 6 + [1.0] * 3 + [50.0])
+    r0 = -J @ np.array([0.8, 0.7, 0.9, 0.6]) + 1e-4 * rng.standard_normal((9, 10))
+    c = np.einsum("si,i,si->s", r0, G, r0)
+    b = np.einsum("sin,i,si->sn", J, G, r0)
+    H = np.einsum("sin,i,sim->snm", J, G, J)
+    cfg = IRLSConfig(backend="numpy", ipm=IPMSettings(max_iter=2))
+    eta, sd, diag = solve_window(c, b, H, np.ones(4), cfg)
+    assert diag.status == "max_iter" and "2 iterations" in diag.message
+    assert all(n == 2 for n in diag.inner_iterations)
+    assert np.all(np.isfinite(eta)) and np.all((eta > cfg.lower) & (eta < cfg.upper))
