@@ -26,7 +26,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 from quadfault.errors import ConfigError, QuadfaultError
-from quadfault.fileio import atomic_write_text
+from quadfault.fileio import atomic_write_files, atomic_write_text
 
 ALGORITHMS = ("ppo", "sac")
 MODEL_FILE = "model.zip"
@@ -235,10 +235,16 @@ def save_agent(model, run_dir, *, force: bool = False) -> Path:
     path = run_dir / MODEL_FILE
     if path.exists() and not force:
         raise QuadfaultError(f"{path}: already exists; pass --force to overwrite")
-    model.save(str(path))
+    import io
+    import pickle
+
+    buf = io.BytesIO()
+    model.save(buf)  # SB3 writes the zip into the buffer; the file is written atomically
+    files = {path: buf.getvalue()}
     vn = model.get_vec_normalize_env()
-    if vn is not None:
-        vn.save(str(run_dir / VECNORM_FILE))
+    if vn is not None:  # what VecNormalize.save writes (a pickle), written atomically
+        files[run_dir / VECNORM_FILE] = pickle.dumps(vn)
+    atomic_write_files(files, force=True)
     return path
 
 
