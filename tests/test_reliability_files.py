@@ -108,3 +108,40 @@ def test_fileio_writers_refuse_to_overwrite(tmp_path, name):
     assert target.read_bytes() != b"keep"
     plt.close(fig)
     assert [p.name for p in tmp_path.iterdir()] == ["out.png"]
+
+
+class _FakeModel:
+    """Stands in for an SB3 model: ``save`` writes into the file object it is given."""
+
+    def __init__(self, payload: bytes, vecnorm=None):
+        self.payload, self.vecnorm = payload, vecnorm
+
+    def save(self, fh):
+        fh.write(self.payload)
+
+    def get_vec_normalize_env(self):
+        return self.vecnorm
+
+
+def test_save_agent_is_atomic_and_refuses_to_overwrite(tmp_path, monkeypatch):
+    import os
+    import pickle
+
+    from agents.train import MODEL_FILE, VECNORM_FILE, save_agent
+    from quadfault.errors import QuadfaultError
+
+    save_agent(_FakeModel(b"old", {"mean": 0}), tmp_path)
+    assert (tmp_path / MODEL_FILE).read_bytes() == b"old"
+    assert pickle.loads((tmp_path / VECNORM_FILE).read_bytes()) == {"mean": 0}
+    with pytest.raises(QuadfaultError, match="--force"):
+        save_agent(_FakeModel(b"new"), tmp_path)
+
+    def interrupted(fd):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(os, "fsync", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        save_agent(_FakeModel(b"new", {"mean": 1}), tmp_path, force=True)
+    monkeypatch.undo()
+    assert (tmp_path / MODEL_FILE).read_bytes() == b"old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([MODEL_FILE, VECNORM_FILE])
