@@ -37,6 +37,7 @@ ENVIRONMENTS = {
 }
 
 for _id, (_steps, _kwargs) in ENVIRONMENTS.items():
-    register(id=_id, entry_point=ENTRY_POINT, max_episode_steps=_steps, kwargs=_kwargs)
+    register(id=_id, entry_point=ENTRY_POINT, max_episode_steps=_steps, kwargs=_kwargs,
+             vector_entry_point="quad_fault_env.vector:QuadFaultVectorEnv")
 
 __all__ = ["ENVIRONMENTS", "make_estimator"]

@@ -1,0 +1,462 @@
+"""QuadFaultVectorEnv: N quadrotors stepped in one array operation (a gymnasium VectorEnv).
+
+The physics is the core model over a leading batch axis -- the same code the single
+:class:`~quad_fault_env.envs.quad_fault.QuadFaultEnv` runs, not a copy:
+:class:`quadfault.motors.MotorModel` (saturation, efficiency, thrust noise, eqs. 11, 13),
+:meth:`quadfault.vehicle.Vehicle.wrench`, :func:`quadfault.dynamics.step_rk4` (eqs. 1-4),
+:class:`quadfault.controller.GeometricController` (eqs. 5-10) and
+:meth:`quadfault.simulator.SensorNoise.measure`. Resets go through one single
+``QuadFaultEnv`` per sub-env (scenario, controller, initial state), so both envs share one
+definition of an episode; the estimate comes from the batched estimators of
+:mod:`estimators.batched`.
+
+Seeds and random streams: sub-env i owns the generator its single twin would own --
+``reset(seed=s)`` seeds sub-env i with ``s + i`` (as ``SyncVectorEnv``) -- and draws from it in
+the single env's order (per physics substep: sensor noise, then thrust noise, then
+accelerometer noise; the end-of-step measurement after the termination check). Standard
+normal draws of a ``numpy.random.Generator`` are sequential, so one block draw per sub-env and
+control step equals the single env's sequence of small draws. Hence N single envs reset with
+seeds ``s .. s+N-1`` and fed the same actions give the same trajectories (tested to 1e-9).
+
+Differences from the single env: ``info`` holds the per-env arrays below (no per-substep
+``samples`` / ``eta_true_samples`` / ``specific_force_samples``, no ``fault_events``); no
+rendering; only the named estimators (``"irls" | "ekf" | "truth" | "none"``).
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from quad_fault_env.envs.config import RewardConfig, TerminationLimits
+from quad_fault_env.envs.quad_fault import QuadFaultEnv
+from quad_fault_env.estimation import NOMINAL_PRIOR_SD
+from quad_fault_env.observation import SD_MAX
+from quadfault.dynamics import RigidBodyState, step_rk4
+from quadfault.errors import ConfigError
+from quadfault.motors import MotorModel
+
+AUTORESET_MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
+_BIG = float(np.finfo(np.float32).max / 2)
+
+
+class _Draws:
+    """A stand-in generator that hands out pre-drawn standard normals, column block by block,
+    so the core's ``measure`` / ``apply`` consume exactly the single env's draws."""
+
+    def __init__(self, z: np.ndarray):
+        self.z = z
+
+    def standard_normal(self, shape):
+        return self.z.reshape(shape)
+
+
+def _groups(keys: np.ndarray):
+    """``[(key, rows), ...]`` of an integer key array (rows sorted)."""
+    order = np.argsort(keys, kind="stable")
+    sk = keys[order]
+    cuts = np.flatnonzero(np.diff(sk)) + 1
+    return [(int(sk[idx[0]]), idx) for idx in np.split(order, cuts)]
+
+
+class _Table:
+    """Interned hashable objects (trajectories, efficiency schedules): object -> small int."""
+
+    def __init__(self):
+        self.items: list = []
+        self.index: dict = {}
+
+    def key(self, obj) -> int:
+        try:
+            k = self.index.get(obj)
+        except TypeError:  # unhashable: one entry per object
+            k = None
+        if k is None:
+            k = len(self.items)
+            self.items.append(obj)
+            try:
+                self.index[obj] = k
+            except TypeError:
+                pass
+        return k
+
+
+def batched_reward(cfg: RewardConfig, pos_err, vel_err, f_cmd, f_max: float, terminated):
+    """:class:`RewardConfig` over a batch (the same formula, rows (N, 3)); (N,) float64."""
+    track = np.linalg.norm(pos_err, axis=-1) + cfg.velocity_weight * np.linalg.norm(vel_err,
+                                                                                    axis=-1)
+    effort = np.mean((np.asarray(f_cmd) / f_max) ** 2, axis=-1)
+    r = np.exp(-track / cfg.position_scale) - cfg.effort_weight * effort
+    r = r - np.where(terminated, cfg.termination_penalty, 0.0)
+    return np.where(np.isfinite(r), r, 0.0)
+
+
+def batched_termination(limits: TerminationLimits, p, R, p_ref) -> np.ndarray:
+    """:meth:`TerminationLimits.reason` over a batch: object array of reasons or None."""
+    reason = np.full(len(p), None, dtype=object)
+    finite = np.isfinite(p).all(-1) & np.isfinite(R).all((-1, -2))
+    tilt = np.arccos(np.clip(np.nan_to_num(R[:, 2, 2]), -1.0, 1.0)) > limits.max_tilt
+    checks = (("excessive_tilt", tilt),
+              ("out_of_bounds", np.linalg.norm(p - p_ref, axis=-1) > limits.max_position_error),
+              ("crash", -p[:, 2] < limits.ground_altitude), ("non_finite", ~finite))
+    for name, hit in checks:  # last assignment wins: the single env's order of precedence
+        reason[hit] = name
+    return reason
+
+
+class QuadFaultVectorEnv(VectorEnv):
+    """N :class:`~quad_fault_env.envs.quad_fault.QuadFaultEnv` episodes stepped as arrays.
+
+    Args:
+        num_envs: N.
+        estimator: ``"irls" | "ekf" | "truth" | "none"`` (batched: :mod:`estimators.batched`).
+        estimator_kwargs: ``config=`` of the estimator.
+        max_episode_steps: truncation after this many control steps (the registration's
+            value through ``gym.make_vec``), like ``TimeLimit`` on the single env.
+        autoreset_mode: ``"next_step"`` (gymnasium's default: the step after an episode's end
+            returns the reset observation, reward 0) or ``"same_step"`` (the reset observation
+            is returned at once; the last one is in ``info["final_obs"]``).
+        **kwargs: every other keyword of ``QuadFaultEnv`` (scenario, action_mode, rates, ...);
+            ``render_mode`` is not supported.
+
+    ``info`` (arrays over the sub-envs, with gymnasium's ``"_<key>"`` masks): ``t`` [s],
+    ``eta_true``, ``eta_hat``, ``eta_sd`` (NaN = none), ``estimator_status``,
+    ``position_error`` [m], ``tracking_error`` [m], ``motor_command`` [N],
+    ``termination_reason``, ``scenario``.
+    """
+
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
+
+    def __init__(self, num_envs: int = 1, estimator: str = "irls", scenario="combined", *,
+                 estimator_kwargs=None, max_episode_steps: int | None = None,
+                 autoreset_mode: str = "next_step", **kwargs):
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
+                or num_envs < 1:
+            raise ConfigError(f"num_envs must be an integer >= 1, got {num_envs!r}")
+        if kwargs.get("render_mode") is not None:
+            raise ConfigError("QuadFaultVectorEnv does not render; use QuadFaultEnv")
+        if not isinstance(estimator, str) or estimator not in ("irls", "ekf", "truth", "none"):
+            raise ConfigError(f"estimator must be 'irls', 'ekf', 'truth' or 'none' in the vector "
+                              f"env, got {estimator!r}")
+        if autoreset_mode not in AUTORESET_MODES:
+            raise ConfigError(f"autoreset_mode must be one of {sorted(AUTORESET_MODES)}, "
+                              f"got {autoreset_mode!r}")
+        if max_episode_steps is not None and not (isinstance(max_episode_steps, int)
+                                                  and max_episode_steps >= 1):
+            raise ConfigError(f"max_episode_steps must be an integer >= 1, "
+                              f"got {max_episode_steps!r}")
+        self.num_envs = N = int(num_envs)
+        self.max_episode_steps = max_episode_steps
+        self.metadata = dict(self.metadata, autoreset_mode=AUTORESET_MODES[autoreset_mode])
+        # one single env per sub-env: validation, scenarios, controllers, resets, generators
+        self.envs = [QuadFaultEnv("none", scenario, **kwargs) for _ in range(N)]
+        e0 = self.envs[0]
+        self.vehicle, self.layout = e0.vehicle, e0.layout
+        self.substeps, self.dt = e0.substeps, e0.dt
+        self.estimator_stride = e0.estimator_stride
+        self.estimator_name = estimator
+        self.single_observation_space = e0.observation_space
+        self.single_action_space = e0.action_space
+        self.observation_space = batch_space(self.single_observation_space, N)
+        self.action_space = batch_space(self.single_action_space, N)
+        self.estimator = None
+        if estimator in ("irls", "ekf"):
+            from estimators.batched import make_batched_estimator
+
+            self.estimator = make_batched_estimator(estimator, self.vehicle, N,
+                                                    **(estimator_kwargs or {}))
+        noise = e0.sensor_noise
+        self._meas_draws = (9 + (3 if noise.attitude else 0)) if noise.any else 0
+        self._accel_draws = 3 if noise.accel else 0
+        self._trajectories, self._schedules = _Table(), _Table()
+        self._controllers: dict = {}
+        n = self.vehicle.n_rotors
+        self.state = RigidBodyState.at_rest(batch_shape=(N,))
+        self.meas = RigidBodyState.at_rest(batch_shape=(N,))
+        self.f_cmd = np.zeros((N, n))
+        self.eta_hat, self.eta_sd = np.ones((N, n)), np.full((N, n), np.nan)
+        self.status = np.full(N, "warmup", dtype=object)
+        self.eta_true = np.ones((N, n))
+        self.sigma = np.zeros(N)
+        self.steps = np.zeros(N, dtype=np.int64)
+        self.max_steps = np.zeros(N, dtype=np.int64)
+        self._traj_key = np.zeros(N, dtype=np.int64)
+        self._sched_key = np.zeros(N, dtype=np.int64)
+        self._needs_reset = np.zeros(N, dtype=bool)
+        self._started = False
+
+    # -- resets ------------------------------------------------------------------------------
+    def _reset_one(self, i: int, seed=None, options=None) -> None:
+        env = self.envs[i]
+        env.reset(seed=seed, options=options)
+        sc = env.scenario
+        self._traj_key[i] = self._trajectories.key(sc.trajectory)
+        self._sched_key[i] = self._schedules.key(sc.efficiency)
+        self._controllers.setdefault(int(self._traj_key[i]), env.controller)
+        for arr, s in zip(self.state, env.plant.state):
+            arr[i] = s
+        for arr, s in zip(self.meas, env._meas):
+            arr[i] = s
+        self.f_cmd[i] = 0.0
+        self.sigma[i] = sc.thrust_noise
+        self.steps[i] = 0
+        self.max_steps[i] = env.max_steps
+        self.eta_true[i] = sc.efficiency(0.0)
+        n = self.vehicle.n_rotors
+        self.eta_hat[i], self.eta_sd[i], self.status[i] = 1.0, np.nan, "warmup"
+        if self.estimator_name == "truth":
+            self.eta_hat[i], self.eta_sd[i], self.status[i] = self.eta_true[i], 0.0, "ok"
+        elif self.estimator_name == "none":
+            self.eta_sd[i], self.status[i] = np.full(n, NOMINAL_PRIOR_SD), "ok"
+
+    def _reset_rows(self, rows, seeds=None, options=None) -> None:
+        for k, i in enumerate(rows):
+            self._reset_one(int(i), None if seeds is None else seeds[k], options)
+        if self.estimator is not None and len(rows):
+            mask = np.zeros(self.num_envs, dtype=bool)
+            mask[np.asarray(rows, dtype=int)] = True
+            self.estimator.reset(mask)
+        if len(self._trajectories.items) > 8 * self.num_envs + 64:
+            self._compact_tables()
+
+    def _compact_tables(self) -> None:
+        """Forget trajectories / schedules no sub-env uses any more."""
+        for attr, keys in (("_trajectories", self._traj_key), ("_schedules", self._sched_key)):
+            old = getattr(self, attr)
+            new = _Table()
+            remap = {int(k): new.key(old.items[int(k)]) for k in np.unique(keys)}
+            keys[:] = [remap[int(k)] for k in keys]
+            setattr(self, attr, new)
+        self._controllers = {int(self._traj_key[i]): env.controller
+                             for i, env in enumerate(self.envs)}
+
+    def reset(self, *, seed=None, options=None):
+        """Reset every sub-env; ``seed`` an int (sub-env i gets ``seed + i``) or a list."""
+        N = self.num_envs
+        if seed is None:
+            seeds = [None] * N
+        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            seeds = [int(seed) + i for i in range(N)]
+        else:
+            seeds = list(seed)
+            if len(seeds) != N:
+                raise ConfigError(f"reset needs {N} seeds, got {len(seeds)}")
+        self._trajectories, self._schedules, self._controllers = _Table(), _Table(), {}
+        self._reset_rows(range(N), seeds, options)
+        self._needs_reset[:] = False
+        self._started = True
+        refs = self._references(self.steps * self.substeps * self.dt)
+        return self._observations(refs), self._infos(refs, np.full(N, None, dtype=object))
+
+    # -- helpers over groups of sub-envs sharing a trajectory / schedule ----------------------
+    def _references(self, t: np.ndarray):
+        """Reference position, velocity, acceleration (N, 3) at per-env times ``t`` (N,)."""
+        N = self.num_envs
+        pos, vel, acc = np.empty((N, 3)), np.empty((N, 3)), np.empty((N, 3))
+        for key, rows in _groups(self._traj_key):
+            ref = self._trajectories.items[key](t[rows])
+            pos[rows], vel[rows], acc[rows] = ref.position, ref.velocity, ref.acceleration
+        return pos, vel, acc
+
+    def _efficiency(self, t: np.ndarray) -> np.ndarray:
+        """True efficiency (N, S, n) at per-env substep times ``t`` (N, S)."""
+        out = np.empty(t.shape + (self.vehicle.n_rotors,))
+        for key, rows in _groups(self._sched_key):
+            out[rows] = self._schedules.items[key](t[rows])
+        return out
+
+    def _check_actions(self, actions) -> np.ndarray:
+        try:
+            a = np.asarray(actions, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"actions must be numeric, got {actions!r}") from None
+        if a.shape != self.action_space.shape:
+            raise ValueError(f"actions have shape {a.shape}, expected {self.action_space.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError("actions contain NaN or inf")
+        if np.any(np.abs(a) > 1.0 + 1e-6):
+            raise ValueError("actions outside [-1, 1] (the agent must clip)")
+        return np.clip(a, -1.0, 1.0)
+
+    def _motor_commands(self, a: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """``QuadFaultEnv.motor_commands`` over the batch (rows share the same formulas)."""
+        e0 = self.envs[0]
+        cfg, f_max, veh = e0.action_config, e0.f_max, self.vehicle
+        if cfg.mode == "motor":
+            f = 0.5 * (a + 1.0) * f_max
+        elif cfg.mode == "wrench":
+            thrust = 0.5 * (a[:, :1] + 1.0) * veh.n_rotors * f_max
+            f = veh.rotor_thrust(np.concatenate((thrust, a[:, 1:] * np.asarray(cfg.moment_scale)),
+                                                axis=1))
+        else:
+            f_ctrl = np.empty_like(a)
+            m = self.meas
+            for key, rows in _groups(self._traj_key):
+                f_ctrl[rows], _ = self._controllers[key].motor_commands(
+                    t[rows], m.p[rows], m.v[rows], m.R[rows], m.w[rows])
+            if e0.compensate:
+                f_ctrl = f_ctrl / np.clip(self.eta_hat, 0.1, None)
+            f = f_ctrl + cfg.residual_scale * a
+        return np.clip(f, 0.0, f_max)
+
+    def _draw(self, sizes: np.ndarray, rows) -> np.ndarray:
+        """Standard normals (N, max size + pad) from each sub-env's own generator."""
+        z = np.zeros((self.num_envs, int(sizes.max(initial=0)) + 16))
+        for i in rows:
+            if sizes[i]:
+                z[i, :sizes[i]] = self.envs[i].np_random.standard_normal(int(sizes[i]))
+        return z
+
+    def _measure(self, state: RigidBodyState, z: np.ndarray) -> RigidBodyState:
+        """``SensorNoise.measure`` over the batch with pre-drawn normals ``z`` (N, k)."""
+        noise = self.envs[0].sensor_noise
+        if not noise.any:
+            return state
+        blocks = iter(np.split(z[:, :self._meas_draws], self._meas_draws // 3, axis=1))
+
+        class _Seq:
+            def standard_normal(self, shape):
+                return next(blocks).reshape(shape)
+
+        return noise.measure(state, None, _Seq())[0]
+
+    # -- step --------------------------------------------------------------------------------
+    def step(self, actions):
+        if not self._started:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        a = self._check_actions(actions)
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            return self._step(a)
+
+    def _step(self, a: np.ndarray):
+        N, S, n = self.num_envs, self.substeps, self.vehicle.n_rotors
+        resetting = self._needs_reset.copy()
+        live = np.flatnonzero(~resetting)
+        k0 = self.steps * S
+        t0 = k0 * self.dt
+        self.f_cmd = self._motor_commands(a, t0)
+        ts = (k0[:, None] + np.arange(S)[None, :]) * self.dt
+        eta = self._efficiency(ts)
+        has_thrust = self.sigma > 0
+        per_sub = self._meas_draws + 4 * has_thrust + self._accel_draws
+        sizes = np.where(resetting, 0, S * per_sub - self._meas_draws)
+        z = self._draw(sizes, live) if sizes.any() else np.zeros((N, 16 + S * 20))
+        motor = MotorModel(1.0, self.envs[0].plant.motor.saturate)
+        f_max, stride = self.vehicle.rotor_max_thrust, self.estimator_stride
+        state, meas = self.state, self.meas
+        off = np.zeros(N, dtype=np.int64)
+        rows_idx = np.arange(N)[:, None]
+        for j in range(S):
+            if j > 0 and self._meas_draws:
+                zm = z[rows_idx, off[:, None] + np.arange(self._meas_draws)]
+                meas = self._measure(state, zm)
+                off = off + self._meas_draws
+            elif j > 0:
+                meas = state
+            if j % stride == 0 and self.estimator is not None:
+                out = self.estimator.update(ts[:, j], meas.p, meas.v, meas.R, meas.w, self.f_cmd)
+                self.eta_hat, self.eta_sd = out.eta, out.sd
+                self.status = out.status_names
+            if has_thrust.any():
+                zt = z[rows_idx, off[:, None] + np.arange(4)] * (self.sigma * has_thrust)[:, None]
+                off = off + 4 * has_thrust
+            else:
+                zt = np.zeros((N, n))
+            f = motor.apply(self.f_cmd, eta[:, j], f_max, _Draws(zt))  # eqs. 11, 13
+            off = off + self._accel_draws
+            wrench = self.vehicle.wrench(f)
+            state = step_rk4(state, wrench[:, 0], wrench[:, 1:], self.vehicle, self.dt)
+        if self.estimator_name == "truth":
+            j_last = ((S - 1) // stride) * stride
+            self.eta_hat, self.eta_sd = eta[:, j_last].copy(), np.zeros((N, n))
+        self.state = state
+        self.steps = self.steps + 1
+        t1 = self.steps * S * self.dt
+        refs = self._references(t1)
+        reason = batched_termination(self.envs[0].limits, state.p, state.R, refs[0])
+        reason[resetting] = None
+        terminated = np.not_equal(reason, None) & ~resetting
+        truncated = ~terminated & (self.steps >= self.max_steps)
+        if self.max_episode_steps is not None:
+            truncated |= self.steps >= self.max_episode_steps
+        truncated &= ~resetting
+        # the end-of-step measurement of sub-envs that go on (after the termination check)
+        sizes = np.where(terminated | resetting, 0, self._meas_draws)
+        if sizes.any():
+            self.meas = self._measure(state, self._draw(sizes, np.flatnonzero(sizes)))
+            self.meas = RigidBodyState(*(np.where(_expand(terminated, x), s, x)
+                                         for s, x in zip(state, self.meas)))
+        else:
+            self.meas = state.copy()
+        self.eta_true = self._efficiency(t1[:, None])[:, 0]
+        reward = batched_reward(self.envs[0].reward_config, state.p - refs[0],
+                                state.v - refs[1], self.f_cmd, f_max, terminated)
+        done = terminated | truncated
+        mode = self.metadata["autoreset_mode"]
+        if resetting.any():
+            self._reset_rows(np.flatnonzero(resetting))
+            reward[resetting] = 0.0
+            refs = self._references(self.steps * S * self.dt)
+        obs = self._observations(refs)
+        infos = self._infos(refs, reason)
+        if mode == AutoresetMode.SAME_STEP and done.any():
+            rows = np.flatnonzero(done)
+            final_obs, final_infos = obs, infos
+            self._reset_rows(rows)
+            refs = self._references(self.steps * S * self.dt)
+            obs = self._observations(refs)
+            infos = self._infos(refs, np.where(done, None, reason))
+            infos["final_obs"] = final_obs
+            infos["final_info"] = final_infos
+            infos["_final_obs"] = infos["_final_info"] = done.copy()
+        else:
+            self._needs_reset = done
+        return obs, reward, terminated, truncated, infos
+
+    # -- observation and info ----------------------------------------------------------------
+    def _observations(self, refs):
+        """``ObservationLayout.values`` over the batch (same slots, clipping and NaN fills)."""
+        m, (pos, vel, acc) = self.meas, refs
+        raw = {"pos_err": m.p - pos, "vel_err": m.v - vel,
+               "rot6": np.concatenate((m.R[:, :, 0], m.R[:, :, 1]), axis=1), "omega": m.w,
+               "eta_hat": self.eta_hat, "eta_sd": self.eta_sd, "ref_acc": acc}
+        out = {}
+        for s in self.layout.slots:
+            fill = SD_MAX if s.name == "eta_sd" else 0.0
+            value = np.nan_to_num(raw[s.name], nan=fill, posinf=_BIG, neginf=-_BIG)
+            out[s.name] = np.clip(value, max(s.low, -_BIG), min(s.high, _BIG)).astype(np.float32)
+        if self.envs[0].observation_kind == "dict":
+            return out
+        return np.concatenate([out[s.name] for s in self.layout.slots], axis=1)
+
+    def _infos(self, refs, reason) -> dict:
+        N = self.num_envs
+        err = self.state.p - refs[0]
+        info = {
+            "t": self.steps * self.substeps * self.dt,
+            "eta_true": self.eta_true.copy(),
+            "eta_hat": self.eta_hat.copy(),
+            "eta_sd": self.eta_sd.copy(),
+            "estimator_status": np.asarray(self.status, dtype=object).copy(),
+            "position_error": err,
+            "tracking_error": np.linalg.norm(err, axis=-1),
+            "motor_command": self.f_cmd.copy(),
+            "termination_reason": np.asarray(reason, dtype=object),
+            "scenario": np.array([e.scenario.name for e in self.envs], dtype=object),
+        }
+        for key in list(info):
+            info["_" + key] = np.ones(N, dtype=bool)
+        return info
+
+    def close_extras(self, **kwargs):
+        for env in self.envs:
+            env.close()
+
+
+def _expand(mask: np.ndarray, like: np.ndarray) -> np.ndarray:
+    return mask.reshape(mask.shape + (1,) * (like.ndim - 1))
+
+
+__all__ = ["QuadFaultVectorEnv", "batched_reward", "batched_termination", "AUTORESET_MODES"]

@@ -1,0 +1,139 @@
+"""QuadFaultVectorEnv: N sub-envs stepped as arrays equal N single QuadFaultEnv step for step."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import quad_fault_env  # noqa: F401  (registers the ids)
+from estimators.ekf import EKFConfig
+from estimators.irls import IRLSConfig
+from quad_fault_env.envs.quad_fault import QuadFaultEnv
+from quad_fault_env.vector import QuadFaultVectorEnv
+from quadfault.errors import ConfigError
+from quadfault.simulator import SensorNoise
+
+NOISE = SensorNoise(position=0.01, velocity=0.02, attitude=0.002, gyro=0.01, accel=0.1)
+
+
+def _estimator_kwargs(name):
+    if name == "irls":
+        return {"config": IRLSConfig(backend="numpy")}
+    if name == "ekf":
+        return {"config": EKFConfig(backend="numpy")}
+    return None
+
+
+def _run_side_by_side(n_envs, steps, seed, estimator, action_scale=1.0, **kw):
+    """Step a vector env and ``n_envs`` single envs with the same actions; compare all."""
+    ekw = _estimator_kwargs(estimator)
+    vec = QuadFaultVectorEnv(n_envs, estimator, estimator_kwargs=ekw, **kw)
+    singles = [QuadFaultEnv(estimator, estimator_kwargs=ekw, **kw) for _ in range(n_envs)]
+    obs, info = vec.reset(seed=seed)
+    single_obs = [e.reset(seed=seed + i)[0] for i, e in enumerate(singles)]
+    np.testing.assert_allclose(obs, np.array(single_obs), rtol=0, atol=1e-9)
+    rng = np.random.default_rng(seed)
+    done = np.zeros(n_envs, dtype=bool)
+    n_done = 0
+    for k in range(steps):
+        a = (action_scale * rng.uniform(-1, 1, (n_envs, 4))).astype(np.float32)
+        obs, rew, term, trunc, info = vec.step(a)
+        for i, env in enumerate(singles):
+            if done[i]:  # next-step autoreset: the vector env returned the reset observation
+                o, r, te, tr, inf = env.reset()[0], 0.0, False, False, None
+            else:
+                o, r, te, tr, inf = env.step(a[i])
+            np.testing.assert_allclose(obs[i], o, rtol=0, atol=1e-9, err_msg=f"step {k} env {i}")
+            assert abs(rew[i] - r) <= 1e-9, (k, i)
+            assert (term[i], trunc[i]) == (te, tr), (k, i)
+            if inf is not None:
+                assert info["termination_reason"][i] == inf["termination_reason"]
+                assert info["estimator_status"][i] == inf["estimator_status"]
+                np.testing.assert_allclose(info["eta_true"][i], inf["eta_true"], atol=1e-12)
+        done = term | trunc
+        n_done += int(done.sum())
+    return n_done
+
+
+def test_matches_single_envs_with_noise_random_scenarios_and_autoreset():
+    """Random scenarios (per-env trajectories, schedules, thrust noise), every sensor noise,
+    the IRLS estimate in the loop, truncation after 0.3 s and the autoreset after it."""
+    n_done = _run_side_by_side(3, 70, seed=7, estimator="irls", scenario="random",
+                               duration=0.3, sensor_noise=NOISE, estimator_rate="control")
+    assert n_done >= 6  # every sub-env went through at least two episodes
+
+
+@pytest.mark.parametrize("estimator", ["ekf", "truth", "none"])
+def test_matches_single_envs_in_motor_mode_until_crashes(estimator):
+    """Full-range random motor commands crash or tilt the vehicles: termination reasons,
+    penalties and resets must agree too."""
+    n_done = _run_side_by_side(2, 60, seed=3, estimator=estimator, scenario="abrupt",
+                               duration=2.0, action_mode="motor", estimator_rate="physics",
+                               reward=gym.make("QuadFault-v0").unwrapped.reward_config)
+    assert n_done >= 1
+
+
+def test_wrench_mode_and_compensation_match():
+    _run_side_by_side(2, 15, seed=11, estimator="truth", scenario="combined", duration=1.0,
+                      action_mode="wrench", action_scale=0.3)
+    _run_side_by_side(2, 15, seed=12, estimator="truth", scenario="combined", duration=1.0,
+                      compensate=True, action_scale=0.3)
+
+
+def test_same_step_autoreset_reports_the_final_observation():
+    kw = dict(scenario="combined", duration=0.05, estimator_rate="control")
+    nxt = QuadFaultVectorEnv(2, "none", **kw)
+    same = QuadFaultVectorEnv(2, "none", autoreset_mode="same_step", **kw)
+    nxt.reset(seed=1)
+    same.reset(seed=1)
+    a = np.zeros((2, 4), dtype=np.float32)
+    for _ in range(5):
+        o1, _, te1, tr1, _ = nxt.step(a)
+        o2, _, te2, tr2, info2 = same.step(a)
+        np.testing.assert_array_equal(te1, te2)
+        np.testing.assert_array_equal(tr1, tr2)
+    assert tr2.all()  # 5 steps of 10 ms
+    np.testing.assert_allclose(info2["final_obs"], o1, atol=1e-12)
+    o1, r1, _, _, _ = nxt.step(a)  # next-step mode resets only now
+    np.testing.assert_allclose(o2, o1, atol=1e-12)
+    assert np.all(r1 == 0.0)
+
+
+def test_make_vec_vector_entry_point_and_dict_observations():
+    env = gym.make_vec("QuadFault-v0", num_envs=3, vectorization_mode="vector_entry_point",
+                       estimator="none", observation="dict")
+    assert isinstance(env.unwrapped, QuadFaultVectorEnv)
+    assert env.unwrapped.max_episode_steps == 2000  # the registration's limit
+    obs, info = env.reset(seed=0)
+    assert obs["eta_hat"].shape == (3, 4) and obs["eta_hat"].dtype == np.float32
+    assert env.observation_space.contains(obs)
+    obs, rew, term, trunc, info = env.step(env.action_space.sample() * 0)
+    assert rew.shape == (3,) and np.all(rew > 0.5)  # hovering on the circle's start
+    assert set(info) >= {"t", "eta_true", "eta_hat", "tracking_error", "_t"}
+    env.close()
+
+
+def test_single_sub_env_passes_check_env():
+    vec = QuadFaultVectorEnv(2, "none", scenario="combined", duration=1.0)
+    check_env(vec.envs[0], skip_render_check=True)
+
+
+def test_bad_input_raises_clear_errors():
+    with pytest.raises(ConfigError, match="num_envs"):
+        QuadFaultVectorEnv(0)
+    with pytest.raises(ConfigError, match="estimator"):
+        QuadFaultVectorEnv(2, "kalman")
+    with pytest.raises(ConfigError, match="autoreset_mode"):
+        QuadFaultVectorEnv(2, "none", autoreset_mode="later")
+    with pytest.raises(ConfigError, match="scenario"):
+        QuadFaultVectorEnv(2, "none", scenario="nope")
+    env = QuadFaultVectorEnv(2, "none", duration=1.0)
+    with pytest.raises(gym.error.ResetNeeded):
+        env.step(np.zeros((2, 4)))
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="shape"):
+        env.step(np.zeros(4))
+    with pytest.raises(ValueError, match="outside"):
+        env.step(np.full((2, 4), 2.0))
