@@ -13,6 +13,78 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, fastmath=True)
+def _mm(A, B):
+    """Matrix product by loops (faster than a BLAS call for these small sizes)."""
+    n, m, p = A.shape[0], A.shape[1], B.shape[1]
+    out = np.zeros((n, p))
+    for i in range(n):
+        for k in range(m):
+            a = A[i, k]
+            if a != 0.0:
+                for j in range(p):
+                    out[i, j] += a * B[k, j]
+    return out
+
+
+@njit(cache=True)
+def _mv(A, x):
+    out = np.zeros(A.shape[0])
+    for i in range(A.shape[0]):
+        acc = 0.0
+        for k in range(A.shape[1]):
+            acc += A[i, k] * x[k]
+        out[i] = acc
+    return out
+
+
+@njit(cache=True, fastmath=True)
+def _mm_bt(A, B):
+    """``A @ B.T`` by row dot products (both operands read contiguously)."""
+    n, m, p = A.shape[0], A.shape[1], B.shape[0]
+    out = np.empty((n, p))
+    for i in range(n):
+        for j in range(p):
+            acc = 0.0
+            for k in range(m):
+                acc += A[i, k] * B[j, k]
+            out[i, j] = acc
+    return out
+
+
+@njit(cache=True, fastmath=True)
+def _gain(S, HP):
+    """Kalman gain ``K = P H^T S^-1 = (S^-1 H P)^T`` for symmetric positive-definite ``S``
+    (Cholesky ``S = L L^T``; row i of K solves ``S k = (H P)[:, i]``)."""
+    n, m = S.shape[0], HP.shape[1]
+    L = np.zeros((n, n))
+    for j in range(n):
+        d = S[j, j]
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        if not d > 0.0:
+            return np.ascontiguousarray(np.linalg.solve(S, HP).T)  # not PD: general solver
+        L[j, j] = math.sqrt(d)
+        for i in range(j + 1, n):
+            acc = S[i, j]
+            for k in range(j):
+                acc -= L[i, k] * L[j, k]
+            L[i, j] = acc / L[j, j]
+    K = np.empty((m, n))
+    for c in range(m):
+        for i in range(n):  # L z = b
+            acc = HP[i, c]
+            for k in range(i):
+                acc -= L[i, k] * K[c, k]
+            K[c, i] = acc / L[i, i]
+        for i in range(n - 1, -1, -1):  # L^T x = z
+            acc = K[c, i]
+            for k in range(i + 1, n):
+                acc -= L[k, i] * K[c, k]
+            K[c, i] = acc / L[i, i]
+    return K
+
+
 @njit(cache=True)
 def _hat(w):
     out = np.zeros((3, 3))
@@ -33,7 +105,7 @@ def _expm(phi):
         a = math.sin(th) / th
         b = (1.0 - math.cos(th)) / th2
     K = _hat(phi)
-    return np.eye(3) + a * K + b * (K @ K)
+    return np.eye(3) + a * K + b * _mm(K, K)
 
 
 @njit(cache=True)
@@ -47,7 +119,7 @@ def _right_jacobian(phi):
         a = (1.0 - math.cos(th)) / th2
         b = (th - math.sin(th)) / (th2 * th)
     K = _hat(phi)
-    return np.eye(3) - a * K + b * (K @ K)
+    return np.eye(3) - a * K + b * _mm(K, K)
 
 
 @njit(cache=True)
@@ -81,6 +153,63 @@ def _unvec(x, start):
 
 
 @njit(cache=True)
+def _inv3(M):
+    """Inverse of a 3x3 matrix by cofactors."""
+    C = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            i1, i2, j1, j2 = (i + 1) % 3, (i + 2) % 3, (j + 1) % 3, (j + 2) % 3
+            C[j, i] = M[i1, j1] * M[i2, j2] - M[i1, j2] * M[i2, j1]
+    det = M[0, 0] * C[0, 0] + M[0, 1] * C[1, 0] + M[0, 2] * C[2, 0]
+    return C / det
+
+
+@njit(cache=True)
+def _project_so3(M):
+    """Closest rotation (polar factor), as ``quadfault.rotation.orthonormalize``: Newton
+    iterations ``M <- (M + M^-T) / 2`` when ``M`` is near SO(3) (the EKF's case), else SVD."""
+    E = _mm(M.T, M) - np.eye(3)
+    if np.max(np.abs(E)) < 1e-3 and np.linalg.det(M) > 0:
+        for _ in range(3):
+            M = 0.5 * (M + _inv3(M).T)
+        return M
+    U, _, Vt = np.linalg.svd(M)
+    D = np.eye(3)
+    D[2, 2] = np.sign(np.linalg.det(U @ Vt))
+    return U @ D @ Vt
+
+
+@njit(cache=True, fastmath=True)
+def _sandwich(F, P):
+    """``F P F^T`` over the non-zeros of the sparse transition Jacobian (CSR rows)."""
+    n = F.shape[0]
+    nnz = np.zeros(n, dtype=np.int64)
+    cols = np.empty((n, n), dtype=np.int64)
+    vals = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            if F[i, j] != 0.0:
+                cols[i, nnz[i]] = j
+                vals[i, nnz[i]] = F[i, j]
+                nnz[i] += 1
+    FP = np.zeros((n, n))
+    for i in range(n):
+        for q in range(nnz[i]):
+            j, f = cols[i, q], vals[i, q]
+            for k in range(n):
+                FP[i, k] += f * P[j, k]
+    out = np.empty((n, n))
+    for i in range(n):
+        for k in range(i, n):
+            acc = 0.0
+            for q in range(nnz[k]):
+                acc += FP[i, cols[k, q]] * vals[k, q]
+            out[i, k] = acc
+            out[k, i] = acc
+    return out
+
+
+@njit(cache=True)
 def step_inplace(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi):
     """One predict + update; ``x`` and ``P`` are overwritten."""
     ns = x.shape[0]
@@ -93,14 +222,14 @@ def step_inplace(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi):
     T = 0.0
     for j in range(nr):
         T += A[0, j] * ef[j]
-    M = A[1:] @ ef
+    M = _mv(A[1:], ef)
     b3 = R[:, 2].copy()
     a = -(T / m) * b3
     a[2] += g
-    wdot = Jinv @ (M - np.cross(w, J @ w))
+    wdot = _mv(Jinv, M - np.cross(w, _mv(J, w)))
     phi = w * dt + 0.5 * wdot * dt * dt
     E = _expm(phi)
-    Rn = R @ E
+    Rn = _mm(R, E)
     xp = np.empty(ns)
     xp[0:3] = p + v * dt + 0.5 * a * dt * dt
     xp[3:6] = v + a * dt
@@ -108,8 +237,8 @@ def step_inplace(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi):
     xp[9:18] = _vec(Rn)
     xp[18:] = eta
     F = np.eye(ns)
-    B = Jinv @ (A[1:] * f.reshape(1, nr))
-    G = Jinv @ (_hat(J @ w) - _hat(w) @ J)
+    B = _mm(Jinv, A[1:] * f.reshape(1, nr))
+    G = _mm(Jinv, _hat(_mv(J, w)) - _mm(_hat(w), J))
     for i in range(3):
         F[i, 3 + i] = dt
         F[i, 15 + i] = -(T / m) * 0.5 * dt * dt
@@ -129,10 +258,10 @@ def step_inplace(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi):
     Jr = _right_jacobian(phi)
     dR = np.empty((9, 3))
     for i in range(3):
-        dR[:, i] = _vec(Rn @ _hat(Jr[:, i].copy()))
-    F[9:18, 6:9] = dR @ (dt * np.eye(3) + 0.5 * dt * dt * G)
-    F[9:18, 18:] = dR @ (0.5 * dt * dt * B)
-    Pp = F @ P @ F.T
+        dR[:, i] = _vec(_mm(Rn, _hat(Jr[:, i].copy())))
+    F[9:18, 6:9] = _mm(dR, dt * np.eye(3) + 0.5 * dt * dt * G)
+    F[9:18, 18:] = _mm(dR, 0.5 * dt * dt * B)
+    Pp = _sandwich(F, P)
     for i in range(ns):
         Pp[i, i] += qc[i] * dt
     # ---- update (p, v, Omega, attitude rotation error)
@@ -140,27 +269,31 @@ def step_inplace(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi):
     y[0:3] = zp - xp[0:3]
     y[3:6] = zv - xp[3:6]
     y[6:9] = zw - xp[6:9]
-    y[9:12] = _log(Rn.T @ zR)
-    H = np.zeros((12, ns))
-    for i in range(9):
-        H[i, i] = 1.0
+    y[9:12] = _log(_mm(np.ascontiguousarray(Rn.T), zR))
+    HR = np.zeros((3, 9))  # attitude rows of H (columns 9..17); rows 0..8 are [I 0]
     for (k, ia, ib) in ((0, 2, 1), (1, 0, 2), (2, 1, 0)):
         for i in range(3):
-            H[9 + k, 9 + 3 * ia + i] -= 0.5 * zR[i, ib]
-            H[9 + k, 9 + 3 * ib + i] += 0.5 * zR[i, ia]
-    HP = H @ Pp
-    S = HP @ H.T
+            HR[k, 3 * ia + i] -= 0.5 * zR[i, ib]
+            HR[k, 3 * ib + i] += 0.5 * zR[i, ia]
+    HP = np.empty((12, ns))  # H P
+    HP[0:9] = Pp[0:9]
+    HP[9:12] = _mm(HR, Pp[9:18])
+    S = np.empty((12, 12))  # H P H^T + R
+    S[:, 0:9] = HP[:, 0:9]
+    S[:, 9:12] = _mm_bt(HP[:, 9:18], HR)
     for i in range(12):
         S[i, i] += r[i]
-    K = np.linalg.solve(S, HP).T
-    xn = xp + K @ y
-    IKH = np.eye(ns) - K @ H
-    Pn = IKH @ Pp @ IKH.T + (K * r.reshape(1, 12)) @ K.T
+    K = _gain(S, HP)
+    xn = xp + _mv(K, y)
+    # Joseph form (I - K H) P (I - K H)^T + K R K^T, associated as A - (A H^T - K R) K^T
+    # with A = (I - K H) P = P - K (H P)
+    A = Pp - _mm(K, HP)
+    AHt = np.empty((ns, 12))
+    AHt[:, 0:9] = A[:, 0:9]
+    AHt[:, 9:12] = _mm_bt(A[:, 9:18], HR)
+    Pn = A - _mm(AHt - K * r.reshape(1, 12), np.ascontiguousarray(K.T))
     Pn = 0.5 * (Pn + Pn.T)
-    U, _, Vt = np.linalg.svd(_unvec(xn, 9))
-    D = np.eye(3)
-    D[2, 2] = np.sign(np.linalg.det(U @ Vt))
-    xn[9:18] = _vec(U @ D @ Vt)
+    xn[9:18] = _vec(_project_so3(_unvec(xn, 9)))
     for j in range(nr):
         xn[18 + j] = min(max(xn[18 + j], lo), hi)
     x[:] = xn
