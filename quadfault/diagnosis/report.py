@@ -40,10 +40,14 @@ def _residuals_png(res: DiagnosisResult, path, force):
         for w in res.where:
             if w.channel == ch:
                 ax.axvspan(w.t0, w.t1, color="orange", alpha=0.25)
+        lo, hi = np.percentile(base[:, j], [0.5, 99.5])  # robust limits: spikes clipped
+        pad = 0.25 * max(hi - lo, 1e-9)
+        ax.set_ylim(lo - pad, hi + pad)
         ax.set_ylabel(f"{ch}\n[{channel_unit(ch)}]", fontsize=8)
         ax.grid(alpha=0.3)
     axes[0].legend(loc="upper right", fontsize=8)
-    axes[0].set_title("held-out residuals (block means); shaded: located intervals")
+    axes[0].set_title("held-out residuals (block means, 0.5-99.5 percentile range); "
+                      "shaded: located intervals", fontsize=9)
     axes[-1].set_xlabel("t [s]")
     fig.tight_layout()
     atomic_savefig(fig, path, force=force, dpi=90)
