@@ -92,6 +92,47 @@ def test_fuzzed_recordings_through_the_cli(index, seed, command):
         assert _files(folder) == before, "a failed run left files behind"
 
 
+def _strict_json(path):
+    def no_constant(name):
+        raise ValueError(f"{path.name} holds {name} (not valid JSON)")
+
+    return json.loads(path.read_text(), parse_constant=no_constant)
+
+
+@settings(max_examples=3, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**32 - 1), rows=st.integers(20, 80),
+       log_scale=st.floats(-3, 3))
+def test_random_valid_recordings_give_finite_results(seed, rows, log_scale):
+    """Valid but meaningless data (random states, unit quaternions, irregular time steps,
+    magnitudes 1e-3..1e3): estimates are finite numbers, the diagnosis is strict JSON."""
+    from estimators.series_io import read_estimate_csv
+
+    rng = np.random.default_rng(seed)
+    header, _, side = valid_recording(rows)
+    scale = 10.0 ** log_scale
+    q = rng.standard_normal((rows, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    data = np.column_stack([np.cumsum(rng.uniform(1e-4, 0.05, rows)),
+                            scale * rng.standard_normal((rows, 6)), q,
+                            scale * rng.standard_normal((rows, 3)),
+                            np.abs(scale * rng.standard_normal((rows, 4)))])
+    with tempfile.TemporaryDirectory() as folder:
+        src = Path(folder) / "r.csv"
+        src.write_bytes(csv_bytes(header, [[repr(float(x)) for x in r] for r in data]))
+        (Path(folder) / "r.json").write_bytes(json_bytes(side))
+        for est in ("irls", "ekf"):
+            out = Path(folder) / f"{est}.csv"
+            code, _, err = run_cli(["estimate", src, "--estimator", est, "--out", out, "--quiet"])
+            assert code == 0, err
+            assert np.all(np.isfinite(read_estimate_csv(out)["eta"]))
+            _strict_json(out.with_suffix(".json"))
+        out = Path(folder) / "diag.json"
+        code, _, err = run_cli(["diagnose", src, "--json", out, "--quiet"])
+        assert code == 0, err
+        assert _strict_json(out)["verdict"] in ("consistent", "mismatch")
+
+
 # -- bad arguments of every subcommand ------------------------------------------------------------
 BAD_ARGUMENTS = [
     ("simulate", ["--duration", "-1", "--out", "a.csv"], "--duration"),
