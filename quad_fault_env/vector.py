@@ -38,6 +38,8 @@ from quadfault.dynamics import RigidBodyState, step_rk4
 from quadfault.errors import ConfigError
 from quadfault.motors import MotorModel
 
+PHYSICS_BACKENDS = ("auto", "numpy", "numba")
+NOISE_STREAMS = ("per_env", "shared")
 AUTORESET_MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
 _BIG = float(np.finfo(np.float32).max / 2)
 
@@ -115,6 +117,13 @@ class QuadFaultVectorEnv(VectorEnv):
         estimator_kwargs: ``config=`` of the estimator.
         max_episode_steps: truncation after this many control steps (the registration's
             value through ``gym.make_vec``), like ``TimeLimit`` on the single env.
+        physics: ``"numpy"`` (default: the core functions over the batch axis), ``"numba"``
+            (their compiled twins in ``quadfault._sim_numba``, parallel over the batch; same
+            results to rounding) or ``"auto"`` (numba when importable).
+        noise_streams: ``"per_env"`` (default: each sub-env draws from its own generator in
+            the single env's order, so it equals its single twin) or ``"shared"`` (the
+            sub-envs' noise comes from one generator seeded at ``reset(seed=...)`` in one
+            array draw per step: faster at large N, but not the single env's numbers).
         autoreset_mode: ``"next_step"`` (gymnasium's default: the step after an episode's end
             returns the reset observation, reward 0) or ``"same_step"`` (the reset observation
             is returned at once; the last one is in ``info["final_obs"]``).
@@ -131,7 +140,8 @@ class QuadFaultVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, estimator: str = "irls", scenario="combined", *,
                  estimator_kwargs=None, max_episode_steps: int | None = None,
-                 autoreset_mode: str = "next_step", **kwargs):
+                 autoreset_mode: str = "next_step", physics: str = "numpy",
+                 noise_streams: str = "per_env", **kwargs):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
                 or num_envs < 1:
             raise ConfigError(f"num_envs must be an integer >= 1, got {num_envs!r}")
@@ -147,6 +157,18 @@ class QuadFaultVectorEnv(VectorEnv):
                                                   and max_episode_steps >= 1):
             raise ConfigError(f"max_episode_steps must be an integer >= 1, "
                               f"got {max_episode_steps!r}")
+        if physics not in PHYSICS_BACKENDS:
+            raise ConfigError(f"physics must be one of {PHYSICS_BACKENDS}, got {physics!r}")
+        if physics == "numba" and not _physics_numba_available():
+            raise ConfigError("physics='numba' needs numba (install the 'fast' extra)")
+        if physics == "auto":
+            physics = "numba" if _physics_numba_available() else "numpy"
+        self.physics = physics
+        if noise_streams not in NOISE_STREAMS:
+            raise ConfigError(f"noise_streams must be one of {NOISE_STREAMS}, "
+                              f"got {noise_streams!r}")
+        self.noise_streams = noise_streams
+        self._shared_rng = np.random.default_rng()
         self.num_envs = N = int(num_envs)
         self.max_episode_steps = max_episode_steps
         self.metadata = dict(self.metadata, autoreset_mode=AUTORESET_MODES[autoreset_mode])
@@ -244,6 +266,8 @@ class QuadFaultVectorEnv(VectorEnv):
             if len(seeds) != N:
                 raise ConfigError(f"reset needs {N} seeds, got {len(seeds)}")
         self._trajectories, self._schedules, self._controllers = _Table(), _Table(), {}
+        if seed is not None:
+            self._shared_rng = np.random.default_rng(seeds)
         self._reset_rows(range(N), seeds, options)
         self._needs_reset[:] = False
         self._started = True
@@ -303,7 +327,10 @@ class QuadFaultVectorEnv(VectorEnv):
 
     def _draw(self, sizes: np.ndarray, rows) -> np.ndarray:
         """Standard normals (N, max size + pad) from each sub-env's own generator."""
-        z = np.zeros((self.num_envs, int(sizes.max(initial=0)) + 16))
+        width = int(sizes.max(initial=0)) + 16
+        if self.noise_streams == "shared":
+            return self._shared_rng.standard_normal((self.num_envs, width))
+        z = np.zeros((self.num_envs, width))
         for i in rows:
             if sizes[i]:
                 z[i, :sizes[i]] = self.envs[i].np_random.standard_normal(int(sizes[i]))
@@ -360,12 +387,21 @@ class QuadFaultVectorEnv(VectorEnv):
                 self.eta_hat, self.eta_sd = out.eta, out.sd
                 self.status = out.status_names
             if has_thrust.any():
-                zt = z[rows_idx, off[:, None] + np.arange(4)] * (self.sigma * has_thrust)[:, None]
+                zraw = z[rows_idx, off[:, None] + np.arange(4)] * has_thrust[:, None]
                 off = off + 4 * has_thrust
             else:
-                zt = np.zeros((N, n))
-            f = motor.apply(self.f_cmd, eta[:, j], f_max, _Draws(zt))  # eqs. 11, 13
+                zraw = np.zeros((N, n))
             off = off + self._accel_draws
+            if self.physics == "numba":
+                if j == 0:  # the kernel works in place on fresh arrays
+                    state = state.copy()
+                    body = _body_of(self.vehicle)
+                    sat = bool(self.envs[0].plant.motor.saturate)
+                _physics_kernel()(state.p, state.v, state.R, state.w, self.f_cmd,
+                                  np.ascontiguousarray(eta[:, j]), self.sigma, zraw, body, sat,
+                                  self.dt)
+                continue
+            f = motor.apply(self.f_cmd, eta[:, j], f_max, _Draws(zraw * self.sigma[:, None]))  # eqs. 11, 13
             wrench = self.vehicle.wrench(f)
             state = step_rk4(state, wrench[:, 0], wrench[:, 1:], self.vehicle, self.dt)
         if self.estimator_name == "truth":
@@ -453,6 +489,53 @@ class QuadFaultVectorEnv(VectorEnv):
     def close_extras(self, **kwargs):
         for env in self.envs:
             env.close()
+
+
+def _body_of(vehicle):
+    from quadfault._sim_numba import body_of
+
+    return body_of(vehicle)
+
+
+def _physics_numba_available() -> bool:
+    from quadfault import _sim_numba
+
+    return _sim_numba.AVAILABLE
+
+
+_KERNEL = None
+
+
+def _physics_kernel():
+    """The compiled substep over the batch: ``quadfault._sim_numba.motor_apply`` (eqs. 11, 13),
+    the allocation (``Vehicle.wrench``) and ``quadfault._sim_numba.step_rk4`` (eqs. 1-4) --
+    the existing transcriptions of the core functions, called in a parallel loop."""
+    global _KERNEL
+    if _KERNEL is None:
+        from numba import njit, prange
+
+        from quadfault._sim_numba import motor_apply, step_rk4
+
+        @njit(cache=True, parallel=True)
+        def substep(p, v, R, w, f_cmd, eta, sigma, z, body, saturate, dt):
+            n = f_cmd.shape[1]
+            A = body.allocation
+            for i in prange(p.shape[0]):
+                f = motor_apply(f_cmd[i], eta[i], body.max_thrust, saturate, sigma[i], z[i])
+                thrust = 0.0
+                moment = np.zeros(3)
+                for k in range(n):
+                    thrust += A[0, k] * f[k]
+                    for r in range(3):
+                        moment[r] += A[r + 1, k] * f[k]
+                pn, vn, Rn, wn = step_rk4(p[i], v[i], R[i], w[i], thrust, moment, body, dt)
+                p[i] = pn
+                v[i] = vn
+                R[i] = Rn
+                w[i] = wn
+
+        _KERNEL = substep
+    return _KERNEL
 
 
 def _expand(mask: np.ndarray, like: np.ndarray) -> np.ndarray:

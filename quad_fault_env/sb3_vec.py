@@ -1,0 +1,126 @@
+"""stable-baselines3 adapter: :class:`QuadFaultSB3VecEnv` wraps a
+:class:`~quad_fault_env.vector.QuadFaultVectorEnv` as an SB3 ``VecEnv``, so PPO / SAC train on
+N quadrotors stepped as arrays (no subprocesses)::
+
+    from stable_baselines3 import PPO
+    from quad_fault_env.sb3_vec import make_sb3_vec_env
+
+    env = make_sb3_vec_env(64, seed=0, estimator="none", scenario="combined")
+    PPO("MlpPolicy", env, n_steps=64).learn(100_000)
+
+SB3 conventions: the vector env runs in ``same_step`` autoreset mode; a finished sub-env's
+last observation is ``infos[i]["terminal_observation"]`` and ``infos[i]["TimeLimit.truncated"]``
+tells truncation from termination; infos are one dict per sub-env. Needs the ``rl`` extra.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from gymnasium.vector import AutoresetMode
+
+from quad_fault_env.vector import QuadFaultVectorEnv
+from quadfault.errors import ConfigError
+
+try:
+    from stable_baselines3.common.vec_env import VecEnv
+except ImportError:  # pragma: no cover - the rl extra is optional
+    VecEnv = None
+
+_INFO_KEYS = ("t", "eta_true", "eta_hat", "eta_sd", "estimator_status", "tracking_error",
+              "termination_reason", "scenario")
+
+
+def _base():
+    if VecEnv is None:
+        raise ConfigError("the SB3 adapter needs stable-baselines3 (install the 'rl' extra)")
+    return VecEnv
+
+
+class QuadFaultSB3VecEnv(VecEnv if VecEnv is not None else object):
+    """An SB3 ``VecEnv`` over a same-step-autoreset :class:`QuadFaultVectorEnv`."""
+
+    def __init__(self, venv: QuadFaultVectorEnv):
+        _base()
+        if not isinstance(venv, QuadFaultVectorEnv):
+            raise ConfigError(f"QuadFaultSB3VecEnv wraps a QuadFaultVectorEnv, got "
+                              f"{type(venv).__name__}")
+        if venv.metadata["autoreset_mode"] != AutoresetMode.SAME_STEP:
+            raise ConfigError("QuadFaultSB3VecEnv needs autoreset_mode='same_step'")
+        self.venv = venv
+        self.render_mode = None
+        super().__init__(venv.num_envs, venv.single_observation_space, venv.single_action_space)
+        self._actions = None
+
+    def reset(self):
+        seeds = self._seeds
+        if all(s is None for s in seeds):
+            obs, info = self.venv.reset()
+        else:
+            base = [s if s is not None else int(np.random.SeedSequence().entropy % 2**31)
+                    for s in seeds]
+            obs, info = self.venv.reset(seed=base)
+        self.reset_infos = self._split(info)
+        self._reset_seeds()
+        self._reset_options()
+        return obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = np.clip(np.asarray(actions, dtype=float).reshape(self.num_envs, -1),
+                                -1.0, 1.0)
+
+    def step_wait(self):
+        obs, rew, term, trunc, info = self.venv.step(self._actions)
+        infos = self._split(info)
+        done = term | trunc
+        for i in np.flatnonzero(done):
+            infos[i]["terminal_observation"] = _row(info["final_obs"], i)
+            infos[i]["TimeLimit.truncated"] = bool(trunc[i] and not term[i])
+        return obs, rew.astype(np.float32), done, infos
+
+    def _split(self, info: dict) -> list[dict]:
+        return [{k: info[k][i] for k in _INFO_KEYS if k in info} for i in range(self.num_envs)]
+
+    def close(self) -> None:
+        self.venv.close()
+
+    def get_attr(self, attr_name, indices=None):
+        if attr_name == "render_mode":
+            return [None] * len(self._indices(indices))
+        return [getattr(self.venv.envs[i], attr_name) for i in self._indices(indices)]
+
+    def set_attr(self, attr_name, value, indices=None) -> None:
+        for i in self._indices(indices):
+            setattr(self.venv.envs[i], attr_name, value)
+
+    def env_method(self, method_name, *method_args, indices=None, **method_kwargs):
+        return [getattr(self.venv.envs[i], method_name)(*method_args, **method_kwargs)
+                for i in self._indices(indices)]
+
+    def env_is_wrapped(self, wrapper_class, indices=None):
+        return [False] * len(self._indices(indices))
+
+    def _indices(self, indices):
+        if indices is None:
+            return range(self.num_envs)
+        if isinstance(indices, int):
+            return [indices]
+        return indices
+
+
+def _row(obs, i):
+    if isinstance(obs, dict):
+        return {k: v[i] for k, v in obs.items()}
+    return obs[i]
+
+
+def make_sb3_vec_env(num_envs: int, seed: int | None = None, **kwargs) -> QuadFaultSB3VecEnv:
+    """A :class:`QuadFaultSB3VecEnv` of ``num_envs`` sub-envs (``kwargs`` as for
+    :class:`QuadFaultVectorEnv`), seeded with ``seed .. seed + num_envs - 1``."""
+    venv = QuadFaultVectorEnv(num_envs, autoreset_mode="same_step", **kwargs)
+    env = QuadFaultSB3VecEnv(venv)
+    if seed is not None:
+        env.seed(seed)
+    return env
+
+
+__all__ = ["QuadFaultSB3VecEnv", "make_sb3_vec_env"]
