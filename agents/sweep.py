@@ -1,0 +1,229 @@
+"""Scale-out for sweeps: run independent tasks in local processes or on a Ray cluster.
+
+:func:`run_sweep` is the whole backend layer: ``run_sweep(fn, tasks, backend=..., workers=N)``
+returns ``[fn(t) for t in tasks]`` in task order, computed
+
+* ``"serial"``: in this process (debugging, ``workers=1``);
+* ``"local"`` (default): in ``workers`` local processes (``concurrent.futures``);
+* ``"ray"``: as Ray tasks -- on the cluster named by ``RAY_ADDRESS`` / ``address=`` or on a
+  local Ray instance started with ``num_cpus=workers``. Ray is optional (``pip install ray``)
+  and imported only here, lazily; without it the backend raises a one-line ``ConfigError``.
+
+``fn`` must be a module-level function (picklable) and each task deterministic in its own
+arguments (seeds travel inside the task), so every backend gives the same results.
+
+Sweeps built on it (the existing code is called, not rewritten):
+
+* :func:`evaluate_sweep` -- agents x scenarios x seeds of :mod:`agents.evaluate`, the same
+  flights in the same order as :func:`agents.evaluate.evaluate`;
+* :func:`blinded_sweep` -- the blinded diagnosis study of ``benchmarks/blinded_study.py``.
+
+Command line::
+
+    python -m agents.sweep evaluate --out results/ --seeds 0 1 2 --backend ray --workers 8
+    python -m agents.sweep blinded --n 200 --backend local --workers 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import os
+import sys
+from contextlib import contextmanager
+from pathlib import Path
+
+from quadfault.errors import ConfigError, QuadfaultError
+
+BACKENDS = ("serial", "local", "ray")
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _check_workers(workers) -> int:
+    if workers is None:
+        return os.cpu_count() or 1
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ConfigError(f"workers must be an integer >= 1, got {workers!r}")
+    return workers
+
+
+def _ray():
+    try:
+        import ray
+    except ImportError:
+        raise ConfigError("backend 'ray' needs Ray: pip install ray (the 'ray' extra)") from None
+    return ray
+
+
+def run_sweep(fn, tasks, *, backend: str = "local", workers: int | None = None,
+              progress: bool = False, desc: str = "sweep", address: str | None = None) -> list:
+    """``[fn(t) for t in tasks]`` in task order on ``backend`` (see the module docstring)."""
+    if backend not in BACKENDS:
+        raise ConfigError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+    workers = _check_workers(workers)
+    tasks = list(tasks)
+    from quadfault.progress import progress_bar
+
+    bar = progress_bar(total=len(tasks), desc=desc, unit="task", disable=None if progress else True)
+    try:
+        if backend == "serial" or not tasks:
+            out = []
+            for t in tasks:
+                out.append(fn(t))
+                bar.update(1)
+            return out
+        if backend == "local":
+            from concurrent.futures import ProcessPoolExecutor, as_completed
+
+            out = [None] * len(tasks)
+            with ProcessPoolExecutor(max_workers=min(workers, len(tasks))) as pool:
+                futures = {pool.submit(fn, t): k for k, t in enumerate(tasks)}
+                for fut in as_completed(futures):
+                    out[futures[fut]] = fut.result()
+                    bar.update(1)
+            return out
+        ray = _ray()
+        if not ray.is_initialized():
+            address = address or os.environ.get("RAY_ADDRESS")
+            if address:
+                ray.init(address=address)
+            else:
+                ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
+        remote = ray.remote(fn)
+        refs = [remote.remote(t) for t in tasks]
+        pending = list(refs)
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            bar.update(len(done))
+        return ray.get(refs)
+    finally:
+        bar.close()
+
+
+# -- evaluation sweep (agents x scenarios x seeds) ---------------------------------------------
+def _fly(job):
+    from agents.evaluate import fly_agent
+
+    agent, scenario, seed, config = job
+    return fly_agent(agent, scenario, seed, config)
+
+
+def evaluation_jobs(agents, suite: str, seeds, *, scenarios=None, config=None, duration=None):
+    """The flights of :func:`agents.evaluate.evaluate`, in its order, as picklable tasks."""
+    from agents.evaluate import FlightConfig
+    from agents.suite import get_suite
+
+    cfg = config or FlightConfig()
+    jobs = []
+    for entry in get_suite(suite, scenarios):
+        for seed in seeds:
+            for agent in agents:
+                sc = entry.scenario(seed)
+                if duration is not None:
+                    sc = sc.replace(duration=float(duration))
+                jobs.append((agent, sc, seed, cfg))
+    return jobs
+
+
+def evaluate_sweep(agents, suite: str, seeds, *, scenarios=None, config=None, duration=None,
+                   backend: str = "local", workers: int | None = None, progress: bool = False):
+    """:func:`agents.evaluate.evaluate` on a backend: the same list of ``Flight`` records."""
+    jobs = evaluation_jobs(agents, suite, seeds, scenarios=scenarios, config=config,
+                           duration=duration)
+    return run_sweep(_fly, jobs, backend=backend, workers=workers, progress=progress,
+                     desc=f"evaluate {suite}")
+
+
+# -- blinded diagnosis study ---------------------------------------------------------------------
+def _blinded_module():
+    spec = importlib.util.spec_from_file_location("blinded_study",
+                                                  ROOT / "benchmarks" / "blinded_study.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("blinded_study", module)
+    spec.loader.exec_module(module)
+    return sys.modules["blinded_study"]
+
+
+def _blinded_one(job):
+    return _blinded_module().run_one(job)
+
+
+def blinded_sweep(n: int, seed: int = 2026, rate: float = 250.0, duration: float = 15.0, *,
+                  backend: str = "local", workers: int | None = None, progress: bool = False):
+    """Rows of the blinded diagnosis study (``benchmarks/blinded_study.py``) and its summary."""
+    jobs = [(seed, i, rate, duration) for i in range(n)]
+    rows = run_sweep(_blinded_one, jobs, backend=backend, workers=workers, progress=progress,
+                     desc="blinded study")
+    return rows, _blinded_module().summarise(rows, rate, duration)
+
+
+# -- command line ----------------------------------------------------------------------------------
+@contextmanager
+def _evaluate_on(backend: str, workers: int | None):
+    """Let :func:`agents.evaluate.run` fly its jobs through :func:`evaluate_sweep`."""
+    import agents.evaluate as ev
+
+    original = ev.evaluate
+
+    def evaluate(agents, suite, seeds, **kw):
+        return evaluate_sweep(agents, suite, seeds, backend=backend, workers=workers, **kw)
+
+    ev.evaluate = evaluate
+    try:
+        yield
+    finally:
+        ev.evaluate = original
+
+
+def _add_backend(parser):
+    parser.add_argument("--backend", choices=BACKENDS, default="local",
+                        help="where the tasks run (default local processes)")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="processes / Ray CPUs (default: all cores)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar or table")
+
+
+def main(argv=None) -> int:
+    import agents.evaluate as ev
+
+    parser = argparse.ArgumentParser(prog="python -m agents.sweep", description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="what", required=True)
+    p_eval = sub.add_parser("evaluate", help="agents x scenarios x seeds (agents.evaluate)")
+    ev.add_arguments(p_eval)
+    _add_backend(p_eval)
+    p_blind = sub.add_parser("blinded", help="the blinded diagnosis study")
+    p_blind.add_argument("--n", type=int, default=200)
+    p_blind.add_argument("--seed", type=int, default=2026)
+    p_blind.add_argument("--rate", type=float, default=250.0)
+    p_blind.add_argument("--duration", type=float, default=15.0)
+    p_blind.add_argument("--out", default=None, help="write rows and summary to this JSON file")
+    p_blind.add_argument("--force", action="store_true")
+    _add_backend(p_blind)
+    args = parser.parse_args(argv)
+    try:
+        _check_workers(args.workers)
+        if args.what == "evaluate":
+            with _evaluate_on(args.backend, args.workers):
+                return ev.run(args)
+        if args.n < 1 or args.rate <= 0 or args.duration <= 5:
+            raise ConfigError("--n >= 1, --rate > 0 and --duration > 5 s are required")
+        rows, summary = blinded_sweep(args.n, args.seed, args.rate, args.duration,
+                                      backend=args.backend, workers=args.workers,
+                                      progress=not args.quiet)
+        if args.out:
+            import json
+
+            from quadfault.fileio import atomic_write_text
+
+            atomic_write_text(args.out, json.dumps({"summary": summary, "rows": rows}, indent=1,
+                                                   default=float) + "\n", force=args.force)
+        if not args.quiet:
+            _blinded_module().print_summary(summary, rows)
+        return 0
+    except QuadfaultError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

@@ -1,0 +1,59 @@
+"""Sweep backends: local processes and Ray give the serial sweep's table."""
+
+from __future__ import annotations
+
+import pytest
+
+from agents.evaluate import AgentSpec, aggregate, markdown_table
+from agents.sweep import evaluate_sweep, main, run_sweep
+from quadfault.errors import ConfigError
+
+AGENTS = [AgentSpec.parse("geometric"), AgentSpec.parse("estimate-aware:none")]
+
+
+def _square(x):
+    return x * x
+
+
+def _table(backend, workers=2):
+    flights = evaluate_sweep(AGENTS, "quick", [0, 1], scenarios=["abrupt_20s"], duration=0.3,
+                             backend=backend, workers=workers)
+    return markdown_table(aggregate(flights)), [f.metrics.rmse for f in flights]
+
+
+@pytest.fixture(scope="module")
+def serial_table():
+    return _table("serial")
+
+
+def test_run_sweep_keeps_task_order():
+    tasks = list(range(7))
+    assert run_sweep(_square, tasks, backend="local", workers=2) == [t * t for t in tasks]
+    assert run_sweep(_square, [], backend="local") == []
+
+
+def test_local_backend_gives_the_serial_table(serial_table):
+    table, rmse = _table("local")
+    assert table == serial_table[0]
+    assert rmse == serial_table[1]
+    assert "geometric" in table
+
+
+def test_ray_backend_gives_the_same_table(serial_table):
+    ray = pytest.importorskip("ray")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        table, rmse = _table("ray")
+    finally:
+        ray.shutdown()
+    assert table == serial_table[0]
+    assert rmse == serial_table[1]
+
+
+def test_bad_backend_and_workers_are_config_errors(capsys):
+    with pytest.raises(ConfigError, match="backend"):
+        run_sweep(_square, [1], backend="slurm")
+    with pytest.raises(ConfigError, match="workers"):
+        run_sweep(_square, [1], workers=0)
+    assert main(["blinded", "--n", "0"]) == 2
+    assert "error:" in capsys.readouterr().err
