@@ -12,7 +12,8 @@ Prints:
    (target: every abrupt drop to 0.5 within 0.1 s, no false alarm on nominal / degradation);
 3. accuracy: motor-averaged RMSE and spike per scenario, mean over the seeds.
 
-The EKF's Q_eta is calibrated first (as ``quadfault reproduce`` does) unless ``--q-eta``.
+Flights use ``quadfault reproduce``'s settings (``estimators.reproduce.sim_config``: no upper
+thrust limit, as in the paper). The EKF's Q_eta is calibrated first (as ``quadfault reproduce`` does) unless ``--q-eta``.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from estimators.ekf import EKFConfig, MotorEfficiencyEKF
 from estimators.fdi import detect, evaluate
 from estimators.irls import IRLSConfig, SlidingWindowIRLS
 from estimators.metrics import fault_windows, mean_or_none, score
+from estimators.reproduce import flight_check, sim_config
 from quadfault.scenarios import named_scenario
 from quadfault.simulator import simulate
 
@@ -35,7 +37,8 @@ SCENARIOS = ("abrupt", "combined", "nominal", "degradation")
 
 
 def speed(duration: float) -> None:
-    rec = simulate(named_scenario("combined", duration), seed=0).without_truth()
+    rec = simulate(named_scenario("combined", duration), config=sim_config("rk4", "combined"),
+                   seed=0).without_truth()
     short = rec.slice(0, min(len(rec), 2000))
     rows = {}
     for label, make, r in (
@@ -56,9 +59,9 @@ def speed(duration: float) -> None:
 
 
 def flight(name: str, seed: int, duration: float, q_eta: float) -> dict:
-    rec = simulate(named_scenario(name, duration), seed=seed)
+    rec = simulate(named_scenario(name, duration), config=sim_config("rk4", name), seed=seed)
     blind = rec.without_truth()
-    out = {}
+    out = {"diverged": flight_check(rec)["diverged"]}
     for est in (SlidingWindowIRLS(rec.vehicle), MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_eta))):
         s = est.run(blind)
         sc = score(rec, s)
@@ -77,7 +80,8 @@ def main() -> None:
     speed(min(args.duration, 20.0))
     q = args.q_eta
     if q is None:
-        cal_rec = simulate(named_scenario("combined", min(args.duration, 40.0)), seed=1000)
+        cal_rec = simulate(named_scenario("combined", min(args.duration, 40.0)),
+                           config=sim_config("rk4", "combined"), seed=1000)
         target = float(np.mean(score(cal_rec, SlidingWindowIRLS(cal_rec.vehicle).run(
             cal_rec.without_truth())).rmse))
         cal = calibrate_q_eta(cal_rec, target, q_range=(1e-4, 10.0), bisection_steps=6)
@@ -87,6 +91,9 @@ def main() -> None:
     with ProcessPoolExecutor(args.workers) as pool:
         res = list(pool.map(flight, [j[0] for j in jobs], [j[1] for j in jobs],
                             [args.duration] * len(jobs), [q] * len(jobs)))
+    lost = [j for j, r in zip(jobs, res) if r["diverged"]]
+    if lost:
+        print(f"WARNING: flights that lost control: {lost}")
     print(f"\nFDI and accuracy over {args.seeds} seeds, {args.duration:g} s flights, EKF Q_eta = {q:.4g}")
     print(f"{'scenario':<12} {'est':<5} {'detected':>9} {'worst lat [s]':>14} {'false':>6} "
           f"{'RMSE':>7} {'spike':>7}")

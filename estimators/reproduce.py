@@ -88,18 +88,38 @@ class ReproduceConfig:
         return self.seed + 1000
 
 
-def _sim_config(mode: str):
+def sim_config(mode: str, name: str):
+    """Simulation settings of a scenario.
+
+    ``reference``: the authors' loop (``SimConfig.reference()``). ``rk4``: our integrator with
+    the paper's actuator assumption, no upper thrust limit (only ``f >= 0``), except for
+    ``clipping``, whose point is saturation at f_max. With the default f_max (thrust-to-weight
+    2), a motor at eta = 0.5 cannot hold hover plus the circle, and the abrupt and combined
+    flights lose control during the first fault.
+    """
     from quadfault.simulator import SimConfig
 
-    return SimConfig.reference() if mode == "reference" else SimConfig()
+    if mode == "reference":
+        return SimConfig.reference()
+    return SimConfig(saturate=name == "clipping")
 
 
 def _fly(name: str, duration: float, seed: int, mode: str, sigma: float):
     from quadfault.scenarios import named_scenario
     from quadfault.simulator import simulate
 
-    return simulate(named_scenario(name, duration), config=_sim_config(mode), seed=seed,
+    return simulate(named_scenario(name, duration), config=sim_config(mode, name), seed=seed,
                     thrust_noise=sigma)
+
+
+def flight_check(rec) -> dict:
+    """Did the flight stay under control? (rotor commands beyond 5x the hover thrust on more
+    than 1 % of the rows, or more than 10 m from the start, mean it did not)."""
+    f = np.abs(rec.thrust_cmd).max(axis=1)
+    wild = float(np.mean(f > 5.0 * rec.vehicle.hover_thrust))
+    drift = float(np.max(np.linalg.norm(rec.position - rec.position[0], axis=1)))
+    return {"max_command": float(f.max()), "max_distance": drift,
+            "diverged": bool(wild > 0.01 or drift > 10.0)}
 
 
 def _calibration_job(mode: str, cfg: ReproduceConfig) -> dict:
@@ -127,7 +147,7 @@ def _scenario_job(mode: str, name: str, cfg: ReproduceConfig, q_eta: float,
 
     rec = _fly(name, cfg.duration, cfg.seed, mode, cfg.thrust_noise)
     blind = rec.without_truth()
-    out = {"mode": mode, "name": name, "scores": {}, "fdi": {}}
+    out = {"mode": mode, "name": name, "scores": {}, "fdi": {}, "flight": flight_check(rec)}
     series = {}
     for est in (SlidingWindowIRLS(rec.vehicle),
                 MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_eta))):
@@ -245,15 +265,18 @@ def metrics_document(run: dict) -> dict:
     """``metrics.json``: the contract's ``scenarios`` block plus config, reference mode, FDI."""
     cfg: ReproduceConfig = run["config"]
     doc = {"scenarios": {}, "reference_mode": {"scenarios": {}}, "fdi": {},
-           "reference_mode_fdi": {}}
+           "reference_mode_fdi": {}, "flights": {}, "reference_mode_flights": {}}
     for r in run["results"]:
-        scen = doc["scenarios"] if r["mode"] == "rk4" else doc["reference_mode"]["scenarios"]
-        fdi = doc["fdi"] if r["mode"] == "rk4" else doc["reference_mode_fdi"]
+        ref = r["mode"] == "reference"
+        scen = doc["reference_mode"]["scenarios"] if ref else doc["scenarios"]
+        fdi = doc["reference_mode_fdi"] if ref else doc["fdi"]
         scen[r["name"]] = {k: v.to_contract() for k, v in r["scores"].items()}
         fdi[r["name"]] = r["fdi"]
+        doc["reference_mode_flights" if ref else "flights"][r["name"]] = r["flight"]
     if not cfg.reference_mode:
-        del doc["reference_mode"], doc["reference_mode_fdi"]
+        del doc["reference_mode"], doc["reference_mode_fdi"], doc["reference_mode_flights"]
     doc["config"] = {**asdict(cfg), "q_range": list(cfg.q_range), "integrator": "rk4",
+                     "upper_thrust_limit": "only in clipping (the paper has none)",
                      "align": "end", "ekf_q_eta": run["calibration"]["rk4"].q_eta,
                      "calibration": {m: c.to_dict() for m, c in run["calibration"].items()},
                      "seconds_total": run["seconds"]}
@@ -323,6 +346,11 @@ def run(args) -> int:
     print(f"quadfault reproduce ({'quick' if args.quick else 'full'}, seed {cfg.seed}, "
           f"integrator rk4, EKF Q_eta = {doc['config']['ekf_q_eta']:.4g})")
     print(table(doc["scenarios"]))
+    bad = [f"{n} ({m})" for m, key in (("rk4", "flights"), ("reference", "reference_mode_flights"))
+           for n, fl in doc.get(key, {}).items() if fl["diverged"]]
+    if bad:
+        print(f"WARNING: flights that lost control (their numbers are meaningless): "
+              f"{', '.join(bad)}")
     if cfg.reference_mode:
         print("\nreference integration mode (the authors' Euler step):")
         print(table(doc["reference_mode"]["scenarios"]))

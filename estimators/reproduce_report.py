@@ -55,6 +55,16 @@ def _paper_rows(scenarios: dict, paper: dict) -> list[str]:
     return rows
 
 
+def _diverged_lines(doc: dict) -> list[str]:
+    bad = [f"{n} ({key.split('_')[0] if key != 'flights' else 'rk4'})"
+           for key in ("flights", "reference_mode_flights")
+           for n, fl in doc.get(key, {}).items() if fl["diverged"]]
+    if not bad:
+        return ["Every flight stayed under control (`flights` in metrics.json).", ""]
+    return [f"**Warning: these flights lost control; their numbers are meaningless: "
+            f"{', '.join(bad)}.**", ""]
+
+
 def write_figures(out: Path, doc: dict, run: dict, force: bool) -> list[str]:
     written = []
     for r in run["results"]:
@@ -92,6 +102,10 @@ def write_report(out: Path, doc: dict, run: dict, force: bool = False) -> Path:
         "",
         "## Main results (RKMK4 integrator, our default simulator)",
         "",
+        "No upper thrust limit (the paper's assumption) except in *clipping*, which exists to "
+        "saturate the weak rotor at f_max.",
+        "",
+        *_diverged_lines(doc),
         f"EKF calibration: {cal['rk4']['message']}.",
         "",
         table(doc["scenarios"]),
@@ -141,10 +155,12 @@ def write_report(out: Path, doc: dict, run: dict, force: bool = False) -> Path:
         "",
         "* **Seeds and RNG.** The paper ran one MATLAB flight (`rng(114512)`); our flights use "
         "numpy generators, so individual spikes differ; compare magnitudes, not digits.",
-        "* **Simulator.** The main table uses RKMK4 with a zero-order-hold command and rotor "
-        "saturation at f_max; the reference integrates by semi-implicit Euler with a "
-        "one-sample input lag that neither estimator models (the reference-mode table keeps "
-        "it, like the paper).",
+        "* **Simulator.** The main table uses RKMK4 with a zero-order-hold command; the "
+        "reference integrates by semi-implicit Euler with a one-sample input lag that neither "
+        "estimator models (the reference-mode table keeps it, like the paper). Neither limits "
+        "the rotor thrust from above, except our clipping scenario: with quadfault's default "
+        "f_max (thrust-to-weight 2) a rotor at eta = 0.5 cannot hold the circle and the "
+        "abrupt / combined flights lose control during the first fault.",
         "* **EKF.** Ours fixes the reference's flaws (docs/ekf.md): a 3-row rotation-error "
         "attitude update instead of the one-sided acos angle, exponential-map prediction, full "
         "gyroscopic Jacobian, Joseph form. Only Q_eta is calibrated; the other noise values "

@@ -93,6 +93,8 @@ def test_quick_reproduce_writes_the_contract_outputs(tmp_path):
     _check_contract(doc)
     assert set(doc["reference_mode"]["scenarios"]) == {"degradation", "abrupt", "combined"}
     assert doc["config"]["ekf_q_eta"] > 0 and doc["config"]["seed"] == 0
+    assert not any(f["diverged"] for f in doc["flights"].values())
+    assert not any(f["diverged"] for f in doc["reference_mode_flights"].values())
     assert doc["config"]["calibration"]["rk4"]["curve_q"]
     report = (out / "report.md").read_text()
     assert "paper" in report and "![estimates_combined.png](estimates_combined.png)" in report
