@@ -274,6 +274,10 @@ class MotorEfficiencyEKF:
 
     def update(self, sample: Sample) -> Estimate:
         """One predict (from the previous sample, its command held) and one update."""
+        shapes = [np.shape(a) for a in (sample.p, sample.v, sample.R, sample.w, sample.f)]
+        if shapes != [(3,), (3,), (3, 3), (3,), (self.n_rotors,)]:
+            raise ConfigError(f"EKF: sample at t = {sample.t} has shapes {shapes}; expected "
+                              f"p, v, w (3,), R (3, 3), f ({self.n_rotors},)")
         finite = all(np.all(np.isfinite(a)) for a in (sample.p, sample.v, sample.R, sample.w,
                                                       sample.f)) and math.isfinite(sample.t)
         if not finite:
@@ -345,8 +349,6 @@ class MotorEfficiencyEKF:
     def _run_numba(self, recording: Recording):
         from estimators.ekf_numba import run_series
 
-        if not recording.has_pose:
-            list(samples(recording))  # raises the one-line error
         R = np.ascontiguousarray(recording.rotation, dtype=float)
         args = [np.ascontiguousarray(a, dtype=float) for a in (
             recording.t, recording.position, recording.velocity, recording.omega,

@@ -204,6 +204,13 @@ def test_time_must_increase_and_bad_samples_are_skipped(vehicle):
         ekf.update(s)
 
 
+def test_malformed_sample_is_a_clear_error(vehicle):
+    ekf = MotorEfficiencyEKF(vehicle, EKFConfig(backend="numpy"))
+    s = Sample(0.0, np.zeros(3), np.zeros(3), np.eye(3), np.zeros(3), np.full(3, 2.45))
+    with pytest.raises(ConfigError, match="shapes"):
+        ekf.update(s)
+
+
 def test_imu_only_recording_is_refused(recording):
     imu = dataclasses.replace(recording, position=None, velocity=None, quaternion=None)
     with pytest.raises(ConfigError, match="IMU-only"):
