@@ -282,7 +282,27 @@ def _vehicle_from_sidecar(path: Path, meta: dict, has_u: bool):
     return vehicle, curve
 
 
+#: rows converted to numbers at a time (the reader streams: memory ~ the numeric table)
+_CHUNK_ROWS = 5_000
+
+
+def _rows_to_array(path, header, rows, first_row):
+    """``rows`` (lists of cells) as a float array; the error names the first bad cell."""
+    try:
+        return np.array(rows, dtype=float).reshape(len(rows), len(header))
+    except ValueError:
+        for i, r in enumerate(rows):
+            for j, cell in enumerate(r):
+                try:
+                    float(cell)
+                except ValueError:
+                    raise RecordingError(path, f"not a number: {cell!r}", column=header[j],
+                                         row=first_row + i) from None
+        raise
+
+
 def _read_table(path: Path) -> tuple[list[str], np.ndarray]:
+    chunks, rows, blank, n = [], [], [], 0  # blank: trailing empty rows (dropped at the end)
     try:
         with _open_text(path) as fh:
             reader = csv.reader(fh)
@@ -291,40 +311,39 @@ def _read_table(path: Path) -> tuple[list[str], np.ndarray]:
             except StopIteration:
                 raise RecordingError(path, "file is empty (no header row)") from None
             header = [h.strip() for h in header]
-            rows = list(reader)
+            seen = set()
+            for h in header:
+                if not h:
+                    raise RecordingError(path, "empty column name in the header")
+                if h in seen:
+                    raise RecordingError(path, "duplicated column", column=h)
+                seen.add(h)
+            width = len(header)
+            for r in reader:
+                if not any(c.strip() for c in r):
+                    blank.append(r)
+                    continue
+                for row in (*blank, r):  # empty rows followed by data are errors
+                    n += 1
+                    if len(row) != width:
+                        raise RecordingError(path, f"has {len(row)} fields, the header has "
+                                                   f"{width}", row=n)
+                    rows.append(row)
+                blank = []
+                if len(rows) >= _CHUNK_ROWS:
+                    chunks.append(_rows_to_array(path, header, rows, n - len(rows) + 1))
+                    rows = []
     except UnicodeDecodeError:
         raise RecordingError(path, "not UTF-8 text") from None
     except (OSError, EOFError, gzip.BadGzipFile) as exc:
         raise RecordingError(path, f"cannot read: {exc}") from None
     except csv.Error as exc:
         raise RecordingError(path, f"malformed CSV: {exc}") from None
-    seen = set()
-    for h in header:
-        if not h:
-            raise RecordingError(path, "empty column name in the header")
-        if h in seen:
-            raise RecordingError(path, "duplicated column", column=h)
-        seen.add(h)
-    while rows and not any(c.strip() for c in rows[-1]):
-        rows.pop()
-    if not rows:
+    if rows:
+        chunks.append(_rows_to_array(path, header, rows, n - len(rows) + 1))
+    if not chunks:
         raise RecordingError(path, "no data rows")
-    width = len(header)
-    for i, r in enumerate(rows):
-        if len(r) != width:
-            raise RecordingError(path, f"has {len(r)} fields, the header has {width}", row=i + 1)
-    try:
-        data = np.array(rows, dtype=float)
-    except ValueError:
-        for i, r in enumerate(rows):
-            for j, cell in enumerate(r):
-                try:
-                    float(cell)
-                except ValueError:
-                    raise RecordingError(path, f"not a number: {cell!r}", column=header[j],
-                                         row=i + 1) from None
-        raise
-    return header, data
+    return header, chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
 
 
 def _check_finite(path, header, data, columns):
