@@ -5,14 +5,13 @@
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from quadfault.diagnosis.library import EXPLANATIONS, build_library, predict, public_params
-from quadfault.diagnosis.residuals import Replay, noise_scale, prepare
+from quadfault.diagnosis.residuals import noise_scale, prepare
 from quadfault.diagnosis.result import DiagnosisResult, EffectFinding
 from quadfault.diagnosis.select import cross_validate, folds_of, select
 from quadfault.effects import EFFECT_NAMES
