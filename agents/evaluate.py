@@ -145,6 +145,7 @@ def aggregate(flights: list[Flight]) -> list[dict]:
             "crash_rate": sum(f.metrics.crashed for f in fs) / len(fs),
             "rmse_mean": _finite_mean(rmse),
             "rmse_std": float(np.std(rmse, ddof=1)) if len(rmse) > 1 else None,
+            "rmse_all_mean": _finite_mean([f.metrics.rmse for f in fs]),
             "peak_attitude_error_deg": _finite_mean([f.metrics.peak_attitude_error for f in fs]),
             "energy": _finite_mean([f.metrics.energy / f.metrics.duration for f in fs]),
             "recovery_mean": _finite_mean(rec),
@@ -159,18 +160,20 @@ def _fmt(x, spec=".3f") -> str:
 
 
 def markdown_table(rows: list[dict]) -> str:
-    lines = ["| scenario | agent | runs | crash rate | RMSE [m] | peak tilt err [deg] | "
-             "energy [N] | recovery [s] (never/faults) |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["| scenario | agent | runs | crash rate | RMSE [m] | RMSE incl. crashed [m] | "
+             "peak tilt err [deg] | energy [N] | recovery [s] (never/faults) |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         rmse = _fmt(r["rmse_mean"], ".4f")
         if r["rmse_std"] is not None:
             rmse += f" ± {r['rmse_std']:.4f}"
         lines.append(f"| {r['scenario']} | {r['agent']} | {r['runs']} | {r['crash_rate']:.2f} | "
-                     f"{rmse} | {_fmt(r['peak_attitude_error_deg'], '.2f')} | "
+                     f"{rmse} | {_fmt(r['rmse_all_mean'], '.4f')} | "
+                     f"{_fmt(r['peak_attitude_error_deg'], '.2f')} | "
                      f"{_fmt(r['energy'], '.2f')} | {_fmt(r['recovery_mean'], '.2f')} "
                      f"({r['recovery_never']}/{r['faults']}) |")
-    notes = ["", "RMSE: mean over the runs that did not crash (± sample std). Energy: "
+    notes = ["", "RMSE: mean over the runs that did not crash (± sample std); RMSE incl. "
+             "crashed: mean over all runs, a crashed run scored up to its crash. Energy: "
              "commanded thrust integrated over time, per second of flight [N s / s]. "
              "Recovery: mean time until the position error is back below 1.5x its "
              "pre-fault level (floor 5 cm) for 0.5 s, over the faults that recovered. "
