@@ -16,7 +16,9 @@ exactly, and whether any estimate was NaN):
 * ``rotor_off``: rotor 1 commanded 0 N (lower saturation) during the flight: its efficiency
   is unobservable;
 * ``nan_rows``: dropped samples delivered as NaN rows;
-* ``repeated_time``: a sample delivered twice (same time stamp).
+* ``repeated_time``: a sample delivered twice (same time stamp);
+* ``saturated`` (a separate flight): rotors limited to 3.2 N, so the weak motor's command
+  stays far above its limit (the estimators clip commands to the limit; eta stays observable).
 
 Recovery: a burst of ``--burst`` seconds at mid-flight is corrupted (``spikes``: position
 +-0.5 m, velocity N(0, 2 m/s), rate N(0, 5 rad/s); ``nan``: NaN rows; ``frozen``: the sensors
@@ -53,6 +55,28 @@ def flight(duration: float = 3.0, seed: int = 0):
                   Circle(), thrust_noise=0.02)
     rec = simulate(sc, seed=seed).without_truth()
     return list(samples(rec)), rec.vehicle
+
+
+def saturated_flight(duration: float = 3.0, seed: int = 0, max_thrust: float = 3.2):
+    """The same flight on a vehicle whose rotors saturate at ``max_thrust`` [N]: the weak
+    motor cannot deliver what the controller asks (its recorded command goes far above the
+    limit). Returns ``(samples, vehicle, fraction of rows with a command at or above the
+    limit)``."""
+    from quadfault.vehicle import Vehicle
+
+    sc = Scenario("saturated", duration, EfficiencySchedule(ConstantEfficiency(ETA_TRUE)),
+                  Circle(), thrust_noise=0.02)
+    rec = simulate(sc, vehicle=Vehicle(max_thrust=max_thrust), seed=seed).without_truth()
+    at_limit = np.any(rec.thrust_cmd >= rec.vehicle.rotor_max_thrust, axis=1)
+    return list(samples(rec)), rec.vehicle, float(np.mean(at_limit))
+
+
+def check_saturated(name, vehicle, stream):
+    """Statuses, NaN anywhere, and the final error against the truth."""
+    t, eta, status, err = run_stream(name, vehicle, stream)
+    return {"statuses": sorted(set(status)), "finite": bool(np.all(np.isfinite(eta))),
+            "error_at_end": float(np.max(np.abs(eta[-1] - ETA_TRUE))),
+            "raised": None if err is None else str(err)}
 
 
 def run_stream(name, vehicle, stream, eta0=None):
@@ -179,6 +203,13 @@ def main(argv=None) -> int:
             r = check_degenerate(name, vehicle, stream, span)
             ok &= r.get("finite", True)
             print(f"  {case:14s} {name:4s} " + ", ".join(f"{k} {v}" for k, v in r.items()))
+    sat, sat_vehicle, frac = saturated_flight(args.duration, args.seed)
+    print(f"saturated rotors (limit {sat_vehicle.rotor_max_thrust} N; {100 * frac:.1f} % of the "
+          "rows command a rotor at or above it):")
+    for name in ESTIMATORS:
+        r = check_saturated(name, sat_vehicle, sat)
+        ok &= r["finite"]
+        print(f"  {name:4s} " + ", ".join(f"{k} {v}" for k, v in r.items()))
     n = int(round(args.burst / 1e-3))
     print(f"recovery after a {args.burst * 1e3:.0f} ms burst at t = {base[at].t:.2f} s "
           f"(tolerance {args.tol} of the clean estimate):")

@@ -97,6 +97,23 @@ def test_ekf_repeated_time_is_bad_sample_and_kept(flight, streams):
     assert r["raised"] is None and r["statuses"] == ["bad_sample"] and r["kept"]
 
 
+@pytest.fixture(scope="module")
+def saturated():
+    return er.saturated_flight(1.2, seed=0)
+
+
+@pytest.mark.parametrize("name", ["irls", "ekf"])
+def test_saturated_rotor_is_estimated_from_its_limit(name, saturated):
+    """The weak rotor's command stays above the limit: the clipped command still identifies
+    eta (thrust = eta * limit), no NaN."""
+    stream, vehicle, frac = saturated
+    assert frac > 0.9
+    r = er.check_saturated(name, vehicle, stream)
+    assert r["finite"] and r["raised"] is None
+    assert set(r["statuses"]) <= {"ok", "warmup"}
+    assert r["error_at_end"] < 0.05
+
+
 @pytest.mark.parametrize("name", ["irls", "ekf"])
 @pytest.mark.parametrize("kind", er.BURSTS)
 def test_recovery_after_a_burst_of_corrupted_samples(name, kind, flight, clean_runs):
