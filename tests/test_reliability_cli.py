@@ -208,6 +208,14 @@ def test_bad_arguments_give_one_line_error(command, args, mentions, hover, monke
     assert _files(hover.parent) == before, "a failed run left files behind"
 
 
+def test_deeply_nested_vehicle_file_is_one_line(tmp_path):
+    deep = tmp_path / "vehicle.json"
+    deep.write_text("[" * 100_000)
+    code, _, err = run_cli(["import", "eschmann", FIXTURES / "eschmann_log.csv", "--vehicle",
+                            deep, "--out", tmp_path / "o.csv", "--quiet"])
+    assert "vehicle.json" in assert_one_line_error(code, err, "import")
+
+
 def test_unknown_subcommand_is_one_line():
     code, _, err = run_cli(["fly"])
     assert code == 2 and len(err.strip().splitlines()) == 1 and "invalid choice" in err
