@@ -148,15 +148,18 @@ class EstimateAwareAllocator:
 
     def _release_yaw(self, f_exact, eta) -> np.ndarray | None:
         """T, Mx, My exact along ``f_exact + s n``; the ``s`` closest to 0 within the bounds."""
-        n = self._null3 / eta  # A[:3] diag(eta) n = 0
-        lo, hi = -math.inf, math.inf
-        for fi, ni in zip(f_exact, n):
-            a, b = (0.0 - fi) / ni, (self.f_max - fi) / ni  # |n_i| > 0 for every rotor
-            lo, hi = max(lo, min(a, b)), min(hi, max(a, b))
+        n = (self._null3 / eta).tolist()  # A[:3] diag(eta) n = 0
+        f0 = f_exact.tolist()
+        lo, hi, f_max = -math.inf, math.inf, self.f_max
+        for fi, ni in zip(f0, n):
+            a, b = -fi / ni, (f_max - fi) / ni  # |n_i| > 0 for every rotor
+            if a > b:
+                a, b = b, a
+            lo, hi = max(lo, a), min(hi, b)
         if lo > hi + 1e-12:
             return None
         s = min(max(0.0, lo), hi)
-        return np.clip(f_exact + s * n, 0.0, self.f_max)
+        return np.array([min(max(fi + s * ni, 0.0), f_max) for fi, ni in zip(f0, n)])
 
     def _weighted(self, B, w) -> np.ndarray:
         """``min ||W (B f - w)||`` s.t. ``0 <= f <= f_max`` by active-set enumeration."""
@@ -167,9 +170,9 @@ class EstimateAwareAllocator:
         Mf = M[None] * _FREE[:, None, :]  # columns of fixed rotors zeroed
         rhs = r[None] - fixed @ M.T
         # normal equations of the free rotors; a unit diagonal pins the fixed ones to 0
-        G = np.einsum("kij,kil->kjl", Mf, Mf) + _PIN
-        g = np.einsum("kij,ki->kj", Mf, rhs)
-        f = fixed + np.linalg.solve(G, g[..., None])[..., 0] * _FREE
+        MfT = np.swapaxes(Mf, 1, 2)
+        G = MfT @ Mf + _PIN
+        f = fixed + np.linalg.solve(G, MfT @ rhs[..., None])[..., 0] * _FREE
         if not math.isfinite(self.f_max):
             f = f[np.all(_PATTERNS != 2, axis=1)]
         tol = 1e-9
