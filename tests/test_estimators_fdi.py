@@ -102,10 +102,12 @@ def test_irls_stream_of_a_seeded_abrupt_flight():
     """End to end: simulated abrupt faults (12 s, schedule scaled), IRLS, the detector."""
     from estimators.irls import SlidingWindowIRLS
     from estimators.metrics import fault_windows
+    from estimators.reproduce import flight_check, sim_config
     from quadfault.scenarios import named_scenario
     from quadfault.simulator import simulate
 
-    rec = simulate(named_scenario("abrupt", 12.0), seed=5)
+    rec = simulate(named_scenario("abrupt", 12.0), config=sim_config("rk4", "abrupt"), seed=5)
+    assert not flight_check(rec)["diverged"]
     est = SlidingWindowIRLS(rec.vehicle).run(rec.without_truth())
     windows = fault_windows(rec)
     s = evaluate(detect(est, FDIConfig(settle=0.5)), windows)
