@@ -182,7 +182,9 @@ def _map(fn, jobs, workers: int, bar):
         return results
     import multiprocessing
 
-    ctx = multiprocessing.get_context("fork")
+    # fork: workers inherit the kernels compiled by _warm_up (spawn where fork is missing)
+    method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
+    ctx = multiprocessing.get_context(method)
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
         futures = [pool.submit(fn, *job) for job in jobs]
         results = []
