@@ -160,6 +160,71 @@ def soak(steps: int, seed: int, *, max_episode_steps: int | None = 300, progress
     return stats
 
 
+#: vector soak: (registered id, action mode, estimator) cycled in blocks
+VECTOR_CONFIGS = (("QuadFaultHover-v0", "motor", "none"), ("QuadFault-v0", "residual", "none"),
+                  ("QuadFault-v0", "wrench", "truth"), ("QuadFaultHover-v0", "residual", "none"),
+                  ("QuadFault-v0", "motor", "none"), ("QuadFaultHover-v0", "wrench", "ekf"),
+                  ("QuadFault-v0", "residual", "irls"))
+
+
+def vector_soak(steps: int, seed: int, num_envs: int = 64, block: int = 100,
+                max_episode_steps: int = 300, report_every: int = 0) -> dict:
+    """``steps`` sub-env steps of ``QuadFaultVectorEnv`` (``num_envs`` per array step, next-step
+    autoreset), cycling :data:`VECTOR_CONFIGS` every ``block`` array steps with a fresh seed."""
+    rng = np.random.default_rng(seed)
+    envs = {}
+    stats = {"steps": 0, "episodes": 0, "nonfinite_obs": 0, "nonfinite_reward": 0,
+             "outside_space": 0, "missing_reason": 0, "spurious_reason": 0,
+             "terminations": {}, "truncations": 0, "interrupted": False}
+    started, k = time.perf_counter(), 0
+    try:
+        while stats["steps"] < steps:
+            key = VECTOR_CONFIGS[k % len(VECTOR_CONFIGS)]
+            k += 1
+            if key not in envs:
+                envs[key] = gym.make_vec(key[0], num_envs=num_envs,
+                                         vectorization_mode="vector_entry_point",
+                                         action_mode=key[1], estimator=key[2], scenario="random",
+                                         max_episode_steps=max_episode_steps)
+            if k == len(VECTOR_CONFIGS) + 1:  # every configuration built and run once
+                stats["rss_warm"] = rss_mib()
+            env = envs[key]
+            space = env.single_observation_space
+            env.reset(seed=int(rng.integers(2**31)))
+            for _ in range(block):
+                action = rng.uniform(-1.0, 1.0, (num_envs, 4)).astype(np.float32)
+                obs, reward, terminated, truncated, info = env.step(action)
+                stats["steps"] += num_envs
+                stats["nonfinite_obs"] += int(np.sum(~np.all(np.isfinite(obs), axis=1)))
+                stats["outside_space"] += int(sum(not space.contains(o) for o in obs))
+                stats["nonfinite_reward"] += int(np.sum(~np.isfinite(reward)))
+                reasons = info.get("termination_reason", np.full(num_envs, None))
+                for i in np.flatnonzero(terminated):
+                    if reasons[i] not in TERMINATION_REASONS:
+                        stats["missing_reason"] += 1
+                    stats["terminations"][reasons[i]] = stats["terminations"].get(reasons[i], 0) + 1
+                stats["spurious_reason"] += int(sum(r is not None for r in
+                                                    np.asarray(reasons)[~terminated]))
+                stats["truncations"] += int(np.sum(truncated & ~terminated))
+                stats["episodes"] += int(np.sum(terminated | truncated))
+                if report_every and stats["steps"] // report_every != \
+                        (stats["steps"] - num_envs) // report_every:
+                    bad = sum(stats[x] for x in ("nonfinite_obs", "nonfinite_reward",
+                                                 "outside_space", "missing_reason",
+                                                 "spurious_reason"))
+                    print(f"  checkpoint: {stats['steps']} sub-env steps, {stats['episodes']} "
+                          f"episode ends, {bad} failed checks, RSS {rss_mib():.1f} MiB, "
+                          f"{time.perf_counter() - started:.0f} s", flush=True)
+                if stats["steps"] >= steps:
+                    break
+    except KeyboardInterrupt:
+        stats["interrupted"] = True
+    for env in envs.values():
+        env.close()
+    stats["configurations"] = len(envs)
+    return stats
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--steps", type=int, default=1_000_000, help="soak steps (default 10^6)")
@@ -168,6 +233,8 @@ def main(argv=None) -> int:
                    help="steps of each of the two determinism runs (0: skip)")
     p.add_argument("--episode-steps", type=int, default=300,
                    help="truncate episodes after this many steps (more resets, more scenarios)")
+    p.add_argument("--vector", type=int, default=0, metavar="N",
+                   help="soak QuadFaultVectorEnv with N sub-envs instead of single envs")
     p.add_argument("--report-every", type=int, default=0,
                    help="print a checkpoint line every this many steps (0: none)")
     p.add_argument("--quiet", action="store_true")
@@ -187,6 +254,25 @@ def main(argv=None) -> int:
               f"{a['episodes']} episodes, {a['combos']} configurations): "
               f"{'bit-for-bit identical' if same else 'DIFFERENT'} "
               f"(sha256 {a['sha256'][:16]}..., {time.perf_counter() - t0:.0f} s)")
+    if args.vector:
+        rss_start = rss_mib()
+        t0 = time.perf_counter()
+        stats = vector_soak(args.steps, args.seed, args.vector,
+                            max_episode_steps=args.episode_steps, report_every=args.report_every)
+        seconds = time.perf_counter() - t0
+        bad = {k: stats[k] for k in ("nonfinite_obs", "nonfinite_reward", "outside_space",
+                                     "missing_reason", "spurious_reason")}
+        ok &= not any(bad.values())
+        print(f"vector soak: {stats['steps']} sub-env steps ({args.vector} per array step), "
+              f"{stats['episodes']} episode ends, {stats['configurations']} configurations in "
+              f"{seconds:.0f} s ({stats['steps'] / seconds:.0f} steps/s), seed {args.seed}"
+              + (" [stopped early by Ctrl-C]" if stats["interrupted"] else ""))
+        print("  " + ", ".join(f"{k} {v}" for k, v in bad.items()))
+        print(f"  terminations {stats['terminations']}, truncations {stats['truncations']}")
+        print(f"  RSS at the start {rss_start:.1f} MiB, after the first cycle of configurations "
+              f"{stats.get('rss_warm', math.nan):.1f} MiB, at the end {rss_mib():.1f} MiB")
+        print("PASS" if ok else "FAIL")
+        return 0 if ok else 1
     rss = {}
     t0 = time.perf_counter()
     stats = soak(args.steps, args.seed, max_episode_steps=args.episode_steps,
