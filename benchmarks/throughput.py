@@ -16,7 +16,7 @@ This script installs nothing. Peers, in a separate virtual environment so they c
 the project's environment::
 
     python -m venv --system-site-packages /tmp/peers
-    /tmp/peers/bin/pip install rotorpy crazyflow
+    /tmp/peers/bin/pip install rotorpy crazyflow torchdiffeq roma
     python benchmarks/throughput.py --peer-python /tmp/peers/bin/python
 
 Flags: ``--full`` (N up to 16384), ``--max-n``, ``--horizon`` (physics steps per timing),
@@ -195,8 +195,8 @@ def ppo_rates(n_envs: int, total: int):
         if name == "native":
             env = make_sb3_vec_env(n_envs, seed=0, **kw)
         else:
-            env = make_vec_env(lambda: gym.make("QuadFault-v0", **kw), n_envs=n_envs, seed=0,
-                               vec_env_cls=SubprocVecEnv)
+            env = make_vec_env(lambda: gym.make("quad_fault_env:QuadFault-v0", **kw),
+                               n_envs=n_envs, seed=0, vec_env_cls=SubprocVecEnv)
         model = PPO("MlpPolicy", env, n_steps=128, batch_size=256, n_epochs=1, device="cpu",
                     seed=0)
         t0 = time.perf_counter()

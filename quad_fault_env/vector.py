@@ -503,39 +503,38 @@ def _physics_numba_available() -> bool:
     return _sim_numba.AVAILABLE
 
 
-_KERNEL = None
+try:  # the optional ``fast`` extra: the compiled twins of the core physics
+    from numba import njit, prange
+
+    from quadfault._sim_numba import motor_apply as _motor_apply_nb
+    from quadfault._sim_numba import step_rk4 as _step_rk4_nb
+except ImportError:  # pragma: no cover - exercised only without numba
+    njit = None
+
+if njit is not None:
+    @njit(cache=True, parallel=True)
+    def _substep_kernel(p, v, R, w, f_cmd, eta, sigma, z, body, saturate, dt):
+        """One physics substep of every vehicle, in place: ``_sim_numba.motor_apply``
+        (eqs. 11, 13), the allocation (``Vehicle.wrench``), ``_sim_numba.step_rk4`` (eqs. 1-4)."""
+        n = f_cmd.shape[1]
+        A = body.allocation
+        for i in prange(p.shape[0]):
+            f = _motor_apply_nb(f_cmd[i], eta[i], body.max_thrust, saturate, sigma[i], z[i])
+            thrust = 0.0
+            moment = np.zeros(3)
+            for k in range(n):
+                thrust += A[0, k] * f[k]
+                for r in range(3):
+                    moment[r] += A[r + 1, k] * f[k]
+            pn, vn, Rn, wn = _step_rk4_nb(p[i], v[i], R[i], w[i], thrust, moment, body, dt)
+            p[i] = pn
+            v[i] = vn
+            R[i] = Rn
+            w[i] = wn
 
 
 def _physics_kernel():
-    """The compiled substep over the batch: ``quadfault._sim_numba.motor_apply`` (eqs. 11, 13),
-    the allocation (``Vehicle.wrench``) and ``quadfault._sim_numba.step_rk4`` (eqs. 1-4) --
-    the existing transcriptions of the core functions, called in a parallel loop."""
-    global _KERNEL
-    if _KERNEL is None:
-        from numba import njit, prange
-
-        from quadfault._sim_numba import motor_apply, step_rk4
-
-        @njit(cache=True, parallel=True)
-        def substep(p, v, R, w, f_cmd, eta, sigma, z, body, saturate, dt):
-            n = f_cmd.shape[1]
-            A = body.allocation
-            for i in prange(p.shape[0]):
-                f = motor_apply(f_cmd[i], eta[i], body.max_thrust, saturate, sigma[i], z[i])
-                thrust = 0.0
-                moment = np.zeros(3)
-                for k in range(n):
-                    thrust += A[0, k] * f[k]
-                    for r in range(3):
-                        moment[r] += A[r + 1, k] * f[k]
-                pn, vn, Rn, wn = step_rk4(p[i], v[i], R[i], w[i], thrust, moment, body, dt)
-                p[i] = pn
-                v[i] = vn
-                R[i] = Rn
-                w[i] = wn
-
-        _KERNEL = substep
-    return _KERNEL
+    return _substep_kernel
 
 
 def _expand(mask: np.ndarray, like: np.ndarray) -> np.ndarray:

@@ -39,6 +39,7 @@ def test_local_backend_gives_the_serial_table(serial_table):
     assert "geometric" in table
 
 
+@pytest.mark.slow  # compiles / starts a framework on the first run
 def test_ray_backend_gives_the_same_table(serial_table):
     ray = pytest.importorskip("ray")
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)

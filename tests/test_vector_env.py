@@ -139,6 +139,7 @@ def test_bad_input_raises_clear_errors():
         env.step(np.full((2, 4), 2.0))
 
 
+@pytest.mark.slow  # compiles / starts a framework on the first run
 def test_noise_streams_shared_is_seeded_and_physics_numba_matches_numpy():
     kw = dict(scenario="combined", duration=1.0, estimator_rate="control")
     runs = []
@@ -155,6 +156,7 @@ def test_noise_streams_shared_is_seeded_and_physics_numba_matches_numpy():
     np.testing.assert_allclose(runs[2], runs[0], rtol=0, atol=1e-6)
 
 
+@pytest.mark.slow  # compiles / starts a framework on the first run
 def test_sb3_adapter_trains_ppo():
     pytest.importorskip("torch")
     sb3 = pytest.importorskip("stable_baselines3")
