@@ -64,7 +64,8 @@ class TrainConfig:
         eval_episodes: episodes per evaluation.
         checkpoint_freq: save a checkpoint every this many steps (0: none).
         tensorboard: TensorBoard log folder, or None.
-        progress_bar: SB3's progress bar.
+        progress_bar: SB3's progress bar (needs ``rich``); otherwise quadfault's own bar is
+            shown on a terminal.
         algo_kwargs: extra keywords of the algorithm (``learning_rate``, ``n_steps``, ...).
         device: torch device (``"cpu"`` by default).
         torch_threads: CPU threads torch may use (1 is fastest for these small networks and
@@ -163,9 +164,31 @@ def make_vec_env(config: TrainConfig, seed: int, n_envs: int, monitor_dir=None):
                             monitor_dir=None if monitor_dir is None else str(monitor_dir))
 
 
-def _callbacks(config: TrainConfig, run_dir: Path, eval_env):
+def _installed(module: str) -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec(module) is not None
+
+
+def _callbacks(config: TrainConfig, run_dir: Path, eval_env, progress: bool):
     from stable_baselines3.common.callbacks import (BaseCallback, CheckpointCallback,
                                                     EvalCallback)
+
+    class Progress(BaseCallback):
+        """quadfault's progress bar (quiet off a terminal and with --quiet)."""
+
+        def _on_training_start(self) -> None:
+            from quadfault.progress import progress_bar
+
+            self.bar = progress_bar(total=config.timesteps, desc=f"train {config.algo}",
+                                    unit="step")
+
+        def _on_step(self) -> bool:
+            self.bar.update(self.model.num_timesteps - self.bar.n)
+            return True
+
+        def _on_training_end(self) -> None:
+            self.bar.close()
 
     class SaveVecNormalize(BaseCallback):
         """Saves the normalisation statistics next to the best model."""
@@ -190,6 +213,8 @@ def _callbacks(config: TrainConfig, run_dir: Path, eval_env):
         cbs.append(CheckpointCallback(max(1, config.checkpoint_freq // config.n_envs),
                                       str(run_dir / "checkpoints"), name_prefix="model",
                                       save_vecnormalize=config.vec_normalize))
+    if progress:
+        cbs.append(Progress())
     return cbs
 
 
@@ -201,6 +226,11 @@ def train_one(config: TrainConfig, seed: int, run_dir: Path, *, force: bool = Fa
     from stable_baselines3.common.vec_env import VecNormalize
 
     torch.set_num_threads(config.torch_threads)
+    if config.tensorboard and not _installed("tensorboard"):
+        raise QuadfaultError("--tensorboard needs the tensorboard package (pip install "
+                             "tensorboard)")
+    # SB3's own bar needs rich; otherwise (or by default) quadfault's tqdm bar is used
+    sb3_bar = config.progress_bar and not quiet and _installed("rich") and _installed("tqdm")
     for name in (MODEL_FILE, VECNORM_FILE, CONFIG_FILE):
         if (run_dir / name).exists() and not force:
             raise QuadfaultError(f"{run_dir / name}: already exists; pass --force to overwrite")
@@ -217,8 +247,9 @@ def train_one(config: TrainConfig, seed: int, run_dir: Path, *, force: bool = Fa
     except TypeError as exc:
         raise ConfigError(f"algo_kwargs rejected by {config.algo.upper()}: {exc}") from None
     try:
-        model.learn(total_timesteps=config.timesteps, callback=_callbacks(config, run_dir, eval_env),
-                    progress_bar=config.progress_bar and not quiet,
+        model.learn(total_timesteps=config.timesteps,
+                    callback=_callbacks(config, run_dir, eval_env, not quiet and not sb3_bar),
+                    progress_bar=sb3_bar,
                     tb_log_name=f"{config.algo}_seed{seed}")
         save_agent(model, run_dir, force=force)
         atomic_write_text(run_dir / CONFIG_FILE,
@@ -311,7 +342,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--checkpoint-freq", type=int, help="steps between checkpoints (0: none)")
     parser.add_argument("--algo-kwargs", help="JSON object of algorithm keywords")
     parser.add_argument("--tensorboard", help="TensorBoard log folder")
-    parser.add_argument("--progress", action="store_true", help="SB3's progress bar")
+    parser.add_argument("--progress", action="store_true",
+                        help="SB3's progress bar (needs rich; quadfault's bar otherwise)")
     parser.add_argument("--out", required=True, help="output folder (one seed_<k>/ per seed)")
     parser.add_argument("--force", action="store_true", help="overwrite an existing run")
 
@@ -351,8 +383,6 @@ def config_from_args(args) -> TrainConfig:
 
 
 def run(args) -> int:
-    from quadfault.progress import enabled
-
     config = config_from_args(args)
     require_sb3()
     out = Path(args.out)
@@ -361,8 +391,7 @@ def run(args) -> int:
     quiet = getattr(args, "quiet", False)
     for seed in config.seeds:
         run_dir = out / f"seed_{seed}"
-        model = train_one(config, seed, run_dir, force=args.force,
-                          quiet=quiet or not enabled())
+        model = train_one(config, seed, run_dir, force=args.force, quiet=quiet)
         best = _best_mean_reward(run_dir)
         if not quiet:
             best_text = "n/a" if math.isnan(best) else f"{best:.3f}"

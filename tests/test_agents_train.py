@@ -95,3 +95,18 @@ def test_missing_sb3_is_one_clean_error(monkeypatch, tmp_path, capsys):
                  str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "rl" in err[0] and "stable-baselines3" in err[0]
+
+
+def test_tensorboard_missing_is_clean(tmp_path):
+    pytest.importorskip("stable_baselines3")
+    import importlib.util
+    from dataclasses import replace
+
+    from agents.train import train_one
+    from quadfault.errors import QuadfaultError
+
+    if importlib.util.find_spec("tensorboard") is not None:
+        pytest.skip("tensorboard is installed")
+    cfg = replace(_tiny("ppo"), tensorboard=str(tmp_path / "tb"))
+    with pytest.raises(QuadfaultError, match="tensorboard"):
+        train_one(cfg, 0, tmp_path / "run", quiet=True)
