@@ -13,7 +13,8 @@ Prints:
 3. accuracy: motor-averaged RMSE and spike per scenario, mean over the seeds.
 
 Flights use ``quadfault reproduce``'s settings (``estimators.reproduce.sim_config``: no upper
-thrust limit, as in the paper). The EKF's Q_eta is calibrated first (as ``quadfault reproduce`` does) unless ``--q-eta``.
+thrust limit, as in the paper). The EKF's Q_eta is calibrated first (as ``quadfault
+reproduce`` does) unless ``--q-eta``.
 """
 
 from __future__ import annotations
@@ -41,12 +42,12 @@ def speed(duration: float) -> None:
                    seed=0).without_truth()
     short = rec.slice(0, min(len(rec), 2000))
     rows = {}
-    for label, make, r in (
-            ("EKF numba", lambda: MotorEfficiencyEKF(rec.vehicle, EKFConfig(backend="numba")), rec),
-            ("IRLS numba", lambda: SlidingWindowIRLS(rec.vehicle, IRLSConfig(backend="numba")), rec),
-            ("EKF numpy", lambda: MotorEfficiencyEKF(rec.vehicle, EKFConfig(backend="numpy")), short),
-            ("IRLS numpy", lambda: SlidingWindowIRLS(rec.vehicle, IRLSConfig(backend="numpy")), short)):
-        est = make()
+    veh = rec.vehicle
+    for label, est, r in (
+            ("EKF numba", MotorEfficiencyEKF(veh, EKFConfig(backend="numba")), rec),
+            ("IRLS numba", SlidingWindowIRLS(veh, IRLSConfig(backend="numba")), rec),
+            ("EKF numpy", MotorEfficiencyEKF(veh, EKFConfig(backend="numpy")), short),
+            ("IRLS numpy", SlidingWindowIRLS(veh, IRLSConfig(backend="numpy")), short)):
         est.run(r.slice(0, 50))  # compile / warm up
         t0 = time.perf_counter()
         est.run(r)
@@ -62,7 +63,8 @@ def flight(name: str, seed: int, duration: float, q_eta: float) -> dict:
     rec = simulate(named_scenario(name, duration), config=sim_config("rk4", name), seed=seed)
     blind = rec.without_truth()
     out = {"diverged": flight_check(rec)["diverged"]}
-    for est in (SlidingWindowIRLS(rec.vehicle), MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_eta))):
+    for est in (SlidingWindowIRLS(rec.vehicle),
+                MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_eta))):
         s = est.run(blind)
         sc = score(rec, s)
         out[est.name] = {"rmse": float(np.mean(sc.rmse)), "spike": mean_or_none(sc.spike),
@@ -94,7 +96,8 @@ def main() -> None:
     lost = [j for j, r in zip(jobs, res) if r["diverged"]]
     if lost:
         print(f"WARNING: flights that lost control: {lost}")
-    print(f"\nFDI and accuracy over {args.seeds} seeds, {args.duration:g} s flights, EKF Q_eta = {q:.4g}")
+    print(f"\nFDI and accuracy over {args.seeds} seeds, {args.duration:g} s flights, "
+          f"EKF Q_eta = {q:.4g}")
     print(f"{'scenario':<12} {'est':<5} {'detected':>9} {'worst lat [s]':>14} {'false':>6} "
           f"{'RMSE':>7} {'spike':>7}")
     for name in SCENARIOS:
@@ -105,8 +108,9 @@ def main() -> None:
             lat = [x for r in rs for x in r["fdi"].latencies if x is not None]
             false = sum(r["fdi"].false_alarms for r in rs)
             spikes = [r["spike"] for r in rs if r["spike"] is not None]
-            print(f"{name:<12} {est:<5} {det:>4}/{tot:<4} {max(lat) if lat else float('nan'):>14.3f} "
-                  f"{false:>6} {np.mean([r['rmse'] for r in rs]):>7.4f} "
+            worst = max(lat) if lat else float("nan")
+            print(f"{name:<12} {est:<5} {det:>4}/{tot:<4} {worst:>14.3f} {false:>6}"
+                  f" {np.mean([r['rmse'] for r in rs]):>7.4f} "
                   f"{(np.mean(spikes) if spikes else float('nan')):>7.4f}")
 
 
