@@ -111,6 +111,7 @@ def run(args) -> int:
         effects = tuple(parse_effect(spec) for spec in args.effect)
     rec = simulate(scenario, vehicle=vehicle, config=cfg, seed=args.seed, effects=effects,
                    thrust_noise=args.thrust_noise, progress=not args.quiet)
+    _warn_if_control_lost(rec, scenario, args)
     if args.commands == "u":
         k = DEFAULT_THRUST_COEFFICIENT
         u = np.sqrt(np.maximum(rec.thrust_cmd, 0.0) / k)
@@ -123,3 +124,27 @@ def run(args) -> int:
         print(f"wrote {out} ({len(rec)} rows, {rec.duration:.3f} s, scenario {args.scenario}, "
               f"seed {args.seed})")
     return 0
+
+
+#: Tracking error [m] above which ``simulate`` warns that the controller lost the vehicle.
+LOST_CONTROL_ERROR = 2.0
+
+
+def _warn_if_control_lost(rec, scenario, args) -> None:
+    """Say so on stderr when the plain controller lost the vehicle (the recording is still
+    written: it is what the physics gives)."""
+    import sys
+
+    import numpy as np
+
+    err = np.linalg.norm(rec.position - scenario.trajectory(rec.t).position, axis=1)
+    lost = np.flatnonzero(err > LOST_CONTROL_ERROR)
+    if lost.size == 0:
+        return
+    hint = ""
+    if not args.no_saturation and args.integrator != "reference":
+        hint = (" With thrust-to-weight 2 a rotor at eta = 0.5 cannot hold the paper's circle;"
+                " the paper's scenarios assume no upper thrust limit (--no-saturation), or use"
+                " the estimate-aware controller (agents).")
+    print(f"warning: the controller lost the vehicle at t = {rec.t[lost[0]]:.2f} s (tracking "
+          f"error > {LOST_CONTROL_ERROR:g} m, max {err.max():.3g} m).{hint}", file=sys.stderr)
