@@ -30,8 +30,10 @@ FUZZ = settings(max_examples=25, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 
 
-def run_cli(argv, timeout: float = 120.0):
-    """``(exit code, stdout, stderr)`` of ``quadfault.cli.main(argv)`` run in-process."""
+def run_cli(argv, timeout: float = 600.0):
+    """``(exit code, stdout, stderr)`` of ``quadfault.cli.main(argv)`` run in-process; a run
+    longer than ``timeout`` [s] (generous: a first call may JIT-compile kernels on a loaded
+    machine) fails as a hang."""
     out, err = io.StringIO(), io.StringIO()
 
     def _hang(signum, frame):
