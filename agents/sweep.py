@@ -186,7 +186,8 @@ def _add_backend(parser):
 def main(argv=None) -> int:
     import agents.evaluate as ev
 
-    parser = argparse.ArgumentParser(prog="python -m agents.sweep", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m agents.sweep",
+                                     description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="what", required=True)
     p_eval = sub.add_parser("evaluate", help="agents x scenarios x seeds (agents.evaluate)")
     ev.add_arguments(p_eval)

@@ -277,7 +277,8 @@ def main(argv=None) -> int:
         else:
             print(f"\nPPO training with {args.ppo_envs} envs, {args.ppo_steps} steps: native "
                   f"vector env {rates['native']:,.0f} steps/s, SubprocVecEnv "
-                  f"{rates['subproc']:,.0f} steps/s, ratio {rates['native'] / rates['subproc']:.2f}")
+                  f"{rates['subproc']:,.0f} steps/s, "
+                  f"ratio {rates['native'] / rates['subproc']:.2f}")
     return 0
 
 

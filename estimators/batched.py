@@ -30,9 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimators.base import (STATUS_BAD_SAMPLE, STATUS_ILL_CONDITIONED, STATUS_MAX_ITER,
-                             STATUS_NO_EXCITATION, STATUS_OK, STATUS_REJECTED, STATUS_WARMUP,
-                             STATUSES, Sample)
+from estimators.base import (STATUS_BAD_SAMPLE, STATUS_MAX_ITER, STATUS_NO_EXCITATION,
+                             STATUS_OK, STATUS_WARMUP, STATUSES, Sample)
 from estimators.ekf import (NOISE_REFERENCE_DT, EKFConfig, MotorEfficiencyEKF,
                             measurement_update, predict)
 from estimators.irls import IRLSConfig, numba_available, solve_window
@@ -334,8 +333,7 @@ def make_batched_estimator(name: str, vehicle: Vehicle, num: int, **kwargs):
     raise ConfigError(f"no batched estimator {name!r}; choose 'irls' or 'ekf'")
 
 
-__all__ = ["BatchedIRLS", "BatchedEKF", "BatchedEstimate", "make_batched_estimator", "CODE",
-           "STATUS_ILL_CONDITIONED", "STATUS_REJECTED"]
+__all__ = ["BatchedIRLS", "BatchedEKF", "BatchedEstimate", "make_batched_estimator", "CODE"]
 
 
 if njit is not None:

@@ -401,7 +401,8 @@ class QuadFaultVectorEnv(VectorEnv):
                                   np.ascontiguousarray(eta[:, j]), self.sigma, zraw, body, sat,
                                   self.dt)
                 continue
-            f = motor.apply(self.f_cmd, eta[:, j], f_max, _Draws(zraw * self.sigma[:, None]))  # eqs. 11, 13
+            # eqs. 11, 13: saturation, efficiency, exp(sigma_f eps) with the sub-env's draws
+            f = motor.apply(self.f_cmd, eta[:, j], f_max, _Draws(zraw * self.sigma[:, None]))
             wrench = self.vehicle.wrench(f)
             state = step_rk4(state, wrench[:, 0], wrench[:, 1:], self.vehicle, self.dt)
         if self.estimator_name == "truth":

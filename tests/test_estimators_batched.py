@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimators.base import STATUSES, samples
+from estimators.base import STATUSES, Sample, samples
 from estimators.batched import BatchedEKF, BatchedIRLS, make_batched_estimator
 from estimators.ekf import EKFConfig, MotorEfficiencyEKF
 from estimators.irls import IRLSConfig, SlidingWindowIRLS
@@ -50,8 +50,6 @@ def _compare(flights, single_factory, batched, corrupt=None):
             sample = tuple(sample)
         out = batched.update(*sample)
         for i, est in enumerate(singles):
-            from estimators.base import Sample
-
             e = est.update(Sample(*(a[i] for a in sample)))
             assert STATUSES[out.status[i]] == e.status, (k, i)
             np.testing.assert_allclose(out.eta[i], e.eta, rtol=0, atol=1e-6)
