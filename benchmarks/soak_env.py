@@ -37,6 +37,9 @@ ACTION_MODES = ("motor", "residual", "wrench")
 #: estimator -> share of episodes (the estimators cost most of the step time)
 ESTIMATORS = {"none": 0.55, "irls": 0.2, "ekf": 0.1, "truth": 0.15}
 OBSERVATIONS = ("flat", "dict")
+#: counters of failed checks
+CHECKS = ("nonfinite_obs", "nonfinite_reward", "outside_space", "missing_reason",
+          "spurious_reason", "nonfinite_truth")
 
 
 def rss_mib() -> float:
@@ -145,8 +148,7 @@ def soak(steps: int, seed: int, *, max_episode_steps: int | None = 300, progress
             if stats["steps"] % 100 == 0:
                 bar.update(100)
             if report_every and stats["steps"] % report_every == 0:
-                bad = sum(stats[k] for k in ("nonfinite_obs", "nonfinite_reward", "outside_space",
-                                             "missing_reason", "spurious_reason", "nonfinite_truth"))
+                bad = sum(stats[k] for k in CHECKS)
                 print(f"  checkpoint: {stats['steps']} steps, {stats['episodes']} episodes, "
                       f"{len(stats['combos'])} configurations, {bad} failed checks, "
                       f"RSS {rss_mib():.1f} MiB, {time.perf_counter() - started:.0f} s", flush=True)

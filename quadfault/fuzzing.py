@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from quadfault.recording import FORMAT, POSE_COLUMNS, RATE_COLUMNS
-from quadfault.vehicle import PAPER_INERTIA, PAPER_MASS, PAPER_GRAVITY, paper_allocation
+from quadfault.vehicle import PAPER_GRAVITY, PAPER_INERTIA, PAPER_MASS, paper_allocation
 
 #: Columns of the valid base recording (pose + rates + thrust commands).
 BASE_COLUMNS = ("t", *POSE_COLUMNS, *RATE_COLUMNS, "f1", "f2", "f3", "f4")

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import contextlib
 import gzip
-import json
 import signal
 import tempfile
 from pathlib import Path
@@ -148,7 +147,7 @@ def test_quaternion_norm_is_renormalised_within_tolerance_else_rejected(scale, d
 @FAST
 @given(mass=st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=5),
                       st.booleans(), st.none(), st.integers(-5, 5)))
-def test_vehicle_mass_accepted_iff_positive_finite_number(mass, ):
+def test_vehicle_mass_accepted_iff_positive_finite_number(mass):
     header, rows, side = valid_recording()
     side["vehicle"]["mass"] = mass
     with tempfile.TemporaryDirectory() as folder:
