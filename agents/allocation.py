@@ -20,7 +20,8 @@ wrench is not reachable; the allocation then gives up objectives by priority:
    whole wrench, ``min ||W (A diag(eta_hat) f - w)||`` s.t. ``0 <= f <= f_max``, with weights
    that favour roll/pitch and thrust and nearly ignore yaw. It is solved exactly by
    enumerating the 3^4 active sets (each rotor free, at 0 or at f_max) with one batched
-   solve of their normal equations; the problem is strictly convex, so the feasible candidate of least cost is
+   solve of their normal equations; the problem is strictly convex, so the feasible
+   candidate of least cost is
    the optimum (the tests cross-check it against :func:`scipy.optimize.lsq_linear`).
 
 ``eta_hat`` is guarded: values below ``eta_floor`` (default 0.1) are raised to it, and
@@ -104,7 +105,8 @@ class EstimateAwareAllocator:
 
     def __init__(self, vehicle: Vehicle, config: AllocationConfig | None = None):
         if vehicle.n_rotors != 4:
-            raise ConfigError(f"the estimate-aware allocation needs 4 rotors, got {vehicle.n_rotors}")
+            raise ConfigError(f"the estimate-aware allocation needs 4 rotors, "
+                              f"got {vehicle.n_rotors}")
         self.vehicle = vehicle
         self.config = config or AllocationConfig()
         self.f_max = vehicle.rotor_max_thrust
