@@ -21,8 +21,8 @@ wrench is not reachable; the allocation then gives up objectives by priority:
    that favour roll/pitch and thrust and nearly ignore yaw. It is solved exactly by
    enumerating the 3^4 active sets (each rotor free, at 0 or at f_max) with one batched
    solve of their normal equations; the problem is strictly convex, so the feasible
-   candidate of least cost is
-   the optimum (the tests cross-check it against :func:`scipy.optimize.lsq_linear`).
+   candidate of least cost is the optimum (the tests cross-check it against
+   :func:`scipy.optimize.lsq_linear`).
 
 ``eta_hat`` is guarded: values below ``eta_floor`` (default 0.1) are raised to it, and
 non-finite values count as 1 (nominal), so a bad estimate can at most make a rotor ask for
