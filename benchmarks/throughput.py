@@ -223,7 +223,7 @@ def main(argv=None) -> int:
     ap.add_argument("--ppo-envs", type=int, default=8)
     ap.add_argument("--ppo-steps", type=int, default=4096)
     args = ap.parse_args(argv)
-    max_n = args.max_n or (16384 if args.full else 4096)
+    max_n = (16384 if args.full else 4096) if args.max_n is None else args.max_n
     if max_n < 1 or args.horizon < 10:
         print("throughput: --max-n >= 1 and --horizon >= 10 required", file=sys.stderr)
         return 2
