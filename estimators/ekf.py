@@ -32,7 +32,8 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from estimators.base import (STATUS_BAD_SAMPLE, STATUS_OK, STATUS_WARMUP, Estimate,
+from estimators.base import (STATUS_BAD_SAMPLE, STATUS_NO_EXCITATION, STATUS_OK,
+                             STATUS_WARMUP, Estimate,
                              EstimateSeries, Sample, samples)
 from quadfault.dynamics import angular_acceleration, translational_acceleration
 from quadfault.errors import ConfigError
@@ -48,6 +49,21 @@ P_, V_, W_, R_, ETA_ = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 18), 18
 #: vec(R) entries of the third column R e3 (column-major vec).
 R_E3 = slice(15, 18)
 
+
+
+#: A rotor commanded at most this thrust [N] carries no information on its efficiency. A step
+#: whose command has such a rotor leaves the whole efficiency vector where it was (status
+#: ``no_excitation``): the kinematic states are filtered as usual, the efficiencies are held,
+#: decorrelated from the kinematic states, and their variance grows by Q_eta dt.
+IDLE_THRUST = 1e-3
+
+
+def _freeze_eta(x, P, eta_keep, P_keep, qc, dt) -> None:
+    """Restore the efficiencies and their covariance block after a step without excitation."""
+    x[ETA_:] = eta_keep
+    P[ETA_:, :ETA_] = 0.0
+    P[:ETA_, ETA_:] = 0.0
+    P[ETA_:, ETA_:] = P_keep + np.diag(qc[ETA_:] * dt)
 
 @dataclass(frozen=True)
 class EKFConfig:
@@ -288,9 +304,11 @@ class MotorEfficiencyEKF:
             return self._estimate(sample.t, STATUS_WARMUP)
         t_prev, f_prev = self._last
         dt = float(sample.t) - t_prev
-        if not dt > 0:
-            raise ConfigError(f"EKF: sample time {sample.t} is not after the previous one "
-                              f"({t_prev}); times must increase strictly")
+        if not dt > 0:  # a repeated or decreasing time stamp: skip it, keep the state
+            return self._estimate(sample.t, STATUS_BAD_SAMPLE)
+        idle = bool(np.any(f_prev <= IDLE_THRUST))
+        if idle:
+            eta_keep, P_keep = self.x[ETA_:].copy(), self.P[ETA_:, ETA_:].copy()
         if self.use_numba:
             from estimators.ekf_numba import step_inplace
 
@@ -300,8 +318,10 @@ class MotorEfficiencyEKF:
             Q = np.diag(self.q_diag * (dt / NOISE_REFERENCE_DT))
             x, P, _ = predict(self.x, self.P, f_prev, dt, self.vehicle, Q)
             self.x, self.P = measurement_update(x, P, sample, self.r_diag, self.config.eta_bounds)
+        if idle:
+            _freeze_eta(self.x, self.P, eta_keep, P_keep, self.q_diag / NOISE_REFERENCE_DT, dt)
         self._last = (float(sample.t), self._commands(sample.f))
-        return self._estimate(sample.t, STATUS_OK)
+        return self._estimate(sample.t, STATUS_NO_EXCITATION if idle else STATUS_OK)
 
     def _commands(self, f) -> np.ndarray:
         f = np.array(f, dtype=float)
@@ -324,6 +344,10 @@ class MotorEfficiencyEKF:
         if self.use_numba and n > 0 and recording.has_pose:
             eta, sd, ok = self._run_numba(recording)
             status = np.where(ok, STATUS_OK, STATUS_BAD_SAMPLE).astype(object)
+            # a row whose predict used an idle rotor's command (previous good row)
+            rows = np.flatnonzero(ok)
+            idle = np.any(self._commands(recording.thrust_cmd) <= IDLE_THRUST, axis=1)
+            status[rows[1:][idle[rows[:-1]]]] = STATUS_NO_EXCITATION
             if ok.any():
                 status[int(np.argmax(ok))] = STATUS_WARMUP  # the row that initialised x
         else:

@@ -12,6 +12,8 @@ import math
 import numpy as np
 from numba import njit
 
+from estimators.ekf import IDLE_THRUST
+
 
 @njit(cache=True, fastmath=True)
 def _mm(A, B):
@@ -313,6 +315,20 @@ def _finite_row(t, p, v, R, w, f, k):
 
 
 @njit(cache=True)
+def freeze_eta(x, P, eta_keep, P_keep, qc, dt):
+    """Mirror of ``ekf._freeze_eta``: a step without excitation leaves eta where it was."""
+    ns = x.shape[0]
+    for i in range(18, ns):
+        x[i] = eta_keep[i - 18]
+        for j in range(18):
+            P[i, j] = 0.0
+            P[j, i] = 0.0
+        for j in range(18, ns):
+            P[i, j] = P_keep[i - 18, j - 18]
+        P[i, i] += qc[i] * dt
+
+
+@njit(cache=True)
 def run_series(t, p, v, R, w, f, eta0, x, P0, A, m, g, J, Jinv, qc, r, lo, hi):
     """Filter a whole recording; returns ``(eta, sd, ok, x, P, last_good_row)``."""
     n, nr = t.shape[0], f.shape[1]
@@ -338,8 +354,18 @@ def run_series(t, p, v, R, w, f, eta0, x, P0, A, m, g, J, Jinv, qc, r, lo, hi):
             x[9:18] = _vec(R[k])
             x[18:] = eta0
         else:
-            step_inplace(x, P, f[last], t[k] - t[last], p[k], v[k], w[k], R[k].copy(),
+            dt = t[k] - t[last]
+            idle = False
+            for j in range(nr):
+                if f[last, j] <= IDLE_THRUST:
+                    idle = True
+            if idle:
+                eta_keep = x[18:].copy()
+                P_keep = P[18:, 18:].copy()
+            step_inplace(x, P, f[last], dt, p[k], v[k], w[k], R[k].copy(),
                          A, m, g, J, Jinv, qc, r, lo, hi)
+            if idle:
+                freeze_eta(x, P, eta_keep, P_keep, qc, dt)
         last = k
         eta[k] = x[18:]
         for j in range(nr):

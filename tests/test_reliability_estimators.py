@@ -81,17 +81,12 @@ def test_ekf_degenerate_windows_never_nan(case, flight, streams):
     assert _check("ekf", flight, streams, case)["finite"]
 
 
-@pytest.mark.xfail(strict=True, reason="EKF has no excitation/observability guard: with the "
-                   "motors off (or a rotor at 0 N) it reports 'ok' and its eta drifts "
-                   "(reported to the estimators owner)")
 @pytest.mark.parametrize("case", ["idle", "rotor_off"])
 def test_ekf_degenerate_windows_flagged_and_kept(case, flight, streams):
     r = _check("ekf", flight, streams, case)
     assert r["statuses"] != ["ok"] and r["kept"]
 
 
-@pytest.mark.xfail(strict=True, reason="EKF.update raises ConfigError on a repeated time stamp "
-                   "instead of returning 'bad_sample' (reported to the estimators owner)")
 def test_ekf_repeated_time_is_bad_sample_and_kept(flight, streams):
     r = _check("ekf", flight, streams, "repeated_time")
     assert r["raised"] is None and r["statuses"] == ["bad_sample"] and r["kept"]
