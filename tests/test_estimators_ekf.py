@@ -9,7 +9,7 @@ import pytest
 from estimators.base import Sample
 from estimators.ekf import (EKFConfig, MotorEfficiencyEKF, attitude_jacobian, kalman_update,
                             predict)
-from quadfault.errors import ConfigError, QuadfaultError
+from quadfault.errors import ConfigError
 from quadfault.rotation import expm_so3, hat, logm_so3, vee
 from quadfault.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario
 from quadfault.simulator import simulate
