@@ -13,6 +13,7 @@ import numpy as np
 from numba import njit
 
 from estimators.ekf import IDLE_THRUST
+from quadfault._sim_numba import expm_so3, hat, matvec  # the core's compiled mirrors
 
 
 @njit(cache=True, fastmath=True)
@@ -26,17 +27,6 @@ def _mm(A, B):
             if a != 0.0:
                 for j in range(p):
                     out[i, j] += a * B[k, j]
-    return out
-
-
-@njit(cache=True)
-def _mv(A, x):
-    out = np.zeros(A.shape[0])
-    for i in range(A.shape[0]):
-        acc = 0.0
-        for k in range(A.shape[1]):
-            acc += A[i, k] * x[k]
-        out[i] = acc
     return out
 
 
@@ -88,29 +78,6 @@ def _gain(S, HP):
 
 
 @njit(cache=True)
-def _hat(w):
-    out = np.zeros((3, 3))
-    out[0, 1], out[0, 2] = -w[2], w[1]
-    out[1, 0], out[1, 2] = w[2], -w[0]
-    out[2, 0], out[2, 1] = -w[1], w[0]
-    return out
-
-
-@njit(cache=True)
-def _expm(phi):
-    th2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
-    if th2 < 1e-8:
-        a = 1.0 - th2 / 6.0 + th2 * th2 / 120.0
-        b = 0.5 - th2 / 24.0 + th2 * th2 / 720.0
-    else:
-        th = math.sqrt(th2)
-        a = math.sin(th) / th
-        b = (1.0 - math.cos(th)) / th2
-    K = _hat(phi)
-    return np.eye(3) + a * K + b * _mm(K, K)
-
-
-@njit(cache=True)
 def _right_jacobian(phi):
     th2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
     if th2 < 1e-8:
@@ -120,7 +87,7 @@ def _right_jacobian(phi):
         th = math.sqrt(th2)
         a = (1.0 - math.cos(th)) / th2
         b = (th - math.sin(th)) / (th2 * th)
-    K = _hat(phi)
+    K = hat(phi)
     return np.eye(3) - a * K + b * _mm(K, K)
 
 
@@ -224,13 +191,13 @@ def step_inplace(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi):
     T = 0.0
     for j in range(nr):
         T += A[0, j] * ef[j]
-    M = _mv(A[1:], ef)
+    M = matvec(A[1:], ef)
     b3 = R[:, 2].copy()
     a = -(T / m) * b3
     a[2] += g
-    wdot = _mv(Jinv, M - np.cross(w, _mv(J, w)))
+    wdot = matvec(Jinv, M - np.cross(w, matvec(J, w)))
     phi = w * dt + 0.5 * wdot * dt * dt
-    E = _expm(phi)
+    E = expm_so3(phi)
     Rn = _mm(R, E)
     xp = np.empty(ns)
     xp[0:3] = p + v * dt + 0.5 * a * dt * dt
@@ -240,7 +207,7 @@ def step_inplace(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi):
     xp[18:] = eta
     F = np.eye(ns)
     B = _mm(Jinv, A[1:] * f.reshape(1, nr))
-    G = _mm(Jinv, _hat(_mv(J, w)) - _mm(_hat(w), J))
+    G = _mm(Jinv, hat(matvec(J, w)) - _mm(hat(w), J))
     for i in range(3):
         F[i, 3 + i] = dt
         F[i, 15 + i] = -(T / m) * 0.5 * dt * dt
@@ -260,7 +227,7 @@ def step_inplace(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi):
     Jr = _right_jacobian(phi)
     dR = np.empty((9, 3))
     for i in range(3):
-        dR[:, i] = _vec(_mm(Rn, _hat(Jr[:, i].copy())))
+        dR[:, i] = _vec(_mm(Rn, hat(Jr[:, i].copy())))
     F[9:18, 6:9] = _mm(dR, dt * np.eye(3) + 0.5 * dt * dt * G)
     F[9:18, 18:] = _mm(dR, 0.5 * dt * dt * B)
     Pp = _sandwich(F, P)
@@ -286,7 +253,7 @@ def step_inplace(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi):
     for i in range(12):
         S[i, i] += r[i]
     K = _gain(S, HP)
-    xn = xp + _mv(K, y)
+    xn = xp + matvec(K, y)
     # Joseph form (I - K H) P (I - K H)^T + K R K^T, associated as A - (A H^T - K R) K^T
     # with A = (I - K H) P = P - K (H P)
     A = Pp - _mm(K, HP)
