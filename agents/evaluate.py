@@ -237,6 +237,8 @@ def run(args) -> int:
     labels = [a.label for a in agents]
     if len(set(labels)) != len(labels):
         raise ConfigError(f"--agents lists an agent twice: {' '.join(labels)}")
+    if any(s < 0 for s in args.seeds):
+        raise ConfigError(f"--seeds must be non-negative integers, got {args.seeds}")
     if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
         raise ConfigError(f"--duration must be positive [s], got {args.duration}")
     out = Path(args.out)

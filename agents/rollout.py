@@ -145,6 +145,8 @@ def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any =
     """
     cfg = config or FlightConfig()
     veh = vehicle or Vehicle()
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ConfigError(f"seed must be a non-negative integer, got {seed!r}")
     rng = np.random.default_rng(seed)
     n = int(round(scenario.duration / cfg.dt))
     if n < 2:
