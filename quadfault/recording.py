@@ -34,6 +34,9 @@ U_COLUMNS = ("u1", "u2", "u3", "u4")
 OMEGA_COLUMNS = ("omega1", "omega2", "omega3", "omega4")
 ETA_COLUMNS = ("eta1", "eta2", "eta3", "eta4")
 QUAT_NORM_TOL = 1e-3
+#: Every column the contract defines; other columns are extras, kept and ignored.
+KNOWN_COLUMNS = frozenset(("t", "vbat") + POSE_COLUMNS + RATE_COLUMNS + ACC_COLUMNS + F_COLUMNS
+                          + U_COLUMNS + OMEGA_COLUMNS + ETA_COLUMNS)
 
 # Quaternions of the fixed frame changes (exact matrices in rotation.py).
 _Q_ENU_TO_NED = rot_to_quat(ENU_TO_NED)
@@ -287,18 +290,25 @@ _CHUNK_ROWS = 5_000
 
 
 def _rows_to_array(path, header, rows, first_row):
-    """``rows`` (lists of cells) as a float array; the error names the first bad cell."""
+    """``rows`` (lists of cells) as a float array; the error names the first bad cell of a
+    contract column. Non-numeric cells of unknown extra columns become NaN (they are kept as
+    columns and ignored, CONTRACT.md sec. 3)."""
     try:
         return np.array(rows, dtype=float).reshape(len(rows), len(header))
     except ValueError:
+        pass
+    out = np.empty((len(rows), len(header)))
+    for j, name in enumerate(header):
+        known = name in KNOWN_COLUMNS
         for i, r in enumerate(rows):
-            for j, cell in enumerate(r):
-                try:
-                    float(cell)
-                except ValueError:
-                    raise RecordingError(path, f"not a number: {cell!r}", column=header[j],
+            try:
+                out[i, j] = float(r[j])
+            except ValueError:
+                if known:
+                    raise RecordingError(path, f"not a number: {r[j]!r}", column=name,
                                          row=first_row + i) from None
-        raise
+                out[i, j] = np.nan
+    return out
 
 
 def _read_table(path: Path) -> tuple[list[str], np.ndarray]:

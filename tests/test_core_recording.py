@@ -189,3 +189,9 @@ def test_imu_only_recording_loads(rec, tmp_path):
 def test_without_truth_strips_truth(rec):
     clean = rec.without_truth()
     assert clean.eta_true is None and "scenario" not in clean.meta
+
+
+def test_unknown_text_columns_are_kept_and_ignored(written):
+    _edit_csv(written, lambda header, rows: (header + ["note"], [r + ["hello"] for r in rows]))
+    back = read_recording(written)
+    assert "note" in back.extra and np.all(np.isnan(back.extra["note"]))
