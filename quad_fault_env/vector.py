@@ -30,7 +30,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from quad_fault_env.envs.config import RewardConfig, TerminationLimits
+from quad_fault_env.envs.config import RewardConfig, TerminationLimits, validate_action
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.estimation import NOMINAL_PRIOR_SD
 from quad_fault_env.observation import SD_MAX
@@ -292,17 +292,7 @@ class QuadFaultVectorEnv(VectorEnv):
         return out
 
     def _check_actions(self, actions) -> np.ndarray:
-        try:
-            a = np.asarray(actions, dtype=float)
-        except (TypeError, ValueError):
-            raise ValueError(f"actions must be numeric, got {actions!r}") from None
-        if a.shape != self.action_space.shape:
-            raise ValueError(f"actions have shape {a.shape}, expected {self.action_space.shape}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError("actions contain NaN or inf")
-        if np.any(np.abs(a) > 1.0 + 1e-6):
-            raise ValueError("actions outside [-1, 1] (the agent must clip)")
-        return np.clip(a, -1.0, 1.0)
+        return validate_action(actions, self.action_space.shape, "actions")
 
     def _motor_commands(self, a: np.ndarray, t: np.ndarray) -> np.ndarray:
         """``QuadFaultEnv.motor_commands`` over the batch (rows share the same formulas)."""

@@ -153,3 +153,22 @@ class InitialStateSpread:
 
     def __post_init__(self):
         _check_nonnegative(self, ("position", "velocity", "attitude", "rate"))
+
+
+def validate_action(action, shape: tuple, name: str = "action") -> np.ndarray:
+    """An agent's action as a float array of ``shape`` inside [-1, 1].
+
+    Raises ValueError naming the problem (non-numeric, wrong shape, NaN/inf, outside the box
+    by more than 1e-6); values within the tolerance are clipped.
+    """
+    try:
+        a = np.asarray(action, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be numeric, got {action!r}") from None
+    if a.shape != tuple(shape):
+        raise ValueError(f"{name} has shape {a.shape}, expected {tuple(shape)}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} contains NaN or inf: {a.tolist()}")
+    if np.any(np.abs(a) > 1.0 + 1e-6):
+        raise ValueError(f"{name} outside [-1, 1]: {a.tolist()} (the agent must clip)")
+    return np.clip(a, -1.0, 1.0)

@@ -21,7 +21,8 @@ import numpy as np
 
 from estimators.base import Estimate, Sample
 from quad_fault_env.envs.config import (ESTIMATOR_RATES, OBSERVATION_KINDS, ActionConfig,
-                                        InitialStateSpread, RewardConfig, TerminationLimits)
+                                        InitialStateSpread, RewardConfig, TerminationLimits,
+                                        validate_action)
 from quad_fault_env.estimation import (NOMINAL_PRIOR_SD, NominalBelief, TruthOracle,
                                        diagnostics_dict, estimate_sd, make_estimator)
 from quad_fault_env.observation import SD_MAX, ObservationLayout
@@ -283,17 +284,7 @@ class QuadFaultEnv(gym.Env):
 
     # -- step --------------------------------------------------------------------------------
     def _check_action(self, action) -> np.ndarray:
-        try:
-            a = np.asarray(action, dtype=float)
-        except (TypeError, ValueError):
-            raise ValueError(f"action must be numeric, got {action!r}") from None
-        if a.shape != self.action_space.shape:
-            raise ValueError(f"action has shape {a.shape}, expected {self.action_space.shape}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"action contains NaN or inf: {a.tolist()}")
-        if np.any(np.abs(a) > 1.0 + 1e-6):
-            raise ValueError(f"action outside [-1, 1]: {a.tolist()} (the agent must clip)")
-        return np.clip(a, -1.0, 1.0)
+        return validate_action(action, self.action_space.shape)
 
     def _measure(self, state: RigidBodyState) -> RigidBodyState:
         return self.sensor_noise.measure(state, None, self.np_random)[0]
