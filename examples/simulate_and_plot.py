@@ -49,4 +49,9 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from quadfault.errors import QuadfaultError
+
+    try:
+        raise SystemExit(main())
+    except QuadfaultError as exc:
+        raise SystemExit(f"error: {exc}") from None
