@@ -24,7 +24,6 @@ import argparse
 import collections
 import contextlib
 import io
-import signal
 import sys
 import tempfile
 import time
@@ -34,27 +33,10 @@ import numpy as np
 
 from quadfault.cli import main as cli_main
 from quadfault.errors import QuadfaultError
-from quadfault.fuzzing import MUTATION_NAMES, bad_case, error_is_clean, write_case
+from quadfault.fuzzing import (MUTATION_NAMES, Hang, bad_case, error_is_clean, time_limit,
+                               write_case)
 from quadfault.progress import progress_bar
 from quadfault.recording import read_recording
-
-
-class Hang(Exception):
-    pass
-
-
-@contextlib.contextmanager
-def time_limit(seconds: float):
-    def _raise(signum, frame):
-        raise Hang()
-
-    previous = signal.signal(signal.SIGALRM, _raise)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
 
 
 def check_reader(case, csv_path, side_path, timeout) -> tuple[str, str]:

@@ -10,8 +10,10 @@ fragments that error must contain (which column / key / row), the file name bein
 
 from __future__ import annotations
 
+import contextlib
 import gzip
 import json
+import signal
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -19,6 +21,26 @@ import numpy as np
 
 from quadfault.recording import FORMAT, POSE_COLUMNS, RATE_COLUMNS
 from quadfault.vehicle import PAPER_GRAVITY, PAPER_INERTIA, PAPER_MASS, paper_allocation
+
+
+class Hang(BaseException):
+    """Raised by :func:`time_limit`; a BaseException so that no ``except OSError`` /
+    ``except Exception`` in the code under test can mistake a hang for a clean error."""
+
+
+@contextlib.contextmanager
+def time_limit(seconds: float):
+    """Raise :class:`Hang` when the block runs longer than ``seconds`` (main thread, POSIX)."""
+    def _raise(signum, frame):
+        raise Hang(f"took longer than {seconds} s")
+
+    previous = signal.signal(signal.SIGALRM, _raise)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
 
 #: Columns of the valid base recording (pose + rates + thrust commands).
 BASE_COLUMNS = ("t", *POSE_COLUMNS, *RATE_COLUMNS, "f1", "f2", "f3", "f4")

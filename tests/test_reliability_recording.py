@@ -4,9 +4,7 @@ and the column / key / row, or in a correct result; never a traceback, a hang or
 
 from __future__ import annotations
 
-import contextlib
 import gzip
-import signal
 import tempfile
 from pathlib import Path
 
@@ -17,26 +15,11 @@ from hypothesis import strategies as st
 
 from quadfault.errors import QuadfaultError, RecordingError
 from quadfault.fuzzing import (BASE_COLUMNS, MUTATIONS, bad_case, csv_bytes, error_is_clean,
-                               json_bytes, valid_recording, write_case)
+                               json_bytes, time_limit, valid_recording, write_case)
 from quadfault.recording import read_recording
 
 FAST = settings(max_examples=60, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow])
-
-
-@contextlib.contextmanager
-def time_limit(seconds: float):
-    """Fail (instead of hanging) when the block runs longer than ``seconds``."""
-    def _raise(signum, frame):
-        raise TimeoutError(f"took longer than {seconds} s")
-
-    previous = signal.signal(signal.SIGALRM, _raise)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
 
 
 def _write(folder, header, rows, side, stem="flight"):
