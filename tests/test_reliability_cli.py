@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 
 from quadfault.cli import SUBCOMMANDS, main
 from quadfault.fuzzing import (MUTATIONS, bad_case, csv_bytes, error_is_clean, json_bytes,
-                               valid_recording, write_case)
+                               time_limit, valid_recording, write_case)
 
 FIXTURES = Path(__file__).parent / "fixtures"
 FUZZ = settings(max_examples=25, deadline=None, derandomize=True,
@@ -33,23 +33,13 @@ FUZZ = settings(max_examples=25, deadline=None, derandomize=True,
 def run_cli(argv, timeout: float = 600.0):
     """``(exit code, stdout, stderr)`` of ``quadfault.cli.main(argv)`` run in-process; a run
     longer than ``timeout`` [s] (generous: a first call may JIT-compile kernels on a loaded
-    machine) fails as a hang."""
+    machine) fails as a hang (:class:`quadfault.fuzzing.Hang`)."""
     out, err = io.StringIO(), io.StringIO()
-
-    def _hang(signum, frame):
-        raise TimeoutError(f"quadfault {' '.join(map(str, argv))} hung for {timeout} s")
-
-    previous = signal.signal(signal.SIGALRM, _hang)
-    signal.setitimer(signal.ITIMER_REAL, timeout)
-    try:
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-            try:
-                code = main([str(a) for a in argv])
-            except SystemExit as exc:  # argparse usage errors and --help
-                code = exc.code
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
+    with time_limit(timeout), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main([str(a) for a in argv])
+        except SystemExit as exc:  # argparse usage errors and --help
+            code = exc.code
     return code, out.getvalue(), err.getvalue()
 
 
