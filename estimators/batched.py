@@ -87,6 +87,17 @@ def _check_batch(num: int, n: int, t, p, v, R, w, f):
     return (t, *arrays), finite
 
 
+def _eta_rows(eta, num: int, n: int) -> np.ndarray:
+    """``eta0`` given as (n,) or (num, n), broadcast to (num, n) and checked finite."""
+    try:
+        eta = np.broadcast_to(eta, (num, n))
+    except ValueError:
+        raise ConfigError(f"eta0 must be {n} or ({num}, {n}) numbers") from None
+    if not np.all(np.isfinite(eta)):
+        raise ConfigError("eta0 must be finite")
+    return eta
+
+
 def _mask(num: int, mask) -> np.ndarray:
     if mask is None:
         return np.ones(num, dtype=bool)
@@ -154,12 +165,7 @@ class BatchedIRLS:
         mask = _mask(self.num, mask)
         n = self.vehicle.n_rotors
         eta = np.ones(n) if eta0 is None else np.asarray(eta0, dtype=float)
-        try:
-            eta = np.broadcast_to(eta, (self.num, n))
-        except ValueError:
-            raise ConfigError(f"eta0 must be {n} or ({self.num}, {n}) numbers") from None
-        if not np.all(np.isfinite(eta)):
-            raise ConfigError("eta0 must be finite")
+        eta = _eta_rows(eta, self.num, n)
         self.eta[mask] = eta[mask]
         self.sd[mask] = np.nan
         self._has_last[mask] = False
@@ -268,12 +274,7 @@ class BatchedEKF:
         mask = _mask(self.num, mask)
         n = self.vehicle.n_rotors
         eta = self.single._eta0_default if eta0 is None else np.asarray(eta0, dtype=float)
-        try:
-            eta = np.broadcast_to(eta, (self.num, n))
-        except ValueError:
-            raise ConfigError(f"eta0 must be {n} or ({self.num}, {n}) numbers") from None
-        if not np.all(np.isfinite(eta)):
-            raise ConfigError("eta0 must be finite")
+        eta = _eta_rows(eta, self.num, n)
         self._eta_init[mask] = eta[mask]
         self._init[mask] = False
 
