@@ -233,7 +233,15 @@ def solve_box_qp(H, q, lo: float, hi: float, x0, settings: IPMSettings | None = 
         raise ConfigError(f"interior-point start must lie strictly inside ({lo}, {hi}), got {x0}")
     Hl = np.asarray(H, dtype=float).tolist()
     ql = np.asarray(q, dtype=float).tolist()
-    x = x0.tolist()
+    if n == 4:  # the quadrotor: the same iteration on scalar locals (see _solve_box_qp4)
+        return _solve_box_qp4(Hl, ql, lo, hi, x0.tolist(), cfg, record_history)
+    return _solve_box_qp_general(Hl, ql, lo, hi, x0.tolist(), cfg, record_history)
+
+
+def _solve_box_qp_general(Hl: list, ql: list, lo: float, hi: float, x: list, cfg: IPMSettings,
+                          record_history: bool) -> IPMResult:
+    """Algorithm 1 on lists of floats, any n (the loop :func:`solve_box_qp` runs)."""
+    n = len(x)
     rn = range(n)
     pu = [xi - hi for xi in x]  # phi = [x - hi; lo - x] kept as its two halves
     pl = [lo - xi for xi in x]
@@ -295,3 +303,151 @@ def solve_box_qp(H, q, lo: float, hi: float, x0, settings: IPMSettings | None = 
         return IPMResult(np.array(x), lam, it, converged)
     return IPMResult(np.array(x), lam, it, converged, np.array(hist[0]), np.array(hist[1]),
                      np.array(hist[2]), np.array(hist[3]).reshape(-1, n))
+
+
+def _solve_box_qp4(Hl: list, ql: list, lo: float, hi: float, x: list, cfg: IPMSettings,
+                   record_history: bool) -> IPMResult:
+    """:func:`solve_box_qp` for n = 4 unknowns, unrolled on scalar Python floats.
+
+    Line for line the generic loop above (eqs. 39, 42-45), with the 4x4 Cholesky factor of the
+    reduced Newton matrix ``H + diag(d)`` written out and every operation in the generic loop's
+    order, so the iterates are the same floating-point numbers (tested bit for bit); it avoids
+    the per-element list indexing that dominates the generic loop (about 3x faster).
+    """
+    (h00, h01, h02, h03), (h10, h11, h12, h13), (h20, h21, h22, h23), (h30, h31, h32, h33) = Hl
+    q0, q1, q2, q3 = ql
+    x0, x1, x2, x3 = x
+    pu0, pu1, pu2, pu3 = x0 - hi, x1 - hi, x2 - hi, x3 - hi  # phi = [x - hi; lo - x]
+    pl0, pl1, pl2, pl3 = lo - x0, lo - x1, lo - x2, lo - x3
+    lu0, lu1, lu2, lu3 = -1.0 / pu0, -1.0 / pu1, -1.0 / pu2, -1.0 / pu3
+    ll0, ll1, ll2, ll3 = -1.0 / pl0, -1.0 / pl1, -1.0 / pl2, -1.0 / pl3
+    scale_t = cfg.mu * 2 * 4
+    alpha, beta, bt_eps, min_step = cfg.alpha, cfg.beta, cfg.backtrack_eps, cfg.min_step
+    tol_feas, tol_gap, sqrt = cfg.tol_feas, cfg.tol_gap, math.sqrt
+    gap = 0.0  # eq. (45)
+    gap -= pu0 * lu0 + pl0 * ll0
+    gap -= pu1 * lu1 + pl1 * ll1
+    gap -= pu2 * lu2 + pl2 * ll2
+    gap -= pu3 * lu3 + pl3 * ll3
+    hist = ([], [], [], []) if record_history else None
+    converged = False
+    it = 0
+    for it in range(1, cfg.max_iter + 1):
+        inv_t = max(gap, 1e-12) / scale_t  # 1/t, t = mu m / gap
+        # KKT residual, eq. (39)
+        rd0 = q0 + lu0 - ll0 + h00 * x0 + h01 * x1 + h02 * x2 + h03 * x3
+        rd1 = q1 + lu1 - ll1 + h10 * x0 + h11 * x1 + h12 * x2 + h13 * x3
+        rd2 = q2 + lu2 - ll2 + h20 * x0 + h21 * x1 + h22 * x2 + h23 * x3
+        rd3 = q3 + lu3 - ll3 + h30 * x0 + h31 * x1 + h32 * x2 + h33 * x3
+        cu0, cl0 = -lu0 * pu0 - inv_t, -ll0 * pl0 - inv_t
+        cu1, cl1 = -lu1 * pu1 - inv_t, -ll1 * pl1 - inv_t
+        cu2, cl2 = -lu2 * pu2 - inv_t, -ll2 * pl2 - inv_t
+        cu3, cl3 = -lu3 * pu3 - inv_t, -ll3 * pl3 - inv_t
+        r2 = 0.0
+        r2 += rd0 * rd0 + cu0 * cu0 + cl0 * cl0
+        r2 += rd1 * rd1 + cu1 * cu1 + cl1 * cl1
+        r2 += rd2 * rd2 + cu2 * cu2 + cl2 * cl2
+        r2 += rd3 * rd3 + cu3 * cu3 + cl3 * cl3
+        r_norm = sqrt(r2)
+        # Newton step, eq. (42) with dlambda eliminated: (H + diag(d)) dx = rhs, Cholesky
+        k00 = h00 - (lu0 / pu0 + ll0 / pl0)
+        k11 = h11 - (lu1 / pu1 + ll1 / pl1)
+        k22 = h22 - (lu2 / pu2 + ll2 / pl2)
+        k33 = h33 - (lu3 / pu3 + ll3 / pl3)
+        b0 = cl0 / pl0 - cu0 / pu0 - rd0
+        b1 = cl1 / pl1 - cu1 / pu1 - rd1
+        b2 = cl2 / pl2 - cu2 / pu2 - rd2
+        b3 = cl3 / pl3 - cu3 / pu3 - rd3
+        if not k00 > 0.0:
+            raise np.linalg.LinAlgError("Newton matrix is not positive definite")
+        a00 = sqrt(k00)
+        a10, a20, a30 = h10 / a00, h20 / a00, h30 / a00
+        s = k11 - a10 * a10
+        if not s > 0.0:
+            raise np.linalg.LinAlgError("Newton matrix is not positive definite")
+        a11 = sqrt(s)
+        a21 = (h21 - a20 * a10) / a11
+        a31 = (h31 - a30 * a10) / a11
+        s = k22 - a20 * a20 - a21 * a21
+        if not s > 0.0:
+            raise np.linalg.LinAlgError("Newton matrix is not positive definite")
+        a22 = sqrt(s)
+        a32 = (h32 - a30 * a20 - a31 * a21) / a22
+        s = k33 - a30 * a30 - a31 * a31 - a32 * a32
+        if not s > 0.0:
+            raise np.linalg.LinAlgError("Newton matrix is not positive definite")
+        a33 = sqrt(s)
+        y0 = b0 / a00  # L y = rhs
+        y1 = (b1 - a10 * y0) / a11
+        y2 = (b2 - a20 * y0 - a21 * y1) / a22
+        y3 = (b3 - a30 * y0 - a31 * y1 - a32 * y2) / a33
+        dx3 = y3 / a33  # L^T dx = y
+        dx2 = (y2 - a32 * dx3) / a22
+        dx1 = (y1 - a21 * dx2 - a31 * dx3) / a11
+        dx0 = (y0 - a10 * dx1 - a20 * dx2 - a30 * dx3) / a00
+        du0, dl0 = (cu0 - lu0 * dx0) / pu0, (cl0 + ll0 * dx0) / pl0
+        du1, dl1 = (cu1 - lu1 * dx1) / pu1, (cl1 + ll1 * dx1) / pl1
+        du2, dl2 = (cu2 - lu2 * dx2) / pu2, (cl2 + ll2 * dx2) / pl2
+        du3, dl3 = (cu3 - lu3 * dx3) / pu3, (cl3 + ll3 * dx3) / pl3
+        s_max = 1.0  # eq. (43): keep lambda > 0 and lo < x < hi
+        for lam, dlam in ((lu0, du0), (lu1, du1), (lu2, du2), (lu3, du3),
+                          (ll0, dl0), (ll1, dl1), (ll2, dl2), (ll3, dl3)):
+            if dlam < 0 and -lam / dlam < s_max:
+                s_max = -lam / dlam
+        for d, pu, pl in ((dx0, pu0, pl0), (dx1, pu1, pl1), (dx2, pu2, pl2), (dx3, pu3, pl3)):
+            if d > 0:
+                if -pu / d < s_max:
+                    s_max = -pu / d
+            elif d < 0 and pl / d < s_max:
+                s_max = pl / d
+        s = cfg.step_fraction * s_max
+        while True:  # backtracking, eq. (44)
+            t0, t1, t2, t3 = x0 + s * dx0, x1 + s * dx1, x2 + s * dx2, x3 + s * dx3
+            tu0, tu1, tu2, tu3 = lu0 + s * du0, lu1 + s * du1, lu2 + s * du2, lu3 + s * du3
+            tl0, tl1, tl2, tl3 = ll0 + s * dl0, ll1 + s * dl1, ll2 + s * dl2, ll3 + s * dl3
+            v0 = q0 + tu0 - tl0 + h00 * t0 + h01 * t1 + h02 * t2 + h03 * t3
+            v1 = q1 + tu1 - tl1 + h10 * t0 + h11 * t1 + h12 * t2 + h13 * t3
+            v2 = q2 + tu2 - tl2 + h20 * t0 + h21 * t1 + h22 * t2 + h23 * t3
+            v3 = q3 + tu3 - tl3 + h30 * t0 + h31 * t1 + h32 * t2 + h33 * t3
+            e0, f0 = -tu0 * (t0 - hi) - inv_t, -tl0 * (lo - t0) - inv_t
+            e1, f1 = -tu1 * (t1 - hi) - inv_t, -tl1 * (lo - t1) - inv_t
+            e2, f2 = -tu2 * (t2 - hi) - inv_t, -tl2 * (lo - t2) - inv_t
+            e3, f3 = -tu3 * (t3 - hi) - inv_t, -tl3 * (lo - t3) - inv_t
+            d2 = 0.0
+            d2 += v0 * v0
+            d2 += v1 * v1
+            d2 += v2 * v2
+            d2 += v3 * v3
+            c2 = 0.0
+            c2 += e0 * e0 + f0 * f0
+            c2 += e1 * e1 + f1 * f1
+            c2 += e2 * e2 + f2 * f2
+            c2 += e3 * e3 + f3 * f3
+            r_try = sqrt(d2 + c2)
+            if r_try <= (1.0 - alpha * s) * r_norm + bt_eps or s < min_step:
+                break
+            s *= beta
+        x0, x1, x2, x3 = t0, t1, t2, t3
+        lu0, lu1, lu2, lu3 = tu0, tu1, tu2, tu3
+        ll0, ll1, ll2, ll3 = tl0, tl1, tl2, tl3
+        pu0, pu1, pu2, pu3 = x0 - hi, x1 - hi, x2 - hi, x3 - hi
+        pl0, pl1, pl2, pl3 = lo - x0, lo - x1, lo - x2, lo - x3
+        gap = 0.0
+        gap -= pu0 * lu0 + pl0 * ll0
+        gap -= pu1 * lu1 + pl1 * ll1
+        gap -= pu2 * lu2 + pl2 * ll2
+        gap -= pu3 * lu3 + pl3 * ll3
+        if hist is not None:
+            hist[0].append(sqrt(d2))
+            hist[1].append(sqrt(c2))
+            hist[2].append(gap)
+            hist[3].append([x0, x1, x2, x3])
+        if r_try < tol_feas and gap < tol_gap:
+            converged = True
+            break
+    x = np.array([x0, x1, x2, x3])
+    lam = np.array([lu0, lu1, lu2, lu3, ll0, ll1, ll2, ll3])
+    if hist is None:
+        return IPMResult(x, lam, it, converged)
+    return IPMResult(x, lam, it, converged, np.array(hist[0]), np.array(hist[1]),
+                     np.array(hist[2]), np.array(hist[3]).reshape(-1, 4))

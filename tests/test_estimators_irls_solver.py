@@ -118,3 +118,28 @@ def test_iteration_limit_gives_usable_max_iter_estimate():
     assert diag.status == "max_iter" and "2 iterations" in diag.message
     assert all(n == 2 for n in diag.inner_iterations)
     assert np.all(np.isfinite(eta)) and np.all((eta > cfg.lower) & (eta < cfg.upper))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_unrolled_four_variable_ipm_is_bit_identical_to_the_general_loop(seed):
+    from estimators.ipm import _solve_box_qp4, _solve_box_qp_general
+
+    x_true = np.random.default_rng(100 + seed).uniform(-0.5, 1.5, 4)  # some bounds active
+    H, q, _, _ = _problem(seed, x_true)
+    x0 = np.random.default_rng(seed).uniform(0.05, 0.95, 4).tolist()
+    for cfg in (IPMSettings(), TIGHT, IPMSettings(max_iter=3)):
+        a = _solve_box_qp4(H.tolist(), q.tolist(), LO, HI, x0, cfg, True)
+        b = _solve_box_qp_general(H.tolist(), q.tolist(), LO, HI, x0, cfg, True)
+        assert (a.iterations, a.converged) == (b.iterations, b.converged)
+        for u, v in ((a.x, b.x), (a.lam, b.lam), (a.dual_history, b.dual_history),
+                     (a.cent_history, b.cent_history), (a.gap_history, b.gap_history),
+                     (a.x_history, b.x_history)):
+            np.testing.assert_array_equal(u, v)
+
+
+def test_unrolled_ipm_reports_a_non_positive_definite_newton_matrix():
+    from estimators.ipm import _solve_box_qp4
+
+    H = -20.0 * np.eye(4)  # not convex: the first Newton matrix H + diag(~8) is indefinite
+    with pytest.raises(np.linalg.LinAlgError):
+        _solve_box_qp4(H.tolist(), [0.0] * 4, LO, HI, [0.5] * 4, IPMSettings(), False)
