@@ -399,3 +399,16 @@ def test_fault_events_are_reported_in_the_step_they_happen():
     np.testing.assert_array_equal(out[10][4]["eta_true_samples"][:, 0], 1.0)
     np.testing.assert_array_equal(out[11][4]["eta_true_samples"][:, 0], 0.5)
     assert out[16][4]["eta_true_samples"][-1, 0] == 1.0
+
+
+def test_default_estimator_rate_does_not_depend_on_numba(monkeypatch):
+    """The same observations on every install: 1 kHz estimator by default, a warning without numba."""
+    import quad_fault_env.envs.quad_fault as qf
+
+    assert QuadFaultEnv(estimator="irls").estimator_rate == "physics"
+    monkeypatch.setattr(qf, "_numba_available", lambda: False)
+    monkeypatch.setattr(qf, "_SLOW_ESTIMATOR_WARNED", False)
+    with pytest.warns(RuntimeWarning, match="estimator_rate='control'"):
+        env = QuadFaultEnv(estimator="irls")
+    assert env.estimator_rate == "physics" and env.estimator_stride == 1
+    assert QuadFaultEnv(estimator="irls", estimator_rate="control").estimator_stride == env.substeps

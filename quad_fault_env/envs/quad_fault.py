@@ -15,6 +15,7 @@ controller only through the estimator (``compensate=True``) or through the agent
 from __future__ import annotations
 
 import math
+import warnings
 
 import gymnasium as gym
 import numpy as np
@@ -56,6 +57,20 @@ def _numba_available() -> bool:
     except ImportError:
         return False
     return True
+
+
+_SLOW_ESTIMATOR_WARNED = False
+
+
+def _warn_slow_estimator_once() -> None:
+    """Tell a user without numba once that the 1 kHz estimator runs in pure numpy."""
+    global _SLOW_ESTIMATOR_WARNED
+    if not _SLOW_ESTIMATOR_WARNED:
+        _SLOW_ESTIMATOR_WARNED = True
+        warnings.warn("QuadFaultEnv: the estimator runs at the physics rate in pure numpy "
+                      "(numba not installed), which is several times slower; install "
+                      "'quadfault[fast]' or pass estimator_rate='control' for a decimated "
+                      "100 Hz stream", RuntimeWarning, stacklevel=3)
 
 
 def _fault_dict(f) -> dict:
@@ -114,8 +129,9 @@ class QuadFaultEnv(gym.Env):
         sensor_noise: a :class:`~quadfault.simulator.SensorNoise` (default noise-free).
         action_mode, residual_scale, moment_scale: see ``ActionConfig``.
         control_rate: agent / controller rate [Hz] (100). physics_rate: plant rate [Hz] (1000).
-        estimator_rate: ``"physics"`` (every substep; default when numba is importable) or
-            ``"control"`` (the first substep of each control step only).
+        estimator_rate: ``"physics"`` (every substep; the default, whether or not numba is
+            installed, so observations do not depend on the install) or ``"control"`` (the
+            first substep of each control step only).
         compensate: divide the geometric controller's commands by eta_hat (fault-tolerant
             allocation through the estimate).
         observation: ``"flat"`` or ``"dict"``. reference_acceleration: add the ``ref_acc`` slot.
@@ -134,7 +150,7 @@ class QuadFaultEnv(gym.Env):
                  thrust_noise: float | None = None, sensor_noise: SensorNoise | None = None,
                  action_mode: str = "residual", residual_scale: float = 1.0,
                  moment_scale: tuple = (1.0, 1.0, 0.05), control_rate: float = 100.0,
-                 physics_rate: float = 1000.0, estimator_rate: str | None = None,
+                 physics_rate: float = 1000.0, estimator_rate: str = "physics",
                  compensate: bool = False, observation: str = "flat",
                  reference_acceleration: bool = True, reward: RewardConfig | None = None,
                  limits: TerminationLimits | None = None,
@@ -166,8 +182,6 @@ class QuadFaultEnv(gym.Env):
         self.substeps = int(round(ratio))
         self.dt = 1.0 / physics_rate
         self.control_period = 1.0 / control_rate
-        if estimator_rate is None:
-            estimator_rate = "physics" if _numba_available() else "control"
         if estimator_rate not in ESTIMATOR_RATES:
             raise ConfigError(f"estimator_rate must be one of {ESTIMATOR_RATES}, "
                               f"got {estimator_rate!r}")
@@ -188,6 +202,8 @@ class QuadFaultEnv(gym.Env):
             raise ConfigError(f"duration must be positive [s], got {duration!r}")
         self.duration = duration
         self.estimator = make_estimator(estimator, self.vehicle, **(estimator_kwargs or {}))
+        if estimator_rate == "physics" and estimator in ("irls", "ekf") and not _numba_available():
+            _warn_slow_estimator_once()
         self.compensate = bool(compensate)
         self.controller_config = controller or ControllerConfig()
         if observation not in OBSERVATION_KINDS:
