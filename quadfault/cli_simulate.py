@@ -109,8 +109,11 @@ def run(args) -> int:
         from quadfault.effects import parse_effect
 
         effects = tuple(parse_effect(spec) for spec in args.effect)
-    rec = simulate(scenario, vehicle=vehicle, config=cfg, seed=args.seed, effects=effects,
-                   thrust_noise=args.thrust_noise, progress=not args.quiet)
+    # an absurd parameter (wind=1e308) overflows inside numpy; the simulator's own
+    # non-finite-state check turns that into the one-line error, so numpy's warnings are noise
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        rec = simulate(scenario, vehicle=vehicle, config=cfg, seed=args.seed, effects=effects,
+                       thrust_noise=args.thrust_noise, progress=not args.quiet)
     _warn_if_control_lost(rec, scenario, args)
     if args.commands == "u":
         k = DEFAULT_THRUST_COEFFICIENT

@@ -142,6 +142,8 @@ BAD_ARGUMENTS = [
      "--control-rate"),
     ("simulate", ["--seed", "-1", "--out", "a.csv", "--duration", "0.05"], "--seed"),
     ("simulate", ["--dt", "1e-12", "--duration", "1", "--out", "a.csv"], "memory"),
+    ("simulate", ["--effect", "wind=1e308,0,0", "--duration", "0.05", "--out", "a.csv"],
+     "diverged"),
     ("estimate", ["missing.csv", "--out", "e.csv"], "missing.csv"),
     ("estimate", [".", "--out", "e.csv"], "directory"),
     ("estimate", ["{hover}", "--out", "e.txt"], ".csv"),
