@@ -166,11 +166,18 @@ def condition_number_1(A) -> float:
     """``||A||_1 ||A^-1||_1`` (inf when singular); MATLAB's ``1/rcond`` up to its estimate."""
     A = np.asarray(A, dtype=float)
     try:
-        Ainv = np.linalg.solve(A, np.eye(len(A)))
+        Ainv = np.linalg.inv(A)
     except np.linalg.LinAlgError:
         return math.inf
     value = float(np.abs(A).sum(0).max() * np.abs(Ainv).sum(0).max())
     return value if math.isfinite(value) else math.inf
+
+
+def _weighted_sum(w, H) -> np.ndarray:
+    """``sum_i w_i H_i`` of (m, n, n) blocks as one matrix-vector product (less call overhead
+    than ``tensordot``)."""
+    m, n = H.shape[0], H.shape[1]
+    return (w @ H.reshape(m, n * n)).reshape(n, n)
 
 
 def segment_energies(c, b, H, x, scale: float = 1.0) -> np.ndarray:
@@ -184,9 +191,9 @@ def window_uncertainty(c, b, H, w, x, gamma: float, scale: float = 1.0) -> np.nd
     n = len(x)
     active = int(np.count_nonzero(w > 0))
     s2 = max(float(w @ e), 0.0) / max(10 * active - n, 1)
-    info = np.tensordot(w, H, 1) * scale + gamma * np.eye(n)
+    info = _weighted_sum(w, H) * scale + gamma * np.eye(n)
     try:
-        cov = np.linalg.solve(info, np.eye(n))
+        cov = np.linalg.inv(info)
     except np.linalg.LinAlgError:
         return np.full(n, np.nan)
     return np.sqrt(np.maximum(np.diag(cov), 0.0) * s2)
@@ -220,7 +227,7 @@ def solve_window(c, b, H, x_prev, config: IRLSConfig, record_history: bool = Fal
         if not np.any(w > 0):
             return x_prev, None, _diag(STATUS_REJECTED, "every segment rejected", iters, w,
                                        cond, hist)
-        JGJ = np.tensordot(w, H, 1) * scale
+        JGJ = _weighted_sum(w, H) * scale
         cond = condition_number_1(JGJ)
         if not cond <= cfg.cond_max:
             return x_prev, None, _diag(STATUS_ILL_CONDITIONED, f"cond(J^T G J) = {cond:.3g} > "
