@@ -1,0 +1,199 @@
+"""Per-flight analyses of imported real logs (used by ``benchmarks/real_flights.py``).
+
+* :func:`efficiency_fit` -- per-rotor efficiency of one flight: the diagnosis' own
+  ``motor_efficiency`` effect (its library, replay and bounded robust least squares) fitted on
+  the airborne blocks only, with a time-blocked held-out score. On a closed-loop flight this
+  is the moment balance: the controller keeps the body level, so the mean moment of
+  ``eta_i f_i`` must vanish (roll, pitch, yaw) and the sum must carry the weight.
+* :func:`irls_efficiency` -- the same quantity from the project's IRLS estimator
+  (``estimators.irls``, paper eqs. 23-30) run offline over the flight: the median over the
+  airborne samples with status ``ok``.
+* :func:`rotational_check` -- why a nominal rotational model disagrees with a log: the gain
+  of measured over modelled angular acceleration in a frequency band (from the commands and,
+  when logged, from the measured rotor speeds), and how much of the slow moment the model
+  cannot explain is a rotor-drag (blade-flapping) moment ``M = c T (v_body x e_z)``, i.e.
+  proportional to the thrust times the horizontal body-frame velocity.
+
+Estimators and the diagnosis never read truth; these functions strip it first.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from quadfault.recording import Recording
+
+MIN_HEIGHT = 0.3  # [m] above the first sample: "airborne"
+
+
+@dataclass(frozen=True)
+class EfficiencyFit:
+    """Per-rotor efficiency of one flight.
+
+    Attributes:
+        eta: fitted efficiency per rotor [-] (1 = the importer's nominal thrust curve).
+        sd: one-sigma uncertainty from the Jacobian [-] (blocks treated as independent, so
+            optimistic; the flight-to-flight spread is the honest error bar).
+        improvement: held-out reduction of the normalised residual RMS over all channels
+            (5 contiguous folds of the airborne blocks) [-].
+        improvement_angular: the same over the angular channels only [-].
+        blocks: airborne blocks used.
+    """
+
+    eta: tuple
+    sd: tuple
+    improvement: float
+    improvement_angular: float
+    blocks: int
+
+
+def airborne(rec: Recording, t: np.ndarray, min_height: float = MIN_HEIGHT) -> np.ndarray:
+    """Boolean mask of times ``t`` [s] at which the vehicle is more than ``min_height`` [m]
+    above its first sample with the rotors carrying at least half the weight."""
+    height = -(rec.position[:, 2] - rec.position[0, 2])  # NED: up is -z
+    thrust = rec.thrust_cmd.sum(axis=1)
+    h = np.interp(t, rec.t, height)
+    f = np.interp(t, rec.t, thrust)
+    return (h > min_height) & (f > 0.5 * rec.vehicle.mass * rec.vehicle.gravity)
+
+
+def _rms(x) -> float:
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+def efficiency_fit(rec: Recording, min_height: float = MIN_HEIGHT, folds: int = 5) -> EfficiencyFit:
+    """Fit the diagnosis' ``motor_efficiency`` effect on the airborne blocks of ``rec``."""
+    from quadfault.diagnosis.fit import fit
+    from quadfault.diagnosis.library import build_library, predict
+    from quadfault.diagnosis.residuals import noise_scale, prepare
+    from quadfault.errors import ConfigError
+
+    rec = rec.without_truth()
+    if not rec.has_pose:
+        raise ConfigError("efficiency_fit needs a recording with position (an airborne mask)")
+    rp = prepare(rec)
+    cand = next(c for c in build_library(rp) if c.name == "motor_efficiency")
+    air = airborne(rec, rp.block_t, min_height)
+    idx = np.flatnonzero(air)
+    if idx.size < 5 * folds:
+        raise ConfigError(f"only {idx.size} airborne blocks; need {5 * folds}")
+    base = rp.measured - predict(rp, [])
+    scale = noise_scale(rp, base)
+    full = fit(rp, [cand], scale, mask=air)
+    after = np.empty_like(rp.measured)
+    for part in np.array_split(idx, folds):  # time-blocked held-out score
+        train = air.copy()
+        train[part] = False
+        f = fit(rp, [cand], scale, mask=train, init=list(full.x))
+        after[part] = rp.measured[part] - predict(rp, f.terms)[part]
+    zb, za = base[idx] / scale, after[idx] / scale
+    ang = [i for i, c in enumerate(rp.channels) if c.startswith("alpha")]
+    return EfficiencyFit(eta=tuple(float(x) for x in full.x[0]),
+                         sd=tuple(float(x) for x in full.sd[0]),
+                         improvement=1.0 - _rms(za) / _rms(zb),
+                         improvement_angular=1.0 - _rms(za[:, ang]) / _rms(zb[:, ang]),
+                         blocks=int(idx.size))
+
+
+def irls_efficiency(rec: Recording, min_height: float = MIN_HEIGHT,
+                    eta_max: float = 1.6) -> tuple:
+    """Median IRLS efficiency per rotor over the airborne ``ok`` estimates of ``rec``.
+
+    The upper bound is raised from the paper's 1 to ``eta_max``: on a real flight the
+    nominal thrust curve is only calibrated on average, so some rotors are above it.
+    Returns ``(eta tuple, number of estimates used)``.
+    """
+    from estimators.base import STATUS_OK
+    from estimators.irls import IRLSConfig, SlidingWindowIRLS
+
+    rec = rec.without_truth()
+    est = SlidingWindowIRLS(rec.vehicle, IRLSConfig(eta_max=eta_max)).run(rec)
+    ok = (est.status == STATUS_OK) & airborne(rec, est.t, min_height)
+    if not ok.any():
+        return (float("nan"),) * rec.thrust_cmd.shape[1], 0
+    return tuple(float(x) for x in np.median(est.eta[ok], axis=0)), int(ok.sum())
+
+
+@dataclass(frozen=True)
+class RotationalCheck:
+    """Nominal rotational model vs the log (body FRD).
+
+    Attributes:
+        band_hz: frequency band of the gains [Hz].
+        gain_cmd: per axis, |H| of measured over modelled angular acceleration in the band
+            (modelled from the commanded thrusts) [-]; 1 = the model is right.
+        gain_rotor: the same with thrusts k omega^2 from the measured rotor speeds (None when
+            the log has none).
+        slow_moment_rms: RMS of the unexplained roll/pitch moment below ``cutoff_hz`` [N m].
+        drag_moment_fraction: fraction of that slow moment's variance explained by
+            ``M = c T (v_by, -v_bx)`` plus a constant offset [-].
+        drag_moment_c: fitted ``c`` for roll and pitch [m s / m] (the aerodynamic moment is
+            ``-c T v_by`` about x and ``+c T v_bx`` about y: nose up when flying forward).
+    """
+
+    band_hz: tuple
+    gain_cmd: tuple
+    gain_rotor: tuple | None
+    slow_moment_rms: tuple
+    drag_moment_fraction: tuple
+    drag_moment_c: tuple
+
+
+def _band_gain(x: np.ndarray, y: np.ndarray, fs: float, band) -> float:
+    """|mean cross-spectrum / mean auto-spectrum of x| of y on x over ``band`` (Welch)."""
+    from scipy.signal import csd, welch
+
+    n = int(min(256, len(x) // 4))
+    f, pxy = csd(x, y, fs=fs, nperseg=n)
+    _, pxx = welch(x, fs=fs, nperseg=n)
+    sel = (f >= band[0]) & (f <= band[1])
+    return float(np.abs(np.sum(pxy[sel])) / np.sum(pxx[sel]))
+
+
+def rotational_check(rec: Recording, thrust_coefficient: float | None = None,
+                     band=(2.0, 16.0), cutoff_hz: float = 1.0) -> RotationalCheck:
+    """See :class:`RotationalCheck`; ``thrust_coefficient`` k [N/(rad/s)^2] turns the logged
+    rotor speeds (``rec.rotor_speed``) into thrusts for the second gain."""
+    from scipy.signal import butter, filtfilt
+
+    from quadfault.rotation import quat_to_rot
+
+    rec = rec.without_truth()
+    veh = rec.vehicle
+    dt = float(np.median(np.diff(rec.t)))
+    fs = 1.0 / dt
+    J = np.diag(veh.inertia)
+    alpha = np.gradient(rec.omega, rec.t, axis=0)
+
+    def model_alpha(f):
+        return (f @ veh.allocation.T)[:, 1:] / J
+
+    gain_cmd = tuple(_band_gain(model_alpha(rec.thrust_cmd)[:, i], alpha[:, i], fs, band)
+                     for i in range(3))
+    gain_rotor = None
+    if rec.rotor_speed is not None and thrust_coefficient is not None:
+        f_rotor = thrust_coefficient * rec.rotor_speed ** 2
+        f_rotor = np.where(np.isfinite(f_rotor), f_rotor, np.nanmedian(f_rotor, axis=0))
+        gain_rotor = tuple(_band_gain(model_alpha(f_rotor)[:, i], alpha[:, i], fs, band)
+                           for i in range(3))
+    # slow moment the model leaves: M_rotors - J alpha, below cutoff_hz
+    f = rec.thrust_cmd
+    moment = (f @ veh.allocation.T)[:, 1:3] - alpha[:, :2] * J[:2]
+    b, a = butter(2, cutoff_hz, fs=fs)
+    slow = filtfilt(b, a, moment, axis=0)
+    R = quat_to_rot(rec.quaternion)
+    v_body = np.einsum("nji,nj->ni", R, rec.velocity)
+    T = f.sum(axis=1)
+    fractions, coefs = [], []
+    for axis, regressor in ((0, T * v_body[:, 1]), (1, -T * v_body[:, 0])):
+        X = np.column_stack((np.ones_like(T), T, regressor))
+        coef, *_ = np.linalg.lstsq(X, slow[:, axis], rcond=None)
+        r0 = slow[:, axis] - X[:, :2] @ np.linalg.lstsq(X[:, :2], slow[:, axis], rcond=None)[0]
+        r1 = slow[:, axis] - X @ coef
+        fractions.append(float(1.0 - np.var(r1) / np.var(r0)))
+        coefs.append(float(coef[2]))
+    return RotationalCheck(band_hz=tuple(band), gain_cmd=gain_cmd, gain_rotor=gain_rotor,
+                           slow_moment_rms=tuple(float(x) for x in slow.std(axis=0)),
+                           drag_moment_fraction=tuple(fractions), drag_moment_c=tuple(coefs))
