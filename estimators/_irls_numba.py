@@ -4,6 +4,14 @@ The same algorithm as :func:`estimators.irls.solve_window` (MAD weights, conditi
 interior-point rounds, uncertainty), written as scalar loops over the per-segment quadratic
 terms so a whole recording runs in one compiled call. Results agree with the numpy path to
 rounding (summation order, LU vs Cholesky for the information matrix; tested to 1e-9).
+
+The kernels allocate nothing per window: every temporary lives in a :func:`workspace` made
+once per recording (``run_windows_numba``), per update (``solve_window_numba``) or per batch
+chunk (:func:`solve_ring_batch`, :func:`segment_terms_batch`, parallel over vehicles), so the
+single estimator and the batched one run the same compiled window solver
+(:func:`_solve_window_into`). A window is read from a ring of per-segment terms: segment ``s``
+(0 = oldest) sits at index ``(start + s) % m``; a recording's window is the ring with
+``start = 0``.
 """
 
 from __future__ import annotations
@@ -11,7 +19,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import get_num_threads, njit, prange
 
 from estimators.base import (STATUS_ILL_CONDITIONED, STATUS_MAX_ITER, STATUS_NO_EXCITATION,
                              STATUS_OK, STATUS_REJECTED, STATUSES)
@@ -21,6 +29,15 @@ _ILL = STATUSES.index(STATUS_ILL_CONDITIONED)
 _NO_EXC = STATUSES.index(STATUS_NO_EXCITATION)
 _REJ = STATUSES.index(STATUS_REJECTED)
 _MAXIT = STATUSES.index(STATUS_MAX_ITER)
+
+# rows of the vector workspace V (n columns) and of the matrix workspace M (n x n each)
+_X, _PU, _PL, _LU, _LL, _DLU, _DLL, _XT, _LUT, _LLT, _RHS, _DX = range(12)
+_XCUR, _Q, _BW, _UNIT, _COL = range(12, 17)
+_N_VEC = 17
+_JGJ, _HQ, _K, _L, _GJ, _INV = range(6)
+_N_MAT = 6
+# rows of the segment workspace S (m columns): energies, |e - median|, sort scratch
+_E, _DEV, _TMP = range(3)
 
 
 def kernel_parameters(cfg, m: int):
@@ -37,6 +54,26 @@ def kernel_parameters(cfg, m: int):
     ip = np.array([cfg.max_irls, ipm.max_iter, int(cfg.hard_drop), int(not paper), int(paper)],
                   dtype=np.int64)
     return fp, ip
+
+
+@njit(cache=True)
+def workspace(m, n, rounds):
+    """Scratch of one window solve (m segments, n rotors, at most ``rounds`` IRLS rounds):
+    ``(V (17, n), M (6, n, n), S (3, m), iters (rounds,), w (m,))``."""
+    return (np.zeros((_N_VEC, n)), np.zeros((_N_MAT, n, n)), np.zeros((3, m)),
+            np.zeros(rounds, dtype=np.int64), np.zeros(m))
+
+
+def batch_chunks(rows: int) -> int:
+    """Work units of the batch kernels: 4 per numba thread (load balance), at most ``rows``
+    (numba's thread count is read here, in Python: inside a kernel it would block caching)."""
+    return max(1, min(rows, 4 * get_num_threads()))
+
+
+@njit(cache=True)
+def _copy(src, dst):
+    for i in range(src.size):
+        dst[i] = src[i]
 
 
 @njit(cache=True)
@@ -70,14 +107,13 @@ def _cholesky_solve_into(A, rhs, L, out):
 
 
 @njit(cache=True)
-def segment_terms(dt, p0, p1, v0, v1, R0, R1, w0, w1, f, mass, g, Jmat, Jinv, A, G):
-    """One segment's quadratic terms ``(c, b, H, thrust)``: the compiled twin of
-    :func:`estimators.residuals.segment_models` + :func:`~estimators.residuals.quadratic_terms`
-    for a single segment (used by the online ``update``)."""
+def segment_terms_into(dt, p0, p1, v0, v1, R0, R1, w0, w1, f, mass, g, Jmat, Jinv, A, G,
+                       r0, J, b, H):
+    """One segment's quadratic terms without allocating: fills ``b`` (n,) and ``H`` (n, n)
+    (``r0`` (10,) and ``J`` (10, n) are scratch) and returns ``(c, thrust)``. The compiled
+    twin of :func:`estimators.residuals.segment_models` +
+    :func:`~estimators.residuals.quadratic_terms` for one segment."""
     n = f.size
-    r0 = np.empty(10)
-    J = np.empty((10, n))
-    b3 = R0[:, 2]
     thrust = 0.0
     for j in range(n):
         thrust += A[0, j] * f[j]
@@ -87,47 +123,50 @@ def segment_terms(dt, p0, p1, v0, v1, R0, R1, w0, w1, f, mass, g, Jmat, Jinv, A,
         r0[a] = v1[a] - v0[a] - ge * dt
         r0[3 + a] = p1[a] - p0[a] - v0[a] * dt - ge * 0.5 * dt * dt
         for j in range(n):
-            dv = b3[a] * f[j] * A[0, j] / mass
+            dv = R0[a, 2] * f[j] * A[0, j] / mass
             J[a, j] = dv * dt
             J[3 + a, j] = dv * (0.5 * dt * dt)
-    # rate (eqs. 15, 19)
-    Jw = np.zeros(3)
+    # rate (eqs. 15, 19): gyro = W x (J W), W_hat0 = W - J^-1 gyro dt
+    jw0 = Jmat[0, 0] * w0[0] + Jmat[0, 1] * w0[1] + Jmat[0, 2] * w0[2]
+    jw1 = Jmat[1, 0] * w0[0] + Jmat[1, 1] * w0[1] + Jmat[1, 2] * w0[2]
+    jw2 = Jmat[2, 0] * w0[0] + Jmat[2, 1] * w0[1] + Jmat[2, 2] * w0[2]
+    gy0 = w0[1] * jw2 - w0[2] * jw1
+    gy1 = w0[2] * jw0 - w0[0] * jw2
+    gy2 = w0[0] * jw1 - w0[1] * jw0
+    wh0 = w0[0] - (Jinv[0, 0] * gy0 + Jinv[0, 1] * gy1 + Jinv[0, 2] * gy2) * dt
+    wh1 = w0[1] - (Jinv[1, 0] * gy0 + Jinv[1, 1] * gy1 + Jinv[1, 2] * gy2) * dt
+    wh2 = w0[2] - (Jinv[2, 0] * gy0 + Jinv[2, 1] * gy1 + Jinv[2, 2] * gy2) * dt
+    r0[6] = w1[0] - wh0
+    r0[7] = w1[1] - wh1
+    r0[8] = w1[2] - wh2
     for a in range(3):
-        for k in range(3):
-            Jw[a] += Jmat[a, k] * w0[k]
-    gyro = np.empty(3)
-    gyro[0] = w0[1] * Jw[2] - w0[2] * Jw[1]
-    gyro[1] = w0[2] * Jw[0] - w0[0] * Jw[2]
-    gyro[2] = w0[0] * Jw[1] - w0[1] * Jw[0]
-    w_hat0 = np.empty(3)
-    for a in range(3):
-        s = 0.0
-        for k in range(3):
-            s += Jinv[a, k] * gyro[k]
-        w_hat0[a] = w0[a] - s * dt
-        r0[6 + a] = w1[a] - w_hat0[a]
         for j in range(n):
             ja = 0.0
             for k in range(3):
                 ja += Jinv[a, k] * A[1 + k, j]
             J[6 + a, j] = -ja * f[j] * dt
-    # rotation (eqs. 20-22): r_R = 1/2 (3 - tr dR) - dt vee(dR) . W_hat
-    dR = np.zeros((3, 3))
-    for a in range(3):
-        for k in range(3):
-            for i in range(3):
-                dR[a, k] += R0[i, a] * R1[i, k]
-    u = np.empty(3)
-    u[0] = 0.5 * (dR[2, 1] - dR[1, 2]) * dt
-    u[1] = 0.5 * (dR[0, 2] - dR[2, 0]) * dt
-    u[2] = 0.5 * (dR[1, 0] - dR[0, 1]) * dt
-    r0[9] = 0.5 * (3.0 - (dR[0, 0] + dR[1, 1] + dR[2, 2])) - (u[0] * w_hat0[0] + u[1] * w_hat0[1]
-                                                                + u[2] * w_hat0[2])
+    # rotation (eqs. 20-22): r_R = 1/2 (3 - tr dR) - dt vee(dR) . W_hat, dR = R0^T R1
+    d00 = R0[0, 0] * R1[0, 0] + R0[1, 0] * R1[1, 0] + R0[2, 0] * R1[2, 0]
+    d11 = R0[0, 1] * R1[0, 1] + R0[1, 1] * R1[1, 1] + R0[2, 1] * R1[2, 1]
+    d22 = R0[0, 2] * R1[0, 2] + R0[1, 2] * R1[1, 2] + R0[2, 2] * R1[2, 2]
+    d21 = R0[0, 2] * R1[0, 1] + R0[1, 2] * R1[1, 1] + R0[2, 2] * R1[2, 1]
+    d12 = R0[0, 1] * R1[0, 2] + R0[1, 1] * R1[1, 2] + R0[2, 1] * R1[2, 2]
+    d02 = R0[0, 0] * R1[0, 2] + R0[1, 0] * R1[1, 2] + R0[2, 0] * R1[2, 2]
+    d20 = R0[0, 2] * R1[0, 0] + R0[1, 2] * R1[1, 0] + R0[2, 2] * R1[2, 0]
+    d10 = R0[0, 1] * R1[0, 0] + R0[1, 1] * R1[1, 0] + R0[2, 1] * R1[2, 0]
+    d01 = R0[0, 0] * R1[0, 1] + R0[1, 0] * R1[1, 1] + R0[2, 0] * R1[2, 1]
+    u0 = 0.5 * (d21 - d12) * dt
+    u1 = 0.5 * (d02 - d20) * dt
+    u2 = 0.5 * (d10 - d01) * dt
+    r0[9] = 0.5 * (3.0 - (d00 + d11 + d22)) - (u0 * wh0 + u1 * wh1 + u2 * wh2)
     for j in range(n):
-        J[9, j] = u[0] * J[6, j] + u[1] * J[7, j] + u[2] * J[8, j]
+        J[9, j] = u0 * J[6, j] + u1 * J[7, j] + u2 * J[8, j]
+    # weighted energy c + 2 b.eta + eta^T H eta (eq. 26)
     c = 0.0
-    b = np.zeros(n)
-    H = np.zeros((n, n))
+    for j in range(n):
+        b[j] = 0.0
+        for k in range(n):
+            H[j, k] = 0.0
     for r in range(10):
         c += r0[r] * G[r] * r0[r]
         for j in range(n):
@@ -135,15 +174,47 @@ def segment_terms(dt, p0, p1, v0, v1, R0, R1, w0, w1, f, mass, g, Jmat, Jinv, A,
             b[j] += gj * r0[r]
             for k in range(n):
                 H[j, k] += gj * J[r, k]
+    return c, thrust
+
+
+def segment_terms(dt, p0, p1, v0, v1, R0, R1, w0, w1, f, mass, g, Jmat, Jinv, A, G):
+    """``(c, b, H, thrust)`` of one segment (the online ``update``'s numba path)."""
+    n = f.size
+    b, H = np.empty(n), np.empty((n, n))
+    c, thrust = segment_terms_into(float(dt), p0, p1, v0, v1, np.ascontiguousarray(R0),
+                                   np.ascontiguousarray(R1), w0, w1, f, mass, g, Jmat, Jinv, A,
+                                   G, np.empty(10), np.empty((10, n)), b, H)
     return c, b, H, thrust
 
 
+@njit(cache=True, parallel=True)
+def segment_terms_batch(rows, slot, t0, p0, v0, R0, w0, f0, t1, p1, v1, R1, w1, mass, g, Jmat,
+                        Jinv, A, G, c, b, H, thrust, chunks):
+    """:func:`segment_terms_into` for the vehicles ``rows`` (segment old -> new sample of each),
+    written into ring slot ``slot`` of ``c`` (N, m), ``b`` (N, m, n), ``H`` (N, m, n, n) and
+    ``thrust`` (N, m); parallel over ``chunks`` chunks of rows (:func:`batch_chunks`), one
+    scratch per chunk."""
+    K, n = rows.size, f0.shape[1]
+    for ch in prange(chunks):
+        r0, J = np.empty(10), np.empty((10, n))
+        for k in range(ch * K // chunks, (ch + 1) * K // chunks):
+            i = rows[k]
+            ci, ti = segment_terms_into(t1[i] - t0[i], p0[i], p1[i], v0[i], v1[i], R0[i], R1[i],
+                                        w0[i], w1[i], f0[i], mass, g, Jmat, Jinv, A, G, r0, J,
+                                        b[i, slot], H[i, slot])
+            c[i, slot] = ci
+            thrust[i, slot] = ti
+
+
 @njit(cache=True)
-def _cond1(A):
-    """1-norm condition number (Gauss-Jordan inverse with partial pivoting); inf if singular."""
+def _cond1_into(A, M, inv):
+    """1-norm condition number (Gauss-Jordan inverse with partial pivoting, in the scratch
+    ``M`` and ``inv``); inf if singular."""
     n = A.shape[0]
-    M = A.copy()
-    inv = np.eye(n)
+    for r in range(n):
+        for k in range(n):
+            M[r, k] = A[r, k]
+            inv[r, k] = 1.0 if r == k else 0.0
     for col in range(n):
         piv = col
         for r in range(col + 1, n):
@@ -179,29 +250,49 @@ def _cond1(A):
 
 
 @njit(cache=True)
-def _energies(c, b, H, x, scale):
-    m, n = b.shape
-    e = np.empty(m)
-    for i in range(m):
-        s = 0.0
+def _energies_into(c, b, H, start, x, scale, e):
+    """Segment energies ``e_s`` of the ring window (eq. 26), oldest segment first."""
+    m, n = b.shape[0], b.shape[1]
+    for s in range(m):
+        i = (start + s) % m
+        acc = 0.0
         for j in range(n):
             hx = 0.0
             for k in range(n):
                 hx += H[i, j, k] * x[k]
-            s += x[j] * hx + 2.0 * b[i, j] * x[j]
-        e[i] = (c[i] + s) * scale
-    return e
+            acc += x[j] * hx + 2.0 * b[i, j] * x[j]
+        e[s] = (c[i] + acc) * scale
 
 
 @njit(cache=True)
-def _mad_weights(e, fp, ip):
+def _median(a, tmp):
+    """Median of ``a`` (insertion sort into ``tmp``), as ``estimators.robust._median``."""
+    m = a.size
+    for i in range(m):
+        v = a[i]
+        j = i - 1
+        while j >= 0 and tmp[j] > v:
+            tmp[j + 1] = tmp[j]
+            j -= 1
+        tmp[j + 1] = v
+    k = m // 2
+    if m % 2:
+        return tmp[k]
+    return 0.5 * (tmp[k - 1] + tmp[k])
+
+
+@njit(cache=True)
+def _mad_weights_into(e, fp, ip, w, dev, tmp):
+    """Robust weights (eqs. 27-30), as :func:`estimators.robust.mad_weights`, into ``w``."""
     m = e.size
-    w = np.ones(m)
-    med = np.median(e)
-    dev = np.abs(e - med)
-    mad = 1.4826 * np.median(dev)
+    med = _median(e, tmp)
+    for i in range(m):
+        dev[i] = abs(e[i] - med)
+    mad = 1.4826 * _median(dev, tmp)
     if mad < fp[8]:
-        return w
+        for i in range(m):
+            w[i] = 1.0
+        return
     hard_drop, median_normalize, floor = ip[2] == 1, ip[3] == 1, ip[4] == 1
     for i in range(m):
         z = dev[i] / max(mad, fp[8])
@@ -212,31 +303,29 @@ def _mad_weights(e, fp, ip):
             wi = 0.0
         w[i] = wi
     if median_normalize:
-        medw = np.median(w)
+        medw = _median(w, tmp)
         if medw > 0:
-            w = w / medw
-    return w
+            for i in range(m):
+                w[i] = w[i] / medw
 
 
 @njit(cache=True)
-def _ipm(H, q, x0, fp, max_iter):
-    """Algorithm 1 on ``1/2 x^T H x + q^T x``, box [fp[0], fp[1]]; returns (x, iters, ok).
+def _ipm_into(H, q, x0, fp, max_iter, V, K, L):
+    """Algorithm 1 on ``1/2 x^T H x + q^T x``, box [fp[0], fp[1]], from ``x0``; the solution
+    is left in ``V[_X]``. Returns ``(iterations, converged)``.
 
-    Mirrors :func:`estimators.ipm.solve_box_qp` (preallocated buffers, no histories)."""
+    Mirrors :func:`estimators.ipm.solve_box_qp` (workspace rows of ``V``, no histories)."""
     n = x0.size
     lo, hi = fp[0], fp[1]
     mu, alpha, beta, frac, bt_eps, min_step, tol_feas, tol_gap = (fp[11], fp[12], fp[13], fp[14],
                                                                    fp[15], fp[16], fp[17], fp[18])
-    x = x0.copy()
-    pu, pl = x - hi, lo - x
-    lu, ll = -1.0 / pu, -1.0 / pl
-    K = np.empty((n, n))
-    rhs = np.empty(n)
-    dlu = np.empty(n)
-    dll = np.empty(n)
-    x_t, lu_t, ll_t = np.empty(n), np.empty(n), np.empty(n)
-    L = np.empty((n, n))
-    dx = np.empty(n)
+    x, pu, pl, lu, ll = V[_X], V[_PU], V[_PL], V[_LU], V[_LL]
+    dlu, dll, x_t, lu_t, ll_t, rhs, dx = (V[_DLU], V[_DLL], V[_XT], V[_LUT], V[_LLT], V[_RHS],
+                                          V[_DX])
+    for i in range(n):
+        x[i] = x0[i]
+        pu[i], pl[i] = x[i] - hi, lo - x[i]
+        lu[i], ll[i] = -1.0 / pu[i], -1.0 / pl[i]
     for it in range(1, max_iter + 1):
         gap = 0.0
         for i in range(n):
@@ -256,7 +345,7 @@ def _ipm(H, q, x0, fp, max_iter):
             K[i, i] -= lu[i] / pu[i] + ll[i] / pl[i]
         r_norm = math.sqrt(r2)
         if not _cholesky_solve_into(K, rhs, L, dx):
-            return x, it, False
+            return it, False
         smax = 1.0
         for i in range(n):
             cu = -lu[i] * pu[i] - inv_t
@@ -295,79 +384,100 @@ def _ipm(H, q, x0, fp, max_iter):
             pu[i], pl[i] = x[i] - hi, lo - x[i]
             gap -= pu[i] * lu[i] + pl[i] * ll[i]
         if r_try < tol_feas and gap < tol_gap:
-            return x, it, True
-    return x, max_iter, False
+            return it, True
+    return max_iter, False
 
 
 @njit(cache=True)
-def _solve_window(c, b, H, x_prev, fp, ip, x_out, sd_out, iters_out):
-    """One window (Algorithm 2). Fills x_out/sd_out/iters_out; returns (status, rounds,
-    cond, weights)."""
-    m, n = b.shape
+def _solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, iters, w, x_out, sd_out):
+    """Algorithm 2 on the ring window ``(c, b, H)`` (segment s at ``(start + s) % m``),
+    allocation-free. Fills ``x_out``, ``sd_out`` (NaN on a guard), ``w`` (final weights) and
+    ``iters``; returns ``(status code, rounds, cond)``."""
+    m, n = b.shape[0], b.shape[1]
     lo, hi, gamma, scale = fp[0], fp[1], fp[2], fp[3]
-    x_cur = np.minimum(np.maximum(x_prev, lo + fp[19]), hi - fp[19])
-    w = np.ones(m)
+    x_cur, q, bw, unit, col = V[_XCUR], V[_Q], V[_BW], V[_UNIT], V[_COL]
+    JGJ, Hq, K, L, GJ, INV = M[_JGJ], M[_HQ], M[_K], M[_L], M[_GJ], M[_INV]
+    e, dev, tmp = S[_E], S[_DEV], S[_TMP]
+    for j in range(n):
+        x_cur[j] = min(max(x_prev[j], lo + fp[19]), hi - fp[19])
+        sd_out[j] = np.nan
+    for i in range(m):
+        w[i] = 1.0
     cond = np.nan
     converged = True
     rounds = 0
     for _r in range(ip[0]):
-        e = _energies(c, b, H, x_cur, scale)
-        w = _mad_weights(e, fp, ip)
-        if not np.any(w > 0):
-            x_out[:] = x_prev
-            return _REJ, rounds, cond, w
-        JGJ = np.zeros((n, n))
-        bw = np.zeros(n)
-        for i in range(m):
-            for j in range(n):
-                bw[j] += w[i] * b[i, j]
-                for k in range(n):
-                    JGJ[j, k] += w[i] * H[i, j, k]
-        JGJ *= scale
-        cond = _cond1(JGJ)
-        if not cond <= fp[10]:
-            x_out[:] = x_prev
-            return _ILL, rounds, cond, w
-        Hq = JGJ.copy()
-        q = bw * scale - gamma * x_prev
+        _energies_into(c, b, H, start, x_cur, scale, e)
+        _mad_weights_into(e, fp, ip, w, dev, tmp)
+        any_pos = False
+        for s in range(m):
+            any_pos = any_pos or w[s] > 0
+        if not any_pos:
+            _copy(x_prev, x_out)
+            return _REJ, rounds, cond
         for j in range(n):
+            bw[j] = 0.0
+            for k in range(n):
+                JGJ[j, k] = 0.0
+        for s in range(m):
+            i = (start + s) % m
+            for j in range(n):
+                bw[j] += w[s] * b[i, j]
+                for k in range(n):
+                    JGJ[j, k] += w[s] * H[i, j, k]
+        for j in range(n):
+            for k in range(n):
+                JGJ[j, k] *= scale
+        cond = _cond1_into(JGJ, GJ, INV)
+        if not cond <= fp[10]:
+            _copy(x_prev, x_out)
+            return _ILL, rounds, cond
+        for j in range(n):
+            q[j] = bw[j] * scale - gamma * x_prev[j]
+            for k in range(n):
+                Hq[j, k] = JGJ[j, k]
             Hq[j, j] += gamma
-        x_new, it, converged = _ipm(Hq, q, x_cur, fp, ip[1])
-        iters_out[rounds] = it
+        it, converged = _ipm_into(Hq, q, x_cur, fp, ip[1], V, K, L)
+        iters[rounds] = it
         rounds += 1
-        step = np.max(np.abs(x_new - x_cur))
-        x_cur = x_new
+        step = 0.0
+        for j in range(n):
+            step = max(step, abs(V[_X, j] - x_cur[j]))
+            x_cur[j] = V[_X, j]
         if step < fp[9]:
             break
     # uncertainty from the information matrix with the final weights
-    e = _energies(c, b, H, x_cur, scale)
+    _energies_into(c, b, H, start, x_cur, scale, e)
     active = 0
     s2 = 0.0
-    for i in range(m):
-        s2 += w[i] * e[i]
-        if w[i] > 0:
+    for s in range(m):
+        s2 += w[s] * e[s]
+        if w[s] > 0:
             active += 1
     s2 = max(s2, 0.0) / max(10 * active - n, 1)
-    info = np.zeros((n, n))
-    for i in range(m):
+    info = JGJ
+    for j in range(n):
+        for k in range(n):
+            info[j, k] = 0.0
+    for s in range(m):
+        i = (start + s) % m
         for j in range(n):
             for k in range(n):
-                info[j, k] += w[i] * H[i, j, k]
-    info *= scale
+                info[j, k] += w[s] * H[i, j, k]
     for j in range(n):
+        for k in range(n):
+            info[j, k] *= scale
         info[j, j] += gamma
-    unit = np.zeros(n)
-    col = np.empty(n)
-    L = np.empty((n, n))
     for j in range(n):
-        unit[:] = 0.0
+        for k in range(n):
+            unit[k] = 0.0
         unit[j] = 1.0
         if _cholesky_solve_into(info, unit, L, col):
             sd_out[j] = math.sqrt(max(col[j], 0.0) * s2)
         else:
             sd_out[j] = np.nan
-    x_out[:] = x_cur
-    return (_OK if converged else _MAXIT), rounds, cond, w
+    _copy(x_cur, x_out)
+    return (_OK if converged else _MAXIT), rounds, cond
 
 
 @njit(cache=True)
@@ -375,22 +485,37 @@ def _run_windows(c, b, H, excited, x0, s0, fp, ip, m, eta, sd, status):
     n = x0.size
     x = x0.copy()
     s = s0.copy()
+    V, M, S, iters, w = workspace(m, n, ip[0])
     x_out = np.empty(n)
     sd_out = np.empty(n)
-    iters = np.zeros(ip[0], dtype=np.int64)
     for k in range(excited.size):
         if excited[k]:
-            code, _rounds, _cond, _w = _solve_window(c[k:k + m], b[k:k + m], H[k:k + m], x,
-                                                    fp, ip, x_out, sd_out, iters)
+            code, _rounds, _cond = _solve_window_into(c[k:k + m], b[k:k + m], H[k:k + m], 0, x,
+                                                      fp, ip, V, M, S, iters, w, x_out, sd_out)
             if code == _OK or code == _MAXIT:
-                x = x_out.copy()
-                s = sd_out.copy()
+                _copy(x_out, x)
+                _copy(sd_out, s)
             status[k] = code
         else:
             status[k] = _NO_EXC
         eta[k] = x
         sd[k] = s
     return x, s
+
+
+@njit(cache=True, parallel=True)
+def solve_ring_batch(c, b, H, start, rows, x_prev, fp, ip, x, sd, code, chunks):
+    """Algorithm 2 on the ring windows of the vehicles ``rows`` (ring arrays ``c`` (N, m),
+    ``b`` (N, m, n), ``H`` (N, m, n, n); oldest segment at ``start``), in parallel over chunks
+    of rows (:func:`batch_chunks`) with one workspace per chunk. Fills ``x``, ``sd`` (K, n) and
+    ``code`` (K,)."""
+    K, m, n = rows.size, b.shape[1], b.shape[2]
+    for ch in prange(chunks):
+        V, M, S, iters, w = workspace(m, n, ip[0])
+        for k in range(ch * K // chunks, (ch + 1) * K // chunks):
+            i = rows[k]
+            code[k], _r, _cond = _solve_window_into(c[i], b[i], H[i], start, x_prev[i], fp, ip,
+                                                    V, M, S, iters, w, x[k], sd[k])
 
 
 def run_windows_numba(c, b, H, excited, x0, cfg, progress: bool = False):
@@ -425,14 +550,14 @@ def solve_window_numba(c, b, H, x_prev, cfg, params=None):
 
     m, n = np.shape(b)
     fp, ip = kernel_parameters(cfg, m) if params is None else params
+    V, M, S, iters, w = workspace(m, n, cfg.max_irls)
     x_out = np.empty(n)
     sd_out = np.empty(n)
-    iters = np.zeros(cfg.max_irls, dtype=np.int64)
-    code, rounds, cond, w = _solve_window(np.ascontiguousarray(c, dtype=float),
-                                          np.ascontiguousarray(b, dtype=float),
-                                          np.ascontiguousarray(H, dtype=float),
-                                          np.asarray(x_prev, dtype=float), fp, ip, x_out,
-                                          sd_out, iters)
+    code, rounds, cond = _solve_window_into(np.ascontiguousarray(c, dtype=float),
+                                            np.ascontiguousarray(b, dtype=float),
+                                            np.ascontiguousarray(H, dtype=float), 0,
+                                            np.asarray(x_prev, dtype=float), fp, ip, V, M, S,
+                                            iters, w, x_out, sd_out)
     status = STATUSES[code]
     message = ""
     if code == _REJ:

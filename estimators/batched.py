@@ -8,9 +8,11 @@ observation. Nothing of the algorithms is written again:
 * the segment residual models and their quadratic terms come from
   :func:`estimators.residuals.segment_models` / :func:`~estimators.residuals.quadratic_terms`
   evaluated over the whole batch at once (paper eqs. 17-26);
-* each window is solved by the existing per-window solver -- the compiled
-  ``estimators._irls_numba._solve_window`` (Algorithm 2) in a parallel loop over the batch when
-  numba is importable, else :func:`estimators.irls.solve_window` in a Python loop;
+* when numba is importable, the segment terms and the windows are computed by the single
+  estimator's compiled kernels (``estimators._irls_numba.segment_terms_batch`` and
+  ``solve_ring_batch``: the same allocation-free ``segment_terms_into`` and window solver
+  ``_solve_window_into``, parallel over chunks of vehicles, reading each window straight from
+  the ring); else :func:`estimators.irls.solve_window` runs in a Python loop;
 * the EKF step is ``estimators.ekf_numba.step_inplace`` (or the numpy ``predict`` /
   ``measurement_update`` pair) applied to each row of the batched state.
 
@@ -42,7 +44,7 @@ from quadfault.vehicle import Vehicle
 try:  # the compiled batch loops call the existing per-vehicle kernels (``fast`` extra)
     from numba import njit, prange
 
-    from estimators._irls_numba import _solve_window
+    from estimators._irls_numba import batch_chunks, segment_terms_batch, solve_ring_batch
     from estimators.ekf_numba import step_inplace
 except ImportError:  # pragma: no cover - exercised without numba
     njit = None
@@ -179,6 +181,16 @@ class BatchedIRLS:
 
     def _add_segments(self, rows: np.ndarray, sample) -> None:
         """Quadratic terms of the segments last -> sample of ``rows`` into the ring."""
+        if self.backend == "numba":
+            v = self.vehicle
+            old = [np.ascontiguousarray(a) for a in self._last[:5]]
+            new = [np.ascontiguousarray(a) for a in sample[:5]]
+            segment_terms_batch(rows.astype(np.int64), self._head, old[0], old[1], old[2], old[3],
+                                old[4], np.ascontiguousarray(self._last[5]), new[0], new[1],
+                                new[2], new[3], new[4], v.mass, v.gravity, v.inertia,
+                                v.inertia_inverse, v.allocation, self._G, self._c, self._b,
+                                self._H, self._thrust, batch_chunks(rows.size))
+            return
         K = rows.size
         pairs = []
         for old, new in zip(self._last, sample):
@@ -230,7 +242,11 @@ class BatchedIRLS:
         start = self._head  # after the write the oldest segment sits at the head
         if self.backend == "numba":
             fp, ip = self._params
-            return _solve_ring_windows(self._c, self._b, self._H, start, rows, self.eta, fp, ip)
+            K, n = rows.size, self.vehicle.n_rotors
+            x, sd, code = np.empty((K, n)), np.empty((K, n)), np.empty(K, dtype=np.int64)
+            solve_ring_batch(self._c, self._b, self._H, int(start), rows.astype(np.int64),
+                             self.eta, fp, ip, x, sd, code, batch_chunks(K))
+            return x, sd, code
         K, n = rows.size, self.vehicle.n_rotors
         order = (start + np.arange(self._m)) % self._m
         x, sd, code = np.empty((K, n)), np.full((K, n), np.nan), np.empty(K, dtype=np.int64)
@@ -339,38 +355,11 @@ __all__ = ["BatchedIRLS", "BatchedEKF", "BatchedEstimate", "make_batched_estimat
 
 if njit is not None:
     @njit(cache=True, parallel=True)
-    def _solve_ring_windows_kernel(c, b, H, start, rows, x_prev, fp, ip, x, sd, code):
-        m, n = b.shape[1], b.shape[2]
-        for k in prange(rows.size):
-            i = rows[k]
-            cw, bw, Hw = np.empty(m), np.empty((m, n)), np.empty((m, n, n))
-            for s in range(m):  # the ring, oldest segment first (as the single estimator)
-                j = (start + s) % m
-                cw[s] = c[i, j]
-                bw[s] = b[i, j]
-                Hw[s] = H[i, j]
-            iters = np.zeros(ip[0], dtype=np.int64)
-            xo, so = np.empty(n), np.empty(n)
-            code[k], _r, _cond, _w = _solve_window(cw, bw, Hw, x_prev[i].copy(), fp, ip, xo, so,
-                                                   iters)
-            x[k] = xo
-            sd[k] = so
-
-    @njit(cache=True, parallel=True)
     def _ekf_steps_kernel(x, P, f, dt, p, v, w, R, rows, A, m, g, J, Jinv, qc, r, lo, hi):
         for k in prange(rows.size):
             i = rows[k]
             step_inplace(x[i], P[i], f[i].copy(), dt[i], p[i].copy(), v[i].copy(), w[i].copy(),
                          R[i].copy(), A, m, g, J, Jinv, qc, r, lo, hi)
-
-
-def _solve_ring_windows(c, b, H, start, rows, x_prev, fp, ip):
-    """Compiled Algorithm 2 on the ring windows of ``rows`` (parallel over the batch)."""
-    K, n = rows.size, b.shape[2]
-    x, sd, code = np.empty((K, n)), np.full((K, n), np.nan), np.empty(K, dtype=np.int64)
-    _solve_ring_windows_kernel(c, b, H, int(start), rows.astype(np.int64), x_prev, fp, ip, x,
-                               sd, code)
-    return x, sd, code
 
 
 def _ekf_steps(x, P, f, dt, p, v, w, R, rows, *kernel_args):
