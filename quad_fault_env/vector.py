@@ -194,6 +194,10 @@ class QuadFaultVectorEnv(VectorEnv):
         self._accel_draws = 3 if noise.accel else 0
         self._trajectories, self._schedules = _Table(), _Table()
         self._controllers: dict = {}
+        if self.physics == "numba":
+            from quadfault._sim_numba import body_of
+
+            self._body = body_of(self.vehicle)
         n = self.vehicle.n_rotors
         self.state = RigidBodyState.at_rest(batch_shape=(N,))
         self.meas = RigidBodyState.at_rest(batch_shape=(N,))
@@ -339,6 +343,79 @@ class QuadFaultVectorEnv(VectorEnv):
 
         return noise.measure(state, None, _Seq())[0]
 
+    def _estimate(self, j: int, t: np.ndarray, meas: RigidBodyState) -> None:
+        """The batched estimator's update at substep ``j`` (every ``estimator_stride``)."""
+        out = self.estimator.update(t, meas.p, meas.v, meas.R, meas.w, self.f_cmd)
+        self.eta_hat, self.eta_sd = out.eta, out.sd
+        self.status = out.status_names
+
+    def _substeps_numpy(self, eta, z, has_thrust, ts) -> RigidBodyState:
+        """The control step's physics substeps with the core functions over the batch axis."""
+        N, n = self.num_envs, self.vehicle.n_rotors
+        motor = MotorModel(1.0, self.envs[0].plant.motor.saturate)
+        f_max = self.vehicle.rotor_max_thrust
+        state = self.state
+        off = np.zeros(N, dtype=np.int64)
+        rows_idx = np.arange(N)[:, None]
+        for j in range(self.substeps):
+            if j > 0 and self._meas_draws:
+                zm = z[rows_idx, off[:, None] + np.arange(self._meas_draws)]
+                meas = self._measure(state, zm)
+                off = off + self._meas_draws
+            elif j > 0:
+                meas = state
+            else:
+                meas = self.meas
+            if j % self.estimator_stride == 0 and self.estimator is not None:
+                self._estimate(j, ts[:, j], meas)
+            if has_thrust.any():
+                zraw = z[rows_idx, off[:, None] + np.arange(n)] * has_thrust[:, None]
+                off = off + n * has_thrust
+            else:
+                zraw = np.zeros((N, n))
+            off = off + self._accel_draws
+            # eqs. 11, 13: saturation, efficiency, exp(sigma_f eps) with the sub-env's draws
+            f = motor.apply(self.f_cmd, eta[:, j], f_max, _Draws(zraw * self.sigma[:, None]))
+            wrench = self.vehicle.wrench(f)
+            state = step_rk4(state, wrench[:, 0], wrench[:, 1:], self.vehicle, self.dt)
+        return state
+
+    def _substeps_numba(self, eta, z, has_thrust, ts) -> RigidBodyState:
+        """The same substeps with the compiled kernel ``quadfault._sim_numba.step_batch``:
+        one call for the whole control step without an estimator, else one call per run of
+        substeps between two estimator updates (the measurement for the estimator in numpy).
+
+        Each sub-env's draws for substep j sit at ``j * per_substep`` in its row of ``z``
+        (substep 0 has no measurement draws): the thrust normals there, the measurement ones
+        ``meas_draws`` before.
+        """
+        from quadfault import _sim_numba
+
+        N, S, n = self.num_envs, self.substeps, self.vehicle.n_rotors
+        state = self.state.copy()  # the kernel works in place; self.meas may alias the state
+        per_sub = self._meas_draws + n * has_thrust + self._accel_draws
+        z_off = np.ascontiguousarray(np.arange(S)[None, :] * per_sub[:, None])
+        z = np.ascontiguousarray(z, dtype=float)
+        sigma = np.where(has_thrust, self.sigma, 0.0)  # no draws: nothing read from z
+        stride = S if self.estimator is None else self.estimator_stride
+        saturate = bool(self.envs[0].plant.motor.saturate)
+        for j0 in range(0, S, stride):
+            j1 = min(S, j0 + stride)
+            if self.estimator is not None:
+                if j0 == 0:
+                    meas = self.meas
+                elif self._meas_draws:
+                    cols = (z_off[:, j0] - self._meas_draws)[:, None] + np.arange(self._meas_draws)
+                    meas = self._measure(state, z[np.arange(N)[:, None], cols])
+                else:
+                    meas = state
+                self._estimate(j0, ts[:, j0], meas)
+            _sim_numba.step_batch(state.p, state.v, state.R, state.w, self.f_cmd,
+                                  np.ascontiguousarray(eta[:, j0:j1]), sigma, z,
+                                  np.ascontiguousarray(z_off[:, j0:j1]), saturate,
+                                  self._body, self.dt)
+        return state
+
     # -- step --------------------------------------------------------------------------------
     def step(self, actions):
         if not self._started:
@@ -357,44 +434,14 @@ class QuadFaultVectorEnv(VectorEnv):
         ts = (k0[:, None] + np.arange(S)[None, :]) * self.dt
         eta = self._efficiency(ts)
         has_thrust = self.sigma > 0
-        per_sub = self._meas_draws + 4 * has_thrust + self._accel_draws
+        per_sub = self._meas_draws + n * has_thrust + self._accel_draws
         sizes = np.where(resetting, 0, S * per_sub - self._meas_draws)
         z = self._draw(sizes, live) if sizes.any() else np.zeros((N, 16 + S * 20))
-        motor = MotorModel(1.0, self.envs[0].plant.motor.saturate)
         f_max, stride = self.vehicle.rotor_max_thrust, self.estimator_stride
-        state, meas = self.state, self.meas
-        off = np.zeros(N, dtype=np.int64)
-        rows_idx = np.arange(N)[:, None]
-        for j in range(S):
-            if j > 0 and self._meas_draws:
-                zm = z[rows_idx, off[:, None] + np.arange(self._meas_draws)]
-                meas = self._measure(state, zm)
-                off = off + self._meas_draws
-            elif j > 0:
-                meas = state
-            if j % stride == 0 and self.estimator is not None:
-                out = self.estimator.update(ts[:, j], meas.p, meas.v, meas.R, meas.w, self.f_cmd)
-                self.eta_hat, self.eta_sd = out.eta, out.sd
-                self.status = out.status_names
-            if has_thrust.any():
-                zraw = z[rows_idx, off[:, None] + np.arange(4)] * has_thrust[:, None]
-                off = off + 4 * has_thrust
-            else:
-                zraw = np.zeros((N, n))
-            off = off + self._accel_draws
-            if self.physics == "numba":
-                if j == 0:  # the kernel works in place on fresh arrays
-                    state = state.copy()
-                    body = _body_of(self.vehicle)
-                    sat = bool(self.envs[0].plant.motor.saturate)
-                _physics_kernel()(state.p, state.v, state.R, state.w, self.f_cmd,
-                                  np.ascontiguousarray(eta[:, j]), self.sigma, zraw, body, sat,
-                                  self.dt)
-                continue
-            # eqs. 11, 13: saturation, efficiency, exp(sigma_f eps) with the sub-env's draws
-            f = motor.apply(self.f_cmd, eta[:, j], f_max, _Draws(zraw * self.sigma[:, None]))
-            wrench = self.vehicle.wrench(f)
-            state = step_rk4(state, wrench[:, 0], wrench[:, 1:], self.vehicle, self.dt)
+        if self.physics == "numba":
+            state = self._substeps_numba(eta, z, has_thrust & ~resetting, ts)
+        else:
+            state = self._substeps_numpy(eta, z, has_thrust, ts)
         if self.estimator_name == "truth":
             j_last = ((S - 1) // stride) * stride
             self.eta_hat, self.eta_sd = eta[:, j_last].copy(), np.zeros((N, n))
@@ -482,54 +529,14 @@ class QuadFaultVectorEnv(VectorEnv):
             env.close()
 
 
-def _body_of(vehicle):
-    from quadfault._sim_numba import body_of
-
-    return body_of(vehicle)
-
-
 def _physics_numba_available() -> bool:
     from quadfault import _sim_numba
 
     return _sim_numba.AVAILABLE
 
 
-try:  # the optional ``fast`` extra: the compiled twins of the core physics
-    from numba import njit, prange
-
-    from quadfault._sim_numba import motor_apply as _motor_apply_nb
-    from quadfault._sim_numba import step_rk4 as _step_rk4_nb
-except ImportError:  # pragma: no cover - exercised only without numba
-    njit = None
-
-if njit is not None:
-    @njit(cache=True, parallel=True)
-    def _substep_kernel(p, v, R, w, f_cmd, eta, sigma, z, body, saturate, dt):
-        """One physics substep of every vehicle, in place: ``_sim_numba.motor_apply``
-        (eqs. 11, 13), the allocation (``Vehicle.wrench``), ``_sim_numba.step_rk4`` (eqs. 1-4)."""
-        n = f_cmd.shape[1]
-        A = body.allocation
-        for i in prange(p.shape[0]):
-            f = _motor_apply_nb(f_cmd[i], eta[i], body.max_thrust, saturate, sigma[i], z[i])
-            thrust = 0.0
-            moment = np.zeros(3)
-            for k in range(n):
-                thrust += A[0, k] * f[k]
-                for r in range(3):
-                    moment[r] += A[r + 1, k] * f[k]
-            pn, vn, Rn, wn = _step_rk4_nb(p[i], v[i], R[i], w[i], thrust, moment, body, dt)
-            p[i] = pn
-            v[i] = vn
-            R[i] = Rn
-            w[i] = wn
-
-
-def _physics_kernel():
-    return _substep_kernel
-
-
 def _expand(mask: np.ndarray, like: np.ndarray) -> np.ndarray:
     return mask.reshape(mask.shape + (1,) * (like.ndim - 1))
 
 
-__all__ = ["QuadFaultVectorEnv", "batched_reward", "batched_termination", "AUTORESET_MODES"]
+__all__ = ["AUTORESET_MODES", "QuadFaultVectorEnv", "batched_reward", "batched_termination"]

@@ -1,22 +1,37 @@
-"""Compiled (numba) fast path of :func:`quadfault.simulator.simulate`.
+"""Compiled (numba) twin of the core physics: one vehicle step, the single-vehicle simulator
+loop and the batched kernel :func:`step_batch`.
 
-The same computation as the pure-numpy loop, compiled with ``numba.njit(cache=True)`` for the
-common case: the :class:`~quadfault.controller.GeometricController` (any
-:class:`~quadfault.controller.ControllerConfig`), no unmodelled effects, the ``rk4`` or
-``reference`` integrator, sensor noise, control decimation, motor saturation and thrust noise.
-Everything that is a function of time only (reference trajectory, feed-forward rates,
-efficiency schedule) and every random number is prepared in numpy before the loop and passed
-in as arrays.
+The same computation as the pure-numpy code, compiled with ``numba.njit(cache=True)``:
+the :class:`~quadfault.controller.GeometricController` (any
+:class:`~quadfault.controller.ControllerConfig`), the motor model, the ``rk4`` (RKMK4) or
+``reference`` integrator, sensor noise. Everything that is a function of time only
+(reference trajectory, feed-forward rates, efficiency schedule) and every random number is
+prepared in numpy and passed in as arrays.
 
-Every ``@njit`` helper below mirrors one pure function one to one and says which; the
-equations are not a second model but a transcription, guarded by
-``tests/test_simulator_fast.py`` (compiled == pure to <= 1e-9 over a 10 s flight).
+Layout of the code:
+
+* **scalar kernels** (``_`` prefix): vectors are 3-tuples of float64 and rotation matrices
+  9-tuples (row-major), so the hot path allocates nothing -- LLVM keeps them in registers.
+  Each mirrors one pure function and says which; it is a transcription, not a second model,
+  guarded by ``tests/test_simulator_fast.py`` (compiled == pure to <= 1e-9 over a flight,
+  helper by helper to ~1e-14) and ``tests/test_throughput_kernel.py``.
+* :func:`plant_step`: **the** per-vehicle physics step (motor model, allocation, RKMK4).
+  The single-vehicle loop :func:`run_steps` and the batched kernel :func:`step_batch` both
+  call it, and both call :func:`_controller` for the geometric controller.
+* array wrappers with the pure functions' names (``expm_so3``, ``step_rk4``,
+  ``motor_commands``, ...): thin conversions around the scalar kernels, for the tests and
+  for other compiled modules (``estimators.ekf_numba``). They allocate; the loops don't.
 
 Random numbers: ``Generator.standard_normal((n, m))`` yields exactly the stream of ``n * m``
 single draws taken in row order, so blocks of rows drawn before each chunk of steps, with the
 columns laid out in the order the pure loop draws them each step (sensor p, v, [attitude],
 gyro; the motors; the accelerometer), reproduce the pure path's noise bit for bit (see
 :func:`noise_layout`).
+
+All kernels use ``error_model="numpy"`` (a division by zero gives inf / NaN as in numpy,
+never an exception inside a parallel loop) and no ``fastmath`` (results stay equal to the
+numpy path to rounding). Threads: numba's default, one per core (``NUMBA_NUM_THREADS`` or
+``numba.set_num_threads`` to change it).
 
 Without numba this module still imports (``AVAILABLE`` is False) and the helpers run as plain
 Python, which is how the tests check them one by one against the pure functions.
@@ -32,11 +47,21 @@ import numpy as np
 from quadfault.errors import ConfigError
 
 try:  # the optional ``fast`` extra
-    from numba import njit
+    import numba
+    from numba import prange
 
     AVAILABLE = True
+
+    def njit(*args, **kwargs):
+        """``numba.njit`` with this module's defaults (cache, numpy error model)."""
+        kwargs.setdefault("cache", True)
+        kwargs.setdefault("error_model", "numpy")
+        if len(args) == 1 and callable(args[0]):
+            return numba.njit(**kwargs)(args[0])
+        return numba.njit(*args, **kwargs)
 except ImportError:  # pragma: no cover - exercised only without numba
     AVAILABLE = False
+    prange = range
 
     def njit(*args, **kwargs):
         """Stand-in decorator: the functions stay plain Python."""
@@ -45,84 +70,24 @@ except ImportError:  # pragma: no cover - exercised only without numba
         return lambda f: f
 
 
-# --- rotation.py ---------------------------------------------------------------------------
-@njit(cache=True)
-def cross(a, b):
-    """Mirrors :func:`quadfault.rotation.cross` (one 3-vector)."""
-    out = np.empty(3)
-    out[0] = a[1] * b[2] - a[2] * b[1]
-    out[1] = a[2] * b[0] - a[0] * b[2]
-    out[2] = a[0] * b[1] - a[1] * b[0]
-    return out
-
-
-@njit(cache=True)
-def hat(w):
-    """Mirrors :func:`quadfault.rotation.hat` (paper eq. 5)."""
-    out = np.zeros((3, 3))
-    out[0, 1] = -w[2]
-    out[0, 2] = w[1]
-    out[1, 0] = w[2]
-    out[1, 2] = -w[0]
-    out[2, 0] = -w[1]
-    out[2, 1] = w[0]
-    return out
-
-
-@njit(cache=True)
-def vee(m):
-    """Mirrors :func:`quadfault.rotation.vee`."""
-    out = np.empty(3)
-    out[0] = 0.5 * (m[2, 1] - m[1, 2])
-    out[1] = 0.5 * (m[0, 2] - m[2, 0])
-    out[2] = 0.5 * (m[1, 0] - m[0, 1])
-    return out
-
-
-@njit(cache=True)
-def matmul(A, B):
-    """``A @ B`` for 3x3 matrices."""
-    out = np.empty((3, 3))
-    for i in range(3):
-        for j in range(3):
-            out[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
-    return out
-
-
-@njit(cache=True)
-def matvec(A, x):
-    """``A @ x`` for a matrix with any number of rows and a vector."""
-    out = np.zeros(A.shape[0])
-    for i in range(A.shape[0]):
-        s = 0.0
-        for j in range(A.shape[1]):
-            s += A[i, j] * x[j]
-        out[i] = s
-    return out
-
-
-@njit(cache=True)
-def put(dst, src):
-    """``dst[...] = src`` element by element (1-D or 2-D). Array-valued slice assignment
-    would compile numba's shape-error formatting, which costs seconds of JIT time."""
-    if dst.ndim == 1:
-        for i in range(dst.shape[0]):
-            dst[i] = src[i]
-    else:
-        for i in range(dst.shape[0]):
-            for j in range(dst.shape[1]):
-                dst[i, j] = src[i, j]
-
-
-@njit(cache=True)
-def dot(a, b):
+# --- scalar kernels: rotation.py -------------------------------------------------------------
+@njit
+def _dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-@njit(cache=True)
-def expm_so3(phi):
-    """Mirrors :func:`quadfault.rotation.expm_so3` (Rodrigues, Taylor series below 1e-4 rad)."""
-    th2 = dot(phi, phi)
+@njit
+def _cross(a, b):
+    """Mirrors :func:`quadfault.rotation.cross`."""
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+@njit
+def _expm(phi):
+    """Mirrors :func:`quadfault.rotation.expm_so3` (Rodrigues, Taylor series below 1e-4 rad):
+    ``I + a [phi]x + b (phi phi^T - |phi|^2 I)`` as a row-major 9-tuple."""
+    x, y, z = phi
+    th2 = x * x + y * y + z * z
     if th2 < 1e-8:
         a = 1.0 - th2 / 6.0 + th2 * th2 / 120.0
         b = 0.5 - th2 / 24.0 + th2 * th2 / 720.0
@@ -130,34 +95,69 @@ def expm_so3(phi):
         th = math.sqrt(th2)
         a = math.sin(th) / th
         b = (1.0 - math.cos(th)) / (th * th)
-    H = hat(phi)
-    out = np.empty((3, 3))
-    for i in range(3):
-        for j in range(3):
-            out[i, j] = b * (phi[i] * phi[j]) + a * H[i, j]
     d = 1.0 - b * th2
-    out[0, 0] += d
-    out[1, 1] += d
-    out[2, 2] += d
-    return out
+    return (b * (x * x) + d, b * (x * y) + a * -z, b * (x * z) + a * y,
+            b * (y * x) + a * z, b * (y * y) + d, b * (y * z) + a * -x,
+            b * (z * x) + a * -y, b * (z * y) + a * x, b * (z * z) + d)
 
 
-@njit(cache=True)
-def dcm_orthonormalize_reference(R):
-    """Mirrors :func:`quadfault.rotation.dcm_orthonormalize_reference`."""
-    x, y = R[0].copy(), R[1].copy()
-    err = dot(x, y)
-    xo = x - 0.5 * err * y
-    yo = y - 0.5 * err * x
-    zo = cross(xo, yo)
-    out = np.empty((3, 3))
-    put(out[0], 0.5 * (3 - dot(xo, xo)) * xo)
-    put(out[1], 0.5 * (3 - dot(yo, yo)) * yo)
-    put(out[2], 0.5 * (3 - dot(zo, zo)) * zo)
-    return out
+@njit
+def _mul(A, B):
+    """``A @ B`` for row-major 9-tuples."""
+    return (A[0] * B[0] + A[1] * B[3] + A[2] * B[6], A[0] * B[1] + A[1] * B[4] + A[2] * B[7],
+            A[0] * B[2] + A[1] * B[5] + A[2] * B[8],
+            A[3] * B[0] + A[4] * B[3] + A[5] * B[6], A[3] * B[1] + A[4] * B[4] + A[5] * B[7],
+            A[3] * B[2] + A[4] * B[5] + A[5] * B[8],
+            A[6] * B[0] + A[7] * B[3] + A[8] * B[6], A[6] * B[1] + A[7] * B[4] + A[8] * B[7],
+            A[6] * B[2] + A[7] * B[5] + A[8] * B[8])
 
 
-# --- dynamics.py ---------------------------------------------------------------------------
+@njit
+def _mv(A, x):
+    """``A @ x`` for a (3, 3) array and a 3-tuple."""
+    return (A[0, 0] * x[0] + A[0, 1] * x[1] + A[0, 2] * x[2],
+            A[1, 0] * x[0] + A[1, 1] * x[1] + A[1, 2] * x[2],
+            A[2, 0] * x[0] + A[2, 1] * x[1] + A[2, 2] * x[2])
+
+
+@njit
+def _axpy(x, a, y):
+    """``x + a * y`` for 3-tuples."""
+    return (x[0] + a * y[0], x[1] + a * y[1], x[2] + a * y[2])
+
+
+@njit
+def _rk_sum(x0, c, k1, k2, k3, k4):
+    """``x0 + c (k1 + 2 k2 + 2 k3 + k4)`` (the RK4 combination, in the pure code's order)."""
+    return (x0[0] + c * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0]),
+            x0[1] + c * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1]),
+            x0[2] + c * (k1[2] + 2 * k2[2] + 2 * k3[2] + k4[2]))
+
+
+@njit
+def _vec(a, off=0):
+    """3-tuple from ``a[off:off + 3]`` of a 1-D array."""
+    return (a[off], a[off + 1], a[off + 2])
+
+
+@njit
+def _mat(M):
+    """Row-major 9-tuple of a (3, 3) array."""
+    return (M[0, 0], M[0, 1], M[0, 2], M[1, 0], M[1, 1], M[1, 2], M[2, 0], M[2, 1], M[2, 2])
+
+
+@njit
+def _store_vec(dst, x):
+    dst[0], dst[1], dst[2] = x[0], x[1], x[2]
+
+
+@njit
+def _store_mat(dst, M):
+    for r in range(3):
+        dst[r, 0], dst[r, 1], dst[r, 2] = M[3 * r], M[3 * r + 1], M[3 * r + 2]
+
+
+# --- scalar kernels: dynamics.py -------------------------------------------------------------
 class Body(NamedTuple):
     """Rigid-body parameters of a :class:`~quadfault.vehicle.Vehicle` as plain arrays."""
 
@@ -179,71 +179,414 @@ def body_of(vehicle) -> Body:
                 float(vehicle.rotor_max_thrust))
 
 
-@njit(cache=True)
-def translational_acceleration(R, thrust, body):
+@njit
+def _tacc(R, thrust, body):
     """Mirrors :func:`quadfault.dynamics.translational_acceleration` (eq. 2, no F_ext)."""
-    acc = np.empty(3)
-    for i in range(3):
-        acc[i] = -(thrust / body.mass) * R[i, 2]
-    acc[2] += body.gravity
-    return acc
+    s = thrust / body.mass
+    return (0.0 - s * R[2], 0.0 - s * R[5], body.gravity - s * R[8])
 
 
-@njit(cache=True)
-def angular_acceleration(w, moment, body):
+@njit
+def _wacc(w, moment, body):
     """Mirrors :func:`quadfault.dynamics.angular_acceleration` (eq. 4, no M_ext)."""
-    m = moment - cross(w, matvec(body.inertia, w))
-    return matvec(body.inertia_inverse, m)
+    c = _cross(w, _mv(body.inertia, w))
+    return _mv(body.inertia_inverse, (moment[0] - c[0], moment[1] - c[1], moment[2] - c[2]))
 
 
-@njit(cache=True)
-def specific_force_body(R, acceleration_world, gravity):
+@njit
+def _specific_force(R, acc, gravity):
     """Mirrors :func:`quadfault.dynamics.specific_force_body`: ``R^T (a - g e3)``."""
-    f = acceleration_world.copy()
-    f[2] -= gravity
+    f2 = acc[2] - gravity
+    return (R[0] * acc[0] + R[3] * acc[1] + R[6] * f2,
+            R[1] * acc[0] + R[4] * acc[1] + R[7] * f2,
+            R[2] * acc[0] + R[5] * acc[1] + R[8] * f2)
+
+
+@njit
+def _dexpinv(theta, w):
+    """Mirrors :func:`quadfault.dynamics._dexpinv`."""
+    tw = _cross(theta, w)
+    ttw = _cross(theta, tw)
+    return (w[0] + 0.5 * tw[0] + ttw[0] / 12.0, w[1] + 0.5 * tw[1] + ttw[1] / 12.0,
+            w[2] + 0.5 * tw[2] + ttw[2] / 12.0)
+
+
+@njit
+def _scale(a, x):
+    return (a * x[0], a * x[1], a * x[2])
+
+
+@njit
+def _rk4(p0, v0, R0, w0, thrust, moment, body, dt):
+    """Mirrors :func:`quadfault.dynamics.step_rk4` (RKMK4, eqs. 1-4, no external wrench):
+    ``R(t) = R0 exp([theta(t)]x)``, ``theta' = dexp^-1(Omega)``; ``_derivatives`` inlined as
+    (p', v', Omega') = (v, eq. 2, eq. 4)."""
+    h = 0.5 * dt
+    k1p, k1v, k1w = v0, _tacc(R0, thrust, body), _wacc(w0, moment, body)
+    th1 = w0
+    v2, R2, w2 = _axpy(v0, h, k1v), _mul(R0, _expm(_scale(h, th1))), _axpy(w0, h, k1w)
+    k2p, k2v, k2w = v2, _tacc(R2, thrust, body), _wacc(w2, moment, body)
+    th2 = _dexpinv(_scale(h, th1), w2)
+    v3, R3, w3 = _axpy(v0, h, k2v), _mul(R0, _expm(_scale(h, th2))), _axpy(w0, h, k2w)
+    k3p, k3v, k3w = v3, _tacc(R3, thrust, body), _wacc(w3, moment, body)
+    th3 = _dexpinv(_scale(h, th2), w3)
+    v4, R4, w4 = _axpy(v0, dt, k3v), _mul(R0, _expm(_scale(dt, th3))), _axpy(w0, dt, k3w)
+    k4p, k4v, k4w = v4, _tacc(R4, thrust, body), _wacc(w4, moment, body)
+    th4 = _dexpinv(_scale(dt, th3), w4)
+    c = dt / 6.0
+    th = (c * (th1[0] + 2 * th2[0] + 2 * th3[0] + th4[0]),
+          c * (th1[1] + 2 * th2[1] + 2 * th3[1] + th4[1]),
+          c * (th1[2] + 2 * th2[2] + 2 * th3[2] + th4[2]))
+    return (_rk_sum(p0, c, k1p, k2p, k3p, k4p), _rk_sum(v0, c, k1v, k2v, k3v, k4v),
+            _mul(R0, _expm(th)), _rk_sum(w0, c, k1w, k2w, k3w, k4w))
+
+
+# --- scalar kernels: motors.py + Vehicle.wrench ----------------------------------------------
+@njit
+def _motor_wrench(f_cmd, eta, saturate, sigma, eps, e0, body):
+    """Mirrors :meth:`quadfault.motors.MotorModel.apply` (eqs. 11, 13) followed by
+    :meth:`quadfault.vehicle.Vehicle.wrench`: collective thrust T [N] and moment (3-tuple,
+    [N m]) of the rotor thrusts ``eta_i clip(f_cmd_i) exp(sigma eps[e0 + i])`` (the normals
+    ``eps`` are read only when ``sigma > 0``)."""
+    A = body.allocation
+    T = m0 = m1 = m2 = 0.0
+    for i in range(f_cmd.shape[0]):
+        fi = max(f_cmd[i], 0.0)
+        if saturate:
+            fi = min(fi, body.max_thrust)
+        fi = fi * eta[i]
+        if sigma > 0:
+            fi = fi * math.exp(sigma * eps[e0 + i])
+        T += A[0, i] * fi
+        m0 += A[1, i] * fi
+        m1 += A[2, i] * fi
+        m2 += A[3, i] * fi
+    return T, (m0, m1, m2)
+
+
+@njit
+def plant_step(p, v, R, w, f_cmd, eta, saturate, sigma, eps, e0, body, dt):
+    """One physics step of one vehicle -- :meth:`quadfault.plant.Plant.step` without effects:
+    the motor model (eqs. 11, 13), the allocation, then RKMK4 (eqs. 1-4) with the wrench held.
+
+    ``p, v, w`` are 3-tuples, ``R`` a row-major 9-tuple; ``f_cmd`` (n,) the held commands
+    [N], ``eta`` (n,) the efficiencies, ``sigma`` the thrust-noise std with its normals at
+    ``eps[e0:e0 + n]``. Returns ``(p, v, R, w, T, M)``: the new state and the applied wrench.
+    Both :func:`run_steps` and :func:`step_batch` call this function.
+    """
+    T, M = _motor_wrench(f_cmd, eta, saturate, sigma, eps, e0, body)
+    p1, v1, R1, w1 = _rk4(p, v, R, w, T, M, body, dt)
+    return p1, v1, R1, w1, T, M
+
+
+# --- scalar kernels: controller.py -----------------------------------------------------------
+class Gains(NamedTuple):
+    """:class:`~quadfault.controller.GeometricController` gains and options as arrays."""
+
+    kx: np.ndarray
+    kv: np.ndarray
+    kR: np.ndarray
+    kW: np.ndarray
+    acceleration_feedforward: bool
+    angular_feedforward: bool
+    normalize_b2d: bool
+
+
+def gains_of(controller) -> Gains:
+    cfg = controller.config
+    return Gains(np.asarray(controller.kx, float), np.asarray(controller.kv, float),
+                 np.asarray(controller.kR, float), np.asarray(controller.kW, float),
+                 bool(cfg.acceleration_feedforward), bool(cfg.angular_feedforward),
+                 bool(cfg.normalize_b2d))
+
+
+@njit
+def _desired_attitude(f_n, b1d, normalize_b2d):
+    """Mirrors :meth:`GeometricController._desired_attitude`: columns (b1, b2d, b3d)."""
+    nf = math.sqrt(_dot(f_n, f_n))
+    b3d = (f_n[0] / nf, f_n[1] / nf, f_n[2] / nf)
+    b2d = _cross(b3d, b1d)
+    if normalize_b2d:
+        nb = math.sqrt(_dot(b2d, b2d))
+        b2d = (b2d[0] / nb, b2d[1] / nb, b2d[2] / nb)
+    b1 = _cross(b2d, b3d)
+    return (b1[0], b2d[0], b3d[0], b1[1], b2d[1], b3d[1], b1[2], b2d[2], b3d[2])
+
+
+@njit
+def _controller(p, v, R, w, ref, gains, body, out):
+    """Mirrors :meth:`GeometricController.compute` (eqs. 9, 10) followed by
+    :meth:`GeometricController.motor_commands`: writes the rotor commands [N] (nominal
+    allocation inverse) into ``out`` (n,).
+
+    ``ref`` (6, 3) rows: position, velocity, acceleration, b1d, Omega_d, Omega_d' (the last
+    two used only with angular feed-forward); ``body`` is the *nominal* vehicle.
+    """
+    kx, kv = gains.kx, gains.kv
+    mg = body.mass * body.gravity
+    f_n = (kx[0] * (p[0] - ref[0, 0]) + kv[0] * (v[0] - ref[1, 0]),
+           kx[1] * (p[1] - ref[0, 1]) + kv[1] * (v[1] - ref[1, 1]),
+           kx[2] * (p[2] - ref[0, 2]) + kv[2] * (v[2] - ref[1, 2]) + mg)
+    if gains.acceleration_feedforward:
+        m = body.mass
+        f_n = (f_n[0] - m * ref[2, 0], f_n[1] - m * ref[2, 1], f_n[2] - m * ref[2, 2])
+    Rd = _desired_attitude(f_n, _vec(ref[3]), gains.normalize_b2d)
+    thrust = f_n[0] * R[2] + f_n[1] * R[5] + f_n[2] * R[8]
+    # A = Rd^T R; e_R = vee(A - A^T) / 2 (eq. 10); R^T Rd = A^T
+    A = _mul((Rd[0], Rd[3], Rd[6], Rd[1], Rd[4], Rd[7], Rd[2], Rd[5], Rd[8]), R)
+    eR = (0.5 * (0.5 * ((A[7] - A[5]) - (A[5] - A[7]))),
+          0.5 * (0.5 * ((A[2] - A[6]) - (A[6] - A[2]))),
+          0.5 * (0.5 * ((A[3] - A[1]) - (A[1] - A[3]))))
+    J = body.inertia
+    Jw = _mv(J, w)
+    if gains.angular_feedforward:
+        RtRd = (A[0], A[3], A[6], A[1], A[4], A[7], A[2], A[5], A[8])
+        w_d, w_dot_d = _vec(ref[4]), _vec(ref[5])
+        w_d_body = (RtRd[0] * w_d[0] + RtRd[1] * w_d[1] + RtRd[2] * w_d[2],
+                    RtRd[3] * w_d[0] + RtRd[4] * w_d[1] + RtRd[5] * w_d[2],
+                    RtRd[6] * w_d[0] + RtRd[7] * w_d[1] + RtRd[8] * w_d[2])
+        eW = (w[0] - w_d_body[0], w[1] - w_d_body[1], w[2] - w_d_body[2])
+        c1 = _cross(w, w_d_body)
+        x = (c1[0] - (RtRd[0] * w_dot_d[0] + RtRd[1] * w_dot_d[1] + RtRd[2] * w_dot_d[2]),
+             c1[1] - (RtRd[3] * w_dot_d[0] + RtRd[4] * w_dot_d[1] + RtRd[5] * w_dot_d[2]),
+             c1[2] - (RtRd[6] * w_dot_d[0] + RtRd[7] * w_dot_d[1] + RtRd[8] * w_dot_d[2]))
+        c0, Jx = _cross(w, Jw), _mv(J, x)
+        ff = (c0[0] - Jx[0], c0[1] - Jx[1], c0[2] - Jx[2])
+    else:
+        eW = w
+        ff = _cross(w, Jw)
+    kR, kW = gains.kR, gains.kW
+    M = (-kR[0] * eR[0] - kW[0] * eW[0] + ff[0], -kR[1] * eR[1] - kW[1] * eW[1] + ff[1],
+         -kR[2] * eR[2] - kW[2] * eW[2] + ff[2])
+    Ai = body.allocation_inverse
+    for i in range(out.shape[0]):
+        out[i] = Ai[i, 0] * thrust + Ai[i, 1] * M[0] + Ai[i, 2] * M[1] + Ai[i, 3] * M[2]
+
+
+# --- scalar kernels: simulator.py ------------------------------------------------------------
+@njit
+def _measure(p, v, R, w, row, layout, sensor_std):
+    """Mirrors :meth:`quadfault.simulator.SensorNoise.measure` (state part).
+
+    ``sensor_std`` = (position, velocity, attitude, gyro); ``layout`` = column offsets of
+    the draws in ``row`` (see :func:`noise_layout`; -1 = not drawn).
+    """
+    if layout[0] < 0:
+        return p, v, R, w
+    pm = _axpy(p, sensor_std[0], _vec(row, layout[0]))
+    vm = _axpy(v, sensor_std[1], _vec(row, layout[1]))
+    Rm = R
+    if layout[2] >= 0:
+        Rm = _mul(R, _expm(_scale(sensor_std[2], _vec(row, layout[2]))))
+    wm = _axpy(w, sensor_std[3], _vec(row, layout[3]))
+    return pm, vm, Rm, wm
+
+
+# --- the batched kernel ----------------------------------------------------------------------
+@njit
+def _advance(i, p, v, R, w, f_cmd, eta, sigma, z, z_off, saturate, body, dt,
+             control_every, refs, gains, nominal):
+    """Vehicle ``i`` of :func:`step_batch`: ``eta.shape[1]`` substeps, in place."""
+    pi, vi, Ri, wi = _vec(p[i]), _vec(v[i]), _mat(R[i]), _vec(w[i])
+    fi, zi = f_cmd[i], z[i]
+    for j in range(eta.shape[1]):
+        if control_every > 0 and j % control_every == 0:
+            _controller(pi, vi, Ri, wi, refs[i], gains, nominal, fi)
+        pi, vi, Ri, wi, _, _ = plant_step(pi, vi, Ri, wi, fi, eta[i, j], saturate, sigma[i],
+                                          zi, z_off[i, j], body, dt)
+    _store_vec(p[i], pi)
+    _store_vec(v[i], vi)
+    _store_mat(R[i], Ri)
+    _store_vec(w[i], wi)
+
+
+@njit(parallel=True)
+def _step_batch_parallel(p, v, R, w, f_cmd, eta, sigma, z, z_off, saturate, body, dt,
+                         control_every, refs, gains, nominal):
+    for i in prange(p.shape[0]):
+        _advance(i, p, v, R, w, f_cmd, eta, sigma, z, z_off, saturate, body, dt,
+                 control_every, refs, gains, nominal)
+
+
+@njit
+def _step_batch_serial(p, v, R, w, f_cmd, eta, sigma, z, z_off, saturate, body, dt,
+                       control_every, refs, gains, nominal):
+    for i in range(p.shape[0]):
+        _advance(i, p, v, R, w, f_cmd, eta, sigma, z, z_off, saturate, body, dt,
+                 control_every, refs, gains, nominal)
+
+
+#: below this many vehicles :func:`step_batch` runs on the calling thread (a parallel launch
+#: costs more than it saves for a handful of vehicles)
+PARALLEL_MIN_VEHICLES = 64
+
+
+def step_batch(p, v, R, w, f_cmd, eta, sigma, z, z_off, saturate, body, dt,
+               control_every=0, refs=None, gains=None, nominal=None):
+    """Advance N vehicles by ``k = eta.shape[1]`` physics substeps, in place, in parallel.
+
+    Per vehicle i and substep j: when ``control_every > 0`` and ``j % control_every == 0``
+    the geometric controller (eqs. 9, 10; :func:`_controller`, from the *true* state, with
+    the reference ``refs[i]`` (6, 3) held over the call, ``gains`` and the nominal vehicle
+    ``nominal`` (default ``body``)) writes ``f_cmd[i]``; then :func:`plant_step` (motor model
+    eqs. 11, 13 with efficiency ``eta[i, j]`` and thrust noise
+    ``sigma[i] * z[i, z_off[i, j]:+n]``, allocation, RKMK4 eqs. 1-4 of length ``dt`` [s]).
+
+    Shapes: ``p, v, w`` (N, 3), ``R`` (N, 3, 3), ``f_cmd`` (N, n) (updated with the
+    controller), ``eta`` (N, k, n), ``sigma`` (N,), ``z`` (N, m) standard normals, ``z_off``
+    (N, k) int64, ``refs`` (N, 6, 3). All float64 and C-contiguous (numba's prange over the
+    vehicles from ``PARALLEL_MIN_VEHICLES`` on; numba's thread count, one per core by default).
+    """
+    if control_every > 0 and (refs is None or gains is None):
+        raise ConfigError("step_batch: the controller (control_every > 0) needs refs and gains")
+    if refs is None:
+        refs = np.zeros((1, 6, 3))
+    gains = no_gains() if gains is None else gains
+    nominal = body if nominal is None else nominal
+    kernel = _step_batch_parallel if len(p) >= PARALLEL_MIN_VEHICLES else _step_batch_serial
+    kernel(p, v, R, w, f_cmd, eta, sigma, z, z_off, bool(saturate), body, float(dt),
+           int(control_every), refs, gains, nominal)
+
+
+def no_gains() -> Gains:
+    """Placeholder gains for :func:`step_batch` calls without the controller."""
+    z = np.zeros(3)
+    return Gains(z, z, z, z, False, False, False)
+
+
+# --- array wrappers with the pure functions' names (tests, estimators.ekf_numba) -----------
+@njit
+def dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit
+def _arr3(x):
     out = np.empty(3)
-    for i in range(3):
-        out[i] = R[0, i] * f[0] + R[1, i] * f[1] + R[2, i] * f[2]
+    _store_vec(out, x)
     return out
 
 
-@njit(cache=True)
+@njit
+def _arr33(M):
+    out = np.empty((3, 3))
+    _store_mat(out, M)
+    return out
+
+
+@njit
+def cross(a, b):
+    """Mirrors :func:`quadfault.rotation.cross` (one 3-vector)."""
+    return _arr3(_cross(_vec(a), _vec(b)))
+
+
+@njit
+def hat(w):
+    """Mirrors :func:`quadfault.rotation.hat` (paper eq. 5)."""
+    out = np.zeros((3, 3))
+    out[0, 1] = -w[2]
+    out[0, 2] = w[1]
+    out[1, 0] = w[2]
+    out[1, 2] = -w[0]
+    out[2, 0] = -w[1]
+    out[2, 1] = w[0]
+    return out
+
+
+@njit
+def vee(m):
+    """Mirrors :func:`quadfault.rotation.vee`."""
+    out = np.empty(3)
+    out[0] = 0.5 * (m[2, 1] - m[1, 2])
+    out[1] = 0.5 * (m[0, 2] - m[2, 0])
+    out[2] = 0.5 * (m[1, 0] - m[0, 1])
+    return out
+
+
+@njit
+def matmul(A, B):
+    """``A @ B`` for 3x3 matrices."""
+    return _arr33(_mul(_mat(A), _mat(B)))
+
+
+@njit
+def matvec(A, x):
+    """``A @ x`` for a matrix with any number of rows and a vector."""
+    out = np.zeros(A.shape[0])
+    for i in range(A.shape[0]):
+        s = 0.0
+        for j in range(A.shape[1]):
+            s += A[i, j] * x[j]
+        out[i] = s
+    return out
+
+
+@njit
+def put(dst, src):
+    """``dst[...] = src`` element by element (1-D or 2-D). Array-valued slice assignment
+    would compile numba's shape-error formatting, which costs seconds of JIT time."""
+    if dst.ndim == 1:
+        for i in range(dst.shape[0]):
+            dst[i] = src[i]
+    else:
+        for i in range(dst.shape[0]):
+            for j in range(dst.shape[1]):
+                dst[i, j] = src[i, j]
+
+
+@njit
+def expm_so3(phi):
+    """Mirrors :func:`quadfault.rotation.expm_so3` (array in, (3, 3) array out)."""
+    return _arr33(_expm(_vec(phi)))
+
+
+@njit
+def dcm_orthonormalize_reference(R):
+    """Mirrors :func:`quadfault.rotation.dcm_orthonormalize_reference`."""
+    x, y = R[0].copy(), R[1].copy()
+    err = dot(x, y)
+    xo = x - 0.5 * err * y
+    yo = y - 0.5 * err * x
+    zo = cross(xo, yo)
+    out = np.empty((3, 3))
+    put(out[0], 0.5 * (3 - dot(xo, xo)) * xo)
+    put(out[1], 0.5 * (3 - dot(yo, yo)) * yo)
+    put(out[2], 0.5 * (3 - dot(zo, zo)) * zo)
+    return out
+
+
+@njit
+def translational_acceleration(R, thrust, body):
+    """Mirrors :func:`quadfault.dynamics.translational_acceleration` (eq. 2, no F_ext)."""
+    return _arr3(_tacc(_mat(R), thrust, body))
+
+
+@njit
+def angular_acceleration(w, moment, body):
+    """Mirrors :func:`quadfault.dynamics.angular_acceleration` (eq. 4, no M_ext)."""
+    return _arr3(_wacc(_vec(w), _vec(moment), body))
+
+
+@njit
+def specific_force_body(R, acceleration_world, gravity):
+    """Mirrors :func:`quadfault.dynamics.specific_force_body`: ``R^T (a - g e3)``."""
+    return _arr3(_specific_force(_mat(R), _vec(acceleration_world), gravity))
+
+
+@njit
 def dexpinv(theta, w):
     """Mirrors :func:`quadfault.dynamics._dexpinv`."""
-    tw = cross(theta, w)
-    return w + 0.5 * tw + cross(theta, tw) / 12.0
+    return _arr3(_dexpinv(_vec(theta), _vec(w)))
 
 
-@njit(cache=True)
+@njit
 def step_rk4(p0, v0, R0, w0, thrust, moment, body, dt):
-    """Mirrors :func:`quadfault.dynamics.step_rk4` (RKMK4, no external wrench).
-
-    ``_derivatives`` is inlined: (p', v', Omega') = (v, eq. 2, eq. 4).
-    """
-    h = 0.5 * dt
-    k1p, k1v, k1w = v0, translational_acceleration(R0, thrust, body), \
-        angular_acceleration(w0, moment, body)
-    th1 = w0
-    p2, v2, R2, w2 = p0 + h * k1p, v0 + h * k1v, matmul(R0, expm_so3(h * th1)), w0 + h * k1w
-    k2p, k2v, k2w = v2, translational_acceleration(R2, thrust, body), \
-        angular_acceleration(w2, moment, body)
-    th2 = dexpinv(h * th1, w2)
-    p3, v3, R3, w3 = p0 + h * k2p, v0 + h * k2v, matmul(R0, expm_so3(h * th2)), w0 + h * k2w
-    k3p, k3v, k3w = v3, translational_acceleration(R3, thrust, body), \
-        angular_acceleration(w3, moment, body)
-    th3 = dexpinv(h * th2, w3)
-    p4, v4, R4, w4 = p0 + dt * k3p, v0 + dt * k3v, matmul(R0, expm_so3(dt * th3)), w0 + dt * k3w
-    k4p, k4v, k4w = v4, translational_acceleration(R4, thrust, body), \
-        angular_acceleration(w4, moment, body)
-    th4 = dexpinv(dt * th3, w4)
-    c = dt / 6.0
-    return (p0 + c * (k1p + 2 * k2p + 2 * k3p + k4p),
-            v0 + c * (k1v + 2 * k2v + 2 * k3v + k4v),
-            matmul(R0, expm_so3(c * (th1 + 2 * th2 + 2 * th3 + th4))),
-            w0 + c * (k1w + 2 * k2w + 2 * k3w + k4w))
+    """Mirrors :func:`quadfault.dynamics.step_rk4` (RKMK4, no external wrench), on arrays."""
+    p, v, R, w = _rk4(_vec(p0), _vec(v0), _mat(R0), _vec(w0), thrust, _vec(moment), body, dt)
+    return _arr3(p), _arr3(v), _arr33(R), _arr3(w)
 
 
-@njit(cache=True)
+@njit
 def reference_euler_step(p0, v0, R0, w0, lag, body, dt):
     """Mirrors :meth:`quadfault.dynamics.ReferenceEuler.step`.
 
@@ -265,7 +608,7 @@ def reference_euler_step(p0, v0, R0, w0, lag, body, dt):
     return p, v, R, w
 
 
-@njit(cache=True)
+@njit
 def reference_euler_apply(lag, thrust, moment, R):
     """Mirrors :meth:`quadfault.dynamics.ReferenceEuler.apply` (stores T R e3 and M)."""
     for i in range(3):
@@ -273,8 +616,7 @@ def reference_euler_apply(lag, thrust, moment, R):
         lag[3, i] = moment[i]
 
 
-# --- motors.py -----------------------------------------------------------------------------
-@njit(cache=True)
+@njit
 def motor_apply(f_cmd, eta, f_max, saturate, thrust_noise, eps):
     """Mirrors :meth:`quadfault.motors.MotorModel.apply` (eqs. 11, 13), with the standard
     normal draws ``eps`` passed in (ignored when ``thrust_noise`` is 0)."""
@@ -290,96 +632,47 @@ def motor_apply(f_cmd, eta, f_max, saturate, thrust_noise, eps):
     return f
 
 
-# --- controller.py -------------------------------------------------------------------------
-class Gains(NamedTuple):
-    """:class:`~quadfault.controller.GeometricController` gains and options as arrays."""
-
-    kx: np.ndarray
-    kv: np.ndarray
-    kR: np.ndarray
-    kW: np.ndarray
-    acceleration_feedforward: bool
-    angular_feedforward: bool
-    normalize_b2d: bool
-
-
-def gains_of(controller) -> Gains:
-    cfg = controller.config
-    return Gains(np.asarray(controller.kx, float), np.asarray(controller.kv, float),
-                 np.asarray(controller.kR, float), np.asarray(controller.kW, float),
-                 bool(cfg.acceleration_feedforward), bool(cfg.angular_feedforward),
-                 bool(cfg.normalize_b2d))
-
-
-@njit(cache=True)
+@njit
 def desired_attitude(f_n, b1d, normalize_b2d):
     """Mirrors :meth:`GeometricController._desired_attitude`: columns (b1, b2d, b3d)."""
-    b3d = f_n / math.sqrt(dot(f_n, f_n))
-    b2d = cross(b3d, b1d)
-    if normalize_b2d:
-        b2d = b2d / math.sqrt(dot(b2d, b2d))
-    b1 = cross(b2d, b3d)
-    Rd = np.empty((3, 3))
-    for i in range(3):
-        Rd[i, 0], Rd[i, 1], Rd[i, 2] = b1[i], b2d[i], b3d[i]
-    return Rd
+    return _arr33(_desired_attitude(_vec(f_n), _vec(b1d), normalize_b2d))
 
 
-@njit(cache=True)
+@njit
 def motor_commands(p, v, R, w, pos_d, vel_d, acc_d, b1d, w_d, w_dot_d, gains, body):
-    """Mirrors :meth:`GeometricController.compute` (eqs. 9, 10) followed by
-    :meth:`GeometricController.motor_commands` (nominal allocation inverse).
-
-    ``body`` is the *nominal* vehicle; ``w_d, w_dot_d`` are used only with angular
-    feed-forward.
-    """
-    ex = p - pos_d
-    ev = v - vel_d
-    f_n = gains.kx * ex + gains.kv * ev
-    f_n[2] += body.mass * body.gravity
-    if gains.acceleration_feedforward:
-        f_n = f_n - body.mass * acc_d
-    Rd = desired_attitude(f_n, b1d, gains.normalize_b2d)
-    thrust = f_n[0] * R[0, 2] + f_n[1] * R[1, 2] + f_n[2] * R[2, 2]
-    RT = R.T.copy()
-    eR = 0.5 * vee(matmul(Rd.T.copy(), R) - matmul(RT, Rd))
-    J = body.inertia
-    Jw = matvec(J, w)
-    if gains.angular_feedforward:
-        RtRd = matmul(RT, Rd)
-        w_d_body = matvec(RtRd, w_d)
-        eW = w - w_d_body
-        ff = cross(w, Jw) - matvec(J, cross(w, w_d_body) - matvec(RtRd, w_dot_d))
-    else:
-        eW = w
-        ff = cross(w, Jw)
-    M = -gains.kR * eR - gains.kW * eW + ff
-    wrench = np.empty(4)
-    wrench[0], wrench[1], wrench[2], wrench[3] = thrust, M[0], M[1], M[2]
-    return matvec(body.allocation_inverse, wrench)
+    """Mirrors :meth:`GeometricController.compute` + ``motor_commands`` (eqs. 9, 10)."""
+    ref = np.empty((6, 3))
+    for i in range(3):
+        ref[0, i], ref[1, i], ref[2, i] = pos_d[i], vel_d[i], acc_d[i]
+        ref[3, i], ref[4, i], ref[5, i] = b1d[i], w_d[i], w_dot_d[i]
+    out = np.empty(body.allocation_inverse.shape[0])
+    _controller(_vec(p), _vec(v), _mat(R), _vec(w), ref, gains, body, out)
+    return out
 
 
-# --- simulator.py --------------------------------------------------------------------------
-@njit(cache=True)
+@njit
 def measure(p, v, R, w, noise_row, layout, sensor_std):
-    """Mirrors :meth:`quadfault.simulator.SensorNoise.measure` (state part).
-
-    ``sensor_std`` = (position, velocity, attitude, gyro); ``layout`` = column offsets of
-    the draws in ``noise_row`` (see :func:`noise_layout`; -1 = not drawn).
-    """
-    if layout[0] < 0:
-        return p, v, R, w
-    i_p, i_v, i_att, i_w = layout[0], layout[1], layout[2], layout[3]
-    pm = p + sensor_std[0] * noise_row[i_p:i_p + 3]
-    vm = v + sensor_std[1] * noise_row[i_v:i_v + 3]
-    Rm = R
-    if i_att >= 0:
-        Rm = matmul(R, expm_so3(sensor_std[2] * noise_row[i_att:i_att + 3]))
-    wm = w + sensor_std[3] * noise_row[i_w:i_w + 3]
-    return pm, vm, Rm, wm
+    """Mirrors :meth:`quadfault.simulator.SensorNoise.measure` (state part), on arrays."""
+    pm, vm, Rm, wm = _measure(_vec(p), _vec(v), _mat(R), _vec(w), noise_row, layout,
+                              sensor_std)
+    return _arr3(pm), _arr3(vm), _arr33(Rm), _arr3(wm)
 
 
-@njit(cache=True)
+# --- simulator.py: the single-vehicle loop ----------------------------------------------------
+@njit
+def _reference_step(p, v, R, w, lag, body, dt):
+    """:func:`reference_euler_step` on tuples (the MATLAB reproduction; allocates)."""
+    pa, va, Ra, wa = reference_euler_step(_arr3(p), _arr3(v), _arr33(R), _arr3(w), lag, body, dt)
+    return _vec(pa), _vec(va), _mat(Ra), _vec(wa)
+
+
+@njit
+def _store_row(dst, x):
+    for i in range(dst.shape[0]):
+        dst[i] = x[i]
+
+
+@njit
 def run_steps(k0, k1, reference, decimation, dt, carry, lag, f_cmd, sf_meas,
               refs, eta, noise, layout, sensor_std, accel_std, record_accel,
               gains, nominal, plant, saturate, thrust_noise, out):
@@ -388,51 +681,52 @@ def run_steps(k0, k1, reference, decimation, dt, carry, lag, f_cmd, sf_meas,
     ``carry`` (rows p, v, w, then R in rows 3..5 of a (6, 3) array) the plant state, ``lag``
     the reference integrator's memory, ``f_cmd`` the held command and ``sf_meas`` the last
     accelerometer reading are updated in place, so the loop runs in chunks; ``noise`` holds
-    the chunk's draws (row 0 = step ``k0``). Returns the first step whose new state is not
+    the chunk's draws (row 0 = step ``k0``); ``refs`` (n_steps, 6, 3) the controller's
+    reference rows (see :func:`_controller`). Returns the first step whose new state is not
     finite, or -1.
     """
     out_p, out_v, out_R, out_w, out_f, out_eta, out_acc = out
-    pos_d, vel_d, acc_d, b1d, w_d, w_dot_d = refs
-    p, v, w = carry[0].copy(), carry[1].copy(), carry[2].copy()
-    R = carry[3:6].copy()
+    p, v, w = _vec(carry[0]), _vec(carry[1]), _vec(carry[2])
+    R = (carry[3, 0], carry[3, 1], carry[3, 2], carry[4, 0], carry[4, 1], carry[4, 2],
+         carry[5, 0], carry[5, 1], carry[5, 2])
+    e_off = max(layout[4], 0)
     diverged = -1
     for k in range(k0, k1):
         row = noise[k - k0]
         if reference:
-            p, v, R, w = reference_euler_step(p, v, R, w, lag, plant, dt)
-        mp, mv, mR, mw = measure(p, v, R, w, row, layout, sensor_std)
+            p, v, R, w = _reference_step(p, v, R, w, lag, plant, dt)
+        mp, mv, mR, mw = _measure(p, v, R, w, row, layout, sensor_std)
         if k % decimation == 0:
-            put(f_cmd, motor_commands(mp, mv, mR, mw, pos_d[k], vel_d[k], acc_d[k], b1d[k],
-                                      w_d[k], w_dot_d[k], gains, nominal))
+            _controller(mp, mv, mR, mw, refs[k], gains, nominal, f_cmd)
         # Plant.step: produced thrust, wrench, accelerometer truth, integration
-        f = motor_apply(f_cmd, eta[k], plant.max_thrust, saturate, thrust_noise,
-                        row[layout[4]:] if layout[4] >= 0 else row)
-        wrench = matvec(plant.allocation, f)
-        thrust, moment = wrench[0], wrench[1:].copy()
-        acc = translational_acceleration(R, thrust, plant)
-        sf = specific_force_body(R, acc, plant.gravity)
+        R_before = R
         if reference:
-            reference_euler_apply(lag, thrust, moment, R)
+            thrust, moment = _motor_wrench(f_cmd, eta[k], saturate, thrust_noise, row, e_off,
+                                           plant)
+            reference_euler_apply(lag, thrust, _arr3(moment), _arr33(R))
         else:
-            p, v, R, w = step_rk4(p, v, R, w, thrust, moment, plant, dt)
+            p, v, R, w, thrust, moment = plant_step(p, v, R, w, f_cmd, eta[k], saturate,
+                                                    thrust_noise, row, e_off, plant, dt)
         if record_accel:
-            put(sf_meas, sf)
+            sf = _specific_force(R_before, _tacc(R_before, thrust, plant), plant.gravity)
             if accel_std != 0.0:
-                put(sf_meas, sf + accel_std * row[layout[5]:layout[5] + 3])
-        put(out_p[k], mp)
-        put(out_v[k], mv)
-        put(out_w[k], mw)
-        put(out_R[k], mR)
-        put(out_f[k], f_cmd)
-        put(out_eta[k], eta[k])
-        put(out_acc[k], sf_meas)
+                sf = _axpy(sf, accel_std, _vec(row, layout[5]))
+            _store_vec(sf_meas, sf)
+        _store_vec(out_p[k], mp)
+        _store_vec(out_v[k], mv)
+        _store_vec(out_w[k], mw)
+        _store_mat(out_R[k], mR)
+        _store_row(out_f[k], f_cmd)
+        _store_row(out_eta[k], eta[k])
+        _store_row(out_acc[k], sf_meas)
         if not (np.isfinite(p[0]) and np.isfinite(p[1]) and np.isfinite(p[2])):
             diverged = k
             break
-    put(carry[0], p)
-    put(carry[1], v)
-    put(carry[2], w)
-    put(carry[3:6], R)
+    _store_vec(carry[0], p)
+    _store_vec(carry[1], v)
+    _store_vec(carry[2], w)
+    for r in range(3):
+        carry[3 + r, 0], carry[3 + r, 1], carry[3 + r, 2] = R[3 * r], R[3 * r + 1], R[3 * r + 2]
     return diverged
 
 
@@ -462,6 +756,17 @@ def noise_layout(sensor_noise, n_rotors: int, thrust_noise: float, record_accel:
     return np.array(layout, dtype=np.int64), col
 
 
+def reference_rows(refs, w_d, w_dot_d) -> np.ndarray:
+    """(n, 6, 3) rows (position, velocity, acceleration, b1d, Omega_d, Omega_d') for
+    :func:`_controller` from a FlatOutput of arrays and the feed-forward rates."""
+    pos, vel, acc, b1d = (np.asarray(a, float) for a in refs[:4])
+    n = pos.shape[0]
+    out = np.empty((n, 6, 3))
+    for r, a in enumerate((pos, vel, acc, b1d, w_d, w_dot_d)):
+        out[:, r] = a
+    return out
+
+
 def run(plant, controller, config, rng, times, refs, feedforward, initial, bar=None,
         chunk: int = 5000):
     """Run the compiled loop; returns ``(out_p, out_v, out_R, out_w, out_f, out_eta, out_acc,
@@ -483,11 +788,10 @@ def run(plant, controller, config, rng, times, refs, feedforward, initial, bar=N
                           f"expected ({n}, {n_rot}); use backend='numpy' for a scalar-only one")
     eta = np.ascontiguousarray(eta)
     if feedforward is None:
-        w_d = np.zeros((n, 3))
-        w_dot_d = w_d
+        w_d = w_dot_d = np.zeros((n, 3))
     else:
-        w_d, w_dot_d = (np.ascontiguousarray(a, float) for a in feedforward)
-    ref_arrays = tuple(np.ascontiguousarray(a, float) for a in refs) + (w_d, w_dot_d)
+        w_d, w_dot_d = (np.asarray(a, float) for a in feedforward)
+    ref_rows = reference_rows(refs, w_d, w_dot_d)
     carry = np.empty((6, 3))
     carry[0], carry[1], carry[2], carry[3:6] = initial.p, initial.v, initial.w, initial.R
     lag = np.zeros((4, 3))
@@ -496,7 +800,7 @@ def run(plant, controller, config, rng, times, refs, feedforward, initial, bar=N
     out = (np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3, 3)), np.empty((n, 3)),
            np.empty((n, n_rot)), np.empty((n, n_rot)), np.empty((n, 3)))
     head = (config.integrator == "reference", config.control_decimation, float(config.dt),
-            carry, lag, f_cmd, sf_meas, ref_arrays, eta)
+            carry, lag, f_cmd, sf_meas, ref_rows, eta)
     tail = (layout, np.array([sn.position, sn.velocity, sn.attitude, sn.gyro], float),
             float(sn.accel), bool(config.record_accel), gains_of(controller),
             body_of(controller.vehicle), body_of(vehicle), bool(plant.motor.saturate),

@@ -18,6 +18,12 @@ from quadfault.simulator import SensorNoise
 NOISE = SensorNoise(position=0.01, velocity=0.02, attitude=0.002, gyro=0.01, accel=0.1)
 
 
+def _numba_available() -> bool:
+    from quadfault import _sim_numba
+
+    return _sim_numba.AVAILABLE
+
+
 def _estimator_kwargs(name):
     if name == "irls":
         return {"config": IRLSConfig(backend="numpy")}
@@ -29,7 +35,9 @@ def _estimator_kwargs(name):
 def _run_side_by_side(n_envs, steps, seed, estimator, action_scale=1.0, **kw):
     """Step a vector env and ``n_envs`` single envs with the same actions; compare all."""
     ekw = _estimator_kwargs(estimator)
-    vec = QuadFaultVectorEnv(n_envs, estimator, estimator_kwargs=ekw, **kw)
+    physics = kw.pop("physics", "numpy")
+    vec = QuadFaultVectorEnv(n_envs, estimator, estimator_kwargs=ekw, physics=physics, **kw)
+    assert vec.physics == physics
     singles = [QuadFaultEnv(estimator, estimator_kwargs=ekw, **kw) for _ in range(n_envs)]
     obs, info = vec.reset(seed=seed)
     single_obs = [e.reset(seed=seed + i)[0] for i, e in enumerate(singles)]
@@ -57,21 +65,31 @@ def _run_side_by_side(n_envs, steps, seed, estimator, action_scale=1.0, **kw):
     return n_done
 
 
-def test_matches_single_envs_with_noise_random_scenarios_and_autoreset():
+needs_numba = pytest.mark.skipif(not _numba_available(), reason="numba (the 'fast' extra) missing")
+PHYSICS = ["numpy", pytest.param("numba", marks=needs_numba)]
+
+
+@pytest.mark.parametrize("physics", PHYSICS)
+def test_matches_single_envs_with_noise_random_scenarios_and_autoreset(physics):
     """Random scenarios (per-env trajectories, schedules, thrust noise), every sensor noise,
-    the IRLS estimate in the loop, truncation after 0.3 s and the autoreset after it."""
+    the IRLS estimate in the loop, truncation after 0.3 s and the autoreset after it; the
+    compiled physics (``step_batch``) too."""
     n_done = _run_side_by_side(3, 70, seed=7, estimator="irls", scenario="random",
-                               duration=0.3, sensor_noise=NOISE, estimator_rate="control")
+                               duration=0.3, sensor_noise=NOISE, estimator_rate="control",
+                               physics=physics)
     assert n_done >= 6  # every sub-env went through at least two episodes
 
 
 @pytest.mark.parametrize("estimator", ["ekf", "truth", "none"])
-def test_matches_single_envs_in_motor_mode_until_crashes(estimator):
+@pytest.mark.parametrize("physics", PHYSICS)
+def test_matches_single_envs_in_motor_mode_until_crashes(estimator, physics):
     """Full-range random motor commands crash or tilt the vehicles: termination reasons,
-    penalties and resets must agree too."""
+    penalties and resets must agree too (the compiled physics: estimator at every substep,
+    between kernel calls, or none: one kernel call per control step)."""
     n_done = _run_side_by_side(2, 60, seed=3, estimator=estimator, scenario="abrupt",
                                duration=2.0, action_mode="motor", estimator_rate="physics",
-                               reward=gym.make("QuadFault-v0").unwrapped.reward_config)
+                               reward=gym.make("QuadFault-v0").unwrapped.reward_config,
+                               physics=physics)
     assert n_done >= 1
 
 
