@@ -54,9 +54,11 @@ def _effects(res) -> list:
 
 
 def _diagnose(rec, effects=None) -> dict:
+    """The diagnosis on the rows outside the importer's calibration segment (fit and score)."""
     from quadfault.diagnosis import Diagnosis, DiagnosisConfig
+    from quadfault.importers.flight_analysis import without_calibration
 
-    res = Diagnosis(DiagnosisConfig(effects=effects)).fit(rec.without_truth())
+    res = Diagnosis(DiagnosisConfig(effects=effects)).fit(without_calibration(rec).without_truth())
     return _jsonable({"verdict": res.verdict, "effects": _effects(res),
                       "model_improvement": res.model_improvement,
                       "untestable": list(res.untestable), "seconds": res.seconds,
@@ -82,6 +84,7 @@ def run_one(kind: str, path: Path) -> dict:
                                                       else path.parent))}
     if kind == "eschmann":
         row["diagnosis"] = _diagnose(rec)
+        row["diagnosis_timing"] = _diagnose(rec, ("motor_lag",))
     elif kind == "nanodrone":
         from quadfault.importers.crazyflie import BRUSHLESS_KF
         from quadfault.importers.flight_analysis import rotational_check
@@ -121,19 +124,23 @@ def _short(v) -> str:
 
 
 def print_eschmann(rows) -> None:
-    print("\n## Eschmann (quadfault diagnose, full library)\n")
-    print("| log | verdict | effects (params +- sd; held-out improvement alone) | model improvement |")
-    print("|---|---|---|---|")
-    taus = []
-    for r in rows:
-        d = r["diagnosis"]
-        print(f"| {r['file']} | {d['verdict']} | {_fmt_effects(d['effects'])} | "
-              f"{100 * d['model_improvement']:.1f}% |")
-        taus += [e["params"]["tau_s"] for e in d["effects"] if e["name"] == "motor_lag"]
-    if taus:
-        print(f"\nmotor_lag tau over {len(taus)} of {len(rows)} logs: mean {np.mean(taus):.3f} s, "
-              f"sd {np.std(taus, ddof=1) if len(taus) > 1 else 0.0:.3f} s, range "
-              f"{min(taus):.3f}-{max(taus):.3f} s")
+    print("\n## Eschmann (quadfault diagnose)")
+    for key, title in (("diagnosis", "full library"),
+                       ("diagnosis_timing", "library restricted to motor_lag")):
+        print(f"\n### {title}\n")
+        print("| log | verdict | effects (params +- sd; held-out improvement alone) | "
+              "model improvement |")
+        print("|---|---|---|---|")
+        taus = []
+        for r in rows:
+            d = r[key]
+            print(f"| {r['file']} | {d['verdict']} | {_fmt_effects(d['effects'])} | "
+                  f"{100 * d['model_improvement']:.1f}% |")
+            taus += [e["params"]["tau_s"] for e in d["effects"] if e["name"] == "motor_lag"]
+        if taus:
+            sd = np.std(taus, ddof=1) if len(taus) > 1 else 0.0
+            print(f"\nmotor_lag tau over {len(taus)} of {len(rows)} logs: mean "
+                  f"{np.mean(taus):.3f} s, sd {sd:.3f} s, range {min(taus):.3f}-{max(taus):.3f} s")
 
 
 def print_nanodrone(rows) -> None:
@@ -194,6 +201,27 @@ def print_crazypad(rows) -> None:
                       f"{score} |")
 
 
+def print_crazypad_airframes(rows) -> None:
+    """eta3 (diagnosis) per airframe (E8, E9): nominal flights vs each condition."""
+    print("\n### eta3 per airframe (motor_data, diagnosis; d in units of that airframe's "
+          "nominal sd)\n")
+    print("| airframe | condition | n | eta3 | d(eta3) |")
+    print("|---|---|---|---|---|")
+    sub = [r for r in rows if r["kind_of_log"] == "motor_data"]
+    for frame in sorted({r["airframe"] for r in sub}):
+        mine = [r for r in sub if r["airframe"] == frame]
+        nom = np.array([r["efficiency"]["eta"][2] for r in mine
+                        if r["condition"] == "normal_flight"])
+        if len(nom) < 2:
+            continue
+        for cond in sorted({r["condition"] for r in mine},
+                           key=lambda c: (c != "normal_flight", c)):
+            e = np.array([r["efficiency"]["eta"][2] for r in mine if r["condition"] == cond])
+            sd = e.std(ddof=1) if len(e) > 1 else 0.0
+            d = (e.mean() - nom.mean()) / nom.std(ddof=1)
+            print(f"| {frame} | {cond} | {len(e)} | {e.mean():.3f} +- {sd:.3f} | {d:+.1f} |")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="the real data folder")
@@ -229,6 +257,7 @@ def main(argv=None) -> int:
         print_nanodrone(by["nanodrone"])
     if by["crazypad"]:
         print_crazypad(by["crazypad"])
+        print_crazypad_airframes(by["crazypad"])
     print(f"\n{len(rows)} flights in {time.perf_counter() - t0:.0f} s")
     if args.json is not None:
         atomic_write_text(args.json, json.dumps(_jsonable(rows), indent=1), force=args.force)

@@ -14,6 +14,9 @@
   cannot explain is a rotor-drag (blade-flapping) moment ``M = c T (v_body x e_z)``, i.e.
   proportional to the thrust times the horizontal body-frame velocity.
 
+* :func:`without_calibration` -- the recording without the importer's calibration segment,
+  for held-out scores that never see the data a constant was fitted on.
+
 Estimators and the diagnosis never read truth; these functions strip it first.
 """
 
@@ -37,7 +40,8 @@ class EfficiencyFit:
         sd: one-sigma uncertainty from the Jacobian [-] (blocks treated as independent, so
             optimistic; the flight-to-flight spread is the honest error bar).
         improvement: held-out reduction of the normalised residual RMS over all channels
-            (5 contiguous folds of the airborne blocks) [-].
+            (5 contiguous folds of the airborne blocks; scored outside the importer's
+            calibration segment) [-].
         improvement_angular: the same over the angular channels only [-].
         blocks: airborne blocks used.
     """
@@ -49,21 +53,48 @@ class EfficiencyFit:
     blocks: int
 
 
-def airborne(rec: Recording, t: np.ndarray, min_height: float = MIN_HEIGHT) -> np.ndarray:
+def airborne(rec: Recording, t: np.ndarray,
+             min_height: float | None = MIN_HEIGHT) -> np.ndarray:
     """Boolean mask of times ``t`` [s] at which the vehicle is more than ``min_height`` [m]
-    above its first sample with the rotors carrying at least half the weight."""
-    height = -(rec.position[:, 2] - rec.position[0, 2])  # NED: up is -z
+    above its first sample (None: any height) with the rotors carrying at least half the
+    weight."""
     thrust = rec.thrust_cmd.sum(axis=1)
-    h = np.interp(t, rec.t, height)
-    f = np.interp(t, rec.t, thrust)
-    return (h > min_height) & (f > 0.5 * rec.vehicle.mass * rec.vehicle.gravity)
+    ok = np.interp(t, rec.t, thrust) > 0.5 * rec.vehicle.mass * rec.vehicle.gravity
+    if min_height is None:
+        return ok
+    height = -(rec.position[:, 2] - rec.position[0, 2])  # NED: up is -z
+    return ok & (np.interp(t, rec.t, height) > min_height)
+
+
+def without_calibration(rec: Recording) -> Recording:
+    """A copy without the rows of the importer's calibration segment
+    (``meta["calibration"]["segment"]``), so that a fit on the copy is scored on data the
+    importer did not use; the cut becomes a gap, which the diagnosis never bridges."""
+    from dataclasses import replace
+
+    seg = (rec.meta.get("calibration") or {}).get("segment")
+    if not seg:
+        return rec
+    keep = (rec.t < seg[0]) | (rec.t > seg[1])
+
+    def cut(a):
+        return None if a is None else a[keep]
+
+    meta = dict(rec.meta, scored_without_calibration_segment=list(seg))
+    return replace(rec, t=rec.t[keep], omega=rec.omega[keep], thrust_cmd=rec.thrust_cmd[keep],
+                   position=cut(rec.position), velocity=cut(rec.velocity),
+                   quaternion=cut(rec.quaternion), accel=cut(rec.accel), vbat=cut(rec.vbat),
+                   rotor_speed=cut(rec.rotor_speed), eta_true=cut(rec.eta_true),
+                   commands_u=cut(rec.commands_u),
+                   extra={k: v[keep] for k, v in rec.extra.items()}, meta=meta)
 
 
 def _rms(x) -> float:
     return float(np.sqrt(np.mean(np.square(x))))
 
 
-def efficiency_fit(rec: Recording, min_height: float = MIN_HEIGHT, folds: int = 5) -> EfficiencyFit:
+def efficiency_fit(rec: Recording, min_height: float | None = MIN_HEIGHT,
+                   folds: int = 5) -> EfficiencyFit:
     """Fit the diagnosis' ``motor_efficiency`` effect on the airborne blocks of ``rec``."""
     from quadfault.diagnosis.fit import fit
     from quadfault.diagnosis.library import build_library, predict
@@ -88,7 +119,14 @@ def efficiency_fit(rec: Recording, min_height: float = MIN_HEIGHT, folds: int = 
         train[part] = False
         f = fit(rp, [cand], scale, mask=train, init=list(full.x))
         after[part] = rp.measured[part] - predict(rp, f.terms)[part]
-    zb, za = base[idx] / scale, after[idx] / scale
+    seg = (rec.meta.get("calibration") or {}).get("segment")
+    scored = idx
+    if seg:  # score outside the importer's calibration segment
+        bt = rp.block_t[idx]
+        scored = idx[(bt < seg[0]) | (bt > seg[1])]
+        if scored.size < folds:
+            scored = idx
+    zb, za = base[scored] / scale, after[scored] / scale
     ang = [i for i, c in enumerate(rp.channels) if c.startswith("alpha")]
     return EfficiencyFit(eta=tuple(float(x) for x in full.x[0]),
                          sd=tuple(float(x) for x in full.sd[0]),
@@ -97,7 +135,7 @@ def efficiency_fit(rec: Recording, min_height: float = MIN_HEIGHT, folds: int = 
                          blocks=int(idx.size))
 
 
-def irls_efficiency(rec: Recording, min_height: float = MIN_HEIGHT,
+def irls_efficiency(rec: Recording, min_height: float | None = MIN_HEIGHT,
                     eta_max: float = 1.6) -> tuple:
     """Median IRLS efficiency per rotor over the airborne ``ok`` estimates of ``rec``.
 
