@@ -123,6 +123,10 @@ def _short(v) -> str:
     return f"{v:.3g}"
 
 
+def _deg(v) -> str:
+    return "-" if v is None else "[" + ", ".join(f"{x:.0f}" for x in v) + "]"
+
+
 def print_eschmann(rows) -> None:
     print("\n## Eschmann (quadfault diagnose)")
     for key, title in (("diagnosis", "full library"),
@@ -145,13 +149,18 @@ def print_eschmann(rows) -> None:
 
 def print_nanodrone(rows) -> None:
     print("\n## Nano-drone\n")
-    print("| flight | speed p95/max [m/s] | gain cmd (x,y,z) | gain rotor speed | drag-moment "
-          "share of slow moment (x,y) | c [mm] (x,y) |")
-    print("|---|---|---|---|---|---|")
+    print("Measured / modelled angular acceleration, 2-16 Hz, per axis (x, y, z): gain and "
+          "phase [deg], model fed the commands or the measured rotor speeds; share of the slow "
+          "(< 1 Hz) unexplained roll/pitch moment that is c T v_body, and c.\n")
+    print("| flight | speed p95/max [m/s] | gain cmd | phase cmd | gain rotor | phase rotor | "
+          "drag-moment share (x,y) | c [mm] (x,y) |")
+    print("|---|---|---|---|---|---|---|---|")
     for r in rows:
         c = r["rotational_check"]
-        print(f"| {r['file']} | {r['speed_p95']:.2f}/{r['speed_max']:.2f} | {_short(c['gain_cmd'])} | "
-              f"{_short(c['gain_rotor'])} | {_short(c['drag_moment_fraction'])} | "
+        print(f"| {r['file']} | {r['speed_p95']:.2f}/{r['speed_max']:.2f} | "
+              f"{_short(c['gain_cmd'])} | {_deg(c['phase_cmd_deg'])} | "
+              f"{_short(c['gain_rotor'])} | {_deg(c['phase_rotor_deg'])} | "
+              f"{_short(c['drag_moment_fraction'])} | "
               f"{_short([1e3 * x for x in c['drag_moment_c']])} |")
     for key, title in (("diagnosis", "full library"), ("diagnosis_no_inertia", "library without inertia")):
         print(f"\n### diagnosis, {title}\n")

@@ -162,8 +162,10 @@ class RotationalCheck:
         band_hz: frequency band of the gains [Hz].
         gain_cmd: per axis, |H| of measured over modelled angular acceleration in the band
             (modelled from the commanded thrusts) [-]; 1 = the model is right.
-        gain_rotor: the same with thrusts k omega^2 from the measured rotor speeds (None when
-            the log has none).
+        phase_cmd_deg: per axis, phase of that response in the band [deg] (0: in phase;
+            a wrong torque sign or axis gives about 180, a lag a negative phase).
+        gain_rotor, phase_rotor_deg: the same with thrusts k omega^2 from the measured rotor
+            speeds (None when the log has none).
         slow_moment_rms: RMS of the unexplained roll/pitch moment below ``cutoff_hz`` [N m].
         drag_moment_fraction: fraction of that slow moment's variance explained by
             ``M = c T (v_by, -v_bx)`` plus a constant offset [-].
@@ -173,21 +175,25 @@ class RotationalCheck:
 
     band_hz: tuple
     gain_cmd: tuple
+    phase_cmd_deg: tuple
     gain_rotor: tuple | None
+    phase_rotor_deg: tuple | None
     slow_moment_rms: tuple
     drag_moment_fraction: tuple
     drag_moment_c: tuple
 
 
-def _band_gain(x: np.ndarray, y: np.ndarray, fs: float, band) -> float:
-    """|mean cross-spectrum / mean auto-spectrum of x| of y on x over ``band`` (Welch)."""
+def _band_response(x: np.ndarray, y: np.ndarray, fs: float, band) -> tuple:
+    """``(gain, phase [deg])`` of y on x over ``band``: summed cross-spectrum over summed
+    auto-spectrum of x (Welch)."""
     from scipy.signal import csd, welch
 
     n = int(min(256, len(x) // 4))
     f, pxy = csd(x, y, fs=fs, nperseg=n)
     _, pxx = welch(x, fs=fs, nperseg=n)
     sel = (f >= band[0]) & (f <= band[1])
-    return float(np.abs(np.sum(pxy[sel])) / np.sum(pxx[sel]))
+    h = np.sum(pxy[sel]) / np.sum(pxx[sel])
+    return float(np.abs(h)), float(np.degrees(np.angle(h)))
 
 
 def rotational_check(rec: Recording, thrust_coefficient: float | None = None,
@@ -208,14 +214,14 @@ def rotational_check(rec: Recording, thrust_coefficient: float | None = None,
     def model_alpha(f):
         return (f @ veh.allocation.T)[:, 1:] / J
 
-    gain_cmd = tuple(_band_gain(model_alpha(rec.thrust_cmd)[:, i], alpha[:, i], fs, band)
-                     for i in range(3))
-    gain_rotor = None
+    cmd = [_band_response(model_alpha(rec.thrust_cmd)[:, i], alpha[:, i], fs, band)
+           for i in range(3)]
+    rotor = None
     if rec.rotor_speed is not None and thrust_coefficient is not None:
         f_rotor = thrust_coefficient * rec.rotor_speed ** 2
         f_rotor = np.where(np.isfinite(f_rotor), f_rotor, np.nanmedian(f_rotor, axis=0))
-        gain_rotor = tuple(_band_gain(model_alpha(f_rotor)[:, i], alpha[:, i], fs, band)
-                           for i in range(3))
+        rotor = [_band_response(model_alpha(f_rotor)[:, i], alpha[:, i], fs, band)
+                 for i in range(3)]
     # slow moment the model leaves: M_rotors - J alpha, below cutoff_hz
     f = rec.thrust_cmd
     moment = (f @ veh.allocation.T)[:, 1:3] - alpha[:, :2] * J[:2]
@@ -232,6 +238,9 @@ def rotational_check(rec: Recording, thrust_coefficient: float | None = None,
         r1 = slow[:, axis] - X @ coef
         fractions.append(float(1.0 - np.var(r1) / np.var(r0)))
         coefs.append(float(coef[2]))
-    return RotationalCheck(band_hz=tuple(band), gain_cmd=gain_cmd, gain_rotor=gain_rotor,
+    return RotationalCheck(band_hz=tuple(band), gain_cmd=tuple(g for g, _ in cmd),
+                           phase_cmd_deg=tuple(p for _, p in cmd),
+                           gain_rotor=None if rotor is None else tuple(g for g, _ in rotor),
+                           phase_rotor_deg=None if rotor is None else tuple(p for _, p in rotor),
                            slow_moment_rms=tuple(float(x) for x in slow.std(axis=0)),
                            drag_moment_fraction=tuple(fractions), drag_moment_c=tuple(coefs))
