@@ -22,6 +22,36 @@ from quadfault import effects as fx
 from quadfault.diagnosis.residuals import Replay, model_channels
 
 
+def lag_series(f: np.ndarray, dt: np.ndarray, tau: float) -> np.ndarray:
+    """:func:`quadfault.effects.lag_series` (the same recursion
+    ``y_k = y_{k-1} + g_k (f_k - y_{k-1})``, the same result to rounding) without a
+    per-sample Python loop for any steps (jittery or merged logs) and without importing
+    ``scipy.signal``: the linear recurrence is solved by a parallel prefix scan (log2 N
+    vectorised passes)."""
+    f = np.asarray(f, dtype=float)
+    g = fx.lag_gain(dt, tau)
+    a = np.repeat((1.0 - g)[:, None], f.shape[1], axis=1)
+    b = g[:, None] * f
+    a[0], b[0] = 0.0, f[0]  # starts at the first command, as the plant does
+    s = 1
+    while s < len(f):
+        b[s:] += a[s:] * b[:-s]
+        a[s:] *= a[:-s]
+        s *= 2
+    return b
+
+
+def drag_basis(rp: Replay) -> np.ndarray:
+    """``(M, 3, 3)``: column i is the drag force [N] of ``k = e_i`` (1 N s/m on body axis i)
+    at every interval of ``rp`` (:func:`quadfault.effects.drag_force`, linear in ``k``);
+    cached on the replay."""
+    D = rp.__dict__.get("_drag_basis")
+    if D is None:
+        D = np.stack([fx.drag_force(rp.R, rp.v, e) for e in np.eye(3)], axis=-1)
+        object.__setattr__(rp, "_drag_basis", D)
+    return D
+
+
 @dataclass(frozen=True)
 class Candidate:
     """One named effect of the library.
@@ -64,7 +94,7 @@ class Candidate:
             c = fx.zoh_cumulative(tk, f)
             return fx.zoh_mean(tk, f, c, tk - x[0], rp.t[1:] - x[0])
         if n == "motor_lag":
-            return fx.lag_series(f, rp.dt, x[0])
+            return lag_series(f, rp.dt, x[0])
         raise KeyError(n)
 
     def wrench(self, x, vehicle, R, v, w, thrust, moment):
@@ -130,7 +160,10 @@ def predict_intervals(rp: Replay, terms) -> np.ndarray:
     for cand, x in terms:
         if cand.stage != "wrench":
             continue
-        dF, dM = cand.wrench(np.asarray(x, dtype=float), rp.vehicle, rp.R, rp.v, rp.w, T, M)
+        if cand.name == "drag":  # the same force, from its cached linear basis
+            dF, dM = drag_basis(rp) @ np.asarray(x, dtype=float), None
+        else:
+            dF, dM = cand.wrench(np.asarray(x, dtype=float), rp.vehicle, rp.R, rp.v, rp.w, T, M)
         if dF is not None:
             F = dF if F is None else F + dF
         if dM is not None:

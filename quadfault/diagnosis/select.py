@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from quadfault.diagnosis.fit import Fit, fit
+from quadfault.diagnosis.fit import Fit, Linearisation, _split, fit, linearisation, solve_linear
 from quadfault.diagnosis.library import Candidate, predict
 from quadfault.diagnosis.residuals import Replay
 
@@ -69,20 +69,39 @@ def folds_of(n_blocks: int, k: int) -> list[np.ndarray]:
     return np.array_split(np.arange(n_blocks), k)
 
 
-def cross_validate(rp: Replay, cands, scale, x_init, folds, **kw) -> CrossValidation:
-    """Time-blocked cross-validation of ``cands`` started from ``x_init``."""
+def cross_validate(rp: Replay, cands, scale, x_init, folds, *, full: Fit | None = None,
+                   fixed=(), **kw) -> CrossValidation:
+    """Time-blocked cross-validation of ``cands`` (on top of ``fixed``).
+
+    The effects are first fitted on all blocks (``full``, or a fit started from ``x_init``);
+    each fold's fit is then the bounded robust least-squares solution of the model linearised
+    at that optimum (:class:`~quadfault.diagnosis.fit.Linearisation`: exact for affine effect
+    sets, one Gauss-Newton step otherwise), and the held-out blocks are predicted by the exact
+    model at the fold's parameters. One replay per fold instead of a nonlinear fit per fold.
+    """
+    fixed = list(fixed)
+    if not cands:
+        res = rp.measured - predict(rp, fixed)
+        z = res / scale
+        return CrossValidation(res, float(np.sum(z * z)), ())
+    cands = list(cands)
+    if full is None:
+        full = fit(rp, cands, scale, init=x_init, fixed=fixed, **kw)
+    xs = np.concatenate(full.x)
+    lo = np.concatenate([c.lower for c in cands])
+    hi = np.concatenate([c.upper for c in cands])
+    lin = linearisation(rp, cands, fixed, xs, scale)
+    if lin is None:
+        lin = Linearisation(rp, cands, fixed, xs, exact=False)
     res = np.empty_like(rp.measured)
     fold_x = []
     for idx in folds:
         mask = np.ones(rp.n_blocks, dtype=bool)
         mask[idx] = False
-        if cands:
-            f = fit(rp, cands, scale, mask=mask, init=x_init, **kw)
-            terms = f.terms
-            fold_x.append(f.x)
-        else:
-            terms = []
-        res[idx] = rp.measured[idx] - predict(rp, terms)[idx]
+        sol = solve_linear(lin, rp.measured, scale, mask, xs, lo, hi)
+        fold_x.append(tuple(_split(sol.x, cands)))
+        pred = lin.at(sol.x) if lin.exact else lin.model(rp, sol.x)
+        res[idx] = rp.measured[idx] - pred[idx]
     z = res / scale
     return CrossValidation(res, float(np.sum(z * z)), tuple(fold_x))
 
@@ -118,18 +137,18 @@ def select(rp: Replay, library: list[Candidate], scale: np.ndarray, *, folds: in
         best = None
         # cross-validate, in BIC order, the candidates that lower BIC enough; keep the one
         # with the lowest held-out error among those that pass the acceptance test
+        cur_pred = predict(rp, x_terms(current, x_cur))
         for b, c, f in [item for item in fits if item[0] < cur_bic - bic_margin][:screen_top]:
-            cv = cross_validate(rp, current + [c], scale, x_cur + list(f.x), fl, max_nfev=15)
             if current:  # joint refit of the candidate with the accepted effects
                 f = fit(rp, current + [c], scale, init=x_cur + list(f.x))
                 b = f.bic()
             if b > cur_bic - bic_margin:
                 continue
+            cv = cross_validate(rp, current + [c], scale, None, fl, full=f)
             gain = 1.0 - np.sqrt(cv.sse / cur_cv.sse)
             # channels the effect acts on (fitted signal above the noise): a real effect must
             # clearly improve those, even when unexplained channels dominate the total
-            sig = (predict(rp, x_terms(current, x_cur) + list(f.terms)[-1:])
-                   - predict(rp, x_terms(current, x_cur))) / scale
+            sig = (predict(rp, x_terms(current, x_cur) + list(f.terms)[-1:]) - cur_pred) / scale
             touched = np.sqrt(np.mean(sig ** 2, axis=0)) >= 1.0
             gain_touched = 0.0
             if touched.any():  # best held-out gain among the channels the effect acts on
