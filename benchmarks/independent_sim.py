@@ -68,8 +68,10 @@ def trajectory(kind: str, vehicle: str):
     return TwoDLissajous(A=scale, B=scale, a=1.6, b=2.4, delta=0.5, height=1.0)
 
 
-def fly(case: str, duration: float, rate: float) -> dict:
-    """Simulate one case with RotorPy; returns its raw arrays and parameters."""
+def fly(case: str, duration: float, rate: float, settle: float = 0.0) -> dict:
+    """Simulate one case with RotorPy for ``settle + duration`` [s] and keep the last
+    ``duration`` (the first ``settle`` seconds hold the start-up transient from a level hover
+    into the trajectory); returns the raw arrays and parameters."""
     from rotorpy.controllers.quadrotor_control import SE3Control
     from rotorpy.estimators.nullestimator import NullEstimator
     from rotorpy.sensors.external_mocap import MotionCapture
@@ -93,10 +95,16 @@ def fly(case: str, duration: float, rate: float) -> dict:
     out = simulate(World.empty((-50, 50, -50, 50, -50, 50)), x0, veh, SE3Control(params), traj,
                    NoWind(), Imu(sampling_rate=rate),
                    MotionCapture(sampling_rate=rate, with_artifacts=False), NullEstimator(),
-                   duration, 1.0 / rate, 0.0, False, terminate=False)
+                   settle + duration, 1.0 / rate, 0.0, False, terminate=False)
     t, state, control = out[0], out[1], out[2]
-    return {"t": t, "state": state, "u": control["cmd_motor_speeds"], "params": params,
-            "vehicle": vname, "trajectory": tkind, "aero": aero, "f_to_TM": veh.f_to_TM}
+    keep = t >= settle - 1e-9
+    state = {k: np.asarray(v)[keep] for k, v in state.items()}
+    # RotorPy clips the commanded speed to its rotor limits (and f = k u^2 needs u >= 0)
+    u = np.clip(np.asarray(control["cmd_motor_speeds"])[keep], params["rotor_speed_min"],
+                params["rotor_speed_max"])
+    return {"t": t[keep] - t[keep][0], "state": state, "u": u, "params": params,
+            "vehicle": vname, "trajectory": tkind, "aero": aero, "f_to_TM": veh.f_to_TM,
+            "settle": settle}
 
 
 def expected(run: dict) -> dict:
@@ -147,7 +155,8 @@ def write_recording(run: dict, csv_path: Path, force: bool) -> None:
                     "thrust_coefficient": p["k_eta"],
                     "max_thrust": p["k_eta"] * p["rotor_speed_max"] ** 2},
         "source": f"RotorPy {run['vehicle']} ({run['trajectory']}, aero={run['aero']}, "
-                  f"tau_m={p['tau_m']} s), exported by benchmarks/independent_sim.py",
+                  f"tau_m={p['tau_m']} s, first {run['settle']} s dropped), exported by "
+                  "benchmarks/independent_sim.py",
         "truth": {"rotorpy_params": {k: (v.tolist() if isinstance(v, np.ndarray) else v)
                                      for k, v in p.items() if k != "rotor_pos"},
                   "expected": expected(run)},
@@ -180,6 +189,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=Path("independent_sim_out"))
     ap.add_argument("--duration", type=float, default=15.0, help="flight length [s]")
     ap.add_argument("--rate", type=float, default=200.0, help="simulation/recording rate [Hz]")
+    ap.add_argument("--settle", type=float, default=0.0,
+                    help="simulate this long first and drop it (start-up transient) [s]")
     ap.add_argument("--cases", default=",".join(CASES), help="comma-separated case names")
     ap.add_argument("--force", action="store_true", help="overwrite existing outputs")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -203,7 +214,7 @@ def main(argv=None) -> int:
                       disable=True if args.quiet else None) as bar:
         for case in cases:
             t0 = time.perf_counter()
-            run = fly(case, args.duration, args.rate)
+            run = fly(case, args.duration, args.rate, args.settle)
             csv_path = args.out / f"{case}.csv"
             write_recording(run, csv_path, args.force)
             t1 = time.perf_counter()
