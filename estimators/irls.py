@@ -31,6 +31,8 @@ import numpy as np
 from estimators.base import (STATUS_BAD_SAMPLE, STATUS_ILL_CONDITIONED, STATUS_MAX_ITER,
                              STATUS_NO_EXCITATION, STATUS_OK, STATUS_REJECTED, STATUS_WARMUP,
                              STATUSES, Estimate, EstimateSeries, Sample)
+from estimators.change_completion import (CausalMedian, ChangeCompletion, causal_median,
+                                          run_completed)
 from estimators.ipm import IPMSettings, solve_box_qp
 from estimators.residuals import quadratic_terms, residual_weights, segment_models
 from estimators.robust import mad_weights
@@ -68,6 +70,15 @@ class IRLSConfig:
             motor looks weaker than it is). ``False`` = the reference code (no clipping).
         record_history: keep per-round KKT histories in the diagnostics (slower; uses numpy).
         backend: "auto" (numba when importable), "numpy" or "numba"; same results.
+        change_completion: beyond the paper (off = the paper/reference): when a window moves
+            the estimate by more than ``change_threshold`` [1] on some motor, complete the
+            change's weak-direction (yaw-differential) component by the sparsest
+            (single-motor) change for the next ``change_hold`` windows instead of leaving it
+            to the smoothness prior (:mod:`estimators.change_completion`, docs/irls.md).
+        output_median: beyond the paper: the reported estimate is the causal running median
+            of the last ``output_median`` estimates [samples] (1 = off, the paper). Only the
+            output is filtered; the next window is still anchored to the unfiltered estimate.
+            Delays a step by about ``output_median / 2`` samples.
     """
 
     window: int = 10
@@ -94,12 +105,23 @@ class IRLSConfig:
     clip_commands: bool = True
     record_history: bool = False
     backend: str = "auto"
+    change_completion: bool = False
+    change_threshold: float = 0.1
+    change_hold: int = 20
+    output_median: int = 1
+
+    @classmethod
+    def improved(cls, **changes) -> "IRLSConfig":
+        """The reference settings plus the spike guards beyond the paper (docs/irls.md,
+        "Spikes"): change completion and a 21-sample causal output median."""
+        return cls(**{"change_completion": True, "output_median": 21, **changes})
 
     def __post_init__(self):
         if not (isinstance(self.window, int) and self.window >= 3):
             raise ConfigError(f"IRLS window must be an integer >= 3 samples, got {self.window!r}")
         for key in ("g_v", "g_x", "g_omega", "g_R", "gamma", "bound_eps", "z_soft", "soft_power",
-                    "z_hard", "w_min", "mad_eps", "irls_tol", "cond_max", "min_thrust"):
+                    "z_hard", "w_min", "mad_eps", "irls_tol", "cond_max", "min_thrust",
+                    "change_threshold"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, (int, float)) \
                     or not math.isfinite(value) or value < 0:
@@ -117,6 +139,13 @@ class IRLSConfig:
             raise ConfigError(f"IRLS max_irls must be an integer >= 1, got {self.max_irls!r}")
         if not isinstance(self.ipm, IPMSettings):
             raise ConfigError("IRLS ipm must be an IPMSettings")
+        for key in ("change_hold", "output_median"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ConfigError(f"IRLS setting {key} must be an integer >= 1, got {value!r}")
+        if not isinstance(self.change_completion, bool):
+            raise ConfigError(f"IRLS change_completion must be True or False, got "
+                              f"{self.change_completion!r}")
 
     @property
     def lower(self) -> float:
@@ -312,6 +341,10 @@ class SlidingWindowIRLS:
         self._c, self._b = np.zeros(m), np.zeros((m, n))
         self._H, self._thrust = np.zeros((m, n, n)), np.zeros(m)
         self._count = 0
+        cfg = self.config
+        self._completion = ChangeCompletion(cfg.change_threshold, cfg.change_hold, cfg.gamma,
+                                            cfg.lower, cfg.upper)
+        self._median = CausalMedian(cfg.output_median)
 
     def _segment_terms(self, a: Sample, z: Sample):
         """``(c, b, H, thrust)`` of the segment from sample ``a`` to ``z``."""
@@ -338,7 +371,8 @@ class SlidingWindowIRLS:
         return self._eta.copy()
 
     def _keep(self, t, status, message="") -> Estimate:
-        return Estimate(float(t), self._eta.copy(), None if self._sd is None else self._sd.copy(),
+        return Estimate(float(t), self._median.push(self._eta),
+                        None if self._sd is None else self._sd.copy(),
                         status, IRLSDiagnostics(status, message))
 
     def update(self, sample: Sample) -> Estimate:
@@ -381,10 +415,13 @@ class SlidingWindowIRLS:
             eta, sd, diag = solve_window(c, b, H, self._eta, self.config,
                                          self.config.record_history)
         if sd is None:
-            return Estimate(float(t), self._eta.copy(), None if self._sd is None
+            return Estimate(float(t), self._median.push(self._eta), None if self._sd is None
                             else self._sd.copy(), diag.status, diag)
+        if self.config.change_completion:
+            eta = self._completion.step(self._eta, eta,
+                                        lambda: _window_information(H, diag.weights, self.config))
         self._eta, self._sd = eta, sd
-        return Estimate(float(t), eta.copy(), sd.copy(), diag.status, diag)
+        return Estimate(float(t), self._median.push(eta), sd.copy(), diag.status, diag)
 
     # offline --------------------------------------------------------------------------
     def run(self, recording: Recording, progress: bool = False) -> EstimateSeries:
@@ -398,7 +435,9 @@ class SlidingWindowIRLS:
         kernel = np.ones(m) / m
         excited = np.convolve(models.thrust, kernel, mode="valid") >= self.config.min_thrust
         x0 = self._eta.copy()
-        if self.backend == "numba":
+        if self.config.change_completion:
+            eta_w, sd_w, status_w = self._run_completed(c, b, H, excited, x0)
+        elif self.backend == "numba":
             from estimators._irls_numba import run_windows_numba
 
             eta_w, sd_w, code_w = run_windows_numba(c, b, H, excited, x0, self.config,
@@ -412,10 +451,44 @@ class SlidingWindowIRLS:
         status = np.empty(N, dtype=object)
         eta[:m], status[:m] = x0, STATUS_WARMUP
         eta[m:], sd[m:], status[m:] = eta_w, sd_w, status_w
+        eta = causal_median(eta, self.config.output_median)
         self.reset()
         return EstimateSeries(t=t.copy(), eta=eta, sd=sd, status=status.astype(str),
                               estimator=self.name, config=asdict(self.config),
                               seconds=time.perf_counter() - start)
+
+
+    def _run_completed(self, c, b, H, excited, x0):
+        """Windows with the change completion (compiled/numpy chunks between changes)."""
+        cfg = self.config
+        if self.backend == "numba":
+            from estimators._irls_numba import (kernel_parameters, run_windows_numba,
+                                                solve_window_numba)
+
+            params = kernel_parameters(cfg, cfg.window - 1)
+
+            def run_chunk(c_, b_, H_, ex, x):
+                eta_w, sd_w, code_w = run_windows_numba(c_, b_, H_, ex, x, cfg)
+                return eta_w, sd_w, np.asarray(STATUSES, dtype=object)[code_w]
+
+            def solve_one(c_, b_, H_, x):
+                return solve_window_numba(c_, b_, H_, x, cfg, params)
+        else:
+            def run_chunk(c_, b_, H_, ex, x):
+                return _run_windows_numpy(c_, b_, H_, ex, x, cfg, False)
+
+            def solve_one(c_, b_, H_, x):
+                return solve_window(c_, b_, H_, x, cfg)
+        completion = ChangeCompletion(cfg.change_threshold, cfg.change_hold, cfg.gamma,
+                                      cfg.lower, cfg.upper)
+        return run_completed(c, b, H, excited, x0, completion, run_chunk, solve_one,
+                             lambda Hw, w: _window_information(Hw, w, cfg))
+
+
+def _window_information(H, w, cfg: IRLSConfig) -> np.ndarray:
+    """``J^T W G J`` of a window (segment terms ``H`` (m, n, n), weights ``w`` (m,))."""
+    scale = 1.0 / len(H) if cfg.scaling == "paper" else 1.0
+    return np.tensordot(np.asarray(w, dtype=float), H, 1) * scale
 
 
 def _run_windows_numpy(c, b, H, excited, x0, cfg: IRLSConfig, progress: bool):
