@@ -2,15 +2,20 @@
 
 Prints, measured in one run (ratios are what to compare; the machine may be shared):
 
-1. physics vehicle-steps/s against N: the core physics alone (motors + ``step_rk4`` over the
-   batch axis, 1 kHz) and the full ``QuadFaultVectorEnv`` step (controller, noise, physics,
-   termination, observation) without an estimator, plus with the batched IRLS estimator;
-   memory per vehicle (tracemalloc peak of building, resetting and stepping the env / N);
+1. physics vehicle-steps/s against N: the core physics alone -- numpy (motors + ``step_rk4``
+   over the batch axis) and compiled (``quadfault._sim_numba.step_batch``: motors + RKMK4,
+   and with the geometric controller at every step, the closed loop crazyflow also runs) --
+   and the full ``QuadFaultVectorEnv`` step (controller, noise, physics, termination,
+   observation) with numpy and numba physics, without an estimator and with the batched IRLS;
+   memory per vehicle (tracemalloc peak of building, resetting and stepping the env / N) and
+   the time to build and reset the env;
 2. batched IRLS window updates/s (``estimators.batched.BatchedIRLS``);
 3. peers at the same physics rate (1 kHz) and horizon: RotorPy's ``BatchedMultirotor``
    (torch, CPU, rk4) and crazyflow's ``Sim`` (JAX, CPU); each runs in a subprocess of
    ``--peer-python`` and is skipped with the reason when it cannot be imported or run;
-4. SB3 PPO training steps/s with the native vector env vs ``SubprocVecEnv``.
+4. where the time goes: the compiled kernel's stages (ns per vehicle-step) and a profile of
+   the env step (kernel, per-env noise draws, controller, the rest);
+5. SB3 PPO training steps/s with the native vector env vs ``SubprocVecEnv``.
 
 This script installs nothing. Peers, in a separate virtual environment so they cannot touch
 the project's environment::
@@ -20,7 +25,8 @@ the project's environment::
     python benchmarks/throughput.py --peer-python /tmp/peers/bin/python
 
 Flags: ``--full`` (N up to 16384), ``--max-n``, ``--horizon`` (physics steps per timing),
-``--skip-peers``, ``--skip-ppo``.
+``--skip-peers``, ``--skip-ppo``, ``--skip-profile``. Every rate is the best of repeated
+timings of at least ``MIN_TIME`` seconds (the machine may be shared).
 """
 
 from __future__ import annotations
@@ -44,6 +50,56 @@ from quadfault.motors import MotorModel  # noqa: E402
 from quadfault.vehicle import Vehicle  # noqa: E402
 
 RATE = 1000.0  # physics rate of every measurement [Hz]
+MIN_TIME = 0.3  # each timing repeats its call for at least this long [s]
+
+
+def _rate(fn, work: int, repeats: int = 3) -> float:
+    """Best of ``repeats`` of: units of ``work`` per second of ``fn()`` called for MIN_TIME."""
+    best = 0.0
+    for _ in range(repeats):
+        calls, t0 = 0, time.perf_counter()
+        while True:
+            fn()
+            calls += 1
+            elapsed = time.perf_counter() - t0
+            if elapsed >= MIN_TIME:
+                break
+        best = max(best, work * calls / elapsed)
+    return best
+
+
+def compiled_batch(N: int, horizon: int, rng, control_every: int = 0, thrust_noise=0.07):
+    """``fn`` advancing N hovering vehicles by ``horizon`` steps with one ``step_batch`` call
+    (motors with thrust noise + RKMK4; the geometric controller every ``control_every``
+    steps when > 0), compiled before it is returned."""
+    from quadfault import _sim_numba
+    from quadfault.controller import GeometricController
+    from quadfault.trajectory import Hover
+
+    veh = Vehicle()
+    body = _sim_numba.body_of(veh)
+    state = RigidBodyState.at_rest((0.0, 0.0, -1.0), (N,))
+    f_cmd = np.full((N, 4), veh.weight / 4) + 0.01 * rng.standard_normal((N, 4))
+    eta = np.ones((N, horizon, 4))
+    sigma = np.full(N, float(thrust_noise))
+    z = rng.standard_normal((N, 4 * horizon))
+    z_off = np.ascontiguousarray(np.broadcast_to(4 * np.arange(horizon), (N, horizon)))
+    ctrl = GeometricController(veh, Hover(position=(0.0, 0.0, -1.0)))
+    refs = np.zeros((N, 6, 3))
+    refs[:, 0, 2], refs[:, 3, 0] = -1.0, 1.0  # hover at 1 m, heading north
+    gains = _sim_numba.gains_of(ctrl)
+
+    def fn():
+        _sim_numba.step_batch(state.p, state.v, state.R, state.w, f_cmd, eta, sigma, z, z_off,
+                              True, body, 1.0 / RATE, control_every, refs, gains, body)
+
+    fn()  # compile (or load numba's cache)
+    return fn
+
+
+def core_compiled(N: int, horizon: int, rng, control_every: int = 0) -> float:
+    """Vehicle-steps/s of the compiled batched kernel (see :func:`compiled_batch`)."""
+    return _rate(compiled_batch(N, horizon, rng, control_every), N * horizon)
 
 
 def core_physics(N: int, horizon: int, rng) -> float:
@@ -53,26 +109,38 @@ def core_physics(N: int, horizon: int, rng) -> float:
     state = RigidBodyState.at_rest((0.0, 0.0, -1.0), (N,))
     f_cmd = np.full((N, 4), veh.weight / 4) + 0.01 * rng.standard_normal((N, 4))
     eta = np.ones((N, 4))
-    t0 = time.perf_counter()
-    for _ in range(horizon):
-        f = motor.apply(f_cmd, eta, veh.rotor_max_thrust, rng)
-        wrench = veh.wrench(f)
-        state = step_rk4(state, wrench[:, 0], wrench[:, 1:], veh, 1.0 / RATE)
-    return N * horizon / (time.perf_counter() - t0)
+
+    def fn():
+        nonlocal state
+        for _ in range(horizon):
+            f = motor.apply(f_cmd, eta, veh.rotor_max_thrust, rng)
+            wrench = veh.wrench(f)
+            state = step_rk4(state, wrench[:, 0], wrench[:, 1:], veh, 1.0 / RATE)
+
+    return _rate(fn, N * horizon, repeats=1)
 
 
-def env_rate(N: int, control_steps: int, estimator: str = "none", **kw) -> float:
-    """Physics vehicle-steps/s of QuadFaultVectorEnv (after one warm-up step)."""
+def make_env(N: int, estimator: str = "none", **kw):
+    """A reset ``QuadFaultVectorEnv`` (combined scenario) and the seconds building + reset took."""
     from quad_fault_env.vector import QuadFaultVectorEnv
 
-    env = QuadFaultVectorEnv(N, estimator, scenario="combined", duration=60.0, **kw)
+    t0 = time.perf_counter()
+    env = QuadFaultVectorEnv(N, estimator, scenario="combined", duration=600.0, **kw)
     env.reset(seed=0)
+    return env, time.perf_counter() - t0
+
+
+def env_rate(N: int, control_steps: int, estimator: str = "none", env=None, **kw) -> float:
+    """Physics vehicle-steps/s of QuadFaultVectorEnv (after one warm-up step)."""
+    env = env if env is not None else make_env(N, estimator, **kw)[0]
     a = np.zeros((N, 4), dtype=np.float32)
     env.step(a)
-    t0 = time.perf_counter()
-    for _ in range(control_steps):
-        env.step(a)
-    return N * control_steps * env.substeps / (time.perf_counter() - t0)
+
+    def fn():
+        for _ in range(control_steps):
+            env.step(a)
+
+    return _rate(fn, N * control_steps * env.substeps, repeats=2)
 
 
 def env_memory_per_vehicle(N: int) -> float:
@@ -135,10 +203,12 @@ PEERS = {
                                 integrator="rk4")
         ctrl = {"cmd_motor_speeds": torch.full((N, 4), hover, dtype=torch.double)}
         state = sim.step(copy.deepcopy(init), ctrl, 1.0 / rate)
-        t0 = time.perf_counter()
-        for _ in range(H):
-            state = sim.step(state, ctrl, 1.0 / rate)
-        print(json.dumps({"rate": N * H / (time.perf_counter() - t0)}))
+        calls, t0 = 0, time.perf_counter()
+        while time.perf_counter() - t0 < 0.3:
+            for _ in range(H):
+                state = sim.step(state, ctrl, 1.0 / rate)
+            calls += 1
+        print(json.dumps({"rate": N * H * calls / (time.perf_counter() - t0)}))
     """),
     "crazyflow": textwrap.dedent("""
         import json, sys, time
@@ -150,10 +220,15 @@ PEERS = {
         sim.reset()
         sim.step(H)  # compile
         jax.block_until_ready(sim.data.states.pos)
-        t0 = time.perf_counter()
-        sim.step(H)
-        jax.block_until_ready(sim.data.states.pos)
-        print(json.dumps({"rate": N * H / (time.perf_counter() - t0)}))
+        best = 0.0
+        for _ in range(3):  # best of 3 timings of >= 0.3 s, as the quadfault rates
+            calls, t0 = 0, time.perf_counter()
+            while time.perf_counter() - t0 < 0.3:
+                sim.step(H)
+                jax.block_until_ready(sim.data.states.pos)
+                calls += 1
+            best = max(best, N * H * calls / (time.perf_counter() - t0))
+        print(json.dumps({"rate": best}))
     """),
 }
 
@@ -210,6 +285,47 @@ def _fmt(x) -> str:
     return "n/a" if x is None else f"{x:,.0f}"
 
 
+def profile_env(N: int, steps: int = 5) -> list[tuple[str, float]]:
+    """Share of the env step's time (cProfile, numba physics, per-env noise) by part."""
+    import cProfile
+    import pstats
+
+    env, _ = make_env(N, physics="numba")
+    a = np.zeros((N, 4), dtype=np.float32)
+    env.step(a)
+    prof = cProfile.Profile()
+    prof.enable()
+    for _ in range(steps):
+        env.step(a)
+    prof.disable()
+    stats = pstats.Stats(prof).stats
+    total = sum(v[2] for v in stats.values())  # own time of every function
+    parts = {"compiled physics kernel (step_batch)": ("_step_batch_parallel",
+                                                      "_step_batch_serial"),
+             "per-env noise draws (one generator call per sub-env)": ("_draw",),
+             "controller (numpy, per trajectory group)": ("_motor_commands",),
+             "reference / efficiency schedule": ("_references", "_efficiency"),
+             "observation + info": ("_observations", "_infos"),
+             "termination + reward": ("batched_termination", "batched_reward")}
+    out = []
+    for label, names in parts.items():
+        cum = sum(v[3] for (_, _, fn), v in stats.items() if fn in names)
+        out.append((label, cum / total))
+    out.append(("everything else", 1.0 - sum(s for _, s in out)))
+    return out
+
+
+def kernel_stages(N: int, horizon: int, rng) -> list[tuple[str, float]]:
+    """ns per vehicle-step of the compiled kernel, stage by stage (differences of runs)."""
+    ns = lambda fn: 1e9 / _rate(fn, N * horizon)  # noqa: E731
+    base = ns(compiled_batch(N, horizon, rng, 0, thrust_noise=0.0))
+    noisy = ns(compiled_batch(N, horizon, rng, 0))
+    ctrl = ns(compiled_batch(N, horizon, rng, 1))
+    return [("motors + allocation + RKMK4 (5 exponentials)", base),
+            ("+ thrust noise (4 exp per step)", noisy - base),
+            ("+ geometric controller every step", ctrl - noisy), ("total closed loop", ctrl)]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--full", action="store_true", help="N up to 16384 (default up to 4096)")
@@ -220,6 +336,7 @@ def main(argv=None) -> int:
     ap.add_argument("--peer-timeout", type=float, default=600.0)
     ap.add_argument("--skip-peers", action="store_true")
     ap.add_argument("--skip-ppo", action="store_true")
+    ap.add_argument("--skip-profile", action="store_true")
     ap.add_argument("--ppo-envs", type=int, default=8)
     ap.add_argument("--ppo-steps", type=int, default=4096)
     args = ap.parse_args(argv)
@@ -227,47 +344,79 @@ def main(argv=None) -> int:
     if max_n < 1 or args.horizon < 10:
         print("throughput: --max-n >= 1 and --horizon >= 10 required", file=sys.stderr)
         return 2
+    from quadfault import _sim_numba
+
+    if not _sim_numba.AVAILABLE:
+        print("throughput: numba (the 'fast' extra) is needed for the compiled rows",
+              file=sys.stderr)
+        return 2
+    import numba
+
     Ns = [n for n in (1, 16, 256, 1024, 4096, 16384) if n <= max_n]
     rng = np.random.default_rng(0)
     steps = max(1, args.horizon // 10)
-    print(f"# physics vehicle-steps/s at {RATE:.0f} Hz, horizon {args.horizon} steps")
-    print("| N | core physics | env, no estimator | env, shared noise | env + IRLS (physics "
-          "rate) | memory/vehicle (env + IRLS) |")
-    print("|---|---|---|---|---|---|")
+    print(f"# physics vehicle-steps/s at {RATE:.0f} Hz, horizon {args.horizon} steps; numba "
+          f"{numba.__version__}, {numba.get_num_threads()} threads "
+          f"({numba.threading_layer() if _threading_started() else 'layer not started'})")
+    print("| N | core numpy | core compiled | core compiled + controller | env numpy | "
+          "env numba | env numba, shared noise | env numba + IRLS | memory/vehicle (env + "
+          "IRLS) | build + reset [s] |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     results = {}
     for N in Ns:
-        core = core_physics(N, args.horizon, rng)
-        env = env_rate(N, steps)
-        shared = env_rate(N, steps, noise_streams="shared")
-        irls = env_rate(N, max(1, steps // 2), "irls") if N <= 1024 else None
+        core = core_physics(N, args.horizon, rng) if N <= 4096 else None
+        comp = core_compiled(N, args.horizon, rng)
+        closed = core_compiled(N, args.horizon, rng, control_every=1)
+        env_np = env_rate(N, steps) if N <= 4096 else None
+        env_nb, setup = make_env(N, physics="numba")
+        nb = env_rate(N, steps, env=env_nb)
+        del env_nb
+        shared = env_rate(N, steps, physics="numba", noise_streams="shared")
+        irls = env_rate(N, max(1, steps // 2), "irls", physics="numba") if N <= 1024 else None
         mem = env_memory_per_vehicle(N) if N <= 4096 else None
-        results[N] = (core, env, shared, irls)
-        print(f"| {N} | {_fmt(core)} | {_fmt(env)} | {_fmt(shared)} | {_fmt(irls)} | "
-              f"{'n/a' if mem is None else f'{mem / 1024:.1f} KiB'} |", flush=True)
+        results[N] = (core, comp, closed, env_np, nb, shared, irls)
+        print(f"| {N} | {_fmt(core)} | {_fmt(comp)} | {_fmt(closed)} | {_fmt(env_np)} | "
+              f"{_fmt(nb)} | {_fmt(shared)} | {_fmt(irls)} | "
+              f"{'n/a' if mem is None else f'{mem / 1024:.1f} KiB'} | {setup:.1f} |", flush=True)
+    n_ref = 4096 if 4096 in results else max(Ns)
+    r = results[n_ref]
+    print(f"\nat N = {n_ref}: compiled core {r[1] / 1e6:.2f}, compiled closed loop "
+          f"{r[2] / 1e6:.2f}, env (numba physics) {r[4] / 1e6:.2f} of the 1,000,000 "
+          f"vehicle-steps/s target")
+    if r[0]:
+        print(f"compiled / numpy core physics at N = {n_ref}: {r[1] / r[0]:.1f}x; env numba / "
+              f"env numpy: {r[4] / r[3]:.1f}x")
     n_irls = min(4096, max_n)
     rate, note = irls_window_rate(n_irls, 20)
     print(f"\nbatched IRLS at N = {n_irls}: {rate:,.0f} window updates/s ({note}; target 100,000: "
           f"ratio {rate / 1e5:.2f})")
-    n_ref = max(Ns)
-    print(f"env, shared noise at N = {n_ref}: {results[n_ref][2] / 1e6:.2f} of the 1,000,000 "
-          f"vehicle-steps/s target")
+    if not args.skip_profile:
+        n_prof = min(4096, max_n)
+        print(f"\n# where the time goes at N = {n_prof}")
+        print("compiled kernel, ns per vehicle-step (closed loop, one step_batch call):")
+        for label, v in kernel_stages(n_prof, args.horizon, rng):
+            print(f"  {label:<48} {v:8.0f}")
+        print("env step (numba physics, per-env noise; cProfile, cumulative share):")
+        for label, share in profile_env(n_prof, steps):
+            print(f"  {label:<56} {share:6.1%}")
     if not args.skip_peers:
         print(f"\n# peers at {RATE:.0f} Hz, horizon {args.horizon} (python {args.peer_python})")
-        print("| N | quadfault core | quadfault env | rotorpy | crazyflow | core/rotorpy | "
-              "env/rotorpy | core/crazyflow | env/crazyflow |")
+        print("| N | quadfault compiled + controller | quadfault env (numba, shared noise) | "
+              "rotorpy | crazyflow | compiled/rotorpy | env/rotorpy | compiled/crazyflow | "
+              "env/crazyflow |")
         print("|---|---|---|---|---|---|---|---|---|")
         for N in [n for n in Ns if n in (1, 256, 4096, 16384)]:
             # measured again right next to the peers (the machine's load drifts)
-            core, env = core_physics(N, args.horizon, rng), env_rate(N, steps,
-                                                                     noise_streams="shared")
+            closed = core_compiled(N, args.horizon, rng, control_every=1)
+            env = env_rate(N, steps, physics="numba", noise_streams="shared")
             peers, why = {}, {}
             for name in PEERS:
                 peers[name], why[name] = peer_rate(args.peer_python, name, N, args.horizon,
                                                    args.peer_timeout)
-            ratio = lambda a, b: "n/a" if b is None else f"{a / b:.1f}x"  # noqa: E731
-            print(f"| {N} | {_fmt(core)} | {_fmt(env)} | {_fmt(peers['rotorpy'])} | "
-                  f"{_fmt(peers['crazyflow'])} | {ratio(core, peers['rotorpy'])} | "
-                  f"{ratio(env, peers['rotorpy'])} | {ratio(core, peers['crazyflow'])} | "
+            ratio = lambda a, b: "n/a" if b is None else f"{a / b:.2f}x"  # noqa: E731
+            print(f"| {N} | {_fmt(closed)} | {_fmt(env)} | {_fmt(peers['rotorpy'])} | "
+                  f"{_fmt(peers['crazyflow'])} | {ratio(closed, peers['rotorpy'])} | "
+                  f"{ratio(env, peers['rotorpy'])} | {ratio(closed, peers['crazyflow'])} | "
                   f"{ratio(env, peers['crazyflow'])} |", flush=True)
             for name, reason in why.items():
                 if reason:
@@ -282,6 +431,16 @@ def main(argv=None) -> int:
                   f"{rates['subproc']:,.0f} steps/s, "
                   f"ratio {rates['native'] / rates['subproc']:.2f}")
     return 0
+
+
+def _threading_started() -> bool:
+    try:
+        import numba
+
+        numba.threading_layer()
+        return True
+    except ValueError:  # no parallel region has run yet
+        return False
 
 
 if __name__ == "__main__":

@@ -217,6 +217,7 @@ class QuadFaultVectorEnv(VectorEnv):
         self._sched_key = np.zeros(N, dtype=np.int64)
         self._needs_reset = np.zeros(N, dtype=bool)
         self._rngs: list = [None] * N  # each sub-env's generator (set by its reset)
+        self._rng_list = None  # the same as a numba typed List (numba physics), built lazily
         self._scenario_names = np.full(N, None, dtype=object)
         self._started = False
 
@@ -226,6 +227,8 @@ class QuadFaultVectorEnv(VectorEnv):
         env.reset(seed=seed, options=options)
         sc = env.scenario
         self._rngs[i] = env.np_random
+        if self._rng_list is not None:
+            self._rng_list[i] = env.np_random
         self._scenario_names[i] = sc.name
         self._traj_key[i] = self._trajectories.key(sc.trajectory)
         self._sched_key[i] = self._schedules.key(sc.efficiency)
@@ -279,6 +282,7 @@ class QuadFaultVectorEnv(VectorEnv):
             if len(seeds) != N:
                 raise ConfigError(f"reset needs {N} seeds, got {len(seeds)}")
         self._trajectories, self._schedules, self._controllers = _Table(), _Table(), {}
+        self._rng_list = None
         if seed is not None:
             self._shared_rng = np.random.default_rng(seeds)
         self._reset_rows(range(N), seeds, options)
@@ -293,15 +297,18 @@ class QuadFaultVectorEnv(VectorEnv):
         N = self.num_envs
         pos, vel, acc = np.empty((N, 3)), np.empty((N, 3)), np.empty((N, 3))
         for key, rows in _groups(self._traj_key):
-            ref = self._trajectories.items[key](t[rows])
+            ref = _at_unique_times(self._trajectories.items[key], t[rows])
             pos[rows], vel[rows], acc[rows] = ref.position, ref.velocity, ref.acceleration
         return pos, vel, acc
 
     def _efficiency(self, t: np.ndarray) -> np.ndarray:
-        """True efficiency (N, S, n) at per-env substep times ``t`` (N, S)."""
+        """True efficiency (N, S, n) at per-env substep times ``t`` (N, S); rows with the same
+        times (sub-envs in step) are evaluated once."""
         out = np.empty(t.shape + (self.vehicle.n_rotors,))
         for key, rows in _groups(self._sched_key):
-            out[rows] = self._schedules.items[key](t[rows])
+            tr = t[rows]
+            _, first, inv = np.unique(tr[:, 0], return_index=True, return_inverse=True)
+            out[rows] = self._schedules.items[key](tr[first])[inv.ravel()]
         return out
 
     def _check_actions(self, actions) -> np.ndarray:
@@ -321,8 +328,15 @@ class QuadFaultVectorEnv(VectorEnv):
             f_ctrl = np.empty_like(a)
             m = self.meas
             for key, rows in _groups(self._traj_key):
-                f_ctrl[rows], _ = self._controllers[key].motor_commands(
-                    t[rows], m.p[rows], m.v[rows], m.R[rows], m.w[rows])
+                ctrl = self._controllers[key]
+                ref = _at_unique_times(ctrl.trajectory, t[rows])
+                ff = (_at_unique_times(ctrl.feedforward_rates, t[rows])
+                      if ctrl.config.angular_feedforward else None)
+                if self.physics == "numba":  # the compiled twin of the same controller
+                    f_ctrl[rows] = _compiled_controller(ctrl, self._body, m, rows, ref, ff)
+                else:
+                    f_ctrl[rows], _ = ctrl.motor_commands(t[rows], m.p[rows], m.v[rows],
+                                                          m.R[rows], m.w[rows], ref, ff)
             if e0.compensate:
                 f_ctrl = f_ctrl / np.clip(self.eta_hat, 0.1, None)
             f = f_ctrl + cfg.residual_scale * a
@@ -334,6 +348,16 @@ class QuadFaultVectorEnv(VectorEnv):
         if self.noise_streams == "shared":
             return self._shared_rng.standard_normal((self.num_envs, width))
         z = np.zeros((self.num_envs, width))
+        if self.physics == "numba":  # the same draws, in one compiled loop
+            from numba.typed import List
+
+            from quadfault._sim_numba import draw_normals
+
+            if self._rng_list is None:
+                self._rng_list = List(self._rngs)
+            draw_normals(self._rng_list, np.asarray(rows, dtype=np.int64),
+                         np.asarray(sizes, dtype=np.int64), z)
+            return z
         rngs = self._rngs
         for i, s in zip(np.asarray(rows).tolist(), np.asarray(sizes)[rows].tolist()):
             if s:
@@ -537,6 +561,29 @@ class QuadFaultVectorEnv(VectorEnv):
     def close_extras(self, **kwargs):
         for env in self.envs:
             env.close()
+
+
+def _at_unique_times(fn, t: np.ndarray):
+    """``fn(t)`` (a tuple of arrays (len(t), ...)) evaluated once per distinct time."""
+    tu, inv = np.unique(t, return_inverse=True)
+    out = fn(tu)
+    items = [np.broadcast_to(np.asarray(x, float), tu.shape + np.shape(x)[-1:])[inv.ravel()]
+             for x in out]
+    return type(out)(*items) if hasattr(out, "_fields") else tuple(items)
+
+
+def _compiled_controller(ctrl, nominal, meas, rows, ref, ff) -> np.ndarray:
+    """``ctrl.motor_commands`` of the rows' measured states by ``_sim_numba.controller_batch``."""
+    from quadfault import _sim_numba
+
+    refs = np.zeros((len(rows), 6, 3))
+    refs[:, 0], refs[:, 1], refs[:, 2], refs[:, 3] = ref
+    if ff is not None:
+        refs[:, 4], refs[:, 5] = ff
+    out = np.empty((len(rows), nominal.allocation_inverse.shape[0]))
+    _sim_numba.controller_batch(meas.p[rows], meas.v[rows], meas.R[rows], meas.w[rows], refs,
+                                _sim_numba.gains_of(ctrl), nominal, out)
+    return out
 
 
 def _physics_numba_available() -> bool:

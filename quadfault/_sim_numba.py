@@ -448,6 +448,43 @@ def step_batch(p, v, R, w, f_cmd, eta, sigma, z, z_off, saturate, body, dt,
            int(control_every), refs, gains, nominal)
 
 
+@njit(parallel=True)
+def _controller_batch_parallel(p, v, R, w, refs, gains, nominal, out):
+    for i in prange(p.shape[0]):
+        _controller(_vec(p[i]), _vec(v[i]), _mat(R[i]), _vec(w[i]), refs[i], gains, nominal,
+                    out[i])
+
+
+@njit
+def _controller_batch_serial(p, v, R, w, refs, gains, nominal, out):
+    for i in range(p.shape[0]):
+        _controller(_vec(p[i]), _vec(v[i]), _mat(R[i]), _vec(w[i]), refs[i], gains, nominal,
+                    out[i])
+
+
+def controller_batch(p, v, R, w, refs, gains, nominal, out):
+    """The geometric controller (eqs. 9, 10; :func:`_controller`) for N states into ``out``
+    (N, n): ``p, v, w`` (N, 3), ``R`` (N, 3, 3), ``refs`` (N, 6, 3) as in :func:`_controller`."""
+    kernel = (_controller_batch_parallel if len(p) >= PARALLEL_MIN_VEHICLES
+              else _controller_batch_serial)
+    kernel(p, v, R, w, refs, gains, nominal, out)
+
+
+@njit
+def draw_normals(generators, rows, sizes, z):
+    """``z[i, :sizes[i]] = generators[i].standard_normal(sizes[i])`` for i in ``rows``.
+
+    numba's ``Generator.standard_normal`` is numpy's algorithm on the generator's own bit
+    generator (shared state), so this gives the numbers -- and leaves the generators in the
+    state -- of the same calls in Python, without a Python call per generator.
+    """
+    for r in range(rows.shape[0]):
+        i = rows[r]
+        g = generators[i]
+        for k in range(sizes[i]):
+            z[i, k] = g.standard_normal()
+
+
 def no_gains() -> Gains:
     """Placeholder gains for :func:`step_batch` calls without the controller."""
     z = np.zeros(3)
