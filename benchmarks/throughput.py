@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import textwrap
@@ -41,6 +42,12 @@ import tracemalloc
 from pathlib import Path
 
 import numpy as np
+
+if "--omp-spin" not in sys.argv:
+    # Idle OpenMP threads sleep instead of spinning: on a shared (oversubscribed) machine a
+    # spinning barrier waits for descheduled threads and costs 4-5x at N = 256 (measured).
+    # Before numba / torch start their thread pools; the peers' subprocesses inherit it.
+    os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -337,6 +344,9 @@ def main(argv=None) -> int:
     ap.add_argument("--skip-peers", action="store_true")
     ap.add_argument("--skip-ppo", action="store_true")
     ap.add_argument("--skip-profile", action="store_true")
+    ap.add_argument("--omp-spin", action="store_true",
+                    help="keep OpenMP's default spin-waiting (default here: OMP_WAIT_POLICY="
+                         "passive, better on a shared machine)")
     ap.add_argument("--ppo-envs", type=int, default=8)
     ap.add_argument("--ppo-steps", type=int, default=4096)
     args = ap.parse_args(argv)
@@ -354,10 +364,13 @@ def main(argv=None) -> int:
 
     Ns = [n for n in (1, 16, 256, 1024, 4096, 16384) if n <= max_n]
     rng = np.random.default_rng(0)
+    compiled_batch(_sim_numba.PARALLEL_MIN_VEHICLES, 10, rng)  # compile; start the threads
     steps = max(1, args.horizon // 10)
     print(f"# physics vehicle-steps/s at {RATE:.0f} Hz, horizon {args.horizon} steps; numba "
           f"{numba.__version__}, {numba.get_num_threads()} threads "
-          f"({numba.threading_layer() if _threading_started() else 'layer not started'})")
+          f"({numba.threading_layer() if _threading_started() else 'layer not started'}, "
+          f"OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY', 'unset')}); load average "
+          f"{', '.join(f'{x:.1f}' for x in os.getloadavg())} on {os.cpu_count()} cpus")
     print("| N | core numpy | core compiled | core compiled + controller | env numpy | "
           "env numba | env numba, shared noise | env numba + IRLS | memory/vehicle (env + "
           "IRLS) | build + reset [s] |")
@@ -411,6 +424,9 @@ def main(argv=None) -> int:
             env = env_rate(N, steps, physics="numba", noise_streams="shared")
             peers, why = {}, {}
             for name in PEERS:
+                if name == "rotorpy" and N > 4096:  # ~1,700 steps/s: minutes per timing
+                    peers[name], why[name] = None, "not run above N = 4096 (too slow)"
+                    continue
                 peers[name], why[name] = peer_rate(args.peer_python, name, N, args.horizon,
                                                    args.peer_timeout)
             ratio = lambda a, b: "n/a" if b is None else f"{a / b:.2f}x"  # noqa: E731
