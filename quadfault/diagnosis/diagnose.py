@@ -13,7 +13,8 @@ import numpy as np
 from quadfault.diagnosis.library import EXPLANATIONS, build_library, predict, public_params
 from quadfault.diagnosis.residuals import noise_scale, prepare
 from quadfault.diagnosis.result import DiagnosisResult, EffectFinding
-from quadfault.diagnosis.select import cross_validate, folds_of, select
+from quadfault.diagnosis.select import (IV_LAG, IV_MIN, cross_validate, folds_of, scored_rows,
+                                        select)
 from quadfault.effects import EFFECT_NAMES
 from quadfault.errors import ConfigError
 from quadfault.recording import Recording
@@ -92,9 +93,24 @@ def _explain(step, selected_names, params) -> str:
         text += " Force in the world frame; no drag identified, so no air velocity."
     if name == "wind" and "drag" in selected_names:
         text += " Air velocity = force / drag coefficient (horizontal mean of kx, ky)."
+    if step.iv is not None:
+        text += (f" Instrumental-variable check (instrument: the fitted signal {IV_LAG} blocks "
+                 f"earlier, blind to feedback on this block's noise): slope {step.iv:.2f} "
+                 f"(1 = all real, accepted >= {IV_MIN}).")
     if name == "ground_effect":
         text += " Height above the ground is taken as -z of the recording (ground at z = 0)."
     return text
+
+
+def _scoring(rp, rows) -> dict:
+    out = {"scored_blocks": int(rows.sum()), "blocks": int(rp.n_blocks),
+           "excluded_s": [list(seg) for seg in rp.excluded]}
+    if rp.excluded:
+        out["note"] = ("meta.calibration.segment: the importer fitted constants on these rows; "
+                       "they are used for fitting but not for any held-out score")
+    elif rp.scoring_note:
+        out["note"] = rp.scoring_note
+    return out
 
 
 class Diagnosis:
@@ -130,7 +146,8 @@ class Diagnosis:
             if np.any(np.abs(np.log(scale2 / scale)) > np.log(1.3)):
                 scale = scale2
                 sel = select(rp, library, scale, **kw)
-        before = _rms(sel.baseline.residual / scale)
+        rows = scored_rows(rp)  # held-out scores never use calibration blocks
+        before = _rms(sel.baseline.residual[rows] / scale)
         fl = folds_of(rp.n_blocks, cfg.folds)
         selected = {s.candidate.name: x for s, x in zip(sel.steps, sel.final.x)} if sel.final else {}
         findings = []
@@ -141,12 +158,12 @@ class Diagnosis:
                 alone = step.cv
             else:
                 alone = cross_validate(rp, [c], scale, [x], fl)
-            imp = 1.0 - _rms(alone.residual / scale) / before
+            imp = 1.0 - _rms(alone.residual[rows] / scale) / before
             params, unc = public_params(c, x, sd, rp.vehicle, selected)
             findings.append((imp, EffectFinding(c.name, params, unc, float(imp),
                                                 _explain(step, selected, params))))
         findings.sort(key=lambda item: -item[0])
-        after = _rms(sel.final_cv.residual / scale)
+        after = _rms(sel.final_cv.residual[rows] / scale)
         model_imp = 1.0 - after / before if before > 0 else 0.0
         terms = sel.final.terms if sel.final else []
         where, regimes = locate(rp, base_res, scale)
@@ -158,8 +175,8 @@ class Diagnosis:
                   "replay": rp, "prediction": prediction}
         return DiagnosisResult(
             verdict=verdict,
-            baseline_rmse=dict(zip(rp.channels, map(float, _rms(sel.baseline.residual, 0)))),
-            model_rmse=dict(zip(rp.channels, map(float, _rms(sel.final_cv.residual, 0)))),
+            baseline_rmse=dict(zip(rp.channels, map(float, _rms(sel.baseline.residual[rows], 0)))),
+            model_rmse=dict(zip(rp.channels, map(float, _rms(sel.final_cv.residual[rows], 0)))),
             model_improvement=float(model_imp),
             effects=tuple(f for _, f in findings),
             untestable=tuple(untestable),
@@ -169,5 +186,6 @@ class Diagnosis:
             channels=rp.channels,
             scale=tuple(float(s) for s in scale),
             seconds=float(time.perf_counter() - t_start),
+            scoring=_scoring(rp, rows),
             series=series,
         )

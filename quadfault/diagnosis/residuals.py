@@ -62,6 +62,11 @@ class Replay:
         knots: recording row of each interval boundary (N_k,): fast logs are merged to an
             internal step of about ``internal_step`` [s] (duration-weighted means of the held
             commands and midpoint states), so ``t = recording.t[knots]``.
+        scored: blocks that held-out scores use (B,) bool: blocks overlapping the recording's
+            calibration segment (``meta.calibration.segment`` [s], written by the importers
+            for rows used to fit missing constants) are fitted on but never scored.
+        excluded: the excluded segments ``((t0, t1), ...)`` [s].
+        scoring_note: why the segment was not excluded (it left too few blocks), or "".
     """
 
     vehicle: Vehicle
@@ -79,6 +84,9 @@ class Replay:
     measured: np.ndarray
     channels: tuple
     knots: np.ndarray
+    scored: np.ndarray | None = None
+    excluded: tuple = ()
+    scoring_note: str = ""
 
     @property
     def has_pose(self) -> bool:
@@ -222,12 +230,42 @@ def prepare(recording: Recording, vehicle: Vehicle | None = None, *,
         acc = None
         R_mid = p_mid = v_mid = None
         channels = IMU_CHANNELS
+    excluded = calibration_segments(recording, where)
+    scored = np.ones(n_blocks, dtype=bool)
+    for a, b in excluded:
+        scored &= ~((tc + 0.5 * dur > a) & (tc - 0.5 * dur < b))
+    note = ""
+    if excluded and scored.sum() < max(10, n_blocks // 10):
+        note = (f"calibration segment {list(excluded[0])} s leaves only {int(scored.sum())} of "
+                f"{n_blocks} blocks: scored on all blocks (including calibration data)")
+        scored[:] = True
+        excluded = ()
     rp = Replay(veh, tk, dtk, f, p_mid, v_mid, R_mid, w_mid, block, tc, dur, run,
-                np.zeros((n_blocks, 6)), channels, knots)
+                np.zeros((n_blocks, 6)), channels, knots, scored, excluded, note)
     if acc is None:
         acc = rp.block_mean(sf)
     object.__setattr__(rp, "measured", np.hstack((acc, rate)))
     return rp
+
+
+def calibration_segments(recording: Recording, where: str = "recording") -> tuple:
+    """``((t0, t1),)`` [s] from ``meta.calibration.segment`` (the importers' calibration rows,
+    see docs/importers.md), or ``()``; a malformed entry is a one-line RecordingError."""
+    cal = (recording.meta or {}).get("calibration")
+    if cal is None:
+        return ()
+    seg = cal.get("segment") if isinstance(cal, dict) else None
+    if seg is None:
+        return ()
+    try:
+        t0, t1 = (float(x) for x in seg)
+    except (TypeError, ValueError):
+        raise RecordingError(where, f"meta calibration.segment must be [t0, t1] in seconds, "
+                                    f"got {seg!r}", key="calibration") from None
+    if not (np.isfinite(t0) and np.isfinite(t1) and t0 < t1):
+        raise RecordingError(where, f"meta calibration.segment needs finite t0 < t1, got {seg!r}",
+                             key="calibration")
+    return ((t0, t1),)
 
 
 def model_channels(rp: Replay, f: np.ndarray, force=None, moment_ext=None,

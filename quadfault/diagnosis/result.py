@@ -51,6 +51,8 @@ class DiagnosisResult:
         regimes: per disagreeing channel, the regime variable that explains it best.
         prediction: open-loop multi-step prediction errors before/after (pose logs).
         channels, scale: channel names and their noise scales (normalisation).
+        scoring: which blocks held-out scores use (``scored_blocks`` of ``blocks``;
+            ``excluded_s``: calibration segments [s] fitted on but not scored).
         series: arrays for plots (times, residuals before/after, regime variables).
     """
 
@@ -66,6 +68,7 @@ class DiagnosisResult:
     channels: tuple = ()
     scale: tuple = ()
     seconds: float = 0.0
+    scoring: dict = field(default_factory=dict)
     series: dict = field(default_factory=dict, repr=False, compare=False)
 
     def to_dict(self) -> dict:
@@ -84,6 +87,7 @@ class DiagnosisResult:
             "prediction": dict(self.prediction),
             "normalisation": dict(zip(self.channels, self.scale)),
             "seconds": self.seconds,
+            "scoring": dict(self.scoring),
         })
 
     def to_json(self) -> str:

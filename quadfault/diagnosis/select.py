@@ -31,7 +31,8 @@ class CrossValidation:
     Attributes:
         residual: held-out block residual (B, 6) in channel units (each block predicted by the
             fit that did not see its fold).
-        sse: sum of squared normalised held-out residuals.
+        sse: sum of squared normalised held-out residuals over the scored blocks (calibration
+            blocks excluded, ``Replay.scored``).
         fold_x: parameter vectors of each fold's fit.
     """
 
@@ -49,6 +50,7 @@ class Step:
     cv: CrossValidation
     improvement_step: float  # held-out RMS reduction relative to the previous model
     rivals: dict = field(default_factory=dict)  # name -> in-sample SSE ratio to the winner
+    iv: float | None = None  # instrumental-variable slope (IV_CHECKED effects)
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,6 +71,42 @@ def folds_of(n_blocks: int, k: int) -> list[np.ndarray]:
     return np.array_split(np.arange(n_blocks), k)
 
 
+#: Effects regressed on closed-loop commands within a block (the controller reacts, inside
+#: the block, to the thrust noise the regression sees: moments anti-correlate with it, so the
+#: fitted inertia scale is biased upwards). They must pass an instrumental-variable check.
+IV_CHECKED = frozenset({"inertia"})
+IV_LAG = 2  # blocks between the instrument and the residual it explains
+IV_MIN = 0.5  # least IV slope (1: the fitted signal is all real, 0: all feedback bias)
+
+
+def iv_slope(rp: Replay, signal, residual, channels) -> float:
+    """Instrumental-variable slope of ``residual`` (B, 6) on a candidate's fitted ``signal``
+    (B, 6), both normalised, over ``channels``: the instrument is the signal ``IV_LAG``
+    blocks earlier (same contiguous run), correlated with the signal through the smooth
+    trajectory but not with the white noise of the current block, so
+    ``sum(z r) / sum(z s)`` is ~1 for a real effect and ~0 for a fit to feedback-correlated
+    noise, whatever least squares made of it."""
+    ch = np.asarray(channels, dtype=int)
+    if ch.size == 0 or rp.n_blocks <= IV_LAG:
+        return float("nan")
+    L = IV_LAG
+    same = rp.block_run[L:] == rp.block_run[:-L]
+    z = signal[:-L][same][:, ch]
+    num = float(np.sum(z * residual[L:][same][:, ch]))
+    den = float(np.sum(z * signal[L:][same][:, ch]))
+    return num / den if den > 0 else float("nan")
+
+
+def scored_rows(rp: Replay) -> np.ndarray:
+    """Blocks held-out scores use (all but calibration blocks, see ``Replay.scored``)."""
+    return np.ones(rp.n_blocks, dtype=bool) if rp.scored is None else rp.scored
+
+
+def scored_sse(rp: Replay, residual, scale) -> float:
+    z = residual[scored_rows(rp)] / scale
+    return float(np.sum(z * z))
+
+
 def cross_validate(rp: Replay, cands, scale, x_init, folds, *, full: Fit | None = None,
                    fixed=(), **kw) -> CrossValidation:
     """Time-blocked cross-validation of ``cands`` (on top of ``fixed``).
@@ -82,8 +120,7 @@ def cross_validate(rp: Replay, cands, scale, x_init, folds, *, full: Fit | None 
     fixed = list(fixed)
     if not cands:
         res = rp.measured - predict(rp, fixed)
-        z = res / scale
-        return CrossValidation(res, float(np.sum(z * z)), ())
+        return CrossValidation(res, scored_sse(rp, res, scale), ())
     cands = list(cands)
     if full is None:
         full = fit(rp, cands, scale, init=x_init, fixed=fixed, **kw)
@@ -102,8 +139,7 @@ def cross_validate(rp: Replay, cands, scale, x_init, folds, *, full: Fit | None 
         fold_x.append(tuple(_split(sol.x, cands)))
         pred = lin.at(sol.x) if lin.exact else lin.model(rp, sol.x)
         res[idx] = rp.measured[idx] - pred[idx]
-    z = res / scale
-    return CrossValidation(res, float(np.sum(z * z)), tuple(fold_x))
+    return CrossValidation(res, scored_sse(rp, res, scale), tuple(fold_x))
 
 
 def select(rp: Replay, library: list[Candidate], scale: np.ndarray, *, folds: int = 5,
@@ -115,7 +151,7 @@ def select(rp: Replay, library: list[Candidate], scale: np.ndarray, *, folds: in
     current: list[Candidate] = []
     x_cur: list = []
     cur_cv = baseline
-    cur_bic = n * np.log(baseline.sse / n)
+    cur_bic = n * np.log(float(np.sum((baseline.residual / scale) ** 2)) / n)  # in-sample
     steps = []
     final = None
     screening = ()
@@ -152,18 +188,25 @@ def select(rp: Replay, library: list[Candidate], scale: np.ndarray, *, folds: in
             touched = np.sqrt(np.mean(sig ** 2, axis=0)) >= 1.0
             gain_touched = 0.0
             if touched.any():  # best held-out gain among the channels the effect acts on
-                before = np.sum((cur_cv.residual / scale)[:, touched] ** 2, axis=0)
-                after = np.sum((cv.residual / scale)[:, touched] ** 2, axis=0)
+                rows = scored_rows(rp)
+                before = np.sum((cur_cv.residual[rows] / scale)[:, touched] ** 2, axis=0)
+                after = np.sum((cv.residual[rows] / scale)[:, touched] ** 2, axis=0)
                 gain_touched = float(np.max(1.0 - np.sqrt(after / before)))
             if gain < min_improvement and gain_touched < 3 * min_improvement:
                 continue
+            iv = None
+            if c.name in IV_CHECKED:  # feedback bias: the signal must survive an IV check
+                iv = iv_slope(rp, sig, (rp.measured - cur_pred) / scale,
+                              np.flatnonzero(touched) if touched.any() else [3, 4, 5])
+                if not iv >= IV_MIN:
+                    continue
             if best is None or cv.sse < best[3].sse:
-                best = (b, c, f, cv, gain)
+                best = (b, c, f, cv, gain, iv)
         if best is None:
             break
-        b, c, f, cv, gain = best
+        b, c, f, cv, gain, iv = best
         rivals = {rc.name: rf.sse / max(f.sse, 1e-300) for _, rc, rf in fits if rc is not c}
-        steps.append(Step(c, f, cv, float(gain), rivals))
+        steps.append(Step(c, f, cv, float(gain), rivals, iv))
         current.append(c)
         x_cur = list(f.x)
         cur_cv, cur_bic, final = cv, b, f
