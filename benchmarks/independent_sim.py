@@ -123,7 +123,8 @@ def expected(run: dict) -> dict:
     speed = np.linalg.norm(vb, axis=1)
     cd = np.array([p.get("c_Dx", 0.0), p.get("c_Dy", 0.0), p.get("c_Dz", 0.0)])
     # best linear k for the quadratic -|v| C_D v in the least-squares sense, per body axis
-    parasitic = cd * np.sum(speed[:, None] * vb * vb, axis=0) / np.maximum(np.sum(vb * vb, 0), 1e-12)
+    parasitic = (cd * np.sum(speed[:, None] * vb * vb, axis=0)
+                 / np.maximum(np.sum(vb * vb, axis=0), 1e-12))
     out["drag_k_N_s_per_m"] = (rotor + parasitic).tolist()
     out["drag_rotor_part"] = rotor.tolist()
     out["translational_lift_k_h"] = float(p.get("k_h", 0.0))

@@ -162,9 +162,11 @@ def print_nanodrone(rows) -> None:
               f"{_short(c['gain_rotor'])} | {_deg(c['phase_rotor_deg'])} | "
               f"{_short(c['drag_moment_fraction'])} | "
               f"{_short([1e3 * x for x in c['drag_moment_c']])} |")
-    for key, title in (("diagnosis", "full library"), ("diagnosis_no_inertia", "library without inertia")):
+    for key, title in (("diagnosis", "full library"),
+                       ("diagnosis_no_inertia", "library without inertia")):
         print(f"\n### diagnosis, {title}\n")
-        print("| flight | verdict | effects | model improvement | open-loop 0.5 s pos. error nominal -> model [m] |")
+        print("| flight | verdict | effects | model improvement | open-loop 0.5 s position "
+              "error nominal -> model [m] |")
         print("|---|---|---|---|---|")
         for r in rows:
             d = r[key]
@@ -196,9 +198,11 @@ def print_crazypad(rows) -> None:
             mu, sd = nom.mean(0), nom.std(0, ddof=1)
             print(f"\n### {kind}, {source} ({len(nom)} nominal flights; d = (eta - nominal mean)"
                   " / nominal sd)\n")
-            print("| condition | n | eta1 | eta2 | eta3 | eta4 | d(eta3) | held-out impr. (angular) |")
+            print("| condition | n | eta1 | eta2 | eta3 | eta4 | d(eta3) | "
+                  "held-out impr. (angular) |")
             print("|---|---|---|---|---|---|---|---|")
-            for cond in sorted({r["condition"] for r in sub}, key=lambda c: (c != "normal_flight", c)):
+            for cond in sorted({r["condition"] for r in sub},
+                               key=lambda c: (c != "normal_flight", c)):
                 rs = [r for r in sub if r["condition"] == cond]
                 e = np.array([eta(r) for r in rs])
                 m = e.mean(0)
