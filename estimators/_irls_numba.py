@@ -23,6 +23,10 @@ from numba import get_num_threads, njit, prange
 
 from estimators.base import (STATUS_ILL_CONDITIONED, STATUS_MAX_ITER, STATUS_NO_EXCITATION,
                              STATUS_OK, STATUS_REJECTED, STATUSES)
+from estimators.ipm import ipm4
+
+# the interior point of the 4-rotor case: the very function the numpy path runs, compiled
+_ipm4 = njit(cache=True)(ipm4)
 
 _OK = STATUSES.index(STATUS_OK)
 _ILL = STATUSES.index(STATUS_ILL_CONDITIONED)
@@ -59,9 +63,10 @@ def kernel_parameters(cfg, m: int):
 @njit(cache=True)
 def workspace(m, n, rounds):
     """Scratch of one window solve (m segments, n rotors, at most ``rounds`` IRLS rounds):
-    ``(V (17, n), M (6, n, n), S (3, m), iters (rounds,), w (m,))``."""
+    ``(V (17, n), M (6, n, n), S (3, m), iters (rounds,), w (m,), nohist (0, 7))`` (``nohist``
+    is :func:`estimators.ipm.ipm4`'s "record no history")."""
     return (np.zeros((_N_VEC, n)), np.zeros((_N_MAT, n, n)), np.zeros((3, m)),
-            np.zeros(rounds, dtype=np.int64), np.zeros(m))
+            np.zeros(rounds, dtype=np.int64), np.zeros(m), np.zeros((0, 7)))
 
 
 def batch_chunks(rows: int) -> int:
@@ -389,7 +394,8 @@ def _ipm_into(H, q, x0, fp, max_iter, V, K, L):
 
 
 @njit(cache=True)
-def _solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, iters, w, x_out, sd_out):
+def _solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, iters, w, nohist, x_out,
+                       sd_out):
     """Algorithm 2 on the ring window ``(c, b, H)`` (segment s at ``(start + s) % m``),
     allocation-free. Fills ``x_out``, ``sd_out`` (NaN on a guard), ``w`` (final weights) and
     ``iters``; returns ``(status code, rounds, cond)``."""
@@ -437,7 +443,16 @@ def _solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, iters, w, x_out,
             for k in range(n):
                 Hq[j, k] = JGJ[j, k]
             Hq[j, j] += gamma
-        it, converged = _ipm_into(Hq, q, x_cur, fp, ip[1], V, K, L)
+        if n == 4:  # closed-form 4x4 algebra on scalars (estimators.ipm.ipm4)
+            out = _ipm4((Hq[0, 0], Hq[0, 1], Hq[0, 2], Hq[0, 3], Hq[1, 0], Hq[1, 1], Hq[1, 2],
+                         Hq[1, 3], Hq[2, 0], Hq[2, 1], Hq[2, 2], Hq[2, 3], Hq[3, 0], Hq[3, 1],
+                         Hq[3, 2], Hq[3, 3]), (q[0], q[1], q[2], q[3]), lo, hi,
+                        (x_cur[0], x_cur[1], x_cur[2], x_cur[3]), fp[11], fp[12], fp[13],
+                        fp[14], fp[15], fp[16], fp[17], fp[18], ip[1], nohist)
+            V[_X, 0], V[_X, 1], V[_X, 2], V[_X, 3] = out[0], out[1], out[2], out[3]
+            it, converged = out[12], out[13] == 1
+        else:
+            it, converged = _ipm_into(Hq, q, x_cur, fp, ip[1], V, K, L)
         iters[rounds] = it
         rounds += 1
         step = 0.0
@@ -485,13 +500,14 @@ def _run_windows(c, b, H, excited, x0, s0, fp, ip, m, eta, sd, status):
     n = x0.size
     x = x0.copy()
     s = s0.copy()
-    V, M, S, iters, w = workspace(m, n, ip[0])
+    V, M, S, iters, w, nohist = workspace(m, n, ip[0])
     x_out = np.empty(n)
     sd_out = np.empty(n)
     for k in range(excited.size):
         if excited[k]:
             code, _rounds, _cond = _solve_window_into(c[k:k + m], b[k:k + m], H[k:k + m], 0, x,
-                                                      fp, ip, V, M, S, iters, w, x_out, sd_out)
+                                                      fp, ip, V, M, S, iters, w, nohist,
+                                                      x_out, sd_out)
             if code == _OK or code == _MAXIT:
                 _copy(x_out, x)
                 _copy(sd_out, s)
@@ -511,11 +527,11 @@ def solve_ring_batch(c, b, H, start, rows, x_prev, fp, ip, x, sd, code, chunks):
     ``code`` (K,)."""
     K, m, n = rows.size, b.shape[1], b.shape[2]
     for ch in prange(chunks):
-        V, M, S, iters, w = workspace(m, n, ip[0])
+        V, M, S, iters, w, nohist = workspace(m, n, ip[0])
         for k in range(ch * K // chunks, (ch + 1) * K // chunks):
             i = rows[k]
             code[k], _r, _cond = _solve_window_into(c[i], b[i], H[i], start, x_prev[i], fp, ip,
-                                                    V, M, S, iters, w, x[k], sd[k])
+                                                    V, M, S, iters, w, nohist, x[k], sd[k])
 
 
 def run_windows_numba(c, b, H, excited, x0, cfg, progress: bool = False):
@@ -550,14 +566,14 @@ def solve_window_numba(c, b, H, x_prev, cfg, params=None):
 
     m, n = np.shape(b)
     fp, ip = kernel_parameters(cfg, m) if params is None else params
-    V, M, S, iters, w = workspace(m, n, cfg.max_irls)
+    V, M, S, iters, w, nohist = workspace(m, n, cfg.max_irls)
     x_out = np.empty(n)
     sd_out = np.empty(n)
     code, rounds, cond = _solve_window_into(np.ascontiguousarray(c, dtype=float),
                                             np.ascontiguousarray(b, dtype=float),
                                             np.ascontiguousarray(H, dtype=float), 0,
                                             np.asarray(x_prev, dtype=float), fp, ip, V, M, S,
-                                            iters, w, x_out, sd_out)
+                                            iters, w, nohist, x_out, sd_out)
     status = STATUSES[code]
     message = ""
     if code == _REJ:

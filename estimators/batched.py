@@ -45,7 +45,8 @@ try:  # the compiled batch loops call the existing per-vehicle kernels (``fast``
     from numba import njit, prange
 
     from estimators._irls_numba import batch_chunks, segment_terms_batch, solve_ring_batch
-    from estimators.ekf_numba import step_inplace
+    from estimators.ekf_numba import step_ws
+    from estimators.ekf_numba import workspace as ekf_workspace
 except ImportError:  # pragma: no cover - exercised without numba
     njit = None
 
@@ -355,13 +356,19 @@ __all__ = ["BatchedIRLS", "BatchedEKF", "BatchedEstimate", "make_batched_estimat
 
 if njit is not None:
     @njit(cache=True, parallel=True)
-    def _ekf_steps_kernel(x, P, f, dt, p, v, w, R, rows, A, m, g, J, Jinv, qc, r, lo, hi):
-        for k in prange(rows.size):
-            i = rows[k]
-            step_inplace(x[i], P[i], f[i].copy(), dt[i], p[i].copy(), v[i].copy(), w[i].copy(),
-                         R[i].copy(), A, m, g, J, Jinv, qc, r, lo, hi)
+    def _ekf_steps_kernel(x, P, f, dt, p, v, w, R, rows, chunks, A, m, g, J, Jinv, qc, r, lo,
+                          hi):
+        K = rows.size
+        for ch in prange(chunks):  # one workspace per chunk of rows
+            ws = ekf_workspace(x.shape[1])
+            for k in range(ch * K // chunks, (ch + 1) * K // chunks):
+                i = rows[k]
+                step_ws(x[i], P[i], f[i], dt[i], p[i], v[i], w[i], R[i], A, m, g, J, Jinv, qc,
+                        r, lo, hi, ws)
 
 
 def _ekf_steps(x, P, f, dt, p, v, w, R, rows, *kernel_args):
     """Compiled EKF predict + update of ``rows`` (parallel over the batch), in place."""
-    _ekf_steps_kernel(x, P, f, dt, p, v, w, R, rows.astype(np.int64), *kernel_args)
+    _ekf_steps_kernel(x, P, f, dt, np.ascontiguousarray(p), np.ascontiguousarray(v),
+                      np.ascontiguousarray(w), np.ascontiguousarray(R), rows.astype(np.int64),
+                      batch_chunks(rows.size), *kernel_args)

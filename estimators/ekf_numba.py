@@ -3,6 +3,16 @@
 The same predict / update as ``ekf.predict`` and ``ekf.measurement_update``, written in the
 subset of numpy that numba compiles, so a whole recording runs in one compiled loop.
 ``tests/test_estimators_ekf.py`` checks that both paths agree to 1e-9; change them together.
+
+The step (:func:`step_ws`) allocates nothing but the core's ``expm_so3`` result: its matrices
+live in a :func:`workspace` made once per recording or per batch chunk, and it uses the
+structure of the 22-state filter instead of dense 22 x 22 products:
+
+* the transition Jacobian ``F`` is the identity plus a few 3 x 3 / 3 x n / 9 x 3 / 9 x n blocks
+  (the eta block is a random walk), so ``F P F^T`` runs over F's non-zeros (about 150 of 484);
+* the measurement Jacobian is ``[I_9 0]`` plus a 3 x 9 attitude block, so ``H P``,
+  ``H P H^T`` and ``(I - K H) P`` read rows of ``P`` instead of multiplying by ``H``;
+* the Joseph update computes each symmetric pair of entries once.
 """
 
 from __future__ import annotations
@@ -13,73 +23,29 @@ import numpy as np
 from numba import njit
 
 from estimators.ekf import IDLE_THRUST
-from quadfault._sim_numba import expm_so3, hat, matvec  # the core's compiled mirrors
+from quadfault._sim_numba import expm_so3  # the core's compiled mirror
 
 
-@njit(cache=True, fastmath=True)
-def _mm(A, B):
-    """Matrix product by loops (faster than a BLAS call for these small sizes)."""
-    n, m, p = A.shape[0], A.shape[1], B.shape[1]
-    out = np.zeros((n, p))
-    for i in range(n):
-        for k in range(m):
-            a = A[i, k]
-            if a != 0.0:
-                for j in range(p):
-                    out[i, j] += a * B[k, j]
-    return out
-
-
-@njit(cache=True, fastmath=True)
-def _mm_bt(A, B):
-    """``A @ B.T`` by row dot products (both operands read contiguously)."""
-    n, m, p = A.shape[0], A.shape[1], B.shape[0]
-    out = np.empty((n, p))
-    for i in range(n):
-        for j in range(p):
-            acc = 0.0
-            for k in range(m):
-                acc += A[i, k] * B[j, k]
-            out[i, j] = acc
-    return out
-
-
-@njit(cache=True, fastmath=True)
-def _gain(S, HP):
-    """Kalman gain ``K = P H^T S^-1 = (S^-1 H P)^T`` for symmetric positive-definite ``S``
-    (Cholesky ``S = L L^T``; row i of K solves ``S k = (H P)[:, i]``)."""
-    n, m = S.shape[0], HP.shape[1]
-    L = np.zeros((n, n))
-    for j in range(n):
-        d = S[j, j]
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        if not d > 0.0:
-            return np.ascontiguousarray(np.linalg.solve(S, HP).T)  # not PD: general solver
-        L[j, j] = math.sqrt(d)
-        for i in range(j + 1, n):
-            acc = S[i, j]
-            for k in range(j):
-                acc -= L[i, k] * L[j, k]
-            L[i, j] = acc / L[j, j]
-    K = np.empty((m, n))
-    for c in range(m):
-        for i in range(n):  # L z = b
-            acc = HP[i, c]
-            for k in range(i):
-                acc -= L[i, k] * K[c, k]
-            K[c, i] = acc / L[i, i]
-        for i in range(n - 1, -1, -1):  # L^T x = z
-            acc = K[c, i]
-            for k in range(i + 1, n):
-                acc -= L[k, i] * K[c, k]
-            K[c, i] = acc / L[i, i]
-    return K
+# workspace slots: matrices (ns x ns), (ns x 12), (12 x 12), small blocks and vectors
+_F, _FP, _PP, _AM = range(4)
+_AHT = 0
+_S, _L = range(2)
 
 
 @njit(cache=True)
-def _right_jacobian(phi):
-    th2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
+def workspace(ns):
+    """Scratch of one EKF step for ``ns`` states (18 + rotors)."""
+    nr = ns - 18
+    return (np.zeros((4, ns, ns)), np.zeros((1, ns, 12)), np.zeros((2, 12, 12)),
+            np.zeros((2, 12, ns)), np.zeros((ns, ns), dtype=np.int64), np.zeros(ns, dtype=np.int64),
+            np.zeros((6, 3, 3)), np.zeros((9, 3)), np.zeros((3, nr)), np.zeros((3, 9)),
+            np.zeros((2, ns)), np.zeros(12))
+
+
+@njit(cache=True)
+def _right_jacobian_into(phi0, phi1, phi2, Jr):
+    """Right Jacobian of SO(3) (``ekf.right_jacobian_so3``): ``I - a K + b K^2``."""
+    th2 = phi0 * phi0 + phi1 * phi1 + phi2 * phi2
     if th2 < 1e-8:
         a = 0.5 - th2 / 24.0
         b = 1.0 / 6.0 - th2 / 120.0
@@ -87,135 +53,198 @@ def _right_jacobian(phi):
         th = math.sqrt(th2)
         a = (1.0 - math.cos(th)) / th2
         b = (th - math.sin(th)) / (th2 * th)
-    K = hat(phi)
-    return np.eye(3) - a * K + b * _mm(K, K)
-
-
-@njit(cache=True)
-def _log(M):
-    """Rotation vector of a rotation matrix (accurate away from pi)."""
-    s0 = 0.5 * (M[2, 1] - M[1, 2])
-    s1 = 0.5 * (M[0, 2] - M[2, 0])
-    s2 = 0.5 * (M[1, 0] - M[0, 1])
-    s = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-    c = 0.5 * (M[0, 0] + M[1, 1] + M[2, 2] - 1.0)
-    scale = 1.0 if s < 1e-12 else math.atan2(s, c) / s
-    return np.array([s0 * scale, s1 * scale, s2 * scale])
-
-
-@njit(cache=True)
-def _vec(M):
-    out = np.empty(9)
-    for j in range(3):
-        for i in range(3):
-            out[3 * j + i] = M[i, j]
-    return out
-
-
-@njit(cache=True)
-def _unvec(x, start):
-    M = np.empty((3, 3))
-    for j in range(3):
-        for i in range(3):
-            M[i, j] = x[start + 3 * j + i]
-    return M
-
-
-@njit(cache=True)
-def _inv3(M):
-    """Inverse of a 3x3 matrix by cofactors."""
-    C = np.empty((3, 3))
+    K = ((0.0, -phi2, phi1), (phi2, 0.0, -phi0), (-phi1, phi0, 0.0))
     for i in range(3):
         for j in range(3):
-            i1, i2, j1, j2 = (i + 1) % 3, (i + 2) % 3, (j + 1) % 3, (j + 2) % 3
-            C[j, i] = M[i1, j1] * M[i2, j2] - M[i1, j2] * M[i2, j1]
-    det = M[0, 0] * C[0, 0] + M[0, 1] * C[1, 0] + M[0, 2] * C[2, 0]
-    return C / det
+            kk = 0.0
+            for k in range(3):
+                kk += K[i][k] * K[k][j]
+            Jr[i, j] = (1.0 if i == j else 0.0) - a * K[i][j] + b * kk
 
 
 @njit(cache=True)
-def _project_so3(M):
-    """Closest rotation (polar factor), as ``quadfault.rotation.orthonormalize``: Newton
-    iterations ``M <- (M + M^-T) / 2`` when ``M`` is near SO(3) (the EKF's case), else SVD."""
-    E = _mm(M.T, M) - np.eye(3)
-    if np.max(np.abs(E)) < 1e-3 and np.linalg.det(M) > 0:
+def _det3(M):
+    return (M[0, 0] * (M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1])
+            - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
+            + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]))
+
+
+@njit(cache=True)
+def _project_so3_into(M, C):
+    """Closest rotation (polar factor) of ``M`` in place, as
+    ``quadfault.rotation.orthonormalize``: Newton iterations ``M <- (M + M^-T) / 2`` when ``M``
+    is near SO(3) (the EKF's case), else SVD. ``C`` is 3 x 3 scratch."""
+    err = 0.0
+    for i in range(3):
+        for j in range(3):
+            s = 0.0
+            for k in range(3):
+                s += M[k, i] * M[k, j]
+            err = max(err, abs(s - (1.0 if i == j else 0.0)))
+    if err < 1e-3 and _det3(M) > 0:
         for _ in range(3):
-            M = 0.5 * (M + _inv3(M).T)
-        return M
+            for i in range(3):  # C = cofactor matrix^T = adj(M); inv(M) = C / det
+                for j in range(3):
+                    i1, i2, j1, j2 = (i + 1) % 3, (i + 2) % 3, (j + 1) % 3, (j + 2) % 3
+                    C[j, i] = M[i1, j1] * M[i2, j2] - M[i1, j2] * M[i2, j1]
+            det = M[0, 0] * C[0, 0] + M[0, 1] * C[1, 0] + M[0, 2] * C[2, 0]
+            for i in range(3):
+                for j in range(3):
+                    M[i, j] = 0.5 * (M[i, j] + C[j, i] / det)
+        return
     U, _, Vt = np.linalg.svd(M)
     D = np.eye(3)
     D[2, 2] = np.sign(np.linalg.det(U @ Vt))
-    return U @ D @ Vt
+    M[:, :] = U @ D @ Vt
 
 
 @njit(cache=True, fastmath=True)
-def _sandwich(F, P):
-    """``F P F^T`` over the non-zeros of the sparse transition Jacobian (CSR rows)."""
+def _sandwich_into(F, P, out, FP, cols, nnz):
+    """``out = F P F^T`` over the non-zeros of the sparse transition Jacobian (column indices
+    of each row's non-zeros in ``cols``/``nnz``; ``FP`` is scratch)."""
     n = F.shape[0]
-    nnz = np.zeros(n, dtype=np.int64)
-    cols = np.empty((n, n), dtype=np.int64)
-    vals = np.empty((n, n))
     for i in range(n):
+        c = 0
         for j in range(n):
             if F[i, j] != 0.0:
-                cols[i, nnz[i]] = j
-                vals[i, nnz[i]] = F[i, j]
-                nnz[i] += 1
-    FP = np.zeros((n, n))
-    for i in range(n):
+                cols[i, c] = j
+                c += 1
+        nnz[i] = c
+    for i in range(n):  # FP = F P
+        for k in range(n):
+            FP[i, k] = 0.0
         for q in range(nnz[i]):
-            j, f = cols[i, q], vals[i, q]
+            j = cols[i, q]
+            f = F[i, j]
             for k in range(n):
                 FP[i, k] += f * P[j, k]
-    out = np.empty((n, n))
-    for i in range(n):
-        for k in range(i, n):
+    for k in range(n):  # out = FP F^T, upper triangle, mirrored
+        for i in range(k + 1):
             acc = 0.0
             for q in range(nnz[k]):
-                acc += FP[i, cols[k, q]] * vals[k, q]
+                acc += FP[i, cols[k, q]] * F[k, cols[k, q]]
             out[i, k] = acc
-            out[k, i] = acc
-    return out
+    for k in range(n):
+        for i in range(k + 1, n):
+            out[i, k] = out[k, i]
+
+
+@njit(cache=True, fastmath=True)
+def _gain_into(S, HP, L, KT):
+    """Transposed Kalman gain ``KT = K^T = S^-1 H P`` for symmetric positive-definite ``S``
+    (Cholesky ``S = L L^T``; the two triangular solves run on whole rows of ``H P``)."""
+    n, m = S.shape[0], HP.shape[1]
+    for j in range(n):
+        d = S[j, j]
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        if not d > 0.0:  # not PD: general solver (allocates; does not happen in practice)
+            KT[:, :] = np.linalg.solve(S, HP)
+            return
+        L[j, j] = math.sqrt(d)
+        for i in range(j + 1, n):
+            acc = S[i, j]
+            for k in range(j):
+                acc -= L[i, k] * L[j, k]
+            L[i, j] = acc / L[j, j]
+    for i in range(n):  # L Z = H P
+        for c in range(m):
+            KT[i, c] = HP[i, c]
+        for k in range(i):
+            lik = L[i, k]
+            for c in range(m):
+                KT[i, c] -= lik * KT[k, c]
+        for c in range(m):
+            KT[i, c] = KT[i, c] / L[i, i]
+    for i in range(n - 1, -1, -1):  # L^T KT = Z
+        for k in range(i + 1, n):
+            lki = L[k, i]
+            for c in range(m):
+                KT[i, c] -= lki * KT[k, c]
+        for c in range(m):
+            KT[i, c] = KT[i, c] / L[i, i]
 
 
 @njit(cache=True)
 def step_inplace(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi):
-    """One predict + update; ``x`` and ``P`` are overwritten."""
+    """One predict + update; ``x`` and ``P`` are overwritten (a fresh workspace)."""
+    step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi,
+            workspace(x.shape[0]))
+
+
+@njit(cache=True)
+def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
+    """One predict + update with the scratch ``ws`` (:func:`workspace`); ``x`` and ``P`` are
+    overwritten."""
+    mats, m12, s12, h12, cols, nnz, M3, dR, B, HR, vecs, y = ws
+    F, FP, Pp, Am = mats[_F], mats[_FP], mats[_PP], mats[_AM]
+    AHt = m12[_AHT]
+    HP, KT = h12[0], h12[1]
+    S, L = s12[_S], s12[_L]
+    R, Rn, Jr, G, Mr, C = M3[0], M3[1], M3[2], M3[3], M3[4], M3[5]
+    xp, phi = vecs[0], vecs[1, 0:3]
     ns = x.shape[0]
     nr = ns - 18
-    p, v, w = x[0:3].copy(), x[3:6].copy(), x[6:9].copy()
-    R = _unvec(x, 9)
-    eta = x[18:].copy()
+    for j in range(3):
+        for i in range(3):
+            R[i, j] = x[9 + 3 * j + i]
     # ---- predict (eqs. 1-4, 12)
-    ef = eta * f
-    T = 0.0
+    T = mo0 = mo1 = mo2 = 0.0  # wrench [T; M] = A diag(eta) f
     for j in range(nr):
-        T += A[0, j] * ef[j]
-    M = matvec(A[1:], ef)
-    b3 = R[:, 2].copy()
-    a = -(T / m) * b3
-    a[2] += g
-    wdot = matvec(Jinv, M - np.cross(w, matvec(J, w)))
-    phi = w * dt + 0.5 * wdot * dt * dt
+        ef = x[18 + j] * f[j]
+        T += A[0, j] * ef
+        mo0 += A[1, j] * ef
+        mo1 += A[2, j] * ef
+        mo2 += A[3, j] * ef
+    w0, w1, w2 = x[6], x[7], x[8]
+    jw = (J[0, 0] * w0 + J[0, 1] * w1 + J[0, 2] * w2, J[1, 0] * w0 + J[1, 1] * w1 + J[1, 2] * w2,
+          J[2, 0] * w0 + J[2, 1] * w1 + J[2, 2] * w2)
+    tq = (mo0 - (w1 * jw[2] - w2 * jw[1]), mo1 - (w2 * jw[0] - w0 * jw[2]),
+          mo2 - (w0 * jw[1] - w1 * jw[0]))
+    wdot = (Jinv[0, 0] * tq[0] + Jinv[0, 1] * tq[1] + Jinv[0, 2] * tq[2],
+            Jinv[1, 0] * tq[0] + Jinv[1, 1] * tq[1] + Jinv[1, 2] * tq[2],
+            Jinv[2, 0] * tq[0] + Jinv[2, 1] * tq[1] + Jinv[2, 2] * tq[2])
+    for i in range(3):
+        phi[i] = x[6 + i] * dt + 0.5 * wdot[i] * dt * dt
     E = expm_so3(phi)
-    Rn = _mm(R, E)
-    xp = np.empty(ns)
-    xp[0:3] = p + v * dt + 0.5 * a * dt * dt
-    xp[3:6] = v + a * dt
-    xp[6:9] = w + wdot * dt
-    xp[9:18] = _vec(Rn)
-    xp[18:] = eta
-    F = np.eye(ns)
-    B = _mm(Jinv, A[1:] * f.reshape(1, nr))
-    G = _mm(Jinv, hat(matvec(J, w)) - _mm(hat(w), J))
+    for i in range(3):
+        for j in range(3):
+            Rn[i, j] = R[i, 0] * E[0, j] + R[i, 1] * E[1, j] + R[i, 2] * E[2, j]
+    for i in range(3):
+        a = -(T / m) * R[i, 2] + (g if i == 2 else 0.0)
+        xp[i] = x[i] + x[3 + i] * dt + 0.5 * a * dt * dt
+        xp[3 + i] = x[3 + i] + a * dt
+        xp[6 + i] = x[6 + i] + wdot[i] * dt
+    for j in range(3):
+        for i in range(3):
+            xp[9 + 3 * j + i] = Rn[i, j]
+    for j in range(nr):
+        xp[18 + j] = x[18 + j]
+    # Jacobian F = d x_pred / d x: identity plus blocks
+    for i in range(ns):
+        for j in range(ns):
+            F[i, j] = 0.0
+        F[i, i] = 1.0
+    for i in range(3):  # B = J^-1 A_M diag(f), G = J^-1 ([J w]x - [w]x J)
+        for j in range(nr):
+            B[i, j] = (Jinv[i, 0] * (A[1, j] * f[j]) + Jinv[i, 1] * (A[2, j] * f[j])
+                       + Jinv[i, 2] * (A[3, j] * f[j]))
+    hjw = ((0.0, -jw[2], jw[1]), (jw[2], 0.0, -jw[0]), (-jw[1], jw[0], 0.0))
+    hw = ((0.0, -w2, w1), (w2, 0.0, -w0), (-w1, w0, 0.0))
+    for k in range(3):
+        for j in range(3):
+            Mr[k, j] = hjw[k][j] - (hw[k][0] * J[0, j] + hw[k][1] * J[1, j] + hw[k][2] * J[2, j])
+    for i in range(3):
+        for j in range(3):
+            G[i, j] = Jinv[i, 0] * Mr[0, j] + Jinv[i, 1] * Mr[1, j] + Jinv[i, 2] * Mr[2, j]
     for i in range(3):
         F[i, 3 + i] = dt
         F[i, 15 + i] = -(T / m) * 0.5 * dt * dt
         F[3 + i, 15 + i] = -(T / m) * dt
         for j in range(nr):
             dTj = A[0, j] * f[j]
-            F[i, 18 + j] = -b3[i] * dTj * (0.5 * dt * dt / m)
-            F[3 + i, 18 + j] = -b3[i] * dTj * (dt / m)
+            F[i, 18 + j] = -R[i, 2] * dTj * (0.5 * dt * dt / m)
+            F[3 + i, 18 + j] = -R[i, 2] * dTj * (dt / m)
             F[6 + i, 18 + j] = dt * B[i, j]
         for j in range(3):
             F[6 + i, 6 + j] += dt * G[i, j]
@@ -224,49 +253,125 @@ def step_inplace(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi):
         for ib in range(3):
             for k in range(3):
                 F[9 + 3 * jb + k, 9 + 3 * ib + k] = E[ib, jb]
-    Jr = _right_jacobian(phi)
-    dR = np.empty((9, 3))
-    for i in range(3):
-        dR[:, i] = _vec(_mm(Rn, hat(Jr[:, i].copy())))
-    F[9:18, 6:9] = _mm(dR, dt * np.eye(3) + 0.5 * dt * dt * G)
-    F[9:18, 18:] = _mm(dR, 0.5 * dt * dt * B)
-    Pp = _sandwich(F, P)
+    _right_jacobian_into(phi[0], phi[1], phi[2], Jr)
+    for i in range(3):  # dR[:, i] = vec(Rn [Jr[:, i]]x)
+        h = ((0.0, -Jr[2, i], Jr[1, i]), (Jr[2, i], 0.0, -Jr[0, i]), (-Jr[1, i], Jr[0, i], 0.0))
+        for cc in range(3):
+            for rr in range(3):
+                dR[3 * cc + rr, i] = Rn[rr, 0] * h[0][cc] + Rn[rr, 1] * h[1][cc] \
+                    + Rn[rr, 2] * h[2][cc]
+    for rr in range(9):
+        for j in range(3):
+            acc = 0.0
+            for k in range(3):
+                acc += dR[rr, k] * ((dt if k == j else 0.0) + 0.5 * dt * dt * G[k, j])
+            F[9 + rr, 6 + j] = acc
+        for j in range(nr):
+            acc = 0.0
+            for k in range(3):
+                acc += dR[rr, k] * (0.5 * dt * dt * B[k, j])
+            F[9 + rr, 18 + j] = acc
+    _sandwich_into(F, P, Pp, FP, cols, nnz)
     for i in range(ns):
         Pp[i, i] += qc[i] * dt
-    # ---- update (p, v, Omega, attitude rotation error)
-    y = np.empty(12)
-    y[0:3] = zp - xp[0:3]
-    y[3:6] = zv - xp[3:6]
-    y[6:9] = zw - xp[6:9]
-    y[9:12] = _log(_mm(np.ascontiguousarray(Rn.T), zR))
-    HR = np.zeros((3, 9))  # attitude rows of H (columns 9..17); rows 0..8 are [I 0]
+    # ---- update (p, v, Omega, attitude rotation error); H = [I_9 0; 0 HR 0]
+    for i in range(3):
+        y[i] = zp[i] - xp[i]
+        y[3 + i] = zv[i] - xp[3 + i]
+        y[6 + i] = zw[i] - xp[6 + i]
+    for i in range(3):  # Mr = Rn^T zR, y[9:12] = log(Mr)
+        for j in range(3):
+            Mr[i, j] = Rn[0, i] * zR[0, j] + Rn[1, i] * zR[1, j] + Rn[2, i] * zR[2, j]
+    s0 = 0.5 * (Mr[2, 1] - Mr[1, 2])
+    s1 = 0.5 * (Mr[0, 2] - Mr[2, 0])
+    s2 = 0.5 * (Mr[1, 0] - Mr[0, 1])
+    sn = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+    cs = 0.5 * (Mr[0, 0] + Mr[1, 1] + Mr[2, 2] - 1.0)
+    scale = 1.0 if sn < 1e-12 else math.atan2(sn, cs) / sn
+    y[9], y[10], y[11] = s0 * scale, s1 * scale, s2 * scale
+    for k in range(3):
+        for i in range(9):
+            HR[k, i] = 0.0
     for (k, ia, ib) in ((0, 2, 1), (1, 0, 2), (2, 1, 0)):
         for i in range(3):
             HR[k, 3 * ia + i] -= 0.5 * zR[i, ib]
             HR[k, 3 * ib + i] += 0.5 * zR[i, ia]
-    HP = np.empty((12, ns))  # H P
-    HP[0:9] = Pp[0:9]
-    HP[9:12] = _mm(HR, Pp[9:18])
-    S = np.empty((12, 12))  # H P H^T + R
-    S[:, 0:9] = HP[:, 0:9]
-    S[:, 9:12] = _mm_bt(HP[:, 9:18], HR)
-    for i in range(12):
-        S[i, i] += r[i]
-    K = _gain(S, HP)
-    xn = xp + matvec(K, y)
-    # Joseph form (I - K H) P (I - K H)^T + K R K^T, associated as A - (A H^T - K R) K^T
-    # with A = (I - K H) P = P - K (H P)
-    A = Pp - _mm(K, HP)
-    AHt = np.empty((ns, 12))
-    AHt[:, 0:9] = A[:, 0:9]
-    AHt[:, 9:12] = _mm_bt(A[:, 9:18], HR)
-    Pn = A - _mm(AHt - K * r.reshape(1, 12), np.ascontiguousarray(K.T))
-    Pn = 0.5 * (Pn + Pn.T)
-    xn[9:18] = _vec(_project_so3(_unvec(xn, 9)))
+    _update(Pp, HP, HR, S, L, KT, AHt, Am, r)
+    # state: xn = xp + K y, then project R, clamp eta
+    for i in range(ns):
+        acc = 0.0
+        for c in range(12):
+            acc += KT[c, i] * y[c]
+        x[i] = xp[i] + acc
+    for j in range(3):
+        for i in range(3):
+            C[i, j] = x[9 + 3 * j + i]
+    _project_so3_into(C, Mr)
+    for j in range(3):
+        for i in range(3):
+            x[9 + 3 * j + i] = C[i, j]
     for j in range(nr):
-        xn[18 + j] = min(max(xn[18 + j], lo), hi)
-    x[:] = xn
-    P[:, :] = Pn
+        x[18 + j] = min(max(x[18 + j], lo), hi)
+    _joseph(P, Am, AHt, KT, FP)
+
+
+@njit(cache=True, fastmath=True)
+def _joseph(P, Am, AHt, KT, Pn):
+    """Joseph-form covariance ``P = sym(A - (A H^T - K R) K^T)``, ``A = (I - K H) P``
+    (``Pn`` is scratch; rows of ``K^T`` streamed)."""
+    ns = P.shape[0]
+    for i in range(ns):
+        for k in range(ns):
+            Pn[i, k] = Am[i, k]
+        for c in range(12):
+            a = AHt[i, c]
+            for k in range(ns):
+                Pn[i, k] -= a * KT[c, k]
+    for i in range(ns):
+        for k in range(i, ns):
+            P[i, k] = 0.5 * (Pn[i, k] + Pn[k, i])
+            P[k, i] = P[i, k]
+
+
+@njit(cache=True, fastmath=True)
+def _update(Pp, HP, HR, S, L, KT, AHt, Am, r):
+    """Gain and the Joseph terms of the update with ``H = [I_9 0; 0 HR 0]``: fills ``KT``,
+    ``Am = Pp - K H Pp`` and ``AHt = Am H^T - K diag(r)``."""
+    ns = Pp.shape[0]
+    for i in range(9):  # H P
+        for k in range(ns):
+            HP[i, k] = Pp[i, k]
+    for i in range(3):
+        for k in range(ns):
+            acc = 0.0
+            for j in range(9):
+                acc += HR[i, j] * Pp[9 + j, k]
+            HP[9 + i, k] = acc
+    for i in range(12):  # S = H P H^T + diag(r)
+        for k in range(9):
+            S[i, k] = HP[i, k]
+        for k in range(3):
+            acc = 0.0
+            for j in range(9):
+                acc += HP[i, 9 + j] * HR[k, j]
+            S[i, 9 + k] = acc
+        S[i, i] += r[i]
+    _gain_into(S, HP, L, KT)
+    for i in range(ns):  # A = P - K (H P), rows of HP streamed (contiguous inner loop)
+        for k in range(ns):
+            Am[i, k] = Pp[i, k]
+        for c in range(12):
+            kic = KT[c, i]
+            for k in range(ns):
+                Am[i, k] -= kic * HP[c, k]
+    for i in range(ns):  # A H^T - K R
+        for k in range(9):
+            AHt[i, k] = Am[i, k] - KT[k, i] * r[k]
+        for k in range(3):
+            acc = 0.0
+            for j in range(9):
+                acc += Am[i, 9 + j] * HR[k, j]
+            AHt[i, 9 + k] = acc - KT[9 + k, i] * r[9 + k]
 
 
 @njit(cache=True)
@@ -299,6 +404,7 @@ def freeze_eta(x, P, eta_keep, P_keep, qc, dt):
 def run_series(t, p, v, R, w, f, eta0, x, P0, A, m, g, J, Jinv, qc, r, lo, hi):
     """Filter a whole recording; returns ``(eta, sd, ok, x, P, last_good_row)``."""
     n, nr = t.shape[0], f.shape[1]
+    ws = workspace(x.shape[0])
     eta = np.empty((n, nr))
     sd = np.full((n, nr), np.nan)
     ok = np.zeros(n, dtype=np.bool_)
@@ -318,7 +424,9 @@ def run_series(t, p, v, R, w, f, eta0, x, P0, A, m, g, J, Jinv, qc, r, lo, hi):
             x[0:3] = p[k]
             x[3:6] = v[k]
             x[6:9] = w[k]
-            x[9:18] = _vec(R[k])
+            for jj in range(3):
+                for ii in range(3):
+                    x[9 + 3 * jj + ii] = R[k, ii, jj]
             x[18:] = eta0
         else:
             dt = t[k] - t[last]
@@ -329,8 +437,8 @@ def run_series(t, p, v, R, w, f, eta0, x, P0, A, m, g, J, Jinv, qc, r, lo, hi):
             if idle:
                 eta_keep = x[18:].copy()
                 P_keep = P[18:, 18:].copy()
-            step_inplace(x, P, f[last], dt, p[k], v[k], w[k], R[k].copy(),
-                         A, m, g, J, Jinv, qc, r, lo, hi)
+            step_ws(x, P, f[last], dt, p[k], v[k], w[k], R[k], A, m, g, J, Jinv, qc, r, lo, hi,
+                    ws)
             if idle:
                 freeze_eta(x, P, eta_keep, P_keep, qc, dt)
         last = k
