@@ -231,34 +231,51 @@ def param_error(true, found, veh):
 
 
 def run_one(job):
-    seed, i, rate, duration = job
+    seed, i, rate, duration, store, reuse = job
     c = draw_case(seed, i)
     veh = c["veh"]
     t0 = time.perf_counter()
-    effects, achieved = [], []
-    if c["names"]:
-        unit = [make_effect(n, 1.0, veh, c["params"][n]) for n in c["names"]]
-        pilot = fly(veh, c["traj"], unit, c["noise"], c["thrust_noise"], rate, 5.0, c["sim_seed"])
-        s0 = snr(pilot, unit, veh)
-        for n, s, k in zip(c["names"], s0, c["target"]):
-            ratio = k / max(s, 1e-6)
-            delta = ratio ** 0.5 if n == "ground_effect" else ratio  # signal ~ r^2 there
-            effects.append(make_effect(n, delta, veh, c["params"][n]))
-    rec = fly(veh, c["traj"], effects, c["noise"], c["thrust_noise"], rate, duration, c["sim_seed"])
-    if effects:
-        achieved = snr(rec, effects, veh)
-    if c["commands"] == "u":
-        k = 1e-5 * veh.mass
-        u = np.sqrt(np.maximum(rec.thrust_cmd, 0.0) / k)
-        rec = dataclasses.replace(rec, commands_u=u, thrust_curve=(0.0, 0.0, k), thrust_cmd=k * u * u)
-    t_sim = time.perf_counter() - t0
-    with tempfile.TemporaryDirectory() as tmp:
-        path = os.path.join(tmp, "flight.csv")
-        write_recording(rec.without_truth(), path, frame=c["frame"])
-        blind = read_recording(path)
-    t1 = time.perf_counter()
+    effects, achieved, deltas = [], [], []
+    stem = None if store is None else os.path.join(store, f"case_{seed}_{i:04d}")
+    if reuse:  # the same blinded file, simulated by an earlier run with --store
+        with open(stem + ".truth.json") as fh:
+            saved = json.load(fh)
+        deltas, achieved, t_sim = saved["deltas"], saved["snr"], saved["t_sim"]
+        effects = [make_effect(n, d, veh, c["params"][n]) for n, d in zip(c["names"], deltas)]
+        blind = read_recording(stem + ".csv")
+    else:
+        if c["names"]:
+            unit = [make_effect(n, 1.0, veh, c["params"][n]) for n in c["names"]]
+            pilot = fly(veh, c["traj"], unit, c["noise"], c["thrust_noise"], rate, 5.0,
+                        c["sim_seed"])
+            s0 = snr(pilot, unit, veh)
+            for n, s, k in zip(c["names"], s0, c["target"]):
+                ratio = k / max(s, 1e-6)
+                delta = ratio ** 0.5 if n == "ground_effect" else ratio  # signal ~ r^2 there
+                deltas.append(float(delta))
+                effects.append(make_effect(n, delta, veh, c["params"][n]))
+        rec = fly(veh, c["traj"], effects, c["noise"], c["thrust_noise"], rate, duration,
+                  c["sim_seed"])
+        if effects:
+            achieved = snr(rec, effects, veh)
+        if c["commands"] == "u":
+            k = 1e-5 * veh.mass
+            u = np.sqrt(np.maximum(rec.thrust_cmd, 0.0) / k)
+            rec = dataclasses.replace(rec, commands_u=u, thrust_curve=(0.0, 0.0, k),
+                                      thrust_cmd=k * u * u)
+        t_sim = time.perf_counter() - t0
+        with tempfile.TemporaryDirectory() as tmp:
+            path = os.path.join(tmp if stem is None else store, "flight.csv" if stem is None
+                                else os.path.basename(stem) + ".csv")
+            write_recording(rec.without_truth(), path, frame=c["frame"], force=True)
+            blind = read_recording(path)
+        if stem is not None:
+            with open(stem + ".truth.json", "w") as fh:
+                json.dump({"names": c["names"], "deltas": deltas, "snr": achieved,
+                           "t_sim": t_sim}, fh)
+    t1, c1 = time.perf_counter(), time.process_time()
     res = Diagnosis().fit(blind)
-    t_diag = time.perf_counter() - t1
+    t_diag, cpu_diag = time.perf_counter() - t1, time.process_time() - c1
     found = res.effect_names
     errs = {}
     for e in effects:
@@ -268,7 +285,7 @@ def run_one(job):
     return dict(i=i, truth=c["names"], found=found, snr=achieved, target=c["target"],
                 mass=veh.mass, frame=c["frame"], commands=c["commands"],
                 improvement=res.model_improvement, param_errors=errs,
-                t_diag=t_diag, t_sim=t_sim, samples=len(blind),
+                t_diag=t_diag, cpu_diag=cpu_diag, t_sim=t_sim, samples=len(blind),
                 params={f.name: f.params for f in res.effects},
                 truth_params=[e.describe() for e in effects])
 
@@ -304,6 +321,8 @@ def summarise(rows, rate, duration) -> dict:
         "held_out_improvement_median": float(np.median(imp)) if imp else None,
         "held_out_improvement_ge_50pct": float(np.mean(np.array(imp) >= 0.5)) if imp else None,
         "seconds_per_recording_median": float(np.median(tdiag)),
+        "cpu_seconds_per_recording_median": float(np.median([r.get("cpu_diag", np.nan)
+                                                             for r in rows])),
         "seconds_per_60s_at_1kHz_extrapolated_median": float(np.median(per60k)),
         "snr_achieved_median": float(np.median([s for r in rows for s in r["snr"]])) if with_eff else None,
         "confusion": {f"{a} -> {b}": v for (a, b), v in sorted(conf.items())},
@@ -327,6 +346,7 @@ def print_summary(s, rows):
     for key in ("top_effect_correct", "top_effect_exact_name", "all_effects_correct",
                 "false_alarm_rate", "median_param_error", "held_out_improvement_median",
                 "held_out_improvement_ge_50pct", "seconds_per_recording_median",
+                "cpu_seconds_per_recording_median",
                 "seconds_per_60s_at_1kHz_extrapolated_median", "snr_achieved_median"):
         v = s[key]
         print(f"{key:<46} {'n/a' if v is None else f'{v:.3f}'}")
@@ -360,6 +380,14 @@ def main(argv=None):
     ap.add_argument("--rate", type=float, default=250.0, help="physics and recording rate [Hz]")
     ap.add_argument("--duration", type=float, default=15.0, help="flight duration [s]")
     ap.add_argument("--out", default=None, help="write rows and summary to this JSON file")
+    ap.add_argument("--only", default=None, metavar="NAME,...",
+                    help="development: keep only cases concealing one of these effects "
+                         "('none' = effect-free); the draws of the others are skipped")
+    ap.add_argument("--store", default=None, metavar="DIR",
+                    help="keep the blinded recordings (and their concealed truth) in DIR")
+    ap.add_argument("--reuse", action="store_true",
+                    help="diagnose the recordings an earlier run kept in --store DIR instead "
+                         "of simulating them again (same seed, n, rate, duration)")
     ap.add_argument("--timing", action="store_true",
                     help="only time one diagnosis of a 60 s log at 1 kHz (drag + motor lag)")
     args = ap.parse_args(argv)
@@ -369,7 +397,18 @@ def main(argv=None):
     if args.n < 1 or args.workers < 1 or args.rate <= 0 or args.duration <= 5:
         print("blinded_study: --n, --workers >= 1, --rate > 0, --duration > 5 s", file=sys.stderr)
         return 2
-    jobs = [(args.seed, i, args.rate, args.duration) for i in range(args.n)]
+    keep = range(args.n)
+    if args.only:
+        only = {x.strip() for x in args.only.split(",") if x.strip()}
+        keep = [i for i in keep if (lambda names: ("none" in only and not names)
+                                    or bool(only & set(names)))(draw_case(args.seed, i)["names"])]
+    if args.reuse and not args.store:
+        print("blinded_study: --reuse needs --store DIR", file=sys.stderr)
+        return 2
+    if args.store:
+        os.makedirs(args.store, exist_ok=True)
+    jobs = [(args.seed, i, args.rate, args.duration, args.store, args.reuse) for i in keep]
+    args.n = len(jobs)
     rows = []
     t0 = time.perf_counter()
     with Pool(args.workers) as pool:
