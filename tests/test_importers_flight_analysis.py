@@ -126,3 +126,33 @@ def test_crazypad_cut_m3_is_weaker_than_nominal_by_more_than_twice_the_spread():
     nominal, cut = eta3("normal_flight"), eta3("cut_propeller_M3_3mm")
     assert len(nominal) == 12 and len(cut) == 6
     assert cut.mean() < nominal.mean() - 2 * nominal.std(ddof=1)
+
+
+# ---------------------------------------------------------------- benchmark scripts skip cleanly
+def _script(name, *args, tmp_path):
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    return subprocess.run([sys.executable, str(root / "benchmarks" / name), *args],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=120)
+
+
+def test_real_flights_script_skips_without_data(tmp_path):
+    out = _script("real_flights.py", "--data", str(tmp_path / "absent"), "--quiet",
+                  tmp_path=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines() == [
+        f"skipped: real data not available ({tmp_path / 'absent'} is absent)"]
+
+
+def test_independent_sim_script_skips_without_rotorpy(tmp_path):
+    import importlib.util
+
+    if importlib.util.find_spec("rotorpy") is not None:
+        pytest.skip("RotorPy is importable here; the skip path is not exercised")
+    out = _script("independent_sim.py", "--out", str(tmp_path / "o"), tmp_path=tmp_path)
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("skipped: RotorPy is not importable")
+    assert not (tmp_path / "o").exists()
