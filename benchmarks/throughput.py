@@ -60,19 +60,28 @@ RATE = 1000.0  # physics rate of every measurement [Hz]
 MIN_TIME = 0.3  # each timing repeats its call for at least this long [s]
 
 
-def _rate(fn, work: int, repeats: int = 3) -> float:
-    """Best of ``repeats`` of: units of ``work`` per second of ``fn()`` called for MIN_TIME."""
-    best = 0.0
+def _rates(fn, work: int, repeats: int = 3) -> tuple[float, float]:
+    """Best of ``repeats`` of: units of ``work`` per second of ``fn()`` called for MIN_TIME,
+    per wall-clock second and per CPU second of this process (all its threads: the rate one
+    core gives, which a shared machine's load does not change much)."""
+    best, best_cpu = 0.0, 0.0
     for _ in range(repeats):
-        calls, t0 = 0, time.perf_counter()
+        calls, t0, c0 = 0, time.perf_counter(), time.process_time()
         while True:
             fn()
             calls += 1
             elapsed = time.perf_counter() - t0
             if elapsed >= MIN_TIME:
                 break
+        cpu = time.process_time() - c0
         best = max(best, work * calls / elapsed)
-    return best
+        best_cpu = max(best_cpu, work * calls / max(cpu, 1e-9))
+    return best, best_cpu
+
+
+def _rate(fn, work: int, repeats: int = 3) -> float:
+    """Wall-clock rate of :func:`_rates`."""
+    return _rates(fn, work, repeats)[0]
 
 
 def compiled_batch(N: int, horizon: int, rng, control_every: int = 0, thrust_noise=0.07):
@@ -104,9 +113,11 @@ def compiled_batch(N: int, horizon: int, rng, control_every: int = 0, thrust_noi
     return fn
 
 
-def core_compiled(N: int, horizon: int, rng, control_every: int = 0) -> float:
-    """Vehicle-steps/s of the compiled batched kernel (see :func:`compiled_batch`)."""
-    return _rate(compiled_batch(N, horizon, rng, control_every), N * horizon)
+def core_compiled(N: int, horizon: int, rng, control_every: int = 0, cpu: bool = False):
+    """Vehicle-steps/s of the compiled batched kernel (see :func:`compiled_batch`); with
+    ``cpu`` the pair (per wall second, per CPU second)."""
+    rates = _rates(compiled_batch(N, horizon, rng, control_every), N * horizon)
+    return rates if cpu else rates[0]
 
 
 def core_physics(N: int, horizon: int, rng) -> float:
@@ -137,8 +148,10 @@ def make_env(N: int, estimator: str = "none", **kw):
     return env, time.perf_counter() - t0
 
 
-def env_rate(N: int, control_steps: int, estimator: str = "none", env=None, **kw) -> float:
-    """Physics vehicle-steps/s of QuadFaultVectorEnv (after one warm-up step)."""
+def env_rate(N: int, control_steps: int, estimator: str = "none", env=None, cpu: bool = False,
+             **kw):
+    """Physics vehicle-steps/s of QuadFaultVectorEnv (after one warm-up step); with ``cpu``
+    the pair (per wall second, per CPU second)."""
     env = env if env is not None else make_env(N, estimator, **kw)[0]
     a = np.zeros((N, 4), dtype=np.float32)
     env.step(a)
@@ -147,7 +160,8 @@ def env_rate(N: int, control_steps: int, estimator: str = "none", env=None, **kw
         for _ in range(control_steps):
             env.step(a)
 
-    return _rate(fn, N * control_steps * env.substeps, repeats=2)
+    rates = _rates(fn, N * control_steps * env.substeps, repeats=2)
+    return rates if cpu else rates[0]
 
 
 def env_memory_per_vehicle(N: int) -> float:
@@ -210,12 +224,13 @@ PEERS = {
                                 integrator="rk4")
         ctrl = {"cmd_motor_speeds": torch.full((N, 4), hover, dtype=torch.double)}
         state = sim.step(copy.deepcopy(init), ctrl, 1.0 / rate)
-        calls, t0 = 0, time.perf_counter()
+        calls, t0, c0 = 0, time.perf_counter(), time.process_time()
         while time.perf_counter() - t0 < 0.3:
             for _ in range(H):
                 state = sim.step(state, ctrl, 1.0 / rate)
             calls += 1
-        print(json.dumps({"rate": N * H * calls / (time.perf_counter() - t0)}))
+        print(json.dumps({"rate": N * H * calls / (time.perf_counter() - t0),
+                          "cpu_rate": N * H * calls / (time.process_time() - c0)}))
     """),
     "crazyflow": textwrap.dedent("""
         import json, sys, time
@@ -227,21 +242,23 @@ PEERS = {
         sim.reset()
         sim.step(H)  # compile
         jax.block_until_ready(sim.data.states.pos)
-        best = 0.0
+        best, best_cpu = 0.0, 0.0
         for _ in range(3):  # best of 3 timings of >= 0.3 s, as the quadfault rates
-            calls, t0 = 0, time.perf_counter()
+            calls, t0, c0 = 0, time.perf_counter(), time.process_time()
             while time.perf_counter() - t0 < 0.3:
                 sim.step(H)
                 jax.block_until_ready(sim.data.states.pos)
                 calls += 1
             best = max(best, N * H * calls / (time.perf_counter() - t0))
-        print(json.dumps({"rate": best}))
+            best_cpu = max(best_cpu, N * H * calls / (time.process_time() - c0))
+        print(json.dumps({"rate": best, "cpu_rate": best_cpu}))
     """),
 }
 
 
 def peer_rate(python: str, name: str, N: int, horizon: int, timeout: float):
-    """(vehicle-steps/s, None) of a peer, or (None, why it could not run)."""
+    """((vehicle-steps per wall s, per CPU s), None) of a peer, or (None, why it could not
+    run)."""
     try:
         out = subprocess.run([python, "-c", PEERS[name], str(N), str(horizon), str(RATE)],
                              capture_output=True, text=True, timeout=timeout)
@@ -253,7 +270,8 @@ def peer_rate(python: str, name: str, N: int, horizon: int, timeout: float):
         lines = [ln for ln in out.stderr.strip().splitlines() if ln.strip()]
         return None, lines[-1] if lines else f"exit {out.returncode}"
     try:
-        return json.loads(out.stdout.strip().splitlines()[-1])["rate"], None
+        got = json.loads(out.stdout.strip().splitlines()[-1])
+        return (got["rate"], got["cpu_rate"]), None
     except (ValueError, IndexError, KeyError):
         return None, f"unreadable output {out.stdout[-200:]!r}"
 
@@ -344,6 +362,8 @@ def main(argv=None) -> int:
     ap.add_argument("--skip-peers", action="store_true")
     ap.add_argument("--skip-ppo", action="store_true")
     ap.add_argument("--skip-profile", action="store_true")
+    ap.add_argument("--skip-table", action="store_true",
+                    help="skip the N table and the batched IRLS (peers / profile / PPO only)")
     ap.add_argument("--omp-spin", action="store_true",
                     help="keep OpenMP's default spin-waiting (default here: OMP_WAIT_POLICY="
                          "passive, better on a shared machine)")
@@ -376,7 +396,7 @@ def main(argv=None) -> int:
           "IRLS) | build + reset [s] |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     results = {}
-    for N in Ns:
+    for N in ([] if args.skip_table else Ns):
         core = core_physics(N, args.horizon, rng) if N <= 4096 else None
         comp = core_compiled(N, args.horizon, rng)
         closed = core_compiled(N, args.horizon, rng, control_every=1)
@@ -391,18 +411,20 @@ def main(argv=None) -> int:
         print(f"| {N} | {_fmt(core)} | {_fmt(comp)} | {_fmt(closed)} | {_fmt(env_np)} | "
               f"{_fmt(nb)} | {_fmt(shared)} | {_fmt(irls)} | "
               f"{'n/a' if mem is None else f'{mem / 1024:.1f} KiB'} | {setup:.1f} |", flush=True)
-    n_ref = 4096 if 4096 in results else max(Ns)
-    r = results[n_ref]
-    print(f"\nat N = {n_ref}: compiled core {r[1] / 1e6:.2f}, compiled closed loop "
-          f"{r[2] / 1e6:.2f}, env (numba physics) {r[4] / 1e6:.2f} of the 1,000,000 "
-          f"vehicle-steps/s target")
-    if r[0]:
-        print(f"compiled / numpy core physics at N = {n_ref}: {r[1] / r[0]:.1f}x; env numba / "
-              f"env numpy: {r[4] / r[3]:.1f}x")
-    n_irls = min(4096, max_n)
-    rate, note = irls_window_rate(n_irls, 20)
-    print(f"\nbatched IRLS at N = {n_irls}: {rate:,.0f} window updates/s ({note}; target 100,000: "
-          f"ratio {rate / 1e5:.2f})")
+    n_ref = 4096 if 4096 in results else max(results, default=0)
+    r = results.get(n_ref)
+    if r is not None:
+        print(f"\nat N = {n_ref}: compiled core {r[1] / 1e6:.2f}, compiled closed loop "
+              f"{r[2] / 1e6:.2f}, env (numba physics) {r[4] / 1e6:.2f} of the 1,000,000 "
+              f"vehicle-steps/s target")
+        if r[0]:
+            print(f"compiled / numpy core physics at N = {n_ref}: {r[1] / r[0]:.1f}x; env numba "
+                  f"/ env numpy: {r[4] / r[3]:.1f}x")
+    if not args.skip_table:
+        n_irls = min(4096, max_n)
+        rate, note = irls_window_rate(n_irls, 20)
+        print(f"\nbatched IRLS at N = {n_irls}: {rate:,.0f} window updates/s ({note}; target "
+              f"100,000: ratio {rate / 1e5:.2f})")
     if not args.skip_profile:
         n_prof = min(4096, max_n)
         print(f"\n# where the time goes at N = {n_prof}")
@@ -413,15 +435,19 @@ def main(argv=None) -> int:
         for label, share in profile_env(n_prof, steps):
             print(f"  {label:<56} {share:6.1%}")
     if not args.skip_peers:
-        print(f"\n# peers at {RATE:.0f} Hz, horizon {args.horizon} (python {args.peer_python})")
+        print(f"\n# peers at {RATE:.0f} Hz, horizon {args.horizon} (python {args.peer_python}); "
+              f"vehicle-steps per wall second / per CPU second of each process")
         print("| N | quadfault compiled + controller | quadfault env (numba, shared noise) | "
               "rotorpy | crazyflow | compiled/rotorpy | env/rotorpy | compiled/crazyflow | "
               "env/crazyflow |")
         print("|---|---|---|---|---|---|---|---|---|")
+        pair = lambda r: "n/a" if r is None else f"{r[0]:,.0f} / {r[1]:,.0f}"  # noqa: E731
+        ratio = lambda a, b: ("n/a" if b is None  # noqa: E731
+                              else f"{a[0] / b[0]:.2f}x / {a[1] / b[1]:.2f}x")
         for N in [n for n in Ns if n in (1, 256, 4096, 16384)]:
             # measured again right next to the peers (the machine's load drifts)
-            closed = core_compiled(N, args.horizon, rng, control_every=1)
-            env = env_rate(N, steps, physics="numba", noise_streams="shared")
+            closed = core_compiled(N, args.horizon, rng, control_every=1, cpu=True)
+            env = env_rate(N, steps, physics="numba", noise_streams="shared", cpu=True)
             peers, why = {}, {}
             for name in PEERS:
                 if name == "rotorpy" and N > 4096:  # ~1,700 steps/s: minutes per timing
@@ -429,9 +455,8 @@ def main(argv=None) -> int:
                     continue
                 peers[name], why[name] = peer_rate(args.peer_python, name, N, args.horizon,
                                                    args.peer_timeout)
-            ratio = lambda a, b: "n/a" if b is None else f"{a / b:.2f}x"  # noqa: E731
-            print(f"| {N} | {_fmt(closed)} | {_fmt(env)} | {_fmt(peers['rotorpy'])} | "
-                  f"{_fmt(peers['crazyflow'])} | {ratio(closed, peers['rotorpy'])} | "
+            print(f"| {N} | {pair(closed)} | {pair(env)} | {pair(peers['rotorpy'])} | "
+                  f"{pair(peers['crazyflow'])} | {ratio(closed, peers['rotorpy'])} | "
                   f"{ratio(env, peers['rotorpy'])} | {ratio(closed, peers['crazyflow'])} | "
                   f"{ratio(env, peers['crazyflow'])} |", flush=True)
             for name, reason in why.items():
