@@ -15,8 +15,15 @@ import numpy as np  # noqa: E402
 
 from quadfault.fileio import atomic_savefig  # noqa: E402
 
-COLORS = {"irls": "tab:blue", "ekf": "tab:orange", "truth": "tab:red"}
-LABELS = {"irls": "IRLS (proposed)", "ekf": "EKF (calibrated)"}
+COLORS = {"irls": "tab:blue", "ekf": "tab:orange", "truth": "tab:red",
+          "irls_improved": "tab:green", "ekf_improved": "tab:brown"}
+LABELS = {"irls": "IRLS (proposed)", "ekf": "EKF (calibrated)",
+          "irls_improved": "IRLS improved (ours)", "ekf_improved": "EKF (calibrated to it)"}
+ORDER = ("irls", "ekf", "irls_improved", "ekf_improved")
+
+
+def _present(d: dict) -> list[str]:
+    return [k for k in ORDER if k in d]
 DPI = 120
 
 
@@ -59,7 +66,7 @@ def plot_errors(path, series: dict, windows, title: str, force: bool = False):
     for m in range(4):
         ax = axes[m]
         _shade(ax, windows)
-        for est in ("ekf", "irls"):
+        for est in [k for k in ("ekf", "irls", "irls_improved") if k in series]:
             ax.plot(t, series["truth"][:, m] - series[est][:, m], color=COLORS[est], lw=0.7,
                     label=LABELS[est], alpha=0.85)
         ax.set_ylabel(f"$e_{m + 1}$")
@@ -74,11 +81,14 @@ def plot_rmse_std(path, scenarios: dict, force: bool = False):
     """Motor-averaged RMSE and std per scenario (the paper's Fig. 6)."""
     names = list(scenarios)
     x = np.arange(len(names))
+    ests = _present(scenarios[names[0]]) if names else []
+    width = 0.76 / max(len(ests), 1)
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
     for ax, key, label in ((axes[0], "rmse", "RMSE"), (axes[1], "std", "std. dev.")):
-        for i, est in enumerate(("irls", "ekf")):
+        for i, est in enumerate(ests):
             vals = [np.mean(scenarios[n][est][key]) for n in names]
-            ax.bar(x + (i - 0.5) * 0.38, vals, 0.38, color=COLORS[est], label=LABELS[est])
+            ax.bar(x + (i - (len(ests) - 1) / 2) * width, vals, width, color=COLORS[est],
+                   label=LABELS[est])
         ax.set_xticks(x, names)
         ax.set_ylabel(label)
         ax.grid(axis="y", alpha=0.3)
@@ -93,9 +103,12 @@ def plot_spikes(path, scenarios: dict, force: bool = False):
                              squeeze=False)
     x = np.arange(4)
     for ax, name in zip(axes[0], names):
-        for i, est in enumerate(("irls", "ekf")):
+        ests = _present(scenarios[name])
+        width = 0.76 / len(ests)
+        for i, est in enumerate(ests):
             vals = [np.nan if v is None else v for v in scenarios[name][est]["spike"]]
-            ax.bar(x + (i - 0.5) * 0.38, vals, 0.38, color=COLORS[est], label=LABELS[est])
+            ax.bar(x + (i - (len(ests) - 1) / 2) * width, vals, width, color=COLORS[est],
+                   label=LABELS[est])
         ax.set_xticks(x, [f"M{m + 1}" for m in x])
         ax.set_title(name)
         ax.set_ylabel("max |error| in others' windows")

@@ -31,6 +31,9 @@ from quadfault.errors import ConfigError
 SCENARIOS = ("degradation", "abrupt", "combined", "clipping")
 REFERENCE_SCENARIOS = ("degradation", "abrupt", "combined")
 MODES = ("rk4", "reference")
+#: Estimator keys of a scenario block: the paper pair (the contract's ``irls``/``ekf``) and the
+#: beyond-the-paper IRLS (``IRLSConfig.improved()``) with an EKF calibrated to *its* RMSE.
+ESTIMATOR_KEYS = ("irls", "ekf", "irls_improved", "ekf_improved")
 FIGURES = ("estimates_{s}.png", "errors_{s}.png")
 STATIC_FIGURES = ("rmse_std_bars.png", "spikes_per_motor.png", "calibration_curve.png",
                   "irls_convergence.png", "kkt_convergence.png")
@@ -63,6 +66,8 @@ class ReproduceConfig:
         workers: parallel processes (1 = in this process).
         history_offset: the convergence figure's window ends this long after motor 1's fault
             onset [s].
+        improved: also run ``IRLSConfig.improved()`` (change completion and output median,
+            docs/irls.md) on the RK4 flights, with an EKF calibrated to its RMSE.
     """
 
     duration: float = 80.0
@@ -76,6 +81,7 @@ class ReproduceConfig:
     reference_mode: bool = True
     workers: int = 2
     history_offset: float = 0.02
+    improved: bool = True
 
     @classmethod
     def quick(cls, **changes) -> "ReproduceConfig":
@@ -122,39 +128,48 @@ def flight_check(rec) -> dict:
             "diverged": bool(wild > 0.01 or drift > 10.0)}
 
 
-def _calibration_job(mode: str, cfg: ReproduceConfig) -> dict:
-    """IRLS RMSE on the calibration flight, then the EKF's Q_eta matching it."""
+def _calibration_job(mode: str, cfg: ReproduceConfig, variant: str = "paper") -> dict:
+    """IRLS RMSE on the calibration flight, then the EKF's Q_eta matching it (``variant``
+    "paper": the reference IRLS; "improved": ``IRLSConfig.improved()``)."""
     from estimators.calibration import calibrate_q_eta
-    from estimators.irls import SlidingWindowIRLS
+    from estimators.irls import IRLSConfig, SlidingWindowIRLS
     from estimators.metrics import score
 
     rec = _fly(cfg.calibration_scenario, cfg.calibration_duration, cfg.calibration_seed, mode,
                cfg.thrust_noise)
-    irls = SlidingWindowIRLS(rec.vehicle).run(rec.without_truth())
+    icfg = IRLSConfig.improved() if variant == "improved" else IRLSConfig()
+    irls = SlidingWindowIRLS(rec.vehicle, icfg).run(rec.without_truth())
     target = float(np.mean(score(rec, irls).rmse))
     cal = calibrate_q_eta(rec, target, q_range=cfg.q_range,
                           points_per_decade=cfg.points_per_decade,
                           bisection_steps=cfg.bisection_steps)
-    return {"mode": mode, "calibration": cal}
+    return {"mode": mode if variant == "paper" else f"{mode}_improved", "calibration": cal}
 
 
 def _scenario_job(mode: str, name: str, cfg: ReproduceConfig, q_eta: float,
-                  keep_series: bool) -> dict:
+                  keep_series: bool, q_eta_improved: float | None = None) -> dict:
+    """Fly one scenario; score IRLS and the EKF (and, with ``q_eta_improved``, the improved
+    IRLS and the EKF calibrated to it)."""
     from estimators.ekf import EKFConfig, MotorEfficiencyEKF
     from estimators.fdi import detect, evaluate
-    from estimators.irls import SlidingWindowIRLS
+    from estimators.irls import IRLSConfig, SlidingWindowIRLS
     from estimators.metrics import fault_windows, score
 
     rec = _fly(name, cfg.duration, cfg.seed, mode, cfg.thrust_noise)
     blind = rec.without_truth()
     out = {"mode": mode, "name": name, "scores": {}, "fdi": {}, "flight": flight_check(rec)}
     series = {}
-    for est in (SlidingWindowIRLS(rec.vehicle),
-                MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_eta))):
+    runs = [("irls", SlidingWindowIRLS(rec.vehicle)),
+            ("ekf", MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_eta)))]
+    if q_eta_improved is not None:
+        runs += [("irls_improved", SlidingWindowIRLS(rec.vehicle, IRLSConfig.improved())),
+                 ("ekf_improved", MotorEfficiencyEKF(rec.vehicle,
+                                                     EKFConfig(q_eta=q_eta_improved)))]
+    for key, est in runs:
         s = est.run(blind)
-        out["scores"][est.name] = score(rec, s)
-        out["fdi"][est.name] = evaluate(detect(s), fault_windows(rec)).to_dict()
-        series[est.name] = s.eta
+        out["scores"][key] = score(rec, s)
+        out["fdi"][key] = evaluate(detect(s), fault_windows(rec)).to_dict()
+        series[key] = s.eta
     if keep_series:
         out["series"] = {"t": rec.t, "truth": rec.eta_true, **series}
         out["windows"] = fault_windows(rec)
@@ -201,14 +216,16 @@ def reproduce(cfg: ReproduceConfig, progress: bool = False) -> dict:
     modes = MODES if cfg.reference_mode else ("rk4",)
     start = time.perf_counter()
     _warm_up()
-    n_jobs = len(modes) + len(SCENARIOS) + (len(REFERENCE_SCENARIOS) if cfg.reference_mode
-                                            else 0)
+    cal_jobs = [(m, cfg) for m in modes] + ([("rk4", cfg, "improved")] if cfg.improved
+                                              else [])
+    n_jobs = len(cal_jobs) + len(SCENARIOS) + (len(REFERENCE_SCENARIOS) if cfg.reference_mode
+                                               else 0)
     bar = progress_bar(total=n_jobs + 1, desc="reproduce", unit="job",
                        disable=None if progress else True)
     try:
-        cals = _map(_calibration_job, [(m, cfg) for m in modes], cfg.workers, bar)
+        cals = _map(_calibration_job, cal_jobs, cfg.workers, bar)
         q = {c["mode"]: c["calibration"].q_eta for c in cals}
-        jobs = [("rk4", s, cfg, q["rk4"], True) for s in SCENARIOS]
+        jobs = [("rk4", s, cfg, q["rk4"], True, q.get("rk4_improved")) for s in SCENARIOS]
         if cfg.reference_mode:
             jobs += [("reference", s, cfg, q["reference"], False) for s in REFERENCE_SCENARIOS]
         results = _map(_scenario_job, jobs, cfg.workers, bar)
@@ -277,13 +294,35 @@ def metrics_document(run: dict) -> dict:
         doc["reference_mode_flights" if ref else "flights"][r["name"]] = r["flight"]
     if not cfg.reference_mode:
         del doc["reference_mode"], doc["reference_mode_fdi"], doc["reference_mode_flights"]
+    doc["spike_ratio"] = spike_ratios(doc["scenarios"])
     doc["config"] = {**asdict(cfg), "q_range": list(cfg.q_range), "integrator": "rk4",
                      "upper_thrust_limit": "only in clipping (the paper has none)",
                      "align": "end", "ekf_q_eta": run["calibration"]["rk4"].q_eta,
+                     "ekf_q_eta_improved": (run["calibration"]["rk4_improved"].q_eta
+                                            if "rk4_improved" in run["calibration"] else None),
                      "calibration": {m: c.to_dict() for m, c in run["calibration"].items()},
                      "seconds_total": run["seconds"]}
     doc["paper"] = PAPER
     return doc
+
+
+def spike_ratios(scenarios: dict) -> dict:
+    """Per scenario with fault windows: motor-averaged IRLS spike / EKF spike, for the paper
+    pair (``irls`` / ``ekf``) and the improved pair when present (target: <= 0.5)."""
+    from estimators.metrics import mean_or_none
+
+    out = {}
+    for name, per in scenarios.items():
+        ratios = {}
+        for label, (a, b) in (("paper", ("irls", "ekf")),
+                              ("improved", ("irls_improved", "ekf_improved"))):
+            if a in per and b in per:
+                sa, sb = mean_or_none(per[a]["spike"]), mean_or_none(per[b]["spike"])
+                if sa is not None and sb:
+                    ratios[label] = sa / sb
+        if ratios:
+            out[name] = ratios
+    return out
 
 
 def _fmt(x, digits=4):
@@ -297,7 +336,7 @@ def table(scenarios: dict) -> str:
     lines = ["| scenario | estimator | RMSE | std | spike | excess spike | seconds |",
              "|---|---|---|---|---|---|---|"]
     for name, per in scenarios.items():
-        for est in ("irls", "ekf"):
+        for est in (k for k in ESTIMATOR_KEYS if k in per):
             s = per[est]
             lines.append(f"| {name} | {est} | {_fmt(np.mean(s['rmse']))} | "
                          f"{_fmt(np.mean(s['std']))} | {_fmt(mean_or_none(s['spike']))} | "
@@ -322,6 +361,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, default=2, help="parallel processes (default 2)")
     p.add_argument("--no-reference-mode", action="store_true",
                    help="skip the flights of the reference integration mode")
+    p.add_argument("--no-improved", action="store_true",
+                   help="skip the beyond-the-paper IRLS (IRLSConfig.improved()) and its EKF")
 
 
 def run(args) -> int:
@@ -338,7 +379,8 @@ def run(args) -> int:
         check_writable(planned_files(out), force=args.force)
     base = ReproduceConfig.quick() if args.quick else ReproduceConfig()
     cfg = replace(base, seed=args.seed, workers=args.workers,
-                  reference_mode=not args.no_reference_mode)
+                  reference_mode=not args.no_reference_mode,
+                  improved=not getattr(args, "no_improved", False))
     result = reproduce(cfg, progress=not args.quiet and enabled())
     out.mkdir(parents=True, exist_ok=True)
     doc = metrics_document(result)
@@ -348,6 +390,9 @@ def run(args) -> int:
     print(f"quadfault reproduce ({'quick' if args.quick else 'full'}, seed {cfg.seed}, "
           f"integrator rk4, EKF Q_eta = {doc['config']['ekf_q_eta']:.4g})")
     print(table(doc["scenarios"]))
+    for name, ratios in doc["spike_ratio"].items():
+        print(f"spike ratio IRLS/EKF {name}: " + ", ".join(f"{k} {v:.2f}x"
+                                                         for k, v in ratios.items()))
     bad = [f"{n} ({m})" for m, key in (("rk4", "flights"), ("reference", "reference_mode_flights"))
            for n, fl in doc.get(key, {}).items() if fl["diverged"]]
     if bad:

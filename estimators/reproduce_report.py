@@ -8,6 +8,8 @@ import numpy as np
 
 from estimators import figures
 from estimators.metrics import mean_or_none
+
+ESTIMATOR_KEYS = ("irls", "ekf", "irls_improved", "ekf_improved")
 from quadfault.fileio import atomic_write_text
 
 
@@ -18,7 +20,7 @@ def _f(x, d=4):
 def _spike_rows(scenarios: dict) -> list[str]:
     rows = ["| scenario | estimator | M1 | M2 | M3 | M4 | mean |", "|---|---|---|---|---|---|---|"]
     for name, per in scenarios.items():
-        for est in ("irls", "ekf"):
+        for est in (k for k in ESTIMATOR_KEYS if k in per):
             sp = per[est]["spike"]
             if sp is None:
                 continue
@@ -31,7 +33,7 @@ def _fdi_rows(fdi: dict) -> list[str]:
     rows = ["| scenario | estimator | faults detected | missed | false alarms "
             "| worst latency [s] |", "|---|---|---|---|---|---|"]
     for name, per in fdi.items():
-        for est in ("irls", "ekf"):
+        for est in (k for k in ESTIMATOR_KEYS if k in per):
             s = per[est]
             lat = [x for x in s["latencies"] if x is not None]
             worst = _f(max(lat) if lat else None, 3)
@@ -61,6 +63,25 @@ def _curve_note(cal: dict) -> str:
     return (f"The EKF's best RMSE on the calibration flight is {cal['curve_rmse'][k]:.4f} at "
             f"Q_eta = {cal['curve_q'][k]:.3g} (calibration_curve.png); the larger matching "
             "Q_eta is the faster filter at the IRLS accuracy.")
+
+
+def _improved_lines(doc: dict) -> list[str]:
+    cal = doc["config"]["calibration"].get("rk4_improved")
+    lines = []
+    if cal is not None:
+        lines += [
+            "*irls* is the paper's estimator with the reference code's settings; "
+            "*irls_improved* adds two options beyond the paper (`IRLSConfig.improved()`: the "
+            "change completion of the weak yaw-differential direction at a detected step, and "
+            "a 21-sample causal running median of the output; docs/irls.md). *ekf_improved* is "
+            "the same EKF calibrated to the improved IRLS's RMSE on the calibration flight: "
+            f"{cal['message']}.", ""]
+    ratios = doc.get("spike_ratio", {})
+    if ratios:
+        lines += ["Spike ratio IRLS / EKF at equal calibration-flight RMSE (target <= 0.5): "
+                  + "; ".join(f"{n}: " + ", ".join(f"{k} {v:.2f}x" for k, v in r.items())
+                              for n, r in ratios.items()) + ".", ""]
+    return lines
 
 
 def _diverged_lines(doc: dict) -> list[str]:
@@ -118,6 +139,7 @@ def write_report(out: Path, doc: dict, run: dict, force: bool = False) -> Path:
         "",
         table(doc["scenarios"]),
         "",
+        *_improved_lines(doc),
         "Motor averages. RMSE = sqrt(mean(e^2)), std = N-1 sample standard deviation of the "
         "signed error e = eta_true - eta_hat, with the truth taken at the time of the newest "
         "sample each estimate used. *spike* = max |e_m| while another motor is in its fault "
