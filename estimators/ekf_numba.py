@@ -99,9 +99,10 @@ def _project_so3_into(M, C):
 
 
 @njit(cache=True, fastmath=True)
-def _sandwich_into(F, P, out, FP, cols, nnz):
+def _sandwich_into(F, P, out, FP, FPT, cols, nnz):
     """``out = F P F^T`` over the non-zeros of the sparse transition Jacobian (column indices
-    of each row's non-zeros in ``cols``/``nnz``; ``FP`` is scratch)."""
+    of each row's non-zeros in ``cols``/``nnz``); ``FP``, ``FPT`` are scratch. Both products
+    stream whole rows: ``FP = F P`` and ``out[k] = sum_j F[k, j] (F P)^T[j]``."""
     n = F.shape[0]
     for i in range(n):
         c = 0
@@ -118,15 +119,20 @@ def _sandwich_into(F, P, out, FP, cols, nnz):
             f = F[i, j]
             for k in range(n):
                 FP[i, k] += f * P[j, k]
-    for k in range(n):  # out = FP F^T, upper triangle, mirrored
-        for i in range(k + 1):
-            acc = 0.0
-            for q in range(nnz[k]):
-                acc += FP[i, cols[k, q]] * F[k, cols[k, q]]
-            out[i, k] = acc
+    for i in range(n):
+        for k in range(n):
+            FPT[k, i] = FP[i, k]
+    for k in range(n):  # out = F (F P)^T, lower triangle mirrored
+        for i in range(n):
+            out[k, i] = 0.0
+        for q in range(nnz[k]):
+            j = cols[k, q]
+            f = F[k, j]
+            for i in range(k + 1):
+                out[k, i] += f * FPT[j, i]
     for k in range(n):
         for i in range(k + 1, n):
-            out[i, k] = out[k, i]
+            out[k, i] = out[i, k]
 
 
 @njit(cache=True, fastmath=True)
@@ -172,7 +178,7 @@ def step_inplace(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi):
             workspace(x.shape[0]))
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=True)
 def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
     """One predict + update with the scratch ``ws`` (:func:`workspace`); ``x`` and ``P`` are
     overwritten."""
@@ -271,7 +277,7 @@ def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
             for k in range(3):
                 acc += dR[rr, k] * (0.5 * dt * dt * B[k, j])
             F[9 + rr, 18 + j] = acc
-    _sandwich_into(F, P, Pp, FP, cols, nnz)
+    _sandwich_into(F, P, Pp, FP, Am, cols, nnz)  # Am: scratch until the update
     for i in range(ns):
         Pp[i, i] += qc[i] * dt
     # ---- update (p, v, Omega, attitude rotation error); H = [I_9 0; 0 HR 0]

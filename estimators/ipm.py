@@ -226,16 +226,16 @@ def solve_box_qp(H, q, lo: float, hi: float, x0, settings: IPMSettings | None = 
         record_history: keep per-iteration residual, gap and iterate histories.
     """
     cfg = settings or IPMSettings()
-    x0 = np.asarray(x0, dtype=float)
-    n = len(x0)
+    xl = np.asarray(x0, dtype=float).tolist()
+    n = len(xl)
     lo, hi = float(lo), float(hi)
-    if not (lo < hi) or np.any(x0 <= lo) or np.any(x0 >= hi):
+    if not (lo < hi) or any(not lo < xi < hi for xi in xl):
         raise ConfigError(f"interior-point start must lie strictly inside ({lo}, {hi}), got {x0}")
     Hl = np.asarray(H, dtype=float).tolist()
     ql = np.asarray(q, dtype=float).tolist()
     if n == 4:  # the quadrotor: the same iteration on scalar locals (see _solve_box_qp4)
-        return _solve_box_qp4(Hl, ql, lo, hi, x0.tolist(), cfg, record_history)
-    return _solve_box_qp_general(Hl, ql, lo, hi, x0.tolist(), cfg, record_history)
+        return _solve_box_qp4(Hl, ql, lo, hi, xl, cfg, record_history)
+    return _solve_box_qp_general(Hl, ql, lo, hi, xl, cfg, record_history)
 
 
 def _solve_box_qp_general(Hl: list, ql: list, lo: float, hi: float, x: list, cfg: IPMSettings,

@@ -214,13 +214,16 @@ def segment_energies(c, b, H, x, scale: float = 1.0) -> np.ndarray:
     return (c + 2.0 * (b @ x) + (H @ x) @ x) * scale
 
 
-def window_uncertainty(c, b, H, w, x, gamma: float, scale: float = 1.0) -> np.ndarray:
-    """One-sigma uncertainty of ``x`` from the window's information matrix (module doc)."""
+def window_uncertainty(c, b, H, w, x, gamma: float, scale: float = 1.0,
+                       info=None) -> np.ndarray:
+    """One-sigma uncertainty of ``x`` from the window's information matrix (module doc);
+    ``info`` is that matrix when the caller has it already."""
     e = segment_energies(c, b, H, x, scale)
     n = len(x)
     active = int(np.count_nonzero(w > 0))
     s2 = max(float(w @ e), 0.0) / max(10 * active - n, 1)
-    info = _weighted_sum(w, H) * scale + gamma * np.eye(n)
+    if info is None:
+        info = _weighted_sum(w, H) * scale + gamma * np.eye(n)
     try:
         cov = np.linalg.inv(info)
     except np.linalg.LinAlgError:
@@ -262,7 +265,8 @@ def solve_window(c, b, H, x_prev, config: IRLSConfig, record_history: bool = Fal
             return x_prev, None, _diag(STATUS_ILL_CONDITIONED, f"cond(J^T G J) = {cond:.3g} > "
                                        f"{cfg.cond_max:g}", iters, w, cond, hist)
         q = (w @ b) * scale - cfg.gamma * x_prev
-        res = solve_box_qp(JGJ + gI, q, lo, hi, x_cur, cfg.ipm, record_history)
+        info = JGJ + gI  # J^T W G J + gamma I: the Newton matrix, and the information matrix
+        res = solve_box_qp(info, q, lo, hi, x_cur, cfg.ipm, record_history)
         iters.append(res.iterations)
         converged = res.converged
         if hist is not None:
@@ -274,7 +278,7 @@ def solve_window(c, b, H, x_prev, config: IRLSConfig, record_history: bool = Fal
         x_cur = res.x
         if step < cfg.irls_tol:
             break
-    sd = window_uncertainty(c, b, H, w, x_cur, cfg.gamma, scale)
+    sd = window_uncertainty(c, b, H, w, x_cur, cfg.gamma, scale, info)  # w of the last round
     status = STATUS_OK if converged else STATUS_MAX_ITER
     msg = "" if converged else f"interior point stopped at {cfg.ipm.max_iter} iterations"
     return x_cur, sd, _diag(status, msg, iters, w, cond, hist)
