@@ -2,6 +2,7 @@
 
     python benchmarks/bench_accuracy.py                 # 80 s flights, 5 seeds (~5 min)
     python benchmarks/bench_accuracy.py --duration 20 --seeds 2    # a quick look
+    python benchmarks/bench_accuracy.py --improved --no-speed      # + IRLSConfig.improved()
 
 Prints:
 
@@ -15,6 +16,11 @@ Prints:
 Flights use ``quadfault reproduce``'s settings (``estimators.reproduce.sim_config``: no upper
 thrust limit, as in the paper). The EKF's Q_eta is calibrated first (as ``quadfault
 reproduce`` does) unless ``--q-eta``.
+
+With ``--improved`` the beyond-the-paper IRLS (``IRLSConfig.improved()``, docs/irls.md) runs
+too, with its own EKF calibrated to its RMSE on the same calibration flight (seed 1000), and
+the spike ratio IRLS / EKF of both pairs is printed per seed (target <= 0.5 on abrupt and
+combined). The calibration flight's seed is never one of the scored seeds (0..seeds-1).
 """
 
 from __future__ import annotations
@@ -59,17 +65,32 @@ def speed(duration: float) -> None:
           f"numpy {rows['EKF numpy'] / rows['IRLS numpy']:.2f}")
 
 
-def flight(name: str, seed: int, duration: float, q_eta: float) -> dict:
+def flight(name: str, seed: int, duration: float, q_eta: float,
+           q_improved: float | None = None) -> dict:
     rec = simulate(named_scenario(name, duration), config=sim_config("rk4", name), seed=seed)
     blind = rec.without_truth()
     out = {"diverged": flight_check(rec)["diverged"]}
-    for est in (SlidingWindowIRLS(rec.vehicle),
-                MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_eta))):
+    runs = [("irls", SlidingWindowIRLS(rec.vehicle)),
+            ("ekf", MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_eta)))]
+    if q_improved is not None:
+        runs += [("irls+", SlidingWindowIRLS(rec.vehicle, IRLSConfig.improved())),
+                 ("ekf+", MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_improved)))]
+    for key, est in runs:
         s = est.run(blind)
         sc = score(rec, s)
-        out[est.name] = {"rmse": float(np.mean(sc.rmse)), "spike": mean_or_none(sc.spike),
-                         "fdi": evaluate(detect(s), fault_windows(rec))}
+        out[key] = {"rmse": float(np.mean(sc.rmse)), "spike": mean_or_none(sc.spike),
+                    "excess": mean_or_none(sc.excess_spike),
+                    "fdi": evaluate(detect(s), fault_windows(rec))}
     return out
+
+
+def calibrate(duration: float, irls_config: IRLSConfig):
+    """The EKF's Q_eta matching ``irls_config``'s RMSE on the combined flight of seed 1000."""
+    cal_rec = simulate(named_scenario("combined", min(duration, 40.0)),
+                       config=sim_config("rk4", "combined"), seed=1000)
+    target = float(np.mean(score(cal_rec, SlidingWindowIRLS(cal_rec.vehicle, irls_config).run(
+        cal_rec.without_truth())).rmse))
+    return calibrate_q_eta(cal_rec, target, q_range=(1e-4, 10.0), bisection_steps=6)
 
 
 def main() -> None:
@@ -78,40 +99,59 @@ def main() -> None:
     p.add_argument("--seeds", type=int, default=5)
     p.add_argument("--q-eta", type=float, default=None)
     p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--improved", action="store_true",
+                   help="also IRLSConfig.improved() and an EKF calibrated to it")
+    p.add_argument("--no-speed", action="store_true", help="skip the speed section")
     args = p.parse_args()
-    speed(min(args.duration, 20.0))
+    if not args.no_speed:
+        speed(min(args.duration, 20.0))
     q = args.q_eta
     if q is None:
-        cal_rec = simulate(named_scenario("combined", min(args.duration, 40.0)),
-                           config=sim_config("rk4", "combined"), seed=1000)
-        target = float(np.mean(score(cal_rec, SlidingWindowIRLS(cal_rec.vehicle).run(
-            cal_rec.without_truth())).rmse))
-        cal = calibrate_q_eta(cal_rec, target, q_range=(1e-4, 10.0), bisection_steps=6)
+        cal = calibrate(args.duration, IRLSConfig())
         q = cal.q_eta
         print(f"calibration: {cal.message}")
+    q_plus = None
+    if args.improved:
+        cal = calibrate(args.duration, IRLSConfig.improved())
+        q_plus = cal.q_eta
+        print(f"calibration (improved IRLS): {cal.message}")
     jobs = [(n, s) for n in SCENARIOS for s in range(args.seeds)]
     with ProcessPoolExecutor(args.workers) as pool:
         res = list(pool.map(flight, [j[0] for j in jobs], [j[1] for j in jobs],
-                            [args.duration] * len(jobs), [q] * len(jobs)))
+                            [args.duration] * len(jobs), [q] * len(jobs),
+                            [q_plus] * len(jobs)))
     lost = [j for j, r in zip(jobs, res) if r["diverged"]]
     if lost:
         print(f"WARNING: flights that lost control: {lost}")
     print(f"\nFDI and accuracy over {args.seeds} seeds, {args.duration:g} s flights, "
           f"EKF Q_eta = {q:.4g}")
     print(f"{'scenario':<12} {'est':<5} {'detected':>9} {'worst lat [s]':>14} {'false':>6} "
-          f"{'RMSE':>7} {'spike':>7}")
+          f"{'RMSE':>7} {'spike':>7} {'excess':>7}")
+    keys = ("irls", "ekf", "irls+", "ekf+") if args.improved else ("irls", "ekf")
     for name in SCENARIOS:
-        for est in ("irls", "ekf"):
+        for est in keys:
             rs = [r[est] for (n, _), r in zip(jobs, res) if n == name]
             det = sum(r["fdi"].detected for r in rs)
             tot = sum(len(r["fdi"].latencies) for r in rs)
             lat = [x for r in rs for x in r["fdi"].latencies if x is not None]
             false = sum(r["fdi"].false_alarms for r in rs)
             spikes = [r["spike"] for r in rs if r["spike"] is not None]
+            excess = [r["excess"] for r in rs if r["excess"] is not None]
             worst = max(lat) if lat else float("nan")
             print(f"{name:<12} {est:<5} {det:>4}/{tot:<4} {worst:>14.3f} {false:>6}"
                   f" {np.mean([r['rmse'] for r in rs]):>7.4f} "
-                  f"{(np.mean(spikes) if spikes else float('nan')):>7.4f}")
+                  f"{(np.mean(spikes) if spikes else float('nan')):>7.4f} "
+                  f"{(np.mean(excess) if excess else float('nan')):>7.4f}")
+    pairs = [("paper", "irls", "ekf")] + ([("improved", "irls+", "ekf+")] if args.improved
+                                          else [])
+    print("\nper seed: IRLS spike / EKF spike = ratio (motor averages; target <= 0.5), "
+          "IRLS RMSE (target <= 0.025)")
+    for name in ("abrupt", "combined"):
+        for label, a, b in pairs:
+            cells = [f"{r[a]['spike']:.3f}/{r[b]['spike']:.3f}={r[a]['spike'] / r[b]['spike']:.2f}"
+                     f" ({r[a]['rmse']:.4f})"
+                     for (n, _), r in zip(jobs, res) if n == name]
+            print(f"  {name:<9} {label:<9} " + "  ".join(cells))
 
 
 if __name__ == "__main__":
