@@ -181,29 +181,43 @@ def markdown_table(rows: list[dict]) -> str:
     return "\n".join(lines + notes) + "\n"
 
 
+def flight_jobs(agents: list[AgentSpec], suite: str, seeds: list[int], *,
+                scenarios: list[str] | None = None, config: FlightConfig | None = None,
+                duration: float | None = None) -> list[tuple]:
+    """Every flight of an evaluation as a picklable ``(agent, scenario, seed, config)`` task,
+    in the table's order (scenario, then seed, then agent)."""
+    cfg = config or FlightConfig()
+    jobs = []
+    for entry in get_suite(suite, scenarios):
+        for seed in seeds:
+            scenario = entry.scenario(seed)
+            if duration is not None:
+                scenario = scenario.replace(duration=float(duration))
+            jobs.extend((agent, scenario, seed, cfg) for agent in agents)
+    return jobs
+
+
+def fly_job(job: tuple) -> Flight:
+    """One task of :func:`flight_jobs` (module level, so process pools can pickle it)."""
+    agent, scenario, seed, config = job
+    return fly_agent(agent, scenario, seed, config)
+
+
 def evaluate(agents: list[AgentSpec], suite: str, seeds: list[int], *,
              scenarios: list[str] | None = None, config: FlightConfig | None = None,
-             duration: float | None = None, progress: bool = False) -> list[Flight]:
-    """Fly every agent over every scenario of ``suite`` and every seed."""
-    cfg = config or FlightConfig()
-    entries = get_suite(suite, scenarios)
-    jobs = [(a, e, s) for e in entries for s in seeds for a in agents]
-    bar = None
-    if progress:
-        from quadfault.progress import progress_bar
+             duration: float | None = None, progress: bool = False,
+             backend: str = "serial", workers: int | None = None) -> list[Flight]:
+    """Fly every agent over every scenario of ``suite`` and every seed.
 
-        bar = progress_bar(total=len(jobs), desc=f"evaluate {suite}", unit="flight")
-    flights = []
-    for agent, entry, seed in jobs:
-        scenario = entry.scenario(seed)
-        if duration is not None:
-            scenario = scenario.replace(duration=float(duration))
-        flights.append(fly_agent(agent, scenario, seed, cfg))
-        if bar is not None:
-            bar.update(1)
-    if bar is not None:
-        bar.close()
-    return flights
+    ``backend``: ``"serial"`` (this process), ``"local"`` (``workers`` processes) or ``"ray"``
+    (:func:`agents.sweep.run_sweep`); every backend returns the same flights in the same order.
+    """
+    from agents.sweep import run_sweep
+
+    jobs = flight_jobs(agents, suite, seeds, scenarios=scenarios, config=config,
+                       duration=duration)
+    return run_sweep(fly_job, jobs, backend=backend, workers=workers, progress=progress,
+                     desc=f"evaluate {suite}")
 
 
 def results_json(flights: list[Flight], rows: list[dict], meta: dict) -> str:
@@ -248,7 +262,9 @@ def run(args) -> int:
     check_writable([out / n for n in RESULT_FILES], force=args.force)
     quiet = getattr(args, "quiet", False)
     flights = evaluate(agents, args.suite, list(args.seeds), scenarios=args.scenarios,
-                       duration=args.duration, progress=not quiet and enabled())
+                       duration=args.duration, progress=not quiet and enabled(),
+                       backend=getattr(args, "backend", "serial"),
+                       workers=getattr(args, "workers", None))
     rows = aggregate(flights)
     meta = {"suite": args.suite, "seeds": list(args.seeds), "agents": labels,
             "duration_override": args.duration}

@@ -30,7 +30,6 @@ import argparse
 import importlib.util
 import os
 import sys
-from contextlib import contextmanager
 from pathlib import Path
 
 from quadfault.errors import ConfigError, QuadfaultError
@@ -101,37 +100,13 @@ def run_sweep(fn, tasks, *, backend: str = "local", workers: int | None = None,
 
 
 # -- evaluation sweep (agents x scenarios x seeds) ---------------------------------------------
-def _fly(job):
-    from agents.evaluate import fly_agent
-
-    agent, scenario, seed, config = job
-    return fly_agent(agent, scenario, seed, config)
-
-
-def evaluation_jobs(agents, suite: str, seeds, *, scenarios=None, config=None, duration=None):
-    """The flights of :func:`agents.evaluate.evaluate`, in its order, as picklable tasks."""
-    from agents.evaluate import FlightConfig
-    from agents.suite import get_suite
-
-    cfg = config or FlightConfig()
-    jobs = []
-    for entry in get_suite(suite, scenarios):
-        for seed in seeds:
-            for agent in agents:
-                sc = entry.scenario(seed)
-                if duration is not None:
-                    sc = sc.replace(duration=float(duration))
-                jobs.append((agent, sc, seed, cfg))
-    return jobs
-
-
 def evaluate_sweep(agents, suite: str, seeds, *, scenarios=None, config=None, duration=None,
                    backend: str = "local", workers: int | None = None, progress: bool = False):
     """:func:`agents.evaluate.evaluate` on a backend: the same list of ``Flight`` records."""
-    jobs = evaluation_jobs(agents, suite, seeds, scenarios=scenarios, config=config,
-                           duration=duration)
-    return run_sweep(_fly, jobs, backend=backend, workers=workers, progress=progress,
-                     desc=f"evaluate {suite}")
+    from agents.evaluate import evaluate
+
+    return evaluate(agents, suite, seeds, scenarios=scenarios, config=config,
+                    duration=duration, progress=progress, backend=backend, workers=workers)
 
 
 # -- blinded diagnosis study ---------------------------------------------------------------------
@@ -158,23 +133,6 @@ def blinded_sweep(n: int, seed: int = 2026, rate: float = 250.0, duration: float
 
 
 # -- command line ----------------------------------------------------------------------------------
-@contextmanager
-def _evaluate_on(backend: str, workers: int | None):
-    """Let :func:`agents.evaluate.run` fly its jobs through :func:`evaluate_sweep`."""
-    import agents.evaluate as ev
-
-    original = ev.evaluate
-
-    def evaluate(agents, suite, seeds, **kw):
-        return evaluate_sweep(agents, suite, seeds, backend=backend, workers=workers, **kw)
-
-    ev.evaluate = evaluate
-    try:
-        yield
-    finally:
-        ev.evaluate = original
-
-
 def _add_backend(parser):
     parser.add_argument("--backend", choices=BACKENDS, default="local",
                         help="where the tasks run (default local processes)")
@@ -204,8 +162,7 @@ def main(argv=None) -> int:
     try:
         _check_workers(args.workers)
         if args.what == "evaluate":
-            with _evaluate_on(args.backend, args.workers):
-                return ev.run(args)
+            return ev.run(args)  # reads args.backend and args.workers
         if args.n < 1 or args.rate <= 0 or args.duration <= 5:
             raise ConfigError("--n >= 1, --rate > 0 and --duration > 5 s are required")
         rows, summary = blinded_sweep(args.n, args.seed, args.rate, args.duration,

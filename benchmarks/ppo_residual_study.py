@@ -1,27 +1,44 @@
 """PPO residual policy vs the plain geometric controller, with and without the estimate.
 
-Two training arms on ``QuadFaultHover-v0`` (hover, random motor faults, residual actions):
+Two training arms on ``QuadFaultHover-v0`` (hover, random motor faults, residual actions
+``f = f_geometric + residual_scale * a``):
 
 * ``with_estimate``: the observation carries the IRLS estimate (``--estimator``);
 * ``without_estimate``: ``estimator="none"`` (eta_hat slot constant 1, sd constant).
 
-Each arm trains ``--seeds`` PPO runs of ``--timesteps`` steps. Every trained model and the
-baseline (the same environment with a zero residual, i.e. the geometric controller) then fly
-the *same* ``--episodes`` random fault scenarios with the same reset seeds, so the comparisons
-are paired. Score per episode: tracking RMSE [m], a crashed episode counting as the crash
-limit (5 m). Reported with 95 % confidence intervals (Student t over the seeds of the
-per-seed mean paired differences; with one seed, over the episodes instead):
+The arms differ only in the estimator: same environment, reward, residual scale, PPO
+hyperparameters (:data:`PPO_KWARGS`), timesteps and seeds. Each arm trains ``--seeds`` PPO
+runs of ``--timesteps`` steps on ``--n-envs`` quadrotors stepped as arrays
+(:class:`quad_fault_env.vector.QuadFaultVectorEnv`, the same episodes as the single env).
+
+Evaluation (paired): every trained model and the baseline (the same environment with a zero
+residual, i.e. the geometric controller) fly the *same* ``--episodes`` episodes: the
+environment's random scenario of a reset seed (the training distribution: hover, 0-2 faults
+of severity 0.3-0.9, optional battery degradation, thrust noise, perturbed initial state;
+seeds from 10000 on, skipping those whose scenario has no fault), hence the same scenario,
+initial state and noise for every agent. All agents of one estimator fly as the rows of one
+vector env. Score per episode: tracking RMSE [m] of the true position error after each
+control step, up to the end; a crashed (terminated) episode scores the crash limit (5 m).
+Reported with 95 % confidence intervals (Student t over the seeds of the per-seed mean
+paired differences; with one seed, over the episodes instead):
 
 * each arm vs the baseline: ``RMSE_baseline - RMSE_arm`` (> 0: the policy is better);
 * ``with`` vs ``without``: ``RMSE_without - RMSE_with`` paired by seed and episode.
 
-The full study (issue 5: >= 3 seeds per arm, ~30 min per run) is e.g.::
+For context (not a target) the estimate-aware allocation (:class:`agents.policies.
+GeometricPolicy` with ``estimate_aware=True``, IRLS) flies the same episodes through the
+same bounded residual: what a policy could gain from the estimate at this residual scale.
 
-    python benchmarks/ppo_residual_study.py --timesteps 150000 --seeds 0 1 2 --episodes 20 \\
-        --out runs/ppo_study
+The study of issue 5 (>= 3 seeds per arm, each run within 30 min of CPU)::
 
-A small run finishes in minutes (``--timesteps 3000 --seeds 0 1 --episodes 4``). Writes
-``OUT/study.json`` and ``OUT/study.md``; trained runs are reused when present (``--retrain``).
+    python benchmarks/ppo_residual_study.py --timesteps 150000 --seeds 0 1 2 \\
+        --episodes 20 --out runs/ppo_study
+
+The arms can train in two processes (``--arms with_estimate --train-only`` and
+``--arms without_estimate --train-only``); the run without ``--train-only`` then reuses the
+trained models (``--retrain`` trains again) and evaluates. Writes ``OUT/study.json`` and
+``OUT/study.md``; per run ``OUT/<arm>/seed_<k>/`` (see ``agents.train``) and
+``train_time.json`` (wall and CPU seconds of the run).
 """
 
 from __future__ import annotations
@@ -35,6 +52,18 @@ from pathlib import Path
 import numpy as np
 
 CRASH_RMSE = 5.0  # [m] score of a crashed episode (the environment's out-of-bounds limit)
+ENV_ID = "QuadFaultHover-v0"
+ARMS = ("with_estimate", "without_estimate")
+#: residual authority [N] per unit action: the hover thrust of one rotor (m g / 4 = 2.45 N
+#: for the F450), so the residual can carry a motor at eta = 0.5 to f_max from hover
+#: (the env's default of 1 N cannot: the estimate-aware allocation needs +2.45 N there)
+RESIDUAL_SCALE = 2.45
+#: PPO settings of both arms. The residual starts at zero (SB3 initialises the action head
+#: with gain 0.01) with exploration noise exp(-2.3) ~ 0.1 per unit action (0.25 N); rollouts
+#: of n_envs x n_steps = 32 x 256 steps (2.56 s of flight per quadrotor).
+PPO_KWARGS = {"n_steps": 256, "batch_size": 1024, "n_epochs": 10, "learning_rate": 3e-4,
+              "gamma": 0.99, "gae_lambda": 0.95, "clip_range": 0.2,
+              "policy_kwargs": {"log_std_init": -2.3, "net_arch": [128, 128]}}
 
 
 def t_interval(x, confidence: float = 0.95):
@@ -49,92 +78,70 @@ def t_interval(x, confidence: float = 0.95):
     return float(x.mean()), float(half)
 
 
-def scenarios(n: int, duration: float):
-    from quadfault.scenarios import random_scenario
-
-    return [random_scenario(np.random.default_rng([2024, i]), duration, n_faults=(1, 2),
-                            trajectory="hover").replace(name=f"random_hover_{i}")
-            for i in range(n)]
+def env_kwargs(args, estimator: str) -> dict:
+    """Keywords of the study's environment (on top of the registration's) for ``estimator``."""
+    return {"action_mode": "residual", "residual_scale": args.residual_scale,
+            "estimator_rate": "control", "duration": args.duration, "estimator": estimator}
 
 
-def episode_scores(policy, env_id, env_kwargs, scs, normalizer_path=None):
-    """Tracking RMSE (crash = CRASH_RMSE) and crash flags of ``policy`` over ``scs``."""
-    from agents.env_rollout import fly_env, make_scenario_env
+def episode_seeds(n: int, kwargs: dict, first: int = 10_000) -> list[int]:
+    """The first ``n`` reset seeds from ``first`` on whose random scenario has a fault.
 
-    rmse, crashed = [], []
-    for i, sc in enumerate(scs):
-        env = make_scenario_env(env_id, env_kwargs, sc)
-        try:
-            pol, norm = policy(env) if callable(policy) else (policy, None)
-            f = fly_env(pol, env, sc, seed=10_000 + i, label="", estimator="")
-        finally:
-            env.close()
-        crashed.append(bool(f.metrics.crashed))
-        rmse.append(CRASH_RMSE if f.metrics.crashed else f.metrics.rmse)
-    return np.array(rmse), np.array(crashed)
+    An episode is the environment's own random scenario of its reset seed (the training
+    distribution); seeds whose scenario has no motor fault are skipped. The choice depends
+    only on the seed, never on an agent.
+    """
+    import gymnasium as gym
+
+    import quad_fault_env  # noqa: F401
+
+    env = gym.make(ENV_ID, **dict(kwargs, estimator="none"))
+    seeds, seed = [], first
+    try:
+        while len(seeds) < n:
+            env.reset(seed=seed)
+            if env.unwrapped.scenario.efficiency.faults:
+                seeds.append(seed)
+            seed += 1
+    finally:
+        env.close()
+    return seeds
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--timesteps", type=int, default=150_000)
-    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    p.add_argument("--episodes", type=int, default=20)
-    p.add_argument("--duration", type=float, default=10.0, help="episode length [s]")
-    p.add_argument("--estimator", default="irls", choices=("irls", "ekf", "truth"))
-    p.add_argument("--n-envs", type=int, default=2)
-    p.add_argument("--out", default="runs/ppo_study")
-    p.add_argument("--retrain", action="store_true")
-    args = p.parse_args(argv)
+def paired_scores(policies, kwargs: dict, seeds: list[int]):
+    """RMSE [m] (crash = CRASH_RMSE) and crash flags, arrays (n_policies, n_episodes).
 
-    from agents.policies import GeometricPolicy
-    from agents.train import TrainConfig, load_agent, train_one
-    from quadfault.fileio import atomic_write_text
+    One :class:`QuadFaultVectorEnv` flies every policy on every episode: row
+    ``j * n_episodes + i`` is policy j on episode i, reset with ``seeds[i]``, so all policies
+    meet the same scenario, initial state and noise. Each policy acts on its rows as a batch.
+    """
+    import gymnasium as gym
 
-    out = Path(args.out)
-    base_kwargs = {"action_mode": "residual", "estimator_rate": "control",
-                   "duration": args.duration}
-    arms = {"with_estimate": dict(base_kwargs, estimator=args.estimator),
-            "without_estimate": dict(base_kwargs, estimator="none")}
-    env_id = "QuadFaultHover-v0"
-    scs = scenarios(args.episodes, args.duration)
-    t0 = time.time()
-    base, base_crash = episode_scores(lambda env: (GeometricPolicy.from_env(env), None), env_id,
-                                      dict(base_kwargs, estimator="none"), scs)
-    results = {"baseline": {"rmse": base.tolist(), "crashed": base_crash.tolist()}}
-    train_seconds = {}
-    for arm, kwargs in arms.items():
-        results[arm] = {}
-        for seed in args.seeds:
-            run_dir = out / arm / f"seed_{seed}"
-            if args.retrain or not (run_dir / "model.zip").exists():
-                cfg = TrainConfig(algo="ppo", env_id=env_id, env_kwargs=kwargs,
-                                  timesteps=args.timesteps, seeds=(seed,), n_envs=args.n_envs,
-                                  eval_freq=max(args.timesteps // 5, 1000), eval_episodes=2,
-                                  algo_kwargs={"n_steps": 512, "batch_size": 128,
-                                               "learning_rate": 1e-4,
-                                               "policy_kwargs": {"log_std_init": -1.5}})
-                ts = time.time()
-                train_one(cfg, seed, run_dir, force=True, quiet=True)
-                train_seconds[f"{arm}/seed_{seed}"] = time.time() - ts
+    import quad_fault_env  # noqa: F401
+    from quad_fault_env.vector import QuadFaultVectorEnv
 
-            def loaded(env, run_dir=run_dir):
-                model, venv = load_agent(run_dir, env)
-                return _Normalised(model, venv), None
-
-            rmse, crash = episode_scores(loaded, env_id, kwargs, scs)
-            results[arm][str(seed)] = {"rmse": rmse.tolist(), "crashed": crash.tolist()}
-    summary = _summary(results, args.seeds)
-    meta = {"timesteps": args.timesteps, "seeds": args.seeds, "episodes": args.episodes,
-            "duration": args.duration, "estimator": args.estimator, "env_id": env_id,
-            "train_seconds": train_seconds, "total_seconds": time.time() - t0}
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "study.json", json.dumps({"meta": meta, "summary": summary,
-                                                      "episodes": results}, indent=2),
-                      force=True)
-    md = _markdown(summary, meta)
-    atomic_write_text(out / "study.md", md, force=True)
-    print(md)
-    return 0
+    spec = gym.spec(ENV_ID)
+    m, n = len(policies), len(seeds)
+    venv = QuadFaultVectorEnv(m * n, **dict(spec.kwargs, **kwargs))
+    try:
+        obs, _ = venv.reset(seed=[int(s) for s in seeds] * m)
+        done = np.zeros(m * n, dtype=bool)
+        crashed = np.zeros(m * n, dtype=bool)
+        sq, steps = np.zeros(m * n), np.zeros(m * n)
+        while not done.all():
+            act = np.concatenate([
+                np.asarray(p.predict(obs[j * n:(j + 1) * n], deterministic=True)[0],
+                           dtype=float).reshape(n, -1) for j, p in enumerate(policies)])
+            obs, _, term, trunc, info = venv.step(np.clip(act, -1.0, 1.0))
+            live = ~done
+            sq[live] += info["tracking_error"][live] ** 2
+            steps[live] += 1
+            crashed[live] |= term[live]
+            done |= term | trunc
+    finally:
+        venv.close()
+    rmse = np.where(crashed, CRASH_RMSE, np.sqrt(sq / np.maximum(steps, 1)))
+    return rmse.reshape(m, n), crashed.reshape(m, n)
 
 
 class _Normalised:
@@ -149,6 +156,111 @@ class _Normalised:
         return self.model.predict(o, state, episode_start, deterministic)
 
 
+def train_arm(args, arm: str, out: Path) -> None:
+    """Train the missing runs of ``arm`` (all of them with ``--retrain``)."""
+    from agents.train import TrainConfig, train_one
+    from quadfault.fileio import atomic_write_text
+
+    estimator = args.estimator if arm == "with_estimate" else "none"
+    for seed in args.seeds:
+        run_dir = out / arm / f"seed_{seed}"
+        if not args.retrain and (run_dir / "model.zip").exists():
+            continue
+        cfg = TrainConfig(algo="ppo", env_id=ENV_ID, env_kwargs=env_kwargs(args, estimator),
+                          timesteps=args.timesteps, seeds=(seed,), n_envs=args.n_envs,
+                          vector_env=True, eval_freq=max(args.timesteps // 2, 1000),
+                          eval_episodes=4, algo_kwargs=PPO_KWARGS)
+        wall, cpu = time.time(), time.process_time()
+        train_one(cfg, seed, run_dir, force=True, quiet=True)
+        times = {"wall_seconds": time.time() - wall, "cpu_seconds": time.process_time() - cpu}
+        atomic_write_text(run_dir / "train_time.json", json.dumps(times, indent=2), force=True)
+        print(f"{arm} seed {seed}: trained {args.timesteps} steps in {times['wall_seconds']:.0f} s"
+              f" wall, {times['cpu_seconds']:.0f} s CPU", flush=True)
+
+
+def evaluate(args, out: Path) -> dict:
+    """Paired scores of the baseline, the reference and every trained run."""
+    from agents.policies import GeometricPolicy
+    from agents.train import load_agent
+    from quadfault.vehicle import Vehicle
+
+    seeds = episode_seeds(args.episodes, env_kwargs(args, "none"))
+    results = {"episode_seeds": seeds}
+    for arm, estimator in (("with_estimate", args.estimator), ("without_estimate", "none")):
+        kwargs = env_kwargs(args, estimator)
+        names, policies = [], []
+        if arm == "with_estimate":
+            names += ["baseline", "estimate_aware_reference"]
+            policies += [GeometricPolicy(Vehicle(), "residual", residual_scale=args.residual_scale),
+                         GeometricPolicy(Vehicle(), "residual", estimate_aware=True,
+                                         residual_scale=args.residual_scale)]
+        for seed in args.seeds:
+            import gymnasium as gym
+
+            env = gym.make(ENV_ID, **kwargs)
+            model, venv = load_agent(out / arm / f"seed_{seed}", env)
+            names.append(f"{arm}/{seed}")
+            policies.append(_Normalised(model, venv))
+        rmse, crashed = paired_scores(policies, kwargs, seeds)
+        for name, r, c in zip(names, rmse, crashed):
+            results[name] = {"rmse": r.tolist(), "crashed": c.tolist()}
+        print(f"evaluated {arm}: {len(names)} agents x {len(seeds)} episodes", flush=True)
+    return results
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--timesteps", type=int, default=150_000)
+    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    p.add_argument("--episodes", type=int, default=20, help="paired evaluation episodes")
+    p.add_argument("--duration", type=float, default=10.0, help="episode length [s]")
+    p.add_argument("--estimator", default="irls", choices=("irls", "ekf", "truth"))
+    p.add_argument("--residual-scale", type=float, default=RESIDUAL_SCALE,
+                   help="thrust per unit residual action [N] (both arms; default m g / 4)")
+    p.add_argument("--n-envs", type=int, default=32, help="quadrotors per training env")
+    p.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS),
+                   help="arms to train (evaluation always needs both)")
+    p.add_argument("--train-only", action="store_true", help="train, do not evaluate")
+    p.add_argument("--out", default="runs/ppo_study")
+    p.add_argument("--retrain", action="store_true")
+    args = p.parse_args(argv)
+
+    from quadfault.fileio import atomic_write_text
+
+    out = Path(args.out)
+    t0 = time.time()
+    for arm in args.arms:
+        train_arm(args, arm, out)
+    if args.train_only:
+        return 0
+    missing = [f"{a}/seed_{s}" for a in ARMS for s in args.seeds
+               if not (out / a / f"seed_{s}" / "model.zip").exists()]
+    if missing:
+        raise SystemExit(f"{out}: runs missing for the evaluation: {', '.join(missing)} "
+                         "(train them with --arms)")
+    results = evaluate(args, out)
+    summary = _summary(results, args.seeds)
+    train_times = {}
+    for a in ARMS:
+        for s in args.seeds:
+            path = out / a / f"seed_{s}" / "train_time.json"
+            if path.exists():
+                train_times[f"{a}/seed_{s}"] = json.loads(path.read_text())
+    meta = {"timesteps": args.timesteps, "seeds": args.seeds, "episodes": args.episodes,
+            "duration": args.duration, "estimator": args.estimator, "env_id": ENV_ID,
+            "residual_scale": args.residual_scale, "n_envs": args.n_envs,
+            "ppo_kwargs": PPO_KWARGS, "train_times": train_times,
+            "evaluation_seconds": time.time() - t0}
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "study.json", json.dumps({"meta": meta, "summary": summary,
+                                                      "episodes": results}, indent=2),
+                      force=True)
+    md = _markdown(summary, meta)
+    atomic_write_text(out / "study.md", md, force=True)
+    print(md)
+    return 0
+
+
 def _paired(a_minus_b_by_seed: list[np.ndarray]):
     if len(a_minus_b_by_seed) >= 2:
         return t_interval([d.mean() for d in a_minus_b_by_seed]) + ("seeds",)
@@ -157,17 +269,23 @@ def _paired(a_minus_b_by_seed: list[np.ndarray]):
 
 def _summary(results, seeds) -> dict:
     base = np.array(results["baseline"]["rmse"])
-    out = {"baseline": {"rmse_mean": float(base.mean()),
-                        "crash_rate": float(np.mean(results["baseline"]["crashed"]))}}
-    for arm in ("with_estimate", "without_estimate"):
-        rm = [np.array(results[arm][str(s)]["rmse"]) for s in seeds]
-        cr = [np.mean(results[arm][str(s)]["crashed"]) for s in seeds]
+    out = {}
+    for name in ("baseline", "estimate_aware_reference"):
+        r = np.array(results[name]["rmse"])
+        mean, half = t_interval(base - r)
+        out[name] = {"rmse_mean": float(r.mean()),
+                     "crash_rate": float(np.mean(results[name]["crashed"])),
+                     "improvement_vs_baseline": mean, "ci95": half, "ci_over": "episodes"}
+    for arm in ARMS:
+        rm = [np.array(results[f"{arm}/{s}"]["rmse"]) for s in seeds]
+        cr = [np.mean(results[f"{arm}/{s}"]["crashed"]) for s in seeds]
         mean, half, over = _paired([base - r for r in rm])
         out[arm] = {"rmse_mean": float(np.mean([r.mean() for r in rm])),
                     "crash_rate": float(np.mean(cr)),
+                    "per_seed_improvement": [float((base - r).mean()) for r in rm],
                     "improvement_vs_baseline": mean, "ci95": half, "ci_over": over}
-    mean, half, over = _paired([np.array(results["without_estimate"][str(s)]["rmse"])
-                                - np.array(results["with_estimate"][str(s)]["rmse"])
+    mean, half, over = _paired([np.array(results[f"without_estimate/{s}"]["rmse"])
+                                - np.array(results[f"with_estimate/{s}"]["rmse"])
                                 for s in seeds])
     out["with_minus_without"] = {"improvement": mean, "ci95": half, "ci_over": over}
     return out
@@ -178,19 +296,29 @@ def _markdown(s, meta) -> str:
         return f"{m:+.4f} ± {h:.4f}" if math.isfinite(h) else f"{m:+.4f} (no CI)"
 
     lines = [f"# PPO residual study ({meta['env_id']}, {meta['timesteps']} steps/run, seeds "
-             f"{meta['seeds']}, {meta['episodes']} paired episodes of {meta['duration']} s)", "",
+             f"{meta['seeds']}, {meta['episodes']} paired episodes of {meta['duration']} s, "
+             f"residual scale {meta['residual_scale']} N)", "",
              "| agent | mean RMSE [m] (crash = 5 m) | crash rate | RMSE gain vs baseline "
              "[m], 95% CI |", "|---|---|---|---|",
              f"| geometric (zero residual) | {s['baseline']['rmse_mean']:.4f} | "
              f"{s['baseline']['crash_rate']:.2f} | - |"]
-    for arm in ("with_estimate", "without_estimate"):
+    for arm in ARMS:
         a = s[arm]
         lines.append(f"| PPO {arm.replace('_', ' ')} | {a['rmse_mean']:.4f} | "
                      f"{a['crash_rate']:.2f} | {ci(a['improvement_vs_baseline'], a['ci95'])} "
                      f"(over {a['ci_over']}) |")
+    r = s["estimate_aware_reference"]
+    lines.append(f"| (reference) estimate-aware allocation, same residual bound | "
+                 f"{r['rmse_mean']:.4f} | {r['crash_rate']:.2f} | "
+                 f"{ci(r['improvement_vs_baseline'], r['ci95'])} (over episodes) |")
     w = s["with_minus_without"]
     lines += ["", f"With vs without the estimate (RMSE_without - RMSE_with, paired): "
-              f"{ci(w['improvement'], w['ci95'])} m (over {w['ci_over']}).", ""]
+              f"{ci(w['improvement'], w['ci95'])} m (over {w['ci_over']}).", "",
+              "Per-seed gains vs baseline [m]: " + "; ".join(
+                  f"{arm}: " + ", ".join(f"{g:+.4f}" for g in s[arm]["per_seed_improvement"])
+                  for arm in ARMS), "", "Training time per run (wall / CPU s): " + ", ".join(
+                  f"{k} {v['wall_seconds']:.0f}/{v['cpu_seconds']:.0f}"
+                  for k, v in meta["train_times"].items()), ""]
     return "\n".join(lines) + "\n"
 
 

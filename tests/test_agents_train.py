@@ -110,3 +110,42 @@ def test_tensorboard_missing_is_clean(tmp_path):
     cfg = replace(_tiny("ppo"), tensorboard=str(tmp_path / "tb"))
     with pytest.raises(QuadfaultError, match="tensorboard"):
         train_one(cfg, 0, tmp_path / "run", quiet=True)
+
+
+@pytest.mark.rl
+def test_vector_env_training_writes_complete_files(tmp_path):
+    """``vector_env``: PPO on the array-stepped env; every file of the run is written through
+    a rename (no temporary or scratch file is left) and loads into a single env."""
+    pytest.importorskip("torch")
+    pytest.importorskip("stable_baselines3")
+    import zipfile
+    from dataclasses import replace
+
+    from agents.train import load_agent, train_one
+
+    cfg = replace(_tiny("ppo"), vector_env=True, n_envs=2, timesteps=128, eval_freq=64)
+    model = train_one(cfg, 0, tmp_path / "run", quiet=True)
+    run = tmp_path / "run"
+    assert model.num_timesteps >= 128
+    assert type(model.get_env().venv).__name__ == "VecMonitor"
+    checkpoints = sorted(p.name for p in (run / "checkpoints").iterdir())
+    assert "model_64_steps.zip" in checkpoints and "model_vecnormalize_64_steps.pkl" in checkpoints
+    for path in [run / "best" / "best_model.zip", run / "model.zip",
+                 *(run / "checkpoints").glob("*.zip")]:
+        assert zipfile.is_zipfile(path), path
+    assert np.load(run / "evaluations.npz")["results"].shape[0] >= 2
+    leftovers = [p for p in run.rglob("*") if p.name.startswith(".")]
+    assert leftovers == []
+    assert (run / "monitor" / "monitor.csv").exists()
+    loaded, venv = load_agent(run)  # a single (non-vector) env from train_config.json
+    action, _ = loaded.predict(venv.reset(), deterministic=True)
+    assert action.shape == (1, 4) and np.all(np.abs(action) <= 1)
+
+
+def test_vector_env_rejects_other_ids(tmp_path):
+    pytest.importorskip("stable_baselines3")
+    from agents.train import TrainConfig, make_vec_env
+
+    cfg = TrainConfig(env_id="CartPole-v1", env_kwargs={}, vector_env=True)
+    with pytest.raises(ConfigError, match="QuadFault"):
+        make_vec_env(cfg, 0, 2)
