@@ -87,11 +87,14 @@ def run_one(kind: str, path: Path) -> dict:
         row["diagnosis_timing"] = _diagnose(rec, ("motor_lag",))
     elif kind == "nanodrone":
         from quadfault.importers.crazyflie import BRUSHLESS_KF
-        from quadfault.importers.flight_analysis import rotational_check
+        from quadfault.importers.flight_analysis import (effect_fit, rotational_check,
+                                                         without_calibration)
 
         speed = np.linalg.norm(rec.velocity, axis=1)
         row["speed_p95"], row["speed_max"] = float(np.percentile(speed, 95)), float(speed.max())
         row["rotational_check"] = _jsonable(rotational_check(rec, BRUSHLESS_KF).__dict__)
+        row["effect_fit"] = _jsonable(effect_fit(without_calibration(rec), ("drag", "motor_lag"),
+                                                 min_height=None).__dict__)
         row["diagnosis"] = _diagnose(rec)
         row["diagnosis_no_inertia"] = _diagnose(rec, NO_INERTIA)
     else:
@@ -162,6 +165,25 @@ def print_nanodrone(rows) -> None:
               f"{_short(c['gain_rotor'])} | {_deg(c['phase_rotor_deg'])} | "
               f"{_short(c['drag_moment_fraction'])} | "
               f"{_short([1e3 * x for x in c['drag_moment_c']])} |")
+    print("\n### drag and motor_lag fitted jointly on every flight (diagnosis library, "
+          "outside the calibration segment; held-out improvement per channel group)\n")
+    print("| flight | drag k (x, y, z) [N s/m] | sd | motor_lag tau [s] | held-out impr. "
+          "translational / angular / all |")
+    print("|---|---|---|---|---|")
+    ks, taus = [], []
+    for r in rows:
+        e = r["effect_fit"]
+        (k, tau), (ksd, tsd) = e["x"], e["sd"]
+        imp = e["improvement"]
+        ks.append(k)
+        taus.append(tau[0])
+        print(f"| {r['file']} | {_short(k)} | {_short(ksd)} | {tau[0]:.3f} +- {tsd[0]:.3f} | "
+              f"{100 * imp['translational']:.0f}% / {100 * imp['angular']:.0f}% / "
+              f"{100 * imp['all']:.0f}% |")
+    ks = np.array(ks)
+    print(f"\ndrag k over {len(ks)} flights: mean {_short(ks.mean(0))}, sd "
+          f"{_short(ks.std(0, ddof=1))} N s/m; motor_lag tau: "
+          + ", ".join(f"{t:.3f}" for t in sorted(taus)) + " s")
     for key, title in (("diagnosis", "full library"),
                        ("diagnosis_no_inertia", "library without inertia")):
         print(f"\n### diagnosis, {title}\n")
