@@ -11,7 +11,10 @@ reference starts scoring at its first full window):
   level, then dilated by +-0.03 s (cross-coupling into healthy motors);
   ``None`` for a run without fault windows;
 * ``excess_spike`` (ours) = that spike minus the 99.9th percentile of ``|e_m|`` outside every
-  fault window: how much the transient exceeds the estimator's ordinary noise.
+  fault window: how much the transient exceeds the estimator's ordinary noise;
+* ``coverage`` (ours) = the fraction of scored estimates with ``|e_m| <= sd_m`` (rows with a
+  finite ``sd``): about 0.68 for an honest Gaussian one-sigma, near 1 for a pessimistic one,
+  lower for an optimistic one; ``None`` when the series has no ``sd``.
 
 Alignment: ``align="end"`` (default) compares each estimate with the truth at its own ``t``,
 the newest sample it used. ``align="reference"`` compares with the truth at the window start
@@ -51,6 +54,7 @@ class Score:
         excess_spike: per motor, like ``spike``.
         seconds: the estimator's wall time [s].
         n: number of scored estimates.
+        coverage: per motor, fraction of estimates with ``|e| <= sd`` (None without sd).
     """
 
     rmse: tuple
@@ -59,6 +63,7 @@ class Score:
     excess_spike: tuple | None
     seconds: float
     n: int
+    coverage: tuple | None = None
 
     def to_contract(self) -> dict:
         """The ``metrics.json`` entry (CONTRACT.md sec. 2) plus ``excess_spike`` and ``n``."""
@@ -66,7 +71,8 @@ class Score:
                 "spike": None if self.spike is None else list(self.spike),
                 "seconds": float(self.seconds),
                 "excess_spike": None if self.excess_spike is None else list(self.excess_spike),
-                "n": self.n}
+                "n": self.n,
+                "coverage": None if self.coverage is None else list(self.coverage)}
 
 
 def fault_windows(recording: Recording) -> list[tuple[int, float, float]]:
@@ -168,7 +174,19 @@ def score(recording: Recording, est: EstimateSeries, *, align: str = "end",
             excess.append(peak - base)
         spike, excess = tuple(spike), tuple(excess)
     return Score(tuple(map(float, rmse)), tuple(map(float, std)), spike, excess,
-                 float(est.seconds), int(keep.sum()))
+                 float(est.seconds), int(keep.sum()), _coverage(est, e, keep))
+
+
+def _coverage(est: EstimateSeries, e: np.ndarray, keep: np.ndarray) -> tuple | None:
+    """Per motor, the fraction of rows with a finite ``sd`` where ``|e| <= sd``."""
+    if est.sd is None:
+        return None
+    sd = np.asarray(est.sd, dtype=float)[keep]
+    out = []
+    for m in range(e.shape[1]):
+        ok = np.isfinite(sd[:, m])
+        out.append(float(np.mean(np.abs(e[ok, m]) <= sd[ok, m])) if ok.any() else None)
+    return tuple(out)
 
 
 def mean_or_none(values) -> float | None:

@@ -333,14 +333,15 @@ def table(scenarios: dict) -> str:
     """Markdown table: motor-averaged RMSE, std, spike (and excess spike), wall time."""
     from estimators.metrics import mean_or_none
 
-    lines = ["| scenario | estimator | RMSE | std | spike | excess spike | seconds |",
-             "|---|---|---|---|---|---|---|"]
+    lines = ["| scenario | estimator | RMSE | std | spike | excess spike | 1-sigma coverage "
+             "| seconds |", "|---|---|---|---|---|---|---|---|"]
     for name, per in scenarios.items():
         for est in (k for k in ESTIMATOR_KEYS if k in per):
             s = per[est]
             lines.append(f"| {name} | {est} | {_fmt(np.mean(s['rmse']))} | "
                          f"{_fmt(np.mean(s['std']))} | {_fmt(mean_or_none(s['spike']))} | "
-                         f"{_fmt(mean_or_none(s['excess_spike']))} | {s['seconds']:.2f} |")
+                         f"{_fmt(mean_or_none(s['excess_spike']))} | "
+                         f"{_fmt(mean_or_none(s.get('coverage')), 2)} | {s['seconds']:.2f} |")
     return "\n".join(lines)
 
 

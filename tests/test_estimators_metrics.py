@@ -131,3 +131,21 @@ def test_bad_input_is_a_clear_error():
     with pytest.raises(ConfigError, match="align"):
         score(_recording(np.ones((100, 4))), _series(_recording(np.ones((100, 4))),
                                                      np.ones((100, 4))), align="start")
+
+
+def test_coverage_counts_errors_within_one_sigma():
+    n = 1000
+    truth = np.ones((n, 4))
+    rec = _recording(truth)
+    err = np.tile(np.where(np.arange(n) % 4 == 0, 0.2, 0.05)[:, None], (1, 4))
+    err[:, 3] *= -1  # the sign does not matter
+    s = _series(rec, truth - err)
+    assert score(rec, s).coverage is None  # no sd
+    sd = np.full((n, 4), 0.1)
+    sd[:10, 2] = np.nan  # rows without sd are not counted
+    s = EstimateSeries(t=rec.t.copy(), eta=truth - err, sd=sd, status=np.array(["ok"] * n),
+                       estimator="test", config={}, seconds=0.0)
+    cov = score(rec, s).coverage
+    assert cov[0] == pytest.approx(0.75) and cov[3] == pytest.approx(0.75)
+    assert cov[2] == pytest.approx(np.mean(np.arange(10, n) % 4 != 0))
+    assert score(rec, s).to_contract()["coverage"] == list(cov)
