@@ -243,18 +243,20 @@ def _rk4(p0, v0, R0, w0, thrust, moment, body, dt):
 
 # --- scalar kernels: motors.py + Vehicle.wrench ----------------------------------------------
 @njit
-def _motor_wrench(f_cmd, eta, saturate, sigma, eps, e0, body):
+def _motor_wrench(f_cmd, eta, row, saturate, sigma, eps, e0, body):
     """Mirrors :meth:`quadfault.motors.MotorModel.apply` (eqs. 11, 13) followed by
     :meth:`quadfault.vehicle.Vehicle.wrench`: collective thrust T [N] and moment (3-tuple,
-    [N m]) of the rotor thrusts ``eta_i clip(f_cmd_i) exp(sigma eps[e0 + i])`` (the normals
-    ``eps`` are read only when ``sigma > 0``)."""
+    [N m]) of the rotor thrusts ``eta[row, i] clip(f_cmd_i) exp(sigma eps[e0 + i])`` (the
+    normals ``eps`` are read only when ``sigma > 0``). Arrays are indexed element by element:
+    a sliced view per step would touch the parent's reference count, an atomic operation
+    that threads of the parallel kernel would contend for."""
     A = body.allocation
     T = m0 = m1 = m2 = 0.0
     for i in range(f_cmd.shape[0]):
         fi = max(f_cmd[i], 0.0)
         if saturate:
             fi = min(fi, body.max_thrust)
-        fi = fi * eta[i]
+        fi = fi * eta[row, i]
         if sigma > 0:
             fi = fi * math.exp(sigma * eps[e0 + i])
         T += A[0, i] * fi
@@ -265,16 +267,16 @@ def _motor_wrench(f_cmd, eta, saturate, sigma, eps, e0, body):
 
 
 @njit
-def plant_step(p, v, R, w, f_cmd, eta, saturate, sigma, eps, e0, body, dt):
+def plant_step(p, v, R, w, f_cmd, eta, row, saturate, sigma, eps, e0, body, dt):
     """One physics step of one vehicle -- :meth:`quadfault.plant.Plant.step` without effects:
     the motor model (eqs. 11, 13), the allocation, then RKMK4 (eqs. 1-4) with the wrench held.
 
     ``p, v, w`` are 3-tuples, ``R`` a row-major 9-tuple; ``f_cmd`` (n,) the held commands
-    [N], ``eta`` (n,) the efficiencies, ``sigma`` the thrust-noise std with its normals at
-    ``eps[e0:e0 + n]``. Returns ``(p, v, R, w, T, M)``: the new state and the applied wrench.
+    [N], ``eta[row]`` (n,) the efficiencies, ``sigma`` the thrust-noise std with its normals
+    at ``eps[e0:e0 + n]``. Returns ``(p, v, R, w, T, M)``: the new state and the applied wrench.
     Both :func:`run_steps` and :func:`step_batch` call this function.
     """
-    T, M = _motor_wrench(f_cmd, eta, saturate, sigma, eps, e0, body)
+    T, M = _motor_wrench(f_cmd, eta, row, saturate, sigma, eps, e0, body)
     p1, v1, R1, w1 = _rk4(p, v, R, w, T, M, body, dt)
     return p1, v1, R1, w1, T, M
 
@@ -330,7 +332,7 @@ def _controller(p, v, R, w, ref, gains, body, out):
     if gains.acceleration_feedforward:
         m = body.mass
         f_n = (f_n[0] - m * ref[2, 0], f_n[1] - m * ref[2, 1], f_n[2] - m * ref[2, 2])
-    Rd = _desired_attitude(f_n, _vec(ref[3]), gains.normalize_b2d)
+    Rd = _desired_attitude(f_n, (ref[3, 0], ref[3, 1], ref[3, 2]), gains.normalize_b2d)
     thrust = f_n[0] * R[2] + f_n[1] * R[5] + f_n[2] * R[8]
     # A = Rd^T R; e_R = vee(A - A^T) / 2 (eq. 10); R^T Rd = A^T
     A = _mul((Rd[0], Rd[3], Rd[6], Rd[1], Rd[4], Rd[7], Rd[2], Rd[5], Rd[8]), R)
@@ -341,7 +343,7 @@ def _controller(p, v, R, w, ref, gains, body, out):
     Jw = _mv(J, w)
     if gains.angular_feedforward:
         RtRd = (A[0], A[3], A[6], A[1], A[4], A[7], A[2], A[5], A[8])
-        w_d, w_dot_d = _vec(ref[4]), _vec(ref[5])
+        w_d, w_dot_d = (ref[4, 0], ref[4, 1], ref[4, 2]), (ref[5, 0], ref[5, 1], ref[5, 2])
         w_d_body = (RtRd[0] * w_d[0] + RtRd[1] * w_d[1] + RtRd[2] * w_d[2],
                     RtRd[3] * w_d[0] + RtRd[4] * w_d[1] + RtRd[5] * w_d[2],
                     RtRd[6] * w_d[0] + RtRd[7] * w_d[1] + RtRd[8] * w_d[2])
@@ -388,12 +390,13 @@ def _advance(i, p, v, R, w, f_cmd, eta, sigma, z, z_off, saturate, body, dt,
              control_every, refs, gains, nominal):
     """Vehicle ``i`` of :func:`step_batch`: ``eta.shape[1]`` substeps, in place."""
     pi, vi, Ri, wi = _vec(p[i]), _vec(v[i]), _mat(R[i]), _vec(w[i])
-    fi, zi = f_cmd[i], z[i]
+    fi, zi, ei, si = f_cmd[i], z[i], eta[i], sigma[i]  # views made once per vehicle and call
+    ri = refs[i] if control_every > 0 else refs[0]
     for j in range(eta.shape[1]):
         if control_every > 0 and j % control_every == 0:
-            _controller(pi, vi, Ri, wi, refs[i], gains, nominal, fi)
-        pi, vi, Ri, wi, _, _ = plant_step(pi, vi, Ri, wi, fi, eta[i, j], saturate, sigma[i],
-                                          zi, z_off[i, j], body, dt)
+            _controller(pi, vi, Ri, wi, ri, gains, nominal, fi)
+        pi, vi, Ri, wi, _, _ = plant_step(pi, vi, Ri, wi, fi, ei, j, saturate, si, zi,
+                                          z_off[i, j], body, dt)
     _store_vec(p[i], pi)
     _store_vec(v[i], vi)
     _store_mat(R[i], Ri)
@@ -738,11 +741,11 @@ def run_steps(k0, k1, reference, decimation, dt, carry, lag, f_cmd, sf_meas,
         # Plant.step: produced thrust, wrench, accelerometer truth, integration
         R_before = R
         if reference:
-            thrust, moment = _motor_wrench(f_cmd, eta[k], saturate, thrust_noise, row, e_off,
+            thrust, moment = _motor_wrench(f_cmd, eta, k, saturate, thrust_noise, row, e_off,
                                            plant)
             reference_euler_apply(lag, thrust, _arr3(moment), _arr33(R))
         else:
-            p, v, R, w, thrust, moment = plant_step(p, v, R, w, f_cmd, eta[k], saturate,
+            p, v, R, w, thrust, moment = plant_step(p, v, R, w, f_cmd, eta, k, saturate,
                                                     thrust_noise, row, e_off, plant, dt)
         if record_accel:
             sf = _specific_force(R_before, _tacc(R_before, thrust, plant), plant.gravity)
