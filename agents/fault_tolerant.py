@@ -81,10 +81,18 @@ def bounded_heading(R, b1d, max_error: float):
     return np.array([math.cos(psi_d), math.sin(psi_d), 0.0])
 
 
-class GeometricBaseline:
-    """The plain geometric controller: nominal allocation, blind to motor faults."""
+class GeometricWrenchController:
+    """What both controllers share: the geometric controller (eqs. 9-10) on the *nominal*
+    vehicle computes the desired wrench ``w = (T, M)``; a subclass turns it into rotor
+    commands (:meth:`_allocate`) and may adjust the reference first (:meth:`_reference`).
 
-    name = "geometric"
+    Args:
+        vehicle: the nominal vehicle.
+        trajectory: the reference.
+        config: geometric controller options (gains, feed-forward).
+    """
+
+    name = "geometric-wrench"
 
     def __init__(self, vehicle: Vehicle, trajectory: Trajectory,
                  config: ControllerConfig | None = None):
@@ -98,15 +106,36 @@ class GeometricBaseline:
     def reset(self) -> None:
         """No internal state."""
 
+    def _reference(self, t, R, reference: FlatOutput | None):
+        """``(reference, clamped)``: the reference the geometric controller tracks (``None``:
+        the trajectory's) and whether it was changed."""
+        return reference, False
+
+    def _allocate(self, wrench: np.ndarray, eta_hat) -> tuple[np.ndarray, str]:
+        """Rotor commands [N] within ``[0, f_max]`` for ``wrench`` and the allocation mode."""
+        raise NotImplementedError
+
     def command(self, t, p, v, R, w, eta_hat=None, reference: FlatOutput | None = None,
                 feedforward=None) -> ControlStep:
+        """Rotor commands [N] for the measured state and the efficiency estimate ``eta_hat``
+        (``None`` = nominal)."""
+        reference, clamped = self._reference(t, R, reference)
         out = self.geometric.compute(t, p, v, R, w, reference, feedforward)
-        f = self.vehicle.rotor_thrust(_wrench(out))
-        f = np.clip(f, 0.0, self.vehicle.rotor_max_thrust)
-        return ControlStep(f, out, EXACT, False)
+        f, mode = self._allocate(_wrench(out), eta_hat)
+        return ControlStep(f, out, mode, clamped)
 
 
-class EstimateAwareController:
+class GeometricBaseline(GeometricWrenchController):
+    """The plain geometric controller: nominal allocation (eq. 12), blind to motor faults."""
+
+    name = "geometric"
+
+    def _allocate(self, wrench, eta_hat):
+        f = self.vehicle.rotor_thrust(wrench)
+        return np.clip(f, 0.0, self.vehicle.rotor_max_thrust), EXACT
+
+
+class EstimateAwareController(GeometricWrenchController):
     """Geometric control with estimate-aware, saturation-aware allocation.
 
     Args:
@@ -121,32 +150,20 @@ class EstimateAwareController:
     def __init__(self, vehicle: Vehicle, trajectory: Trajectory,
                  config: ControllerConfig | None = None,
                  fault_tolerant: FaultTolerantConfig | None = None):
-        self.vehicle = vehicle
-        self.geometric = GeometricController(vehicle, trajectory, config)
+        super().__init__(vehicle, trajectory, config)
         self.ft = fault_tolerant or FaultTolerantConfig()
         self.allocator = EstimateAwareAllocator(vehicle, self.ft.allocation)
-        self.reset()
 
-    @property
-    def trajectory(self) -> Trajectory:
-        return self.geometric.trajectory
-
-    def reset(self) -> None:
-        """No internal state."""
-
-    def command(self, t, p, v, R, w, eta_hat=None, reference: FlatOutput | None = None,
-                feedforward=None) -> ControlStep:
-        """Rotor commands [N] for the measured state and the efficiency estimate ``eta_hat``
-        (``None`` = nominal)."""
+    def _reference(self, t, R, reference):
+        if self.ft.max_heading_error is None:
+            return reference, False
         ref = self.trajectory(t) if reference is None else reference
-        clamped = False
-        if self.ft.max_heading_error is not None:
-            b1d = bounded_heading(R, ref.b1d, self.ft.max_heading_error)
-            clamped = b1d is not ref.b1d
-            reference = ref._replace(b1d=b1d)
-        out = self.geometric.compute(t, p, v, R, w, reference, feedforward)
-        res = self.allocator.allocate(_wrench(out), eta_hat)
-        return ControlStep(res.f, out, res.mode, clamped)
+        b1d = bounded_heading(R, ref.b1d, self.ft.max_heading_error)
+        return ref._replace(b1d=b1d), b1d is not ref.b1d
+
+    def _allocate(self, wrench, eta_hat):
+        res = self.allocator.allocate(wrench, eta_hat)  # A diag(eta_hat) f = w (eqs. 12-13)
+        return res.f, res.mode
 
 
 CONTROLLERS = {"geometric": GeometricBaseline, "estimate-aware": EstimateAwareController}
