@@ -237,7 +237,7 @@ def run_one(job):
     t0 = time.perf_counter()
     effects, achieved, deltas = [], [], []
     stem = None if store is None else os.path.join(store, f"case_{seed}_{i:04d}")
-    if reuse:  # the same blinded file, simulated by an earlier run with --store
+    if reuse and os.path.exists(stem + ".truth.json"):  # kept by an earlier --store run
         with open(stem + ".truth.json") as fh:
             saved = json.load(fh)
         deltas, achieved, t_sim = saved["deltas"], saved["snr"], saved["t_sim"]
@@ -387,7 +387,10 @@ def main(argv=None):
                     help="keep the blinded recordings (and their concealed truth) in DIR")
     ap.add_argument("--reuse", action="store_true",
                     help="diagnose the recordings an earlier run kept in --store DIR instead "
-                         "of simulating them again (same seed, n, rate, duration)")
+                         "of simulating them again (same seed, rate, duration); cases not "
+                         "kept there are simulated")
+    ap.add_argument("--kept-only", action="store_true",
+                    help="with --reuse: skip the cases not kept in --store DIR")
     ap.add_argument("--timing", action="store_true",
                     help="only time one diagnosis of a 60 s log at 1 kHz (drag + motor lag)")
     args = ap.parse_args(argv)
@@ -407,6 +410,9 @@ def main(argv=None):
         return 2
     if args.store:
         os.makedirs(args.store, exist_ok=True)
+    if args.reuse and args.kept_only:
+        keep = [i for i in keep if os.path.exists(
+            os.path.join(args.store, f"case_{args.seed}_{i:04d}.truth.json"))]
     jobs = [(args.seed, i, args.rate, args.duration, args.store, args.reuse) for i in keep]
     args.n = len(jobs)
     rows = []

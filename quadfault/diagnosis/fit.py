@@ -179,8 +179,10 @@ def solve_linear(lin: Linearisation, measured, scale, mask, x_start, lo, hi,
         r = z - A @ x
         w = 1.0 / np.sqrt(1.0 + (r / f_scale) ** 2) if loss == "soft_l1" else np.ones_like(r)
         Aw = A * w[:, None]
-        H = A.T @ Aw
-        g = Aw.T @ z
+        if p < 3:  # BLAS' gemm/gemv on a (N, 1) operand is pathologically slow here
+            H, g = np.einsum("ij,ik->jk", A, Aw), np.einsum("ij,i->j", Aw, z)
+        else:
+            H, g = A.T @ Aw, Aw.T @ z
         H[np.diag_indices(p)] += 1e-12 * max(float(np.max(np.diag(H))), 1e-300)
         try:
             x_new = np.linalg.solve(H, g)
