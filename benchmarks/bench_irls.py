@@ -4,6 +4,11 @@ Measures, side by side in one run on the same recording:
 
 * window updates per second of the numpy path and of the compiled numba path (``run``,
   one window per sample), and their ratio; compile/cache-load time is reported apart;
+* the compiled EKF against the compiled IRLS on the same recording (updates/s, alternating
+  repeats, median), and their ratio (target: EKF at least as fast);
+* the batched IRLS (``estimators.batched.BatchedIRLS``, N vehicles per call, target 100,000
+  window updates/s at N = 4096) against the single compiled estimator's online ``update`` and
+  offline ``run`` in the same run;
 * with ``--accuracy``: RMSE / std / spike per scenario (degradation, abrupt, combined, 80 s,
   sigma_f = 0.07) with the numba path, scored by :mod:`estimators.metrics`.
 
@@ -11,6 +16,7 @@ Simulated recordings are cached in ``--cache`` (default /tmp/quadfault-bench), s
 flight takes a while on the numpy simulator.
 
     python benchmarks/bench_irls.py                     # speed on 80 s combined
+    python benchmarks/bench_irls.py --duration 20 --batch 4096   # shorter, batch size
     python benchmarks/bench_irls.py --accuracy          # + accuracy table
     python benchmarks/bench_irls.py --integrator reference --accuracy
 """
@@ -74,6 +80,94 @@ def speed(rec, numpy_windows: int) -> None:
     print(f"max |numba - numpy| over the first {numpy_windows} windows: {diff:.2e}")
 
 
+def _median_rate(fn, count: int, repeat: int):
+    """Median over ``repeat`` calls of ``(count / wall s, count / CPU s)``."""
+    rates = []
+    for _ in range(repeat):
+        _, wall, cpu = _timed(fn)
+        rates.append((count / wall, count / max(cpu, 1e-9)))
+    walls, cpus = zip(*rates)
+    return float(np.median(walls)), float(np.median(cpus))
+
+
+def ekf_vs_irls(rec, repeat: int) -> None:
+    """Compiled EKF and compiled IRLS on the same recording, alternating, median rates."""
+    from estimators.ekf import EKFConfig, MotorEfficiencyEKF
+
+    if not numba_available():
+        print("ekf vs irls: numba not installed")
+        return
+    rec = rec.without_truth()
+    ekf = MotorEfficiencyEKF(rec.vehicle, EKFConfig(backend="numba"))
+    irls = SlidingWindowIRLS(rec.vehicle, IRLSConfig(backend="numba"))
+    ekf.run(rec.slice(0, 30))  # compile / load the cache
+    irls.run(rec.slice(0, 30))
+    res = {"ekf": [], "irls": []}
+    for _ in range(repeat):  # alternate, so both see the same machine load
+        for name, est in (("ekf", ekf), ("irls", irls)):
+            res[name].append(_median_rate(lambda e=est: e.run(rec), len(rec), 1))
+    print(f"\ncompiled EKF vs compiled IRLS, run() on {len(rec)} samples, median of {repeat} "
+          f"alternating runs (load average {os.getloadavg()[0]:.1f})")
+    med = {k: (np.median([r[0] for r in v]), np.median([r[1] for r in v])) for k, v in res.items()}
+    for name in ("ekf", "irls"):
+        print(f"{name:5s}: {med[name][0]:10.0f} updates/s wall, {med[name][1]:10.0f} per CPU-s")
+    print(f"ratio EKF / IRLS: {med['ekf'][0] / med['irls'][0]:.2f} (wall), "
+          f"{med['ekf'][1] / med['irls'][1]:.2f} (CPU)")
+
+
+def batched(rec, N: int, updates: int) -> None:
+    """BatchedIRLS at N vehicles vs the single compiled estimator, same samples."""
+    from estimators.base import samples
+    from estimators.batched import CODE, BatchedIRLS
+
+    if not numba_available():
+        print("batched: numba not installed")
+        return
+    import numba
+
+    rec = rec.without_truth()
+    rows = list(samples(rec.slice(0, updates + 12)))
+    rng = np.random.default_rng(0)
+    def tile(x):
+        return np.broadcast_to(np.asarray(x, float), (N,) + np.shape(x))
+
+    batches = [(np.full(N, s.t), tile(s.p) + 1e-4 * rng.standard_normal((N, 3)), tile(s.v),
+                tile(s.R), tile(s.w), tile(s.f)) for s in rows]
+    est = BatchedIRLS(rec.vehicle, N, IRLSConfig(backend="numba"))
+    for b in batches[:12]:  # fill the windows (and compile or load the cache)
+        est.update(*b)
+    solved = [0]
+
+    def run_batch():
+        for b in batches[12:]:
+            out = est.update(*b)
+            solved[0] += int(np.sum((out.status == CODE['ok']) | (out.status == CODE['max_iter'])))
+
+    count = N * (len(batches) - 12)
+    bw, bc = _median_rate(run_batch, count, 1)
+    single = SlidingWindowIRLS(rec.vehicle, IRLSConfig(backend="numba"))
+    one = rows[:]  # the online update of one estimator over the same samples, repeated
+
+    def run_single():
+        for _ in range(max(1, 4096 // len(one))):
+            single.reset()
+            for s in one:
+                single.update(s)
+
+    for s in one:  # compile / load the cache outside the timing
+        single.update(s)
+    n_single = max(1, 4096 // len(one)) * (len(one) - 9)
+    sw, sc = _median_rate(run_single, n_single, 1)
+    ow, oc = _median_rate(lambda: single.run(rec), len(rec) - 9, 1)
+    print(f"\nbatched IRLS, N = {N}, {len(batches) - 12} updates, {numba.get_num_threads()} numba "
+          f"threads (load average {os.getloadavg()[0]:.1f}); {solved[0] / count:.0%} solved ok")
+    print(f"batched update : {bw:10.0f} window updates/s wall, {bc:10.0f} per CPU-s")
+    print(f"single update(): {sw:10.0f} window updates/s wall, {sc:10.0f} per CPU-s (online)")
+    print(f"single run()   : {ow:10.0f} window updates/s wall, {oc:10.0f} per CPU-s (offline)")
+    print(f"ratio batched / single online: {bw / sw:.1f}x wall, {bc / sc:.1f}x per CPU-s; "
+          f"batched / single offline: {bw / ow:.1f}x wall, {bc / oc:.1f}x per CPU-s")
+
+
 def accuracy(args) -> None:
     from estimators.metrics import score
 
@@ -100,9 +194,16 @@ def main() -> None:
     p.add_argument("--numpy-windows", type=int, default=2000)
     p.add_argument("--cache", type=Path, default=Path("/tmp/quadfault-bench"))
     p.add_argument("--accuracy", action="store_true")
+    p.add_argument("--batch", type=int, default=4096, help="vehicles of the batched IRLS "
+                   "(0: skip)")
+    p.add_argument("--batch-updates", type=int, default=30)
+    p.add_argument("--repeat", type=int, default=3, help="alternating EKF/IRLS runs")
     args = p.parse_args()
     rec = cached_flight(args.scenario, args.duration, args.integrator, args.cache, args.seed)
     speed(rec, args.numpy_windows)
+    ekf_vs_irls(rec, args.repeat)
+    if args.batch > 0:
+        batched(rec, args.batch, args.batch_updates)
     if args.accuracy:
         accuracy(args)
 

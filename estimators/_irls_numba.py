@@ -44,7 +44,14 @@ _N_MAT = 6
 _E, _DEV, _TMP = range(3)
 
 
-def kernel_parameters(cfg, m: int):
+class KernelParams(tuple):
+    """``(fp, ip)`` of a configuration; :func:`solve_window_numba` keeps its window workspace
+    here, so an estimator that caches its parameters reuses one workspace."""
+
+    workspace = None
+
+
+def kernel_parameters(cfg, m: int) -> KernelParams:
     """Pack an :class:`~estimators.irls.IRLSConfig` into the kernels' float/int arrays."""
     from estimators.irls import _START_MARGIN
 
@@ -57,7 +64,7 @@ def kernel_parameters(cfg, m: int):
     paper = cfg.scaling == "paper"
     ip = np.array([cfg.max_irls, ipm.max_iter, int(cfg.hard_drop), int(not paper), int(paper)],
                   dtype=np.int64)
-    return fp, ip
+    return KernelParams((fp, ip))
 
 
 @njit(cache=True)
@@ -565,8 +572,14 @@ def solve_window_numba(c, b, H, x_prev, cfg, params=None):
     from estimators.irls import _diag
 
     m, n = np.shape(b)
-    fp, ip = kernel_parameters(cfg, m) if params is None else params
-    V, M, S, iters, w, nohist = workspace(m, n, cfg.max_irls)
+    params = kernel_parameters(cfg, m) if params is None else params
+    fp, ip = params
+    ws = getattr(params, "workspace", None)
+    if ws is None or ws[0].shape[1] != n or ws[2].shape[1] != m:
+        ws = workspace(m, n, int(ip[0]))
+        if isinstance(params, KernelParams):
+            params.workspace = ws
+    V, M, S, iters, w, nohist = ws
     x_out = np.empty(n)
     sd_out = np.empty(n)
     code, rounds, cond = _solve_window_into(np.ascontiguousarray(c, dtype=float),
@@ -582,7 +595,7 @@ def solve_window_numba(c, b, H, x_prev, cfg, params=None):
         message = f"interior point stopped at {cfg.ipm.max_iter} iterations"
     elif code == _ILL:
         message = f"cond(J^T G J) = {cond:.3g} > {cfg.cond_max:g}"
-    diag = _diag(status, message, [int(i) for i in iters[:rounds]], w, cond, None)
+    diag = _diag(status, message, [int(i) for i in iters[:rounds]], w.copy(), cond, None)
     if code in (_OK, _MAXIT):
         return x_out, sd_out, diag
     return np.asarray(x_prev, dtype=float), None, diag

@@ -85,3 +85,25 @@ def test_compiled_segment_terms_equal_numpy(fault_flight):
         np.testing.assert_allclose(bi, b[i], rtol=1e-9, atol=1e-18)
         np.testing.assert_allclose(Hi, H[i], rtol=1e-9, atol=1e-18)
         assert Ti == pytest.approx(models.thrust[i], rel=1e-12)
+
+
+def test_compiled_interior_point_is_the_python_one():
+    """The compiled kernel runs estimators.ipm.ipm4 itself: same iterates as on Python floats."""
+    pytest.importorskip("numba")
+    from estimators._irls_numba import _ipm4
+    from estimators.ipm import IPMSettings, ipm4
+
+    s = IPMSettings()
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        J = rng.standard_normal((90, 4)) * 0.05
+        H = J.T @ J * 50.0 + 5e-3 * np.eye(4)
+        q = J.T @ (-J @ rng.uniform(-0.3, 1.3, 4)) * 50.0
+        x0 = rng.uniform(0.05, 0.95, 4)
+        args = (-0.001, 1.001)
+        consts = (s.mu, s.alpha, s.beta, s.step_fraction, s.backtrack_eps, s.min_step,
+                  s.tol_feas, s.tol_gap, s.max_iter)
+        py = ipm4(H.ravel().tolist(), q.tolist(), *args, x0.tolist(), *consts, np.empty((0, 7)))
+        nb = _ipm4(tuple(H.ravel()), tuple(q), *args, tuple(x0), *consts, np.empty((0, 7)))
+        assert py[12:] == nb[12:]  # iterations and convergence flag
+        np.testing.assert_allclose(nb[:12], py[:12], rtol=1e-12, atol=1e-15)
