@@ -58,3 +58,31 @@ def test_bad_backend_and_workers_are_config_errors(capsys):
         run_sweep(_square, [1], workers=0)
     assert main(["blinded", "--n", "0"]) == 2
     assert "error:" in capsys.readouterr().err
+
+
+def test_sweep_cli_evaluates_through_the_backend_parameter(tmp_path, monkeypatch):
+    """``python -m agents.sweep evaluate`` hands --backend/--workers to agents.evaluate.evaluate
+    (no patching of the module): the same results file as ``quadfault evaluate``."""
+    import json
+
+    import agents.evaluate as ev
+    import agents.sweep as sweep
+
+    seen = []
+    original = ev.evaluate
+
+    def spy(*args, **kwargs):
+        seen.append((kwargs.get("backend"), kwargs.get("workers")))
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(ev, "evaluate", spy)
+    common = ["--agents", "geometric", "--suite", "quick", "--scenarios", "abrupt_20s",
+              "--seeds", "0", "--duration", "0.3", "--no-plots", "--quiet"]
+    assert sweep.main(["evaluate", *common, "--out", str(tmp_path / "a"), "--backend", "serial",
+                       "--workers", "1"]) == 0
+    assert seen == [("serial", 1)]
+    from quadfault.cli import main as cli_main
+
+    assert cli_main(["evaluate", *common, "--out", str(tmp_path / "b")]) == 0
+    runs = [json.loads((tmp_path / d / "results.json").read_text())["runs"] for d in "ab"]
+    assert runs[0] == runs[1] and len(runs[0]) == 1
