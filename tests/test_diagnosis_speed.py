@@ -142,3 +142,15 @@ def test_heavy_vehicle_thrust_noise_is_no_inertia_false_alarm():
     res = Diagnosis().fit(rec)
     assert "inertia" not in res.effect_names
     assert res.verdict == "consistent"
+
+
+@pytest.mark.parametrize("n,window", [(600, 25), (31, 31), (300, 5)])
+def test_numpy_savgol_matches_scipy(n, window):
+    from scipy.signal import savgol_coeffs as ref_coeffs, savgol_filter as ref_filter
+
+    from quadfault.diagnosis.locate import savgol_coeffs, savgol_filter
+
+    z = np.random.default_rng(n).normal(size=(n, 6)).cumsum(axis=0)
+    np.testing.assert_allclose(savgol_filter(z, window), ref_filter(z, window, 2, axis=0, mode="interp"),
+                               atol=1e-10)
+    np.testing.assert_allclose(savgol_coeffs(window), ref_coeffs(window, 2), atol=1e-14)

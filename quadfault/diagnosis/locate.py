@@ -1,7 +1,9 @@
 """Locate the mismatch: time intervals per channel and the regime that explains it.
 
 The normalised baseline residual of each channel is smoothed over about 0.5 s
-(Savitzky-Golay, ``scipy.signal.savgol_filter``, order 2); an interval is reported where the
+(Savitzky-Golay, order 2, edges by polynomial fit: ``scipy.signal.savgol_filter`` with
+``mode="interp"``, written here in numpy to spare the diagnosis the ~1 s import of
+``scipy.signal``; the tests cross-check it); an interval is reported where the
 smoothed residual exceeds 4 times the noise it would show on pure noise (the filter's noise
 gain). For every channel whose normalised RMS exceeds 1.5, each regime variable (airspeed,
 height above z = 0, thrust level T / mg, command rate, tilt, body rate) is correlated with the
@@ -12,13 +14,34 @@ RMS in five quantile bins of that variable as evidence.
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import savgol_coeffs, savgol_filter
 
 from quadfault.diagnosis.residuals import Replay, channel_unit
 from quadfault.diagnosis.result import Interval
 
 REGIME_UNITS = {"airspeed": "m/s", "height": "m", "thrust_level": "T/(m g)",
                 "command_rate": "1/s", "tilt": "deg", "body_rate": "rad/s"}
+
+
+def savgol_coeffs(window: int, order: int = 2) -> np.ndarray:
+    """Smoothing weights of a centred Savitzky-Golay window (odd ``window``)."""
+    x = np.arange(window, dtype=float) - window // 2
+    return np.linalg.pinv(np.vander(x, order + 1, increasing=True))[0]
+
+
+def savgol_filter(z: np.ndarray, window: int, order: int = 2) -> np.ndarray:
+    """Savitzky-Golay smoothing of ``z`` (n, k) along axis 0 (odd ``window`` <= n); the first
+    and last ``window // 2`` rows take the polynomial fitted to the first / last window."""
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    z = np.asarray(z, dtype=float)
+    n, h = len(z), window // 2
+    out = np.empty_like(z)
+    out[h:n - h] = sliding_window_view(z, window, axis=0) @ savgol_coeffs(window, order)
+    V = np.vander(np.arange(window, dtype=float), order + 1, increasing=True)
+    P = V @ np.linalg.pinv(V)  # fitted values of a window at each of its positions
+    out[:h] = P[:h] @ z[:window]
+    out[n - h:] = P[window - h:] @ z[n - window:]
+    return out
 
 
 def regime_variables(rp: Replay) -> dict:
@@ -63,7 +86,7 @@ def locate(rp: Replay, residual: np.ndarray, scale: np.ndarray, per_channel: int
     if win < 5:
         return [], []
     gain = float(np.sqrt(np.sum(savgol_coeffs(win, 2) ** 2)))
-    zs = savgol_filter(z, win, 2, axis=0, mode="interp")
+    zs = savgol_filter(z, win, 2)
     thresh = 4.0 * gain
     where = []
     for j, ch in enumerate(rp.channels):

@@ -106,6 +106,14 @@ def _markdown(res: DiagnosisResult, source: str) -> str:
          f"**Verdict: {res.verdict}.** Held-out residual RMS reduced by "
          f"{100 * res.model_improvement:.1f}% with the accepted effects "
          f"({res.seconds:.1f} s).", ""]
+    sc = res.scoring or {}
+    if sc.get("excluded_s"):
+        segs = ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in sc["excluded_s"])
+        L += [f"Held-out scores use {sc['scored_blocks']} of {sc['blocks']} blocks: the "
+              f"calibration segment {segs} (where the importer fitted constants) is fitted on "
+              "but never scored.", ""]
+    elif sc.get("note"):
+        L += [f"Scoring: {sc['note']}.", ""]
     L += ["## Effects", ""]
     if res.effects:
         L += ["| effect | parameters | 1-sigma | held-out improvement | explanation |",
