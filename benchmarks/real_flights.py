@@ -18,6 +18,7 @@ skips with one line when they are absent:
 
     python benchmarks/real_flights.py [--data DIR] [--only eschmann,nanodrone,crazypad]
                                       [--json OUT.json] [--force] [--quiet]
+    python benchmarks/real_flights.py --from-json OUT.json   # re-print the tables
 """
 
 from __future__ import annotations
@@ -121,7 +122,7 @@ def _fmt_effects(effects) -> str:
 
 
 def _short(v) -> str:
-    if isinstance(v, (list, tuple)):
+    if isinstance(v, (list, tuple, np.ndarray)):
         return "[" + ", ".join(f"{x:.3g}" for x in v) + "]"
     return f"{v:.3g}"
 
@@ -264,27 +265,35 @@ def main(argv=None) -> int:
     ap.add_argument("--json", type=Path, default=None, help="also write all results here")
     ap.add_argument("--force", action="store_true", help="overwrite --json")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
+    ap.add_argument("--from-json", type=Path, default=None,
+                    help="print the tables of an earlier run's --json instead of computing")
     args = ap.parse_args(argv)
     only = tuple(s.strip() for s in args.only.split(",") if s.strip())
     bad = [s for s in only if s not in DATASETS]
     if bad:
         print(f"error: unknown data set {bad[0]!r}; choose from {', '.join(DATASETS)}")
         return 2
-    if not args.data.is_dir():
+    if args.from_json is None and not args.data.is_dir():
         print(f"skipped: real data not available ({args.data} is absent)")
         return 0
     from quadfault.fileio import atomic_write_text, check_writable
     from quadfault.progress import progress_bar
 
-    if args.json is not None:
-        check_writable([args.json], force=args.force)
-    todo = jobs(args.data, only)
-    rows, t0 = [], time.perf_counter()
-    with progress_bar(total=len(todo), desc="real flights", unit="flight",
-                      disable=True if args.quiet else None) as bar:
-        for kind, path in todo:
-            rows.append(run_one(kind, path))
-            bar.update(1)
+    t0 = time.perf_counter()
+    if args.from_json is not None:  # re-print the tables of an earlier run
+        rows = [r for r in json.loads(args.from_json.read_text()) if r["kind"] in only]
+    else:
+        if args.json is not None:
+            check_writable([args.json], force=args.force)
+        todo = jobs(args.data, only)
+        rows = []
+        with progress_bar(total=len(todo), desc="real flights", unit="flight",
+                          disable=True if args.quiet else None) as bar:
+            for kind, path in todo:
+                rows.append(run_one(kind, path))
+                bar.update(1)
+        if args.json is not None:
+            atomic_write_text(args.json, json.dumps(_jsonable(rows), indent=1), force=args.force)
     by = {k: [r for r in rows if r["kind"] == k] for k in DATASETS}
     if by["eschmann"]:
         print_eschmann(by["eschmann"])
@@ -294,8 +303,6 @@ def main(argv=None) -> int:
         print_crazypad(by["crazypad"])
         print_crazypad_airframes(by["crazypad"])
     print(f"\n{len(rows)} flights in {time.perf_counter() - t0:.0f} s")
-    if args.json is not None:
-        atomic_write_text(args.json, json.dumps(_jsonable(rows), indent=1), force=args.force)
     return 0
 
 
