@@ -14,9 +14,8 @@
 * :func:`rotational_check` -- why a nominal rotational model disagrees with a log: the gain
   of measured over modelled angular acceleration in a frequency band (from the commands and,
   when logged, from the measured rotor speeds), and how much of the slow moment the model
-  cannot explain is a rotor-drag (blade-flapping) moment ``M = c T (v_body x e_z)``, i.e.
-  proportional to the thrust times the horizontal body-frame velocity.
-
+  cannot explain is a rotor-drag (blade-flapping) moment ``M = -c T (v_body x e_z)`` (body
+  FRD), i.e. proportional to the thrust times the horizontal body-frame velocity.
 * :func:`without_calibration` -- the recording without the importer's calibration segment,
   for held-out scores that never see the data a constant was fitted on.
 
