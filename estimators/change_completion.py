@@ -11,9 +11,11 @@ the pattern of ``v`` -- the cross-coupling spike of the paper's metric (about 0.
 0.355 step; the whole-window fit is not the cause: restarting the window at the true change
 gives the same error).
 
-The fix (:class:`ChangeCompletion`): when one window moves the estimate by more than
-``change_threshold`` on some motor, a change has happened. From the estimate before it
-(the anchor ``x_a``), for the next ``change_hold`` windows the estimate is
+The fix (:class:`ChangeCompletion`): when the estimate has moved by more than
+``change_threshold`` on some motor over the last ``span`` windows (the window length less
+one: a step takes several windows to pass through the robust weights), a change has
+happened. From the estimate ``span`` windows before (the anchor ``x_a``), until
+``change_hold`` windows after the last such move, the estimate is
 
     x = clip(x_a + P d + alpha* v),   d = x_raw - x_a,   P = I - v v^T,
     alpha* = argmin_alpha ||P d + alpha v||_1
@@ -63,50 +65,71 @@ class ChangeCompletion:
     """State of the change completion over a stream of window estimates (module doc).
 
     Args:
-        threshold: a window whose estimate moves by more than this on some motor starts (or
-            extends) a change [1].
+        threshold: an estimate that differs by more than this on some motor from the one
+            ``span`` windows before starts (or extends) a change [1].
         hold: windows during which the completion applies after the last such move.
         gamma: the estimator's smoothness weight (the weak direction must be below it).
         lower, upper: the box of the estimate.
+        span: windows over which a move is measured.
     """
 
-    def __init__(self, threshold: float, hold: int, gamma: float, lower: float, upper: float):
+    def __init__(self, threshold: float, hold: int, gamma: float, lower: float, upper: float,
+                 span: int = 9):
         self.threshold, self.hold, self.gamma = threshold, hold, gamma
-        self.lower, self.upper = lower, upper
-        self.reset()
+        self.lower, self.upper, self.span = lower, upper, span
+        self.reset(None)
 
-    def reset(self) -> None:
+    def reset(self, x0) -> None:
+        """Forget any change; the past ``span`` estimates are taken as ``x0``."""
         self.left = 0
         self.anchor = None
         self.v = None
         self.events = 0
+        self.history = None if x0 is None else np.repeat(
+            np.asarray(x0, dtype=float)[None], self.span, axis=0)
+        self._k = 0
+
+    @property
+    def reference(self) -> np.ndarray:
+        """The estimate ``span`` windows ago."""
+        return self.history[self._k]
+
+    def observe(self, x: np.ndarray) -> None:
+        """Record the estimate of a window (every window, solved or held)."""
+        self.history[self._k] = x
+        self._k = (self._k + 1) % self.span
+
+    def recent(self) -> np.ndarray:
+        """The last ``span`` estimates, oldest first."""
+        return np.roll(self.history, -self._k, axis=0)
 
     @property
     def active(self) -> bool:
         """True while a change is being completed."""
         return self.left > 0
 
-    def triggers(self, x_prev: np.ndarray, x_raw: np.ndarray) -> bool:
-        """Would ``x_prev -> x_raw`` start or extend a change?"""
-        return bool(np.max(np.abs(x_raw - x_prev)) > self.threshold)
+    def triggers(self, x_raw: np.ndarray) -> bool:
+        """Would the estimate ``x_raw`` start or extend a change?"""
+        return bool(np.max(np.abs(x_raw - self.reference)) > self.threshold)
 
-    def step(self, x_prev: np.ndarray, x_raw: np.ndarray, info) -> np.ndarray:
-        """The estimate to use (and feed back) for a window whose solver returned ``x_raw``
-        starting from ``x_prev``; ``info()`` gives the window's information matrix."""
-        if self.triggers(x_prev, x_raw):
+    def step(self, x_raw: np.ndarray, info) -> np.ndarray:
+        """The estimate to use (and feed back) for a window whose solver returned ``x_raw``;
+        ``info()`` gives the window's information matrix. Records the result."""
+        x = x_raw
+        if self.triggers(x_raw):
             if self.left == 0:
                 v, lam = weak_direction(info())
                 self.v = v if lam < self.gamma else None
-                self.anchor = np.array(x_prev, dtype=float)
+                self.anchor = self.reference.copy()
                 self.events += 1
             self.left = self.hold
-        if self.left == 0:
-            return x_raw
-        self.left -= 1
-        if self.v is None:
-            return x_raw
-        x = self.anchor + l1_completion(x_raw - self.anchor, self.v)
-        return np.clip(x, self.lower, self.upper)
+        if self.left > 0:
+            self.left -= 1
+            if self.v is not None:
+                x = np.clip(self.anchor + l1_completion(x_raw - self.anchor, self.v),
+                            self.lower, self.upper)
+        self.observe(x)
+        return x
 
 
 def causal_median(x: np.ndarray, length: int) -> np.ndarray:
@@ -164,6 +187,8 @@ def run_completed(c, b, H, excited, x0, completion: ChangeCompletion, run_chunk,
 
     m = c.shape[0] - excited.shape[0] + 1
     n_win, n = excited.shape[0], len(x0)
+    completion.reset(x0)
+    span = completion.span
     eta = np.empty((n_win, n))
     sd = np.full((n_win, n), np.nan)
     status = np.empty(n_win, dtype=object)
@@ -175,9 +200,11 @@ def run_completed(c, b, H, excited, x0, completion: ChangeCompletion, run_chunk,
             hi = min(k + chunk, n_win)
             e_w, s_w, st_w = run_chunk(c[k:hi + m - 1], b[k:hi + m - 1], H[k:hi + m - 1],
                                        excited[k:hi], x)
-            prev = np.vstack((x[None], e_w[:-1]))
-            jumps = np.flatnonzero(np.max(np.abs(e_w - prev), axis=1) > completion.threshold)
+            ref = np.vstack((completion.recent(), e_w))[:len(e_w)]  # span windows back
+            jumps = np.flatnonzero(np.max(np.abs(e_w - ref), axis=1) > completion.threshold)
             take = int(jumps[0]) if jumps.size else hi - k
+            for row in e_w[max(take - span, 0):take]:
+                completion.observe(row)
             if take:
                 eta[k:k + take], sd[k:k + take], status[k:k + take] = (
                     e_w[:take], s_w[:take], st_w[:take])
@@ -192,14 +219,17 @@ def run_completed(c, b, H, excited, x0, completion: ChangeCompletion, run_chunk,
                 continue
         # one window at a time: the triggering window and the hold after it
         sl = slice(k, k + m)
+        solved = False
         if excited[k]:
             x_raw, s_raw, diag = solve_one(c[sl], b[sl], H[sl], x)
             if s_raw is not None:
-                x = completion.step(x, x_raw, lambda: window_info(H[sl], diag.weights))
-                s = s_raw
+                x = completion.step(x_raw, lambda: window_info(H[sl], diag.weights))
+                s, solved = s_raw, True
             status[k] = diag.status
         else:
             status[k] = STATUS_NO_EXCITATION
+        if not solved:
+            completion.observe(x)
         eta[k], sd[k] = x, s
         k += 1
     return eta, sd, status

@@ -70,8 +70,9 @@ class IRLSConfig:
             motor looks weaker than it is). ``False`` = the reference code (no clipping).
         record_history: keep per-round KKT histories in the diagnostics (slower; uses numpy).
         backend: "auto" (numba when importable), "numpy" or "numba"; same results.
-        change_completion: beyond the paper (off = the paper/reference): when a window moves
-            the estimate by more than ``change_threshold`` [1] on some motor, complete the
+        change_completion: beyond the paper (off = the paper/reference): when the estimate
+            moves by more than ``change_threshold`` [1] on some motor over ``window - 1``
+            windows, complete the
             change's weak-direction (yaw-differential) component by the sparsest
             (single-motor) change for the next ``change_hold`` windows instead of leaving it
             to the smoothness prior (:mod:`estimators.change_completion`, docs/irls.md).
@@ -106,7 +107,7 @@ class IRLSConfig:
     record_history: bool = False
     backend: str = "auto"
     change_completion: bool = False
-    change_threshold: float = 0.1
+    change_threshold: float = 0.2
     change_hold: int = 20
     output_median: int = 1
 
@@ -347,7 +348,8 @@ class SlidingWindowIRLS:
         self._count = 0
         cfg = self.config
         self._completion = ChangeCompletion(cfg.change_threshold, cfg.change_hold, cfg.gamma,
-                                            cfg.lower, cfg.upper)
+                                            cfg.lower, cfg.upper, span=m)
+        self._completion.reset(eta)
         self._median = CausalMedian(cfg.output_median)
 
     def _segment_terms(self, a: Sample, z: Sample):
@@ -407,6 +409,7 @@ class SlidingWindowIRLS:
             return self._keep(t, STATUS_WARMUP)
         c, b, H = self._c, self._b, self._H
         if self._thrust.mean() < self.config.min_thrust:
+            self._completion.observe(self._eta)
             return self._keep(t, STATUS_NO_EXCITATION, "commanded thrust ~ 0 in the window")
         if self.backend == "numba":
             from estimators._irls_numba import kernel_parameters, solve_window_numba
@@ -419,11 +422,12 @@ class SlidingWindowIRLS:
             eta, sd, diag = solve_window(c, b, H, self._eta, self.config,
                                          self.config.record_history)
         if sd is None:
+            self._completion.observe(self._eta)
             return Estimate(float(t), self._median.push(self._eta), None if self._sd is None
                             else self._sd.copy(), diag.status, diag)
         if self.config.change_completion:
-            eta = self._completion.step(self._eta, eta,
-                                        lambda: _window_information(H, diag.weights, self.config))
+            eta = self._completion.step(eta, lambda: _window_information(H, diag.weights,
+                                                                         self.config))
         self._eta, self._sd = eta, sd
         return Estimate(float(t), self._median.push(eta), sd.copy(), diag.status, diag)
 
@@ -484,7 +488,7 @@ class SlidingWindowIRLS:
             def solve_one(c_, b_, H_, x):
                 return solve_window(c_, b_, H_, x, cfg)
         completion = ChangeCompletion(cfg.change_threshold, cfg.change_hold, cfg.gamma,
-                                      cfg.lower, cfg.upper)
+                                      cfg.lower, cfg.upper, span=cfg.window - 1)
         return run_completed(c, b, H, excited, x0, completion, run_chunk, solve_one,
                              lambda Hw, w: _window_information(Hw, w, cfg))
 

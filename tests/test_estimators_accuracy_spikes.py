@@ -55,14 +55,35 @@ def test_weak_direction_is_the_smallest_eigenvector():
 
 
 def test_completion_leaves_small_moves_and_well_observed_windows_alone():
-    comp = ChangeCompletion(0.1, 5, gamma=5e-3, lower=-0.001, upper=1.001)
-    x0, x1 = np.full(4, 0.9), np.full(4, 0.9) + [0.05, -0.05, 0.0, 0.02]
-    np.testing.assert_array_equal(comp.step(x0, x1, lambda: np.eye(4)), x1)
+    comp = ChangeCompletion(0.1, 5, gamma=5e-3, lower=-0.001, upper=1.001, span=3)
+    x0 = np.full(4, 0.9)
+    comp.reset(x0)
+    x1 = x0 + [0.05, -0.05, 0.0, 0.02]
+    np.testing.assert_array_equal(comp.step(x1, lambda: np.eye(4)), x1)
     assert comp.events == 0
     # a step, but the weakest direction carries more information than gamma: no completion
     big = x0 + [0.0, 0.0, -0.3, 0.0] + 0.05 * YAW
-    np.testing.assert_array_equal(comp.step(x0, big, lambda: np.eye(4)), big)
+    np.testing.assert_array_equal(comp.step(big, lambda: np.eye(4)), big)
     assert comp.events == 1 and comp.v is None
+
+
+def test_completion_anchors_at_the_estimate_before_the_change():
+    """A step of motor 3 that arrives over several windows, with the prior's yaw error."""
+    comp = ChangeCompletion(0.2, 4, gamma=5e-3, lower=-0.001, upper=1.001, span=3)
+    x0 = np.full(4, 0.9)
+    comp.reset(x0)
+    weak = np.diag([1.0, 1.0, 1.0, 1e-4])
+    Q = np.linalg.qr(np.column_stack([YAW, np.eye(4)[:, :3]]))[0]
+    info = Q[:, ::-1] @ weak @ Q[:, ::-1].T  # smallest eigenvector: YAW
+    P = np.eye(4) - np.outer(YAW, YAW)
+    step = np.array([0.0, 0.0, -0.4, 0.0])
+    outs = []
+    for frac in (0.1, 0.3, 0.7, 1.0, 1.0, 1.0):
+        raw = x0 + P @ (frac * step)  # the data give the observable part only
+        outs.append(comp.step(raw, lambda: info))
+    assert comp.events == 1
+    np.testing.assert_allclose(outs[-1], x0 + step, atol=1e-12)
+    np.testing.assert_allclose(outs[0], x0 + P @ (0.1 * step))  # below the threshold
 
 
 def test_causal_median_matches_a_direct_loop_and_its_online_twin():
@@ -156,7 +177,7 @@ def test_chunked_driver_equals_one_window_at_a_time(combined):
     # threshold low enough to trigger on noise too: many hand-overs between the two paths
     results = []
     for chunk in (1, 37, 10 ** 6):
-        comp = ChangeCompletion(0.03, 4, cfg.gamma, cfg.lower, cfg.upper)
+        comp = ChangeCompletion(0.06, 4, cfg.gamma, cfg.lower, cfg.upper)
         results.append(run_completed(c, b, H, excited, np.ones(4), comp, run_chunk, solve_one,
                                      info, chunk=chunk))
         assert comp.events >= 2
