@@ -128,9 +128,10 @@ def test_iv_slope_separates_feedback_bias_from_a_real_effect():
 
 
 @pytest.mark.slow
-def test_heavy_vehicle_thrust_noise_is_no_inertia_false_alarm():
-    """Closed loop, 1.2 kg, thrust noise 0.045: least squares puts the inertia scale at ~1.4
-    (feedback bias); the diagnosis must stay consistent."""
+def test_heavy_vehicle_thrust_noise_inertia_bias_is_caught_by_the_iv_check():
+    """Closed loop, 1.2 kg, thrust noise 0.045, no effect: least squares puts the inertia scale
+    at ~1.4 (feedback bias); the IV slope of that fit is ~0 and the diagnosis stays
+    consistent."""
     m, d = 1.222, 0.2 * 1.222 ** (1 / 3)
     veh = Vehicle.from_rotors([(d, d), (d, -d), (-d, -d), (-d, d)], PAPER_YAW_SIGNS, 0.045 * d,
                               mass=m, inertia=(0.32 * m * d * d, 0.32 * m * d * d, 0.58 * m * d * d),
@@ -139,6 +140,14 @@ def test_heavy_vehicle_thrust_noise_is_no_inertia_false_alarm():
         trajectory=Lissajous(amplitude=(1.6, 1.1, 0.2), frequency=0.18))
     cfg = SimConfig(dt=4e-3, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001), backend="numpy")
     rec = simulate(sc, vehicle=veh, config=cfg, seed=0, thrust_noise=0.045).without_truth()
+    rp = prepare(rec)
+    inertia = next(c for c in build_library(rp) if c.name == "inertia")
+    base = predict(rp, [])
+    scale = noise_scale(rp, rp.measured - base)
+    f = fit(rp, [inertia], scale)
+    assert np.all(f.x[0][:2] > 1.2)  # the bias is real and large
+    sig = (predict(rp, f.terms) - base) / scale
+    assert iv_slope(rp, sig, (rp.measured - base) / scale, [3, 4, 5]) < 0.3
     res = Diagnosis().fit(rec)
     assert "inertia" not in res.effect_names
     assert res.verdict == "consistent"
