@@ -328,7 +328,7 @@ def profile_env(N: int, steps: int = 5) -> list[tuple[str, float]]:
     parts = {"compiled physics kernel (step_batch)": ("_step_batch_parallel",
                                                       "_step_batch_serial"),
              "per-env noise draws (one generator call per sub-env)": ("_draw",),
-             "controller (numpy, per trajectory group)": ("_motor_commands",),
+             "controller (trajectory in numpy, compiled controller_batch)": ("_motor_commands",),
              "reference / efficiency schedule": ("_references", "_efficiency"),
              "observation + info": ("_observations", "_infos"),
              "termination + reward": ("batched_termination", "batched_reward")}
