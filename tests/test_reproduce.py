@@ -106,6 +106,12 @@ def test_quick_reproduce_writes_the_contract_outputs(tmp_path):
     # the IRLS detector finds every abrupt fault on the right motor
     assert doc["fdi"]["abrupt"]["irls"]["detected"] == 4
     assert doc["fdi"]["abrupt"]["irls"]["false_alarms"] == 0
+    # the improved IRLS and the EKF calibrated to it sit beside the paper's pair
+    assert {"irls_improved", "ekf_improved"} <= set(doc["scenarios"]["combined"])
+    assert doc["config"]["ekf_q_eta_improved"] > 0
+    assert set(doc["spike_ratio"]["abrupt"]) == {"paper", "improved"}
+    assert doc["fdi"]["abrupt"]["irls_improved"]["detected"] == 4
+    assert "| combined | irls_improved |" in r.stdout and "spike ratio" in r.stdout
     # a second run refuses to overwrite
     r2 = _cli("--quick", "--out", str(out), "--quiet")
     assert r2.returncode == 2 and "already exists" in r2.stderr
