@@ -20,7 +20,7 @@ changes the thrust follows with the same time constant.
 Nothing in the diagnosis was tuned on these recordings: this is a held-out check.
 
     /tmp/peers/bin/python benchmarks/independent_sim.py [--out DIR] [--duration 15]
-        [--rate 200] [--cases NAME,...] [--force] [--quiet]
+        [--rate 200] [--settle S] [--cases NAME,...] [--reuse] [--force] [--quiet]
 
 Skips with a one-line message when RotorPy is not importable.
 """
@@ -167,6 +167,14 @@ def write_recording(run: dict, csv_path: Path, force: bool) -> None:
                        force=force)
 
 
+def reused(csv_path: Path) -> tuple:
+    """``(expected, speed p95)`` of a recording written earlier by this script."""
+    truth = json.loads(csv_path.with_suffix(".json").read_text())["truth"]["expected"]
+    data = np.genfromtxt(csv_path, delimiter=",", names=True)
+    speed = np.sqrt(data["vx"] ** 2 + data["vy"] ** 2 + data["vz"] ** 2)
+    return truth, float(np.percentile(speed, 95))
+
+
 def diagnose(csv_path: Path, force: bool) -> dict:
     from quadfault import cli
 
@@ -194,6 +202,8 @@ def main(argv=None) -> int:
                     help="simulate this long first and drop it (start-up transient) [s]")
     ap.add_argument("--cases", default=",".join(CASES), help="comma-separated case names")
     ap.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    ap.add_argument("--reuse", action="store_true",
+                    help="diagnose the recordings already in --out instead of flying again")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     args = ap.parse_args(argv)
     try:
@@ -215,13 +225,17 @@ def main(argv=None) -> int:
                       disable=True if args.quiet else None) as bar:
         for case in cases:
             t0 = time.perf_counter()
-            run = fly(case, args.duration, args.rate, args.settle)
             csv_path = args.out / f"{case}.csv"
-            write_recording(run, csv_path, args.force)
+            if args.reuse and csv_path.exists():
+                exp, v95 = reused(csv_path)
+            else:
+                run = fly(case, args.duration, args.rate, args.settle)
+                write_recording(run, csv_path, args.force)
+                exp = expected(run)
+                v95 = float(np.percentile(np.linalg.norm(run["state"]["v"], axis=1), 95))
             t1 = time.perf_counter()
-            diag = diagnose(csv_path, args.force)
-            rows.append((case, expected(run), diag, t1 - t0, time.perf_counter() - t1,
-                         float(np.percentile(np.linalg.norm(run["state"]["v"], axis=1), 95))))
+            diag = diagnose(csv_path, args.force or args.reuse)
+            rows.append((case, exp, diag, t1 - t0, time.perf_counter() - t1, v95))
             bar.update(1)
     print("| case | RotorPy: drag k (x,y,z) [N s/m], tau_m [s] | speed p95 [m/s] | verdict | "
           "diagnosis: effects (params +- sd; held-out improvement) | model improvement |")
