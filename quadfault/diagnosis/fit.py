@@ -1,10 +1,13 @@
 """Bounded robust least squares of a set of library effects (the optimizer).
 
 The residual vector is the normalised block residual ``(measured - model) / scale`` over the
-blocks in ``mask`` and all channels; ``scipy.optimize.least_squares`` (trust-region
-reflective, bounds from the library) minimises it with the ``soft_l1`` loss so dropouts and
-spikes have bounded influence. One-sigma uncertainties come from the Jacobian at the optimum,
-``sd = sqrt(diag(s^2 (J^T J)^-1))`` with ``s^2`` the residual variance.
+blocks in ``mask`` and all channels, minimised with the ``soft_l1`` loss so dropouts and
+spikes have bounded influence, within the library's bounds. Effect sets whose model is affine
+in their parameters (:func:`is_affine`) are solved on a verified linear model of the replay
+(:class:`Linearisation`, :func:`solve_linear`: iteratively reweighted least squares, the same
+optimum as ``scipy.optimize.least_squares``); the others by ``scipy.optimize.least_squares``
+(trust-region reflective) on the exact replay. One-sigma uncertainties come from the Jacobian
+at the optimum, ``sd = sqrt(diag(s^2 (J^T J)^-1))`` with ``s^2`` the residual variance.
 """
 
 from __future__ import annotations

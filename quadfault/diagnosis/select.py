@@ -7,8 +7,11 @@ accepted only if it lowers the held-out residual RMS by at least ``min_improveme
 (relative to the current model) -- or by three times that in one of the channels it acts on
 (fitted signal above the noise), so that an effect is still found when other, unexplained
 channels dominate the total -- *and* lowers BIC by more than ``bic_margin``. Up to
-``screen_top`` candidates are tried in BIC order; the search stops when none passes. Equivalent pairs (``thrust_scale`` / ``motor_efficiency``) are never both
-accepted.
+``screen_top`` candidates are tried in BIC order; the search stops when none passes.
+Equivalent pairs (``thrust_scale`` / ``motor_efficiency``) are never both accepted.
+Effects in ``IV_CHECKED`` (``inertia``) must also pass an instrumental-variable check against
+closed-loop feedback bias (:func:`iv_slope`). Held-out errors count only the scored blocks
+(calibration rows excluded, ``Replay.scored``).
 """
 
 from __future__ import annotations
