@@ -51,7 +51,7 @@ def _jsonable(x):
 
 def _effects(res) -> list:
     return [{"name": e.name, "params": e.params, "uncertainty": e.uncertainty,
-             "improvement": e.improvement} for e in res.effects]
+             "improvement": e.improvement, "explanation": e.explanation} for e in res.effects]
 
 
 def _diagnose(rec, effects=None) -> dict:
