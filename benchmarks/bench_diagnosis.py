@@ -22,7 +22,6 @@ import subprocess
 import sys
 import tempfile
 import time
-import types
 from pathlib import Path
 
 import numpy as np
@@ -106,7 +105,7 @@ def main(argv=None):
         print(f"bench_diagnosis: unknown case {bad[0]!r}", file=sys.stderr)
         return 2
     import quadfault.diagnosis as new
-    import quadfault.diagnosis.locate  # noqa: F401  (imports are not timed)
+    import quadfault.diagnosis.locate  # imports are not timed
     import quadfault.diagnosis.prediction  # noqa: F401
 
     ref = reference_package(args.reference) if args.reference else None

@@ -39,9 +39,9 @@ from multiprocessing import Pool
 
 import numpy as np
 
-from quadfault import effects as fx
-import quadfault.diagnosis.locate  # noqa: F401  (imported before forking the workers)
+import quadfault.diagnosis.locate  # imported before forking the workers (and not timed)
 import quadfault.diagnosis.prediction  # noqa: F401
+from quadfault import effects as fx
 from quadfault.diagnosis import Diagnosis
 from quadfault.diagnosis.library import EQUIVALENT, build_library, predict
 from quadfault.diagnosis.residuals import noise_scale, prepare
@@ -403,8 +403,8 @@ def main(argv=None):
     keep = range(args.n)
     if args.only:
         only = {x.strip() for x in args.only.split(",") if x.strip()}
-        keep = [i for i in keep if (lambda names: ("none" in only and not names)
-                                    or bool(only & set(names)))(draw_case(args.seed, i)["names"])]
+        names = {i: draw_case(args.seed, i)["names"] for i in keep}
+        keep = [i for i in keep if ("none" in only and not names[i]) or only & set(names[i])]
     if args.reuse and not args.store:
         print("blinded_study: --reuse needs --store DIR", file=sys.stderr)
         return 2

@@ -155,7 +155,8 @@ def test_heavy_vehicle_thrust_noise_inertia_bias_is_caught_by_the_iv_check():
 
 @pytest.mark.parametrize("n,window", [(600, 25), (31, 31), (300, 5)])
 def test_numpy_savgol_matches_scipy(n, window):
-    from scipy.signal import savgol_coeffs as ref_coeffs, savgol_filter as ref_filter
+    from scipy.signal import savgol_coeffs as ref_coeffs
+    from scipy.signal import savgol_filter as ref_filter
 
     from quadfault.diagnosis.locate import savgol_coeffs, savgol_filter
 

@@ -13,8 +13,7 @@ import numpy as np
 from quadfault.diagnosis.library import EXPLANATIONS, build_library, predict, public_params
 from quadfault.diagnosis.residuals import noise_scale, prepare
 from quadfault.diagnosis.result import DiagnosisResult, EffectFinding
-from quadfault.diagnosis.select import (IV_LAG, IV_MIN, cross_validate, folds_of, scored_rows,
-                                        select)
+from quadfault.diagnosis.select import IV_LAG, IV_MIN, cross_validate, folds_of, scored_rows, select
 from quadfault.effects import EFFECT_NAMES
 from quadfault.errors import ConfigError
 from quadfault.recording import Recording
