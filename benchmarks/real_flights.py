@@ -88,8 +88,11 @@ def run_one(kind: str, path: Path) -> dict:
         row["diagnosis_timing"] = _diagnose(rec, ("motor_lag",))
     elif kind == "nanodrone":
         from quadfault.importers.crazyflie import BRUSHLESS_KF
-        from quadfault.importers.flight_analysis import (effect_fit, rotational_check,
-                                                         without_calibration)
+        from quadfault.importers.flight_analysis import (
+            effect_fit,
+            rotational_check,
+            without_calibration,
+        )
 
         speed = np.linalg.norm(rec.velocity, axis=1)
         row["speed_p95"], row["speed_max"] = float(np.percentile(speed, 95)), float(speed.max())
@@ -213,7 +216,7 @@ def print_crazypad(rows) -> None:
         if not sub:
             continue
         for source in ("diagnosis", "irls"):
-            def eta(r):
+            def eta(r, source=source):
                 return np.array(r["efficiency"]["eta"] if source == "diagnosis" else r["eta_irls"])
             nom = np.array([eta(r) for r in sub if r["condition"] == "normal_flight"])
             if len(nom) < 2:

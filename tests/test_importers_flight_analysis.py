@@ -14,8 +14,7 @@ import numpy as np
 import pytest
 
 from quadfault import effects as fx
-from quadfault.importers.flight_analysis import (efficiency_fit, irls_efficiency,
-                                                 rotational_check)
+from quadfault.importers.flight_analysis import efficiency_fit, irls_efficiency, rotational_check
 from quadfault.rotation import quat_to_rot
 from quadfault.scenarios import named_scenario
 from quadfault.simulator import SensorNoise, SimConfig, simulate
@@ -135,7 +134,8 @@ def _script(name, *args, tmp_path):
 
     root = Path(__file__).resolve().parents[1]
     return subprocess.run([sys.executable, str(root / "benchmarks" / name), *args],
-                          capture_output=True, text=True, cwd=tmp_path, timeout=120)
+                          capture_output=True, text=True, cwd=tmp_path, timeout=120,
+                          check=False)
 
 
 def test_real_flights_script_skips_without_data(tmp_path):
