@@ -178,8 +178,8 @@ def train_arm(args, arm: str, out: Path) -> None:
               f" wall, {times['cpu_seconds']:.0f} s CPU", flush=True)
 
 
-def evaluate(args, out: Path) -> dict:
-    """Paired scores of the baseline, the reference and every trained run."""
+def evaluate(args, out: Path, seeds_by_arm: dict) -> dict:
+    """Paired scores of the baseline, the reference and the trained runs of every arm."""
     from agents.policies import GeometricPolicy
     from agents.train import load_agent
     from quadfault.vehicle import Vehicle
@@ -194,7 +194,7 @@ def evaluate(args, out: Path) -> dict:
             policies += [GeometricPolicy(Vehicle(), "residual", residual_scale=args.residual_scale),
                          GeometricPolicy(Vehicle(), "residual", estimate_aware=True,
                                          residual_scale=args.residual_scale)]
-        for seed in args.seeds:
+        for seed in seeds_by_arm[arm]:
             import gymnasium as gym
 
             env = gym.make(ENV_ID, **kwargs)
@@ -223,23 +223,27 @@ def main(argv=None) -> int:
     p.add_argument("--train-only", action="store_true", help="train, do not evaluate")
     p.add_argument("--out", default="runs/ppo_study")
     p.add_argument("--retrain", action="store_true")
+    p.add_argument("--available", action="store_true",
+                   help="train nothing; evaluate the runs that exist (at least one per arm) "
+                   "and list the missing ones")
     args = p.parse_args(argv)
 
     from quadfault.fileio import atomic_write_text
 
     out = Path(args.out)
     t0 = time.time()
-    for arm in args.arms:
+    for arm in () if args.available else args.arms:
         train_arm(args, arm, out)
     if args.train_only:
         return 0
-    missing = [f"{a}/seed_{s}" for a in ARMS for s in args.seeds
-               if not (out / a / f"seed_{s}" / "model.zip").exists()]
-    if missing:
+    done = {a: [s for s in args.seeds if (out / a / f"seed_{s}" / "model.zip").exists()]
+            for a in ARMS}
+    missing = [f"{a}/seed_{s}" for a in ARMS for s in args.seeds if s not in done[a]]
+    if missing and not (args.available and all(done.values())):
         raise SystemExit(f"{out}: runs missing for the evaluation: {', '.join(missing)} "
-                         "(train them with --arms)")
-    results = evaluate(args, out)
-    summary = _summary(results, args.seeds)
+                         "(train them with --arms, or evaluate what exists with --available)")
+    results = evaluate(args, out, done)
+    summary = _summary(results, done)
     train_times = {}
     for a in ARMS:
         for s in args.seeds:
@@ -250,6 +254,7 @@ def main(argv=None) -> int:
             "duration": args.duration, "estimator": args.estimator, "env_id": ENV_ID,
             "residual_scale": args.residual_scale, "n_envs": args.n_envs,
             "ppo_kwargs": PPO_KWARGS, "train_times": train_times,
+            "evaluated_seeds": done, "missing_runs": missing,
             "evaluation_seconds": time.time() - t0}
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "study.json", json.dumps({"meta": meta, "summary": summary,
@@ -267,7 +272,7 @@ def _paired(a_minus_b_by_seed: list[np.ndarray]):
     return t_interval(a_minus_b_by_seed[0]) + ("episodes",)
 
 
-def _summary(results, seeds) -> dict:
+def _summary(results, seeds_by_arm: dict) -> dict:
     base = np.array(results["baseline"]["rmse"])
     out = {}
     for name in ("baseline", "estimate_aware_reference"):
@@ -277,6 +282,7 @@ def _summary(results, seeds) -> dict:
                      "crash_rate": float(np.mean(results[name]["crashed"])),
                      "improvement_vs_baseline": mean, "ci95": half, "ci_over": "episodes"}
     for arm in ARMS:
+        seeds = seeds_by_arm[arm]
         rm = [np.array(results[f"{arm}/{s}"]["rmse"]) for s in seeds]
         cr = [np.mean(results[f"{arm}/{s}"]["crashed"]) for s in seeds]
         mean, half, over = _paired([base - r for r in rm])
@@ -284,10 +290,12 @@ def _summary(results, seeds) -> dict:
                     "crash_rate": float(np.mean(cr)),
                     "per_seed_improvement": [float((base - r).mean()) for r in rm],
                     "improvement_vs_baseline": mean, "ci95": half, "ci_over": over}
+    common = [s for s in seeds_by_arm["with_estimate"] if s in seeds_by_arm["without_estimate"]]
     mean, half, over = _paired([np.array(results[f"without_estimate/{s}"]["rmse"])
                                 - np.array(results[f"with_estimate/{s}"]["rmse"])
-                                for s in seeds])
-    out["with_minus_without"] = {"improvement": mean, "ci95": half, "ci_over": over}
+                                for s in common])
+    out["with_minus_without"] = {"improvement": mean, "ci95": half, "ci_over": over,
+                                 "seeds": common}
     return out
 
 
@@ -296,8 +304,10 @@ def _markdown(s, meta) -> str:
         return f"{m:+.4f} ± {h:.4f}" if math.isfinite(h) else f"{m:+.4f} (no CI)"
 
     lines = [f"# PPO residual study ({meta['env_id']}, {meta['timesteps']} steps/run, seeds "
-             f"{meta['seeds']}, {meta['episodes']} paired episodes of {meta['duration']} s, "
-             f"residual scale {meta['residual_scale']} N)", "",
+             f"{meta['evaluated_seeds']}, {meta['episodes']} paired episodes of "
+             f"{meta['duration']} s, residual scale {meta['residual_scale']} N)", "",
+             *([f"Missing runs (not trained yet): {', '.join(meta['missing_runs'])}", ""]
+               if meta["missing_runs"] else []),
              "| agent | mean RMSE [m] (crash = 5 m) | crash rate | RMSE gain vs baseline "
              "[m], 95% CI |", "|---|---|---|---|",
              f"| geometric (zero residual) | {s['baseline']['rmse_mean']:.4f} | "
@@ -312,8 +322,8 @@ def _markdown(s, meta) -> str:
                  f"{r['rmse_mean']:.4f} | {r['crash_rate']:.2f} | "
                  f"{ci(r['improvement_vs_baseline'], r['ci95'])} (over episodes) |")
     w = s["with_minus_without"]
-    lines += ["", f"With vs without the estimate (RMSE_without - RMSE_with, paired): "
-              f"{ci(w['improvement'], w['ci95'])} m (over {w['ci_over']}).", "",
+    lines += ["", f"With vs without the estimate (RMSE_without - RMSE_with, paired, seeds "
+              f"{w['seeds']}): {ci(w['improvement'], w['ci95'])} m (over {w['ci_over']}).", "",
               "Per-seed gains vs baseline [m]: " + "; ".join(
                   f"{arm}: " + ", ".join(f"{g:+.4f}" for g in s[arm]["per_seed_improvement"])
                   for arm in ARMS), "", "Training time per run (wall / CPU s): " + ", ".join(
