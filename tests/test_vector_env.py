@@ -194,3 +194,27 @@ def test_sb3_adapter_trains_ppo():
             assert infos[i]["TimeLimit.truncated"]
     assert done_seen
     env.close()
+
+
+def test_physics_auto_follows_numba_availability(monkeypatch):
+    from quadfault import _sim_numba
+
+    kw = {"scenario": "combined", "duration": 0.5}
+    want = "numba" if _sim_numba.AVAILABLE else "numpy"
+    assert QuadFaultVectorEnv(2, "none", **kw).physics == want  # "auto" is the default
+    monkeypatch.setattr(_sim_numba, "AVAILABLE", False)
+    assert QuadFaultVectorEnv(2, "none", physics="auto", **kw).physics == "numpy"
+    with pytest.raises(ConfigError, match="physics='numba' needs numba"):
+        QuadFaultVectorEnv(2, "none", physics="numba", **kw)
+
+
+def test_sub_envs_built_from_one_template_share_no_episode_state():
+    """Sub-envs 1.. are copies of sub-env 0: after a reset each owns its generator, plant,
+    scenario and controller (nothing mutable is shared)."""
+    vec = QuadFaultVectorEnv(3, "none", scenario="random", duration=0.5)
+    vec.reset(seed=5)
+    for attr in ("np_random", "plant", "scenario", "controller", "history"):
+        assert len({id(getattr(e, attr)) for e in vec.envs}) == 3, attr
+    a = vec.envs[0].np_random.bit_generator.state["state"]["state"]
+    b = vec.envs[1].np_random.bit_generator.state["state"]["state"]
+    assert a != b
