@@ -25,8 +25,11 @@ the project's environment::
     python benchmarks/throughput.py --peer-python /tmp/peers/bin/python
 
 Flags: ``--full`` (N up to 16384), ``--max-n``, ``--horizon`` (physics steps per timing),
-``--skip-peers``, ``--skip-ppo``, ``--skip-profile``. Every rate is the best of repeated
-timings of at least ``MIN_TIME`` seconds (the machine may be shared).
+``--skip-peers``, ``--skip-ppo``, ``--skip-profile``, ``--skip-table`` (peers / profile / PPO
+only), ``--omp-spin`` (keep OpenMP's spin-waiting; by default the script sets
+``OMP_WAIT_POLICY=passive``, which is much faster on a shared machine). Every rate is the best
+of repeated timings of at least ``MIN_TIME`` seconds, per wall second and (peers table) per
+CPU second of the measuring process.
 """
 
 from __future__ import annotations
