@@ -54,6 +54,9 @@ def _timed(fn):
 
 
 def speed(rec, numpy_windows: int) -> None:
+    import estimators
+
+    print(f"estimators from {os.path.dirname(estimators.__file__)}")
     print(f"recording: {len(rec)} samples ({rec.duration:.1f} s); load average "
           f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs (CPU-time rates are less "
           "affected by a busy machine)")

@@ -34,12 +34,50 @@ _S, _L = range(2)
 
 @njit(cache=True)
 def workspace(ns):
-    """Scratch of one EKF step for ``ns`` states (18 + rotors)."""
+    """Scratch of one EKF step for ``ns`` states (18 + rotors), with the transition Jacobian
+    ``F`` set to the identity and the column indices of its structural non-zeros per row
+    (:func:`_jacobian_pattern`); a step writes only those entries."""
     nr = ns - 18
-    return (np.zeros((4, ns, ns)), np.zeros((1, ns, 12)), np.zeros((2, 12, 12)),
-            np.zeros((2, 12, ns)), np.zeros((ns, ns), dtype=np.int64), np.zeros(ns, dtype=np.int64),
-            np.zeros((6, 3, 3)), np.zeros((9, 3)), np.zeros((3, nr)), np.zeros((3, 9)),
-            np.zeros((2, ns)), np.zeros(12))
+    ws = (np.zeros((4, ns, ns)), np.zeros((1, ns, 12)), np.zeros((2, 12, 12)),
+          np.zeros((2, 12, ns)), np.zeros((ns, ns), dtype=np.int64), np.zeros(ns, dtype=np.int64),
+          np.zeros((6, 3, 3)), np.zeros((9, 3)), np.zeros((3, nr)), np.zeros((3, 9)),
+          np.zeros((2, ns)), np.zeros(12))
+    for i in range(ns):
+        ws[0][_F, i, i] = 1.0
+    _jacobian_pattern(ws[4], ws[5])
+    return ws
+
+
+@njit(cache=True)
+def _jacobian_pattern(cols, nnz):
+    """Columns (ascending) that the prediction writes in each row of ``F``: p row i:
+    p_i, v_i, (R e3)_i, eta; v row i: v_i, (R e3)_i, eta; Omega rows: Omega, eta; vec(R) row
+    3 jb + k: Omega, the k-th entry of each column of R, eta; eta rows: the diagonal."""
+    ns = cols.shape[0]
+    for i in range(ns):
+        nnz[i] = 0
+    for i in range(ns):
+        if i < 3:
+            base = (i, 3 + i, 15 + i)
+        elif i < 6:
+            base = (i, 12 + i, -1)
+        elif i < 18:
+            base = (6, 7, 8)
+        else:
+            base = (i, -1, -1)
+        for j in base:
+            if j >= 0:
+                cols[i, nnz[i]] = j
+                nnz[i] += 1
+        if 9 <= i < 18:
+            k = (i - 9) % 3
+            for j in (9 + k, 12 + k, 15 + k):
+                cols[i, nnz[i]] = j
+                nnz[i] += 1
+        if i < 18:
+            for j in range(18, ns):
+                cols[i, nnz[i]] = j
+                nnz[i] += 1
 
 
 @njit(cache=True)
@@ -98,19 +136,13 @@ def _project_so3_into(M, C):
     M[:, :] = U @ D @ Vt
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _sandwich_into(F, P, out, FP, FPT, cols, nnz):
-    """``out = F P F^T`` over the non-zeros of the sparse transition Jacobian (column indices
-    of each row's non-zeros in ``cols``/``nnz``); ``FP``, ``FPT`` are scratch. Both products
-    stream whole rows: ``FP = F P`` and ``out[k] = sum_j F[k, j] (F P)^T[j]``."""
+    """``out = F P F^T`` over the structural non-zeros of the transition Jacobian (column
+    indices of each row in ``cols``/``nnz``, :func:`_jacobian_pattern`); ``FP``, ``FPT`` are
+    scratch. Both products stream whole rows: ``FP = F P`` and
+    ``out[k] = sum_j F[k, j] (F P)^T[j]``."""
     n = F.shape[0]
-    for i in range(n):
-        c = 0
-        for j in range(n):
-            if F[i, j] != 0.0:
-                cols[i, c] = j
-                c += 1
-        nnz[i] = c
     for i in range(n):  # FP = F P
         for k in range(n):
             FP[i, k] = 0.0
@@ -135,7 +167,7 @@ def _sandwich_into(F, P, out, FP, FPT, cols, nnz):
             out[k, i] = out[i, k]
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _gain_into(S, HP, L, KT):
     """Transposed Kalman gain ``KT = K^T = S^-1 H P`` for symmetric positive-definite ``S``
     (Cholesky ``S = L L^T``; the two triangular solves run on whole rows of ``H P``)."""
@@ -178,7 +210,7 @@ def step_inplace(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi):
             workspace(x.shape[0]))
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
     """One predict + update with the scratch ``ws`` (:func:`workspace`); ``x`` and ``P`` are
     overwritten."""
@@ -226,11 +258,7 @@ def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
             xp[9 + 3 * j + i] = Rn[i, j]
     for j in range(nr):
         xp[18 + j] = x[18 + j]
-    # Jacobian F = d x_pred / d x: identity plus blocks
-    for i in range(ns):
-        for j in range(ns):
-            F[i, j] = 0.0
-        F[i, i] = 1.0
+    # Jacobian F = d x_pred / d x: identity (set by the workspace) plus blocks, written here
     for i in range(3):  # B = J^-1 A_M diag(f), G = J^-1 ([J w]x - [w]x J)
         for j in range(nr):
             B[i, j] = (Jinv[i, 0] * (A[1, j] * f[j]) + Jinv[i, 1] * (A[2, j] * f[j])
@@ -253,7 +281,7 @@ def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
             F[3 + i, 18 + j] = -R[i, 2] * dTj * (dt / m)
             F[6 + i, 18 + j] = dt * B[i, j]
         for j in range(3):
-            F[6 + i, 6 + j] += dt * G[i, j]
+            F[6 + i, 6 + j] = (1.0 if i == j else 0.0) + dt * G[i, j]
     # vec(R E) = (E^T kron I3) vec(R)
     for jb in range(3):
         for ib in range(3):
@@ -321,7 +349,7 @@ def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
     _joseph(P, Am, AHt, KT, FP)
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _joseph(P, Am, AHt, KT, Pn):
     """Joseph-form covariance ``P = sym(A - (A H^T - K R) K^T)``, ``A = (I - K H) P``
     (``Pn`` is scratch; rows of ``K^T`` streamed)."""
@@ -339,7 +367,7 @@ def _joseph(P, Am, AHt, KT, Pn):
             P[k, i] = P[i, k]
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _update(Pp, HP, HR, S, L, KT, AHt, Am, r):
     """Gain and the Joseph terms of the update with ``H = [I_9 0; 0 HR 0]``: fills ``KT``,
     ``Am = Pp - K H Pp`` and ``AHt = Am H^T - K diag(r)``."""
