@@ -21,6 +21,8 @@ With ``--improved`` the beyond-the-paper IRLS (``IRLSConfig.improved()``, docs/i
 too, with its own EKF calibrated to its RMSE on the same calibration flight (seed 1000), and
 the spike ratio IRLS / EKF of both pairs is printed per seed (target <= 0.5 on abrupt and
 combined). The calibration flight's seed is never one of the scored seeds (0..seeds-1).
+``--ekf-median`` adds a fairness check: the EKF with the same 21-sample output median,
+calibrated (median included) to the improved IRLS's RMSE.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from estimators.calibration import calibrate_q_eta
+from estimators.calibration import calibrate_q_eta, median_filtered
 from estimators.ekf import EKFConfig, MotorEfficiencyEKF
 from estimators.fdi import detect, evaluate
 from estimators.irls import IRLSConfig, SlidingWindowIRLS
@@ -66,7 +68,7 @@ def speed(duration: float) -> None:
 
 
 def flight(name: str, seed: int, duration: float, q_eta: float,
-           q_improved: float | None = None) -> dict:
+           q_improved: float | None = None, q_median: float | None = None) -> dict:
     rec = simulate(named_scenario(name, duration), config=sim_config("rk4", name), seed=seed)
     blind = rec.without_truth()
     out = {"diverged": flight_check(rec)["diverged"]}
@@ -75,8 +77,12 @@ def flight(name: str, seed: int, duration: float, q_eta: float,
     if q_improved is not None:
         runs += [("irls+", SlidingWindowIRLS(rec.vehicle, IRLSConfig.improved())),
                  ("ekf+", MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_improved)))]
+    if q_median is not None:
+        runs += [("ekf+m", MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_median)))]
     for key, est in runs:
         s = est.run(blind)
+        if key == "ekf+m":
+            s = median_filtered(s, IRLSConfig.improved().output_median)
         sc = score(rec, s)
         out[key] = {"rmse": float(np.mean(sc.rmse)), "spike": mean_or_none(sc.spike),
                     "excess": mean_or_none(sc.excess_spike),
@@ -84,13 +90,15 @@ def flight(name: str, seed: int, duration: float, q_eta: float,
     return out
 
 
-def calibrate(duration: float, irls_config: IRLSConfig):
-    """The EKF's Q_eta matching ``irls_config``'s RMSE on the combined flight of seed 1000."""
+def calibrate(duration: float, irls_config: IRLSConfig, post_median: int = 1):
+    """The EKF's Q_eta matching ``irls_config``'s RMSE on the combined flight of seed 1000
+    (the EKF's output median-filtered over ``post_median`` rows when > 1)."""
     cal_rec = simulate(named_scenario("combined", min(duration, 40.0)),
                        config=sim_config("rk4", "combined"), seed=1000)
     target = float(np.mean(score(cal_rec, SlidingWindowIRLS(cal_rec.vehicle, irls_config).run(
         cal_rec.without_truth())).rmse))
-    return calibrate_q_eta(cal_rec, target, q_range=(1e-4, 10.0), bisection_steps=6)
+    return calibrate_q_eta(cal_rec, target, q_range=(1e-4, 10.0), bisection_steps=6,
+                           post_median=post_median)
 
 
 def main() -> None:
@@ -102,6 +110,11 @@ def main() -> None:
     p.add_argument("--improved", action="store_true",
                    help="also IRLSConfig.improved() and an EKF calibrated to it")
     p.add_argument("--no-speed", action="store_true", help="skip the speed section")
+    p.add_argument("--ekf-median", action="store_true",
+                   help="with --improved: also the EKF with the same output median, "
+                        "calibrated to the improved IRLS (fairness check)")
+    p.add_argument("--scenarios", default=",".join(SCENARIOS),
+                   help="comma-separated subset of " + ", ".join(SCENARIOS))
     args = p.parse_args()
     if not args.no_speed:
         speed(min(args.duration, 20.0))
@@ -110,16 +123,22 @@ def main() -> None:
         cal = calibrate(args.duration, IRLSConfig())
         q = cal.q_eta
         print(f"calibration: {cal.message}")
-    q_plus = None
+    q_plus = q_med = None
     if args.improved:
         cal = calibrate(args.duration, IRLSConfig.improved())
         q_plus = cal.q_eta
         print(f"calibration (improved IRLS): {cal.message}")
-    jobs = [(n, s) for n in SCENARIOS for s in range(args.seeds)]
+        if args.ekf_median:
+            cal = calibrate(args.duration, IRLSConfig.improved(),
+                            IRLSConfig.improved().output_median)
+            q_med = cal.q_eta
+            print(f"calibration (EKF + output median, to the improved IRLS): {cal.message}")
+    scenarios = [n for n in SCENARIOS if n in args.scenarios.split(",")]
+    jobs = [(n, s) for n in scenarios for s in range(args.seeds)]
     with ProcessPoolExecutor(args.workers) as pool:
         res = list(pool.map(flight, [j[0] for j in jobs], [j[1] for j in jobs],
                             [args.duration] * len(jobs), [q] * len(jobs),
-                            [q_plus] * len(jobs)))
+                            [q_plus] * len(jobs), [q_med] * len(jobs)))
     lost = [j for j, r in zip(jobs, res) if r["diverged"]]
     if lost:
         print(f"WARNING: flights that lost control: {lost}")
@@ -128,7 +147,8 @@ def main() -> None:
     print(f"{'scenario':<12} {'est':<5} {'detected':>9} {'worst lat [s]':>14} {'false':>6} "
           f"{'RMSE':>7} {'spike':>7} {'excess':>7}")
     keys = ("irls", "ekf", "irls+", "ekf+") if args.improved else ("irls", "ekf")
-    for name in SCENARIOS:
+    keys += ("ekf+m",) if q_med is not None else ()
+    for name in scenarios:
         for est in keys:
             rs = [r[est] for (n, _), r in zip(jobs, res) if n == name]
             det = sum(r["fdi"].detected for r in rs)
@@ -144,9 +164,10 @@ def main() -> None:
                   f"{(np.mean(excess) if excess else float('nan')):>7.4f}")
     pairs = [("paper", "irls", "ekf")] + ([("improved", "irls+", "ekf+")] if args.improved
                                           else [])
+    pairs += [("vs ekf+m", "irls+", "ekf+m")] if q_med is not None else []
     print("\nper seed: IRLS spike / EKF spike = ratio (motor averages; target <= 0.5), "
           "IRLS RMSE (target <= 0.025)")
-    for name in ("abrupt", "combined"):
+    for name in [n for n in ("abrupt", "combined") if n in scenarios]:
         for label, a, b in pairs:
             cells = [f"{r[a]['spike']:.3f}/{r[b]['spike']:.3f}={r[a]['spike'] / r[b]['spike']:.2f}"
                      f" ({r[a]['rmse']:.4f})"

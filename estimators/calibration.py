@@ -113,18 +113,32 @@ def match_larger_root(rmse_of: Callable[[float], float], target: float, grid,
 
 
 def ekf_rmse(recording: Recording, q_eta: float, base: EKFConfig | None = None,
-             align: str = "end") -> float:
-    """Motor-averaged RMSE of the EKF with ``q_eta`` on ``recording`` (which holds truth)."""
+             align: str = "end", post_median: int = 1) -> float:
+    """Motor-averaged RMSE of the EKF with ``q_eta`` on ``recording`` (which holds truth);
+    ``post_median > 1`` scores the causal running median of its output (a fairness check of
+    ``IRLSConfig.output_median``, docs/ekf.md)."""
     cfg = (base or EKFConfig()).replace(q_eta=float(q_eta))
     est = MotorEfficiencyEKF(recording.vehicle, cfg).run(recording.without_truth())
+    if post_median > 1:
+        est = median_filtered(est, post_median)
     return float(np.mean(score(recording, est, align=align).rmse))
+
+
+def median_filtered(series, length: int):
+    """``series`` with its ``eta`` replaced by the causal running median of ``length`` rows."""
+    from dataclasses import replace
+
+    from estimators.change_completion import causal_median
+
+    return replace(series, eta=causal_median(series.eta, length))
 
 
 def calibrate_q_eta(recording: Recording, target_rmse: float, *, base: EKFConfig | None = None,
                     q_range: tuple = (1e-6, 10.0), points_per_decade: float = 1.0,
                     bisection_steps: int = 8, align: str = "end",
-                    progress: bool = False) -> CalibrationResult:
-    """Choose ``Q_eta`` so the EKF's RMSE on ``recording`` equals ``target_rmse``."""
+                    progress: bool = False, post_median: int = 1) -> CalibrationResult:
+    """Choose ``Q_eta`` so the EKF's RMSE on ``recording`` (of its output's causal running
+    median over ``post_median`` rows when > 1) equals ``target_rmse``."""
     lo, hi = q_range
     if not (0 < lo < hi):
         raise ConfigError(f"q_range must be (low, high) with 0 < low < high, got {q_range!r}")
@@ -137,7 +151,7 @@ def calibrate_q_eta(recording: Recording, target_rmse: float, *, base: EKFConfig
         bar = progress_bar(total=n + bisection_steps, desc="calibrate EKF", unit="run")
 
     def rmse_of(q):
-        value = ekf_rmse(recording, q, base, align)
+        value = ekf_rmse(recording, q, base, align, post_median)
         if bar is not None:
             bar.update(1)
         return value
