@@ -21,8 +21,11 @@ With ``--improved`` the beyond-the-paper IRLS (``IRLSConfig.improved()``, docs/i
 too, with its own EKF calibrated to its RMSE on the same calibration flight (seed 1000), and
 the spike ratio IRLS / EKF of both pairs is printed per seed (target <= 0.5 on abrupt and
 combined). The calibration flight's seed is never one of the scored seeds (0..seeds-1).
-``--ekf-median`` adds a fairness check: the EKF with the same 21-sample output median,
-calibrated (median included) to the improved IRLS's RMSE.
+``--ekf-median`` adds a fairness check, ``ekf+m``: the improved IRLS's EKF (same ``Q_eta``)
+with the same 21-sample output median. (Calibrating the median-filtered EKF to the improved
+IRLS's RMSE is degenerate: with the median its RMSE stays below the target from ~5e-3 up to
+``Q_eta`` = 10, so the only crossing is on the slow branch, ~5e-3, a filter that lags every
+fault.)
 """
 
 from __future__ import annotations
@@ -111,8 +114,8 @@ def main() -> None:
                    help="also IRLSConfig.improved() and an EKF calibrated to it")
     p.add_argument("--no-speed", action="store_true", help="skip the speed section")
     p.add_argument("--ekf-median", action="store_true",
-                   help="with --improved: also the EKF with the same output median, "
-                        "calibrated to the improved IRLS (fairness check)")
+                   help="with --improved: also the improved IRLS's EKF with the same output "
+                        "median (fairness check)")
     p.add_argument("--scenarios", default=",".join(SCENARIOS),
                    help="comma-separated subset of " + ", ".join(SCENARIOS))
     args = p.parse_args()
@@ -129,10 +132,7 @@ def main() -> None:
         q_plus = cal.q_eta
         print(f"calibration (improved IRLS): {cal.message}")
         if args.ekf_median:
-            cal = calibrate(args.duration, IRLSConfig.improved(),
-                            IRLSConfig.improved().output_median)
-            q_med = cal.q_eta
-            print(f"calibration (EKF + output median, to the improved IRLS): {cal.message}")
+            q_med = q_plus
     scenarios = [n for n in SCENARIOS if n in args.scenarios.split(",")]
     jobs = [(n, s) for n in scenarios for s in range(args.seeds)]
     with ProcessPoolExecutor(args.workers) as pool:
