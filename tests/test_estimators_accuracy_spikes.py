@@ -193,3 +193,14 @@ def test_numba_and_numpy_paths_agree_with_the_options_on(combined):
     a = SlidingWindowIRLS(rec.vehicle, IRLSConfig.improved(backend="numba")).run(rec)
     b = SlidingWindowIRLS(rec.vehicle, IRLSConfig.improved(backend="numpy")).run(rec)
     np.testing.assert_allclose(a.eta, b.eta, atol=1e-9)
+
+
+def test_median_filtered_series_keeps_everything_but_eta(combined):
+    from estimators.calibration import median_filtered
+
+    rec = combined.slice(0, 400).without_truth()
+    s = SlidingWindowIRLS(rec.vehicle).run(rec)
+    f = median_filtered(s, 5)
+    np.testing.assert_array_equal(f.eta, causal_median(s.eta, 5))
+    np.testing.assert_array_equal(f.sd, s.sd)
+    assert f.estimator == s.estimator and list(f.status) == list(s.status)
