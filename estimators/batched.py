@@ -9,8 +9,8 @@ observation. Nothing of the algorithms is written again:
   :func:`estimators.residuals.segment_models` / :func:`~estimators.residuals.quadratic_terms`
   evaluated over the whole batch at once (paper eqs. 17-26);
 * when numba is importable, the segment terms and the windows are computed by the single
-  estimator's compiled kernels (``estimators._irls_numba.segment_terms_batch`` and
-  ``solve_ring_batch``: the same allocation-free ``segment_terms_into`` and window solver
+  estimator's compiled kernels (``estimators._residuals_numba.segment_terms_batch`` and
+  ``estimators._irls_numba.solve_ring_batch``: the same allocation-free ``segment_terms_into`` and window solver
   ``_solve_window_into``, parallel over chunks of vehicles, reading each window straight from
   the ring); else :func:`estimators.irls.solve_window` runs in a Python loop;
 * the EKF step is ``estimators.ekf_numba.step_inplace`` (or the numpy ``predict`` /
@@ -44,7 +44,8 @@ from quadfault.vehicle import Vehicle
 try:  # the compiled batch loops call the existing per-vehicle kernels (``fast`` extra)
     from numba import njit, prange
 
-    from estimators._irls_numba import batch_chunks, segment_terms_batch, solve_ring_batch
+    from estimators._irls_numba import batch_chunks, solve_ring_batch
+    from estimators._residuals_numba import segment_terms_batch
     from estimators.ekf_numba import step_ws
     from estimators.ekf_numba import workspace as ekf_workspace
 except ImportError:  # pragma: no cover - exercised without numba

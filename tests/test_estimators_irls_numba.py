@@ -65,7 +65,7 @@ def test_backend_choice(monkeypatch, fault_flight):
 @pytest.mark.slow
 def test_compiled_segment_terms_equal_numpy(fault_flight):
     pytest.importorskip("numba")
-    from estimators._irls_numba import segment_terms
+    from estimators._residuals_numba import segment_terms
     from estimators.residuals import quadratic_terms, residual_weights, segment_models
 
     rec, veh = fault_flight, fault_flight.vehicle
