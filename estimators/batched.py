@@ -5,16 +5,16 @@
 with a leading batch axis so the vectorised environment keeps an estimate in every
 observation. Nothing of the algorithms is written again:
 
-* the segment residual models and their quadratic terms come from
-  :func:`estimators.residuals.segment_models` / :func:`~estimators.residuals.quadratic_terms`
-  evaluated over the whole batch at once (paper eqs. 17-26);
-* when numba is importable, the segment terms and the windows are computed by the single
-  estimator's compiled kernels (``estimators._residuals_numba.segment_terms_batch`` and
-  ``estimators._irls_numba.solve_ring_batch``: the same allocation-free ``segment_terms_into`` and window solver
-  ``_solve_window_into``, parallel over chunks of vehicles, reading each window straight from
-  the ring); else :func:`estimators.irls.solve_window` runs in a Python loop;
-* the EKF step is ``estimators.ekf_numba.step_inplace`` (or the numpy ``predict`` /
-  ``measurement_update`` pair) applied to each row of the batched state.
+* with numba (the ``fast`` extra), the segment terms and the windows are computed by the single
+  estimator's compiled kernels: ``estimators._residuals_numba.segment_terms_batch`` and
+  ``estimators._irls_numba.solve_ring_batch`` call the same allocation-free
+  ``segment_terms_into`` and window solver ``_solve_window_into`` (paper eqs. 17-26,
+  Algorithms 1-2), in parallel over chunks of vehicles, reading each window from the ring;
+* without numba, :func:`estimators.residuals.segment_models` /
+  :func:`~estimators.residuals.quadratic_terms` run over the whole batch at once and
+  :func:`estimators.irls.solve_window` in a Python loop;
+* the EKF step is ``estimators.ekf_numba.step_ws`` (one workspace per chunk of vehicles) or
+  the numpy ``predict`` / ``measurement_update`` pair, applied to each row of the batched state.
 
 Each row follows exactly the single estimator's online rules (window ring, warm-up,
 ``no_excitation`` / ``bad_sample`` guards, the previous estimate kept on a guard), so row i of
