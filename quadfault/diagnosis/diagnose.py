@@ -119,7 +119,17 @@ class Diagnosis:
         self.config = config or DiagnosisConfig()
 
     def fit(self, recording: Recording, vehicle=None, progress=None) -> DiagnosisResult:
-        """Diagnose ``recording`` against ``vehicle`` (default: the recording's own)."""
+        """Diagnose ``recording`` against ``vehicle`` (default: the recording's own).
+
+        BLAS runs single-threaded inside: the diagnosis multiplies many small matrices, for
+        which a multi-threaded BLAS spends more CPU spinning than computing (about 2x the CPU
+        time measured with ``benchmarks/bench_diagnosis.py``)."""
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=1, user_api="blas"):
+            return self._fit(recording, vehicle, progress)
+
+    def _fit(self, recording: Recording, vehicle, progress) -> DiagnosisResult:
         from quadfault.diagnosis.locate import locate
         from quadfault.diagnosis.prediction import open_loop_errors
 
