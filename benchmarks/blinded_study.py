@@ -45,6 +45,7 @@ from quadfault import effects as fx
 from quadfault.diagnosis import Diagnosis
 from quadfault.diagnosis.library import EQUIVALENT, build_library, predict
 from quadfault.diagnosis.residuals import noise_scale, prepare
+from quadfault.fileio import atomic_write_text
 from quadfault.recording import read_recording, write_recording
 from quadfault.scenarios import named_scenario
 from quadfault.simulator import SensorNoise, SimConfig, simulate
@@ -270,9 +271,9 @@ def run_one(job):
             write_recording(rec.without_truth(), path, frame=c["frame"], force=True)
             blind = read_recording(path)
         if stem is not None:
-            with open(stem + ".truth.json", "w") as fh:
-                json.dump({"names": c["names"], "deltas": deltas, "snr": achieved,
-                           "t_sim": t_sim}, fh)
+            atomic_write_text(stem + ".truth.json",
+                              json.dumps({"names": c["names"], "deltas": deltas, "snr": achieved,
+                                          "t_sim": t_sim}), force=True)
     t1, c1 = time.perf_counter(), time.process_time()
     res = Diagnosis().fit(blind)
     t_diag, cpu_diag = time.perf_counter() - t1, time.process_time() - c1
@@ -428,8 +429,6 @@ def main(argv=None):
     s["wall_seconds"] = time.perf_counter() - t0
     print_summary(s, rows)
     if args.out:
-        from quadfault.fileio import atomic_write_text
-
         atomic_write_text(args.out, json.dumps({"summary": s, "rows": rows}, indent=1,
                                                default=float) + "\n", force=True)
     return 0
