@@ -16,8 +16,8 @@ residual, i.e. the geometric controller) fly the *same* ``--episodes`` episodes:
 environment's random scenario of a reset seed (the training distribution: hover, 0-2 faults
 of severity 0.3-0.9, optional battery degradation, thrust noise, perturbed initial state;
 seeds from 10000 on, skipping those whose scenario has no fault), hence the same scenario,
-initial state and noise for every agent. All agents of one estimator fly as the rows of one
-vector env. Score per episode: tracking RMSE [m] of the true position error after each
+initial state and noise for every agent. Each agent flies the episodes as the rows of its
+own vector env. Score per episode: tracking RMSE [m] of the true position error after each
 control step, up to the end; a crashed (terminated) episode scores the crash limit (5 m).
 Reported with 95 % confidence intervals (Student t over the seeds of the per-seed mean
 paired differences; with one seed, over the episodes instead):
@@ -111,9 +111,10 @@ def episode_seeds(n: int, kwargs: dict, first: int = 10_000) -> list[int]:
 def paired_scores(policies, kwargs: dict, seeds: list[int]):
     """RMSE [m] (crash = CRASH_RMSE) and crash flags, arrays (n_policies, n_episodes).
 
-    One :class:`QuadFaultVectorEnv` flies every policy on every episode: row
-    ``j * n_episodes + i`` is policy j on episode i, reset with ``seeds[i]``, so all policies
-    meet the same scenario, initial state and noise. Each policy acts on its rows as a batch.
+    Policy j flies its own :class:`QuadFaultVectorEnv` whose row i is reset with
+    ``seeds[i]``, so every policy meets the same scenarios, initial states and noise. (One
+    env per policy: rows that repeat a seed inside one vector env were measured to couple,
+    giving results that differ from the single env.)
     """
     import gymnasium as gym
 
@@ -121,27 +122,28 @@ def paired_scores(policies, kwargs: dict, seeds: list[int]):
     from quad_fault_env.vector import QuadFaultVectorEnv
 
     spec = gym.spec(ENV_ID)
-    m, n = len(policies), len(seeds)
-    venv = QuadFaultVectorEnv(m * n, **dict(spec.kwargs, **kwargs))
-    try:
-        obs, _ = venv.reset(seed=[int(s) for s in seeds] * m)
-        done = np.zeros(m * n, dtype=bool)
-        crashed = np.zeros(m * n, dtype=bool)
-        sq, steps = np.zeros(m * n), np.zeros(m * n)
-        while not done.all():
-            act = np.concatenate([
-                np.asarray(p.predict(obs[j * n:(j + 1) * n], deterministic=True)[0],
-                           dtype=float).reshape(n, -1) for j, p in enumerate(policies)])
-            obs, _, term, trunc, info = venv.step(np.clip(act, -1.0, 1.0))
-            live = ~done
-            sq[live] += info["tracking_error"][live] ** 2
-            steps[live] += 1
-            crashed[live] |= term[live]
-            done |= term | trunc
-    finally:
-        venv.close()
-    rmse = np.where(crashed, CRASH_RMSE, np.sqrt(sq / np.maximum(steps, 1)))
-    return rmse.reshape(m, n), crashed.reshape(m, n)
+    n = len(seeds)
+    rmse = np.zeros((len(policies), n))
+    crashed = np.zeros((len(policies), n), dtype=bool)
+    for j, policy in enumerate(policies):
+        venv = QuadFaultVectorEnv(n, **dict(spec.kwargs, **kwargs))
+        try:
+            obs, _ = venv.reset(seed=[int(s) for s in seeds])
+            done = np.zeros(n, dtype=bool)
+            sq, steps = np.zeros(n), np.zeros(n)
+            while not done.all():
+                act = np.asarray(policy.predict(obs, deterministic=True)[0],
+                                 dtype=float).reshape(n, -1)
+                obs, _, term, trunc, info = venv.step(np.clip(act, -1.0, 1.0))
+                live = ~done
+                sq[live] += info["tracking_error"][live] ** 2
+                steps[live] += 1
+                crashed[j, live] |= term[live]
+                done |= term | trunc
+        finally:
+            venv.close()
+        rmse[j] = np.where(crashed[j], CRASH_RMSE, np.sqrt(sq / np.maximum(steps, 1)))
+    return rmse, crashed
 
 
 class _Normalised:
