@@ -65,7 +65,7 @@ def _groups(keys: np.ndarray):
     order = np.argsort(keys, kind="stable")
     sk = keys[order]
     cuts = np.flatnonzero(np.diff(sk)) + 1
-    return [(int(sk[idx[0]]), idx) for idx in np.split(order, cuts)]
+    return [(int(keys[idx[0]]), idx) for idx in np.split(order, cuts)]
 
 
 class _Table:

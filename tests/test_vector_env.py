@@ -80,6 +80,25 @@ def test_matches_single_envs_with_noise_random_scenarios_and_autoreset(physics):
     assert n_done >= 6  # every sub-env went through at least two episodes
 
 
+@pytest.mark.parametrize("physics", PHYSICS)
+def test_rows_sharing_a_scenario_do_not_leak_it_to_other_rows(physics):
+    """Rows that repeat a reset seed share one interned schedule; the other rows must keep
+    their own (a grouping bug once gave row 1 the schedule of rows 0 and 2)."""
+    kw = dict(scenario="random", random_trajectory="hover", duration=0.2,
+              estimator_rate="control")
+    seeds = [10001, 10002, 10001]
+    vec = QuadFaultVectorEnv(len(seeds), "truth", physics=physics, **kw)
+    singles = [QuadFaultEnv("truth", **kw) for _ in seeds]
+    obs, info = vec.reset(seed=seeds)
+    assert [e.reset(seed=s)[0] for e, s in zip(singles, seeds)]  # same seeds, same scenarios
+    for k in range(15):
+        obs, _, _, _, info = vec.step(np.zeros((len(seeds), 4), np.float32))
+        for i, env in enumerate(singles):
+            o, _, _, _, inf = env.step(np.zeros(4, np.float32))
+            np.testing.assert_allclose(obs[i], o, rtol=0, atol=1e-9, err_msg=f"step {k} row {i}")
+            np.testing.assert_allclose(info["eta_true"][i], inf["eta_true"], atol=1e-12)
+
+
 @pytest.mark.parametrize("estimator", ["ekf", "truth", "none"])
 @pytest.mark.parametrize("physics", PHYSICS)
 def test_matches_single_envs_in_motor_mode_until_crashes(estimator, physics):
