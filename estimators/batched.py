@@ -139,6 +139,9 @@ class BatchedIRLS:
             raise ConfigError("config must be an IRLSConfig")
         if self.config.record_history:
             raise ConfigError("BatchedIRLS does not record KKT histories (record_history=True)")
+        if self.config.change_completion or self.config.output_median != 1:
+            raise ConfigError("BatchedIRLS implements the paper's IRLS only: change_completion "
+                              "and output_median (IRLSConfig.improved()) are not batched yet")
         backend = self.config.backend
         if backend == "numba" and not numba_available():
             raise ConfigError("IRLS backend 'numba' needs numba (install the 'fast' extra)")

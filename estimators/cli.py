@@ -37,10 +37,18 @@ def estimator_class(name: str):
                           f"{exc})") from None
 
 
-def make_estimator(name: str, vehicle, backend: str | None = None):
-    """Build an estimator with its default configuration (and ``backend`` if given)."""
+def make_estimator(name: str, vehicle, backend: str | None = None, improved: bool = False):
+    """Build an estimator with its default configuration (and ``backend`` if given);
+    ``improved``: the IRLS with the options beyond the paper (``IRLSConfig.improved()``)."""
     cls = estimator_class(name)
-    est = cls(vehicle)
+    if improved:
+        if name != "irls":
+            raise ConfigError(f"--improved applies to the irls estimator, not {name!r}")
+        from estimators.irls import IRLSConfig
+
+        est = cls(vehicle, IRLSConfig.improved())
+    else:
+        est = cls(vehicle)
     if backend is not None:
         config = getattr(est, "config", None)
         if config is None or not dataclasses.is_dataclass(config) \
@@ -58,6 +66,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--force", action="store_true", help="overwrite existing files")
     p.add_argument("--backend", choices=("auto", "numpy", "numba"), default=None,
                    help="numba (compiled) or numpy; default auto (numba when installed)")
+    p.add_argument("--improved", action="store_true",
+                   help="IRLS with the options beyond the paper: change completion and a "
+                        "21-sample causal output median (docs/irls.md)")
 
 
 def run(args) -> int:
@@ -72,7 +83,7 @@ def run(args) -> int:
     if not rec.has_pose:
         raise ConfigError(f"{args.recording}: 'estimate' needs position, velocity and attitude "
                           "columns (px..pz, vx..vz, qw..qz); this recording is IMU-only")
-    est = make_estimator(args.estimator, rec.vehicle, args.backend)
+    est = make_estimator(args.estimator, rec.vehicle, args.backend, args.improved)
     series = est.run(rec.without_truth(), progress=enabled())
     extra = {"backend_used": getattr(est, "backend", None) or
              ("numba" if getattr(est, "use_numba", False) else "numpy")}

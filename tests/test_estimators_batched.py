@@ -110,3 +110,5 @@ def test_bad_shapes_and_names_raise_config_errors(flights):
         BatchedEKF(veh, 0)
     with pytest.raises(ConfigError, match="no batched estimator"):
         make_batched_estimator("kalman", veh, 2)
+    with pytest.raises(ConfigError, match="change_completion"):  # not silently the paper's
+        BatchedIRLS(veh, 2, IRLSConfig.improved())

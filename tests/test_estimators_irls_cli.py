@@ -56,6 +56,20 @@ def test_simulate_then_estimate_round_trip(flight_csv, tmp_path):
     assert forced.returncode == 0, forced.stderr
 
 
+def test_estimate_improved_irls_records_its_options(flight_csv, tmp_path):
+    est = tmp_path / "imp.csv"
+    r = _quadfault("estimate", flight_csv, "--improved", "--out", est, "--backend", "numpy",
+                   "--quiet", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    config = json.loads((tmp_path / "imp.json").read_text())["config"]
+    assert config["change_completion"] is True and config["output_median"] == 21
+    rec, data = read_recording(flight_csv), read_estimate_csv(est)
+    assert np.sqrt(np.mean((data["eta"][100:] - rec.eta_true[100:]) ** 2)) < 0.05
+    bad = _quadfault("estimate", flight_csv, "--estimator", "ekf", "--improved", "--out",
+                     tmp_path / "x.csv", "--quiet", cwd=tmp_path)
+    assert bad.returncode == 2 and "--improved" in bad.stderr and not (tmp_path / "x.csv").exists()
+
+
 def test_estimate_ekf_through_the_registry(flight_csv, tmp_path):
     pytest.importorskip("estimators.ekf")
     est = tmp_path / "ekf.csv"
