@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import re
 
 import gymnasium as gym
 import numpy as np
@@ -412,3 +413,22 @@ def test_default_estimator_rate_does_not_depend_on_numba(monkeypatch):
         env = QuadFaultEnv(estimator="irls")
     assert env.estimator_rate == "physics" and env.estimator_stride == 1
     assert QuadFaultEnv(estimator="irls", estimator_rate="control").estimator_stride == env.substeps
+
+
+def test_random_faults_bounds_the_random_scenarios_faults():
+    env = QuadFaultEnv("none", "random", random_faults={"n_faults": (1, 1), "severity": (0.6, 0.7),
+                                                         "degradation_prob": 0.0})
+    for seed in range(8):
+        env.reset(seed=seed)
+        faults = env.scenario.efficiency.faults
+        assert len(faults) == 1
+        assert 0.6 <= faults[0].level <= 0.7
+
+
+@pytest.mark.parametrize("spec, word", [
+    ({"n_faults": (0, 1.5)}, "whole numbers"), ({"severity": (0.5, 1.2)}, "[0, 1]"),
+    ({"severity": (0.8, 0.5)}, "low <= high"), ({"ramp_prob": 2}, "probability"),
+    ({"bogus": 1}, "unknown key"), ({"severity": 0.5}, "pair"), ([1, 2], "dict")])
+def test_random_faults_rejects_bad_specs(spec, word):
+    with pytest.raises(ConfigError, match=re.escape(word)):
+        QuadFaultEnv("none", "random", random_faults=spec)

@@ -51,6 +51,49 @@ def _number_at_least(value, low: float) -> bool:
             and math.isfinite(value) and value >= low)
 
 
+#: keywords of ``random_faults``: (low, high) ranges and probabilities of ``random_scenario``
+_RANGE_KEYS = ("n_faults", "severity", "xi_range", "thrust_noise")
+_PROB_KEYS = ("degradation_prob", "ramp_prob")
+
+
+def _check_random_faults(spec) -> dict:
+    """Validate ``random_faults`` (None: the defaults of ``random_scenario``)."""
+    if spec is None:
+        return {}
+    if not isinstance(spec, dict):
+        raise ConfigError(f"random_faults must be a dict of random_scenario keywords, got {spec!r}")
+    out = {}
+    for key, value in spec.items():
+        if key in _PROB_KEYS:
+            if not (_number_at_least(value, 0.0) and value <= 1.0):
+                raise ConfigError(f"random_faults[{key!r}] must be a probability in [0, 1], "
+                                  f"got {value!r}")
+            out[key] = float(value)
+        elif key in _RANGE_KEYS:
+            try:
+                low, high = (float(v) for v in value)
+            except (TypeError, ValueError):
+                raise ConfigError(f"random_faults[{key!r}] must be a (low, high) pair, "
+                                  f"got {value!r}") from None
+            if not (math.isfinite(low) and math.isfinite(high) and 0.0 <= low <= high):
+                raise ConfigError(f"random_faults[{key!r}] must satisfy 0 <= low <= high, "
+                                  f"got {value!r}")
+            if key == "n_faults":
+                if low != int(low) or high != int(high):
+                    raise ConfigError(f"random_faults['n_faults'] must be whole numbers, "
+                                      f"got {value!r}")
+                out[key] = (int(low), int(high))
+            elif key == "severity" and high > 1.0:
+                raise ConfigError(f"random_faults['severity'] levels are efficiencies in "
+                                  f"[0, 1], got {value!r}")
+            else:
+                out[key] = (low, high)
+        else:
+            raise ConfigError(f"random_faults has unknown key {key!r}; choose from "
+                              f"{', '.join(_RANGE_KEYS + _PROB_KEYS)}")
+    return out
+
+
 def _numba_available() -> bool:
     try:
         import numba  # noqa: F401
@@ -123,6 +166,10 @@ class QuadFaultEnv(gym.Env):
             :class:`~quadfault.scenarios.Scenario`, or ``"random"``
             (:func:`~quadfault.scenarios.random_scenario` with ``self.np_random``).
         random_trajectory: trajectory of random scenarios (``"random"``, ``"hover"``, ...).
+        random_faults: keyword arguments of :func:`~quadfault.scenarios.random_scenario` for
+            random scenarios (``n_faults``, ``severity``, ``degradation_prob``, ``xi_range``,
+            ``thrust_noise``, ``ramp_prob``), e.g. ``{"n_faults": (1, 1), "severity": (0.5,
+            0.8)}`` for one fault a controller can counter; None keeps its defaults.
         duration: episode length [s] of named and random scenarios (default 20 s); a
             Scenario object brings its own ``duration``.
         thrust_noise: sigma_f overriding the scenario's (None keeps it).
@@ -146,7 +193,8 @@ class QuadFaultEnv(gym.Env):
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
 
     def __init__(self, estimator="irls", scenario="combined", *, estimator_kwargs=None,
-                 random_trajectory: str = "random", duration: float | None = None,
+                 random_trajectory: str = "random", random_faults: dict | None = None,
+                 duration: float | None = None,
                  thrust_noise: float | None = None, sensor_noise: SensorNoise | None = None,
                  action_mode: str = "residual", residual_scale: float = 1.0,
                  moment_scale: tuple = (1.0, 1.0, 0.05), control_rate: float = 100.0,
@@ -198,6 +246,7 @@ class QuadFaultEnv(gym.Env):
             raise ConfigError(f"random_trajectory must be one of {RANDOM_TRAJECTORIES}, "
                               f"got {random_trajectory!r}")
         self.random_trajectory = random_trajectory
+        self.random_faults = _check_random_faults(random_faults)
         if duration is not None and not (_number_at_least(duration, 0.0) and duration > 0):
             raise ConfigError(f"duration must be positive [s], got {duration!r}")
         self.duration = duration
@@ -244,7 +293,7 @@ class QuadFaultEnv(gym.Env):
             sc = spec  # a Scenario object brings its own duration
         elif spec == "random":
             sc = random_scenario(self.np_random, self.duration or DEFAULT_DURATION,
-                                 trajectory=self.random_trajectory)
+                                 trajectory=self.random_trajectory, **self.random_faults)
         elif isinstance(spec, str) and spec in SCENARIO_NAMES:
             sc = named_scenario(spec, self.duration or DEFAULT_DURATION, self.dt)
         else:
