@@ -444,6 +444,79 @@ def solve_ring_batch(c, b, H, start, rows, x_prev, fp, ip, x, sd, code, chunks):
                                                     V, M, S, iters, w, nohist, x[k], sd[k])
 
 
+#: why :func:`online_update` refused a sample (``bad_sample``)
+WHY_NONFINITE, WHY_TIME = 1, 2
+_WARM = STATUSES.index("warmup")
+_BAD = STATUSES.index("bad_sample")
+
+
+def online_state(m: int, n: int, rounds: int):
+    """The state of one online estimator as arrays (:func:`online_update` updates it in place):
+    ``(ints, last_t, last_p, last_v, last_R, last_w, last_f, c, b, H, thrust, r0, J)`` where
+    ``ints = [head, count, has_last]`` (``head``: ring slot written next, which is the oldest
+    segment of a full window), ``last_*`` the previous sample (its command clipped), ``c``,
+    ``b``, ``H``, ``thrust`` the ring of the window's segment terms and ``r0``, ``J`` scratch
+    of :func:`segment_terms_into`."""
+    return (np.zeros(3, dtype=np.int64), np.zeros(1), np.zeros(3), np.zeros(3),
+            np.zeros((3, 3)), np.zeros(3), np.zeros(n), np.zeros(m), np.zeros((m, n)),
+            np.zeros((m, n, n)), np.zeros(m), np.zeros(10), np.zeros((10, n)))
+
+
+@njit(cache=True)
+def _all_finite(a):
+    for x in a.flat:
+        if not math.isfinite(x):
+            return False
+    return True
+
+
+@njit(cache=True)
+def online_update(t, p, v, R, w, f, f_max, clip, min_thrust, ints, last_t, last_p, last_v,
+                  last_R, last_w, last_f, c, b, H, thrust, r0, J, mass, g, Jmat, Jinv, A, G,
+                  x, x_out, sd_out, fp, ip, V, M, S, iters, wts, nohist):
+    """One online update of the sliding-window IRLS in one compiled call: checks the sample
+    (finite, time increasing), clips its command to ``[0, f_max]`` (``clip``), adds the
+    segment previous -> this sample to the ring (eqs. 17-26), and solves the window
+    (Algorithm 2, :func:`_solve_window_into`) from the previous estimate ``x`` when it is full
+    and excited. The caller keeps ``x``: the solution is left in ``x_out`` / ``sd_out``.
+
+    Returns ``(status code, why, rounds, cond)``; ``why`` is :data:`WHY_NONFINITE` or
+    :data:`WHY_TIME` for a ``bad_sample`` (the window restarts), else 0."""
+    m = c.size
+    finite = (math.isfinite(t) and _all_finite(p) and _all_finite(v) and _all_finite(R)
+              and _all_finite(w) and _all_finite(f))
+    if not finite or (ints[2] == 1 and not t > last_t[0]):
+        ints[1] = 0
+        ints[2] = 0
+        return _BAD, (WHY_NONFINITE if not finite else WHY_TIME), 0, np.nan
+    if ints[2] == 1:
+        slot = ints[0]
+        ci, ti = segment_terms_into(t - last_t[0], last_p, p, last_v, v, last_R, R, last_w, w,
+                                    last_f, mass, g, Jmat, Jinv, A, G, r0, J, b[slot], H[slot])
+        c[slot] = ci
+        thrust[slot] = ti
+        ints[0] = (slot + 1) % m
+        ints[1] = min(ints[1] + 1, m)
+    last_t[0] = t
+    for a in range(3):
+        last_p[a], last_v[a], last_w[a] = p[a], v[a], w[a]
+        for k in range(3):
+            last_R[a, k] = R[a, k]
+    for j in range(f.size):
+        last_f[j] = min(max(f[j], 0.0), f_max) if clip else f[j]
+    ints[2] = 1
+    if ints[1] < m:
+        return _WARM, 0, 0, np.nan
+    mean = 0.0
+    for s in range(m):
+        mean += thrust[(ints[0] + s) % m]
+    if mean / m < min_thrust:
+        return _NO_EXC, 0, 0, np.nan
+    code, rounds, cond = _solve_window_into(c, b, H, ints[0], x, fp, ip, V, M, S, iters, wts,
+                                            nohist, x_out, sd_out)
+    return code, 0, rounds, cond
+
+
 def run_windows_numba(c, b, H, excited, x0, cfg, progress: bool = False):
     """All windows of a recording in compiled code; returns (eta, sd, status codes)."""
     from quadfault.progress import progress_bar
@@ -469,11 +542,27 @@ def run_windows_numba(c, b, H, excited, x0, cfg, progress: bool = False):
     return eta, sd, status
 
 
+def window_diagnostics(code: int, rounds: int, cond: float, iters, w, cfg):
+    """The :class:`~estimators.irls.IRLSDiagnostics` of a compiled window solve (status
+    ``code``, ``rounds`` IRLS rounds with ``iters`` interior-point iterations each, final
+    weights ``w``, copied)."""
+    from estimators.irls import IRLSDiagnostics
+
+    message = ""
+    if code == _REJ:
+        message = "every segment rejected"
+    elif code == _MAXIT:
+        message = f"interior point stopped at {cfg.ipm.max_iter} iterations"
+    elif code == _ILL:
+        message = f"cond(J^T G J) = {cond:.3g} > {cfg.cond_max:g}"
+    rejected = tuple(k for k, wk in enumerate(w.tolist()) if wk == 0)
+    return IRLSDiagnostics(STATUSES[code], message, tuple(iters[:rounds].tolist()), w.copy(),
+                           rejected, cond)
+
+
 def solve_window_numba(c, b, H, x_prev, cfg, params=None):
     """Compiled :func:`estimators.irls.solve_window` (no histories); ``params`` are the
     cached :func:`kernel_parameters` of ``cfg``."""
-    from estimators.irls import _diag
-
     m, n = np.shape(b)
     params = kernel_parameters(cfg, m) if params is None else params
     fp, ip = params
@@ -490,15 +579,7 @@ def solve_window_numba(c, b, H, x_prev, cfg, params=None):
                                             np.ascontiguousarray(H, dtype=float), 0,
                                             np.asarray(x_prev, dtype=float), fp, ip, V, M, S,
                                             iters, w, nohist, x_out, sd_out)
-    status = STATUSES[code]
-    message = ""
-    if code == _REJ:
-        message = "every segment rejected"
-    elif code == _MAXIT:
-        message = f"interior point stopped at {cfg.ipm.max_iter} iterations"
-    elif code == _ILL:
-        message = f"cond(J^T G J) = {cond:.3g} > {cfg.cond_max:g}"
-    diag = _diag(status, message, [int(i) for i in iters[:rounds]], w.copy(), cond, None)
+    diag = window_diagnostics(code, rounds, cond, iters, w, cfg)
     if code in (_OK, _MAXIT):
         return x_out, sd_out, diag
     return np.asarray(x_prev, dtype=float), None, diag

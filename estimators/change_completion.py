@@ -162,7 +162,13 @@ class CausalMedian:
             self._buf = np.repeat(row[None], self.length, axis=0)
         self._buf[self._k] = row
         self._k = (self._k + 1) % self.length
-        return np.median(self._buf, axis=0)
+        # np.median's value (middle element, or the mean of the middle two), from one sort:
+        # a few times faster on these small buffers
+        ordered = np.sort(self._buf, axis=0)
+        k = self.length // 2
+        if self.length % 2:
+            return ordered[k]
+        return (ordered[k - 1] + ordered[k]) / 2.0
 
 
 def run_completed(c, b, H, excited, x0, completion: ChangeCompletion, run_chunk, solve_one,

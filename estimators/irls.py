@@ -43,6 +43,7 @@ from quadfault.vehicle import Vehicle
 SCALINGS = ("reference", "paper")
 BACKENDS = ("auto", "numpy", "numba")
 _START_MARGIN = 1e-6  # the interior-point start is kept this far inside the bounds
+_F64 = np.dtype(np.float64)
 
 
 @dataclass(frozen=True)
@@ -192,6 +193,45 @@ class IRLSDiagnostics:
     residual_history: tuple | None = None
 
 
+class CompiledWindowDiagnostics(IRLSDiagnostics):
+    """The :class:`IRLSDiagnostics` of a compiled online window solve, built on first read.
+
+    The online update runs at every physics substep while its diagnostics are mostly
+    ignored, so it keeps only the raw outcome (status code, IRLS rounds, condition number, a
+    copy of the interior-point iteration counts and of the final weights); any field read
+    builds them (:func:`estimators._irls_numba.window_diagnostics`). It is an
+    ``IRLSDiagnostics`` in every respect: same fields, ``dataclasses.fields`` / ``asdict``.
+    """
+
+    def __init__(self, code: int, rounds: int, cond: float, iters, weights, config):
+        object.__setattr__(self, "_raw", (code, rounds, cond, iters, weights, config))
+        object.__setattr__(self, "_built", None)
+
+    def _get(self, name):
+        built = self._built
+        if built is None:
+            from estimators._irls_numba import window_diagnostics
+
+            built = window_diagnostics(*self._raw)
+            object.__setattr__(self, "_built", built)
+        return getattr(built, name)
+
+    @property
+    def status(self) -> str:
+        return STATUSES[self._raw[0]]
+
+    @property
+    def weights(self):
+        return self._raw[4]
+
+
+for _name in IRLSDiagnostics.__dataclass_fields__:
+    if _name not in ("status", "weights"):
+        setattr(CompiledWindowDiagnostics, _name,
+                property(lambda self, _n=_name: self._get(_n)))
+del _name
+
+
 def condition_number_1(A) -> float:
     """``||A||_1 ||A^-1||_1`` (inf when singular); MATLAB's ``1/rcond`` up to its estimate."""
     A = np.asarray(A, dtype=float)
@@ -327,6 +367,17 @@ class SlidingWindowIRLS:
         self.backend = "numpy" if self.config.record_history else backend
         self._G = self.config.segment_weights
         self._kernel_params = None
+        if self.backend == "numba":
+            from estimators._irls_numba import kernel_parameters, workspace
+
+            m, n, v = self.config.window - 1, vehicle.n_rotors, vehicle
+            self._kernel_params = kernel_parameters(self.config, m)
+            # the arguments of online_update that never change: vehicle, settings, scratch
+            self._vehicle_args = (float(v.mass), float(v.gravity), _c64(v.inertia),
+                                  _c64(v.inertia_inverse), _c64(v.allocation), _c64(self._G))
+            self._x_out, self._sd_out = np.empty(n), np.empty(n)
+            self._solver_args = (*self._kernel_params,
+                                 *workspace(m, n, int(self._kernel_params[1][0])))
         self.reset()
 
     # online ---------------------------------------------------------------------------
@@ -343,10 +394,15 @@ class SlidingWindowIRLS:
         self._sd = None
         self._last: Sample | None = None
         m = self.config.window - 1  # ring of the window's segment terms, oldest first
-        self._c, self._b = np.zeros(m), np.zeros((m, n))
-        self._H, self._thrust = np.zeros((m, n, n)), np.zeros(m)
-        self._count = 0
         cfg = self.config
+        if self.backend == "numba":  # the compiled online state (estimators._irls_numba)
+            from estimators._irls_numba import online_state
+
+            self._online = online_state(m, n, cfg.max_irls)
+        else:
+            self._c, self._b = np.zeros(m), np.zeros((m, n))
+            self._H, self._thrust = np.zeros((m, n, n)), np.zeros(m)
+            self._count = 0
         self._completion = ChangeCompletion(cfg.change_threshold, cfg.change_hold, cfg.gamma,
                                             cfg.lower, cfg.upper, span=m)
         self._completion.reset(eta)
@@ -383,6 +439,8 @@ class SlidingWindowIRLS:
 
     def update(self, sample: Sample) -> Estimate:
         """Add one measurement row; returns the estimate of the window ending at it."""
+        if self.backend == "numba":
+            return self._update_compiled(sample)
         n = self.vehicle.n_rotors
         try:
             t = float(sample.t)
@@ -390,7 +448,7 @@ class SlidingWindowIRLS:
             shapes_ok = [a.shape for a in arrays] == [(3,), (3,), (3, 3), (3,), (n,)]
             finite = shapes_ok and math.isfinite(t) and all(np.all(np.isfinite(a))
                                                             for a in arrays)
-        except (TypeError, ValueError, IndexError):
+        except (AttributeError, TypeError, ValueError, IndexError):
             t, finite = math.nan, False
         if not finite or (self._last is not None and not t > self._last.t):
             self._last = None
@@ -430,6 +488,54 @@ class SlidingWindowIRLS:
                                                                          self.config))
         self._eta, self._sd = eta, sd
         return Estimate(float(t), self._median.push(eta), sd.copy(), diag.status, diag)
+
+    def _update_compiled(self, sample: Sample) -> Estimate:
+        """:meth:`update` in one compiled call (``_irls_numba.online_update``): the same
+        rules, ring and window solver as the numpy path; Python only checks shapes and
+        applies the options beyond the paper."""
+        from estimators._irls_numba import WHY_NONFINITE, online_update
+
+        n = self.vehicle.n_rotors
+        try:
+            t = float(sample.t)
+            p, v, R, w, f = [np.asarray(a, dtype=_F64) for a in sample[1:]]
+            malformed = (p.shape != (3,) or v.shape != (3,) or R.shape != (3, 3)
+                         or w.shape != (3,) or f.shape != (n,))
+        except (AttributeError, TypeError, ValueError, IndexError):
+            t, malformed = math.nan, True
+        state = self._online
+        if malformed:
+            state[0][1:] = 0  # window restarted
+            return self._keep(t, STATUS_BAD_SAMPLE,
+                              "non-finite or malformed sample; window restarted")
+        cfg = self.config
+        code, why, rounds, cond = online_update(
+            t, p, v, R, w, f, self.vehicle.rotor_max_thrust, cfg.clip_commands,
+            cfg.min_thrust, *state, *self._vehicle_args, self._eta, self._x_out,
+            self._sd_out, *self._solver_args)
+        status = STATUSES[code]
+        if status == STATUS_BAD_SAMPLE:
+            why = "non-finite or malformed sample" if why == WHY_NONFINITE \
+                else "time not increasing"
+            return self._keep(t, STATUS_BAD_SAMPLE, f"{why}; window restarted")
+        if status == STATUS_WARMUP:
+            return self._keep(t, STATUS_WARMUP)
+        if status == STATUS_NO_EXCITATION:
+            self._completion.observe(self._eta)
+            return self._keep(t, STATUS_NO_EXCITATION, "commanded thrust ~ 0 in the window")
+        iters, weights = self._solver_args[5], self._solver_args[6]
+        diag = CompiledWindowDiagnostics(code, rounds, cond, iters.copy(), weights.copy(), cfg)
+        if status not in (STATUS_OK, STATUS_MAX_ITER):
+            self._completion.observe(self._eta)
+            return Estimate(t, self._median.push(self._eta), None if self._sd is None
+                            else self._sd.copy(), status, diag)
+        eta, sd = self._x_out.copy(), self._sd_out.copy()
+        if cfg.change_completion:
+            head, m = state[0][0], cfg.window - 1
+            eta = self._completion.step(eta, lambda: _window_information(
+                state[9][(head + np.arange(m)) % m], diag.weights, cfg))
+        self._eta, self._sd = eta, sd
+        return Estimate(t, self._median.push(eta), sd.copy(), status, diag)
 
     # offline --------------------------------------------------------------------------
     def run(self, recording: Recording, progress: bool = False) -> EstimateSeries:
@@ -491,6 +597,10 @@ class SlidingWindowIRLS:
                                       cfg.lower, cfg.upper, span=cfg.window - 1)
         return run_completed(c, b, H, excited, x0, completion, run_chunk, solve_one,
                              lambda Hw, w: _window_information(Hw, w, cfg))
+
+
+def _c64(a) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64)
 
 
 def _window_information(H, w, cfg: IRLSConfig) -> np.ndarray:

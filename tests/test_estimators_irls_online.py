@@ -1,0 +1,124 @@
+"""The online ``SlidingWindowIRLS.update``: the compiled one-call path gives the numpy path's
+estimates, statuses, messages and diagnostics, and ``run()``'s estimates."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from estimators.base import Sample, samples
+from estimators.irls import IRLSConfig, IRLSDiagnostics, SlidingWindowIRLS
+from quadfault.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
+from quadfault.simulator import simulate
+from quadfault.trajectory import Circle
+
+pytest.importorskip("numba")
+
+
+@pytest.fixture(scope="module")
+def fault_flight():
+    """A motor fault at 0.2 s (the change completion triggers on it)."""
+    sc = Scenario("fault", 0.4, EfficiencySchedule(
+        ConstantEfficiency((1.0, 0.9, 0.8, 0.95)), (AbruptFault(motor=3, onset=0.2, level=0.4),)),
+        Circle())
+    return simulate(sc, seed=5).without_truth()
+
+
+def _troubled_rows(rec):
+    """The flight's samples with every guard in them: a NaN, a repeated time, a stretch of
+    zero thrust, a malformed command, a silent rotor (ill-conditioned)."""
+    rows = list(samples(rec))
+    rows[60] = rows[60]._replace(p=np.array([np.nan, 0.0, 0.0]))
+    rows[120] = rows[120]._replace(t=rows[119].t)
+    for k in range(150, 165):
+        rows[k] = rows[k]._replace(f=np.zeros(4))
+    rows[180] = rows[180]._replace(f=np.zeros(3))
+    for k in range(300, 312):
+        rows[k] = rows[k]._replace(f=np.array([2.5, 0.0, 2.5, 2.5]))
+    return rows
+
+
+@pytest.mark.parametrize("improved", [False, True])
+def test_compiled_online_update_equals_numpy_online_update(fault_flight, improved):
+    make = IRLSConfig.improved if improved else IRLSConfig
+    a = SlidingWindowIRLS(fault_flight.vehicle, make(backend="numpy"))
+    b = SlidingWindowIRLS(fault_flight.vehicle, make(backend="numba"))
+    seen = set()
+    for s in _troubled_rows(fault_flight):
+        ea, eb = a.update(s), b.update(s)
+        seen.add(eb.status)
+        assert (ea.status, ea.t) == (eb.status, eb.t)
+        np.testing.assert_allclose(eb.eta, ea.eta, rtol=0, atol=1e-9)
+        assert (ea.sd is None) == (eb.sd is None)
+        if ea.sd is not None:
+            np.testing.assert_allclose(eb.sd, ea.sd, rtol=0, atol=1e-9)
+        da, db = ea.diagnostics, eb.diagnostics
+        assert (da.status, da.message, da.inner_iterations, da.rejected) == \
+               (db.status, db.message, db.inner_iterations, db.rejected)
+        assert (da.weights is None) == (db.weights is None)
+        if da.weights is not None:
+            np.testing.assert_allclose(db.weights, da.weights, atol=1e-9)
+    assert {"ok", "warmup", "bad_sample", "no_excitation", "ill_conditioned"} <= seen
+    if improved:
+        assert b._completion.events >= 1 and a._completion.events == b._completion.events
+
+
+@pytest.mark.parametrize("improved", [False, True])
+def test_compiled_online_update_equals_run(fault_flight, improved):
+    cfg = (IRLSConfig.improved if improved else IRLSConfig)(backend="numba")
+    est = SlidingWindowIRLS(fault_flight.vehicle, cfg)
+    online = [est.update(s) for s in samples(fault_flight)]
+    offline = SlidingWindowIRLS(fault_flight.vehicle, cfg).run(fault_flight)
+    np.testing.assert_allclose(np.array([e.eta for e in online]), offline.eta, rtol=0,
+                               atol=1e-12)
+    assert [e.status for e in online] == list(offline.status)
+    sd = np.array([np.full(4, np.nan) if e.sd is None else e.sd for e in online])
+    np.testing.assert_allclose(sd, offline.sd, rtol=0, atol=1e-12)
+
+
+def test_online_estimates_do_not_alias_the_estimator_state(fault_flight):
+    est = SlidingWindowIRLS(fault_flight.vehicle, IRLSConfig(backend="numba"))
+    outs = [est.update(s) for s in samples(fault_flight.slice(0, 40))]
+    first = outs[20].eta.copy(), outs[20].sd.copy(), outs[20].diagnostics.weights.copy()
+    for s in samples(fault_flight.slice(40, 80)):
+        est.update(s)
+    np.testing.assert_array_equal(outs[20].eta, first[0])
+    np.testing.assert_array_equal(outs[20].sd, first[1])
+    np.testing.assert_array_equal(outs[20].diagnostics.weights, first[2])
+    assert est.eta is not est.eta  # a copy
+
+
+def test_lazy_diagnostics_are_irls_diagnostics(fault_flight):
+    est = SlidingWindowIRLS(fault_flight.vehicle, IRLSConfig(backend="numba"))
+    for s in samples(fault_flight.slice(0, 30)):
+        out = est.update(s)
+    d = out.diagnostics
+    assert isinstance(d, IRLSDiagnostics) and dataclasses.is_dataclass(d)
+    fields = dataclasses.asdict(d)
+    assert set(fields) == {f.name for f in dataclasses.fields(IRLSDiagnostics)}
+    assert fields["status"] == out.status == "ok"
+    assert len(fields["inner_iterations"]) >= 1 and all(k > 0 for k in d.inner_iterations)
+    assert d.weights.shape == (9,) and d.rejected == tuple(np.flatnonzero(d.weights == 0))
+    assert np.isfinite(d.cond) and d.dual_history is None
+    assert "inner_iterations=" in repr(d)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_malformed_samples_restart_the_window(fault_flight, backend):
+    est = SlidingWindowIRLS(fault_flight.vehicle, IRLSConfig(backend=backend))
+    rows = list(samples(fault_flight.slice(0, 30)))
+    for bad, why in ((rows[12]._replace(R=np.eye(4)), "non-finite or malformed sample"),
+                     (("not", "a", "sample"), "non-finite or malformed sample"),
+                     (rows[11], "time not increasing")):
+        est.reset()
+        assert [est.update(s).status for s in rows[:13]][-1] == "ok"
+        out = est.update(bad)
+        assert out.status == "bad_sample" and out.diagnostics.message.startswith(why)
+        assert np.all(np.isfinite(out.eta))
+        assert est.update(rows[13]).status == "warmup"
+    est.reset()
+    assert [est.update(s).status for s in rows[:10]] == ["warmup"] * 9 + ["ok"]
+    bad = Sample(rows[10].t, rows[10].p, rows[10].v, rows[10].R, rows[10].w, [1, 1, np.inf, 1])
+    assert est.update(bad).status == "bad_sample"
