@@ -432,3 +432,115 @@ def test_random_faults_bounds_the_random_scenarios_faults():
 def test_random_faults_rejects_bad_specs(spec, word):
     with pytest.raises(ConfigError, match=re.escape(word)):
         QuadFaultEnv("none", "random", random_faults=spec)
+
+
+# -- physics="numba": the compiled control step equals the numpy plant ----------------------
+needs_numba = pytest.mark.skipif(not _have("numba"), reason="numba (the 'fast' extra) missing")
+FAULT_NOISE = dict(scenario="combined", duration=1.2, thrust_noise=0.07,
+                   sensor_noise=SensorNoise(position=0.01, velocity=0.02, attitude=0.002,
+                                            gyro=0.01, accel=0.1))
+
+
+def _assert_same_step(a, b, where):
+    """Two env.step results agree to 1e-9 (the numba-vs-numpy tolerance of the simulator and
+    vector env tests), samples and truth streams included."""
+    (o0, r0, te0, tr0, i0), (o1, r1, te1, tr1, i1) = a, b
+    np.testing.assert_allclose(o1, o0, rtol=0, atol=1e-9, err_msg=where)
+    assert abs(r1 - r0) <= 1e-9 and (te1, tr1) == (te0, tr0), where
+    assert len(i1["samples"]) == len(i0["samples"]), where
+    for s0, s1 in zip(i0["samples"], i1["samples"]):
+        assert s1.t == s0.t, where
+        for x0, x1 in zip(s0[1:], s1[1:]):
+            np.testing.assert_allclose(x1, x0, rtol=0, atol=1e-9, err_msg=where)
+    for key in ("eta_true", "eta_hat", "eta_true_samples", "specific_force_samples",
+                "motor_command", "position_error"):
+        np.testing.assert_allclose(np.asarray(i1[key], float), np.asarray(i0[key], float),
+                                   rtol=0, atol=1e-9, err_msg=f"{where} {key}")
+    for key in ("termination_reason", "estimator_status", "fault_events", "faults", "t"):
+        assert i1[key] == i0[key], f"{where} {key}"
+
+
+@needs_numba
+@pytest.mark.parametrize("estimator, kw", [
+    ("none", FAULT_NOISE),
+    ("irls", dict(FAULT_NOISE, duration=0.6, compensate=True)),
+    ("truth", dict(scenario="random", duration=1.0, action_mode="motor")),
+])
+def test_compiled_physics_matches_numpy_over_an_episode(estimator, kw):
+    """Same seed and actions: physics='numba' gives the numpy path's observations, rewards
+    and infos (fault, thrust noise and sensor noise drawn from the same stream), and leaves
+    the generator in the same state."""
+    envs = [QuadFaultEnv(estimator, physics=p, **kw) for p in ("numpy", "numba")]
+    assert [e.physics for e in envs] == ["numpy", "numba"]
+    first = [e.reset(seed=7) for e in envs]
+    np.testing.assert_array_equal(first[1][0], first[0][0])
+    rng = np.random.default_rng(1)
+    n_events = 0
+    for k in range(300):
+        a = rng.uniform(-0.3, 0.3, 4).astype(np.float32)
+        out = [e.step(a) for e in envs]
+        _assert_same_step(*out, f"step {k}")
+        n_events += len(out[0][4]["fault_events"])
+        if out[0][2] or out[0][3]:
+            break
+    states = [e.np_random.bit_generator.state for e in envs]
+    assert states[1] == states[0]
+    assert k >= 30  # a real episode, not an immediate termination
+    if kw["scenario"] == "combined":
+        assert n_events >= 4  # the faults' onsets and ends fell inside the episode
+
+
+@needs_numba
+def test_compiled_physics_stops_and_rewinds_the_noise_where_numpy_does_on_divergence():
+    """A state that overflows mid-step: both paths stop after the same substep with the same
+    samples, terminate as non_finite, and leave the generator at the same draw."""
+    envs = [QuadFaultEnv("none", physics=p, **FAULT_NOISE) for p in ("numpy", "numba")]
+    out = []
+    for env in envs:
+        env.reset(seed=3)
+        env.step(np.zeros(4, np.float32))
+        s = env.plant.state
+        s.w[:] = (1e80, -2e80, 3e80)  # finite, but its gyroscopic term overflows
+        with np.errstate(over="ignore", invalid="ignore"):
+            out.append(env.step(np.zeros(4, np.float32)))
+    _assert_same_step(*out, "diverging step")
+    assert out[0][4]["termination_reason"] == "non_finite"
+    assert 0 < len(out[0][4]["samples"]) < envs[0].substeps
+    assert envs[1].np_random.bit_generator.state == envs[0].np_random.bit_generator.state
+
+
+def test_observation_is_the_layouts_values_even_for_nan_and_inf():
+    """The env's one-vector observation equals ObservationLayout.values (NaN -> fill,
+    +-inf -> bound, clipped) for the flat and the dict layouts."""
+    for kind in ("flat", "dict"):
+        env = QuadFaultEnv("none", "hover", observation=kind, physics="numpy")
+        env.reset(seed=0)
+        env._meas.p[:] = (np.nan, np.inf, -3.0)
+        env._meas.w[:] = (-np.inf, 60.0, 0.1)
+        env._estimate = Estimate(0.0, np.array([np.nan, 3.0, -1.0, 0.5]), None)
+        ref = env.scenario.trajectory(0.0)
+        got = env._observation(ref)
+        m = env._meas
+        want = env.layout.values(pos_err=m.p - ref.position, vel_err=m.v - ref.velocity, R=m.R,
+                                 omega=m.w, eta_hat=env._estimate.eta, eta_sd=None,
+                                 ref_acc=ref.acceleration)
+        if kind == "flat":
+            np.testing.assert_array_equal(got, env.layout.flatten(want))
+            assert got.dtype == np.float32
+        else:
+            assert list(got) == list(want)
+            for name in want:
+                np.testing.assert_array_equal(got[name], want[name])
+
+
+def test_physics_keyword_is_validated_and_auto_follows_numba(monkeypatch):
+    with pytest.raises(ConfigError, match="physics must be one of"):
+        QuadFaultEnv("none", physics="gpu")
+    want = "numba" if _have("numba") else "numpy"
+    assert QuadFaultEnv("none").physics == want
+    from quadfault import _numba_kernels
+
+    monkeypatch.setattr(_numba_kernels, "AVAILABLE", False)
+    assert QuadFaultEnv("none", physics="auto").physics == "numpy"
+    with pytest.raises(ConfigError, match="physics='numba' needs numba"):
+        QuadFaultEnv("none", physics="numba")

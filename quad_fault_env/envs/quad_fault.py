@@ -102,6 +102,16 @@ def _numba_available() -> bool:
     return True
 
 
+#: ``physics`` values: the plant's substeps in numpy or on the compiled plant step
+PHYSICS_BACKENDS = ("auto", "numpy", "numba")
+
+
+def _compiled_physics_available() -> bool:
+    from quadfault import _numba_kernels
+
+    return _numba_kernels.AVAILABLE
+
+
 _SLOW_ESTIMATOR_WARNED = False
 
 
@@ -188,6 +198,13 @@ class QuadFaultEnv(gym.Env):
             with the scenario's efficiency).
         controller: ``ControllerConfig`` of the baseline controller.
         render_mode: ``"rgb_array"`` or ``"human"``.
+        physics: ``"auto"`` (default: ``"numba"`` when numba is importable, else
+            ``"numpy"``), ``"numpy"`` (the core :class:`~quadfault.plant.Plant`, one call
+            per substep) or ``"numba"`` (the substeps of a control step in one compiled call
+            on the same plant step as the simulator and the vector env,
+            ``quadfault._numba_kernels.plant_step``, and the compiled twin of the geometric
+            controller). Both give the same observations, rewards and infos to rounding
+            (tested to 1e-9) and draw the same random numbers.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
@@ -204,7 +221,7 @@ class QuadFaultEnv(gym.Env):
                  limits: TerminationLimits | None = None,
                  initial_spread: InitialStateSpread | None = None,
                  vehicle: Vehicle | None = None, controller: ControllerConfig | None = None,
-                 render_mode: str | None = None):
+                 render_mode: str | None = None, physics: str = "auto"):
         self.vehicle = vehicle or Vehicle()
         if not isinstance(self.vehicle, Vehicle) or self.vehicle.n_rotors != 4:
             raise ConfigError("vehicle must be a quadfault Vehicle with 4 rotors (the scenarios "
@@ -262,12 +279,26 @@ class QuadFaultEnv(gym.Env):
         self.layout = ObservationLayout(reference_acceleration)
         self.observation_space = (self.layout.flat_space() if observation == "flat"
                                   else self.layout.dict_space())
+        # per element of the flat layout: lower and upper bound, NaN fill (see _observation)
+        self._obs_bounds = tuple(np.concatenate([np.full(s.size, x(s), dtype=float)
+                                                 for s in self.layout.slots])
+                                 for x in (lambda s: s.low, lambda s: s.high,
+                                           lambda s: SD_MAX if s.name == "eta_sd" else 0.0))
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(self.vehicle.n_rotors,),
                                            dtype=np.float32)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ConfigError(f"render_mode must be one of {self.metadata['render_modes']}, "
                               f"got {render_mode!r}")
         self.render_mode = render_mode
+        if not isinstance(physics, str) or physics not in PHYSICS_BACKENDS:
+            raise ConfigError(f"physics must be one of {PHYSICS_BACKENDS}, got {physics!r}")
+        if physics == "numba" and not _compiled_physics_available():
+            raise ConfigError("physics='numba' needs numba (install the 'fast' extra)")
+        if physics == "auto":
+            physics = "numba" if _compiled_physics_available() else "numpy"
+        #: ``"numpy"`` or ``"numba"``: how the plant's substeps run (``physics`` resolved)
+        self.physics = physics
+        self._compiled = None
         self._renderer = None
         self.scenario: Scenario | None = None
         self.plant: Plant | None = None
@@ -324,12 +355,15 @@ class QuadFaultEnv(gym.Env):
                            rng=self.np_random)
         self.plant.reset(self._initial_state(self.controller))
         self.max_steps = int(round(self.scenario.duration / self.control_period))
+        self._compiled = None  # the compiled path's CompiledStep, built at the first step
         self._step_count = 0
         self._f_cmd = np.zeros(self.vehicle.n_rotors)
         self._terminal = False
         if isinstance(self.estimator, TruthOracle):
             self.estimator.bind(self.scenario.efficiency)
         self.estimator.reset()
+        #: the estimate depends only on the newest sample (the oracle, the nominal belief)
+        self._stateless_estimator = type(self.estimator) in (TruthOracle, NominalBelief)
         n = self.vehicle.n_rotors
         if isinstance(self.estimator, TruthOracle):
             self._estimate = self.estimator.update(self._sample(0.0, self.plant.state))
@@ -368,19 +402,20 @@ class QuadFaultEnv(gym.Env):
             moment = action[1:] * np.asarray(cfg.moment_scale)
             f = self.vehicle.rotor_thrust(np.concatenate(([thrust], moment)))
         else:
-            f_ctrl, _ = self.controller.motor_commands(t, meas.p, meas.v, meas.R, meas.w)
+            f_ctrl = self._controller_commands(t, meas)
             if self.compensate:
                 f_ctrl = f_ctrl / np.clip(self._estimate.eta, 0.1, None)
             f = f_ctrl + cfg.residual_scale * action
         return np.clip(f, 0.0, f_max)
 
-    def step(self, action):
-        if self.plant is None or self._terminal:
-            raise gym.error.ResetNeeded("call reset() before step() (the episode has ended)")
-        a = self._check_action(action)
-        k0 = self._step_count * self.substeps
-        t0 = k0 * self.dt
-        self._f_cmd = self.motor_commands(a, t0, self._meas)
+    def _controller_commands(self, t: float, meas: RigidBodyState) -> np.ndarray:
+        """The geometric controller's rotor commands [N] (eqs. 5-10, nominal allocation)."""
+        if self._compiled is not None and t == self._step_count * self.substeps * self.dt:
+            return self._compiled.controller_commands(self._step_count, meas)
+        return self.controller.motor_commands(t, meas.p, meas.v, meas.R, meas.w)[0]
+
+    def _substeps_numpy(self, k0: int):
+        """The control step's physics substeps through the core ``Plant`` (numpy)."""
         samples, eta_true, sf = [], [], []
         meas = self._meas
         for j in range(self.substeps):
@@ -397,12 +432,36 @@ class QuadFaultEnv(gym.Env):
                 sf.append(out.specific_force)
             if not self.plant.state.is_finite():
                 break
+        n = self.vehicle.n_rotors
+        return samples, np.array(eta_true).reshape(-1, n), np.array(sf).reshape(-1, 3), None
+
+    def step(self, action):
+        if self.plant is None or self._terminal:
+            raise gym.error.ResetNeeded("call reset() before step() (the episode has ended)")
+        a = self._check_action(action)
+        k0 = self._step_count * self.substeps
+        t0 = k0 * self.dt
+        if self.physics == "numba" and self._compiled is None:
+            from quad_fault_env.envs.compiled_substeps import CompiledStep
+
+            self._compiled = CompiledStep(self)
+        self._f_cmd = self.motor_commands(a, t0, self._meas)
+        if self._compiled is not None:
+            samples, eta_true, sf, eta_t1 = self._compiled.substeps(self._step_count,
+                                                                    self._f_cmd, self.np_random)
+        else:
+            samples, eta_true, sf, eta_t1 = self._substeps_numpy(k0)
         self._step_count += 1
         t1 = self.time
-        for s in samples[::self.estimator_stride]:
-            self._estimate = self.estimator.update(s)
+        if self._stateless_estimator:  # a pure function of the sample: the last one decides
+            if samples[::self.estimator_stride]:
+                self._estimate = self.estimator.update(samples[::self.estimator_stride][-1])
+        else:
+            for s in samples[::self.estimator_stride]:
+                self._estimate = self.estimator.update(s)
         state = self.plant.state
-        ref = self.scenario.trajectory(t1)
+        ref = (self.scenario.trajectory(t1) if self._compiled is None
+               else self._compiled.reference(self._step_count))
         reason = self.limits.reason(state.p, state.R, ref.position)
         terminated = reason is not None
         self._terminal = terminated
@@ -416,7 +475,7 @@ class QuadFaultEnv(gym.Env):
             for kind, tk in (("onset", f.onset), ("end", f.end)):
                 if t0 - EVENT_TOL <= tk < t1 - EVENT_TOL:
                     events.append(dict(_fault_dict(f), kind=kind, t=tk))
-        info = self._info(samples, eta_true, sf, events, reason, ref)
+        info = self._info(samples, eta_true, sf, events, reason, ref, eta_t1)
         if self.render_mode == "human":
             self.render()
         return self._observation(ref), (0.0 if not math.isfinite(reward) else reward), \
@@ -424,22 +483,33 @@ class QuadFaultEnv(gym.Env):
 
     # -- observation and info ----------------------------------------------------------------
     def _observation(self, ref):
-        """The observation at the end of the step; ``ref`` is the reference at that time."""
-        m = self._meas
-        sd = estimate_sd(self._estimate, self.vehicle.n_rotors)
-        values = self.layout.values(pos_err=m.p - ref.position, vel_err=m.v - ref.velocity,
-                                    R=m.R, omega=m.w, eta_hat=self._estimate.eta,
-                                    eta_sd=SD_MAX if sd is None else sd,
-                                    ref_acc=ref.acceleration)
-        return values if self.observation_kind == "dict" else self.layout.flatten(values)
+        """The observation at the end of the step; ``ref`` is the reference at that time.
 
-    def _info(self, samples, eta_true, sf, events, reason, ref) -> dict:
+        The numbers of ``ObservationLayout.values`` (NaN -> the slot's fill, clipped into the
+        slot's bounds, float32) in one vector operation over the flat layout."""
+        m, n = self._meas, self.vehicle.n_rotors
+        sd = estimate_sd(self._estimate, n)
+        lo, hi, fill = self._obs_bounds
+        raw = {"pos_err": m.p - ref.position, "vel_err": m.v - ref.velocity,
+               "rot6": (m.R[:, 0], m.R[:, 1]), "omega": m.w,
+               "eta_hat": np.broadcast_to(np.asarray(self._estimate.eta, dtype=float), (n,)),
+               "eta_sd": np.full(n, SD_MAX) if sd is None else sd, "ref_acc": ref.acceleration}
+        x = np.concatenate([a for s in self.layout.slots
+                            for a in (raw[s.name] if s.name == "rot6" else (raw[s.name],))])
+        x = np.where(np.isnan(x), fill, x)
+        flat = np.clip(x, lo, hi).astype(np.float32)
+        if self.observation_kind == "flat":
+            return flat
+        return {s.name: flat[self.layout.slice(s.name)].copy() for s in self.layout.slots}
+
+    def _info(self, samples, eta_true, sf, events, reason, ref, eta_t=None) -> dict:
         t = self.time
         state = self.plant.state
         est = self._estimate
         return {
             "t": t,
-            "eta_true": np.asarray(self.scenario.efficiency(t), dtype=float),
+            "eta_true": (np.asarray(self.scenario.efficiency(t), dtype=float) if eta_t is None
+                         else eta_t),
             "eta_hat": np.asarray(est.eta, dtype=float),
             "eta_sd": estimate_sd(est, self.vehicle.n_rotors),
             "estimator": getattr(self.estimator, "name", type(self.estimator).__name__),
