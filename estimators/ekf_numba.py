@@ -26,9 +26,13 @@ from estimators.ekf import IDLE_THRUST
 from quadfault._sim_numba import expm_so3  # the core's compiled mirror
 
 
+#: fastmath flags of the step's loops: reassociation (vectorised sums), FMA contraction, no
+#: signed zeros, reciprocals -- but not ``nnan`` / ``ninf``, so NaN and inf still propagate and
+#: are tested as in numpy (results differ from the numpy path by rounding only, tested).
+FAST = {"reassoc", "contract", "nsz", "arcp"}
+
 # workspace slots: matrices (ns x ns), (ns x 12), (12 x 12), small blocks and vectors
-_F, _FP, _PP, _AM = range(4)
-_AHT = 0
+_F, _FP, _PP, _FPT = range(4)
 _S, _L = range(2)
 
 
@@ -38,8 +42,8 @@ def workspace(ns):
     ``F`` set to the identity and the column indices of its structural non-zeros per row
     (:func:`_jacobian_pattern`); a step writes only those entries."""
     nr = ns - 18
-    ws = (np.zeros((4, ns, ns)), np.zeros((1, ns, 12)), np.zeros((2, 12, 12)),
-          np.zeros((2, 12, ns)), np.zeros((ns, ns), dtype=np.int64), np.zeros(ns, dtype=np.int64),
+    ws = (np.zeros((4, ns, ns)), np.zeros((ns, 12)), np.zeros((2, 12, 12)),
+          np.zeros((12, ns)), np.zeros((ns, ns), dtype=np.int64), np.zeros(ns, dtype=np.int64),
           np.zeros((6, 3, 3)), np.zeros((9, 3)), np.zeros((3, nr)), np.zeros((3, 9)),
           np.zeros((2, ns)), np.zeros(12))
     for i in range(ns):
@@ -136,7 +140,7 @@ def _project_so3_into(M, C):
     M[:, :] = U @ D @ Vt
 
 
-@njit(cache=True, fastmath=True, error_model="numpy")
+@njit(cache=True, fastmath=FAST, error_model="numpy")
 def _sandwich_into(F, P, out, FP, FPT, cols, nnz):
     """``out = F P F^T`` over the structural non-zeros of the transition Jacobian (column
     indices of each row in ``cols``/``nnz``, :func:`_jacobian_pattern`); ``FP``, ``FPT`` are
@@ -167,40 +171,25 @@ def _sandwich_into(F, P, out, FP, FPT, cols, nnz):
             out[k, i] = out[i, k]
 
 
-@njit(cache=True, fastmath=True, error_model="numpy")
-def _gain_into(S, HP, L, KT):
-    """Transposed Kalman gain ``KT = K^T = S^-1 H P`` for symmetric positive-definite ``S``
-    (Cholesky ``S = L L^T``; the two triangular solves run on whole rows of ``H P``)."""
-    n, m = S.shape[0], HP.shape[1]
+@njit(cache=True, error_model="numpy")
+def _cholesky_into(S, L):
+    """Lower Cholesky factor ``S = L L^T`` of the symmetric matrix ``S`` (only its lower
+    triangle is read) into ``L``'s lower triangle; False when ``S`` is not positive definite
+    (or not finite). No fastmath, so the test ``not d > 0`` keeps seeing NaN."""
+    n = S.shape[0]
     for j in range(n):
         d = S[j, j]
         for k in range(j):
             d -= L[j, k] * L[j, k]
-        if not d > 0.0:  # not PD: general solver (allocates; does not happen in practice)
-            KT[:, :] = np.linalg.solve(S, HP)
-            return
+        if not d > 0.0:
+            return False
         L[j, j] = math.sqrt(d)
         for i in range(j + 1, n):
             acc = S[i, j]
             for k in range(j):
                 acc -= L[i, k] * L[j, k]
             L[i, j] = acc / L[j, j]
-    for i in range(n):  # L Z = H P
-        for c in range(m):
-            KT[i, c] = HP[i, c]
-        for k in range(i):
-            lik = L[i, k]
-            for c in range(m):
-                KT[i, c] -= lik * KT[k, c]
-        for c in range(m):
-            KT[i, c] = KT[i, c] / L[i, i]
-    for i in range(n - 1, -1, -1):  # L^T KT = Z
-        for k in range(i + 1, n):
-            lki = L[k, i]
-            for c in range(m):
-                KT[i, c] -= lki * KT[k, c]
-        for c in range(m):
-            KT[i, c] = KT[i, c] / L[i, i]
+    return True
 
 
 @njit(cache=True)
@@ -210,14 +199,12 @@ def step_inplace(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi):
             workspace(x.shape[0]))
 
 
-@njit(cache=True, fastmath=True, error_model="numpy")
+@njit(cache=True, fastmath=FAST, error_model="numpy")
 def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
     """One predict + update with the scratch ``ws`` (:func:`workspace`); ``x`` and ``P`` are
     overwritten."""
-    mats, m12, s12, h12, cols, nnz, M3, dR, B, HR, vecs, y = ws
-    F, FP, Pp, Am = mats[_F], mats[_FP], mats[_PP], mats[_AM]
-    AHt = m12[_AHT]
-    HP, KT = h12[0], h12[1]
+    mats, WT, s12, HP, cols, nnz, M3, dR, B, HR, vecs, y = ws
+    F, FP, Pp, FPT = mats[_F], mats[_FP], mats[_PP], mats[_FPT]
     S, L = s12[_S], s12[_L]
     R, Rn, Jr, G, Mr, C = M3[0], M3[1], M3[2], M3[3], M3[4], M3[5]
     xp, phi = vecs[0], vecs[1, 0:3]
@@ -305,7 +292,7 @@ def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
             for k in range(3):
                 acc += dR[rr, k] * (0.5 * dt * dt * B[k, j])
             F[9 + rr, 18 + j] = acc
-    _sandwich_into(F, P, Pp, FP, Am, cols, nnz)  # Am: scratch until the update
+    _sandwich_into(F, P, Pp, FP, FPT, cols, nnz)
     for i in range(ns):
         Pp[i, i] += qc[i] * dt
     # ---- update (p, v, Omega, attitude rotation error); H = [I_9 0; 0 HR 0]
@@ -330,14 +317,8 @@ def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
         for i in range(3):
             HR[k, 3 * ia + i] -= 0.5 * zR[i, ib]
             HR[k, 3 * ib + i] += 0.5 * zR[i, ia]
-    _update(Pp, HP, HR, S, L, KT, AHt, Am, r)
-    # state: xn = xp + K y, then project R, clamp eta
-    for i in range(ns):
-        acc = 0.0
-        for c in range(12):
-            acc += KT[c, i] * y[c]
-        x[i] = xp[i] + acc
-    for j in range(3):
+    _update(x, P, xp, Pp, HR, y, r, HP, WT, S, L)
+    for j in range(3):  # project R back to SO(3), clamp eta
         for i in range(3):
             C[i, j] = x[9 + 3 * j + i]
     _project_so3_into(C, Mr)
@@ -346,66 +327,94 @@ def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
             x[9 + 3 * j + i] = C[i, j]
     for j in range(nr):
         x[18 + j] = min(max(x[18 + j], lo), hi)
-    _joseph(P, Am, AHt, KT, FP)
 
 
-@njit(cache=True, fastmath=True, error_model="numpy")
-def _joseph(P, Am, AHt, KT, Pn):
-    """Joseph-form covariance ``P = sym(A - (A H^T - K R) K^T)``, ``A = (I - K H) P``
-    (``Pn`` is scratch; rows of ``K^T`` streamed)."""
-    ns = P.shape[0]
-    for i in range(ns):
-        for k in range(ns):
-            Pn[i, k] = Am[i, k]
-        for c in range(12):
-            a = AHt[i, c]
-            for k in range(ns):
-                Pn[i, k] -= a * KT[c, k]
-    for i in range(ns):
-        for k in range(i, ns):
-            P[i, k] = 0.5 * (Pn[i, k] + Pn[k, i])
-            P[k, i] = P[i, k]
+@njit(cache=True, fastmath=FAST, error_model="numpy")
+def _update(x, P, xp, Pp, HR, y, r, HP, WT, S, L):
+    """Measurement update of ``(xp, Pp)`` into ``(x, P)`` with ``H = [I_9 0; 0 HR 0]`` and
+    ``R = diag(r)``, in the square-root form of the optimal gain::
 
+        S = H Pp H^T + R = L L^T,   W = L^-1 H Pp,   x = xp + W^T (L^-1 y),   P = Pp - W^T W
 
-@njit(cache=True, fastmath=True, error_model="numpy")
-def _update(Pp, HP, HR, S, L, KT, AHt, Am, r):
-    """Gain and the Joseph terms of the update with ``H = [I_9 0; 0 HR 0]``: fills ``KT``,
-    ``Am = Pp - K H Pp`` and ``AHt = Am H^T - K diag(r)``."""
+    which is ``K = Pp H^T S^-1``, ``x = xp + K y`` and ``P = (I - K H) Pp = Pp - K S K^T``:
+    equal to ``ekf.kalman_update``'s Joseph form for this (optimal) gain up to rounding,
+    symmetric by construction (lower triangle computed, mirrored) and positive
+    semi-definite up to rounding. ``HP`` (12 x ns) becomes ``W``, ``WT`` is its transpose,
+    ``y`` becomes ``L^-1 y``. If ``S`` is not positive definite (a corrupted covariance;
+    it has ``diag(r) > 0`` added) the general solver and ``P = sym(Pp - K H Pp)`` are used."""
     ns = Pp.shape[0]
-    for i in range(9):  # H P
+    for i in range(9):  # H P: rows of P, and the attitude rows
         for k in range(ns):
             HP[i, k] = Pp[i, k]
     for i in range(3):
         for k in range(ns):
-            acc = 0.0
-            for j in range(9):
-                acc += HR[i, j] * Pp[9 + j, k]
-            HP[9 + i, k] = acc
-    for i in range(12):  # S = H P H^T + diag(r)
-        for k in range(9):
+            HP[9 + i, k] = 0.0
+        for j in range(9):
+            h = HR[i, j]
+            if h != 0.0:
+                for k in range(ns):
+                    HP[9 + i, k] += h * Pp[9 + j, k]
+    for i in range(12):  # lower triangle of S = H P H^T + R
+        for k in range(min(i + 1, 9)):
             S[i, k] = HP[i, k]
-        for k in range(3):
+        for k in range(9, i + 1):
             acc = 0.0
             for j in range(9):
-                acc += HP[i, 9 + j] * HR[k, j]
-            S[i, 9 + k] = acc
+                acc += HP[i, 9 + j] * HR[k - 9, j]
+            S[i, k] = acc
         S[i, i] += r[i]
-    _gain_into(S, HP, L, KT)
-    for i in range(ns):  # A = P - K (H P), rows of HP streamed (contiguous inner loop)
-        for k in range(ns):
-            Am[i, k] = Pp[i, k]
+    if not _cholesky_into(S, L):
+        _update_general(x, P, xp, Pp, y, HP, S)
+        return
+    for i in range(12):  # W = L^-1 H P (forward substitution on whole rows, in place)
+        for k in range(i):
+            lik = L[i, k]
+            for c in range(ns):
+                HP[i, c] -= lik * HP[k, c]
+        d = L[i, i]
+        for c in range(ns):
+            HP[i, c] = HP[i, c] / d
+    for i in range(12):  # y <- L^-1 y
+        acc = y[i]
+        for k in range(i):
+            acc -= L[i, k] * y[k]
+        y[i] = acc / L[i, i]
+    for i in range(ns):
+        acc = 0.0
         for c in range(12):
-            kic = KT[c, i]
-            for k in range(ns):
-                Am[i, k] -= kic * HP[c, k]
-    for i in range(ns):  # A H^T - K R
-        for k in range(9):
-            AHt[i, k] = Am[i, k] - KT[k, i] * r[k]
-        for k in range(3):
+            WT[i, c] = HP[c, i]
+            acc += HP[c, i] * y[c]
+        x[i] = xp[i] + acc
+    for i in range(ns):  # P = Pp - W^T W
+        for k in range(i + 1):
             acc = 0.0
-            for j in range(9):
-                acc += Am[i, 9 + j] * HR[k, j]
-            AHt[i, 9 + k] = acc - KT[9 + k, i] * r[9 + k]
+            for c in range(12):
+                acc += WT[i, c] * WT[k, c]
+            P[i, k] = Pp[i, k] - acc
+            P[k, i] = P[i, k]
+
+
+@njit(cache=True)
+def _update_general(x, P, xp, Pp, y, HP, S):
+    """Fallback of :func:`_update` for an ``S`` that is not positive definite: ``K^T`` by
+    LU (``np.linalg.solve``, allocates), ``x = xp + K y``, ``P = sym(Pp - K H Pp)``."""
+    ns, m = Pp.shape[0], S.shape[0]
+    for i in range(m):
+        for k in range(i + 1, m):
+            S[i, k] = S[k, i]
+    KT = np.linalg.solve(S, HP)
+    for i in range(ns):
+        acc = 0.0
+        for c in range(m):
+            acc += KT[c, i] * y[c]
+        x[i] = xp[i] + acc
+    for i in range(ns):
+        for k in range(i + 1):
+            a = Pp[i, k] + Pp[k, i]
+            for c in range(m):
+                a -= KT[c, i] * HP[c, k] + KT[c, k] * HP[c, i]
+            P[i, k] = 0.5 * a
+            P[k, i] = P[i, k]
 
 
 @njit(cache=True)
