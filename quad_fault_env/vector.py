@@ -36,9 +36,11 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from quad_fault_env.envs.config import RewardConfig, TerminationLimits, validate_action
+from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.estimation import NOMINAL_PRIOR_SD
 from quad_fault_env.observation import SD_MAX
+from quadfault.controller import GeometricController
 from quadfault.dynamics import RigidBodyState, step_rk4
 from quadfault.errors import ConfigError
 from quadfault.motors import MotorModel
@@ -199,6 +201,8 @@ class QuadFaultVectorEnv(VectorEnv):
 
             self.estimator = make_batched_estimator(estimator, self.vehicle, N,
                                                     **(estimator_kwargs or {}))
+        # the single env's plant: MotorModel(thrust_noise) with its default saturation
+        self._saturate = bool(MotorModel().saturate)
         noise = e0.sensor_noise
         self._meas_draws = (9 + (3 if noise.attitude else 0)) if noise.any else 0
         self._accel_draws = 3 if noise.accel else 0
@@ -227,42 +231,73 @@ class QuadFaultVectorEnv(VectorEnv):
         self._started = False
 
     # -- resets ------------------------------------------------------------------------------
-    def _reset_one(self, i: int, seed=None, options=None) -> None:
-        env = self.envs[i]
-        env.reset(seed=seed, options=options)
-        sc = env.scenario
-        self._rngs[i] = env.np_random
-        if self._rng_list is not None:
-            self._rng_list[i] = env.np_random
-        self._scenario_names[i] = sc.name
-        self._traj_key[i] = self._trajectories.key(sc.trajectory)
-        self._sched_key[i] = self._schedules.key(sc.efficiency)
-        self._controllers.setdefault(int(self._traj_key[i]), env.controller)
-        for arr, s in zip(self.state, env.plant.state):
-            arr[i] = s
-        for arr, s in zip(self.meas, env._meas):
-            arr[i] = s
-        self.f_cmd[i] = 0.0
-        self.sigma[i] = sc.thrust_noise
-        self.steps[i] = 0
-        self.max_steps[i] = env.max_steps
-        self.eta_true[i] = sc.efficiency(0.0)
-        n = self.vehicle.n_rotors
-        self.eta_hat[i], self.eta_sd[i], self.status[i] = 1.0, np.nan, "warmup"
-        if self.estimator_name == "truth":
-            self.eta_hat[i], self.eta_sd[i], self.status[i] = self.eta_true[i], 0.0, "ok"
-        elif self.estimator_name == "none":
-            self.eta_sd[i], self.status[i] = np.full(n, NOMINAL_PRIOR_SD), "ok"
+    def _reset_rows(self, rows, seeds=None, options=None):
+        """Start new episodes in ``rows``: the single env's reset, batched.
 
-    def _reset_rows(self, rows, seeds=None, options=None) -> None:
-        for k, i in enumerate(rows):
-            self._reset_one(int(i), None if seeds is None else seeds[k], options)
-        if self.estimator is not None and len(rows):
+        Per row, in the single env's order on the row's generator: the seed (if given), the
+        scenario (``QuadFaultEnv._make_scenario``), the 12 uniform draws of the initial
+        spread and the initial measurement's normals. Then, over all the rows at once, the
+        initial states (``episode_start.start_states``: each distinct trajectory evaluated
+        once), the measurement (``SensorNoise.measure``) and the true efficiency at t = 0 (each
+        distinct schedule once). Deterministic scenarios (a name or a Scenario object) are
+        built once per call. Returns the rows' reference at t = 0 (position, velocity,
+        acceleration; (len(rows), 3) each), or None for no rows.
+        """
+        rows = np.asarray(rows, dtype=np.int64).reshape(-1)
+        if not len(rows):
+            return None
+        e0, n = self.envs[0], self.vehicle.n_rotors
+        spec = e0._scenario_option(options)
+        shared = None if (isinstance(spec, str) and spec == "random") else e0._make_scenario(spec)
+        u = np.empty((len(rows), SPREAD_DRAWS))
+        z = np.zeros((len(rows), max(self._meas_draws, 1)))
+        for k, i in enumerate(rows.tolist()):
+            env = self.envs[i]
+            gym.Env.reset(env, seed=None if seeds is None else seeds[k])
+            rng = env.np_random
+            sc = shared if shared is not None else env._make_scenario(spec)
+            env.scenario = sc
+            u[k] = rng.uniform(-1.0, 1.0, SPREAD_DRAWS)
+            if self._meas_draws:
+                rng.standard_normal(out=z[k, :self._meas_draws])
+            self._rngs[i] = rng
+            if self._rng_list is not None:
+                self._rng_list[i] = rng
+            self._scenario_names[i] = sc.name
+            self._traj_key[i] = self._trajectories.key(sc.trajectory)
+            self._sched_key[i] = self._schedules.key(sc.efficiency)
+            self.sigma[i] = sc.thrust_noise
+            self.max_steps[i] = int(round(sc.duration / e0.control_period))
+        keys, inv = np.unique(self._traj_key[rows], return_inverse=True)
+        items = [self._trajectories.items[int(key)] for key in keys]
+        for key, traj in zip(keys.tolist(), items):
+            if key not in self._controllers:
+                self._controllers[key] = GeometricController(self.vehicle, traj,
+                                                             e0.controller_config)
+        for i, key in zip(rows.tolist(), self._traj_key[rows].tolist()):
+            self.envs[i].controller = self._controllers[key]
+        start, ref0 = start_states(items, inv.ravel(), self.vehicle, e0.controller_config,
+                                   e0.initial_spread, u)
+        meas = self._measure(start, z)
+        for arr, s_new, m_arr, m_new in zip(self.state, start, self.meas, meas):
+            arr[rows] = s_new
+            m_arr[rows] = m_new
+        for key, idx in _groups(self._sched_key[rows]):
+            self.eta_true[rows[idx]] = self._schedules.items[key](0.0)
+        self.f_cmd[rows] = 0.0
+        self.steps[rows] = 0
+        self.eta_hat[rows], self.eta_sd[rows], self.status[rows] = 1.0, np.nan, "warmup"
+        if self.estimator_name == "truth":
+            self.eta_hat[rows], self.eta_sd[rows], self.status[rows] = self.eta_true[rows], 0.0, "ok"
+        elif self.estimator_name == "none":
+            self.eta_sd[rows], self.status[rows] = NOMINAL_PRIOR_SD, "ok"
+        if self.estimator is not None:
             mask = np.zeros(self.num_envs, dtype=bool)
-            mask[np.asarray(rows, dtype=int)] = True
+            mask[rows] = True
             self.estimator.reset(mask)
         if len(self._trajectories.items) > 8 * self.num_envs + 64:
             self._compact_tables()
+        return ref0.position, ref0.velocity, ref0.acceleration
 
     def _compact_tables(self) -> None:
         """Forget trajectories / schedules no sub-env uses any more."""
@@ -290,10 +325,9 @@ class QuadFaultVectorEnv(VectorEnv):
         self._rng_list = None
         if seed is not None:
             self._shared_rng = np.random.default_rng(seeds)
-        self._reset_rows(range(N), seeds, options)
+        refs = self._reset_rows(np.arange(N), seeds, options)  # every row at t = 0
         self._needs_reset[:] = False
         self._started = True
-        refs = self._references(self.steps * self.substeps * self.dt)
         return self._observations(refs), self._infos(refs, np.full(N, None, dtype=object))
 
     # -- helpers over groups of sub-envs sharing a trajectory / schedule ----------------------
@@ -391,7 +425,7 @@ class QuadFaultVectorEnv(VectorEnv):
     def _substeps_numpy(self, eta, z, has_thrust, ts) -> RigidBodyState:
         """The control step's physics substeps with the core functions over the batch axis."""
         N, n = self.num_envs, self.vehicle.n_rotors
-        motor = MotorModel(1.0, self.envs[0].plant.motor.saturate)
+        motor = MotorModel(1.0, self._saturate)
         f_max = self.vehicle.rotor_max_thrust
         state = self.state
         off = np.zeros(N, dtype=np.int64)
@@ -437,7 +471,7 @@ class QuadFaultVectorEnv(VectorEnv):
         z = np.ascontiguousarray(z, dtype=float)
         sigma = np.where(has_thrust, self.sigma, 0.0)  # no draws: nothing read from z
         stride = S if self.estimator is None else self.estimator_stride
-        saturate = bool(self.envs[0].plant.motor.saturate)
+        saturate = self._saturate
         for j0 in range(0, S, stride):
             j1 = min(S, j0 + stride)
             if self.estimator is not None:

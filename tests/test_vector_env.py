@@ -12,6 +12,8 @@ from estimators.ekf import EKFConfig
 from estimators.irls import IRLSConfig
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.vector import QuadFaultVectorEnv
+from quad_fault_env.envs.config import InitialStateSpread
+from quadfault.controller import ControllerConfig
 from quadfault.errors import ConfigError
 from quadfault.simulator import SensorNoise
 
@@ -228,12 +230,52 @@ def test_physics_auto_follows_numba_availability(monkeypatch):
 
 
 def test_sub_envs_built_from_one_template_share_no_episode_state():
-    """Sub-envs 1.. are copies of sub-env 0: after a reset each owns its generator, plant,
-    scenario and controller (nothing mutable is shared)."""
+    """Sub-envs 1.. are copies of sub-env 0: after a reset each owns its generator, scenario
+    and controller (nothing mutable is shared)."""
     vec = QuadFaultVectorEnv(3, "none", scenario="random", duration=0.5)
     vec.reset(seed=5)
-    for attr in ("np_random", "plant", "scenario", "controller", "history"):
+    for attr in ("np_random", "scenario", "controller"):
         assert len({id(getattr(e, attr)) for e in vec.envs}) == 3, attr
     a = vec.envs[0].np_random.bit_generator.state["state"]["state"]
     b = vec.envs[1].np_random.bit_generator.state["state"]["state"]
     assert a != b
+
+
+@pytest.mark.parametrize("kw", [
+    dict(scenario="random", initial_spread=InitialStateSpread(0.3, 0.2, 0.1, 0.2),
+         sensor_noise=NOISE),
+    dict(scenario="combined", thrust_noise=0.05, initial_spread=InitialStateSpread(0.3, 0.2, 0.1, 0.2)),
+    dict(scenario="random", random_trajectory="hover", controller=ControllerConfig.reference()),
+])
+def test_batched_reset_equals_single_env_resets(kw):
+    """The batched reset gives every row the single env's episode start for seed s + i:
+    scenario, true and measured initial state, the generator's position after the draws."""
+    n = 12
+    vec = QuadFaultVectorEnv(n, "none", physics="numpy", **kw)
+    obs, _ = vec.reset(seed=40)
+    for i in range(n):
+        env = QuadFaultEnv("none", physics="numpy", **kw)
+        o, info = env.reset(seed=40 + i)
+        np.testing.assert_allclose(obs[i], o, rtol=0, atol=1e-12, err_msg=f"row {i}")
+        assert vec.envs[i].scenario == env.scenario
+        for got, want in zip(vec.state, env.plant.state):
+            np.testing.assert_allclose(got[i], want, rtol=0, atol=1e-12)
+        for got, want in zip(vec.meas, env._meas):
+            np.testing.assert_allclose(got[i], want, rtol=0, atol=1e-12)
+        assert vec.max_steps[i] == env.max_steps
+        np.testing.assert_array_equal(vec.eta_true[i], info["eta_true"])
+        assert vec._rngs[i].bit_generator.state == env.np_random.bit_generator.state
+
+
+def test_reset_options_and_seed_lists():
+    """options['scenario'] for every row (validated like the single env); a list of seeds."""
+    vec = QuadFaultVectorEnv(3, "none", scenario="random", duration=0.5)
+    _, info = vec.reset(seed=[7, 7, 9], options={"scenario": "hover"})
+    assert list(info["scenario"]) == ["hover"] * 3
+    obs, _ = vec.reset(seed=[7, 7, 9])
+    np.testing.assert_array_equal(obs[0], obs[1])
+    assert not np.array_equal(obs[0], obs[2])
+    with pytest.raises(ConfigError, match="unknown reset option"):
+        vec.reset(seed=0, options={"wind": 3})
+    with pytest.raises(ConfigError, match="options\\['scenario'\\]"):
+        vec.reset(seed=0, options={"scenario": 42})

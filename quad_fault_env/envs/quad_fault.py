@@ -21,6 +21,7 @@ import gymnasium as gym
 import numpy as np
 
 from estimators.base import Estimate, Sample
+from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
 from quad_fault_env.envs.config import (ESTIMATOR_RATES, OBSERVATION_KINDS, ActionConfig,
                                         InitialStateSpread, RewardConfig, TerminationLimits,
                                         validate_action)
@@ -32,9 +33,8 @@ from quadfault.dynamics import RigidBodyState
 from quadfault.errors import ConfigError
 from quadfault.motors import MotorModel
 from quadfault.plant import Plant
-from quadfault.rotation import expm_so3
 from quadfault.scenarios import SCENARIO_NAMES, Scenario, named_scenario, random_scenario
-from quadfault.simulator import SensorNoise, initial_state
+from quadfault.simulator import SensorNoise
 from quadfault.vehicle import Vehicle
 
 DEFAULT_DURATION = 20.0  # [s] episode length for named and random scenarios
@@ -334,26 +334,30 @@ class QuadFaultEnv(gym.Env):
             sc = sc.replace(thrust_noise=self.thrust_noise)
         return sc
 
-    def _initial_state(self, controller) -> RigidBodyState:
-        s = initial_state(self.scenario, 0.0, controller)
-        sp, rng = self.initial_spread, self.np_random
-        u = lambda w: w * rng.uniform(-1.0, 1.0, 3)  # noqa: E731
-        return RigidBodyState(s.p + u(sp.position), s.v + u(sp.velocity),
-                              s.R @ expm_so3(u(sp.attitude)), s.w + u(sp.rate))
-
-    def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
+    def _scenario_option(self, options):
+        """The scenario spec of a reset (``options["scenario"]`` or the env's)."""
         options = options or {}
         unknown = set(options) - {"scenario"}
         if unknown:
             raise ConfigError(f"unknown reset option(s) {sorted(unknown)}; only 'scenario'")
-        self.scenario = self._make_scenario(options.get("scenario", self.scenario_spec))
+        return options.get("scenario", self.scenario_spec)
+
+    def _initial_state(self) -> RigidBodyState:
+        """The episode's true initial state (``episode_start.start_states`` with N = 1)."""
+        u = self.np_random.uniform(-1.0, 1.0, SPREAD_DRAWS)[None]
+        s, _ = start_states([self.scenario.trajectory], np.zeros(1, dtype=np.int64),
+                            self.vehicle, self.controller_config, self.initial_spread, u)
+        return RigidBodyState(*(x[0].copy() for x in s))
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.scenario = self._make_scenario(self._scenario_option(options))
         self.controller = GeometricController(self.vehicle, self.scenario.trajectory,
                                               self.controller_config)
         self.plant = Plant(self.vehicle, self.scenario.efficiency,
                            MotorModel(self.scenario.thrust_noise), dt=self.dt,
                            rng=self.np_random)
-        self.plant.reset(self._initial_state(self.controller))
+        self.plant.reset(self._initial_state())
         self.max_steps = int(round(self.scenario.duration / self.control_period))
         self._compiled = None  # the compiled path's CompiledStep, built at the first step
         self._step_count = 0

@@ -1,0 +1,75 @@
+"""The start of an episode over a batch axis: one definition for the single and the vector env.
+
+An episode of :class:`~quad_fault_env.envs.quad_fault.QuadFaultEnv` starts from the core's
+:func:`quadfault.simulator.initial_state` (the geometric controller's feed-forward attitude
+``R_d`` and rate ``Omega_d`` at t = 0 on the reference's position and velocity), perturbed by
+:class:`~quad_fault_env.envs.config.InitialStateSpread` with 12 uniform draws of the episode's
+generator (position, velocity, attitude, rate; 3 each). :func:`start_states` computes that for
+N episodes at once: each distinct trajectory is evaluated once (with the same calls as for a
+single episode), and the controller arithmetic runs over the batch axis -- the single env
+calls it with N = 1, the vector env's reset with all the rows it resets.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from quadfault.controller import ControllerConfig, GeometricController
+from quadfault.dynamics import RigidBodyState
+from quadfault.rotation import expm_so3
+from quadfault.simulator import initial_state
+from quadfault.trajectory import FlatOutput
+from quadfault.vehicle import Vehicle
+
+#: uniform draws in [-1, 1] per episode start: position, velocity, attitude, rate (3 each)
+SPREAD_DRAWS = 12
+
+
+class RowTrajectories:
+    """N reference trajectories as one callable: row i follows ``items[keys[i]]``.
+
+    ``self(t)`` returns a :class:`~quadfault.trajectory.FlatOutput` of arrays
+    ``(N,) + shape(t) + (3,)``; each distinct trajectory is called once, with ``t`` as given.
+    """
+
+    def __init__(self, items, keys: np.ndarray):
+        self.items = list(items)
+        self.keys = np.asarray(keys, dtype=np.int64)
+        self._memo: dict = {}  # times -> FlatOutput (initial_state asks for t = 0 twice)
+
+    def __call__(self, t) -> FlatOutput:
+        t_key = (np.shape(t), np.asarray(t, dtype=float).tobytes())
+        if t_key not in self._memo:
+            shape = np.shape(t) + (3,)
+            outs = [traj(t) for traj in self.items]
+            self._memo[t_key] = FlatOutput(*(
+                np.stack([np.broadcast_to(np.asarray(o[f], dtype=float), shape)
+                          for o in outs])[self.keys] for f in range(4)))
+        return FlatOutput(*(x.copy() for x in self._memo[t_key]))
+
+
+def start_states(items, keys, vehicle: Vehicle, controller: ControllerConfig, spread,
+                 u: np.ndarray) -> tuple[RigidBodyState, FlatOutput]:
+    """Initial true states (N,) of N episodes.
+
+    Args:
+        items, keys: the distinct trajectories and each row's index into them (N,).
+        vehicle, controller: the nominal vehicle and the controller configuration.
+        spread: the :class:`~quad_fault_env.envs.config.InitialStateSpread` half-widths.
+        u: (N, 12) uniform draws in [-1, 1] (each row's generator: ``uniform(-1, 1, 12)``,
+            the same numbers as four draws of 3).
+
+    Returns the states and the reference at t = 0 (rows (N, 3)).
+    """
+    traj = RowTrajectories(items, keys)
+    s = initial_state(SimpleNamespace(trajectory=traj), 0.0,
+                      GeometricController(vehicle, traj, controller))
+    pos, vel, att, rate = (u[:, 3 * k:3 * k + 3] for k in range(4))
+    state = RigidBodyState(s.p + spread.position * pos, s.v + spread.velocity * vel,
+                           s.R @ expm_so3(spread.attitude * att), s.w + spread.rate * rate)
+    return state, traj(0.0)
+
+
+__all__ = ["RowTrajectories", "SPREAD_DRAWS", "start_states"]
