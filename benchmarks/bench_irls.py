@@ -6,9 +6,12 @@ Measures, side by side in one run on the same recording:
   one window per sample), and their ratio; compile/cache-load time is reported apart;
 * the compiled EKF against the compiled IRLS on the same recording (updates/s, alternating
   repeats, median), and their ratio (target: EKF at least as fast);
+* the single compiled estimator's online ``update()`` (one sample per call, what the
+  environment runs at every physics substep) against its offline ``run()``, with the reference
+  and the improved settings (``IRLSConfig.improved()``), alternating;
 * the batched IRLS (``estimators.batched.BatchedIRLS``, N vehicles per call, target 100,000
-  window updates/s at N = 4096) against the single compiled estimator's online ``update`` and
-  offline ``run`` in the same run;
+  window updates/s at N = 4096) with the reference and the improved settings side by side,
+  against the single compiled estimator's online ``update``;
 * with ``--accuracy``: RMSE / std / spike per scenario (degradation, abrupt, combined, 80 s,
   sigma_f = 0.07) with the numba path, scored by :mod:`estimators.metrics`.
 
@@ -19,6 +22,7 @@ flight takes a while on the numpy simulator.
     python benchmarks/bench_irls.py --duration 20 --batch 4096   # shorter, batch size
     python benchmarks/bench_irls.py --accuracy          # + accuracy table
     python benchmarks/bench_irls.py --integrator reference --accuracy
+    python benchmarks/bench_irls.py --only online --only batched   # online and batched parts
 """
 
 from __future__ import annotations
@@ -118,8 +122,52 @@ def ekf_vs_irls(rec, repeat: int) -> None:
           f"{med['ekf'][1] / med['irls'][1]:.2f} (CPU)")
 
 
-def batched(rec, N: int, updates: int) -> None:
-    """BatchedIRLS at N vehicles vs the single compiled estimator, same samples."""
+def online(rec, updates: int, repeat: int) -> None:
+    """The single estimator's online ``update()`` (one sample per call, as the environment at
+    every physics substep) against its offline ``run()``, numba path, reference and improved
+    settings, alternating; median rates."""
+    from estimators.base import samples
+
+    if not numba_available():
+        print("online: numba not installed")
+        return
+    rec = rec.without_truth()
+    sub = rec.slice(0, updates + 9)
+    rows = list(samples(sub))
+    variants = (("reference", IRLSConfig(backend="numba")),
+                ("improved", IRLSConfig.improved(backend="numba")))
+    ests = {name: SlidingWindowIRLS(rec.vehicle, cfg) for name, cfg in variants}
+    for est in ests.values():  # compile / load the cache outside the timing
+        for s in rows[:30]:
+            est.update(s)
+        est.run(rec.slice(0, 30))
+
+    def run_online(est):
+        est.reset()
+        for s in rows:
+            est.update(s)
+
+    res = {}
+    for _ in range(repeat):  # alternate, so all see the same machine load
+        for name, est in ests.items():
+            res.setdefault((name, "update"), []).append(
+                _median_rate(lambda e=est: run_online(e), len(rows), 1))
+            res.setdefault((name, "run"), []).append(
+                _median_rate(lambda e=est: e.run(sub), len(rows), 1))
+    print(f"\nsingle IRLS online update() vs offline run(), {len(rows)} samples, median of "
+          f"{repeat} alternating runs (load average {os.getloadavg()[0]:.1f})")
+    med = {k: (np.median([r[0] for r in v]), np.median([r[1] for r in v]))
+           for k, v in res.items()}
+    for name, _cfg in variants:
+        up, off = med[(name, "update")], med[(name, "run")]
+        print(f"{name:9s} update(): {up[0]:8.0f} updates/s wall, {up[1]:8.0f} per CPU-s; "
+              f"run(): {off[0]:8.0f} /s wall, {off[1]:8.0f} per CPU-s; "
+              f"update / run {up[1] / off[1]:.2f} (CPU)")
+
+
+def batched(rec, N: int, updates: int, repeat: int) -> None:
+    """BatchedIRLS at N vehicles, reference and improved settings (alternating, median), vs
+    the single compiled estimator's online update, same samples."""
     from estimators.base import samples
     from estimators.batched import CODE, BatchedIRLS
 
@@ -129,46 +177,57 @@ def batched(rec, N: int, updates: int) -> None:
     import numba
 
     rec = rec.without_truth()
-    rows = list(samples(rec.slice(0, updates + 12)))
+    rows = list(samples(rec.slice(0, 12 + (repeat + 1) * updates)))
     rng = np.random.default_rng(0)
+
     def tile(x):
         return np.broadcast_to(np.asarray(x, float), (N,) + np.shape(x))
 
     batches = [(np.full(N, s.t), tile(s.p) + 1e-4 * rng.standard_normal((N, 3)), tile(s.v),
                 tile(s.R), tile(s.w), tile(s.f)) for s in rows]
-    est = BatchedIRLS(rec.vehicle, N, IRLSConfig(backend="numba"))
-    for b in batches[:12]:  # fill the windows (and compile or load the cache)
-        est.update(*b)
-    solved = [0]
+    variants = (("reference", IRLSConfig(backend="numba")),
+                ("improved", IRLSConfig.improved(backend="numba")))
+    ests = {name: BatchedIRLS(rec.vehicle, N, cfg) for name, cfg in variants}
+    solved = {name: [0, 0] for name in ests}
 
-    def run_batch():
-        for b in batches[12:]:
-            out = est.update(*b)
-            solved[0] += int(np.sum((out.status == CODE['ok']) | (out.status == CODE['max_iter'])))
+    def run_batch(name, chunk):
+        for b in chunk:
+            out = ests[name].update(*b)
+            solved[name][0] += int(np.sum((out.status == CODE['ok'])
+                                          | (out.status == CODE['max_iter'])))
+            solved[name][1] += N
 
-    count = N * (len(batches) - 12)
-    bw, bc = _median_rate(run_batch, count, 1)
+    for name in ests:  # fill the windows and compile / load the cache outside the timing
+        run_batch(name, batches[:12 + updates])
+        solved[name] = [0, 0]
+    res = {name: [] for name in ests}
+    for r in range(repeat):  # each repeat continues the flights with the next samples
+        chunk = batches[12 + (r + 1) * updates:12 + (r + 2) * updates]
+        for name in ests:
+            res[name].append(_median_rate(lambda n=name: run_batch(n, chunk), N * updates, 1))
     single = SlidingWindowIRLS(rec.vehicle, IRLSConfig(backend="numba"))
-    one = rows[:]  # the online update of one estimator over the same samples, repeated
 
     def run_single():
-        for _ in range(max(1, 4096 // len(one))):
-            single.reset()
-            for s in one:
-                single.update(s)
+        single.reset()
+        for s in rows:
+            single.update(s)
 
-    for s in one:  # compile / load the cache outside the timing
-        single.update(s)
-    n_single = max(1, 4096 // len(one)) * (len(one) - 9)
-    sw, sc = _median_rate(run_single, n_single, 1)
-    ow, oc = _median_rate(lambda: single.run(rec), len(rec) - 9, 1)
-    print(f"\nbatched IRLS, N = {N}, {len(batches) - 12} updates, {numba.get_num_threads()} numba "
-          f"threads (load average {os.getloadavg()[0]:.1f}); {solved[0] / count:.0%} solved ok")
-    print(f"batched update : {bw:10.0f} window updates/s wall, {bc:10.0f} per CPU-s")
-    print(f"single update(): {sw:10.0f} window updates/s wall, {sc:10.0f} per CPU-s (online)")
-    print(f"single run()   : {ow:10.0f} window updates/s wall, {oc:10.0f} per CPU-s (offline)")
-    print(f"ratio batched / single online: {bw / sw:.1f}x wall, {bc / sc:.1f}x per CPU-s; "
-          f"batched / single offline: {bw / ow:.1f}x wall, {bc / oc:.1f}x per CPU-s")
+    run_single()
+    sw, sc = _median_rate(run_single, len(rows), repeat)
+    print(f"\nbatched IRLS, N = {N}, {updates} updates per run, median of {repeat} "
+          f"alternating runs, {numba.get_num_threads()} numba threads "
+          f"(load average {os.getloadavg()[0]:.1f})")
+    med = {k: (np.median([r[0] for r in v]), np.median([r[1] for r in v]))
+           for k, v in res.items()}
+    for name in ests:
+        ok = solved[name][0] / max(solved[name][1], 1)
+        print(f"batched {name:9s}: {med[name][0]:10.0f} window updates/s wall, "
+              f"{med[name][1]:10.0f} per CPU-s ({ok:.0%} solved ok)")
+    print(f"single update()  : {sw:10.0f} window updates/s wall, {sc:10.0f} per CPU-s (online)")
+    r, i = med["reference"], med["improved"]
+    print(f"ratio batched improved / reference: {i[0] / r[0]:.2f} wall, {i[1] / r[1]:.2f} per "
+          f"CPU-s; batched reference / single online: {r[0] / sw:.1f}x wall, {r[1] / sc:.1f}x "
+          "per CPU-s")
 
 
 def accuracy(args) -> None:
@@ -200,13 +259,23 @@ def main() -> None:
     p.add_argument("--batch", type=int, default=4096, help="vehicles of the batched IRLS "
                    "(0: skip)")
     p.add_argument("--batch-updates", type=int, default=30)
-    p.add_argument("--repeat", type=int, default=3, help="alternating EKF/IRLS runs")
+    p.add_argument("--repeat", type=int, default=3, help="alternating runs of the side-by-side "
+                   "comparisons (EKF/IRLS, online/offline, batched variants)")
+    p.add_argument("--online-updates", type=int, default=5000,
+                   help="samples of the online update() timing")
+    p.add_argument("--only", choices=("speed", "ekf", "online", "batched"), action="append",
+                   help="run only these parts (repeatable; default all)")
     args = p.parse_args()
+    only = set(args.only or ("speed", "ekf", "online", "batched"))
     rec = cached_flight(args.scenario, args.duration, args.integrator, args.cache, args.seed)
-    speed(rec, args.numpy_windows)
-    ekf_vs_irls(rec, args.repeat)
-    if args.batch > 0:
-        batched(rec, args.batch, args.batch_updates)
+    if "speed" in only:
+        speed(rec, args.numpy_windows)
+    if "ekf" in only:
+        ekf_vs_irls(rec, args.repeat)
+    if "online" in only:
+        online(rec, args.online_updates, args.repeat)
+    if args.batch > 0 and "batched" in only:
+        batched(rec, args.batch, args.batch_updates, args.repeat)
     if args.accuracy:
         accuracy(args)
 

@@ -430,18 +430,38 @@ def _run_windows(c, b, H, excited, x0, s0, fp, ip, m, eta, sd, status):
 
 
 @njit(cache=True, parallel=True)
-def solve_ring_batch(c, b, H, start, rows, x_prev, fp, ip, x, sd, code, chunks):
+def solve_ring_batch(c, b, H, start, rows, x_prev, fp, ip, x, sd, code, weights, chunks):
     """Algorithm 2 on the ring windows of the vehicles ``rows`` (ring arrays ``c`` (N, m),
     ``b`` (N, m, n), ``H`` (N, m, n, n); oldest segment at ``start``), in parallel over chunks
-    of rows (:func:`batch_chunks`) with one workspace per chunk. Fills ``x``, ``sd`` (K, n) and
-    ``code`` (K,)."""
+    of rows (:func:`batch_chunks`) with one workspace per chunk. Fills ``x``, ``sd`` (K, n),
+    ``code`` (K,) and the final robust weights (K, m), oldest segment first."""
     K, m, n = rows.size, b.shape[1], b.shape[2]
     for ch in prange(chunks):
         V, M, S, iters, w, nohist = workspace(m, n, ip[0])
         for k in range(ch * K // chunks, (ch + 1) * K // chunks):
             i = rows[k]
             code[k], _r, _cond = _solve_window_into(c[i], b[i], H[i], start, x_prev[i], fp, ip,
-                                                    V, M, S, iters, w, nohist, x[k], sd[k])
+                                                    V, M, S, iters, weights[k], nohist, x[k],
+                                                    sd[k])
+
+
+@njit(cache=True, parallel=True)
+def median_rows(buf, out):
+    """Per row and motor, the median of ``buf`` (N, L, n) over its L values into ``out``
+    (N, n): the middle value, or the mean of the middle two (as ``np.median``)."""
+    N, L, n = buf.shape
+    for i in prange(N):
+        tmp = np.empty(L)
+        for j in range(n):
+            for s in range(L):  # insertion sort
+                v = buf[i, s, j]
+                r = s - 1
+                while r >= 0 and tmp[r] > v:
+                    tmp[r + 1] = tmp[r]
+                    r -= 1
+                tmp[r + 1] = v
+            k = L // 2
+            out[i, j] = tmp[k] if L % 2 else (tmp[k - 1] + tmp[k]) / 2.0
 
 
 #: why :func:`online_update` refused a sample (``bad_sample``)

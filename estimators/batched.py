@@ -17,9 +17,9 @@ observation. Nothing of the algorithms is written again:
   the numpy ``predict`` / ``measurement_update`` pair, applied to each row of the batched state.
 
 Each row follows exactly the single estimator's online rules (window ring, warm-up,
-``no_excitation`` / ``bad_sample`` guards, the previous estimate kept on a guard), so row i of
-a batch fed the samples of vehicle i gives the single estimator's estimates (tested to 1e-6;
-the batch only changes the summation order of the ring, a rounding-level difference).
+``no_excitation`` / ``bad_sample`` guards, the previous estimate kept on a guard, and with
+``IRLSConfig.improved()`` the change completion and the causal output median), so row i of a
+batch fed the samples of vehicle i gives the single estimator's estimates (tested to 1e-6).
 
 Inputs of :meth:`update` are the N samples of one instant: ``t`` (N,) [s], ``p``, ``v``
 (N, 3) world NED [m], [m/s], ``R`` (N, 3, 3) body FRD -> world, ``w`` (N, 3) [rad/s] and
@@ -36,7 +36,8 @@ from estimators.base import (STATUS_BAD_SAMPLE, STATUS_MAX_ITER, STATUS_NO_EXCIT
                              STATUS_OK, STATUS_WARMUP, STATUSES, Sample)
 from estimators.ekf import (NOISE_REFERENCE_DT, EKFConfig, MotorEfficiencyEKF,
                             measurement_update, predict)
-from estimators.irls import IRLSConfig, numba_available, solve_window
+from estimators.change_completion import BatchedCausalMedian, BatchedChangeCompletion
+from estimators.irls import IRLSConfig, _window_information, numba_available, solve_window
 from estimators.residuals import quadratic_terms, segment_models
 from quadfault.errors import ConfigError
 from quadfault.vehicle import Vehicle
@@ -44,12 +45,12 @@ from quadfault.vehicle import Vehicle
 try:  # the compiled batch loops call the existing per-vehicle kernels (``fast`` extra)
     from numba import njit, prange
 
-    from estimators._irls_numba import batch_chunks, solve_ring_batch
+    from estimators._irls_numba import batch_chunks, median_rows, solve_ring_batch
     from estimators._residuals_numba import segment_terms_batch
     from estimators.ekf_numba import step_ws
     from estimators.ekf_numba import workspace as ekf_workspace
 except ImportError:  # pragma: no cover - exercised without numba
-    njit = None
+    njit = median_rows = None
 
 CODE = {name: k for k, name in enumerate(STATUSES)}  # status name -> integer code
 _OK, _MAXIT = CODE[STATUS_OK], CODE[STATUS_MAX_ITER]
@@ -125,6 +126,11 @@ class BatchedIRLS:
         num: number of vehicles N.
         config: :class:`~estimators.irls.IRLSConfig` shared by all rows (``backend`` selects
             the compiled batch kernel or the numpy loop; ``record_history`` is not supported).
+            The options beyond the paper (``IRLSConfig.improved()``: change completion, output
+            median) are applied per row as in the single estimator
+            (:class:`~estimators.change_completion.BatchedChangeCompletion`,
+            :class:`~estimators.change_completion.BatchedCausalMedian`); the returned ``eta``
+            is then the filtered estimate and :attr:`eta` the unfiltered one.
     """
 
     name = "irls"
@@ -139,9 +145,6 @@ class BatchedIRLS:
             raise ConfigError("config must be an IRLSConfig")
         if self.config.record_history:
             raise ConfigError("BatchedIRLS does not record KKT histories (record_history=True)")
-        if self.config.change_completion or self.config.output_median != 1:
-            raise ConfigError("BatchedIRLS implements the paper's IRLS only: change_completion "
-                              "and output_median (IRLSConfig.improved()) are not batched yet")
         backend = self.config.backend
         if backend == "numba" and not numba_available():
             raise ConfigError("IRLS backend 'numba' needs numba (install the 'fast' extra)")
@@ -159,12 +162,19 @@ class BatchedIRLS:
             from estimators._irls_numba import kernel_parameters
 
             self._params = kernel_parameters(self.config, m)
-        self.eta = np.ones((N, n))
+        self.eta = np.ones((N, n))  # the unfiltered estimate (next window's anchor)
         self.sd = np.full((N, n), np.nan)
         self._has_last = np.zeros(N, dtype=bool)
         self._count = np.zeros(N, dtype=np.int64)
         self._t = np.zeros(N)
         self._status = np.full(N, CODE[STATUS_WARMUP])
+        cfg = self.config  # the options beyond the paper (estimators.change_completion)
+        self._completion = BatchedChangeCompletion(N, n, cfg.change_threshold, cfg.change_hold,
+                                                   cfg.gamma, cfg.lower, cfg.upper, span=m) \
+            if cfg.change_completion else None
+        self._median = BatchedCausalMedian(N, n, cfg.output_median, median_rows
+                                           if self.backend == "numba" else None)
+        self.reset()
 
     def reset(self, mask=None, eta0=None) -> None:
         """Forget the windows of the rows in ``mask`` (default all); start from ``eta0``
@@ -175,6 +185,9 @@ class BatchedIRLS:
         eta = _eta_rows(eta, self.num, n)
         self.eta[mask] = eta[mask]
         self.sd[mask] = np.nan
+        if self._completion is not None:
+            self._completion.reset(mask, self.eta)
+        self._median.reset(mask)
         self._has_last[mask] = False
         self._count[mask] = 0
         self._status[mask] = CODE[STATUS_WARMUP]
@@ -233,35 +246,55 @@ class BatchedIRLS:
         no_exc = ready & (self._thrust.mean(axis=1) < self.config.min_thrust)
         status[no_exc] = CODE[STATUS_NO_EXCITATION]
         solve = np.flatnonzero(ready & ~no_exc)
+        held = no_exc.copy()  # windows whose previous estimate is kept (no_exc, guards)
         if solve.size:
-            x, sd, code = self._solve(solve)
+            x, sd, code, weights = self._solve(solve)
             status[solve] = code
             keep = (code == _OK) | (code == _MAXIT)
+            held[solve[~keep]] = True
+            if self._completion is not None and keep.any():
+                x[keep] = self._complete(solve[keep], x[keep], weights[keep])
             self.eta[solve[keep]], self.sd[solve[keep]] = x[keep], sd[keep]
+        if self._completion is not None:
+            rows = np.flatnonzero(held)
+            self._completion.observe(rows, self.eta[rows])
         self._t = np.where(np.isfinite(t), t, self._t)
         self._status = status
-        return BatchedEstimate(t.copy(), self.eta.copy(), self.sd.copy(), status)
+        return BatchedEstimate(t.copy(), self._median.push(self.eta), self.sd.copy(), status)
+
+    def _complete(self, rows: np.ndarray, x_raw: np.ndarray, weights: np.ndarray):
+        """The change completion of the solved windows of ``rows`` (final robust weights
+        ``weights`` (K, m), oldest segment first)."""
+        order = (self._head + np.arange(self._m)) % self._m  # oldest segment first
+
+        def info(j):
+            return _window_information(self._H[rows[j]][order], weights[j], self.config)
+
+        return self._completion.step(rows, x_raw, info)
 
     def _solve(self, rows: np.ndarray):
-        """Algorithm 2 on the windows of ``rows``; (x, sd, status code) per row."""
+        """Algorithm 2 on the windows of ``rows``; (x, sd, status code, final robust
+        weights (K, m), oldest segment first) per row."""
         start = self._head  # after the write the oldest segment sits at the head
+        K, n, m = rows.size, self.vehicle.n_rotors, self._m
+        weights = np.zeros((K, m))
         if self.backend == "numba":
             fp, ip = self._params
-            K, n = rows.size, self.vehicle.n_rotors
             x, sd, code = np.empty((K, n)), np.empty((K, n)), np.empty(K, dtype=np.int64)
             solve_ring_batch(self._c, self._b, self._H, int(start), rows.astype(np.int64),
-                             self.eta, fp, ip, x, sd, code, batch_chunks(K))
-            return x, sd, code
-        K, n = rows.size, self.vehicle.n_rotors
-        order = (start + np.arange(self._m)) % self._m
+                             self.eta, fp, ip, x, sd, code, weights, batch_chunks(K))
+            return x, sd, code, weights
+        order = (start + np.arange(m)) % m
         x, sd, code = np.empty((K, n)), np.full((K, n), np.nan), np.empty(K, dtype=np.int64)
         for k, i in enumerate(rows):
             xi, si, diag = solve_window(self._c[i, order], self._b[i, order], self._H[i, order],
                                         self.eta[i], self.config)
             x[k], code[k] = xi, CODE[diag.status]
+            if diag.weights is not None:
+                weights[k] = diag.weights
             if si is not None:
                 sd[k] = si
-        return x, sd, code
+        return x, sd, code, weights
 
 
 class BatchedEKF:

@@ -29,7 +29,8 @@ is fed back as the next window's anchor ``eta_prev``, after which the data agree
 
 Also here: the causal running median of the output (:func:`causal_median`,
 :class:`CausalMedian`), the other option of :class:`estimators.irls.IRLSConfig` beyond the
-paper.
+paper, and the batched twins of both (:class:`BatchedChangeCompletion`,
+:class:`BatchedCausalMedian`) used by :class:`estimators.batched.BatchedIRLS`.
 """
 
 from __future__ import annotations
@@ -169,6 +170,105 @@ class CausalMedian:
         if self.length % 2:
             return ordered[k]
         return (ordered[k - 1] + ordered[k]) / 2.0
+
+
+class BatchedChangeCompletion:
+    """:class:`ChangeCompletion` for N independent rows (the batched estimator's), as arrays.
+
+    Row i follows exactly the single object's rules; only the rows of a window that
+    triggers a new change (rare) and the rows being completed run per row in Python.
+    Arguments as :class:`ChangeCompletion`, plus ``num`` rows of ``n`` motors.
+    """
+
+    def __init__(self, num: int, n: int, threshold: float, hold: int, gamma: float,
+                 lower: float, upper: float, span: int = 9):
+        self.threshold, self.hold, self.gamma = threshold, hold, gamma
+        self.lower, self.upper, self.span = lower, upper, span
+        self.history = np.zeros((num, span, n))
+        self._k = np.zeros(num, dtype=np.int64)
+        self.left = np.zeros(num, dtype=np.int64)
+        self.anchor = np.zeros((num, n))
+        self.v = np.zeros((num, n))
+        self.has_v = np.zeros(num, dtype=bool)
+        self.events = np.zeros(num, dtype=np.int64)
+
+    def reset(self, mask: np.ndarray, x0: np.ndarray) -> None:
+        """Forget the rows in ``mask``; their past ``span`` estimates are taken as ``x0``
+        (num, n)."""
+        self.history[mask] = x0[mask][:, None, :]
+        self._k[mask] = 0
+        self.left[mask] = 0
+        self.has_v[mask] = False
+        self.events[mask] = 0
+
+    def observe(self, rows: np.ndarray, x: np.ndarray) -> None:
+        """Record the window estimates ``x`` (K, n) of ``rows`` (K,), distinct."""
+        k = self._k[rows]
+        self.history[rows, k] = x
+        self._k[rows] = (k + 1) % self.span
+
+    def step(self, rows: np.ndarray, x_raw: np.ndarray, info) -> np.ndarray:
+        """:meth:`ChangeCompletion.step` of ``rows`` (K,), distinct, whose solver returned
+        ``x_raw`` (K, n); ``info(j)`` gives the information matrix of the window of
+        ``rows[j]``. Returns the estimates to use (K, n) and records them."""
+        ref = self.history[rows, self._k[rows]]
+        trig = np.max(np.abs(x_raw - ref), axis=1) > self.threshold
+        for j in np.flatnonzero(trig & (self.left[rows] == 0)):  # a new change
+            i = rows[j]
+            v, lam = weak_direction(info(j))
+            self.v[i], self.has_v[i] = v, lam < self.gamma
+            self.anchor[i] = ref[j]
+            self.events[i] += 1
+        self.left[rows[trig]] = self.hold
+        active = self.left[rows] > 0
+        self.left[rows[active]] -= 1
+        x = x_raw.copy()
+        for j in np.flatnonzero(active & self.has_v[rows]):
+            i = rows[j]
+            x[j] = np.clip(self.anchor[i] + l1_completion(x_raw[j] - self.anchor[i], self.v[i]),
+                           self.lower, self.upper)
+        self.observe(rows, x)
+        return x
+
+
+class BatchedCausalMedian:
+    """:class:`CausalMedian` for N rows pushed together (every row at every push).
+
+    The rows share the buffer slot they write; a reset row refills its whole buffer with
+    its next value, so it holds the same values as a fresh :class:`CausalMedian` (the
+    median does not depend on their order). ``median`` computes the middle of each row's
+    ``length`` values, ``(buffer (N, L, n), out (N, n)) -> None`` (default: numpy sort).
+    """
+
+    def __init__(self, num: int, n: int, length: int, median=None):
+        self.length = length
+        self._median = median
+        self._buf = np.zeros((num, length, n)) if length > 1 else None
+        self._fresh = np.ones(num, dtype=bool)
+        self._k = 0
+
+    def reset(self, mask: np.ndarray) -> None:
+        self._fresh[mask] = True
+
+    def push(self, x: np.ndarray) -> np.ndarray:
+        """Add one value per row (N, n); returns each row's running median (N, n)."""
+        if self.length <= 1:
+            return np.array(x, dtype=float)
+        fresh = np.flatnonzero(self._fresh)
+        if fresh.size:
+            self._buf[fresh] = x[fresh][:, None, :]
+            self._fresh[:] = False
+        self._buf[:, self._k] = x
+        self._k = (self._k + 1) % self.length
+        if self._median is not None:
+            out = np.empty(x.shape)
+            self._median(self._buf, out)
+            return out
+        ordered = np.sort(self._buf, axis=1)
+        k = self.length // 2
+        if self.length % 2:
+            return ordered[:, k]
+        return (ordered[:, k - 1] + ordered[:, k]) / 2.0
 
 
 def run_completed(c, b, H, excited, x0, completion: ChangeCompletion, run_chunk, solve_one,

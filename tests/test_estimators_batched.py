@@ -39,10 +39,16 @@ def _stack(flights):
                     for name in ("t", "p", "v", "R", "w", "f"))
 
 
-def _compare(flights, single_factory, batched, corrupt=None):
+def _compare(flights, single_factory, batched, corrupt=None, reset_at=None):
+    """Feed both; ``reset_at = (k, row)`` resets that row (batch and single) before step k."""
     singles = [single_factory() for _ in flights]
     n_ok = 0
     for k, sample in enumerate(_stack(flights)):
+        if reset_at is not None and k == reset_at[0]:
+            mask = np.zeros(len(flights), dtype=bool)
+            mask[reset_at[1]] = True
+            batched.reset(mask, eta0=np.full(4, 0.8))
+            singles[reset_at[1]].reset(np.full(4, 0.8))
         if corrupt is not None and k == corrupt:
             sample = list(sample)
             sample[1] = sample[1].copy()
@@ -58,7 +64,7 @@ def _compare(flights, single_factory, batched, corrupt=None):
             else:
                 np.testing.assert_allclose(out.sd[i], e.sd, rtol=0, atol=1e-6)
             n_ok += e.status == "ok"
-    return n_ok
+    return n_ok, singles
 
 
 @pytest.mark.parametrize("backend", ["numpy", "numba"])
@@ -69,8 +75,25 @@ def test_batched_irls_matches_single(flights, backend):
     cfg = IRLSConfig(backend=backend)
     batched = BatchedIRLS(veh, N_VEHICLES, cfg)
     assert batched.backend == backend
-    n_ok = _compare(flights, lambda: SlidingWindowIRLS(veh, cfg), batched, corrupt=40)
+    n_ok, _ = _compare(flights, lambda: SlidingWindowIRLS(veh, cfg), batched, corrupt=40)
     assert n_ok > 100  # the windows were really solved, not held by a guard
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_batched_improved_irls_matches_single(flights, backend):
+    """Change completion and output median (IRLSConfig.improved()) row by row, through a
+    bad sample and a reset of one row in the middle."""
+    if backend == "numba":
+        pytest.importorskip("numba")
+    veh = flights[0].vehicle
+    cfg = IRLSConfig.improved(backend=backend)
+    batched = BatchedIRLS(veh, N_VEHICLES, cfg)
+    n_ok, singles = _compare(flights, lambda: SlidingWindowIRLS(veh, cfg), batched,
+                             corrupt=40, reset_at=(70, 2))
+    assert n_ok > 100
+    events = [s._completion.events for s in singles]
+    assert sum(events) >= 2  # the faults triggered the completion
+    np.testing.assert_array_equal(batched._completion.events, events)
 
 
 @pytest.mark.parametrize("backend", ["numpy", "numba"])
@@ -80,7 +103,7 @@ def test_batched_ekf_matches_single(flights, backend):
     veh = flights[0].vehicle
     cfg = EKFConfig(backend=backend)
     batched = BatchedEKF(veh, N_VEHICLES, cfg)
-    n_ok = _compare(flights, lambda: MotorEfficiencyEKF(veh, cfg), batched, corrupt=40)
+    n_ok, _ = _compare(flights, lambda: MotorEfficiencyEKF(veh, cfg), batched, corrupt=40)
     assert n_ok > 100
 
 
@@ -110,5 +133,3 @@ def test_bad_shapes_and_names_raise_config_errors(flights):
         BatchedEKF(veh, 0)
     with pytest.raises(ConfigError, match="no batched estimator"):
         make_batched_estimator("kalman", veh, 2)
-    with pytest.raises(ConfigError, match="change_completion"):  # not silently the paper's
-        BatchedIRLS(veh, 2, IRLSConfig.improved())
