@@ -8,11 +8,20 @@ The step (:func:`step_ws`) allocates nothing but the core's ``expm_so3`` result:
 live in a :func:`workspace` made once per recording or per batch chunk, and it uses the
 structure of the 22-state filter instead of dense 22 x 22 products:
 
-* the transition Jacobian ``F`` is the identity plus a few 3 x 3 / 3 x n / 9 x 3 / 9 x n blocks
-  (the eta block is a random walk), so ``F P F^T`` runs over F's non-zeros (about 150 of 484);
-* the measurement Jacobian is ``[I_9 0]`` plus a 3 x 9 attitude block, so ``H P``,
-  ``H P H^T`` and ``(I - K H) P`` read rows of ``P`` instead of multiplying by ``H``;
-* the Joseph update computes each symmetric pair of entries once.
+* the transition Jacobian ``F`` is never formed: it is the identity plus a few blocks (p and
+  v rows: dt, the thrust direction ``R e3`` and a rank-one eta coupling; Omega rows:
+  ``I + dt G`` and ``dt B``; vec(R) rows: ``E^T kron I3`` and the rank-3 product
+  ``dR/dphi [dphi/dOmega, dphi/deta]``; eta rows: the identity, a random walk), so
+  ``F P F^T`` is two passes of :func:`_jacobian_times` over those blocks, the second on the
+  lower triangle only (mirrored);
+* the measurement Jacobian is ``[I_9 0]`` plus a 3 x 9 attitude block, so ``H P`` and
+  ``H P H^T`` read rows of ``P``;
+* the update uses the square-root form of the optimal gain (:func:`_update`):
+  ``S = L L^T``, ``W = L^-1 H P``, ``x += W^T L^-1 y``, ``P -= W^T W``: no explicit gain, no
+  Joseph products; equal to the numpy path's Joseph form for this gain up to rounding.
+
+fastmath: the loops use :data:`FAST` (reassociation, contraction; not ``nnan``/``ninf``);
+the Cholesky factorisation uses none, so its positive-definiteness test sees NaN.
 """
 
 from __future__ import annotations
@@ -25,63 +34,34 @@ from numba import njit
 from estimators.ekf import IDLE_THRUST
 from quadfault._sim_numba import expm_so3  # the core's compiled mirror
 
-
 #: fastmath flags of the step's loops: reassociation (vectorised sums), FMA contraction, no
 #: signed zeros, reciprocals -- but not ``nnan`` / ``ninf``, so NaN and inf still propagate and
 #: are tested as in numpy (results differ from the numpy path by rounding only, tested).
 FAST = {"reassoc", "contract", "nsz", "arcp"}
 
-# workspace slots: matrices (ns x ns), (ns x 12), (12 x 12), small blocks and vectors
-_F, _FP, _PP, _FPT = range(4)
-_S, _L = range(2)
+# workspace slots: ns x ns matrices, 3 x 3 blocks, vectors of length ns
+_FP, _FPT, _PP = range(3)
+_R, _RN, _JR, _G, _MR, _C, _FW, _MW = range(8)
+_XP, _ZE, _PHI = range(3)
 
 
 @njit(cache=True)
 def workspace(ns):
-    """Scratch of one EKF step for ``ns`` states (18 + rotors), with the transition Jacobian
-    ``F`` set to the identity and the column indices of its structural non-zeros per row
-    (:func:`_jacobian_pattern`); a step writes only those entries."""
+    """Scratch of one EKF step for ``ns`` states (18 + rotors); a step overwrites all of it
+    before reading it, so one workspace serves any sequence of steps (and vehicles)."""
     nr = ns - 18
-    ws = (np.zeros((4, ns, ns)), np.zeros((ns, 12)), np.zeros((2, 12, 12)),
-          np.zeros((12, ns)), np.zeros((ns, ns), dtype=np.int64), np.zeros(ns, dtype=np.int64),
-          np.zeros((6, 3, 3)), np.zeros((9, 3)), np.zeros((3, nr)), np.zeros((3, 9)),
-          np.zeros((2, ns)), np.zeros(12))
-    for i in range(ns):
-        ws[0][_F, i, i] = 1.0
-    _jacobian_pattern(ws[4], ws[5])
-    return ws
-
-
-@njit(cache=True)
-def _jacobian_pattern(cols, nnz):
-    """Columns (ascending) that the prediction writes in each row of ``F``: p row i:
-    p_i, v_i, (R e3)_i, eta; v row i: v_i, (R e3)_i, eta; Omega rows: Omega, eta; vec(R) row
-    3 jb + k: Omega, the k-th entry of each column of R, eta; eta rows: the diagonal."""
-    ns = cols.shape[0]
-    for i in range(ns):
-        nnz[i] = 0
-    for i in range(ns):
-        if i < 3:
-            base = (i, 3 + i, 15 + i)
-        elif i < 6:
-            base = (i, 12 + i, -1)
-        elif i < 18:
-            base = (6, 7, 8)
-        else:
-            base = (i, -1, -1)
-        for j in base:
-            if j >= 0:
-                cols[i, nnz[i]] = j
-                nnz[i] += 1
-        if 9 <= i < 18:
-            k = (i - 9) % 3
-            for j in (9 + k, 12 + k, 15 + k):
-                cols[i, nnz[i]] = j
-                nnz[i] += 1
-        if i < 18:
-            for j in range(18, ns):
-                cols[i, nnz[i]] = j
-                nnz[i] += 1
+    return (np.zeros((3, ns, ns)),  # F P, (F P)^T, predicted P
+            np.zeros((ns, 12)),  # W^T
+            np.zeros((2, 12, 12)),  # S, L
+            np.zeros((12, ns)),  # H P, then W
+            np.zeros((8, 3, 3)),  # R, R_pred, Jr, G, Mr, C, I + dt G, dt I + dt^2 G / 2
+            np.zeros((9, 3)),  # d vec(R_pred) / d phi
+            np.zeros((3, nr, 3)),  # B^T, (dt B)^T, (dt^2 B / 2)^T
+            np.zeros((3, 9)),  # attitude rows of H
+            np.zeros((3, ns)),  # x_pred, eta coupling of the p / v rows, phi
+            np.zeros((3, ns)),  # Z: the vec(R) rows' rank-3 factor
+            np.zeros(12),  # innovation
+            np.zeros(nr))  # d T / d eta
 
 
 @njit(cache=True)
@@ -141,34 +121,58 @@ def _project_so3_into(M, C):
 
 
 @njit(cache=True, fastmath=FAST, error_model="numpy")
-def _sandwich_into(F, P, out, FP, FPT, cols, nnz):
-    """``out = F P F^T`` over the structural non-zeros of the transition Jacobian (column
-    indices of each row in ``cols``/``nnz``, :func:`_jacobian_pattern`); ``FP``, ``FPT`` are
-    scratch. Both products stream whole rows: ``FP = F P`` and
-    ``out[k] = sum_j F[k, j] (F P)^T[j]``."""
-    n = F.shape[0]
-    for i in range(n):  # FP = F P
-        for k in range(n):
-            FP[i, k] = 0.0
-        for q in range(nnz[i]):
-            j = cols[i, q]
-            f = F[i, j]
-            for k in range(n):
-                FP[i, k] += f * P[j, k]
-    for i in range(n):
-        for k in range(n):
-            FPT[k, i] = FP[i, k]
-    for k in range(n):  # out = F (F P)^T, lower triangle mirrored
-        for i in range(n):
-            out[k, i] = 0.0
-        for q in range(nnz[k]):
-            j = cols[k, q]
-            f = F[k, j]
-            for i in range(k + 1):
-                out[k, i] += f * FPT[j, i]
-    for k in range(n):
-        for i in range(k + 1, n):
-            out[k, i] = out[i, k]
+def _jacobian_times(Pin, out, lower, dt, cp, cv, up, uv, dT, Fw, BwT, E, dR, Mw, BrT, ze, Z):
+    """``out = F Pin`` over the blocks of the transition Jacobian ``F`` (``ekf.predict``),
+    only ``out[i, :i + 1]`` when ``lower``. Blocks: p row i: ``e_i + dt e_{v,i} +
+    cp e_{R e3, i} + up_i dT^T``; v row i: ``e_{v,i} + cv e_{R e3, i} + uv_i dT^T``; Omega
+    rows: ``[Fw, dt B]`` on (Omega, eta); vec(R) row ``3 jb + k``: ``E[:, jb]`` on the k-th
+    entries of R's columns plus ``dR [Mw, Br]`` on (Omega, eta); eta rows: the identity
+    (``BwT``, ``BrT``: ``(dt B)^T``, ``(dt^2 B / 2)^T``). ``ze``, ``Z`` are scratch."""
+    ns = Pin.shape[0]
+    nr = ns - 18
+    n6 = 6 if lower else ns  # columns the p / v rows need
+    n18 = 18 if lower else ns
+    for k in range(n6):  # ze = dT^T Pin[eta]  (the rank-one eta coupling)
+        acc = 0.0
+        for j in range(nr):
+            acc += dT[j] * Pin[18 + j, k]
+        ze[k] = acc
+    for i in range(3):
+        lp = i + 1 if lower else ns
+        for k in range(lp):
+            out[i, k] = Pin[i, k] + dt * Pin[3 + i, k] + cp * Pin[15 + i, k] + up[i] * ze[k]
+        lv = i + 4 if lower else ns
+        for k in range(lv):
+            out[3 + i, k] = Pin[3 + i, k] + cv * Pin[15 + i, k] + uv[i] * ze[k]
+    for i in range(3):  # Omega rows
+        lw = i + 7 if lower else ns
+        for k in range(lw):
+            out[6 + i, k] = Fw[i, 0] * Pin[6, k] + Fw[i, 1] * Pin[7, k] + Fw[i, 2] * Pin[8, k]
+        for j in range(nr):
+            b = BwT[j, i]
+            for k in range(lw):
+                out[6 + i, k] += b * Pin[18 + j, k]
+    for a in range(3):  # Z = [Mw, Br] Pin[(Omega, eta)]
+        for k in range(n18):
+            Z[a, k] = Mw[a, 0] * Pin[6, k] + Mw[a, 1] * Pin[7, k] + Mw[a, 2] * Pin[8, k]
+        for j in range(nr):
+            b = BrT[j, a]
+            for k in range(n18):
+                Z[a, k] += b * Pin[18 + j, k]
+    for jb in range(3):  # vec(R) rows: vec(R E) = (E^T kron I3) vec(R), plus dR Z
+        e0, e1, e2 = E[0, jb], E[1, jb], E[2, jb]
+        for kk in range(3):
+            row = 3 * jb + kk
+            d0, d1, d2 = dR[row, 0], dR[row, 1], dR[row, 2]
+            lr = row + 10 if lower else ns
+            for k in range(lr):
+                out[9 + row, k] = (e0 * Pin[9 + kk, k] + e1 * Pin[12 + kk, k]
+                                   + e2 * Pin[15 + kk, k]
+                                   + d0 * Z[0, k] + d1 * Z[1, k] + d2 * Z[2, k])
+    for i in range(18, ns):  # eta rows: random walk
+        le = i + 1 if lower else ns
+        for k in range(le):
+            out[i, k] = Pin[i, k]
 
 
 @njit(cache=True, error_model="numpy")
@@ -203,11 +207,13 @@ def step_inplace(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi):
 def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
     """One predict + update with the scratch ``ws`` (:func:`workspace`); ``x`` and ``P`` are
     overwritten."""
-    mats, WT, s12, HP, cols, nnz, M3, dR, B, HR, vecs, y = ws
-    F, FP, Pp, FPT = mats[_F], mats[_FP], mats[_PP], mats[_FPT]
-    S, L = s12[_S], s12[_L]
-    R, Rn, Jr, G, Mr, C = M3[0], M3[1], M3[2], M3[3], M3[4], M3[5]
-    xp, phi = vecs[0], vecs[1, 0:3]
+    mats, WT, s12, HP, M3, dR, Bs, HR, vecs, Z, y, dT = ws
+    FP, FPT, Pp = mats[_FP], mats[_FPT], mats[_PP]
+    S, L = s12[0], s12[1]
+    R, Rn, Jr, G, Mr, C = M3[_R], M3[_RN], M3[_JR], M3[_G], M3[_MR], M3[_C]
+    Fw, Mw = M3[_FW], M3[_MW]
+    BT, BwT, BrT = Bs[0], Bs[1], Bs[2]
+    xp, ze, phi = vecs[_XP], vecs[_ZE], vecs[_PHI, 0:3]
     ns = x.shape[0]
     nr = ns - 18
     for j in range(3):
@@ -229,8 +235,10 @@ def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
     wdot = (Jinv[0, 0] * tq[0] + Jinv[0, 1] * tq[1] + Jinv[0, 2] * tq[2],
             Jinv[1, 0] * tq[0] + Jinv[1, 1] * tq[1] + Jinv[1, 2] * tq[2],
             Jinv[2, 0] * tq[0] + Jinv[2, 1] * tq[1] + Jinv[2, 2] * tq[2])
-    for i in range(3):
-        phi[i] = x[6 + i] * dt + 0.5 * wdot[i] * dt * dt
+    phi0 = w0 * dt + 0.5 * wdot[0] * dt * dt
+    phi1 = w1 * dt + 0.5 * wdot[1] * dt * dt
+    phi2 = w2 * dt + 0.5 * wdot[2] * dt * dt
+    phi[0], phi[1], phi[2] = phi0, phi1, phi2
     E = expm_so3(phi)
     for i in range(3):
         for j in range(3):
@@ -245,55 +253,45 @@ def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
             xp[9 + 3 * j + i] = Rn[i, j]
     for j in range(nr):
         xp[18 + j] = x[18 + j]
-    # Jacobian F = d x_pred / d x: identity (set by the workspace) plus blocks, written here
-    for i in range(3):  # B = J^-1 A_M diag(f), G = J^-1 ([J w]x - [w]x J)
-        for j in range(nr):
-            B[i, j] = (Jinv[i, 0] * (A[1, j] * f[j]) + Jinv[i, 1] * (A[2, j] * f[j])
-                       + Jinv[i, 2] * (A[3, j] * f[j]))
+    # blocks of the Jacobian F = d x_pred / d x (ekf.predict); F itself is never formed
+    for j in range(nr):  # B = J^-1 A_M diag(f) = d Omega' / d eta, dT = d T / d eta
+        dT[j] = A[0, j] * f[j]
+        for i in range(3):
+            b = (Jinv[i, 0] * (A[1, j] * f[j]) + Jinv[i, 1] * (A[2, j] * f[j])
+                 + Jinv[i, 2] * (A[3, j] * f[j]))
+            BT[j, i] = b
+            BwT[j, i] = dt * b
+            BrT[j, i] = 0.5 * dt * dt * b
     hjw = ((0.0, -jw[2], jw[1]), (jw[2], 0.0, -jw[0]), (-jw[1], jw[0], 0.0))
     hw = ((0.0, -w2, w1), (w2, 0.0, -w0), (-w1, w0, 0.0))
-    for k in range(3):
+    for k in range(3):  # G = J^-1 ([J w]x - [w]x J) = d Omega' / d Omega
         for j in range(3):
             Mr[k, j] = hjw[k][j] - (hw[k][0] * J[0, j] + hw[k][1] * J[1, j] + hw[k][2] * J[2, j])
     for i in range(3):
         for j in range(3):
             G[i, j] = Jinv[i, 0] * Mr[0, j] + Jinv[i, 1] * Mr[1, j] + Jinv[i, 2] * Mr[2, j]
-    for i in range(3):
-        F[i, 3 + i] = dt
-        F[i, 15 + i] = -(T / m) * 0.5 * dt * dt
-        F[3 + i, 15 + i] = -(T / m) * dt
-        for j in range(nr):
-            dTj = A[0, j] * f[j]
-            F[i, 18 + j] = -R[i, 2] * dTj * (0.5 * dt * dt / m)
-            F[3 + i, 18 + j] = -R[i, 2] * dTj * (dt / m)
-            F[6 + i, 18 + j] = dt * B[i, j]
-        for j in range(3):
-            F[6 + i, 6 + j] = (1.0 if i == j else 0.0) + dt * G[i, j]
-    # vec(R E) = (E^T kron I3) vec(R)
-    for jb in range(3):
-        for ib in range(3):
-            for k in range(3):
-                F[9 + 3 * jb + k, 9 + 3 * ib + k] = E[ib, jb]
-    _right_jacobian_into(phi[0], phi[1], phi[2], Jr)
-    for i in range(3):  # dR[:, i] = vec(Rn [Jr[:, i]]x)
+            Fw[i, j] = (1.0 if i == j else 0.0) + dt * G[i, j]
+            Mw[i, j] = (dt if i == j else 0.0) + 0.5 * dt * dt * G[i, j]  # d phi / d Omega
+    _right_jacobian_into(phi0, phi1, phi2, Jr)
+    for i in range(3):  # dR[:, i] = vec(Rn [Jr[:, i]]x) = d vec(R_pred) / d phi_i
         h = ((0.0, -Jr[2, i], Jr[1, i]), (Jr[2, i], 0.0, -Jr[0, i]), (-Jr[1, i], Jr[0, i], 0.0))
         for cc in range(3):
             for rr in range(3):
                 dR[3 * cc + rr, i] = Rn[rr, 0] * h[0][cc] + Rn[rr, 1] * h[1][cc] \
                     + Rn[rr, 2] * h[2][cc]
-    for rr in range(9):
-        for j in range(3):
-            acc = 0.0
-            for k in range(3):
-                acc += dR[rr, k] * ((dt if k == j else 0.0) + 0.5 * dt * dt * G[k, j])
-            F[9 + rr, 6 + j] = acc
-        for j in range(nr):
-            acc = 0.0
-            for k in range(3):
-                acc += dR[rr, k] * (0.5 * dt * dt * B[k, j])
-            F[9 + rr, 18 + j] = acc
-    _sandwich_into(F, P, Pp, FP, FPT, cols, nnz)
+    cp, cv = -(T / m) * 0.5 * dt * dt, -(T / m) * dt  # d (p, v) / d (R e3)
+    up = (-R[0, 2] * (0.5 * dt * dt / m), -R[1, 2] * (0.5 * dt * dt / m),
+          -R[2, 2] * (0.5 * dt * dt / m))  # d (p, v) / d eta = up / uv (x) dT
+    uv = (-R[0, 2] * (dt / m), -R[1, 2] * (dt / m), -R[2, 2] * (dt / m))
+    # P_pred = F P F^T + Q: F P, then F (F P)^T on the lower triangle, mirrored
+    _jacobian_times(P, FP, False, dt, cp, cv, up, uv, dT, Fw, BwT, E, dR, Mw, BrT, ze, Z)
     for i in range(ns):
+        for k in range(ns):
+            FPT[k, i] = FP[i, k]
+    _jacobian_times(FPT, Pp, True, dt, cp, cv, up, uv, dT, Fw, BwT, E, dR, Mw, BrT, ze, Z)
+    for i in range(ns):
+        for k in range(i):
+            Pp[k, i] = Pp[i, k]
         Pp[i, i] += qc[i] * dt
     # ---- update (p, v, Omega, attitude rotation error); H = [I_9 0; 0 HR 0]
     for i in range(3):
