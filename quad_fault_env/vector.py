@@ -282,8 +282,10 @@ class QuadFaultVectorEnv(VectorEnv):
         for arr, s_new, m_arr, m_new in zip(self.state, start, self.meas, meas):
             arr[rows] = s_new
             m_arr[rows] = m_new
-        for key, idx in _groups(self._sched_key[rows]):
-            self.eta_true[rows[idx]] = self._schedules.items[key](0.0)
+        keys, inv = np.unique(self._sched_key[rows], return_inverse=True)
+        eta0 = np.array([np.broadcast_to(np.asarray(self._schedules.items[key](0.0), float), (n,))
+                         for key in keys.tolist()])
+        self.eta_true[rows] = eta0[inv.ravel()]
         self.f_cmd[rows] = 0.0
         self.steps[rows] = 0
         self.eta_hat[rows], self.eta_sd[rows], self.status[rows] = 1.0, np.nan, "warmup"

@@ -27,6 +27,11 @@ from quadfault.vehicle import Vehicle
 SPREAD_DRAWS = 12
 
 
+def _as_shape(x, shape: tuple) -> np.ndarray:
+    x = np.asarray(x, dtype=float)
+    return x if x.shape == shape else np.broadcast_to(x, shape)
+
+
 class RowTrajectories:
     """N reference trajectories as one callable: row i follows ``items[keys[i]]``.
 
@@ -42,12 +47,24 @@ class RowTrajectories:
     def __call__(self, t) -> FlatOutput:
         t_key = (np.shape(t), np.asarray(t, dtype=float).tobytes())
         if t_key not in self._memo:
+            self._memo[t_key] = self._scalar_from_memo(t)
+        if self._memo[t_key] is None:
             shape = np.shape(t) + (3,)
             outs = [traj(t) for traj in self.items]
             self._memo[t_key] = FlatOutput(*(
-                np.stack([np.broadcast_to(np.asarray(o[f], dtype=float), shape)
-                          for o in outs])[self.keys] for f in range(4)))
+                np.stack([_as_shape(o[f], shape) for o in outs])[self.keys] for f in range(4)))
         return FlatOutput(*(x.copy() for x in self._memo[t_key]))
+
+    def _scalar_from_memo(self, t):
+        """A scalar time already evaluated inside a 1-D array of times, or None."""
+        if np.ndim(t) != 0:
+            return None
+        for (shape, raw), ref in self._memo.items():
+            if len(shape) == 1 and ref is not None:
+                hit = np.flatnonzero(np.frombuffer(raw) == float(t))
+                if len(hit):
+                    return FlatOutput(*(x[:, hit[0]] for x in ref))
+        return None
 
 
 def start_states(items, keys, vehicle: Vehicle, controller: ControllerConfig, spread,
@@ -64,6 +81,9 @@ def start_states(items, keys, vehicle: Vehicle, controller: ControllerConfig, sp
     Returns the states and the reference at t = 0 (rows (N, 3)).
     """
     traj = RowTrajectories(items, keys)
+    if controller.angular_feedforward:  # one evaluation per trajectory: the feed-forward's
+        h = controller.ff_step          # times (as feedforward_rates forms them) hold t = 0
+        traj(np.stack((0.0 - h, 0.0, 0.0 + h), axis=-1))
     s = initial_state(SimpleNamespace(trajectory=traj), 0.0,
                       GeometricController(vehicle, traj, controller))
     pos, vel, att, rate = (u[:, 3 * k:3 * k + 3] for k in range(4))

@@ -1,0 +1,135 @@
+"""Environment speed: single-env steps/s (numpy vs compiled physics) and vector-env reset vs N.
+
+Part 1 steps ``gym.make("QuadFault-v0", estimator=E, physics=P)`` with the zero residual
+action for P = numpy and numba side by side in one run (rounds interleaved, best round kept,
+numba compiled / loaded from its cache before timing) and prints env steps per wall second,
+per CPU second of this process and the numba / numpy ratio, for E = none and irls.
+
+Part 2 times ``QuadFaultVectorEnv(N, "none", "random").reset(seed=0)`` (the batched reset)
+against the per-row path it replaced -- one ``QuadFaultEnv.reset(seed=i)`` per sub-env, the
+same episodes -- and the part of a row's reset that stays per row in Python (seeding the
+row's generator and drawing its random scenario), measured side by side for each N.
+
+Every timing line carries the 1-minute load average: on a shared machine read the ratios and
+the per-CPU-second rates, not the absolute numbers.
+
+    nice -n 10 python benchmarks/bench_env_step.py                  # N up to 4096
+    nice -n 10 python benchmarks/bench_env_step.py --quick          # small, for a smoke run
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+
+def _parse(argv):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--steps", type=int, default=400,
+                   help="compiled-physics steps per round (numpy: a tenth; default 400)")
+    p.add_argument("--rounds", type=int, default=3, help="interleaved rounds, best kept")
+    p.add_argument("--sizes", type=int, nargs="+", default=[256, 1024, 4096],
+                   help="vector env sizes N for the reset timing (default 256 1024 4096)")
+    p.add_argument("--estimators", nargs="+", default=["none", "irls"],
+                   choices=["none", "irls", "ekf", "truth"])
+    p.add_argument("--quick", action="store_true", help="few steps, N = 64 and 256 only")
+    return p.parse_args(argv)
+
+
+def _load() -> str:
+    return f"load {os.getloadavg()[0]:.2f}"
+
+
+def _clock(fn):
+    """(wall seconds, CPU seconds of this process) of ``fn()``."""
+    w, c = time.perf_counter(), time.process_time()
+    fn()
+    return time.perf_counter() - w, time.process_time() - c
+
+
+def single_env(estimators, steps: int, rounds: int) -> None:
+    import gymnasium as gym
+    import numpy as np
+
+    import quad_fault_env  # noqa: F401  (registers the ids)
+
+    print(f"# single env QuadFault-v0, zero residual action ({_load()}, {os.cpu_count()} CPUs)")
+    print(f"{'estimator':<10} {'physics':<7} {'steps/s':>9} {'steps/CPU-s':>12} {'ms/step':>8}")
+    a = np.zeros(4, dtype=np.float32)
+    for est in estimators:
+        envs = {p: gym.make("QuadFault-v0", estimator=est, physics=p)
+                for p in ("numpy", "numba")}
+        n_steps = {"numpy": max(steps // 10, 5), "numba": steps}
+        best = {p: (0.0, 0.0) for p in envs}
+        for env in envs.values():
+            env.reset(seed=0)
+            for _ in range(3):  # numba compile / cache load, first-step allocations
+                env.step(a)
+
+        def run(env, n):
+            for _ in range(n):
+                *_, term, trunc, _ = env.step(a)
+                if term or trunc:
+                    env.reset()
+
+        for _ in range(rounds):
+            for p, env in envs.items():
+                wall, cpu = _clock(lambda: run(env, n_steps[p]))  # noqa: B023
+                rate = (n_steps[p] / wall, n_steps[p] / max(cpu, 1e-9))
+                best[p] = max(best[p], rate)
+        for p in envs:
+            print(f"{est:<10} {p:<7} {best[p][0]:>9.0f} {best[p][1]:>12.0f} "
+                  f"{1e3 / best[p][0]:>8.2f}")
+        print(f"{est:<10} ratio numba/numpy: {best['numba'][0] / best['numpy'][0]:.1f}x wall, "
+              f"{best['numba'][1] / best['numpy'][1]:.1f}x per CPU-s ({_load()})")
+
+
+def vector_reset(sizes) -> None:
+    import gymnasium as gym
+
+    from quad_fault_env.envs.quad_fault import QuadFaultEnv
+    from quad_fault_env.vector import QuadFaultVectorEnv
+
+    print(f"\n# vector env reset, scenario='random', estimator='none' ({_load()})")
+    print(f"{'N':>6} {'batched s':>10} {'per-row s':>10} {'ratio':>6} {'scenario+seed s':>16} "
+          f"{'batched CPU-s':>14}  load")
+    QuadFaultVectorEnv(4, "none", "random").reset(seed=0)  # imports, numba cache
+    for n in sizes:
+        vec = QuadFaultVectorEnv(n, "none", "random")
+        vec.reset(seed=1)
+        batched = min((_clock(lambda: vec.reset(seed=0)) for _ in range(2)),  # noqa: B023
+                      key=lambda x: x[0])
+        single = QuadFaultEnv("none", "random")
+
+        def per_row():
+            for i in range(n):
+                single.reset(seed=i)  # noqa: B023
+
+        def floor():
+            for i in range(n):
+                gym.Env.reset(single, seed=i)  # noqa: B023
+                single._make_scenario("random")  # noqa: B023
+
+        row_wall, _ = _clock(per_row)
+        floor_wall, _ = _clock(floor)
+        print(f"{n:>6} {batched[0]:>10.3f} {row_wall:>10.3f} {row_wall / batched[0]:>6.1f} "
+              f"{floor_wall:>16.3f} {batched[1]:>14.3f}  {os.getloadavg()[0]:.2f}")
+
+
+def main(argv=None) -> int:
+    args = _parse(argv)
+    from quadfault import _sim_numba
+
+    if not _sim_numba.AVAILABLE:
+        print("numba is not installed: pip install 'quadfault[fast]'", file=sys.stderr)
+        return 1
+    steps, sizes = (60, [64, 256]) if args.quick else (args.steps, args.sizes)
+    single_env(args.estimators, steps, args.rounds)
+    vector_reset(sizes)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
