@@ -208,6 +208,44 @@ def irls_window_rate(N: int, updates: int) -> tuple[float, str]:
         f"{solved / (N * len(batches[12:])):.0%} ok, backend {est.backend}"
 
 
+_CRAZYFLOW_SIM = textwrap.dedent("""
+    import json, sys, time
+    import jax
+    jax.config.update("jax_platform_name", "cpu")
+    from crazyflow.sim import Sim
+    N, H, rate = int(sys.argv[1]), int(sys.argv[2]), int(float(sys.argv[3]))
+    sim = Sim(n_worlds=N, n_drones=1, freq=rate, device="cpu", **KW)
+    sim.reset()
+    sim.step(H)  # compile
+    jax.block_until_ready(sim.data.states.pos)
+    best, best_cpu = 0.0, 0.0
+    for _ in range(3):  # best of 3 timings of >= 0.3 s, as the quadfault rates
+        calls, t0, c0 = 0, time.perf_counter(), time.process_time()
+        while time.perf_counter() - t0 < 0.3:
+            sim.step(H)
+            jax.block_until_ready(sim.data.states.pos)
+            calls += 1
+        best = max(best, N * H * calls / (time.perf_counter() - t0))
+        best_cpu = max(best_cpu, N * H * calls / (time.process_time() - c0))
+    print(json.dumps({"rate": best, "cpu_rate": best_cpu}))
+""")
+
+#: what one step of each peer (and of the quadfault row it is compared with) includes
+PEER_STEPS = {
+    "rotorpy": "RotorPy BatchedMultirotor (torch CPU): rk4, aero, motor-speed commands, no "
+               "controller",
+    "crazyflow": "crazyflow Sim defaults (JAX CPU): Euler, first-principles model, attitude "
+                 "controller (computed every step, applied at 500 Hz), motor mixing",
+    "crazyflow-rk4": "crazyflow Sim like-for-like: rk4, first-principles model, Mellinger "
+                     "position + attitude controller at 1 kHz, motor mixing",
+    "crazyflow-env": "crazyflow ReachPosEnv (gymnasium VectorEnv) defaults: so_rpy model, "
+                     "1 physics step at 500 Hz per env step",
+}
+#: the quadfault row each peer is compared with: the compiled closed loop or the env
+PEER_VERSUS = {"rotorpy": "compiled", "crazyflow": "compiled", "crazyflow-rk4": "compiled",
+               "crazyflow-env": "env500"}
+
+
 PEERS = {
     "rotorpy": textwrap.dedent("""
         import json, sys, time, copy
@@ -235,25 +273,34 @@ PEERS = {
         print(json.dumps({"rate": N * H * calls / (time.perf_counter() - t0),
                           "cpu_rate": N * H * calls / (time.process_time() - c0)}))
     """),
-    "crazyflow": textwrap.dedent("""
+    "crazyflow": _CRAZYFLOW_SIM.replace("KW", "{}"),
+    "crazyflow-rk4": _CRAZYFLOW_SIM.replace(
+        "KW", "dict(control='state', integrator='rk4', state_freq=rate, attitude_freq=rate)"),
+    "crazyflow-env": textwrap.dedent("""
         import json, sys, time
+        import numpy as np
         import jax
         jax.config.update("jax_platform_name", "cpu")
-        from crazyflow.sim import Sim
-        N, H, rate = int(sys.argv[1]), int(sys.argv[2]), int(float(sys.argv[3]))
-        sim = Sim(n_worlds=N, n_drones=1, freq=rate, attitude_freq=500, device="cpu")
-        sim.reset()
-        sim.step(H)  # compile
-        jax.block_until_ready(sim.data.states.pos)
+        from crazyflow.envs import ReachPosEnv
+        N, H = int(sys.argv[1]), max(1, int(sys.argv[2]) // 10)
+        env = ReachPosEnv(num_envs=N, device="cpu")  # its defaults: so_rpy model, 500 Hz
+        env.reset(seed=0)
+        lo, hi = env.single_action_space.low, env.single_action_space.high
+        a = np.tile(np.where(np.arange(lo.size) == 0, (lo + hi) / 2, 0.0), (N, 1))
+        a = a.astype(np.float32)  # collective thrust mid-range, level attitude
+        for _ in range(2):
+            jax.block_until_ready(env.step(a)[0])  # compile
         best, best_cpu = 0.0, 0.0
-        for _ in range(3):  # best of 3 timings of >= 0.3 s, as the quadfault rates
+        work = N * H * env.n_substeps  # physics vehicle-steps per timing call
+        for _ in range(3):
             calls, t0, c0 = 0, time.perf_counter(), time.process_time()
             while time.perf_counter() - t0 < 0.3:
-                sim.step(H)
-                jax.block_until_ready(sim.data.states.pos)
+                for _ in range(H):
+                    out = env.step(a)
+                jax.block_until_ready(out[0])
                 calls += 1
-            best = max(best, N * H * calls / (time.perf_counter() - t0))
-            best_cpu = max(best_cpu, N * H * calls / (time.process_time() - c0))
+            best = max(best, work * calls / (time.perf_counter() - t0))
+            best_cpu = max(best_cpu, work * calls / (time.process_time() - c0))
         print(json.dumps({"rate": best, "cpu_rate": best_cpu}))
     """),
 }
@@ -439,32 +486,40 @@ def main(argv=None) -> int:
             print(f"  {label:<56} {share:6.1%}")
     if not args.skip_peers:
         print(f"\n# peers at {RATE:.0f} Hz, horizon {args.horizon} (python {args.peer_python}); "
-              f"vehicle-steps per wall second / per CPU second of each process")
-        print("| N | quadfault compiled + controller | quadfault env (numba, shared noise) | "
-              "rotorpy | crazyflow | compiled/rotorpy | env/rotorpy | compiled/crazyflow | "
-              "env/crazyflow |")
-        print("|---|---|---|---|---|---|---|---|---|")
+              f"vehicle-steps per wall second / per CPU second of each process (all threads)")
+        for name, what in PEER_STEPS.items():
+            print(f"  {name}: {what}")
+        print("  quadfault compiled + controller: step_batch, geometric controller every step, "
+              "motor model with thrust noise, RKMK4 (4 derivatives, 5 SO(3) exponentials)")
+        print("  quadfault env: QuadFaultVectorEnv.step (shared noise, no estimator); env500 = "
+              "at crazyflow's env rates (control = physics = 500 Hz, 1 substep per step)")
+        print("| N | system | vehicle-steps/s wall / CPU | quadfault / system, wall / CPU |")
+        print("|---|---|---|---|")
         pair = lambda r: "n/a" if r is None else f"{r[0]:,.0f} / {r[1]:,.0f}"  # noqa: E731
         ratio = lambda a, b: ("n/a" if b is None  # noqa: E731
-                              else f"{a[0] / b[0]:.2f}x / {a[1] / b[1]:.2f}x")
+                              else f"**{a[0] / b[0]:.2f}x / {a[1] / b[1]:.2f}x**")
         for N in [n for n in Ns if n in (1, 256, 4096, 16384)]:
             # measured again right next to the peers (the machine's load drifts)
-            closed = core_compiled(N, args.horizon, rng, control_every=1, cpu=True)
-            env = env_rate(N, steps, physics="numba", noise_streams="shared", cpu=True)
-            peers, why = {}, {}
+            ours = {"compiled": core_compiled(N, args.horizon, rng, control_every=1, cpu=True),
+                    "env": env_rate(N, steps, physics="numba", noise_streams="shared",
+                                    cpu=True),
+                    "env500": env_rate(N, max(1, steps * 2), physics="numba",
+                                       noise_streams="shared", cpu=True, control_rate=500.0,
+                                       physics_rate=500.0)}
+            for key, label in (("compiled", "quadfault compiled + controller"),
+                               ("env", "quadfault env (100 Hz control, 1 kHz physics)"),
+                               ("env500", "quadfault env500")):
+                print(f"| {N} | {label} | {pair(ours[key])} | |")
             for name in PEERS:
                 if name == "rotorpy" and N > 4096:  # ~1,700 steps/s: minutes per timing
-                    peers[name], why[name] = None, "not run above N = 4096 (too slow)"
+                    print(f"| {N} | {name} | not run above N = 4096 (too slow) | |")
                     continue
-                peers[name], why[name] = peer_rate(args.peer_python, name, N, args.horizon,
-                                                   args.peer_timeout)
-            print(f"| {N} | {pair(closed)} | {pair(env)} | {pair(peers['rotorpy'])} | "
-                  f"{pair(peers['crazyflow'])} | {ratio(closed, peers['rotorpy'])} | "
-                  f"{ratio(env, peers['rotorpy'])} | {ratio(closed, peers['crazyflow'])} | "
-                  f"{ratio(env, peers['crazyflow'])} |", flush=True)
-            for name, reason in why.items():
-                if reason:
-                    print(f"  {name} at N = {N} did not run: {reason}")
+                got, why = peer_rate(args.peer_python, name, N, args.horizon, args.peer_timeout)
+                if got is None:
+                    print(f"| {N} | {name} | did not run: {why} | |", flush=True)
+                    continue
+                print(f"| {N} | {name} | {pair(got)} | {PEER_VERSUS[name]}: "
+                      f"{ratio(ours[PEER_VERSUS[name]], got)} |", flush=True)
     if not args.skip_ppo:
         rates, why = ppo_rates(args.ppo_envs, args.ppo_steps)
         if rates is None:
