@@ -445,23 +445,29 @@ def solve_ring_batch(c, b, H, start, rows, x_prev, fp, ip, x, sd, code, weights,
                                                     sd[k])
 
 
+@njit(cache=True)
+def median_columns(buf, out):
+    """Per column, the median of ``buf`` (L, n) into ``out`` (n,): the middle value, or the
+    mean of the middle two (as ``np.median``)."""
+    L, n = buf.shape
+    tmp = np.empty(L)
+    for j in range(n):
+        for s in range(L):  # insertion sort
+            v = buf[s, j]
+            r = s - 1
+            while r >= 0 and tmp[r] > v:
+                tmp[r + 1] = tmp[r]
+                r -= 1
+            tmp[r + 1] = v
+        k = L // 2
+        out[j] = tmp[k] if L % 2 else (tmp[k - 1] + tmp[k]) / 2.0
+
+
 @njit(cache=True, parallel=True)
 def median_rows(buf, out):
-    """Per row and motor, the median of ``buf`` (N, L, n) over its L values into ``out``
-    (N, n): the middle value, or the mean of the middle two (as ``np.median``)."""
-    N, L, n = buf.shape
-    for i in prange(N):
-        tmp = np.empty(L)
-        for j in range(n):
-            for s in range(L):  # insertion sort
-                v = buf[i, s, j]
-                r = s - 1
-                while r >= 0 and tmp[r] > v:
-                    tmp[r + 1] = tmp[r]
-                    r -= 1
-                tmp[r + 1] = v
-            k = L // 2
-            out[i, j] = tmp[k] if L % 2 else (tmp[k - 1] + tmp[k]) / 2.0
+    """:func:`median_columns` of each row of ``buf`` (N, L, n) into ``out`` (N, n)."""
+    for i in prange(buf.shape[0]):
+        median_columns(buf[i], out[i])
 
 
 #: why :func:`online_update` refused a sample (``bad_sample``)

@@ -111,7 +111,11 @@ class ChangeCompletion:
 
     def triggers(self, x_raw: np.ndarray) -> bool:
         """Would the estimate ``x_raw`` start or extend a change?"""
-        return bool(np.max(np.abs(x_raw - self.reference)) > self.threshold)
+        # max_i |x_i - ref_i| on Python floats: the same numbers, without numpy's
+        # per-call overhead on a 4-vector (the online update calls this every window)
+        ref = self.history[self._k].tolist()
+        return max(abs(a - b) for a, b in zip(np.asarray(x_raw, dtype=float).tolist(),
+                                              ref)) > self.threshold
 
     def step(self, x_raw: np.ndarray, info) -> np.ndarray:
         """The estimate to use (and feed back) for a window whose solver returned ``x_raw``;
@@ -145,10 +149,12 @@ def causal_median(x: np.ndarray, length: int) -> np.ndarray:
 
 
 class CausalMedian:
-    """Online twin of :func:`causal_median` (one row at a time)."""
+    """Online twin of :func:`causal_median` (one row at a time); ``median`` computes the
+    middle of the buffer, ``(buffer (L, n), out (n,)) -> None`` (default: numpy sort)."""
 
-    def __init__(self, length: int):
+    def __init__(self, length: int, median=None):
         self.length = length
+        self._median = median
         self.reset()
 
     def reset(self) -> None:
@@ -163,6 +169,10 @@ class CausalMedian:
             self._buf = np.repeat(row[None], self.length, axis=0)
         self._buf[self._k] = row
         self._k = (self._k + 1) % self.length
+        if self._median is not None:
+            out = np.empty(row.shape)
+            self._median(self._buf, out)
+            return out
         # np.median's value (middle element, or the mean of the middle two), from one sort:
         # a few times faster on these small buffers
         ordered = np.sort(self._buf, axis=0)

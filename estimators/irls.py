@@ -406,7 +406,10 @@ class SlidingWindowIRLS:
         self._completion = ChangeCompletion(cfg.change_threshold, cfg.change_hold, cfg.gamma,
                                             cfg.lower, cfg.upper, span=m)
         self._completion.reset(eta)
-        self._median = CausalMedian(cfg.output_median)
+        median = None
+        if self.backend == "numba" and cfg.output_median > 1:
+            from estimators._irls_numba import median_columns as median
+        self._median = CausalMedian(cfg.output_median, median)
 
     def _segment_terms(self, a: Sample, z: Sample):
         """``(c, b, H, thrust)`` of the segment from sample ``a`` to ``z``."""
