@@ -57,6 +57,9 @@ R_E3 = slice(15, 18)
 #: decorrelated from the kinematic states, and their variance grows by Q_eta dt.
 IDLE_THRUST = 1e-3
 
+_STATUS_WIDTH = max(len(s) for s in (STATUS_BAD_SAMPLE, STATUS_NO_EXCITATION, STATUS_OK,
+                                        STATUS_WARMUP))
+
 
 def _freeze_eta(x, P, eta_keep, P_keep, qc, dt) -> None:
     """Restore the efficiencies and their covariance block after a step without excitation."""
@@ -343,7 +346,8 @@ class MotorEfficiencyEKF:
         n = len(recording)
         if self.use_numba and n > 0 and recording.has_pose:
             eta, sd, ok = self._run_numba(recording)
-            status = np.where(ok, STATUS_OK, STATUS_BAD_SAMPLE).astype(object)
+            status = np.full(n, STATUS_BAD_SAMPLE, dtype=f"<U{_STATUS_WIDTH}")
+            status[ok] = STATUS_OK
             # a row whose predict used an idle rotor's command (previous good row)
             rows = np.flatnonzero(ok)
             idle = np.any(self._commands(recording.thrust_cmd) <= IDLE_THRUST, axis=1)
