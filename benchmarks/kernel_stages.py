@@ -31,7 +31,7 @@ if "--repo" in sys.argv:  # before anything imports quadfault
 else:
     sys.path.insert(0, str(ROOT))
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 STAGES = (
     ("expm", "5 SO(3) exponentials (the ones of one RKMK4 step)"),

@@ -13,8 +13,9 @@ Prints, measured in one run (ratios are what to compare; the machine may be shar
 3. peers at the same physics rate (1 kHz) and horizon: RotorPy's ``BatchedMultirotor``
    (torch, CPU, rk4) and crazyflow's ``Sim`` (JAX, CPU); each runs in a subprocess of
    ``--peer-python`` and is skipped with the reason when it cannot be imported or run;
-4. where the time goes: the compiled kernel's stages (ns per vehicle-step) and a profile of
-   the env step (kernel, per-env noise draws, controller, the rest);
+4. where the time goes: the compiled kernel's stages (CPU ns per vehicle-step, each alone;
+   ``benchmarks/kernel_stages.py``) and a profile of the env step (kernel, per-env noise
+   draws, controller, the rest);
 5. SB3 PPO training steps/s with the native vector env vs ``SubprocVecEnv``.
 
 This script installs nothing. Peers, in a separate virtual environment so they cannot touch
@@ -390,17 +391,6 @@ def profile_env(N: int, steps: int = 5) -> list[tuple[str, float]]:
     return out
 
 
-def kernel_stages(N: int, horizon: int, rng) -> list[tuple[str, float]]:
-    """ns per vehicle-step of the compiled kernel, stage by stage (differences of runs)."""
-    ns = lambda fn: 1e9 / _rate(fn, N * horizon)  # noqa: E731
-    base = ns(compiled_batch(N, horizon, rng, 0, thrust_noise=0.0))
-    noisy = ns(compiled_batch(N, horizon, rng, 0))
-    ctrl = ns(compiled_batch(N, horizon, rng, 1))
-    return [("motors + allocation + RKMK4 (5 exponentials)", base),
-            ("+ thrust noise (4 exp per step)", noisy - base),
-            ("+ geometric controller every step", ctrl - noisy), ("total closed loop", ctrl)]
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--full", action="store_true", help="N up to 16384 (default up to 4096)")
@@ -478,9 +468,13 @@ def main(argv=None) -> int:
     if not args.skip_profile:
         n_prof = min(4096, max_n)
         print(f"\n# where the time goes at N = {n_prof}")
-        print("compiled kernel, ns per vehicle-step (closed loop, one step_batch call):")
-        for label, v in kernel_stages(n_prof, args.horizon, rng):
-            print(f"  {label:<48} {v:8.0f}")
+        print("compiled kernel, CPU ns per vehicle-step, each stage alone on one core "
+              "(benchmarks/kernel_stages.py):")
+        from benchmarks.kernel_stages import STAGES, stage_ns
+
+        ns = stage_ns(n_prof, args.horizon, repeats=3)
+        for key, label in STAGES:
+            print(f"  {label:<64} {ns[key]:8.0f}")
         print("env step (numba physics, per-env noise; cProfile, cumulative share):")
         for label, share in profile_env(n_prof, steps):
             print(f"  {label:<56} {share:6.1%}")

@@ -209,3 +209,60 @@ def test_compile_options_float64_nopython_cache_and_threads():
         arrays = [t for t in sig if isinstance(t, numba.types.Array)]
         assert arrays and all(t.dtype in (numba.float64, numba.int64) for t in arrays), sig
     assert 1 <= numba.get_num_threads() <= (os.cpu_count() or 1)
+
+
+def test_expm_series_equals_rodrigues_on_both_sides_of_its_bound():
+    """Below 0.1 rad ``_expm`` evaluates sin(th)/th and (1 - cos th)/th^2 from their series:
+    equal to the closed forms (and to ``expm_so3``) to rounding, up to and across the bound."""
+    from quadfault import _numba_kernels as K
+
+    rng = np.random.default_rng(7)
+    bound = np.sqrt(K._EXPM_SERIES_MAX_TH2)
+    for th in (1e-9, 1e-5, 1e-3, 0.03, 0.0999999, bound, 0.1000001, 0.3):
+        for _ in range(5):
+            axis = rng.normal(size=3)
+            phi = th * axis / np.linalg.norm(axis)
+            got = np.array(K._expm(tuple(phi))).reshape(3, 3)
+            np.testing.assert_allclose(got, expm_so3(phi), rtol=0, atol=2e-16)
+            x, y, z = phi
+            a = np.sin(th) / th
+            b = 2 * np.sin(th / 2) ** 2 / th**2  # (1 - cos th)/th^2 without cancellation
+            hat = np.array([[0, -z, y], [z, 0, -x], [-y, x, 0]])
+            np.testing.assert_allclose(got, np.eye(3) + a * hat + b * hat @ hat, rtol=0,
+                                       atol=2e-16)
+
+
+def test_per_step_cores_take_no_arrays():
+    """The RKMK4 and controller cores are called per vehicle-step; an array argument would
+    make every call increment / decrement its reference count (an atomic operation the
+    threads share), which cost more than the physics (~200 ns per vehicle-step). Their array
+    wrappers are inlined into the caller instead."""
+    import numba
+
+    from quadfault import _numba_kernels as K
+
+    rng = np.random.default_rng(8)
+    veh = Vehicle()
+    ctrl = GeometricController(veh, named_scenario("lissajous").trajectory)
+    s = _batch(rng, 1)
+    f_cmd, eta, sigma, z, z_off = _inputs(rng, 1, 1, veh)
+
+    @numba.njit(cache=False)  # types the kernels afresh (a cached caller does not)
+    def one_step(p, v, R, w, f_cmd, eta, z, ref, gains, body):
+        pi, vi, Ri, wi = K._vec(p[0]), K._vec(v[0]), K._mat(R[0]), K._vec(w[0])
+        K._controller(pi, vi, Ri, wi, ref, gains, body, f_cmd[0])
+        return K.plant_step(pi, vi, Ri, wi, f_cmd[0], eta[0], 0, True, 0.07, z[0], 0, body,
+                            DT)
+
+    one_step(s.p, s.v, s.R, s.w, f_cmd, eta, z, np.zeros((6, 3)), fast.gains_of(ctrl),
+             fast.body_of(veh))
+    for core in (K._rk4_c, K._controller_c):  # called per step from the inlined wrappers
+        assert core.signatures, core
+        for sig in core.signatures:
+            flat = [t for a in sig for t in (a.types if isinstance(a, numba.types.BaseTuple)
+                                             else (a,))]
+            nested = [u for t in flat for u in (t.types if isinstance(t, numba.types.BaseTuple)
+                                                else (t,))]
+            assert not any(isinstance(t, numba.types.Array) for t in nested), (core, sig)
+    for wrapper in (K.plant_step, K._rk4, K._controller, K._motor_wrench, K._tacc, K._wacc):
+        assert wrapper.targetoptions.get("inline") == "always", wrapper
