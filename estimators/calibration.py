@@ -13,18 +13,24 @@ the motor-averaged RMSE of the EKF as a function of ``Q_eta`` is U-shaped -- too
 3. refine the crossing by bisection in ``log Q_eta``.
 
 The returned :class:`CalibrationResult` keeps every evaluated point (for a figure).
+
+:func:`calibrate_sd_scale` calibrates the EKF's reported one-sigma ``sd`` (not part of the
+paper): the filter's ``sqrt(diag P_eta)`` follows its noise model, which with the reference's
+measurement noise bounds the error by two orders of magnitude (coverage 100 %). One scale,
+the ``coverage`` quantile of ``|error| / sd`` on a calibration flight, makes ``scale * sd`` a
+calibrated error bar for that tuning (docs/ekf.md, "Uncertainty").
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
 
 from estimators.ekf import EKFConfig, MotorEfficiencyEKF
-from estimators.metrics import score
+from estimators.metrics import aligned_truth, score
 from quadfault.errors import ConfigError
 from quadfault.recording import Recording
 
@@ -161,3 +167,62 @@ def calibrate_q_eta(recording: Recording, target_rmse: float, *, base: EKFConfig
     finally:
         if bar is not None:
             bar.close()
+
+
+#: Fraction of a normal error within one standard deviation.
+ONE_SIGMA = 0.6827
+
+
+@dataclass(frozen=True)
+class SdCalibration:
+    """Scale of the EKF's reported ``sd`` fitted by :func:`calibrate_sd_scale`.
+
+    Attributes:
+        scale: multiplier of the reported ``sd`` [1].
+        coverage: the target fraction of samples with ``|error| <= scale * sd`` [1].
+        raw_coverage: that fraction on the calibration flight before scaling [1].
+        samples: number of (row, motor) pairs it was fitted on.
+        config: the :class:`~estimators.ekf.EKFConfig` it holds for (a different ``Q_eta`` or
+            noise setting changes ``P`` and needs its own scale).
+    """
+
+    scale: float
+    coverage: float
+    raw_coverage: float
+    samples: int
+    config: EKFConfig
+
+    def apply(self, series):
+        """``series`` (an :class:`~estimators.base.EstimateSeries`) with ``sd`` scaled."""
+        sd = None if series.sd is None else np.asarray(series.sd, dtype=float) * self.scale
+        return replace(series, sd=sd)
+
+    def to_dict(self) -> dict:
+        return {"scale": self.scale, "coverage": self.coverage,
+                "raw_coverage": self.raw_coverage, "samples": self.samples,
+                "q_eta": self.config.q_eta}
+
+
+def calibrate_sd_scale(recording: Recording, config: EKFConfig | None = None, *,
+                       coverage: float = ONE_SIGMA) -> SdCalibration:
+    """Fit ``scale`` so that ``|eta_true - eta| <= scale * sd`` on a ``coverage`` fraction of
+    the scored samples (status other than ``warmup``, finite positive ``sd``, all motors
+    pooled) of the EKF with ``config`` on ``recording``, which must hold the truth. Fit it on
+    a calibration flight and apply it (:meth:`SdCalibration.apply`) to other flights."""
+    if not (isinstance(coverage, (int, float)) and 0.0 < coverage < 1.0):
+        raise ConfigError(f"coverage must be a fraction in (0, 1), got {coverage!r}")
+    cfg = config or EKFConfig()
+    if recording.eta_true is None:
+        raise ConfigError(f"{recording.path or 'recording'}: no true efficiency (eta1..eta4) "
+                          "to calibrate the EKF's sd against")
+    est = MotorEfficiencyEKF(recording.vehicle, cfg).run(recording.without_truth())
+    _, eta_true = aligned_truth(recording, est)
+    sd = np.asarray(est.sd, dtype=float)
+    keep = (np.asarray(est.status) != "warmup")[:, None] & np.isfinite(sd) & (sd > 0)
+    if keep.sum() < 2:
+        raise ConfigError("fewer than two scored estimates with an sd; the recording is too "
+                          "short to calibrate the EKF's sd")
+    err = np.abs(eta_true - est.eta)[keep]
+    ratio = err / sd[keep]
+    return SdCalibration(float(np.quantile(ratio, coverage)), float(coverage),
+                         float(np.mean(ratio <= 1.0)), int(keep.sum()), cfg)
