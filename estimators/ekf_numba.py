@@ -179,7 +179,8 @@ def _jacobian_times(Pin, out, lower, dt, cp, cv, up, uv, dT, Fw, BwT, E, dR, Mw,
 def _cholesky_into(S, L):
     """Lower Cholesky factor ``S = L L^T`` of the symmetric matrix ``S`` (only its lower
     triangle is read) into ``L``'s lower triangle; False when ``S`` is not positive definite
-    (or not finite). No fastmath, so the test ``not d > 0`` keeps seeing NaN."""
+    (or not finite). No fastmath, so the test ``not d > 0`` keeps seeing NaN. (The compiled
+    IRLS has its own copy, ``_irls_numba._cholesky_solve_into``, which also solves.)"""
     n = S.shape[0]
     for j in range(n):
         d = S[j, j]

@@ -47,12 +47,20 @@ def _compiled_step(ekf, x, P, f, dt, z):
     return x, P
 
 
+def _hexarotor():
+    ang = np.arange(6) * np.pi / 3
+    pos = 0.1 * np.stack((np.cos(ang), np.sin(ang), np.zeros(6)), axis=1)
+    return Vehicle.from_rotors(pos, (1, -1, 1, -1, 1, -1), 0.006)
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_compiled_step_equals_numpy_step_from_random_states(seed):
+    """Seeds 0-4: the quadrotor (22 states); seed 5: a hexarotor (24 states)."""
     rng = np.random.default_rng(seed)
-    ekf = MotorEfficiencyEKF(Vehicle(), EKFConfig(q_eta=float(rng.uniform(1e-4, 1.0)),
-                                                 eta_bounds=None))
-    x, P, f, dt, z = _random_case(rng)
+    vehicle = Vehicle() if seed < 5 else _hexarotor()
+    ekf = MotorEfficiencyEKF(vehicle, EKFConfig(q_eta=float(rng.uniform(1e-4, 1.0)),
+                                                eta_bounds=None))
+    x, P, f, dt, z = _random_case(rng, vehicle.n_rotors)
     x_np, P_np = _numpy_step(ekf, x, P, f, dt, z)
     x_nb, P_nb = _compiled_step(ekf, x, P, f, dt, z)
     np.testing.assert_allclose(x_nb, x_np, rtol=0, atol=1e-10)
