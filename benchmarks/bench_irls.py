@@ -23,6 +23,7 @@ flight takes a while on the numpy simulator.
     python benchmarks/bench_irls.py --accuracy          # + accuracy table
     python benchmarks/bench_irls.py --integrator reference --accuracy
     python benchmarks/bench_irls.py --only online --only batched   # online and batched parts
+    python benchmarks/bench_irls.py --only online --baseline ec394f0  # vs an older update()
 """
 
 from __future__ import annotations
@@ -122,10 +123,27 @@ def ekf_vs_irls(rec, repeat: int) -> None:
           f"{med['ekf'][1] / med['irls'][1]:.2f} (CPU)")
 
 
-def online(rec, updates: int, repeat: int) -> None:
+def baseline_estimator(rev: str):
+    """``SlidingWindowIRLS`` of ``estimators/irls.py`` at git revision ``rev`` (run against
+    today's other modules and compiled kernels), to time an older online path side by side."""
+    import subprocess
+    import sys
+    import types
+
+    repo = Path(__file__).resolve().parent.parent
+    src = subprocess.run(["git", "-C", str(repo), "show", f"{rev}:estimators/irls.py"],
+                         capture_output=True, text=True, check=True).stdout
+    mod = types.ModuleType("_irls_baseline")
+    sys.modules[mod.__name__] = mod
+    exec(compile(src, f"{rev}:estimators/irls.py", "exec"), mod.__dict__)
+    return mod
+
+
+def online(rec, updates: int, repeat: int, baseline: str | None = None) -> None:
     """The single estimator's online ``update()`` (one sample per call, as the environment at
     every physics substep) against its offline ``run()``, numba path, reference and improved
-    settings, alternating; median rates."""
+    settings, alternating; median rates. With ``baseline`` (a git revision), the online
+    update of that revision's ``estimators/irls.py`` (reference settings) in the same loop."""
     from estimators.base import samples
 
     if not numba_available():
@@ -137,6 +155,10 @@ def online(rec, updates: int, repeat: int) -> None:
     variants = (("reference", IRLSConfig(backend="numba")),
                 ("improved", IRLSConfig.improved(backend="numba")))
     ests = {name: SlidingWindowIRLS(rec.vehicle, cfg) for name, cfg in variants}
+    if baseline:
+        old = baseline_estimator(baseline)
+        ests[f"@{baseline}"] = old.SlidingWindowIRLS(rec.vehicle, old.IRLSConfig(backend="numba"))
+        variants = variants + ((f"@{baseline}", None),)
     for est in ests.values():  # compile / load the cache outside the timing
         for s in rows[:30]:
             est.update(s)
@@ -154,6 +176,13 @@ def online(rec, updates: int, repeat: int) -> None:
                 _median_rate(lambda e=est: run_online(e), len(rows), 1))
             res.setdefault((name, "run"), []).append(
                 _median_rate(lambda e=est: e.run(sub), len(rows), 1))
+    if baseline:
+        etas = []
+        for name in ("reference", f"@{baseline}"):
+            ests[name].reset()
+            etas.append(np.array([ests[name].update(s).eta for s in rows]))
+        print(f"max |update() - update()@{baseline}| (reference settings): "
+              f"{np.max(np.abs(etas[0] - etas[1])):.1e}")
     print(f"\nsingle IRLS online update() vs offline run(), {len(rows)} samples, median of "
           f"{repeat} alternating runs (load average {os.getloadavg()[0]:.1f})")
     med = {k: (np.median([r[0] for r in v]), np.median([r[1] for r in v]))
@@ -163,6 +192,10 @@ def online(rec, updates: int, repeat: int) -> None:
         print(f"{name:9s} update(): {up[0]:8.0f} updates/s wall, {up[1]:8.0f} per CPU-s; "
               f"run(): {off[0]:8.0f} /s wall, {off[1]:8.0f} per CPU-s; "
               f"update / run {up[1] / off[1]:.2f} (CPU)")
+    if baseline:
+        new, old = med[("reference", "update")], med[(f"@{baseline}", "update")]
+        print(f"ratio update() now / @{baseline}: {new[0] / old[0]:.1f}x wall, "
+              f"{new[1] / old[1]:.1f}x per CPU-s")
 
 
 def batched(rec, N: int, updates: int, repeat: int) -> None:
@@ -263,6 +296,8 @@ def main() -> None:
                    "comparisons (EKF/IRLS, online/offline, batched variants)")
     p.add_argument("--online-updates", type=int, default=5000,
                    help="samples of the online update() timing")
+    p.add_argument("--baseline", metavar="REV", help="also time the online update of "
+                   "estimators/irls.py at this git revision (e.g. ec394f0), side by side")
     p.add_argument("--only", choices=("speed", "ekf", "online", "batched"), action="append",
                    help="run only these parts (repeatable; default all)")
     args = p.parse_args()
@@ -273,7 +308,7 @@ def main() -> None:
     if "ekf" in only:
         ekf_vs_irls(rec, args.repeat)
     if "online" in only:
-        online(rec, args.online_updates, args.repeat)
+        online(rec, args.online_updates, args.repeat, args.baseline)
     if args.batch > 0 and "batched" in only:
         batched(rec, args.batch, args.batch_updates, args.repeat)
     if args.accuracy:

@@ -476,16 +476,54 @@ _WARM = STATUSES.index("warmup")
 _BAD = STATUSES.index("bad_sample")
 
 
+# the online estimator's state lives in two flat buffers (few kernel arguments: the call
+# overhead of a compiled function grows with their number); these are their pieces, in order
+_ONLINE_FLOAT_PIECES = ("last_t", "last_p", "last_v", "last_R", "last_w", "last_f", "c", "b",
+                        "H", "thrust", "r0", "J", "x_out", "sd_out", "V", "M", "S", "weights")
+_ONLINE_INT_PIECES = ("ints", "iters")
+_CONST_PIECES = ("scalars", "Jmat", "Jinv", "A", "G")
+
+
+def _online_shapes(m, n, rounds):
+    """Shapes of the pieces of the float state, the int state and the constants (the order
+    :func:`online_update` reads them in)."""
+    fs = ((1,), (3,), (3,), (3, 3), (3,), (n,), (m,), (m, n), (m, n, n), (m,), (10,),
+          (10, n), (n,), (n,), (_N_VEC, n), (_N_MAT, n, n), (3, m), (m,))
+    return fs, ((4,), (rounds,)), ((5,), (3, 3), (3, 3), (4, n), (10,))
+
+
+def _views(buf, shapes, names):
+    out, o = {}, 0
+    for name, shape in zip(names, shapes):
+        size = int(np.prod(shape))
+        out[name] = buf[o:o + size].reshape(shape)
+        o += size
+    return out
+
+
 def online_state(m: int, n: int, rounds: int):
-    """The state of one online estimator as arrays (:func:`online_update` updates it in place):
-    ``(ints, last_t, last_p, last_v, last_R, last_w, last_f, c, b, H, thrust, r0, J)`` where
-    ``ints = [head, count, has_last]`` (``head``: ring slot written next, which is the oldest
-    segment of a full window), ``last_*`` the previous sample (its command clipped), ``c``,
-    ``b``, ``H``, ``thrust`` the ring of the window's segment terms and ``r0``, ``J`` scratch
-    of :func:`segment_terms_into`."""
-    return (np.zeros(3, dtype=np.int64), np.zeros(1), np.zeros(3), np.zeros(3),
-            np.zeros((3, 3)), np.zeros(3), np.zeros(n), np.zeros(m), np.zeros((m, n)),
-            np.zeros((m, n, n)), np.zeros(m), np.zeros(10), np.zeros((10, n)))
+    """The state of one online estimator (:func:`online_update` updates it in place):
+    ``(fstate, istate, views)``: a float and an int buffer, and named numpy views of their
+    pieces -- ``ints = [head, count, has_last, m]`` (``head``: ring slot written next, the
+    oldest segment of a full window), ``last_*`` the previous sample (command clipped),
+    ``c``, ``b``, ``H``, ``thrust`` the ring of segment terms, ``x_out``, ``sd_out``,
+    ``weights``, ``iters`` the last window's solution, and scratch."""
+    fs, ints, _ = _online_shapes(m, n, rounds)
+    fstate = np.zeros(sum(int(np.prod(s)) for s in fs))
+    istate = np.zeros(sum(int(np.prod(s)) for s in ints), dtype=np.int64)
+    views = _views(fstate, fs, _ONLINE_FLOAT_PIECES)
+    views.update(_views(istate, ints, _ONLINE_INT_PIECES))
+    views["ints"][3] = m
+    return fstate, istate, views
+
+
+def online_constants(vehicle, G, clip: bool, min_thrust: float) -> np.ndarray:
+    """The constant arguments of :func:`online_update` in one buffer: ``[mass, gravity,
+    rotor_max_thrust, clip, min_thrust]``, inertia, its inverse, allocation, ``G``."""
+    parts = (np.array([vehicle.mass, vehicle.gravity, vehicle.rotor_max_thrust, float(clip),
+                       min_thrust]), vehicle.inertia, vehicle.inertia_inverse,
+             vehicle.allocation, G)
+    return np.concatenate([np.asarray(a, dtype=np.float64).ravel() for a in parts])
 
 
 @njit(cache=True)
@@ -497,18 +535,56 @@ def _all_finite(a):
 
 
 @njit(cache=True)
-def online_update(t, p, v, R, w, f, f_max, clip, min_thrust, ints, last_t, last_p, last_v,
-                  last_R, last_w, last_f, c, b, H, thrust, r0, J, mass, g, Jmat, Jinv, A, G,
-                  x, x_out, sd_out, fp, ip, V, M, S, iters, wts, nohist):
+def _take(buf, o, size):
+    return buf[o:o + size], o + size
+
+
+@njit(cache=True)
+def online_update(t, p, v, R, w, f, const, fp, ip, fstate, istate, x):
     """One online update of the sliding-window IRLS in one compiled call: checks the sample
-    (finite, time increasing), clips its command to ``[0, f_max]`` (``clip``), adds the
+    (finite, time increasing), clips its command to ``[0, rotor_max_thrust]``, adds the
     segment previous -> this sample to the ring (eqs. 17-26), and solves the window
     (Algorithm 2, :func:`_solve_window_into`) from the previous estimate ``x`` when it is full
-    and excited. The caller keeps ``x``: the solution is left in ``x_out`` / ``sd_out``.
+    and excited. The caller keeps ``x``: the solution is left in the state's ``x_out`` /
+    ``sd_out`` (:func:`online_state`; ``const`` from :func:`online_constants`).
 
     Returns ``(status code, why, rounds, cond)``; ``why`` is :data:`WHY_NONFINITE` or
     :data:`WHY_TIME` for a ``bad_sample`` (the window restarts), else 0."""
-    m = c.size
+    n = f.size
+    ints = istate[:4]
+    m = ints[3]
+    iters = istate[4:]
+    o = 0
+    last_t, o = _take(fstate, o, 1)
+    last_p, o = _take(fstate, o, 3)
+    last_v, o = _take(fstate, o, 3)
+    a, o = _take(fstate, o, 9)
+    last_R = a.reshape((3, 3))
+    last_w, o = _take(fstate, o, 3)
+    last_f, o = _take(fstate, o, n)
+    c, o = _take(fstate, o, m)
+    a, o = _take(fstate, o, m * n)
+    b = a.reshape((m, n))
+    a, o = _take(fstate, o, m * n * n)
+    H = a.reshape((m, n, n))
+    thrust, o = _take(fstate, o, m)
+    r0, o = _take(fstate, o, 10)
+    a, o = _take(fstate, o, 10 * n)
+    J = a.reshape((10, n))
+    x_out, o = _take(fstate, o, n)
+    sd_out, o = _take(fstate, o, n)
+    a, o = _take(fstate, o, _N_VEC * n)
+    V = a.reshape((_N_VEC, n))
+    a, o = _take(fstate, o, _N_MAT * n * n)
+    M = a.reshape((_N_MAT, n, n))
+    a, o = _take(fstate, o, 3 * m)
+    S = a.reshape((3, m))
+    wts, o = _take(fstate, o, m)
+    mass, g, f_max, clip, min_thrust = const[0], const[1], const[2], const[3] != 0.0, const[4]
+    Jmat = const[5:14].reshape((3, 3))
+    Jinv = const[14:23].reshape((3, 3))
+    A = const[23:23 + 4 * n].reshape((4, n))
+    G = const[23 + 4 * n:33 + 4 * n]
     finite = (math.isfinite(t) and _all_finite(p) and _all_finite(v) and _all_finite(R)
               and _all_finite(w) and _all_finite(f))
     if not finite or (ints[2] == 1 and not t > last_t[0]):
@@ -524,11 +600,11 @@ def online_update(t, p, v, R, w, f, f_max, clip, min_thrust, ints, last_t, last_
         ints[0] = (slot + 1) % m
         ints[1] = min(ints[1] + 1, m)
     last_t[0] = t
-    for a in range(3):
-        last_p[a], last_v[a], last_w[a] = p[a], v[a], w[a]
+    for i in range(3):
+        last_p[i], last_v[i], last_w[i] = p[i], v[i], w[i]
         for k in range(3):
-            last_R[a, k] = R[a, k]
-    for j in range(f.size):
+            last_R[i, k] = R[i, k]
+    for j in range(n):
         last_f[j] = min(max(f[j], 0.0), f_max) if clip else f[j]
     ints[2] = 1
     if ints[1] < m:
@@ -539,7 +615,7 @@ def online_update(t, p, v, R, w, f, f_max, clip, min_thrust, ints, last_t, last_
     if mean / m < min_thrust:
         return _NO_EXC, 0, 0, np.nan
     code, rounds, cond = _solve_window_into(c, b, H, ints[0], x, fp, ip, V, M, S, iters, wts,
-                                            nohist, x_out, sd_out)
+                                            np.zeros((0, 7)), x_out, sd_out)
     return code, 0, rounds, cond
 
 

@@ -44,6 +44,10 @@ SCALINGS = ("reference", "paper")
 BACKENDS = ("auto", "numpy", "numba")
 _START_MARGIN = 1e-6  # the interior-point start is kept this far inside the bounds
 _F64 = np.dtype(np.float64)
+# status codes of the compiled online update that solved nothing (estimators._irls_numba)
+_HELD_CODES = frozenset(STATUSES.index(s) for s in (STATUS_WARMUP, STATUS_BAD_SAMPLE,
+                                                    STATUS_NO_EXCITATION))
+_WHY_TIME = 2  # estimators._irls_numba.WHY_TIME (that module needs numba)
 
 
 @dataclass(frozen=True)
@@ -368,16 +372,14 @@ class SlidingWindowIRLS:
         self._G = self.config.segment_weights
         self._kernel_params = None
         if self.backend == "numba":
-            from estimators._irls_numba import kernel_parameters, workspace
+            from estimators._irls_numba import (kernel_parameters, online_constants,
+                                                online_update)
 
-            m, n, v = self.config.window - 1, vehicle.n_rotors, vehicle
-            self._kernel_params = kernel_parameters(self.config, m)
-            # the arguments of online_update that never change: vehicle, settings, scratch
-            self._vehicle_args = (float(v.mass), float(v.gravity), _c64(v.inertia),
-                                  _c64(v.inertia_inverse), _c64(v.allocation), _c64(self._G))
-            self._x_out, self._sd_out = np.empty(n), np.empty(n)
-            self._solver_args = (*self._kernel_params,
-                                 *workspace(m, n, int(self._kernel_params[1][0])))
+            cfg = self.config
+            self._kernel_params = kernel_parameters(cfg, cfg.window - 1)
+            # the arguments of online_update that never change: vehicle, settings
+            self._const = online_constants(vehicle, self._G, cfg.clip_commands, cfg.min_thrust)
+            self._online_update = online_update
         self.reset()
 
     # online ---------------------------------------------------------------------------
@@ -398,7 +400,7 @@ class SlidingWindowIRLS:
         if self.backend == "numba":  # the compiled online state (estimators._irls_numba)
             from estimators._irls_numba import online_state
 
-            self._online = online_state(m, n, cfg.max_irls)
+            self._fstate, self._istate, self._online = online_state(m, n, cfg.max_irls)
         else:
             self._c, self._b = np.zeros(m), np.zeros((m, n))
             self._H, self._thrust = np.zeros((m, n, n)), np.zeros(m)
@@ -496,47 +498,43 @@ class SlidingWindowIRLS:
         """:meth:`update` in one compiled call (``_irls_numba.online_update``): the same
         rules, ring and window solver as the numpy path; Python only checks shapes and
         applies the options beyond the paper."""
-        from estimators._irls_numba import WHY_NONFINITE, online_update
-
-        n = self.vehicle.n_rotors
         try:
             t = float(sample.t)
             p, v, R, w, f = [np.asarray(a, dtype=_F64) for a in sample[1:]]
             malformed = (p.shape != (3,) or v.shape != (3,) or R.shape != (3, 3)
-                         or w.shape != (3,) or f.shape != (n,))
+                         or w.shape != (3,) or f.shape != self._eta.shape)
         except (AttributeError, TypeError, ValueError, IndexError):
             t, malformed = math.nan, True
         state = self._online
         if malformed:
-            state[0][1:] = 0  # window restarted
+            state["ints"][1:3] = 0  # window restarted
             return self._keep(t, STATUS_BAD_SAMPLE,
                               "non-finite or malformed sample; window restarted")
-        cfg = self.config
-        code, why, rounds, cond = online_update(
-            t, p, v, R, w, f, self.vehicle.rotor_max_thrust, cfg.clip_commands,
-            cfg.min_thrust, *state, *self._vehicle_args, self._eta, self._x_out,
-            self._sd_out, *self._solver_args)
+        code, why, rounds, cond = self._online_update(
+            t, p, v, R, w, f, self._const, *self._kernel_params, self._fstate, self._istate,
+            self._eta)
         status = STATUSES[code]
-        if status == STATUS_BAD_SAMPLE:
-            why = "non-finite or malformed sample" if why == WHY_NONFINITE \
-                else "time not increasing"
-            return self._keep(t, STATUS_BAD_SAMPLE, f"{why}; window restarted")
-        if status == STATUS_WARMUP:
-            return self._keep(t, STATUS_WARMUP)
-        if status == STATUS_NO_EXCITATION:
+        if code in _HELD_CODES:  # warm-up, bad sample, no excitation: nothing solved
+            if status == STATUS_BAD_SAMPLE:
+                why = "time not increasing" if why == _WHY_TIME \
+                    else "non-finite or malformed sample"
+                return self._keep(t, STATUS_BAD_SAMPLE, f"{why}; window restarted")
+            if status == STATUS_WARMUP:
+                return self._keep(t, STATUS_WARMUP)
             self._completion.observe(self._eta)
             return self._keep(t, STATUS_NO_EXCITATION, "commanded thrust ~ 0 in the window")
-        iters, weights = self._solver_args[5], self._solver_args[6]
-        diag = CompiledWindowDiagnostics(code, rounds, cond, iters.copy(), weights.copy(), cfg)
+        cfg = self.config
+        diag = CompiledWindowDiagnostics(code, rounds, cond, state["iters"].copy(),
+                                         state["weights"].copy(), cfg)
         if status not in (STATUS_OK, STATUS_MAX_ITER):
             self._completion.observe(self._eta)
             return Estimate(t, self._median.push(self._eta), None if self._sd is None
                             else self._sd.copy(), status, diag)
-        eta, sd = self._x_out.copy(), self._sd_out.copy()
+        eta, sd = state["x_out"].copy(), state["sd_out"].copy()
         if cfg.change_completion:
-            head, m = state[0][0], cfg.window - 1
+            head, m = state["ints"][0], cfg.window - 1
             eta = self._completion.step(eta, lambda: _window_information(
-                state[9][(head + np.arange(m)) % m], diag.weights, cfg))
+                state["H"][(head + np.arange(m)) % m], diag.weights, cfg))
         self._eta, self._sd = eta, sd
         return Estimate(t, self._median.push(eta), sd.copy(), status, diag)
 
@@ -600,10 +598,6 @@ class SlidingWindowIRLS:
                                       cfg.lower, cfg.upper, span=cfg.window - 1)
         return run_completed(c, b, H, excited, x0, completion, run_chunk, solve_one,
                              lambda Hw, w: _window_information(Hw, w, cfg))
-
-
-def _c64(a) -> np.ndarray:
-    return np.ascontiguousarray(a, dtype=np.float64)
 
 
 def _window_information(H, w, cfg: IRLSConfig) -> np.ndarray:
