@@ -135,7 +135,7 @@ def baseline_estimator(rev: str):
                          capture_output=True, text=True, check=True).stdout
     mod = types.ModuleType("_irls_baseline")
     sys.modules[mod.__name__] = mod
-    exec(compile(src, f"{rev}:estimators/irls.py", "exec"), mod.__dict__)
+    exec(compile(src, f"{rev}:estimators/irls.py", "exec"), mod.__dict__)  # noqa: S102 (our own git history)
     return mod
 
 
@@ -237,7 +237,8 @@ def batched(rec, N: int, updates: int, repeat: int) -> None:
     for r in range(repeat):  # each repeat continues the flights with the next samples
         chunk = batches[12 + (r + 1) * updates:12 + (r + 2) * updates]
         for name in ests:
-            res[name].append(_median_rate(lambda n=name: run_batch(n, chunk), N * updates, 1))
+            res[name].append(_median_rate(lambda n=name, c=chunk: run_batch(n, c), N * updates,
+                                          1))
     single = SlidingWindowIRLS(rec.vehicle, IRLSConfig(backend="numba"))
 
     def run_single():

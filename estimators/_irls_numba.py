@@ -437,7 +437,7 @@ def solve_ring_batch(c, b, H, start, rows, x_prev, fp, ip, x, sd, code, weights,
     ``code`` (K,) and the final robust weights (K, m), oldest segment first."""
     K, m, n = rows.size, b.shape[1], b.shape[2]
     for ch in prange(chunks):
-        V, M, S, iters, w, nohist = workspace(m, n, ip[0])
+        V, M, S, iters, _w, nohist = workspace(m, n, ip[0])
         for k in range(ch * K // chunks, (ch + 1) * K // chunks):
             i = rows[k]
             code[k], _r, _cond = _solve_window_into(c[i], b[i], H[i], start, x_prev[i], fp, ip,

@@ -372,8 +372,7 @@ class SlidingWindowIRLS:
         self._G = self.config.segment_weights
         self._kernel_params = None
         if self.backend == "numba":
-            from estimators._irls_numba import (kernel_parameters, online_constants,
-                                                online_update)
+            from estimators._irls_numba import kernel_parameters, online_constants, online_update
 
             cfg = self.config
             self._kernel_params = kernel_parameters(cfg, cfg.window - 1)
