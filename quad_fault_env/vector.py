@@ -5,9 +5,11 @@ The physics is the core model over a leading batch axis -- the same code the sin
 :class:`quadfault.motors.MotorModel` (saturation, efficiency, thrust noise, eqs. 11, 13),
 :meth:`quadfault.vehicle.Vehicle.wrench`, :func:`quadfault.dynamics.step_rk4` (eqs. 1-4),
 :class:`quadfault.controller.GeometricController` (eqs. 5-10) and
-:meth:`quadfault.simulator.SensorNoise.measure`. Resets go through one single
-``QuadFaultEnv`` per sub-env (scenario, controller, initial state), so both envs share one
-definition of an episode; the estimate comes from the batched estimators of
+:meth:`quadfault.simulator.SensorNoise.measure`. Resets are batched: per row only the seed,
+the scenario (``QuadFaultEnv._make_scenario``) and the row's draws; the initial states come
+from :func:`quad_fault_env.envs.episode_start.start_states` over all reset rows -- the function
+the single env's reset calls with one row -- so both envs share one definition of an episode
+start. The estimate comes from the batched estimators of
 :mod:`estimators.batched`. With ``physics="numba"`` (the default when numba is importable) the
 substeps run in the compiled twin of the same functions, ``quadfault._sim_numba.step_batch``
 (one call per control step without an estimator, one per run of substeps between estimator
