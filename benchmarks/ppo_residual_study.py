@@ -3,41 +3,47 @@
 Two training arms on ``QuadFaultHover-v0`` (hover, random motor faults, residual actions
 ``f = f_geometric + residual_scale * a``):
 
-* ``with_estimate``: the observation carries the IRLS estimate (``--estimator``);
+* ``with_estimate``: the observation carries the IRLS estimate (``--estimator``, run at the
+  control rate);
 * ``without_estimate``: ``estimator="none"`` (eta_hat slot constant 1, sd constant).
 
-The arms differ only in the estimator: same environment, reward, residual scale, PPO
-hyperparameters (:data:`PPO_KWARGS`), timesteps and seeds. Each arm trains ``--seeds`` PPO
-runs of ``--timesteps`` steps on ``--n-envs`` quadrotors stepped as arrays
+The arms differ only in the estimator: same environment and fault distribution
+(``--random-faults``, default :data:`RANDOM_FAULTS`: one motor at efficiency 0.5-0.85),
+reward (the environment's default), residual scale, VecNormalize, PPO hyperparameters
+(:data:`PPO_KWARGS`), timesteps and seeds. Each arm trains ``--seeds`` PPO runs of
+``--timesteps`` steps on ``--n-envs`` quadrotors stepped as arrays
 (:class:`quad_fault_env.vector.QuadFaultVectorEnv`, the same episodes as the single env).
 
 Evaluation (paired): every trained model and the baseline (the same environment with a zero
 residual, i.e. the geometric controller) fly the *same* ``--episodes`` episodes: the
-environment's random scenario of a reset seed (the training distribution: hover, 0-2 faults
-of severity 0.3-0.9, optional battery degradation, thrust noise, perturbed initial state;
-seeds from 10000 on, skipping those whose scenario has no fault), hence the same scenario,
-initial state and noise for every agent. Each agent flies the episodes as the rows of its
-own vector env. Score per episode: tracking RMSE [m] of the true position error after each
-control step, up to the end; a crashed (terminated) episode scores the crash limit (5 m).
-Reported with 95 % confidence intervals (Student t over the seeds of the per-seed mean
-paired differences; with one seed, over the episodes instead):
+environment's random scenario of a reset seed (the training distribution; seeds from 10000
+on, skipping any whose scenario has no fault), hence the same scenario, initial state and
+noise for every agent. Each agent flies the episodes as the rows of its own vector env.
+Scores per episode: the tracking RMSE [m] of the true position error after each control
+step over the flown part (primary; crashes are counted separately as the crash rate) and,
+as a secondary column, the session-2 score in which a crash counts 5 m. Reported with 95 %
+confidence intervals (Student t over the seeds of the per-seed mean paired differences;
+with one seed, over the episodes instead):
 
 * each arm vs the baseline: ``RMSE_baseline - RMSE_arm`` (> 0: the policy is better);
 * ``with`` vs ``without``: ``RMSE_without - RMSE_with`` paired by seed and episode.
 
-For context (not a target) the estimate-aware allocation (:class:`agents.policies.
-GeometricPolicy` with ``estimate_aware=True``, IRLS) flies the same episodes through the
-same bounded residual: what a policy could gain from the estimate at this residual scale.
+The estimate-aware allocation (:class:`agents.policies.GeometricPolicy` with
+``estimate_aware=True``, IRLS) flies the same episodes through the same bounded residual:
+the headroom, what a policy could gain from the estimate at this residual scale.
+``--check-distribution`` flies only the baseline and this reference (no training): the
+first check of a fault distribution (the baseline must not crash, the reference must gain).
 
 The study of issue 5 (>= 3 seeds per arm, each run within 30 min of CPU)::
 
+    python benchmarks/ppo_residual_study.py --check-distribution --episodes 40 --out runs/ppo_s3
     python benchmarks/ppo_residual_study.py --timesteps 150000 --seeds 0 1 2 \\
-        --episodes 20 --out runs/ppo_study
+        --episodes 40 --out runs/ppo_s3
 
-The arms can train in two processes (``--arms with_estimate --train-only`` and
-``--arms without_estimate --train-only``); the run without ``--train-only`` then reuses the
-trained models (``--retrain`` trains again) and evaluates. Writes ``OUT/study.json`` and
-``OUT/study.md``; per run ``OUT/<arm>/seed_<k>/`` (see ``agents.train``) and
+The runs can train in separate processes (``--arms <arm> --seeds <k> --train-only``); the
+run without ``--train-only`` then reuses the trained models (``--retrain`` trains again) and
+evaluates. Writes ``OUT/study.json`` and ``OUT/study.md`` (``distribution.*`` with
+``--check-distribution``); per run ``OUT/<arm>/seed_<k>/`` (see ``agents.train``) and
 ``train_time.json`` (wall and CPU seconds of the run).
 """
 
@@ -58,6 +64,10 @@ ARMS = ("with_estimate", "without_estimate")
 #: for the F450), so the residual can carry a motor at eta = 0.5 to f_max from hover
 #: (the env's default of 1 N cannot: the estimate-aware allocation needs +2.45 N there)
 RESIDUAL_SCALE = 2.45
+#: the study's fault distribution (``random_faults`` of the environment, both arms): one
+#: motor, efficiency 0.5-0.85 -- faults the geometric controller survives but tracks worse
+#: and the estimate-aware allocation counters (checked with ``--check-distribution``)
+RANDOM_FAULTS = {"n_faults": [1, 1], "severity": [0.5, 0.85]}
 #: PPO settings of both arms. The residual starts at zero (SB3 initialises the action head
 #: with gain 0.01) with exploration noise exp(-2.3) ~ 0.1 per unit action (0.25 N); rollouts
 #: of n_envs x n_steps = 32 x 256 steps (2.56 s of flight per quadrotor).
@@ -80,8 +90,11 @@ def t_interval(x, confidence: float = 0.95):
 
 def env_kwargs(args, estimator: str) -> dict:
     """Keywords of the study's environment (on top of the registration's) for ``estimator``."""
-    return {"action_mode": "residual", "residual_scale": args.residual_scale,
-            "estimator_rate": "control", "duration": args.duration, "estimator": estimator}
+    kwargs = {"action_mode": "residual", "residual_scale": args.residual_scale,
+              "estimator_rate": "control", "duration": args.duration, "estimator": estimator}
+    if args.random_faults is not None:
+        kwargs["random_faults"] = args.random_faults
+    return kwargs
 
 
 def episode_seeds(n: int, kwargs: dict, first: int = 10_000) -> list[int]:
@@ -109,7 +122,8 @@ def episode_seeds(n: int, kwargs: dict, first: int = 10_000) -> list[int]:
 
 
 def paired_scores(policies, kwargs: dict, seeds: list[int]):
-    """RMSE [m] (crash = CRASH_RMSE) and crash flags, arrays (n_policies, n_episodes).
+    """RMSE [m] of the flown part (up to the end or a crash) and crash flags, arrays
+    (n_policies, n_episodes).
 
     Policy j flies its own :class:`QuadFaultVectorEnv` whose row i is reset with
     ``seeds[i]``, so every policy meets the same scenarios, initial states and noise. (One
@@ -142,7 +156,7 @@ def paired_scores(policies, kwargs: dict, seeds: list[int]):
                 done |= term | trunc
         finally:
             venv.close()
-        rmse[j] = np.where(crashed[j], CRASH_RMSE, np.sqrt(sq / np.maximum(steps, 1)))
+        rmse[j] = np.sqrt(sq / np.maximum(steps, 1))
     return rmse, crashed
 
 
@@ -174,14 +188,25 @@ def train_arm(args, arm: str, out: Path) -> None:
                           eval_episodes=4, algo_kwargs=PPO_KWARGS)
         wall, cpu = time.time(), time.process_time()
         train_one(cfg, seed, run_dir, force=True, quiet=True)
-        times = {"wall_seconds": time.time() - wall, "cpu_seconds": time.process_time() - cpu}
+        times = {"wall_seconds": time.time() - wall, "cpu_seconds": time.process_time() - cpu,
+                 "timesteps": args.timesteps}
         atomic_write_text(run_dir / "train_time.json", json.dumps(times, indent=2), force=True)
         print(f"{arm} seed {seed}: trained {args.timesteps} steps in {times['wall_seconds']:.0f} s"
               f" wall, {times['cpu_seconds']:.0f} s CPU", flush=True)
 
 
+def model_path(out: Path, arm: str, seed: int, snapshot: str) -> Path:
+    """The model evaluated: the run's final ``model.zip`` or (``snapshot="mid"``) the one the
+    mid-training evaluation saved (``best/best_model.zip``, written at the first
+    evaluation, after ``timesteps // 2`` steps; later only when an evaluation improves)."""
+    run = out / arm / f"seed_{seed}"
+    return run / "model.zip" if snapshot == "final" else run / "best" / "best_model.zip"
+
+
 def evaluate(args, out: Path, seeds_by_arm: dict) -> dict:
-    """Paired scores of the baseline, the reference and the trained runs of every arm."""
+    """Paired flown RMSE and crash flags of the baseline, the reference and the trained runs."""
+    import gymnasium as gym
+
     from agents.policies import GeometricPolicy
     from agents.train import load_agent
     from quadfault.vehicle import Vehicle
@@ -196,13 +221,13 @@ def evaluate(args, out: Path, seeds_by_arm: dict) -> dict:
             policies += [GeometricPolicy(Vehicle(), "residual", residual_scale=args.residual_scale),
                          GeometricPolicy(Vehicle(), "residual", estimate_aware=True,
                                          residual_scale=args.residual_scale)]
-        for seed in seeds_by_arm[arm]:
-            import gymnasium as gym
-
-            env = gym.make(ENV_ID, **kwargs)
-            model, venv = load_agent(out / arm / f"seed_{seed}", env)
+        for seed in seeds_by_arm.get(arm, ()):
+            model, venv = load_agent(model_path(out, arm, seed, args.snapshot),
+                                     gym.make(ENV_ID, **kwargs))
             names.append(f"{arm}/{seed}")
             policies.append(_Normalised(model, venv))
+        if not policies:
+            continue
         rmse, crashed = paired_scores(policies, kwargs, seeds)
         for name, r, c in zip(names, rmse, crashed):
             results[name] = {"rmse": r.tolist(), "crashed": c.tolist()}
@@ -210,16 +235,32 @@ def evaluate(args, out: Path, seeds_by_arm: dict) -> dict:
     return results
 
 
+def _random_faults(text: str):
+    if text == "default":
+        return None
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise argparse.ArgumentTypeError(f"not JSON: {exc}") from None
+    if not isinstance(value, dict):
+        raise argparse.ArgumentTypeError("must be a JSON object of random_faults keywords")
+    return value
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--timesteps", type=int, default=150_000)
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    p.add_argument("--episodes", type=int, default=20, help="paired evaluation episodes")
+    p.add_argument("--episodes", type=int, default=40, help="paired evaluation episodes")
     p.add_argument("--duration", type=float, default=10.0, help="episode length [s]")
     p.add_argument("--estimator", default="irls", choices=("irls", "ekf", "truth"))
     p.add_argument("--residual-scale", type=float, default=RESIDUAL_SCALE,
                    help="thrust per unit residual action [N] (both arms; default m g / 4)")
     p.add_argument("--n-envs", type=int, default=32, help="quadrotors per training env")
+    p.add_argument("--random-faults", type=_random_faults, default=RANDOM_FAULTS,
+                   help="fault distribution: JSON random_faults keywords of the environment, "
+                   "or 'default' for the environment's own (0-2 faults, severity 0.3-0.9); "
+                   f"default {json.dumps(RANDOM_FAULTS)}")
     p.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS),
                    help="arms to train (evaluation always needs both)")
     p.add_argument("--train-only", action="store_true", help="train, do not evaluate")
@@ -228,109 +269,147 @@ def main(argv=None) -> int:
     p.add_argument("--available", action="store_true",
                    help="train nothing; evaluate the runs that exist (at least one per arm) "
                    "and list the missing ones")
+    p.add_argument("--snapshot", choices=("final", "mid"), default="final",
+                   help="evaluate each run's final model or its mid-training snapshot "
+                   "(best/best_model.zip: for runs stopped after their first evaluation)")
+    p.add_argument("--check-distribution", action="store_true",
+                   help="train nothing; fly only the baseline and the estimate-aware reference "
+                   "(does the fault distribution leave headroom without crashing the baseline?)")
     args = p.parse_args(argv)
 
     from quadfault.fileio import atomic_write_text
 
     out = Path(args.out)
     t0 = time.time()
-    for arm in () if args.available else args.arms:
-        train_arm(args, arm, out)
-    if args.train_only:
-        return 0
-    done = {a: [s for s in args.seeds if (out / a / f"seed_{s}" / "model.zip").exists()]
-            for a in ARMS}
-    missing = [f"{a}/seed_{s}" for a in ARMS for s in args.seeds if s not in done[a]]
-    if missing and not (args.available and all(done.values())):
-        raise SystemExit(f"{out}: runs missing for the evaluation: {', '.join(missing)} "
-                         "(train them with --arms, or evaluate what exists with --available)")
+    if args.check_distribution:
+        done, missing = {a: [] for a in ARMS}, []
+    else:
+        for arm in () if args.available else args.arms:
+            train_arm(args, arm, out)
+        if args.train_only:
+            return 0
+        done = {a: [s for s in args.seeds if model_path(out, a, s, args.snapshot).exists()]
+                for a in ARMS}
+        missing = [f"{a}/seed_{s}" for a in ARMS for s in args.seeds if s not in done[a]]
+        if missing and not (args.available and all(done.values())):
+            raise SystemExit(f"{out}: runs missing for the evaluation: {', '.join(missing)} "
+                             "(train them with --arms, or evaluate what exists with --available)")
     results = evaluate(args, out, done)
     summary = _summary(results, done)
     train_times = {}
     for a in ARMS:
-        for s in args.seeds:
+        for s in done[a]:
             path = out / a / f"seed_{s}" / "train_time.json"
             if path.exists():
                 train_times[f"{a}/seed_{s}"] = json.loads(path.read_text())
     meta = {"timesteps": args.timesteps, "seeds": args.seeds, "episodes": args.episodes,
             "duration": args.duration, "estimator": args.estimator, "env_id": ENV_ID,
-            "residual_scale": args.residual_scale, "n_envs": args.n_envs,
-            "ppo_kwargs": PPO_KWARGS, "train_times": train_times,
+            "residual_scale": args.residual_scale, "random_faults": args.random_faults,
+            "n_envs": args.n_envs, "ppo_kwargs": PPO_KWARGS, "train_times": train_times,
+            "snapshot": args.snapshot,
             "evaluated_seeds": done, "missing_runs": missing,
             "evaluation_seconds": time.time() - t0}
+    name = "distribution" if args.check_distribution else "study"
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "study.json", json.dumps({"meta": meta, "summary": summary,
-                                                      "episodes": results}, indent=2),
+    atomic_write_text(out / f"{name}.json", json.dumps({"meta": meta, "summary": summary,
+                                                        "episodes": results}, indent=2),
                       force=True)
     md = _markdown(summary, meta)
-    atomic_write_text(out / "study.md", md, force=True)
+    atomic_write_text(out / f"{name}.md", md, force=True)
     print(md)
     return 0
 
 
 def _paired(a_minus_b_by_seed: list[np.ndarray]):
+    """Mean paired difference, CI half-width and what the CI is over (seeds or episodes)."""
     if len(a_minus_b_by_seed) >= 2:
         return t_interval([d.mean() for d in a_minus_b_by_seed]) + ("seeds",)
     return t_interval(a_minus_b_by_seed[0]) + ("episodes",)
 
 
+#: the scores of an episode [m]: ``rmse`` the flown part's RMSE (primary; crashes are
+#: reported separately as the crash rate), ``rmse_crash5`` the session-2 score (a crash
+#: scores CRASH_RMSE)
+SCORES = ("rmse", "rmse_crash5")
+
+
+def _scores(entry: dict) -> dict:
+    r, c = np.array(entry["rmse"]), np.array(entry["crashed"], dtype=bool)
+    return {"rmse": r, "rmse_crash5": np.where(c, CRASH_RMSE, r)}
+
+
 def _summary(results, seeds_by_arm: dict) -> dict:
-    base = np.array(results["baseline"]["rmse"])
+    base = _scores(results["baseline"])
     out = {}
     for name in ("baseline", "estimate_aware_reference"):
-        r = np.array(results[name]["rmse"])
-        mean, half = t_interval(base - r)
-        out[name] = {"rmse_mean": float(r.mean()),
-                     "crash_rate": float(np.mean(results[name]["crashed"])),
-                     "improvement_vs_baseline": mean, "ci95": half, "ci_over": "episodes"}
+        sc = _scores(results[name])
+        out[name] = {"crash_rate": float(np.mean(results[name]["crashed"])), "ci_over": "episodes"}
+        for k in SCORES:
+            mean, half = t_interval(base[k] - sc[k])
+            out[name][k] = {"mean": float(sc[k].mean()), "gain": mean, "ci95": half}
     for arm in ARMS:
-        seeds = seeds_by_arm[arm]
-        rm = [np.array(results[f"{arm}/{s}"]["rmse"]) for s in seeds]
-        cr = [np.mean(results[f"{arm}/{s}"]["crashed"]) for s in seeds]
-        mean, half, over = _paired([base - r for r in rm])
-        out[arm] = {"rmse_mean": float(np.mean([r.mean() for r in rm])),
-                    "crash_rate": float(np.mean(cr)),
-                    "per_seed_improvement": [float((base - r).mean()) for r in rm],
-                    "improvement_vs_baseline": mean, "ci95": half, "ci_over": over}
+        runs = [_scores(results[f"{arm}/{s}"]) for s in seeds_by_arm[arm]]
+        if not runs:
+            continue
+        out[arm] = {"crash_rate": float(np.mean([results[f"{arm}/{s}"]["crashed"]
+                                                 for s in seeds_by_arm[arm]]))}
+        for k in SCORES:
+            mean, half, over = _paired([base[k] - r[k] for r in runs])
+            out[arm][k] = {"mean": float(np.mean([r[k].mean() for r in runs])), "gain": mean,
+                           "ci95": half, "per_seed_gain": [float((base[k] - r[k]).mean())
+                                                           for r in runs]}
+            out[arm]["ci_over"] = over
     common = [s for s in seeds_by_arm["with_estimate"] if s in seeds_by_arm["without_estimate"]]
-    mean, half, over = _paired([np.array(results[f"without_estimate/{s}"]["rmse"])
-                                - np.array(results[f"with_estimate/{s}"]["rmse"])
-                                for s in common])
-    out["with_minus_without"] = {"improvement": mean, "ci95": half, "ci_over": over,
-                                 "seeds": common}
+    if common:
+        out["with_minus_without"] = {"seeds": common}
+        for k in SCORES:
+            mean, half, over = _paired([
+                _scores(results[f"without_estimate/{s}"])[k]
+                - _scores(results[f"with_estimate/{s}"])[k] for s in common])
+            out["with_minus_without"][k] = {"gain": mean, "ci95": half, "ci_over": over}
     return out
 
 
 def _markdown(s, meta) -> str:
-    def ci(m, h):
+    def ci(d):
+        m, h = d["gain"], d["ci95"]
         return f"{m:+.4f} ± {h:.4f}" if math.isfinite(h) else f"{m:+.4f} (no CI)"
 
-    lines = [f"# PPO residual study ({meta['env_id']}, {meta['timesteps']} steps/run, seeds "
+    def row(label, a):
+        gains = ("-", "-") if label.startswith("geometric") else (
+            f"{ci(a['rmse'])} (over {a['ci_over']})", ci(a["rmse_crash5"]))
+        return (f"| {label} | {a['rmse']['mean']:.4f} | {a['crash_rate']:.3f} | {gains[0]} | "
+                f"{a['rmse_crash5']['mean']:.4f} | {gains[1]} |")
+
+    lines = [(f"# PPO residual study ({meta['env_id']}, random_faults "
+             f"{json.dumps(meta['random_faults'])}, {meta['timesteps']} steps/run"
+             f"{' (mid-training snapshots)' if meta.get('snapshot') == 'mid' else ''}, seeds "
              f"{meta['evaluated_seeds']}, {meta['episodes']} paired episodes of "
-             f"{meta['duration']} s, residual scale {meta['residual_scale']} N)", "",
+             f"{meta['duration']} s, residual scale {meta['residual_scale']} N)"), "",
              *([f"Missing runs (not trained yet): {', '.join(meta['missing_runs'])}", ""]
                if meta["missing_runs"] else []),
-             "| agent | mean RMSE [m] (crash = 5 m) | crash rate | RMSE gain vs baseline "
-             "[m], 95% CI |", "|---|---|---|---|",
-             f"| geometric (zero residual) | {s['baseline']['rmse_mean']:.4f} | "
-             f"{s['baseline']['crash_rate']:.2f} | - |"]
+             ("| agent | mean RMSE [m] | crash rate | RMSE gain vs baseline [m], 95% CI | "
+             "mean RMSE, crash = 5 m [m] | its gain, 95% CI |"), "|---|---|---|---|---|---|",
+             row("geometric (zero residual)", s["baseline"])]
     for arm in ARMS:
-        a = s[arm]
-        lines.append(f"| PPO {arm.replace('_', ' ')} | {a['rmse_mean']:.4f} | "
-                     f"{a['crash_rate']:.2f} | {ci(a['improvement_vs_baseline'], a['ci95'])} "
-                     f"(over {a['ci_over']}) |")
-    r = s["estimate_aware_reference"]
-    lines.append(f"| (reference) estimate-aware allocation, same residual bound | "
-                 f"{r['rmse_mean']:.4f} | {r['crash_rate']:.2f} | "
-                 f"{ci(r['improvement_vs_baseline'], r['ci95'])} (over episodes) |")
-    w = s["with_minus_without"]
-    lines += ["", f"With vs without the estimate (RMSE_without - RMSE_with, paired, seeds "
-              f"{w['seeds']}): {ci(w['improvement'], w['ci95'])} m (over {w['ci_over']}).", "",
-              "Per-seed gains vs baseline [m]: " + "; ".join(
-                  f"{arm}: " + ", ".join(f"{g:+.4f}" for g in s[arm]["per_seed_improvement"])
-                  for arm in ARMS), "", "Training time per run (wall / CPU s): " + ", ".join(
-                  f"{k} {v['wall_seconds']:.0f}/{v['cpu_seconds']:.0f}"
-                  for k, v in meta["train_times"].items()), ""]
+        if arm in s:
+            lines.append(row(f"PPO {arm.replace('_', ' ')}", s[arm]))
+    lines.append(row("(reference) estimate-aware allocation, same residual bound",
+                     s["estimate_aware_reference"]))
+    if "with_minus_without" in s:
+        w = s["with_minus_without"]
+        lines += ["", (f"With vs without the estimate (RMSE_without - RMSE_with, paired, seeds "
+                  f"{w['seeds']}): {ci(w['rmse'])} m (over {w['rmse']['ci_over']}); crash = "
+                  f"5 m score: {ci(w['rmse_crash5'])} m.")]
+    arms = [a for a in ARMS if a in s]
+    if arms:
+        lines += ["", "Per-seed RMSE gains vs baseline [m]: " + "; ".join(
+            f"{a}: " + ", ".join(f"{g:+.4f}" for g in s[a]["rmse"]["per_seed_gain"])
+            for a in arms)]
+    if meta["train_times"]:
+        lines += ["", "Training per run (steps, wall / CPU s): " + ", ".join(
+            f"{k} {v.get('timesteps', meta['timesteps'])}, {v['wall_seconds']:.0f}/"
+            f"{v['cpu_seconds']:.0f}" for k, v in meta["train_times"].items())]
     return "\n".join(lines) + "\n"
 
 
