@@ -42,10 +42,12 @@ from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.estimation import NOMINAL_PRIOR_SD
 from quad_fault_env.observation import SD_MAX
+from quad_fault_env.time_tables import WINDOW, RowTimeTables
 from quadfault.controller import GeometricController
 from quadfault.dynamics import RigidBodyState, step_rk4
 from quadfault.errors import ConfigError
 from quadfault.motors import MotorModel
+from quadfault.trajectory import FlatOutput
 
 PHYSICS_BACKENDS = ("auto", "numpy", "numba")
 NOISE_STREAMS = ("per_env", "shared")
@@ -210,10 +212,15 @@ class QuadFaultVectorEnv(VectorEnv):
         self._accel_draws = 3 if noise.accel else 0
         self._trajectories, self._schedules = _Table(), _Table()
         self._controllers: dict = {}
+        # the geometric controller's gains and options (shared by every row; references given)
+        self._controller = GeometricController(self.vehicle, None, e0.controller_config)
+        self._tables = RowTimeTables(N, self.substeps, self.dt, self.vehicle,
+                                     e0.controller_config)
         if self.physics == "numba":
-            from quadfault._sim_numba import body_of
+            from quadfault._sim_numba import body_of, gains_of
 
             self._body = body_of(self.vehicle)
+            self._gains = gains_of(self._controller)
         n = self.vehicle.n_rotors
         self.state = RigidBodyState.at_rest(batch_shape=(N,))
         self.meas = RigidBodyState.at_rest(batch_shape=(N,))
@@ -263,13 +270,17 @@ class QuadFaultVectorEnv(VectorEnv):
             if self._meas_draws:
                 rng.standard_normal(out=z[k, :self._meas_draws])
             self._rngs[i] = rng
-            if self._rng_list is not None:
-                self._rng_list[i] = rng
             self._scenario_names[i] = sc.name
             self._traj_key[i] = self._trajectories.key(sc.trajectory)
             self._sched_key[i] = self._schedules.key(sc.efficiency)
             self.sigma[i] = sc.thrust_noise
             self.max_steps[i] = int(round(sc.duration / e0.control_period))
+        if self._rng_list is not None:  # the compiled draws' typed list of the generators
+            if 4 * len(rows) > self.num_envs:
+                self._rng_list = None  # rebuilt at the next draw: cheaper than many setitems
+            else:
+                for i in rows.tolist():
+                    self._rng_list[i] = self._rngs[i]
         keys, inv = np.unique(self._traj_key[rows], return_inverse=True)
         items = [self._trajectories.items[int(key)] for key in keys]
         for key, traj in zip(keys.tolist(), items):
@@ -290,6 +301,7 @@ class QuadFaultVectorEnv(VectorEnv):
         self.eta_true[rows] = eta0[inv.ravel()]
         self.f_cmd[rows] = 0.0
         self.steps[rows] = 0
+        self._tables.invalidate(rows)
         self.eta_hat[rows], self.eta_sd[rows], self.status[rows] = 1.0, np.nan, "warmup"
         if self.estimator_name == "truth":
             self.eta_hat[rows], self.eta_sd[rows], self.status[rows] = self.eta_true[rows], 0.0, "ok"
@@ -334,31 +346,23 @@ class QuadFaultVectorEnv(VectorEnv):
         self._started = True
         return self._observations(refs), self._infos(refs, np.full(N, None, dtype=object))
 
-    # -- helpers over groups of sub-envs sharing a trajectory / schedule ----------------------
-    def _references(self, t: np.ndarray):
-        """Reference position, velocity, acceleration (N, 3) at per-env times ``t`` (N,)."""
-        N = self.num_envs
-        pos, vel, acc = np.empty((N, 3)), np.empty((N, 3)), np.empty((N, 3))
-        for key, rows in _groups(self._traj_key):
-            ref = _at_unique_times(self._trajectories.items[key], t[rows])
-            pos[rows], vel[rows], acc[rows] = ref.position, ref.velocity, ref.acceleration
-        return pos, vel, acc
+    # -- functions of time: per-row windows (quad_fault_env.time_tables) ---------------------
+    def _ensure_tables(self, k: np.ndarray, last: int) -> None:
+        self._tables.ensure(k, self._traj_key, self._sched_key, self._trajectories.items,
+                            self._schedules.items, last)
 
-    def _efficiency(self, t: np.ndarray) -> np.ndarray:
-        """True efficiency (N, S, n) at per-env substep times ``t`` (N, S); rows with the same
-        times (sub-envs in step) are evaluated once."""
-        out = np.empty(t.shape + (self.vehicle.n_rotors,))
-        for key, rows in _groups(self._sched_key):
-            tr = t[rows]
-            _, first, inv = np.unique(tr[:, 0], return_index=True, return_inverse=True)
-            out[rows] = self._schedules.items[key](tr[first])[inv.ravel()]
-        return out
+    def _references_now(self):
+        """Reference position, velocity, acceleration (N, 3) at each row's current time."""
+        self._ensure_tables(self.steps, WINDOW)
+        ref = self._tables.references(self.steps)
+        return ref[:, 0], ref[:, 1], ref[:, 2]
 
     def _check_actions(self, actions) -> np.ndarray:
         return validate_action(actions, self.action_space.shape, "actions")
 
-    def _motor_commands(self, a: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """``QuadFaultEnv.motor_commands`` over the batch (rows share the same formulas)."""
+    def _motor_commands(self, a: np.ndarray, t: np.ndarray, refs: np.ndarray) -> np.ndarray:
+        """``QuadFaultEnv.motor_commands`` over the batch (rows share the same formulas);
+        ``refs`` (N, 6, 3) the controller's reference rows at ``t`` (see ``time_tables``)."""
         e0 = self.envs[0]
         cfg, f_max, veh = e0.action_config, e0.f_max, self.vehicle
         if cfg.mode == "motor":
@@ -368,18 +372,19 @@ class QuadFaultVectorEnv(VectorEnv):
             f = veh.rotor_thrust(np.concatenate((thrust, a[:, 1:] * np.asarray(cfg.moment_scale)),
                                                 axis=1))
         else:
-            f_ctrl = np.empty_like(a)
             m = self.meas
-            for key, rows in _groups(self._traj_key):
-                ctrl = self._controllers[key]
-                ref = _at_unique_times(ctrl.trajectory, t[rows])
-                ff = (_at_unique_times(ctrl.feedforward_rates, t[rows])
-                      if ctrl.config.angular_feedforward else None)
-                if self.physics == "numba":  # the compiled twin of the same controller
-                    f_ctrl[rows] = _compiled_controller(ctrl, self._body, m, rows, ref, ff)
-                else:
-                    f_ctrl[rows], _ = ctrl.motor_commands(t[rows], m.p[rows], m.v[rows],
-                                                          m.R[rows], m.w[rows], ref, ff)
+            if self.physics == "numba":  # the compiled twin of the same controller
+                from quadfault import _sim_numba
+
+                f_ctrl = np.empty_like(a)
+                _sim_numba.controller_batch(*(np.ascontiguousarray(x) for x in m),
+                                            np.ascontiguousarray(refs), self._gains, self._body,
+                                            f_ctrl)
+            else:  # the controller's trajectory is not used: the references are given
+                ctrl = self._controller
+                ff = (refs[:, 4], refs[:, 5]) if ctrl.config.angular_feedforward else None
+                f_ctrl, _ = ctrl.motor_commands(t, m.p, m.v, m.R, m.w,
+                                                FlatOutput(*(refs[:, r] for r in range(4))), ff)
             if e0.compensate:
                 f_ctrl = f_ctrl / np.clip(self.eta_hat, 0.1, None)
             f = f_ctrl + cfg.residual_scale * a
@@ -507,9 +512,11 @@ class QuadFaultVectorEnv(VectorEnv):
         live = np.flatnonzero(~resetting)
         k0 = self.steps * S
         t0 = k0 * self.dt
-        self.f_cmd = self._motor_commands(a, t0)
+        self._ensure_tables(self.steps, WINDOW - 1)
+        self.f_cmd = self._motor_commands(a, t0, self._tables.references(self.steps))
         ts = (k0[:, None] + np.arange(S)[None, :]) * self.dt
-        eta = self._efficiency(ts)
+        eta_all = self._tables.efficiency(self.steps)  # S substeps, then the step's end
+        eta = eta_all[:, :S]
         has_thrust = self.sigma > 0
         per_sub = self._meas_draws + n * has_thrust + self._accel_draws
         sizes = np.where(resetting, 0, S * per_sub - self._meas_draws)
@@ -524,8 +531,8 @@ class QuadFaultVectorEnv(VectorEnv):
             self.eta_hat, self.eta_sd = eta[:, j_last].copy(), np.zeros((N, n))
         self.state = state
         self.steps = self.steps + 1
-        t1 = self.steps * S * self.dt
-        refs = self._references(t1)
+        ref1 = self._tables.references(self.steps)  # k - k0 <= WINDOW: still in the window
+        refs = ref1[:, 0], ref1[:, 1], ref1[:, 2]
         reason = batched_termination(self.envs[0].limits, state.p, state.R, refs[0])
         reason[resetting] = None
         terminated = np.not_equal(reason, None) & ~resetting
@@ -541,7 +548,7 @@ class QuadFaultVectorEnv(VectorEnv):
                                          for s, x in zip(state, self.meas)))
         else:
             self.meas = state.copy()
-        self.eta_true = self._efficiency(t1[:, None])[:, 0]
+        self.eta_true = eta_all[:, S].copy()
         reward = batched_reward(self.envs[0].reward_config, state.p - refs[0],
                                 state.v - refs[1], self.f_cmd, f_max, terminated)
         done = terminated | truncated
@@ -549,14 +556,14 @@ class QuadFaultVectorEnv(VectorEnv):
         if resetting.any():
             self._reset_rows(np.flatnonzero(resetting))
             reward[resetting] = 0.0
-            refs = self._references(self.steps * S * self.dt)
+            refs = self._references_now()
         obs = self._observations(refs)
         infos = self._infos(refs, reason)
         if mode == AutoresetMode.SAME_STEP and done.any():
             rows = np.flatnonzero(done)
             final_obs, final_infos = obs, infos
             self._reset_rows(rows)
-            refs = self._references(self.steps * S * self.dt)
+            refs = self._references_now()
             obs = self._observations(refs)
             infos = self._infos(refs, np.where(done, None, reason))
             infos["final_obs"] = final_obs
@@ -604,29 +611,6 @@ class QuadFaultVectorEnv(VectorEnv):
     def close_extras(self, **kwargs):
         for env in self.envs:
             env.close()
-
-
-def _at_unique_times(fn, t: np.ndarray):
-    """``fn(t)`` (a tuple of arrays (len(t), ...)) evaluated once per distinct time."""
-    tu, inv = np.unique(t, return_inverse=True)
-    out = fn(tu)
-    items = [np.broadcast_to(np.asarray(x, float), tu.shape + np.shape(x)[-1:])[inv.ravel()]
-             for x in out]
-    return type(out)(*items) if hasattr(out, "_fields") else tuple(items)
-
-
-def _compiled_controller(ctrl, nominal, meas, rows, ref, ff) -> np.ndarray:
-    """``ctrl.motor_commands`` of the rows' measured states by ``_sim_numba.controller_batch``."""
-    from quadfault import _sim_numba
-
-    refs = np.zeros((len(rows), 6, 3))
-    refs[:, 0], refs[:, 1], refs[:, 2], refs[:, 3] = ref
-    if ff is not None:
-        refs[:, 4], refs[:, 5] = ff
-    out = np.empty((len(rows), nominal.allocation_inverse.shape[0]))
-    _sim_numba.controller_batch(meas.p[rows], meas.v[rows], meas.R[rows], meas.w[rows], refs,
-                                _sim_numba.gains_of(ctrl), nominal, out)
-    return out
 
 
 def _physics_numba_available() -> bool:

@@ -1,0 +1,109 @@
+"""Per-row tables of the functions of time for the vector env (reference, feed-forward rates,
+true efficiency), filled in windows of control steps.
+
+The reference trajectory, the controller's feed-forward rates and the efficiency schedule are
+functions of time only. Evaluating them every control step costs one Python call per distinct
+trajectory / schedule -- with random scenarios, one per sub-env. Instead each row keeps a window
+of :data:`WINDOW` control steps: the reference and feed-forward at the step boundaries
+``t = (k S) dt`` and the efficiency at the substeps ``t = (k S + j) dt``, evaluated with one
+vectorised call per distinct trajectory (per distinct schedule) and window start, and the
+feed-forward arithmetic of :meth:`~quadfault.controller.GeometricController.feedforward_rates`
+over all refilled rows at once (its times hold the boundaries, so each trajectory is called
+once). A row whose step leaves its window, or that was reset, is refilled.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from quad_fault_env.envs.episode_start import RowTrajectories
+from quadfault.controller import ControllerConfig, GeometricController
+from quadfault.vehicle import Vehicle
+
+#: control steps per window
+WINDOW = 16
+_STALE = np.iinfo(np.int64).min // 2
+
+
+def _combo_groups(keys: np.ndarray, k: np.ndarray):
+    """``[(key, k0, positions), ...]`` of the distinct (key, k0) pairs."""
+    combo = keys.astype(np.int64) * (1 << 32) + k.astype(np.int64)
+    order = np.argsort(combo, kind="stable")
+    cuts = np.flatnonzero(np.diff(combo[order])) + 1
+    return [(int(keys[idx[0]]), int(k[idx[0]]), idx) for idx in np.split(order, cuts)]
+
+
+def _as_rows(x, n: int) -> np.ndarray:
+    x = np.asarray(x, dtype=float)
+    return np.broadcast_to(x, (n,) + x.shape[-1:])
+
+
+class RowTimeTables:
+    """Windows of the functions of time, one per row.
+
+    Args:
+        n_rows, substeps, dt: the vector env's N, physics substeps per control step and
+            physics step [s].
+        vehicle, controller: the nominal vehicle and the geometric controller's configuration
+            (for the feed-forward rates).
+    """
+
+    def __init__(self, n_rows: int, substeps: int, dt: float, vehicle: Vehicle,
+                 controller: ControllerConfig):
+        self.S, self.dt = int(substeps), float(dt)
+        self.vehicle, self.config = vehicle, controller
+        n_rotors = vehicle.n_rotors
+        self.k0 = np.full(n_rows, _STALE, dtype=np.int64)
+        #: rows: position, velocity, acceleration, b1d, Omega_d, Omega_d' at the boundaries
+        self.refs = np.zeros((n_rows, WINDOW + 1, 6, 3))
+        self.eta = np.zeros((n_rows, WINDOW * self.S + 1, n_rotors))
+        self._rows = np.arange(n_rows)
+
+    def invalidate(self, rows) -> None:
+        """Forget the windows of ``rows`` (a reset changes their trajectory and schedule)."""
+        self.k0[rows] = _STALE
+
+    def ensure(self, k: np.ndarray, traj_key, sched_key, trajectories, schedules,
+               last: int) -> None:
+        """Make ``k - k0`` lie in ``[0, last]`` for every row (refilling from ``k``).
+
+        ``trajectories[key]`` / ``schedules[key]`` are the callables of ``traj_key`` /
+        ``sched_key`` (N,).
+        """
+        off = k - self.k0
+        rows = np.flatnonzero((off < 0) | (off > last))
+        if not len(rows):
+            return
+        S, dt, kr = self.S, self.dt, k[rows]
+        for _, k0, idx in _combo_groups(np.zeros(len(rows), dtype=np.int64), kr):
+            r = rows[idx]
+            keys, inv = np.unique(traj_key[r], return_inverse=True)
+            traj = RowTrajectories([trajectories[key] for key in keys.tolist()], inv.ravel())
+            ts = (np.arange(k0, k0 + WINDOW + 1) * S) * dt  # t = (k S) dt
+            block = np.zeros((len(r), WINDOW + 1, 6, 3))
+            if self.config.angular_feedforward:  # its times (t - h, t, t + h) hold ts
+                h = self.config.ff_step
+                ref = [x[:, :, 1] for x in traj(np.stack((ts - h, ts, ts + h), axis=-1))]
+                ctrl = GeometricController(self.vehicle, traj, self.config)
+                block[:, :, 4], block[:, :, 5] = ctrl.feedforward_rates(ts)
+            else:
+                ref = traj(ts)
+            for c in range(4):
+                block[:, :, c] = ref[c]
+            self.refs[r] = block
+        for key, k0, idx in _combo_groups(sched_key[rows], kr):
+            tsub = (k0 * S + np.arange(WINDOW * S + 1)) * dt  # t = (k S + j) dt
+            self.eta[rows[idx]] = _as_rows(schedules[key](tsub), len(tsub))
+        self.k0[rows] = kr
+
+    def references(self, k: np.ndarray) -> np.ndarray:
+        """(N, 6, 3) reference rows at the start of step ``k`` (N,) (t = k S dt)."""
+        return self.refs[self._rows, k - self.k0]
+
+    def efficiency(self, k: np.ndarray) -> np.ndarray:
+        """(N, S + 1, n) true efficiency at step ``k``'s substeps and at its end."""
+        j = (k - self.k0)[:, None] * self.S + np.arange(self.S + 1)
+        return self.eta[self._rows[:, None], j]
+
+
+__all__ = ["RowTimeTables", "WINDOW"]
