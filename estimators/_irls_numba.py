@@ -463,11 +463,36 @@ def median_columns(buf, out):
         out[j] = tmp[k] if L % 2 else (tmp[k - 1] + tmp[k]) / 2.0
 
 
-@njit(cache=True, parallel=True)
-def median_rows(buf, out):
-    """:func:`median_columns` of each row of ``buf`` (N, L, n) into ``out`` (N, n)."""
-    for i in prange(buf.shape[0]):
-        median_columns(buf[i], out[i])
+@njit(cache=True)  # serial: a few ops per value; threads cost more than they save here
+def median_push_rows(buf, srt, k, x, fresh, out):
+    """One push of :class:`estimators.change_completion.BatchedCausalMedian`, compiled: per
+    row i and motor j, ``x[i, j]`` replaces the value in slot ``k`` of the ring ``buf``
+    (N, L, n) (a ``fresh`` row fills its whole ring with it), ``srt`` keeps each ring's
+    values sorted (one removal and one insertion instead of a sort), and ``out`` (N, n)
+    gets the median (the middle value, or the mean of the middle two, as ``np.median``)."""
+    N, L, n = buf.shape
+    h = L // 2
+    for i in range(N):
+        for j in range(n):
+            new = x[i, j]
+            if fresh[i]:
+                for s in range(L):
+                    buf[i, s, j] = new
+                    srt[i, s, j] = new
+            else:
+                old = buf[i, k, j]
+                buf[i, k, j] = new
+                r = 0
+                while r < L - 1 and srt[i, r, j] != old:  # the old value leaves the ring
+                    r += 1
+                while r > 0 and srt[i, r - 1, j] > new:  # the new one moves into place
+                    srt[i, r, j] = srt[i, r - 1, j]
+                    r -= 1
+                while r < L - 1 and srt[i, r + 1, j] < new:
+                    srt[i, r, j] = srt[i, r + 1, j]
+                    r += 1
+                srt[i, r, j] = new
+            out[i, j] = srt[i, h, j] if L % 2 else (srt[i, h - 1, j] + srt[i, h, j]) / 2.0
 
 
 #: why :func:`online_update` refused a sample (``bad_sample``)

@@ -45,12 +45,12 @@ from quadfault.vehicle import Vehicle
 try:  # the compiled batch loops call the existing per-vehicle kernels (``fast`` extra)
     from numba import njit, prange
 
-    from estimators._irls_numba import batch_chunks, median_rows, solve_ring_batch
+    from estimators._irls_numba import batch_chunks, median_push_rows, solve_ring_batch
     from estimators._residuals_numba import segment_terms_batch
     from estimators.ekf_numba import step_ws
     from estimators.ekf_numba import workspace as ekf_workspace
 except ImportError:  # pragma: no cover - exercised without numba
-    njit = median_rows = None
+    njit = median_push_rows = None
 
 CODE = {name: k for k, name in enumerate(STATUSES)}  # status name -> integer code
 _OK, _MAXIT = CODE[STATUS_OK], CODE[STATUS_MAX_ITER]
@@ -172,7 +172,7 @@ class BatchedIRLS:
         self._completion = BatchedChangeCompletion(N, n, cfg.change_threshold, cfg.change_hold,
                                                    cfg.gamma, cfg.lower, cfg.upper, span=m) \
             if cfg.change_completion else None
-        self._median = BatchedCausalMedian(N, n, cfg.output_median, median_rows
+        self._median = BatchedCausalMedian(N, n, cfg.output_median, median_push_rows
                                            if self.backend == "numba" else None)
         self.reset()
 

@@ -246,14 +246,16 @@ class BatchedCausalMedian:
 
     The rows share the buffer slot they write; a reset row refills its whole buffer with
     its next value, so it holds the same values as a fresh :class:`CausalMedian` (the
-    median does not depend on their order). ``median`` computes the middle of each row's
-    ``length`` values, ``(buffer (N, L, n), out (N, n)) -> None`` (default: numpy sort).
+    median does not depend on their order). ``push_kernel`` is the compiled push
+    (``estimators._irls_numba.median_push_rows``, which keeps each buffer sorted
+    incrementally); without it each push sorts the buffers with numpy. Same values.
     """
 
-    def __init__(self, num: int, n: int, length: int, median=None):
+    def __init__(self, num: int, n: int, length: int, push_kernel=None):
         self.length = length
-        self._median = median
+        self._kernel = push_kernel
         self._buf = np.zeros((num, length, n)) if length > 1 else None
+        self._sorted = np.zeros((num, length, n)) if length > 1 and push_kernel else None
         self._fresh = np.ones(num, dtype=bool)
         self._k = 0
 
@@ -264,21 +266,24 @@ class BatchedCausalMedian:
         """Add one value per row (N, n); returns each row's running median (N, n)."""
         if self.length <= 1:
             return np.array(x, dtype=float)
+        k = self._k
+        self._k = (k + 1) % self.length
+        if self._kernel is not None:
+            out = np.empty(x.shape)
+            self._kernel(self._buf, self._sorted, k, np.ascontiguousarray(x, dtype=float),
+                         self._fresh, out)
+            self._fresh[:] = False
+            return out
         fresh = np.flatnonzero(self._fresh)
         if fresh.size:
             self._buf[fresh] = x[fresh][:, None, :]
             self._fresh[:] = False
-        self._buf[:, self._k] = x
-        self._k = (self._k + 1) % self.length
-        if self._median is not None:
-            out = np.empty(x.shape)
-            self._median(self._buf, out)
-            return out
+        self._buf[:, k] = x
         ordered = np.sort(self._buf, axis=1)
-        k = self.length // 2
+        h = self.length // 2
         if self.length % 2:
-            return ordered[:, k]
-        return (ordered[:, k - 1] + ordered[:, k]) / 2.0
+            return ordered[:, h]
+        return (ordered[:, h - 1] + ordered[:, h]) / 2.0
 
 
 def run_completed(c, b, H, excited, x0, completion: ChangeCompletion, run_chunk, solve_one,

@@ -8,7 +8,7 @@ import pytest
 from estimators.base import STATUSES, Sample, samples
 from estimators.batched import BatchedEKF, BatchedIRLS, make_batched_estimator
 from estimators.ekf import EKFConfig, MotorEfficiencyEKF
-from estimators.irls import IRLSConfig, SlidingWindowIRLS
+from estimators.irls import IRLSConfig, SlidingWindowIRLS, numba_available
 from quadfault.errors import ConfigError
 from quadfault.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
 from quadfault.simulator import simulate
@@ -133,3 +133,30 @@ def test_bad_shapes_and_names_raise_config_errors(flights):
         BatchedEKF(veh, 0)
     with pytest.raises(ConfigError, match="no batched estimator"):
         make_batched_estimator("kalman", veh, 2)
+
+
+@pytest.mark.parametrize("length", [1, 4, 21])
+def test_batched_causal_median_equals_single_medians(length):
+    """Both pushes (numpy sort, compiled incremental) give N single CausalMedians' values
+    exactly, through ties and resets of some rows."""
+    from estimators.change_completion import BatchedCausalMedian, CausalMedian
+
+    rng = np.random.default_rng(3)
+    N, n = 7, 4
+    kernels = [None]
+    if numba_available():
+        from estimators._irls_numba import median_push_rows
+        kernels.append(median_push_rows)
+    batches = [BatchedCausalMedian(N, n, length, kernel) for kernel in kernels]
+    singles = [CausalMedian(length) for _ in range(N)]
+    for step in range(60):
+        x = np.round(rng.random((N, n)), 1)  # many ties
+        if step in (10, 33):
+            mask = rng.random(N) < 0.5
+            for b in batches:
+                b.reset(mask)
+            for i in np.flatnonzero(mask):
+                singles[i].reset()
+        want = np.array([s.push(x[i]) for i, s in enumerate(singles)])
+        for b in batches:
+            np.testing.assert_array_equal(b.push(x), want)
