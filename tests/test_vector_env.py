@@ -279,3 +279,36 @@ def test_reset_options_and_seed_lists():
         vec.reset(seed=0, options={"wind": 3})
     with pytest.raises(ConfigError, match="options\\['scenario'\\]"):
         vec.reset(seed=0, options={"scenario": 42})
+
+
+def test_time_tables_equal_the_functions_of_time():
+    """RowTimeTables: the reference, the feed-forward rates and the efficiency of each row at
+    its window's step boundaries / substeps, for rows with their own trajectories, shared ones
+    and different window starts; refilled when a row leaves its window or is invalidated."""
+    from quad_fault_env.time_tables import WINDOW, RowTimeTables
+    from quadfault.controller import GeometricController
+    from quadfault.scenarios import random_scenario
+    from quadfault.vehicle import Vehicle
+
+    rng = np.random.default_rng(3)
+    scs = [random_scenario(rng, 5.0, trajectory=t) for t in ("circle", "lissajous", "hover")]
+    traj_key = np.array([0, 1, 2, 0])
+    sched_key = np.array([0, 1, 2, 2])
+    trajs, scheds = [s.trajectory for s in scs], [s.efficiency for s in scs]
+    vehicle, cfg, S, dt = Vehicle(), ControllerConfig(), 10, 1e-3
+    tables = RowTimeTables(4, S, dt, vehicle, cfg)
+    for k in (np.array([0, 0, 7, 3]), np.array([5, 15, 7, 20])):
+        tables.ensure(k, traj_key, sched_key, trajs, scheds, WINDOW - 1)
+        assert np.all((k - tables.k0 >= 0) & (k - tables.k0 < WINDOW))
+        for step in (k, k + 1):
+            refs, eta = tables.references(step), tables.efficiency(np.minimum(step, k))
+            for i in range(4):
+                t = float(step[i] * S * dt)
+                want = trajs[traj_key[i]](t)
+                ff = GeometricController(vehicle, trajs[traj_key[i]], cfg).feedforward_rates(t)
+                for r, x in enumerate(tuple(want) + tuple(ff)):
+                    np.testing.assert_allclose(refs[i, r], x, rtol=0, atol=1e-9)
+                ts = (min(step[i], k[i]) * S + np.arange(S + 1)) * dt
+                np.testing.assert_allclose(eta[i], scheds[sched_key[i]](ts), rtol=0, atol=1e-12)
+    tables.invalidate([1])
+    assert tables.k0[1] < 0
