@@ -11,6 +11,11 @@ best of 2 by CPU time) against the per-row path it replaced -- one
 reset that stays per row in Python (seeding the row's generator and drawing its random
 scenario), measured side by side for each N, in wall and CPU seconds of this process.
 
+Part 3 steps ``QuadFaultVectorEnv(N, "none", scenario, duration=0.1)`` (compiled physics,
+zero action) for ``scenario="combined"`` (one trajectory shared by every row) and
+``"random"`` (a trajectory and a schedule per row) side by side: CPU seconds per ordinary
+step, and of the step that autoresets every row (the episodes end together).
+
 Every timing line carries the 1-minute load average: on a shared machine read the ratios and
 the per-CPU-second rates, not the absolute numbers.
 
@@ -120,6 +125,29 @@ def vector_reset(sizes) -> None:
               f"{rest[1]:>20.3f}  {os.getloadavg()[0]:.2f}")
 
 
+def vector_step(sizes) -> None:
+    import numpy as np
+
+    from quad_fault_env.vector import QuadFaultVectorEnv
+
+    print(f"\n# vector env step, physics='numba', estimator='none', 0.1 s episodes ({_load()})")
+    print(f"{'N':>6} {'scenario':<9} {'step CPU-s':>10} {'vehicle-steps/CPU-s':>20} "
+          f"{'autoreset step CPU-s':>21}  load")
+    for n in sizes:
+        for scenario in ("combined", "random"):
+            vec = QuadFaultVectorEnv(n, "none", scenario, duration=0.1, physics="numba")
+            a = np.zeros((n, 4), dtype=np.float32)
+            vec.reset(seed=0)
+            cpu = {"plain": [], "autoreset": []}
+            for _ in range(33):  # three episodes of 10 steps plus their autoreset steps
+                resetting = bool(vec._needs_reset.any())
+                _, c = _clock(lambda: vec.step(a))  # noqa: B023
+                cpu["autoreset" if resetting else "plain"].append(c)
+            plain = float(np.median(cpu["plain"][12:]))  # after the first window and reset
+            print(f"{n:>6} {scenario:<9} {plain:>10.4f} {n * vec.substeps / plain:>20.0f} "
+                  f"{float(np.median(cpu['autoreset'])):>21.3f}  {os.getloadavg()[0]:.2f}")
+
+
 def main(argv=None) -> int:
     args = _parse(argv)
     from quadfault import _sim_numba
@@ -130,6 +158,7 @@ def main(argv=None) -> int:
     steps, sizes = (60, [64, 256]) if args.quick else (args.steps, args.sizes)
     single_env(args.estimators, steps, args.rounds)
     vector_reset(sizes)
+    vector_step(sizes)
     return 0
 
 
