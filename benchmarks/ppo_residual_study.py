@@ -204,34 +204,47 @@ def model_path(out: Path, arm: str, seed: int, snapshot: str) -> Path:
 
 
 def evaluate(args, out: Path, seeds_by_arm: dict) -> dict:
-    """Paired flown RMSE and crash flags of the baseline, the reference and the trained runs."""
+    """Paired flown RMSE and crash flags of the baseline, the reference and the trained runs.
+
+    Each agent's episodes are kept in ``OUT/eval/<agent>.json`` together with what they
+    depend on (episode seeds, environment keywords, model file and its modification time);
+    a later evaluation reuses a file only when all of that matches (flights are deterministic
+    under the seeds), so agents can be evaluated as their runs finish.
+    """
     import gymnasium as gym
 
     from agents.policies import GeometricPolicy
     from agents.train import load_agent
+    from quadfault.fileio import atomic_write_text
     from quadfault.vehicle import Vehicle
 
     seeds = episode_seeds(args.episodes, env_kwargs(args, "none"))
     results = {"episode_seeds": seeds}
     for arm, estimator in (("with_estimate", args.estimator), ("without_estimate", "none")):
         kwargs = env_kwargs(args, estimator)
-        names, policies = [], []
+        agents = []  # (name, model file or None, make policy)
         if arm == "with_estimate":
-            names += ["baseline", "estimate_aware_reference"]
-            policies += [GeometricPolicy(Vehicle(), "residual", residual_scale=args.residual_scale),
-                         GeometricPolicy(Vehicle(), "residual", estimate_aware=True,
-                                         residual_scale=args.residual_scale)]
+            for name, aware in (("baseline", False), ("estimate_aware_reference", True)):
+                agents.append((name, None, lambda aware=aware: GeometricPolicy(
+                    Vehicle(), "residual", estimate_aware=aware,
+                    residual_scale=args.residual_scale)))
         for seed in seeds_by_arm.get(arm, ()):
-            model, venv = load_agent(model_path(out, arm, seed, args.snapshot),
-                                     gym.make(ENV_ID, **kwargs))
-            names.append(f"{arm}/{seed}")
-            policies.append(_Normalised(model, venv))
-        if not policies:
-            continue
-        rmse, crashed = paired_scores(policies, kwargs, seeds)
-        for name, r, c in zip(names, rmse, crashed):
-            results[name] = {"rmse": r.tolist(), "crashed": c.tolist()}
-        print(f"evaluated {arm}: {len(names)} agents x {len(seeds)} episodes", flush=True)
+            path = model_path(out, arm, seed, args.snapshot)
+            agents.append((f"{arm}/{seed}", path, lambda path=path, kw=kwargs: _Normalised(
+                *load_agent(path, gym.make(ENV_ID, **kw)))))
+        for name, path, make in agents:
+            key = {"episode_seeds": seeds, "env_kwargs": kwargs,
+                   "model": None if path is None else [str(path), path.stat().st_mtime]}
+            cache = out / "eval" / f"{name.replace('/', '_seed_')}.json"
+            if cache.exists() and json.loads(cache.read_text())["key"] == key:
+                results[name] = json.loads(cache.read_text())["episodes"]
+                continue
+            rmse, crashed = paired_scores([make()], kwargs, seeds)
+            results[name] = {"rmse": rmse[0].tolist(), "crashed": crashed[0].tolist()}
+            cache.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(cache, json.dumps({"key": key, "episodes": results[name]}),
+                              force=True)
+            print(f"evaluated {name}: {len(seeds)} episodes", flush=True)
     return results
 
 
@@ -299,9 +312,15 @@ def main(argv=None) -> int:
     train_times = {}
     for a in ARMS:
         for s in done[a]:
-            path = out / a / f"seed_{s}" / "train_time.json"
-            if path.exists():
-                train_times[f"{a}/seed_{s}"] = json.loads(path.read_text())
+            # a run stopped at its snapshot has snapshot_time.json (CPU and wall seconds
+            # of the process when it was stopped) instead of train_time.json
+            names = ("snapshot_time.json", "train_time.json") if args.snapshot == "mid" \
+                else ("train_time.json",)
+            for path in (out / a / f"seed_{s}" / n for n in names):
+                if path.exists():
+                    train_times[f"{a}/seed_{s}"] = dict(json.loads(path.read_text()),
+                                                        file=path.name)
+                    break
     meta = {"timesteps": args.timesteps, "seeds": args.seeds, "episodes": args.episodes,
             "duration": args.duration, "estimator": args.estimator, "env_id": ENV_ID,
             "residual_scale": args.residual_scale, "random_faults": args.random_faults,
@@ -408,8 +427,10 @@ def _markdown(s, meta) -> str:
             for a in arms)]
     if meta["train_times"]:
         lines += ["", "Training per run (steps, wall / CPU s): " + ", ".join(
-            f"{k} {v.get('timesteps', meta['timesteps'])}, {v['wall_seconds']:.0f}/"
-            f"{v['cpu_seconds']:.0f}" for k, v in meta["train_times"].items())]
+            f"{k} {v.get('timesteps', meta['timesteps'])}"
+            f"{' (stopped at the snapshot)' if v.get('file') == 'snapshot_time.json' else ''}, "
+            f"{v['wall_seconds']:.0f}/{v['cpu_seconds']:.0f}"
+            for k, v in meta["train_times"].items())]
     return "\n".join(lines) + "\n"
 
 

@@ -3,6 +3,7 @@
 
 import argparse
 import importlib.util
+import json
 import types
 from pathlib import Path
 
@@ -127,3 +128,13 @@ def test_check_distribution_flies_baseline_and_reference(tmp_path):
     md = (out / "distribution.md").read_text()
     assert "| geometric (zero residual) |" in md and "estimate-aware allocation" in md
     assert not (out / "with_estimate").exists()
+    # the per-agent episode file is reused while its key (seeds, env keywords) matches
+    cache = out / "eval" / "baseline.json"
+    data = json.loads(cache.read_text())
+    data["episodes"]["rmse"] = [9.0, 9.0]
+    cache.write_text(json.dumps(data))
+    argv = ["--check-distribution", "--episodes", "2", "--duration", "0.5", "--out", str(out)]
+    assert study.main(argv) == 0
+    assert "| geometric (zero residual) | 9.0000 |" in (out / "distribution.md").read_text()
+    assert study.main(argv[:4] + ["0.4"] + argv[5:]) == 0   # other duration: flown again
+    assert "| geometric (zero residual) | 9.0000 |" not in (out / "distribution.md").read_text()
