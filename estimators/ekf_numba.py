@@ -56,7 +56,7 @@ def workspace(ns):
             np.zeros((12, ns)),  # H P, then W
             np.zeros((8, 3, 3)),  # R, R_pred, Jr, G, Mr, C, I + dt G, dt I + dt^2 G / 2
             np.zeros((9, 3)),  # d vec(R_pred) / d phi
-            np.zeros((3, nr, 3)),  # B^T, (dt B)^T, (dt^2 B / 2)^T
+            np.zeros((2, nr, 3)),  # (dt B)^T, (dt^2 B / 2)^T
             np.zeros((3, 9)),  # attitude rows of H
             np.zeros((3, ns)),  # x_pred, eta coupling of the p / v rows, phi
             np.zeros((3, ns)),  # Z: the vec(R) rows' rank-3 factor
@@ -213,7 +213,7 @@ def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
     S, L = s12[0], s12[1]
     R, Rn, Jr, G, Mr, C = M3[_R], M3[_RN], M3[_JR], M3[_G], M3[_MR], M3[_C]
     Fw, Mw = M3[_FW], M3[_MW]
-    BT, BwT, BrT = Bs[0], Bs[1], Bs[2]
+    BwT, BrT = Bs[0], Bs[1]
     xp, ze, phi = vecs[_XP], vecs[_ZE], vecs[_PHI, 0:3]
     ns = x.shape[0]
     nr = ns - 18
@@ -260,7 +260,6 @@ def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
         for i in range(3):
             b = (Jinv[i, 0] * (A[1, j] * f[j]) + Jinv[i, 1] * (A[2, j] * f[j])
                  + Jinv[i, 2] * (A[3, j] * f[j]))
-            BT[j, i] = b
             BwT[j, i] = dt * b
             BrT[j, i] = 0.5 * dt * dt * b
     hjw = ((0.0, -jw[2], jw[1]), (jw[2], 0.0, -jw[0]), (-jw[1], jw[0], 0.0))

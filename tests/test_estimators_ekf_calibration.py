@@ -12,7 +12,6 @@ from quadfault.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario
 from quadfault.simulator import simulate
 from quadfault.trajectory import Circle
 
-
 _FLIGHTS = {}
 
 

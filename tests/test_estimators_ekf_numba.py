@@ -8,15 +8,20 @@ import pytest
 
 pytest.importorskip("numba")
 
-from estimators.base import Sample  # noqa: E402
-from estimators.ekf import (NOISE_REFERENCE_DT, EKFConfig, MotorEfficiencyEKF,  # noqa: E402
-                            measurement_update, predict)
-from estimators.ekf_numba import step_inplace  # noqa: E402
-from quadfault.rotation import expm_so3  # noqa: E402
-from quadfault.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario  # noqa: E402
-from quadfault.simulator import simulate  # noqa: E402
-from quadfault.trajectory import Circle  # noqa: E402
-from quadfault.vehicle import Vehicle  # noqa: E402
+from estimators.base import Sample
+from estimators.ekf import (
+    NOISE_REFERENCE_DT,
+    EKFConfig,
+    MotorEfficiencyEKF,
+    measurement_update,
+    predict,
+)
+from estimators.ekf_numba import step_inplace
+from quadfault.rotation import expm_so3
+from quadfault.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario
+from quadfault.simulator import simulate
+from quadfault.trajectory import Circle
+from quadfault.vehicle import Vehicle
 
 
 def _random_case(rng, n_rotors=4):
