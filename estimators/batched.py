@@ -37,7 +37,7 @@ from estimators.base import (STATUS_BAD_SAMPLE, STATUS_MAX_ITER, STATUS_NO_EXCIT
 from estimators.ekf import (NOISE_REFERENCE_DT, EKFConfig, MotorEfficiencyEKF,
                             measurement_update, predict)
 from estimators.change_completion import BatchedCausalMedian, BatchedChangeCompletion
-from estimators.irls import IRLSConfig, _window_information, numba_available, solve_window
+from estimators.irls import IRLSConfig, numba_available, solve_window
 from estimators.residuals import quadratic_terms, segment_models
 from quadfault.errors import ConfigError
 from quadfault.vehicle import Vehicle
@@ -266,11 +266,13 @@ class BatchedIRLS:
         """The change completion of the solved windows of ``rows`` (final robust weights
         ``weights`` (K, m), oldest segment first)."""
         order = (self._head + np.arange(self._m)) % self._m  # oldest segment first
+        scale = 1.0 / self._m if self.config.scaling == "paper" else 1.0
 
-        def info(j):
-            return _window_information(self._H[rows[j]][order], weights[j], self.config)
+        def infos(J):  # J^T W G J of the windows of rows[J] (as _window_information)
+            H = self._H[rows[J]][:, order]
+            return np.einsum("km,kmij->kij", weights[J], H) * scale
 
-        return self._completion.step(rows, x_raw, info)
+        return self._completion.step(rows, x_raw, infos)
 
     def _solve(self, rows: np.ndarray):
         """Algorithm 2 on the windows of ``rows``; (x, sd, status code, final robust

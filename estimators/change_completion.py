@@ -217,28 +217,48 @@ class BatchedChangeCompletion:
         self.history[rows, k] = x
         self._k[rows] = (k + 1) % self.span
 
-    def step(self, rows: np.ndarray, x_raw: np.ndarray, info) -> np.ndarray:
+    def step(self, rows: np.ndarray, x_raw: np.ndarray, infos) -> np.ndarray:
         """:meth:`ChangeCompletion.step` of ``rows`` (K,), distinct, whose solver returned
-        ``x_raw`` (K, n); ``info(j)`` gives the information matrix of the window of
-        ``rows[j]``. Returns the estimates to use (K, n) and records them."""
+        ``x_raw`` (K, n); ``infos(J)`` gives the information matrices (len(J), n, n) of the
+        windows of ``rows[J]``. Returns the estimates to use (K, n) and records them.
+        Vectorised over rows, so a fault that hits every row at once stays cheap."""
         ref = self.history[rows, self._k[rows]]
         trig = np.max(np.abs(x_raw - ref), axis=1) > self.threshold
-        for j in np.flatnonzero(trig & (self.left[rows] == 0)):  # a new change
-            i = rows[j]
-            v, lam = weak_direction(info(j))
-            self.v[i], self.has_v[i] = v, lam < self.gamma
-            self.anchor[i] = ref[j]
+        new = np.flatnonzero(trig & (self.left[rows] == 0))  # rows starting a change
+        if new.size:
+            info = infos(new)
+            vals, vecs = np.linalg.eigh(0.5 * (info + np.swapaxes(info, 1, 2)))
+            i = rows[new]
+            self.v[i], self.has_v[i] = vecs[:, :, 0], vals[:, 0] < self.gamma
+            self.anchor[i] = ref[new]
             self.events[i] += 1
         self.left[rows[trig]] = self.hold
         active = self.left[rows] > 0
         self.left[rows[active]] -= 1
         x = x_raw.copy()
-        for j in np.flatnonzero(active & self.has_v[rows]):
-            i = rows[j]
-            x[j] = np.clip(self.anchor[i] + l1_completion(x_raw[j] - self.anchor[i], self.v[i]),
+        J = np.flatnonzero(active & self.has_v[rows])
+        if J.size:
+            i = rows[J]
+            x[J] = np.clip(self.anchor[i] + l1_completion_rows(x_raw[J] - self.anchor[i],
+                                                               self.v[i]),
                            self.lower, self.upper)
         self.observe(rows, x)
         return x
+
+
+def l1_completion_rows(delta: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """:func:`l1_completion` of each row of ``delta`` (K, n) with its own ``v`` (K, n)."""
+    delta = np.asarray(delta, dtype=float)
+    p = delta - np.einsum("ki,ki->k", delta, v)[:, None] * v
+    nz = np.abs(v) > 1e-12
+    r = np.where(nz, -p / np.where(nz, v, 1.0), np.inf)  # excluded entries: last, weight 0
+    wts = np.where(nz, np.abs(v), 0.0)
+    order = np.argsort(r, axis=1)
+    r = np.take_along_axis(r, order, axis=1)
+    cw = np.cumsum(np.take_along_axis(wts, order, axis=1), axis=1)
+    pick = np.argmax(cw >= 0.5 * cw[:, -1:], axis=1)  # the weighted median (searchsorted)
+    alpha = np.where(nz.any(axis=1), r[np.arange(len(r)), pick], 0.0)
+    return p + alpha[:, None] * v
 
 
 class BatchedCausalMedian:

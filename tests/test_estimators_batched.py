@@ -160,3 +160,17 @@ def test_batched_causal_median_equals_single_medians(length):
         want = np.array([s.push(x[i]) for i, s in enumerate(singles)])
         for b in batches:
             np.testing.assert_array_equal(b.push(x), want)
+
+
+def test_l1_completion_rows_equals_the_single_completion():
+    from estimators.change_completion import l1_completion, l1_completion_rows
+
+    rng = np.random.default_rng(4)
+    v = rng.standard_normal((50, 4))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    v[3] = [0.0, 0.0, 0.6, 0.8]  # entries the completion must skip
+    v[4] = [0.5, -0.5, 0.5, -0.5]  # the yaw mode: ties in the weighted median
+    delta = rng.standard_normal((50, 4))
+    delta[4] = [0.0, -0.4, 0.0, 0.0]
+    want = np.array([l1_completion(d, vi) for d, vi in zip(delta, v)])
+    np.testing.assert_allclose(l1_completion_rows(delta, v), want, rtol=0, atol=1e-12)
