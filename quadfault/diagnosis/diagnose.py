@@ -13,7 +13,14 @@ import numpy as np
 from quadfault.diagnosis.library import EXPLANATIONS, build_library, predict, public_params
 from quadfault.diagnosis.residuals import noise_scale, prepare
 from quadfault.diagnosis.result import DiagnosisResult, EffectFinding
-from quadfault.diagnosis.select import IV_LAG, IV_MIN, cross_validate, folds_of, scored_rows, select
+from quadfault.diagnosis.select import (
+    IV_MIN,
+    IV_UNVERIFIED_GAIN,
+    cross_validate,
+    folds_of,
+    scored_rows,
+    select,
+)
 from quadfault.effects import EFFECT_NAMES
 from quadfault.errors import ConfigError
 from quadfault.recording import Recording
@@ -92,10 +99,15 @@ def _explain(step, selected_names, params) -> str:
         text += " Force in the world frame; no drag identified, so no air velocity."
     if name == "wind" and "drag" in selected_names:
         text += " Air velocity = force / drag coefficient (horizontal mean of kx, ky)."
-    if step.iv is not None:
-        text += (f" Instrumental-variable check (instrument: the fitted signal {IV_LAG} blocks "
-                 f"earlier, blind to feedback on this block's noise): slope {step.iv:.2f} "
-                 f"(1 = all real, accepted >= {IV_MIN}).")
+    if step.iv is not None and np.isfinite(step.iv):
+        text += (f" Instrumental-variable check (instrument: the fitted signal with each "
+                 f"block's inputs frozen at its start, blind to feedback on the block's own "
+                 f"noise): slope {step.iv:.2f} (1 = all real, 0 = feedback bias; accepted "
+                 f"only when significantly above {IV_MIN}).")
+    elif step.iv is not None:
+        text += (" The instrumental-variable check could not vouch for this signal (no "
+                 "predictable part), so it was accepted only on a held-out gain of at least "
+                 f"{IV_UNVERIFIED_GAIN:.0%}.")
     if name == "ground_effect":
         text += " Height above the ground is taken as -z of the recording (ground at z = 0)."
     return text

@@ -89,12 +89,8 @@ class Candidate:
         if n == "ground_effect":
             r = float(np.sqrt(max(x[0], 0.0)))
             return f * fx.ground_effect_factor(-rp.p[:, 2], r)[:, None]
-        if n == "delay":
-            tk = rp.t[:-1]
-            c = fx.zoh_cumulative(tk, f)
-            return fx.zoh_mean(tk, f, c, tk - x[0], rp.t[1:] - x[0])
-        if n == "motor_lag":
-            return lag_series(f, rp.dt, x[0])
+        if n in TIMING:
+            return timing_thrust(n, x, rp.t, rp.dt, f)
         raise KeyError(n)
 
     def wrench(self, x, vehicle, R, v, w, thrust, moment):
@@ -110,6 +106,23 @@ class Candidate:
             Jt = fx.scaled_inertia(vehicle.inertia, x)
             return None, fx.inertia_moment(w, moment, vehicle.inertia, Jt)
         raise KeyError(n)
+
+
+#: thrust-stage effects with memory: on merged (fast) logs they act on the raw commands
+TIMING = ("delay", "motor_lag")
+
+
+def timing_thrust(name: str, x, t: np.ndarray, dt: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Held thrust over each interval of sample times ``t`` after a pure ``delay`` (the mean
+    of the command zero-order hold shifted by ``x[0]`` [s]) or a first-order ``motor_lag``
+    (time constant ``x[0]`` [s])."""
+    if name == "delay":
+        tk = t[:-1]
+        c = fx.zoh_cumulative(tk, f)
+        return fx.zoh_mean(tk, f, c, tk - x[0], t[1:] - x[0])
+    if name == "motor_lag":
+        return lag_series(f, dt, x[0])
+    raise KeyError(name)
 
 
 def build_library(rp: Replay) -> list[Candidate]:
@@ -144,9 +157,23 @@ def build_library(rp: Replay) -> list[Candidate]:
 
 
 def thrust_series(rp: Replay, terms) -> np.ndarray:
-    """Produced rotor thrusts (M, n) [N] after the thrust-stage terms ``[(cand, x), ...]``."""
+    """Produced rotor thrusts (M, n) [N] after the thrust-stage terms ``[(cand, x), ...]``.
+
+    On merged (fast) logs (``rp.raw``) the timing effects act on the raw commands, which are
+    then merged; the pointwise stages (efficiency, scale, ground effect) follow on the merged
+    thrust -- exact for the constant factors, and for the ground effect up to its variation
+    within one internal step."""
+    stages = sorted((t for t in terms if t[0].stage == "thrust"), key=lambda t: t[0].order)
+    timing = [t for t in stages if t[0].name in TIMING]
     f = rp.f
-    for cand, x in sorted((t for t in terms if t[0].stage == "thrust"), key=lambda t: t[0].order):
+    if timing and rp.raw is not None:
+        raw = rp.raw
+        fr = raw["f"]
+        for cand, x in timing:
+            fr = timing_thrust(cand.name, np.asarray(x, dtype=float), raw["t"], raw["dt"], fr)
+        f = np.asarray(raw["merge"] @ fr)
+        stages = [t for t in stages if t[0].name not in TIMING]
+    for cand, x in stages:
         f = cand.thrust(np.asarray(x, dtype=float), rp, f)
     return f
 

@@ -67,6 +67,15 @@ class Replay:
             for rows used to fit missing constants) are fitted on but never scored.
         excluded: the excluded segments ``((t0, t1), ...)`` [s].
         scoring_note: why the segment was not excluded (it left too few blocks), or "".
+        starts: the unmerged inputs at the first recording row of every interval:
+            ``{"f", "p", "v", "R", "w"}`` (``p, v, R`` None for an IMU-only log) -- what the
+            controller knew when it chose the interval's first command (instruments of the
+            feedback-bias check, ``select.frozen_replay``).
+        raw: for merged (fast) logs, the unmerged commands ``{"t", "dt", "f", "merge",
+            "seg"}`` (recording times (N,), interval lengths and saturated commands (M_raw,
+            ...), the duration-weighted merge matrix and the merged interval of each raw one):
+            timing effects (delay, lag) act on the raw commands before merging, so merging
+            does not bias their time constants; None when nothing was merged.
     """
 
     vehicle: Vehicle
@@ -87,6 +96,8 @@ class Replay:
     scored: np.ndarray | None = None
     excluded: tuple = ()
     scoring_note: str = ""
+    starts: dict | None = None
+    raw: dict | None = None
 
     @property
     def has_pose(self) -> bool:
@@ -214,6 +225,9 @@ def prepare(recording: Recording, vehicle: Vehicle | None = None, *,
     ok_idx = np.flatnonzero(ok)
     first_k = ok_idx[np.unique(block[ok], return_index=True)[1]]
     first, last = knots[first_k], knots[first_k + q]  # sample indices at the block ends
+    k0 = knots[:-1]
+    raw = {"t": t, "dt": dt, "f": f, "merge": merge, "seg": seg} if r > 1 else None
+    starts = {"f": f[k0], "w": recording.omega[k0], "p": None, "v": None, "R": None}
     f = mean(f)
     w_mid = mean(0.5 * (recording.omega[:-1] + recording.omega[1:]))
     rate = (recording.omega[last] - recording.omega[first]) / dur[:, None]
@@ -225,6 +239,7 @@ def prepare(recording: Recording, vehicle: Vehicle | None = None, *,
         p_mid = mean(0.5 * (recording.position[:-1] + recording.position[1:]))
         v_mid = mean(0.5 * (vel[:-1] + vel[1:]))
         channels = POSE_CHANNELS
+        starts.update(p=recording.position[k0], v=vel[k0], R=Rm[k0])
     else:
         sf = mean(recording.accel[:-1])
         acc = None
@@ -241,7 +256,8 @@ def prepare(recording: Recording, vehicle: Vehicle | None = None, *,
         scored[:] = True
         excluded = ()
     rp = Replay(veh, tk, dtk, f, p_mid, v_mid, R_mid, w_mid, block, tc, dur, run,
-                np.zeros((n_blocks, 6)), channels, knots, scored, excluded, note)
+                np.zeros((n_blocks, 6)), channels, knots, scored, excluded, note, starts,
+                raw)
     if acc is None:
         acc = rp.block_mean(sf)
     object.__setattr__(rp, "measured", np.hstack((acc, rate)))
