@@ -109,14 +109,14 @@ def vector_reset(sizes) -> None:
                       key=lambda x: x[1])
         single = QuadFaultEnv("none", "random")
 
-        def per_row():
+        def per_row(n=n, single=single):
             for i in range(n):
-                single.reset(seed=i)  # noqa: B023
+                single.reset(seed=i)
 
-        def floor():
+        def floor(n=n, single=single):
             for i in range(n):
-                gym.Env.reset(single, seed=i)  # noqa: B023
-                single._make_scenario("random")  # noqa: B023
+                gym.Env.reset(single, seed=i)
+                single._make_scenario("random")
 
         row = _clock(per_row)
         rest = _clock(floor)

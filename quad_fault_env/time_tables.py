@@ -106,4 +106,4 @@ class RowTimeTables:
         return self.eta[self._rows[:, None], j]
 
 
-__all__ = ["RowTimeTables", "WINDOW"]
+__all__ = ["WINDOW", "RowTimeTables"]

@@ -10,9 +10,9 @@ from gymnasium.utils.env_checker import check_env
 import quad_fault_env  # noqa: F401  (registers the ids)
 from estimators.ekf import EKFConfig
 from estimators.irls import IRLSConfig
+from quad_fault_env.envs.config import InitialStateSpread
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.vector import QuadFaultVectorEnv
-from quad_fault_env.envs.config import InitialStateSpread
 from quadfault.controller import ControllerConfig
 from quadfault.errors import ConfigError
 from quadfault.simulator import SensorNoise

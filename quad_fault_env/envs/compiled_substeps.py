@@ -24,11 +24,22 @@ from __future__ import annotations
 import numpy as np
 
 from estimators.base import Sample
-from quadfault.dynamics import RigidBodyState
 from quadfault import _sim_numba
+from quadfault._numba_kernels import (
+    AVAILABLE,
+    _axpy,
+    _mat,
+    _measure,
+    _specific_force,
+    _store_mat,
+    _store_vec,
+    _tacc,
+    _vec,
+    njit,
+    plant_step,
+)
+from quadfault.dynamics import RigidBodyState
 from quadfault.trajectory import FlatOutput
-from quadfault._numba_kernels import (AVAILABLE, _axpy, _mat, _measure, _specific_force,
-                                      _store_mat, _store_vec, _tacc, _vec, njit, plant_step)
 
 
 def step_noise_layout(sensor_noise, n_rotors: int, thrust_noise: float):

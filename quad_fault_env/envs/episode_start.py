@@ -92,4 +92,4 @@ def start_states(items, keys, vehicle: Vehicle, controller: ControllerConfig, sp
     return state, traj(0.0)
 
 
-__all__ = ["RowTrajectories", "SPREAD_DRAWS", "start_states"]
+__all__ = ["SPREAD_DRAWS", "RowTrajectories", "start_states"]

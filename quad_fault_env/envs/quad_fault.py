@@ -21,12 +21,24 @@ import gymnasium as gym
 import numpy as np
 
 from estimators.base import Estimate, Sample
+from quad_fault_env.envs.config import (
+    ESTIMATOR_RATES,
+    OBSERVATION_KINDS,
+    ActionConfig,
+    InitialStateSpread,
+    RewardConfig,
+    TerminationLimits,
+    validate_action,
+)
 from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
-from quad_fault_env.envs.config import (ESTIMATOR_RATES, OBSERVATION_KINDS, ActionConfig,
-                                        InitialStateSpread, RewardConfig, TerminationLimits,
-                                        validate_action)
-from quad_fault_env.estimation import (NOMINAL_PRIOR_SD, NominalBelief, TruthOracle,
-                                       diagnostics_dict, estimate_sd, make_estimator)
+from quad_fault_env.estimation import (
+    NOMINAL_PRIOR_SD,
+    NominalBelief,
+    TruthOracle,
+    diagnostics_dict,
+    estimate_sd,
+    make_estimator,
+)
 from quad_fault_env.observation import SD_MAX, ObservationLayout
 from quadfault.controller import ControllerConfig, GeometricController
 from quadfault.dynamics import RigidBodyState
