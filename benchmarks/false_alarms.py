@@ -34,7 +34,7 @@ def draw(rng: np.random.Generator) -> dict:
             "hover": Hover(),
             "lissajous": Lissajous(amplitude=(float(rng.uniform(0.5, 2.0)),
                                               float(rng.uniform(0.5, 2.0)), 0.2),
-                                   frequency=float(rng.uniform(0.1, 0.3)))}[kind]
+                                   frequency=float(rng.uniform(0.1, 0.2)))}[kind]
     noise = (SensorNoise(0.002, 0.005, 0.001, 0.001) if rng.random() < 0.5 else SensorNoise())
     return {"kind": kind, "traj": traj, "sigma_f": float(rng.uniform(0.02, 0.1)),
             "sensor": noise, "seed": int(rng.integers(2**31))}
@@ -52,7 +52,7 @@ def main(argv=None) -> int:
 
     ref = reference_package(args.reference) if args.reference else None
     rng = np.random.default_rng(args.seed)
-    alarms = {"new": 0, "ref": 0}
+    alarms = {"new": 0, "ref": 0, "flown": 0}
     print(f"{args.n} effect-free flights, {args.duration:g} s at 1 kHz; load "
           f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
     for i in range(args.n):
@@ -60,19 +60,25 @@ def main(argv=None) -> int:
         sc = named_scenario("nominal", args.duration, 1e-3).replace(trajectory=c["traj"])
         rec = simulate(sc, config=SimConfig(dt=1e-3, sensor_noise=c["sensor"]), seed=c["seed"],
                        thrust_noise=c["sigma_f"]).without_truth()
+        f_max = rec.vehicle.rotor_max_thrust
+        if not np.all(np.abs(rec.thrust_cmd) <= 1.5 * f_max):  # lost vehicle: not a test
+            print(f"{i:3d} {c['kind']:9s} the controller lost the vehicle: skipped", flush=True)
+            continue
         t0 = time.perf_counter()
         res = new.Diagnosis().fit(rec)
         line = (f"{i:3d} {c['kind']:9s} sigma_f {c['sigma_f']:.3f} sensor noise "
                 f"{'on ' if c['sensor'].any else 'off'} | new: {res.verdict:10s} "
                 f"{describe(res)} ({time.perf_counter() - t0:.1f} s)")
         alarms["new"] += res.verdict != "consistent"
+        alarms["flown"] += 1
         if ref is not None:
             res0 = ref.Diagnosis().fit(rec)
             alarms["ref"] += res0.verdict != "consistent"
             line += f" | ref: {res0.verdict:10s} {describe(res0)}"
         print(line, flush=True)
-    print(f"false alarms: new {alarms['new']}/{args.n}"
-          + (f", reference {args.reference} {alarms['ref']}/{args.n}" if ref is not None else ""))
+    n = alarms["flown"]
+    print(f"false alarms: new {alarms['new']}/{n}"
+          + (f", reference {args.reference} {alarms['ref']}/{n}" if ref is not None else ""))
     return 0
 
 
