@@ -135,7 +135,8 @@ def baseline_estimator(rev: str):
                          capture_output=True, text=True, check=True).stdout
     mod = types.ModuleType("_irls_baseline")
     sys.modules[mod.__name__] = mod
-    exec(compile(src, f"{rev}:estimators/irls.py", "exec"), mod.__dict__)  # noqa: S102 (our own git history)
+    code = compile(src, f"{rev}:estimators/irls.py", "exec")
+    exec(code, mod.__dict__)  # noqa: S102 -- this repository's own history
     return mod
 
 

@@ -45,7 +45,8 @@ from quadfault.vehicle import Vehicle
 try:  # the compiled batch loops call the existing per-vehicle kernels (``fast`` extra)
     from numba import njit, prange
 
-    from estimators._irls_numba import batch_chunks, median_push_rows, solve_ring_batch
+    from estimators._irls_numba import batch_chunks, solve_ring_batch
+    from estimators._irls_online_numba import median_push_rows
     from estimators._residuals_numba import segment_terms_batch
     from estimators.ekf_numba import step_ws
     from estimators.ekf_numba import workspace as ekf_workspace

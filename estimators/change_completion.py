@@ -267,7 +267,7 @@ class BatchedCausalMedian:
     The rows share the buffer slot they write; a reset row refills its whole buffer with
     its next value, so it holds the same values as a fresh :class:`CausalMedian` (the
     median does not depend on their order). ``push_kernel`` is the compiled push
-    (``estimators._irls_numba.median_push_rows``, which keeps each buffer sorted
+    (``estimators._irls_online_numba.median_push_rows``, which keeps each buffer sorted
     incrementally); without it each push sorts the buffers with numpy. Same values.
     """
 

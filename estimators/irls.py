@@ -44,10 +44,10 @@ SCALINGS = ("reference", "paper")
 BACKENDS = ("auto", "numpy", "numba")
 _START_MARGIN = 1e-6  # the interior-point start is kept this far inside the bounds
 _F64 = np.dtype(np.float64)
-# status codes of the compiled online update that solved nothing (estimators._irls_numba)
+# status codes of the compiled online update that solved nothing (estimators._irls_online_numba)
 _HELD_CODES = frozenset(STATUSES.index(s) for s in (STATUS_WARMUP, STATUS_BAD_SAMPLE,
                                                     STATUS_NO_EXCITATION))
-_WHY_TIME = 2  # estimators._irls_numba.WHY_TIME (that module needs numba)
+_WHY_TIME = 2  # estimators._irls_online_numba.WHY_TIME (that module needs numba)
 
 
 @dataclass(frozen=True)
@@ -372,7 +372,8 @@ class SlidingWindowIRLS:
         self._G = self.config.segment_weights
         self._kernel_params = None
         if self.backend == "numba":
-            from estimators._irls_numba import kernel_parameters, online_constants, online_update
+            from estimators._irls_numba import kernel_parameters
+            from estimators._irls_online_numba import online_constants, online_update
 
             cfg = self.config
             self._kernel_params = kernel_parameters(cfg, cfg.window - 1)
@@ -396,8 +397,8 @@ class SlidingWindowIRLS:
         self._last: Sample | None = None
         m = self.config.window - 1  # ring of the window's segment terms, oldest first
         cfg = self.config
-        if self.backend == "numba":  # the compiled online state (estimators._irls_numba)
-            from estimators._irls_numba import online_state
+        if self.backend == "numba":  # the compiled online state (estimators._irls_online_numba)
+            from estimators._irls_online_numba import online_state
 
             self._fstate, self._istate, self._online = online_state(m, n, cfg.max_irls)
         else:
@@ -409,7 +410,7 @@ class SlidingWindowIRLS:
         self._completion.reset(eta)
         median = None
         if self.backend == "numba" and cfg.output_median > 1:
-            from estimators._irls_numba import median_columns as median
+            from estimators._irls_online_numba import median_columns as median
         self._median = CausalMedian(cfg.output_median, median)
 
     def _segment_terms(self, a: Sample, z: Sample):
@@ -494,7 +495,7 @@ class SlidingWindowIRLS:
         return Estimate(float(t), self._median.push(eta), sd.copy(), diag.status, diag)
 
     def _update_compiled(self, sample: Sample) -> Estimate:
-        """:meth:`update` in one compiled call (``_irls_numba.online_update``): the same
+        """:meth:`update` in one compiled call (``_irls_online_numba.online_update``): the same
         rules, ring and window solver as the numpy path; Python only checks shapes and
         applies the options beyond the paper."""
         try:

@@ -145,7 +145,7 @@ def test_batched_causal_median_equals_single_medians(length):
     N, n = 7, 4
     kernels = [None]
     if numba_available():
-        from estimators._irls_numba import median_push_rows
+        from estimators._irls_online_numba import median_push_rows
         kernels.append(median_push_rows)
     batches = [BatchedCausalMedian(N, n, length, kernel) for kernel in kernels]
     singles = [CausalMedian(length) for _ in range(N)]
