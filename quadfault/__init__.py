@@ -19,6 +19,9 @@ Heavy modules are imported lazily so ``quadfault --help`` stays instant.
 
 __version__ = "0.1.0"
 
+from quadfault._numba_cache import configure as _configure_numba_cache  # noqa: E402
 from quadfault.errors import QuadfaultError, RecordingError  # noqa: E402  (light, no numpy)
+
+_configure_numba_cache()  # before any compiled module: one numba cache per source version
 
 __all__ = ["__version__", "QuadfaultError", "RecordingError"]
