@@ -245,7 +245,7 @@ def test_per_step_cores_take_no_arrays():
     veh = Vehicle()
     ctrl = GeometricController(veh, named_scenario("lissajous").trajectory)
     s = _batch(rng, 1)
-    f_cmd, eta, sigma, z, z_off = _inputs(rng, 1, 1, veh)
+    f_cmd, eta, _, z, _ = _inputs(rng, 1, 1, veh)
 
     @numba.njit(cache=False)  # types the kernels afresh (a cached caller does not)
     def one_step(p, v, R, w, f_cmd, eta, z, ref, gains, body):
