@@ -401,8 +401,8 @@ def _markdown(s, meta) -> str:
                 f"{a['rmse_crash5']['mean']:.4f} | {gains[1]} |")
 
     lines = [(f"# PPO residual study ({meta['env_id']}, random_faults "
-             f"{json.dumps(meta['random_faults'])}, {meta['timesteps']} steps/run"
-             f"{' (mid-training snapshots)' if meta.get('snapshot') == 'mid' else ''}, seeds "
+             f"{json.dumps(meta['random_faults'])}, {meta['timesteps']}-step runs"
+             f"{' (their mid-training snapshots)' if meta.get('snapshot') == 'mid' else ''}, seeds "
              f"{meta['evaluated_seeds']}, {meta['episodes']} paired episodes of "
              f"{meta['duration']} s, residual scale {meta['residual_scale']} N)"), "",
              *([f"Missing runs (not trained yet): {', '.join(meta['missing_runs'])}", ""]
