@@ -103,7 +103,7 @@ def _explain(step, selected_names, params) -> str:
         text += (f" Instrumental-variable check (instrument: the fitted signal with each "
                  f"block's inputs frozen at its start, blind to feedback on the block's own "
                  f"noise): slope {step.iv:.2f} (1 = all real, 0 = feedback bias; accepted "
-                 f"only when significantly above {IV_MIN}).")
+                 f"when >= {IV_MIN} and significantly above 0).")
     elif step.iv is not None:
         text += (" The instrumental-variable check could not vouch for this signal (no "
                  "predictable part), so it was accepted only on a held-out gain of at least "

@@ -81,7 +81,7 @@ def folds_of(n_blocks: int, k: int) -> list[np.ndarray]:
 #: effect-free flight with thrust noise 0.05, least squares "finds" a 0.07 s motor lag.
 IV_CHECKED = frozenset({"motor_efficiency", "thrust_scale", "ground_effect", "delay", "motor_lag",
                         "drag", "wind", "com_offset", "inertia"})
-IV_Z = 2.0  # standard errors of the IV slope in the acceptance test
+IV_Z = 2.0  # the IV slope must be this many standard errors above 0
 #: least held-out gain of an effect whose signal the instrument cannot predict at all
 IV_UNVERIFIED_GAIN = 0.5
 IV_MIN = 0.5  # least IV slope (1: the fitted signal is all real, 0: all feedback bias)
@@ -266,8 +266,9 @@ def select(rp: Replay, library: list[Candidate], scale: np.ndarray, *, folds: in
                 iv, iv_se = iv_slope(rp, x_terms(current, x_cur), f.terms, scale,
                                             (rp.measured - cur_pred) / scale,
                                             np.flatnonzero(touched) if touched.any() else [3, 4, 5])
-                # the fitted signal must be significantly more than IV_MIN real
-                if iv - IV_Z * iv_se < IV_MIN:
+                # the fitted signal must be significantly real (slope above 0) and mostly
+                # real (slope at least IV_MIN): a weak instrument widens the first test only
+                if not (iv >= IV_MIN and iv - IV_Z * iv_se > 0.0):
                     continue
                 if not np.isfinite(iv) and gain < IV_UNVERIFIED_GAIN:
                     continue  # the instrument cannot vouch for it: it must explain much more
