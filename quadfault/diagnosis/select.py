@@ -95,14 +95,18 @@ def iv_slope(rp: Replay, before, after, scale, residual, channels) -> tuple[floa
     The instrument is the same signal on the :func:`frozen_replay`, which knows only what
     happened before each block began, so it is blind to the block's own process noise and to
     the controller's reaction to it: ``sum(z r) / sum(z s)`` is ~1 when the fitted signal is
-    real and ~0 when least squares fitted that reaction (closed-loop feedback bias). NaN when
-    the instrument does not predict the signal at all (``sum(z s) <= 0``)."""
+    real and ~0 when least squares fitted that reaction (closed-loop feedback bias). Only the
+    channels of ``channels`` in which the instrument predicts the signal (``sum(z s) > 0``)
+    count; NaN when there are none."""
     ch = np.asarray(channels, dtype=int)
     if ch.size == 0:
         return float("nan"), float("nan")
     sig = (predict(rp, list(after)) - predict(rp, list(before))) / scale
     fr = frozen_replay(rp)
     z = (predict(fr, list(after)) - predict(fr, list(before))) / scale
+    ch = ch[np.sum(z[:, ch] * sig[:, ch], axis=0) > 0]  # channels the instrument predicts
+    if ch.size == 0:
+        return float("nan"), float("nan")
     num = float(np.sum(z[:, ch] * residual[:, ch]))
     den = float(np.sum(z[:, ch] * sig[:, ch]))
     beta = num / den if den > 0 else float("nan")
@@ -266,12 +270,13 @@ def select(rp: Replay, library: list[Candidate], scale: np.ndarray, *, folds: in
                 iv, iv_se = iv_slope(rp, x_terms(current, x_cur), f.terms, scale,
                                             (rp.measured - cur_pred) / scale,
                                             np.flatnonzero(touched) if touched.any() else [3, 4, 5])
+                if not np.isfinite(iv):
+                    if gain < IV_UNVERIFIED_GAIN:
+                        continue  # the instrument cannot vouch for it: it must explain more
                 # the fitted signal must be significantly real (slope above 0) and mostly
                 # real (slope at least IV_MIN): a weak instrument widens the first test only
-                if not (iv >= IV_MIN and iv - IV_Z * iv_se > 0.0):
+                elif not (iv >= IV_MIN and iv - IV_Z * iv_se > 0.0):
                     continue
-                if not np.isfinite(iv) and gain < IV_UNVERIFIED_GAIN:
-                    continue  # the instrument cannot vouch for it: it must explain much more
             if best is None or cv.sse < best[3].sse:
                 best = (b, c, f, cv, gain, iv)
         if best is None:
