@@ -15,7 +15,7 @@ import math
 import numpy as np
 from numba import njit
 
-from estimators._irls_numba import _N_MAT, _N_VEC, _NO_EXC, _solve_window_into
+from estimators._irls_numba import _N_MAT, _N_VEC, _NO_EXC, _median, _solve_window_into
 from estimators._residuals_numba import segment_terms_into
 from estimators.base import STATUSES
 
@@ -175,15 +175,7 @@ def median_columns(buf, out):
     L, n = buf.shape
     tmp = np.empty(L)
     for j in range(n):
-        for s in range(L):  # insertion sort
-            v = buf[s, j]
-            r = s - 1
-            while r >= 0 and tmp[r] > v:
-                tmp[r + 1] = tmp[r]
-                r -= 1
-            tmp[r + 1] = v
-        k = L // 2
-        out[j] = tmp[k] if L % 2 else (tmp[k - 1] + tmp[k]) / 2.0
+        out[j] = _median(buf[:, j], tmp)
 
 
 @njit(cache=True)  # serial: a few ops per value; threads cost more than they save here

@@ -50,24 +50,9 @@ def step_noise_layout(sensor_noise, n_rotors: int, thrust_noise: float):
     draws (-1: not drawn); the first ``meas_width`` columns are the measurement's, which
     substep 0 does not draw (it reuses the end-of-step measurement of the previous step).
     """
-    layout = [-1] * 6
-    col = 0
-    if sensor_noise.any:  # SensorNoise.measure: p, v, [attitude], w
-        layout[0], layout[1] = 0, 3
-        col = 6
-        if sensor_noise.attitude:
-            layout[2] = col
-            col += 3
-        layout[3] = col
-        col += 3
-    meas_width = col
-    if thrust_noise > 0:  # MotorModel.apply
-        layout[4] = col
-        col += n_rotors
-    if sensor_noise.accel:  # the env's accelerometer noise, after the plant step
-        layout[5] = col
-        col += 3
-    return np.array(layout, dtype=np.int64), col, meas_width
+    layout, width = _sim_numba.noise_layout(sensor_noise, n_rotors, thrust_noise, True)
+    meas_width = int(layout[3]) + 3 if sensor_noise.any else 0  # p, v, [attitude], w
+    return layout, width, meas_width
 
 
 @njit
