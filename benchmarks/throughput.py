@@ -380,7 +380,7 @@ def profile_env(N: int, steps: int = 5) -> list[tuple[str, float]]:
                                                       "_step_batch_serial"),
              "per-env noise draws (one generator call per sub-env)": ("_draw",),
              "controller (trajectory in numpy, compiled controller_batch)": ("_motor_commands",),
-             "reference / efficiency schedule": ("_references", "_efficiency"),
+             "reference / efficiency tables": ("_ensure_tables", "references"),
              "observation + info": ("_observations", "_infos"),
              "termination + reward": ("batched_termination", "batched_reward")}
     out = []
