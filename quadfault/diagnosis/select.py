@@ -107,21 +107,19 @@ def iv_slope(rp: Replay, before, after, scale, residual, channels) -> tuple[floa
     ch = ch[np.sum(z[:, ch] * sig[:, ch], axis=0) > 0]  # channels the instrument predicts
     if ch.size == 0:
         return float("nan"), float("nan")
-    num = float(np.sum(z[:, ch] * residual[:, ch]))
-    den = float(np.sum(z[:, ch] * sig[:, ch]))
-    beta = num / den if den > 0 else float("nan")
+    den = float(np.sum(z[:, ch] * sig[:, ch]))  # > 0: a sum of positive channel terms
+    beta = float(np.sum(z[:, ch] * residual[:, ch])) / den
     u = residual[:, ch] - beta * sig[:, ch]
-    se = float(np.sqrt(np.sum((z[:, ch] * u) ** 2))) / den if den > 0 else float("nan")
-    return beta, se
+    return beta, float(np.sqrt(np.sum((z[:, ch] * u) ** 2))) / den
 
 
 def frozen_replay(rp: Replay) -> Replay:
     """``rp`` with every block's inputs replaced by what was known when the block began.
 
     The state (``p, v, R, w``) of a block's first row holds over the block; the command is
-    the first row's command extrapolated linearly with the trend between the previous
-    block's first command and this one (no trend at the start of a run). Intervals outside
-    blocks keep their inputs. Cached on ``rp``.
+    the first row's command extrapolated linearly with its rate of change over the recording
+    row just before the block (no trend at the start of a run). Intervals outside blocks keep
+    their inputs. Cached on ``rp``.
 
     A model signal computed on it depends only on what happened before each block started
     (the first command was chosen from the state at the block's start), so it is blind to the
