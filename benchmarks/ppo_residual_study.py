@@ -76,6 +76,13 @@ PPO_KWARGS = {"n_steps": 256, "batch_size": 1024, "n_epochs": 10, "learning_rate
               "policy_kwargs": {"log_std_init": -2.3, "net_arch": [128, 128]}}
 
 
+def ppo_kwargs(args) -> dict:
+    """:data:`PPO_KWARGS` updated with ``--ppo-kwargs`` (``policy_kwargs`` merged key by key)."""
+    extra = dict(getattr(args, "ppo_kwargs", None) or {})
+    policy = dict(PPO_KWARGS["policy_kwargs"], **extra.pop("policy_kwargs", {}))
+    return dict(PPO_KWARGS, **extra, policy_kwargs=policy)
+
+
 def t_interval(x, confidence: float = 0.95):
     """Mean and the half-width of its Student-t confidence interval (nan for n < 2)."""
     from scipy import stats
@@ -91,7 +98,10 @@ def t_interval(x, confidence: float = 0.95):
 def env_kwargs(args, estimator: str) -> dict:
     """Keywords of the study's environment (on top of the registration's) for ``estimator``."""
     kwargs = {"action_mode": "residual", "residual_scale": args.residual_scale,
-              "estimator_rate": "control", "duration": args.duration, "estimator": estimator}
+              "estimator_rate": "control", "duration": args.duration, "estimator": estimator,
+              "random_trajectory": getattr(args, "trajectory", "hover")}
+    if getattr(args, "compensate", False):
+        kwargs["compensate"] = True
     if args.random_faults is not None:
         kwargs["random_faults"] = args.random_faults
     return kwargs
@@ -185,7 +195,7 @@ def train_arm(args, arm: str, out: Path) -> None:
         cfg = TrainConfig(algo="ppo", env_id=ENV_ID, env_kwargs=env_kwargs(args, estimator),
                           timesteps=args.timesteps, seeds=(seed,), n_envs=args.n_envs,
                           vector_env=True, eval_freq=max(args.timesteps // 2, 1000),
-                          eval_episodes=4, algo_kwargs=PPO_KWARGS)
+                          eval_episodes=4, algo_kwargs=ppo_kwargs(args))
         wall, cpu = time.time(), time.process_time()
         train_one(cfg, seed, run_dir, force=True, quiet=True)
         times = {"wall_seconds": time.time() - wall, "cpu_seconds": time.process_time() - cpu,
@@ -248,16 +258,18 @@ def evaluate(args, out: Path, seeds_by_arm: dict) -> dict:
     return results
 
 
-def _random_faults(text: str):
-    if text == "default":
-        return None
+def _json_object(text: str) -> dict:
     try:
         value = json.loads(text)
     except json.JSONDecodeError as exc:
         raise argparse.ArgumentTypeError(f"not JSON: {exc}") from None
     if not isinstance(value, dict):
-        raise argparse.ArgumentTypeError("must be a JSON object of random_faults keywords")
+        raise argparse.ArgumentTypeError("must be a JSON object")
     return value
+
+
+def _random_faults(text: str):
+    return None if text == "default" else _json_object(text)
 
 
 def main(argv=None) -> int:
@@ -266,6 +278,12 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--episodes", type=int, default=40, help="paired evaluation episodes")
     p.add_argument("--duration", type=float, default=10.0, help="episode length [s]")
+    p.add_argument("--trajectory", default="hover",
+                   choices=("hover", "circle", "lissajous", "random"),
+                   help="reference of the random scenarios (both arms; default hover)")
+    p.add_argument("--compensate", action="store_true",
+                   help="both arms: the residual is added to the geometric commands divided by "
+                   "eta_hat (the environment's compensate=True; a no-op without the estimate)")
     p.add_argument("--estimator", default="irls", choices=("irls", "ekf", "truth"))
     p.add_argument("--residual-scale", type=float, default=RESIDUAL_SCALE,
                    help="thrust per unit residual action [N] (both arms; default m g / 4)")
@@ -274,6 +292,9 @@ def main(argv=None) -> int:
                    help="fault distribution: JSON random_faults keywords of the environment, "
                    "or 'default' for the environment's own (0-2 faults, severity 0.3-0.9); "
                    f"default {json.dumps(RANDOM_FAULTS)}")
+    p.add_argument("--ppo-kwargs", type=_json_object, default=None,
+                   help="JSON overriding PPO_KWARGS in both arms (policy_kwargs merged), "
+                   'e.g. \'{"use_sde": true}\'')
     p.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS),
                    help="arms to train (evaluation always needs both)")
     p.add_argument("--train-only", action="store_true", help="train, do not evaluate")
@@ -324,7 +345,8 @@ def main(argv=None) -> int:
     meta = {"timesteps": args.timesteps, "seeds": args.seeds, "episodes": args.episodes,
             "duration": args.duration, "estimator": args.estimator, "env_id": ENV_ID,
             "residual_scale": args.residual_scale, "random_faults": args.random_faults,
-            "n_envs": args.n_envs, "ppo_kwargs": PPO_KWARGS, "train_times": train_times,
+            "trajectory": args.trajectory, "compensate": args.compensate, "n_envs": args.n_envs, "ppo_kwargs": ppo_kwargs(args),
+            "train_times": train_times,
             "snapshot": args.snapshot,
             "evaluated_seeds": done, "missing_runs": missing,
             "evaluation_seconds": time.time() - t0}

@@ -138,3 +138,46 @@ def test_check_distribution_flies_baseline_and_reference(tmp_path):
     assert "| geometric (zero residual) | 9.0000 |" in (out / "distribution.md").read_text()
     assert study.main(argv[:4] + ["0.4"] + argv[5:]) == 0   # other duration: flown again
     assert "| geometric (zero residual) | 9.0000 |" not in (out / "distribution.md").read_text()
+
+
+def test_ppo_kwargs_override_merges_policy_kwargs():
+    assert study.ppo_kwargs(_args()) == study.PPO_KWARGS
+    merged = study.ppo_kwargs(_args(ppo_kwargs={"n_epochs": 5,
+                                                "policy_kwargs": {"log_std_init": -1.0}}))
+    assert merged["n_epochs"] == 5 and merged["learning_rate"] == study.PPO_KWARGS["learning_rate"]
+    assert merged["policy_kwargs"] == {"log_std_init": -1.0, "net_arch": [128, 128]}
+    assert study.PPO_KWARGS["policy_kwargs"]["log_std_init"] == -2.3  # not mutated
+    with pytest.raises(argparse.ArgumentTypeError):
+        study._json_object("[1]")
+
+
+def test_trajectory_and_compensate_reach_both_arms_alike():
+    args = _args(trajectory="circle", compensate=True)
+    with_kw, without_kw = study.env_kwargs(args, "irls"), study.env_kwargs(args, "none")
+    assert with_kw["random_trajectory"] == without_kw["random_trajectory"] == "circle"
+    assert with_kw["compensate"] is without_kw["compensate"] is True
+    assert "compensate" not in study.env_kwargs(_args(), "irls")
+    assert study.env_kwargs(_args(), "irls")["random_trajectory"] == "hover"
+
+
+def test_compensate_is_a_no_op_without_the_estimate():
+    """The study's ``--compensate`` changes only the arm with the estimate: with
+    ``estimator="none"`` (eta_hat = 1) the environment flies exactly as without it, so the
+    arm without the estimate can share its runs."""
+    import gymnasium as gym
+
+    from quad_fault_env.vector import QuadFaultVectorEnv
+
+    spec = gym.spec(study.ENV_ID)
+    flights = []
+    for compensate in (False, True):
+        kwargs = study.env_kwargs(_args(compensate=compensate), "none")
+        venv = QuadFaultVectorEnv(2, **dict(spec.kwargs, **kwargs))
+        obs, _ = venv.reset(seed=[3, 4])
+        trace = [obs]
+        for k in range(30):
+            obs, *_ = venv.step(np.full((2, 4), 0.1 * np.sin(k)))
+            trace.append(obs)
+        venv.close()
+        flights.append(np.array(trace))
+    np.testing.assert_array_equal(flights[0], flights[1])
