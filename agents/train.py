@@ -37,7 +37,7 @@ CONFIG_FILE = "train_config.json"
 def require_sb3():
     """Import stable-baselines3 (and torch) or raise a one-line error naming the extra."""
     try:
-        import stable_baselines3  # noqa: F401
+        import stable_baselines3
         import torch  # noqa: F401
     except ImportError as exc:
         raise QuadfaultError(
@@ -75,6 +75,11 @@ class TrainConfig:
         device: torch device (``"cpu"`` by default).
         torch_threads: CPU threads torch may use (1 is fastest for these small networks and
             leaves the other cores to the environments).
+        numba_threads: threads of numba's parallel kernels (the vector env's batched
+            estimator and physics) in the training process, when numba is installed. 1 by
+            default: training envs have tens of rows, where a parallel region costs more
+            than it saves and idle OpenMP workers spin, burning CPU that parallel runs need
+            (docs/agents.md, "numba threads"). None keeps numba's own setting.
     """
 
     algo: str = "ppo"
@@ -93,6 +98,7 @@ class TrainConfig:
     algo_kwargs: dict = field(default_factory=dict)
     device: str = "cpu"
     torch_threads: int = 1
+    numba_threads: int | None = 1
 
     def __post_init__(self):
         if self.algo not in ALGORITHMS:
@@ -106,13 +112,18 @@ class TrainConfig:
         if not isinstance(self.checkpoint_freq, int) or self.checkpoint_freq < 0:
             raise ConfigError(f"checkpoint_freq must be an integer >= 0, got "
                               f"{self.checkpoint_freq!r}")
+        if self.numba_threads is not None and (
+                isinstance(self.numba_threads, bool) or not isinstance(self.numba_threads, int)
+                or self.numba_threads < 1):
+            raise ConfigError(f"numba_threads must be a positive integer or null, got "
+                              f"{self.numba_threads!r}")
         seeds = tuple(self.seeds) if isinstance(self.seeds, (list, tuple)) else (self.seeds,)
         if not seeds or any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in seeds):
             raise ConfigError(f"seeds must be a list of integers >= 0, got {self.seeds!r}")
         object.__setattr__(self, "seeds", seeds)
 
     @classmethod
-    def from_file(cls, path) -> "TrainConfig":
+    def from_file(cls, path) -> TrainConfig:
         try:
             data = json.loads(Path(path).read_text())
         except json.JSONDecodeError as exc:
@@ -300,6 +311,18 @@ def _callbacks(config: TrainConfig, run_dir: Path, eval_env, progress: bool):
     return cbs
 
 
+def _set_numba_threads(n: int | None) -> None:
+    """Use ``n`` threads in numba's parallel kernels (capped at numba's maximum; nothing
+    when ``n`` is None or numba is not installed)."""
+    if n is None:
+        return
+    try:
+        import numba
+    except ImportError:
+        return
+    numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+
+
 def train_one(config: TrainConfig, seed: int, run_dir: Path, *, force: bool = False,
               quiet: bool = False):
     """Train one seed into ``run_dir``; returns the trained model."""
@@ -308,6 +331,7 @@ def train_one(config: TrainConfig, seed: int, run_dir: Path, *, force: bool = Fa
     from stable_baselines3.common.vec_env import VecNormalize
 
     torch.set_num_threads(config.torch_threads)
+    _set_numba_threads(config.numba_threads)
     if config.tensorboard and not _installed("tensorboard"):
         raise QuadfaultError("--tensorboard needs the tensorboard package (pip install "
                              "tensorboard)")

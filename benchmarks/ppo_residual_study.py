@@ -311,8 +311,10 @@ def main(argv=None) -> int:
                    "(does the fault distribution leave headroom without crashing the baseline?)")
     args = p.parse_args(argv)
 
+    from agents.train import _set_numba_threads
     from quadfault.fileio import atomic_write_text
 
+    _set_numba_threads(1)  # small batches: see TrainConfig.numba_threads
     out = Path(args.out)
     t0 = time.time()
     if args.check_distribution:

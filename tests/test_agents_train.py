@@ -16,6 +16,10 @@ def test_config_validation_and_file(tmp_path):
         TrainConfig(algo="dqn")
     with pytest.raises(ConfigError, match="timesteps"):
         TrainConfig(timesteps=0)
+    for bad in (0, True, 1.5):
+        with pytest.raises(ConfigError, match="numba_threads"):
+            TrainConfig(numba_threads=bad)
+    assert TrainConfig(numba_threads=None).numba_threads is None
     path = tmp_path / "cfg.json"
     path.write_text(json.dumps({"algo": "sac", "seeds": [1, 2], "bogus": 1}))
     with pytest.raises(ConfigError, match="unknown key"):

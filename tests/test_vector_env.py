@@ -312,3 +312,31 @@ def test_time_tables_equal_the_functions_of_time():
                 np.testing.assert_allclose(eta[i], scheds[sched_key[i]](ts), rtol=0, atol=1e-12)
     tables.invalidate([1])
     assert tables.k0[1] < 0
+
+
+@pytest.mark.skipif(not _numba_available(), reason="needs numba")
+@pytest.mark.parametrize("estimator", ["irls", "ekf"])
+def test_numba_thread_count_does_not_change_the_flight(estimator):
+    """The compiled batch kernels split rows across threads; each row is computed alone, so
+    one thread (training's default, ``TrainConfig.numba_threads``) and several give the
+    same observations bit for bit."""
+    import numba
+
+    before = numba.get_num_threads()
+    traces = []
+    try:
+        for threads in (1, numba.config.NUMBA_NUM_THREADS):
+            numba.set_num_threads(threads)
+            venv = QuadFaultVectorEnv(6, scenario="random", random_trajectory="random",
+                                      estimator=estimator, estimator_rate="physics",
+                                      duration=1.0, physics="numba")
+            obs, _ = venv.reset(seed=11)
+            trace = [obs]
+            for k in range(40):
+                obs, *_ = venv.step(np.full((6, 4), 0.2 * np.cos(0.3 * k)))
+                trace.append(obs)
+            venv.close()
+            traces.append(np.array(trace))
+    finally:
+        numba.set_num_threads(before)
+    np.testing.assert_array_equal(traces[0], traces[1])
