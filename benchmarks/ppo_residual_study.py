@@ -232,24 +232,31 @@ def evaluate(args, out: Path, seeds_by_arm: dict) -> dict:
     results = {"episode_seeds": seeds}
     for arm, estimator in (("with_estimate", args.estimator), ("without_estimate", "none")):
         kwargs = env_kwargs(args, estimator)
-        agents = []  # (name, model file or None, make policy)
+        agents = []  # (name, model file or None, make policy, environment keywords)
         if arm == "with_estimate":
-            for name, aware in (("baseline", False), ("estimate_aware_reference", True)):
+            # the baseline and the reference always fly the plain geometric controller's
+            # environment; with --compensate the zero residual of the arm's own environment
+            # (the geometric commands divided by eta_hat) is one more row
+            plain = {k: v for k, v in kwargs.items() if k != "compensate"}
+            rows = [("baseline", False, plain), ("estimate_aware_reference", True, plain)]
+            if "compensate" in kwargs:
+                rows.append(("compensated_zero_residual", False, kwargs))
+            for name, aware, kw in rows:
                 agents.append((name, None, lambda aware=aware: GeometricPolicy(
                     Vehicle(), "residual", estimate_aware=aware,
-                    residual_scale=args.residual_scale)))
+                    residual_scale=args.residual_scale), kw))
         for seed in seeds_by_arm.get(arm, ()):
             path = model_path(out, arm, seed, args.snapshot)
             agents.append((f"{arm}/{seed}", path, lambda path=path, kw=kwargs: _Normalised(
-                *load_agent(path, gym.make(ENV_ID, **kw)))))
-        for name, path, make in agents:
-            key = {"episode_seeds": seeds, "env_kwargs": kwargs,
+                *load_agent(path, gym.make(ENV_ID, **kw))), kwargs))
+        for name, path, make, kw in agents:
+            key = {"episode_seeds": seeds, "env_kwargs": kw,
                    "model": None if path is None else [str(path), path.stat().st_mtime]}
             cache = out / "eval" / f"{name.replace('/', '_seed_')}.json"
             if cache.exists() and json.loads(cache.read_text())["key"] == key:
                 results[name] = json.loads(cache.read_text())["episodes"]
                 continue
-            rmse, crashed = paired_scores([make()], kwargs, seeds)
+            rmse, crashed = paired_scores([make()], kw, seeds)
             results[name] = {"rmse": rmse[0].tolist(), "crashed": crashed[0].tolist()}
             cache.parent.mkdir(parents=True, exist_ok=True)
             atomic_write_text(cache, json.dumps({"key": key, "episodes": results[name]}),
@@ -384,7 +391,9 @@ def _scores(entry: dict) -> dict:
 def _summary(results, seeds_by_arm: dict) -> dict:
     base = _scores(results["baseline"])
     out = {}
-    for name in ("baseline", "estimate_aware_reference"):
+    for name in ("baseline", "estimate_aware_reference", "compensated_zero_residual"):
+        if name not in results:
+            continue
         sc = _scores(results[name])
         out[name] = {"crash_rate": float(np.mean(results[name]["crashed"])), "ci_over": "episodes"}
         for k in SCORES:
@@ -439,6 +448,9 @@ def _markdown(s, meta) -> str:
             lines.append(row(f"PPO {arm.replace('_', ' ')}", s[arm]))
     lines.append(row("(reference) estimate-aware allocation, same residual bound",
                      s["estimate_aware_reference"]))
+    if "compensated_zero_residual" in s:
+        lines.append(row("(--compensate) zero residual on geometric / eta_hat",
+                         s["compensated_zero_residual"]))
     if "with_minus_without" in s:
         w = s["with_minus_without"]
         lines += ["", (f"With vs without the estimate (RMSE_without - RMSE_with, paired, seeds "
