@@ -445,6 +445,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--checkpoint-freq", type=int, help="steps between checkpoints (0: none)")
     parser.add_argument("--algo-kwargs", help="JSON object of algorithm keywords")
     parser.add_argument("--tensorboard", help="TensorBoard log folder")
+    parser.add_argument("--numba-threads", type=int,
+                        help=f"threads of numba's parallel kernels (default {d.numba_threads})")
     parser.add_argument("--progress", action="store_true",
                         help="SB3's progress bar (needs rich; quadfault's bar otherwise)")
     parser.add_argument("--out", required=True, help="output folder (one seed_<k>/ per seed)")
@@ -464,8 +466,9 @@ def _json_arg(text: str, flag: str) -> dict:
 def config_from_args(args) -> TrainConfig:
     cfg = TrainConfig.from_file(args.config) if args.config else TrainConfig()
     changes = {k: getattr(args, k) for k in ("algo", "env_id", "timesteps", "n_envs", "eval_freq",
-                                             "eval_episodes", "checkpoint_freq", "tensorboard")
-               if getattr(args, k) is not None}
+                                             "eval_episodes", "checkpoint_freq", "tensorboard",
+                                             "numba_threads")
+               if getattr(args, k, None) is not None}
     if args.seeds is not None:
         changes["seeds"] = tuple(args.seeds)
     env_kwargs = dict(cfg.env_kwargs)

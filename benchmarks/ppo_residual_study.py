@@ -195,7 +195,8 @@ def train_arm(args, arm: str, out: Path) -> None:
         cfg = TrainConfig(algo="ppo", env_id=ENV_ID, env_kwargs=env_kwargs(args, estimator),
                           timesteps=args.timesteps, seeds=(seed,), n_envs=args.n_envs,
                           vector_env=True, eval_freq=max(args.timesteps // 2, 1000),
-                          eval_episodes=4, algo_kwargs=ppo_kwargs(args))
+                          eval_episodes=4, algo_kwargs=ppo_kwargs(args),
+                          numba_threads=getattr(args, "numba_threads", 1))
         wall, cpu = time.time(), time.process_time()
         train_one(cfg, seed, run_dir, force=True, quiet=True)
         times = {"wall_seconds": time.time() - wall, "cpu_seconds": time.process_time() - cpu,
@@ -302,6 +303,9 @@ def main(argv=None) -> int:
     p.add_argument("--ppo-kwargs", type=_json_object, default=None,
                    help="JSON overriding PPO_KWARGS in both arms (policy_kwargs merged), "
                    'e.g. \'{"use_sde": true}\'')
+    p.add_argument("--numba-threads", type=int, default=1,
+                   help="threads of numba's parallel kernels per training run (default 1: "
+                   "see agents.train.TrainConfig.numba_threads)")
     p.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS),
                    help="arms to train (evaluation always needs both)")
     p.add_argument("--train-only", action="store_true", help="train, do not evaluate")

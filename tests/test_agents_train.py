@@ -153,3 +153,24 @@ def test_vector_env_rejects_other_ids(tmp_path):
     cfg = TrainConfig(env_id="CartPole-v1", env_kwargs={}, vector_env=True)
     with pytest.raises(ConfigError, match="QuadFault"):
         make_vec_env(cfg, 0, 2)
+
+
+def test_flags_override_the_config_file(tmp_path):
+    """``quadfault train`` flags win over the config file; unset flags keep its values."""
+    import argparse
+
+    from agents.train import add_arguments, config_from_args
+
+    path = tmp_path / "cfg.json"
+    path.write_text(json.dumps({"algo": "sac", "timesteps": 500, "numba_threads": 2,
+                                "env_kwargs": {"estimator": "ekf", "duration": 2}}))
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    cfg = config_from_args(parser.parse_args(
+        ["--config", str(path), "--timesteps", "700", "--estimator", "irls", "--out", "x"]))
+    assert (cfg.algo, cfg.timesteps, cfg.numba_threads) == ("sac", 700, 2)
+    assert cfg.env_kwargs == {"estimator": "irls", "duration": 2}
+    cfg = config_from_args(parser.parse_args(["--numba-threads", "1", "--out", "x"]))
+    assert cfg.numba_threads == 1 and cfg.algo == "ppo"
+    with pytest.raises(ConfigError, match="numba_threads"):
+        config_from_args(parser.parse_args(["--numba-threads", "0", "--out", "x"]))
