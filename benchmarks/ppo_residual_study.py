@@ -34,11 +34,18 @@ the headroom, what a policy could gain from the estimate at this residual scale.
 ``--check-distribution`` flies only the baseline and this reference (no training): the
 first check of a fault distribution (the baseline must not crash, the reference must gain).
 
-The study of issue 5 (>= 3 seeds per arm, each run within 30 min of CPU)::
+The study of issue 5 (>= 3 seeds per arm, each run within 30 min of CPU; session 4,
+docs/agents.md)::
 
     python benchmarks/ppo_residual_study.py --check-distribution --episodes 40 --out runs/ppo_s3
-    python benchmarks/ppo_residual_study.py --timesteps 150000 --seeds 0 1 2 \\
-        --episodes 40 --out runs/ppo_s3
+    python benchmarks/ppo_residual_study.py --timesteps 1000000 --seeds 0 1 2 \\
+        --episodes 40 --out runs/ppo_s4m
+
+Variants, both arms alike: ``--trajectory`` (reference of the random scenarios),
+``--compensate`` (the residual is added to the geometric commands divided by eta_hat, a no-op
+in the arm without the estimate; its zero residual is one more row), ``--estimator truth``
+(the oracle efficiency), ``--ppo-kwargs`` (JSON over :data:`PPO_KWARGS`). Training uses one
+numba thread per run (``--numba-threads``; ``agents.train.TrainConfig.numba_threads``).
 
 The runs can train in separate processes (``--arms <arm> --seeds <k> --train-only``); the
 run without ``--train-only`` then reuses the trained models (``--retrain`` trains again) and
@@ -282,7 +289,7 @@ def _random_faults(text: str):
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--timesteps", type=int, default=150_000)
+    p.add_argument("--timesteps", type=int, default=1_000_000)
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--episodes", type=int, default=40, help="paired evaluation episodes")
     p.add_argument("--duration", type=float, default=10.0, help="episode length [s]")
