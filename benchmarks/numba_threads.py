@@ -1,0 +1,96 @@
+"""Vector-env step cost with one numba thread vs numba's default, by batch size.
+
+Steps ``QuadFaultVectorEnv(N, estimator=E, estimator_rate="control")`` on the PPO study's
+environment (``QuadFaultHover-v0``, one fault of eta 0.5-0.85, residual actions, zero
+action) with ``numba.set_num_threads(1)`` and with numba's default thread count, rounds
+interleaved, and prints wall and CPU microseconds per vehicle-step and the ratios
+(default / one thread: above 1 means the extra threads cost more than they save).
+
+CPU time counts every thread of this process, so idle OpenMP workers that spin between
+parallel regions show up there even when the wall time looks fine. On a shared machine read
+the CPU ratio; every line carries the 1-minute load average.
+
+    python benchmarks/numba_threads.py                    # N = 8 ... 4096, IRLS and none
+    python benchmarks/numba_threads.py --sizes 32 --steps 200
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numpy as np
+
+
+def _env(n: int, estimator: str):
+    import gymnasium as gym
+
+    import quad_fault_env  # noqa: F401
+    from quad_fault_env.vector import QuadFaultVectorEnv
+
+    kwargs = dict(gym.spec("QuadFaultHover-v0").kwargs, action_mode="residual",
+                  residual_scale=2.45, estimator_rate="control", duration=10.0,
+                  estimator=estimator, random_faults={"n_faults": [1, 1],
+                                                      "severity": [0.5, 0.85]})
+    venv = QuadFaultVectorEnv(n, **kwargs)
+    venv.reset(seed=0)
+    return venv
+
+
+def _time(venv, steps: int, threads: int) -> tuple[float, float]:
+    """Wall and CPU seconds of ``steps`` vector steps with ``threads`` numba threads."""
+    import numba
+
+    numba.set_num_threads(threads)
+    action = np.zeros((venv.num_envs, 4))
+    for _ in range(5):
+        venv.step(action)
+    wall, cpu = time.perf_counter(), time.process_time()
+    for _ in range(steps):
+        venv.step(action)
+    return time.perf_counter() - wall, time.process_time() - cpu
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--sizes", type=int, nargs="+", default=[8, 32, 128, 512, 4096])
+    p.add_argument("--estimators", nargs="+", default=["irls", "none"],
+                   choices=("irls", "ekf", "none"))
+    p.add_argument("--steps", type=int, default=100, help="vector steps per round")
+    p.add_argument("--rounds", type=int, default=3, help="interleaved rounds (best kept)")
+    args = p.parse_args(argv)
+
+    import numba
+
+    default = numba.config.NUMBA_NUM_THREADS
+    if default == 1:
+        print("numba has one thread on this machine: nothing to compare")
+        return 0
+    print(f"numba threads: 1 vs {default} (default); us per vehicle-step, best of "
+          f"{args.rounds} rounds")
+    print(f"{'estimator':>9} {'N':>5} {'wall 1':>8} {'wall d':>8} {'cpu 1':>8} {'cpu d':>8} "
+          f"{'wall d/1':>8} {'cpu d/1':>8}  load")
+    for est in args.estimators:
+        for n in args.sizes:
+            venv = _env(n, est)
+            steps = max(5, args.steps * 32 // max(n, 32))
+            best = {1: [np.inf, np.inf], default: [np.inf, np.inf]}
+            try:
+                for _ in range(args.rounds):
+                    for threads in (1, default):
+                        wall, cpu = _time(venv, steps, threads)
+                        best[threads] = [min(best[threads][0], wall), min(best[threads][1], cpu)]
+            finally:
+                numba.set_num_threads(default)
+                venv.close()
+            per = 1e6 / (steps * n)
+            w1, c1 = (x * per for x in best[1])
+            wd, cd = (x * per for x in best[default])
+            print(f"{est:>9} {n:>5} {w1:8.2f} {wd:8.2f} {c1:8.2f} {cd:8.2f} {wd / w1:8.2f} "
+                  f"{cd / c1:8.2f}  {os.getloadavg()[0]:.1f}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
