@@ -86,7 +86,11 @@ PPO_KWARGS = {"n_steps": 256, "batch_size": 1024, "n_epochs": 10, "learning_rate
 def ppo_kwargs(args) -> dict:
     """:data:`PPO_KWARGS` updated with ``--ppo-kwargs`` (``policy_kwargs`` merged key by key)."""
     extra = dict(getattr(args, "ppo_kwargs", None) or {})
-    policy = dict(PPO_KWARGS["policy_kwargs"], **extra.pop("policy_kwargs", {}))
+    policy_extra = extra.pop("policy_kwargs", {})
+    if not isinstance(policy_extra, dict):
+        raise SystemExit(f"--ppo-kwargs: policy_kwargs must be a JSON object, got "
+                         f"{policy_extra!r}")
+    policy = dict(PPO_KWARGS["policy_kwargs"], **policy_extra)
     return dict(PPO_KWARGS, **extra, policy_kwargs=policy)
 
 

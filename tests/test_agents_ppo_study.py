@@ -149,6 +149,8 @@ def test_ppo_kwargs_override_merges_policy_kwargs():
     assert study.PPO_KWARGS["policy_kwargs"]["log_std_init"] == -2.3  # not mutated
     with pytest.raises(argparse.ArgumentTypeError):
         study._json_object("[1]")
+    with pytest.raises(SystemExit, match="policy_kwargs must be a JSON object"):
+        study.ppo_kwargs(_args(ppo_kwargs={"policy_kwargs": [1]}))
 
 
 def test_trajectory_and_compensate_reach_both_arms_alike():
