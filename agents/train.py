@@ -311,7 +311,7 @@ def _callbacks(config: TrainConfig, run_dir: Path, eval_env, progress: bool):
     return cbs
 
 
-def _set_numba_threads(n: int | None) -> None:
+def set_numba_threads(n: int | None) -> None:
     """Use ``n`` threads in numba's parallel kernels (capped at numba's maximum; nothing
     when ``n`` is None or numba is not installed)."""
     if n is None:
@@ -331,7 +331,7 @@ def train_one(config: TrainConfig, seed: int, run_dir: Path, *, force: bool = Fa
     from stable_baselines3.common.vec_env import VecNormalize
 
     torch.set_num_threads(config.torch_threads)
-    _set_numba_threads(config.numba_threads)
+    set_numba_threads(config.numba_threads)
     if config.tensorboard and not _installed("tensorboard"):
         raise QuadfaultError("--tensorboard needs the tensorboard package (pip install "
                              "tensorboard)")

@@ -207,7 +207,7 @@ def train_arm(args, arm: str, out: Path) -> None:
                           timesteps=args.timesteps, seeds=(seed,), n_envs=args.n_envs,
                           vector_env=True, eval_freq=max(args.timesteps // 2, 1000),
                           eval_episodes=4, algo_kwargs=ppo_kwargs(args),
-                          numba_threads=getattr(args, "numba_threads", 1))
+                          numba_threads=args.numba_threads)
         wall, cpu = time.time(), time.process_time()
         train_one(cfg, seed, run_dir, force=True, quiet=True)
         times = {"wall_seconds": time.time() - wall, "cpu_seconds": time.process_time() - cpu,
@@ -287,6 +287,16 @@ def _json_object(text: str) -> dict:
     return value
 
 
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}")
+    return value
+
+
 def _random_faults(text: str):
     return None if text == "default" else _json_object(text)
 
@@ -314,7 +324,7 @@ def main(argv=None) -> int:
     p.add_argument("--ppo-kwargs", type=_json_object, default=None,
                    help="JSON overriding PPO_KWARGS in both arms (policy_kwargs merged), "
                    'e.g. \'{"use_sde": true}\'')
-    p.add_argument("--numba-threads", type=int, default=1,
+    p.add_argument("--numba-threads", type=_positive_int, default=1,
                    help="threads of numba's parallel kernels per training run (default 1: "
                    "see agents.train.TrainConfig.numba_threads)")
     p.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS),
@@ -333,10 +343,10 @@ def main(argv=None) -> int:
                    "(does the fault distribution leave headroom without crashing the baseline?)")
     args = p.parse_args(argv)
 
-    from agents.train import _set_numba_threads
+    from agents.train import set_numba_threads
     from quadfault.fileio import atomic_write_text
 
-    _set_numba_threads(1)  # small batches: see TrainConfig.numba_threads
+    set_numba_threads(args.numba_threads)  # evaluation too: see TrainConfig.numba_threads
     out = Path(args.out)
     t0 = time.time()
     if args.check_distribution:
