@@ -19,8 +19,8 @@ Heavy modules are imported lazily so ``quadfault --help`` stays instant.
 
 __version__ = "0.1.0"
 
-from quadfault._numba_cache import configure as _configure_numba_cache  # noqa: E402
 from quadfault.errors import QuadfaultError, RecordingError  # noqa: E402  (light, no numpy)
+from quadfault.jit import configure_cache as _configure_numba_cache  # noqa: E402  (no numba yet)
 
 _configure_numba_cache()  # before any compiled module: one numba cache per source version
 

@@ -1,0 +1,159 @@
+"""The one compile decorator of the project, and where numba keeps what it compiled.
+
+Every algorithm is written once, as plain allocation-free Python, and decorated with
+:func:`jit`. With numba importable (a core dependency) the function is compiled
+(``nopython``, ``cache=True``, ``error_model="numpy"``: a division by zero gives inf / NaN as
+in numpy, never an exception inside a parallel loop; no ``fastmath``, so results do not
+depend on the compiler's reassociation). Without numba the decorator leaves the function as
+Python -- slow but correct -- and warns once. Batched paths run the same kernel under
+:data:`prange`.
+
+Cache: numba's on-disk cache checks only the source file of the function it compiled. Our
+kernels call compiled functions of other modules, so after an update that changes only a
+callee (a ``git pull`` in an editable install) numba would load a stale caller with the old
+callee inlined: wrong numbers or a crash. :func:`configure_cache` points ``NUMBA_CACHE_DIR``
+at ``<user cache>/quadfault-numba/<hash>``, the hash being that of every module that uses
+this decorator, so any change to any of them starts a fresh cache. It does nothing when the
+user set ``NUMBA_CACHE_DIR`` themselves or when no writable cache directory exists.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import sys
+import warnings
+from pathlib import Path
+
+#: the packages whose modules may hold compiled kernels
+PACKAGES = ("quadfault", "estimators", "quad_fault_env", "agents")
+#: a module whose source mentions one of these is hashed into the cache key
+_MARKERS = (b"quadfault.jit", b"numba")
+
+_warned = False
+_numba_module = False  # not looked up yet
+
+
+def _numba():
+    """numba, imported on first use (``import quadfault`` stays light), or None."""
+    global _numba_module
+    if _numba_module is False:
+        try:
+            import numba
+        except ImportError:  # pragma: no cover - exercised only without numba
+            numba = None
+        _numba_module = numba
+    return _numba_module
+
+
+def __getattr__(name):
+    if name == "AVAILABLE":
+        return _numba() is not None
+    if name == "prange":
+        nb = _numba()
+        return range if nb is None else nb.prange
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def _warn_once() -> None:
+    global _warned
+    if not _warned:
+        _warned = True
+        warnings.warn("numba is not importable: quadfault's kernels run as plain Python "
+                      "(correct but slow); pip install numba", RuntimeWarning, stacklevel=3)
+
+
+def jit(*args, **kwargs):
+    """Compile a kernel with the project's options (``@jit`` or ``@jit(parallel=True)``).
+
+    Keyword arguments go to ``numba.njit`` (``cache``, ``error_model`` and ``nogil`` have
+    the project's defaults). Without numba the function is returned unchanged.
+    """
+    nb = _numba()
+    if nb is None:
+        _warn_once()
+        if len(args) == 1 and callable(args[0]) and not kwargs:
+            return args[0]
+        return lambda f: f
+    kwargs.setdefault("cache", True)
+    kwargs.setdefault("error_model", "numpy")
+    kwargs.setdefault("nogil", True)
+    if len(args) == 1 and callable(args[0]):
+        return nb.njit(**kwargs)(args[0])
+    return nb.njit(*args, **kwargs)
+
+
+def set_threads(n: int | None) -> int:
+    """Set numba's worker-thread count for this process (``None``: leave it); return it.
+
+    numba's OpenMP-style workers spin between parallel regions, so a small batch on a busy
+    machine runs faster on one thread (docs/throughput.md has the measured crossover).
+    """
+    nb = _numba()
+    if nb is None:
+        return 1
+    if n is not None:
+        most = nb.config.NUMBA_NUM_THREADS
+        if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= most:
+            from quadfault.errors import ConfigError
+
+            raise ConfigError(f"numba threads must be an integer in 1..{most}, got {n!r}")
+        nb.set_num_threads(n)
+    return int(nb.get_num_threads())
+
+
+# ----------------------------------------------------------------------------------------
+# the per-source-version cache
+def compiled_sources(root: Path | None = None) -> list[Path]:
+    """The modules of :data:`PACKAGES` that use this decorator (sorted)."""
+    root = root or Path(__file__).resolve().parent.parent
+    out = []
+    for pkg in PACKAGES:
+        base = root / pkg
+        if not base.is_dir():
+            continue
+        for path in sorted(base.rglob("*.py")):
+            try:
+                text = path.read_bytes()
+            except OSError:
+                continue
+            if any(m in text for m in _MARKERS):
+                out.append(path)
+    return out
+
+
+def sources_digest(root: Path | None = None) -> str:
+    """SHA-256 (hex, 16 characters) over the compiled modules' paths and sources."""
+    root = root or Path(__file__).resolve().parent.parent
+    h = hashlib.sha256()
+    for path in compiled_sources(root):
+        h.update(str(path.relative_to(root)).encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def _user_cache() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "quadfault-numba"
+
+
+def configure_cache() -> str | None:
+    """Set ``NUMBA_CACHE_DIR`` for this process (see the module docstring); return it, or
+    None when left alone."""
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return None
+    target = _user_cache() / sources_digest()
+    try:
+        target.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return None
+    if not os.access(target, os.W_OK):
+        return None
+    os.environ["NUMBA_CACHE_DIR"] = str(target)
+    config = sys.modules.get("numba.core.config")
+    if config is not None:  # numba was imported first: make it read the variable again
+        config.reload_config()
+    return str(target)
+
+
+__all__ = ["AVAILABLE", "jit", "prange", "set_threads", "configure_cache", "sources_digest"]
