@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from quadfault import effects as fx
-from quadfault.dynamics import RigidBodyState, angular_acceleration
+from quadfault.dynamics import RigidBodyState
 from quadfault.errors import ConfigError
 from quadfault.rotation import cross, euler_zyx_to_rot
 from quadfault.vehicle import Vehicle
@@ -77,16 +77,16 @@ def test_zoh_mean_matches_numerical_integration():
     np.testing.assert_allclose(fx.zoh_mean(t, f, c, np.array([a]), np.array([b]))[0], num, atol=2e-3)
 
 
-def test_lag_series_uniform_and_general_paths_agree():
+def test_lag_series_steps_equal_one_series_and_reach_a_held_command():
     rng = np.random.default_rng(2)
     f = rng.uniform(0, 2, (300, 4))
-    dt = np.full(300, 1e-3)
-    fast = fx.lag_series(f, dt, 0.03)
-    dt2 = dt.copy()
-    dt2[0] *= 1.0 + 1e-6  # forces the explicit loop
-    slow = fx.lag_series(f, dt2, 0.03)
-    np.testing.assert_allclose(fast, slow, rtol=1e-5)
-    # steady state: a held command is reached
+    dt = rng.uniform(0.5e-3, 2e-3, 300)
+    whole = fx.lag_series(f, dt, 0.03)
+    y, steps = None, []
+    for k in range(300):  # the plant's call: one row, continuing from the previous thrust
+        y = fx.lag_series(f[k], dt[k], 0.03, y)[0]
+        steps.append(y)
+    np.testing.assert_allclose(whole, steps, rtol=1e-12, atol=1e-14)
     held = fx.lag_series(np.ones((2000, 4)) * 3.0, np.full(2000, 1e-3), 0.05)
     assert held[-1] == pytest.approx(3.0 * np.ones(4))
 
@@ -112,15 +112,16 @@ def test_plant_step_equals_series_model(effect):
     assert Candidate  # the library uses these same functions
 
 
-def test_inertia_moment_reproduces_true_body():
-    rng = np.random.default_rng(4)
+def test_body_effects_change_the_flown_vehicle_only():
+    from quadfault.plant import Plant
+
     veh = Vehicle()
-    Jt = fx.scaled_inertia(veh.inertia, (1.3, 0.8, 1.1))
-    w, M = rng.normal(size=(20, 3)), rng.normal(size=(20, 3))
-    Mx = fx.inertia_moment(w, M, veh.inertia, Jt)
-    nominal_with_effect = angular_acceleration(w, M, veh, Mx)
-    true = angular_acceleration(w, M, veh, inertia=Jt, inertia_inverse=np.linalg.inv(Jt))
-    np.testing.assert_allclose(nominal_with_effect, true, atol=1e-10)
+    plant = Plant(veh, lambda t: np.ones(4), effects=(fx.Inertia((1.3, 0.8, 1.1)), fx.Mass(1.2)))
+    plant.reset(RigidBodyState.at_rest())
+    np.testing.assert_allclose(np.diag(plant.vehicle.inertia), np.diag(veh.inertia) * (1.3, 0.8, 1.1))
+    assert plant.vehicle.mass == pytest.approx(1.2 * veh.mass)
+    assert plant.vehicle.rotor_max_thrust == veh.rotor_max_thrust  # the rotors are unchanged
+    assert plant.base_vehicle is veh and veh.mass == 1.0
 
 
 def test_com_offset_moment_is_r_cross_thrust():

@@ -153,7 +153,7 @@ class Diagnosis:
         library = build_library(rp)
         if cfg.effects is not None:
             library = [c for c in library if c.name in cfg.effects]
-        untestable = [c.name for c in library if c.needs_pose and not rp.has_pose]
+        untestable = [c.name for c in library if not c.testable(rp)]
         base_res = rp.measured - predict(rp, [])
         scale = noise_scale(rp, base_res)
         kw = dict(folds=cfg.folds, max_effects=cfg.max_effects,
