@@ -73,6 +73,7 @@ class Candidate:
         uses_thrust: a wrench proportional to the produced thrust (jointly with a thrust gain
             the model is no longer affine).
         needs_rate: the wrench needs the thrusts' rate of change.
+        default: in the default library (else only when asked for by name).
     """
 
     name: str
@@ -86,6 +87,7 @@ class Candidate:
     needs_pose: bool = False
     requires: tuple = ()
     affine: bool = False
+    default: bool = True
     on_raw: ClassVar[bool] = False
     uses_thrust: ClassVar[bool] = False
     needs_rate: ClassVar[bool] = False
@@ -124,6 +126,12 @@ class Candidate:
         lo, hi = self._split(self.lower), self._split(self.upper)
         return {k: [lo[k], hi[k]] for k in lo}
 
+    def x_from_params(self, params: dict) -> np.ndarray:
+        """The parameter vector of reported (or plant-effect) ``params``: the inverse of
+        :meth:`public` (used to score a known effect, e.g. a simulated truth)."""
+        return np.concatenate([np.ravel(np.asarray(params[k], dtype=float))
+                               for k, _, _ in self.keys])
+
     def _split(self, x) -> dict:
         x = np.asarray(x, dtype=float)
         return {k: (float(x[a]) if b - a == 1 else x[a:b].tolist()) for k, a, b in self.keys}
@@ -152,6 +160,13 @@ class ThrustCurveCandidate(Candidate):
 
     def thrust(self, x, rp, f, t, dt):
         return fx.recurve(f, self.nominal, self.curve(x))
+
+    def x_from_params(self, params):
+        da, db, dc = np.asarray(params["curve"], dtype=float) - np.asarray(self.nominal)
+        fh, uh = self.f_hover, self.u_hover
+        d2 = dc * uh ** 2 / fh
+        d1 = db * uh / fh + 2 * d2
+        return np.array([da / fh + d1 - d2, d1, d2])
 
     def public(self, x, sd, ctx):
         params, unc = super().public(x, sd, ctx)
@@ -211,6 +226,9 @@ class GroundEffectCandidate(Candidate):
 
     def public_bounds(self):
         return {"rotor_radius_m": [float(np.sqrt(self.lower[0])), float(np.sqrt(self.upper[0]))]}
+
+    def x_from_params(self, params):
+        return np.array([float(params["rotor_radius_m"]) ** 2])
 
 
 @dataclass(frozen=True)

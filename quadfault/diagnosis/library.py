@@ -40,8 +40,14 @@ def _voltage_profile(rp: Replay) -> tuple:
     return float(icpt), float(icpt + slope * dur), dur
 
 
-def build_library(rp: Replay) -> list[Candidate]:
-    """All candidates, with bounds scaled to the nominal vehicle of ``rp``."""
+def build_library(rp: Replay, names=None) -> list[Candidate]:
+    """The candidates named in ``names`` (default: the default library), with bounds scaled to
+    the nominal vehicle of ``rp``.
+
+    ``thrust_curve`` is in the default library only for ``u``-command recordings (whose
+    command-to-thrust curve is a declared, calibrated model); for thrust commands in newtons
+    it is asked for by name: in closed loop its slope fits the same signal as an inertia or a
+    payload (docs/effects.md, "What the data cannot tell apart")."""
     veh = rp.vehicle
     m, g, arm, n = veh.mass, veh.gravity, rp.arm, veh.n_rotors
     J = np.diag(veh.inertia)
@@ -88,7 +94,8 @@ def build_library(rp: Replay) -> list[Candidate]:
                             profile=_voltage_profile(rp) if rp.vbat is not None else (1.0,) * 3),
         cd.ThrustCurveCandidate("thrust_curve", ("d0 [-]", "d1 [-]", "d2 [-]"), (-0.5, -1.0, -1.0),
                                 (0.5, 1.0, 1.0), zero3, (zero3,), "thrust", 0, affine=True,
-                                nominal=nominal, f_hover=f_h, u_hover=u_h),
+                                default=rp.thrust_curve is not None, nominal=nominal,
+                                f_hover=f_h, u_hover=u_h),
         cd.MassCandidate("mass", ("scale [-]",), (0.5,), (float(np.clip(0.8 * tw, 1.2, 2.0)),),
                          (1.0,), ((1.0,),), "body"),
         cd.RateDampingCandidate("rate_damping", tuple(f"D1{a} [N m s/rad]" for a in "xyz")
@@ -96,7 +103,9 @@ def build_library(rp: Replay) -> list[Candidate]:
                                 tuple(J / 0.02) + tuple(J / 0.2), (0.0,) * 6, ((0.0,) * 6,),
                                 "wrench", affine=True),
     ]
-    return lib
+    if names is None:
+        return [c for c in lib if c.default]
+    return [c for c in lib if c.name in names]
 
 
 def thrust_series(rp: Replay, terms, ends: bool = False):
