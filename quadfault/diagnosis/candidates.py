@@ -153,10 +153,7 @@ class ThrustCurveCandidate(Candidate):
                              ("curvature_change", 2, 3))
 
     def curve(self, x) -> np.ndarray:
-        d0, d1, d2 = (float(v) for v in x)
-        fh, uh = self.f_hover, self.u_hover
-        return np.asarray(self.nominal) + fh * np.array([d0 - d1 + d2, (d1 - 2 * d2) / uh,
-                                                         d2 / uh ** 2])
+        return fx.curve_from_changes(self.nominal, self.f_hover, x)
 
     def thrust(self, x, rp, f, t, dt):
         return fx.recurve(f, self.nominal, self.curve(x))

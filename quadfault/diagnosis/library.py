@@ -222,5 +222,8 @@ EXPLANATIONS = {
 }
 
 #: Effects the data cannot always tell apart; counted as one class in the blinded study.
+#: "thrust": the same translational response (a thrust gain, a curve, or a mass change); only
+#: the angular response separates them, which closed-loop feedback biases. "timing": both
+#: low-pass the command. docs/effects.md explains each.
 EQUIVALENT = {"thrust_scale": "thrust", "motor_efficiency": "thrust", "thrust_curve": "thrust",
-              "delay": "timing", "motor_lag": "timing"}
+              "mass": "thrust", "delay": "timing", "motor_lag": "timing"}

@@ -35,6 +35,17 @@ def curve_command(curve, f) -> np.ndarray:
     return np.maximum((np.sqrt(disc) - b) / (2.0 * c), 0.0)
 
 
+def curve_from_changes(nominal, f_hover: float, changes) -> np.ndarray:
+    """The curve ``(a, b, c)`` whose thrust differs from the ``nominal`` curve's by
+    ``f_h (d0 + d1 (x - 1) + d2 (x - 1)^2)``, ``x = u / u_h`` the command relative to the
+    hover command ``u_h`` (the nominal curve's command for ``f_h`` [N]); ``changes`` =
+    ``(d0, d1, d2)`` [-]: hover thrust, slope and curvature changes relative to hover."""
+    d0, d1, d2 = (float(v) for v in changes)
+    uh = float(curve_command(nominal, f_hover))
+    return np.asarray(nominal, dtype=float) + f_hover * np.array(
+        [d0 - d1 + d2, (d1 - 2 * d2) / uh, d2 / uh ** 2])
+
+
 def recurve(f, nominal, curve) -> np.ndarray:
     """Thrust [N] produced through ``curve`` by the command that the ``nominal`` curve maps to
     the commanded thrust ``f`` [N] (never negative)."""
