@@ -27,6 +27,15 @@ def _state(rng, n=()):
     ("ground_effect=0.12", fx.GroundEffect, "rotor_radius", 0.12),
     ("com_offset=0.01,-0.02", fx.ComOffset, "offset", (0.01, -0.02)),
     ("inertia=1.2", fx.Inertia, "scale", (1.2, 1.2, 1.2)),
+    ("blade_flapping=0.05,0.002", fx.BladeFlapping, "k_moment", 0.002),
+    ("blade_flapping=0.05", fx.BladeFlapping, "k_moment", 0.0),
+    ("rotor_inertia=0.004", fx.RotorInertia, "kappa", 0.004),
+    ("battery_thrust=2,v_start=4.2,v_end=3.6", fx.BatteryThrust, "v_ref", 3.9),
+    ("thrust_curve=0.1,0.9,0.02", fx.ThrustCurve, "curve", (0.1, 0.9, 0.02)),
+    ("mass=1.15", fx.Mass, "scale", 1.15),
+    ("rate_damping=0.01", fx.RateDamping, "linear", (0.01, 0.01, 0.01)),
+    ("rate_damping=0.01,0.002", fx.RateDamping, "quadratic", (0.002, 0.002, 0.002)),
+    ("rate_damping=1,2,3,4,5,6", fx.RateDamping, "quadratic", (4.0, 5.0, 6.0)),
 ])
 def test_parse_effect(spec, cls, attr, value):
     e = fx.parse_effect(spec)
@@ -40,10 +49,37 @@ def test_parse_effect(spec, cls, attr, value):
     ("nothing=1", "unknown effect"), ("drag", "NAME=VALUES"), ("drag=1,2", "expects 1 or 3"),
     ("wind=1,0,0,color=3", "unknown option"), ("delay=-1", "delay"), ("drag=x", "not a number"),
     ("motor_lag=0", "tau"), ("drag=nan", "finite"),
+    ("rate_damping=1,2,3,4", "expects 1 or 2 or 3 or 6"), ("mass=0", "mass scale"),
+    ("thrust_curve=0,0,0", "b > 0 or c > 0"), ("rate_damping=-1", ">= 0"),
+    ("battery_thrust=2,v_start=-1", "v_start"), ("drag=0.1:0.3", "random generator"),
+    ("blade_flapping=x", "not a number"),
 ])
 def test_parse_effect_errors(spec, words):
     with pytest.raises(ConfigError, match=words):
         fx.parse_effect(spec)
+
+
+def test_parse_effect_ranges_are_drawn_from_the_generator():
+    a = fx.parse_effect("motor_lag=0.02:0.06", rng=np.random.default_rng(5))
+    b = fx.parse_effect("motor_lag=0.02:0.06", rng=np.random.default_rng(5))
+    assert a == b and 0.02 <= a.tau <= 0.06
+    with pytest.raises(ConfigError, match="low <= high"):
+        fx.parse_effect("motor_lag=0.06:0.02", rng=np.random.default_rng(5))
+
+
+def test_every_effect_round_trips_through_its_params():
+    rng = np.random.default_rng(6)
+    for name in fx.EFFECT_NAMES:
+        spec = {"wind": "wind=1,2,0", "com_offset": "com_offset=0.01,0.02",
+                "thrust_curve": "thrust_curve=0.1,0.9,0.02",
+                "blade_flapping": "blade_flapping=0.05,0.002"}.get(name, f"{name}=0.5:0.9")
+        e = fx.parse_effect(spec, rng=rng)
+        again = fx.EFFECTS[name].from_params(e.params())
+        if name == "wind":  # the diagnosis' model: the steady force
+            np.testing.assert_allclose(again.steady_force(), e.steady_force())
+            continue
+        for key, value in e.params().items():
+            np.testing.assert_allclose(again.params()[key], value, err_msg=f"{name}.{key}")
 
 
 def test_drag_opposes_air_velocity_and_is_linear():
