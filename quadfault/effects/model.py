@@ -200,7 +200,7 @@ def _fitted(entry, k: int, where: str, frame: str, curve) -> FittedEffect:
     try:
         effect = EFFECTS[name].from_params(params)
     except (QuadfaultError, TypeError, ValueError) as exc:
-        _fail(where, f"{key}.params", f"{name}: {exc}")
+        _fail(where, f"{key}.params", str(exc))
     return FittedEffect(name, params, unc, bounds, effect)
 
 
