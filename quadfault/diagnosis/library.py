@@ -100,7 +100,7 @@ def build_library(rp: Replay, names=None) -> list[Candidate]:
                          (1.0,), ((1.0,),), "body"),
         cd.RateDampingCandidate("rate_damping", tuple(f"D1{a} [N m s/rad]" for a in "xyz")
                                 + tuple(f"D2{a} [N m s^2/rad^2]" for a in "xyz"), (0.0,) * 6,
-                                tuple(J / 0.02) + tuple(J / 0.2), (0.0,) * 6, ((0.0,) * 6,),
+                                tuple(J / 0.02) + tuple(J * 1.0), (0.0,) * 6, ((0.0,) * 6,),
                                 "wrench", affine=True),
     ]
     if names is None:
