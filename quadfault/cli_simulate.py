@@ -194,7 +194,11 @@ def _warn_if_control_lost(rec, scenario, args) -> None:
     if lost.size == 0:
         return
     hint = ""
-    if not args.no_saturation and args.integrator != "reference":
+    names = {e["name"] for e in rec.meta.get("effects", ())}
+    if "rotor_inertia" in names and "motor_lag" not in names:
+        hint = (" rotor_inertia without motor_lag makes every thrust step a yaw kick; a rotor "
+                "with inertia has a lag: add --effect motor_lag=TAU (docs/effects.md).")
+    elif not args.no_saturation and args.integrator != "reference":
         hint = (" With thrust-to-weight 2 a rotor at eta = 0.5 cannot hold the paper's circle;"
                 " the paper's scenarios assume no upper thrust limit (--no-saturation), or use"
                 " the estimate-aware controller (agents).")

@@ -178,3 +178,12 @@ def test_written_recording_sidecar_is_a_valid_diagnosis_vehicle(tmp_path):
     doc = {"format": "quadfault-diagnosis/2", "frame": side["frame"], "gravity": side["gravity"],
            "vehicle": side["vehicle"], "effects": []}
     assert fx.from_diagnosis(doc).vehicle == VEHICLE
+
+
+def test_rotor_inertia_without_lag_losing_the_vehicle_says_why(tmp_path, capsys):
+    out = tmp_path / "ri.csv"
+    assert main(["simulate", "--scenario", "nominal", "--trajectory", "lissajous", "--duration",
+                 "5", "--dt", "0.004", "--out", str(out), "--quiet", "--effect",
+                 "rotor_inertia=0.001"]) == 0
+    err = capsys.readouterr().err
+    assert "lost the vehicle" in err and "add --effect motor_lag" in err
