@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from quadfault import effects as fx
+from quadfault.diagnosis.candidates import PublicContext
 from quadfault.diagnosis.library import build_library, predict
 from quadfault.diagnosis.residuals import prepare
 from quadfault.dynamics import RigidBodyState
@@ -127,3 +128,26 @@ def test_library_with_the_true_parameters_reproduces_the_plant(effect):
     acting = before > max(1e-3, 1e-3 * before.max())
     assert acting.any()
     assert np.all(after[acting] < 0.01 * before[acting]), (after / before)
+
+
+def test_every_candidate_reports_bounds_in_its_public_keys():
+    sc = named_scenario("nominal", 1.0, 4e-3).replace(trajectory=TRAJ,
+                                                      voltage=LinearVoltage(12.0, 11.0, 1.0))
+    rec = simulate(sc, config=SimConfig(dt=4e-3), seed=0, thrust_noise=0.0).without_truth()
+    rp = prepare(rec)
+    lib = build_library(rp, fx.EFFECT_NAMES)
+    assert {c.name for c in lib} == set(fx.EFFECT_NAMES)
+    for c in lib:
+        x = np.asarray(c.x0, dtype=float)
+        params, _ = c.public(x, np.zeros(c.size), PublicContext(rp.vehicle, {}))
+        bounds = c.public_bounds()
+        assert set(bounds) <= set(params), c.name
+        for key, (lo, hi) in bounds.items():
+            assert np.all(np.asarray(lo) <= np.asarray(params[key]) + 1e-12), (c.name, key)
+            assert np.all(np.asarray(params[key]) <= np.asarray(hi) + 1e-12), (c.name, key)
+        np.testing.assert_allclose(c.x_from_params(params), x, atol=1e-12, err_msg=c.name)
+    bounds = {c.name: c.public_bounds() for c in lib}
+    assert bounds["motor_lag"] == {"tau_s": [1e-4, 0.3]}
+    assert bounds["inertia"] == {"scale": [0.5, 2.0]}
+    m, g = rp.vehicle.mass, rp.vehicle.gravity
+    assert bounds["wind"]["force_N"][1] == pytest.approx([0.5 * m * g] * 2 + [0.25 * m * g])

@@ -122,9 +122,16 @@ class Candidate:
         return self._split(x), self._split(sd)
 
     def public_bounds(self) -> dict:
-        """``{"<param>": [lo, hi]}`` in the reported keys (``lo``/``hi`` lists for vectors)."""
+        """``{"<param>": [lo, hi]}`` in the reported keys; for a vector parameter ``lo`` and
+        ``hi`` are numbers when every element has the same bounds, else lists."""
         lo, hi = self._split(self.lower), self._split(self.upper)
-        return {k: [lo[k], hi[k]] for k in lo}
+        out = {}
+        for k in lo:
+            a, b = lo[k], hi[k]
+            if isinstance(a, list) and len(set(a)) == 1 and len(set(b)) == 1:
+                a, b = a[0], b[0]
+            out[k] = [a, b]
+        return out
 
     def x_from_params(self, params: dict) -> np.ndarray:
         """The parameter vector of reported (or plant-effect) ``params``: the inverse of
