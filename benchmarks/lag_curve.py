@@ -2,9 +2,10 @@
 
 A fixed command-to-thrust curve biases the lag: the time constant also absorbs the curve's
 error. For each recording, ``quadfault diagnose`` runs twice on the same rows, with
-``--effects motor_lag`` and with ``--effects thrust_curve,motor_lag`` (the curve's hover
-thrust, slope and curvature fitted jointly with the lag), and the lag and the curve are
-printed. ``--segment T0,T1`` [s] restricts the rows; ``--author-segments`` takes the
+``--effects motor_lag``, with ``--effects thrust_curve,motor_lag`` (the curve's hover
+thrust, slope and curvature fitted jointly with the lag) and with ``inertia`` added (a
+curve's slope also scales the rotor moments, so without it an inertia error leaks into the
+slope); the lag, the curve and the inertia are printed. ``--segment T0,T1`` [s] restricts the rows; ``--author-segments`` takes the
 segments the importer lists in the sidecar (``meta.author_segments``: the data set authors'
 manoeuvres) -- whole logs also hold take-off, ground and landing rows, which the lag and the
 curve do not describe.
@@ -29,7 +30,7 @@ import numpy as np
 from quadfault.cli import main as cli
 from quadfault.recording import read_recording, write_recording
 
-LIBRARIES = ("motor_lag", "thrust_curve,motor_lag")
+LIBRARIES = ("motor_lag", "thrust_curve,motor_lag", "thrust_curve,motor_lag,inertia")
 
 
 def segments(rec, segment, author: bool) -> list[tuple[str, float, float]]:
@@ -67,6 +68,8 @@ def describe(doc) -> str:
         p = found["thrust_curve"]["params"]
         text += (f"; curve: hover {p['hover_thrust_change']:+.3f}, slope "
                  f"{p['slope_change']:+.3f}, curvature {p['curvature_change']:+.3f}")
+    if "inertia" in found:
+        text += "; inertia x" + ", ".join(f"{s:.2f}" for s in found["inertia"]["params"]["scale"])
     return text + f"; model improvement {doc['model']['improvement']:.2f}"
 
 
@@ -81,7 +84,7 @@ def run(paths, segment, author: bool) -> list[dict]:
                 for effects in LIBRARIES:
                     doc = diagnose(rec, t0, t1, effects, Path(tmp))
                     row[effects] = doc["effects"]
-                    print(f"  --effects {effects:<24} {describe(doc)}")
+                    print(f"  --effects {effects:<32} {describe(doc)}")
                 rows.append(row)
     return rows
 
