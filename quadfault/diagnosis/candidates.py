@@ -74,6 +74,7 @@ class Candidate:
             the model is no longer affine).
         needs_rate: the wrench needs the thrusts' rate of change.
         default: in the default library (else only when asked for by name).
+        excludes: effects this one contains (never accepted together with it).
     """
 
     name: str
@@ -88,6 +89,7 @@ class Candidate:
     requires: tuple = ()
     affine: bool = False
     default: bool = True
+    excludes: tuple = ()
     on_raw: ClassVar[bool] = False
     uses_thrust: ClassVar[bool] = False
     needs_rate: ClassVar[bool] = False

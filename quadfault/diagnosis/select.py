@@ -228,6 +228,7 @@ def select(rp: Replay, library: list[Candidate], scale: np.ndarray, *, folds: in
     for _ in range(max_effects):
         chosen = {c.name for c in current}
         pool = [c for c in library if c.name not in chosen and EXCLUSIVE.get(c.name) not in chosen
+                and not chosen & set(c.excludes) and not any(c.name in o.excludes for o in current)
                 and c.testable(rp)]
         if not pool:
             break
