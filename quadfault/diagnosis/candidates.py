@@ -161,6 +161,10 @@ class ThrustCurveCandidate(Candidate):
     keys: ClassVar[tuple] = (("hover_thrust_change", 0, 1), ("slope_change", 1, 2),
                              ("curvature_change", 2, 3))
 
+    def testable(self, rp) -> bool:
+        """Also needs a nominal curve that reaches the hover thrust at a positive command."""
+        return self.u_hover > 0 and super().testable(rp)
+
     def curve(self, x) -> np.ndarray:
         return fx.curve_from_changes(self.nominal, self.f_hover, x)
 
