@@ -60,7 +60,7 @@ def run(paths, split: float, effects, starts: int) -> list[dict]:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for path in paths:
-            rec, model, doc, t_split = calibrate(Path(path), split, effects, Path(tmp))
+            rec, model, _, t_split = calibrate(Path(path), split, effects, Path(tmp))
             span = (t_split, float(rec.t[-1]))
             nominal = replay_errors(rec, model.vehicle, (), HORIZONS, starts=starts, span=span)
             calibrated = replay_errors(rec, model.vehicle, model.effects, HORIZONS,

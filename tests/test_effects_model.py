@@ -159,8 +159,8 @@ def test_simulate_model_flies_the_effects_and_keeps_the_nominal_vehicle(tmp_path
 def test_simulate_battery_thrust_records_its_voltage(tmp_path, capsys):
     out = tmp_path / "b.csv"
     assert main(["simulate", "--scenario", "nominal", "--duration", "2", "--dt", "0.004",
-                 "--out", str(out), "--quiet", "--effect", "battery_thrust=2,v_start=4.2,"
-                 "v_end=3.7"]) == 0
+                 "--out", str(out), "--quiet", "--effect",
+                 "battery_thrust=2,v_start=4.2,v_end=3.7"]) == 0
     rec = read_recording(out)
     assert rec.vbat[0] == pytest.approx(4.2) and rec.vbat[-1] == pytest.approx(3.7, abs=1e-3)
     assert main(["simulate", "--scenario", "combined", "--duration", "2", "--out",

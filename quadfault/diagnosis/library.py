@@ -27,9 +27,20 @@ from quadfault.diagnosis.candidates import Candidate, PublicContext, WrenchInput
 from quadfault.diagnosis.residuals import Replay, model_channels
 from quadfault.effects.model import frame_vectors
 
-__all__ = ["Candidate", "EQUIVALENT", "EXPLANATIONS", "WrenchInputs", "body_vehicle",
-           "build_library", "external_wrench", "predict", "predict_intervals", "public_bounds",
-           "public_params", "thrust_series"]
+__all__ = [
+    "EQUIVALENT",
+    "EXPLANATIONS",
+    "Candidate",
+    "WrenchInputs",
+    "body_vehicle",
+    "build_library",
+    "external_wrench",
+    "predict",
+    "predict_intervals",
+    "public_bounds",
+    "public_params",
+    "thrust_series",
+]
 
 
 def _voltage_profile(rp: Replay) -> tuple:

@@ -13,8 +13,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from quadfault.diagnosis.library import (WrenchInputs, body_vehicle, external_wrench, needs_rate,
-                                          thrust_series)
+from quadfault.diagnosis.library import (
+    WrenchInputs,
+    body_vehicle,
+    external_wrench,
+    needs_rate,
+    thrust_series,
+)
 from quadfault.diagnosis.residuals import Replay
 from quadfault.dynamics import RigidBodyState, step_rk4
 from quadfault.rotation import rotation_angle

@@ -68,7 +68,7 @@ class Effect:
         raise NotImplementedError
 
     @classmethod
-    def from_params(cls, params: dict) -> "Effect":
+    def from_params(cls, params: dict) -> Effect:
         """The effect from its ``params()`` (the keys the diagnosis reports)."""
         raise NotImplementedError
 

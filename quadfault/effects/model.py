@@ -21,7 +21,7 @@ Fields read (everything else is ignored):
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -94,7 +94,6 @@ class DiagnosedModel:
     fitted: tuple
     frame: str = "NED"
     source: str = ""
-    extra: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def effects(self) -> tuple:
@@ -225,7 +224,7 @@ def from_diagnosis(source) -> DiagnosedModel:
     names = [f.name for f in fitted]
     dup = {n for n in names if names.count(n) > 1}
     if dup:
-        _fail(where, "effects", f"effect {sorted(dup)[0]!r} appears twice")
+        _fail(where, "effects", f"effect {min(dup)!r} appears twice")
     order = {id(e): k for k, e in enumerate(canonical_order([f.effect for f in fitted]))}
     fitted.sort(key=lambda f: order[id(f.effect)])
     return DiagnosedModel(vehicle, curve, tuple(fitted), frame, where)

@@ -50,8 +50,8 @@ def replay_errors(recording, vehicle, effects=(), horizons=(0.05, 0.1, 0.2, 0.5)
     t = recording.t
     dt = np.diff(t)
     med = float(np.median(dt))
-    steps = [max(1, int(round(h / med))) for h in horizons]
-    nh, nw = max(steps), int(round(warmup / med))
+    steps = [max(1, round(h / med)) for h in horizons]
+    nh, nw = max(steps), round(warmup / med)
     t0, t1 = (t[0], t[-1]) if span is None else span
     bad = np.r_[0, np.cumsum(dt > 2.5 * med)]
     k = np.arange(nw, len(t) - nh)
@@ -81,6 +81,6 @@ def replay_errors(recording, vehicle, effects=(), horizons=(0.05, 0.1, 0.2, 0.5)
     def rms(x):
         return np.sqrt(np.mean(x ** 2, axis=0)).tolist()
 
-    return {"horizons_s": [n * med for n in steps], "starts": int(len(rows)),
+    return {"horizons_s": [n * med for n in steps], "starts": len(rows),
             "position_rmse_m": rms(err["p"]), "velocity_rmse_m_per_s": rms(err["v"]),
             "attitude_rmse_deg": rms(err["a"])}
