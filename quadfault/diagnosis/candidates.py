@@ -75,6 +75,11 @@ class Candidate:
         needs_rate: the wrench needs the thrusts' rate of change.
         default: in the default library (else only when asked for by name).
         excludes: effects this one contains (never accepted together with it).
+        rotor_side: acts between the command and the rotor speed (the command curve, the
+            battery, motor dynamics), so measured rotor speeds see it; effects after the
+            rotor speed (propeller, aerodynamics, the body) leave them unchanged.
+        frames: ``((param_key, "world" | "body"), ...)``: reported vector parameters in the
+            world or body frame (reported in the recording's own frame).
     """
 
     name: str
@@ -90,6 +95,8 @@ class Candidate:
     affine: bool = False
     default: bool = True
     excludes: tuple = ()
+    rotor_side: bool = False
+    frames: tuple = ()
     on_raw: ClassVar[bool] = False
     uses_thrust: ClassVar[bool] = False
     needs_rate: ClassVar[bool] = False
