@@ -61,7 +61,7 @@ class Plant:
     Args:
         vehicle: true vehicle parameters (the controller may hold different, nominal ones);
             effects with a ``true_vehicle`` hook modify it at every reset (``self.vehicle`` is
-            the one flown, ``self.base_vehicle`` the one given).
+            the one flown, ``self.nominal_vehicle`` the one given).
         efficiency: callable ``t -> (4,)`` true motor efficiency.
         motor: saturation and thrust noise.
         effects: unmodelled effects applied in order.
@@ -79,7 +79,7 @@ class Plant:
             raise ConfigError(f"dt must be positive [s], got {dt!r}")
         if integrator == "reference" and effects:
             raise ConfigError("the reference integrator does not support extra effects")
-        self.base_vehicle = vehicle
+        self.nominal_vehicle = vehicle
         self.efficiency = efficiency
         self.motor = motor or MotorModel()
         self.effects = tuple(effects)
@@ -93,8 +93,8 @@ class Plant:
     def reset(self, state: RigidBodyState) -> None:
         self.state = state.copy()
         for e in self.effects:
-            e.reset(self.base_vehicle.n_rotors)
-        self.vehicle = flown_vehicle(self.base_vehicle, self.effects)
+            e.reset(self.nominal_vehicle.n_rotors)
+        self.vehicle = flown_vehicle(self.nominal_vehicle, self.effects)
         if self._reference is not None:
             self._reference = ReferenceEuler(self.vehicle, self.dt)
 

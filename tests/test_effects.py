@@ -157,7 +157,7 @@ def test_body_effects_change_the_flown_vehicle_only():
     np.testing.assert_allclose(np.diag(plant.vehicle.inertia), np.diag(veh.inertia) * (1.3, 0.8, 1.1))
     assert plant.vehicle.mass == pytest.approx(1.2 * veh.mass)
     assert plant.vehicle.rotor_max_thrust == veh.rotor_max_thrust  # the rotors are unchanged
-    assert plant.base_vehicle is veh and veh.mass == 1.0
+    assert plant.nominal_vehicle is veh and veh.mass == 1.0
 
 
 def test_com_offset_moment_is_r_cross_thrust():

@@ -13,12 +13,26 @@ import numpy as np
 from quadfault.errors import ConfigError
 
 
+# the simulator's plant, one step at a time: the only calls into it ----------------------
 def _plant(vehicle, effects, dt):
     from quadfault.motors import MotorModel
     from quadfault.plant import Plant
 
     n = vehicle.n_rotors
     return Plant(vehicle, lambda t: np.ones(n), MotorModel(0.0, True), tuple(effects), dt=dt)
+
+
+def _warm(plant, state, f_cmd, t, dt) -> None:
+    """Advance the effects' memory by one step of command ``f_cmd`` at ``state``."""
+    plant.state, plant.dt = state, dt
+    plant.produced_thrust(f_cmd, t)
+
+
+def _step(plant, f_cmd, t, dt):
+    """One physics step of the plant with command ``f_cmd`` held; its new state."""
+    plant.dt = dt
+    plant.step(f_cmd, t)
+    return plant.state
 
 
 def _state(rec, k):
@@ -64,16 +78,13 @@ def replay_errors(recording, vehicle, effects=(), horizons=(0.05, 0.1, 0.2, 0.5)
         plant = _plant(vehicle, effects, med)
         plant.reset(_state(recording, k - nw))
         for j in range(k - nw, k):  # the effects' memory: commands before the start
-            plant.state = _state(recording, j)
-            plant.dt = float(dt[j])
-            plant.produced_thrust(recording.thrust_cmd[j], float(t[j]))
+            _warm(plant, _state(recording, j), recording.thrust_cmd[j], float(t[j]), float(dt[j]))
         plant.state = _state(recording, k)
         for j in range(nh):
-            plant.dt = float(dt[k + j])
-            plant.step(recording.thrust_cmd[k + j], float(t[k + j]))
+            s = _step(plant, recording.thrust_cmd[k + j], float(t[k + j]), float(dt[k + j]))
             for h, n in enumerate(steps):
                 if n == j + 1:
-                    s, r = plant.state, k + n
+                    r = k + n
                     err["p"][i, h] = np.linalg.norm(s.p - recording.position[r])
                     err["v"][i, h] = np.linalg.norm(s.v - recording.velocity[r])
                     err["a"][i, h] = np.degrees(rotation_angle(s.R.T @ recording.rotation[r]))
