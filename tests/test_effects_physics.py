@@ -9,7 +9,6 @@ from quadfault.diagnosis.candidates import PublicContext
 from quadfault.diagnosis.library import build_library, predict
 from quadfault.diagnosis.residuals import prepare
 from quadfault.dynamics import RigidBodyState
-from quadfault.plant import Plant
 from quadfault.rotation import euler_zyx_to_rot
 from quadfault.scenarios import LinearVoltage, named_scenario
 from quadfault.simulator import SimConfig, simulate
@@ -71,26 +70,30 @@ def test_battery_factor_is_one_at_the_reference_and_a_power_law():
     assert fx.battery_factor(11.0, 12.0, 2.0) == pytest.approx((11.0 / 12.0) ** 2)
 
 
-def test_rotor_inertia_kick_in_the_plant_equals_kappa_times_the_thrust_step():
-    """A yaw-neutral thrust jump at rest (same step on the two rotors of each spin direction
-    would cancel; here one pair only): angular momentum change J_z dw_z = kappa sum s_i df_i
-    on top of the drag torque's."""
+def test_rotor_inertia_hook_gives_kappa_times_the_thrust_step_over_the_step():
+    """Through the plant protocol: the yaw moment over a physics step is
+    ``kappa sum_i s_i df_i / dt`` for the step of produced thrust, the same at every
+    integrator stage of the step, zero when the thrust holds; the signs come from the flown
+    vehicle's allocation."""
     veh = Vehicle()
+    e = fx.RotorInertia(0.004)
+    e.reset(4)
+    assert e.true_vehicle(veh) is veh
+    s = RigidBodyState.at_rest()
     dt = 1e-3
-
-    def yaw_rate_after(effects, steps=3):
-        plant = Plant(veh, lambda t: np.ones(4), effects=effects, dt=dt)
-        plant.reset(RigidBodyState.at_rest())
-        f0 = np.full(4, veh.hover_thrust)
-        f1 = f0 + np.array([0.2, 0.0, 0.2, 0.0])  # the yaw-sign -1 rotors spin up
-        plant.step(f0, 0.0)
-        for k in range(steps):
-            plant.step(f1, (k + 1) * dt)
-        return plant.state.w[2]
-
-    kappa = 0.004
-    kick = yaw_rate_after((fx.RotorInertia(kappa),)) - yaw_rate_after(())
-    assert kick == pytest.approx(kappa * (-0.2 - 0.2) / veh.inertia[2, 2], rel=1e-3)
+    f0 = np.full(4, veh.hover_thrust)
+    f1 = f0 + np.array([0.2, 0.0, 0.3, 0.0])
+    e.rotor_thrust(f0, 0.0, dt, s)
+    np.testing.assert_allclose(e.wrench(s, f0, 0.0)[1], 0.0)  # no step before the first
+    e.rotor_thrust(f1, dt, dt, s)
+    want = 0.004 * (np.sign(veh.allocation[3]) @ (f1 - f0)) / dt
+    for _ in range(4):  # every RK stage of the step
+        F, M = e.wrench(s, f1, dt)
+        np.testing.assert_allclose(F, 0.0)
+        np.testing.assert_allclose(M, [0.0, 0.0, want])
+    e.rotor_thrust(f1, 2 * dt, dt, s)
+    np.testing.assert_allclose(e.wrench(s, f1, 2 * dt)[1], 0.0)
+    assert want < 0  # rotors 1 and 3 carry yaw sign -1 in the paper's layout
 
 
 def test_thrust_rate_telescopes_over_blocks():
