@@ -141,7 +141,7 @@ def make_effect(name, delta, veh, rng_params, nominal_curve=None, duration=15.0)
     if name == "thrust_curve":
         nominal = nominal_curve or fx.thrust.IDENTITY_CURVE
         changes = np.clip(np.array([p["s0"] * 0.02, p["sign"] * 0.05, p["s2"] * 0.05]) * delta,
-                          -0.8, 0.8)
+                          -0.45, 0.45)  # inside the plausible bounds (+-0.5)
         return fx.ThrustCurve(tuple(fx.curve_from_changes(nominal, veh.hover_thrust, changes)),
                               nominal)
     if name == "mass":
