@@ -30,6 +30,7 @@ import numpy as np
 from quadfault.cli import main as cli
 from quadfault.effects import from_diagnosis
 from quadfault.effects.replay import replay_errors
+from quadfault.fileio import atomic_write_text
 from quadfault.recording import read_recording, sidecar_path, write_recording
 
 HORIZONS = (0.05, 0.1, 0.2, 0.5)
@@ -133,7 +134,7 @@ def main(argv=None) -> int:
         rows = run(paths, args.split, args.effects, args.starts)
     summary(rows)
     if args.out:
-        Path(args.out).write_text(json.dumps(rows, indent=1) + "\n")
+        atomic_write_text(args.out, json.dumps(rows, indent=1) + "\n", force=True)
     return 0
 
 

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from quadfault.cli import main as cli
+from quadfault.fileio import atomic_write_text
 from quadfault.recording import read_recording, write_recording
 
 LIBRARIES = ("motor_lag", "thrust_curve,motor_lag", "thrust_curve,motor_lag,inertia")
@@ -125,7 +126,7 @@ def main(argv=None) -> int:
             return 2
         rows = run(paths, segment, author)
     if args.out:
-        Path(args.out).write_text(json.dumps(rows, indent=1) + "\n")
+        atomic_write_text(args.out, json.dumps(rows, indent=1) + "\n", force=True)
     return 0
 
 
