@@ -28,7 +28,8 @@ def test_eschmann_motor_lag():
     from quadfault.diagnosis import Diagnosis
 
     res = Diagnosis().fit(_load("log10"))
-    assert set(res.untestable) == {"drag", "wind", "ground_effect"}
+    assert set(res.untestable) == {"drag", "wind", "ground_effect", "blade_flapping",
+                                   "battery_thrust"}
     assert res.verdict == "mismatch"
     timing = [e for e in res.effects if e.name == "motor_lag"]
     assert timing, res.effect_names

@@ -150,10 +150,8 @@ class Diagnosis:
         rec = recording.without_truth() if isinstance(recording, Recording) else recording
         rp = prepare(rec, vehicle, block_seconds=cfg.block_seconds, gap_factor=cfg.gap_factor,
                      saturate=cfg.saturate, internal_step=cfg.internal_step)
-        library = build_library(rp)
-        if cfg.effects is not None:
-            library = [c for c in library if c.name in cfg.effects]
-        untestable = [c.name for c in library if c.needs_pose and not rp.has_pose]
+        library = build_library(rp, cfg.effects)
+        untestable = [c.name for c in library if not c.testable(rp)]
         base_res = rp.measured - predict(rp, [])
         scale = noise_scale(rp, base_res)
         kw = dict(folds=cfg.folds, max_effects=cfg.max_effects,

@@ -13,7 +13,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from quadfault.diagnosis.library import thrust_series
+from quadfault.diagnosis.library import (
+    WrenchInputs,
+    body_vehicle,
+    external_wrench,
+    needs_rate,
+    thrust_series,
+)
 from quadfault.diagnosis.residuals import Replay
 from quadfault.dynamics import RigidBodyState, step_rk4
 from quadfault.rotation import rotation_angle
@@ -21,7 +27,9 @@ from quadfault.rotation import rotation_angle
 
 def _rollout(rec, rp: Replay, terms, starts, nh, max_steps=100):
     veh = rp.vehicle
-    f = thrust_series(rp, terms)
+    rated = needs_rate(terms)
+    f, f_end = thrust_series(rp, terms, ends=True) if rated else (thrust_series(rp, terms), None)
+    body = body_vehicle(veh, terms)
     kn = rp.knots
     P, V, Rm, W0 = rec.position[kn], rec.velocity[kn], rec.rotation[kn], rec.omega[kn]
     s = RigidBodyState(P[starts].copy(), V[starts].copy(), Rm[starts].copy(), W0[starts].copy())
@@ -37,19 +45,17 @@ def _rollout(rec, rp: Replay, terms, starts, nh, max_steps=100):
         idx = starts + (j + 1) * sub - 1
         W = veh.wrench(fm)
         T, M = W[:, 0], W[:, 1:]
+        rate = None
+        if rated:  # mean rate over the step: from the thrust held before it to its last one
+            before = np.maximum(span[:, 0] - 1, 0)
+            rate = (f_end[idx] - f_end[before]) / dt[:, None]
 
-        def external(st, T=T, M=M):
-            F = np.zeros(st.p.shape)
-            Mx = np.zeros(st.w.shape)
-            for c, x in wterms:
-                dF, dM = c.wrench(x, veh, st.R, st.v, st.w, T, M)
-                if dF is not None:
-                    F = F + dF
-                if dM is not None:
-                    Mx = Mx + dM
-            return F, Mx
+        def external(st, T=T, M=M, rate=rate):
+            F, Mx = external_wrench(wterms, WrenchInputs(veh, st.R, st.v, st.w, T, M, rate))
+            return (np.zeros(st.p.shape) if F is None else F,
+                    np.zeros(st.w.shape) if Mx is None else Mx)
 
-        s = step_rk4(s, T, M, veh, dt[:, None], external if wterms else None)
+        s = step_rk4(s, T, M, body, dt[:, None], external if wterms else None)
         curve[j] = np.sqrt(np.mean(np.sum((s.p - P[idx + 1]) ** 2, axis=1)))
     end = starts + n_steps * sub
     ep = np.linalg.norm(s.p - P[end], axis=1)

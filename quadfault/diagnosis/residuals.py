@@ -76,6 +76,10 @@ class Replay:
             ...), the duration-weighted merge matrix and the merged interval of each raw one):
             timing effects (delay, lag) act on the raw commands before merging, so merging
             does not bias their time constants; None when nothing was merged.
+        thrust_curve: the nominal ``(a, b, c)`` command-to-thrust curve of a ``u``-command
+            recording (``f = a + b u + c u^2``), None for thrust commands.
+        vbat: battery voltage [V] at each interval's midpoint (M,) (gaps in the stream
+            interpolated), or None when not logged.
     """
 
     vehicle: Vehicle
@@ -98,6 +102,8 @@ class Replay:
     scoring_note: str = ""
     starts: dict | None = None
     raw: dict | None = None
+    thrust_curve: tuple | None = None
+    vbat: np.ndarray | None = None
 
     @property
     def has_pose(self) -> bool:
@@ -255,13 +261,28 @@ def prepare(recording: Recording, vehicle: Vehicle | None = None, *,
                 f"{n_blocks} blocks: scored on all blocks (including calibration data)")
         scored[:] = True
         excluded = ()
+    curve = recording.thrust_curve if recording.commands_u is not None else None
+    vbat = _interval_voltage(recording, mean)
     rp = Replay(veh, tk, dtk, f, p_mid, v_mid, R_mid, w_mid, block, tc, dur, run,
                 np.zeros((n_blocks, 6)), channels, knots, scored, excluded, note, starts,
-                raw)
+                raw, curve, vbat)
     if acc is None:
         acc = rp.block_mean(sf)
     object.__setattr__(rp, "measured", np.hstack((acc, rate)))
     return rp
+
+
+def _interval_voltage(recording: Recording, mean) -> np.ndarray | None:
+    """Battery voltage at the (merged) interval midpoints, dropouts (NaN, <= 0) interpolated;
+    None without a usable ``vbat`` column."""
+    if recording.vbat is None:
+        return None
+    t, v = recording.t, np.asarray(recording.vbat, dtype=float)
+    ok = np.isfinite(v) & (v > 0)
+    if ok.sum() < 2:
+        return None
+    v = np.interp(t, t[ok], v[ok])
+    return mean(0.5 * (v[:-1] + v[1:]))
 
 
 def calibration_segments(recording: Recording, where: str = "recording") -> tuple:
@@ -285,10 +306,11 @@ def calibration_segments(recording: Recording, where: str = "recording") -> tupl
 
 
 def model_channels(rp: Replay, f: np.ndarray, force=None, moment_ext=None,
-                   thrust=None, moment=None) -> np.ndarray:
+                   thrust=None, moment=None, vehicle: Vehicle | None = None) -> np.ndarray:
     """Interval channels (M, 6) the model predicts for produced rotor thrusts ``f`` [N] and
-    external force (world) [N] / moment (body) [N m] (paper eqs. 2 and 4)."""
-    veh = rp.vehicle
+    external force (world) [N] / moment (body) [N m] (paper eqs. 2 and 4), for the rigid body
+    ``vehicle`` (default: the nominal one; another mass or inertia for body-stage effects)."""
+    veh = rp.vehicle if vehicle is None else vehicle
     if thrust is None or moment is None:
         wrench = veh.wrench(f)
         thrust, moment = wrench[:, 0], wrench[:, 1:]

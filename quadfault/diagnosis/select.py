@@ -80,7 +80,8 @@ def folds_of(n_blocks: int, k: int) -> list[np.ndarray]:
 #: response (inertia, efficiency) can fit that reaction instead of physics -- on a 1 kHz
 #: effect-free flight with thrust noise 0.05, least squares "finds" a 0.07 s motor lag.
 IV_CHECKED = frozenset({"motor_efficiency", "thrust_scale", "ground_effect", "delay", "motor_lag",
-                        "drag", "wind", "com_offset", "inertia"})
+                        "drag", "wind", "com_offset", "inertia", "blade_flapping", "rotor_inertia",
+                        "battery_thrust", "thrust_curve", "mass", "rate_damping"})
 IV_Z = 2.0  # the IV slope must be this many standard errors above 0
 #: least held-out gain of an effect whose signal the instrument cannot predict at all
 IV_UNVERIFIED_GAIN = 0.5
@@ -227,7 +228,8 @@ def select(rp: Replay, library: list[Candidate], scale: np.ndarray, *, folds: in
     for _ in range(max_effects):
         chosen = {c.name for c in current}
         pool = [c for c in library if c.name not in chosen and EXCLUSIVE.get(c.name) not in chosen
-                and (rp.has_pose or not c.needs_pose)]
+                and not chosen & set(c.excludes) and not any(c.name in o.excludes for o in current)
+                and c.testable(rp)]
         if not pool:
             break
         fits = []
