@@ -10,11 +10,16 @@ Part 2 (side by side, on the same recorded frames): the renderer as it runs (sta
 drawn once, moving artists blitted over them) against a full redraw of the same figure for
 every frame, in interleaved rounds (best round kept); prints both and their ratio.
 
-Every timing line carries the 1-minute load average: on a shared machine read the ratio and
+Part 3 (``--reference REV``): the renderer of git revision REV
+(``quad_fault_env/rendering.py`` read with ``git show``) against the current one, drawing the
+same environment state, in interleaved rounds (best kept, CPU time of this process).
+
+Every timing line carries the 1-minute load average: on a shared machine read the ratios and
 the CPU times.
 
     python benchmarks/bench_render.py                 # 300 frames
     python benchmarks/bench_render.py --steps 60      # a quick run
+    python benchmarks/bench_render.py --reference 3cc5532
 """
 
 from __future__ import annotations
@@ -105,16 +110,53 @@ def side_by_side(states, rounds: int) -> None:
           f"({_load()})")
 
 
+def against_revision(rev: str, rounds: int, frames: int = 40) -> None:
+    import subprocess
+    import sys
+    import types
+    from pathlib import Path
+
+    from quad_fault_env.envs.quad_fault import QuadFaultEnv
+    from quad_fault_env.rendering import FlightRenderer
+
+    repo = Path(__file__).resolve().parents[1]
+    source = subprocess.run(["git", "show", f"{rev}:quad_fault_env/rendering.py"], cwd=repo,
+                            capture_output=True, text=True, check=True).stdout
+    module = types.ModuleType("reference_rendering")
+    sys.modules[module.__name__] = module
+    exec(compile(source, f"{rev}:quad_fault_env/rendering.py", "exec"), module.__dict__)
+    env = QuadFaultEnv("irls", "combined", duration=20.0)
+    env.reset(seed=0)
+    for _ in range(150):
+        env.step(np.zeros(4, dtype=np.float32))
+    renderers = {rev: module.FlightRenderer(env.vehicle), "current": FlightRenderer(env.vehicle)}
+    best = {name: np.inf for name in renderers}
+    for r in renderers.values():
+        r.draw(env)
+    for _ in range(rounds):
+        for name, r in renderers.items():
+            c = time.process_time()
+            for _ in range(frames):
+                r.draw(env)
+            best[name] = min(best[name], (time.process_time() - c) / frames)
+    print(f"renderer of {rev} {best[rev] * 1e3:.1f} ms, current {best['current'] * 1e3:.1f} ms "
+          f"CPU per frame: {best[rev] / best['current']:.1f}x ({_load()})")
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--steps", type=int, default=300, help="frames (control steps, default 300)")
-    p.add_argument("--rounds", type=int, default=3, help="interleaved rounds of part 2")
+    p.add_argument("--rounds", type=int, default=3, help="interleaved rounds of parts 2 and 3")
+    p.add_argument("--reference", metavar="REV", help="also time the renderer of git revision "
+                   "REV against the current one")
     args = p.parse_args(argv)
     import matplotlib
 
     matplotlib.use("Agg")
     states = user_path(args.steps)
     side_by_side(states, args.rounds)
+    if args.reference:
+        against_revision(args.reference, args.rounds)
     return 0
 
 

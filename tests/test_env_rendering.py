@@ -150,3 +150,14 @@ def test_record_video_plays_in_real_time(tmp_path):
         # reset + one frame per step, at 100 frames per second of video
         assert clip.duration == pytest.approx((steps + 1) / 100, abs=0.011)
     assert info["t"] == pytest.approx(steps / 100)
+
+
+@pytest.mark.slow
+def test_render_benchmark_runs():
+    """``benchmarks/bench_render.py`` prints the frame time (no timing assertion here)."""
+    res = subprocess.run([sys.executable, str(REPO / "benchmarks" / "bench_render.py"),
+                          "--steps", "5", "--rounds", "1"], capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert "env.render(), 5 frames of 800x320 px: median" in res.stdout
+    assert "full / blitted" in res.stdout
