@@ -306,7 +306,7 @@ def save_agent(model, run_dir, *, force: bool = False) -> Path:
 
 
 def load_agent(path, env=None, device: str = "cpu"):
-    """Load a saved agent: ``path`` is a run folder or a ``.zip``.
+    """Load a saved agent: ``path`` is a run folder, its ``best/`` folder or a ``.zip``.
 
     Returns ``(model, venv)``: ``venv`` is ``env`` (a Gymnasium env or a VecEnv; ``None`` to
     build one from the saved ``train_config.json``) wrapped in the saved ``VecNormalize``
@@ -316,7 +316,10 @@ def load_agent(path, env=None, device: str = "cpu"):
     from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecNormalize
 
     path = Path(path)
-    zip_path = path / MODEL_FILE if path.is_dir() else path
+    zip_path = path
+    if path.is_dir():  # a run folder, or its best/ folder
+        zip_path = next((path / n for n in (MODEL_FILE, "best_model.zip")
+                         if (path / n).exists()), path / MODEL_FILE)
     if not zip_path.exists():
         raise QuadfaultError(f"{zip_path}: no saved model there")
     folder = zip_path.parent

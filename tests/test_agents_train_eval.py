@@ -115,7 +115,7 @@ def test_best_model_comes_from_fixed_seeded_episodes(tmp_path, capsys):
     np.testing.assert_array_equal(data["baseline_results"], returns)
     np.testing.assert_array_equal(data["baseline_ep_lengths"], lengths)
     assert len(set(np.round(returns, 9))) > 1  # ten different episodes, not one repeated
-    model, venv = load_agent(run / "best" / "best_model.zip")
+    model, venv = load_agent(run / "best")  # best/best_model.zip with its statistics
     best = data["results"].mean(axis=1).argmax()
     again, _ = evaluate_episodes(model, env, seeds, venv)
     np.testing.assert_allclose(again, data["results"][best], rtol=0, atol=1e-9)
