@@ -273,11 +273,15 @@ def train_one(config: TrainConfig, seed: int, run_dir: Path, *, force: bool = Fa
         if config.vec_normalize:
             env = VecNormalize(env, norm_obs=True, norm_reward=True)
         algo_cls = {"ppo": sb3.PPO, "sac": sb3.SAC}[config.algo]
+        kwargs = dict(config.algo_kwargs)
+        if isinstance(kwargs.get("train_freq"), list):  # JSON has no tuples: [1, "episode"]
+            kwargs["train_freq"] = tuple(kwargs["train_freq"])
         try:
             model = algo_cls(policy, env, seed=seed, device=config.device, verbose=0,
-                             tensorboard_log=config.tensorboard, **config.algo_kwargs)
-        except TypeError as exc:
-            raise ConfigError(f"algo_kwargs rejected by {config.algo.upper()}: {exc}") from None
+                             tensorboard_log=config.tensorboard, **kwargs)
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(f"algo_kwargs rejected by {config.algo.upper()}: "
+                              f"{' '.join(str(exc).split())}") from None
         rollout = steps_per_rollout(model)
         total = planned_timesteps(config.timesteps, rollout)
         if total != config.timesteps and not quiet:

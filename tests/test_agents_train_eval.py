@@ -55,6 +55,28 @@ def test_cli_runs_whole_rollouts_and_says_so(tmp_path, capsys):
 
 
 @pytest.mark.rl
+def test_sac_budget_in_steps_and_episode_train_freq_refused(tmp_path, capsys):
+    pytest.importorskip("stable_baselines3")
+    from quadfault.cli import main
+
+    sac = ["train", "--algo", "sac", "--env-kwargs", json.dumps(TINY_ENV), "--eval-freq", "64",
+           "--eval-episodes", "1"]
+    code = main([*sac, "--timesteps", "50", "--out", str(tmp_path / "sac"), "--algo-kwargs",
+                 '{"learning_starts": 16, "batch_size": 16, "buffer_size": 500}'])
+    out, err = capsys.readouterr()
+    assert code == 0 and "sac seed 0: 50 steps" in out and "rollouts of" not in out, err
+    code = main([*sac, "--timesteps", "50", "--out", str(tmp_path / "episodes"),
+                 "--algo-kwargs", '{"train_freq": [1, "episode"]}'])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "train_freq" in err[0]
+    # a value SB3 itself rejects is one line too, not its traceback
+    code = main([*sac, "--out", str(tmp_path / "bad"), "--algo-kwargs",
+                 '{"train_freq": ["many", "step"]}'])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "algo_kwargs rejected by SAC" in err[0]
+
+
+@pytest.mark.rl
 def test_dict_observation_picks_multi_input_policy(tmp_path, capsys):
     pytest.importorskip("stable_baselines3")
     from agents.train import load_agent
