@@ -18,6 +18,7 @@ import numpy as np
 
 from quad_fault_env.envs.episode_start import RowTrajectories
 from quadfault.controller import ControllerConfig, GeometricController
+from quadfault.scenarios import at_times
 from quadfault.vehicle import Vehicle
 
 #: control steps per window
@@ -93,7 +94,7 @@ class RowTimeTables:
             self.refs[r] = block
         for key, k0, idx in _combo_groups(sched_key[rows], kr):
             tsub = (k0 * S + np.arange(WINDOW * S + 1)) * dt  # t = (k S + j) dt
-            self.eta[rows[idx]] = _as_rows(schedules[key](tsub), len(tsub))
+            self.eta[rows[idx]] = _as_rows(at_times(schedules[key], tsub), len(tsub))
         self.k0[rows] = kr
 
     def references(self, k: np.ndarray) -> np.ndarray:

@@ -8,6 +8,7 @@ The physics parameters live in the core package (:class:`quadfault.vehicle.Vehic
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,6 +19,8 @@ ACTION_MODES = ("motor", "residual", "wrench")
 ESTIMATOR_RATES = ("physics", "control")
 OBSERVATION_KINDS = ("flat", "dict")
 TERMINATION_REASONS = ("crash", "out_of_bounds", "excessive_tilt", "non_finite")
+#: trajectories of random scenarios (``quadfault.scenarios.random_scenario``)
+RANDOM_TRAJECTORIES = ("random", "circle", "hover", "lissajous")
 
 
 def _check_nonnegative(obj, names):
@@ -172,3 +175,67 @@ def validate_action(action, shape: tuple, name: str = "action") -> np.ndarray:
     if np.any(np.abs(a) > 1.0 + 1e-6):
         raise ValueError(f"{name} outside [-1, 1]: {a.tolist()} (the agent must clip)")
     return np.clip(a, -1.0, 1.0)
+
+
+def number_at_least(value, low: float) -> bool:
+    """Whether ``value`` is a finite real number >= ``low``."""
+    return (isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+            and math.isfinite(value) and value >= low)
+
+
+#: keywords of ``random_faults``: (low, high) ranges and probabilities of ``random_scenario``
+_RANGE_KEYS = ("n_faults", "severity", "xi_range", "thrust_noise")
+_PROB_KEYS = ("degradation_prob", "ramp_prob")
+
+
+def check_random_faults(spec) -> dict:
+    """Validate ``random_faults`` (None: the defaults of ``random_scenario``)."""
+    if spec is None:
+        return {}
+    if not isinstance(spec, dict):
+        raise ConfigError(f"random_faults must be a dict of random_scenario keywords, got {spec!r}")
+    out = {}
+    for key, value in spec.items():
+        if key in _PROB_KEYS:
+            if not (number_at_least(value, 0.0) and value <= 1.0):
+                raise ConfigError(f"random_faults[{key!r}] must be a probability in [0, 1], "
+                                  f"got {value!r}")
+            out[key] = float(value)
+        elif key in _RANGE_KEYS:
+            try:
+                low, high = (float(v) for v in value)
+            except (TypeError, ValueError):
+                raise ConfigError(f"random_faults[{key!r}] must be a (low, high) pair, "
+                                  f"got {value!r}") from None
+            if not (math.isfinite(low) and math.isfinite(high) and 0.0 <= low <= high):
+                raise ConfigError(f"random_faults[{key!r}] must satisfy 0 <= low <= high, "
+                                  f"got {value!r}")
+            if key == "n_faults":
+                if low != int(low) or high != int(high):
+                    raise ConfigError(f"random_faults['n_faults'] must be whole numbers, "
+                                      f"got {value!r}")
+                out[key] = (int(low), int(high))
+            elif key == "severity" and high > 1.0:
+                raise ConfigError(f"random_faults['severity'] levels are efficiencies in "
+                                  f"[0, 1], got {value!r}")
+            else:
+                out[key] = (low, high)
+        else:
+            raise ConfigError(f"random_faults has unknown key {key!r}; choose from "
+                              f"{', '.join(_RANGE_KEYS + _PROB_KEYS)}")
+    return out
+
+
+#: values the deprecated ``physics`` keyword of the environments accepted
+PHYSICS_BACKENDS = ("auto", "numpy", "numba")
+
+
+def deprecated_physics(physics) -> None:
+    """Accept the deprecated ``physics`` keyword (no effect) with a ``DeprecationWarning``."""
+    if physics is None:
+        return
+    if not isinstance(physics, str) or physics not in PHYSICS_BACKENDS:
+        raise ConfigError(f"physics must be one of {PHYSICS_BACKENDS}, got {physics!r}")
+    warnings.warn("the 'physics' keyword is deprecated and has no effect: the environment has "
+                  "one (compiled) implementation of the physics", DeprecationWarning,
+                  stacklevel=3)
