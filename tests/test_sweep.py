@@ -56,7 +56,7 @@ def test_bad_backend_and_workers_are_config_errors(capsys):
         run_sweep(_square, [1], backend="slurm")
     with pytest.raises(ConfigError, match="workers"):
         run_sweep(_square, [1], workers=0)
-    assert main(["blinded", "--n", "0"]) == 2
+    assert main(["evaluate", "--out", "unused", "--workers", "0"]) == 2
     assert "error:" in capsys.readouterr().err
 
 
