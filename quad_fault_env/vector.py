@@ -31,12 +31,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from quad_fault_env.envs.config import (
-    RewardConfig,
-    TerminationLimits,
-    deprecated_physics,
-    validate_action,
-)
+from quad_fault_env.envs.config import deprecated_physics, validate_action
 from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.estimation import NOMINAL_PRIOR_SD
@@ -82,29 +77,6 @@ class _Table:
             except TypeError:
                 pass
         return k
-
-
-def batched_reward(cfg: RewardConfig, pos_err, vel_err, f_cmd, f_max: float, terminated):
-    """:class:`RewardConfig` over a batch (the same formula, rows (N, 3)); (N,) float64."""
-    track = np.linalg.norm(pos_err, axis=-1) + cfg.velocity_weight * np.linalg.norm(vel_err,
-                                                                                    axis=-1)
-    effort = np.mean((np.asarray(f_cmd) / f_max) ** 2, axis=-1)
-    r = np.exp(-track / cfg.position_scale) - cfg.effort_weight * effort
-    r = r - np.where(terminated, cfg.termination_penalty, 0.0)
-    return np.where(np.isfinite(r), r, 0.0)
-
-
-def batched_termination(limits: TerminationLimits, p, R, p_ref) -> np.ndarray:
-    """:meth:`TerminationLimits.reason` over a batch: object array of reasons or None."""
-    reason = np.full(len(p), None, dtype=object)
-    finite = np.isfinite(p).all(-1) & np.isfinite(R).all((-1, -2))
-    tilt = np.arccos(np.clip(np.nan_to_num(R[:, 2, 2]), -1.0, 1.0)) > limits.max_tilt
-    checks = (("excessive_tilt", tilt),
-              ("out_of_bounds", np.linalg.norm(p - p_ref, axis=-1) > limits.max_position_error),
-              ("crash", -p[:, 2] < limits.ground_altitude), ("non_finite", ~finite))
-    for name, hit in checks:  # last assignment wins: the single env's order of precedence
-        reason[hit] = name
-    return reason
 
 
 class QuadFaultVectorEnv(VectorEnv):
@@ -418,7 +390,7 @@ class QuadFaultVectorEnv(VectorEnv):
         state = self.state
         ref1 = self._tables.references(self.steps)  # k - k0 <= WINDOW: still in the window
         refs = ref1[:, 0], ref1[:, 1], ref1[:, 2]
-        reason = batched_termination(self.envs[0].limits, state.p, state.R, refs[0])
+        reason = self.envs[0].limits.reasons(state.p, state.R, refs[0])
         reason[resetting] = None
         terminated = np.not_equal(reason, None) & ~resetting
         truncated = ~terminated & (self.steps >= self.max_steps)
@@ -433,7 +405,7 @@ class QuadFaultVectorEnv(VectorEnv):
         for m, x in zip(self.meas, state):
             m[terminated] = x[terminated]
         self.eta_true = eta_all[:, S].copy()
-        reward = batched_reward(self.envs[0].reward_config, state.p - refs[0],
+        reward = self.envs[0].reward_config(state.p - refs[0],
                                 state.v - refs[1], self.f_cmd, self.vehicle.rotor_max_thrust,
                                 terminated)
         done = terminated | truncated
@@ -498,4 +470,4 @@ class QuadFaultVectorEnv(VectorEnv):
             env.close()
 
 
-__all__ = ["AUTORESET_MODES", "QuadFaultVectorEnv", "batched_reward", "batched_termination"]
+__all__ = ["AUTORESET_MODES", "QuadFaultVectorEnv"]

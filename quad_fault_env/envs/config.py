@@ -91,11 +91,16 @@ class RewardConfig:
         if not (math.isfinite(self.position_scale) and self.position_scale > 0):
             raise ConfigError(f"position_scale must be positive [m], got {self.position_scale!r}")
 
-    def __call__(self, pos_err, vel_err, f_cmd, f_max: float, terminated: bool) -> float:
-        track = np.linalg.norm(pos_err) + self.velocity_weight * np.linalg.norm(vel_err)
-        effort = float(np.mean((np.asarray(f_cmd) / f_max) ** 2))
-        r = math.exp(-track / self.position_scale) - self.effort_weight * effort
-        return float(r - (self.termination_penalty if terminated else 0.0))
+    def __call__(self, pos_err, vel_err, f_cmd, f_max: float, terminated):
+        """The reward (0 where it is not finite); batched over leading axes (the vector env:
+        rows (N, 3), ``terminated`` (N,)), a float for one vehicle."""
+        track = (np.linalg.norm(pos_err, axis=-1)
+                 + self.velocity_weight * np.linalg.norm(vel_err, axis=-1))
+        effort = np.mean((np.asarray(f_cmd) / f_max) ** 2, axis=-1)
+        r = np.exp(-track / self.position_scale) - self.effort_weight * effort
+        r = r - np.where(terminated, self.termination_penalty, 0.0)
+        r = np.where(np.isfinite(r), r, 0.0)
+        return float(r) if r.ndim == 0 else r
 
 
 @dataclass(frozen=True)
@@ -123,17 +128,25 @@ class TerminationLimits:
         if not (0 < self.max_tilt <= math.pi):
             raise ConfigError(f"max_tilt must be in (0, pi] [rad], got {self.max_tilt!r}")
 
+    def reasons(self, p, R, p_ref) -> np.ndarray:
+        """Termination reasons of true positions ``p`` (N, 3), attitudes ``R`` (N, 3, 3)
+        against the references ``p_ref`` (N, 3): an object array of names or None."""
+        p, R = np.asarray(p, dtype=float), np.asarray(R, dtype=float)
+        reason = np.full(len(p), None, dtype=object)
+        finite = np.isfinite(p).all(-1) & np.isfinite(R).all((-1, -2))
+        with np.errstate(invalid="ignore"):
+            tilt = np.arccos(np.clip(np.nan_to_num(R[:, 2, 2]), -1.0, 1.0)) > self.max_tilt
+            checks = (("excessive_tilt", tilt),
+                      ("out_of_bounds", np.linalg.norm(p - p_ref, axis=-1)
+                       > self.max_position_error),
+                      ("crash", -p[:, 2] < self.ground_altitude), ("non_finite", ~finite))
+        for name, hit in checks:  # the last assignment wins: non_finite, crash, out of bounds
+            reason[hit] = name
+        return reason
+
     def reason(self, p, R, p_ref) -> str | None:
-        """The termination reason for true position ``p``, attitude ``R``, or None."""
-        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(R))):
-            return "non_finite"
-        if -p[2] < self.ground_altitude:
-            return "crash"
-        if np.linalg.norm(p - p_ref) > self.max_position_error:
-            return "out_of_bounds"
-        if math.acos(float(np.clip(R[2, 2], -1.0, 1.0))) > self.max_tilt:
-            return "excessive_tilt"
-        return None
+        """The termination reason for one true position ``p``, attitude ``R``, or None."""
+        return self.reasons(np.asarray(p)[None], np.asarray(R)[None], np.asarray(p_ref)[None])[0]
 
 
 @dataclass(frozen=True)

@@ -16,8 +16,6 @@ baseline controller is the core :class:`quadfault.controller.GeometricController
 
 from __future__ import annotations
 
-import math
-
 import gymnasium as gym
 import numpy as np
 
@@ -415,8 +413,7 @@ class QuadFaultEnv(gym.Env):
         info = self._info(samples, eta_true, sf, events, reason, ref, eta_t1)
         if self.render_mode == "human":
             self.render()
-        return self._observation(ref), (0.0 if not math.isfinite(reward) else reward), \
-            terminated, truncated, info
+        return self._observation(ref), reward, terminated, truncated, info
 
     # -- observation and info ----------------------------------------------------------------
     def _observation(self, ref):
