@@ -35,7 +35,6 @@ from quad_fault_env.envs.config import deprecated_physics, validate_action
 from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.estimation import NOMINAL_PRIOR_SD
-from quad_fault_env.observation import SD_MAX
 from quad_fault_env.time_tables import WINDOW, RowTimeTables
 from quadfault import closed_loop
 from quadfault.controller import GeometricController
@@ -46,7 +45,6 @@ from quadfault.plant import Plant
 
 NOISE_STREAMS = ("per_env", "shared")
 AUTORESET_MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
-_BIG = float(np.finfo(np.float32).max / 2)
 
 
 def _groups(keys: np.ndarray):
@@ -322,24 +320,16 @@ class QuadFaultVectorEnv(VectorEnv):
     def _check_actions(self, actions) -> np.ndarray:
         return validate_action(actions, self.action_space.shape, "actions")
 
-    def _motor_commands(self, a: np.ndarray, t: np.ndarray, refs: np.ndarray) -> np.ndarray:
-        """``QuadFaultEnv.motor_commands`` over the batch (rows share the same formulas);
-        ``refs`` (N, 6, 3) the controller's reference rows at ``t`` (see ``time_tables``)."""
+    def _motor_commands(self, a: np.ndarray, refs: np.ndarray) -> np.ndarray:
+        """``QuadFaultEnv.motor_commands`` for every row (``ActionConfig.commands``); ``refs``
+        (N, 6, 3) the controller's reference rows at the step's start (``time_tables``)."""
         e0 = self.envs[0]
-        cfg, f_max, veh = e0.action_config, e0.f_max, self.vehicle
-        if cfg.mode == "motor":
-            f = 0.5 * (a + 1.0) * f_max
-        elif cfg.mode == "wrench":
-            thrust = 0.5 * (a[:, :1] + 1.0) * veh.n_rotors * f_max
-            f = veh.rotor_thrust(np.concatenate((thrust, a[:, 1:] * np.asarray(cfg.moment_scale)),
-                                                axis=1))
-        else:
+        cfg = e0.action_config
+        f_ctrl = None
+        if cfg.mode == "residual":
             m = self.meas
             f_ctrl = self._controller.commands(m.p, m.v, m.R, m.w, refs)
-            if e0.compensate:
-                f_ctrl = f_ctrl / np.clip(self.eta_hat, 0.1, None)
-            f = f_ctrl + cfg.residual_scale * a
-        return np.clip(f, 0.0, f_max)
+        return cfg.commands(a, self.vehicle, f_ctrl, self.eta_hat, e0.compensate)
 
     def _substeps(self, eta: np.ndarray, ts: np.ndarray, active: np.ndarray) -> None:
         """The control step's physics substeps of the ``active`` rows in one call of the loop
@@ -380,9 +370,8 @@ class QuadFaultVectorEnv(VectorEnv):
         S = self.substeps
         resetting = self._needs_reset.copy()
         k0 = self.steps * S
-        t0 = k0 * self.dt
         self._ensure_tables(self.steps, WINDOW - 1)
-        self.f_cmd[:] = self._motor_commands(a, t0, self._tables.references(self.steps))
+        self.f_cmd[:] = self._motor_commands(a, self._tables.references(self.steps))
         ts = (k0[:, None] + np.arange(S)[None, :]) * self.dt
         eta_all = self._tables.efficiency(self.steps)  # S substeps, then the step's end
         self._substeps(eta_all[:, :S], ts, ~resetting)
@@ -432,19 +421,11 @@ class QuadFaultVectorEnv(VectorEnv):
 
     # -- observation and info ----------------------------------------------------------------
     def _observations(self, refs):
-        """``ObservationLayout.values`` over the batch (same slots, clipping and NaN fills)."""
+        """The sub-envs' observations (``ObservationLayout.flat`` over the batch)."""
         m, (pos, vel, acc) = self.meas, refs
-        raw = {"pos_err": m.p - pos, "vel_err": m.v - vel,
-               "rot6": np.concatenate((m.R[:, :, 0], m.R[:, :, 1]), axis=1), "omega": m.w,
-               "eta_hat": self.eta_hat, "eta_sd": self.eta_sd, "ref_acc": acc}
-        out = {}
-        for s in self.layout.slots:
-            fill = SD_MAX if s.name == "eta_sd" else 0.0
-            value = np.nan_to_num(raw[s.name], nan=fill, posinf=_BIG, neginf=-_BIG)
-            out[s.name] = np.clip(value, max(s.low, -_BIG), min(s.high, _BIG)).astype(np.float32)
-        if self.envs[0].observation_kind == "dict":
-            return out
-        return np.concatenate([out[s.name] for s in self.layout.slots], axis=1)
+        flat = self.layout.flat(pos_err=m.p - pos, vel_err=m.v - vel, R=m.R, omega=m.w,
+                                eta_hat=self.eta_hat, eta_sd=self.eta_sd, ref_acc=acc)
+        return self.layout.split(flat) if self.envs[0].observation_kind == "dict" else flat
 
     def _infos(self, refs, reason) -> dict:
         N = self.num_envs

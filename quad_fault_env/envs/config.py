@@ -63,6 +63,24 @@ class ActionConfig:
                               f"got {self.moment_scale!r}")
         object.__setattr__(self, "moment_scale", ms)
 
+    def commands(self, action: np.ndarray, vehicle, f_ctrl=None, eta_hat=None,
+                 compensate: bool = False) -> np.ndarray:
+        """Rotor thrust commands [N] for checked actions ``(..., 4)`` (one vehicle or a
+        batch); ``f_ctrl`` the geometric controller's commands [N] (residual mode), divided by
+        ``eta_hat`` (floored at 0.1) with ``compensate``."""
+        f_max = vehicle.rotor_max_thrust
+        if self.mode == "motor":
+            f = 0.5 * (action + 1.0) * f_max
+        elif self.mode == "wrench":
+            thrust = 0.5 * (action[..., :1] + 1.0) * vehicle.n_rotors * f_max
+            f = vehicle.rotor_thrust(np.concatenate(
+                (thrust, action[..., 1:] * np.asarray(self.moment_scale)), axis=-1))
+        else:
+            if compensate:
+                f_ctrl = f_ctrl / np.clip(eta_hat, 0.1, None)
+            f = f_ctrl + self.residual_scale * action
+        return np.clip(f, 0.0, f_max)
+
 
 @dataclass(frozen=True)
 class RewardConfig:

@@ -42,7 +42,7 @@ from quad_fault_env.estimation import (
     estimate_sd,
     make_estimator,
 )
-from quad_fault_env.observation import SD_MAX, ObservationLayout
+from quad_fault_env.observation import ObservationLayout
 from quad_fault_env.time_tables import WINDOW, RowTimeTables
 from quadfault import closed_loop
 from quadfault.controller import ControllerConfig, GeometricController
@@ -208,11 +208,6 @@ class QuadFaultEnv(gym.Env):
         self.layout = ObservationLayout(reference_acceleration)
         self.observation_space = (self.layout.flat_space() if observation == "flat"
                                   else self.layout.dict_space())
-        # per element of the flat layout: lower and upper bound, NaN fill (see _observation)
-        self._obs_bounds = tuple(np.concatenate([np.full(s.size, x(s), dtype=float)
-                                                 for s in self.layout.slots])
-                                 for x in (lambda s: s.low, lambda s: s.high,
-                                           lambda s: SD_MAX if s.name == "eta_sd" else 0.0))
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(self.vehicle.n_rotors,),
                                            dtype=np.float32)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -333,19 +328,9 @@ class QuadFaultEnv(gym.Env):
 
     def motor_commands(self, action: np.ndarray, t: float, meas: RigidBodyState) -> np.ndarray:
         """Rotor thrust commands [N] for a checked ``action`` (see ``ActionConfig``)."""
-        cfg, f_max = self.action_config, self.f_max
-        if cfg.mode == "motor":
-            f = 0.5 * (action + 1.0) * f_max
-        elif cfg.mode == "wrench":
-            thrust = 0.5 * (action[0] + 1.0) * self.vehicle.n_rotors * f_max
-            moment = action[1:] * np.asarray(cfg.moment_scale)
-            f = self.vehicle.rotor_thrust(np.concatenate(([thrust], moment)))
-        else:
-            f_ctrl = self._controller_commands(t, meas)
-            if self.compensate:
-                f_ctrl = f_ctrl / np.clip(self._estimate.eta, 0.1, None)
-            f = f_ctrl + cfg.residual_scale * action
-        return np.clip(f, 0.0, f_max)
+        cfg = self.action_config
+        f_ctrl = self._controller_commands(t, meas) if cfg.mode == "residual" else None
+        return cfg.commands(action, self.vehicle, f_ctrl, self._estimate.eta, self.compensate)
 
     def _controller_commands(self, t: float, meas: RigidBodyState) -> np.ndarray:
         """The geometric controller's rotor commands [N] (eqs. 5-10, nominal allocation); at
@@ -417,24 +402,13 @@ class QuadFaultEnv(gym.Env):
 
     # -- observation and info ----------------------------------------------------------------
     def _observation(self, ref):
-        """The observation at the end of the step; ``ref`` is the reference at that time.
-
-        The numbers of ``ObservationLayout.values`` (NaN -> the slot's fill, clipped into the
-        slot's bounds, float32) in one vector operation over the flat layout."""
+        """The observation at the end of the step (``ObservationLayout.flat``); ``ref`` is
+        the reference at that time."""
         m, n = self._meas, self.vehicle.n_rotors
-        sd = estimate_sd(self._estimate, n)
-        lo, hi, fill = self._obs_bounds
-        raw = {"pos_err": m.p - ref.position, "vel_err": m.v - ref.velocity,
-               "rot6": (m.R[:, 0], m.R[:, 1]), "omega": m.w,
-               "eta_hat": np.broadcast_to(np.asarray(self._estimate.eta, dtype=float), (n,)),
-               "eta_sd": np.full(n, SD_MAX) if sd is None else sd, "ref_acc": ref.acceleration}
-        x = np.concatenate([a for s in self.layout.slots
-                            for a in (raw[s.name] if s.name == "rot6" else (raw[s.name],))])
-        x = np.where(np.isnan(x), fill, x)
-        flat = np.clip(x, lo, hi).astype(np.float32)
-        if self.observation_kind == "flat":
-            return flat
-        return {s.name: flat[self.layout.slice(s.name)].copy() for s in self.layout.slots}
+        flat = self.layout.flat(pos_err=m.p - ref.position, vel_err=m.v - ref.velocity, R=m.R,
+                                omega=m.w, eta_hat=self._estimate.eta,
+                                eta_sd=estimate_sd(self._estimate, n), ref_acc=ref.acceleration)
+        return flat if self.observation_kind == "flat" else self.layout.split(flat)
 
     def _info(self, samples, eta_true, sf, events, reason, ref, eta_t=None) -> dict:
         t = self.time
