@@ -12,24 +12,16 @@ returns ``[fn(t) for t in tasks]`` in task order, computed
 ``fn`` must be a module-level function (picklable) and each task deterministic in its own
 arguments (seeds travel inside the task), so every backend gives the same results.
 
-Sweeps built on it (the existing code is called, not rewritten):
-
-* :func:`evaluate_sweep` -- agents x scenarios x seeds of :mod:`agents.evaluate`, the same
-  flights in the same order as :func:`agents.evaluate.evaluate`;
-* the blinded diagnosis study (``python benchmarks/blinded_study.py --backend ray``).
-
-Command line::
-
-    python -m agents.sweep evaluate --out results/ --seeds 0 1 2 --backend ray --workers 8
+Sweeps on it: :func:`agents.evaluate.evaluate` (agents x scenarios x seeds;
+``quadfault evaluate --backend ray --workers 8``) and the blinded diagnosis study
+(``python benchmarks/blinded_study.py --backend ray``).
 """
 
 from __future__ import annotations
 
-import argparse
 import os
-import sys
 
-from quadfault.errors import ConfigError, QuadfaultError
+from quadfault.errors import ConfigError
 
 BACKENDS = ("serial", "local", "ray")
 
@@ -93,44 +85,3 @@ def run_sweep(fn, tasks, *, backend: str = "local", workers: int | None = None,
         return ray.get(refs)
     finally:
         bar.close()
-
-
-# -- evaluation sweep (agents x scenarios x seeds) ---------------------------------------------
-def evaluate_sweep(agents, suite: str, seeds, *, scenarios=None, config=None, duration=None,
-                   backend: str = "local", workers: int | None = None, progress: bool = False):
-    """:func:`agents.evaluate.evaluate` on a backend: the same list of ``Flight`` records."""
-    from agents.evaluate import evaluate
-
-    return evaluate(agents, suite, seeds, scenarios=scenarios, config=config,
-                    duration=duration, progress=progress, backend=backend, workers=workers)
-
-
-# -- command line ----------------------------------------------------------------------------------
-def _add_backend(parser):
-    parser.add_argument("--backend", choices=BACKENDS, default="local",
-                        help="where the tasks run (default local processes)")
-    parser.add_argument("--workers", type=int, default=None,
-                        help="processes / Ray CPUs (default: all cores)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar or table")
-
-
-def main(argv=None) -> int:
-    import agents.evaluate as ev
-
-    parser = argparse.ArgumentParser(prog="python -m agents.sweep",
-                                     description=__doc__.split("\n")[0])
-    sub = parser.add_subparsers(dest="what", required=True)
-    p_eval = sub.add_parser("evaluate", help="agents x scenarios x seeds (agents.evaluate)")
-    ev.add_arguments(p_eval)
-    _add_backend(p_eval)
-    args = parser.parse_args(argv)
-    try:
-        _check_workers(args.workers)
-        return ev.run(args)  # reads args.backend and args.workers
-    except QuadfaultError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-
-
-if __name__ == "__main__":  # pragma: no cover
-    raise SystemExit(main())
