@@ -172,6 +172,7 @@ def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any =
     tables = closed_loop.Tables(np.zeros(1, dtype=np.int64), eta_table[None],
                                 np.zeros((1, 0, 6, 3)))
     vehicles, no_records = plant.vehicles, closed_loop.Records.none(1, veh.n_rotors)
+    gens = closed_loop.generators([rng])
     decim = cfg.control_decimation
     pos_err, tilt, f_hist = np.empty(n), np.empty(n), np.empty((n, 4))
     keep = np.arange(0, n, cfg.trace_every)
@@ -194,7 +195,7 @@ def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any =
                 or state.p[2] > lim.ground_z):
             crash_time, k_end = float(t), k
             break
-        closed_loop.sense(rng, loop, vehicles)
+        closed_loop.sense(gens, loop, vehicles)
         meas = vehicles.measurement(0)
         if k % decim == 0:
             ref_k = type(refs)(*(a[k] for a in refs))
@@ -210,7 +211,7 @@ def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any =
             j = k // cfg.trace_every
             tr_p[j], tr_eta_hat[j], tr_wz[j] = state.p, eta_hat, state.w[2]
         vehicles.f_cmd[0] = f_cmd
-        closed_loop.fly(rng, k, k + 1, False, loop, vehicles, tables, no_records)
+        closed_loop.fly(gens, k, k + 1, False, loop, vehicles, tables, no_records)
         if k % cfg.trace_every == 0:
             tr_eta[k // cfg.trace_every] = eta_table[k]
         if k % cfg.estimator_every == 0:

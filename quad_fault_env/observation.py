@@ -107,16 +107,16 @@ class ObservationLayout:
         means "none given" (``SD_MAX``)."""
         R = np.asarray(R, dtype=float)
         batch = R.shape[:-2]
-        raw = {"pos_err": pos_err, "vel_err": vel_err, "rot6": None, "omega": omega,
-               "eta_hat": eta_hat, "eta_sd": SD_MAX if eta_sd is None else eta_sd,
-               "ref_acc": ref_acc}
+        raw = {"pos_err": pos_err, "vel_err": vel_err, "omega": omega, "eta_hat": eta_hat,
+               "eta_sd": SD_MAX if eta_sd is None else eta_sd, "ref_acc": ref_acc}
         parts = []
         for s in self.slots:
             if s.name == "rot6":
                 parts += [R[..., :, 0], R[..., :, 1]]
-            else:
-                parts.append(np.broadcast_to(np.asarray(raw[s.name], dtype=float),
-                                             batch + (s.size,)))
+                continue
+            x = np.asarray(raw[s.name], dtype=float)
+            parts.append(x if x.shape == batch + (s.size,) else
+                         np.broadcast_to(x, batch + (s.size,)))
         return self._bounded(np.concatenate(parts, axis=-1))
 
     def _bounded(self, x: np.ndarray, where=None) -> np.ndarray:
@@ -124,7 +124,7 @@ class ObservationLayout:
         clipped, float32."""
         sl = where if where is not None else Ellipsis
         x = np.where(np.isnan(x), self._fill[sl], x)
-        return np.clip(x, self._low[sl], self._high[sl]).astype(np.float32)
+        return np.minimum(np.maximum(x, self._low[sl]), self._high[sl]).astype(np.float32)
 
     def values(self, **slots) -> dict:
         """Slot values (float32, NaN filled, clipped into their bounds) as a dict; the

@@ -45,6 +45,7 @@ from quadfault.controller import (
     reference_row,
     rotor_commands,
 )
+from quadfault.errors import ConfigError
 from quadfault.dynamics import (
     reference_euler_step,
     reference_euler_store,
@@ -178,7 +179,7 @@ def _allocate(A, f):
     return T, (m0, m1, m2)
 
 
-@jit(inline="always")
+@jit
 def _tuples(C):
     """The kernels' tuples of :class:`LoopConstants`: the true rigid body and the sensors."""
     rigid = (C.mass, C.gravity, mat3(C.inertia), mat3(C.inertia_inverse))
@@ -190,7 +191,8 @@ def _tuples(C):
 def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx):
     """Steps ``k0 .. k1-1`` of vehicle ``i`` (see the module docstring), drawing from
     ``gen``; ``C`` the :class:`LoopConstants`, ``K`` the controller's
-    :class:`~quadfault.controller.ControllerConstants`, ``V`` the :class:`Vehicles` (updated), ``T``
+    :class:`~quadfault.controller.ControllerConstants` of the controller in the loop (None: the
+    caller sets ``V.f_cmd``), ``V`` the :class:`Vehicles` (updated), ``T``
     the :class:`Tables`, ``out`` the :class:`Records`, ``fx`` the effects hook (None: none).
     With ``measure_first`` False the first step uses the carried measurement ``V.m*[i]``.
     Returns the number of steps run: it stops after the first step whose state is not
@@ -200,7 +202,6 @@ def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx):
     f_cmd, f, memory, sigma = V.f_cmd[i], V.f[i], V.memory[i], V.sigma[i]
     eta, refs, first = T.eta[i], T.refs[i], T.first[i]
     rigid, sensors = _tuples(C)
-    gains, nominal = controller_tuples(K)
     rec = out.p.shape[1] > 0
     rec_accel = out.accel.shape[1] > 0
     done = 0
@@ -211,9 +212,11 @@ def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx):
             p, v, R, w = reference_euler_step(p, v, R, w, memory, rigid, C.dt)
         if k > k0 or measure_first:
             mp, mv, mR, mw = measure3(p, v, R, w, sensors, gen)
-        if C.decimation > 0 and k % C.decimation == 0:
-            u = geometric_control(mp, mv, mR, mw, reference_row(refs, row), gains, nominal)
-            rotor_commands(u[0], u[1], K.allocation_inverse, f_cmd)
+        if K is not None:  # (compiled out without a controller in the loop)
+            if k % C.decimation == 0:
+                gains, nominal = controller_tuples(K)
+                u = geometric_control(mp, mv, mR, mw, reference_row(refs, row), gains, nominal)
+                rotor_commands(u[0], u[1], K.allocation_inverse, f_cmd)
         motor_thrust(f_cmd, eta, row, C.f_max, C.saturate, sigma, gen, f)
         if fx is not None:
             fx.rotor_thrust(f, t, C.dt, p, v, R, w)
@@ -254,20 +257,20 @@ def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx):
 
 
 @jit(parallel=True)
-def _fly_parallel(gens, active, k0, n_steps, measure_first, C, K, V, T, out, done):
+def _fly_parallel(gens, active, k0, n_steps, measure_first, C, V, T, out, done):
     for r in prange(active.shape[0]):
         i = np.int64(r)  # the same specialisation of fly_vehicle as the serial loop's
         if active[i]:
-            done[i] = fly_vehicle(i, gens[i], k0[i], k0[i] + n_steps, measure_first, C, K, V,
-                                  T, out, None)
+            done[i] = fly_vehicle(i, gens[i], k0[i], k0[i] + n_steps, measure_first, C, None,
+                                  V, T, out, None)
 
 
 @jit
-def _fly_serial(gens, active, k0, n_steps, measure_first, C, K, V, T, out, done):
+def _fly_serial(gens, active, k0, n_steps, measure_first, C, V, T, out, done):
     for i in range(active.shape[0]):
         if active[i]:
-            done[i] = fly_vehicle(i, gens[i], k0[i], k0[i] + n_steps, measure_first, C, K, V,
-                                  T, out, None)
+            done[i] = fly_vehicle(i, gens[i], k0[i], k0[i] + n_steps, measure_first, C, None,
+                                  V, T, out, None)
 
 
 @jit
@@ -292,15 +295,22 @@ def _sense_rows(gens, rows, C, V):
 PARALLEL_MIN_VEHICLES = 64
 
 
-def fly(gen, k0: int, k1: int, measure_first: bool, C: LoopConstants, V: Vehicles, T: Tables,
+@jit
+def _fly_one(gens, i, k0, k1, measure_first, C, K, V, T, out):
+    return fly_vehicle(i, gens[i], k0, k1, measure_first, C, K, V, T, out, None)
+
+
+def fly(gens, k0: int, k1: int, measure_first: bool, C: LoopConstants, V: Vehicles, T: Tables,
         out: Records, hook=None, K: ControllerConstants | None = None, i: int = 0) -> int:
-    """:func:`fly_vehicle` for vehicle ``i`` (``K``: the controller in the loop, needed when
-    ``C.decimation > 0``); with an effects ``hook`` the loop runs interpreted by Python
-    (see :mod:`quadfault.plant`)."""
-    K = NO_CONTROLLER if K is None else K
+    """:func:`fly_vehicle` for vehicle ``i`` with its generator ``gens[i]`` (a
+    :func:`generators` list); ``K``: the controller in the loop, every ``C.decimation``
+    steps (None: the commands in ``V.f_cmd`` are held). With an effects ``hook`` the loop
+    runs interpreted by Python (see :mod:`quadfault.plant`)."""
+    if K is not None and C.decimation < 1:
+        raise ConfigError(f"a controller in the loop needs a decimation >= 1, got {C.decimation}")
     if hook is None:
-        return fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, None)
-    return python(fly_vehicle)(i, gen, k0, k1, measure_first, C, K, V, T, out, hook)
+        return _fly_one(gens, i, k0, k1, measure_first, C, K, V, T, out)
+    return python(fly_vehicle)(i, gens[i], k0, k1, measure_first, C, K, V, T, out, hook)
 
 
 def fly_batch(gens, active: np.ndarray, k0: np.ndarray, n_steps: int, measure_first: bool,
@@ -310,14 +320,18 @@ def fly_batch(gens, active: np.ndarray, k0: np.ndarray, n_steps: int, measure_fi
     :data:`PARALLEL_MIN_VEHICLES` on. Returns the steps each vehicle ran (N,)."""
     done = np.zeros(len(active), dtype=np.int64)
     kernel = _fly_parallel if len(active) >= PARALLEL_MIN_VEHICLES else _fly_serial
-    kernel(gens, active, k0, int(n_steps), bool(measure_first), C, NO_CONTROLLER, V, T, out,
-           done)
+    kernel(gens, active, k0, int(n_steps), bool(measure_first), C, V, T, out, done)
     return done
 
 
-def sense(gen, C: LoopConstants, V: Vehicles, i: int = 0) -> None:
-    """Measure vehicle ``i`` (:func:`sense_vehicle`)."""
-    sense_vehicle(i, gen, C, V)
+def sense(gens, C: LoopConstants, V: Vehicles, i: int = 0) -> None:
+    """Measure vehicle ``i`` with its generator ``gens[i]`` (:func:`sense_vehicle`;
+    noise-free sensors draw nothing and measure the state itself, copied here without a
+    kernel call)."""
+    if C.sensors[5] == 0.0:
+        V.mp[i], V.mv[i], V.mR[i], V.mw[i] = V.p[i], V.v[i], V.R[i], V.w[i]
+    else:
+        _sense_rows(gens, np.array([i], dtype=np.int64), C, V)
 
 
 def sense_rows(gens, rows: np.ndarray, C: LoopConstants, V: Vehicles) -> None:
@@ -327,7 +341,9 @@ def sense_rows(gens, rows: np.ndarray, C: LoopConstants, V: Vehicles) -> None:
 
 
 def generators(rngs):
-    """The list of generators :func:`fly_batch` takes (a numba typed list)."""
+    """The list of generators the loop takes: one ``numpy.random.Generator`` per vehicle (a
+    numba typed list: a kernel draws from them directly; passing it costs a fraction of
+    passing a Generator)."""
     from quadfault.jit import typed_list
 
     return typed_list(rngs)
@@ -345,11 +361,6 @@ def constants(plant, sensors, decimation: int = 0, record_accel: bool = True,
         arr(sensors.constants), bool(record_accel), bool(plant.motor.saturate),
         float(veh.rotor_max_thrust), float(veh.mass), float(veh.gravity), arr(veh.inertia),
         arr(veh.inertia_inverse), arr(veh.allocation))
-
-
-#: the controller constants of a loop whose commands the caller sets (never used)
-NO_CONTROLLER = ControllerConstants(np.zeros((4, 3)), False, False, False, 1.0, 0.0,
-                                    np.eye(3), np.eye(3), np.zeros((4, 4)))
 
 
 __all__ = ["LoopConstants", "Vehicles", "Tables", "Records", "fly_vehicle", "fly", "fly_batch",

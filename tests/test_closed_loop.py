@@ -82,7 +82,7 @@ def test_kernel_draws_are_the_generators_own_stream():
     plant = Plant(Vehicle(), sc.efficiency, MotorModel(0.1), dt=1e-3)
     consts = closed_loop.constants(plant, SensorNoise(gyro=0.1))
     tables = closed_loop.Tables(np.zeros(1, np.int64), np.ones((1, 5, 4)), np.zeros((1, 0, 6, 3)))
-    closed_loop.fly(gen, 0, 5, True, consts, plant.vehicles, tables,
+    closed_loop.fly(closed_loop.generators([gen]), 0, 5, True, consts, plant.vehicles, tables,
                     closed_loop.Records.none(1, 4))
     twin.standard_normal(5 * (9 + 4))  # per step: p, v, w (sensors), 4 motors (no accel)
     assert gen.standard_normal() == twin.standard_normal()
@@ -137,7 +137,8 @@ def test_the_batch_is_the_single_vehicle_loop_in_any_thread_count():
     for i in (0, 1, N - 1):
         one = _fleet(N)
         out = closed_loop.Records.empty(N, 5, 4, stride=2)
-        closed_loop.fly(np.random.default_rng(i), i % 3, i % 3 + 10, True, one[1],
+        gens = closed_loop.generators([np.random.default_rng(i)] * N)
+        closed_loop.fly(gens, i % 3, i % 3 + 10, True, one[1],
                         one[0].vehicles, one[2], out, i=i)
         np.testing.assert_array_equal(one[0].vehicles.p[i], runs[0][0].p[i])
         np.testing.assert_array_equal(one[0].vehicles.R[i], runs[0][0].R[i])

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from quadfault.errors import ConfigError
+from quadfault.jit import jit
 
 ACTION_MODES = ("motor", "residual", "wrench")
 ESTIMATOR_RATES = ("physics", "control")
@@ -77,9 +78,9 @@ class ActionConfig:
                 (thrust, action[..., 1:] * np.asarray(self.moment_scale)), axis=-1))
         else:
             if compensate:
-                f_ctrl = f_ctrl / np.clip(eta_hat, 0.1, None)
+                f_ctrl = f_ctrl / np.maximum(eta_hat, 0.1)
             f = f_ctrl + self.residual_scale * action
-        return np.clip(f, 0.0, f_max)
+        return np.minimum(np.maximum(f, 0.0), f_max)
 
 
 @dataclass(frozen=True)
@@ -110,15 +111,34 @@ class RewardConfig:
             raise ConfigError(f"position_scale must be positive [m], got {self.position_scale!r}")
 
     def __call__(self, pos_err, vel_err, f_cmd, f_max: float, terminated):
-        """The reward (0 where it is not finite); batched over leading axes (the vector env:
-        rows (N, 3), ``terminated`` (N,)), a float for one vehicle."""
-        track = (np.linalg.norm(pos_err, axis=-1)
-                 + self.velocity_weight * np.linalg.norm(vel_err, axis=-1))
-        effort = np.mean((np.asarray(f_cmd) / f_max) ** 2, axis=-1)
-        r = np.exp(-track / self.position_scale) - self.effort_weight * effort
-        r = r - np.where(terminated, self.termination_penalty, 0.0)
-        r = np.where(np.isfinite(r), r, 0.0)
-        return float(r) if r.ndim == 0 else r
+        """The reward (0 where it is not finite): a float for one vehicle, an array for rows
+        (the vector env: ``pos_err`` (N, 3), ``terminated`` (N,))."""
+        pe = np.ascontiguousarray(pos_err, dtype=float)
+        f = np.ascontiguousarray(f_cmd, dtype=float)
+        out = np.empty(pe.shape[:-1])
+        _rewards(pe.reshape(-1, 3), np.ascontiguousarray(vel_err, dtype=float).reshape(-1, 3),
+                 f.reshape(-1, f.shape[-1]), float(f_max),
+                 np.ascontiguousarray(terminated, dtype=np.bool_).reshape(-1),
+                 float(self.position_scale), float(self.velocity_weight),
+                 float(self.effort_weight), float(self.termination_penalty), out.reshape(-1))
+        return float(out) if out.ndim == 0 else out
+
+
+@jit
+def _rewards(pos_err, vel_err, f_cmd, f_max, terminated, scale, w_vel, w_effort, penalty, out):
+    """:class:`RewardConfig` per row."""
+    for i in range(out.shape[0]):
+        pe, ve = pos_err[i], vel_err[i]
+        track = (math.sqrt(pe[0] * pe[0] + pe[1] * pe[1] + pe[2] * pe[2])
+                 + w_vel * math.sqrt(ve[0] * ve[0] + ve[1] * ve[1] + ve[2] * ve[2]))
+        effort = 0.0
+        for j in range(f_cmd.shape[1]):
+            u = f_cmd[i, j] / f_max
+            effort += u * u
+        r = math.exp(-track / scale) - w_effort * (effort / f_cmd.shape[1])
+        if terminated[i]:
+            r -= penalty
+        out[i] = r if np.isfinite(r) else 0.0
 
 
 @dataclass(frozen=True)
@@ -149,22 +169,44 @@ class TerminationLimits:
     def reasons(self, p, R, p_ref) -> np.ndarray:
         """Termination reasons of true positions ``p`` (N, 3), attitudes ``R`` (N, 3, 3)
         against the references ``p_ref`` (N, 3): an object array of names or None."""
-        p, R = np.asarray(p, dtype=float), np.asarray(R, dtype=float)
-        reason = np.full(len(p), None, dtype=object)
-        finite = np.isfinite(p).all(-1) & np.isfinite(R).all((-1, -2))
-        with np.errstate(invalid="ignore"):
-            tilt = np.arccos(np.clip(np.nan_to_num(R[:, 2, 2]), -1.0, 1.0)) > self.max_tilt
-            checks = (("excessive_tilt", tilt),
-                      ("out_of_bounds", np.linalg.norm(p - p_ref, axis=-1)
-                       > self.max_position_error),
-                      ("crash", -p[:, 2] < self.ground_altitude), ("non_finite", ~finite))
-        for name, hit in checks:  # the last assignment wins: non_finite, crash, out of bounds
-            reason[hit] = name
-        return reason
+        codes = np.empty(len(p), dtype=np.int64)
+        _termination_codes(np.ascontiguousarray(p, dtype=float),
+                           np.ascontiguousarray(R, dtype=float),
+                           np.ascontiguousarray(p_ref, dtype=float), float(self.ground_altitude),
+                           float(self.max_position_error), float(self.max_tilt), codes)
+        return _REASONS[codes]
 
     def reason(self, p, R, p_ref) -> str | None:
         """The termination reason for one true position ``p``, attitude ``R``, or None."""
         return self.reasons(np.asarray(p)[None], np.asarray(R)[None], np.asarray(p_ref)[None])[0]
+
+
+#: termination codes of :func:`_termination_codes` -> reasons
+_REASONS = np.array([None, "excessive_tilt", "out_of_bounds", "crash", "non_finite"],
+                    dtype=object)
+
+
+@jit
+def _termination_codes(p, R, p_ref, ground, max_error, max_tilt, out):
+    """:class:`TerminationLimits` per row, in order of precedence: non_finite (4), crash (3),
+    out_of_bounds (2), excessive_tilt (1); 0 = none."""
+    for i in range(out.shape[0]):
+        finite = True
+        for k in range(3):
+            finite = finite and np.isfinite(p[i, k])
+            for m in range(3):
+                finite = finite and np.isfinite(R[i, k, m])
+        d0, d1, d2 = p[i, 0] - p_ref[i, 0], p[i, 1] - p_ref[i, 1], p[i, 2] - p_ref[i, 2]
+        if not finite:
+            out[i] = 4
+        elif -p[i, 2] < ground:
+            out[i] = 3
+        elif math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) > max_error:
+            out[i] = 2
+        elif math.acos(min(max(R[i, 2, 2], -1.0), 1.0)) > max_tilt:
+            out[i] = 1
+        else:
+            out[i] = 0
 
 
 @dataclass(frozen=True)

@@ -43,7 +43,7 @@ from quad_fault_env.estimation import (
     make_estimator,
 )
 from quad_fault_env.observation import ObservationLayout
-from quad_fault_env.time_tables import WINDOW, RowTimeTables
+from quad_fault_env.time_tables import RowTimeTables
 from quadfault import closed_loop
 from quadfault.controller import ControllerConfig, GeometricController
 from quadfault.dynamics import RigidBodyState
@@ -60,6 +60,7 @@ DEFAULT_DURATION = 20.0  # [s] episode length for named and random scenarios
 #: tolerance as the fault windows of quadfault.scenarios) [s]
 EVENT_TOL = 1e-9
 _KEY0 = np.zeros(1, dtype=np.int64)  # the single env's row of the time tables
+TABLE_WINDOW = 64  # control steps per refill of the time tables (one row: cheap to hold)
 _NO_REFS = np.zeros((1, 0, 6, 3))  # the loop's reference table (the env sets the commands)
 
 
@@ -275,8 +276,9 @@ class QuadFaultEnv(gym.Env):
                            MotorModel(self.scenario.thrust_noise), dt=self.dt)
         self.plant.reset(self._initial_state())
         self._loop = closed_loop.constants(self.plant, self.sensor_noise)
+        self._gens = closed_loop.generators([self.np_random])  # (rebuilt if it is replaced)
         self._tables = RowTimeTables(1, self.substeps, self.dt, self.vehicle,
-                                     self.controller_config)
+                                     self.controller_config, TABLE_WINDOW)
         self.max_steps = int(round(self.scenario.duration / self.control_period))
         self._step_count = 0
         self._f_cmd = np.zeros(self.vehicle.n_rotors)
@@ -293,7 +295,7 @@ class QuadFaultEnv(gym.Env):
             self._estimate = Estimate(0.0, np.ones(n), np.full(n, NOMINAL_PRIOR_SD))
         else:
             self._estimate = Estimate(0.0, np.ones(n), None, "warmup")
-        closed_loop.sense(self.np_random, self._loop, self.plant.vehicles)
+        closed_loop.sense(self._gens, self._loop, self.plant.vehicles)
         self.history = [self.plant.state.p.copy()]
         events = [dict(_fault_dict(f), kind="onset", t=f.onset)
                   for f in self.scenario.efficiency.faults if f.onset < -EVENT_TOL]
@@ -304,6 +306,18 @@ class QuadFaultEnv(gym.Env):
         return self._observation(ref), info
 
     # -- step --------------------------------------------------------------------------------
+    def _generators(self):
+        """The loop's list holding ``self.np_random`` (the env's one generator)."""
+        if self._gens[0] is not self.np_random:
+            self._gens = closed_loop.generators([self.np_random])
+        return self._gens
+
+    @property
+    def _state(self) -> RigidBodyState:
+        """The true state now (views of the plant's arrays: read them at once)."""
+        V = self.plant.vehicles
+        return RigidBodyState(V.p[0], V.v[0], V.R[0], V.w[0])
+
     @property
     def _meas(self) -> RigidBodyState:
         """The measurement the agent and the controller see now (end of the last step;
@@ -318,13 +332,16 @@ class QuadFaultEnv(gym.Env):
         return Sample(t, meas.p.copy(), meas.v.copy(), meas.R.copy(), meas.w.copy(),
                       self._f_cmd.copy())
 
-    def _ensure_tables(self, k: int) -> np.ndarray:
-        """The time tables hold control step ``k`` (and its end); returns ``[k]``."""
-        ks = np.array([k], dtype=np.int64)
-        if not 0 <= k - int(self._tables.k0[0]) < WINDOW:
+    def _table_row(self, k: int) -> int:
+        """Control step ``k``'s row in the time tables (filled so that it and its end are
+        there)."""
+        i = k - int(self._tables.k0[0])
+        if not 0 <= i < TABLE_WINDOW:
             sc = self.scenario
-            self._tables.ensure(ks, _KEY0, _KEY0, [sc.trajectory], [sc.efficiency], WINDOW - 1)
-        return ks
+            self._tables.ensure(np.array([k], dtype=np.int64), _KEY0, _KEY0, [sc.trajectory],
+                                [sc.efficiency], TABLE_WINDOW - 1)
+            i = k - int(self._tables.k0[0])
+        return i
 
     def motor_commands(self, action: np.ndarray, t: float, meas: RigidBodyState) -> np.ndarray:
         """Rotor thrust commands [N] for a checked ``action`` (see ``ActionConfig``)."""
@@ -337,7 +354,7 @@ class QuadFaultEnv(gym.Env):
         a control step's start the reference comes from the time tables."""
         k = self._step_count
         if t == k * self.substeps * self.dt:
-            refs = self._tables.references(self._ensure_tables(k))[0]
+            refs = self._tables.refs[0, self._table_row(k)]
             return self.controller.commands(meas.p, meas.v, meas.R, meas.w, refs)
         return self.controller.motor_commands(t, meas.p, meas.v, meas.R, meas.w)[0]
 
@@ -345,17 +362,17 @@ class QuadFaultEnv(gym.Env):
         """Control step ``k``'s physics substeps through the closed loop: the samples, the
         true efficiency and accelerometer reading of each, and the efficiency at the end."""
         S, n = self.substeps, self.vehicle.n_rotors
-        ks = self._ensure_tables(k)
+        row = self._table_row(k)
         vehicles = self.plant.vehicles
         vehicles.f_cmd[0] = self._f_cmd
         out = closed_loop.Records.empty(1, S, n)
         tables = closed_loop.Tables(self._tables.k0 * S, self._tables.eta, _NO_REFS)
-        done = closed_loop.fly(self.np_random, k * S, k * S + S, False, self._loop, vehicles,
+        done = closed_loop.fly(self._generators(), k * S, k * S + S, False, self._loop, vehicles,
                                tables, out, self.plant.hook)
         t = ((k * S + np.arange(done)) * self.dt).tolist()
         samples = [Sample(t[j], out.p[0, j], out.v[0, j], out.R[0, j], out.w[0, j],
                           self._f_cmd.copy()) for j in range(done)]
-        eta = self._tables.efficiency(ks)[0]
+        eta = self._tables.eta[0, row * S:row * S + S + 1]
         return samples, eta[:done].copy(), out.accel[0, :done], eta[S].copy()
 
     def step(self, action):
@@ -374,8 +391,8 @@ class QuadFaultEnv(gym.Env):
         else:
             for s in samples[::self.estimator_stride]:
                 self._estimate = self.estimator.update(s)
-        state = self.plant.state
-        refs = self._tables.references(np.array([self._step_count]))[0]
+        state = self._state
+        refs = self._tables.refs[0, self._step_count - int(self._tables.k0[0])]
         ref = FlatOutput(refs[0].copy(), refs[1].copy(), refs[2].copy(), refs[3].copy())
         reason = self.limits.reason(state.p, state.R, ref.position)
         terminated = reason is not None
@@ -386,7 +403,7 @@ class QuadFaultEnv(gym.Env):
             for dst, src in zip((vehicles.mp, vehicles.mv, vehicles.mR, vehicles.mw), state):
                 dst[0] = src
         else:
-            closed_loop.sense(self.np_random, self._loop, vehicles)
+            closed_loop.sense(self._generators(), self._loop, vehicles)
         self.history.append(np.array(state.p, dtype=float))
         reward = self.reward_config(state.p - ref.position, state.v - ref.velocity,
                                     self._f_cmd, self.f_max, terminated)
@@ -412,7 +429,7 @@ class QuadFaultEnv(gym.Env):
 
     def _info(self, samples, eta_true, sf, events, reason, ref, eta_t=None) -> dict:
         t = self.time
-        state = self.plant.state
+        state = self._state
         est = self._estimate
         return {
             "t": t,
