@@ -256,7 +256,7 @@ class QuadFaultVectorEnv(VectorEnv):
         start, ref0 = start_states(items, inv.ravel(), self.vehicle, e0.controller_config,
                                    e0.initial_spread, u)
         self.plant.vehicles.set_state(rows, start)
-        closed_loop.sense_rows(self._generators(), rows, self._loop, self.plant.vehicles)
+        closed_loop.sense_rows(self._generators, rows, self._loop, self.plant.vehicles)
         keys, inv = np.unique(self._sched_key[rows], return_inverse=True)
         eta0 = np.array([np.broadcast_to(np.asarray(self._schedules.items[key](0.0), float), (n,))
                          for key in keys.tolist()])
@@ -390,7 +390,7 @@ class QuadFaultVectorEnv(VectorEnv):
         # a terminated one shows its true state
         on = np.flatnonzero(~(terminated | resetting))
         if len(on):
-            closed_loop.sense_rows(self._generators(), on, self._loop, self.plant.vehicles)
+            closed_loop.sense_rows(self._generators, on, self._loop, self.plant.vehicles)
         for m, x in zip(self.meas, state):
             m[terminated] = x[terminated]
         self.eta_true = eta_all[:, S].copy()

@@ -179,7 +179,7 @@ def _allocate(A, f):
     return T, (m0, m1, m2)
 
 
-@jit
+@jit(inline="always")
 def _tuples(C):
     """The kernels' tuples of :class:`LoopConstants`: the true rigid body and the sensors."""
     rigid = (C.mass, C.gravity, mat3(C.inertia), mat3(C.inertia_inverse))
@@ -188,18 +188,20 @@ def _tuples(C):
 
 
 @jit
-def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx):
+def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx, memory=None):
     """Steps ``k0 .. k1-1`` of vehicle ``i`` (see the module docstring), drawing from
     ``gen``; ``C`` the :class:`LoopConstants`, ``K`` the controller's
     :class:`~quadfault.controller.ControllerConstants` of the controller in the loop (None: the
     caller sets ``V.f_cmd``), ``V`` the :class:`Vehicles` (updated), ``T``
     the :class:`Tables`, ``out`` the :class:`Records`, ``fx`` the effects hook (None: none).
     With ``measure_first`` False the first step uses the carried measurement ``V.m*[i]``.
+    ``memory`` (``V.memory``) selects the authors' Euler step (``C.reference``); None, RKMK4
+    (the branch not taken is compiled out).
     Returns the number of steps run: it stops after the first step whose state is not
     finite."""
     p, v, R, w = vec3(V.p[i]), vec3(V.v[i]), mat3(V.R[i]), vec3(V.w[i])
     mp, mv, mR, mw = vec3(V.mp[i]), vec3(V.mv[i]), mat3(V.mR[i]), vec3(V.mw[i])
-    f_cmd, f, memory, sigma = V.f_cmd[i], V.f[i], V.memory[i], V.sigma[i]
+    f_cmd, f, sigma = V.f_cmd[i], V.f[i], V.sigma[i]
     eta, refs, first = T.eta[i], T.refs[i], T.first[i]
     rigid, sensors = _tuples(C)
     rec = out.p.shape[1] > 0
@@ -208,8 +210,8 @@ def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx):
     for k in range(k0, k1):
         row = k - first
         t = C.t0 + C.dt * k
-        if C.reference:
-            p, v, R, w = reference_euler_step(p, v, R, w, memory, rigid, C.dt)
+        if memory is not None:
+            p, v, R, w = reference_euler_step(p, v, R, w, memory[i], rigid, C.dt)
         if k > k0 or measure_first:
             mp, mv, mR, mw = measure3(p, v, R, w, sensors, gen)
         if K is not None:  # (compiled out without a controller in the loop)
@@ -221,8 +223,8 @@ def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx):
         if fx is not None:
             fx.rotor_thrust(f, t, C.dt, p, v, R, w)
         thrust, M = _allocate(C.allocation, f)
-        if C.reference:
-            reference_euler_store(memory, thrust, M, R)
+        if memory is not None:
+            reference_euler_store(memory[i], thrust, M, R)
             p1, v1, R1, w1 = p, v, R, w
             a0 = translational_acceleration3(R, thrust, rigid)
         else:
@@ -296,21 +298,27 @@ PARALLEL_MIN_VEHICLES = 64
 
 
 @jit
-def _fly_one(gens, i, k0, k1, measure_first, C, K, V, T, out):
-    return fly_vehicle(i, gens[i], k0, k1, measure_first, C, K, V, T, out, None)
+def _fly_one(gens, i, k0, k1, measure_first, C, K, V, T, out, memory):
+    return fly_vehicle(i, gens[i], k0, k1, measure_first, C, K, V, T, out, None, memory)
 
 
 def fly(gens, k0: int, k1: int, measure_first: bool, C: LoopConstants, V: Vehicles, T: Tables,
         out: Records, hook=None, K: ControllerConstants | None = None, i: int = 0) -> int:
     """:func:`fly_vehicle` for vehicle ``i`` with its generator ``gens[i]`` (a
-    :func:`generators` list); ``K``: the controller in the loop, every ``C.decimation``
+    :func:`generators` list, cheap to pass per call) or ``gens`` itself (a
+    ``numpy.random.Generator``); ``K``: the controller in the loop, every ``C.decimation``
     steps (None: the commands in ``V.f_cmd`` are held). With an effects ``hook`` the loop
     runs interpreted by Python (see :mod:`quadfault.plant`)."""
     if K is not None and C.decimation < 1:
         raise ConfigError(f"a controller in the loop needs a decimation >= 1, got {C.decimation}")
-    if hook is None:
-        return _fly_one(gens, i, k0, k1, measure_first, C, K, V, T, out)
-    return python(fly_vehicle)(i, gens[i], k0, k1, measure_first, C, K, V, T, out, hook)
+    gen = gens if isinstance(gens, np.random.Generator) else None
+    memory = V.memory if C.reference else None
+    if hook is not None:
+        gen = gens[i] if gen is None else gen
+        return python(fly_vehicle)(i, gen, k0, k1, measure_first, C, K, V, T, out, hook, memory)
+    if gen is not None:  # a Generator: ~10 us per call to pass (fine for long calls)
+        return fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, None, memory)
+    return _fly_one(gens, i, k0, k1, measure_first, C, K, V, T, out, memory)
 
 
 def fly_batch(gens, active: np.ndarray, k0: np.ndarray, n_steps: int, measure_first: bool,
@@ -325,19 +333,28 @@ def fly_batch(gens, active: np.ndarray, k0: np.ndarray, n_steps: int, measure_fi
 
 
 def sense(gens, C: LoopConstants, V: Vehicles, i: int = 0) -> None:
-    """Measure vehicle ``i`` with its generator ``gens[i]`` (:func:`sense_vehicle`;
+    """Measure vehicle ``i`` with its generator ``gens[i]`` (or ``gens``, a Generator;
+    :func:`sense_vehicle`;
     noise-free sensors draw nothing and measure the state itself, copied here without a
     kernel call)."""
     if C.sensors[5] == 0.0:
         V.mp[i], V.mv[i], V.mR[i], V.mw[i] = V.p[i], V.v[i], V.R[i], V.w[i]
+    elif isinstance(gens, np.random.Generator):
+        sense_vehicle(i, gens, C, V)
     else:
         _sense_rows(gens, np.array([i], dtype=np.int64), C, V)
 
 
 def sense_rows(gens, rows: np.ndarray, C: LoopConstants, V: Vehicles) -> None:
-    """Measure the vehicles ``rows`` with their generators (on the calling thread: a few
-    draws per vehicle cost less than a parallel launch)."""
-    _sense_rows(gens, np.asarray(rows, dtype=np.int64), C, V)
+    """Measure the vehicles ``rows`` with their generators ``gens`` (on the calling thread:
+    a few draws per vehicle cost less than a parallel launch); noise-free sensors measure
+    the state itself (copied here; ``gens`` is then not used and may be None)."""
+    rows = np.asarray(rows, dtype=np.int64)
+    if C.sensors[5] == 0.0:
+        for m, x in ((V.mp, V.p), (V.mv, V.v), (V.mR, V.R), (V.mw, V.w)):
+            m[rows] = x[rows]
+    else:
+        _sense_rows(gens() if callable(gens) else gens, rows, C, V)
 
 
 def generators(rngs):

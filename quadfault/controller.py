@@ -197,7 +197,7 @@ def feedforward_rates3(acc, b1d, h, gains, nominal):
             (w_dot_d[0] / (h * h), w_dot_d[1] / (h * h), w_dot_d[2] / (h * h)))
 
 
-@jit
+@jit(inline="always")
 def controller_tuples(K):
     """``(gains, nominal)`` of :func:`geometric_control` from :class:`ControllerConstants`."""
     g = K.gains

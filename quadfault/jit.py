@@ -116,14 +116,29 @@ def _python(fn, replace: tuple, memo: dict):
 
 
 def typed_list(items):
-    """``items`` as a list a compiled kernel can take (numba's typed list; a Python list
-    without numba), e.g. one ``numpy.random.Generator`` per vehicle."""
+    """``items`` as a list a compiled kernel takes cheaply (numba's typed list, built by a
+    cached kernel; a Python list without numba), e.g. one ``numpy.random.Generator`` per
+    vehicle: passing a Generator itself to a kernel costs about 10 us per call."""
     nb = _numba()
     if nb is None:
         return list(items)
-    from numba.typed import List
+    global _make_list
+    if _make_list is None:
+        from numba.typed import List
 
-    return List(items)
+        @nb.njit(cache=True)
+        def _make_list(xs):
+            out = List()
+            for x in xs:
+                out.append(x)
+            return out
+
+    with warnings.catch_warnings():  # numba's reflected list of the argument (read once)
+        warnings.simplefilter("ignore", nb.NumbaPendingDeprecationWarning)
+        return _make_list(list(items))
+
+
+_make_list = None
 
 
 def set_threads(n: int | None) -> int:

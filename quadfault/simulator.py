@@ -190,13 +190,13 @@ def simulate(scenario: Scenario, *, vehicle: Vehicle | None = None,
     consts = closed_loop.constants(plant, cfg.sensor_noise, cfg.control_decimation,
                                    cfg.record_accel, t0)
     out = closed_loop.Records.empty(1, n, n_rot, accel=cfg.record_accel)
-    hook, gens = plant.hook, closed_loop.generators([rng])
+    hook = plant.hook
     bar = _progress(n, progress, f"simulate {scenario.name}")
     chunk = CHUNK if hook is None else CHUNK // 10
     for k0 in range(0, n, chunk):
         k1 = min(n, k0 + chunk)
         rows = closed_loop.Records(1, *(a[:, k0:k1] for a in out[1:]))
-        done = closed_loop.fly(gens, k0, k1, True, consts, vehicles, tables, rows, hook,
+        done = closed_loop.fly(rng, k0, k1, True, consts, vehicles, tables, rows, hook,
                                ctrl.constants)
         if bar is not None:
             bar.update(k1 - k0)
