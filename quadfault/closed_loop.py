@@ -259,20 +259,20 @@ def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx, memory=None)
 
 
 @jit(parallel=True)
-def _fly_parallel(gens, active, k0, n_steps, measure_first, C, V, T, out, done):
+def _fly_parallel(gens, active, k0, n_steps, measure_first, C, K, V, T, out, done):
     for r in prange(active.shape[0]):
         i = np.int64(r)  # the same specialisation of fly_vehicle as the serial loop's
         if active[i]:
-            done[i] = fly_vehicle(i, gens[i], k0[i], k0[i] + n_steps, measure_first, C, None,
-                                  V, T, out, None)
+            done[i] = fly_vehicle(i, gens[i], k0[i], k0[i] + n_steps, measure_first, C, K, V,
+                                  T, out, None)
 
 
 @jit
-def _fly_serial(gens, active, k0, n_steps, measure_first, C, V, T, out, done):
+def _fly_serial(gens, active, k0, n_steps, measure_first, C, K, V, T, out, done):
     for i in range(active.shape[0]):
         if active[i]:
-            done[i] = fly_vehicle(i, gens[i], k0[i], k0[i] + n_steps, measure_first, C, None,
-                                  V, T, out, None)
+            done[i] = fly_vehicle(i, gens[i], k0[i], k0[i] + n_steps, measure_first, C, K, V,
+                                  T, out, None)
 
 
 @jit
@@ -322,13 +322,20 @@ def fly(gens, k0: int, k1: int, measure_first: bool, C: LoopConstants, V: Vehicl
 
 
 def fly_batch(gens, active: np.ndarray, k0: np.ndarray, n_steps: int, measure_first: bool,
-              C: LoopConstants, V: Vehicles, T: Tables, out: Records) -> np.ndarray:
+              C: LoopConstants, V: Vehicles, T: Tables, out: Records,
+              K: ControllerConstants | None = None) -> np.ndarray:
     """``n_steps`` steps of every active vehicle ``i`` from its step ``k0[i]``, each with its
     generator ``gens[i]`` (a :func:`generators` list), in parallel from
-    :data:`PARALLEL_MIN_VEHICLES` on. Returns the steps each vehicle ran (N,)."""
+    :data:`PARALLEL_MIN_VEHICLES` on (``K``: a controller in the loop, as for :func:`fly`).
+    Returns the steps each vehicle ran (N,). The reference integrator and effects are single-
+    vehicle features (:func:`fly`)."""
+    if C.reference:
+        raise ConfigError("the reference integrator flies one vehicle at a time (fly)")
+    if K is not None and C.decimation < 1:
+        raise ConfigError(f"a controller in the loop needs a decimation >= 1, got {C.decimation}")
     done = np.zeros(len(active), dtype=np.int64)
     kernel = _fly_parallel if len(active) >= PARALLEL_MIN_VEHICLES else _fly_serial
-    kernel(gens, active, k0, int(n_steps), bool(measure_first), C, V, T, out, done)
+    kernel(gens, active, k0, int(n_steps), bool(measure_first), C, K, V, T, out, done)
     return done
 
 
