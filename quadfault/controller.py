@@ -278,16 +278,23 @@ class GeometricController:
         self.vehicle = vehicle
         self.trajectory = trajectory
         self.config = config or ControllerConfig()
-        g, c = self.config.gains, self.config
+        g = self.config.gains
         self.kx, self.kv = np.asarray(g.kx, float), np.asarray(g.kv, float)
         self.kR, self.kW = np.asarray(g.kR, float), np.asarray(g.kW, float)
-        arr = (lambda a: np.array(a, dtype=float, order="C"))  # writable: one specialisation
-        #: the kernels' constants: gains and options, the nominal vehicle
-        self.constants = ControllerConstants(
-            arr((g.kx, g.kv, g.kR, g.kW)), bool(c.acceleration_feedforward),
-            bool(c.angular_feedforward), bool(c.normalize_b2d), float(vehicle.mass),
-            float(vehicle.gravity), arr(vehicle.inertia), arr(vehicle.inertia_inverse),
-            arr(vehicle.allocation_inverse))
+        self._constants = None
+
+    @property
+    def constants(self) -> ControllerConstants:
+        """The kernels' form of the gains, options and nominal vehicle (made on first use)."""
+        if self._constants is None:
+            g, c, veh = self.config.gains, self.config, self.vehicle
+            arr = (lambda a: np.array(a, dtype=float, order="C"))  # writable: one specialisation
+            self._constants = ControllerConstants(
+                arr((g.kx, g.kv, g.kR, g.kW)), bool(c.acceleration_feedforward),
+                bool(c.angular_feedforward), bool(c.normalize_b2d), float(veh.mass),
+                float(veh.gravity), arr(veh.inertia), arr(veh.inertia_inverse),
+                arr(veh.allocation_inverse))
+        return self._constants
 
     def feedforward(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The feed-forward attitude R_d (the reference alone: ``f_n = m g e3 - m a_d``) and

@@ -91,8 +91,9 @@ def start_states(items, keys, vehicle: Vehicle, controller: ControllerConfig, sp
     s = initial_state(SimpleNamespace(trajectory=traj), 0.0,
                       GeometricController(vehicle, traj, controller))
     pos, vel, att, rate = (u[:, 3 * k:3 * k + 3] for k in range(4))
-    state = RigidBodyState(s.p + spread.position * pos, s.v + spread.velocity * vel,
-                           s.R @ expm_so3(spread.attitude * att), s.w + spread.rate * rate)
+    R = s.R if spread.attitude == 0 else s.R @ expm_so3(spread.attitude * att)  # R I == R
+    state = RigidBodyState(s.p + spread.position * pos, s.v + spread.velocity * vel, R,
+                           s.w + spread.rate * rate)
     return state, traj(0.0)
 
 
