@@ -103,6 +103,10 @@ class RowTimeTables:
         """(N, 6, 3) reference rows at the start of step ``k`` (N,) (t = k S dt)."""
         return self.refs[self._rows, k - self.k0]
 
+    def efficiency_at(self, k: np.ndarray, j: int) -> np.ndarray:
+        """(N, n) true efficiency at substep ``j`` of step ``k`` (N,) (``j = S``: its end)."""
+        return self.eta[self._rows, (k - self.k0) * self.S + j]
+
     def efficiency(self, k: np.ndarray) -> np.ndarray:
         """(N, S + 1, n) true efficiency at step ``k``'s substeps and at its end."""
         j = (k - self.k0)[:, None] * self.S + np.arange(self.S + 1)

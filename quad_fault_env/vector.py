@@ -331,7 +331,7 @@ class QuadFaultVectorEnv(VectorEnv):
             f_ctrl = self._controller.commands(m.p, m.v, m.R, m.w, refs)
         return cfg.commands(a, self.vehicle, f_ctrl, self.eta_hat, e0.compensate)
 
-    def _substeps(self, eta: np.ndarray, ts: np.ndarray, active: np.ndarray) -> None:
+    def _substeps(self, ts: np.ndarray, active: np.ndarray) -> None:
         """The control step's physics substeps of the ``active`` rows in one call of the loop
         (:func:`quadfault.closed_loop.fly_batch`); then the batched estimator's updates on the
         measurements it recorded every ``estimator_stride`` substeps (the estimate does not
@@ -356,7 +356,8 @@ class QuadFaultVectorEnv(VectorEnv):
                 self.status = res.status_names
         if self.estimator_name == "truth":
             j_last = ((S - 1) // stride) * stride
-            self.eta_hat, self.eta_sd = eta[:, j_last].copy(), np.zeros((N, n))
+            self.eta_hat = self._tables.efficiency_at(self.steps, j_last)
+            self.eta_sd = np.zeros((N, n))
 
     # -- step --------------------------------------------------------------------------------
     def step(self, actions):
@@ -373,8 +374,7 @@ class QuadFaultVectorEnv(VectorEnv):
         self._ensure_tables(self.steps, WINDOW - 1)
         self.f_cmd[:] = self._motor_commands(a, self._tables.references(self.steps))
         ts = (k0[:, None] + np.arange(S)[None, :]) * self.dt
-        eta_all = self._tables.efficiency(self.steps)  # S substeps, then the step's end
-        self._substeps(eta_all[:, :S], ts, ~resetting)
+        self._substeps(ts, ~resetting)
         self.steps = self.steps + 1
         state = self.state
         ref1 = self._tables.references(self.steps)  # k - k0 <= WINDOW: still in the window
@@ -393,7 +393,7 @@ class QuadFaultVectorEnv(VectorEnv):
             closed_loop.sense_rows(self._generators, on, self._loop, self.plant.vehicles)
         for m, x in zip(self.meas, state):
             m[terminated] = x[terminated]
-        self.eta_true = eta_all[:, S].copy()
+        self.eta_true = self._tables.efficiency_at(self.steps - 1, S)
         reward = self.envs[0].reward_config(state.p - refs[0],
                                 state.v - refs[1], self.f_cmd, self.vehicle.rotor_max_thrust,
                                 terminated)

@@ -276,7 +276,7 @@ class QuadFaultEnv(gym.Env):
                            MotorModel(self.scenario.thrust_noise), dt=self.dt)
         self.plant.reset(self._initial_state())
         self._loop = closed_loop.constants(self.plant, self.sensor_noise)
-        self._gens = closed_loop.generators([self.np_random])  # (rebuilt if it is replaced)
+        self._gens, self._gens_of = closed_loop.generators([self.np_random]), self.np_random
         self._tables = RowTimeTables(1, self.substeps, self.dt, self.vehicle,
                                      self.controller_config, TABLE_WINDOW)
         self.max_steps = int(round(self.scenario.duration / self.control_period))
@@ -308,8 +308,8 @@ class QuadFaultEnv(gym.Env):
     # -- step --------------------------------------------------------------------------------
     def _generators(self):
         """The loop's list holding ``self.np_random`` (the env's one generator)."""
-        if self._gens[0] is not self.np_random:
-            self._gens = closed_loop.generators([self.np_random])
+        if self._gens_of is not self.np_random:  # replaced since the reset
+            self._gens, self._gens_of = closed_loop.generators([self.np_random]), self.np_random
         return self._gens
 
     @property
