@@ -92,7 +92,7 @@ def main(argv=None) -> int:
             ("cold", "first flight, empty numba cache [CPU s]", now["cold_cpu_s"],
              base and base["cold_cpu_s"])]
     if base:
-        print(f"| measure | baseline | this checkout | baseline / this |\n|---|---|---|---|")
+        print("| measure | baseline | this checkout | baseline / this |\n|---|---|---|---|")
         for _, label, x, y in rows:
             print(f"| {label} | {y:.4g} | {x:.4g} | {y / x:.2f}x |")
     else:

@@ -215,9 +215,9 @@ class QuadFaultVectorEnv(VectorEnv):
         spread. Then, over all the rows at once, the initial states
         (``episode_start.start_states``: each distinct trajectory evaluated once), the
         measurement (the loop's sensors, each row's normals from its generator) and the true
-        efficiency at t = 0 (each distinct schedule once). Deterministic scenarios (a name or a Scenario object) are
-        built once per call. Returns the rows' reference at t = 0 (position, velocity,
-        acceleration; (len(rows), 3) each), or None for no rows.
+        efficiency at t = 0 (each distinct schedule once). Deterministic scenarios (a name or
+        a Scenario object) are built once per call. Returns the rows' reference at t = 0
+        (position, velocity, acceleration; (len(rows), 3) each), or None for no rows.
         """
         rows = np.asarray(rows, dtype=np.int64).reshape(-1)
         if not len(rows):

@@ -45,7 +45,6 @@ from quadfault.controller import (
     reference_row,
     rotor_commands,
 )
-from quadfault.errors import ConfigError
 from quadfault.dynamics import (
     reference_euler_step,
     reference_euler_store,
@@ -53,6 +52,7 @@ from quadfault.dynamics import (
     specific_force3,
     translational_acceleration3,
 )
+from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange, python
 from quadfault.motors import motor_thrust
 from quadfault.rotation import mat3, store3, store33, vec3
@@ -195,10 +195,9 @@ def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx, memory=None)
     caller sets ``V.f_cmd``), ``V`` the :class:`Vehicles` (updated), ``T``
     the :class:`Tables`, ``out`` the :class:`Records`, ``fx`` the effects hook (None: none).
     With ``measure_first`` False the first step uses the carried measurement ``V.m*[i]``.
-    ``memory`` (``V.memory``) selects the authors' Euler step (``C.reference``); None, RKMK4
-    (the branch not taken is compiled out).
-    Returns the number of steps run: it stops after the first step whose state is not
-    finite."""
+    ``memory`` (``V.memory``) flies the authors' Euler step (``C.reference``), None RKMK4
+    (the branch not taken is compiled out). Returns the number of steps run: it stops after
+    the first step whose state is not finite."""
     p, v, R, w = vec3(V.p[i]), vec3(V.v[i]), mat3(V.R[i]), vec3(V.w[i])
     mp, mv, mR, mw = vec3(V.mp[i]), vec3(V.mv[i]), mat3(V.mR[i]), vec3(V.mw[i])
     f_cmd, f, sigma = V.f_cmd[i], V.f[i], V.sigma[i]
