@@ -4,7 +4,7 @@ The same predict / update as ``ekf.predict`` and ``ekf.measurement_update``, wri
 subset of numpy that numba compiles, so a whole recording runs in one compiled loop.
 ``tests/test_estimators_ekf.py`` checks that both paths agree to 1e-9; change them together.
 
-The step (:func:`step_ws`) allocates nothing but the core's ``expm_so3`` result: its matrices
+The step (:func:`step_ws`) allocates nothing but the core's ``expm3`` result: its matrices
 live in a :func:`workspace` made once per recording or per batch chunk, and it uses the
 structure of the 22-state filter instead of dense 22 x 22 products:
 
@@ -32,7 +32,7 @@ import numpy as np
 from numba import njit
 
 from estimators.ekf import IDLE_THRUST
-from quadfault._sim_numba import expm_so3  # the core's compiled mirror
+from quadfault.rotation import expm3  # the core's SO(3) exponential (kernel)
 
 #: fastmath flags of the step's loops: reassociation (vectorised sums), FMA contraction, no
 #: signed zeros, reciprocals -- but not ``nnan`` / ``ninf``, so NaN and inf still propagate and
@@ -240,7 +240,11 @@ def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
     phi1 = w1 * dt + 0.5 * wdot[1] * dt * dt
     phi2 = w2 * dt + 0.5 * wdot[2] * dt * dt
     phi[0], phi[1], phi[2] = phi0, phi1, phi2
-    E = expm_so3(phi)
+    E9 = expm3((phi0, phi1, phi2))
+    E = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            E[i, j] = E9[3 * i + j]
     for i in range(3):
         for j in range(3):
             Rn[i, j] = R[i, 0] * E[0, j] + R[i, 1] * E[1, j] + R[i, 2] * E[2, j]
