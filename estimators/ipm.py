@@ -118,17 +118,22 @@ def ipm_parameters(settings: IPMSettings) -> np.ndarray:
                      s.tol_feas, s.tol_gap], dtype=np.float64)
 
 
+#: rows of the interior point's workspace ``W`` (:func:`ipm_into`)
+W_LAM_HI, W_LAM_LO, W_D, W_RHS, W_DX, W_DLAM_HI, W_DLAM_LO = range(7)
+N_WORK_ROWS = 7
+
+
 @jit
-def ipm_into(H, q, lo, hi, x, lam_hi, lam_lo, settings, max_iter, scratch, L, hist):
+def ipm_into(H, q, lo, hi, x, settings, max_iter, W, L, hist):
     """Algorithm 1 on ``1/2 x^T H x + q^T x`` over the box ``[lo, hi]``, in place.
 
     Args:
         H: (n, n) symmetric positive definite; q: (n,).
         x: the start on entry, strictly inside the box; the last iterate on return.
-        lam_hi, lam_lo: (n,) receive the multipliers of ``x <= hi`` and ``lo <= x``.
         settings: :func:`ipm_parameters`; max_iter: at most this many Newton iterations.
-        scratch: (5, n), L: (n, n) scratch.
-        hist: (max_iter, 3 + n) receives ``||r_dual||, ||r_cent||, gap, x`` after each
+        W: (7, n) workspace; on return its rows ``W_LAM_HI``, ``W_LAM_LO`` hold the
+            multipliers of ``x <= hi`` and ``lo <= x``. L: (n, n) scratch.
+        hist: (max_iter, >= 3 + n) receives ``||r_dual||, ||r_cent||, gap, x`` after each
             iteration, or a (0, 3 + n) array to record nothing.
 
     Returns:
@@ -138,65 +143,64 @@ def ipm_into(H, q, lo, hi, x, lam_hi, lam_lo, settings, max_iter, scratch, L, hi
     n = q.shape[0]
     mu, alpha, beta, step_fraction = settings[0], settings[1], settings[2], settings[3]
     bt_eps, min_step, tol_feas, tol_gap = settings[4], settings[5], settings[6], settings[7]
-    d, rhs, dx, dlu, dll = scratch[0], scratch[1], scratch[2], scratch[3], scratch[4]
-    lu, ll = lam_hi, lam_lo
-    record = hist.shape[0] > 0
     gap = 0.0  # surrogate gap -phi^T lambda, eq. (45); phi = [x - hi; lo - x]
     for i in range(n):
         pu = x[i] - hi
         pl = lo - x[i]
-        lu[i] = -1.0 / pu
-        ll[i] = -1.0 / pl
-        gap -= pu * lu[i] + pl * ll[i]
+        W[W_LAM_HI, i] = -1.0 / pu
+        W[W_LAM_LO, i] = -1.0 / pl
+        gap -= pu * W[W_LAM_HI, i] + pl * W[W_LAM_LO, i]
     scale_t = mu * 2 * n
-    flag = 0
-    it = 0
     for it in range(1, max_iter + 1):
         inv_t = max(gap, 1e-12) / scale_t  # 1/t, t = mu m / gap
         r2 = 0.0
         for i in range(n):  # KKT residual, eq. (39), and the reduced Newton system, eq. (42)
             pu = x[i] - hi
             pl = lo - x[i]
-            rd = q[i] + lu[i] - ll[i]
+            lu, ll = W[W_LAM_HI, i], W[W_LAM_LO, i]
+            rd = q[i] + lu - ll
             for k in range(n):
                 rd += H[i, k] * x[k]
-            cu = -lu[i] * pu - inv_t
-            cl = -ll[i] * pl - inv_t
+            cu = -lu * pu - inv_t
+            cl = -ll * pl - inv_t
             r2 += rd * rd + cu * cu + cl * cl
-            d[i] = -(lu[i] / pu + ll[i] / pl)  # (H + diag(d)) dx = rhs
-            rhs[i] = cl / pl - cu / pu - rd
+            W[W_D, i] = -(lu / pu + ll / pl)  # (H + diag(d)) dx = rhs
+            W[W_RHS, i] = cl / pl - cu / pu - rd
         r_norm = math.sqrt(r2)
-        if not cholesky_into(H, d, L):
-            flag = -1
-            break
-        cholesky_solve_into(L, rhs, dx)
+        if not cholesky_into(H, W[W_D], L):
+            return it, -1
+        cholesky_solve_into(L, W[W_RHS], W[W_DX])
         s_max = 1.0  # eq. (43): keep lambda > 0 and lo < x < hi
         for i in range(n):
             pu = x[i] - hi
             pl = lo - x[i]
-            dlu[i] = (-lu[i] * pu - inv_t - lu[i] * dx[i]) / pu
-            dll[i] = (-ll[i] * pl - inv_t + ll[i] * dx[i]) / pl
-            if dlu[i] < 0:
-                s_max = min(s_max, -lu[i] / dlu[i])
-            if dll[i] < 0:
-                s_max = min(s_max, -ll[i] / dll[i])
-            if dx[i] > 0:
-                s_max = min(s_max, -pu / dx[i])
-            elif dx[i] < 0:
-                s_max = min(s_max, pl / dx[i])
+            lu, ll, dx = W[W_LAM_HI, i], W[W_LAM_LO, i], W[W_DX, i]
+            dlu = (-lu * pu - inv_t - lu * dx) / pu
+            dll = (-ll * pl - inv_t + ll * dx) / pl
+            W[W_DLAM_HI, i] = dlu
+            W[W_DLAM_LO, i] = dll
+            if dlu < 0:
+                s_max = min(s_max, -lu / dlu)
+            if dll < 0:
+                s_max = min(s_max, -ll / dll)
+            if dx > 0:
+                s_max = min(s_max, -pu / dx)
+            elif dx < 0:
+                s_max = min(s_max, pl / dx)
         s = step_fraction * s_max
         while True:  # backtracking, eq. (44), on the KKT residual at the trial point
             d2 = 0.0
             for i in range(n):
-                v = q[i] + (lu[i] + s * dlu[i]) - (ll[i] + s * dll[i])
+                v = q[i] + (W[W_LAM_HI, i] + s * W[W_DLAM_HI, i]) \
+                    - (W[W_LAM_LO, i] + s * W[W_DLAM_LO, i])
                 for k in range(n):
-                    v += H[i, k] * (x[k] + s * dx[k])
+                    v += H[i, k] * (x[k] + s * W[W_DX, k])
                 d2 += v * v
             c2 = 0.0
             for i in range(n):
-                xt = x[i] + s * dx[i]
-                cu = -(lu[i] + s * dlu[i]) * (xt - hi) - inv_t
-                cl = -(ll[i] + s * dll[i]) * (lo - xt) - inv_t
+                xt = x[i] + s * W[W_DX, i]
+                cu = -(W[W_LAM_HI, i] + s * W[W_DLAM_HI, i]) * (xt - hi) - inv_t
+                cl = -(W[W_LAM_LO, i] + s * W[W_DLAM_LO, i]) * (lo - xt) - inv_t
                 c2 += cu * cu + cl * cl
             r_try = math.sqrt(d2 + c2)
             if r_try <= (1.0 - alpha * s) * r_norm + bt_eps or s < min_step:
@@ -204,20 +208,19 @@ def ipm_into(H, q, lo, hi, x, lam_hi, lam_lo, settings, max_iter, scratch, L, hi
             s *= beta
         gap = 0.0
         for i in range(n):
-            x[i] = x[i] + s * dx[i]
-            lu[i] = lu[i] + s * dlu[i]
-            ll[i] = ll[i] + s * dll[i]
-            gap -= (x[i] - hi) * lu[i] + (lo - x[i]) * ll[i]
-        if record:
+            x[i] = x[i] + s * W[W_DX, i]
+            W[W_LAM_HI, i] = W[W_LAM_HI, i] + s * W[W_DLAM_HI, i]
+            W[W_LAM_LO, i] = W[W_LAM_LO, i] + s * W[W_DLAM_LO, i]
+            gap -= (x[i] - hi) * W[W_LAM_HI, i] + (lo - x[i]) * W[W_LAM_LO, i]
+        if hist.shape[0] > 0:
             hist[it - 1, 0] = math.sqrt(d2)
             hist[it - 1, 1] = math.sqrt(c2)
             hist[it - 1, 2] = gap
             for i in range(n):
                 hist[it - 1, 3 + i] = x[i]
         if r_try < tol_feas and gap < tol_gap:
-            flag = 1
-            break
-    return it, flag
+            return it, 1
+    return max_iter, 0
 
 
 def solve_box_qp(H, q, lo: float, hi: float, x0, settings: IPMSettings | None = None,
@@ -243,13 +246,13 @@ def solve_box_qp(H, q, lo: float, hi: float, x0, settings: IPMSettings | None = 
         raise ConfigError(f"interior-point start must lie strictly inside ({lo}, {hi}), got {x0}")
     H = np.ascontiguousarray(H, dtype=float)
     q = np.ascontiguousarray(q, dtype=float)
-    lam_hi, lam_lo = np.empty(n), np.empty(n)
+    W = np.zeros((N_WORK_ROWS, n))
     hist = np.zeros((cfg.max_iter if record_history else 0, 3 + n))
-    it, flag = ipm_into(H, q, lo, hi, x, lam_hi, lam_lo, ipm_parameters(cfg), cfg.max_iter,
-                        np.empty((5, n)), np.empty((n, n)), hist)
+    it, flag = ipm_into(H, q, lo, hi, x, ipm_parameters(cfg), cfg.max_iter, W,
+                        np.empty((n, n)), hist)
     if flag < 0:
         raise np.linalg.LinAlgError("Newton matrix is not positive definite")
-    lam = np.concatenate((lam_hi, lam_lo))
+    lam = np.concatenate((W[W_LAM_HI], W[W_LAM_LO]))
     if not record_history:
         return IPMResult(x, lam, it, flag == 1)
     h = hist[:it]

@@ -52,6 +52,7 @@ NO_EXCITATION = STATUSES.index(STATUS_NO_EXCITATION)
 BAD_SAMPLE = STATUSES.index(STATUS_BAD_SAMPLE)
 #: why :func:`irls_update` refused a sample (``bad_sample``)
 WHY_NONFINITE, WHY_TIME = 1, 2
+_ROW0 = np.zeros(1, dtype=np.int64)
 _WHY = {WHY_NONFINITE: "non-finite or malformed sample", WHY_TIME: "time not increasing"}
 
 # extra settings after the window's (estimators.window.window_settings)
@@ -62,6 +63,7 @@ I_OFFSETS = N_INT_SETTINGS + 5  # then the offsets of the float state's pieces
 (F_LAST_T, F_LAST_P, F_LAST_V, F_LAST_R, F_LAST_W, F_LAST_F, F_C, F_B, F_H, F_THRUST, F_R0, F_J,
  F_ETA, F_SD, F_OUT, F_X, F_SD_X, F_V, F_M, F_S, F_WEIGHTS, F_HISTORY, F_ANCHOR, F_DIRECTION,
  F_SCRATCH, F_BUF, F_SORTED) = range(27)
+N_PIECES = 27
 # the int state: counters, then the completion's (estimators.change_completion), then the
 # interior-point iterations of each IRLS round
 K_HEAD, K_COUNT, K_HAS_LAST, K_HAS_SD, K_MEDIAN_K, K_MEDIAN_FRESH = range(6)
@@ -72,12 +74,14 @@ C_MASS, C_G, C_FMAX, C_CLIP, C_MIN_THRUST, C_J, C_JINV, C_A = 0, 1, 2, 3, 4, 5, 
 
 
 class IRLSState:
-    """The state of one online IRLS estimator in two flat buffers, with numpy views of its
-    pieces (the compiled update reads them through the offsets in ``ip``).
+    """The state of ``N`` online IRLS estimators (one for :class:`SlidingWindowIRLS`, a batch
+    for :class:`estimators.batched.BatchedIRLS`) in a float and an int buffer, with numpy
+    views of its pieces, each ``(N, *shape)``; the compiled update reads the same pieces
+    through :func:`state_pieces` and the offsets in ``ip``.
 
     Float pieces: the previous sample (``last_*``, command clipped), the ring of segment terms
-    (``c, b, H, thrust``; ``K_HEAD`` is the slot written next, the oldest segment of a full
-    window), the unfiltered estimate ``eta`` and its ``sd``, the reported ``out``, the last
+    (``c, b, H, thrust``; ``ints[:, K_HEAD]`` is the slot written next, the oldest segment of a
+    full window), the unfiltered estimate ``eta`` and its ``sd``, the reported ``out``, the last
     window solve (``x, sd_x, weights``) and its workspace, the change completion (``history,
     anchor, direction``) and the output median's ring (``buf, sorted``).
     """
@@ -88,13 +92,13 @@ class IRLSState:
                 (10, n), (n,), (n,), (n,), (n,), (n,), (N_VECTORS, n), (N_MATRICES, n, n),
                 (3, m), (m,), (m, n), (n,), (n,), (3, n), (L, n), (L, n))
 
-    def __init__(self, m: int, n: int, L: int, rounds: int):
+    def __init__(self, m: int, n: int, L: int, rounds: int, num: int = 1):
         shapes = self.shapes(m, n, L)
-        sizes = [int(np.prod(s)) for s in shapes]
+        sizes = [num * int(np.prod(s)) for s in shapes]  # piece-major: piece k of every row
         self.offsets = np.concatenate(([0], np.cumsum(sizes))).astype(np.int64)
         self.floats = np.zeros(int(self.offsets[-1]))
-        self.ints = np.zeros(K_ITERS + rounds, dtype=np.int64)
-        self.views = [self.floats[a:b].reshape(s) for a, b, s in
+        self.ints = np.zeros((num, K_ITERS + rounds), dtype=np.int64)
+        self.views = [self.floats[a:b].reshape((num,) + s) for a, b, s in
                       zip(self.offsets[:-1], self.offsets[1:], shapes)]
 
 
@@ -114,8 +118,31 @@ def irls_parameters(vehicle: Vehicle, cfg: IRLSConfig, offsets: np.ndarray):
 
 
 @jit
-def _piece(fs, ip, k):
-    return fs[ip[I_OFFSETS + k]:ip[I_OFFSETS + k + 1]]
+def _rows(fs, offsets, k, N):
+    """Piece ``k`` of the float state of ``N`` rows, flat per row (N, size)."""
+    return fs[offsets[k]:offsets[k + 1]].reshape((N, (offsets[k + 1] - offsets[k]) // N))
+
+
+@jit
+def state_pieces(fs, ip, N):
+    """The pieces of the float state of ``N`` estimators (:class:`IRLSState`), each
+    ``(N, *shape)``, in the order of the ``F_*`` constants."""
+    m, n, L = ip[I_M], ip[I_N], ip[I_L]
+    o = ip[I_OFFSETS:]
+    return (_rows(fs, o, F_LAST_T, N), _rows(fs, o, F_LAST_P, N), _rows(fs, o, F_LAST_V, N),
+            _rows(fs, o, F_LAST_R, N).reshape((N, 3, 3)), _rows(fs, o, F_LAST_W, N),
+            _rows(fs, o, F_LAST_F, N), _rows(fs, o, F_C, N),
+            _rows(fs, o, F_B, N).reshape((N, m, n)), _rows(fs, o, F_H, N).reshape((N, m, n, n)),
+            _rows(fs, o, F_THRUST, N), _rows(fs, o, F_R0, N),
+            _rows(fs, o, F_J, N).reshape((N, 10, n)), _rows(fs, o, F_ETA, N),
+            _rows(fs, o, F_SD, N), _rows(fs, o, F_OUT, N), _rows(fs, o, F_X, N),
+            _rows(fs, o, F_SD_X, N), _rows(fs, o, F_V, N).reshape((N, N_VECTORS, n)),
+            _rows(fs, o, F_M, N).reshape((N, N_MATRICES, n, n)),
+            _rows(fs, o, F_S, N).reshape((N, 3, m)), _rows(fs, o, F_WEIGHTS, N),
+            _rows(fs, o, F_HISTORY, N).reshape((N, m, n)), _rows(fs, o, F_ANCHOR, N),
+            _rows(fs, o, F_DIRECTION, N), _rows(fs, o, F_SCRATCH, N).reshape((N, 3, n)),
+            _rows(fs, o, F_BUF, N).reshape((N, L, n)),
+            _rows(fs, o, F_SORTED, N).reshape((N, L, n)))
 
 
 @jit
@@ -127,77 +154,71 @@ def _finite(a) -> bool:
 
 
 @jit
-def irls_update(t, p, v, R, w, f, const, fp, ip, fs, ks, hist):
-    """One online update of the sliding-window IRLS (module docstring) on the state
-    ``(fs, ks)`` (:class:`IRLSState`), in place. Returns ``(status code, why, rounds,
-    cond)``: ``why`` is :data:`WHY_NONFINITE` or :data:`WHY_TIME` for a ``bad_sample``, else 0;
-    ``rounds`` and ``cond`` describe the window solve (0 and NaN when none ran)."""
+def irls_step(t, p, v, R, w, f, const, fp, ip, S, ks, i, hist):
+    """One online update of the sliding-window IRLS (module docstring) of row ``i`` of the
+    state ``(S, ks)`` (:func:`state_pieces`, int state (N, K)), in place. Returns ``(status
+    code, why, rounds, cond)``: ``why`` is :data:`WHY_NONFINITE` or :data:`WHY_TIME` for a
+    ``bad_sample``, else 0; ``rounds`` and ``cond`` describe the window solve (0 and NaN when
+    none ran)."""
     m, n, L = ip[I_M], ip[I_N], ip[I_L]
-    last_t, last_p, last_v = _piece(fs, ip, F_LAST_T), _piece(fs, ip, F_LAST_P), \
-        _piece(fs, ip, F_LAST_V)
-    last_R, last_w = _piece(fs, ip, F_LAST_R).reshape((3, 3)), _piece(fs, ip, F_LAST_W)
-    last_f, c, thrust = _piece(fs, ip, F_LAST_F), _piece(fs, ip, F_C), _piece(fs, ip, F_THRUST)
-    b, H = _piece(fs, ip, F_B).reshape((m, n)), _piece(fs, ip, F_H).reshape((m, n, n))
-    eta, sd, out = _piece(fs, ip, F_ETA), _piece(fs, ip, F_SD), _piece(fs, ip, F_OUT)
-    x, sd_x, weights = _piece(fs, ip, F_X), _piece(fs, ip, F_SD_X), _piece(fs, ip, F_WEIGHTS)
-    V, M = _piece(fs, ip, F_V).reshape((N_VECTORS, n)), \
-        _piece(fs, ip, F_M).reshape((N_MATRICES, n, n))
-    history_ = _piece(fs, ip, F_HISTORY).reshape((m, n))
-    completion = ks[K_COMPLETION:K_ITERS]
+    last_t, last_p, last_v, last_R = S[F_LAST_T][i], S[F_LAST_P][i], S[F_LAST_V][i], \
+        S[F_LAST_R][i]
+    last_w, last_f, c, b, H = S[F_LAST_W][i], S[F_LAST_F][i], S[F_C][i], S[F_B][i], S[F_H][i]
+    thrust, eta, sd, out = S[F_THRUST][i], S[F_ETA][i], S[F_SD][i], S[F_OUT][i]
+    x, sd_x, M, history_ = S[F_X][i], S[F_SD_X][i], S[F_M][i], S[F_HISTORY][i]
+    k_row = ks[i]
+    completion = k_row[K_COMPLETION:K_ITERS]
     code, why, rounds, cond = WARMUP, 0, 0, np.nan
     finite = (math.isfinite(t) and _finite(p) and _finite(v) and _finite(R) and _finite(w)
               and _finite(f))
-    if not finite or (ks[K_HAS_LAST] == 1 and not t > last_t[0]):
-        ks[K_COUNT] = 0
-        ks[K_HAS_LAST] = 0
+    if not finite or (k_row[K_HAS_LAST] == 1 and not t > last_t[0]):
+        k_row[K_COUNT] = 0
+        k_row[K_HAS_LAST] = 0
         code, why = BAD_SAMPLE, (WHY_TIME if finite else WHY_NONFINITE)
     else:
-        if ks[K_HAS_LAST] == 1:  # the segment last -> this sample into the ring (eqs. 13-26)
-            slot = ks[K_HEAD]
+        if k_row[K_HAS_LAST] == 1:  # the segment last -> this sample into the ring (eqs. 13-26)
+            slot = k_row[K_HEAD]
             c[slot], thrust[slot] = segment_terms_into(
                 t - last_t[0], last_p, p, last_v, v, last_R, R, last_w, w, last_f,
                 const[C_MASS], const[C_G], const[C_J:C_JINV].reshape((3, 3)),
                 const[C_JINV:C_A].reshape((3, 3)), const[C_A:C_A + 4 * n].reshape((4, n)),
-                const[C_A + 4 * n:C_A + 4 * n + 10], _piece(fs, ip, F_R0),
-                _piece(fs, ip, F_J).reshape((10, n)), b[slot], H[slot])
-            ks[K_HEAD] = (slot + 1) % m
-            ks[K_COUNT] = min(ks[K_COUNT] + 1, m)
+                const[C_A + 4 * n:C_A + 4 * n + 10], S[F_R0][i], S[F_J][i], b[slot], H[slot])
+            k_row[K_HEAD] = (slot + 1) % m
+            k_row[K_COUNT] = min(k_row[K_COUNT] + 1, m)
         last_t[0] = t
-        for i in range(3):
-            last_p[i], last_v[i], last_w[i] = p[i], v[i], w[i]
+        for a in range(3):
+            last_p[a], last_v[a], last_w[a] = p[a], v[a], w[a]
             for k in range(3):
-                last_R[i, k] = R[i, k]
+                last_R[a, k] = R[a, k]
         for j in range(n):
             last_f[j] = min(max(f[j], 0.0), const[C_FMAX]) if const[C_CLIP] != 0.0 else f[j]
-        ks[K_HAS_LAST] = 1
-        if ks[K_COUNT] == m:
+        k_row[K_HAS_LAST] = 1
+        if k_row[K_COUNT] == m:
             mean = 0.0
             for s in range(m):
-                mean += thrust[(ks[K_HEAD] + s) % m]
+                mean += thrust[(k_row[K_HEAD] + s) % m]
             if mean / m < const[C_MIN_THRUST]:
                 code = NO_EXCITATION
             else:
                 code, rounds, cond = solve_window_into(
-                    c, b, H, ks[K_HEAD], eta, fp, ip, V, M,
-                    _piece(fs, ip, F_S).reshape((3, m)), weights, ks[K_ITERS:], hist, x, sd_x)
+                    c, b, H, k_row[K_HEAD], eta, fp, ip, S[F_V][i], M, S[F_S][i],
+                    S[F_WEIGHTS][i], k_row[K_ITERS:], hist, x, sd_x)
             if code == OK or code == MAX_ITER:
                 if ip[I_COMPLETION] == 1:
-                    complete_into(x, M[M_JGJ], history_, _piece(fs, ip, F_ANCHOR),
-                                  _piece(fs, ip, F_DIRECTION), completion, fp[P_THRESHOLD],
-                                  ip[I_HOLD], fp[P_GAMMA], fp[P_LO], fp[P_HI], M[M_A], M[M_B],
-                                  _piece(fs, ip, F_SCRATCH).reshape((3, n)))
+                    complete_into(x, M[M_JGJ], history_, S[F_ANCHOR][i], S[F_DIRECTION][i],
+                                  completion, fp[P_THRESHOLD], ip[I_HOLD], fp[P_GAMMA],
+                                  fp[P_LO], fp[P_HI], M[M_A], M[M_B], S[F_SCRATCH][i])
                 for j in range(n):
                     eta[j] = x[j]
                     sd[j] = sd_x[j]
-                ks[K_HAS_SD] = 1
+                k_row[K_HAS_SD] = 1
             elif ip[I_COMPLETION] == 1:  # a held window: the completion sees the kept estimate
                 observe_into(eta, history_, completion)
     if L > 1:
-        median_push_into(_piece(fs, ip, F_BUF).reshape((L, n)),
-                         _piece(fs, ip, F_SORTED).reshape((L, n)), ks[K_MEDIAN_K], eta,
-                         ks[K_MEDIAN_FRESH] == 1, out)
-        ks[K_MEDIAN_K] = (ks[K_MEDIAN_K] + 1) % L
-        ks[K_MEDIAN_FRESH] = 0
+        median_push_into(S[F_BUF][i], S[F_SORTED][i], k_row[K_MEDIAN_K], eta,
+                         k_row[K_MEDIAN_FRESH] == 1, out)
+        k_row[K_MEDIAN_K] = (k_row[K_MEDIAN_K] + 1) % L
+        k_row[K_MEDIAN_FRESH] = 0
     else:
         for j in range(n):
             out[j] = eta[j]
@@ -205,36 +226,48 @@ def irls_update(t, p, v, R, w, f, const, fp, ip, fs, ks, hist):
 
 
 @jit
-def irls_reset(eta0, ip, fs, ks) -> None:
-    """Forget everything; start from ``eta0``."""
-    m, n = ip[I_M], ip[I_N]
-    for i in range(fs.shape[0]):
-        fs[i] = 0.0
-    for i in range(ks.shape[0]):
-        ks[i] = 0
-    eta, out, sd = _piece(fs, ip, F_ETA), _piece(fs, ip, F_OUT), _piece(fs, ip, F_SD)
-    history_ = _piece(fs, ip, F_HISTORY).reshape((m, n))
-    for j in range(n):
-        eta[j] = eta0[j]
-        out[j] = eta0[j]
-        sd[j] = np.nan
-        for s in range(m):
-            history_[s, j] = eta0[j]
-    ks[K_MEDIAN_FRESH] = 1
+def irls_update(t, p, v, R, w, f, const, fp, ip, fs, ks, hist):
+    """:func:`irls_step` of a single estimator (state of one row): the online update."""
+    return irls_step(t, p, v, R, w, f, const, fp, ip, state_pieces(fs, ip, 1), ks, 0, hist)
+
+
+@jit
+def irls_reset(eta0, ip, fs, ks, rows) -> None:
+    """Forget everything of the estimators ``rows``; start them from ``eta0`` (N, n)."""
+    N = ks.shape[0]
+    S = state_pieces(fs, ip, N)
+    n = ip[I_N]
+    for i in rows:
+        for k in range(ks.shape[1]):
+            ks[i, k] = 0
+        for k in range(N_PIECES):
+            row = _rows(fs, ip[I_OFFSETS:], k, N)[i]
+            for a in range(row.shape[0]):
+                row[a] = 0.0
+        eta, out, sd, history_ = S[F_ETA][i], S[F_OUT][i], S[F_SD][i], S[F_HISTORY][i]
+        for j in range(n):
+            eta[j] = eta0[i, j]
+            out[j] = eta0[i, j]
+            sd[j] = np.nan
+            for s in range(history_.shape[0]):
+                history_[s, j] = eta0[i, j]
+        ks[i, K_MEDIAN_FRESH] = 1
 
 
 @jit
 def irls_run(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, eta, sd, code):
-    """:func:`irls_update` over the rows of a recording: the reported estimate, its sd (NaN
-    until a window is solved) and the status code of every row."""
+    """:func:`irls_step` over the rows of a recording (a single estimator's state): the
+    reported estimate, its sd (NaN until a window is solved) and the status code of every
+    row."""
     n = ip[I_N]
-    out, sd_now = _piece(fs, ip, F_OUT), _piece(fs, ip, F_SD)
+    S = state_pieces(fs, ip, 1)
+    out, sd_now = S[F_OUT][0], S[F_SD][0]
     for k in range(t.shape[0]):
-        code[k], _why, _rounds, _cond = irls_update(t[k], p[k], v[k], R[k], w[k], f[k], const,
-                                                    fp, ip, fs, ks, hist)
+        code[k], _why, _rounds, _cond = irls_step(t[k], p[k], v[k], R[k], w[k], f[k], const,
+                                                  fp, ip, S, ks, 0, hist)
         for j in range(n):
             eta[k, j] = out[j]
-            sd[k, j] = sd_now[j] if ks[K_HAS_SD] == 1 else np.nan
+            sd[k, j] = sd_now[j] if ks[0, K_HAS_SD] == 1 else np.nan
 
 
 class SlidingWindowIRLS:
@@ -271,17 +304,17 @@ class SlidingWindowIRLS:
             eta = np.array(eta0, dtype=float).reshape(-1)
             if eta.shape != (n,) or not np.all(np.isfinite(eta)):
                 raise ConfigError(f"eta0 must be {n} finite numbers, got {eta0!r}")
-        irls_reset(eta, self._ip, self._state.floats, self._state.ints)
+        irls_reset(eta[None], self._ip, self._state.floats, self._state.ints, _ROW0)
 
     @property
     def eta(self) -> np.ndarray:
         """The current (unfiltered) estimate, a copy."""
-        return self._state.views[F_ETA].copy()
+        return self._state.views[F_ETA][0].copy()
 
     @property
     def change_events(self) -> int:
         """Changes the change completion has started since the last reset."""
-        return int(self._state.ints[K_COMPLETION + 3])
+        return int(self._state.ints[0, K_COMPLETION + 3])
 
     def update(self, sample: Sample) -> Estimate:
         """Add one measurement row; returns the estimate of the window ending at it."""
@@ -299,8 +332,8 @@ class SlidingWindowIRLS:
         code, why, rounds, cond = irls_update(math.nan if malformed else t, p, v, R, w, f,
                                               self._const, self._fp, self._ip, st.floats,
                                               st.ints, self._hist)
-        views, cfg = st.views, self.config
-        sd = views[F_SD].copy() if st.ints[K_HAS_SD] == 1 else None
+        views, ints, cfg = st.views, st.ints[0], self.config
+        sd = views[F_SD][0].copy() if ints[K_HAS_SD] == 1 else None
         if code in (WARMUP, NO_EXCITATION, BAD_SAMPLE):
             message = ""
             if code == BAD_SAMPLE:
@@ -309,12 +342,12 @@ class SlidingWindowIRLS:
                 message = "commanded thrust ~ 0 in the window"
             diag = IRLSDiagnostics(STATUSES[code], message)
         elif cfg.record_history:
-            diag = window_diagnostics(code, rounds, cond, st.ints[K_ITERS:], views[F_WEIGHTS],
+            diag = window_diagnostics(code, rounds, cond, ints[K_ITERS:], views[F_WEIGHTS][0],
                                       cfg, self._hist)
         else:
-            diag = LazyWindowDiagnostics(code, rounds, cond, st.ints[K_ITERS:].copy(),
-                                         views[F_WEIGHTS].copy(), cfg)
-        return Estimate(t, views[F_OUT].copy(), sd, STATUSES[code], diag)
+            diag = LazyWindowDiagnostics(code, rounds, cond, ints[K_ITERS:].copy(),
+                                         views[F_WEIGHTS][0].copy(), cfg)
+        return Estimate(t, views[F_OUT][0].copy(), sd, STATUSES[code], diag)
 
     def run(self, recording: Recording, progress: bool = False) -> EstimateSeries:
         """Estimate over a whole recording, one row per sample (the first ``window - 1`` rows

@@ -20,7 +20,7 @@ import math
 from quadfault.jit import jit
 
 
-@jit
+@jit(inline="always")
 def cholesky_into(A, shift, L) -> bool:
     """Lower Cholesky factor of ``A + diag(shift)`` into ``L``'s lower triangle (only ``A``'s
     lower triangle is read); False, with ``L`` undefined, when the matrix is not positive
@@ -42,20 +42,34 @@ def cholesky_into(A, shift, L) -> bool:
     return True
 
 
-@jit
+@jit(inline="always")
 def cholesky_solve_into(L, rhs, out) -> None:
     """Solve ``L L^T out = rhs`` given the factor of :func:`cholesky_into`."""
-    n = rhs.shape[0]
-    for i in range(n):  # forward: L y = rhs (y kept in out)
+    _forward_into(L, rhs, out)
+    _backward_into(L, out)
+
+
+@jit(inline="always")
+def _forward_into(L, rhs, y) -> None:
+    """``L y = rhs``."""
+    for i in range(rhs.shape[0]):
         s = rhs[i]
         for k in range(i):
-            s -= L[i, k] * out[k]
-        out[i] = s / L[i, i]
-    for i in range(n - 1, -1, -1):  # back: L^T out = y
-        s = out[i]
+            s -= L[i, k] * y[k]
+        y[i] = s / L[i, i]
+
+
+@jit(inline="always")
+def _backward_into(L, y) -> None:
+    """``L^T x = y``, ``x`` over ``y``. (Its own function, with a forward range: numba then
+    compiles both substitutions without reference counting on the arrays.)"""
+    n = y.shape[0]
+    for back in range(n):
+        i = n - 1 - back
+        s = y[i]
         for k in range(i + 1, n):
-            s -= L[k, i] * out[k]
-        out[i] = s / L[i, i]
+            s -= L[k, i] * y[k]
+        y[i] = s / L[i, i]
 
 
 @jit

@@ -35,7 +35,7 @@ import numpy as np
 
 from estimators.base import STATUS_ILL_CONDITIONED, STATUS_MAX_ITER, STATUS_OK, STATUS_REJECTED
 from estimators.base import STATUSES
-from estimators.ipm import ipm_into, ipm_parameters
+from estimators.ipm import N_WORK_ROWS, ipm_into, ipm_parameters
 from estimators.irls_config import IRLSConfig, window_diagnostics
 from estimators.linalg import cholesky_into, cholesky_solve_into, cond1_into
 from estimators.robust import mad_weights_into
@@ -57,8 +57,8 @@ I_MAX_IRLS, I_IPM_MAX_ITER, I_HARD_DROP, I_MEDIAN_NORMALIZE, I_FLOOR = range(5)
 N_INT_SETTINGS = 5
 
 # rows of the workspace's vectors V (n each), matrices M (n x n each) and segment rows S (m)
-(V_XCUR, V_Q, V_LU, V_LL, V_ZERO, V_UNIT, V_COL, V_IPM) = range(8)  # V_IPM: 5 rows of scratch
-N_VECTORS = V_IPM + 5
+(V_XCUR, V_Q, V_ZERO, V_UNIT, V_COL, V_IPM) = range(6)  # V_IPM: the interior point's rows
+N_VECTORS = V_IPM + N_WORK_ROWS
 M_JGJ, M_HQ, M_L, M_A, M_B = range(5)
 N_MATRICES = 5
 S_E, S_Z, S_TMP = range(3)
@@ -172,8 +172,8 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
         for j in range(n):
             x_out[j] = x_cur[j]
         h = hist[rounds] if record else hist[0]
-        it, flag = ipm_into(Hq, q, lo, hi, x_out, V[V_LU], V[V_LL], fp[P_IPM:P_IPM + 8],
-                            ip[I_IPM_MAX_ITER], V[V_IPM:V_IPM + 5], L, h)
+        it, flag = ipm_into(Hq, q, lo, hi, x_out, fp[P_IPM:P_IPM + 8], ip[I_IPM_MAX_ITER],
+                            V[V_IPM:], L, h)
         converged = flag == 1
         iters[rounds] = it
         if record:
