@@ -13,7 +13,7 @@ Prints:
    (target: every abrupt drop to 0.5 within 0.1 s, no false alarm on nominal / degradation);
 3. accuracy: motor-averaged RMSE and spike per scenario, mean over the seeds.
 
-Flights use ``quadfault reproduce``'s settings (``estimators.reproduce.sim_config``: no upper
+Flights use ``quadfault reproduce``'s settings (``estimators.paper.reproduce.sim_config``: no upper
 thrust limit, as in the paper). The EKF's Q_eta is calibrated first (as ``quadfault
 reproduce`` does) unless ``--q-eta``.
 
@@ -36,12 +36,12 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from estimators.calibration import calibrate_q_eta, median_filtered
+from estimators.paper.calibration import calibrate_q_eta, median_filtered
 from estimators.ekf import EKFConfig, MotorEfficiencyEKF
 from estimators.fdi import detect, evaluate
 from estimators.irls import IRLSConfig, SlidingWindowIRLS
 from estimators.metrics import fault_windows, mean_or_none, score
-from estimators.reproduce import flight_check, sim_config
+from estimators.paper.reproduce import flight_check, sim_config
 from quadfault.scenarios import named_scenario
 from quadfault.simulator import simulate
 

@@ -8,7 +8,7 @@ from estimators.change_completion import (CausalMedian, ChangeCompletion, causal
                                           l1_completion, run_completed, weak_direction)
 from estimators.irls import IRLSConfig, SlidingWindowIRLS, numba_available, solve_window
 from estimators.metrics import mean_or_none, score
-from estimators.reproduce import sim_config
+from estimators.paper.reproduce import sim_config
 from quadfault.errors import ConfigError
 from quadfault.scenarios import named_scenario
 from quadfault.simulator import simulate
@@ -196,7 +196,7 @@ def test_numba_and_numpy_paths_agree_with_the_options_on(combined):
 
 
 def test_median_filtered_series_keeps_everything_but_eta(combined):
-    from estimators.calibration import median_filtered
+    from estimators.paper.calibration import median_filtered
 
     rec = combined.slice(0, 400).without_truth()
     s = SlidingWindowIRLS(rec.vehicle).run(rec)

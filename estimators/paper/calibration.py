@@ -134,7 +134,7 @@ def median_filtered(series, length: int):
     """``series`` with its ``eta`` replaced by the causal running median of ``length`` rows."""
     from dataclasses import replace
 
-    from estimators.change_completion import causal_median
+    from estimators.median import causal_median
 
     return replace(series, eta=causal_median(series.eta, length))
 
