@@ -72,6 +72,18 @@ class OnlineEstimator(Protocol):
     def run(self, recording: Recording, progress: bool = False) -> EstimateSeries: ...
 
 
-__all__ = ["Estimate", "EstimateSeries", "OnlineEstimator", "Sample", "samples", "STATUSES",
-           "STATUS_OK", "STATUS_WARMUP", "STATUS_ILL_CONDITIONED", "STATUS_NO_EXCITATION",
-           "STATUS_REJECTED", "STATUS_MAX_ITER", "STATUS_BAD_SAMPLE"]
+__all__ = [
+    "STATUSES",
+    "STATUS_BAD_SAMPLE",
+    "STATUS_ILL_CONDITIONED",
+    "STATUS_MAX_ITER",
+    "STATUS_NO_EXCITATION",
+    "STATUS_OK",
+    "STATUS_REJECTED",
+    "STATUS_WARMUP",
+    "Estimate",
+    "EstimateSeries",
+    "OnlineEstimator",
+    "Sample",
+    "samples",
+]

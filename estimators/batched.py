@@ -23,11 +23,32 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimators.base import STATUSES
-from estimators.ekf import (F_ETA0, F_P, F_X, K_INITIALISED, EKFConfig, EKFState,
-                            default_eta0, ekf_constants, ekf_reset, ekf_step)
+from estimators.ekf import (
+    F_ETA0,
+    F_P,
+    F_X,
+    K_INITIALISED,
+    EKFConfig,
+    EKFState,
+    default_eta0,
+    ekf_constants,
+    ekf_reset,
+    ekf_step,
+)
 from estimators.ekf import state_pieces as ekf_pieces
-from estimators.irls import (F_ETA, F_OUT, F_SD, K_COMPLETION, K_HAS_SD, IRLSConfig, IRLSState,
-                             irls_parameters, irls_reset, irls_step, state_pieces)
+from estimators.irls import (
+    F_ETA,
+    F_OUT,
+    F_SD,
+    K_COMPLETION,
+    K_HAS_SD,
+    IRLSConfig,
+    IRLSState,
+    irls_parameters,
+    irls_reset,
+    irls_step,
+    state_pieces,
+)
 from estimators.window import no_history
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange
@@ -103,8 +124,8 @@ def irls_update_rows(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, code):
     N = ks.shape[0]
     S = state_pieces(fs, ip, N)
     for i in prange(N):
-        code[i] = irls_step(t[i], p[i], v[i], R[i], w[i], f[i], const, fp, ip, S, ks, i,
-                            hist)[0]
+        code[i] = irls_step(t[i], p[i], v[i], R[i], w[i], f[i], const, fp, ip, S, ks,
+                            np.int64(i), hist)[0]
 
 
 @jit(parallel=True)
@@ -114,7 +135,7 @@ def ekf_update_rows(t, p, v, R, w, f, const, offsets, fs, ks, code):
     N = ks.shape[0]
     S = ekf_pieces(fs, offsets, f.shape[1], N)
     for i in prange(N):
-        code[i] = ekf_step(t[i], p[i], v[i], R[i], w[i], f[i], const, S, ks, i)
+        code[i] = ekf_step(t[i], p[i], v[i], R[i], w[i], f[i], const, S, ks, np.int64(i))
 
 
 class BatchedIRLS:
@@ -239,5 +260,12 @@ def make_batched_estimator(name: str, vehicle: Vehicle, num: int, **kwargs):
     raise ConfigError(f"no batched estimator {name!r}; choose 'irls' or 'ekf'")
 
 
-__all__ = ["BatchedIRLS", "BatchedEKF", "BatchedEstimate", "make_batched_estimator", "CODE",
-           "irls_update_rows", "ekf_update_rows"]
+__all__ = [
+    "CODE",
+    "BatchedEKF",
+    "BatchedEstimate",
+    "BatchedIRLS",
+    "ekf_update_rows",
+    "irls_update_rows",
+    "make_batched_estimator",
+]

@@ -139,7 +139,8 @@ def l1_completion(delta, v) -> np.ndarray:
 
 def weak_direction(info) -> tuple[np.ndarray, float]:
     """``(v, lambda_min)``: the unit eigenvector of the smallest eigenvalue of the symmetric
-    part of ``info`` (n, n), largest entry positive (:func:`estimators.linalg.smallest_eigenpair_into`)."""
+    part of ``info`` (n, n), largest entry positive
+    (:func:`estimators.linalg.smallest_eigenpair_into`)."""
     info = np.ascontiguousarray(info, dtype=float)
     n = info.shape[0]
     v = np.empty(n)
@@ -147,5 +148,11 @@ def weak_direction(info) -> tuple[np.ndarray, float]:
     return v, float(lam)
 
 
-__all__ = ["complete_into", "observe_into", "l1_completion_into", "l1_completion",
-           "weak_direction", "N_COUNTERS"]
+__all__ = [
+    "N_COUNTERS",
+    "complete_into",
+    "l1_completion",
+    "l1_completion_into",
+    "observe_into",
+    "weak_direction",
+]

@@ -39,8 +39,16 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from estimators.base import (STATUS_BAD_SAMPLE, STATUS_NO_EXCITATION, STATUS_OK, STATUS_WARMUP,
-                             STATUSES, Estimate, EstimateSeries, Sample)
+from estimators.base import (
+    STATUS_BAD_SAMPLE,
+    STATUS_NO_EXCITATION,
+    STATUS_OK,
+    STATUS_WARMUP,
+    STATUSES,
+    Estimate,
+    EstimateSeries,
+    Sample,
+)
 from estimators.ekf_filter import predict_update_into
 from estimators.irls_config import BACKENDS, deprecated_backend  # noqa: F401  (re-exported)
 from quadfault.errors import ConfigError
@@ -117,11 +125,11 @@ class EKFConfig:
         deprecated_backend("EKFConfig", self.backend)
 
     @classmethod
-    def reference(cls, **changes) -> "EKFConfig":
+    def reference(cls, **changes) -> EKFConfig:
         """The reference code's settings, including its clamp ``[1e-3, 1 - 1e-3]``."""
         return replace(cls(eta_bounds=(1e-3, 1.0 - 1e-3), clip_commands=False), **changes)
 
-    def replace(self, **changes) -> "EKFConfig":
+    def replace(self, **changes) -> EKFConfig:
         return replace(self, **changes)
 
 
@@ -159,8 +167,9 @@ class EKFState:
 
 
 @jit
-def _rows(fs, offsets, k, N):
-    return fs[offsets[k]:offsets[k + 1]].reshape((N, (offsets[k + 1] - offsets[k]) // N))
+def _rows(fs, a, b, N):
+    """The piece ``fs[a:b]`` of the float state of ``N`` rows, flat per row (N, size)."""
+    return fs[a:b].reshape((N, (b - a) // N))
 
 
 @jit
@@ -169,17 +178,25 @@ def state_pieces(fs, offsets, n, N):
     ``(N, *shape)``, in the order of the ``F_*`` constants."""
     ns = 18 + n
     o = offsets
-    return (_rows(fs, o, F_X, N), _rows(fs, o, F_P, N).reshape((N, ns, ns)),
-            _rows(fs, o, F_LAST_T, N), _rows(fs, o, F_LAST_F, N), _rows(fs, o, F_ETA0, N),
-            _rows(fs, o, F_ETA_KEEP, N), _rows(fs, o, F_P_KEEP, N).reshape((N, n, n)),
-            _rows(fs, o, F_MATS, N).reshape((N, 3, ns, ns)),
-            _rows(fs, o, F_WT, N).reshape((N, ns, 12)),
-            _rows(fs, o, F_S12, N).reshape((N, 2, 12, 12)),
-            _rows(fs, o, F_HP, N).reshape((N, 12, ns)), _rows(fs, o, F_M3, N).reshape((N, 8, 3, 3)),
-            _rows(fs, o, F_DR, N).reshape((N, 9, 3)), _rows(fs, o, F_BS, N).reshape((N, 2, n, 3)),
-            _rows(fs, o, F_HR, N).reshape((N, 3, 9)), _rows(fs, o, F_VECS, N).reshape((N, 3, ns)),
-            _rows(fs, o, F_Z, N).reshape((N, 3, ns)), _rows(fs, o, F_Y, N),
-            _rows(fs, o, F_DT, N))
+    return (_rows(fs, o[F_X], o[F_X + 1], N),
+            _rows(fs, o[F_P], o[F_P + 1], N).reshape((N, ns, ns)),
+            _rows(fs, o[F_LAST_T], o[F_LAST_T + 1], N),
+            _rows(fs, o[F_LAST_F], o[F_LAST_F + 1], N),
+            _rows(fs, o[F_ETA0], o[F_ETA0 + 1], N),
+            _rows(fs, o[F_ETA_KEEP], o[F_ETA_KEEP + 1], N),
+            _rows(fs, o[F_P_KEEP], o[F_P_KEEP + 1], N).reshape((N, n, n)),
+            _rows(fs, o[F_MATS], o[F_MATS + 1], N).reshape((N, 3, ns, ns)),
+            _rows(fs, o[F_WT], o[F_WT + 1], N).reshape((N, ns, 12)),
+            _rows(fs, o[F_S12], o[F_S12 + 1], N).reshape((N, 2, 12, 12)),
+            _rows(fs, o[F_HP], o[F_HP + 1], N).reshape((N, 12, ns)),
+            _rows(fs, o[F_M3], o[F_M3 + 1], N).reshape((N, 8, 3, 3)),
+            _rows(fs, o[F_DR], o[F_DR + 1], N).reshape((N, 9, 3)),
+            _rows(fs, o[F_BS], o[F_BS + 1], N).reshape((N, 2, n, 3)),
+            _rows(fs, o[F_HR], o[F_HR + 1], N).reshape((N, 3, 9)),
+            _rows(fs, o[F_VECS], o[F_VECS + 1], N).reshape((N, 3, ns)),
+            _rows(fs, o[F_Z], o[F_Z + 1], N).reshape((N, 3, ns)),
+            _rows(fs, o[F_Y], o[F_Y + 1], N),
+            _rows(fs, o[F_DT], o[F_DT + 1], N))
 
 
 @jit
@@ -266,10 +283,10 @@ def ekf_reset(ip_offsets, n, fs, ks, rows, eta0) -> None:
     for i in rows:
         ks[i, K_INITIALISED] = 0
         for k in range(N_PIECES):
-            row = _rows(fs, ip_offsets, k, N)[i]
+            row = _rows(fs, ip_offsets[k], ip_offsets[k + 1], N)[i]
             for a in range(row.shape[0]):
                 row[a] = 0.0
-        e0 = _rows(fs, ip_offsets, F_ETA0, N)[i]
+        e0 = _rows(fs, ip_offsets[F_ETA0], ip_offsets[F_ETA0 + 1], N)[i]
         for j in range(n):
             e0[j] = eta0[i, j]
 
@@ -277,7 +294,8 @@ def ekf_reset(ip_offsets, n, fs, ks, rows, eta0) -> None:
 @jit
 def ekf_update(t, p, v, R, w, f, const, offsets, fs, ks) -> int:
     """:func:`ekf_step` of a single filter (the online update)."""
-    return ekf_step(t, p, v, R, w, f, const, state_pieces(fs, offsets, f.shape[0], 1), ks, 0)
+    S = state_pieces(fs, offsets, f.shape[0], ks.shape[0])
+    return ekf_step(t, p, v, R, w, f, const, S, ks, ks.shape[0] - 1)  # row 0, run-time value
 
 
 @jit
@@ -286,12 +304,13 @@ def ekf_run(t, p, v, R, w, f, const, offsets, fs, ks, eta, sd, code) -> None:
     (the initial efficiency before the first good sample), its sd (NaN before it) and the
     status code of every row."""
     n = f.shape[1]
-    S = state_pieces(fs, offsets, n, 1)
-    x, P, eta0 = S[F_X][0], S[F_P][0], S[F_ETA0][0]
+    S = state_pieces(fs, offsets, n, ks.shape[0])
+    row = ks.shape[0] - 1  # 0, a run-time value like the batch's rows
+    x, P, eta0 = S[F_X][row], S[F_P][row], S[F_ETA0][row]
     for k in range(t.shape[0]):
-        code[k] = ekf_step(t[k], p[k], v[k], R[k], w[k], f[k], const, S, ks, 0)
+        code[k] = ekf_step(t[k], p[k], v[k], R[k], w[k], f[k], const, S, ks, row)
         for j in range(n):
-            if ks[0, K_INITIALISED] == 1:
+            if ks[row, K_INITIALISED] == 1:
                 eta[k, j] = x[18 + j]
                 sd[k, j] = math.sqrt(P[18 + j, 18 + j])
             else:

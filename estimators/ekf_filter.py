@@ -25,9 +25,7 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
-from estimators.linalg import cholesky_into
+from estimators.linalg import cholesky_into, gauss_jordan_into, symmetric_eigen_into
 from quadfault._sim_numba import expm_so3  # the core's compiled SO(3) exponential
 from quadfault.jit import jit
 
@@ -64,18 +62,21 @@ def _det3(M):
 
 
 @jit
-def _project_so3_into(M, C):
+def _project_so3_into(M, A, D, V):
     """Closest rotation (polar factor) of ``M`` in place, as
     ``quadfault.rotation.orthonormalize``: Newton iterations ``M <- (M + M^-T) / 2`` when ``M``
-    is near SO(3) (the EKF's case), else SVD. ``C`` is 3 x 3 scratch."""
+    is near SO(3) (the EKF's case), else from the eigen-decomposition of ``M^T M`` (the SVD
+    of ``M``). ``A``, ``D``, ``V`` are 3 x 3 scratch."""
     err = 0.0
     for i in range(3):
         for j in range(3):
             s = 0.0
             for k in range(3):
                 s += M[k, i] * M[k, j]
+            A[i, j] = s
             err = max(err, abs(s - (1.0 if i == j else 0.0)))
     if err < 1e-3 and _det3(M) > 0:
+        C = A
         for _ in range(3):
             for i in range(3):  # C = cofactor matrix^T = adj(M); inv(M) = C / det
                 for j in range(3):
@@ -86,10 +87,27 @@ def _project_so3_into(M, C):
                 for j in range(3):
                     M[i, j] = 0.5 * (M[i, j] + C[j, i] / det)
         return
-    U, _, Vt = np.linalg.svd(M)
-    D = np.eye(3)
-    D[2, 2] = np.sign(np.linalg.det(U @ Vt))
-    M[:, :] = U @ D @ Vt
+    # M = U S V^T: V and S^2 from M^T M; the two largest singular directions give
+    # u_k = M v_k / s_k, the third completes a right-handed pair; R = U V^T
+    symmetric_eigen_into(A, D, V)
+    lo = 0
+    for k in range(1, 3):
+        if D[k, k] < D[lo, lo]:
+            lo = k
+    a, b = (lo + 1) % 3, (lo + 2) % 3
+    for k in (a, b):
+        sk = math.sqrt(max(D[k, k], 1e-300))
+        for i in range(3):
+            A[i, k] = (M[i, 0] * V[0, k] + M[i, 1] * V[1, k] + M[i, 2] * V[2, k]) / sk
+    for i in range(3):  # u_lo = u_a x u_b, with V's orientation: det(U V^T) = +1
+        i1, i2 = (i + 1) % 3, (i + 2) % 3
+        A[i, lo] = A[i1, a] * A[i2, b] - A[i2, a] * A[i1, b]
+    if _det3(V) < 0:
+        for i in range(3):
+            A[i, lo] = -A[i, lo]
+    for i in range(3):
+        for j in range(3):
+            M[i, j] = A[i, 0] * V[j, 0] + A[i, 1] * V[j, 1] + A[i, 2] * V[j, 2]
 
 
 @jit
@@ -266,7 +284,7 @@ def predict_update_into(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo
     for j in range(3):  # project R back to SO(3), clamp eta
         for i in range(3):
             C[i, j] = x[9 + 3 * j + i]
-    _project_so3_into(C, Mr)
+    _project_so3_into(C, Mr, Jr, G)
     for j in range(3):
         for i in range(3):
             x[9 + 3 * j + i] = C[i, j]
@@ -311,7 +329,7 @@ def _update(x, P, xp, Pp, HR, y, r, HP, WT, S, L):
     if not cholesky_into(S, r, L):
         for i in range(12):
             S[i, i] += r[i]
-        _update_general(x, P, xp, Pp, y, HP, S)
+        _update_general(x, P, xp, Pp, y, HP, S, WT.reshape((12, ns)))
         return
     for i in range(12):  # W = L^-1 H P (forward substitution on whole rows, in place)
         for k in range(i):
@@ -342,14 +360,22 @@ def _update(x, P, xp, Pp, HR, y, r, HP, WT, S, L):
 
 
 @jit
-def _update_general(x, P, xp, Pp, y, HP, S):
+def _update_general(x, P, xp, Pp, y, HP, S, KT):
     """Fallback of :func:`_update` for an ``S`` that is not positive definite: ``K^T`` by
-    LU (``np.linalg.solve``, allocates), ``x = xp + K y``, ``P = sym(Pp - K H Pp)``."""
+    Gauss-Jordan elimination into ``KT`` (12, ns), ``x = xp + K y``,
+    ``P = sym(Pp - K H Pp)``; nothing changes if ``S`` is singular."""
     ns, m = Pp.shape[0], S.shape[0]
     for i in range(m):
         for k in range(i + 1, m):
             S[i, k] = S[k, i]
-    KT = np.linalg.solve(S, HP)
+        for k in range(ns):
+            KT[i, k] = HP[i, k]
+    if not gauss_jordan_into(S, KT):
+        for i in range(ns):
+            x[i] = xp[i]
+            for k in range(ns):
+                P[i, k] = Pp[i, k]
+        return
     for i in range(ns):
         acc = 0.0
         for c in range(m):

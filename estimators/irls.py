@@ -29,23 +29,58 @@ from dataclasses import asdict
 
 import numpy as np
 
-from estimators.base import (STATUS_BAD_SAMPLE, STATUS_NO_EXCITATION, STATUS_WARMUP, STATUSES,
-                             Estimate, EstimateSeries, Sample)
+from estimators.base import (
+    STATUS_BAD_SAMPLE,
+    STATUS_NO_EXCITATION,
+    STATUS_WARMUP,
+    STATUSES,
+    Estimate,
+    EstimateSeries,
+    Sample,
+)
 from estimators.change_completion import N_COUNTERS, complete_into, observe_into
-from estimators.irls_config import (BACKENDS, SCALINGS, IRLSConfig,  # noqa: F401  (re-exported)
-                                    IRLSDiagnostics, LazyWindowDiagnostics, window_diagnostics)
+from estimators.irls_config import (  # noqa: F401  (re-exported)
+    BACKENDS,
+    SCALINGS,
+    IRLSConfig,
+    IRLSDiagnostics,
+    LazyWindowDiagnostics,
+    window_diagnostics,
+)
 from estimators.median import median_push_into
 from estimators.residuals import segment_terms_into
-from estimators.window import (M_A, M_B, M_JGJ, MAX_ITER, N_FLOAT_SETTINGS, N_INT_SETTINGS,
-                               N_MATRICES, N_VECTORS, OK, P_GAMMA, P_HI, P_LO, history,
-                               no_history, solve_window, solve_window_into, window_settings)
+from estimators.window import (
+    M_A,
+    M_B,
+    M_JGJ,
+    MAX_ITER,
+    N_FLOAT_SETTINGS,
+    N_INT_SETTINGS,
+    N_MATRICES,
+    N_VECTORS,
+    OK,
+    P_GAMMA,
+    P_HI,
+    P_LO,
+    history,
+    no_history,
+    solve_window,
+    solve_window_into,
+    window_settings,
+)
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
 from quadfault.recording import Recording
 from quadfault.vehicle import Vehicle
 
-__all__ = ["IRLSConfig", "IRLSDiagnostics", "SlidingWindowIRLS", "IRLSState", "irls_update",
-           "solve_window"]
+__all__ = [
+    "IRLSConfig",
+    "IRLSDiagnostics",
+    "IRLSState",
+    "SlidingWindowIRLS",
+    "irls_update",
+    "solve_window",
+]
 
 WARMUP = STATUSES.index(STATUS_WARMUP)
 NO_EXCITATION = STATUSES.index(STATUS_NO_EXCITATION)
@@ -118,9 +153,9 @@ def irls_parameters(vehicle: Vehicle, cfg: IRLSConfig, offsets: np.ndarray):
 
 
 @jit
-def _rows(fs, offsets, k, N):
-    """Piece ``k`` of the float state of ``N`` rows, flat per row (N, size)."""
-    return fs[offsets[k]:offsets[k + 1]].reshape((N, (offsets[k + 1] - offsets[k]) // N))
+def _rows(fs, a, b, N):
+    """The piece ``fs[a:b]`` of the float state of ``N`` rows, flat per row (N, size)."""
+    return fs[a:b].reshape((N, (b - a) // N))
 
 
 @jit
@@ -129,20 +164,33 @@ def state_pieces(fs, ip, N):
     ``(N, *shape)``, in the order of the ``F_*`` constants."""
     m, n, L = ip[I_M], ip[I_N], ip[I_L]
     o = ip[I_OFFSETS:]
-    return (_rows(fs, o, F_LAST_T, N), _rows(fs, o, F_LAST_P, N), _rows(fs, o, F_LAST_V, N),
-            _rows(fs, o, F_LAST_R, N).reshape((N, 3, 3)), _rows(fs, o, F_LAST_W, N),
-            _rows(fs, o, F_LAST_F, N), _rows(fs, o, F_C, N),
-            _rows(fs, o, F_B, N).reshape((N, m, n)), _rows(fs, o, F_H, N).reshape((N, m, n, n)),
-            _rows(fs, o, F_THRUST, N), _rows(fs, o, F_R0, N),
-            _rows(fs, o, F_J, N).reshape((N, 10, n)), _rows(fs, o, F_ETA, N),
-            _rows(fs, o, F_SD, N), _rows(fs, o, F_OUT, N), _rows(fs, o, F_X, N),
-            _rows(fs, o, F_SD_X, N), _rows(fs, o, F_V, N).reshape((N, N_VECTORS, n)),
-            _rows(fs, o, F_M, N).reshape((N, N_MATRICES, n, n)),
-            _rows(fs, o, F_S, N).reshape((N, 3, m)), _rows(fs, o, F_WEIGHTS, N),
-            _rows(fs, o, F_HISTORY, N).reshape((N, m, n)), _rows(fs, o, F_ANCHOR, N),
-            _rows(fs, o, F_DIRECTION, N), _rows(fs, o, F_SCRATCH, N).reshape((N, 3, n)),
-            _rows(fs, o, F_BUF, N).reshape((N, L, n)),
-            _rows(fs, o, F_SORTED, N).reshape((N, L, n)))
+    return (_rows(fs, o[F_LAST_T], o[F_LAST_T + 1], N),
+            _rows(fs, o[F_LAST_P], o[F_LAST_P + 1], N),
+            _rows(fs, o[F_LAST_V], o[F_LAST_V + 1], N),
+            _rows(fs, o[F_LAST_R], o[F_LAST_R + 1], N).reshape((N, 3, 3)),
+            _rows(fs, o[F_LAST_W], o[F_LAST_W + 1], N),
+            _rows(fs, o[F_LAST_F], o[F_LAST_F + 1], N),
+            _rows(fs, o[F_C], o[F_C + 1], N),
+            _rows(fs, o[F_B], o[F_B + 1], N).reshape((N, m, n)),
+            _rows(fs, o[F_H], o[F_H + 1], N).reshape((N, m, n, n)),
+            _rows(fs, o[F_THRUST], o[F_THRUST + 1], N),
+            _rows(fs, o[F_R0], o[F_R0 + 1], N),
+            _rows(fs, o[F_J], o[F_J + 1], N).reshape((N, 10, n)),
+            _rows(fs, o[F_ETA], o[F_ETA + 1], N),
+            _rows(fs, o[F_SD], o[F_SD + 1], N),
+            _rows(fs, o[F_OUT], o[F_OUT + 1], N),
+            _rows(fs, o[F_X], o[F_X + 1], N),
+            _rows(fs, o[F_SD_X], o[F_SD_X + 1], N),
+            _rows(fs, o[F_V], o[F_V + 1], N).reshape((N, N_VECTORS, n)),
+            _rows(fs, o[F_M], o[F_M + 1], N).reshape((N, N_MATRICES, n, n)),
+            _rows(fs, o[F_S], o[F_S + 1], N).reshape((N, 3, m)),
+            _rows(fs, o[F_WEIGHTS], o[F_WEIGHTS + 1], N),
+            _rows(fs, o[F_HISTORY], o[F_HISTORY + 1], N).reshape((N, m, n)),
+            _rows(fs, o[F_ANCHOR], o[F_ANCHOR + 1], N),
+            _rows(fs, o[F_DIRECTION], o[F_DIRECTION + 1], N),
+            _rows(fs, o[F_SCRATCH], o[F_SCRATCH + 1], N).reshape((N, 3, n)),
+            _rows(fs, o[F_BUF], o[F_BUF + 1], N).reshape((N, L, n)),
+            _rows(fs, o[F_SORTED], o[F_SORTED + 1], N).reshape((N, L, n)))
 
 
 @jit
@@ -228,7 +276,9 @@ def irls_step(t, p, v, R, w, f, const, fp, ip, S, ks, i, hist):
 @jit
 def irls_update(t, p, v, R, w, f, const, fp, ip, fs, ks, hist):
     """:func:`irls_step` of a single estimator (state of one row): the online update."""
-    return irls_step(t, p, v, R, w, f, const, fp, ip, state_pieces(fs, ip, 1), ks, 0, hist)
+    S = state_pieces(fs, ip, ks.shape[0])
+    return irls_step(t, p, v, R, w, f, const, fp, ip, S, ks, ks.shape[0] - 1,
+                     hist)  # row 0, a run-time value like the batch's rows
 
 
 @jit
@@ -241,7 +291,7 @@ def irls_reset(eta0, ip, fs, ks, rows) -> None:
         for k in range(ks.shape[1]):
             ks[i, k] = 0
         for k in range(N_PIECES):
-            row = _rows(fs, ip[I_OFFSETS:], k, N)[i]
+            row = _rows(fs, ip[I_OFFSETS + k], ip[I_OFFSETS + k + 1], N)[i]
             for a in range(row.shape[0]):
                 row[a] = 0.0
         eta, out, sd, history_ = S[F_ETA][i], S[F_OUT][i], S[F_SD][i], S[F_HISTORY][i]
@@ -260,11 +310,12 @@ def irls_run(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, eta, sd, code):
     reported estimate, its sd (NaN until a window is solved) and the status code of every
     row."""
     n = ip[I_N]
-    S = state_pieces(fs, ip, 1)
-    out, sd_now = S[F_OUT][0], S[F_SD][0]
+    S = state_pieces(fs, ip, ks.shape[0])
+    row = ks.shape[0] - 1  # 0, a run-time value like the batch's rows
+    out, sd_now = S[F_OUT][row], S[F_SD][row]
     for k in range(t.shape[0]):
         code[k], _why, _rounds, _cond = irls_step(t[k], p[k], v[k], R[k], w[k], f[k], const,
-                                                  fp, ip, S, ks, 0, hist)
+                                                  fp, ip, S, ks, row, hist)
         for j in range(n):
             eta[k, j] = out[j]
             sd[k, j] = sd_now[j] if ks[0, K_HAS_SD] == 1 else np.nan

@@ -202,10 +202,9 @@ def window_diagnostics(code: int, rounds: int, cond: float, iters, weights, cfg:
     kw = {}
     if hist is not None:
         n = hist.shape[2] - 4
-        kw = dict(dual_history=tuple(hist[r, :k, 0].copy() for r, k in enumerate(its)),
-                  cent_history=tuple(hist[r, :k, 1].copy() for r, k in enumerate(its)),
-                  gap_history=tuple(hist[r, :k, 2].copy() for r, k in enumerate(its)),
-                  residual_history=tuple(hist[r, :k, 3 + n].copy() for r, k in enumerate(its)))
+        kw = {name: tuple(hist[r, :k, col].copy() for r, k in enumerate(its))
+              for name, col in (("dual_history", 0), ("cent_history", 1), ("gap_history", 2),
+                                ("residual_history", 3 + n))}
     return IRLSDiagnostics(status, message, its, w, tuple(int(i) for i in np.flatnonzero(w == 0)),
                            float(cond), **kw)
 

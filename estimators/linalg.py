@@ -7,10 +7,11 @@ conditioning guard), the change completion (its weak direction) and the EKF (its
 * :func:`cholesky_into` / :func:`cholesky_solve_into` -- ``A + diag(shift) = L L^T`` and the
   two triangular solves (the shift is the interior point's barrier diagonal and the EKF's
   measurement noise; zero elsewhere);
-* :func:`cond1_into` -- the 1-norm condition number ``||A||_1 ||A^-1||_1`` by Gauss-Jordan
-  elimination with partial pivoting (MATLAB's ``1 / rcond`` up to its estimate);
-* :func:`smallest_eigenpair_into` -- the smallest eigenvalue of a symmetric matrix and its
-  unit eigenvector, by cyclic Jacobi rotations.
+* :func:`gauss_jordan_into` -- ``A X = B`` by Gauss-Jordan elimination with partial pivoting,
+  for a general square ``A``; :func:`cond1_into` -- the 1-norm condition number
+  ``||A||_1 ||A^-1||_1`` with it (MATLAB's ``1 / rcond`` up to its estimate);
+* :func:`symmetric_eigen_into` -- the eigenvalues and eigenvectors of a symmetric matrix by
+  cyclic Jacobi rotations; :func:`smallest_eigenpair_into` -- its smallest pair.
 """
 
 from __future__ import annotations
@@ -73,42 +74,55 @@ def _backward_into(L, y) -> None:
 
 
 @jit
+def gauss_jordan_into(A, X) -> bool:
+    """Solve ``A Y = X`` in place: ``X`` (n, k) becomes ``Y``, ``A`` (n, n) is destroyed.
+    Gauss-Jordan elimination with partial pivoting; False when ``A`` is singular."""
+    n, k = A.shape[0], X.shape[1]
+    for col in range(n):
+        piv = col
+        for r in range(col + 1, n):
+            if abs(A[r, col]) > abs(A[piv, col]):
+                piv = r
+        if A[piv, col] == 0.0:
+            return False
+        for c in range(n):
+            A[col, c], A[piv, c] = A[piv, c], A[col, c]
+        for c in range(k):
+            X[col, c], X[piv, c] = X[piv, c], X[col, c]
+        d = A[col, col]
+        for c in range(n):
+            A[col, c] /= d
+        for c in range(k):
+            X[col, c] /= d
+        for r in range(n):
+            if r != col:
+                f = A[r, col]
+                for c in range(n):
+                    A[r, c] -= f * A[col, c]
+                for c in range(k):
+                    X[r, c] -= f * X[col, c]
+    return True
+
+
+@jit
 def cond1_into(A, M, inv) -> float:
     """``||A||_1 ||A^-1||_1`` (inf when ``A`` is singular); ``M`` and ``inv`` are n x n
     scratch (``inv`` holds ``A^-1`` afterwards)."""
     n = A.shape[0]
     for r in range(n):
-        for k in range(n):
-            M[r, k] = A[r, k]
-            inv[r, k] = 1.0 if r == k else 0.0
-    for col in range(n):
-        piv = col
-        for r in range(col + 1, n):
-            if abs(M[r, col]) > abs(M[piv, col]):
-                piv = r
-        if M[piv, col] == 0.0:
-            return math.inf
-        for k in range(n):
-            M[col, k], M[piv, k] = M[piv, k], M[col, k]
-            inv[col, k], inv[piv, k] = inv[piv, k], inv[col, k]
-        d = M[col, col]
-        for k in range(n):
-            M[col, k] /= d
-            inv[col, k] /= d
-        for r in range(n):
-            if r != col:
-                f = M[r, col]
-                for k in range(n):
-                    M[r, k] -= f * M[col, k]
-                    inv[r, k] -= f * inv[col, k]
+        for c in range(n):
+            M[r, c] = A[r, c]
+            inv[r, c] = 1.0 if r == c else 0.0
+    if not gauss_jordan_into(M, inv):
+        return math.inf
     norm_a = 0.0
     norm_inv = 0.0
-    for k in range(n):
+    for c in range(n):
         sa = 0.0
         si = 0.0
         for r in range(n):
-            sa += abs(A[r, k])
-            si += abs(inv[r, k])
+            sa += abs(A[r, c])
+            si += abs(inv[r, c])
         norm_a = max(norm_a, sa)
         norm_inv = max(norm_inv, si)
     value = norm_a * norm_inv
@@ -116,9 +130,9 @@ def cond1_into(A, M, inv) -> float:
 
 
 @jit
-def smallest_eigenpair_into(A, D, V, v) -> float:
-    """Smallest eigenvalue of the symmetric part of ``A`` (n x n); its unit eigenvector goes
-    into ``v`` (sign: largest entry positive). ``D`` and ``V`` are n x n scratch.
+def symmetric_eigen_into(A, D, V) -> None:
+    """Eigen-decomposition of the symmetric part of ``A`` (n x n): the eigenvalues end on the
+    diagonal of ``D``, the unit eigenvectors in the columns of ``V``.
 
     Cyclic Jacobi: each sweep zeroes every off-diagonal entry once by a plane rotation
     (Golub & Van Loan, Algorithm 8.4.3); it converges quadratically and stops when the
@@ -136,29 +150,44 @@ def smallest_eigenpair_into(A, D, V, v) -> float:
             for j in range(i + 1, n):
                 off += D[i, j] * D[i, j]
         if not off > 1e-30 * total:
-            break
+            return
         for p in range(n - 1):
             for q in range(p + 1, n):
-                if D[p, q] == 0.0:
-                    continue
-                theta = (D[q, q] - D[p, p]) / (2.0 * D[p, q])
-                t = 1.0 / (abs(theta) + math.sqrt(theta * theta + 1.0))
-                if theta < 0.0:
-                    t = -t
-                c = 1.0 / math.sqrt(t * t + 1.0)
-                s = t * c
-                for k in range(n):  # D <- J^T D J, V <- V J
-                    dkp, dkq = D[k, p], D[k, q]
-                    D[k, p] = c * dkp - s * dkq
-                    D[k, q] = s * dkp + c * dkq
-                for k in range(n):
-                    dpk, dqk = D[p, k], D[q, k]
-                    D[p, k] = c * dpk - s * dqk
-                    D[q, k] = s * dpk + c * dqk
-                for k in range(n):
-                    vkp, vkq = V[k, p], V[k, q]
-                    V[k, p] = c * vkp - s * vkq
-                    V[k, q] = s * vkp + c * vkq
+                if D[p, q] != 0.0:
+                    _rotate(D, V, p, q)
+
+
+@jit
+def _rotate(D, V, p, q) -> None:
+    """One Jacobi rotation zeroing ``D[p, q]``: ``D <- J^T D J``, ``V <- V J``."""
+    n = D.shape[0]
+    theta = (D[q, q] - D[p, p]) / (2.0 * D[p, q])
+    t = 1.0 / (abs(theta) + math.sqrt(theta * theta + 1.0))
+    if theta < 0.0:
+        t = -t
+    c = 1.0 / math.sqrt(t * t + 1.0)
+    s = t * c
+    for k in range(n):
+        dkp, dkq = D[k, p], D[k, q]
+        D[k, p] = c * dkp - s * dkq
+        D[k, q] = s * dkp + c * dkq
+    for k in range(n):
+        dpk, dqk = D[p, k], D[q, k]
+        D[p, k] = c * dpk - s * dqk
+        D[q, k] = s * dpk + c * dqk
+    for k in range(n):
+        vkp, vkq = V[k, p], V[k, q]
+        V[k, p] = c * vkp - s * vkq
+        V[k, q] = s * vkp + c * vkq
+
+
+@jit
+def smallest_eigenpair_into(A, D, V, v) -> float:
+    """Smallest eigenvalue of the symmetric part of ``A`` (n x n); its unit eigenvector goes
+    into ``v`` (sign: largest entry positive). ``D`` and ``V`` are n x n scratch
+    (:func:`symmetric_eigen_into`)."""
+    n = A.shape[0]
+    symmetric_eigen_into(A, D, V)
     best = 0
     for i in range(1, n):
         if D[i, i] < D[best, best]:

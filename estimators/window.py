@@ -33,8 +33,13 @@ import math
 
 import numpy as np
 
-from estimators.base import STATUS_ILL_CONDITIONED, STATUS_MAX_ITER, STATUS_OK, STATUS_REJECTED
-from estimators.base import STATUSES
+from estimators.base import (
+    STATUS_ILL_CONDITIONED,
+    STATUS_MAX_ITER,
+    STATUS_OK,
+    STATUS_REJECTED,
+    STATUSES,
+)
 from estimators.ipm import N_WORK_ROWS, ipm_into, ipm_parameters
 from estimators.irls_config import IRLSConfig, window_diagnostics
 from estimators.linalg import cholesky_into, cholesky_solve_into, cond1_into

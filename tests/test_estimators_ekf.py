@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 
 from estimators.base import Sample
-from estimators.ekf import (EKFConfig, MotorEfficiencyEKF, attitude_jacobian, kalman_update,
-                            predict)
+from estimators.ekf import EKFConfig, MotorEfficiencyEKF, attitude_jacobian, kalman_update, predict
 from quadfault.errors import ConfigError
 from quadfault.rotation import expm_so3, hat, logm_so3, vee
 from quadfault.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario

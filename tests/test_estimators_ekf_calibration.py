@@ -4,9 +4,9 @@ fitted on one seed gives about one-sigma coverage on held-out seeds; clear error
 import numpy as np
 import pytest
 
-from estimators.paper.calibration import ONE_SIGMA, SdCalibration, calibrate_sd_scale
 from estimators.ekf import EKFConfig, MotorEfficiencyEKF
 from estimators.metrics import score
+from estimators.paper.calibration import ONE_SIGMA, SdCalibration, calibrate_sd_scale
 from quadfault.errors import ConfigError
 from quadfault.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario
 from quadfault.simulator import simulate

@@ -8,6 +8,8 @@ import pytest
 
 pytest.importorskip("numba")
 
+from estimators.ekf_numba import step_inplace
+
 from estimators.base import Sample
 from estimators.ekf import (
     NOISE_REFERENCE_DT,
@@ -16,7 +18,6 @@ from estimators.ekf import (
     measurement_update,
     predict,
 )
-from estimators.ekf_numba import step_inplace
 from quadfault.rotation import expm_so3
 from quadfault.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario
 from quadfault.simulator import simulate

@@ -24,8 +24,8 @@ calibrated error bar for that tuning (docs/ekf.md, "Uncertainty").
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Callable
 
 import numpy as np
 

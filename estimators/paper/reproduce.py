@@ -81,7 +81,7 @@ class ReproduceConfig:
     improved: bool = True
 
     @classmethod
-    def quick(cls, **changes) -> "ReproduceConfig":
+    def quick(cls, **changes) -> ReproduceConfig:
         """~1 minute: 12 s flights (schedule scaled) and a coarser calibration."""
         return replace(cls(duration=12.0, calibration_duration=12.0, q_range=(1e-3, 10.0),
                            bisection_steps=4), **changes)
@@ -128,9 +128,9 @@ def flight_check(rec) -> dict:
 def _calibration_job(mode: str, cfg: ReproduceConfig, variant: str = "paper") -> dict:
     """IRLS RMSE on the calibration flight, then the EKF's Q_eta matching it (``variant``
     "paper": the reference IRLS; "improved": ``IRLSConfig.improved()``)."""
-    from estimators.paper.calibration import calibrate_q_eta
     from estimators.irls import IRLSConfig, SlidingWindowIRLS
     from estimators.metrics import score
+    from estimators.paper.calibration import calibrate_q_eta
 
     rec = _fly(cfg.calibration_scenario, cfg.calibration_duration, cfg.calibration_seed, mode,
                cfg.thrust_noise)
