@@ -338,6 +338,14 @@ class MotorEfficiencyEKF:
         self.n_rotors = vehicle.n_rotors
         self._eta0_default = default_eta0(self.config, self.n_rotors)
         self._const = ekf_constants(vehicle, self.config)
+        cfg, n = self.config, self.n_rotors
+        #: process-noise variances per 1 ms step (diagonal of Q at dt = 1 ms)
+        self.q_diag = np.concatenate((np.full(3, cfg.q_position), np.full(3, cfg.q_velocity),
+                                      np.full(3, cfg.q_rate), np.full(9, cfg.q_rotation),
+                                      np.full(n, cfg.q_eta)))
+        #: measurement-noise variances (p, v, Omega, attitude rows)
+        self.r_diag = np.concatenate((np.full(3, cfg.r_position), np.full(3, cfg.r_velocity),
+                                      np.full(3, cfg.r_rate), np.full(3, cfg.r_attitude)))
         self._state = EKFState(self.n_rotors)
         self.reset()
 

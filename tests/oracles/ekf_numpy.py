@@ -12,6 +12,8 @@ from quadfault.dynamics import angular_acceleration, translational_acceleration
 from quadfault.rotation import expm_so3, hat, logm_so3, orthonormalize
 from quadfault.vehicle import Vehicle
 
+#: Sample period the per-step noise values refer to [s] (the reference's 1 kHz).
+NOISE_REFERENCE_DT = 1e-3
 P_, V_, W_, R_, ETA_ = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 18), 18
 #: vec(R) entries of the third column R e3 (column-major vec).
 R_E3 = slice(15, 18)
