@@ -35,13 +35,15 @@ from estimators.ekf import (
     ekf_reset,
     ekf_step,
 )
+from estimators.ekf import constant_arrays as ekf_constant_arrays
 from estimators.ekf import state_pieces as ekf_pieces
 from estimators.irls import (
-    F_ETA,
-    F_OUT,
-    F_SD,
+    F_VN,
     K_COMPLETION,
     K_HAS_SD,
+    VN_ETA,
+    VN_OUT,
+    VN_SD,
     IRLSConfig,
     IRLSState,
     irls_parameters,
@@ -49,6 +51,7 @@ from estimators.irls import (
     irls_step,
     state_pieces,
 )
+from estimators.irls import constant_arrays as irls_constant_arrays
 from estimators.window import no_history
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange
@@ -123,8 +126,9 @@ def irls_update_rows(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, code):
     ``code``."""
     N = ks.shape[0]
     S = state_pieces(fs, ip, N)
+    arrays = irls_constant_arrays(const, ip)
     for i in prange(N):
-        code[i] = irls_step(t[i], p[i], v[i], R[i], w[i], f[i], const, fp, ip, S, ks,
+        code[i] = irls_step(t[i], p[i], v[i], R[i], w[i], f[i], const, arrays, fp, ip, S, ks,
                             np.int64(i), hist)[0]
 
 
@@ -134,8 +138,10 @@ def ekf_update_rows(t, p, v, R, w, f, const, offsets, fs, ks, code):
     ``code``."""
     N = ks.shape[0]
     S = ekf_pieces(fs, offsets, f.shape[1], N)
+    arrays = ekf_constant_arrays(const, f.shape[1])
     for i in prange(N):
-        code[i] = ekf_step(t[i], p[i], v[i], R[i], w[i], f[i], const, S, ks, np.int64(i))
+        code[i] = ekf_step(t[i], p[i], v[i], R[i], w[i], f[i], const, arrays, S, ks,
+                           np.int64(i))
 
 
 class BatchedIRLS:
@@ -171,7 +177,7 @@ class BatchedIRLS:
     @property
     def eta(self) -> np.ndarray:
         """The unfiltered estimates (the next windows' anchors), (N, n)."""
-        return self._state.views[F_ETA]
+        return self._state.views[F_VN][:, VN_ETA]
 
     @property
     def change_events(self) -> np.ndarray:
@@ -192,8 +198,9 @@ class BatchedIRLS:
         st = self._state
         irls_update_rows(t, p, v, R, w, f, self._const, self._fp, self._ip, st.floats, st.ints,
                          self._hist, self._code)
-        sd = np.where(st.ints[:, K_HAS_SD, None] == 1, st.views[F_SD], np.nan)
-        return BatchedEstimate(t.copy(), st.views[F_OUT].copy(), sd, self._code.copy())
+        VN = st.views[F_VN]
+        sd = np.where(st.ints[:, K_HAS_SD, None] == 1, VN[:, VN_SD], np.nan)
+        return BatchedEstimate(t.copy(), VN[:, VN_OUT].copy(), sd, self._code.copy())
 
 
 class BatchedEKF:

@@ -208,14 +208,24 @@ def _finite(a) -> bool:
 
 
 @jit
-def ekf_step(t, p, v, R, w, f, const, S, ks, i) -> int:
+def constant_arrays(const, n):
+    """``(A (4, n), J (3, 3), J^-1 (3, 3), qc (18 + n), r (12))``: the array constants of
+    :func:`ekf_step`, as views of ``const`` (:func:`ekf_constants`)."""
+    a4, ns = C_A + 4 * n, 18 + n
+    return (const[C_A:a4].reshape((4, n)), const[a4:a4 + 9].reshape((3, 3)),
+            const[a4 + 9:a4 + 18].reshape((3, 3)), const[a4 + 18:a4 + 18 + ns],
+            const[a4 + 18 + ns:a4 + 30 + ns])
+
+
+@jit
+def ekf_step(t, p, v, R, w, f, const, arrays, S, ks, i) -> int:
     """One sample into filter ``i`` of the state ``(S, ks)`` (:func:`state_pieces`), in place;
     returns the status code. A non-finite sample or a time not after the previous one is
     skipped (``bad_sample``); the first good sample sets the kinematic states (``warmup``);
     later ones predict from the previous sample, its command held, and update
     (:func:`predict_update_into`); a step whose command had an idle rotor (``<= IDLE_THRUST``)
     keeps the efficiencies, decorrelated, their variance grown by ``Q_eta dt``
-    (``no_excitation``)."""
+    (``no_excitation``). ``arrays`` is :func:`constant_arrays` of ``const``."""
     n = f.shape[0]
     ns = 18 + n
     x, P, last_t, last_f = S[F_X][i], S[F_P][i], S[F_LAST_T][i], S[F_LAST_F][i]
@@ -249,12 +259,9 @@ def ekf_step(t, p, v, R, w, f, const, S, ks, i) -> int:
                 keep[j] = x[18 + j]
                 for k in range(n):
                     P_keep[j, k] = P[18 + j, 18 + k]
-        a4 = C_A + 4 * n
-        qc = const[a4 + 18:a4 + 18 + ns]
-        predict_update_into(x, P, last_f, dt, p, v, w, R, const[C_A:a4].reshape((4, n)),
-                            const[C_MASS], const[C_G], const[a4:a4 + 9].reshape((3, 3)),
-                            const[a4 + 9:a4 + 18].reshape((3, 3)), qc,
-                            const[a4 + 18 + ns:a4 + 30 + ns], const[C_LO], const[C_HI],
+        A, J, Jinv, qc, r = arrays
+        predict_update_into(x, P, last_f, dt, p, v, w, R, A, const[C_MASS], const[C_G], J,
+                            Jinv, qc, r, const[C_LO], const[C_HI],
                             S[F_MATS][i], S[F_WT][i], S[F_S12][i], S[F_HP][i], S[F_M3][i],
                             S[F_DR][i], S[F_BS][i], S[F_HR][i], S[F_VECS][i], S[F_Z][i],
                             S[F_Y][i], S[F_DT][i])
@@ -295,7 +302,8 @@ def ekf_reset(ip_offsets, n, fs, ks, rows, eta0) -> None:
 def ekf_update(t, p, v, R, w, f, const, offsets, fs, ks) -> int:
     """:func:`ekf_step` of a single filter (the online update)."""
     S = state_pieces(fs, offsets, f.shape[0], ks.shape[0])
-    return ekf_step(t, p, v, R, w, f, const, S, ks, ks.shape[0] - 1)  # row 0, run-time value
+    return ekf_step(t, p, v, R, w, f, const, constant_arrays(const, f.shape[0]), S, ks,
+                    ks.shape[0] - 1)  # row 0, a run-time value like the batch's rows
 
 
 @jit
@@ -307,8 +315,9 @@ def ekf_run(t, p, v, R, w, f, const, offsets, fs, ks, eta, sd, code) -> None:
     S = state_pieces(fs, offsets, n, ks.shape[0])
     row = ks.shape[0] - 1  # 0, a run-time value like the batch's rows
     x, P, eta0 = S[F_X][row], S[F_P][row], S[F_ETA0][row]
+    arrays = constant_arrays(const, n)
     for k in range(t.shape[0]):
-        code[k] = ekf_step(t[k], p[k], v[k], R[k], w[k], f[k], const, S, ks, row)
+        code[k] = ekf_step(t[k], p[k], v[k], R[k], w[k], f[k], const, arrays, S, ks, row)
         for j in range(n):
             if ks[row, K_INITIALISED] == 1:
                 eta[k, j] = x[18 + j]

@@ -110,7 +110,7 @@ def _project_so3_into(M, A, D, V):
             M[i, j] = A[i, 0] * V[j, 0] + A[i, 1] * V[j, 1] + A[i, 2] * V[j, 2]
 
 
-@jit
+@jit(inline="always")
 def _jacobian_times(Pin, out, lower, dt, cp, cv, up, uv, dT, Fw, BwT, E, dR, Mw, BrT, ze, Z):
     """``out = F Pin`` over the blocks of the transition Jacobian ``F`` (``ekf.predict``),
     only ``out[i, :i + 1]`` when ``lower``. Blocks: p row i: ``e_i + dt e_{v,i} +
@@ -165,7 +165,7 @@ def _jacobian_times(Pin, out, lower, dt, cp, cv, up, uv, dT, Fw, BwT, E, dR, Mw,
             out[i, k] = Pin[i, k]
 
 
-@jit
+@jit(inline="always")
 def predict_update_into(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, mats, WT,
                         s12, HP, M3, dR, Bs, HR, vecs, Z, y, dT):
     """One predict over ``dt`` [s] with the rotor commands ``f`` [N] held (eqs. 1-4, 12) and one
@@ -292,7 +292,7 @@ def predict_update_into(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo
         x[18 + j] = min(max(x[18 + j], lo), hi)
 
 
-@jit
+@jit(inline="always")
 def _update(x, P, xp, Pp, HR, y, r, HP, WT, S, L):
     """Measurement update of ``(xp, Pp)`` into ``(x, P)`` with ``H = [I_9 0; 0 HR 0]`` and
     ``R = diag(r)``, in the square-root form of the optimal gain::

@@ -89,16 +89,29 @@ BAD_SAMPLE = STATUSES.index(STATUS_BAD_SAMPLE)
 WHY_NONFINITE, WHY_TIME = 1, 2
 _ROW0 = np.zeros(1, dtype=np.int64)
 _WHY = {WHY_NONFINITE: "non-finite or malformed sample", WHY_TIME: "time not increasing"}
+#: the diagnostics of the statuses that solve nothing (frozen, so one instance serves all)
+_HELD = {WARMUP: IRLSDiagnostics(STATUS_WARMUP),
+         NO_EXCITATION: IRLSDiagnostics(STATUS_NO_EXCITATION,
+                                        "commanded thrust ~ 0 in the window")}
 
 # extra settings after the window's (estimators.window.window_settings)
 P_THRESHOLD = N_FLOAT_SETTINGS  # change_threshold
 (I_M, I_N, I_L, I_COMPLETION, I_HOLD) = range(N_INT_SETTINGS, N_INT_SETTINGS + 5)
 I_OFFSETS = N_INT_SETTINGS + 5  # then the offsets of the float state's pieces
-# pieces of the float state, in order (their shapes: IRLSState.shapes)
-(F_LAST_T, F_LAST_P, F_LAST_V, F_LAST_R, F_LAST_W, F_LAST_F, F_C, F_B, F_H, F_THRUST, F_R0, F_J,
- F_ETA, F_SD, F_OUT, F_X, F_SD_X, F_V, F_M, F_S, F_WEIGHTS, F_HISTORY, F_ANCHOR, F_DIRECTION,
- F_SCRATCH, F_BUF, F_SORTED) = range(27)
-N_PIECES = 27
+# pieces of the float state, in order (their shapes: IRLSState.shapes); rows of the grouped ones
+F_T, F_SAMPLE, F_VN, F_VM, F_BH, F_H, F_M, F_R0, F_J, F_MEDIAN = range(10)
+N_PIECES = 10
+S_P, S_V, S_W, S_R = 0, 1, 2, 3  # F_SAMPLE (6, 3): the previous sample's p, v, w; R (rows 3-5)
+# F_VN (n-vectors): the previous command, the estimate, its sd, the reported estimate, the
+# window's solution and sd, the completion's anchor, direction and scratch (3 rows), then the
+# window solver's vectors (estimators.window)
+(VN_LAST_F, VN_ETA, VN_SD, VN_OUT, VN_X, VN_SD_X, VN_ANCHOR, VN_DIRECTION, VN_SCRATCH) = range(9)
+VN_WINDOW = VN_SCRATCH + 3
+# F_VM (m-vectors): the ring's energy constants and thrusts, the final weights, then the window
+# solver's segment rows; F_BH: the ring's b and the completion's history; F_MEDIAN: the
+# output median's ring and its sorted copy
+VM_C, VM_THRUST, VM_WEIGHTS, VM_WINDOW = 0, 1, 2, 3
+BH_B, BH_HISTORY = 0, 1
 # the int state: counters, then the completion's (estimators.change_completion), then the
 # interior-point iterations of each IRLS round
 K_HEAD, K_COUNT, K_HAS_LAST, K_HAS_SD, K_MEDIAN_K, K_MEDIAN_FRESH = range(6)
@@ -114,18 +127,19 @@ class IRLSState:
     views of its pieces, each ``(N, *shape)``; the compiled update reads the same pieces
     through :func:`state_pieces` and the offsets in ``ip``.
 
-    Float pieces: the previous sample (``last_*``, command clipped), the ring of segment terms
-    (``c, b, H, thrust``; ``ints[:, K_HEAD]`` is the slot written next, the oldest segment of a
-    full window), the unfiltered estimate ``eta`` and its ``sd``, the reported ``out``, the last
-    window solve (``x, sd_x, weights``) and its workspace, the change completion (``history,
-    anchor, direction``) and the output median's ring (``buf, sorted``).
+    Float pieces: the previous sample's time, its state and (clipped) command, the ring of
+    segment terms (``c, b, H, thrust``; ``ints[:, K_HEAD]`` is the slot written next, the oldest
+    segment of a full window), the unfiltered estimate ``eta`` and its ``sd``, the reported
+    ``out``, the last window solve (``x, sd_x, weights``) and its workspace, the change
+    completion (``history, anchor, direction``) and the output median's ring. Pieces of the
+    same length are grouped (the ``VN_*``, ``VM_*`` rows), so the compiled update forms few
+    views.
     """
 
     @staticmethod
     def shapes(m: int, n: int, L: int) -> tuple:
-        return ((1,), (3,), (3,), (3, 3), (3,), (n,), (m,), (m, n), (m, n, n), (m,), (10,),
-                (10, n), (n,), (n,), (n,), (n,), (n,), (N_VECTORS, n), (N_MATRICES, n, n),
-                (3, m), (m,), (m, n), (n,), (n,), (3, n), (L, n), (L, n))
+        return ((1,), (6, 3), (VN_WINDOW + N_VECTORS, n), (VM_WINDOW + 3, m), (2, m, n),
+                (m, n, n), (N_MATRICES, n, n), (10,), (10, n), (2, L, n))
 
     def __init__(self, m: int, n: int, L: int, rounds: int, num: int = 1):
         shapes = self.shapes(m, n, L)
@@ -164,33 +178,16 @@ def state_pieces(fs, ip, N):
     ``(N, *shape)``, in the order of the ``F_*`` constants."""
     m, n, L = ip[I_M], ip[I_N], ip[I_L]
     o = ip[I_OFFSETS:]
-    return (_rows(fs, o[F_LAST_T], o[F_LAST_T + 1], N),
-            _rows(fs, o[F_LAST_P], o[F_LAST_P + 1], N),
-            _rows(fs, o[F_LAST_V], o[F_LAST_V + 1], N),
-            _rows(fs, o[F_LAST_R], o[F_LAST_R + 1], N).reshape((N, 3, 3)),
-            _rows(fs, o[F_LAST_W], o[F_LAST_W + 1], N),
-            _rows(fs, o[F_LAST_F], o[F_LAST_F + 1], N),
-            _rows(fs, o[F_C], o[F_C + 1], N),
-            _rows(fs, o[F_B], o[F_B + 1], N).reshape((N, m, n)),
+    return (_rows(fs, o[F_T], o[F_T + 1], N),
+            _rows(fs, o[F_SAMPLE], o[F_SAMPLE + 1], N).reshape((N, 6, 3)),
+            _rows(fs, o[F_VN], o[F_VN + 1], N).reshape((N, VN_WINDOW + N_VECTORS, n)),
+            _rows(fs, o[F_VM], o[F_VM + 1], N).reshape((N, VM_WINDOW + 3, m)),
+            _rows(fs, o[F_BH], o[F_BH + 1], N).reshape((N, 2, m, n)),
             _rows(fs, o[F_H], o[F_H + 1], N).reshape((N, m, n, n)),
-            _rows(fs, o[F_THRUST], o[F_THRUST + 1], N),
+            _rows(fs, o[F_M], o[F_M + 1], N).reshape((N, N_MATRICES, n, n)),
             _rows(fs, o[F_R0], o[F_R0 + 1], N),
             _rows(fs, o[F_J], o[F_J + 1], N).reshape((N, 10, n)),
-            _rows(fs, o[F_ETA], o[F_ETA + 1], N),
-            _rows(fs, o[F_SD], o[F_SD + 1], N),
-            _rows(fs, o[F_OUT], o[F_OUT + 1], N),
-            _rows(fs, o[F_X], o[F_X + 1], N),
-            _rows(fs, o[F_SD_X], o[F_SD_X + 1], N),
-            _rows(fs, o[F_V], o[F_V + 1], N).reshape((N, N_VECTORS, n)),
-            _rows(fs, o[F_M], o[F_M + 1], N).reshape((N, N_MATRICES, n, n)),
-            _rows(fs, o[F_S], o[F_S + 1], N).reshape((N, 3, m)),
-            _rows(fs, o[F_WEIGHTS], o[F_WEIGHTS + 1], N),
-            _rows(fs, o[F_HISTORY], o[F_HISTORY + 1], N).reshape((N, m, n)),
-            _rows(fs, o[F_ANCHOR], o[F_ANCHOR + 1], N),
-            _rows(fs, o[F_DIRECTION], o[F_DIRECTION + 1], N),
-            _rows(fs, o[F_SCRATCH], o[F_SCRATCH + 1], N).reshape((N, 3, n)),
-            _rows(fs, o[F_BUF], o[F_BUF + 1], N).reshape((N, L, n)),
-            _rows(fs, o[F_SORTED], o[F_SORTED + 1], N).reshape((N, L, n)))
+            _rows(fs, o[F_MEDIAN], o[F_MEDIAN + 1], N).reshape((N, 2, L, n)))
 
 
 @jit
@@ -202,18 +199,29 @@ def _finite(a) -> bool:
 
 
 @jit
-def irls_step(t, p, v, R, w, f, const, fp, ip, S, ks, i, hist):
+def constant_arrays(const, ip):
+    """``(J (3, 3), J^-1 (3, 3), A (4, n), G (10))``: the vehicle's array constants of
+    :func:`irls_step`, as views of ``const`` (:func:`irls_parameters`)."""
+    n = ip[I_N]
+    return (const[C_J:C_JINV].reshape((3, 3)), const[C_JINV:C_A].reshape((3, 3)),
+            const[C_A:C_A + 4 * n].reshape((4, n)), const[C_A + 4 * n:C_A + 4 * n + 10])
+
+
+@jit
+def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist):
     """One online update of the sliding-window IRLS (module docstring) of row ``i`` of the
-    state ``(S, ks)`` (:func:`state_pieces`, int state (N, K)), in place. Returns ``(status
+    state ``(S, ks)`` (:func:`state_pieces`, int state (N, K)), in place (``arrays``:
+    :func:`constant_arrays` of ``const``). Returns ``(status
     code, why, rounds, cond)``: ``why`` is :data:`WHY_NONFINITE` or :data:`WHY_TIME` for a
     ``bad_sample``, else 0; ``rounds`` and ``cond`` describe the window solve (0 and NaN when
     none ran)."""
     m, n, L = ip[I_M], ip[I_N], ip[I_L]
-    last_t, last_p, last_v, last_R = S[F_LAST_T][i], S[F_LAST_P][i], S[F_LAST_V][i], \
-        S[F_LAST_R][i]
-    last_w, last_f, c, b, H = S[F_LAST_W][i], S[F_LAST_F][i], S[F_C][i], S[F_B][i], S[F_H][i]
-    thrust, eta, sd, out = S[F_THRUST][i], S[F_ETA][i], S[F_SD][i], S[F_OUT][i]
-    x, sd_x, M, history_ = S[F_X][i], S[F_SD_X][i], S[F_M][i], S[F_HISTORY][i]
+    last_t, sample, VN, VM, BH = S[F_T][i], S[F_SAMPLE][i], S[F_VN][i], S[F_VM][i], S[F_BH][i]
+    last_p, last_v, last_w, last_R = sample[S_P], sample[S_V], sample[S_W], sample[S_R:]
+    last_f, eta, sd, out, x, sd_x = (VN[VN_LAST_F], VN[VN_ETA], VN[VN_SD], VN[VN_OUT],
+                                     VN[VN_X], VN[VN_SD_X])
+    c, thrust, b, history_, H, M = VM[VM_C], VM[VM_THRUST], BH[BH_B], BH[BH_HISTORY], S[F_H][i], \
+        S[F_M][i]
     k_row = ks[i]
     completion = k_row[K_COMPLETION:K_ITERS]
     code, why, rounds, cond = WARMUP, 0, 0, np.nan
@@ -226,11 +234,11 @@ def irls_step(t, p, v, R, w, f, const, fp, ip, S, ks, i, hist):
     else:
         if k_row[K_HAS_LAST] == 1:  # the segment last -> this sample into the ring (eqs. 13-26)
             slot = k_row[K_HEAD]
+            Jmat, Jinv, A, G = arrays
             c[slot], thrust[slot] = segment_terms_into(
                 t - last_t[0], last_p, p, last_v, v, last_R, R, last_w, w, last_f,
-                const[C_MASS], const[C_G], const[C_J:C_JINV].reshape((3, 3)),
-                const[C_JINV:C_A].reshape((3, 3)), const[C_A:C_A + 4 * n].reshape((4, n)),
-                const[C_A + 4 * n:C_A + 4 * n + 10], S[F_R0][i], S[F_J][i], b[slot], H[slot])
+                const[C_MASS], const[C_G], Jmat, Jinv, A, G, S[F_R0][i], S[F_J][i], b[slot],
+                H[slot])
             k_row[K_HEAD] = (slot + 1) % m
             k_row[K_COUNT] = min(k_row[K_COUNT] + 1, m)
         last_t[0] = t
@@ -249,13 +257,14 @@ def irls_step(t, p, v, R, w, f, const, fp, ip, S, ks, i, hist):
                 code = NO_EXCITATION
             else:
                 code, rounds, cond = solve_window_into(
-                    c, b, H, k_row[K_HEAD], eta, fp, ip, S[F_V][i], M, S[F_S][i],
-                    S[F_WEIGHTS][i], k_row[K_ITERS:], hist, x, sd_x)
+                    c, b, H, k_row[K_HEAD], eta, fp, ip, VN[VN_WINDOW:], M, VM[VM_WINDOW:],
+                    VM[VM_WEIGHTS], k_row[K_ITERS:], hist, x, sd_x)
             if code == OK or code == MAX_ITER:
                 if ip[I_COMPLETION] == 1:
-                    complete_into(x, M[M_JGJ], history_, S[F_ANCHOR][i], S[F_DIRECTION][i],
+                    complete_into(x, M[M_JGJ], history_, VN[VN_ANCHOR], VN[VN_DIRECTION],
                                   completion, fp[P_THRESHOLD], ip[I_HOLD], fp[P_GAMMA],
-                                  fp[P_LO], fp[P_HI], M[M_A], M[M_B], S[F_SCRATCH][i])
+                                  fp[P_LO], fp[P_HI], M[M_A], M[M_B],
+                                  VN[VN_SCRATCH:VN_SCRATCH + 3])
                 for j in range(n):
                     eta[j] = x[j]
                     sd[j] = sd_x[j]
@@ -263,7 +272,8 @@ def irls_step(t, p, v, R, w, f, const, fp, ip, S, ks, i, hist):
             elif ip[I_COMPLETION] == 1:  # a held window: the completion sees the kept estimate
                 observe_into(eta, history_, completion)
     if L > 1:
-        median_push_into(S[F_BUF][i], S[F_SORTED][i], k_row[K_MEDIAN_K], eta,
+        median = S[F_MEDIAN][i]
+        median_push_into(median[0], median[1], k_row[K_MEDIAN_K], eta,
                          k_row[K_MEDIAN_FRESH] == 1, out)
         k_row[K_MEDIAN_K] = (k_row[K_MEDIAN_K] + 1) % L
         k_row[K_MEDIAN_FRESH] = 0
@@ -277,8 +287,8 @@ def irls_step(t, p, v, R, w, f, const, fp, ip, S, ks, i, hist):
 def irls_update(t, p, v, R, w, f, const, fp, ip, fs, ks, hist):
     """:func:`irls_step` of a single estimator (state of one row): the online update."""
     S = state_pieces(fs, ip, ks.shape[0])
-    return irls_step(t, p, v, R, w, f, const, fp, ip, S, ks, ks.shape[0] - 1,
-                     hist)  # row 0, a run-time value like the batch's rows
+    return irls_step(t, p, v, R, w, f, const, constant_arrays(const, ip), fp, ip, S, ks,
+                     ks.shape[0] - 1, hist)  # row 0, a run-time value like the batch's rows
 
 
 @jit
@@ -294,7 +304,8 @@ def irls_reset(eta0, ip, fs, ks, rows) -> None:
             row = _rows(fs, ip[I_OFFSETS + k], ip[I_OFFSETS + k + 1], N)[i]
             for a in range(row.shape[0]):
                 row[a] = 0.0
-        eta, out, sd, history_ = S[F_ETA][i], S[F_OUT][i], S[F_SD][i], S[F_HISTORY][i]
+        VN, history_ = S[F_VN][i], S[F_BH][i, BH_HISTORY]
+        eta, out, sd = VN[VN_ETA], VN[VN_OUT], VN[VN_SD]
         for j in range(n):
             eta[j] = eta0[i, j]
             out[j] = eta0[i, j]
@@ -312,10 +323,11 @@ def irls_run(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, eta, sd, code):
     n = ip[I_N]
     S = state_pieces(fs, ip, ks.shape[0])
     row = ks.shape[0] - 1  # 0, a run-time value like the batch's rows
-    out, sd_now = S[F_OUT][row], S[F_SD][row]
+    out, sd_now = S[F_VN][row, VN_OUT], S[F_VN][row, VN_SD]
+    arrays = constant_arrays(const, ip)
     for k in range(t.shape[0]):
         code[k], _why, _rounds, _cond = irls_step(t[k], p[k], v[k], R[k], w[k], f[k], const,
-                                                  fp, ip, S, ks, row, hist)
+                                                  arrays, fp, ip, S, ks, row, hist)
         for j in range(n):
             eta[k, j] = out[j]
             sd[k, j] = sd_now[j] if ks[0, K_HAS_SD] == 1 else np.nan
@@ -344,6 +356,9 @@ class SlidingWindowIRLS:
         self._hist = history(cfg, n) if cfg.record_history else no_history(n)
         self._nan_sample = (np.full(3, np.nan), np.full(3, np.nan), np.full((3, 3), np.nan),
                             np.full(3, np.nan), np.full(n, np.nan))
+        self._shape_f = (n,)
+        self._row = self._state.views[F_VN][0]  # the n-vectors of the state (estimate, sd, ...)
+        self._weights = self._state.views[F_VM][0, VM_WEIGHTS]
         self.reset()
 
     def reset(self, eta0=None) -> None:
@@ -360,7 +375,7 @@ class SlidingWindowIRLS:
     @property
     def eta(self) -> np.ndarray:
         """The current (unfiltered) estimate, a copy."""
-        return self._state.views[F_ETA][0].copy()
+        return self._state.views[F_VN][0, VN_ETA].copy()
 
     @property
     def change_events(self) -> int:
@@ -369,12 +384,11 @@ class SlidingWindowIRLS:
 
     def update(self, sample: Sample) -> Estimate:
         """Add one measurement row; returns the estimate of the window ending at it."""
-        n = self.vehicle.n_rotors
         try:
             t = float(sample.t)
-            p, v, R, w, f = (np.ascontiguousarray(a, dtype=np.float64) for a in sample[1:])
+            p, v, R, w, f = [np.ascontiguousarray(a, dtype=np.float64) for a in sample[1:]]
             malformed = (p.shape != (3,) or v.shape != (3,) or R.shape != (3, 3)
-                         or w.shape != (3,) or f.shape != (n,))
+                         or w.shape != (3,) or f.shape != self._shape_f)
         except (AttributeError, TypeError, ValueError, IndexError):
             t, malformed = math.nan, True
         if malformed:
@@ -383,22 +397,21 @@ class SlidingWindowIRLS:
         code, why, rounds, cond = irls_update(math.nan if malformed else t, p, v, R, w, f,
                                               self._const, self._fp, self._ip, st.floats,
                                               st.ints, self._hist)
-        views, ints, cfg = st.views, st.ints[0], self.config
-        sd = views[F_SD][0].copy() if ints[K_HAS_SD] == 1 else None
-        if code in (WARMUP, NO_EXCITATION, BAD_SAMPLE):
-            message = ""
-            if code == BAD_SAMPLE:
-                message = f"{_WHY[why]}; window restarted"
-            elif code == NO_EXCITATION:
-                message = "commanded thrust ~ 0 in the window"
-            diag = IRLSDiagnostics(STATUSES[code], message)
-        elif cfg.record_history:
-            diag = window_diagnostics(code, rounds, cond, ints[K_ITERS:], views[F_WEIGHTS][0],
-                                      cfg, self._hist)
-        else:
-            diag = LazyWindowDiagnostics(code, rounds, cond, ints[K_ITERS:].copy(),
-                                         views[F_WEIGHTS][0].copy(), cfg)
-        return Estimate(t, views[F_OUT][0].copy(), sd, STATUSES[code], diag)
+        row, ints = self._row, st.ints[0]
+        sd = row[VN_SD].copy() if ints[K_HAS_SD] == 1 else None
+        if code in _HELD:
+            diag = _HELD[code]
+        elif code == BAD_SAMPLE:
+            diag = IRLSDiagnostics(STATUSES[code], f"{_WHY[why]}; window restarted")
+        else:  # a window was solved (or held by a guard)
+            cfg = self.config
+            if cfg.record_history:
+                diag = window_diagnostics(code, rounds, cond, ints[K_ITERS:], self._weights, cfg,
+                                          self._hist)
+            else:
+                diag = LazyWindowDiagnostics(code, rounds, cond, ints[K_ITERS:].copy(),
+                                             self._weights.copy(), cfg)
+        return Estimate(t, row[VN_OUT].copy(), sd, STATUSES[code], diag)
 
     def run(self, recording: Recording, progress: bool = False) -> EstimateSeries:
         """Estimate over a whole recording, one row per sample (the first ``window - 1`` rows
