@@ -19,7 +19,7 @@ before and after.
     python benchmarks/bench_irls.py                                   # this checkout
     python benchmarks/bench_irls.py --reference /tmp/qf-ref --cold    # side by side
     python benchmarks/bench_irls.py --only run --only ekf --duration 20
-    python benchmarks/bench_irls.py --accuracy                        # + accuracy table
+    python benchmarks/bench_irls.py --accuracy --no-speed             # the accuracy table
 """
 
 from __future__ import annotations
@@ -40,17 +40,26 @@ WORKLOADS = ("run", "online", "online_improved", "ekf", "batched", "batched_impr
 
 
 def cached_flight(scenario: str, duration: float, integrator: str, cache: Path,
-                  seed: int = 0) -> Path:
-    """The recording's path, simulated on first use."""
+                  seed: int = 0, paper: bool = False) -> Path:
+    """The recording's path, simulated on first use (``paper``: ``quadfault reproduce``'s
+    settings, sigma_f = 0.07 and no upper thrust limit except in ``clipping``)."""
     from quadfault.recording import write_recording
     from quadfault.scenarios import named_scenario
     from quadfault.simulator import SimConfig, simulate
 
     cache.mkdir(parents=True, exist_ok=True)
-    path = cache / f"{scenario}_{duration:g}s_{integrator}_seed{seed}.csv"
+    tag = "_paper" if paper else ""
+    path = cache / f"{scenario}_{duration:g}s_{integrator}{tag}_seed{seed}.csv"
     if not path.exists():
-        cfg = SimConfig.reference() if integrator == "reference" else SimConfig()
-        write_recording(simulate(named_scenario(scenario, duration), config=cfg, seed=seed), path)
+        kw = {}
+        if paper:
+            from estimators.paper.reproduce import sim_config
+
+            cfg, kw = sim_config(integrator, scenario), {"thrust_noise": 0.07}
+        else:
+            cfg = SimConfig.reference() if integrator == "reference" else SimConfig()
+        write_recording(simulate(named_scenario(scenario, duration), config=cfg, seed=seed,
+                                 **kw), path)
     return path
 
 
@@ -208,11 +217,12 @@ def accuracy(args) -> None:
     from estimators.metrics import score
     from quadfault.recording import read_recording
 
-    print(f"\naccuracy (80 s, sigma_f = 0.07, integrator {args.integrator}, seed {args.seed}, "
-          f"align=end; mean over motors)")
+    print(f"\naccuracy (80 s, quadfault reproduce's flights: sigma_f = 0.07, integrator "
+          f"{args.integrator}, seed {args.seed}, align=end; mean over motors)")
     print(f"{'scenario':12s} {'rmse':>7s} {'std':>7s} {'spike':>7s} {'ok %':>6s} {'s':>6s}")
     for name in ("degradation", "abrupt", "combined"):
-        rec = read_recording(cached_flight(name, 80.0, args.integrator, args.cache, args.seed))
+        rec = read_recording(cached_flight(name, 80.0, args.integrator, args.cache, args.seed,
+                                           paper=True))
         series = SlidingWindowIRLS(rec.vehicle).run(rec.without_truth())
         sc = score(rec, series)
         spikes = [s for s in (sc.spike or ()) if s is not None]
@@ -241,7 +251,8 @@ def main() -> None:
     p.add_argument("--cold-repeat", type=int, default=1)
     p.add_argument("--only", choices=WORKLOADS, action="append",
                    help="these workloads only (repeatable; default all)")
-    p.add_argument("--accuracy", action="store_true")
+    p.add_argument("--accuracy", action="store_true", help="also print the accuracy table")
+    p.add_argument("--no-speed", action="store_true", help="skip the speed measurements")
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--recording", type=Path, help=argparse.SUPPRESS)
     args = p.parse_args()
@@ -251,7 +262,8 @@ def main() -> None:
         return
     args.recording = cached_flight(args.scenario, args.duration, args.integrator, args.cache,
                                    args.seed)
-    side_by_side(args)
+    if not args.no_speed:
+        side_by_side(args)
     if args.accuracy:
         accuracy(args)
 

@@ -51,6 +51,7 @@ from estimators.base import (
 )
 from estimators.ekf_filter import predict_update_into
 from estimators.irls_config import BACKENDS, deprecated_backend  # noqa: F401  (re-exported)
+from estimators.state import FlatState, all_finite, piece_rows
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
 from quadfault.recording import Recording
@@ -143,9 +144,10 @@ K_INITIALISED = 0  # the int state: 1 once the first good sample set the kinemat
 C_MASS, C_G, C_FMAX, C_CLIP, C_LO, C_HI, C_P0, C_A = range(8)
 
 
-class EKFState:
-    """The state of ``N`` filters in a float and an int buffer, with numpy views of the
-    pieces, each ``(N, *shape)``: ``x``, ``P``, the previous sample's time and (clipped)
+class EKFState(FlatState):
+    """The state of ``N`` filters in a float and an int buffer
+    (:class:`estimators.state.FlatState`), with numpy views of the pieces, each
+    ``(N, *shape)``: ``x``, ``P``, the previous sample's time and (clipped)
     command, the initial efficiency, the efficiencies kept across an idle step, and the
     workspace of :func:`predict_update_into`."""
 
@@ -157,19 +159,7 @@ class EKFState:
                 (12,), (n,))
 
     def __init__(self, n: int, num: int = 1):
-        shapes = self.shapes(n)
-        sizes = [num * int(np.prod(s)) for s in shapes]  # piece-major: piece k of every row
-        self.offsets = np.concatenate(([0], np.cumsum(sizes))).astype(np.int64)
-        self.floats = np.zeros(int(self.offsets[-1]))
-        self.ints = np.zeros((num, 1), dtype=np.int64)
-        self.views = [self.floats[a:b].reshape((num,) + s) for a, b, s in
-                      zip(self.offsets[:-1], self.offsets[1:], shapes)]
-
-
-@jit
-def _rows(fs, a, b, N):
-    """The piece ``fs[a:b]`` of the float state of ``N`` rows, flat per row (N, size)."""
-    return fs[a:b].reshape((N, (b - a) // N))
+        super().__init__(self.shapes(n), num, 1)
 
 
 @jit
@@ -178,33 +168,25 @@ def state_pieces(fs, offsets, n, N):
     ``(N, *shape)``, in the order of the ``F_*`` constants."""
     ns = 18 + n
     o = offsets
-    return (_rows(fs, o[F_X], o[F_X + 1], N),
-            _rows(fs, o[F_P], o[F_P + 1], N).reshape((N, ns, ns)),
-            _rows(fs, o[F_LAST_T], o[F_LAST_T + 1], N),
-            _rows(fs, o[F_LAST_F], o[F_LAST_F + 1], N),
-            _rows(fs, o[F_ETA0], o[F_ETA0 + 1], N),
-            _rows(fs, o[F_ETA_KEEP], o[F_ETA_KEEP + 1], N),
-            _rows(fs, o[F_P_KEEP], o[F_P_KEEP + 1], N).reshape((N, n, n)),
-            _rows(fs, o[F_MATS], o[F_MATS + 1], N).reshape((N, 3, ns, ns)),
-            _rows(fs, o[F_WT], o[F_WT + 1], N).reshape((N, ns, 12)),
-            _rows(fs, o[F_S12], o[F_S12 + 1], N).reshape((N, 2, 12, 12)),
-            _rows(fs, o[F_HP], o[F_HP + 1], N).reshape((N, 12, ns)),
-            _rows(fs, o[F_M3], o[F_M3 + 1], N).reshape((N, 8, 3, 3)),
-            _rows(fs, o[F_DR], o[F_DR + 1], N).reshape((N, 9, 3)),
-            _rows(fs, o[F_BS], o[F_BS + 1], N).reshape((N, 2, n, 3)),
-            _rows(fs, o[F_HR], o[F_HR + 1], N).reshape((N, 3, 9)),
-            _rows(fs, o[F_VECS], o[F_VECS + 1], N).reshape((N, 3, ns)),
-            _rows(fs, o[F_Z], o[F_Z + 1], N).reshape((N, 3, ns)),
-            _rows(fs, o[F_Y], o[F_Y + 1], N),
-            _rows(fs, o[F_DT], o[F_DT + 1], N))
-
-
-@jit
-def _finite(a) -> bool:
-    for v in a.flat:
-        if not math.isfinite(v):
-            return False
-    return True
+    return (piece_rows(fs, o[F_X], o[F_X + 1], N),
+            piece_rows(fs, o[F_P], o[F_P + 1], N).reshape((N, ns, ns)),
+            piece_rows(fs, o[F_LAST_T], o[F_LAST_T + 1], N),
+            piece_rows(fs, o[F_LAST_F], o[F_LAST_F + 1], N),
+            piece_rows(fs, o[F_ETA0], o[F_ETA0 + 1], N),
+            piece_rows(fs, o[F_ETA_KEEP], o[F_ETA_KEEP + 1], N),
+            piece_rows(fs, o[F_P_KEEP], o[F_P_KEEP + 1], N).reshape((N, n, n)),
+            piece_rows(fs, o[F_MATS], o[F_MATS + 1], N).reshape((N, 3, ns, ns)),
+            piece_rows(fs, o[F_WT], o[F_WT + 1], N).reshape((N, ns, 12)),
+            piece_rows(fs, o[F_S12], o[F_S12 + 1], N).reshape((N, 2, 12, 12)),
+            piece_rows(fs, o[F_HP], o[F_HP + 1], N).reshape((N, 12, ns)),
+            piece_rows(fs, o[F_M3], o[F_M3 + 1], N).reshape((N, 8, 3, 3)),
+            piece_rows(fs, o[F_DR], o[F_DR + 1], N).reshape((N, 9, 3)),
+            piece_rows(fs, o[F_BS], o[F_BS + 1], N).reshape((N, 2, n, 3)),
+            piece_rows(fs, o[F_HR], o[F_HR + 1], N).reshape((N, 3, 9)),
+            piece_rows(fs, o[F_VECS], o[F_VECS + 1], N).reshape((N, 3, ns)),
+            piece_rows(fs, o[F_Z], o[F_Z + 1], N).reshape((N, 3, ns)),
+            piece_rows(fs, o[F_Y], o[F_Y + 1], N),
+            piece_rows(fs, o[F_DT], o[F_DT + 1], N))
 
 
 @jit
@@ -230,8 +212,8 @@ def ekf_step(t, p, v, R, w, f, const, arrays, S, ks, i) -> int:
     ns = 18 + n
     x, P, last_t, last_f = S[F_X][i], S[F_P][i], S[F_LAST_T][i], S[F_LAST_F][i]
     clip, f_max = const[C_CLIP] != 0.0, const[C_FMAX]
-    if not (math.isfinite(t) and _finite(p) and _finite(v) and _finite(R) and _finite(w)
-            and _finite(f)):
+    if not (math.isfinite(t) and all_finite(p) and all_finite(v) and all_finite(R)
+            and all_finite(w) and all_finite(f)):
         return BAD_SAMPLE
     if ks[i, K_INITIALISED] == 0:  # the first sample sets the kinematic states
         eta0 = S[F_ETA0][i]
@@ -290,10 +272,10 @@ def ekf_reset(ip_offsets, n, fs, ks, rows, eta0) -> None:
     for i in rows:
         ks[i, K_INITIALISED] = 0
         for k in range(N_PIECES):
-            row = _rows(fs, ip_offsets[k], ip_offsets[k + 1], N)[i]
+            row = piece_rows(fs, ip_offsets[k], ip_offsets[k + 1], N)[i]
             for a in range(row.shape[0]):
                 row[a] = 0.0
-        e0 = _rows(fs, ip_offsets[F_ETA0], ip_offsets[F_ETA0 + 1], N)[i]
+        e0 = piece_rows(fs, ip_offsets[F_ETA0], ip_offsets[F_ETA0 + 1], N)[i]
         for j in range(n):
             e0[j] = eta0[i, j]
 

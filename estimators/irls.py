@@ -49,6 +49,7 @@ from estimators.irls_config import (  # noqa: F401  (re-exported)
 )
 from estimators.median import median_push_into
 from estimators.residuals import segment_terms_into
+from estimators.state import FlatState, all_finite, piece_rows
 from estimators.window import (
     M_A,
     M_B,
@@ -121,11 +122,12 @@ K_ITERS = K_COMPLETION + N_COUNTERS
 C_MASS, C_G, C_FMAX, C_CLIP, C_MIN_THRUST, C_J, C_JINV, C_A = 0, 1, 2, 3, 4, 5, 14, 23
 
 
-class IRLSState:
+class IRLSState(FlatState):
     """The state of ``N`` online IRLS estimators (one for :class:`SlidingWindowIRLS`, a batch
-    for :class:`estimators.batched.BatchedIRLS`) in a float and an int buffer, with numpy
-    views of its pieces, each ``(N, *shape)``; the compiled update reads the same pieces
-    through :func:`state_pieces` and the offsets in ``ip``.
+    for :class:`estimators.batched.BatchedIRLS`) in a float and an int buffer
+    (:class:`estimators.state.FlatState`), with numpy views of its pieces, each
+    ``(N, *shape)``; the compiled update reads the same pieces through :func:`state_pieces`
+    and the offsets in ``ip``.
 
     Float pieces: the previous sample's time, its state and (clipped) command, the ring of
     segment terms (``c, b, H, thrust``; ``ints[:, K_HEAD]`` is the slot written next, the oldest
@@ -142,13 +144,7 @@ class IRLSState:
                 (m, n, n), (N_MATRICES, n, n), (10,), (10, n), (2, L, n))
 
     def __init__(self, m: int, n: int, L: int, rounds: int, num: int = 1):
-        shapes = self.shapes(m, n, L)
-        sizes = [num * int(np.prod(s)) for s in shapes]  # piece-major: piece k of every row
-        self.offsets = np.concatenate(([0], np.cumsum(sizes))).astype(np.int64)
-        self.floats = np.zeros(int(self.offsets[-1]))
-        self.ints = np.zeros((num, K_ITERS + rounds), dtype=np.int64)
-        self.views = [self.floats[a:b].reshape((num,) + s) for a, b, s in
-                      zip(self.offsets[:-1], self.offsets[1:], shapes)]
+        super().__init__(self.shapes(m, n, L), num, K_ITERS + rounds)
 
 
 def irls_parameters(vehicle: Vehicle, cfg: IRLSConfig, offsets: np.ndarray):
@@ -167,35 +163,21 @@ def irls_parameters(vehicle: Vehicle, cfg: IRLSConfig, offsets: np.ndarray):
 
 
 @jit
-def _rows(fs, a, b, N):
-    """The piece ``fs[a:b]`` of the float state of ``N`` rows, flat per row (N, size)."""
-    return fs[a:b].reshape((N, (b - a) // N))
-
-
-@jit
 def state_pieces(fs, ip, N):
     """The pieces of the float state of ``N`` estimators (:class:`IRLSState`), each
     ``(N, *shape)``, in the order of the ``F_*`` constants."""
     m, n, L = ip[I_M], ip[I_N], ip[I_L]
     o = ip[I_OFFSETS:]
-    return (_rows(fs, o[F_T], o[F_T + 1], N),
-            _rows(fs, o[F_SAMPLE], o[F_SAMPLE + 1], N).reshape((N, 6, 3)),
-            _rows(fs, o[F_VN], o[F_VN + 1], N).reshape((N, VN_WINDOW + N_VECTORS, n)),
-            _rows(fs, o[F_VM], o[F_VM + 1], N).reshape((N, VM_WINDOW + 3, m)),
-            _rows(fs, o[F_BH], o[F_BH + 1], N).reshape((N, 2, m, n)),
-            _rows(fs, o[F_H], o[F_H + 1], N).reshape((N, m, n, n)),
-            _rows(fs, o[F_M], o[F_M + 1], N).reshape((N, N_MATRICES, n, n)),
-            _rows(fs, o[F_R0], o[F_R0 + 1], N),
-            _rows(fs, o[F_J], o[F_J + 1], N).reshape((N, 10, n)),
-            _rows(fs, o[F_MEDIAN], o[F_MEDIAN + 1], N).reshape((N, 2, L, n)))
-
-
-@jit
-def _finite(a) -> bool:
-    for x in a.flat:
-        if not math.isfinite(x):
-            return False
-    return True
+    return (piece_rows(fs, o[F_T], o[F_T + 1], N),
+            piece_rows(fs, o[F_SAMPLE], o[F_SAMPLE + 1], N).reshape((N, 6, 3)),
+            piece_rows(fs, o[F_VN], o[F_VN + 1], N).reshape((N, VN_WINDOW + N_VECTORS, n)),
+            piece_rows(fs, o[F_VM], o[F_VM + 1], N).reshape((N, VM_WINDOW + 3, m)),
+            piece_rows(fs, o[F_BH], o[F_BH + 1], N).reshape((N, 2, m, n)),
+            piece_rows(fs, o[F_H], o[F_H + 1], N).reshape((N, m, n, n)),
+            piece_rows(fs, o[F_M], o[F_M + 1], N).reshape((N, N_MATRICES, n, n)),
+            piece_rows(fs, o[F_R0], o[F_R0 + 1], N),
+            piece_rows(fs, o[F_J], o[F_J + 1], N).reshape((N, 10, n)),
+            piece_rows(fs, o[F_MEDIAN], o[F_MEDIAN + 1], N).reshape((N, 2, L, n)))
 
 
 @jit
@@ -225,8 +207,8 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist):
     k_row = ks[i]
     completion = k_row[K_COMPLETION:K_ITERS]
     code, why, rounds, cond = WARMUP, 0, 0, np.nan
-    finite = (math.isfinite(t) and _finite(p) and _finite(v) and _finite(R) and _finite(w)
-              and _finite(f))
+    finite = (math.isfinite(t) and all_finite(p) and all_finite(v) and all_finite(R)
+              and all_finite(w) and all_finite(f))
     if not finite or (k_row[K_HAS_LAST] == 1 and not t > last_t[0]):
         k_row[K_COUNT] = 0
         k_row[K_HAS_LAST] = 0
@@ -301,7 +283,7 @@ def irls_reset(eta0, ip, fs, ks, rows) -> None:
         for k in range(ks.shape[1]):
             ks[i, k] = 0
         for k in range(N_PIECES):
-            row = _rows(fs, ip[I_OFFSETS + k], ip[I_OFFSETS + k + 1], N)[i]
+            row = piece_rows(fs, ip[I_OFFSETS + k], ip[I_OFFSETS + k + 1], N)[i]
             for a in range(row.shape[0]):
                 row[a] = 0.0
         VN, history_ = S[F_VN][i], S[F_BH][i, BH_HISTORY]

@@ -100,16 +100,22 @@ def test_ipm_rejects_infeasible_start_and_bad_settings():
         IPMSettings(max_iter=0)
 
 
-def test_window_history_records_each_round():
-    """The diagnostics carry the paper's KKT figure data when record_history is on."""
-    rng = np.random.default_rng(7)
-    m = 9
+def _window(seed, m):
+    """``(c, b, H)`` of a synthetic window of ``m`` segments (eq. 26's quadratic terms)."""
+    rng = np.random.default_rng(seed)
     J = rng.standard_normal((m, 10, 4)) * 0.01
     G = np.array([50.0] * 6 + [1.0] * 3 + [50.0])
     r0 = -J @ np.array([0.8, 0.7, 0.9, 0.6]) + 1e-4 * rng.standard_normal((m, 10))
     c = np.einsum("si,i,si->s", r0, G, r0)
     b = np.einsum("sin,i,si->sn", J, G, r0)
     H = np.einsum("sin,i,sim->snm", J, G, J)
+    return c, b, H
+
+
+def test_window_history_records_each_round():
+    """The diagnostics carry the paper's KKT figure data when record_history is on."""
+    m = 9
+    c, b, H = _window(7, m)
     cfg = IRLSConfig(record_history=True)
     eta, sd, diag = solve_window(c, b, H, np.full(4, 0.5), cfg, record_history=True)
     assert diag.status == "ok" and 1 <= len(diag.inner_iterations) <= 3
@@ -123,13 +129,7 @@ def test_window_history_records_each_round():
 
 
 def test_iteration_limit_gives_usable_max_iter_estimate():
-    rng = np.random.default_rng(8)
-    J = rng.standard_normal((9, 10, 4)) * 0.01
-    G = np.array([50.0] * 6 + [1.0] * 3 + [50.0])
-    r0 = -J @ np.array([0.8, 0.7, 0.9, 0.6]) + 1e-4 * rng.standard_normal((9, 10))
-    c = np.einsum("si,i,si->s", r0, G, r0)
-    b = np.einsum("sin,i,si->sn", J, G, r0)
-    H = np.einsum("sin,i,sim->snm", J, G, J)
+    c, b, H = _window(8, 9)
     cfg = IRLSConfig(ipm=IPMSettings(max_iter=2))
     eta, sd, diag = solve_window(c, b, H, np.ones(4), cfg)
     assert diag.status == "max_iter" and "2 iterations" in diag.message
@@ -144,14 +144,7 @@ def test_a_non_positive_definite_newton_matrix_is_reported():
 
 
 def test_window_residual_history_is_the_weighted_residual_norm_of_each_iterate():
-    rng = np.random.default_rng(9)
-    m = 9
-    J = rng.standard_normal((m, 10, 4)) * 0.01
-    G = np.array([50.0] * 6 + [1.0] * 3 + [50.0])
-    r0 = -J @ np.array([0.8, 0.7, 0.9, 0.6]) + 1e-4 * rng.standard_normal((m, 10))
-    c = np.einsum("si,i,si->s", r0, G, r0)
-    b = np.einsum("sin,i,si->sn", J, G, r0)
-    H = np.einsum("sin,i,sim->snm", J, G, J)
+    c, b, H = _window(9, 9)
     cfg = IRLSConfig(record_history=True, max_irls=1)
     eta, _sd, diag = solve_window(c, b, H, np.full(4, 0.5), cfg, record_history=True)
     w = diag.weights
