@@ -288,11 +288,6 @@ def ekf_update(t, p, v, R, w, f, const, offsets, fs, ks) -> int:
                     ks.shape[0] - 1)  # row 0, a run-time value like the batch's rows
 
 
-#: :func:`ekf_step` compiled into the loop of :func:`ekf_run` (the same code: one call per sample
-#: with its many array arguments would cost a quarter of the run in reference counting)
-_ekf_step_inlined = jit(inline="always")(getattr(ekf_step, "py_func", ekf_step))
-
-
 @jit
 def ekf_run(t, p, v, R, w, f, const, offsets, fs, ks, eta, sd, code) -> None:
     """:func:`ekf_step` over the rows of a recording (a single filter's state): the estimate
@@ -304,8 +299,7 @@ def ekf_run(t, p, v, R, w, f, const, offsets, fs, ks, eta, sd, code) -> None:
     x, P, eta0 = S[F_X][row], S[F_P][row], S[F_ETA0][row]
     arrays = constant_arrays(const, n)
     for k in range(t.shape[0]):
-        code[k] = _ekf_step_inlined(t[k], p[k], v[k], R[k], w[k], f[k], const, arrays, S, ks,
-                                    row)
+        code[k] = ekf_step(t[k], p[k], v[k], R[k], w[k], f[k], const, arrays, S, ks, row)
         for j in range(n):
             if ks[row, K_INITIALISED] == 1:
                 eta[k, j] = x[18 + j]

@@ -165,7 +165,7 @@ def _jacobian_times(Pin, out, lower, dt, cp, cv, up, uv, dT, Fw, BwT, E, dR, Mw,
             out[i, k] = Pin[i, k]
 
 
-@jit(inline="always")
+@jit
 def predict_update_into(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, mats, WT,
                         s12, HP, M3, dR, Bs, HR, vecs, Z, y, dT):
     """One predict over ``dt`` [s] with the rotor commands ``f`` [N] held (eqs. 1-4, 12) and one
