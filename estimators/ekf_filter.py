@@ -150,7 +150,7 @@ def _jacobian_times(Pin, out, lower, dt, cp, cv, up, uv, dT, Fw, BwT, E, dR, Mw,
             for k in range(n18):
                 Z[a, k] += b * Pin[18 + j, k]
     for jb in range(3):  # vec(R) rows: vec(R E) = (E^T kron I3) vec(R), plus dR Z
-        e0, e1, e2 = E[0, jb], E[1, jb], E[2, jb]
+        e0, e1, e2 = E[jb], E[3 + jb], E[6 + jb]  # column jb of the row-major 9-tuple
         for kk in range(3):
             row = 3 * jb + kk
             d0, d1, d2 = dR[row, 0], dR[row, 1], dR[row, 2]
