@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from quadfault.effects import chain as C
+import quadfault.effects.chain as C
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, typed_list
 
