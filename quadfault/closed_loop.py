@@ -59,7 +59,7 @@ from quadfault.dynamics import (
     specific_force3,
     translational_acceleration3,
 )
-from quadfault.effects.chain import EffectRows, effect_row, thrust_effects
+from quadfault.effects.chain import EffectRows, thrust_effects, wrench_terms
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange, python
 from quadfault.motors import motor_thrust
@@ -226,7 +226,6 @@ def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx, memory=None)
     f_cmd, f, sigma, f_max = V.f_cmd[i], V.f[i], V.sigma[i], V.f_max[i]
     eta, refs, first = T.eta[i], T.refs[i], T.first[i]
     rigid, sensors = _tuples(C, V, i)
-    ex = effect_row(fx, i)
     rec = out.p.shape[1] > 0
     rec_accel = out.accel.shape[1] > 0
     done = 0
@@ -244,14 +243,17 @@ def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx, memory=None)
                 rotor_commands(u[0], u[1], K.allocation_inverse, f_cmd)
         motor_thrust(f_cmd, eta, row, f_max, C.saturate, sigma, gen, f)
         if fx is not None:
-            thrust_effects(ex, f, t, C.dt, p, v, R, w, gen)
+            thrust_effects(fx, i, f, t, C.dt, p, v, R, w, gen)
         thrust, M = _allocate(C.allocation, f)
         if memory is not None:
             reference_euler_store(memory[i], thrust, M, R)
             p1, v1, R1, w1 = p, v, R, w
             a0 = translational_acceleration3(R, thrust, rigid)
-        else:
-            p1, v1, R1, w1, a0 = rkmk4_step(p, v, R, w, thrust, M, rigid, C.dt, ex, f, t)
+        elif fx is None:
+            p1, v1, R1, w1, a0 = rkmk4_step(p, v, R, w, thrust, M, rigid, C.dt)
+        else:  # the stages get the step's wrench terms: numbers, no arrays
+            p1, v1, R1, w1, a0 = rkmk4_step(p, v, R, w, thrust, M, rigid, C.dt,
+                                            wrench_terms(fx, i, f, t))
         sf = a0
         if C.record_accel:
             sf = accelerometer3(specific_force3(R, a0, C.gravity), sensors, gen)
@@ -325,16 +327,23 @@ def _fly_one(gens, i, k0, k1, measure_first, C, K, V, T, out, fx, memory):
     return fly_vehicle(i, gens[i], k0, k1, measure_first, C, K, V, T, out, fx, memory)
 
 
-def _hook_row(fx, i):
-    return fx
-
-
-def _call_thrust(fx, f, t, dt, p, v, R, w, gen):
+def _call_thrust(fx, i, f, t, dt, p, v, R, w, gen):
     fx.rotor_thrust(f, t, dt, p, v, R, w, gen)
 
 
+class _StepHook:
+    """The interpreted loop's wrench terms: the hook with the step's thrusts and time."""
+
+    def __init__(self, hook, i, f, t):
+        self.hook, self.f, self.t = hook, f, t
+
+    def wrench(self, p, v, R, w, f, t):
+        return self.hook.wrench(p, v, R, w, self.f, self.t)
+
+
 #: the interpreted loop's calls at the chain's two points: the hook's methods
-HOOK_CALLS = {"effect_row": _hook_row, "thrust_effects": _call_thrust,
+HOOK_CALLS = {"thrust_effects": _call_thrust,
+              "wrench_terms": _StepHook,
               "effects_wrench": call_wrench}
 
 

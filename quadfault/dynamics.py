@@ -144,7 +144,7 @@ def dexpinv3(theta, w):
             w[2] + 0.5 * tw[2] + ttw[2] / 12.0)
 
 
-@jit
+@jit(inline="always")
 def _accelerations(p, v, R, w, thrust, moment, rigid, fx, f, t):
     """(v', Omega') of eqs. 2 and 4 at one stage's state; the effects ``fx`` (None: none)
     add their external wrench at that state."""
@@ -169,9 +169,9 @@ def rkmk4_step(p0, v0, R0, w0, thrust, moment, rigid, dt, fx=None, f=None, t=0.0
     """One RKMK4 step of length ``dt`` [s] with thrust [N] and moment [N m] held constant:
     ``R(t) = R0 exp([theta(t)]x)``, ``theta' = dexp^-1_{-theta}(Omega)``; order 4 in ``dt``.
 
-    ``fx`` (the effects, None for none: a vehicle's compiled effect chain,
-    :func:`quadfault.effects.chain.effect_row`, or in the interpreted kernel any object with
-    a ``wrench`` method) gives the external wrench at each stage for the produced rotor
+    ``fx`` (the effects, None for none: a vehicle's compiled effects over the step,
+    :func:`quadfault.effects.chain.wrench_terms`, or in the interpreted kernel any object
+    with a ``wrench`` method) gives the external wrench at each stage for the produced rotor
     thrusts ``f`` and the step's start time ``t`` [s]. Returns
     ``(p, v, R, w, a0)``: the new state and eq. 2's acceleration at the start (what the
     accelerometer measures, :func:`specific_force3`).

@@ -162,3 +162,13 @@ def test_model_uncertainty_draws_the_fitted_parameters_per_reset(tmp_path):
     np.testing.assert_allclose(k.mean(axis=0), [0.2, 0.25, 0.1], atol=0.015)
     assert all("wind" in d for d in draws)
     assert _drawn(env.reset(seed=7)[1]) == draws[7]
+
+
+def test_more_wrench_effects_than_a_vehicle_holds_is_a_one_line_error():
+    from quadfault.effects import Drag, RateDamping
+    from quadfault.plant import Plant
+
+    Plant(Vehicle(), effects=(Drag(0.1),) * 3 + (RateDamping(0.01),) * 3)  # six: fine
+    with pytest.raises(ConfigError) as err:
+        Plant(Vehicle(), effects=(Drag(0.1),) * 7)
+    assert "at most 6" in str(err.value) and "\n" not in str(err.value)

@@ -8,8 +8,10 @@ protocol:
 
 * :func:`thrust_effects` once per physics step, on the thrusts the motor model produced
   (in the order of the entries, each one's output the next one's input);
-* :func:`effects_wrench` at every stage of the RKMK4 step, the sum of the entries' external
-  force (world) [N] and moment (body) [N m] at the stage's state.
+* :func:`effects_wrench` at every stage of the RKMK4 step, the sum of the wrench entries'
+  external force (world) [N] and moment (body) [N m] at the stage's state, from the
+  numbers :func:`wrench_terms` takes from the rows once per step (the stages take no
+  arrays: an array argument costs reference counting at every call).
 
 Each entry runs the kernels of :mod:`quadfault.effects.kernels`, the code the diagnosis runs
 over whole recordings (:mod:`quadfault.effects.physics`). Parameters (``P``, from the entry's
@@ -89,14 +91,6 @@ class EffectRows(NamedTuple):
     params: np.ndarray  # (N, P) parameters
     memory: np.ndarray  # (N, Q) memory (zeros: a flight's start)
     streams: object  # typed list of N generators: a seeded wind's own (else never drawn)
-
-
-@jit
-def effect_row(fx, i):
-    """What the kernels pass on for vehicle ``i``: ``(fx, i)`` (None without effects)."""
-    if fx is None:
-        return None
-    return (fx, i)
 
 
 @jit
@@ -184,21 +178,19 @@ def _thrust_entry(c, P, Q, i, a, m, f, t, dt, p, gen):
 
 
 @jit
-def thrust_effects(ex, f, t, dt, p, v, R, w, gen):
+def thrust_effects(fx, i, f, t, dt, p, v, R, w, gen):
     """The chain's thrust stage for the step ``[t, t + dt)`` [s]: ``f`` (n,), the thrusts
     [N] the motors produced, replaced in place; ``(p, v, R, w)`` the state at the step's
-    start; ``gen`` the vehicle's generator."""
-    fx, i = ex
-    for e in range(fx.code.shape[1]):
-        c = fx.code[i, e]
+    start; ``gen`` the vehicle's generator; ``fx`` the rows, ``i`` the vehicle."""
+    code, param, mem, P, Q = fx.code, fx.param, fx.mem, fx.params, fx.memory  # once
+    for e in range(code.shape[1]):
+        c = code[i, e]
         if c < 0:
             break
-        if c == WIND and fx.params[i, fx.param[i, e] + 8] != 0.0:
-            _thrust_entry(c, fx.params, fx.memory, i, fx.param[i, e], fx.mem[i, e], f, t, dt,
-                          p, fx.streams[i])
+        if c == WIND and P[i, param[i, e] + 8] != 0.0:
+            _thrust_entry(c, P, Q, i, param[i, e], mem[i, e], f, t, dt, p, fx.streams[i])
         else:
-            _thrust_entry(c, fx.params, fx.memory, i, fx.param[i, e], fx.mem[i, e], f, t, dt,
-                          p, gen)
+            _thrust_entry(c, P, Q, i, param[i, e], mem[i, e], f, t, dt, p, gen)
 
 
 @jit
@@ -220,50 +212,109 @@ def _rotor_rate(P, Q, i, a, m, f):
     return s
 
 
-@jit
-def _wrench_entry(c, P, Q, i, a, m, p, v, R, w, f):
-    """One entry's external force (world) [N] and moment (body) [N m]."""
-    zero = (0.0, 0.0, 0.0)
-    if c == DRAG:
-        va = (v[0] - P[i, a + 3], v[1] - P[i, a + 4], v[2] - P[i, a + 5])
-        return drag_force3(R, va, (P[i, a], P[i, a + 1], P[i, a + 2])), zero
-    if c == WIND:
-        va = (P[i, a] + Q[i, m], P[i, a + 1] + Q[i, m + 1], P[i, a + 2] + Q[i, m + 2])
-        F = drag_force3(R, va, (P[i, a + 5], P[i, a + 6], P[i, a + 7]))
-        return (-F[0], -F[1], -F[2]), zero
-    if c == ROTOR_INERTIA:
-        return zero, (0.0, 0.0, rotor_inertia_moment1(_rotor_rate(P, Q, i, a, m, f), P[i, a]))
-    if c == DAMPING:
-        return zero, rate_damping3(w, (P[i, a], P[i, a + 1], P[i, a + 2]),
-                                   (P[i, a + 3], P[i, a + 4], P[i, a + 5]))
-    thrust = 0.0
-    for r in range(f.shape[0]):
-        thrust += f[r]
-    if c == COM:
-        return zero, com_offset_moment3(thrust, P[i, a], P[i, a + 1])
-    if c == FLAPPING:
-        va = (v[0] - P[i, a + 2], v[1] - P[i, a + 3], v[2] - P[i, a + 4])
-        return blade_flapping3(R, va, thrust, P[i, a], P[i, a + 1])
-    return zero, zero
+#: wrench entries a vehicle may have (e.g. one of each wrench effect); each becomes a term
+#: of :data:`TERM` numbers (:func:`wrench_terms`)
+WRENCH_TERMS = 6
+TERM = 7
+_NO_TERM = (-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
-@jit
-def effects_wrench(ex, p, v, R, w, f, t):
-    """The chain's summed external force (world) [N] and moment (body) [N m] at one RK
-    stage's state, for the produced thrusts ``f`` of the step starting at ``t``."""
-    fx, i = ex
-    F0 = F1 = F2 = M0 = M1 = M2 = 0.0
-    for e in range(fx.code.shape[1]):
-        c = fx.code[i, e]
+@jit(inline="always")
+def _term(code, param, mem, P, Q, i, k, f):
+    """The ``k``-th wrench entry of vehicle ``i`` as the numbers the RK stages need, fixed
+    over the step: ``(code, six numbers)``; DRAG: k (3), air velocity (3); WIND: wind drag k
+    (3), air velocity with the step's gust (3); FLAPPING: k_force, k_moment, thrust, air
+    velocity (3); DAMPING: D1 (3), D2 (3); COM and ROTOR_INERTIA: their body moment (3),
+    fixed by the step's thrusts ``f`` (code COM). Code -1: no such entry."""
+    seen = 0
+    for e in range(code.shape[1]):
+        c = code[i, e]
         if c < 0:
             break
         if c < DRAG:
             continue
-        F, M = _wrench_entry(c, fx.params, fx.memory, i, fx.param[i, e], fx.mem[i, e], p, v,
-                             R, w, f)
-        F0, F1, F2 = F0 + F[0], F1 + F[1], F2 + F[2]
-        M0, M1, M2 = M0 + M[0], M1 + M[1], M2 + M[2]
-    return (F0, F1, F2), (M0, M1, M2)
+        if seen < k:
+            seen += 1
+            continue
+        a, m = param[i, e], mem[i, e]
+        if c == DRAG or c == DAMPING:
+            return (float(c), P[i, a], P[i, a + 1], P[i, a + 2], P[i, a + 3], P[i, a + 4],
+                    P[i, a + 5])
+        if c == WIND:
+            return (float(c), P[i, a + 5], P[i, a + 6], P[i, a + 7], P[i, a] + Q[i, m],
+                    P[i, a + 1] + Q[i, m + 1], P[i, a + 2] + Q[i, m + 2])
+        if c == ROTOR_INERTIA:
+            Mz = rotor_inertia_moment1(_rotor_rate(P, Q, i, a, m, f), P[i, a])
+            return (float(COM), 0.0, 0.0, Mz, 0.0, 0.0, 0.0)
+        thrust = 0.0
+        for r in range(f.shape[0]):
+            thrust += f[r]
+        if c == COM:
+            M = com_offset_moment3(thrust, P[i, a], P[i, a + 1])
+            return (float(c), M[0], M[1], M[2], 0.0, 0.0, 0.0)
+        if c == FLAPPING:
+            return (float(c), P[i, a], P[i, a + 1], thrust, P[i, a + 2], P[i, a + 3],
+                    P[i, a + 4])
+        return _NO_TERM
+    return _NO_TERM
 
 
-__all__ = ["CODES", "EffectRows", "effect_row", "thrust_effects", "effects_wrench"]
+@jit(inline="always")
+def wrench_terms(fx, i, f, t):
+    """Vehicle ``i``'s wrench entries over the step starting at ``t`` [s] whose produced
+    thrusts are ``f``: :data:`WRENCH_TERMS` terms (:func:`_term`), numbers only, so that the
+    RK stages (:func:`effects_wrench`) take no arrays (an array argument costs reference
+    counting at every call)."""
+    c, a, m, P, Q = fx.code, fx.param, fx.mem, fx.params, fx.memory  # each taken once
+    return (_term(c, a, m, P, Q, i, 0, f), _term(c, a, m, P, Q, i, 1, f),
+            _term(c, a, m, P, Q, i, 2, f), _term(c, a, m, P, Q, i, 3, f),
+            _term(c, a, m, P, Q, i, 4, f), _term(c, a, m, P, Q, i, 5, f))
+
+
+@jit(inline="always")
+def _stage_term(s, v, R, w):
+    """One term's external force (world) [N] and moment (body) [N m] at a stage's state."""
+    zero = (0.0, 0.0, 0.0)
+    c = int(s[0])
+    if c == DRAG:
+        va = (v[0] - s[4], v[1] - s[5], v[2] - s[6])
+        return drag_force3(R, va, (s[1], s[2], s[3])), zero
+    if c == WIND:
+        F = drag_force3(R, (s[4], s[5], s[6]), (s[1], s[2], s[3]))
+        return (-F[0], -F[1], -F[2]), zero
+    if c == DAMPING:
+        return zero, rate_damping3(w, (s[1], s[2], s[3]), (s[4], s[5], s[6]))
+    if c == COM:
+        return zero, (s[1], s[2], s[3])
+    if c == FLAPPING:
+        va = (v[0] - s[4], v[1] - s[5], v[2] - s[6])
+        return blade_flapping3(R, va, s[3], s[1], s[2])
+    return zero, zero
+
+
+@jit(inline="always")
+def _add_term(F, M, s, v, R, w):
+    """``(F, M)`` plus term ``s``'s force and moment (unchanged past the last term)."""
+    if s[0] < 0.0:
+        return F, M
+    dF, dM = _stage_term(s, v, R, w)
+    return ((F[0] + dF[0], F[1] + dF[1], F[2] + dF[2]),
+            (M[0] + dM[0], M[1] + dM[1], M[2] + dM[2]))
+
+
+@jit(inline="always")
+def effects_wrench(W, p, v, R, w, f, t):
+    """The summed external force (world) [N] and moment (body) [N m] of a vehicle's wrench
+    entries at one RK stage's state, from the step's :func:`wrench_terms` ``W`` (``p``,
+    ``f``, ``t``: the protocol's arguments, already in the terms)."""
+    zero = (0.0, 0.0, 0.0)
+    F, M = _add_term(zero, zero, W[0], v, R, w)
+    F, M = _add_term(F, M, W[1], v, R, w)
+    F, M = _add_term(F, M, W[2], v, R, w)
+    F, M = _add_term(F, M, W[3], v, R, w)
+    F, M = _add_term(F, M, W[4], v, R, w)
+    return _add_term(F, M, W[5], v, R, w)
+
+
+__all__ = ["CODES", "EffectRows", "WRENCH_TERMS", "thrust_effects",
+           "wrench_terms", "effects_wrench"]

@@ -103,6 +103,10 @@ def write(fx: C.EffectRows, i: int, entries) -> None:
     from a fresh start (memory cleared); they must :func:`fits`."""
     if not fits(fx, entries):
         raise ConfigError("these effects need more room than the rows were built with")
+    if sum(code >= C.DRAG for code, _, _ in entries) > C.WRENCH_TERMS:
+        raise ConfigError(f"a vehicle flies at most {C.WRENCH_TERMS} effects with a wrench "
+                          "(drag, wind, com_offset, blade_flapping, rotor_inertia, "
+                          "rate_damping)")
     fx.code[i] = -1
     a = m = 0
     for e, (code, params, memory) in enumerate(entries):
@@ -158,12 +162,12 @@ def lost(fx: C.EffectRows) -> np.ndarray:
 
 @jit
 def _thrust_one(fx, f, t, dt, p, v, R, w, gen):
-    C.thrust_effects((fx, 0), f, t, dt, p, v, R, w, gen)
+    C.thrust_effects(fx, 0, f, t, dt, p, v, R, w, gen)
 
 
 @jit
 def _wrench_one(fx, p, v, R, w, f, t):
-    return C.effects_wrench((fx, 0), p, v, R, w, f, t)
+    return C.effects_wrench(C.wrench_terms(fx, 0, f, t), p, v, R, w, f, t)
 
 
 class Single:
