@@ -15,6 +15,7 @@ randomisation (1 - randomised / nominal) and the load average::
 
     python benchmarks/randomisation_cost.py            # N = 1024
     python benchmarks/randomisation_cost.py --n 256 --rounds 5
+    python benchmarks/randomisation_cost.py --skip-env --ranges thrust_scale=1   # a no-op effect
 """
 
 from __future__ import annotations
@@ -50,10 +51,10 @@ def _timed(fn, work: int, min_time: float) -> tuple[float, float]:
     return work * calls / wall, work * calls / max(time.process_time() - c0, 1e-9)
 
 
-def loop_batch(N: int, horizon: int, randomise: bool):
+def loop_batch(N: int, horizon: int, randomise: bool, ranges=RANGES):
     """``fn`` advancing N hovering vehicles by ``horizon`` physics steps with the controller in
     the loop (one ``fly_batch`` call); with ``randomise`` each vehicle flies its own draw of
-    :data:`RANGES`."""
+    ``ranges`` (default :data:`RANGES`)."""
     from quadfault import closed_loop
     from quadfault.controller import GeometricController
     from quadfault.effects import parse_effect
@@ -68,7 +69,7 @@ def loop_batch(N: int, horizon: int, randomise: bool):
     if randomise:
         rng = np.random.default_rng(1)
         for i in range(N):
-            plant.assign(i, [parse_effect(s, rng) for s in RANGES])
+            plant.assign(i, [parse_effect(s, rng) for s in ranges])
     V = plant.vehicles
     ctrl = GeometricController(veh, Hover(position=(0.0, 0.0, -1.0)))
     refs = np.zeros((N, horizon, 6, 3))
@@ -90,11 +91,11 @@ def loop_batch(N: int, horizon: int, randomise: bool):
     return fn
 
 
-def env_batch(N: int, steps: int, randomise: bool):
+def env_batch(N: int, steps: int, randomise: bool, ranges=RANGES):
     """``fn`` stepping a reset ``QuadFaultVectorEnv`` (no estimator) ``steps`` times."""
     from quad_fault_env.vector import QuadFaultVectorEnv
 
-    kw = {"effects": list(RANGES)} if randomise else {}
+    kw = {"effects": list(ranges)} if randomise else {}
     env = QuadFaultVectorEnv(N, "none", scenario="hover", duration=600.0, **kw)
     env.reset(seed=0)
     a = np.zeros((N, 4), dtype=np.float32)
@@ -129,22 +130,25 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds (best kept)")
     ap.add_argument("--min-time", type=float, default=0.5, help="seconds per timing")
     ap.add_argument("--skip-env", action="store_true", help="only the closed loop")
+    ap.add_argument("--ranges", nargs="+", default=list(RANGES), metavar="SPEC",
+                    help="the randomised effects (--effect syntax with a:b ranges)")
     args = ap.parse_args(argv)
 
     import numba
 
     N = args.n
     nominal = loop_batch(N, args.horizon, False)
-    randomised = loop_batch(N, args.horizon, True)
+    randomised = loop_batch(N, args.horizon, True, args.ranges)
     print(f"N = {N}, physics {RATE:g} Hz, numba {numba.__version__}, "
           f"{numba.get_num_threads()} threads ({numba.threading_layer()}), "
           f"OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY')}, {os.cpu_count()} cpus")
-    print(f"randomised: {', '.join(RANGES)}")
+    print(f"randomised: {', '.join(args.ranges)}")
     print(f"load average before: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
     _compare("closed loop + controller (fly_batch)", nominal, randomised, N * args.horizon,
              args.rounds, args.min_time)
     if not args.skip_env:
-        (e0, S), (e1, _) = env_batch(N, args.steps, False), env_batch(N, args.steps, True)
+        (e0, S), (e1, _) = (env_batch(N, args.steps, False),
+                            env_batch(N, args.steps, True, args.ranges))
         _compare("QuadFaultVectorEnv step (no estimator), effects= vs none", e0, e1,
                  N * args.steps * S, args.rounds, args.min_time)
     print(f"load average after: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
