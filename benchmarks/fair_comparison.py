@@ -23,6 +23,8 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
+from quadfault.fileio import atomic_write_text
+
 METRICS = ("spike", "excess_spike", "rmse")
 #: an excess-spike ratio is reported only when the EKF's excess spike exceeds this on every
 #: seed; below it the EKF's transient is within its own noise and the ratio is meaningless
@@ -149,8 +151,9 @@ def main(argv=None) -> int:
     seeds = seeds_of(args.seeds)
     docs = {k: run_seed(out, k, args.quick, args.workers) for k in seeds}
     summary = summarise(docs)
-    (out / "summary.json").write_text(json.dumps({"seeds": seeds, "quick": args.quick,
-                                                  "ratios": summary}, indent=2) + "\n")
+    # summary.json is derived from the per-seed runs: rewritten on every call
+    atomic_write_text(out / "summary.json", json.dumps(
+        {"seeds": seeds, "quick": args.quick, "ratios": summary}, indent=2) + "\n", force=True)
     print_summary(summary, seeds)
     return 0
 

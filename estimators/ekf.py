@@ -91,8 +91,9 @@ class EKFConfig:
         eta0: initial efficiency (one value for all rotors, or one per rotor).
         eta_bounds: clamp of the efficiency after each update, or None for no clamp.
         clip_commands: clip the commanded thrusts to ``[0, vehicle.rotor_max_thrust]`` before
-            use (as IRLS does: a saturated rotor cannot deliver its command); ``False`` = the
-            reference code.
+            use (as IRLS does: a saturated rotor cannot deliver its command; ``run(recording)``
+            clips above only when the recording does not say its flight was unsaturated,
+            :func:`estimators.base.command_limit`); ``False`` = the reference code.
         backend: deprecated, does nothing (one implementation); a value other than None
             warns. Removed in the next release.
     """

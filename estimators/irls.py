@@ -4,7 +4,9 @@ One update per measurement sample (:func:`irls_update`, plain Python compiled by
 :func:`quadfault.jit.jit`, allocation-free, one call):
 
 1. check the sample (finite, time increasing; otherwise ``bad_sample`` and the window
-   restarts) and clip its command to ``[0, rotor_max_thrust]`` (``clip_commands``);
+   restarts) and clip its command to ``[0, rotor_max_thrust]`` (``clip_commands``; ``run``
+   clips above only when the recording's flight was saturated,
+   :func:`estimators.base.command_limit`);
 2. write the segment previous sample -> this sample into a ring of the last ``window - 1``
    segments' quadratic terms (:mod:`estimators.residuals`, eqs. 13-26);
 3. when the ring is full (else ``warmup``) and the window's mean commanded thrust reaches
