@@ -122,8 +122,9 @@ def test_quick_reproduce_writes_the_contract_outputs(tmp_path):
     assert set(doc["spike_ratio"]["abrupt"]) == {"paper", "median", "improved"}
     assert set(doc["ratios"]["abrupt"]["paper"]) == {"spike", "excess_spike", "rmse"}
     cal = doc["config"]["calibration"]["rk4_improved"]
-    feasible = [e for r, e in zip(cal["curve_rmse"], cal["curve_excess"])
-                if r <= cal["target_rmse"]]
+    q_min = cal["curve_q"][int(np.argmin(cal["curve_rmse"]))]
+    feasible = [e for q, r, e in zip(cal["curve_q"], cal["curve_rmse"], cal["curve_excess"])
+                if r <= cal["target_rmse"] and q >= q_min]
     assert cal["matched"] and cal["excess_spike"] == min(feasible)
     assert doc["fdi"]["abrupt"]["irls_improved"]["detected"] == 4
     assert "| combined | irls_improved |" in r.stdout and "excess" in r.stdout

@@ -39,6 +39,16 @@ def test_partner_is_the_least_excess_spike_within_the_rmse_target():
                for r, e in zip(res.curve_rmse, res.curve_excess))
 
 
+def test_partner_keeps_to_the_fast_branch():
+    """A slow filter (left of the RMSE minimum) with a lower excess spike is not chosen."""
+    def curve(q):
+        r, e = _curve(q)
+        return r, (0.0 if q < 1e-2 else e)
+    res = choose_partner(None, 0.065, evaluate=curve, q_range=(1e-5, 1e2), refine=4)
+    assert res.matched and res.q_eta == pytest.approx(1.0, rel=0.05)
+    assert min(res.curve_excess) == 0.0 and res.excess_spike > 0.0
+
+
 def test_partner_falls_back_to_the_most_accurate_q_eta():
     res = choose_partner(None, 0.01, evaluate=_curve, q_range=(1e-5, 1e2))
     assert not res.matched and res.q_eta == pytest.approx(1e-2, rel=0.2)

@@ -6,8 +6,11 @@ partner gets the identical post-processing (the causal output median) and the ``
 chosen on a separate calibration flight by :func:`choose_partner`: among the ``Q_eta`` whose
 motor-averaged RMSE is at most the IRLS's, the one with the smallest motor-averaged excess
 spike (the EKF's RMSE-vs-``Q_eta`` curve is U-shaped, so "equal RMSE" alone has two answers
-and says nothing about spikes). When no ``Q_eta`` reaches the IRLS's RMSE, the most accurate
-one is taken (and the result says so).
+and says nothing about spikes). The search keeps to the fast branch of the U (``Q_eta`` at
+least the most accurate one): on the slow branch the filter lags every fault, and its excess
+spike is deflated because the lag already inflates its error outside the fault windows, the
+baseline the excess is measured from. When no ``Q_eta`` reaches the IRLS's RMSE, the most
+accurate one is taken (and the result says so).
 
 Every series of a pair comes from :func:`estimators.cli.estimate_series`, the code behind
 ``quadfault estimate``, and each ``metrics.json`` entry records the arguments
@@ -100,13 +103,16 @@ class PartnerResult:
                 "excess_spike": self.excess_spike, "matched": self.matched,
                 "curve_q": list(self.curve_q), "curve_rmse": list(self.curve_rmse),
                 "curve_excess": list(self.curve_excess), "message": self.message,
-                "rule": "smallest excess spike with RMSE <= target"}
+                "rule": "smallest excess spike with RMSE <= target, Q_eta >= the most "
+                        "accurate one"}
 
 
 def _best(points: dict, target: float):
-    """``(q, matched)``: the feasible point (RMSE <= target) of least excess spike, or the
-    least-RMSE point when none is feasible."""
-    feasible = [q for q, (r, _) in points.items() if r <= target]
+    """``(q, matched)``: the feasible point (RMSE <= target, on the fast branch: ``q`` at
+    least the most accurate evaluated ``q``) of least excess spike, or the least-RMSE point
+    when none is feasible."""
+    q_min = min(points, key=lambda q: points[q][0])
+    feasible = [q for q, (r, _) in points.items() if r <= target and q >= q_min]
     if feasible:
         return min(feasible, key=lambda q: (points[q][1], points[q][0])), True
     return min(points, key=lambda q: points[q][0]), False
@@ -116,8 +122,9 @@ def choose_partner(recording: Recording, target_rmse: float, median: int = 1, *,
                    q_range: tuple = (1e-4, 10.0), points_per_decade: float = 3.0,
                    refine: int = 3, evaluate=None) -> PartnerResult:
     """The EKF's ``Q_eta`` on ``recording`` (which holds the truth) with the smallest
-    motor-averaged excess spike among those whose RMSE (of the output after a ``median``-row
-    causal median) is at most ``target_rmse``: a log-spaced scan of ``q_range``, then
+    motor-averaged excess spike among those on the fast branch whose RMSE (of the output after
+    a ``median``-row causal median) is at most ``target_rmse``: a log-spaced scan of
+    ``q_range``, then
     ``refine`` rounds of halving the log-spacing around the best point.
 
     ``evaluate(q) -> (rmse, excess)`` replaces the EKF run (tests; shared scans)."""
@@ -144,7 +151,7 @@ def choose_partner(recording: Recording, target_rmse: float, median: int = 1, *,
     order = sorted(points)
     if matched:
         msg = (f"Q_eta = {q:.4g}: least excess spike {excess:.4f} with RMSE {rmse:.4f} <= "
-               f"{target_rmse:.4f} ({len(points)} evaluations)")
+               f"{target_rmse:.4f} on the fast branch ({len(points)} evaluations)")
     else:
         msg = (f"no Q_eta in [{lo:.3g}, {hi:.3g}] reaches RMSE {target_rmse:.4f}; using the most "
                f"accurate, Q_eta = {q:.4g} (RMSE {rmse:.4f})")
