@@ -87,7 +87,8 @@ def _pair_lines(doc: dict) -> list[str]:
     lines = [
         "Pairs: every IRLS variant runs against an EKF given the identical post-processing "
         "(`postprocess` in metrics.json). The EKF partner's Q_eta is chosen on the calibration "
-        "flight: the smallest excess spike among the Q_eta whose RMSE is at most the IRLS's, on the fast branch of its U-shaped RMSE curve. "
+        "flight: the smallest excess spike among the Q_eta whose RMSE is at most the IRLS's, "
+        "on the fast branch of its U-shaped RMSE curve. "
         "*irls* is the paper's estimator (reference settings); *irls_median* adds a 21-sample "
         "causal output median; *irls_improved* adds the median and the change completion "
         "(`IRLSConfig.improved()`, docs/irls.md).", ""]
