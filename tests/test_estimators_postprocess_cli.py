@@ -55,7 +55,7 @@ def test_q_eta_changes_the_ekf_and_median_overrides_improved(abrupt, tmp_path):
     a, _ = _estimate(abrupt, tmp_path / "a.csv", "--estimator", "ekf")
     b, side = _estimate(abrupt, tmp_path / "b.csv", "--estimator", "ekf", "--q-eta", "0.01")
     assert side["config"]["q_eta"] == 0.01 and not np.allclose(a["eta"], b["eta"])
-    imp, side = _estimate(abrupt, tmp_path / "i.csv", "--estimator", "irls", "--improved",
+    _, side = _estimate(abrupt, tmp_path / "i.csv", "--estimator", "irls", "--improved",
                           "--median", "5")
     assert side["config"]["output_median"] == 5 and side["config"]["change_completion"]
     assert side["postprocess"] == "median:5"
@@ -96,13 +96,14 @@ def test_clipping_follows_the_recording(abrupt, tmp_path):
         # a sidecar without the key is clipped at max_thrust, as before the key existed
         np.testing.assert_array_equal(legacy["eta"], clipped["eta"])
         # the unsaturated flight is not clipped, and that is the more accurate model
-        from estimators.base import EstimateSeries
+        assert _rmse(rec, follows, name) < 0.95 * _rmse(rec, clipped, name), name
 
-        def rmse(d):
-            s = EstimateSeries(d["t"], d["eta"], d["sd"], d["status"], name)
-            return float(np.mean(score(rec, s).rmse))
 
-        assert rmse(follows) < 0.95 * rmse(clipped), name
+def _rmse(rec, d, name):
+    from estimators.base import EstimateSeries
+
+    s = EstimateSeries(d["t"], d["eta"], d["sd"], d["status"], name)
+    return float(np.mean(score(rec, s).rmse))
 
 
 def test_simulate_records_saturation_and_bad_flags_are_errors(abrupt, tmp_path):

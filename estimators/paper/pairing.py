@@ -136,7 +136,7 @@ def choose_partner(recording: Recording, target_rmse: float, median: int = 1, *,
     if evaluate is None:
         def evaluate(q):
             return ekf_point(recording, q, median)
-    n = max(2, int(round(math.log10(hi / lo) * points_per_decade)) + 1)
+    n = max(2, round(math.log10(hi / lo) * points_per_decade) + 1)
     points = {float(q): evaluate(float(q)) for q in np.logspace(math.log10(lo),
                                                                   math.log10(hi), n)}
     step = math.log10(hi / lo) / (n - 1)
