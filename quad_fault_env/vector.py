@@ -35,6 +35,7 @@ from quad_fault_env.envs.config import deprecated_physics, validate_action
 from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.estimation import NOMINAL_PRIOR_SD
+from quad_fault_env.observation import SD_MAX
 from quad_fault_env.time_tables import WINDOW, RowTimeTables
 from quadfault import closed_loop
 from quadfault.controller import GeometricController
@@ -97,7 +98,8 @@ class QuadFaultVectorEnv(VectorEnv):
             ``render_mode`` is not supported.
 
     ``info`` (arrays over the sub-envs, with gymnasium's ``"_<key>"`` masks): ``t`` [s],
-    ``eta_true``, ``eta_hat``, ``eta_sd`` (NaN = none), ``estimator_status``,
+    ``eta_true``, ``eta_hat``, ``eta_sd`` (10 = none, as in the observation),
+    ``estimator_status``,
     ``position_error`` [m], ``tracking_error`` [m], ``motor_command`` [N],
     ``termination_reason``, ``scenario``.
     """
@@ -434,7 +436,7 @@ class QuadFaultVectorEnv(VectorEnv):
             "t": self.steps * self.substeps * self.dt,
             "eta_true": self.eta_true.copy(),
             "eta_hat": self.eta_hat.copy(),
-            "eta_sd": self.eta_sd.copy(),
+            "eta_sd": np.where(np.isnan(self.eta_sd), SD_MAX, self.eta_sd),
             "estimator_status": np.asarray(self.status, dtype=object).copy(),
             "position_error": err,
             "tracking_error": np.linalg.norm(err, axis=-1),

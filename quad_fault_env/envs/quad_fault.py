@@ -38,7 +38,8 @@ from quad_fault_env.estimation import (
     NOMINAL_PRIOR_SD,
     NominalBelief,
     TruthOracle,
-    diagnostics_dict,
+    diagnostics_template,
+    estimate_info,
     estimate_sd,
     make_estimator,
 )
@@ -201,6 +202,7 @@ class QuadFaultEnv(gym.Env):
             raise ConfigError(f"duration must be positive [s], got {duration!r}")
         self.duration = duration
         self.estimator = make_estimator(estimator, self.vehicle, **(estimator_kwargs or {}))
+        self._diagnostics_template = diagnostics_template(self.estimator)
         self.compensate = bool(compensate)
         self.controller_config = controller or ControllerConfig()
         if observation not in OBSERVATION_KINDS:
@@ -429,28 +431,29 @@ class QuadFaultEnv(gym.Env):
         return flat if self.observation_kind == "flat" else self.layout.split(flat)
 
     def _info(self, samples, eta_true, sf, events, reason, ref, eta_t=None) -> dict:
+        """The step's (or the reset's) ``info``: the same keys, types and shapes every time
+        (``gym.make_vec`` batches them); per-substep rows that were not flown are NaN."""
         t = self.time
         state = self._state
-        est = self._estimate
+        S, n = self.substeps, self.vehicle.n_rotors
+        eta_rows, sf_rows = np.full((S, n), np.nan), np.full((S, 3), np.nan)
+        eta_rows[:len(samples)] = np.reshape(eta_true, (-1, n))
+        sf_rows[:len(samples)] = np.reshape(sf, (-1, 3))
         return {
-            "t": t,
+            "t": float(t),
             "eta_true": (np.asarray(self.scenario.efficiency(t), dtype=float) if eta_t is None
                          else eta_t),
-            "eta_hat": np.asarray(est.eta, dtype=float),
-            "eta_sd": estimate_sd(est, self.vehicle.n_rotors),
-            "estimator": getattr(self.estimator, "name", type(self.estimator).__name__),
-            "estimator_status": est.status,
-            "estimator_diagnostics": diagnostics_dict(est.diagnostics),
+            **estimate_info(self._estimate, self.estimator, n, self._diagnostics_template),
             "position_error": state.p - ref.position,
             "tracking_error": float(np.linalg.norm(state.p - ref.position)),
             "motor_command": self._f_cmd.copy(),
             "fault_events": events,
             "faults": [_fault_dict(f) for f in self.scenario.efficiency.faults],
             "scenario": self.scenario.name,
-            "thrust_noise": self.scenario.thrust_noise,
+            "thrust_noise": float(self.scenario.thrust_noise),
             "samples": samples,
-            "eta_true_samples": np.array(eta_true).reshape(-1, self.vehicle.n_rotors),
-            "specific_force_samples": np.array(sf).reshape(-1, 3),
+            "eta_true_samples": eta_rows,
+            "specific_force_samples": sf_rows,
             "termination_reason": reason,
         }
 
