@@ -29,6 +29,7 @@ from quad_fault_env.envs.config import (
     RewardConfig,
     TerminationLimits,
     check_random_faults,
+    config_of,
     deprecated_physics,
     number_at_least,
     validate_action,
@@ -160,9 +161,9 @@ class QuadFaultEnv(gym.Env):
             raise ConfigError("vehicle must be a quadfault Vehicle with 4 rotors (the scenarios "
                               "and the observation have four motors)")
         self.action_config = ActionConfig(action_mode, residual_scale, moment_scale)
-        self.reward_config = reward or RewardConfig()
-        self.limits = limits or TerminationLimits()
-        self.initial_spread = initial_spread or InitialStateSpread()
+        self.reward_config = config_of(reward, RewardConfig, "reward")
+        self.limits = config_of(limits, TerminationLimits, "limits")
+        self.initial_spread = config_of(initial_spread, InitialStateSpread, "initial_spread")
         self.sensor_noise = sensor_noise or SensorNoise()
         if not isinstance(self.sensor_noise, SensorNoise):
             raise ConfigError(f"sensor_noise must be a SensorNoise, got {sensor_noise!r}")
@@ -409,7 +410,7 @@ class QuadFaultEnv(gym.Env):
             closed_loop.sense(self._generators(), self._loop, vehicles)
         self.history.append(np.array(state.p, dtype=float))
         reward = self.reward_config(state.p - ref.position, state.v - ref.velocity,
-                                    self._f_cmd, self.f_max, terminated)
+                                    self._f_cmd, self.f_max, terminated, a)
         events = []
         for f in self.scenario.efficiency.faults:
             for kind, tk in (("onset", f.onset), ("end", f.end)):
