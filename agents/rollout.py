@@ -27,7 +27,7 @@ import numpy as np
 
 from agents.fault_tolerant import FaultTolerantConfig, make_controller
 from agents.metrics import CrashLimits, FlightMetrics, RecoveryConfig, flight_metrics, tilt_angle
-from estimators.base import Sample
+from quadfault.sample import Sample
 from quadfault import closed_loop
 from quadfault.controller import ControllerConfig
 from quadfault.errors import ConfigError

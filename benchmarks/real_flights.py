@@ -102,7 +102,8 @@ def run_one(kind: str, path: Path) -> dict:
         row["diagnosis"] = _diagnose(rec)
         row["diagnosis_no_inertia"] = _diagnose(rec, NO_INERTIA)
     else:
-        from quadfault.importers.flight_analysis import efficiency_fit, irls_efficiency
+        from estimators.flight_efficiency import irls_efficiency
+        from quadfault.importers.flight_analysis import efficiency_fit
 
         fit = efficiency_fit(rec)
         eta_irls, n_irls = irls_efficiency(rec)

@@ -189,7 +189,7 @@ def irls_window_rate(N: int, updates: int) -> tuple[float, str]:
         out = est.update(*b)
         solved += int(np.sum(out.status_names == "ok") + np.sum(out.status_names == "max_iter"))
     return N * len(batches[12:]) / (time.perf_counter() - t0), \
-        f"{solved / (N * len(batches[12:])):.0%} ok, backend {est.backend}"
+        f"{solved / (N * len(batches[12:])):.0%} ok"
 
 
 _CRAZYFLOW_SIM = textwrap.dedent("""

@@ -331,7 +331,7 @@ def test_import_refuses_to_overwrite(tmp_path):
 
 
 def test_reproduce_refuses_to_overwrite_before_running(tmp_path):
-    from estimators.reproduce import planned_files
+    from estimators.paper.reproduce import planned_files
 
     for victim in planned_files(tmp_path)[:2]:
         _plant([victim])
