@@ -23,9 +23,10 @@ from dataclasses import dataclass, field
 
 from quad_fault_env.envs.config import InitialStateSpread, RewardConfig, TerminationLimits
 
-#: the reward of the -v0 ids: tracking and thrust effort only, no termination penalty
+#: the reward of the -v0 ids: tracking and thrust effort only (no action effort, no survival
+#: bonus, no termination penalty)
 REWARD_V0 = RewardConfig(position_scale=1.0, velocity_weight=0.1, effort_weight=0.01,
-                         termination_penalty=0.0, action_weight=0.0)
+                         action_weight=0.0, survival_bonus=0.0, termination_penalty=0.0)
 #: the reward of the -v1 ids (the defaults of :class:`RewardConfig`)
 REWARD_V1 = RewardConfig()
 #: the initial-state spread of the hover tasks
