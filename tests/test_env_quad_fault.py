@@ -482,8 +482,12 @@ def test_a_diverging_state_stops_the_substeps_and_terminates_non_finite():
     with np.errstate(over="ignore", invalid="ignore"):
         _, _, term, _, info = env.step(np.zeros(4, np.float32))
     assert term and info["termination_reason"] == "non_finite"
-    assert 0 < len(info["samples"]) < env.substeps
-    assert len(info["specific_force_samples"]) == len(info["samples"])
+    flown = len(info["samples"])
+    assert 0 < flown < env.substeps
+    for key, width in (("specific_force_samples", 3), ("eta_true_samples", 4)):
+        rows = info[key]  # one row per substep of a step; the ones not flown are NaN
+        assert rows.shape == (env.substeps, width)
+        assert np.isfinite(rows[:flown]).all() and np.isnan(rows[flown:]).all()
 
 
 def test_observation_is_the_layouts_values_even_for_nan_and_inf():

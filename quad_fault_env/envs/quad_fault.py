@@ -29,6 +29,7 @@ from quad_fault_env.envs.config import (
     RewardConfig,
     TerminationLimits,
     check_random_faults,
+    config_of,
     deprecated_physics,
     number_at_least,
     validate_action,
@@ -38,7 +39,8 @@ from quad_fault_env.estimation import (
     NOMINAL_PRIOR_SD,
     NominalBelief,
     TruthOracle,
-    diagnostics_dict,
+    diagnostics_template,
+    estimate_info,
     estimate_sd,
     make_estimator,
 )
@@ -159,9 +161,9 @@ class QuadFaultEnv(gym.Env):
             raise ConfigError("vehicle must be a quadfault Vehicle with 4 rotors (the scenarios "
                               "and the observation have four motors)")
         self.action_config = ActionConfig(action_mode, residual_scale, moment_scale)
-        self.reward_config = reward or RewardConfig()
-        self.limits = limits or TerminationLimits()
-        self.initial_spread = initial_spread or InitialStateSpread()
+        self.reward_config = config_of(reward, RewardConfig, "reward")
+        self.limits = config_of(limits, TerminationLimits, "limits")
+        self.initial_spread = config_of(initial_spread, InitialStateSpread, "initial_spread")
         self.sensor_noise = sensor_noise or SensorNoise()
         if not isinstance(self.sensor_noise, SensorNoise):
             raise ConfigError(f"sensor_noise must be a SensorNoise, got {sensor_noise!r}")
@@ -201,6 +203,7 @@ class QuadFaultEnv(gym.Env):
             raise ConfigError(f"duration must be positive [s], got {duration!r}")
         self.duration = duration
         self.estimator = make_estimator(estimator, self.vehicle, **(estimator_kwargs or {}))
+        self._diagnostics_template = diagnostics_template(self.estimator)
         self.compensate = bool(compensate)
         self.controller_config = controller or ControllerConfig()
         if observation not in OBSERVATION_KINDS:
@@ -407,7 +410,7 @@ class QuadFaultEnv(gym.Env):
             closed_loop.sense(self._generators(), self._loop, vehicles)
         self.history.append(np.array(state.p, dtype=float))
         reward = self.reward_config(state.p - ref.position, state.v - ref.velocity,
-                                    self._f_cmd, self.f_max, terminated)
+                                    self._f_cmd, self.f_max, terminated, a)
         events = []
         for f in self.scenario.efficiency.faults:
             for kind, tk in (("onset", f.onset), ("end", f.end)):
@@ -429,28 +432,29 @@ class QuadFaultEnv(gym.Env):
         return flat if self.observation_kind == "flat" else self.layout.split(flat)
 
     def _info(self, samples, eta_true, sf, events, reason, ref, eta_t=None) -> dict:
+        """The step's (or the reset's) ``info``: the same keys, types and shapes every time
+        (``gym.make_vec`` batches them); per-substep rows that were not flown are NaN."""
         t = self.time
         state = self._state
-        est = self._estimate
+        S, n = self.substeps, self.vehicle.n_rotors
+        eta_rows, sf_rows = np.full((S, n), np.nan), np.full((S, 3), np.nan)
+        eta_rows[:len(samples)] = np.reshape(eta_true, (-1, n))
+        sf_rows[:len(samples)] = np.reshape(sf, (-1, 3))
         return {
-            "t": t,
+            "t": float(t),
             "eta_true": (np.asarray(self.scenario.efficiency(t), dtype=float) if eta_t is None
                          else eta_t),
-            "eta_hat": np.asarray(est.eta, dtype=float),
-            "eta_sd": estimate_sd(est, self.vehicle.n_rotors),
-            "estimator": getattr(self.estimator, "name", type(self.estimator).__name__),
-            "estimator_status": est.status,
-            "estimator_diagnostics": diagnostics_dict(est.diagnostics),
+            **estimate_info(self._estimate, self.estimator, n, self._diagnostics_template),
             "position_error": state.p - ref.position,
             "tracking_error": float(np.linalg.norm(state.p - ref.position)),
             "motor_command": self._f_cmd.copy(),
             "fault_events": events,
             "faults": [_fault_dict(f) for f in self.scenario.efficiency.faults],
             "scenario": self.scenario.name,
-            "thrust_noise": self.scenario.thrust_noise,
+            "thrust_noise": float(self.scenario.thrust_noise),
             "samples": samples,
-            "eta_true_samples": np.array(eta_true).reshape(-1, self.vehicle.n_rotors),
-            "specific_force_samples": np.array(sf).reshape(-1, 3),
+            "eta_true_samples": eta_rows,
+            "specific_force_samples": sf_rows,
             "termination_reason": reason,
         }
 
