@@ -15,7 +15,7 @@ from quadfault.scenarios import named_scenario
 from quadfault.simulator import SensorNoise, SimConfig, simulate
 from quadfault.trajectory import Lissajous
 
-CHANNELS = {"acc_x", "acc_y", "acc_z", "alpha_x", "alpha_y", "alpha_z"}
+CHANNELS = {"acc_x", "acc_y", "acc_z", "sf_x", "sf_y", "sf_z", "alpha_x", "alpha_y", "alpha_z"}
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +45,8 @@ def validate_contract(doc: dict) -> None:
         assert _number(w["t0"]) and _number(w["t1"]) and w["t0"] <= w["t1"]
     imps = []
     for e in doc["effects"]:
-        assert set(e) == {"name", "params", "uncertainty", "improvement", "explanation"}
+        assert set(e) >= {"name", "params", "uncertainty", "improvement", "explanation",
+                          "bounds", "folds"}
         assert isinstance(e["name"], str) and e["name"] == e["name"].lower()
         assert isinstance(e["params"], dict) and isinstance(e["uncertainty"], dict)
         assert _number(e["improvement"]) and e["improvement"] <= 1.0
@@ -118,7 +119,10 @@ def test_imu_only_log_lists_untestable_effects(com_recording):
     assert set(res.untestable) == {"drag", "wind", "ground_effect"}
     assert set(res.baseline_rmse) == {"sf_x", "sf_y", "sf_z", "alpha_x", "alpha_y", "alpha_z"}
     assert res.effect_names[0] == "com_offset"
-    assert res.prediction == {}
+    # no pose to start from: the prediction is of the body rate and the attitude change
+    p = res.prediction
+    assert "position_rmse_m" not in p and set(p["rate_rmse_rad_per_s"]) == {
+        "nominal", "model", "constant_velocity", "constant_acceleration"}
 
 
 def test_gaps_and_jitter_are_handled(com_recording):

@@ -63,6 +63,12 @@ class Candidate:
         starts: initial guesses tried before the local fit (multi-modal effects).
         stage: ``"thrust"`` or ``"wrench"``; order: position among thrust stages.
         needs_pose: the effect needs position/velocity/attitude (not testable on IMU logs).
+        rotor_side: the effect acts between the command and the rotor speed (motor
+            dynamics, the command curve), so measured rotor speeds see it (``rotor_*``
+            channels of :mod:`~quadfault.diagnosis.residuals`); effects after the rotor
+            speed (propeller, aerodynamics) leave those channels unchanged.
+        frames: ``((param_key, "world" | "body"), ...)``: public parameters that are
+            vectors in the world or body frame, reported in the recording's own frame.
     """
 
     name: str
@@ -74,6 +80,8 @@ class Candidate:
     stage: str
     order: int = 0
     needs_pose: bool = False
+    rotor_side: bool = False
+    frames: tuple = ()
 
     @property
     def size(self) -> int:
@@ -139,17 +147,18 @@ def build_library(rp: Replay) -> list[Candidate]:
                   needs_pose=True),
         Candidate("delay", ("delay [s]",), (0.0,), (0.3,), (0.0,),
                   tuple((d,) for d in np.unique(np.r_[np.arange(0.0, 0.2, max(dt, 0.01)), 0.25])),
-                  "thrust", 2),
+                  "thrust", 2, rotor_side=True),
         Candidate("motor_lag", ("tau [s]",), (1e-4,), (0.6,), (1e-4,),
                   tuple((tau,) for tau in (0.005, 0.01, 0.02, 0.04, 0.07, 0.12, 0.2, 0.35)),
-                  "thrust", 3),
+                  "thrust", 3, rotor_side=True),
         Candidate("drag", ("kx [N s/m]", "ky [N s/m]", "kz [N s/m]"), (0.0,) * 3,
                   (30.0 * m,) * 3, (0.0,) * 3, ((0.0,) * 3, (0.5 * m,) * 3), "wrench",
                   needs_pose=True),
         Candidate("wind", ("Fx [N]", "Fy [N]", "Fz [N]"), (-m * g,) * 3, (m * g,) * 3,
-                  (0.0,) * 3, ((0.0,) * 3,), "wrench", needs_pose=True),
+                  (0.0,) * 3, ((0.0,) * 3,), "wrench", needs_pose=True,
+                  frames=(("force_N", "world"), ("air_velocity_m_per_s", "world"))),
         Candidate("com_offset", ("rx [m]", "ry [m]"), (-arm,) * 2, (arm,) * 2, (0.0, 0.0),
-                  ((0.0, 0.0),), "wrench"),
+                  ((0.0, 0.0),), "wrench", frames=(("offset_m", "body"),)),
         Candidate("inertia", ("sx [-]", "sy [-]", "sz [-]"), (0.2,) * 3, (5.0,) * 3, one3,
                   (one3,), "wrench"),
     ]
@@ -179,7 +188,7 @@ def thrust_series(rp: Replay, terms) -> np.ndarray:
 
 
 def predict_intervals(rp: Replay, terms) -> np.ndarray:
-    """Model channels (M, 6) per interval for the nominal model plus ``terms``."""
+    """Model channels (M, C) per interval for the nominal model plus ``terms``."""
     f = thrust_series(rp, terms)
     W = rp.vehicle.wrench(f)
     T, M = W[:, 0], W[:, 1:]
@@ -195,11 +204,14 @@ def predict_intervals(rp: Replay, terms) -> np.ndarray:
             F = dF if F is None else F + dF
         if dM is not None:
             Mx = dM if Mx is None else Mx + dM
-    return model_channels(rp, f, F, Mx, T, M)
+    out = model_channels(rp, f, F, Mx, T, M)
+    if rp.has_rotor:  # measured rotor speeds see only the effects before the rotor speed
+        out = np.hstack((out, thrust_series(rp, [t for t in terms if t[0].rotor_side])))
+    return out
 
 
 def predict(rp: Replay, terms) -> np.ndarray:
-    """Block-mean model channels (B, 6)."""
+    """Block-mean model channels (B, C)."""
     return rp.block_mean(predict_intervals(rp, terms))
 
 

@@ -1,0 +1,129 @@
+"""Time-blocked cross-validation of an effect set, and the rules that read its folds.
+
+Folds are contiguous time segments of the blocks; each fold's fit sees the other folds only,
+and predicts its own. Held-out errors are scored with the recording's fixed weights
+(:mod:`quadfault.diagnosis.scores`).
+
+Fold agreement (:func:`fold_agreement`): the leave-one-fold-out parameter vectors give a
+jackknife standard error ``sd_j = sqrt((k - 1) / k * sum_i (x_ij - mean_j)^2)`` of every
+parameter. An effect's folds agree when, for the parameter that departs most from the nominal
+value in units of that error, the all-data departure is at least ``FOLD_Z`` (3) jackknife
+standard errors, every fold departs to the same side, and no fold sits at a bound. A fit that
+one part of the flight asks for and another contradicts fails it.
+
+At a bound (:func:`at_bound`): a parameter within ``BOUND_MARGIN`` (2 %) of the span of its
+bounds from a bound that is not the effect's neutral value (``Candidate.x0``; a drag
+coefficient at its lower bound 0 is "no drag on that axis", an inertia scale at 5 is "the
+data asks for more than this effect allows").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from quadfault.diagnosis.fit import Fit, Linearisation, _split, fit, linearisation, solve_linear
+from quadfault.diagnosis.library import predict
+from quadfault.diagnosis.residuals import Replay
+
+FOLD_Z = 3.0
+BOUND_MARGIN = 0.02
+
+
+@dataclass(frozen=True, eq=False)
+class CrossValidation:
+    """Held-out result of one effect set.
+
+    Attributes:
+        residual: held-out block residual (B, C) in channel units (each block predicted by the
+            fit that did not see its fold).
+        sse: winsorised weighted sum of squares of the held-out residual over the scored
+            blocks (:meth:`~quadfault.diagnosis.scores.Scoring.sse`).
+        fold_x: per fold, the parameter vector of each effect (fit without that fold).
+    """
+
+    residual: np.ndarray
+    sse: float
+    fold_x: tuple = ()
+
+
+def folds_of(n_blocks: int, k: int) -> list[np.ndarray]:
+    k = max(2, min(k, n_blocks // 5))
+    return np.array_split(np.arange(n_blocks), k)
+
+
+def cross_validate(rp: Replay, cands, sc, x_init, folds, *, full: Fit | None = None,
+                   fixed=(), **kw) -> CrossValidation:
+    """Time-blocked cross-validation of ``cands`` (on top of ``fixed``) with the scoring
+    ``sc``.
+
+    The effects are first fitted on all blocks (``full``, or a fit started from ``x_init``);
+    each fold's fit is then the bounded robust least-squares solution of the model linearised
+    at that optimum (:class:`~quadfault.diagnosis.fit.Linearisation`: exact for affine effect
+    sets, one Gauss-Newton step otherwise), and the held-out blocks are predicted by the exact
+    model at the fold's parameters. One replay per fold instead of a nonlinear fit per fold.
+    """
+    fixed = list(fixed)
+    if not cands:
+        res = rp.measured - predict(rp, fixed)
+        return CrossValidation(res, sc.sse(res), ())
+    cands = list(cands)
+    scale = sc.divisor
+    if full is None:
+        full = fit(rp, cands, scale, init=x_init, fixed=fixed, **kw)
+    xs = np.concatenate(full.x)
+    lo = np.concatenate([c.lower for c in cands])
+    hi = np.concatenate([c.upper for c in cands])
+    lin = linearisation(rp, cands, fixed, xs, scale)
+    if lin is None:
+        lin = Linearisation(rp, cands, fixed, xs, exact=False)
+    res = np.empty_like(rp.measured)
+    fold_x = []
+    for idx in folds:
+        mask = np.ones(rp.n_blocks, dtype=bool)
+        mask[idx] = False
+        sol = solve_linear(lin, rp.measured, scale, mask, xs, lo, hi)
+        fold_x.append(tuple(_split(sol.x, cands)))
+        pred = lin.at(sol.x) if lin.exact else lin.model(rp, sol.x)
+        res[idx] = rp.measured[idx] - pred[idx]
+    return CrossValidation(res, sc.sse(res), tuple(fold_x))
+
+
+def _near_bound(cand, x) -> np.ndarray:
+    """Per parameter: within ``BOUND_MARGIN`` of a bound that is not the neutral value."""
+    x = np.asarray(x, dtype=float)
+    lo, hi, x0 = (np.asarray(v, dtype=float) for v in (cand.lower, cand.upper, cand.x0))
+    margin = BOUND_MARGIN * (hi - lo)
+    tiny = 1e-9 * (hi - lo)
+    low = (x <= lo + margin) & (np.abs(lo - x0) > tiny)
+    high = (x >= hi - margin) & (np.abs(hi - x0) > tiny)
+    return low | high
+
+
+def at_bound(cand, x) -> bool:
+    """Whether a parameter of ``cand`` at ``x`` sits at (or within the margin of) a bound."""
+    return bool(np.any(_near_bound(cand, x)))
+
+
+def fold_agreement(cand, x, fold_x) -> tuple[bool, str]:
+    """``(agree, detail)``: the fold-agreement rule of the module docstring for the effect
+    ``cand`` fitted at ``x`` with the per-fold vectors ``fold_x`` (k, p)."""
+    X = np.asarray(fold_x, dtype=float)
+    x = np.asarray(x, dtype=float)
+    k = len(X)
+    if k < 2:
+        return True, "one fold"
+    x0 = np.asarray(cand.x0, dtype=float)
+    span = np.asarray(cand.upper, dtype=float) - np.asarray(cand.lower, dtype=float)
+    sd = np.sqrt((k - 1) / k * np.sum((X - X.mean(axis=0)) ** 2, axis=0))
+    sd = np.maximum(sd, 1e-12 * span)
+    z = np.abs(x - x0) / sd
+    j = int(np.argmax(z))
+    label = cand.labels[j] if j < len(cand.labels) else f"parameter {j}"
+    same_side = bool(np.all(np.sign(X[:, j] - x0[j]) == np.sign(x[j] - x0[j])))
+    bound_folds = int(sum(at_bound(cand, xi) for xi in X))
+    detail = (f"folds: {label} departs from nominal by {z[j]:.1f} jackknife sd "
+              f"(needs {FOLD_Z:g})" + ("" if same_side else ", folds on both sides of nominal")
+              + (f", {bound_folds} of {k} folds at a bound" if bound_folds else ""))
+    return bool(z[j] >= FOLD_Z and same_side and bound_folds == 0), detail
