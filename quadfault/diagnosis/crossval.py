@@ -123,7 +123,7 @@ def fold_agreement(cand, x, fold_x) -> tuple[bool, str]:
     label = cand.labels[j] if j < len(cand.labels) else f"parameter {j}"
     same_side = bool(np.all(np.sign(X[:, j] - x0[j]) == np.sign(x[j] - x0[j])))
     bound_folds = int(sum(at_bound(cand, xi) for xi in X))
-    detail = (f"folds: {label} departs from nominal by {z[j]:.1f} jackknife sd "
-              f"(needs {FOLD_Z:g})" + ("" if same_side else ", folds on both sides of nominal")
+    size = "every fold gives the same value" if z[j] > 1e6 else f"{z[j]:.1f} jackknife sd"
+    detail = (f"folds: {label} departs from nominal by {size} (needs {FOLD_Z:g})" + ("" if same_side else ", folds on both sides of nominal")
               + (f", {bound_folds} of {k} folds at a bound" if bound_folds else ""))
     return bool(z[j] >= FOLD_Z and same_side and bound_folds == 0), detail

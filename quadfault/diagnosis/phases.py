@@ -16,7 +16,9 @@ a span is excluded with its reason:
     of the weight, beyond the flight's own level of that excess (its 20th percentile, which
     absorbs a thrust curve that is off by a constant factor), for at least
     ``SUPPORT_SECONDS`` (0.3 s); or by more than ``IDLE_FRACTION`` (15 %) while every rotor
-    command stays exactly constant (a controller at idle, not flying).
+    command stays exactly constant (a controller at idle, not flying) -- in both cases with
+    the body nearly at rest, its specific force within ``HELD_G`` (0.25 g) of 1 g (strong
+    ground effect in flight accelerates the vehicle and is not mistaken for support).
 ``impact``
     the measured specific force exceeds by ``IMPACT_G`` (2 g) the most the commanded thrust
     of the last ``IMPACT_MEMORY`` (0.3 s) could give -- a crash, a hard landing or a
@@ -42,7 +44,7 @@ import numpy as np
 from quadfault.diagnosis.residuals import Replay
 
 OFF_FRACTION, OFF_SECONDS = 0.05, 0.5
-SUPPORT_FRACTION, SUPPORT_SECONDS, SUPPORT_QUANTILE = 0.5, 0.3, 20.0
+SUPPORT_FRACTION, SUPPORT_SECONDS, SUPPORT_QUANTILE, HELD_G = 0.5, 0.3, 20.0, 0.25
 IDLE_FRACTION = 0.15
 IMPACT_G, IMPACT_MEMORY, AFTER_IMPACT = 2.0, 0.3, 0.5
 WRONG_WAY_G, WRONG_WAY_SECONDS = 0.5, 0.1
@@ -151,10 +153,11 @@ def flight_phases(rp: Replay) -> tuple:
     found = []
     for a, b, *_ in _runs(s["thrust"] < OFF_FRACTION, t0, t1, OFF_SECONDS):
         found.append([a - MARGIN, b + MARGIN, "motors off"])
-    held = (support > SUPPORT_FRACTION) | ((support > IDLE_FRACTION) & s["constant"])
-    # partial contact: some support while the vehicle does not accelerate (|sf| = g)
-    rest = np.abs(np.linalg.norm(s["sf"], axis=1) / g - 1.0) < REST_G
-    partial = (support > TRANSITION_FRACTION) & rest
+    # held: support while the body is (nearly) at rest, its specific force about 1 g
+    rest = np.abs(np.linalg.norm(s["sf"], axis=1) / g - 1.0)
+    held = ((support > SUPPORT_FRACTION) | ((support > IDLE_FRACTION) & s["constant"])) \
+        & (rest < HELD_G)
+    partial = (support > TRANSITION_FRACTION) & (rest < REST_G)  # take-off, landing
     for span in _runs(held, t0, t1, SUPPORT_SECONDS):
         a, b = _extend(span, partial, t0, t1)
         found.append([a - MARGIN, b + MARGIN, "supported (ground, pad or hand)"])

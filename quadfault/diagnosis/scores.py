@@ -4,8 +4,9 @@
 candidate (fits, cross-validation, acceptance tests, reported improvements):
 
 * the noise scale ``s_j`` of channel ``j`` is the smaller of two robust estimates of its
-  block-to-block noise -- the MAD of the second differences of the *measured* channel and of
-  the *nominal model's* residual, each divided by sqrt(6) (white noise) -- floored
+  block-to-block noise -- the MAD of the second differences at lag 2 (``x[k+2] - 2 x[k] +
+  x[k-2]``) of the *measured* channel and of the *nominal model's* residual, each divided by
+  sqrt(6) (white noise) -- floored
   (``Replay.floors``). Both contain the noise; the first is blind to any model, the second to
   the trajectory, so an unmodelled effect cannot inflate the smaller one much (an unmodelled
   lag makes the nominal residual of roll/pitch fast, not the measured body motion);
@@ -41,8 +42,11 @@ GROUP_WEIGHT = 3.0
 
 
 def _second_difference_scale(rp: Replay, x: np.ndarray) -> np.ndarray:
-    same = (rp.block_run[2:] == rp.block_run[:-2])
-    d = (x[2:] - 2.0 * x[1:-1] + x[:-2])[same]
+    """Robust scale of white noise in ``x`` (B, C) from second differences at lag 2 within
+    runs, ``x[k+2] - 2 x[k] + x[k-2]``: blind to linear trends and to the lag-1 correlation
+    of block-mean accelerations that share their end samples."""
+    same = (rp.block_run[4:] == rp.block_run[:-4])
+    d = (x[4:] - 2.0 * x[2:-2] + x[:-4])[same]
     if len(d) < 5:
         d = x - np.median(x, axis=0)
         return 1.4826 * np.median(np.abs(d), axis=0)

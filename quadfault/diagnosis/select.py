@@ -163,7 +163,15 @@ def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, single
         opt.failed = (f"instrumental-variable slope {opt.iv:.2f} +- {iv_se:.2f} (feedback "
                       f"bias; needs >= {IV_MIN} and > {IV_Z:g} se above 0)")
         return
-    for j, c in enumerate(opt.cands[len(current):], start=len(current)):
+    new = list(enumerate(opt.cands[len(current):], start=len(current)))
+    if any(at_bound(c, opt.fit.x[j]) for j, c in new):
+        opt.failed = "at a bound"
+        return
+    pushed = [c.name for j, c in enumerate(current) if at_bound(c, opt.fit.x[j])]
+    if pushed:  # the joint refit drives an accepted effect to its bound
+        opt.failed = f"it pushes the accepted {pushed[0]} to a bound"
+        return
+    for j, c in new:
         ok, detail = fold_agreement(c, opt.fit.x[j], [fx[j] for fx in opt.cv.fold_x])
         opt.agreement[c.name] = detail
         if not ok:
@@ -206,6 +214,9 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
                 progress()
         singles.sort(key=lambda item: item[0])
         screening = tuple((c.name, b) for b, c, _ in singles)
+        for b, c, f in singles:  # this round's reading, unless an option test says more
+            verdicts[c.name] = Verdict(c, "rejected", _screen_reason(b, cur_bic, kw), f,
+                                       f.x[0], f.sd[0])
         cur_pred = predict(rp, x_terms(current, x_cur))
         options = []
         for b, c, f in [s for s in singles if s[0] < cur_bic - bic_margin][:screen_top]:
@@ -236,11 +247,9 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
         for opt in options:
             _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, singles_cv)
         passed = []
-        for opt in options:
+        single_tested = set()
+        for opt in sorted(options, key=lambda o: len(o.cands)):  # singles first
             new = opt.cands[len(current):]
-            if not opt.failed and any(at_bound(c, opt.fit.x[j])
-                                      for j, c in enumerate(opt.cands) if c in new):
-                opt.failed = "at a bound"
             for j, c in enumerate(opt.cands):
                 if c not in new or c.name in verdicts_final(verdicts):
                     continue
@@ -249,7 +258,7 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
                         "improves the held-out fit only with a parameter at its bound: the data "
                         "asks for more than this effect allows; a missing effect is likely"),
                         opt, j)
-                elif opt.failed and (len(new) == 1 or c.name not in verdicts):
+                elif opt.failed and (len(new) == 1 or c.name not in single_tested):
                     why = opt.failed
                     if why == "at a bound":
                         other = [o.name for o in new if o is not c]
@@ -257,13 +266,11 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
                     elif len(new) == 2:
                         why = f"as a pair with {[o.name for o in new if o is not c][0]}: {why}"
                     verdicts[c.name] = _verdict(c, "rejected", why, opt, j)
+                if len(new) == 1:
+                    single_tested.add(c.name)
             if not opt.failed:
                 passed.append(opt)
         if not passed:
-            for b, c, f in singles:  # screened but not an option: BIC too high or ranked low
-                if c.name not in verdicts:
-                    verdicts[c.name] = Verdict(c, "rejected", _screen_reason(b, cur_bic, kw),
-                                               f, f.x[0], f.sd[0])
             break
         one = [o for o in passed if len(o.cands) == len(current) + 1]
         two = [o for o in passed if len(o.cands) == len(current) + 2]
@@ -272,6 +279,14 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
             pair = min(two, key=lambda o: o.cv.sse)
             if best is None or np.sqrt(pair.cv.sse / best.cv.sse) <= 1.0 - min_improvement:
                 best = pair
+        for o in passed:
+            if o is not best:
+                for j, c in enumerate(o.cands[len(current):], start=len(current)):
+                    if c not in best.cands:
+                        verdicts[c.name] = _verdict(c, "rejected", (
+                            "passed the tests, but " + " + ".join(x.name for x in
+                                                                 best.cands[len(current):])
+                            + " fitted the held-out data better"), o, j)
         for j, c in enumerate(best.cands[len(current):], start=len(current)):
             rivals = {rc.name: rf.sse / max(best.fit.sse, 1e-300) for _, rc, rf in singles
                       if rc is not c}

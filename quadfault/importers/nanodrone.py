@@ -144,6 +144,9 @@ def import_nanodrone(path, *, keep_all: bool = False, calibration=None,
         "dataset": DATASET,
         "file": path.name,
         "licence": LICENCE,
+        # thrust per squared measured rotor speed [N/(rad/s)^2]: the diagnosis' rotor_*
+        # channels compare k omega_i^2 with the commanded thrust (docs/importers.md)
+        "rotor_thrust_coefficient": BRUSHLESS_KF,
         "constants": dict(CF21_BRUSHLESS.sources),
         "calibration": {
             "segment": list(calibration),
