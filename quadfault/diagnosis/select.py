@@ -21,7 +21,9 @@ Each round:
    (:func:`~quadfault.diagnosis.crossval.at_bound`) is a **suspect**: the data asks for more
    than the effect allows, so another effect is likely missing; it is never accepted. Among
    the others the lowest held-out error wins, a pair only if its held-out RMS is lower than
-   the best single's by ``min_improvement``.
+   the best single's by ``min_improvement``. An option whose joint refit moves an accepted
+   effect by more than half its departure from nominal (:func:`trade_off`) or pushes it to a
+   bound fails: it would exchange, not add.
 
 The search stops when no option passes or ``max_effects`` are accepted. Equivalent pairs
 (``thrust_scale`` / ``motor_efficiency``) are never both accepted. Every candidate that was
@@ -35,7 +37,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from quadfault.diagnosis.crossval import (CrossValidation, at_bound, cross_validate,
+from quadfault.diagnosis.crossval import (FOLD_Z, CrossValidation, at_bound, cross_validate,
                                           fold_agreement, folds_of)
 from quadfault.diagnosis.feedback import (IV_MIN, IV_UNVERIFIED_GAIN, IV_Z, frozen_replay,
                                           iv_slope)
@@ -48,6 +50,7 @@ __all__ = ["Selection", "Step", "Verdict", "select", "frozen_replay", "iv_slope"
 
 EXCLUSIVE = {"thrust_scale": "motor_efficiency", "motor_efficiency": "thrust_scale"}
 PAIR_TOP = 3
+TRADE_FRACTION = 0.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -145,12 +148,20 @@ def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, single
         opt.failed = (f"held-out gain {opt.gain:.1%} (best channel {gain_touched:.1%}) below "
                       f"{m:.0%} ({3 * m:.0%} in a channel it acts on)")
         return
-    if n_new == 2:  # a pair must beat each of its members alone
+    if n_new == 2:  # a pair must beat each of its members alone, and add to the better
+        ones = []
         for c in opt.cands[len(current):]:
-            one = singles_cv(c)
-            if one is not None and np.sqrt(opt.cv.sse / one.sse) > 1.0 - m:
+            one, fit_one = singles_cv(c)
+            if np.sqrt(opt.cv.sse / one.sse) > 1.0 - m:
                 opt.failed = f"the pair is not better than {c.name} alone by {m:.0%}"
                 return
+            ones.append((one.sse, c, one, fit_one))
+        _, c, one, fit_one = min(ones, key=lambda item: item[0])
+        j = opt.cands.index(c)
+        moved = trade_off([c], [fit_one.x[-1]], [fx[-1:] for fx in one.fold_x], [opt.fit.x[j]])
+        if moved:
+            opt.failed = moved.replace("accepted", "better single effect")
+            return
     channels = np.flatnonzero(touched) if touched.any() else rp.channel_index("alpha")
     opt.iv, iv_se = iv_slope(rp, x_terms(current, x_cur), opt.fit.terms, sc.divisor,
                              (rp.measured - cur_pred) / sc.divisor, channels)
@@ -171,12 +182,37 @@ def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, single
     if pushed:  # the joint refit drives an accepted effect to its bound
         opt.failed = f"it pushes the accepted {pushed[0]} to a bound"
         return
+    moved = trade_off(current, x_cur, cur_cv.fold_x, opt.fit.x)
+    if moved:
+        opt.failed = moved
+        return
     for j, c in new:
         ok, detail = fold_agreement(c, opt.fit.x[j], [fx[j] for fx in opt.cv.fold_x])
         opt.agreement[c.name] = detail
         if not ok:
             opt.failed = f"{c.name}: the folds disagree ({detail})"
             return
+
+
+def trade_off(current, x_cur, fold_x, x_new) -> str:
+    """Why adding an option would trade with an accepted effect, or "".
+
+    The joint refit may adjust the accepted effects, but not move one of them by more than
+    ``TRADE_FRACTION`` (half) of its departure from the nominal value plus ``FOLD_Z`` of its
+    jackknife standard errors (from the current model's folds): the new effect would then not
+    add to what was found but exchange it along a direction the data cannot resolve (an
+    efficiency that drops on every rotor while a steady upward force carries the weight)."""
+    for j, c in enumerate(current):
+        x, xn = np.asarray(x_cur[j], float), np.asarray(x_new[j], float)
+        X = np.asarray([fx[j] for fx in fold_x], float) if fold_x else x[None, :]
+        k = len(X)
+        sd = np.sqrt(max(k - 1, 1) / max(k, 1) * np.sum((X - X.mean(axis=0)) ** 2, axis=0))
+        allowed = TRADE_FRACTION * np.abs(x - np.asarray(c.x0, float)) + FOLD_Z * sd
+        i = int(np.argmax(np.abs(xn - x) - allowed))
+        if abs(xn[i] - x[i]) > allowed[i]:
+            return (f"it moves the accepted {c.name} ({c.labels[i]} {x[i]:.4g} -> {xn[i]:.4g}) "
+                    "by more than half its departure from nominal: the two trade off")
+    return ""
 
 
 def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
@@ -232,16 +268,17 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
         single_cv = {}
 
         def singles_cv(c):
+            """Held-out result and fit of ``c`` alone on top of the accepted effects."""
             for o in options:
                 if len(o.cands) == len(current) + 1 and o.cands[-1] is c:
-                    if o.cv is None and not o.failed:
+                    if o.cv is None:
                         o.cv = cross_validate(rp, o.cands, sc, None, fl, full=o.fit)
-                    return o.cv
+                    return o.cv, o.fit
             if c.name not in single_cv:
                 f = next(s[2] for s in singles if s[1] is c)
                 if current:
                     f = fit(rp, current + [c], scale, init=x_cur + list(f.x))
-                single_cv[c.name] = cross_validate(rp, current + [c], sc, None, fl, full=f)
+                single_cv[c.name] = (cross_validate(rp, current + [c], sc, None, fl, full=f), f)
             return single_cv[c.name]
 
         for opt in options:
