@@ -43,6 +43,7 @@ import quadfault.diagnosis.locate  # imported before forking the workers (and no
 import quadfault.diagnosis.prediction  # noqa: F401
 from quadfault import effects as fx
 from quadfault.diagnosis import Diagnosis
+from quadfault.diagnosis.findings import to_frame
 from quadfault.diagnosis.library import EQUIVALENT, build_library, predict
 from quadfault.diagnosis.residuals import noise_scale, prepare
 from quadfault.fileio import atomic_write_text
@@ -201,8 +202,9 @@ def draw_case(seed, i):
                 sim_seed=int(rng.integers(1 << 30)))
 
 
-def param_error(true, found, veh):
-    """Relative error of the effect's main magnitude (deviation from nominal)."""
+def param_error(true, found, veh, frame="NED"):
+    """Relative error of the effect's main magnitude (deviation from nominal); directions
+    compared in the recording's own frame, as the diagnosis reports them."""
     n = true.name
     p = found.params
     if n == "motor_efficiency":
@@ -218,12 +220,12 @@ def param_error(true, found, veh):
     if n == "delay":
         return abs(p["delay_s"] - true.delay) / true.delay
     if n == "wind":
-        F = true.steady_force()[:2]
+        F = np.asarray(to_frame(true.steady_force(), "world", frame))[:2]
         return float(np.linalg.norm(np.array(p["force_N"][:2]) - F) / np.linalg.norm(F))
     if n == "ground_effect":
         return abs(p["rotor_radius_m"] - true.rotor_radius) / true.rotor_radius
     if n == "com_offset":
-        r = np.array(true.offset)
+        r = np.asarray(to_frame(true.offset, "body", frame))
         return float(np.linalg.norm(np.array(p["offset_m"]) - r) / np.linalg.norm(r))
     if n == "inertia":
         s = np.array(true.scale[:2])
@@ -282,7 +284,7 @@ def run_one(job):
     for e in effects:
         match = [f for f in res.effects if f.name == e.name]
         if match:
-            errs[e.name] = param_error(e, match[0], veh)
+            errs[e.name] = param_error(e, match[0], veh, c["frame"])
     return dict(i=i, truth=c["names"], found=found, snr=achieved, target=c["target"],
                 mass=veh.mass, frame=c["frame"], commands=c["commands"],
                 improvement=res.model_improvement, param_errors=errs,

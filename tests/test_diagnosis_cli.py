@@ -81,7 +81,7 @@ def test_json_validates_and_cli_writes_report(com_recording, tmp_path):
     validate_contract(json.loads(out.read_text()))
 
 
-def test_cli_errors_are_one_line(tmp_path, capsys):
+def test_cli_errors_are_one_line(tmp_path, capsys, com_recording):
     assert main(["diagnose", str(tmp_path / "none.csv"), "--json", str(tmp_path / "o.json")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "not found" in err
@@ -89,6 +89,34 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
     bad.write_text("t,wx\n0,1\n")
     assert main(["diagnose", str(bad), "--json", str(tmp_path / "o.json")]) == 2
     assert "sidecar" in capsys.readouterr().err
+    csv = tmp_path / "flight.csv"
+    write_recording(com_recording, csv)
+    side = (tmp_path / "flight.json").read_text()
+    # the recording's own sidecar is never the output, not even with --force
+    assert main(["diagnose", str(csv), "--json", str(tmp_path / "flight.json"), "--force"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "sidecar" in err
+    assert (tmp_path / "flight.json").read_text() == side
+    assert main(["diagnose", str(csv), "--json", str(tmp_path / "o.json"), "--effects",
+                 "vortex"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "vortex" in err
+
+
+def test_no_mask_flag_and_json_additions(com_recording, tmp_path):
+    csv = tmp_path / "flight.csv"
+    write_recording(com_recording, csv, frame="ENU")
+    out = tmp_path / "d.json"
+    assert main(["diagnose", str(csv), "--json", str(out), "--quiet", "--no-mask"]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["format"] == "quadfault-diagnosis/2" and doc["frame"] == "ENU"
+    assert doc["vehicle"] == json.loads((tmp_path / "flight.json").read_text())["vehicle"]
+    assert doc["scoring"]["excluded"] == [] and doc["scoring"]["excluded_fraction"] == 0.0
+    assert set(doc["model"]["channels"]) == set(doc["baseline"]["rmse"])
+    for key in ("suspect", "rejected"):
+        assert isinstance(doc[key], list)
+    for e in doc["effects"] + doc["suspect"] + doc["rejected"]:
+        assert set(e["bounds"]) and set(e["folds"])
 
 
 def test_malformed_recordings_give_clear_errors(com_recording):

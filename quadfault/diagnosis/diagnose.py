@@ -186,7 +186,11 @@ class Diagnosis:
         selected = ({s.candidate.name: x for s, x in zip(sel.steps, sel.final.x)}
                     if sel.final else {})
 
-        def alone_cv(c):
+        def alone_cv(c, x=None):
+            """Held-out result of nominal + ``c`` alone: fitted alone, or from ``x`` (an
+            accepted effect's value in the final model, so the fit stays in its basin)."""
+            if x is not None:
+                return cross_validate(rp, [c], sc, [x], fl)
             f = sel.alone.get(c.name)
             return None if f is None else cross_validate(rp, [c], sc, None, fl, full=f)
 
@@ -202,7 +206,7 @@ class Diagnosis:
             x, sd = sel.final.x[k], sel.final.sd[k]
             params, _ = public_params(c, x, sd, rp.vehicle, selected)
             effects.append(finding(
-                c, x, sd, improvement=improvement(alone_cv(c)),
+                c, x, sd, improvement=improvement(alone_cv(c, x)),
                 explanation=_explain(step, selected, params),
                 fold_x=[fx[k] for fx in sel.final_cv.fold_x], gain=step.improvement_step,
                 agreement=step.agreement, **common))

@@ -21,9 +21,9 @@ Each round:
    (:func:`~quadfault.diagnosis.crossval.at_bound`) is a **suspect**: the data asks for more
    than the effect allows, so another effect is likely missing; it is never accepted. Among
    the others the lowest held-out error wins, a pair only if its held-out RMS is lower than
-   the best single's by ``min_improvement``. An option whose joint refit moves an accepted
-   effect by more than half its departure from nominal (:func:`trade_off`) or pushes it to a
-   bound fails: it would exchange, not add.
+   the best single's by ``min_improvement``. An option whose joint refit makes an accepted
+   effect (or a pair member's single fit) much less certain (:func:`trade_off`) or pushes it
+   to a bound fails: it would exchange, not add.
 
 The search stops when no option passes or ``max_effects`` are accepted. Equivalent pairs
 (``thrust_scale`` / ``motor_efficiency``) are never both accepted. Every candidate that was
@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from quadfault.diagnosis.crossval import (FOLD_Z, CrossValidation, at_bound, cross_validate,
+from quadfault.diagnosis.crossval import (CrossValidation, at_bound, cross_validate,
                                           fold_agreement, folds_of)
 from quadfault.diagnosis.feedback import (IV_MIN, IV_UNVERIFIED_GAIN, IV_Z, frozen_replay,
                                           iv_slope)
@@ -50,7 +50,7 @@ __all__ = ["Selection", "Step", "Verdict", "select", "frozen_replay", "iv_slope"
 
 EXCLUSIVE = {"thrust_scale": "motor_efficiency", "motor_efficiency": "thrust_scale"}
 PAIR_TOP = 3
-TRADE_FRACTION = 0.5
+INFLATION = 3.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,7 +128,8 @@ def _touched(rp, sc, current, x_cur, opt, cur_pred):
     return np.sqrt(np.mean(sig ** 2, axis=0)) >= 1.0
 
 
-def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, singles_cv):
+def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, singles_cv,
+          cur_fit):
     """Run the acceptance tests of one option; fills ``opt.cv``, ``gain``, ``iv``,
     ``failed``."""
     n_new = len(opt.cands) - len(current)
@@ -156,12 +157,11 @@ def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, single
                 opt.failed = f"the pair is not better than {c.name} alone by {m:.0%}"
                 return
             ones.append((one.sse, c, one, fit_one))
-        _, c, one, fit_one = min(ones, key=lambda item: item[0])
-        j = opt.cands.index(c)
-        moved = trade_off([c], [fit_one.x[-1]], [fx[-1:] for fx in one.fold_x], [opt.fit.x[j]])
-        if moved:
-            opt.failed = moved.replace("accepted", "better single effect")
-            return
+        for _, c, one, fit_one in ones:
+            moved = trade_off(fit_one, [c.name], opt.fit)
+            if moved:
+                opt.failed = moved
+                return
     channels = np.flatnonzero(touched) if touched.any() else rp.channel_index("alpha")
     opt.iv, iv_se = iv_slope(rp, x_terms(current, x_cur), opt.fit.terms, sc.divisor,
                              (rp.measured - cur_pred) / sc.divisor, channels)
@@ -182,10 +182,11 @@ def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, single
     if pushed:  # the joint refit drives an accepted effect to its bound
         opt.failed = f"it pushes the accepted {pushed[0]} to a bound"
         return
-    moved = trade_off(current, x_cur, cur_cv.fold_x, opt.fit.x)
-    if moved:
-        opt.failed = moved
-        return
+    if cur_fit is not None:
+        moved = trade_off(cur_fit, [c.name for c in current], opt.fit)
+        if moved:
+            opt.failed = moved
+            return
     for j, c in new:
         ok, detail = fold_agreement(c, opt.fit.x[j], [fx[j] for fx in opt.cv.fold_x])
         opt.agreement[c.name] = detail
@@ -194,24 +195,26 @@ def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, single
             return
 
 
-def trade_off(current, x_cur, fold_x, x_new) -> str:
-    """Why adding an option would trade with an accepted effect, or "".
+def trade_off(before: Fit, names, after: Fit) -> str:
+    """Why refitting the effects ``names`` of ``before`` together with new ones (``after``)
+    would trade instead of add, or "".
 
-    The joint refit may adjust the accepted effects, but not move one of them by more than
-    ``TRADE_FRACTION`` (half) of its departure from the nominal value plus ``FOLD_Z`` of its
-    jackknife standard errors (from the current model's folds): the new effect would then not
-    add to what was found but exchange it along a direction the data cannot resolve (an
-    efficiency that drops on every rotor while a steady upward force carries the weight)."""
-    for j, c in enumerate(current):
-        x, xn = np.asarray(x_cur[j], float), np.asarray(x_new[j], float)
-        X = np.asarray([fx[j] for fx in fold_x], float) if fold_x else x[None, :]
-        k = len(X)
-        sd = np.sqrt(max(k - 1, 1) / max(k, 1) * np.sum((X - X.mean(axis=0)) ** 2, axis=0))
-        allowed = TRADE_FRACTION * np.abs(x - np.asarray(c.x0, float)) + FOLD_Z * sd
-        i = int(np.argmax(np.abs(xn - x) - allowed))
-        if abs(xn[i] - x[i]) > allowed[i]:
-            return (f"it moves the accepted {c.name} ({c.labels[i]} {x[i]:.4g} -> {xn[i]:.4g}) "
-                    "by more than half its departure from nominal: the two trade off")
+    Each parameter's standard error from the fit's geometry alone (``sd / sqrt(s2)``, the
+    Jacobian without the residual level) may grow by at most ``INFLATION`` (3x) when the new
+    effects join: more, and the new effect and the old one move together along a direction
+    the data cannot resolve (an efficiency falling on every rotor while a steady upward force
+    carries the weight), so the joint fit is not evidence for the new effect."""
+    for name in names:
+        i = [c.name for c in before.candidates].index(name)
+        j = [c.name for c in after.candidates].index(name)
+        sd0 = np.asarray(before.sd[i], float) / np.sqrt(max(before.s2, 1e-300))
+        sd1 = np.asarray(after.sd[j], float) / np.sqrt(max(after.s2, 1e-300))
+        ratio = sd1 / np.maximum(sd0, 1e-300)
+        k = int(np.argmax(ratio))
+        if ratio[k] > INFLATION:
+            c = before.candidates[i]
+            return (f"{name} would become {ratio[k]:.0f}x less certain ({c.labels[k]}): the "
+                    "effects trade along a direction the data cannot resolve")
     return ""
 
 
@@ -282,7 +285,8 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
             return single_cv[c.name]
 
         for opt in options:
-            _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, singles_cv)
+            _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, singles_cv,
+                  final)
         passed = []
         single_tested = set()
         for opt in sorted(options, key=lambda o: len(o.cands)):  # singles first
