@@ -20,6 +20,7 @@ def diagnose(kind, rel, tmp_path, *flags):
     path = DATA / rel
     if not path.exists():
         pytest.skip("../shared/data/real is not available")
+    tmp_path.mkdir(parents=True, exist_ok=True)
     csv = tmp_path / "flight.csv"
     assert main(["import", kind, str(path), "--out", str(csv), "--quiet"]) == 0
     out = tmp_path / "diag.json"
