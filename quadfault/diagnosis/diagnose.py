@@ -21,7 +21,7 @@ from quadfault.diagnosis.result import DiagnosisResult
 from quadfault.diagnosis.scores import fixed_scoring
 from quadfault.diagnosis.select import select
 from quadfault.effects import EFFECT_NAMES
-from quadfault.errors import ConfigError
+from quadfault.errors import ConfigError, RecordingError
 from quadfault.recording import Recording
 
 #: a located interval whose nominal residual RMS reaches this many noise scales makes the
@@ -120,7 +120,7 @@ def _explain(step, selected_names, params) -> str:
     return text
 
 
-def _scoring_dict(rp, sc, recording) -> dict:
+def _scoring_dict(rp, sc, recording, mask_note="") -> dict:
     t0, t1 = float(recording.t[0]), float(recording.t[-1])
     spans = [{"t0": a, "t1": b, "reason": why} for a, b, why in rp.masked]
     spans += [{"t0": a, "t1": b, "reason": "calibration segment of the importer (fitted on, "
@@ -135,8 +135,9 @@ def _scoring_dict(rp, sc, recording) -> dict:
                       "residuals winsorised at 5 robust sd of the nominal residual"}
     if rp.has_rotor:
         out["rotor_thrust_coefficient"] = {"value": rp.rotor_k, "source": rp.rotor_k_source}
-    if rp.scoring_note:
-        out["note"] = rp.scoring_note
+    notes = [n for n in (mask_note, rp.scoring_note) if n]
+    if notes:
+        out["note"] = "; ".join(notes)
     return out
 
 
@@ -168,10 +169,19 @@ class Diagnosis:
         kw = dict(block_seconds=cfg.block_seconds, gap_factor=cfg.gap_factor,
                   saturate=cfg.saturate, internal_step=cfg.internal_step)
         rp = prepare(rec, vehicle, **kw)
+        mask_note = ""
         if cfg.mask:
             spans = flight_phases(rp)
             if spans:
-                rp = prepare(rec, vehicle, exclude=[s.as_tuple() for s in spans], **kw)
+                try:
+                    rp = prepare(rec, vehicle, exclude=[s.as_tuple() for s in spans], **kw)
+                except RecordingError:  # too little would be left: keep everything, say so
+                    frac = excluded_fraction([s.as_tuple() for s in spans], float(rec.t[0]),
+                                             float(rec.t[-1]))
+                    why = "; ".join(sorted({s.reason for s in spans}))
+                    mask_note = (f"nothing excluded: what does not look like free flight "
+                                 f"({why}; {100 * frac:.0f}% of the recording) would leave "
+                                 "too few blocks")
         library = build_library(rp)
         if cfg.effects is not None:
             library = [c for c in library if c.name in cfg.effects]
@@ -260,7 +270,8 @@ class Diagnosis:
             untestable=tuple(untestable), where=tuple(where), regimes=tuple(regimes),
             prediction={k: v for k, v in prediction.items() if not k.startswith("_")},
             channels=rp.channels, scale=tuple(float(s) for s in sc.noise),
-            seconds=float(time.perf_counter() - t_start), scoring=_scoring_dict(rp, sc, rec),
+            seconds=float(time.perf_counter() - t_start),
+            scoring=_scoring_dict(rp, sc, rec, mask_note),
             suspect=tuple(suspect), rejected=tuple(rejected), channel_scores=table,
             model_ci95=tuple(model_ci), weights=tuple(float(w) for w in sc.weight),
             vehicle=side["vehicle"], frame=frame, gravity=float(side["gravity"]),
