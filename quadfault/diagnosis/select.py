@@ -11,7 +11,8 @@ Each round:
    model in which neither effect alone explains the residual (a payload: mass and inertia
    change together; a single ``wind`` fits the hover part of it better than either alone).
 3. **Tests** of each option, refitted jointly with the accepted effects: BIC lower by more
-   than ``bic_margin``; held-out RMS (5 contiguous folds, fixed weights) lower by at least
+   than ``bic_margin``; a fitted signal above the noise scale (RMS over the flight) in at
+   least one channel (else it is negligible); held-out RMS (5 contiguous folds, fixed weights) lower by at least
    ``min_improvement`` relative to the current model, or by three times that in one of the
    channels the option acts on (its fitted signal above the noise); the instrumental-variable
    check against closed-loop feedback bias (:mod:`~quadfault.diagnosis.feedback`); the fold
@@ -123,8 +124,9 @@ class _Option:
 
 
 def _touched(rp, sc, current, x_cur, opt, cur_pred):
+    """Channels in which the option's fitted signal has an RMS of at least the noise."""
     sig = (predict(rp, x_terms(current, x_cur) + list(opt.fit.terms)[len(current):])
-           - cur_pred) / sc.divisor
+           - cur_pred) / sc.noise
     return np.sqrt(np.mean(sig ** 2, axis=0)) >= 1.0
 
 
@@ -139,6 +141,9 @@ def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, single
     opt.cv = cross_validate(rp, opt.cands, sc, None, fl, full=opt.fit)
     opt.gain = 1.0 - np.sqrt(opt.cv.sse / cur_cv.sse)
     touched = _touched(rp, sc, current, x_cur, opt, cur_pred)
+    if not touched.any():
+        opt.failed = "negligible: its fitted signal stays below the noise in every channel"
+        return
     gain_touched = 0.0
     if touched.any():  # best held-out gain among the channels the option acts on
         before = sc.channel_sse(cur_cv.residual)[touched]
@@ -162,7 +167,7 @@ def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, single
             if moved:
                 opt.failed = moved
                 return
-    channels = np.flatnonzero(touched) if touched.any() else rp.channel_index("alpha")
+    channels = np.flatnonzero(touched)
     opt.iv, iv_se = iv_slope(rp, x_terms(current, x_cur), opt.fit.terms, sc.divisor,
                              (rp.measured - cur_pred) / sc.divisor, channels)
     if not np.isfinite(opt.iv):
