@@ -17,9 +17,7 @@ Each round:
    channels the option acts on (its fitted signal above the noise); the instrumental-variable
    check against closed-loop feedback bias (:mod:`~quadfault.diagnosis.feedback`); the fold
    agreement of every new effect (:func:`~quadfault.diagnosis.crossval.fold_agreement`); and
-   for a pair, a held-out RMS lower by ``min_improvement`` than each of its members alone;
-   and, when it joins other effects, every new effect must improve the nominal model on its
-   own at the value the joint fit gives it (else it only helps by shifting another effect).
+   for a pair, a held-out RMS lower by ``min_improvement`` than each of its members alone.
 4. An option that passes but has a parameter at a bound
    (:func:`~quadfault.diagnosis.crossval.at_bound`) is a **suspect**: the data asks for more
    than the effect allows, so another effect is likely missing; it is never accepted. Among
@@ -182,12 +180,6 @@ def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, single
                       f"bias; needs >= {IV_MIN} and > {IV_Z:g} se above 0)")
         return
     new = list(enumerate(opt.cands[len(current):], start=len(current)))
-    base = sc.sse(rp.measured - predict(rp, []))
-    for j, c in new if len(opt.cands) > 1 else ():
-        if sc.sse(rp.measured - predict(rp, [(c, opt.fit.x[j])])) >= base:
-            opt.failed = (f"{c.name} at the value the joint fit gives it does not improve the "
-                          "nominal model on its own: it only helps by shifting another effect")
-            return
     if any(at_bound(c, opt.fit.x[j]) for j, c in new):
         opt.failed = "at a bound"
         return
