@@ -7,7 +7,8 @@ Each round:
    model (kept for the ``rejected`` list).
 2. **Options**: the best ``screen_top`` candidates that lower BIC by more than ``bic_margin``,
    and -- while two more effects may be accepted -- every pair among the best ``pair_top``
-   by BIC, fitted jointly (started from their single fits). Pairs let the search reach a
+   by BIC whose better member lowers BIC by that margin, fitted jointly (started from their
+   single fits). Pairs let the search reach a
    model in which neither effect alone explains the residual (a payload: mass and inertia
    change together; a single ``wind`` fits the hover part of it better than either alone).
 3. **Tests** of each option, refitted jointly with the accepted effects: BIC lower by more
@@ -237,7 +238,7 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
     x_cur: list = []
     cur_cv = baseline
     cur_bic = n * np.log(float(np.sum((baseline.residual / scale) ** 2)) / n)  # in-sample
-    steps, verdicts, alone = [], {}, {}
+    steps, verdicts, alone, last_x = [], {}, {}, {}
     final = None
     screening = ()
     testable = [c for c in library if rp.has_pose or not c.needs_pose]
@@ -250,8 +251,10 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
         fixed = list(zip(current, x_cur))
         singles = []
         for c in pool:  # screening: the new effect alone on top of the current model
-            f = fit(rp, [c], scale, fixed=fixed)
+            # started from its last screening fit (the first round scans its start guesses)
+            f = fit(rp, [c], scale, fixed=fixed, init=[last_x.get(c.name)])
             singles.append((f.bic(), c, f))
+            last_x[c.name] = f.x[0]
             if not current:
                 alone[c.name] = f
             if progress is not None:
@@ -268,9 +271,9 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
                 f = fit(rp, current + [c], scale, init=x_cur + list(f.x))
             options.append(_Option(current + [c], f, f.bic()))
         if len(current) + 2 <= max_effects:
-            for (_, a, fa), (_, b, fb) in itertools.combinations(singles[:pair_top], 2):
-                if EXCLUSIVE.get(a.name) == b.name:
-                    continue
+            for (ba, a, fa), (_, b, fb) in itertools.combinations(singles[:pair_top], 2):
+                if EXCLUSIVE.get(a.name) == b.name or ba >= cur_bic - bic_margin:
+                    continue  # (singles are in BIC order: the better one must lower BIC)
                 f = fit(rp, current + [a, b], scale, init=x_cur + list(fa.x) + list(fb.x))
                 options.append(_Option(current + [a, b], f, f.bic()))
         single_cv = {}
