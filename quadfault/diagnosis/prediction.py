@@ -121,7 +121,7 @@ def open_loop_errors(rec, rp: Replay, fold_terms, fold_of_block, horizons=HORIZO
 
     ``fold_terms``: per fold, the accepted effects ``[(cand, x), ...]`` fitted without that
     fold (empty lists: no effect accepted); ``fold_of_block``: fold index of each block."""
-    med = float(np.median(rp.dt))
+    med = float(np.median(rp.dt[rp.block >= 0]))  # the (merged) step inside blocks
     M = len(rp.dt)
     gap = np.r_[0, np.cumsum(rp.block < 0)]  # intervals outside blocks (gaps, excluded) so far
     back = _block_steps(rp)

@@ -52,10 +52,18 @@ def _shade(ax, res):
         ax.axvspan(a, b, facecolor="none", edgecolor="tab:blue", hatch="//", alpha=0.25, lw=0)
 
 
+def _broken(t, *arrays):
+    """``t`` and ``arrays`` with a NaN row wherever consecutive blocks are not adjacent
+    (gaps, excluded spans), so plotted lines do not bridge them."""
+    dt = np.diff(t)
+    cut = np.flatnonzero(dt > 2.0 * np.median(dt)) + 1
+    return [np.insert(np.asarray(a, float), cut, np.nan, axis=0) for a in (t,) + arrays]
+
+
 def _residuals_png(res: DiagnosisResult, path, force):
     plt = _plt()
     s = res.series
-    t, base, model = s["block_t"], s["baseline"], s["model"]
+    t, base, model = _broken(s["block_t"], s["baseline"], s["model"])
     n = len(res.channels)
     fig, axes = plt.subplots(n, 1, figsize=(10, 1.6 * n + 1.2), sharex=True, squeeze=False)
     for j, (ax, ch) in enumerate(zip(axes[:, 0], res.channels)):
@@ -65,7 +73,7 @@ def _residuals_png(res: DiagnosisResult, path, force):
         for w in res.where:
             if w.channel == ch:
                 ax.axvspan(w.t0, w.t1, color="orange", alpha=0.25, lw=0)
-        lo, hi = np.percentile(base[:, j], [0.5, 99.5])  # robust limits: spikes clipped
+        lo, hi = np.nanpercentile(base[:, j], [0.5, 99.5])  # robust limits: spikes clipped
         pad = 0.25 * max(hi - lo, 1e-9)
         ax.set_ylim(lo - pad, hi + pad)
         ax.set_ylabel(f"{ch}\n[{channel_unit(ch)}]", fontsize=8)
