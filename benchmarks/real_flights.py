@@ -214,6 +214,17 @@ def targets(rows) -> list:
                          f"{100 * v['ci95'][1]:.0f}]")
         out.append(("Eschmann: motor_lag tau 0.05-0.11 s, vertical >= 30% with CI above 0",
                     "; ".join(cells), ok))
+    fitted = [(r, e) for r in rows for key in ("effects", "suspect", "rejected")
+              for e in r["diagnosis"][key]]
+    lags = [e.get("folds_agree") for r, e in fitted
+            if r["kind"] == "eschmann" and e["name"] == "motor_lag"]
+    inert = [e.get("folds_agree") for r, e in fitted
+             if r["kind"] == "crazypad" and e["name"] == "inertia"]
+    if lags or inert:
+        out.append(("fold agreement accepts the Eschmann lag, rejects the CrazyPAD inertia",
+                    f"lag folds agree on {sum(bool(a) for a in lags)} of {len(lags)} logs; "
+                    f"inertia folds agree on {sum(bool(a) for a in inert)} of {len(inert)} "
+                    "CrazyPAD flights", all(lags) and not any(inert)))
     nano = [r for r in rows if r["kind"] == "nanodrone"]
     if nano:
         n_ok, cells, taus = 0, [], []

@@ -219,7 +219,7 @@ class Diagnosis:
                 c, x, sd, improvement=improvement(alone_cv(c, x)),
                 explanation=_explain(step, selected, params),
                 fold_x=[fx[k] for fx in sel.final_cv.fold_x], gain=step.improvement_step,
-                agreement=step.agreement, **common))
+                **common))
         effects.sort(key=lambda e: -e.improvement)
         suspect, rejected = [], []
         for name, v in sel.verdicts.items():
@@ -232,7 +232,7 @@ class Diagnosis:
                     c, v.x, v.sd, improvement=improvement(cv_alone),
                     explanation=f"{base_explanation(c.name)}. {v.reason}.", fold_x=folds,
                     status="suspect", reason=v.reason, at_bound=True, gain=v.gain,
-                    agreement=v.agreement, **common))
+                    **common))
             else:
                 f = sel.alone.get(name, v.fit)
                 j = list(f.candidates).index(c)
@@ -240,8 +240,7 @@ class Diagnosis:
                     c, f.x[j], f.sd[j], improvement=improvement(cv_alone),
                     explanation=base_explanation(c.name), status="rejected", reason=v.reason,
                     fold_x=[] if cv_alone is None else [fx[0] for fx in cv_alone.fold_x],
-                    at_bound=at_bound(c, f.x[j]), gain=v.gain, agreement=v.agreement,
-                    **common))
+                    at_bound=at_bound(c, f.x[j]), gain=v.gain, **common))
         suspect.sort(key=lambda e: -e.improvement)
         rejected.sort(key=lambda e: -e.improvement)
         table, model_ci = sc.channel_table(sel.baseline.residual, sel.final_cv.residual,

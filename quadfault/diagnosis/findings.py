@@ -4,7 +4,8 @@ Every fitted effect -- accepted, suspect or rejected -- is reported the same way
 ``params`` and ``uncertainty`` (one sigma, from the Jacobian), ``bounds`` ``{key: [lo, hi]}``
 (the library's bounds through the same mapping as the parameters, the same shape as each
 parameter), ``folds`` ``{key: [value of fold 1, ...]}`` (each fold's fit without that fold)
-and ``improvement`` (held-out, nominal model plus this effect alone).
+with ``folds_agree`` / ``fold_agreement`` (the fold-agreement rule on them) and
+``improvement`` (held-out, nominal model plus this effect alone).
 
 Frames: parameters that are vectors in the world or body frame
 (:attr:`~quadfault.diagnosis.library.Candidate.frames`) are given in the recording's own
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from quadfault.diagnosis.crossval import fold_agreement
 from quadfault.diagnosis.library import EXPLANATIONS, public_params
 from quadfault.diagnosis.result import EffectFinding
 
@@ -80,9 +82,9 @@ def folds_of_params(cand, fold_x, vehicle, selected: dict, frame: str) -> dict:
 
 def finding(cand, x, sd, *, vehicle, selected: dict, frame: str, improvement: float,
             explanation: str, fold_x=(), status: str = "accepted", reason: str = "",
-            at_bound: bool = False, gain: float | None = None,
-            agreement: str = "") -> EffectFinding:
-    """One reported effect (module docstring)."""
+            at_bound: bool = False, gain: float | None = None) -> EffectFinding:
+    """One reported effect (module docstring); the fold-agreement rule
+    (:func:`~quadfault.diagnosis.crossval.fold_agreement`) is read from ``fold_x``."""
     frames = dict(cand.frames)
     params, unc = public_params(cand, np.asarray(x, float), np.asarray(sd, float), vehicle,
                                 selected)
@@ -92,12 +94,13 @@ def finding(cand, x, sd, *, vehicle, selected: dict, frame: str, improvement: fl
     if kinds:
         explanation += " Directions in the " + " and the ".join(
             FRAME_TEXT[(kind, frame if frame == "ENU" else "NED")] for kind in kinds) + "."
+    agree, detail = fold_agreement(cand, x, fold_x) if len(fold_x) else (None, "")
     return EffectFinding(cand.name, params, unc, float(improvement), explanation,
                          bounds=bounds_of(cand, vehicle, selected, frame),
                          folds=folds_of_params(cand, fold_x, vehicle, selected, frame),
                          status=status, reason=reason, at_bound=bool(at_bound),
                          improvement_when_added=None if gain is None else float(gain),
-                         fold_agreement=agreement)
+                         fold_agreement=detail, folds_agree=agree)
 
 
 def base_explanation(name: str) -> str:

@@ -29,7 +29,8 @@ class EffectFinding:
         at_bound: a parameter sits at (or within 2 % of the span of) a bound.
         improvement_when_added: held-out RMS reduction when it was added to (or tested on
             top of) the model before it, or None.
-        fold_agreement: the fold-agreement rule's reading, or "".
+        fold_agreement: the fold-agreement rule's reading of ``folds``, or "".
+        folds_agree: whether the folds pass that rule (None without folds).
     """
 
     name: str
@@ -44,6 +45,7 @@ class EffectFinding:
     at_bound: bool = False
     improvement_when_added: float | None = None
     fold_agreement: str = ""
+    folds_agree: bool | None = None
 
     def to_dict(self) -> dict:
         out = {"name": self.name, "params": self.params, "uncertainty": self.uncertainty,
@@ -55,6 +57,7 @@ class EffectFinding:
             out["improvement_when_added"] = self.improvement_when_added
         if self.fold_agreement:
             out["fold_agreement"] = self.fold_agreement
+            out["folds_agree"] = self.folds_agree
         return out
 
 
