@@ -24,9 +24,10 @@ from quadfault.effects import EFFECT_NAMES
 from quadfault.errors import ConfigError, RecordingError
 from quadfault.recording import Recording
 
-#: a located interval whose nominal residual RMS reaches this many noise scales makes the
-#: verdict ``mismatch`` even when nothing in the library explains it
-STRONG_INTERVAL = 3.0
+#: a located interval whose nominal residual RMS reaches this many noise scales for at least
+#: ``STRONG_SECONDS`` makes the verdict ``mismatch`` even when nothing in the library explains
+#: it (see :func:`_unexplained`)
+STRONG_INTERVAL, STRONG_SECONDS = 3.0, 0.5
 
 
 @dataclass(frozen=True)
@@ -118,6 +119,19 @@ def _explain(step, selected_names, params) -> str:
     if name == "ground_effect":
         text += " Height above the ground is taken as -z of the recording (ground at z = 0)."
     return text
+
+
+def _unexplained(rp, sc, base_res, where) -> bool:
+    """A mismatch no library effect explains: a strong localised interval (its nominal
+    residual at least ``STRONG_INTERVAL`` noise scales, lasting ``STRONG_SECONDS`` but less
+    than half the scored flight), or a nominal residual beyond ``STRONG_INTERVAL`` noise scales
+    over the whole flight (weighted RMS) where the locate step finds intervals."""
+    scored = float(np.sum(rp.block_dur[sc.rows]))
+    for w in where:
+        if w.excess >= STRONG_INTERVAL and STRONG_SECONDS <= w.t1 - w.t0 < 0.5 * scored:
+            return True
+    z = sc.normalised(base_res) / np.sqrt(sc.weight)  # in noise units
+    return bool(where) and float(np.sqrt(np.mean(z * z))) > STRONG_INTERVAL
 
 
 def _scoring_dict(rp, sc, recording, mask_note="") -> dict:
@@ -247,8 +261,8 @@ class Diagnosis:
                                            rp.block_dur[sc.rows])
         model_imp = sc.improvement(sel.baseline.residual, sel.final_cv.residual)
         where, regimes = locate(rp, base_res, sc.noise)
-        strong = [w for w in where if w.excess >= STRONG_INTERVAL]
-        verdict = "mismatch" if effects or suspect or strong else "consistent"
+        verdict = "mismatch" if effects or suspect or _unexplained(rp, sc, base_res, where) \
+            else "consistent"
         fold_of_block = np.zeros(rp.n_blocks, dtype=int)
         for i, idx in enumerate(fl):
             fold_of_block[idx] = i

@@ -173,11 +173,12 @@ class Replay:
         return np.asarray(S @ x)
 
     def floors(self) -> np.ndarray:
-        """Least noise scale per channel: 1e-3 g (accelerations), 1e-3 g / arm (angular),
-        1e-4 of the hover thrust per rotor (rotor channels)."""
+        """Least noise scale per channel (what a noise-free recording is compared to):
+        1e-3 g (accelerations), 1e-3 g / arm (angular), 1e-3 of the hover thrust per rotor
+        (rotor channels)."""
         g = self.vehicle.gravity
         per = {"acc": 1e-3 * g, "sf": 1e-3 * g, "alpha": 1e-3 * g / max(self.arm, 1e-3),
-               "rotor": 1e-4 * self.vehicle.weight / self.vehicle.n_rotors}
+               "rotor": 1e-3 * self.vehicle.weight / self.vehicle.n_rotors}
         return np.array([per[c.split("_")[0]] for c in self.channels])
 
 
