@@ -12,13 +12,16 @@ Each round:
    model in which neither effect alone explains the residual (a payload: mass and inertia
    change together; a single ``wind`` fits the hover part of it better than either alone).
 3. **Tests** of each option, refitted jointly with the accepted effects: BIC lower by more
-   than ``bic_margin``; a fitted signal above the noise scale (RMS over the flight) in at
-   least one channel (else it is negligible); held-out RMS (5 contiguous folds, fixed weights) lower by at least
+   than ``bic_margin``; a fitted signal above the noise (root-sum-square over the channels
+   of its RMS in noise units; else it is negligible); held-out RMS (5 contiguous folds, fixed weights) lower by at least
    ``min_improvement`` relative to the current model, or by three times that in one of the
    channels the option acts on (its fitted signal above the noise); the instrumental-variable
    check against closed-loop feedback bias (:mod:`~quadfault.diagnosis.feedback`); the fold
    agreement of every new effect (:func:`~quadfault.diagnosis.crossval.fold_agreement`); and
-   for a pair, a held-out RMS lower by ``min_improvement`` than each of its members alone.
+   for a pair, a held-out RMS lower by ``min_improvement`` than each of its members alone;
+   and, when it joins other effects, every new effect at its joint value must, alone on the
+   nominal model, lower the total residual or the RMS of a channel in which its signal is
+   above the noise by ``min_improvement`` (else it only helps by shifting another effect).
 4. An option that passes but has a parameter at a bound
    (:func:`~quadfault.diagnosis.crossval.at_bound`) is a **suspect**: the data asks for more
    than the effect allows, so another effect is likely missing; it is never accepted. Among
@@ -124,11 +127,11 @@ class _Option:
     agreement: dict = field(default_factory=dict)
 
 
-def _touched(rp, sc, current, x_cur, opt, cur_pred):
-    """Channels in which the option's fitted signal has an RMS of at least the noise."""
+def _signal(rp, sc, current, x_cur, opt, cur_pred) -> np.ndarray:
+    """RMS of the option's fitted signal per channel, in noise units."""
     sig = (predict(rp, x_terms(current, x_cur) + list(opt.fit.terms)[len(current):])
            - cur_pred) / sc.noise
-    return np.sqrt(np.mean(sig ** 2, axis=0)) >= 1.0
+    return np.sqrt(np.mean(sig ** 2, axis=0))
 
 
 def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, singles_cv,
@@ -141,9 +144,10 @@ def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, single
         return
     opt.cv = cross_validate(rp, opt.cands, sc, None, fl, full=opt.fit)
     opt.gain = 1.0 - np.sqrt(opt.cv.sse / cur_cv.sse)
-    touched = _touched(rp, sc, current, x_cur, opt, cur_pred)
-    if not touched.any():
-        opt.failed = "negligible: its fitted signal stays below the noise in every channel"
+    signal = _signal(rp, sc, current, x_cur, opt, cur_pred)
+    touched = signal >= 1.0  # the channels it acts on
+    if np.sqrt(np.sum(signal ** 2)) < 1.0:
+        opt.failed = "negligible: its fitted signal, over all channels, is below the noise"
         return
     gain_touched = 0.0
     if touched.any():  # best held-out gain among the channels the option acts on
@@ -168,7 +172,7 @@ def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, single
             if moved:
                 opt.failed = moved
                 return
-    channels = np.flatnonzero(touched)
+    channels = np.flatnonzero(touched) if touched.any() else np.flatnonzero(signal > 0)
     opt.iv, iv_se = iv_slope(rp, x_terms(current, x_cur), opt.fit.terms, sc.divisor,
                              (rp.measured - cur_pred) / sc.divisor, channels)
     if not np.isfinite(opt.iv):
@@ -181,6 +185,19 @@ def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, single
                       f"bias; needs >= {IV_MIN} and > {IV_Z:g} se above 0)")
         return
     new = list(enumerate(opt.cands[len(current):], start=len(current)))
+    if len(opt.cands) > 1:  # each new effect must explain something by itself
+        nominal = rp.measured - predict(rp, [])
+        base = sc.channel_sse(nominal)
+        for j, c in new:
+            own = predict(rp, [(c, opt.fit.x[j])])
+            alone = sc.channel_sse(rp.measured - own)
+            acts = np.sqrt(np.mean(((own - predict(rp, [])) / sc.noise) ** 2, axis=0)) >= 1.0
+            better = np.sqrt(alone / np.maximum(base, 1e-300)) <= 1.0 - kw["min_improvement"]
+            if alone.sum() >= base.sum() and not np.any(better & acts):
+                opt.failed = (f"{c.name} at the value the joint fit gives it does not improve "
+                              "the nominal model on its own: it only helps by shifting "
+                              "another effect")
+                return
     if any(at_bound(c, opt.fit.x[j]) for j, c in new):
         opt.failed = "at a bound"
         return
