@@ -136,86 +136,102 @@ def _signal(rp, sc, current, x_cur, opt, cur_pred) -> np.ndarray:
 
 def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, singles_cv,
           cur_fit):
-    """Run the acceptance tests of one option; fills ``opt.cv``, ``gain``, ``iv``,
-    ``failed``."""
-    n_new = len(opt.cands) - len(current)
+    """Run the acceptance tests of one option in order (module docstring); fills
+    ``opt.cv``, ``gain``, ``iv``, ``agreement`` and, on the first failure, ``failed``."""
     if opt.bic > cur_bic - kw["bic_margin"]:
         opt.failed = f"BIC not lower by more than {kw['bic_margin']:g}"
         return
     opt.cv = cross_validate(rp, opt.cands, sc, None, fl, full=opt.fit)
     opt.gain = 1.0 - np.sqrt(opt.cv.sse / cur_cv.sse)
     signal = _signal(rp, sc, current, x_cur, opt, cur_pred)
-    touched = signal >= 1.0  # the channels it acts on
+    new = list(enumerate(opt.cands[len(current):], start=len(current)))
+    opt.failed = (_held_out(sc, opt, cur_cv, signal, kw["min_improvement"])
+                  or _pair(opt, new, singles_cv, kw["min_improvement"])
+                  or _feedback(rp, sc, opt, current, x_cur, cur_pred, signal)
+                  or _explains_alone(rp, sc, opt, new, kw["min_improvement"])
+                  or _bounds_and_trade(opt, current, new, cur_fit)
+                  or _folds(opt, new))
+
+
+def _held_out(sc, opt, cur_cv, signal, m) -> str:
     if np.sqrt(np.sum(signal ** 2)) < 1.0:
-        opt.failed = "negligible: its fitted signal, over all channels, is below the noise"
-        return
+        return "negligible: its fitted signal, over all channels, is below the noise"
+    touched = signal >= 1.0  # the channels it acts on
     gain_touched = 0.0
     if touched.any():  # best held-out gain among the channels the option acts on
         before = sc.channel_sse(cur_cv.residual)[touched]
         after = sc.channel_sse(opt.cv.residual)[touched]
         gain_touched = float(np.max(1.0 - np.sqrt(after / np.maximum(before, 1e-300))))
-    m = kw["min_improvement"]
     if opt.gain < m and gain_touched < 3 * m:
-        opt.failed = (f"held-out gain {opt.gain:.1%} (best channel {gain_touched:.1%}) below "
-                      f"{m:.0%} ({3 * m:.0%} in a channel it acts on)")
-        return
-    if n_new == 2:  # a pair must beat each of its members alone, and add to the better
-        ones = []
-        for c in opt.cands[len(current):]:
-            one, fit_one = singles_cv(c)
-            if np.sqrt(opt.cv.sse / one.sse) > 1.0 - m:
-                opt.failed = f"the pair is not better than {c.name} alone by {m:.0%}"
-                return
-            ones.append((one.sse, c, one, fit_one))
-        for _, c, one, fit_one in ones:
-            moved = trade_off(fit_one, [c.name], opt.fit)
-            if moved:
-                opt.failed = moved
-                return
+        return (f"held-out gain {opt.gain:.1%} (best channel {gain_touched:.1%}) below "
+                f"{m:.0%} ({3 * m:.0%} in a channel it acts on)")
+    return ""
+
+
+def _pair(opt, new, singles_cv, m) -> str:
+    """A pair must beat each of its members alone, and add to their single fits."""
+    if len(new) != 2:
+        return ""
+    for _, c in new:
+        one, fit_one = singles_cv(c)
+        if np.sqrt(opt.cv.sse / one.sse) > 1.0 - m:
+            return f"the pair is not better than {c.name} alone by {m:.0%}"
+        moved = trade_off(fit_one, [c.name], opt.fit)
+        if moved:
+            return moved
+    return ""
+
+
+def _feedback(rp, sc, opt, current, x_cur, cur_pred, signal) -> str:
+    """The instrumental-variable check on the channels the option acts on."""
+    touched = signal >= 1.0
     channels = np.flatnonzero(touched) if touched.any() else np.flatnonzero(signal > 0)
     opt.iv, iv_se = iv_slope(rp, x_terms(current, x_cur), opt.fit.terms, sc.divisor,
                              (rp.measured - cur_pred) / sc.divisor, channels)
     if not np.isfinite(opt.iv):
         if opt.gain < IV_UNVERIFIED_GAIN:
-            opt.failed = ("the instrumental-variable check cannot vouch for its signal and the "
-                          f"held-out gain is under {IV_UNVERIFIED_GAIN:.0%}")
-            return
+            return ("the instrumental-variable check cannot vouch for its signal and the "
+                    f"held-out gain is under {IV_UNVERIFIED_GAIN:.0%}")
     elif not (opt.iv >= IV_MIN and opt.iv - IV_Z * iv_se > 0.0):
-        opt.failed = (f"instrumental-variable slope {opt.iv:.2f} +- {iv_se:.2f} (feedback "
-                      f"bias; needs >= {IV_MIN} and > {IV_Z:g} se above 0)")
-        return
-    new = list(enumerate(opt.cands[len(current):], start=len(current)))
-    if len(opt.cands) > 1:  # each new effect must explain something by itself
-        nominal = rp.measured - predict(rp, [])
-        base = sc.channel_sse(nominal)
-        for j, c in new:
-            own = predict(rp, [(c, opt.fit.x[j])])
-            alone = sc.channel_sse(rp.measured - own)
-            acts = np.sqrt(np.mean(((own - predict(rp, [])) / sc.noise) ** 2, axis=0)) >= 1.0
-            better = np.sqrt(alone / np.maximum(base, 1e-300)) <= 1.0 - kw["min_improvement"]
-            if alone.sum() >= base.sum() and not np.any(better & acts):
-                opt.failed = (f"{c.name} at the value the joint fit gives it does not improve "
-                              "the nominal model on its own: it only helps by shifting "
-                              "another effect")
-                return
+        return (f"instrumental-variable slope {opt.iv:.2f} +- {iv_se:.2f} (feedback bias; "
+                f"needs >= {IV_MIN} and > {IV_Z:g} se above 0)")
+    return ""
+
+
+def _explains_alone(rp, sc, opt, new, m) -> str:
+    """Joining other effects, each new one at its joint value must improve the nominal model
+    on its own (the total, or by ``m`` a channel it acts on)."""
+    if len(opt.cands) == 1:
+        return ""
+    nominal = predict(rp, [])
+    base = sc.channel_sse(rp.measured - nominal)
+    for j, c in new:
+        own = predict(rp, [(c, opt.fit.x[j])])
+        alone = sc.channel_sse(rp.measured - own)
+        acts = np.sqrt(np.mean(((own - nominal) / sc.noise) ** 2, axis=0)) >= 1.0
+        better = np.sqrt(alone / np.maximum(base, 1e-300)) <= 1.0 - m
+        if alone.sum() >= base.sum() and not np.any(better & acts):
+            return (f"{c.name} at the value the joint fit gives it does not improve the "
+                    "nominal model on its own: it only helps by shifting another effect")
+    return ""
+
+
+def _bounds_and_trade(opt, current, new, cur_fit) -> str:
     if any(at_bound(c, opt.fit.x[j]) for j, c in new):
-        opt.failed = "at a bound"
-        return
+        return "at a bound"
     pushed = [c.name for j, c in enumerate(current) if at_bound(c, opt.fit.x[j])]
     if pushed:  # the joint refit drives an accepted effect to its bound
-        opt.failed = f"it pushes the accepted {pushed[0]} to a bound"
-        return
-    if cur_fit is not None:
-        moved = trade_off(cur_fit, [c.name for c in current], opt.fit)
-        if moved:
-            opt.failed = moved
-            return
+        return f"it pushes the accepted {pushed[0]} to a bound"
+    return "" if cur_fit is None else trade_off(cur_fit, [c.name for c in current], opt.fit)
+
+
+def _folds(opt, new) -> str:
     for j, c in new:
         ok, detail = fold_agreement(c, opt.fit.x[j], [fx[j] for fx in opt.cv.fold_x])
         opt.agreement[c.name] = detail
         if not ok:
-            opt.failed = f"{c.name}: the folds disagree ({detail})"
-            return
+            return f"{c.name}: the folds disagree ({detail})"
+    return ""
 
 
 def trade_off(before: Fit, names, after: Fit) -> str:
