@@ -9,13 +9,13 @@ import numpy as np
 from quadfault.fileio import atomic_savefig
 
 
-def _figure(nrows: int):
+def _figure(nrows: int, row_height: float = 2.6):
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(nrows, 1, figsize=(8, 2.6 * nrows), sharex=True)
+    fig, axes = plt.subplots(nrows, 1, figsize=(8, row_height * nrows), sharex=True)
     return plt, fig, np.atleast_1d(axes)
 
 
@@ -70,20 +70,33 @@ def _onsets(flights):
     return [(float(f.t[k + 1]), int(motor))]
 
 
-def plot_learning_curve(timesteps, rewards, path, *, labels=None, force: bool = False,
-                        title: str = "learning curve"):
-    """Mean evaluation reward against environment steps, one line per run."""
-    plt, fig, (ax,) = _figure(1)
-    for i, (ts, r) in enumerate(zip(timesteps, rewards)):
-        r = np.asarray(r, float)
-        mean = r.mean(axis=1) if r.ndim == 2 else r
-        ax.plot(ts, mean, marker="o", label=None if labels is None else labels[i])
+def plot_learning_curve(timesteps, returns, path, *, baseline: float | None = None,
+                        label: str = "policy", title: str = "learning curve",
+                        force: bool = False):
+    """Evaluation return against environment steps.
+
+    ``returns``: ``(n_seeds, n_evaluations)`` mean evaluation returns, one row per training
+    seed, all evaluated at ``timesteps``. Draws their mean and, with several seeds, the band
+    between the lowest and the highest seed; ``baseline`` (the geometric controller's mean
+    return on the same episodes) as a dashed horizontal line."""
+    returns = np.atleast_2d(np.asarray(returns, float))
+    ts = np.asarray(timesteps)
+    plt, fig, (ax,) = _figure(1, 4.0)
+    n = returns.shape[0]
+    line_label = label if n == 1 else f"{label}: mean of {n} seeds (band: lowest to highest)"
+    line, = ax.plot(ts, returns.mean(axis=0), marker="o", label=line_label)
+    if n > 1:
+        ax.fill_between(ts, returns.min(axis=0), returns.max(axis=0), color=line.get_color(),
+                        alpha=0.25, lw=0)
+    if baseline is not None:
+        ax.axhline(baseline, color="k", ls="--", lw=1.2,
+                   label="geometric controller (same episodes)")
+    ax.ticklabel_format(axis="y", useOffset=False)
     ax.set_xlabel("environment steps")
     ax.set_ylabel("mean evaluation return")
     ax.set_title(title)
     ax.grid(alpha=0.3)
-    if labels:
-        ax.legend(fontsize=8)
+    ax.legend(fontsize=8)
     fig.tight_layout()
     out = atomic_savefig(fig, path, force=force, dpi=110)
     plt.close(fig)

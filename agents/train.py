@@ -8,10 +8,14 @@ file (``--config``; the same keys as :class:`TrainConfig`, flags given explicitl
         --timesteps 20000 --seeds 0 1 2 --n-envs 2 --out runs/ppo_residual
 
 Per seed, ``OUT/seed_<k>/`` holds ``model.zip`` + ``vecnormalize.pkl`` (final),
-``best/best_model.zip`` + ``best/vecnormalize.pkl`` (best evaluation, from ``EvalCallback``),
-``checkpoints/`` (with their normalisation statistics), ``evaluations.npz``,
-``monitor/`` and ``train_config.json``; ``--tensorboard`` adds TensorBoard logs.
-:func:`load_agent` loads a model together with its ``VecNormalize`` statistics.
+``best/best_model.zip`` + ``best/vecnormalize.pkl`` (best evaluation on the fixed seeded
+episodes of :mod:`agents.train_eval`), ``checkpoints/`` (with their normalisation
+statistics), ``evaluations.npz`` (with the geometric controller's returns on the same
+episodes), ``monitor/`` and ``train_config.json`` (with the steps actually run:
+PPO and SAC train in whole rollouts, :func:`agents.train_eval.planned_timesteps`);
+``OUT/learning_curve.png`` is the curve over the seeds (:mod:`agents.learning_curve`);
+``--tensorboard`` adds TensorBoard logs. :func:`load_agent` loads a model together with its
+``VecNormalize`` statistics.
 
 Needs the ``rl`` extra (stable-baselines3, torch); without it the command stops with a
 one-line error.
@@ -25,13 +29,14 @@ import math
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
+from agents.learning_curve import CONFIG_FILE, CURVE_FILE, matching_runs, write_learning_curve
+from agents.train_eval import (POLICIES, VECNORM_FILE, budget_line, callbacks, choose_policy,
+                               model_files, planned_timesteps, steps_per_rollout)
 from quadfault.errors import ConfigError, QuadfaultError
 from quadfault.fileio import atomic_write_files, atomic_write_text
 
 ALGORITHMS = ("ppo", "sac")
 MODEL_FILE = "model.zip"
-VECNORM_FILE = "vecnormalize.pkl"
-CONFIG_FILE = "train_config.json"
 
 
 def require_sb3():
@@ -56,7 +61,8 @@ class TrainConfig:
         algo: ``"ppo"`` or ``"sac"``.
         env_id: a registered Gymnasium id (``QuadFault-v0``, ``QuadFaultHover-v0``, ...).
         env_kwargs: keywords of the environment (estimator, action_mode, duration, ...).
-        timesteps: environment steps per seed.
+        timesteps: environment steps per seed, rounded to the nearest whole rollout (the
+            steps run are printed and saved as ``timesteps_run``; :mod:`agents.train_eval`).
         seeds: one run per seed (seeds the algorithm and the environments).
         n_envs: parallel environments (subprocesses when > 1; sub-envs of one array-stepped
             vector env with ``vector_env``).
@@ -65,8 +71,14 @@ class TrainConfig:
             env; QuadFault ids and the named estimators only). Several times more steps per
             CPU second than subprocesses of single envs (docs/throughput.md).
         vec_normalize: normalise observations and rewards (``VecNormalize``).
-        eval_freq: evaluate every this many steps (per environment: divided by n_envs).
-        eval_episodes: episodes per evaluation.
+        policy: an SB3 policy name of :data:`POLICIES`, checked against the observation
+            space; None picks ``MultiInputPolicy`` for Dict observations (``observation=
+            "dict"``) and ``MlpPolicy`` otherwise.
+        eval_freq: evaluate every this many environment steps (all environments together;
+            at the start of the first rollout at or after each multiple, and at the end).
+        eval_episodes: episodes per evaluation: reset seeds ``eval_seed`` ... ``eval_seed +
+            eval_episodes - 1``, the same for every evaluation and every training seed.
+        eval_seed: reset seed of the first evaluation episode.
         checkpoint_freq: save a checkpoint every this many steps (0: none).
         tensorboard: TensorBoard log folder, or None.
         progress_bar: SB3's progress bar (needs ``rich``); otherwise quadfault's own bar is
@@ -90,8 +102,10 @@ class TrainConfig:
     n_envs: int = 1
     vector_env: bool = False
     vec_normalize: bool = True
+    policy: str | None = None
     eval_freq: int = 5_000
-    eval_episodes: int = 3
+    eval_episodes: int = 10
+    eval_seed: int = 10_000
     checkpoint_freq: int = 0
     tensorboard: str | None = None
     progress_bar: bool = False
@@ -109,6 +123,11 @@ class TrainConfig:
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ConfigError(f"{key} must be a positive integer, got {value!r}")
+        if self.policy is not None and self.policy not in POLICIES:
+            raise ConfigError(f"policy must be one of {POLICIES} or null, got {self.policy!r}")
+        if isinstance(self.eval_seed, bool) or not isinstance(self.eval_seed, int) \
+                or self.eval_seed < 0:
+            raise ConfigError(f"eval_seed must be an integer >= 0, got {self.eval_seed!r}")
         if not isinstance(self.checkpoint_freq, int) or self.checkpoint_freq < 0:
             raise ConfigError(f"checkpoint_freq must be an integer >= 0, got "
                               f"{self.checkpoint_freq!r}")
@@ -214,103 +233,6 @@ def _installed(module: str) -> bool:
     return importlib.util.find_spec(module) is not None
 
 
-def _model_files(model, zip_path: Path, vecnorm_path: Path | None) -> dict:
-    """``{path: bytes}`` of a model's zip and (when it trains on one) its ``VecNormalize``
-    pickle: what ``model.save`` and ``VecNormalize.save`` write, for one atomic write."""
-    import io
-    import pickle
-
-    buf = io.BytesIO()
-    model.save(buf)
-    files = {Path(zip_path): buf.getvalue()}
-    vn = model.get_vec_normalize_env()
-    if vn is not None and vecnorm_path is not None:
-        files[Path(vecnorm_path)] = pickle.dumps(vn)
-    return files
-
-
-EVAL_SCRATCH = ".evaluations_scratch"  # EvalCallback's own (non-atomic) log, removed at the end
-
-
-def _callbacks(config: TrainConfig, run_dir: Path, eval_env, progress: bool):
-    """Evaluation (best model), checkpoints and the progress bar. Every file they leave in
-    ``run_dir`` is written atomically (temporary file + rename, :mod:`quadfault.fileio`): an
-    interrupted run never leaves a truncated ``best/`` model or checkpoint."""
-    import io
-
-    import numpy as np
-    from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
-
-    from quadfault.fileio import atomic_write_bytes
-
-    class Progress(BaseCallback):
-        """quadfault's progress bar (quiet off a terminal and with --quiet)."""
-
-        def _on_training_start(self) -> None:
-            from quadfault.progress import progress_bar
-
-            self.bar = progress_bar(total=config.timesteps, desc=f"train {config.algo}",
-                                    unit="step")
-
-        def _on_step(self) -> bool:
-            self.bar.update(self.model.num_timesteps - self.bar.n)
-            return True
-
-        def _on_training_end(self) -> None:
-            self.bar.close()
-
-    class SaveBest(BaseCallback):
-        """``best/best_model.zip`` + ``best/vecnormalize.pkl``, on every new best evaluation."""
-
-        def _on_step(self) -> bool:
-            best = run_dir / "best"
-            best.mkdir(parents=True, exist_ok=True)
-            atomic_write_files(_model_files(self.model, best / "best_model.zip",
-                                            best / VECNORM_FILE), force=True)
-            return True
-
-    class SaveEvaluations(BaseCallback):
-        """``evaluations.npz`` (SB3's layout) after every evaluation."""
-
-        def _on_step(self) -> bool:
-            ev = self.parent
-            buf = io.BytesIO()
-            np.savez(buf, timesteps=ev.evaluations_timesteps, results=ev.evaluations_results,
-                     ep_lengths=ev.evaluations_length)
-            atomic_write_bytes(run_dir / "evaluations.npz", buf.getvalue(), force=True)
-            return True
-
-    class Checkpoint(BaseCallback):
-        """``checkpoints/model_<steps>_steps.zip`` (+ ``model_vecnormalize_<steps>_steps.pkl``,
-        SB3's names) every ``every`` calls."""
-
-        def __init__(self, every: int):
-            super().__init__()
-            self.every = every
-
-        def _on_step(self) -> bool:
-            if self.n_calls % self.every == 0:
-                folder = run_dir / "checkpoints"
-                folder.mkdir(parents=True, exist_ok=True)
-                k = self.num_timesteps
-                vn = folder / f"model_vecnormalize_{k}_steps.pkl" if config.vec_normalize \
-                    else None
-                atomic_write_files(_model_files(self.model, folder / f"model_{k}_steps.zip", vn),
-                                   force=True)
-            return True
-
-    cbs = [EvalCallback(eval_env, log_path=str(run_dir / EVAL_SCRATCH),
-                        eval_freq=max(1, config.eval_freq // config.n_envs),
-                        n_eval_episodes=config.eval_episodes, deterministic=True,
-                        callback_on_new_best=SaveBest(), callback_after_eval=SaveEvaluations(),
-                        verbose=0)]
-    if config.checkpoint_freq:
-        cbs.append(Checkpoint(max(1, config.checkpoint_freq // config.n_envs)))
-    if progress:
-        cbs.append(Progress())
-    return cbs
-
-
 def set_numba_threads(n: int | None) -> None:
     """Use ``n`` threads in numba's parallel kernels (capped at numba's maximum; nothing
     when ``n`` is None or numba is not installed)."""
@@ -325,7 +247,10 @@ def set_numba_threads(n: int | None) -> None:
 
 def train_one(config: TrainConfig, seed: int, run_dir: Path, *, force: bool = False,
               quiet: bool = False):
-    """Train one seed into ``run_dir``; returns the trained model."""
+    """Train one seed into ``run_dir``; returns the trained model.
+
+    Runs ``config.timesteps`` rounded to the nearest whole rollout (one line says so when
+    it differs, unless ``quiet``; ``train_config.json`` records ``timesteps_run``)."""
     sb3 = require_sb3()
     import torch
     from stable_baselines3.common.vec_env import VecNormalize
@@ -340,32 +265,37 @@ def train_one(config: TrainConfig, seed: int, run_dir: Path, *, force: bool = Fa
     for name in (MODEL_FILE, VECNORM_FILE, CONFIG_FILE):
         if (run_dir / name).exists() and not force:
             raise QuadfaultError(f"{run_dir / name}: already exists; pass --force to overwrite")
+    eval_env = _env_factory(config.env_id, config.env_kwargs)()
+    policy = choose_policy(config.policy, eval_env.observation_space, config.env_id)
     run_dir.mkdir(parents=True, exist_ok=True)
     env = make_vec_env(config, seed, config.n_envs, run_dir / "monitor")
-    eval_env = make_vec_env(config, seed + 10_000, 1)
-    if config.vec_normalize:
-        env = VecNormalize(env, norm_obs=True, norm_reward=True)
-        eval_env = VecNormalize(eval_env, norm_obs=True, norm_reward=False, training=False)
-    algo_cls = {"ppo": sb3.PPO, "sac": sb3.SAC}[config.algo]
     try:
-        model = algo_cls("MlpPolicy", env, seed=seed, device=config.device, verbose=0,
-                         tensorboard_log=config.tensorboard, **config.algo_kwargs)
-    except TypeError as exc:
-        raise ConfigError(f"algo_kwargs rejected by {config.algo.upper()}: {exc}") from None
-    try:
-        model.learn(total_timesteps=config.timesteps,
-                    callback=_callbacks(config, run_dir, eval_env, not quiet and not sb3_bar),
-                    progress_bar=sb3_bar,
-                    tb_log_name=f"{config.algo}_seed{seed}")
+        if config.vec_normalize:
+            env = VecNormalize(env, norm_obs=True, norm_reward=True)
+        algo_cls = {"ppo": sb3.PPO, "sac": sb3.SAC}[config.algo]
+        kwargs = dict(config.algo_kwargs)
+        if isinstance(kwargs.get("train_freq"), list):  # JSON has no tuples: [1, "episode"]
+            kwargs["train_freq"] = tuple(kwargs["train_freq"])
+        try:
+            model = algo_cls(policy, env, seed=seed, device=config.device, verbose=0,
+                             tensorboard_log=config.tensorboard, **kwargs)
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(f"algo_kwargs rejected by {config.algo.upper()}: "
+                              f"{' '.join(str(exc).split())}") from None
+        rollout = steps_per_rollout(model)
+        total = planned_timesteps(config.timesteps, rollout)
+        if total != config.timesteps and not quiet:
+            print(budget_line(config.algo, seed, config.timesteps, total, model), flush=True)
+        model.learn(total_timesteps=total,
+                    callback=callbacks(config, run_dir, eval_env, total, not quiet and not sb3_bar),
+                    progress_bar=sb3_bar, tb_log_name=f"{config.algo}_seed{seed}")
         save_agent(model, run_dir, force=force)
-        atomic_write_text(run_dir / CONFIG_FILE,
-                          json.dumps(dict(config.to_dict(), seed=seed), indent=2), force=True)
+        saved = dict(config.to_dict(), seed=seed, policy=policy, timesteps_run=total,
+                     steps_per_rollout=rollout)
+        atomic_write_text(run_dir / CONFIG_FILE, json.dumps(saved, indent=2), force=True)
     finally:
         env.close()
         eval_env.close()
-        import shutil
-
-        shutil.rmtree(run_dir / EVAL_SCRATCH, ignore_errors=True)
     return model
 
 
@@ -375,12 +305,12 @@ def save_agent(model, run_dir, *, force: bool = False) -> Path:
     path = run_dir / MODEL_FILE
     if path.exists() and not force:
         raise QuadfaultError(f"{path}: already exists; pass --force to overwrite")
-    atomic_write_files(_model_files(model, path, run_dir / VECNORM_FILE), force=True)
+    atomic_write_files(model_files(model, path, run_dir / VECNORM_FILE), force=True)
     return path
 
 
 def load_agent(path, env=None, device: str = "cpu"):
-    """Load a saved agent: ``path`` is a run folder or a ``.zip``.
+    """Load a saved agent: ``path`` is a run folder, its ``best/`` folder or a ``.zip``.
 
     Returns ``(model, venv)``: ``venv`` is ``env`` (a Gymnasium env or a VecEnv; ``None`` to
     build one from the saved ``train_config.json``) wrapped in the saved ``VecNormalize``
@@ -390,7 +320,10 @@ def load_agent(path, env=None, device: str = "cpu"):
     from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecNormalize
 
     path = Path(path)
-    zip_path = path / MODEL_FILE if path.is_dir() else path
+    zip_path = path
+    if path.is_dir():  # a run folder, or its best/ folder
+        zip_path = next((path / n for n in (MODEL_FILE, "best_model.zip")
+                         if (path / n).exists()), path / MODEL_FILE)
     if not zip_path.exists():
         raise QuadfaultError(f"{zip_path}: no saved model there")
     folder = zip_path.parent
@@ -441,7 +374,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="do not normalise observations and rewards")
     parser.add_argument("--eval-freq", type=int, help=f"steps between evaluations "
                         f"(default {d.eval_freq})")
-    parser.add_argument("--eval-episodes", type=int, help="episodes per evaluation")
+    parser.add_argument("--eval-episodes", type=int, help=f"fixed seeded episodes per "
+                        f"evaluation (default {d.eval_episodes})")
+    parser.add_argument("--eval-seed", type=int, help=f"reset seed of the first evaluation "
+                        f"episode (default {d.eval_seed})")
+    parser.add_argument("--policy", choices=POLICIES, help="SB3 policy (default: "
+                        "MultiInputPolicy for Dict observations, MlpPolicy otherwise)")
     parser.add_argument("--checkpoint-freq", type=int, help="steps between checkpoints (0: none)")
     parser.add_argument("--algo-kwargs", help="JSON object of algorithm keywords")
     parser.add_argument("--tensorboard", help="TensorBoard log folder")
@@ -466,8 +404,8 @@ def _json_arg(text: str, flag: str) -> dict:
 def config_from_args(args) -> TrainConfig:
     cfg = TrainConfig.from_file(args.config) if args.config else TrainConfig()
     changes = {k: getattr(args, k) for k in ("algo", "env_id", "timesteps", "n_envs", "eval_freq",
-                                             "eval_episodes", "checkpoint_freq", "tensorboard",
-                                             "numba_threads")
+                                             "eval_episodes", "eval_seed", "checkpoint_freq",
+                                             "tensorboard", "numba_threads", "policy")
                if getattr(args, k, None) is not None}
     if args.seeds is not None:
         changes["seeds"] = tuple(args.seeds)
@@ -504,7 +442,14 @@ def run(args) -> int:
         if not quiet:
             best_text = "n/a" if math.isnan(best) else f"{best:.3f}"
             print(f"{config.algo} seed {seed}: {model.num_timesteps} steps, best evaluation "
-                  f"reward {best_text} -> {run_dir}")
+                  f"return {best_text} ({config.eval_episodes} fixed episodes) -> {run_dir}")
+    saved = json.loads((out / f"seed_{config.seeds[-1]}" / CONFIG_FILE).read_text())
+    runs, other = matching_runs(out, saved)
+    data = write_learning_curve(runs, out / CURVE_FILE,
+                                label=f"{config.algo.upper()} on {config.env_id}")
+    if not quiet and data["runs"]:
+        note = f"; left out {len(other)} run(s) with other settings" if other else ""
+        print(f"learning curve over {len(data['runs'])} seed(s) -> {out / CURVE_FILE}{note}")
     return 0
 
 

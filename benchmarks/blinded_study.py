@@ -1,8 +1,9 @@
-"""Blinded study of the model-mismatch diagnosis (issue 6).
+"""Blinded study of the model-mismatch diagnosis.
 
-Each recording hides an effect drawn at random -- none, one of the nine library effects, or a
-pair of effects from different classes -- on a randomised vehicle (mass 0.03-3 kg with
-inertia, arm and yaw coefficient scaled consistently), a randomised trajectory (circle or
+Each recording hides an effect drawn at random -- none, one of the effects of
+``quadfault.effects.EFFECT_NAMES``, or a pair of effects from different classes -- on a
+randomised vehicle (mass 0.03-3 kg with inertia, arm and yaw coefficient scaled
+consistently), a randomised trajectory (circle or
 Lissajous; low altitude for ground effect), random sensor and thrust noise, written in NED or
 ENU with ``f`` or ``u`` commands and read back. The diagnosis sees only the recording file
 (truth stripped) and its nominal vehicle.
@@ -13,8 +14,9 @@ flight with the effect at a unit magnitude measures that ratio; the effect is th
 its signal-to-noise ratio is a random 3-10 and the real flight is flown (magnitudes clipped
 to physical bounds; the achieved SNR is reported).
 
-Classes: ``thrust_scale`` and ``motor_efficiency`` count as one class ("thrust"), ``delay``
-and ``motor_lag`` as one ("timing"); the report says so. Seeds 1-... were used while
+Classes (``quadfault.diagnosis.library.EQUIVALENT``): ``thrust_scale``, ``motor_efficiency``,
+``thrust_curve`` and ``mass`` count as one class ("thrust"), ``delay`` and ``motor_lag`` as one
+("timing"); the report says so. Seeds 1-... were used while
 developing; the held-out seed (default 2026) was never used for tuning.
 
     python benchmarks/blinded_study.py --n 200 --seed 2026 --workers 2
@@ -43,12 +45,12 @@ import quadfault.diagnosis.locate  # imported before forking the workers (and no
 import quadfault.diagnosis.prediction  # noqa: F401
 from quadfault import effects as fx
 from quadfault.diagnosis import Diagnosis
-from quadfault.diagnosis.findings import to_frame
 from quadfault.diagnosis.library import EQUIVALENT, build_library, predict
 from quadfault.diagnosis.residuals import noise_scale, prepare
+from quadfault.effects.model import frame_vectors
 from quadfault.fileio import atomic_write_text
 from quadfault.recording import read_recording, write_recording
-from quadfault.scenarios import named_scenario
+from quadfault.scenarios import LinearVoltage, named_scenario
 from quadfault.simulator import SensorNoise, SimConfig, simulate
 from quadfault.trajectory import Circle, Lissajous
 from quadfault.vehicle import PAPER_YAW_SIGNS, Vehicle
@@ -91,18 +93,24 @@ def random_trajectory(rng, scale, low=None):
                      yaw_rate=float(rng.uniform(-0.2, 0.2)))
 
 
-def make_effect(name, delta, veh, rng_params):
-    """Effect ``name`` at magnitude ``delta`` (relative units, 1 = the pilot's unit)."""
+def make_effect(name, delta, veh, rng_params, nominal_curve=None, duration=15.0):
+    """Effect ``name`` at magnitude ``delta`` (relative units, 1 = the pilot's unit).
+
+    ``nominal_curve``: the recording's command-to-thrust curve for ``u`` commands (a concealed
+    ``thrust_curve`` is a quadratic in those commands), None for thrust commands;
+    ``duration``: the flight's (a battery discharges over it)."""
     m, d = veh.mass, float(np.max(np.abs(veh.allocation[2])))
+    c_yaw = float(np.mean(np.abs(veh.allocation[3])))
+    J = np.diag(veh.inertia)
     p = rng_params
     if name == "motor_efficiency":
         eta = [1.0] * 4
         eta[p["motor"]] = max(0.3, 1.0 - 0.1 * delta)
         return fx.MotorEfficiency(tuple(eta))
     if name == "thrust_scale":
-        return fx.ThrustScale(float(np.clip(1.0 + p["sign"] * 0.05 * delta, 0.5, 1.5)))
+        return fx.ThrustScale(float(np.clip(1.0 + p["sign"] * 0.05 * delta, 0.6, 1.4)))
     if name == "drag":
-        k = min(0.3 * delta, 3.0) * m
+        k = min(0.3 * delta, 2.5) * m
         return fx.Drag((k, k * p["ky"], k * p["kz"]))
     if name == "motor_lag":
         return fx.MotorLag(float(np.clip(0.02 * delta, 0.003, 0.25)))
@@ -113,45 +121,47 @@ def make_effect(name, delta, veh, rng_params):
         return fx.Wind((v * math.cos(p["dir"]), v * math.sin(p["dir"]), 0.0), gust=0.1 * v,
                        gust_tau=3.0, k=(0.3 * m,) * 3, seed=p["seed"])
     if name == "ground_effect":
-        return fx.GroundEffect(float(np.clip(0.6 * d * math.sqrt(delta), 0.05 * d, 2.0 * d)))
+        return fx.GroundEffect(float(np.clip(0.6 * d * math.sqrt(delta), 0.05 * d, 1.2 * d)))
     if name == "com_offset":
-        r = min(0.05 * d * delta, 0.5 * d)
+        r = min(0.05 * d * delta, 0.35 * d)
         return fx.ComOffset((r * math.cos(p["dir"]), r * math.sin(p["dir"])))
     if name == "inertia":
-        s = float(np.clip(1.0 + p["sign"] * 0.25 * delta, 0.4, 3.0))
-        return fx.Inertia((s, s, 1.0 + (s - 1.0) * p["kz"]), vehicle=veh)
+        s = float(np.clip(1.0 + p["sign"] * 0.25 * delta, 0.55, 1.9))
+        return fx.Inertia((s, s, 1.0 + (s - 1.0) * p["kz"]))
+    if name == "blade_flapping":
+        kf = min(0.02 * delta, 0.25)
+        return fx.BladeFlapping(kf, p["ratio"] * d * kf)
+    if name == "rotor_inertia":
+        return fx.RotorInertia(min(0.03 * c_yaw * delta, 1.2 * c_yaw))
+    if name == "battery_thrust":
+        cells = 1 if m < 0.1 else (3 if m < 1.5 else 4)
+        v0 = 4.2 * cells
+        return fx.BatteryThrust(float(np.clip(0.4 * delta, 0.2, 3.5)), v0, v0 * p["drop"],
+                                duration)
+    if name == "thrust_curve":
+        nominal = nominal_curve or fx.thrust.IDENTITY_CURVE
+        changes = np.clip(np.array([p["s0"] * 0.02, p["sign"] * 0.05, p["s2"] * 0.05]) * delta,
+                          -0.45, 0.45)  # inside the plausible bounds (+-0.5)
+        return fx.ThrustCurve(tuple(fx.curve_from_changes(nominal, veh.hover_thrust, changes)),
+                              nominal)
+    if name == "mass":
+        return fx.Mass(float(np.clip(1.0 + p["sign"] * 0.04 * delta, 0.7, 1.5)))
+    if name == "rate_damping":
+        lin = np.minimum(J * 0.5 * delta * np.array([1.0, p["ky"], p["kz"]]), J / 0.03)
+        return fx.RateDamping(tuple(lin), tuple(p["quad"] * lin / 2.0))
     raise KeyError(name)
 
 
-def truth_x(effect, veh):
+def truth_x(effect, lib):
     """The library parameter vector equivalent to a true effect (for SNR only)."""
-    n = effect.name
-    if n == "motor_efficiency":
-        return np.array(effect.eta)
-    if n == "thrust_scale":
-        return np.array([effect.scale])
-    if n == "drag":
-        return np.array(effect.k)
-    if n == "motor_lag":
-        return np.array([effect.tau])
-    if n == "delay":
-        return np.array([effect.delay])
-    if n == "wind":
-        return effect.steady_force()
-    if n == "ground_effect":
-        return np.array([effect.rotor_radius ** 2])
-    if n == "com_offset":
-        return np.array(effect.offset)
-    if n == "inertia":
-        return np.array(effect.scale)
-    raise KeyError(n)
+    return lib[effect.name].x_from_params(effect.params())
 
 
 def snr(rec, effects, veh):
     """Signal-to-noise ratio of each true effect in the diagnosis' normalised channels."""
     rp = prepare(rec.without_truth(), veh)
-    lib = {c.name: c for c in build_library(rp)}
-    terms = [(lib[e.name], truth_x(e, veh)) for e in effects]
+    lib = {c.name: c for c in build_library(rp, NAMES)}
+    terms = [(lib[e.name], truth_x(e, lib)) for e in effects]
     base = predict(rp, [])
     scale = noise_scale(rp, rp.measured - predict(rp, terms))
     out = []
@@ -162,9 +172,17 @@ def snr(rec, effects, veh):
     return [s / max(noise, 1e-12) for s in out]
 
 
-def fly(veh, traj, effects, noise, thrust_noise, rate, duration, seed):
+def fly(veh, traj, effects, noise, thrust_noise, rate, duration, seed, vbat=None):
+    """``vbat``: ``(v_start, v_end)`` [V] of a recorded battery voltage (a ``battery_thrust``
+    effect records its own), or None."""
     dt = 1.0 / rate
-    sc = named_scenario("nominal", duration, dt).replace(trajectory=traj)
+    battery = [e for e in effects if isinstance(e, fx.BatteryThrust)]
+    voltage = None
+    if battery:
+        voltage = LinearVoltage(battery[0].v_start, battery[0].v_end, battery[0].duration)
+    elif vbat is not None:
+        voltage = LinearVoltage(vbat[0], vbat[1], duration)
+    sc = named_scenario("nominal", duration, dt).replace(trajectory=traj, voltage=voltage)
     kw = {"backend": "numpy"} if "backend" in SimConfig.__dataclass_fields__ else {}
     cfg = SimConfig(dt=dt, sensor_noise=noise, **kw)
     return simulate(sc, vehicle=veh, config=cfg, seed=seed, effects=tuple(effects),
@@ -196,15 +214,21 @@ def draw_case(seed, i):
                   "dir": float(rng.uniform(0, 2 * math.pi)), "seed": int(rng.integers(1 << 30))}
               for n in names}
     target = [float(rng.uniform(3.0, 10.0)) for _ in names]
-    return dict(names=names, veh=veh, traj=traj, noise=noise,
+    case = dict(names=names, veh=veh, traj=traj, noise=noise,
                 thrust_noise=float(rng.uniform(0.0, 0.05)), params=params, target=target,
                 frame=str(rng.choice(["NED", "ENU"])), commands=str(rng.choice(["f", "u"])),
                 sim_seed=int(rng.integers(1 << 30)))
+    for n in names:
+        params[n].update(ratio=float(rng.uniform(0.2, 0.6)), drop=float(rng.uniform(0.85, 0.92)),
+                         s0=float(rng.choice([-1.0, 1.0])), s2=float(rng.choice([-1.0, 1.0])),
+                         quad=float(rng.uniform(0.0, 0.5)))
+    case["vbat"] = (12.6, 12.6 * float(rng.uniform(0.85, 0.92))) if rng.random() < 0.5 else None
+    return case
 
 
-def param_error(true, found, veh, frame="NED"):
-    """Relative error of the effect's main magnitude (deviation from nominal); directions
-    compared in the recording's own frame, as the diagnosis reports them."""
+def param_error(true, found, veh):
+    """Relative error of the effect's main magnitude (deviation from nominal); ``found``'s
+    direction parameters in NED / FRD, as the truth."""
     n = true.name
     p = found.params
     if n == "motor_efficiency":
@@ -220,52 +244,85 @@ def param_error(true, found, veh, frame="NED"):
     if n == "delay":
         return abs(p["delay_s"] - true.delay) / true.delay
     if n == "wind":
-        F = np.asarray(to_frame(true.steady_force(), "world", frame))[:2]
+        F = true.steady_force()[:2]
         return float(np.linalg.norm(np.array(p["force_N"][:2]) - F) / np.linalg.norm(F))
     if n == "ground_effect":
         return abs(p["rotor_radius_m"] - true.rotor_radius) / true.rotor_radius
     if n == "com_offset":
-        r = np.asarray(to_frame(true.offset, "body", frame))
+        r = np.array(true.offset)
         return float(np.linalg.norm(np.array(p["offset_m"]) - r) / np.linalg.norm(r))
     if n == "inertia":
         s = np.array(true.scale[:2])
         return float(np.linalg.norm(np.array(p["scale"][:2]) - s) / np.linalg.norm(s - 1))
+    if n == "blade_flapping":
+        return 0.5 * (abs(p["k_force_s_per_m"] - true.k_force) / true.k_force
+                      + abs(p["k_moment_s"] - true.k_moment) / abs(true.k_moment))
+    if n == "rotor_inertia":
+        return abs(p["kappa_m_s"] - true.kappa) / true.kappa
+    if n == "battery_thrust":
+        return abs(p["exponent"] - true.exponent) / true.exponent
+    if n == "mass":
+        return abs(p["scale"] - true.scale) / abs(true.scale - 1)
+    if n == "rate_damping":
+        d = np.array(true.linear[:2])
+        return float(np.linalg.norm(np.array(p["linear_N_m_s_per_rad"][:2]) - d)
+                     / np.linalg.norm(d))
+    if n == "thrust_curve":  # the thrust change over commands of 0.6-1.4 times hover thrust
+        f = np.linspace(0.6, 1.4, 41) * veh.hover_thrust
+        dtrue = fx.recurve(f, true.nominal, true.curve) - f
+        dfound = fx.recurve(f, p["nominal_curve"], p["curve"]) - f
+        return float(np.sqrt(np.mean((dfound - dtrue) ** 2) / np.mean(dtrue ** 2)))
     return float("nan")
+
+
+def u_curve(c):
+    """The nominal curve of a case's ``u`` commands, None for thrust commands."""
+    return (0.0, 0.0, 1e-5 * c["veh"].mass) if c["commands"] == "u" else None
+
+
+def as_commands(rec, curve):
+    """``rec`` with its thrust commands written as ``u`` through ``curve`` (None: kept)."""
+    if curve is None:
+        return rec
+    u = fx.curve_command(curve, rec.thrust_cmd)
+    return dataclasses.replace(rec, commands_u=u, thrust_curve=curve,
+                               thrust_cmd=fx.curve_thrust(curve, u))
 
 
 def run_one(job):
     seed, i, rate, duration, store, reuse = job
     c = draw_case(seed, i)
     veh = c["veh"]
+    curve = u_curve(c)
     t0 = time.perf_counter()
     effects, achieved, deltas = [], [], []
     stem = None if store is None else os.path.join(store, f"case_{seed}_{i:04d}")
+
+    def make(n, delta, dur):
+        return make_effect(n, delta, veh, c["params"][n], curve, dur)
+
     if reuse and os.path.exists(stem + ".truth.json"):  # kept by an earlier --store run
         with open(stem + ".truth.json") as fh:
             saved = json.load(fh)
         deltas, achieved, t_sim = saved["deltas"], saved["snr"], saved["t_sim"]
-        effects = [make_effect(n, d, veh, c["params"][n]) for n, d in zip(c["names"], deltas)]
+        effects = [make(n, d, duration) for n, d in zip(c["names"], deltas)]
         blind = read_recording(stem + ".csv")
     else:
         if c["names"]:
-            unit = [make_effect(n, 1.0, veh, c["params"][n]) for n in c["names"]]
+            unit = [make(n, 1.0, 5.0) for n in c["names"]]
             pilot = fly(veh, c["traj"], unit, c["noise"], c["thrust_noise"], rate, 5.0,
-                        c["sim_seed"])
-            s0 = snr(pilot, unit, veh)
+                        c["sim_seed"], c["vbat"])
+            s0 = snr(as_commands(pilot, curve), unit, veh)
             for n, s, k in zip(c["names"], s0, c["target"]):
                 ratio = k / max(s, 1e-6)
                 delta = ratio ** 0.5 if n == "ground_effect" else ratio  # signal ~ r^2 there
                 deltas.append(float(delta))
-                effects.append(make_effect(n, delta, veh, c["params"][n]))
+                effects.append(make(n, delta, duration))
         rec = fly(veh, c["traj"], effects, c["noise"], c["thrust_noise"], rate, duration,
-                  c["sim_seed"])
+                  c["sim_seed"], c["vbat"])
+        rec = as_commands(rec, curve)
         if effects:
             achieved = snr(rec, effects, veh)
-        if c["commands"] == "u":
-            k = 1e-5 * veh.mass
-            u = np.sqrt(np.maximum(rec.thrust_cmd, 0.0) / k)
-            rec = dataclasses.replace(rec, commands_u=u, thrust_curve=(0.0, 0.0, k),
-                                      thrust_cmd=k * u * u)
         t_sim = time.perf_counter() - t0
         with tempfile.TemporaryDirectory() as tmp:
             path = os.path.join(tmp if stem is None else store, "flight.csv" if stem is None
@@ -280,11 +337,13 @@ def run_one(job):
     res = Diagnosis().fit(blind)
     t_diag, cpu_diag = time.perf_counter() - t1, time.process_time() - c1
     found = res.effect_names
+    frame = res.to_dict().get("frame", "NED")  # direction parameters: in the file's frame
     errs = {}
     for e in effects:
         match = [f for f in res.effects if f.name == e.name]
         if match:
-            errs[e.name] = param_error(e, match[0], veh, c["frame"])
+            f = dataclasses.replace(match[0], params=frame_vectors(match[0].params, frame))
+            errs[e.name] = param_error(e, f, veh)
     return dict(i=i, truth=c["names"], found=found, snr=achieved, target=c["target"],
                 mass=veh.mass, frame=c["frame"], commands=c["commands"],
                 improvement=res.model_improvement, param_errors=errs,
@@ -336,8 +395,11 @@ def summarise(rows, rate, duration) -> dict:
 def print_summary(s, rows):
     print(f"\nBlinded study: {s['n']} recordings ({s['n_with_effect']} with effects, "
           f"{s['n_effect_free']} effect-free), {s['rate_hz']:.0f} Hz, {s['duration_s']:.0f} s")
-    print("classes: thrust = {thrust_scale, motor_efficiency}, timing = {delay, motor_lag} "
-          "(not separable in general; counted as one class)")
+    classes = {}
+    for name, c in EQUIVALENT.items():
+        classes.setdefault(c, []).append(name)
+    print("classes: " + ", ".join(f"{c} = {{{', '.join(v)}}}" for c, v in classes.items())
+          + " (not separable in general; each counted as one class)")
     truths = sorted({k.split(" -> ")[0] for k in s["confusion"]})
     founds = sorted({k.split(" -> ")[1] for k in s["confusion"]})
     w = max(len(t) for t in truths) + 2

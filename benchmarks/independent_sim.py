@@ -12,7 +12,8 @@ from RotorPy's ``f_to_TM`` (its rotor geometry and yaw ratio ``k_m / k_eta``) an
 ground-truth state (no sensor noise). RotorPy's parameters go to the sidecar's ``truth``
 (hidden from the diagnosis). Then ``quadfault diagnose`` runs on each file.
 
-RotorPy's effects in the diagnosis' terms: rotor drag is linear in velocity with a coefficient
+RotorPy's effects in the diagnosis' terms (``blade_flapping`` when the diagnosis reports the
+rotor drag as proportional to thrust): rotor drag is linear in velocity with a coefficient
 ``K_d sum(omega_i)`` that follows the rotor speeds; parasitic drag is quadratic (its best
 linear equivalent over the flight is reported); ``tau_m`` acts on the rotor speed, so for small
 changes the thrust follows with the same time constant.
@@ -127,6 +128,9 @@ def expected(run: dict) -> dict:
                  / np.maximum(np.sum(vb * vb, axis=0), 1e-12))
     out["drag_k_N_s_per_m"] = (rotor + parasitic).tolist()
     out["drag_rotor_part"] = rotor.tolist()
+    # the same rotor drag in blade_flapping's terms (force proportional to thrust; RotorPy's
+    # rotors sit in the CoM plane, so no flapping moment): k_force = k_rotor / (m g) at hover
+    out["blade_flapping_k_force_s_per_m"] = float(rotor[0] / (p["mass"] * 9.81))
     out["translational_lift_k_h"] = float(p.get("k_h", 0.0))
     return out
 
@@ -237,7 +241,8 @@ def main(argv=None) -> int:
             diag = diagnose(csv_path, args.force or args.reuse)
             rows.append((case, exp, diag, t1 - t0, time.perf_counter() - t1, v95))
             bar.update(1)
-    print("| case | RotorPy: drag k (x,y,z) [N s/m], tau_m [s] | speed p95 [m/s] | verdict | "
+    print("| case | RotorPy: drag k (x,y,z) [N s/m], tau_m [s] (as blade_flapping k_force "
+          "[s/m]) | speed p95 [m/s] | verdict | "
           "diagnosis: effects (params +- sd; held-out improvement) | model improvement |")
     print("|---|---|---|---|---|---|")
     for case, exp, diag, t_sim, t_diag, v95 in rows:
@@ -245,7 +250,9 @@ def main(argv=None) -> int:
             f"{e['name']}(" + ", ".join(f"{k}={_fmt(v)} +- {_fmt(e['uncertainty'].get(k))}"
                                         for k, v in e["params"].items())
             + f"; {100 * e['improvement']:.0f}%)" for e in diag["effects"]) or "none"
-        print(f"| {case} | {_fmt(exp['drag_k_N_s_per_m'])}, {exp['motor_lag_tau_s']:g} | "
+        flap = exp.get("blade_flapping_k_force_s_per_m")
+        flap = "" if flap is None else f" ({flap:.3g})"
+        print(f"| {case} | {_fmt(exp['drag_k_N_s_per_m'])}, {exp['motor_lag_tau_s']:g}{flap} | "
               f"{v95:.2f} | {diag['verdict']} | {eff} | "
               f"{100 * diag['model']['improvement']:.1f}% |")
     print(f"\n(simulation + export {sum(r[3] for r in rows):.0f} s, diagnosis "

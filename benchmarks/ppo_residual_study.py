@@ -13,6 +13,8 @@ reward (the environment's default), residual scale, VecNormalize, PPO hyperparam
 (:data:`PPO_KWARGS`), timesteps and seeds. Each arm trains ``--seeds`` PPO runs of
 ``--timesteps`` steps on ``--n-envs`` quadrotors stepped as arrays
 (:class:`quad_fault_env.vector.QuadFaultVectorEnv`, the same episodes as the single env).
+``--timesteps`` is rounded *up* to whole rollouts of ``n_envs x n_steps`` (10^6 -> 1,007,616
+with the defaults), the steps the documented runs trained.
 
 Evaluation (paired): every trained model and the baseline (the same environment with a zero
 residual, i.e. the geometric controller) fly the *same* ``--episodes`` episodes: the
@@ -199,21 +201,23 @@ def train_arm(args, arm: str, out: Path) -> None:
     from quadfault.fileio import atomic_write_text
 
     estimator = args.estimator if arm == "with_estimate" else "none"
+    rollout = args.n_envs * ppo_kwargs(args)["n_steps"]
+    steps = math.ceil(args.timesteps / rollout) * rollout
     for seed in args.seeds:
         run_dir = out / arm / f"seed_{seed}"
         if not args.retrain and (run_dir / "model.zip").exists():
             continue
         cfg = TrainConfig(algo="ppo", env_id=ENV_ID, env_kwargs=env_kwargs(args, estimator),
-                          timesteps=args.timesteps, seeds=(seed,), n_envs=args.n_envs,
+                          timesteps=steps, seeds=(seed,), n_envs=args.n_envs,
                           vector_env=True, eval_freq=max(args.timesteps // 2, 1000),
                           eval_episodes=4, algo_kwargs=ppo_kwargs(args),
                           numba_threads=args.numba_threads)
         wall, cpu = time.time(), time.process_time()
         train_one(cfg, seed, run_dir, force=True, quiet=True)
         times = {"wall_seconds": time.time() - wall, "cpu_seconds": time.process_time() - cpu,
-                 "timesteps": args.timesteps}
+                 "timesteps": steps}
         atomic_write_text(run_dir / "train_time.json", json.dumps(times, indent=2), force=True)
-        print(f"{arm} seed {seed}: trained {args.timesteps} steps in {times['wall_seconds']:.0f} s"
+        print(f"{arm} seed {seed}: trained {steps} steps in {times['wall_seconds']:.0f} s"
               f" wall, {times['cpu_seconds']:.0f} s CPU", flush=True)
 
 

@@ -11,7 +11,9 @@ minutes on a 2-core CPU without GPU::
     python examples/train_ppo_residual.py --out runs/ppo_residual
 
 Writes ``OUT/seed_0/`` (model, VecNormalize statistics, best model, evaluations) and
-``OUT/learning_curve.png``. Needs the ``rl`` extra (stable-baselines3, torch).
+``OUT/learning_curve.png`` (the same figure as ``quadfault train``: evaluation return on 10
+fixed seeded episodes against environment steps, with the geometric controller on the same
+episodes). Needs the ``rl`` extra (stable-baselines3, torch).
 """
 
 from __future__ import annotations
@@ -19,8 +21,6 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-
-import numpy as np
 
 
 def main(argv=None) -> int:
@@ -35,7 +35,7 @@ def main(argv=None) -> int:
     parser.add_argument("--force", action="store_true")
     args = parser.parse_args(argv)
 
-    from agents.plots import plot_learning_curve
+    from agents.learning_curve import CURVE_FILE, write_learning_curve
     from agents.train import TrainConfig, train_one
     from quadfault.errors import QuadfaultError
 
@@ -46,7 +46,7 @@ def main(argv=None) -> int:
                     "random_faults": {"n_faults": [1, 1], "severity": [0.5, 0.85]},
                     "duration": args.duration},
         timesteps=args.timesteps, seeds=(args.seed,), n_envs=args.n_envs, vector_env=True,
-        eval_freq=max(args.timesteps // 8, 500), eval_episodes=3,
+        eval_freq=max(args.timesteps // 8, 500),
         # small initial exploration noise (exp(-2.3) x 2.45 N ~ 0.25 N per rotor, as in the
         # study): the residual starts from a controller that already flies, and large noise
         # early only costs return
@@ -56,17 +56,16 @@ def main(argv=None) -> int:
     run_dir = out / f"seed_{args.seed}"
     try:
         train_one(config, args.seed, run_dir, force=args.force)
-        data = np.load(run_dir / "evaluations.npz")
-        png = plot_learning_curve([data["timesteps"]], [data["results"]],
-                                  out / "learning_curve.png", force=True,
-                                  labels=[f"PPO residual, eta_hat from {args.estimator}"],
-                                  title="QuadFaultHover-v0 (5 s episodes, one random fault)")
+        data = write_learning_curve([run_dir], out / CURVE_FILE,
+                                    label=f"PPO residual, eta_hat from {args.estimator}")
     except QuadfaultError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    best = data["results"].mean(axis=1)
-    print(f"evaluation return: first {best[0]:.1f}, last {best[-1]:.1f}, best {best.max():.1f}"
-          f" (max possible {args.duration * 100:.0f}); curve -> {png}")
+    curve = data["returns"][0]
+    print(f"evaluation return ({len(data['episode_seeds'])} fixed episodes, max possible "
+          f"{args.duration * 100:.0f}): geometric controller {data['baseline']:.1f}; PPO first "
+          f"{curve[0]:.1f}, last {curve[-1]:.1f}, best {curve.max():.1f}; curve -> "
+          f"{out / CURVE_FILE}")
     return 0
 
 

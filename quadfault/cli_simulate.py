@@ -28,6 +28,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("--scenario", default="combined", choices=SCENARIO_NAMES,
                    help="efficiency schedule and trajectory (default: combined)")
+    p.add_argument("--trajectory", choices=("circle", "lissajous", "hover"), default=None,
+                   help="fly this reference instead of the scenario's: the paper's circle, a "
+                        "Lissajous figure-eight exciting all axes, or hover (their default "
+                        "shapes in quadfault.trajectory)")
     p.add_argument("--duration", type=float, default=None,
                    help="flight time [s] (default 80, the reference schedule)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
@@ -56,7 +60,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         f"[rad/s] with thrust_coefficient {DEFAULT_THRUST_COEFFICIENT:g}")
     p.add_argument("--effect", action="append", default=[], metavar="NAME=VALUES",
                    help="add an unmodelled effect to the true plant, e.g. drag=0.3, "
-                        "wind=2,0,0, motor_lag=0.05 (repeatable; see docs/diagnosis.md)")
+                        "wind=2,0,0, motor_lag=0.05, blade_flapping=0.05,0.002, mass=1.15 "
+                        "(repeatable; see docs/effects.md)")
+    p.add_argument("--model", default=None, metavar="DIAG.json",
+                   help="fly a diagnosis' fitted model: its nominal vehicle (what the controller "
+                        "and the recording's sidecar know) plus its accepted effects with their "
+                        "fitted parameters (the recording's truth); --effect adds more")
     p.add_argument("--no-truth", action="store_true",
                    help="omit the true efficiency eta1..eta4 and effect truth")
 
@@ -89,6 +98,11 @@ def run(args) -> int:
 
     check_writable([out, sidecar_path(out)], force=args.force)
     scenario = named_scenario(args.scenario, args.duration, args.dt)
+    if args.trajectory is not None:
+        from quadfault.trajectory import Circle, Hover, Lissajous
+
+        traj = {"circle": Circle, "lissajous": Lissajous, "hover": Hover}[args.trajectory]()
+        scenario = scenario.replace(trajectory=traj)
     noise = SensorNoise()
     if args.sensor_noise:
         parts = args.sensor_noise.split(",")
@@ -96,7 +110,14 @@ def run(args) -> int:
         if len(vals) not in (4, 5) or min(vals) < 0:
             raise ConfigError("--sensor-noise expects 4 or 5 non-negative numbers")
         noise = SensorNoise(*vals)
-    vehicle = Vehicle() if args.max_thrust is None else Vehicle(max_thrust=args.max_thrust)
+    model = None
+    if args.model is not None:
+        from quadfault.effects import from_diagnosis
+
+        model = from_diagnosis(args.model)
+    vehicle = Vehicle() if model is None else model.vehicle
+    if args.max_thrust is not None:
+        vehicle = vehicle.replace(max_thrust=args.max_thrust)
     if args.integrator == "reference":
         cfg = SimConfig.reference(dt=args.dt, sensor_noise=noise)
     else:
@@ -104,22 +125,24 @@ def run(args) -> int:
         period = None if args.control_rate is None else 1.0 / args.control_rate
         cfg = SimConfig(dt=args.dt, control_period=period, saturate=not args.no_saturation,
                         sensor_noise=noise, controller=ctrl)
-    effects = ()
-    if args.effect:
-        from quadfault.effects import parse_effect
-
-        effects = tuple(parse_effect(spec) for spec in args.effect)
+    effects, scenario = _effects(args, model, scenario)
     # an absurd parameter (wind=1e308) overflows inside numpy; the simulator's own
     # non-finite-state check turns that into the one-line error, so numpy's warnings are noise
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         rec = simulate(scenario, vehicle=vehicle, config=cfg, seed=args.seed, effects=effects,
                        thrust_noise=args.thrust_noise, progress=not args.quiet)
+    if model is not None:
+        rec.meta["truth"] = {"model": model.source}
     _warn_if_control_lost(rec, scenario, args)
     if args.commands == "u":
-        k = DEFAULT_THRUST_COEFFICIENT
-        u = np.sqrt(np.maximum(rec.thrust_cmd, 0.0) / k)
-        rec = dataclasses.replace(rec, commands_u=u, thrust_curve=(0.0, 0.0, k),
-                                  thrust_cmd=k * u * u)
+        from quadfault.effects import curve_command, curve_thrust
+
+        curve = (0.0, 0.0, DEFAULT_THRUST_COEFFICIENT)
+        if model is not None and model.thrust_curve is not None:
+            curve = model.thrust_curve
+        u = curve_command(curve, rec.thrust_cmd)
+        rec = dataclasses.replace(rec, commands_u=u, thrust_curve=tuple(curve),
+                                  thrust_cmd=curve_thrust(curve, u))
     if args.no_truth:
         rec = rec.without_truth()
     write_recording(rec, out, frame=args.frame, force=args.force)
@@ -127,6 +150,32 @@ def run(args) -> int:
         print(f"wrote {out} ({len(rec)} rows, {rec.duration:.3f} s, scenario {args.scenario}, "
               f"seed {args.seed})")
     return 0
+
+
+def _effects(args, model, scenario):
+    """The plant's effects (the model's, then ``--effect``'s; canonical order) and the scenario,
+    which records a ``battery_thrust`` effect's voltage as ``vbat``."""
+    from quadfault.effects import BatteryThrust, canonical_order, parse_effect
+    from quadfault.scenarios import LinearVoltage
+
+    effects = list(model.effects) if model is not None else []
+    for spec in args.effect:
+        e = parse_effect(spec)
+        if isinstance(e, BatteryThrust) and "duration=" not in spec:
+            e = dataclasses.replace(e, duration=scenario.duration)  # discharge over the flight
+        effects.append(e)
+    names = [e.name for e in effects]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ConfigError(f"effect {twice[0]} given twice (in --model and --effect, or twice)")
+    battery = [e for e in effects if isinstance(e, BatteryThrust)]
+    if battery:
+        if scenario.voltage is not None:
+            raise ConfigError(f"scenario {scenario.name!r} has its own battery voltage profile; "
+                              "battery_thrust needs one without (e.g. nominal, abrupt, hover)")
+        b = battery[0]
+        scenario = scenario.replace(voltage=LinearVoltage(b.v_start, b.v_end, b.duration))
+    return canonical_order(effects), scenario
 
 
 #: Tracking error [m] above which ``simulate`` warns that the controller lost the vehicle.
@@ -145,7 +194,11 @@ def _warn_if_control_lost(rec, scenario, args) -> None:
     if lost.size == 0:
         return
     hint = ""
-    if not args.no_saturation and args.integrator != "reference":
+    names = {e["name"] for e in rec.meta.get("effects", ())}
+    if "rotor_inertia" in names and "motor_lag" not in names:
+        hint = (" rotor_inertia without motor_lag makes every thrust step a yaw kick; a rotor "
+                "with inertia has a lag: add --effect motor_lag=TAU (docs/effects.md).")
+    elif not args.no_saturation and args.integrator != "reference":
         hint = (" With thrust-to-weight 2 a rotor at eta = 0.5 cannot hold the paper's circle;"
                 " the paper's scenarios assume no upper thrust limit (--no-saturation), or use"
                 " the estimate-aware controller (agents).")

@@ -35,6 +35,19 @@ class Effect(Protocol):
     def wrench(self, state: RigidBodyState, f: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
         """External force (world) [N] and moment (body) [N m] at ``state``."""
 
+    # optional: ``true_vehicle(vehicle) -> Vehicle``, the rigid body the plant flies (another
+    # mass or inertia), applied once at reset; the controller keeps the nominal vehicle.
+
+
+def flown_vehicle(vehicle: Vehicle, effects) -> Vehicle:
+    """The vehicle the plant flies: ``vehicle`` passed through every effect's optional
+    ``true_vehicle`` hook, in order."""
+    for e in effects:
+        hook = getattr(e, "true_vehicle", None)
+        if hook is not None:
+            vehicle = hook(vehicle)
+    return vehicle
+
 
 class PlantStep(NamedTuple):
     rotor_thrust: np.ndarray  # thrust each rotor produced over the step [N]
@@ -46,7 +59,9 @@ class Plant:
     """The true multirotor.
 
     Args:
-        vehicle: true vehicle parameters (the controller may hold different, nominal ones).
+        vehicle: true vehicle parameters (the controller may hold different, nominal ones);
+            effects with a ``true_vehicle`` hook modify it at every reset (``self.vehicle`` is
+            the one flown, ``self.nominal_vehicle`` the one given).
         efficiency: callable ``t -> (4,)`` true motor efficiency.
         motor: saturation and thrust noise.
         effects: unmodelled effects applied in order.
@@ -64,10 +79,11 @@ class Plant:
             raise ConfigError(f"dt must be positive [s], got {dt!r}")
         if integrator == "reference" and effects:
             raise ConfigError("the reference integrator does not support extra effects")
-        self.vehicle = vehicle
+        self.nominal_vehicle = vehicle
         self.efficiency = efficiency
         self.motor = motor or MotorModel()
         self.effects = tuple(effects)
+        self.vehicle = flown_vehicle(vehicle, self.effects)
         self.integrator = integrator
         self.dt = float(dt)
         self.rng = rng if rng is not None else np.random.default_rng()
@@ -77,7 +93,8 @@ class Plant:
     def reset(self, state: RigidBodyState) -> None:
         self.state = state.copy()
         for e in self.effects:
-            e.reset(self.vehicle.n_rotors)
+            e.reset(self.nominal_vehicle.n_rotors)
+        self.vehicle = flown_vehicle(self.nominal_vehicle, self.effects)
         if self._reference is not None:
             self._reference = ReferenceEuler(self.vehicle, self.dt)
 

@@ -144,7 +144,8 @@ def test_malformed_recordings_give_clear_errors(com_recording):
 def test_imu_only_log_lists_untestable_effects(com_recording):
     imu = dataclasses.replace(com_recording, position=None, velocity=None, quaternion=None)
     res = Diagnosis().fit(imu)
-    assert set(res.untestable) == {"drag", "wind", "ground_effect"}
+    assert set(res.untestable) == {"drag", "wind", "ground_effect", "blade_flapping",
+                                   "battery_thrust"}
     assert set(res.baseline_rmse) == {"sf_x", "sf_y", "sf_z", "alpha_x", "alpha_y", "alpha_z"}
     assert res.effect_names[0] == "com_offset"
     # no pose to start from: the prediction is of the body rate and the attitude change

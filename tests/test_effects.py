@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from quadfault import effects as fx
-from quadfault.dynamics import RigidBodyState, angular_acceleration
+from quadfault.dynamics import RigidBodyState
 from quadfault.errors import ConfigError
 from quadfault.rotation import cross, euler_zyx_to_rot
 from quadfault.vehicle import Vehicle
@@ -27,6 +27,15 @@ def _state(rng, n=()):
     ("ground_effect=0.12", fx.GroundEffect, "rotor_radius", 0.12),
     ("com_offset=0.01,-0.02", fx.ComOffset, "offset", (0.01, -0.02)),
     ("inertia=1.2", fx.Inertia, "scale", (1.2, 1.2, 1.2)),
+    ("blade_flapping=0.05,0.002", fx.BladeFlapping, "k_moment", 0.002),
+    ("blade_flapping=0.05", fx.BladeFlapping, "k_moment", 0.0),
+    ("rotor_inertia=0.004", fx.RotorInertia, "kappa", 0.004),
+    ("battery_thrust=2,v_start=4.2,v_end=3.6", fx.BatteryThrust, "v_ref", 3.9),
+    ("thrust_curve=0.1,0.9,0.02", fx.ThrustCurve, "curve", (0.1, 0.9, 0.02)),
+    ("mass=1.15", fx.Mass, "scale", 1.15),
+    ("rate_damping=0.01", fx.RateDamping, "linear", (0.01, 0.01, 0.01)),
+    ("rate_damping=0.01,0.002", fx.RateDamping, "quadratic", (0.002, 0.002, 0.002)),
+    ("rate_damping=1,2,3,4,5,6", fx.RateDamping, "quadratic", (4.0, 5.0, 6.0)),
 ])
 def test_parse_effect(spec, cls, attr, value):
     e = fx.parse_effect(spec)
@@ -40,10 +49,37 @@ def test_parse_effect(spec, cls, attr, value):
     ("nothing=1", "unknown effect"), ("drag", "NAME=VALUES"), ("drag=1,2", "expects 1 or 3"),
     ("wind=1,0,0,color=3", "unknown option"), ("delay=-1", "delay"), ("drag=x", "not a number"),
     ("motor_lag=0", "tau"), ("drag=nan", "finite"),
+    ("rate_damping=1,2,3,4", "expects 1 or 2 or 3 or 6"), ("mass=0", "mass scale"),
+    ("thrust_curve=0,0,0", "b > 0 or c > 0"), ("rate_damping=-1", ">= 0"),
+    ("battery_thrust=2,v_start=-1", "v_start"), ("drag=0.1:0.3", "random generator"),
+    ("blade_flapping=x", "not a number"),
 ])
 def test_parse_effect_errors(spec, words):
     with pytest.raises(ConfigError, match=words):
         fx.parse_effect(spec)
+
+
+def test_parse_effect_ranges_are_drawn_from_the_generator():
+    a = fx.parse_effect("motor_lag=0.02:0.06", rng=np.random.default_rng(5))
+    b = fx.parse_effect("motor_lag=0.02:0.06", rng=np.random.default_rng(5))
+    assert a == b and 0.02 <= a.tau <= 0.06
+    with pytest.raises(ConfigError, match="low <= high"):
+        fx.parse_effect("motor_lag=0.06:0.02", rng=np.random.default_rng(5))
+
+
+def test_every_effect_round_trips_through_its_params():
+    rng = np.random.default_rng(6)
+    for name in fx.EFFECT_NAMES:
+        spec = {"wind": "wind=1,2,0", "com_offset": "com_offset=0.01,0.02",
+                "thrust_curve": "thrust_curve=0.1,0.9,0.02",
+                "blade_flapping": "blade_flapping=0.05,0.002"}.get(name, f"{name}=0.5:0.9")
+        e = fx.parse_effect(spec, rng=rng)
+        again = fx.EFFECTS[name].from_params(e.params())
+        if name == "wind":  # the diagnosis' model: the steady force
+            np.testing.assert_allclose(again.steady_force(), e.steady_force())
+            continue
+        for key, value in e.params().items():
+            np.testing.assert_allclose(again.params()[key], value, err_msg=f"{name}.{key}")
 
 
 def test_drag_opposes_air_velocity_and_is_linear():
@@ -77,16 +113,16 @@ def test_zoh_mean_matches_numerical_integration():
     np.testing.assert_allclose(fx.zoh_mean(t, f, c, np.array([a]), np.array([b]))[0], num, atol=2e-3)
 
 
-def test_lag_series_uniform_and_general_paths_agree():
+def test_lag_series_steps_equal_one_series_and_reach_a_held_command():
     rng = np.random.default_rng(2)
     f = rng.uniform(0, 2, (300, 4))
-    dt = np.full(300, 1e-3)
-    fast = fx.lag_series(f, dt, 0.03)
-    dt2 = dt.copy()
-    dt2[0] *= 1.0 + 1e-6  # forces the explicit loop
-    slow = fx.lag_series(f, dt2, 0.03)
-    np.testing.assert_allclose(fast, slow, rtol=1e-5)
-    # steady state: a held command is reached
+    dt = rng.uniform(0.5e-3, 2e-3, 300)
+    whole = fx.lag_series(f, dt, 0.03)
+    y, steps = None, []
+    for k in range(300):  # the plant's call: one row, continuing from the previous thrust
+        y = fx.lag_series(f[k], dt[k], 0.03, y)[0]
+        steps.append(y)
+    np.testing.assert_allclose(whole, steps, rtol=1e-12, atol=1e-14)
     held = fx.lag_series(np.ones((2000, 4)) * 3.0, np.full(2000, 1e-3), 0.05)
     assert held[-1] == pytest.approx(3.0 * np.ones(4))
 
@@ -112,15 +148,16 @@ def test_plant_step_equals_series_model(effect):
     assert Candidate  # the library uses these same functions
 
 
-def test_inertia_moment_reproduces_true_body():
-    rng = np.random.default_rng(4)
+def test_body_effects_change_the_flown_vehicle_only():
+    from quadfault.plant import Plant
+
     veh = Vehicle()
-    Jt = fx.scaled_inertia(veh.inertia, (1.3, 0.8, 1.1))
-    w, M = rng.normal(size=(20, 3)), rng.normal(size=(20, 3))
-    Mx = fx.inertia_moment(w, M, veh.inertia, Jt)
-    nominal_with_effect = angular_acceleration(w, M, veh, Mx)
-    true = angular_acceleration(w, M, veh, inertia=Jt, inertia_inverse=np.linalg.inv(Jt))
-    np.testing.assert_allclose(nominal_with_effect, true, atol=1e-10)
+    plant = Plant(veh, lambda t: np.ones(4), effects=(fx.Inertia((1.3, 0.8, 1.1)), fx.Mass(1.2)))
+    plant.reset(RigidBodyState.at_rest())
+    np.testing.assert_allclose(np.diag(plant.vehicle.inertia), np.diag(veh.inertia) * (1.3, 0.8, 1.1))
+    assert plant.vehicle.mass == pytest.approx(1.2 * veh.mass)
+    assert plant.vehicle.rotor_max_thrust == veh.rotor_max_thrust  # the rotors are unchanged
+    assert plant.nominal_vehicle is veh and veh.mass == 1.0
 
 
 def test_com_offset_moment_is_r_cross_thrust():

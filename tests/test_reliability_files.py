@@ -28,13 +28,13 @@ WRITE_ALLOWED = {
     ("quadfault/fileio.py", "savefig"): "atomic_savefig renders into a buffer",
     ("quadfault/fuzzing.py", "write_text/write_bytes"): "writes broken test files into a "
                                                          "caller's temporary folder",
-    ("agents/train.py", "numpy save"): "np.savez into an in-memory buffer that "
-                                       "atomic_write_bytes then writes",
+    ("agents/train_eval.py", "numpy save"): "np.savez into an in-memory buffer that "
+                                            "atomic_write_bytes then writes",
     ("benchmarks/bench_diagnosis.py", "write_text/write_bytes"): "the reference revision's "
                                                                  "modules, into its own "
                                                                  "temporary folder",
-    ("agents/train.py", "SB3 save"): "stable-baselines3 writes model.zip / vecnormalize.pkl "
-                                     "itself (not atomic; docs/reliability.md)",
+    ("agents/train_eval.py", "SB3 save"): "model.save into an in-memory buffer that "
+                                          "atomic_write_files then writes",
 }
 
 #: loaders that can execute code from a file

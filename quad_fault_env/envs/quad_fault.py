@@ -259,6 +259,7 @@ class QuadFaultEnv(gym.Env):
         self.substeps = int(round(ratio))
         self.dt = 1.0 / physics_rate
         self.control_period = 1.0 / control_rate
+        self.metadata = {**self.metadata, "render_fps": control_rate}  # a frame per step
         if estimator_rate not in ESTIMATOR_RATES:
             raise ConfigError(f"estimator_rate must be one of {ESTIMATOR_RATES}, "
                               f"got {estimator_rate!r}")

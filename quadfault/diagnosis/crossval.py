@@ -13,8 +13,14 @@ one part of the flight asks for and another contradicts fails it.
 
 At a bound (:func:`at_bound`): a parameter within ``BOUND_MARGIN`` (2 %) of the span of its
 bounds from a bound that is not the effect's neutral value (``Candidate.x0``; a drag
-coefficient at its lower bound 0 is "no drag on that axis", an inertia scale at 5 is "the
-data asks for more than this effect allows").
+coefficient at its lower bound 0 is "no drag on that axis", an inertia scale at 2 is "the
+data asks for more than this effect allows") and, given the recording, whose part of the
+model matters: putting that one parameter back to its neutral value changes the model's
+channels by more than the noise (root-sum-square over the channels of the RMS change in
+noise units at least 1, the measure of a negligible effect in the selection). A parameter
+whose whole range hardly changes the model -- quadratic rate damping over a flight at low
+rates, next to the linear term that carries the signal -- ends at a bound without the data
+asking for anything.
 """
 
 from __future__ import annotations
@@ -101,14 +107,37 @@ def _near_bound(cand, x) -> np.ndarray:
     return low | high
 
 
-def at_bound(cand, x) -> bool:
-    """Whether a parameter of ``cand`` at ``x`` sits at (or within the margin of) a bound."""
-    return bool(np.any(_near_bound(cand, x)))
+def at_bound(cand, x, rp: Replay | None = None, sc=None, others=()) -> bool:
+    """Whether a parameter of ``cand`` at ``x`` sits at (or within the margin of) a bound;
+    with the replay ``rp`` and its scoring ``sc``, only a parameter whose part of the model
+    (with the terms ``others``) is above the noise (module docstring)."""
+    near = _near_bound(cand, x)
+    if rp is None or not near.any():
+        return bool(near.any())
+    x = np.asarray(x, dtype=float)
+    others = list(others)
+    model = predict(rp, others + [(cand, x)])
+    for i in np.flatnonzero(near):
+        back = x.copy()
+        back[i] = cand.x0[i]
+        change = (model - predict(rp, others + [(cand, back)])) / sc.noise
+        if np.sqrt(np.sum(np.mean(change ** 2, axis=0))) >= 1.0:
+            return True
+    return False
 
 
-def fold_agreement(cand, x, fold_x) -> tuple[bool, str]:
+def fit_at_bound(rp: Replay, sc, f: Fit, j: int, x=None) -> bool:
+    """:func:`at_bound` for effect ``j`` of the fit ``f`` (at ``x``, default its fitted
+    value), the fit's other effects at their fitted values."""
+    terms = list(f.terms)
+    x = terms[j][1] if x is None else x
+    return at_bound(f.candidates[j], x, rp, sc, terms[:j] + terms[j + 1:])
+
+
+def fold_agreement(cand, x, fold_x, bound=None) -> tuple[bool, str]:
     """``(agree, detail)``: the fold-agreement rule of the module docstring for the effect
-    ``cand`` fitted at ``x`` with the per-fold vectors ``fold_x`` (k, p)."""
+    ``cand`` fitted at ``x`` with the per-fold vectors ``fold_x`` (k, p); ``bound(x_fold)``
+    says whether a fold is at a bound (default :func:`at_bound` without the recording)."""
     X = np.asarray(fold_x, dtype=float)
     x = np.asarray(x, dtype=float)
     k = len(X)
@@ -122,7 +151,8 @@ def fold_agreement(cand, x, fold_x) -> tuple[bool, str]:
     j = int(np.argmax(z))
     label = cand.labels[j] if j < len(cand.labels) else f"parameter {j}"
     same_side = bool(np.all(np.sign(X[:, j] - x0[j]) == np.sign(x[j] - x0[j])))
-    bound_folds = int(sum(at_bound(cand, xi) for xi in X))
+    bound = bound or (lambda xi: at_bound(cand, xi))
+    bound_folds = int(sum(bound(xi) for xi in X))
     size = "every fold gives the same value" if z[j] > 1e6 else f"{z[j]:.1f} jackknife sd"
     detail = (f"folds: {label} departs from nominal by {size} (needs {FOLD_Z:g})" + ("" if same_side else ", folds on both sides of nominal")
               + (f", {bound_folds} of {k} folds at a bound" if bound_folds else ""))

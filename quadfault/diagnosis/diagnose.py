@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from quadfault.diagnosis.crossval import at_bound, cross_validate, folds_of
+from quadfault.diagnosis.crossval import cross_validate, fit_at_bound, folds_of
 from quadfault.diagnosis.feedback import IV_MIN, IV_UNVERIFIED_GAIN
 from quadfault.diagnosis.findings import base_explanation, finding
 from quadfault.diagnosis.library import build_library, predict, public_params
@@ -196,10 +196,8 @@ class Diagnosis:
                     mask_note = (f"nothing excluded: what does not look like free flight "
                                  f"({why}; {100 * frac:.0f}% of the recording) would leave "
                                  "too few blocks")
-        library = build_library(rp)
-        if cfg.effects is not None:
-            library = [c for c in library if c.name in cfg.effects]
-        untestable = [c.name for c in library if c.needs_pose and not rp.has_pose]
+        library = build_library(rp, cfg.effects)
+        untestable = [c.name for c in library if not c.testable(rp)]
         base_res = rp.measured - predict(rp, [])
         sc = fixed_scoring(rp, base_res, rp.scored)
         sel = select(rp, library, sc, folds=cfg.folds, max_effects=cfg.max_effects,
@@ -233,20 +231,21 @@ class Diagnosis:
                 c, x, sd, improvement=improvement(alone_cv(c, x)),
                 explanation=_explain(step, selected, params),
                 fold_x=[fx[k] for fx in sel.final_cv.fold_x], gain=step.improvement_step,
-                **common))
+                at_bound=fit_at_bound(rp, sc, sel.final, k),
+                bound=lambda xf, k=k: fit_at_bound(rp, sc, sel.final, k, xf), **common))
         effects.sort(key=lambda e: -e.improvement)
         suspect, rejected = [], []
         for name, v in sel.verdicts.items():
             c = v.candidate
             cv_alone = alone_cv(c)
             if v.status == "suspect":
-                folds = [] if v.cv is None else [fx[list(v.fit.candidates).index(c)]
-                                                 for fx in v.cv.fold_x]
+                j = list(v.fit.candidates).index(c)
+                folds = [] if v.cv is None else [fx[j] for fx in v.cv.fold_x]
                 suspect.append(finding(
                     c, v.x, v.sd, improvement=improvement(cv_alone),
                     explanation=f"{base_explanation(c.name)}. {v.reason}.", fold_x=folds,
                     status="suspect", reason=v.reason, at_bound=True, gain=v.gain,
-                    **common))
+                    bound=lambda xf, f=v.fit, j=j: fit_at_bound(rp, sc, f, j, xf), **common))
             else:
                 f = sel.alone.get(name, v.fit)
                 j = list(f.candidates).index(c)
@@ -254,7 +253,8 @@ class Diagnosis:
                     c, f.x[j], f.sd[j], improvement=improvement(cv_alone),
                     explanation=base_explanation(c.name), status="rejected", reason=v.reason,
                     fold_x=[] if cv_alone is None else [fx[0] for fx in cv_alone.fold_x],
-                    at_bound=at_bound(c, f.x[j]), gain=v.gain, **common))
+                    at_bound=fit_at_bound(rp, sc, f, j), gain=v.gain,
+                    bound=lambda xf, f=f, j=j: fit_at_bound(rp, sc, f, j, xf), **common))
         suspect.sort(key=lambda e: -e.improvement)
         rejected.sort(key=lambda e: -e.improvement)
         table, model_ci = sc.channel_table(sel.baseline.residual, sel.final_cv.residual,

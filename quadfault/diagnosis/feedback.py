@@ -72,41 +72,34 @@ def frozen_replay(rp: Replay) -> Replay:
     start = ok[heads]  # first interval of each block (blocks are numbered in time order)
     first = np.arange(len(rp.dt))
     first[ok] = start[blk]
-    src = rp.starts or {"f": rp.f, "u": rp.u, "p": rp.p, "v": rp.v, "R": rp.R, "w": rp.w}
+    src = rp.starts or {"f": rp.f, "p": rp.p, "v": rp.v, "R": rp.R, "w": rp.w}
     t0 = rp.t[start]  # time at each block's first row
     cont = np.r_[False, rp.block_run[1:] == rp.block_run[:-1]]
     k0 = rp.knots[start] if rp.raw is not None else start
+    # the commands frozen per block: the first row's value plus its trend over the last
+    # recording row before the block
+    x0 = src["f"][start]
+    rows, rows_t = (rp.raw["f"], rp.raw["t"]) if rp.raw is not None else (rp.f, rp.t)
+    trend = np.zeros_like(x0)
+    kc = k0[cont]
+    trend[cont] = (rows[kc] - rows[kc - 1]) / (rows_t[kc] - rows_t[kc - 1])[:, None]
 
-    def frozen(name):
-        """Commands ``name`` ("f" or "u") frozen per block: the first row's value plus its
-        trend over the last recording row before the block."""
-        own = getattr(rp, name)
-        if own is None:
-            return None, None
-        x0 = src[name][start]
-        rows, rows_t = (rp.raw[name], rp.raw["t"]) if rp.raw is not None else (own, rp.t)
-        trend = np.zeros_like(x0)
-        kc = k0[cont]
-        trend[cont] = (rows[kc] - rows[kc - 1]) / (rows_t[kc] - rows_t[kc - 1])[:, None]
+    def commands(t_rows, block_of_row, values):
+        out = values.copy()
+        inside = block_of_row >= 0
+        b = block_of_row[inside]
+        out[inside] = x0[b] + (t_rows[inside] - t0[b])[:, None] * trend[b]
+        return out
 
-        def commands(t_rows, block_of_row, values):
-            out = values.copy()
-            inside = block_of_row >= 0
-            b = block_of_row[inside]
-            out[inside] = x0[b] + (t_rows[inside] - t0[b])[:, None] * trend[b]
-            return out
-
-        if rp.raw is not None:
-            seg = rp.raw["seg"]
-            r = commands(rp.raw["t"][:-1], rp.block[seg], rp.raw[name])
-            return np.asarray(rp.raw["merge"] @ r), r
-        return commands(rp.t[:-1], rp.block, src[name]), None
-
-    f, f_raw = frozen("f")
-    u, u_raw = frozen("u")
-    raw = None if rp.raw is None else dict(rp.raw, f=f_raw, u=u_raw)
+    raw = None
+    if rp.raw is not None:
+        f_raw = commands(rp.raw["t"][:-1], rp.block[rp.raw["seg"]], rp.raw["f"])
+        f = np.asarray(rp.raw["merge"] @ f_raw)
+        raw = dict(rp.raw, f=f_raw)
+    else:
+        f = commands(rp.t[:-1], rp.block, src["f"])
     take = (lambda a: None if a is None else a[first])
-    fr = replace(rp, f=f, u=u, p=take(src["p"]), v=take(src["v"]), R=take(src["R"]),
+    fr = replace(rp, f=f, p=take(src["p"]), v=take(src["v"]), R=take(src["R"]),
                  w=take(src["w"]), raw=raw)
     object.__setattr__(rp, "_frozen", fr)
     return fr

@@ -77,17 +77,16 @@ def residual_vector(rp: Replay, terms, scale: np.ndarray, mask) -> np.ndarray:
     return ((rp.measured[mask] - predict(rp, terms)[mask]) / scale).ravel()
 
 
-#: Effects whose model channels are affine in their own parameters when every other effect
-#: is held fixed (the wrench is linear in the rotor thrusts, and every thrust stage is a
-#: linear operator on them). Jointly fitted, a thrust gain and ``com_offset`` multiply.
-LINEAR = frozenset({"motor_efficiency", "thrust_scale", "drag", "wind", "com_offset"})
-_GAINS = frozenset({"motor_efficiency", "thrust_scale"})
-
-
 def is_affine(cands) -> bool:
-    """Whether the model is affine in the joint parameter vector of ``cands``."""
-    names = {c.name for c in cands}
-    return names <= LINEAR and not ("com_offset" in names and names & _GAINS)
+    """Whether the model is affine in the joint parameter vector of ``cands``: each is affine
+    alone (``Candidate.affine``: the wrench is linear in the rotor thrusts, and every thrust
+    stage is a linear operator on them), and no two multiply -- at most one thrust stage, and
+    none with a wrench proportional to the thrust (``Candidate.uses_thrust``)."""
+    cands = list(cands)
+    if not all(c.affine for c in cands):
+        return False
+    n_thrust = sum(c.stage == "thrust" for c in cands)
+    return n_thrust == 0 or (n_thrust == 1 and not any(c.uses_thrust for c in cands))
 
 
 def _key(cands, fixed):

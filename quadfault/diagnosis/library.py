@@ -1,211 +1,201 @@
 """The candidate library: physically named effects with bounded parameter vectors.
 
-Every candidate predicts through :mod:`quadfault.effects` (the same physics the simulator's
-plant runs) and :mod:`quadfault.dynamics` (the same rigid-body equations). A candidate acts at
-one stage of the model:
+Every candidate (:mod:`quadfault.diagnosis.candidates`) predicts through
+:mod:`quadfault.effects` (the same physics the simulator's plant runs) and
+:mod:`quadfault.dynamics` (the same rigid-body equations). The model of a set of terms
+``[(candidate, x), ...]`` is the plant's chain:
 
-* ``thrust`` -- transforms the produced rotor thrusts (efficiency, scale, ground effect,
-  delay, lag; applied in that order);
-* ``wrench`` -- adds an external force (world) and/or moment (body) (drag, wind, CoM offset,
-  inertia).
+1. ``thrust`` stages in ``order``: command-to-thrust curve, battery voltage, efficiency or
+   common scale, ground effect, delay, lag (on fast merged logs the curve and the timing
+   effects act on the raw commands, the pointwise factors on the merged thrust);
+2. ``wrench`` stages add a force (world) and a moment (body);
+3. ``body`` stages change the rigid body the equations of motion use (mass, inertia).
 
-Bounds scale with the nominal vehicle (mass m [kg], gravity g, rotor distance ``arm`` [m]).
+Bounds are physically plausible for the vehicle class: they scale with the nominal vehicle
+(mass m [kg], weight m g, rotor distance ``arm`` [m], inertia J, yaw coefficient c) and are
+documented in docs/effects.md. A fit at a bound means the data asks for more than the effect
+allows.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from quadfault import effects as fx
+from quadfault.diagnosis import candidates as cd
+from quadfault.diagnosis.candidates import Candidate, PublicContext, WrenchInputs
 from quadfault.diagnosis.residuals import Replay, model_channels
+from quadfault.effects.model import frame_vectors
+
+__all__ = [
+    "EQUIVALENT",
+    "EXPLANATIONS",
+    "Candidate",
+    "WrenchInputs",
+    "body_vehicle",
+    "build_library",
+    "external_wrench",
+    "predict",
+    "predict_intervals",
+    "public_bounds",
+    "public_params",
+    "thrust_series",
+]
 
 
-def lag_series(f: np.ndarray, dt: np.ndarray, tau: float) -> np.ndarray:
-    """:func:`quadfault.effects.lag_series` (the same recursion
-    ``y_k = y_{k-1} + g_k (f_k - y_{k-1})``, the same result to rounding) without a
-    per-sample Python loop for any steps (jittery or merged logs) and without importing
-    ``scipy.signal``: the linear recurrence is solved by a parallel prefix scan (log2 N
-    vectorised passes)."""
-    f = np.asarray(f, dtype=float)
-    g = fx.lag_gain(dt, tau)
-    a = np.repeat((1.0 - g)[:, None], f.shape[1], axis=1)
-    b = g[:, None] * f
-    a[0], b[0] = 0.0, f[0]  # starts at the first command, as the plant does
-    s = 1
-    while s < len(f):
-        b[s:] += a[s:] * b[:-s]
-        a[s:] *= a[:-s]
-        s *= 2
-    return b
+def _voltage_profile(rp: Replay) -> tuple:
+    """``(v_start, v_end, duration)``: a straight line through the logged voltage."""
+    t = 0.5 * (rp.t[:-1] + rp.t[1:])
+    slope, icpt = np.polyfit(t - t[0], rp.vbat, 1)
+    dur = float(rp.t[-1] - rp.t[0])
+    return float(icpt), float(icpt + slope * dur), dur
 
 
-def drag_basis(rp: Replay) -> np.ndarray:
-    """``(M, 3, 3)``: column i is the drag force [N] of ``k = e_i`` (1 N s/m on body axis i)
-    at every interval of ``rp`` (:func:`quadfault.effects.drag_force`, linear in ``k``);
-    cached on the replay."""
-    D = rp.__dict__.get("_drag_basis")
-    if D is None:
-        D = np.stack([fx.drag_force(rp.R, rp.v, e) for e in np.eye(3)], axis=-1)
-        object.__setattr__(rp, "_drag_basis", D)
-    return D
+def build_library(rp: Replay, names=None) -> list[Candidate]:
+    """The candidates named in ``names`` (default: the default library), with bounds scaled to
+    the nominal vehicle of ``rp``.
 
-
-@dataclass(frozen=True)
-class Candidate:
-    """One named effect of the library.
-
-    Attributes:
-        name: canonical effect name (CONTRACT.md sec. 4).
-        labels: name of each scalar parameter, with its unit.
-        lower, upper: bounds; x0: neutral value (the nominal model).
-        starts: initial guesses tried before the local fit (multi-modal effects).
-        stage: ``"thrust"`` or ``"wrench"``; order: position among thrust stages.
-        needs_pose: the effect needs position/velocity/attitude (not testable on IMU logs).
-        rotor_side: the effect acts between the command and the rotor speed (motor
-            dynamics, the command curve), so measured rotor speeds see it (``rotor_*``
-            channels of :mod:`~quadfault.diagnosis.residuals`); effects after the rotor
-            speed (propeller, aerodynamics) leave those channels unchanged.
-        frames: ``((param_key, "world" | "body"), ...)``: public parameters that are
-            vectors in the world or body frame, reported in the recording's own frame.
-    """
-
-    name: str
-    labels: tuple
-    lower: tuple
-    upper: tuple
-    x0: tuple
-    starts: tuple
-    stage: str
-    order: int = 0
-    needs_pose: bool = False
-    rotor_side: bool = False
-    frames: tuple = ()
-
-    @property
-    def size(self) -> int:
-        return len(self.x0)
-
-    # model hooks -------------------------------------------------------------------------
-    def thrust(self, x, rp: Replay, f):
-        n = self.name
-        if n == "motor_efficiency":
-            return f * x[None, :]
-        if n == "thrust_scale":
-            return f * x[0]
-        if n == "ground_effect":
-            r = float(np.sqrt(max(x[0], 0.0)))
-            return f * fx.ground_effect_factor(-rp.p[:, 2], r)[:, None]
-        if n in TIMING:
-            return timing_thrust(n, x, rp.t, rp.dt, f)
-        raise KeyError(n)
-
-    def wrench(self, x, vehicle, R, v, w, thrust, moment):
-        """External force (world) [N] and moment (body) [N m]; either may be None."""
-        n = self.name
-        if n == "drag":
-            return fx.drag_force(R, v, x), None
-        if n == "wind":
-            return np.broadcast_to(x, v.shape), None
-        if n == "com_offset":
-            return None, fx.com_offset_moment(thrust, x)
-        if n == "inertia":
-            Jt = fx.scaled_inertia(vehicle.inertia, x)
-            return None, fx.inertia_moment(w, moment, vehicle.inertia, Jt)
-        raise KeyError(n)
-
-
-#: thrust-stage effects with memory: on merged (fast) logs they act on the raw commands
-TIMING = ("delay", "motor_lag")
-
-
-def timing_thrust(name: str, x, t: np.ndarray, dt: np.ndarray, f: np.ndarray) -> np.ndarray:
-    """Held thrust over each interval of sample times ``t`` after a pure ``delay`` (the mean
-    of the command zero-order hold shifted by ``x[0]`` [s]) or a first-order ``motor_lag``
-    (time constant ``x[0]`` [s])."""
-    if name == "delay":
-        tk = t[:-1]
-        c = fx.zoh_cumulative(tk, f)
-        return fx.zoh_mean(tk, f, c, tk - x[0], t[1:] - x[0])
-    if name == "motor_lag":
-        return lag_series(f, dt, x[0])
-    raise KeyError(name)
-
-
-def build_library(rp: Replay) -> list[Candidate]:
-    """All candidates, with bounds scaled to the nominal vehicle of ``rp``."""
-    m, g, arm = rp.vehicle.mass, rp.vehicle.gravity, rp.arm
+    ``thrust_curve`` is in the default library only for ``u``-command recordings (whose
+    command-to-thrust curve is a declared, calibrated model); for thrust commands in newtons
+    it is asked for by name: in closed loop its slope fits the same signal as an inertia or a
+    payload (docs/effects.md, "What the data cannot tell apart")."""
+    veh = rp.vehicle
+    m, g, arm, n = veh.mass, veh.gravity, rp.arm, veh.n_rotors
+    J = np.diag(veh.inertia)
+    c_yaw = float(np.mean(np.abs(veh.allocation[3])))
     dt = float(np.median(rp.dt))
-    one4, one3 = (1.0,) * 4, (1.0,) * 3
+    tw = n * veh.rotor_max_thrust / (m * g)  # thrust-to-weight (inf without a limit)
+    one4, one3, zero3 = (1.0,) * 4, (1.0,) * 3, (0.0,) * 3
+    nominal = tuple(rp.thrust_curve) if rp.thrust_curve is not None else fx.thrust.IDENTITY_CURVE
+    f_h = m * g / n
+    u_h = float(fx.curve_command(nominal, f_h))
     lib = [
-        Candidate("motor_efficiency", ("eta1 [-]", "eta2 [-]", "eta3 [-]", "eta4 [-]"),
-                  (0.1,) * 4, (1.6,) * 4, one4, (one4,), "thrust", 0),
-        Candidate("thrust_scale", ("scale [-]",), (0.2,), (2.0,), (1.0,), ((1.0,),), "thrust", 0),
-        Candidate("ground_effect", ("rotor_radius^2 [m^2]",), (0.0,), ((3 * arm) ** 2,), (0.0,),
-                  tuple(((k * arm) ** 2,) for k in (0.3, 0.6, 1.0, 1.5)), "thrust", 1,
-                  needs_pose=True),
-        Candidate("delay", ("delay [s]",), (0.0,), (0.3,), (0.0,),
-                  tuple((d,) for d in np.unique(np.r_[np.arange(0.0, 0.2, max(dt, 0.01)), 0.25])),
-                  "thrust", 2, rotor_side=True),
-        Candidate("motor_lag", ("tau [s]",), (1e-4,), (0.6,), (1e-4,),
-                  tuple((tau,) for tau in (0.005, 0.01, 0.02, 0.04, 0.07, 0.12, 0.2, 0.35)),
-                  "thrust", 3, rotor_side=True),
-        Candidate("drag", ("kx [N s/m]", "ky [N s/m]", "kz [N s/m]"), (0.0,) * 3,
-                  (30.0 * m,) * 3, (0.0,) * 3, ((0.0,) * 3, (0.5 * m,) * 3), "wrench",
-                  needs_pose=True),
-        Candidate("wind", ("Fx [N]", "Fy [N]", "Fz [N]"), (-m * g,) * 3, (m * g,) * 3,
-                  (0.0,) * 3, ((0.0,) * 3,), "wrench", needs_pose=True,
-                  frames=(("force_N", "world"), ("air_velocity_m_per_s", "world"))),
-        Candidate("com_offset", ("rx [m]", "ry [m]"), (-arm,) * 2, (arm,) * 2, (0.0, 0.0),
-                  ((0.0, 0.0),), "wrench", frames=(("offset_m", "body"),)),
-        Candidate("inertia", ("sx [-]", "sy [-]", "sz [-]"), (0.2,) * 3, (5.0,) * 3, one3,
-                  (one3,), "wrench"),
+        cd.EfficiencyCandidate("motor_efficiency", ("eta1 [-]", "eta2 [-]", "eta3 [-]", "eta4 [-]"),
+                               (0.2,) * 4, (1.5,) * 4, one4, (one4,), "thrust", 2, affine=True,
+                               excludes=("thrust_scale",)),
+        cd.ScaleCandidate("thrust_scale", ("scale [-]",), (0.5,), (1.5,), (1.0,), ((1.0,),),
+                          "thrust", 2, affine=True),
+        cd.GroundEffectCandidate("ground_effect", ("rotor_radius^2 [m^2]",), (0.0,), (arm ** 2,),
+                                 (0.0,), tuple(((k * arm) ** 2,) for k in (0.2, 0.45, 0.7, 0.95)),
+                                 "thrust", 3, needs_pose=True),
+        cd.DelayCandidate("delay", ("delay [s]",), (0.0,), (0.2,), (0.0,),
+                          tuple((d,) for d in np.unique(np.r_[np.arange(0.0, 0.15, max(dt, 0.01)),
+                                                              0.19])),
+                          "thrust", 4, rotor_side=True),
+        cd.LagCandidate("motor_lag", ("tau [s]",), (1e-4,), (0.3,), (1e-4,),
+                        tuple((tau,) for tau in (0.005, 0.01, 0.02, 0.04, 0.07, 0.12, 0.2, 0.28)),
+                        "thrust", 5, rotor_side=True),
+        cd.DragCandidate("drag", ("kx [N s/m]", "ky [N s/m]", "kz [N s/m]"), zero3,
+                         (3.0 * m, 3.0 * m, 5.0 * m), zero3, (zero3, (0.5 * m,) * 3), "wrench",
+                         needs_pose=True, affine=True),
+        cd.WindCandidate("wind", ("Fx [N]", "Fy [N]", "Fz [N]"), (-0.5 * m * g,) * 2 + (-0.25 * m * g,),
+                         (0.5 * m * g,) * 2 + (0.25 * m * g,), zero3, (zero3,), "wrench",
+                         needs_pose=True, affine=True,
+                         frames=(("force_N", "world"), ("air_velocity_m_per_s", "world"))),
+        cd.ComOffsetCandidate("com_offset", ("rx [m]", "ry [m]"), (-0.3 * arm,) * 2, (0.3 * arm,) * 2,
+                              (0.0, 0.0), ((0.0, 0.0),), "wrench", affine=True,
+                              frames=(("offset_m", "body"),)),
+        cd.InertiaCandidate("inertia", ("sx [-]", "sy [-]", "sz [-]"), (0.5,) * 3, (2.0,) * 3, one3,
+                            (one3,), "body"),
+        cd.BladeFlappingCandidate("blade_flapping", ("k_force [s/m]", "k_moment [s]"),
+                                  (0.0, -0.3 * arm), (0.3, 0.3 * arm), (0.0, 0.0), ((0.0, 0.0),),
+                                  "wrench", needs_pose=True, affine=True),
+        cd.RotorInertiaCandidate("rotor_inertia", ("kappa [m s]",), (0.0,), (1.5 * c_yaw,), (0.0,),
+                                 ((0.0,),), "wrench", affine=True),
+        cd.BatteryCandidate("battery_thrust", ("exponent [-]",), (-1.0,), (4.0,), (0.0,),
+                            ((0.0,), (2.0,)), "thrust", 1, requires=("vbat",), rotor_side=True,
+                            v_ref=float(np.median(rp.vbat)) if rp.vbat is not None else 1.0,
+                            profile=_voltage_profile(rp) if rp.vbat is not None else (1.0,) * 3),
+        cd.ThrustCurveCandidate("thrust_curve", ("d0 [-]", "d1 [-]", "d2 [-]"), (-0.5,) * 3,
+                                (0.5,) * 3, zero3, (zero3,), "thrust", 0, affine=True,
+                                default=rp.thrust_curve is not None,
+                                excludes=("thrust_scale",), rotor_side=True, nominal=nominal,
+                                f_hover=f_h, u_hover=u_h),
+        cd.MassCandidate("mass", ("scale [-]",), (0.5,), (float(np.clip(0.8 * tw, 1.2, 2.0)),),
+                         (1.0,), ((1.0,),), "body"),
+        cd.RateDampingCandidate("rate_damping", tuple(f"D1{a} [N m s/rad]" for a in "xyz")
+                                + tuple(f"D2{a} [N m s^2/rad^2]" for a in "xyz"), (0.0,) * 6,
+                                tuple(J / 0.02) + tuple(J * 1.0), (0.0,) * 6, ((0.0,) * 6,),
+                                "wrench", affine=True),
     ]
-    return lib
+    if names is None:
+        return [c for c in lib if c.default]
+    return [c for c in lib if c.name in names]
 
 
-def thrust_series(rp: Replay, terms) -> np.ndarray:
+def thrust_series(rp: Replay, terms, ends: bool = False):
     """Produced rotor thrusts (M, n) [N] after the thrust-stage terms ``[(cand, x), ...]``.
 
-    On merged (fast) logs (``rp.raw``) the timing effects act on the raw commands, which are
-    then merged; the pointwise stages (efficiency, scale, ground effect) follow on the merged
-    thrust -- exact for the constant factors, and for the ground effect up to its variation
-    within one internal step."""
-    stages = sorted((t for t in terms if t[0].stage == "thrust"), key=lambda t: t[0].order)
-    timing = [t for t in stages if t[0].name in TIMING]
-    f = rp.f
-    if timing and rp.raw is not None:
-        raw = rp.raw
+    On merged (fast) logs (``rp.raw``) the stages that act on raw commands (curve, delay, lag)
+    run on the raw rows, which are then merged; the pointwise factors (battery, efficiency,
+    scale, ground effect) follow on the merged thrust -- exact for the constant factors, and
+    for the others up to their variation within one internal step. With ``ends``, also the
+    thrust held at the end of each interval (M, n) (its last raw row), for rates."""
+    stages = sorted(((c, np.asarray(x, dtype=float)) for c, x in terms if c.stage == "thrust"),
+                    key=lambda t: t[0].order)
+    f, f_end = rp.f, None
+    raw = rp.raw
+    if raw is not None and (ends or any(c.on_raw for c, _ in stages)):
         fr = raw["f"]
-        for cand, x in timing:
-            fr = timing_thrust(cand.name, np.asarray(x, dtype=float), raw["t"], raw["dt"], fr)
+        for cand, x in (s for s in stages if s[0].on_raw):
+            fr = cand.thrust(x, rp, fr, raw["t"], raw["dt"])
         f = np.asarray(raw["merge"] @ fr)
-        stages = [t for t in stages if t[0].name not in TIMING]
+        f_end = fr[rp.knots[1:] - 1] if ends else None
+        stages = [s for s in stages if not s[0].on_raw]
     for cand, x in stages:
-        f = cand.thrust(np.asarray(x, dtype=float), rp, f)
+        f = cand.thrust(x, rp, f, rp.t, rp.dt)
+        if f_end is not None:
+            f_end = cand.thrust(x, rp, f_end, rp.t, rp.dt)
+    if ends:
+        return f, (f if f_end is None else f_end)
     return f
 
 
-def predict_intervals(rp: Replay, terms) -> np.ndarray:
-    """Model channels (M, C) per interval for the nominal model plus ``terms``."""
-    f = thrust_series(rp, terms)
-    W = rp.vehicle.wrench(f)
-    T, M = W[:, 0], W[:, 1:]
+def body_vehicle(vehicle, terms):
+    """The rigid body of the model: ``vehicle`` through the body-stage terms."""
+    for cand, x in terms:
+        if cand.stage == "body":
+            vehicle = cand.body(np.asarray(x, dtype=float), vehicle)
+    return vehicle
+
+
+def external_wrench(terms, inp: WrenchInputs, rp: Replay | None = None):
+    """Summed external force (world) [N] and moment (body) [N m] of the wrench-stage terms
+    (either None when no term gives one); over the intervals of ``rp`` when given."""
     F = Mx = None
     for cand, x in terms:
         if cand.stage != "wrench":
             continue
-        if cand.name == "drag":  # the same force, from its cached linear basis
-            dF, dM = drag_basis(rp) @ np.asarray(x, dtype=float), None
-        else:
-            dF, dM = cand.wrench(np.asarray(x, dtype=float), rp.vehicle, rp.R, rp.v, rp.w, T, M)
+        x = np.asarray(x, dtype=float)
+        dF, dM = cand.wrench(x, inp) if rp is None else cand.wrench_series(x, rp, inp)
         if dF is not None:
             F = dF if F is None else F + dF
         if dM is not None:
             Mx = dM if Mx is None else Mx + dM
-    out = model_channels(rp, f, F, Mx, T, M)
-    if rp.has_rotor:  # measured rotor speeds see only the effects before the rotor speed
+    return F, Mx
+
+
+def needs_rate(terms) -> bool:
+    return any(c.needs_rate for c, _ in terms)
+
+
+def predict_intervals(rp: Replay, terms) -> np.ndarray:
+    """Model channels (M, C) per interval for the nominal model plus ``terms``: the six
+    acceleration channels, then the accelerometer's, then (with measured rotor speeds) the
+    rotor thrusts seen through only the effects before the rotor speed (``rotor_side``)."""
+    terms = list(terms)
+    rate = None
+    if needs_rate(terms):
+        f, f_end = thrust_series(rp, terms, ends=True)
+        rate = fx.thrust_rate(f_end, rp.dt)
+    else:
+        f = thrust_series(rp, terms)
+    W = rp.vehicle.wrench(f)
+    T, M = W[:, 0], W[:, 1:]
+    inp = WrenchInputs(rp.vehicle, rp.R, rp.v, rp.w, T, M, rate)
+    F, Mx = external_wrench(terms, inp, rp)
+    out = model_channels(rp, f, F, Mx, T, M, vehicle=body_vehicle(rp.vehicle, terms))
+    if rp.has_rotor:
         out = np.hstack((out, thrust_series(rp, [t for t in terms if t[0].rotor_side])))
     return out
 
@@ -215,39 +205,20 @@ def predict(rp: Replay, terms) -> np.ndarray:
     return rp.block_mean(predict_intervals(rp, terms))
 
 
-def public_params(cand: Candidate, x, sd, vehicle, selected: dict) -> tuple[dict, dict]:
-    """``params`` and ``uncertainty`` (one sigma) as reported in the diagnosis JSON."""
-    x = np.asarray(x, dtype=float)
-    sd = np.asarray(sd, dtype=float)
-    n = cand.name
-    if n == "motor_efficiency":
-        return {"eta": x.tolist()}, {"eta": sd.tolist()}
-    if n == "thrust_scale":
-        return {"scale": x[0]}, {"scale": sd[0]}
-    if n == "ground_effect":
-        r = float(np.sqrt(max(x[0], 0.0)))
-        sr = float(sd[0] / (2 * r)) if r > 0 else float(np.sqrt(sd[0]))
-        return {"rotor_radius_m": r, "ground_z_m": 0.0}, {"rotor_radius_m": sr}
-    if n == "delay":
-        return {"delay_s": x[0]}, {"delay_s": sd[0]}
-    if n == "motor_lag":
-        return {"tau_s": x[0]}, {"tau_s": sd[0]}
-    if n == "drag":
-        return {"k_N_s_per_m": x.tolist()}, {"k_N_s_per_m": sd.tolist()}
-    if n == "wind":
-        if "drag" in selected:
-            k = np.asarray(selected["drag"], dtype=float)
-            kk = np.array([0.5 * (k[0] + k[1])] * 2 + [k[2]])
-            kk = np.maximum(kk, 1e-9)
-            return ({"air_velocity_m_per_s": (x / kk).tolist(), "force_N": x.tolist()},
-                    {"air_velocity_m_per_s": (sd / kk).tolist(), "force_N": sd.tolist()})
-        return {"force_N": x.tolist()}, {"force_N": sd.tolist()}
-    if n == "com_offset":
-        return {"offset_m": x.tolist()}, {"offset_m": sd.tolist()}
-    if n == "inertia":
-        return ({"scale": x.tolist(), "inertia_diag_kg_m2": (np.diag(vehicle.inertia) * x).tolist()},
-                {"scale": sd.tolist()})
-    raise KeyError(n)
+def public_params(cand: Candidate, x, sd, vehicle, selected: dict,
+                  frame: str = "NED") -> tuple[dict, dict]:
+    """``params`` and ``uncertainty`` (one sigma) as reported in the diagnosis JSON; direction
+    parameters (world ``force_N``, ``air_velocity_m_per_s``; body ``offset_m``) in the
+    recording's own frame (``"ENU"``: world ENU, body FLU)."""
+    params, unc = cand.public(np.asarray(x, dtype=float), np.asarray(sd, dtype=float),
+                              PublicContext(vehicle, selected, frame))
+    return frame_vectors(params, frame), frame_vectors(unc, frame, magnitude=True)
+
+
+def public_bounds(cand: Candidate) -> dict:
+    """``{"<param>": [lo, hi]}`` of the reported parameters (``lo``, ``hi`` are lists for
+    vector parameters; symmetric for direction parameters, so the same in every frame)."""
+    return cand.public_bounds()
 
 
 EXPLANATIONS = {
@@ -260,8 +231,19 @@ EXPLANATIONS = {
     "wind": "a steady external force pushes the vehicle (moving air)",
     "com_offset": "the centre of mass is offset from the rotor-plane centre: thrust makes a moment",
     "inertia": "the inertia differs from the nominal value (angular response scaled)",
+    "blade_flapping": "rotor drag and blade flapping: a force against and a moment from the "
+                      "in-plane airspeed, both proportional to thrust",
+    "rotor_inertia": "the rotors' inertia: changing rotor speeds kick the body in yaw",
+    "battery_thrust": "thrust per command follows the battery voltage, f ~ (V / V_ref)^n",
+    "thrust_curve": "the command-to-thrust curve differs from the nominal one "
+                    "(f = a + b u + c u^2 in the recording's command units)",
+    "mass": "the mass differs from the nominal value (a payload): translation responds less",
+    "rate_damping": "the body rates are damped, M = -(D1 + D2 |w|) w per body axis",
 }
 
 #: Effects the data cannot always tell apart; counted as one class in the blinded study.
-EQUIVALENT = {"thrust_scale": "thrust", "motor_efficiency": "thrust",
-              "delay": "timing", "motor_lag": "timing"}
+#: "thrust": the same translational response (a thrust gain, a curve, or a mass change); only
+#: the angular response separates them, which closed-loop feedback biases. "timing": both
+#: low-pass the command. docs/effects.md explains each.
+EQUIVALENT = {"thrust_scale": "thrust", "motor_efficiency": "thrust", "thrust_curve": "thrust",
+              "mass": "thrust", "delay": "timing", "motor_lag": "timing"}

@@ -25,7 +25,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from quadfault.diagnosis.library import thrust_series
+from quadfault.diagnosis.library import (
+    WrenchInputs,
+    body_vehicle,
+    external_wrench,
+    needs_rate,
+    thrust_series,
+)
 from quadfault.diagnosis.residuals import Replay
 from quadfault.dynamics import RigidBodyState, step_rk4
 from quadfault.rotation import expm_so3, rotation_angle
@@ -50,7 +56,9 @@ def _measured_rotation(rp: Replay, rec, starts, n):
 def _rollout(rec, rp: Replay, terms, starts, steps, sub):
     """States after each of ``steps`` integration steps of ``sub`` intervals."""
     veh = rp.vehicle
-    f = thrust_series(rp, terms)
+    rated = needs_rate(terms)
+    f, f_end = thrust_series(rp, terms, ends=True) if rated else (thrust_series(rp, terms), None)
+    body = body_vehicle(veh, terms)
     kn = rp.knots
     S = len(starts)
     if rec.has_pose:
@@ -68,19 +76,17 @@ def _rollout(rec, rp: Replay, terms, starts, steps, sub):
         fm = np.einsum("sk,skn->sn", dts, f[span]) / dt[:, None]  # mean held thrust
         W = veh.wrench(fm)
         T, M = W[:, 0], W[:, 1:]
+        rate = None
+        if rated:  # mean rate over the step: from the thrust held before it to its last one
+            before = np.maximum(span[:, 0] - 1, 0)
+            rate = (f_end[span[:, -1]] - f_end[before]) / dt[:, None]
 
-        def external(st, T=T, M=M):
-            F = np.zeros(st.p.shape)
-            Mx = np.zeros(st.w.shape)
-            for c, x in wterms:
-                dF, dM = c.wrench(x, veh, st.R, st.v, st.w, T, M)
-                if dF is not None:
-                    F = F + dF
-                if dM is not None:
-                    Mx = Mx + dM
-            return F, Mx
+        def external(st, T=T, M=M, rate=rate):
+            F, Mx = external_wrench(wterms, WrenchInputs(veh, st.R, st.v, st.w, T, M, rate))
+            return (np.zeros(st.p.shape) if F is None else F,
+                    np.zeros(st.w.shape) if Mx is None else Mx)
 
-        s = step_rk4(s, T, M, veh, dt[:, None], external if wterms else None)
+        s = step_rk4(s, T, M, body, dt[:, None], external if wterms else None)
         out.append(s)
     return out
 

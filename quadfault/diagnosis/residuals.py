@@ -86,26 +86,25 @@ class Replay:
         excluded: the calibration segments ``((t0, t1), ...)`` [s] (fitted on, not scored).
         scoring_note: why the segment was not excluded (it left too few blocks), or "".
         starts: the unmerged inputs at the first recording row of every interval:
-            ``{"f", "u", "p", "v", "R", "w"}`` (``u`` None without ``u`` commands, ``p, v, R``
-            None for an IMU-only log) -- what the
+            ``{"f", "p", "v", "R", "w"}`` (``p, v, R`` None for an IMU-only log) -- what the
             controller knew when it chose the interval's first command (instruments of the
-            feedback-bias check, ``select.frozen_replay``).
+            feedback-bias check, ``feedback.frozen_replay``).
         raw: for merged (fast) logs, the unmerged commands ``{"t", "dt", "f", "merge",
             "seg"}`` (recording times (N,), interval lengths and saturated commands (M_raw,
-            ...), the duration-weighted merge matrix and the merged interval of each raw one;
-            ``"u"``: the raw ``u`` commands or None):
+            ...), the duration-weighted merge matrix and the merged interval of each raw one):
             timing effects (delay, lag) act on the raw commands before merging, so merging
             does not bias their time constants; None when nothing was merged.
         masked: spans ``((t0, t1, reason), ...)`` [s] left out of fitting and scoring (not
             free flight, :mod:`quadfault.diagnosis.phases`).
         accel: accelerometer specific force held over each interval, body FRD [m/s^2]
             (M, 3), or None.
-        u: raw commands ``u`` held over each interval (M, n) when the recording has them
-            (with ``thrust_curve``), else None; vbat: battery voltage [V] (M,) or None.
         rotor_k: thrust per squared measured rotor speed [N/(rad/s)^2] of the ``rotor_*``
             channels, or None without rotor speeds; rotor_k_source: ``"sidecar"`` or
             ``"fitted"``.
-        thrust_curve: the recording's ``(a, b, c)`` command curve, or None.
+        thrust_curve: the nominal ``(a, b, c)`` command-to-thrust curve of a ``u``-command
+            recording (``f = a + b u + c u^2``), None for thrust commands.
+        vbat: battery voltage [V] at each interval's midpoint (M,) (gaps in the stream
+            interpolated), or None when not logged.
     """
 
     vehicle: Vehicle
@@ -130,11 +129,10 @@ class Replay:
     raw: dict | None = None
     masked: tuple = ()
     accel: np.ndarray | None = None
-    u: np.ndarray | None = None
-    vbat: np.ndarray | None = None
     rotor_k: float | None = None
     rotor_k_source: str = ""
     thrust_curve: tuple | None = None
+    vbat: np.ndarray | None = None
 
     @property
     def has_pose(self) -> bool:
@@ -303,13 +301,8 @@ def prepare(recording: Recording, vehicle: Vehicle | None = None, *,
     first_k = ok_idx[np.unique(block[ok], return_index=True)[1]]
     first, last = knots[first_k], knots[first_k + q]  # sample indices at the block ends
     k0 = knots[:-1]
-    u_raw = None
-    if recording.commands_u is not None and recording.thrust_curve is not None:
-        u_raw = np.asarray(recording.commands_u[:-1], dtype=float)
-    raw = ({"t": t, "dt": dt, "f": f, "merge": merge, "seg": seg, "u": u_raw}
-           if r > 1 else None)
-    starts = {"f": f[k0], "u": None if u_raw is None else u_raw[k0], "w": recording.omega[k0],
-              "p": None, "v": None, "R": None}
+    raw = {"t": t, "dt": dt, "f": f, "merge": merge, "seg": seg} if r > 1 else None
+    starts = {"f": f[k0], "w": recording.omega[k0], "p": None, "v": None, "R": None}
     f = mean(f)
     w_mid = mean(0.5 * (recording.omega[:-1] + recording.omega[1:]))
     rate = (recording.omega[last] - recording.omega[first]) / dur[:, None]
@@ -363,17 +356,29 @@ def prepare(recording: Recording, vehicle: Vehicle | None = None, *,
         excluded = ()
     masked = tuple((float(s[0]), float(s[1]), str(s[2]) if len(s) > 2 else "excluded")
                    for s in exclude)
-    u_mid = None if u_raw is None else mean(u_raw)
-    vbat = None if recording.vbat is None else mean(np.asarray(recording.vbat[:-1], float))
+    curve = recording.thrust_curve if recording.commands_u is not None else None
+    vbat = _interval_voltage(recording, mean)
     rp = Replay(veh, tk, dtk, f, p_mid, v_mid, R_mid, w_mid, block, tc, dur, run,
                 np.zeros((n_blocks, len(channels))), channels, knots, scored, excluded, note,
-                starts, raw, masked, accel, u_mid, vbat, rotor_k, k_source,
-                recording.thrust_curve)
+                starts, raw, masked, accel, rotor_k, k_source, curve, vbat)
     later = iter([rp.block_mean(x) for x in (accel, None if W is None else rotor_k * f2)
                   if x is not None])
     parts = [next(later) if x is None else x for x in parts]
     object.__setattr__(rp, "measured", np.hstack(parts))
     return rp
+
+
+def _interval_voltage(recording: Recording, mean) -> np.ndarray | None:
+    """Battery voltage at the (merged) interval midpoints, dropouts (NaN, <= 0) interpolated;
+    None without a usable ``vbat`` column."""
+    if recording.vbat is None:
+        return None
+    t, v = recording.t, np.asarray(recording.vbat, dtype=float)
+    ok = np.isfinite(v) & (v > 0)
+    if ok.sum() < 2:
+        return None
+    v = np.interp(t, t[ok], v[ok])
+    return mean(0.5 * (v[:-1] + v[1:]))
 
 
 def calibration_segments(recording: Recording, where: str = "recording") -> tuple:
@@ -397,12 +402,14 @@ def calibration_segments(recording: Recording, where: str = "recording") -> tupl
 
 
 def model_channels(rp: Replay, f: np.ndarray, force=None, moment_ext=None,
-                   thrust=None, moment=None) -> np.ndarray:
+                   thrust=None, moment=None, vehicle: Vehicle | None = None) -> np.ndarray:
     """Interval channels (M, C) the model predicts for produced rotor thrusts ``f`` [N] and
     external force (world; body for an IMU-only log) [N] / moment (body) [N m] (paper eqs. 2
-    and 4). The ``rotor_*`` channels are not formed here (they need the command before the
-    effects that act after the rotor speed; ``library.predict_intervals`` appends them)."""
-    veh = rp.vehicle
+    and 4), for the rigid body ``vehicle`` (default: the nominal one; another mass or inertia
+    for body-stage effects). The ``rotor_*`` channels are not formed here (they need the
+    command before the effects that act after the rotor speed; ``library.predict_intervals``
+    appends them)."""
+    veh = rp.vehicle if vehicle is None else vehicle
     if thrust is None or moment is None:
         wrench = veh.wrench(f)
         thrust, moment = wrench[:, 0], wrench[:, 1:]

@@ -18,10 +18,7 @@ Each round:
    channels the option acts on (its fitted signal above the noise); the instrumental-variable
    check against closed-loop feedback bias (:mod:`~quadfault.diagnosis.feedback`); the fold
    agreement of every new effect (:func:`~quadfault.diagnosis.crossval.fold_agreement`); and
-   for a pair, a held-out RMS lower by ``min_improvement`` than each of its members alone;
-   and, when it joins other effects, every new effect at its joint value must, alone on the
-   nominal model, lower the total residual or the RMS of a channel in which its signal is
-   above the noise by ``min_improvement`` (else it only helps by shifting another effect).
+   for a pair, a held-out RMS lower by ``min_improvement`` than each of its members alone.
 4. An option that passes but has a parameter at a bound
    (:func:`~quadfault.diagnosis.crossval.at_bound`) is a **suspect**: the data asks for more
    than the effect allows, so another effect is likely missing; it is never accepted. Among
@@ -30,8 +27,9 @@ Each round:
    effect (or a pair member's single fit) much less certain (:func:`trade_off`) or pushes it
    to a bound fails: it would exchange, not add.
 
-The search stops when no option passes or ``max_effects`` are accepted. Equivalent pairs
-(``thrust_scale`` / ``motor_efficiency``) are never both accepted. Every candidate that was
+The search stops when no option passes or ``max_effects`` are accepted. An effect that
+contains another (``Candidate.excludes``: ``motor_efficiency`` and ``thrust_curve`` contain
+``thrust_scale``) is never accepted with it. Every candidate that was
 fitted and not accepted keeps the reason it last failed.
 """
 
@@ -42,7 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from quadfault.diagnosis.crossval import (CrossValidation, at_bound, cross_validate,
+from quadfault.diagnosis.crossval import (CrossValidation, cross_validate, fit_at_bound,
                                           fold_agreement, folds_of)
 from quadfault.diagnosis.feedback import (IV_MIN, IV_UNVERIFIED_GAIN, IV_Z, frozen_replay,
                                           iv_slope)
@@ -53,7 +51,6 @@ from quadfault.diagnosis.residuals import Replay
 __all__ = ["Selection", "Step", "Verdict", "select", "frozen_replay", "iv_slope", "folds_of",
            "cross_validate", "CrossValidation"]
 
-EXCLUSIVE = {"thrust_scale": "motor_efficiency", "motor_efficiency": "thrust_scale"}
 PAIR_TOP = 3
 INFLATION = 3.0
 
@@ -148,9 +145,8 @@ def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, single
     opt.failed = (_held_out(sc, opt, cur_cv, signal, kw["min_improvement"])
                   or _pair(opt, new, singles_cv, kw["min_improvement"])
                   or _feedback(rp, sc, opt, current, x_cur, cur_pred, signal)
-                  or _explains_alone(rp, sc, opt, new, kw["min_improvement"])
-                  or _bounds_and_trade(opt, current, new, cur_fit)
-                  or _folds(opt, new))
+                  or _bounds_and_trade(rp, sc, opt, current, new, cur_fit)
+                  or _folds(rp, sc, opt, new))
 
 
 def _held_out(sc, opt, cur_cv, signal, m) -> str:
@@ -198,36 +194,19 @@ def _feedback(rp, sc, opt, current, x_cur, cur_pred, signal) -> str:
     return ""
 
 
-def _explains_alone(rp, sc, opt, new, m) -> str:
-    """Joining other effects, each new one at its joint value must improve the nominal model
-    on its own (the total, or by ``m`` a channel it acts on)."""
-    if len(opt.cands) == 1:
-        return ""
-    nominal = predict(rp, [])
-    base = sc.channel_sse(rp.measured - nominal)
-    for j, c in new:
-        own = predict(rp, [(c, opt.fit.x[j])])
-        alone = sc.channel_sse(rp.measured - own)
-        acts = np.sqrt(np.mean(((own - nominal) / sc.noise) ** 2, axis=0)) >= 1.0
-        better = np.sqrt(alone / np.maximum(base, 1e-300)) <= 1.0 - m
-        if alone.sum() >= base.sum() and not np.any(better & acts):
-            return (f"{c.name} at the value the joint fit gives it does not improve the "
-                    "nominal model on its own: it only helps by shifting another effect")
-    return ""
-
-
-def _bounds_and_trade(opt, current, new, cur_fit) -> str:
-    if any(at_bound(c, opt.fit.x[j]) for j, c in new):
+def _bounds_and_trade(rp, sc, opt, current, new, cur_fit) -> str:
+    if any(fit_at_bound(rp, sc, opt.fit, j) for j, _ in new):
         return "at a bound"
-    pushed = [c.name for j, c in enumerate(current) if at_bound(c, opt.fit.x[j])]
+    pushed = [c.name for j, c in enumerate(current) if fit_at_bound(rp, sc, opt.fit, j)]
     if pushed:  # the joint refit drives an accepted effect to its bound
         return f"it pushes the accepted {pushed[0]} to a bound"
     return "" if cur_fit is None else trade_off(cur_fit, [c.name for c in current], opt.fit)
 
 
-def _folds(opt, new) -> str:
+def _folds(rp, sc, opt, new) -> str:
     for j, c in new:
-        ok, detail = fold_agreement(c, opt.fit.x[j], [fx[j] for fx in opt.cv.fold_x])
+        ok, detail = fold_agreement(c, opt.fit.x[j], [fx[j] for fx in opt.cv.fold_x],
+                                    lambda xf, j=j: fit_at_bound(rp, sc, opt.fit, j, xf))
         opt.agreement[c.name] = detail
         if not ok:
             return f"{c.name}: the folds disagree ({detail})"
@@ -274,11 +253,11 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
     steps, verdicts, alone, last_x = [], {}, {}, {}
     final = None
     screening = ()
-    testable = [c for c in library if rp.has_pose or not c.needs_pose]
+    testable = [c for c in library if c.testable(rp)]
     while len(current) < max_effects:
         chosen = {c.name for c in current}
-        pool = [c for c in testable if c.name not in chosen and c.name not in verdicts_final(verdicts)
-                and EXCLUSIVE.get(c.name) not in chosen]
+        pool = [c for c in testable if c.name not in chosen
+                and c.name not in verdicts_final(verdicts) and c.compatible(current)]
         if not pool:
             break
         fixed = list(zip(current, x_cur))
@@ -305,7 +284,7 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
             options.append(_Option(current + [c], f, f.bic()))
         if len(current) + 2 <= max_effects:
             for (ba, a, fa), (_, b, fb) in itertools.combinations(singles[:pair_top], 2):
-                if EXCLUSIVE.get(a.name) == b.name or ba >= cur_bic - bic_margin:
+                if not a.compatible([b]) or ba >= cur_bic - bic_margin:
                     continue  # (singles are in BIC order: the better one must lower BIC)
                 f = fit(rp, current + [a, b], scale, init=x_cur + list(fa.x) + list(fb.x))
                 options.append(_Option(current + [a, b], f, f.bic()))
@@ -335,7 +314,7 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
             for j, c in enumerate(opt.cands):
                 if c not in new or c.name in verdicts_final(verdicts):
                     continue
-                if opt.failed == "at a bound" and at_bound(c, opt.fit.x[j]):
+                if opt.failed == "at a bound" and fit_at_bound(rp, sc, opt.fit, j):
                     verdicts[c.name] = _verdict(c, "suspect", (
                         "improves the held-out fit only with a parameter at its bound: the data "
                         "asks for more than this effect allows; a missing effect is likely"),
