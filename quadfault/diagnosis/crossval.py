@@ -8,7 +8,9 @@ Fold agreement (:func:`fold_agreement`): the leave-one-fold-out parameter vector
 jackknife standard error ``sd_j = sqrt((k - 1) / k * sum_i (x_ij - mean_j)^2)`` of every
 parameter. An effect's folds agree when, for the parameter that departs most from the nominal
 value in units of that error, the all-data departure is at least ``FOLD_Z`` (3) jackknife
-standard errors, every fold departs to the same side, and no fold sits at a bound. A fit that
+standard errors, every fold departs to the same side, and no fold has that parameter at a
+bound that matters (:func:`bound_mask`). A parameter the all-data fit leaves at a bound that
+does not matter is never the one read. A fit that
 one part of the flight asks for and another contradicts fails it.
 
 At a bound (:func:`at_bound`): a parameter within ``BOUND_MARGIN`` (2 %) of the span of its
@@ -107,13 +109,13 @@ def _near_bound(cand, x) -> np.ndarray:
     return low | high
 
 
-def at_bound(cand, x, rp: Replay | None = None, sc=None, others=()) -> bool:
-    """Whether a parameter of ``cand`` at ``x`` sits at (or within the margin of) a bound;
-    with the replay ``rp`` and its scoring ``sc``, only a parameter whose part of the model
-    (with the terms ``others``) is above the noise (module docstring)."""
+def bound_mask(cand, x, rp: Replay | None = None, sc=None, others=()) -> np.ndarray:
+    """Per parameter of ``cand`` at ``x``: at (or within the margin of) a bound; with the
+    replay ``rp`` and its scoring ``sc``, only where that parameter's part of the model (with
+    the terms ``others``) is above the noise (module docstring)."""
     near = _near_bound(cand, x)
     if rp is None or not near.any():
-        return bool(near.any())
+        return near
     x = np.asarray(x, dtype=float)
     others = list(others)
     model = predict(rp, others + [(cand, x)])
@@ -121,39 +123,55 @@ def at_bound(cand, x, rp: Replay | None = None, sc=None, others=()) -> bool:
         back = x.copy()
         back[i] = cand.x0[i]
         change = (model - predict(rp, others + [(cand, back)])) / sc.noise
-        if np.sqrt(np.sum(np.mean(change ** 2, axis=0))) >= 1.0:
-            return True
-    return False
+        near[i] = np.sqrt(np.sum(np.mean(change ** 2, axis=0))) >= 1.0
+    return near
 
 
-def fit_at_bound(rp: Replay, sc, f: Fit, j: int, x=None) -> bool:
-    """:func:`at_bound` for effect ``j`` of the fit ``f`` (at ``x``, default its fitted
+def at_bound(cand, x, rp: Replay | None = None, sc=None, others=()) -> bool:
+    """Whether a parameter of ``cand`` at ``x`` sits at a bound that matters
+    (:func:`bound_mask`)."""
+    return bool(np.any(bound_mask(cand, x, rp, sc, others)))
+
+
+def fit_bound_mask(rp: Replay, sc, f: Fit, j: int, x=None) -> np.ndarray:
+    """:func:`bound_mask` for effect ``j`` of the fit ``f`` (at ``x``, default its fitted
     value), the fit's other effects at their fitted values."""
     terms = list(f.terms)
     x = terms[j][1] if x is None else x
-    return at_bound(f.candidates[j], x, rp, sc, terms[:j] + terms[j + 1:])
+    return bound_mask(f.candidates[j], x, rp, sc, terms[:j] + terms[j + 1:])
 
 
-def fold_agreement(cand, x, fold_x, bound=None) -> tuple[bool, str]:
+def fit_at_bound(rp: Replay, sc, f: Fit, j: int, x=None) -> bool:
+    return bool(np.any(fit_bound_mask(rp, sc, f, j, x)))
+
+
+def fold_agreement(cand, x, fold_x, mask=None) -> tuple[bool, str]:
     """``(agree, detail)``: the fold-agreement rule of the module docstring for the effect
-    ``cand`` fitted at ``x`` with the per-fold vectors ``fold_x`` (k, p); ``bound(x_fold)``
-    says whether a fold is at a bound (default :func:`at_bound` without the recording)."""
+    ``cand`` fitted at ``x`` with the per-fold vectors ``fold_x`` (k, p); ``mask(x)`` gives
+    the parameters at a bound that matters (default :func:`bound_mask` without the
+    recording). The rule reads the one parameter that departs most; parameters the all-data
+    fit leaves at a bound that does not matter are never that parameter (their spread says
+    nothing)."""
     X = np.asarray(fold_x, dtype=float)
     x = np.asarray(x, dtype=float)
     k = len(X)
     if k < 2:
         return True, "one fold"
+    mask = mask or (lambda xi: bound_mask(cand, xi))
+    use = ~(_near_bound(cand, x) & ~mask(x))
+    if not use.any():
+        use[:] = True
     x0 = np.asarray(cand.x0, dtype=float)
     span = np.asarray(cand.upper, dtype=float) - np.asarray(cand.lower, dtype=float)
     sd = np.sqrt((k - 1) / k * np.sum((X - X.mean(axis=0)) ** 2, axis=0))
     sd = np.maximum(sd, 1e-12 * span)
-    z = np.abs(x - x0) / sd
+    z = np.where(use, np.abs(x - x0) / sd, -1.0)
     j = int(np.argmax(z))
     label = cand.labels[j] if j < len(cand.labels) else f"parameter {j}"
     same_side = bool(np.all(np.sign(X[:, j] - x0[j]) == np.sign(x[j] - x0[j])))
-    bound = bound or (lambda xi: at_bound(cand, xi))
-    bound_folds = int(sum(bound(xi) for xi in X))
+    bound_folds = int(sum(bool(mask(xi)[j]) for xi in X))
     size = "every fold gives the same value" if z[j] > 1e6 else f"{z[j]:.1f} jackknife sd"
-    detail = (f"folds: {label} departs from nominal by {size} (needs {FOLD_Z:g})" + ("" if same_side else ", folds on both sides of nominal")
+    detail = (f"folds: {label} departs from nominal by {size} (needs {FOLD_Z:g})"
+              + ("" if same_side else ", folds on both sides of nominal")
               + (f", {bound_folds} of {k} folds at a bound" if bound_folds else ""))
     return bool(z[j] >= FOLD_Z and same_side and bound_folds == 0), detail

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from quadfault.diagnosis.crossval import cross_validate, fit_at_bound, folds_of
+from quadfault.diagnosis.crossval import cross_validate, fit_at_bound, fit_bound_mask, folds_of
 from quadfault.diagnosis.feedback import IV_MIN, IV_UNVERIFIED_GAIN
 from quadfault.diagnosis.findings import base_explanation, finding
 from quadfault.diagnosis.library import build_library, predict, public_params
@@ -232,7 +232,7 @@ class Diagnosis:
                 explanation=_explain(step, selected, params),
                 fold_x=[fx[k] for fx in sel.final_cv.fold_x], gain=step.improvement_step,
                 at_bound=fit_at_bound(rp, sc, sel.final, k),
-                bound=lambda xf, k=k: fit_at_bound(rp, sc, sel.final, k, xf), **common))
+                bound=lambda xf, k=k: fit_bound_mask(rp, sc, sel.final, k, xf), **common))
         effects.sort(key=lambda e: -e.improvement)
         suspect, rejected = [], []
         for name, v in sel.verdicts.items():
@@ -245,7 +245,7 @@ class Diagnosis:
                     c, v.x, v.sd, improvement=improvement(cv_alone),
                     explanation=f"{base_explanation(c.name)}. {v.reason}.", fold_x=folds,
                     status="suspect", reason=v.reason, at_bound=True, gain=v.gain,
-                    bound=lambda xf, f=v.fit, j=j: fit_at_bound(rp, sc, f, j, xf), **common))
+                    bound=lambda xf, f=v.fit, j=j: fit_bound_mask(rp, sc, f, j, xf), **common))
             else:
                 f = sel.alone.get(name, v.fit)
                 j = list(f.candidates).index(c)
@@ -254,7 +254,7 @@ class Diagnosis:
                     explanation=base_explanation(c.name), status="rejected", reason=v.reason,
                     fold_x=[] if cv_alone is None else [fx[0] for fx in cv_alone.fold_x],
                     at_bound=fit_at_bound(rp, sc, f, j), gain=v.gain,
-                    bound=lambda xf, f=f, j=j: fit_at_bound(rp, sc, f, j, xf), **common))
+                    bound=lambda xf, f=f, j=j: fit_bound_mask(rp, sc, f, j, xf), **common))
         suspect.sort(key=lambda e: -e.improvement)
         rejected.sort(key=lambda e: -e.improvement)
         table, model_ci = sc.channel_table(sel.baseline.residual, sel.final_cv.residual,

@@ -44,7 +44,7 @@ def finding(cand, x, sd, *, vehicle, selected: dict, frame: str, improvement: fl
             at_bound: bool = False, gain: float | None = None, bound=None) -> EffectFinding:
     """One reported effect (module docstring); the fold-agreement rule
     (:func:`~quadfault.diagnosis.crossval.fold_agreement`) is read from ``fold_x``, with
-    ``bound(x_fold)`` telling whether a fold is at a bound."""
+    ``bound(x)`` the parameters at a bound that matters."""
     frames = dict(cand.frames)
     params, unc = public_params(cand, np.asarray(x, float), np.asarray(sd, float), vehicle,
                                 selected, frame=frame)

@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from quadfault.diagnosis.crossval import (CrossValidation, cross_validate, fit_at_bound,
-                                          fold_agreement, folds_of)
+                                          fit_bound_mask, fold_agreement, folds_of)
 from quadfault.diagnosis.feedback import (IV_MIN, IV_UNVERIFIED_GAIN, IV_Z, frozen_replay,
                                           iv_slope)
 from quadfault.diagnosis.fit import Fit, fit
@@ -206,7 +206,7 @@ def _bounds_and_trade(rp, sc, opt, current, new, cur_fit) -> str:
 def _folds(rp, sc, opt, new) -> str:
     for j, c in new:
         ok, detail = fold_agreement(c, opt.fit.x[j], [fx[j] for fx in opt.cv.fold_x],
-                                    lambda xf, j=j: fit_at_bound(rp, sc, opt.fit, j, xf))
+                                    lambda xf, j=j: fit_bound_mask(rp, sc, opt.fit, j, xf))
         opt.agreement[c.name] = detail
         if not ok:
             return f"{c.name}: the folds disagree ({detail})"
