@@ -17,9 +17,11 @@ At a bound (:func:`at_bound`): a parameter within ``BOUND_MARGIN`` (2 %) of the 
 bounds from a bound that is not the effect's neutral value (``Candidate.x0``; a drag
 coefficient at its lower bound 0 is "no drag on that axis", an inertia scale at 2 is "the
 data asks for more than this effect allows") and, given the recording, whose part of the
-model matters: putting that one parameter back to its neutral value changes the model's
-channels by more than the noise (root-sum-square over the channels of the RMS change in
-noise units at least 1, the measure of a negligible effect in the selection). A parameter
+model matters: putting the parameters at a bound back to their neutral values changes the
+model's channels by more than the noise (root-sum-square over the channels of the RMS change
+in noise units at least 1, the measure of a negligible effect in the selection); then each
+of them that does so alone is at a bound that matters (all of them when only together). A
+parameter
 whose whole range hardly changes the model -- quadratic rate damping over a flight at low
 rates, next to the linear term that carries the signal -- ends at a bound without the data
 asking for anything.
@@ -119,11 +121,18 @@ def bound_mask(cand, x, rp: Replay | None = None, sc=None, others=()) -> np.ndar
     x = np.asarray(x, dtype=float)
     others = list(others)
     model = predict(rp, others + [(cand, x)])
-    for i in np.flatnonzero(near):
+
+    def matters(idx) -> bool:
         back = x.copy()
-        back[i] = cand.x0[i]
+        back[idx] = np.asarray(cand.x0, dtype=float)[idx]
         change = (model - predict(rp, others + [(cand, back)])) / sc.noise
-        near[i] = np.sqrt(np.sum(np.mean(change ** 2, axis=0))) >= 1.0
+        return bool(np.sqrt(np.sum(np.mean(change ** 2, axis=0))) >= 1.0)
+
+    idx = np.flatnonzero(near)
+    if not matters(idx):  # all of them together below the noise
+        return np.zeros_like(near)
+    alone = np.array([matters([i]) for i in idx])
+    near[idx] = alone if alone.any() else True  # together they matter
     return near
 
 

@@ -34,7 +34,10 @@ def iv_slope(rp: Replay, before, after, scale, residual, channels) -> tuple[floa
     the controller's reaction to it: ``sum(z r) / sum(z s)`` is ~1 when the fitted signal is
     real and ~0 when least squares fitted that reaction (closed-loop feedback bias). Only the
     channels of ``channels`` in which the instrument predicts the signal (``sum(z s) > 0``)
-    count; NaN when there are none."""
+    count; NaN when there are none. A fit stopped by a bound leaves part of its own signal in
+    the residual: its least-squares slope ``sum(s r) / sum(s s)`` is then above 1 and the
+    instrumented slope is divided by it (a feedback-biased inertia clipped at its bound must
+    not pass for a real one)."""
     ch = np.asarray(channels, dtype=int)
     if ch.size == 0:
         return float("nan"), float("nan")
@@ -47,7 +50,14 @@ def iv_slope(rp: Replay, before, after, scale, residual, channels) -> tuple[floa
     den = float(np.sum(z[:, ch] * sig[:, ch]))  # > 0: a sum of positive channel terms
     beta = float(np.sum(z[:, ch] * residual[:, ch])) / den
     u = residual[:, ch] - beta * sig[:, ch]
-    return beta, float(np.sqrt(np.sum((z[:, ch] * u) ** 2))) / den
+    se = float(np.sqrt(np.sum((z[:, ch] * u) ** 2))) / den
+    # relative to the least-squares slope of the same signal: 1 at an interior optimum, more
+    # when the fit stopped at a bound (the residual still holds more of the signal, which
+    # would inflate the instrumented slope too)
+    ols = float(np.sum(sig[:, ch] * residual[:, ch])) / max(float(np.sum(sig[:, ch] ** 2)),
+                                                            1e-300)
+    scale = max(ols, 1.0)
+    return beta / scale, se / scale
 
 
 def frozen_replay(rp: Replay) -> Replay:
