@@ -175,10 +175,12 @@ def test_two_effects_can_enter_in_one_step_as_a_pair(lag_and_drag):
 
 
 def test_measured_rotor_speeds_identify_the_motor_lag():
-    """Rotor speeds that follow the command through a 40 ms lag, with the sidecar's k."""
+    """Rotor speeds that follow the command through a 40 ms lag, with the sidecar's k: the
+    speed sampled in row k is the rotor's at t_k, reached under the commands before it."""
     k = 1e-5
     rec = fly((fx.MotorLag(0.04),), seed=8)
     lagged = fx.lag_series(rec.thrust_cmd, np.r_[np.diff(rec.t), DT], 0.04)
+    lagged = np.vstack((rec.thrust_cmd[:1], lagged[:-1]))  # value at the end of interval k-1
     omega = np.sqrt(np.maximum(lagged, 0.0) / k)
     omega[100:103, 2] = np.nan  # a few telemetry dropouts
     with_rotor = dataclasses.replace(rec, rotor_speed=omega,

@@ -12,6 +12,10 @@ Channels (CONTRACT.md sec. 4), each present when the recording measures it:
   ``k`` is the sidecar's ``rotor_thrust_coefficient`` [N/(rad/s)^2], else the least-squares
   ratio of the commanded thrust to ``omega^2`` over the flight (then these channels carry the
   motor dynamics but not the curve's overall scale). Missing speed samples are interpolated.
+  An interval's value is the speed sampled at its end: the model's thrust produced over an
+  interval (the simulator's and the library's) is what the rotor reaches by its end, exact
+  for a first-order motor at any sampling; the mean of the two end samples would lag it by
+  half a sample (a fast motor's speed at a sample is already the command held before it).
 
 Smoothing ("block means"): the recording is cut into contiguous blocks of about
 ``block_seconds`` (default 20 ms; at least one sample interval). Logs faster than
@@ -326,7 +330,7 @@ def prepare(recording: Recording, vehicle: Vehicle | None = None, *,
     W = rotor_speeds(recording)
     rotor_k, k_source = None, ""
     if W is not None:
-        f2 = mean(0.5 * (W[:-1] ** 2 + W[1:] ** 2))  # mean squared speed over each interval
+        f2 = mean(W[1:] ** 2)  # squared speed at each interval's end (module docstring)
         rotor_k = (recording.meta or {}).get("rotor_thrust_coefficient")
         k_source = "sidecar"
         if rotor_k is None:
