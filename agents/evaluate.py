@@ -41,6 +41,7 @@ import numpy as np
 
 from agents.rollout import ESTIMATOR_SOURCES, Flight, FlightConfig, fly
 from agents.suite import SUITES, get_suite
+from agents.sweep import BACKENDS, run_sweep
 from quadfault.errors import ConfigError, QuadfaultError
 from quadfault.fileio import atomic_write_text, check_writable
 
@@ -212,8 +213,6 @@ def evaluate(agents: list[AgentSpec], suite: str, seeds: list[int], *,
     ``backend``: ``"serial"`` (this process), ``"local"`` (``workers`` processes) or ``"ray"``
     (:func:`agents.sweep.run_sweep`); every backend returns the same flights in the same order.
     """
-    from agents.sweep import run_sweep
-
     jobs = flight_jobs(agents, suite, seeds, scenarios=scenarios, config=config,
                        duration=duration)
     return run_sweep(fly_job, jobs, backend=backend, workers=workers, progress=progress,
@@ -242,6 +241,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, help="output folder")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     parser.add_argument("--force", action="store_true", help="overwrite existing results")
+    parser.add_argument("--backend", choices=BACKENDS, default="serial",
+                        help="where the flights run: this process (default), local processes "
+                             "or Ray (agents.sweep.run_sweep)")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="processes / Ray CPUs of --backend local / ray (default: all cores)")
 
 
 def run(args) -> int:
@@ -263,8 +267,7 @@ def run(args) -> int:
     quiet = getattr(args, "quiet", False)
     flights = evaluate(agents, args.suite, list(args.seeds), scenarios=args.scenarios,
                        duration=args.duration, progress=not quiet and enabled(),
-                       backend=getattr(args, "backend", "serial"),
-                       workers=getattr(args, "workers", None))
+                       backend=args.backend, workers=args.workers)
     rows = aggregate(flights)
     meta = {"suite": args.suite, "seeds": list(args.seeds), "agents": labels,
             "duration_override": args.duration}

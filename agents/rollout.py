@@ -1,10 +1,11 @@
 """Closed-loop flights with an estimator in the loop, without the Gymnasium environment.
 
-:func:`fly` is an explicit loop over physics steps (same order as
-:func:`quadfault.simulator.simulate`): measure, control (with the current ``eta_hat``), step
-the plant (:class:`quadfault.plant.Plant`, the one model), then feed the estimator the sample
-just sent (state at ``t_k``, command held from ``t_k``). The estimate is therefore causal:
-the command at ``t_k`` uses samples up to ``t_{k-1}``.
+:func:`fly` flies the model's one closed loop (:mod:`quadfault.closed_loop`, the loop of
+:func:`quadfault.simulator.simulate`) with Python acting between its steps: per physics
+step, the sensors measure (the loop's ``sense``), the controller computes the commands from
+the measurement and the current ``eta_hat``, the loop steps the motors and the plant, then
+the estimator gets the sample just sent (state at ``t_k``, command held from ``t_k``). The
+estimate is therefore causal: the command at ``t_k`` uses samples up to ``t_{k-1}``.
 
 Sources of ``eta_hat`` (the built-in ablation):
 
@@ -26,12 +27,13 @@ import numpy as np
 
 from agents.fault_tolerant import FaultTolerantConfig, make_controller
 from agents.metrics import CrashLimits, FlightMetrics, RecoveryConfig, flight_metrics, tilt_angle
-from estimators.base import Sample
+from quadfault.sample import Sample
+from quadfault import closed_loop
 from quadfault.controller import ControllerConfig
 from quadfault.errors import ConfigError
 from quadfault.motors import MotorModel
 from quadfault.plant import Plant
-from quadfault.scenarios import Scenario
+from quadfault.scenarios import Scenario, at_times
 from quadfault.simulator import SensorNoise, initial_state
 from quadfault.vehicle import Vehicle
 
@@ -152,9 +154,9 @@ def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any =
     if n < 2:
         raise ConfigError(f"scenario duration {scenario.duration} s is shorter than two steps")
     times = cfg.dt * np.arange(n)
-    efficiency = _Tabulated(cfg.dt, scenario.efficiency(times))
-    plant = Plant(veh, efficiency, MotorModel(scenario.thrust_noise, True), (), "rk4", cfg.dt,
-                  rng)
+    eta_table = np.ascontiguousarray(at_times(scenario.efficiency, times), dtype=float)
+    efficiency = _Tabulated(cfg.dt, eta_table)
+    plant = Plant(veh, efficiency, MotorModel(scenario.thrust_noise, True), dt=cfg.dt)
     ctrl = make_controller(controller, veh, scenario.trajectory, cfg.controller,
                            cfg.fault_tolerant)
     est = make_estimator(estimator, veh, efficiency)
@@ -165,6 +167,12 @@ def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any =
            else None)
     plant.reset(initial_state(scenario, 0.0, ctrl.geometric))
     ctrl.reset()
+    # the loop: the sensors without the accelerometer, the commands set here
+    loop = closed_loop.constants(plant, cfg.sensor_noise, record_accel=False)
+    tables = closed_loop.Tables(np.zeros(1, dtype=np.int64), eta_table[None],
+                                np.zeros((1, 0, 6, 3)))
+    vehicles, no_records = plant.vehicles, closed_loop.Records.none(1, veh.n_rotors)
+    gens = closed_loop.generators([rng])
     decim = cfg.control_decimation
     pos_err, tilt, f_hist = np.empty(n), np.empty(n), np.empty((n, 4))
     keep = np.arange(0, n, cfg.trace_every)
@@ -187,7 +195,8 @@ def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any =
                 or state.p[2] > lim.ground_z):
             crash_time, k_end = float(t), k
             break
-        meas, _ = cfg.sensor_noise.measure(state, None, rng)
+        closed_loop.sense(gens, loop, vehicles)
+        meas = vehicles.measurement(0)
         if k % decim == 0:
             ref_k = type(refs)(*(a[k] for a in refs))
             ff_k = None if ffs is None else (ffs[0][k], ffs[1][k])
@@ -201,9 +210,10 @@ def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any =
         if k % cfg.trace_every == 0:
             j = k // cfg.trace_every
             tr_p[j], tr_eta_hat[j], tr_wz[j] = state.p, eta_hat, state.w[2]
-        plant_step = plant.step(f_cmd, t)
+        vehicles.f_cmd[0] = f_cmd
+        closed_loop.fly(gens, k, k + 1, False, loop, vehicles, tables, no_records)
         if k % cfg.trace_every == 0:
-            tr_eta[k // cfg.trace_every] = plant_step.eta
+            tr_eta[k // cfg.trace_every] = eta_table[k]
         if k % cfg.estimator_every == 0:
             estimate = est.update(Sample(float(t), meas.p, meas.v, meas.R, meas.w, f_cmd.copy()))
             eta_hat = np.asarray(estimate.eta, float)

@@ -12,30 +12,18 @@ returns ``[fn(t) for t in tasks]`` in task order, computed
 ``fn`` must be a module-level function (picklable) and each task deterministic in its own
 arguments (seeds travel inside the task), so every backend gives the same results.
 
-Sweeps built on it (the existing code is called, not rewritten):
-
-* :func:`evaluate_sweep` -- agents x scenarios x seeds of :mod:`agents.evaluate`, the same
-  flights in the same order as :func:`agents.evaluate.evaluate`;
-* :func:`blinded_sweep` -- the blinded diagnosis study of ``benchmarks/blinded_study.py``.
-
-Command line::
-
-    python -m agents.sweep evaluate --out results/ --seeds 0 1 2 --backend ray --workers 8
-    python -m agents.sweep blinded --n 200 --backend local --workers 2
+Sweeps on it: :func:`agents.evaluate.evaluate` (agents x scenarios x seeds;
+``quadfault evaluate --backend ray --workers 8``) and the blinded diagnosis study
+(``python benchmarks/blinded_study.py --backend ray``).
 """
 
 from __future__ import annotations
 
-import argparse
-import importlib.util
 import os
-import sys
-from pathlib import Path
 
-from quadfault.errors import ConfigError, QuadfaultError
+from quadfault.errors import ConfigError
 
 BACKENDS = ("serial", "local", "ray")
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def _check_workers(workers) -> int:
@@ -97,91 +85,3 @@ def run_sweep(fn, tasks, *, backend: str = "local", workers: int | None = None,
         return ray.get(refs)
     finally:
         bar.close()
-
-
-# -- evaluation sweep (agents x scenarios x seeds) ---------------------------------------------
-def evaluate_sweep(agents, suite: str, seeds, *, scenarios=None, config=None, duration=None,
-                   backend: str = "local", workers: int | None = None, progress: bool = False):
-    """:func:`agents.evaluate.evaluate` on a backend: the same list of ``Flight`` records."""
-    from agents.evaluate import evaluate
-
-    return evaluate(agents, suite, seeds, scenarios=scenarios, config=config,
-                    duration=duration, progress=progress, backend=backend, workers=workers)
-
-
-# -- blinded diagnosis study ---------------------------------------------------------------------
-def _blinded_module():
-    spec = importlib.util.spec_from_file_location("blinded_study",
-                                                  ROOT / "benchmarks" / "blinded_study.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("blinded_study", module)
-    spec.loader.exec_module(module)
-    return sys.modules["blinded_study"]
-
-
-def _blinded_one(job):
-    return _blinded_module().run_one(job)
-
-
-def blinded_sweep(n: int, seed: int = 2026, rate: float = 250.0, duration: float = 15.0, *,
-                  backend: str = "local", workers: int | None = None, progress: bool = False):
-    """Rows of the blinded diagnosis study (``benchmarks/blinded_study.py``) and its summary."""
-    jobs = [(seed, i, rate, duration) for i in range(n)]
-    rows = run_sweep(_blinded_one, jobs, backend=backend, workers=workers, progress=progress,
-                     desc="blinded study")
-    return rows, _blinded_module().summarise(rows, rate, duration)
-
-
-# -- command line ----------------------------------------------------------------------------------
-def _add_backend(parser):
-    parser.add_argument("--backend", choices=BACKENDS, default="local",
-                        help="where the tasks run (default local processes)")
-    parser.add_argument("--workers", type=int, default=None,
-                        help="processes / Ray CPUs (default: all cores)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar or table")
-
-
-def main(argv=None) -> int:
-    import agents.evaluate as ev
-
-    parser = argparse.ArgumentParser(prog="python -m agents.sweep",
-                                     description=__doc__.split("\n")[0])
-    sub = parser.add_subparsers(dest="what", required=True)
-    p_eval = sub.add_parser("evaluate", help="agents x scenarios x seeds (agents.evaluate)")
-    ev.add_arguments(p_eval)
-    _add_backend(p_eval)
-    p_blind = sub.add_parser("blinded", help="the blinded diagnosis study")
-    p_blind.add_argument("--n", type=int, default=200)
-    p_blind.add_argument("--seed", type=int, default=2026)
-    p_blind.add_argument("--rate", type=float, default=250.0)
-    p_blind.add_argument("--duration", type=float, default=15.0)
-    p_blind.add_argument("--out", default=None, help="write rows and summary to this JSON file")
-    p_blind.add_argument("--force", action="store_true")
-    _add_backend(p_blind)
-    args = parser.parse_args(argv)
-    try:
-        _check_workers(args.workers)
-        if args.what == "evaluate":
-            return ev.run(args)  # reads args.backend and args.workers
-        if args.n < 1 or args.rate <= 0 or args.duration <= 5:
-            raise ConfigError("--n >= 1, --rate > 0 and --duration > 5 s are required")
-        rows, summary = blinded_sweep(args.n, args.seed, args.rate, args.duration,
-                                      backend=args.backend, workers=args.workers,
-                                      progress=not args.quiet)
-        if args.out:
-            import json
-
-            from quadfault.fileio import atomic_write_text
-
-            atomic_write_text(args.out, json.dumps({"summary": summary, "rows": rows}, indent=1,
-                                                   default=float) + "\n", force=args.force)
-        if not args.quiet:
-            _blinded_module().print_summary(summary, rows)
-        return 0
-    except QuadfaultError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-
-
-if __name__ == "__main__":  # pragma: no cover
-    raise SystemExit(main())

@@ -13,7 +13,7 @@ Prints:
    (target: every abrupt drop to 0.5 within 0.1 s, no false alarm on nominal / degradation);
 3. accuracy: motor-averaged RMSE and spike per scenario, mean over the seeds.
 
-Flights use ``quadfault reproduce``'s settings (``estimators.reproduce.sim_config``: no upper
+Flights use ``quadfault reproduce``'s settings (``estimators.paper.reproduce.sim_config``: no upper
 thrust limit, as in the paper). The EKF's Q_eta is calibrated first (as ``quadfault
 reproduce`` does) unless ``--q-eta``.
 
@@ -36,12 +36,12 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from estimators.calibration import calibrate_q_eta, median_filtered
+from estimators.paper.calibration import calibrate_q_eta, median_filtered
 from estimators.ekf import EKFConfig, MotorEfficiencyEKF
 from estimators.fdi import detect, evaluate
 from estimators.irls import IRLSConfig, SlidingWindowIRLS
 from estimators.metrics import fault_windows, mean_or_none, score
-from estimators.reproduce import flight_check, sim_config
+from estimators.paper.reproduce import flight_check, sim_config
 from quadfault.scenarios import named_scenario
 from quadfault.simulator import simulate
 
@@ -51,23 +51,17 @@ SCENARIOS = ("abrupt", "combined", "nominal", "degradation")
 def speed(duration: float) -> None:
     rec = simulate(named_scenario("combined", duration), config=sim_config("rk4", "combined"),
                    seed=0).without_truth()
-    short = rec.slice(0, min(len(rec), 2000))
     rows = {}
     veh = rec.vehicle
-    for label, est, r in (
-            ("EKF numba", MotorEfficiencyEKF(veh, EKFConfig(backend="numba")), rec),
-            ("IRLS numba", SlidingWindowIRLS(veh, IRLSConfig(backend="numba")), rec),
-            ("EKF numpy", MotorEfficiencyEKF(veh, EKFConfig(backend="numpy")), short),
-            ("IRLS numpy", SlidingWindowIRLS(veh, IRLSConfig(backend="numpy")), short)):
-        est.run(r.slice(0, 50))  # compile / warm up
+    for label, est in (("EKF", MotorEfficiencyEKF(veh)), ("IRLS", SlidingWindowIRLS(veh))):
+        est.run(rec.slice(0, 50))  # compile / warm up
         t0 = time.perf_counter()
-        est.run(r)
-        rows[label] = len(r) / (time.perf_counter() - t0)
+        est.run(rec)
+        rows[label] = len(rec) / (time.perf_counter() - t0)
     print("speed [updates/s]")
     for k, v in rows.items():
-        print(f"  {k:<11} {v:10.0f}")
-    print(f"  ratio EKF/IRLS numba {rows['EKF numba'] / rows['IRLS numba']:.2f}, "
-          f"numpy {rows['EKF numpy'] / rows['IRLS numpy']:.2f}")
+        print(f"  {k:<5} {v:10.0f}")
+    print(f"  ratio EKF/IRLS {rows['EKF'] / rows['IRLS']:.2f}")
 
 
 def flight(name: str, seed: int, duration: float, q_eta: float,

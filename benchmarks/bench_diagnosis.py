@@ -44,7 +44,7 @@ def recording(case, duration, rate, cache):
     dt = 1.0 / rate
     sc = named_scenario("nominal", duration, dt).replace(
         trajectory=Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.15))
-    cfg = SimConfig(dt=dt, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001), backend="numpy")
+    cfg = SimConfig(dt=dt, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001))
     rec = simulate(sc, config=cfg, seed=1, effects=CASES[case], thrust_noise=0.02).without_truth()
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -1,26 +1,22 @@
-"""Environment speed: single-env steps/s (numpy vs compiled physics) and vector-env reset vs N.
+"""Environment speed: single-env steps, vector-env steps and resets against N, cold start.
 
-Part 1 steps ``gym.make("QuadFault-v0", estimator=E, physics=P)`` with the zero residual
-action for P = numpy and numba side by side in one run (rounds interleaved, best round kept,
-numba compiled / loaded from its cache before timing) and prints env steps per wall second,
-per CPU second of this process and the numba / numpy ratio, for E = none and irls.
+* single env: ``gym.make("QuadFault-v0", estimator=E)`` stepped with the zero residual action
+  (episodes reset when they end), env steps per CPU second of the process and per wall second,
+  for E = none and irls;
+* vector env: ``QuadFaultVectorEnv(N, "none", "combined", duration=600)`` stepped with the
+  zero action, physics vehicle-steps per CPU second and per wall second, and the batched
+  ``reset(seed=0)`` of ``QuadFaultVectorEnv(N, "none", "random")``, for N = ``--sizes``;
+* cold start: CPU seconds of the first env step and of the first vector-env step (N = 128) in
+  a fresh process with an empty numba cache (what compiling the kernels costs).
 
-Part 2 times ``QuadFaultVectorEnv(N, "none", "random").reset(seed=0)`` (the batched reset,
-best of 2 by CPU time) against the per-row path it replaced -- one
-``QuadFaultEnv.reset(seed=i)`` per sub-env, the same episodes -- and the part of a row's
-reset that stays per row in Python (seeding the row's generator and drawing its random
-scenario), measured side by side for each N, in wall and CPU seconds of this process.
+Every timing is the best of repeated runs. Numba's thread count is its default (one per
+core) -- what users get. With ``--baseline PATH`` (another checkout, e.g. ``git worktree add
+/tmp/qf-base <commit>``) each measure runs in both, rounds alternated, and the table gives the
+ratio this / baseline for rates (above 1 = this checkout is faster) and baseline / this for
+times. On a shared machine read the per-CPU-second columns; every table carries the load.
 
-Part 3 steps ``QuadFaultVectorEnv(N, "none", scenario, duration=0.1)`` (compiled physics,
-zero action) for ``scenario="combined"`` (one trajectory shared by every row) and
-``"random"`` (a trajectory and a schedule per row) side by side: CPU seconds per ordinary
-step, and of the step that autoresets every row (the episodes end together).
-
-Every timing line carries the 1-minute load average: on a shared machine read the ratios and
-the per-CPU-second rates, not the absolute numbers.
-
-    nice -n 10 python benchmarks/bench_env_step.py                  # N up to 4096
-    nice -n 10 python benchmarks/bench_env_step.py --quick          # small, for a smoke run
+    python benchmarks/bench_env_step.py
+    python benchmarks/bench_env_step.py --baseline /tmp/qf-base --rounds 3
 """
 
 from __future__ import annotations
@@ -28,137 +24,155 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import tempfile
 import time
 
 
-def _parse(argv):
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--steps", type=int, default=400,
-                   help="compiled-physics steps per round (numpy: a tenth; default 400)")
-    p.add_argument("--rounds", type=int, default=3, help="interleaved rounds, best kept")
-    p.add_argument("--sizes", type=int, nargs="+", default=[256, 1024, 4096],
-                   help="vector env sizes N for the reset timing (default 256 1024 4096)")
-    p.add_argument("--estimators", nargs="+", default=["none", "irls"],
-                   choices=["none", "irls", "ekf", "truth"])
-    p.add_argument("--quick", action="store_true", help="few steps, N = 64 and 256 only")
-    return p.parse_args(argv)
+def _clock(fn, repeat: int) -> tuple[float, float]:
+    """Best (wall, CPU) seconds of ``fn()`` over ``repeat`` calls."""
+    wall = cpu = float("inf")
+    for _ in range(repeat):
+        w, c = time.perf_counter(), time.process_time()
+        fn()
+        wall, cpu = min(wall, time.perf_counter() - w), min(cpu, time.process_time() - c)
+    return wall, cpu
 
 
-def _load() -> str:
-    return f"load {os.getloadavg()[0]:.2f}"
-
-
-def _clock(fn):
-    """(wall seconds, CPU seconds of this process) of ``fn()``."""
-    w, c = time.perf_counter(), time.process_time()
-    fn()
-    return time.perf_counter() - w, time.process_time() - c
-
-
-def single_env(estimators, steps: int, rounds: int) -> None:
+def single(estimators=("none", "irls"), steps: int = 400, repeat: int = 3) -> dict:
+    """Env steps per wall / CPU second of the single env, per estimator."""
     import gymnasium as gym
     import numpy as np
 
     import quad_fault_env  # noqa: F401  (registers the ids)
 
-    print(f"# single env QuadFault-v0, zero residual action ({_load()}, {os.cpu_count()} CPUs)")
-    print(f"{'estimator':<10} {'physics':<7} {'steps/s':>9} {'steps/CPU-s':>12} {'ms/step':>8}")
+    out = {}
     a = np.zeros(4, dtype=np.float32)
     for est in estimators:
-        envs = {p: gym.make("QuadFault-v0", estimator=est, physics=p)
-                for p in ("numpy", "numba")}
-        n_steps = {"numpy": max(steps // 10, 5), "numba": steps}
-        best = {p: (0.0, 0.0) for p in envs}
-        for env in envs.values():
-            env.reset(seed=0)
-            for _ in range(3):  # numba compile / cache load, first-step allocations
-                env.step(a)
+        env = gym.make("QuadFault-v0", estimator=est)
+        env.reset(seed=0)
+        for _ in range(5):  # compile / load the cache, first-step allocations
+            env.step(a)
 
-        def run(env, n):
-            for _ in range(n):
+        def run(env=env):
+            for _ in range(steps):
                 *_, term, trunc, _ = env.step(a)
                 if term or trunc:
                     env.reset()
 
-        for _ in range(rounds):
-            for p, env in envs.items():
-                wall, cpu = _clock(lambda: run(env, n_steps[p]))  # noqa: B023
-                rate = (n_steps[p] / wall, n_steps[p] / max(cpu, 1e-9))
-                best[p] = max(best[p], rate)
-        for p in envs:
-            print(f"{est:<10} {p:<7} {best[p][0]:>9.0f} {best[p][1]:>12.0f} "
-                  f"{1e3 / best[p][0]:>8.2f}")
-        print(f"{est:<10} ratio numba/numpy: {best['numba'][0] / best['numpy'][0]:.1f}x wall, "
-              f"{best['numba'][1] / best['numpy'][1]:.1f}x per CPU-s ({_load()})")
+        wall, cpu = _clock(run, repeat)
+        out[f"single_{est}_wall"], out[f"single_{est}_cpu"] = steps / wall, steps / cpu
+    return out
 
 
-def vector_reset(sizes) -> None:
-    import gymnasium as gym
-
-    from quad_fault_env.envs.quad_fault import QuadFaultEnv
-    from quad_fault_env.vector import QuadFaultVectorEnv
-
-    print(f"\n# vector env reset, scenario='random', estimator='none' ({_load()})")
-    print(f"{'N':>6} {'batched s':>10} {'per-row s':>10} {'ratio':>6} {'batched CPU-s':>14} "
-          f"{'per-row CPU-s':>14} {'CPU ratio':>9} {'scenario+seed CPU-s':>20}  load")
-    QuadFaultVectorEnv(4, "none", "random").reset(seed=0)  # imports, numba cache
-    for n in sizes:
-        vec = QuadFaultVectorEnv(n, "none", "random")
-        vec.reset(seed=1)
-        batched = min((_clock(lambda: vec.reset(seed=0)) for _ in range(2)),  # noqa: B023
-                      key=lambda x: x[1])
-        single = QuadFaultEnv("none", "random")
-
-        def per_row(n=n, single=single):
-            for i in range(n):
-                single.reset(seed=i)
-
-        def floor(n=n, single=single):
-            for i in range(n):
-                gym.Env.reset(single, seed=i)
-                single._make_scenario("random")
-
-        row = _clock(per_row)
-        rest = _clock(floor)
-        print(f"{n:>6} {batched[0]:>10.3f} {row[0]:>10.3f} {row[0] / batched[0]:>6.1f} "
-              f"{batched[1]:>14.3f} {row[1]:>14.3f} {row[1] / batched[1]:>9.1f} "
-              f"{rest[1]:>20.3f}  {os.getloadavg()[0]:.2f}")
-
-
-def vector_step(sizes) -> None:
+def vector(sizes=(1024, 4096), steps: int = 20, repeat: int = 3) -> dict:
+    """Vehicle-steps per wall / CPU second of the vector env's step."""
     import numpy as np
 
     from quad_fault_env.vector import QuadFaultVectorEnv
 
-    print(f"\n# vector env step, physics='numba', estimator='none', 0.1 s episodes ({_load()})")
-    print(f"{'N':>6} {'scenario':<9} {'step CPU-s':>10} {'vehicle-steps/CPU-s':>20} "
-          f"{'autoreset step CPU-s':>21}  load")
+    out = {}
     for n in sizes:
-        for scenario in ("combined", "random"):
-            vec = QuadFaultVectorEnv(n, "none", scenario, duration=0.1, physics="numba")
-            a = np.zeros((n, 4), dtype=np.float32)
-            vec.reset(seed=0)
-            cpu = {"plain": [], "autoreset": []}
-            for _ in range(33):  # three episodes of 10 steps plus their autoreset steps
-                resetting = bool(vec._needs_reset.any())
-                _, c = _clock(lambda: vec.step(a))  # noqa: B023
-                cpu["autoreset" if resetting else "plain"].append(c)
-            plain = float(np.median(cpu["plain"][12:]))  # after the first window and reset
-            print(f"{n:>6} {scenario:<9} {plain:>10.4f} {n * vec.substeps / plain:>20.0f} "
-                  f"{float(np.median(cpu['autoreset'])):>21.3f}  {os.getloadavg()[0]:.2f}")
+        env = QuadFaultVectorEnv(n, "none", scenario="combined", duration=600.0)
+        env.reset(seed=0)
+        a = np.zeros((n, 4), dtype=np.float32)
+        for _ in range(3):
+            env.step(a)
+
+        def run(env=env, a=a):
+            for _ in range(steps):
+                env.step(a)
+
+        wall, cpu = _clock(run, repeat)
+        work = n * steps * env.substeps
+        out[f"vector_{n}_wall"], out[f"vector_{n}_cpu"] = work / wall, work / cpu
+    return out
+
+
+def resets(sizes=(1024, 4096)) -> dict:
+    """Seconds of the batched ``reset(seed=0)`` of a vector env of random scenarios."""
+    from quad_fault_env.vector import QuadFaultVectorEnv
+
+    out = {}
+    for n in sizes:
+        rand = QuadFaultVectorEnv(n, "none", scenario="random")
+        rand.reset(seed=1)
+        out[f"reset_{n}_wall"], out[f"reset_{n}_cpu"] = _clock(lambda r=rand: r.reset(seed=0),
+                                                               2)
+    return out
+
+
+def cold_start() -> dict:
+    """CPU seconds of the first env step and the first vector-env step (N = 128) with an empty
+    numba cache (``NUMBA_CACHE_DIR`` set by the caller)."""
+    import gymnasium as gym
+    import numpy as np
+
+    import quad_fault_env  # noqa: F401
+    from quad_fault_env.vector import QuadFaultVectorEnv
+
+    c0 = time.process_time()
+    env = gym.make("QuadFault-v0", estimator="none")
+    env.reset(seed=0)
+    env.step(np.zeros(4, dtype=np.float32))
+    c1 = time.process_time()
+    vec = QuadFaultVectorEnv(128, "none", scenario="combined")
+    vec.reset(seed=0)
+    vec.step(np.zeros((128, 4), dtype=np.float32))
+    return {"cold_env_cpu_s": c1 - c0, "cold_vector_cpu_s": time.process_time() - c1}
 
 
 def main(argv=None) -> int:
-    args = _parse(argv)
-    from quadfault import _sim_numba
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--sizes", type=int, nargs="+", default=[1024, 4096],
+                   help="vector env sizes N (default 1024 4096)")
+    p.add_argument("--steps", type=int, default=400, help="single-env steps per timing (400)")
+    p.add_argument("--baseline", default=None, help="another checkout, measured side by side")
+    p.add_argument("--rounds", type=int, default=3, help="alternated rounds (3)")
+    args = p.parse_args(argv)
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    import side_by_side as sbs
 
-    if not _sim_numba.AVAILABLE:
-        print("numba is not installed: pip install 'quadfault[fast]'", file=sys.stderr)
-        return 1
-    steps, sizes = (60, [64, 256]) if args.quick else (args.steps, args.sizes)
-    single_env(args.estimators, steps, args.rounds)
-    vector_reset(sizes)
-    vector_step(sizes)
+    jobs = (("single", max, {"steps": args.steps}), ("vector", max, {"sizes": list(args.sizes)}),
+            ("resets", min, {"sizes": list(args.sizes)}))
+    now, base = {}, {}
+    for fn, better, kw in jobs:
+        if args.baseline:
+            a, b = sbs.compare(args.baseline, "bench_env_step", fn, args.rounds, better=better,
+                               **kw)
+            now.update(a)
+            base.update(b)
+        else:
+            now.update(sbs.measure(sbs.ROOT, "bench_env_step", fn, **kw))
+    for _ in range(args.rounds if args.baseline else 1):
+        cold_env = {"NUMBA_CACHE_DIR": tempfile.mkdtemp(prefix="qf-cold-")}
+        got = sbs.measure(sbs.ROOT, "bench_env_step", "cold_start", env=cold_env)
+        now.update({k: min(now.get(k, x), x) for k, x in got.items()})
+        if args.baseline:
+            cold_env = {"NUMBA_CACHE_DIR": tempfile.mkdtemp(prefix="qf-cold-")}
+            got = sbs.measure(args.baseline, "bench_env_step", "cold_start", env=cold_env)
+            base.update({k: min(base.get(k, x), x) for k, x in got.items()})
+    rows = []
+    for est in ("none", "irls"):
+        rows.append((f"single env ({est}) steps / CPU s", f"single_{est}_cpu", "rate"))
+        rows.append((f"single env ({est}) steps / wall s", f"single_{est}_wall", "rate"))
+    for n in args.sizes:
+        rows.append((f"vector N = {n}: vehicle-steps / CPU s", f"vector_{n}_cpu", "rate"))
+        rows.append((f"vector N = {n}: vehicle-steps / wall s", f"vector_{n}_wall", "rate"))
+        rows.append((f"vector N = {n}: reset (random) [CPU s]", f"reset_{n}_cpu", "time"))
+    rows.append(("first env step, empty cache [CPU s]", "cold_env_cpu_s", "time"))
+    rows.append(("first vector step (N = 128), empty cache [CPU s]", "cold_vector_cpu_s",
+                 "time"))
+    print(f"# environments; {sbs.load()} on {os.cpu_count()} cpus")
+    if args.baseline:
+        print("| measure | baseline | this checkout | speed-up |\n|---|---|---|---|")
+        for label, key, kind in rows:
+            x, y = now[key], base[key]
+            ratio = x / y if kind == "rate" else y / x
+            print(f"| {label} | {y:.4g} | {x:.4g} | {ratio:.2f}x |")
+    else:
+        print("| measure | value |\n|---|---|")
+        for label, key, _ in rows:
+            print(f"| {label} | {now[key]:.4g} |")
     return 0
 
 

@@ -1,289 +1,228 @@
-"""Speed (and, optionally, accuracy) of the sliding-window IRLS estimator.
+"""Speed of the estimators, optionally side by side with another checkout of this repository.
 
-Measures, side by side in one run on the same recording:
+Workloads (each on the same cached recording, 80 s of the combined scenario by default):
 
-* window updates per second of the numpy path and of the compiled numba path (``run``,
-  one window per sample), and their ratio; compile/cache-load time is reported apart;
-* the compiled EKF against the compiled IRLS on the same recording (updates/s, alternating
-  repeats, median), and their ratio (target: EKF at least as fast);
-* the single compiled estimator's online ``update()`` (one sample per call, what the
-  environment runs at every physics substep) against its offline ``run()``, with the reference
-  and the improved settings (``IRLSConfig.improved()``), alternating;
-* the batched IRLS (``estimators.batched.BatchedIRLS``, N vehicles per call, target 100,000
-  window updates/s at N = 4096) with the reference and the improved settings side by side,
-  against the single compiled estimator's online ``update``;
-* with ``--accuracy``: RMSE / std / spike per scenario (degradation, abrupt, combined, 80 s,
-  sigma_f = 0.07) with the numba path, scored by :mod:`estimators.metrics`.
+* ``run``: ``SlidingWindowIRLS.run()`` over the whole flight (one window per sample);
+* ``online`` / ``online_improved``: the single estimator's ``update()``, one sample per call (what
+  the environment runs at every physics substep), reference and ``IRLSConfig.improved()``;
+* ``ekf``: ``MotorEfficiencyEKF.run()`` over the whole flight;
+* ``batched`` / ``batched_improved``: ``BatchedIRLS.update()`` at N vehicles (default 4096);
+* with ``--cold``: the time of the first call of each workload on a fresh numba cache (compile).
 
-Simulated recordings are cached in ``--cache`` (default /tmp/quadfault-bench), since an 80 s
-flight takes a while on the numpy simulator.
+Each measurement runs in its own process (the fastest of ``--inner`` passes after a warm-up
+pass). With ``--reference DIR`` (a checkout of another
+commit, e.g. ``git worktree add /tmp/qf-ref <commit>``) the same workloads run with that
+checkout's code, alternating with this one's, ``--repeat`` times; the table gives the median
+rates of both and their ratio (above 1: this checkout is faster), and the load average
+before and after.
 
-    python benchmarks/bench_irls.py                     # speed on 80 s combined
-    python benchmarks/bench_irls.py --duration 20 --batch 4096   # shorter, batch size
-    python benchmarks/bench_irls.py --accuracy          # + accuracy table
-    python benchmarks/bench_irls.py --integrator reference --accuracy
-    python benchmarks/bench_irls.py --only online --only batched   # online and batched parts
-    python benchmarks/bench_irls.py --only online --baseline ec394f0  # vs an older update()
+    python benchmarks/bench_irls.py                                   # this checkout
+    python benchmarks/bench_irls.py --reference /tmp/qf-ref --cold    # side by side
+    python benchmarks/bench_irls.py --only run --only ekf --duration 20
+    python benchmarks/bench_irls.py --accuracy --no-speed             # the accuracy table
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import subprocess
+import sys
+import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from estimators.irls import IRLSConfig, SlidingWindowIRLS, numba_available
-from quadfault.recording import read_recording, write_recording
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import SimConfig, simulate
+ROOT = Path(__file__).resolve().parent.parent
+WORKLOADS = ("run", "online", "online_improved", "ekf", "batched", "batched_improved")
 
 
-def cached_flight(scenario: str, duration: float, integrator: str, cache: Path, seed: int = 0):
+def cached_flight(scenario: str, duration: float, integrator: str, cache: Path,
+                  seed: int = 0, paper: bool = False) -> Path:
+    """The recording's path, simulated on first use (``paper``: ``quadfault reproduce``'s
+    settings, sigma_f = 0.07 and no upper thrust limit except in ``clipping``)."""
+    from quadfault.recording import write_recording
+    from quadfault.scenarios import named_scenario
+    from quadfault.simulator import SimConfig, simulate
+
     cache.mkdir(parents=True, exist_ok=True)
-    path = cache / f"{scenario}_{duration:g}s_{integrator}_seed{seed}.csv"
+    tag = "_paper" if paper else ""
+    path = cache / f"{scenario}_{duration:g}s_{integrator}{tag}_seed{seed}.csv"
     if not path.exists():
-        cfg = SimConfig.reference() if integrator == "reference" else SimConfig()
-        rec = simulate(named_scenario(scenario, duration), config=cfg, seed=seed)
-        write_recording(rec, path)
-    return read_recording(path)
+        kw = {}
+        if paper:
+            from estimators.paper.reproduce import sim_config
+
+            cfg, kw = sim_config(integrator, scenario), {"thrust_noise": 0.07}
+        else:
+            cfg = SimConfig.reference() if integrator == "reference" else SimConfig()
+        write_recording(simulate(named_scenario(scenario, duration), config=cfg, seed=seed,
+                                 **kw), path)
+    return path
 
 
+# ------------------------------------------------------------------------------------------
+# the child: one checkout's code, one set of measurements, JSON on stdout
 def _timed(fn):
-    """``(result, wall seconds, CPU seconds of this process)``."""
     w0, c0 = time.perf_counter(), time.process_time()
-    out = fn()
-    return out, time.perf_counter() - w0, time.process_time() - c0
+    fn()
+    return time.perf_counter() - w0, time.process_time() - c0
 
 
-def speed(rec, numpy_windows: int) -> None:
-    import estimators
-
-    print(f"estimators from {os.path.dirname(estimators.__file__)}")
-    print(f"recording: {len(rec)} samples ({rec.duration:.1f} s); load average "
-          f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs (CPU-time rates are less "
-          "affected by a busy machine)")
-    sub = rec.slice(0, numpy_windows + 9)
-    est = SlidingWindowIRLS(rec.vehicle, IRLSConfig(backend="numpy"))
-    _, wall, cpu = _timed(lambda: est.run(sub))
-    numpy_rate = numpy_windows / wall
-    print(f"numpy : {numpy_rate:10.0f} window updates/s wall, {numpy_windows / cpu:10.0f} per "
-          f"CPU-s  ({numpy_windows} windows)")
-    if not numba_available():
-        print("numba : not installed (pip install -e '.[fast]')")
-        return
-    est = SlidingWindowIRLS(rec.vehicle, IRLSConfig(backend="numba"))
-    _, wall, _ = _timed(lambda: est.run(rec.slice(0, 30)))
-    print(f"numba : compile / cache load {wall:.2f} s")
-    series, wall, cpu = _timed(lambda: est.run(rec))
-    n_win = len(rec) - 9
-    rate = n_win / wall
-    print(f"numba : {rate:10.0f} window updates/s wall, {n_win / cpu:10.0f} per CPU-s  "
-          f"({n_win} windows in {wall:.2f} s, including residual set-up)")
-    print(f"ratio numba / numpy: {rate / numpy_rate:.0f}x")
-    same = SlidingWindowIRLS(rec.vehicle, IRLSConfig(backend="numpy")).run(sub)
-    diff = np.max(np.abs(same.eta - series.eta[:len(sub)]))
-    print(f"max |numba - numpy| over the first {numpy_windows} windows: {diff:.2e}")
-
-
-def _median_rate(fn, count: int, repeat: int):
-    """Median over ``repeat`` calls of ``(count / wall s, count / CPU s)``."""
-    rates = []
-    for _ in range(repeat):
-        _, wall, cpu = _timed(fn)
-        rates.append((count / wall, count / max(cpu, 1e-9)))
-    walls, cpus = zip(*rates)
-    return float(np.median(walls)), float(np.median(cpus))
-
-
-def ekf_vs_irls(rec, repeat: int) -> None:
-    """Compiled EKF and compiled IRLS on the same recording, alternating, median rates."""
-    from estimators.ekf import EKFConfig, MotorEfficiencyEKF
-
-    if not numba_available():
-        print("ekf vs irls: numba not installed")
-        return
-    rec = rec.without_truth()
-    ekf = MotorEfficiencyEKF(rec.vehicle, EKFConfig(backend="numba"))
-    irls = SlidingWindowIRLS(rec.vehicle, IRLSConfig(backend="numba"))
-    ekf.run(rec.slice(0, 30))  # compile / load the cache
-    irls.run(rec.slice(0, 30))
-    res = {"ekf": [], "irls": []}
-    for _ in range(repeat):  # alternate, so both see the same machine load
-        for name, est in (("ekf", ekf), ("irls", irls)):
-            res[name].append(_median_rate(lambda e=est: e.run(rec), len(rec), 1))
-    print(f"\ncompiled EKF vs compiled IRLS, run() on {len(rec)} samples, median of {repeat} "
-          f"alternating runs (load average {os.getloadavg()[0]:.1f})")
-    med = {k: (np.median([r[0] for r in v]), np.median([r[1] for r in v])) for k, v in res.items()}
-    for name in ("ekf", "irls"):
-        print(f"{name:5s}: {med[name][0]:10.0f} updates/s wall, {med[name][1]:10.0f} per CPU-s")
-    print(f"ratio EKF / IRLS: {med['ekf'][0] / med['irls'][0]:.2f} (wall), "
-          f"{med['ekf'][1] / med['irls'][1]:.2f} (CPU)")
-
-
-def baseline_estimator(rev: str):
-    """``SlidingWindowIRLS`` of ``estimators/irls.py`` at git revision ``rev`` (run against
-    today's other modules and compiled kernels), to time an older online path side by side."""
-    import subprocess
-    import sys
-    import types
-
-    repo = Path(__file__).resolve().parent.parent
-    src = subprocess.run(["git", "-C", str(repo), "show", f"{rev}:estimators/irls.py"],
-                         capture_output=True, text=True, check=True).stdout
-    mod = types.ModuleType("_irls_baseline")
-    sys.modules[mod.__name__] = mod
-    code = compile(src, f"{rev}:estimators/irls.py", "exec")
-    exec(code, mod.__dict__)  # noqa: S102 -- this repository's own history
-    return mod
-
-
-def online(rec, updates: int, repeat: int, baseline: str | None = None) -> None:
-    """The single estimator's online ``update()`` (one sample per call, as the environment at
-    every physics substep) against its offline ``run()``, numba path, reference and improved
-    settings, alternating; median rates. With ``baseline`` (a git revision), the online
-    update of that revision's ``estimators/irls.py`` (reference settings) in the same loop."""
+def _workload(name: str, rec, args):
+    """``(count, fn)``: a callable doing ``count`` updates of workload ``name``."""
     from estimators.base import samples
+    from estimators.irls import IRLSConfig, SlidingWindowIRLS
 
-    if not numba_available():
-        print("online: numba not installed")
-        return
-    rec = rec.without_truth()
-    sub = rec.slice(0, updates + 9)
-    rows = list(samples(sub))
-    variants = (("reference", IRLSConfig(backend="numba")),
-                ("improved", IRLSConfig.improved(backend="numba")))
-    ests = {name: SlidingWindowIRLS(rec.vehicle, cfg) for name, cfg in variants}
-    if baseline:
-        old = baseline_estimator(baseline)
-        ests[f"@{baseline}"] = old.SlidingWindowIRLS(rec.vehicle, old.IRLSConfig(backend="numba"))
-        variants = variants + ((f"@{baseline}", None),)
-    for est in ests.values():  # compile / load the cache outside the timing
-        for s in rows[:30]:
-            est.update(s)
-        est.run(rec.slice(0, 30))
+    veh = rec.vehicle
+    cfg = IRLSConfig.improved() if name.endswith("improved") else IRLSConfig()
+    if name == "run":
+        est = SlidingWindowIRLS(veh, cfg)
+        return len(rec), lambda: est.run(rec)
+    if name == "ekf":
+        from estimators.ekf import MotorEfficiencyEKF
 
-    def run_online(est):
-        est.reset()
-        for s in rows:
-            est.update(s)
+        ekf = MotorEfficiencyEKF(veh)
+        return len(rec), lambda: ekf.run(rec)
+    if name.startswith("online"):
+        rows = list(samples(rec.slice(0, min(len(rec), args.online_updates + 9))))
+        est = SlidingWindowIRLS(veh, cfg)
 
-    res = {}
-    for _ in range(repeat):  # alternate, so all see the same machine load
-        for name, est in ests.items():
-            res.setdefault((name, "update"), []).append(
-                _median_rate(lambda e=est: run_online(e), len(rows), 1))
-            res.setdefault((name, "run"), []).append(
-                _median_rate(lambda e=est: e.run(sub), len(rows), 1))
-    if baseline:
-        etas = []
-        for name in ("reference", f"@{baseline}"):
-            ests[name].reset()
-            etas.append(np.array([ests[name].update(s).eta for s in rows]))
-        print(f"max |update() - update()@{baseline}| (reference settings): "
-              f"{np.max(np.abs(etas[0] - etas[1])):.1e}")
-    print(f"\nsingle IRLS online update() vs offline run(), {len(rows)} samples, median of "
-          f"{repeat} alternating runs (load average {os.getloadavg()[0]:.1f})")
-    med = {k: (np.median([r[0] for r in v]), np.median([r[1] for r in v]))
-           for k, v in res.items()}
-    for name, _cfg in variants:
-        up, off = med[(name, "update")], med[(name, "run")]
-        print(f"{name:9s} update(): {up[0]:8.0f} updates/s wall, {up[1]:8.0f} per CPU-s; "
-              f"run(): {off[0]:8.0f} /s wall, {off[1]:8.0f} per CPU-s; "
-              f"update / run {up[1] / off[1]:.2f} (CPU)")
-    if baseline:
-        new, old = med[("reference", "update")], med[(f"@{baseline}", "update")]
-        print(f"ratio update() now / @{baseline}: {new[0] / old[0]:.1f}x wall, "
-              f"{new[1] / old[1]:.1f}x per CPU-s")
+        def online():
+            est.reset()
+            for s in rows:
+                est.update(s)
+        return len(rows), online
+    if name.startswith("batched"):
+        from estimators.batched import BatchedIRLS
+
+        N = args.batch
+        rows = list(samples(rec.slice(0, 12 + args.batch_updates)))
+        rng = np.random.default_rng(0)
+
+        def tile(x):
+            return np.broadcast_to(np.asarray(x, float), (N,) + np.shape(x))
+
+        batches = [(np.full(N, s.t), tile(s.p) + 1e-4 * rng.standard_normal((N, 3)),
+                    tile(s.v), tile(s.R), tile(s.w), tile(s.f)) for s in rows]
+        est = BatchedIRLS(veh, N, cfg)
+
+        def batched():
+            est.reset()
+            for b in batches:
+                est.update(*b)
+        return N * len(batches), batched
+    raise SystemExit(f"unknown workload {name!r}")
 
 
-def batched(rec, N: int, updates: int, repeat: int, start: float = 0.0) -> None:
-    """BatchedIRLS at N vehicles, reference and improved settings (alternating, median), vs
-    the single compiled estimator's online update, same samples. All rows fly the same
-    flight from ``start`` [s] (a fault edge in range makes every row's change completion
-    start at once: the improved variant's worst case)."""
-    from estimators.base import samples
-    from estimators.batched import CODE, BatchedIRLS
+def child(args) -> None:
+    from quadfault.recording import read_recording
 
-    if not numba_available():
-        print("batched: numba not installed")
-        return
-    import numba
+    rec = read_recording(args.recording).without_truth()
+    out = {}
+    for name in args.only:
+        if args.cold:  # first call on a fresh cache: compile (a short slice: little else)
+            count, fn = _workload(name, rec.slice(0, 60), args)
+            out[name] = _timed(fn)[0]
+            continue
+        count, fn = _workload(name, rec, args)
+        _count, warm = _workload(name, rec.slice(0, 60), args)
+        warm()  # compile / load the cache outside the timing
+        fn()  # first pass: page in the data
+        wall, cpu = min(_timed(fn) for _ in range(args.inner))  # the least disturbed pass
+        out[name] = {"wall": count / wall, "cpu": count / max(cpu, 1e-9), "seconds": wall}
+    print(json.dumps(out))
 
-    rec = rec.without_truth()
-    k0 = int(np.searchsorted(rec.t, rec.t[0] + start))
-    warm = 22  # untimed: 12 samples fill the windows, 10 solve (compile / load the cache)
-    rows = list(samples(rec.slice(k0, k0 + warm + repeat * updates)))
-    rng = np.random.default_rng(0)
 
-    def tile(x):
-        return np.broadcast_to(np.asarray(x, float), (N,) + np.shape(x))
+# ------------------------------------------------------------------------------------------
+# the parent: alternate checkouts, print medians and ratios
+def _run_child(checkout: Path, args, cold: bool) -> dict:
+    env = dict(os.environ, PYTHONPATH=str(checkout))
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--child", "--recording",
+           str(args.recording), "--batch", str(args.batch), "--batch-updates",
+           str(args.batch_updates), "--online-updates", str(args.online_updates), "--inner",
+           str(args.inner)]
+    for name in args.only:
+        cmd += ["--only", name]
+    with tempfile.TemporaryDirectory() as cache:
+        if cold:
+            cmd.append("--cold")
+            env["NUMBA_CACHE_DIR"] = cache
+        r = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=checkout,
+                           check=False)
+    if r.returncode != 0:
+        raise SystemExit(f"{checkout}: benchmark child failed:\n{r.stderr[-2000:]}")
+    return json.loads(r.stdout.strip().splitlines()[-1])
 
-    batches = [(np.full(N, s.t), tile(s.p) + 1e-4 * rng.standard_normal((N, 3)), tile(s.v),
-                tile(s.R), tile(s.w), tile(s.f)) for s in rows]
-    variants = (("reference", IRLSConfig(backend="numba")),
-                ("improved", IRLSConfig.improved(backend="numba")))
-    ests = {name: BatchedIRLS(rec.vehicle, N, cfg) for name, cfg in variants}
-    solved = {name: [0, 0] for name in ests}
-    slowest = {name: 0.0 for name in ests}
 
-    def run_batch(name, chunk):
-        for b in chunk:
-            w0 = time.perf_counter()
-            out = ests[name].update(*b)
-            slowest[name] = max(slowest[name], time.perf_counter() - w0)
-            solved[name][0] += int(np.sum((out.status == CODE['ok'])
-                                          | (out.status == CODE['max_iter'])))
-            solved[name][1] += N
+def _load() -> str:
+    return "load average " + ", ".join(f"{x:.1f}" for x in os.getloadavg())
 
-    for name in ests:  # fill the windows and compile / load the cache outside the timing
-        run_batch(name, batches[:warm])
-        solved[name], slowest[name] = [0, 0], 0.0
-    res = {name: [] for name in ests}
-    for r in range(repeat):  # each repeat continues the flights with the next samples
-        chunk = batches[warm + r * updates:warm + (r + 1) * updates]
-        for name in ests:
-            res[name].append(_median_rate(lambda n=name, c=chunk: run_batch(n, c), N * updates,
-                                          1))
-    single = SlidingWindowIRLS(rec.vehicle, IRLSConfig(backend="numba"))
 
-    def run_single():
-        single.reset()
-        for s in rows:
-            single.update(s)
+def side_by_side(args) -> None:
+    checkouts = {"this": ROOT}
+    if args.reference:
+        checkouts["reference"] = Path(args.reference).resolve()
+    print(f"recording {args.recording}; {_load()} on {os.cpu_count()} CPUs")
+    for name, path in checkouts.items():
+        print(f"  {name:9s} = {path}")
+    if args.cold:
+        cold = {k: [] for k in checkouts}
+        for _ in range(args.cold_repeat):
+            for k, path in checkouts.items():
+                cold[k].append(_run_child(path, args, cold=True))
+        print(f"\ncold compile: first call on an empty numba cache [s], median of "
+              f"{args.cold_repeat} ({_load()})")
+        _table(cold, lambda v: v, "{:8.1f}", lower_is_better=True)
+    res = {k: [] for k in checkouts}
+    for _ in range(args.repeat):
+        for k, path in checkouts.items():
+            res[k].append(_run_child(path, args, cold=False))
+    print(f"\nupdates per second (wall clock), median of {args.repeat} alternating runs "
+          f"({_load()})")
+    _table(res, lambda v: v["wall"], "{:10.0f}")
+    print(f"\nupdates per CPU-second, median of {args.repeat}")
+    _table(res, lambda v: v["cpu"], "{:10.0f}")
+    if "run" in args.only:
+        secs = {k: np.median([r["run"]["seconds"] for r in v]) for k, v in res.items()}
+        print("\nrun() of the whole flight: " + ", ".join(f"{k} {s:.2f} s"
+                                                         for k, s in secs.items()))
 
-    run_single()
-    sw, sc = _median_rate(run_single, len(rows), repeat)
-    events = ests["improved"]._completion.events
-    print(f"\nbatched IRLS, N = {N}, timed from {rows[warm].t:.3f} s, {updates} updates per run, "
-          f"change completions started: {int(events.sum())} in {int(np.sum(events > 0))} rows; "
-          f"median of {repeat} "
-          f"alternating runs, {numba.get_num_threads()} numba threads "
-          f"(load average {os.getloadavg()[0]:.1f})")
-    med = {k: (np.median([r[0] for r in v]), np.median([r[1] for r in v]))
-           for k, v in res.items()}
-    for name in ests:
-        ok = solved[name][0] / max(solved[name][1], 1)
-        print(f"batched {name:9s}: {med[name][0]:10.0f} window updates/s wall, "
-              f"{med[name][1]:10.0f} per CPU-s ({ok:.0%} solved ok; slowest update "
-              f"{1e3 * slowest[name]:.0f} ms wall)")
-    print(f"single update()  : {sw:10.0f} window updates/s wall, {sc:10.0f} per CPU-s (online)")
-    r, i = med["reference"], med["improved"]
-    print(f"ratio batched improved / reference: {i[0] / r[0]:.2f} wall, {i[1] / r[1]:.2f} per "
-          f"CPU-s; batched reference / single online: {r[0] / sw:.1f}x wall, {r[1] / sc:.1f}x "
-          "per CPU-s")
+
+def _table(res: dict, value, fmt: str, lower_is_better: bool = False) -> None:
+    names = list(res)
+    better = "< 1: this is faster" if lower_is_better else "> 1: this is faster"
+    print(f"{'workload':18s}" + "".join(f"{n:>12s}" for n in names)
+          + (f"   this/reference ({better})" if len(names) > 1 else ""))
+    total = {n: 0.0 for n in names}
+    for w in res[names[0]][0]:
+        med = {n: float(np.median([value(r[w]) for r in res[n]])) for n in names}
+        for n in names:
+            total[n] += med[n]
+        line = f"{w:18s}" + "".join(f"{fmt.format(med[n]):>12s}" for n in names)
+        if len(names) > 1:
+            line += f"   {med['this'] / med['reference']:.2f}"
+        print(line)
+    if lower_is_better:
+        line = f"{'total':18s}" + "".join(f"{fmt.format(total[n]):>12s}" for n in names)
+        if len(names) > 1:
+            line += f"   {total['this'] / total['reference']:.2f}"
+        print(line)
 
 
 def accuracy(args) -> None:
+    from estimators.irls import SlidingWindowIRLS
     from estimators.metrics import score
+    from quadfault.recording import read_recording
 
-    print(f"\naccuracy (80 s, sigma_f = 0.07, integrator {args.integrator}, seed {args.seed}, "
-          f"align=end; mean over motors)")
+    print(f"\naccuracy (80 s, quadfault reproduce's flights: sigma_f = 0.07, integrator "
+          f"{args.integrator}, seed {args.seed}, align=end; mean over motors)")
     print(f"{'scenario':12s} {'rmse':>7s} {'std':>7s} {'spike':>7s} {'ok %':>6s} {'s':>6s}")
     for name in ("degradation", "abrupt", "combined"):
-        rec = cached_flight(name, 80.0, args.integrator, args.cache, args.seed)
+        rec = read_recording(cached_flight(name, 80.0, args.integrator, args.cache, args.seed,
+                                           paper=True))
         series = SlidingWindowIRLS(rec.vehicle).run(rec.without_truth())
         sc = score(rec, series)
         spikes = [s for s in (sc.spike or ()) if s is not None]
@@ -295,38 +234,36 @@ def accuracy(args) -> None:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--reference", metavar="DIR", help="another checkout to time side by side")
     p.add_argument("--scenario", default="combined")
     p.add_argument("--duration", type=float, default=80.0)
     p.add_argument("--integrator", choices=("rk4", "reference"), default="rk4")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--numpy-windows", type=int, default=2000)
-    p.add_argument("--cache", type=Path, default=Path("/tmp/quadfault-bench"))
-    p.add_argument("--accuracy", action="store_true")
-    p.add_argument("--batch", type=int, default=4096, help="vehicles of the batched IRLS "
-                   "(0: skip)")
+    p.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "quadfault-bench")
+    p.add_argument("--batch", type=int, default=4096, help="vehicles of the batched IRLS")
     p.add_argument("--batch-updates", type=int, default=30)
-    p.add_argument("--batch-start", type=float, default=0.0, help="time [s] the batched rows "
-                   "start at (1.64 on the 20 s 'combined' flight: every row starts a change "
-                   "completion at 1.672 s, inside the first timed run)")
-    p.add_argument("--repeat", type=int, default=3, help="alternating runs of the side-by-side "
-                   "comparisons (EKF/IRLS, online/offline, batched variants)")
-    p.add_argument("--online-updates", type=int, default=5000,
-                   help="samples of the online update() timing")
-    p.add_argument("--baseline", metavar="REV", help="also time the online update of "
-                   "estimators/irls.py at this git revision (e.g. ec394f0), side by side")
-    p.add_argument("--only", choices=("speed", "ekf", "online", "batched"), action="append",
-                   help="run only these parts (repeatable; default all)")
+    p.add_argument("--online-updates", type=int, default=5000)
+    p.add_argument("--repeat", type=int, default=3, help="alternating processes per checkout")
+    p.add_argument("--inner", type=int, default=3, help="timed passes per process (the "
+                   "fastest counts)")
+    p.add_argument("--cold", action="store_true", help="also time the first calls on an "
+                   "empty numba cache (compile time)")
+    p.add_argument("--cold-repeat", type=int, default=1)
+    p.add_argument("--only", choices=WORKLOADS, action="append",
+                   help="these workloads only (repeatable; default all)")
+    p.add_argument("--accuracy", action="store_true", help="also print the accuracy table")
+    p.add_argument("--no-speed", action="store_true", help="skip the speed measurements")
+    p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--recording", type=Path, help=argparse.SUPPRESS)
     args = p.parse_args()
-    only = set(args.only or ("speed", "ekf", "online", "batched"))
-    rec = cached_flight(args.scenario, args.duration, args.integrator, args.cache, args.seed)
-    if "speed" in only:
-        speed(rec, args.numpy_windows)
-    if "ekf" in only:
-        ekf_vs_irls(rec, args.repeat)
-    if "online" in only:
-        online(rec, args.online_updates, args.repeat, args.baseline)
-    if args.batch > 0 and "batched" in only:
-        batched(rec, args.batch, args.batch_updates, args.repeat, args.batch_start)
+    args.only = list(args.only or WORKLOADS)
+    if args.child:
+        child(args)
+        return
+    args.recording = cached_flight(args.scenario, args.duration, args.integrator, args.cache,
+                                   args.seed)
+    if not args.no_speed:
+        side_by_side(args)
     if args.accuracy:
         accuracy(args)
 

@@ -1,13 +1,17 @@
-"""Single-vehicle closed-loop simulation speed at 1 kHz, controller included: numpy vs numba.
+"""Single-vehicle closed-loop simulation speed at 1 kHz, and the compile time of its kernels.
 
-Both backends of :func:`quadfault.simulator.simulate` fly the same scenario in one run; the
-table gives steps per second, microseconds per step, the ratio to real time and the ratio
-between the two paths. The numba JIT cost (compile, or load from numba's on-disk cache) is
-measured separately on a 10 ms flight and is not part of the timed runs. ``--cold`` points
-numba at an empty cache directory so the first call really compiles.
+Times :func:`quadfault.simulator.simulate` (the paper's 80 s ``combined`` flight by default,
+the geometric controller in the loop; best of ``--repeat``), a flight with effects (drag and
+motor lag: the loop interpreted by Python with the effects hook) and the cold start: the
+first 10 ms flight in a fresh process with an empty numba cache (CPU seconds: the compile,
+which a busy machine does not inflate as much as the wall time).
 
-    python benchmarks/bench_simulator.py                      # 80 s numba, 5 s numpy flight
-    python benchmarks/bench_simulator.py --cold --numpy-duration 10
+With ``--baseline PATH`` (another checkout of the project, e.g. ``git worktree add
+/tmp/qf-base <commit>``) every number is measured in both, rounds alternated, and the table
+gives the ratio (baseline / this checkout: above 1 = this checkout is faster).
+
+    python benchmarks/bench_simulator.py
+    python benchmarks/bench_simulator.py --baseline /tmp/qf-base --rounds 3
 """
 
 from __future__ import annotations
@@ -17,79 +21,85 @@ import os
 import sys
 import tempfile
 import time
-from dataclasses import replace
 
 
-def _parse(argv):
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--scenario", default="combined", help="named scenario (default: combined)")
-    p.add_argument("--duration", type=float, default=80.0,
-                   help="flight time of the numba run [s] (default 80, the paper's flight)")
-    p.add_argument("--numpy-duration", type=float, default=5.0,
-                   help="flight time of the numpy run [s] (default 5; ~0.5-1 ms per step)")
-    p.add_argument("--repeat", type=int, default=3, help="numba runs, best kept (default 3)")
-    p.add_argument("--sensor-noise", action="store_true", help="add white sensor noise")
-    p.add_argument("--integrator", choices=("rk4", "reference"), default="rk4")
-    p.add_argument("--cold", action="store_true",
-                   help="use an empty numba cache so the JIT compile time is measured")
-    return p.parse_args(argv)
+def flights(duration: float = 80.0, effects_duration: float = 4.0, repeat: int = 3,
+            scenario: str = "combined") -> dict:
+    """Wall seconds of the timed flights (after one warm-up flight)."""
+    from quadfault.effects import parse_effect
+    from quadfault.scenarios import named_scenario
+    from quadfault.simulator import simulate
 
-
-def _timed(fn):
+    simulate(named_scenario(scenario, 0.01))  # compile or load the cache
+    sc = named_scenario(scenario, duration)
+    best = float("inf")
+    for _ in range(max(1, repeat)):
+        t0 = time.perf_counter()
+        simulate(sc, seed=0)
+        best = min(best, time.perf_counter() - t0)
+    fx = (parse_effect("drag=0.3"), parse_effect("motor_lag=0.04"))
+    sc_fx = named_scenario("lissajous", effects_duration)
     t0 = time.perf_counter()
-    out = fn()
-    return out, time.perf_counter() - t0
+    simulate(sc_fx, seed=4, effects=fx)
+    return {"flight_s": best, "steps": round(duration / 1e-3),
+            "effects_flight_s": time.perf_counter() - t0,
+            "effects_steps": round(effects_duration / 1e-3)}
+
+
+def cold_start(scenario: str = "combined") -> dict:
+    """CPU seconds of the first 10 ms flight with an empty numba cache (set by the caller's
+    environment: ``NUMBA_CACHE_DIR``)."""
+    from quadfault.scenarios import named_scenario
+    from quadfault.simulator import simulate
+
+    c0, w0 = time.process_time(), time.perf_counter()
+    simulate(named_scenario(scenario, 0.01))
+    return {"cold_cpu_s": time.process_time() - c0, "cold_wall_s": time.perf_counter() - w0}
 
 
 def main(argv=None) -> int:
-    args = _parse(argv)
-    if args.cold:  # must be set before numba is imported
-        os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="quadfault-numba-")
-    import numpy as np
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--scenario", default="combined", help="named scenario (default combined)")
+    p.add_argument("--duration", type=float, default=80.0, help="flight time [s] (80)")
+    p.add_argument("--repeat", type=int, default=3, help="timed flights per round (3)")
+    p.add_argument("--baseline", default=None, help="another checkout, measured side by side")
+    p.add_argument("--rounds", type=int, default=3, help="alternated rounds with --baseline")
+    args = p.parse_args(argv)
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    import side_by_side as sbs
 
-    from quadfault import _sim_numba
-    from quadfault.scenarios import named_scenario
-    from quadfault.simulator import SensorNoise, SimConfig, simulate
-
-    if not _sim_numba.AVAILABLE:
-        print("numba is not installed: pip install 'quadfault[fast]'", file=sys.stderr)
-        return 1
-    base = SimConfig.reference() if args.integrator == "reference" else SimConfig()
-    if args.sensor_noise:
-        base = replace(base, sensor_noise=SensorNoise(0.01, 0.02, 0.003, 0.01, 0.05))
-    cfg_np, cfg_nb = replace(base, backend="numpy"), replace(base, backend="numba")
-    dt = base.dt
-
-    _, jit = _timed(lambda: simulate(named_scenario(args.scenario, 0.01), config=cfg_nb))
-
-    sc_np = named_scenario(args.scenario, args.numpy_duration)
-    rec_np, t_np = _timed(lambda: simulate(sc_np, config=cfg_np, seed=0))
-    # cross-check on the same flight: the two paths must agree
-    rec_chk = simulate(sc_np, config=cfg_nb, seed=0)
-    diff = max(float(np.max(np.abs(getattr(rec_np, k) - getattr(rec_chk, k))))
-               for k in ("position", "velocity", "quaternion", "omega", "thrust_cmd"))
-
-    sc_nb = named_scenario(args.scenario, args.duration)
-    t_nb = min(_timed(lambda: simulate(sc_nb, config=cfg_nb, seed=0))[1]
-               for _ in range(max(1, args.repeat)))
-
-    rows = []
-    for name, duration, wall in (("numpy", args.numpy_duration, t_np),
-                                 ("numba", args.duration, t_nb)):
-        steps = round(duration / dt)
-        rows.append((name, duration, steps, wall, steps / wall, 1e6 * wall / steps,
-                     duration / wall))
-    print(f"closed-loop simulate(), scenario {args.scenario}, {args.integrator}, "
-          f"dt = {dt * 1e3:g} ms, sensor noise {'on' if args.sensor_noise else 'off'}, "
-          f"cpus {os.cpu_count()}")
-    print(f"{'backend':8} {'flight [s]':>10} {'steps':>7} {'wall [s]':>9} {'steps/s':>10} "
-          f"{'us/step':>8} {'x real time':>11}")
-    for name, duration, steps, wall, sps, us, rt in rows:
-        print(f"{name:8} {duration:10.1f} {steps:7d} {wall:9.3f} {sps:10.0f} {us:8.1f} {rt:11.1f}")
-    print(f"numba / numpy speed-up: {rows[1][4] / rows[0][4]:.0f}x (steps/s ratio)")
-    print(f"numba first call (10 ms flight, {'cold cache: JIT compile' if args.cold else 'JIT compile or cache load'}): "
-          f"{jit:.2f} s (not in the timings above)")
-    print(f"max |numba - numpy| over the {args.numpy_duration:g} s flight: {diff:.1e}")
+    kw = dict(duration=args.duration, repeat=args.repeat, scenario=args.scenario)
+    if args.baseline:
+        now, base = sbs.compare(args.baseline, "bench_simulator", "flights", args.rounds, **kw)
+        cold = [sbs.compare(args.baseline, "bench_simulator", "cold_start", 1,
+                            env={"NUMBA_CACHE_DIR": tempfile.mkdtemp(prefix="qf-cold-")},
+                            scenario=args.scenario) for _ in range(args.rounds)]
+        now.update({k: min(c[0][k] for c in cold) for k in cold[0][0]})
+        base.update({k: min(c[1][k] for c in cold) for k in cold[0][1]})
+    else:
+        now, base = sbs.measure(sbs.ROOT, "bench_simulator", "flights", **kw), None
+        now.update(sbs.measure(sbs.ROOT, "bench_simulator", "cold_start",
+                               env={"NUMBA_CACHE_DIR": tempfile.mkdtemp(prefix="qf-cold-")},
+                               scenario=args.scenario))
+    print(f"# simulate(), scenario {args.scenario}, dt = 1 ms; {sbs.load()} on "
+          f"{os.cpu_count()} cpus")
+    rows = [("flight", f"{args.duration:g} s flight [s]", now["flight_s"],
+             base and base["flight_s"]),
+            ("us/step", "microseconds per step", 1e6 * now["flight_s"] / now["steps"],
+             base and 1e6 * base["flight_s"] / base["steps"]),
+            ("effects", f"lissajous {now['effects_steps'] / 1e3:g} s with drag + motor lag [s]",
+             now["effects_flight_s"], base and base["effects_flight_s"]),
+            ("cold", "first flight, empty numba cache [CPU s]", now["cold_cpu_s"],
+             base and base["cold_cpu_s"])]
+    if base:
+        print("| measure | baseline | this checkout | baseline / this |\n|---|---|---|---|")
+        for _, label, x, y in rows:
+            print(f"| {label} | {y:.4g} | {x:.4g} | {y / x:.2f}x |")
+    else:
+        print("| measure | value |\n|---|---|")
+        for _, label, x, _ in rows:
+            print(f"| {label} | {x:.4g} |")
+    print(f"real-time factor: {args.duration / now['flight_s']:.0f}x")
     return 0
 
 

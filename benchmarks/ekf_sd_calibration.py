@@ -11,7 +11,7 @@ import argparse
 
 import numpy as np
 
-from estimators.calibration import calibrate_sd_scale
+from estimators.paper.calibration import calibrate_sd_scale
 from estimators.ekf import EKFConfig, MotorEfficiencyEKF
 from estimators.metrics import score
 from quadfault.scenarios import named_scenario

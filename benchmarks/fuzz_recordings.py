@@ -2,7 +2,7 @@
 
     python benchmarks/fuzz_recordings.py [--cases 1000] [--seed 0] [--timeout 30]
 
-Each case (:mod:`quadfault.fuzzing`: truncated files, missing or broken sidecars, wrong types,
+Each case (``tests/support/fuzzing.py``: truncated files, missing or broken sidecars, wrong types,
 NaN/inf, repeated or decreasing time, bad quaternions, absurd vehicles, ...) goes through
 ``read_recording`` and, in-process via ``quadfault.cli.main``, through
 ``quadfault estimate`` and ``quadfault diagnose``. Every run is classified:
@@ -33,10 +33,18 @@ import numpy as np
 
 from quadfault.cli import main as cli_main
 from quadfault.errors import QuadfaultError
-from quadfault.fuzzing import (MUTATION_NAMES, Hang, bad_case, error_is_clean, time_limit,
-                               write_case)
 from quadfault.progress import progress_bar
 from quadfault.recording import read_recording
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from support.fuzzing import (  # noqa: E402  (the tests' case generators)
+    MUTATION_NAMES,
+    Hang,
+    bad_case,
+    error_is_clean,
+    time_limit,
+    write_case,
+)
 
 
 def check_reader(case, csv_path, side_path, timeout) -> tuple[str, str]:

@@ -21,7 +21,7 @@ import numpy as np
 
 from estimators.irls import IRLSConfig, SlidingWindowIRLS
 from estimators.metrics import fault_windows, score, window_masks
-from estimators.reproduce import sim_config
+from estimators.paper.reproduce import sim_config
 from quadfault.scenarios import named_scenario
 from quadfault.simulator import simulate
 

@@ -2,20 +2,19 @@
 
 Prints, measured in one run (ratios are what to compare; the machine may be shared):
 
-1. physics vehicle-steps/s against N: the core physics alone -- numpy (motors + ``step_rk4``
-   over the batch axis) and compiled (``quadfault._sim_numba.step_batch``: motors + RKMK4,
-   and with the geometric controller at every step, the closed loop crazyflow also runs) --
-   and the full ``QuadFaultVectorEnv`` step (controller, noise, physics, termination,
-   observation) with numpy and numba physics, without an estimator and with the batched IRLS;
-   memory per vehicle (tracemalloc peak of building, resetting and stepping the env / N) and
-   the time to build and reset the env;
+1. physics vehicle-steps/s against N: the model's closed loop alone
+   (``quadfault.closed_loop.fly_batch``: motors with thrust noise + RKMK4, and with the
+   geometric controller at every step, the closed loop crazyflow also runs) and the full
+   ``QuadFaultVectorEnv`` step (controller, noise, physics, termination, observation), without
+   an estimator and with the batched IRLS; memory per vehicle (tracemalloc peak of building,
+   resetting and stepping the env / N) and the time to build and reset the env;
 2. batched IRLS window updates/s (``estimators.batched.BatchedIRLS``);
 3. peers at the same physics rate (1 kHz) and horizon: RotorPy's ``BatchedMultirotor``
    (torch, CPU, rk4) and crazyflow's ``Sim`` (JAX, CPU); each runs in a subprocess of
    ``--peer-python`` and is skipped with the reason when it cannot be imported or run;
-4. where the time goes: the compiled kernel's stages (CPU ns per vehicle-step, each alone;
-   ``benchmarks/kernel_stages.py``) and a profile of the env step (kernel, per-env noise
-   draws, controller, the rest);
+4. where the time goes: the kernels' stages (CPU ns per vehicle-step, each alone;
+   ``benchmarks/kernel_stages.py``) and a profile of the env step (the loop, sensors,
+   controller, the rest);
 5. SB3 PPO training steps/s with the native vector env vs ``SubprocVecEnv``.
 
 This script installs nothing. Peers, in a separate virtual environment so they cannot touch
@@ -56,8 +55,6 @@ if "--omp-spin" not in sys.argv:
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from quadfault.dynamics import RigidBodyState, step_rk4  # noqa: E402
-from quadfault.motors import MotorModel  # noqa: E402
 from quadfault.vehicle import Vehicle  # noqa: E402
 
 RATE = 1000.0  # physics rate of every measurement [Hz]
@@ -89,57 +86,43 @@ def _rate(fn, work: int, repeats: int = 3) -> float:
 
 
 def compiled_batch(N: int, horizon: int, rng, control_every: int = 0, thrust_noise=0.07):
-    """``fn`` advancing N hovering vehicles by ``horizon`` steps with one ``step_batch`` call
-    (motors with thrust noise + RKMK4; the geometric controller every ``control_every``
-    steps when > 0), compiled before it is returned."""
-    from quadfault import _sim_numba
+    """``fn`` advancing N hovering vehicles by ``horizon`` steps with one call of the loop
+    (``closed_loop.fly_batch``: motors with thrust noise + RKMK4; the geometric controller
+    every ``control_every`` steps when > 0), compiled before it is returned."""
+    from quadfault import closed_loop
     from quadfault.controller import GeometricController
+    from quadfault.motors import MotorModel
+    from quadfault.plant import Plant
+    from quadfault.sensors import SensorNoise
     from quadfault.trajectory import Hover
 
     veh = Vehicle()
-    body = _sim_numba.body_of(veh)
-    state = RigidBodyState.at_rest((0.0, 0.0, -1.0), (N,))
-    f_cmd = np.full((N, 4), veh.weight / 4) + 0.01 * rng.standard_normal((N, 4))
-    eta = np.ones((N, horizon, 4))
-    sigma = np.full(N, float(thrust_noise))
-    z = rng.standard_normal((N, 4 * horizon))
-    z_off = np.ascontiguousarray(np.broadcast_to(4 * np.arange(horizon), (N, horizon)))
+    plant = Plant(veh, None, MotorModel(thrust_noise), dt=1.0 / RATE, n_vehicles=N)
+    V = plant.vehicles
+    V.p[:, 2] = -1.0
+    V.f_cmd[:] = veh.weight / 4 + 0.01 * rng.standard_normal((N, 4))
     ctrl = GeometricController(veh, Hover(position=(0.0, 0.0, -1.0)))
-    refs = np.zeros((N, 6, 3))
-    refs[:, 0, 2], refs[:, 3, 0] = -1.0, 1.0  # hover at 1 m, heading north
-    gains = _sim_numba.gains_of(ctrl)
+    refs = np.zeros((N, horizon, 6, 3))
+    refs[:, :, 0, 2], refs[:, :, 3, 0] = -1.0, 1.0  # hover at 1 m, heading north
+    tables = closed_loop.Tables(np.zeros(N, np.int64), np.ones((N, horizon, 4)), refs)
+    consts = closed_loop.constants(plant, SensorNoise(), max(control_every, 0))
+    K = ctrl.constants if control_every > 0 else None
+    gens = closed_loop.generators([np.random.default_rng(i) for i in range(N)])
+    active, k0 = np.ones(N, dtype=bool), np.zeros(N, dtype=np.int64)
+    none = closed_loop.Records.none(N, 4)
 
     def fn():
-        _sim_numba.step_batch(state.p, state.v, state.R, state.w, f_cmd, eta, sigma, z, z_off,
-                              True, body, 1.0 / RATE, control_every, refs, gains, body)
+        closed_loop.fly_batch(gens, active, k0, horizon, True, consts, V, tables, none, K)
 
     fn()  # compile (or load numba's cache)
     return fn
 
 
 def core_compiled(N: int, horizon: int, rng, control_every: int = 0, cpu: bool = False):
-    """Vehicle-steps/s of the compiled batched kernel (see :func:`compiled_batch`); with
-    ``cpu`` the pair (per wall second, per CPU second)."""
+    """Vehicle-steps/s of the compiled loop (see :func:`compiled_batch`); with ``cpu`` the
+    pair (per wall second, per CPU second)."""
     rates = _rates(compiled_batch(N, horizon, rng, control_every), N * horizon)
     return rates if cpu else rates[0]
-
-
-def core_physics(N: int, horizon: int, rng) -> float:
-    """Vehicle-steps/s of motors (eqs. 11, 13) + RKMK4 (eqs. 1-4) over a batch of N."""
-    veh = Vehicle()
-    motor = MotorModel(0.07)
-    state = RigidBodyState.at_rest((0.0, 0.0, -1.0), (N,))
-    f_cmd = np.full((N, 4), veh.weight / 4) + 0.01 * rng.standard_normal((N, 4))
-    eta = np.ones((N, 4))
-
-    def fn():
-        nonlocal state
-        for _ in range(horizon):
-            f = motor.apply(f_cmd, eta, veh.rotor_max_thrust, rng)
-            wrench = veh.wrench(f)
-            state = step_rk4(state, wrench[:, 0], wrench[:, 1:], veh, 1.0 / RATE)
-
-    return _rate(fn, N * horizon, repeats=1)
 
 
 def make_env(N: int, estimator: str = "none", **kw):
@@ -206,7 +189,7 @@ def irls_window_rate(N: int, updates: int) -> tuple[float, str]:
         out = est.update(*b)
         solved += int(np.sum(out.status_names == "ok") + np.sum(out.status_names == "max_iter"))
     return N * len(batches[12:]) / (time.perf_counter() - t0), \
-        f"{solved / (N * len(batches[12:])):.0%} ok, backend {est.backend}"
+        f"{solved / (N * len(batches[12:])):.0%} ok"
 
 
 _CRAZYFLOW_SIM = textwrap.dedent("""
@@ -362,11 +345,11 @@ def _fmt(x) -> str:
 
 
 def profile_env(N: int, steps: int = 5) -> list[tuple[str, float]]:
-    """Share of the env step's time (cProfile, numba physics, per-env noise) by part."""
+    """Share of the env step's time (cProfile) by part."""
     import cProfile
     import pstats
 
-    env, _ = make_env(N, physics="numba")
+    env, _ = make_env(N)
     a = np.zeros((N, 4), dtype=np.float32)
     env.step(a)
     prof = cProfile.Profile()
@@ -376,13 +359,12 @@ def profile_env(N: int, steps: int = 5) -> list[tuple[str, float]]:
     prof.disable()
     stats = pstats.Stats(prof).stats
     total = sum(v[2] for v in stats.values())  # own time of every function
-    parts = {"compiled physics kernel (step_batch)": ("_step_batch_parallel",
-                                                      "_step_batch_serial"),
-             "per-env noise draws (one generator call per sub-env)": ("_draw",),
-             "controller (trajectory in numpy, compiled controller_batch)": ("_motor_commands",),
+    parts = {"the closed loop (fly_batch: sensors, motors, RKMK4)": ("fly_batch",),
+             "end-of-step measurement (sense_rows)": ("sense_rows",),
+             "controller + action mapping (_motor_commands)": ("_motor_commands",),
              "reference / efficiency tables": ("_ensure_tables", "references"),
              "observation + info": ("_observations", "_infos"),
-             "termination + reward": ("batched_termination", "batched_reward")}
+             "termination + reward": ("reasons", "__call__")}
     out = []
     for label, names in parts.items():
         cum = sum(v[3] for (_, _, fn), v in stats.items() if fn in names)
@@ -414,52 +396,39 @@ def main(argv=None) -> int:
     if max_n < 1 or args.horizon < 10:
         print("throughput: --max-n >= 1 and --horizon >= 10 required", file=sys.stderr)
         return 2
-    from quadfault import _sim_numba
-
-    if not _sim_numba.AVAILABLE:
-        print("throughput: numba (the 'fast' extra) is needed for the compiled rows",
-              file=sys.stderr)
-        return 2
     import numba
+
+    from quadfault import closed_loop
 
     Ns = [n for n in (1, 16, 256, 1024, 4096, 16384) if n <= max_n]
     rng = np.random.default_rng(0)
-    compiled_batch(_sim_numba.PARALLEL_MIN_VEHICLES, 10, rng)  # compile; start the threads
+    compiled_batch(closed_loop.PARALLEL_MIN_VEHICLES, 10, rng)  # compile; start the threads
     steps = max(1, args.horizon // 10)
     print(f"# physics vehicle-steps/s at {RATE:.0f} Hz, horizon {args.horizon} steps; numba "
           f"{numba.__version__}, {numba.get_num_threads()} threads "
           f"({numba.threading_layer() if _threading_started() else 'layer not started'}, "
           f"OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY', 'unset')}); load average "
           f"{', '.join(f'{x:.1f}' for x in os.getloadavg())} on {os.cpu_count()} cpus")
-    print("| N | core numpy | core compiled | core compiled + controller | env numpy | "
-          "env numba | env numba, shared noise | env numba + IRLS | memory/vehicle (env + "
-          "IRLS) | build + reset [s] |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("| N | loop (motors + RKMK4) | loop + controller | env | env + IRLS | "
+          "memory/vehicle (env + IRLS) | build + reset [s] |")
+    print("|---|---|---|---|---|---|---|")
     results = {}
     for N in ([] if args.skip_table else Ns):
-        core = core_physics(N, args.horizon, rng) if N <= 4096 else None
         comp = core_compiled(N, args.horizon, rng)
         closed = core_compiled(N, args.horizon, rng, control_every=1)
-        env_np = env_rate(N, steps) if N <= 4096 else None
-        env_nb, setup = make_env(N, physics="numba")
-        nb = env_rate(N, steps, env=env_nb)
-        del env_nb
-        shared = env_rate(N, steps, physics="numba", noise_streams="shared")
-        irls = env_rate(N, max(1, steps // 2), "irls", physics="numba") if N <= 1024 else None
+        env, setup = make_env(N)
+        nb = env_rate(N, steps, env=env)
+        del env
+        irls = env_rate(N, max(1, steps // 2), "irls") if N <= 1024 else None
         mem = env_memory_per_vehicle(N) if N <= 4096 else None
-        results[N] = (core, comp, closed, env_np, nb, shared, irls)
-        print(f"| {N} | {_fmt(core)} | {_fmt(comp)} | {_fmt(closed)} | {_fmt(env_np)} | "
-              f"{_fmt(nb)} | {_fmt(shared)} | {_fmt(irls)} | "
+        results[N] = (comp, closed, nb, irls)
+        print(f"| {N} | {_fmt(comp)} | {_fmt(closed)} | {_fmt(nb)} | {_fmt(irls)} | "
               f"{'n/a' if mem is None else f'{mem / 1024:.1f} KiB'} | {setup:.1f} |", flush=True)
     n_ref = 4096 if 4096 in results else max(results, default=0)
     r = results.get(n_ref)
     if r is not None:
-        print(f"\nat N = {n_ref}: compiled core {r[1] / 1e6:.2f}, compiled closed loop "
-              f"{r[2] / 1e6:.2f}, env (numba physics) {r[4] / 1e6:.2f} of the 1,000,000 "
-              f"vehicle-steps/s target")
-        if r[0]:
-            print(f"compiled / numpy core physics at N = {n_ref}: {r[1] / r[0]:.1f}x; env numba "
-                  f"/ env numpy: {r[4] / r[3]:.1f}x")
+        print(f"\nat N = {n_ref}: loop {r[0] / 1e6:.2f}, loop + controller {r[1] / 1e6:.2f}, "
+              f"env {r[2] / 1e6:.2f} of the 1,000,000 vehicle-steps/s target")
     if not args.skip_table:
         n_irls = min(4096, max_n)
         rate, note = irls_window_rate(n_irls, 20)
@@ -468,14 +437,14 @@ def main(argv=None) -> int:
     if not args.skip_profile:
         n_prof = min(4096, max_n)
         print(f"\n# where the time goes at N = {n_prof}")
-        print("compiled kernel, CPU ns per vehicle-step, each stage alone on one core "
+        print("kernels, CPU ns per vehicle-step, each stage alone on one core "
               "(benchmarks/kernel_stages.py):")
         from benchmarks.kernel_stages import STAGES, stage_ns
 
         ns = stage_ns(n_prof, args.horizon, repeats=3)
         for key, label in STAGES:
             print(f"  {label:<64} {ns[key]:8.0f}")
-        print("env step (numba physics, per-env noise; cProfile, cumulative share):")
+        print("env step (cProfile, cumulative share):")
         for label, share in profile_env(n_prof, steps):
             print(f"  {label:<56} {share:6.1%}")
     if not args.skip_peers:
@@ -483,10 +452,11 @@ def main(argv=None) -> int:
               f"vehicle-steps per wall second / per CPU second of each process (all threads)")
         for name, what in PEER_STEPS.items():
             print(f"  {name}: {what}")
-        print("  quadfault compiled + controller: step_batch, geometric controller every step, "
-              "motor model with thrust noise, RKMK4 (4 derivatives, 5 SO(3) exponentials)")
-        print("  quadfault env: QuadFaultVectorEnv.step (shared noise, no estimator); env500 = "
-              "at crazyflow's env rates (control = physics = 500 Hz, 1 substep per step)")
+        print("  quadfault compiled + controller: closed_loop.fly_batch, geometric controller "
+              "every step, motor model with thrust noise, RKMK4 (4 derivatives, 5 SO(3) "
+              "exponentials)")
+        print("  quadfault env: QuadFaultVectorEnv.step (no estimator); env500 = at crazyflow's "
+              "env rates (control = physics = 500 Hz, 1 substep per step)")
         print("| N | system | vehicle-steps/s wall / CPU | quadfault / system, wall / CPU |")
         print("|---|---|---|---|")
         pair = lambda r: "n/a" if r is None else f"{r[0]:,.0f} / {r[1]:,.0f}"  # noqa: E731
@@ -495,10 +465,8 @@ def main(argv=None) -> int:
         for N in [n for n in Ns if n in (1, 256, 4096, 16384)]:
             # measured again right next to the peers (the machine's load drifts)
             ours = {"compiled": core_compiled(N, args.horizon, rng, control_every=1, cpu=True),
-                    "env": env_rate(N, steps, physics="numba", noise_streams="shared",
-                                    cpu=True),
-                    "env500": env_rate(N, max(1, steps * 2), physics="numba",
-                                       noise_streams="shared", cpu=True, control_rate=500.0,
+                    "env": env_rate(N, steps, cpu=True),
+                    "env500": env_rate(N, max(1, steps * 2), cpu=True, control_rate=500.0,
                                        physics_rate=500.0)}
             for key, label in (("compiled", "quadfault compiled + controller"),
                                ("env", "quadfault env (100 Hz control, 1 kHz physics)"),

@@ -3,18 +3,19 @@
 Online: ``est.update(sample) -> Estimate``, one measurement row at a time (the environment
 calls this). Offline: ``est.run(recording) -> EstimateSeries`` over a whole recording.
 Estimators receive the *nominal* vehicle and measurements only; they never read the
-recording's true efficiency columns.
+recording's true efficiency columns. The measurement record :class:`~quadfault.sample.Sample`
+and :func:`~quadfault.sample.samples` live in the core and are re-exported here.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple, Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from quadfault.errors import ConfigError
 from quadfault.recording import Recording
+from quadfault.sample import Sample, samples  # the measurement record lives in the core
 
 #: Status values an estimate may carry.
 STATUS_OK = "ok"
@@ -26,26 +27,6 @@ STATUS_MAX_ITER = "max_iter"  # solver stopped at its iteration limit (estimate 
 STATUS_BAD_SAMPLE = "bad_sample"  # non-finite measurement skipped; previous estimate kept
 STATUSES = (STATUS_OK, STATUS_WARMUP, STATUS_ILL_CONDITIONED, STATUS_NO_EXCITATION,
             STATUS_REJECTED, STATUS_MAX_ITER, STATUS_BAD_SAMPLE)
-
-
-class Sample(NamedTuple):
-    """One measurement row (internal NED/FRD convention).
-
-    Attributes:
-        t: time [s].
-        p: position, world [m] (3,).
-        v: velocity, world [m/s] (3,).
-        R: rotation body->world (3, 3).
-        w: body rate [rad/s] (3,).
-        f: commanded rotor thrusts [N] (n,), held from ``t`` until the next sample.
-    """
-
-    t: float
-    p: np.ndarray
-    v: np.ndarray
-    R: np.ndarray
-    w: np.ndarray
-    f: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -91,13 +72,18 @@ class OnlineEstimator(Protocol):
     def run(self, recording: Recording, progress: bool = False) -> EstimateSeries: ...
 
 
-def samples(recording: Recording):
-    """Iterate the measurement rows of a recording as :class:`Sample` (no truth columns)."""
-    if not recording.has_pose:
-        raise ConfigError(f"{recording.path or 'recording'}: the estimators need position, "
-                          "velocity and attitude columns (px..pz, vx..vz, qw..qz); this "
-                          "recording is IMU-only")
-    R = recording.rotation
-    for k in range(len(recording)):
-        yield Sample(float(recording.t[k]), recording.position[k], recording.velocity[k], R[k],
-                     recording.omega[k], recording.thrust_cmd[k])
+__all__ = [
+    "STATUSES",
+    "STATUS_BAD_SAMPLE",
+    "STATUS_ILL_CONDITIONED",
+    "STATUS_MAX_ITER",
+    "STATUS_NO_EXCITATION",
+    "STATUS_OK",
+    "STATUS_REJECTED",
+    "STATUS_WARMUP",
+    "Estimate",
+    "EstimateSeries",
+    "OnlineEstimator",
+    "Sample",
+    "samples",
+]

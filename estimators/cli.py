@@ -1,6 +1,6 @@
 """``quadfault estimate``: run a motor-efficiency estimator over a recording.
 
-    quadfault estimate FILE.csv --estimator irls|ekf --out EST.csv [--force] [--backend ...]
+    quadfault estimate FILE.csv --estimator irls|ekf --out EST.csv [--force] [--improved]
 
 Writes ``EST.csv`` (``t, eta1..eta4, sd1..sd4, status``) and its sidecar ``EST.json``
 (:mod:`estimators.series_io`). Estimators are looked up in :data:`ESTIMATORS` and imported
@@ -10,7 +10,6 @@ only when chosen.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import importlib
 import sys
 
@@ -38,24 +37,21 @@ def estimator_class(name: str):
 
 
 def make_estimator(name: str, vehicle, backend: str | None = None, improved: bool = False):
-    """Build an estimator with its default configuration (and ``backend`` if given);
-    ``improved``: the IRLS with the options beyond the paper (``IRLSConfig.improved()``)."""
+    """Build an estimator with its default configuration; ``improved``: the IRLS with the
+    options beyond the paper (``IRLSConfig.improved()``). ``backend`` is deprecated and
+    ignored (there is one implementation)."""
     cls = estimator_class(name)
+    if backend is not None:
+        from estimators.irls_config import deprecated_backend
+
+        deprecated_backend("make_estimator", backend)
     if improved:
         if name != "irls":
             raise ConfigError(f"--improved applies to the irls estimator, not {name!r}")
         from estimators.irls import IRLSConfig
 
-        est = cls(vehicle, IRLSConfig.improved())
-    else:
-        est = cls(vehicle)
-    if backend is not None:
-        config = getattr(est, "config", None)
-        if config is None or not dataclasses.is_dataclass(config) \
-                or "backend" not in {f.name for f in dataclasses.fields(config)}:
-            raise ConfigError(f"estimator {name!r} has no backend option")
-        est = cls(vehicle, dataclasses.replace(config, backend=backend))
-    return est
+        return cls(vehicle, IRLSConfig.improved())
+    return cls(vehicle)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -65,7 +61,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, help="output EST.csv (+ EST.json)")
     p.add_argument("--force", action="store_true", help="overwrite existing files")
     p.add_argument("--backend", choices=("auto", "numpy", "numba"), default=None,
-                   help="numba (compiled) or numpy; default auto (numba when installed)")
+                   help="deprecated, does nothing (one compiled implementation); removed in "
+                        "the next release")
     p.add_argument("--improved", action="store_true",
                    help="IRLS with the options beyond the paper: change completion and a "
                         "21-sample causal output median (docs/irls.md)")
@@ -83,11 +80,12 @@ def run(args) -> int:
     if not rec.has_pose:
         raise ConfigError(f"{args.recording}: 'estimate' needs position, velocity and attitude "
                           "columns (px..pz, vx..vz, qw..qz); this recording is IMU-only")
-    est = make_estimator(args.estimator, rec.vehicle, args.backend, args.improved)
+    if args.backend is not None:
+        print("quadfault estimate: --backend is deprecated and does nothing (one compiled "
+              "implementation); it goes in the next release", file=sys.stderr)
+    est = make_estimator(args.estimator, rec.vehicle, improved=args.improved)
     series = est.run(rec.without_truth(), progress=enabled())
-    extra = {"backend_used": getattr(est, "backend", None) or
-             ("numba" if getattr(est, "use_numba", False) else "numpy")}
-    write_estimate_series(series, out, input_path=args.recording, force=args.force, extra=extra)
+    write_estimate_series(series, out, input_path=args.recording, force=args.force)
     if not args.quiet:
         print(f"{series.estimator}: {len(series.t)} estimates in {series.seconds:.2f} s -> {out}",
               file=sys.stdout)

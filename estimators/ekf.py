@@ -17,11 +17,18 @@ Deviations from the reference code (each discussed in ``docs/ekf.md``):
 * attitude prediction with the exponential map at the mid-step rate
   (``R_pred = R exp([Omega dt + Omega' dt^2 / 2]x)``) instead of ``R + R [Omega]x dt`` + SVD;
 * full gyroscopic block in ``F`` (the reference leaves ``dOmega/dOmega = I``);
-* Joseph-form covariance update and ``numpy.linalg.solve`` instead of an inverse;
+* the covariance update in the square-root form of the optimal gain (``S = L L^T``,
+  ``W = L^-1 H P``, ``P = P - W^T W``, symmetric by construction; no inverse), the predicted
+  covariance from the structure of ``F`` (:mod:`estimators.ekf_filter`);
 * the recording's allocation matrix and per-sample ``dt``; process noise scaled by
   ``dt / 1 ms`` so the reference's per-step values are the defaults at 1 kHz;
 * efficiency clamp ``[-0.001, 1.001]`` (the IRLS bounds) by default;
   ``EKFConfig.reference()`` restores the reference's ``[1e-3, 1 - 1e-3]``.
+
+One update per sample is :func:`ekf_step` (plain Python compiled by :func:`quadfault.jit.jit`)
+on the state of one filter in a flat buffer (:class:`EKFState`); the single filter, its
+offline :meth:`MotorEfficiencyEKF.run` (:func:`ekf_run`) and the batched filter
+(:class:`estimators.batched.BatchedEKF`) all run it.
 """
 
 from __future__ import annotations
@@ -32,24 +39,28 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from estimators.base import (STATUS_BAD_SAMPLE, STATUS_NO_EXCITATION, STATUS_OK,
-                             STATUS_WARMUP, Estimate,
-                             EstimateSeries, Sample, samples)
-from quadfault.dynamics import angular_acceleration, translational_acceleration
+from estimators.base import (
+    STATUS_BAD_SAMPLE,
+    STATUS_NO_EXCITATION,
+    STATUS_OK,
+    STATUS_WARMUP,
+    STATUSES,
+    Estimate,
+    EstimateSeries,
+    Sample,
+)
+from estimators.ekf_filter import predict_update_into
+from estimators.irls_config import BACKENDS, deprecated_backend  # noqa: F401  (re-exported)
+from estimators.state import FlatState, all_finite, piece_rows
 from quadfault.errors import ConfigError
+from quadfault.jit import jit
 from quadfault.recording import Recording
-from quadfault.rotation import expm_so3, hat, logm_so3, orthonormalize
 from quadfault.vehicle import Vehicle
 
 #: Sample period the per-step noise values refer to [s] (the reference's 1 kHz).
 NOISE_REFERENCE_DT = 1e-3
-BACKENDS = ("auto", "numpy", "numba")
-
-P_, V_, W_, R_, ETA_ = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 18), 18
-#: vec(R) entries of the third column R e3 (column-major vec).
-R_E3 = slice(15, 18)
-
-
+#: The first state index of the efficiencies.
+ETA_ = 18
 
 #: A rotor commanded at most this thrust [N] carries no information on its efficiency. A step
 #: whose command has such a rotor leaves the whole efficiency vector where it was (status
@@ -57,16 +68,11 @@ R_E3 = slice(15, 18)
 #: decorrelated from the kinematic states, and their variance grows by Q_eta dt.
 IDLE_THRUST = 1e-3
 
-_STATUS_WIDTH = max(len(s) for s in (STATUS_BAD_SAMPLE, STATUS_NO_EXCITATION, STATUS_OK,
-                                        STATUS_WARMUP))
+OK = STATUSES.index(STATUS_OK)
+WARMUP = STATUSES.index(STATUS_WARMUP)
+NO_EXCITATION = STATUSES.index(STATUS_NO_EXCITATION)
+BAD_SAMPLE = STATUSES.index(STATUS_BAD_SAMPLE)
 
-
-def _freeze_eta(x, P, eta_keep, P_keep, qc, dt) -> None:
-    """Restore the efficiencies and their covariance block after a step without excitation."""
-    x[ETA_:] = eta_keep
-    P[ETA_:, :ETA_] = 0.0
-    P[:ETA_, ETA_:] = 0.0
-    P[ETA_:, ETA_:] = P_keep + np.diag(qc[ETA_:] * dt)
 
 @dataclass(frozen=True)
 class EKFConfig:
@@ -86,7 +92,8 @@ class EKFConfig:
         clip_commands: clip the commanded thrusts to ``[0, vehicle.rotor_max_thrust]`` before
             use (as IRLS does: a saturated rotor cannot deliver its command); ``False`` = the
             reference code.
-        backend: ``"auto"`` (numba when installed), ``"numpy"`` or ``"numba"``; same results.
+        backend: deprecated, does nothing (one implementation); a value other than None
+            warns. Removed in the next release.
     """
 
     q_eta: float = 0.5
@@ -102,7 +109,7 @@ class EKFConfig:
     eta0: float | tuple = 1.0
     eta_bounds: tuple | None = (-0.001, 1.001)
     clip_commands: bool = True
-    backend: str = "auto"
+    backend: str | None = None
 
     def __post_init__(self):
         for key in ("q_eta", "q_position", "q_velocity", "q_rate", "q_rotation", "r_position",
@@ -116,127 +123,190 @@ class EKFConfig:
             if not (lo < hi):
                 raise ConfigError(f"EKFConfig.eta_bounds must be (low, high) with low < high, "
                                   f"got {self.eta_bounds!r}")
-        if self.backend not in BACKENDS:
-            raise ConfigError(f"EKFConfig.backend must be one of {BACKENDS}, got {self.backend!r}")
+        deprecated_backend("EKFConfig", self.backend)
 
     @classmethod
-    def reference(cls, **changes) -> "EKFConfig":
+    def reference(cls, **changes) -> EKFConfig:
         """The reference code's settings, including its clamp ``[1e-3, 1 - 1e-3]``."""
         return replace(cls(eta_bounds=(1e-3, 1.0 - 1e-3), clip_commands=False), **changes)
 
-    def replace(self, **changes) -> "EKFConfig":
+    def replace(self, **changes) -> EKFConfig:
         return replace(self, **changes)
 
 
-def right_jacobian_so3(phi: np.ndarray) -> np.ndarray:
-    """Right Jacobian of SO(3): ``exp(phi + d) ~= exp(phi) exp(Jr(phi) d)``."""
-    th2 = float(phi @ phi)
-    K = hat(phi)
-    if th2 < 1e-8:
-        a, b = 0.5 - th2 / 24.0, 1.0 / 6.0 - th2 / 120.0
-    else:
-        th = math.sqrt(th2)
-        a, b = (1.0 - math.cos(th)) / th2, (th - math.sin(th)) / (th2 * th)
-    return np.eye(3) - a * K + b * (K @ K)
+# pieces of the float state (EKFState), in order, then the workspace of predict_update_into
+(F_X, F_P, F_LAST_T, F_LAST_F, F_ETA0, F_ETA_KEEP, F_P_KEEP, F_MATS, F_WT, F_S12, F_HP, F_M3,
+ F_DR, F_BS, F_HR, F_VECS, F_Z, F_Y, F_DT) = range(19)
+N_PIECES = 19
+K_INITIALISED = 0  # the int state: 1 once the first good sample set the kinematic states
+# the constants: mass, gravity, rotor_max_thrust, clip, lo, hi, p0, then A (4 n), J (9),
+# J^-1 (9), qc (18 + n), r (12)
+C_MASS, C_G, C_FMAX, C_CLIP, C_LO, C_HI, C_P0, C_A = range(8)
 
 
-def attitude_jacobian(R_meas: np.ndarray) -> np.ndarray:
-    """``(3, 9)`` Jacobian ``H_R = -d vee(skew(R^T R_meas)) / d vec(R)`` (column-major vec).
+class EKFState(FlatState):
+    """The state of ``N`` filters in a float and an int buffer
+    (:class:`estimators.state.FlatState`), with numpy views of the pieces, each
+    ``(N, *shape)``: ``x``, ``P``, the previous sample's time and (clipped)
+    command, the initial efficiency, the efficiencies kept across an idle step, and the
+    workspace of :func:`predict_update_into`."""
 
-    ``vee(skew(R^T R_m))`` equals ``log(R^T R_m)`` to first order, so this is the measurement
-    Jacobian of the rotation-error innovation; it does not depend on the estimate and is
-    well-defined at zero error (unlike the reference's ``d acos / d vec(R)``).
-    """
-    H = np.zeros((3, 9))
-    for k, a, b in ((0, 2, 1), (1, 0, 2), (2, 1, 0)):  # g_k = (A_ab - A_ba) / 2, A = R^T R_m
-        H[k, 3 * a:3 * a + 3] -= 0.5 * R_meas[:, b]
-        H[k, 3 * b:3 * b + 3] += 0.5 * R_meas[:, a]
-    return H
+    @staticmethod
+    def shapes(n: int) -> tuple:
+        ns = 18 + n
+        return ((ns,), (ns, ns), (1,), (n,), (n,), (n,), (n, n), (3, ns, ns), (ns, 12),
+                (2, 12, 12), (12, ns), (8, 3, 3), (9, 3), (2, n, 3), (3, 9), (3, ns), (3, ns),
+                (12,), (n,))
+
+    def __init__(self, n: int, num: int = 1):
+        super().__init__(self.shapes(n), num, 1)
 
 
-def predict(x: np.ndarray, P: np.ndarray, f: np.ndarray, dt: float, vehicle: Vehicle,
-            Q: np.ndarray):
-    """EKF time update over ``dt`` [s] with rotor commands ``f`` [N] held.
+@jit
+def state_pieces(fs, offsets, n, N):
+    """The pieces of the float state of ``N`` filters (:class:`EKFState`), each
+    ``(N, *shape)``, in the order of the ``F_*`` constants."""
+    ns = 18 + n
+    o = offsets
+    return (piece_rows(fs, o[F_X], o[F_X + 1], N),
+            piece_rows(fs, o[F_P], o[F_P + 1], N).reshape((N, ns, ns)),
+            piece_rows(fs, o[F_LAST_T], o[F_LAST_T + 1], N),
+            piece_rows(fs, o[F_LAST_F], o[F_LAST_F + 1], N),
+            piece_rows(fs, o[F_ETA0], o[F_ETA0 + 1], N),
+            piece_rows(fs, o[F_ETA_KEEP], o[F_ETA_KEEP + 1], N),
+            piece_rows(fs, o[F_P_KEEP], o[F_P_KEEP + 1], N).reshape((N, n, n)),
+            piece_rows(fs, o[F_MATS], o[F_MATS + 1], N).reshape((N, 3, ns, ns)),
+            piece_rows(fs, o[F_WT], o[F_WT + 1], N).reshape((N, ns, 12)),
+            piece_rows(fs, o[F_S12], o[F_S12 + 1], N).reshape((N, 2, 12, 12)),
+            piece_rows(fs, o[F_HP], o[F_HP + 1], N).reshape((N, 12, ns)),
+            piece_rows(fs, o[F_M3], o[F_M3 + 1], N).reshape((N, 8, 3, 3)),
+            piece_rows(fs, o[F_DR], o[F_DR + 1], N).reshape((N, 9, 3)),
+            piece_rows(fs, o[F_BS], o[F_BS + 1], N).reshape((N, 2, n, 3)),
+            piece_rows(fs, o[F_HR], o[F_HR + 1], N).reshape((N, 3, 9)),
+            piece_rows(fs, o[F_VECS], o[F_VECS + 1], N).reshape((N, 3, ns)),
+            piece_rows(fs, o[F_Z], o[F_Z + 1], N).reshape((N, 3, ns)),
+            piece_rows(fs, o[F_Y], o[F_Y + 1], N),
+            piece_rows(fs, o[F_DT], o[F_DT + 1], N))
 
-    Returns ``(x_pred, P_pred, F)``. Mean: eqs. (1)-(4) discretised as
-    ``v+ = v + a dt``, ``p+ = p + v dt + a dt^2/2``, ``Omega+ = Omega + Omega' dt``,
-    ``R+ = R exp([phi]x)`` with ``phi = (Omega + Omega+) dt / 2``.
-    """
+
+@jit
+def constant_arrays(const, n):
+    """``(A (4, n), J (3, 3), J^-1 (3, 3), qc (18 + n), r (12))``: the array constants of
+    :func:`ekf_step`, as views of ``const`` (:func:`ekf_constants`)."""
+    a4, ns = C_A + 4 * n, 18 + n
+    return (const[C_A:a4].reshape((4, n)), const[a4:a4 + 9].reshape((3, 3)),
+            const[a4 + 9:a4 + 18].reshape((3, 3)), const[a4 + 18:a4 + 18 + ns],
+            const[a4 + 18 + ns:a4 + 30 + ns])
+
+
+@jit
+def ekf_step(t, p, v, R, w, f, const, arrays, S, ks, i) -> int:
+    """One sample into filter ``i`` of the state ``(S, ks)`` (:func:`state_pieces`), in place;
+    returns the status code. A non-finite sample or a time not after the previous one is
+    skipped (``bad_sample``); the first good sample sets the kinematic states (``warmup``);
+    later ones predict from the previous sample, its command held, and update
+    (:func:`predict_update_into`); a step whose command had an idle rotor (``<= IDLE_THRUST``)
+    keeps the efficiencies, decorrelated, their variance grown by ``Q_eta dt``
+    (``no_excitation``). ``arrays`` is :func:`constant_arrays` of ``const``."""
     n = f.shape[0]
-    p, v, w = x[P_], x[V_], x[W_]
-    R = x[R_].reshape(3, 3, order="F")
-    eta = x[ETA_:]
-    A = vehicle.allocation
-    m, Jinv = vehicle.mass, vehicle.inertia_inverse
-    wrench = A @ (eta * f)  # eq. (12) with efficiency: [T; M] = A diag(eta) f
-    a = translational_acceleration(R, wrench[0], vehicle)  # eq. (2)
-    wdot = angular_acceleration(w, wrench[1:], vehicle)  # eq. (4)
-    phi = w * dt + 0.5 * wdot * dt * dt
-    E = expm_so3(phi)
-    R_new = R @ E  # eq. (3), exponential map
-    x_pred = np.concatenate((p + v * dt + 0.5 * a * dt * dt, v + a * dt, w + wdot * dt,
-                             R_new.reshape(9, order="F"), eta))
-    # Jacobian F = d x_pred / d x
-    J = vehicle.inertia
-    b3 = R[:, 2]
-    dT = A[0] * f  # d T / d eta
-    B = Jinv @ (A[1:] * f)  # d Omega' / d eta
-    G = Jinv @ (hat(J @ w) - hat(w) @ J)  # d Omega' / d Omega (gyroscopic term of eq. 4)
-    F = np.eye(18 + n)
-    F[P_, V_] = dt * np.eye(3)
-    F[P_, R_E3] = -(wrench[0] / m) * 0.5 * dt * dt * np.eye(3)
-    F[P_, ETA_:] = -np.outer(b3, dT) * (0.5 * dt * dt / m)
-    F[V_, R_E3] = -(wrench[0] / m) * dt * np.eye(3)
-    F[V_, ETA_:] = -np.outer(b3, dT) * (dt / m)
-    F[W_, W_] += dt * G
-    F[W_, ETA_:] = dt * B
-    F[R_, R_] = np.kron(E.T, np.eye(3))  # vec(R E) = (E^T kron I) vec(R)
-    RE, Jr = R_new, right_jacobian_so3(phi)
-    dR_dphi = np.stack([(RE @ hat(Jr[:, i])).reshape(9, order="F") for i in range(3)], axis=1)
-    F[R_, W_] = dR_dphi @ (dt * np.eye(3) + 0.5 * dt * dt * G)
-    F[R_, ETA_:] = dR_dphi @ (0.5 * dt * dt * B)
-    P_pred = F @ P @ F.T + Q
-    return x_pred, P_pred, F
+    ns = 18 + n
+    x, P, last_t, last_f = S[F_X][i], S[F_P][i], S[F_LAST_T][i], S[F_LAST_F][i]
+    clip, f_max = const[C_CLIP] != 0.0, const[C_FMAX]
+    if not (math.isfinite(t) and all_finite(p) and all_finite(v) and all_finite(R)
+            and all_finite(w) and all_finite(f)):
+        return BAD_SAMPLE
+    if ks[i, K_INITIALISED] == 0:  # the first sample sets the kinematic states
+        eta0 = S[F_ETA0][i]
+        for a in range(3):
+            x[a], x[3 + a], x[6 + a] = p[a], v[a], w[a]
+            for b in range(3):
+                x[9 + 3 * b + a] = R[a, b]  # vec(R), column-major
+        for j in range(n):
+            x[18 + j] = eta0[j]
+        for a in range(ns):
+            for b in range(ns):
+                P[a, b] = const[C_P0] if a == b else 0.0
+        ks[i, K_INITIALISED] = 1
+        code = WARMUP
+    else:
+        dt = t - last_t[0]
+        if not dt > 0:
+            return BAD_SAMPLE
+        idle = False
+        for j in range(n):
+            idle = idle or last_f[j] <= IDLE_THRUST
+        keep, P_keep = S[F_ETA_KEEP][i], S[F_P_KEEP][i]
+        if idle:
+            for j in range(n):
+                keep[j] = x[18 + j]
+                for k in range(n):
+                    P_keep[j, k] = P[18 + j, 18 + k]
+        A, J, Jinv, qc, r = arrays
+        predict_update_into(x, P, last_f, dt, p, v, w, R, A, const[C_MASS], const[C_G], J,
+                            Jinv, qc, r, const[C_LO], const[C_HI],
+                            S[F_MATS][i], S[F_WT][i], S[F_S12][i], S[F_HP][i], S[F_M3][i],
+                            S[F_DR][i], S[F_BS][i], S[F_HR][i], S[F_VECS][i], S[F_Z][i],
+                            S[F_Y][i], S[F_DT][i])
+        code = OK
+        if idle:  # the efficiencies stay, decorrelated; their variance grows by Q_eta dt
+            for j in range(n):
+                x[18 + j] = keep[j]
+                for k in range(18):
+                    P[18 + j, k] = 0.0
+                    P[k, 18 + j] = 0.0
+                for k in range(n):
+                    P[18 + j, 18 + k] = P_keep[j, k]
+                P[18 + j, 18 + j] += qc[18 + j] * dt
+            code = NO_EXCITATION
+    last_t[0] = t
+    for j in range(n):
+        last_f[j] = min(max(f[j], 0.0), f_max) if clip else f[j]
+    return code
 
 
-def kalman_update(x: np.ndarray, P: np.ndarray, y: np.ndarray, H: np.ndarray,
-                  R: np.ndarray):
-    """Measurement update with innovation ``y``, Jacobian ``H`` and noise ``R``.
-
-    ``S = H P H^T + R``, ``K = P H^T S^-1`` (by ``solve``), ``x+ = x + K y`` and the Joseph
-    form ``P+ = (I - K H) P (I - K H)^T + K R K^T``, symmetric and positive semi-definite
-    even when ``K`` is not exactly optimal.
-    """
-    S = H @ P @ H.T + R
-    K = np.linalg.solve(S, H @ P).T  # P, S symmetric: (S^-1 H P)^T = P H^T S^-1
-    IKH = np.eye(P.shape[0]) - K @ H
-    P_new = IKH @ P @ IKH.T + K @ R @ K.T
-    return x + K @ y, 0.5 * (P_new + P_new.T)
-
-
-def measurement_update(x: np.ndarray, P: np.ndarray, sample: Sample, r_diag: np.ndarray,
-                       bounds):
-    """Update with the measured ``p, v, Omega`` and attitude; project R, clamp eta."""
-    n = x.shape[0]
-    R_est = x[R_].reshape(3, 3, order="F")
-    y = np.concatenate((sample.p - x[P_], sample.v - x[V_], sample.w - x[W_],
-                        logm_so3(R_est.T @ sample.R)))
-    H = np.zeros((12, n))
-    H[:9, :9] = np.eye(9)
-    H[9:, R_] = attitude_jacobian(sample.R)
-    x, P = kalman_update(x, P, y, H, np.diag(r_diag))
-    x[R_] = orthonormalize(x[R_].reshape(3, 3, order="F")).reshape(9, order="F")
-    if bounds is not None:
-        x[ETA_:] = np.clip(x[ETA_:], bounds[0], bounds[1])
-    return x, P
+@jit
+def ekf_reset(ip_offsets, n, fs, ks, rows, eta0) -> None:
+    """Forget the filters ``rows``; the next good sample initialises them, with the
+    efficiencies ``eta0`` (N, n)."""
+    N = ks.shape[0]
+    for i in rows:
+        ks[i, K_INITIALISED] = 0
+        for k in range(N_PIECES):
+            row = piece_rows(fs, ip_offsets[k], ip_offsets[k + 1], N)[i]
+            for a in range(row.shape[0]):
+                row[a] = 0.0
+        e0 = piece_rows(fs, ip_offsets[F_ETA0], ip_offsets[F_ETA0 + 1], N)[i]
+        for j in range(n):
+            e0[j] = eta0[i, j]
 
 
-def _numba_available() -> bool:
-    try:
-        import numba  # noqa: F401
-    except ImportError:
-        return False
-    return True
+@jit
+def ekf_update(t, p, v, R, w, f, const, offsets, fs, ks) -> int:
+    """:func:`ekf_step` of a single filter (the online update)."""
+    S = state_pieces(fs, offsets, f.shape[0], ks.shape[0])
+    return ekf_step(t, p, v, R, w, f, const, constant_arrays(const, f.shape[0]), S, ks,
+                    ks.shape[0] - 1)  # row 0, a run-time value like the batch's rows
+
+
+@jit
+def ekf_run(t, p, v, R, w, f, const, offsets, fs, ks, eta, sd, code) -> None:
+    """:func:`ekf_step` over the rows of a recording (a single filter's state): the estimate
+    (the initial efficiency before the first good sample), its sd (NaN before it) and the
+    status code of every row."""
+    n = f.shape[1]
+    S = state_pieces(fs, offsets, n, ks.shape[0])
+    row = ks.shape[0] - 1  # 0, a run-time value like the batch's rows
+    x, P, eta0 = S[F_X][row], S[F_P][row], S[F_ETA0][row]
+    arrays = constant_arrays(const, n)
+    for k in range(t.shape[0]):
+        code[k] = ekf_step(t[k], p[k], v[k], R[k], w[k], f[k], const, arrays, S, ks, row)
+        for j in range(n):
+            if ks[row, K_INITIALISED] == 1:
+                eta[k, j] = x[18 + j]
+                sd[k, j] = math.sqrt(P[18 + j, 18 + j])
+            else:
+                eta[k, j] = eta0[j]
+                sd[k, j] = np.nan
 
 
 class MotorEfficiencyEKF:
@@ -250,150 +320,139 @@ class MotorEfficiencyEKF:
     name = "ekf"
 
     def __init__(self, vehicle: Vehicle, config: EKFConfig | None = None):
+        if not isinstance(vehicle, Vehicle):
+            raise ConfigError(f"MotorEfficiencyEKF needs a Vehicle, got {type(vehicle).__name__}")
         self.vehicle = vehicle
         self.config = config or EKFConfig()
-        cfg = self.config
+        if not isinstance(self.config, EKFConfig):
+            raise ConfigError("config must be an EKFConfig")
         self.n_rotors = vehicle.n_rotors
-        if cfg.backend == "numba" and not _numba_available():
-            raise ConfigError("EKFConfig.backend='numba' needs numba (install the 'fast' extra)")
-        self.use_numba = cfg.backend == "numba" or (cfg.backend == "auto" and _numba_available())
-        eta0 = np.broadcast_to(np.asarray(cfg.eta0, dtype=float), (self.n_rotors,)).copy()
-        self._eta0_default = eta0
+        self._eta0_default = default_eta0(self.config, self.n_rotors)
+        self._const = ekf_constants(vehicle, self.config)
+        cfg, n = self.config, self.n_rotors
+        #: process-noise variances per 1 ms step (diagonal of Q at dt = 1 ms)
         self.q_diag = np.concatenate((np.full(3, cfg.q_position), np.full(3, cfg.q_velocity),
                                       np.full(3, cfg.q_rate), np.full(9, cfg.q_rotation),
-                                      np.full(self.n_rotors, cfg.q_eta)))
+                                      np.full(n, cfg.q_eta)))
+        #: measurement-noise variances (p, v, Omega, attitude rows)
         self.r_diag = np.concatenate((np.full(3, cfg.r_position), np.full(3, cfg.r_velocity),
                                       np.full(3, cfg.r_rate), np.full(3, cfg.r_attitude)))
+        self._state = EKFState(self.n_rotors)
         self.reset()
 
     @property
     def n_states(self) -> int:
         return 18 + self.n_rotors
 
+    @property
+    def x(self) -> np.ndarray | None:
+        """The state ``[p, v, Omega, vec(R), eta]`` (None before the first good sample)."""
+        return self._state.views[F_X][0] if self._state.ints[0, K_INITIALISED] else None
+
+    @property
+    def P(self) -> np.ndarray | None:
+        """The state covariance (None before the first good sample)."""
+        return self._state.views[F_P][0] if self._state.ints[0, K_INITIALISED] else None
+
     def reset(self, eta0=None) -> None:
         """Forget everything; the next sample initialises the kinematic states."""
         eta = self._eta0_default if eta0 is None else np.asarray(eta0, dtype=float)
         if eta.shape != (self.n_rotors,) or not np.all(np.isfinite(eta)):
             raise ConfigError(f"eta0 must be {self.n_rotors} finite values, got {eta0!r}")
-        self._eta_init = eta.copy()
-        self.x = None
-        self.P = None
-        self._last = None  # (t, f) of the previous sample
+        st = self._state
+        ekf_reset(st.offsets, self.n_rotors, st.floats, st.ints, _ROW0, eta[None])
 
-    def _initialise(self, sample: Sample) -> None:
-        self.x = np.concatenate((sample.p, sample.v, sample.w,
-                                 np.asarray(sample.R, float).reshape(9, order="F"),
-                                 self._eta_init))
-        self.P = self.config.p0 * np.eye(self.n_states)
-
-    def _estimate(self, t, status) -> Estimate:
-        eta = self.x[ETA_:].copy() if self.x is not None else self._eta_init.copy()
-        sd = np.sqrt(np.diag(self.P)[ETA_:]) if self.P is not None else None
-        return Estimate(t=float(t), eta=eta, sd=sd, status=status)
+    def _estimate(self, t, code) -> Estimate:
+        views = self._state.views
+        if self._state.ints[0, K_INITIALISED]:
+            eta = views[F_X][0, ETA_:].copy()
+            sd = np.sqrt(np.diagonal(views[F_P][0])[ETA_:])
+        else:
+            eta, sd = views[F_ETA0][0].copy(), None
+        return Estimate(t=float(t), eta=eta, sd=sd, status=STATUSES[code])
 
     def update(self, sample: Sample) -> Estimate:
         """One predict (from the previous sample, its command held) and one update."""
-        shapes = [np.shape(a) for a in (sample.p, sample.v, sample.R, sample.w, sample.f)]
+        try:
+            t = float(sample.t)
+            arrays = [np.asarray(a, dtype=np.float64) for a in sample[1:]]
+        except (AttributeError, TypeError, ValueError, IndexError):
+            raise ConfigError(f"EKF: {sample!r} is not a sample (t, p, v, R, w, f of numbers)") \
+                from None
+        shapes = [a.shape for a in arrays]
         if shapes != [(3,), (3,), (3, 3), (3,), (self.n_rotors,)]:
             raise ConfigError(f"EKF: sample at t = {sample.t} has shapes {shapes}; expected "
                               f"p, v, w (3,), R (3, 3), f ({self.n_rotors},)")
-        finite = all(np.all(np.isfinite(a)) for a in (sample.p, sample.v, sample.R, sample.w,
-                                                      sample.f)) and math.isfinite(sample.t)
-        if not finite:
-            return self._estimate(sample.t, STATUS_BAD_SAMPLE)
-        if self.x is None:
-            self._initialise(sample)
-            self._last = (float(sample.t), self._commands(sample.f))
-            return self._estimate(sample.t, STATUS_WARMUP)
-        t_prev, f_prev = self._last
-        dt = float(sample.t) - t_prev
-        if not dt > 0:  # a repeated or decreasing time stamp: skip it, keep the state
-            return self._estimate(sample.t, STATUS_BAD_SAMPLE)
-        idle = bool(np.any(f_prev <= IDLE_THRUST))
-        if idle:
-            eta_keep, P_keep = self.x[ETA_:].copy(), self.P[ETA_:, ETA_:].copy()
-        if self.use_numba:
-            from estimators.ekf_numba import step_inplace
-
-            step_inplace(self.x, self.P, f_prev, dt, sample.p, sample.v, sample.w,
-                         np.ascontiguousarray(sample.R, dtype=float), *self._kernel_args())
-        else:
-            Q = np.diag(self.q_diag * (dt / NOISE_REFERENCE_DT))
-            x, P, _ = predict(self.x, self.P, f_prev, dt, self.vehicle, Q)
-            self.x, self.P = measurement_update(x, P, sample, self.r_diag, self.config.eta_bounds)
-        if idle:
-            _freeze_eta(self.x, self.P, eta_keep, P_keep, self.q_diag / NOISE_REFERENCE_DT, dt)
-        self._last = (float(sample.t), self._commands(sample.f))
-        return self._estimate(sample.t, STATUS_NO_EXCITATION if idle else STATUS_OK)
-
-    def _commands(self, f) -> np.ndarray:
-        f = np.array(f, dtype=float)
-        if self.config.clip_commands:
-            f = np.clip(f, 0.0, self.vehicle.rotor_max_thrust)
-        return f
-
-    def _kernel_args(self):
-        veh, b = self.vehicle, self.config.eta_bounds
-        lo, hi = (-np.inf, np.inf) if b is None else (float(b[0]), float(b[1]))
-        return (np.ascontiguousarray(veh.allocation), veh.mass, veh.gravity,
-                np.ascontiguousarray(veh.inertia), np.ascontiguousarray(veh.inertia_inverse),
-                self.q_diag / NOISE_REFERENCE_DT, self.r_diag, lo, hi)
+        p, v, R, w, f = (np.ascontiguousarray(a) for a in arrays)
+        st = self._state
+        code = ekf_update(t, p, v, R, w, f, self._const, st.offsets, st.floats, st.ints)
+        return self._estimate(t, code)
 
     def run(self, recording: Recording, progress: bool = False) -> EstimateSeries:
-        """Estimates at every row of ``recording`` (row 0 is the initial guess, ``warmup``)."""
+        """Estimates at every row of ``recording`` (row 0 is the initial guess, ``warmup``);
+        the filter is left at the end of the recording."""
+        from quadfault.progress import progress_bar
+
         start = time.perf_counter()
-        self.reset(self._eta_init)
-        n = len(recording)
-        if self.use_numba and n > 0 and recording.has_pose:
-            eta, sd, ok = self._run_numba(recording)
-            status = np.full(n, STATUS_BAD_SAMPLE, dtype=f"<U{_STATUS_WIDTH}")
-            status[ok] = STATUS_OK
-            # a row whose predict used an idle rotor's command (previous good row)
-            rows = np.flatnonzero(ok)
-            idle = np.any(self._commands(recording.thrust_cmd) <= IDLE_THRUST, axis=1)
-            status[rows[1:][idle[rows[:-1]]]] = STATUS_NO_EXCITATION
-            if ok.any():
-                status[int(np.argmax(ok))] = STATUS_WARMUP  # the row that initialised x
-        else:
-            eta, sd = np.empty((n, self.n_rotors)), np.empty((n, self.n_rotors))
-            status = np.empty(n, dtype=object)
-            bar = None
-            if progress:
-                from quadfault.progress import progress_bar
-
-                bar = progress_bar(total=n, desc="ekf", unit="sample")
-            for k, s in enumerate(samples(recording)):
-                est = self.update(s)
-                eta[k], status[k] = est.eta, est.status
-                sd[k] = est.sd if est.sd is not None else np.nan
-                if bar is not None and k % 1000 == 999:
-                    bar.update(1000)
-            if bar is not None:
-                bar.close()
-        return EstimateSeries(t=np.array(recording.t, dtype=float), eta=eta, sd=sd,
-                              status=status.astype(str), estimator=self.name,
-                              config=self.describe(), seconds=time.perf_counter() - start)
-
-    def _run_numba(self, recording: Recording):
-        from estimators.ekf_numba import run_series
-
-        R = np.ascontiguousarray(recording.rotation, dtype=float)
-        args = [np.ascontiguousarray(a, dtype=float) for a in (
-            recording.t, recording.position, recording.velocity, recording.omega,
-            self._commands(recording.thrust_cmd))]
-        x0 = np.empty(self.n_states)
-        P0 = self.config.p0 * np.eye(self.n_states)
-        eta, sd, ok, x, P, k_last = run_series(*args[:3], R, *args[3:], self._eta_init.copy(),
-                                               x0, P0, *self._kernel_args())
-        if k_last >= 0:
-            self.x, self.P = x, P
-            self._last = (float(recording.t[k_last]), args[4][k_last].copy())
-        return eta, sd, ok
+        if not isinstance(recording, Recording):
+            raise ConfigError(f"run() needs a Recording, got {type(recording).__name__}")
+        if not recording.has_pose:
+            raise ConfigError(f"{recording.path or 'recording'}: the estimators need position, "
+                              "velocity and attitude columns (px..pz, vx..vz, qw..qz); this "
+                              "recording is IMU-only")
+        if recording.thrust_cmd.shape[1] != self.n_rotors:
+            raise ConfigError(f"{recording.path or 'recording'}: "
+                              f"{recording.thrust_cmd.shape[1]} rotor commands, the vehicle has "
+                              f"{self.n_rotors} rotors")
+        self.reset(self._state.views[F_ETA0][0].copy())
+        t, p, v, R, w, f = (np.ascontiguousarray(a, dtype=np.float64) for a in (
+            recording.t, recording.position, recording.velocity, recording.rotation,
+            recording.omega, recording.thrust_cmd))
+        N, n, st = len(t), self.n_rotors, self._state
+        eta, sd, code = np.empty((N, n)), np.empty((N, n)), np.empty(N, dtype=np.int64)
+        chunk = 50000
+        bar = progress_bar(total=N, desc="ekf", unit="sample", disable=None if progress else True)
+        for k0 in range(0, N, chunk):
+            k = slice(k0, min(k0 + chunk, N))
+            ekf_run(t[k], p[k], v[k], R[k], w[k], f[k], self._const, st.offsets, st.floats,
+                    st.ints, eta[k], sd[k], code[k])
+            bar.update(k.stop - k0)
+        bar.close()
+        return EstimateSeries(t=t.copy(), eta=eta, sd=sd, status=np.asarray(STATUSES)[code],
+                              estimator=self.name, config=self.describe(),
+                              seconds=time.perf_counter() - start)
 
     def describe(self) -> dict:
         """JSON-ready description (for sidecars and reports)."""
         cfg = asdict(self.config)
         cfg["eta_bounds"] = None if cfg["eta_bounds"] is None else list(cfg["eta_bounds"])
         cfg["eta0"] = self._eta0_default.tolist()
-        cfg["backend_used"] = "numba" if self.use_numba else "numpy"
         return cfg
+
+
+def default_eta0(cfg: EKFConfig, n: int) -> np.ndarray:
+    """``EKFConfig.eta0`` as one value per rotor."""
+    try:
+        return np.broadcast_to(np.asarray(cfg.eta0, dtype=float), (n,)).copy()
+    except ValueError:
+        raise ConfigError(f"EKFConfig.eta0 must be one value or {n}, got {cfg.eta0!r}") from None
+
+
+def ekf_constants(vehicle: Vehicle, cfg: EKFConfig) -> np.ndarray:
+    """The constants of :func:`ekf_step`: mass, gravity, rotor_max_thrust, clip, the clamp,
+    p0, the allocation, the inertia and its inverse, the process-noise variance rates
+    ``qc`` [1/s] (per 1 ms values divided by 1 ms) and the measurement-noise variances."""
+    n = vehicle.n_rotors
+    b = cfg.eta_bounds
+    lo, hi = (-np.inf, np.inf) if b is None else (float(b[0]), float(b[1]))
+    q = np.concatenate((np.full(3, cfg.q_position), np.full(3, cfg.q_velocity),
+                        np.full(3, cfg.q_rate), np.full(9, cfg.q_rotation), np.full(n, cfg.q_eta)))
+    r = np.concatenate((np.full(3, cfg.r_position), np.full(3, cfg.r_velocity),
+                        np.full(3, cfg.r_rate), np.full(3, cfg.r_attitude)))
+    return np.concatenate([np.asarray(a, dtype=np.float64).ravel() for a in (
+        [vehicle.mass, vehicle.gravity, vehicle.rotor_max_thrust, float(cfg.clip_commands), lo,
+         hi, cfg.p0], vehicle.allocation, vehicle.inertia, vehicle.inertia_inverse,
+        q / NOISE_REFERENCE_DT, r)])
+
+
+_ROW0 = np.zeros(1, dtype=np.int64)

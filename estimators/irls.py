@@ -1,23 +1,24 @@
-"""The paper's sliding-window IRLS motor-efficiency estimator (Algorithm 2).
+"""The paper's sliding-window IRLS motor-efficiency estimator (Algorithm 2), online.
 
-Per update, over the last ``n = 10`` samples (9 segments, :mod:`estimators.residuals`)::
+One update per measurement sample (:func:`irls_update`, plain Python compiled by
+:func:`quadfault.jit.jit`, allocation-free, one call):
 
-    min_eta  1/2 sum_i w_i r_i(eta)^T G_i r_i(eta) + gamma/2 ||eta - eta_prev||^2   (eq. 24)
-    s.t.     eta_min - eps <= eta <= eta_max + eps                                   (eq. 25)
+1. check the sample (finite, time increasing; otherwise ``bad_sample`` and the window
+   restarts) and clip its command to ``[0, rotor_max_thrust]`` (``clip_commands``);
+2. write the segment previous sample -> this sample into a ring of the last ``window - 1``
+   segments' quadratic terms (:mod:`estimators.residuals`, eqs. 13-26);
+3. when the ring is full (else ``warmup``) and the window's mean commanded thrust reaches
+   ``min_thrust`` (else ``no_excitation``), solve the window from the previous estimate
+   (:mod:`estimators.window`, Algorithm 2 around the interior point of
+   :mod:`estimators.ipm`); on a guard (``ill_conditioned``, ``rejected``) the previous
+   estimate is kept;
+4. beyond the paper, both off by default (:meth:`IRLSConfig.improved` turns them on): the
+   change completion of the solved estimate (:mod:`estimators.change_completion`), and the
+   reported estimate is the causal running median of the estimates (:mod:`estimators.median`).
 
-solved by an outer IRLS loop (robust MAD z-score weights ``w_i``, :mod:`estimators.robust`)
-around a primal-dual interior-point method (:mod:`estimators.ipm`), warm-started from the
-previous estimate. The residuals are affine in ``eta``, so each window reduces to per-segment
-quadratic terms ``(c_i, b_i, H_i)`` computed once.
-
-Guards (the previous estimate is kept): a window with (almost) no commanded thrust
-(``no_excitation``), ``cond_1(J^T G J) > cond_max`` (``ill_conditioned``, the reference's
-``rcond < 1e-4``), every segment rejected (``rejected``), a non-finite sample (``bad_sample``).
-
-Uncertainty (``Estimate.sd``), from the window's information matrix with the final weights::
-
-    s^2 = sum_i w_i e_i(eta) / max(10 k - n, 1)        (k = segments with w_i > 0)
-    sd  = sqrt(diag(s^2 (J^T G J + gamma I)^-1))
+The state of one estimator lives in a float and an int buffer (:class:`IRLSState`); the
+offline :meth:`SlidingWindowIRLS.run` is the same update in a compiled loop over the
+recording, and :class:`estimators.batched.BatchedIRLS` runs it over a batch of such states.
 """
 
 from __future__ import annotations
@@ -30,153 +31,288 @@ import numpy as np
 
 from estimators.base import (
     STATUS_BAD_SAMPLE,
-    STATUS_ILL_CONDITIONED,
-    STATUS_MAX_ITER,
     STATUS_NO_EXCITATION,
-    STATUS_OK,
-    STATUS_REJECTED,
     STATUS_WARMUP,
     STATUSES,
     Estimate,
     EstimateSeries,
     Sample,
 )
-from estimators.change_completion import (
-    CausalMedian,
-    ChangeCompletion,
-    causal_median,
-    run_completed,
-)
-from estimators.ipm import solve_box_qp
-from estimators.irls_config import (  # noqa: F401
+from estimators.change_completion import N_COUNTERS, complete_into, observe_into
+from estimators.irls_config import (  # noqa: F401  (re-exported)
     BACKENDS,
     SCALINGS,
-    CompiledWindowDiagnostics,
     IRLSConfig,
     IRLSDiagnostics,
+    LazyWindowDiagnostics,
+    window_diagnostics,
 )
-from estimators.residuals import quadratic_terms, segment_models
-from estimators.robust import mad_weights
+from estimators.median import median_push_into
+from estimators.residuals import segment_terms_into
+from estimators.state import FlatState, all_finite, piece_rows
+from estimators.window import (
+    M_A,
+    M_B,
+    M_JGJ,
+    MAX_ITER,
+    N_FLOAT_SETTINGS,
+    N_INT_SETTINGS,
+    N_MATRICES,
+    N_VECTORS,
+    OK,
+    P_GAMMA,
+    P_HI,
+    P_LO,
+    history,
+    no_history,
+    solve_window,
+    solve_window_into,
+    window_settings,
+)
 from quadfault.errors import ConfigError
+from quadfault.jit import jit
 from quadfault.recording import Recording
 from quadfault.vehicle import Vehicle
 
-_START_MARGIN = 1e-6  # the interior-point start is kept this far inside the bounds
-_F64 = np.dtype(np.float64)
-# status codes of the compiled online update that solved nothing (estimators._irls_online_numba)
-_HELD_CODES = frozenset(STATUSES.index(s) for s in (STATUS_WARMUP, STATUS_BAD_SAMPLE,
-                                                    STATUS_NO_EXCITATION))
-_WHY_TIME = 2  # estimators._irls_online_numba.WHY_TIME (that module needs numba)
+__all__ = [
+    "IRLSConfig",
+    "IRLSDiagnostics",
+    "IRLSState",
+    "SlidingWindowIRLS",
+    "irls_update",
+    "solve_window",
+]
+
+WARMUP = STATUSES.index(STATUS_WARMUP)
+NO_EXCITATION = STATUSES.index(STATUS_NO_EXCITATION)
+BAD_SAMPLE = STATUSES.index(STATUS_BAD_SAMPLE)
+#: why :func:`irls_update` refused a sample (``bad_sample``)
+WHY_NONFINITE, WHY_TIME = 1, 2
+_ROW0 = np.zeros(1, dtype=np.int64)
+_WHY = {WHY_NONFINITE: "non-finite or malformed sample", WHY_TIME: "time not increasing"}
+#: the diagnostics of the statuses that solve nothing (frozen, so one instance serves all)
+_HELD = {WARMUP: IRLSDiagnostics(STATUS_WARMUP),
+         NO_EXCITATION: IRLSDiagnostics(STATUS_NO_EXCITATION,
+                                        "commanded thrust ~ 0 in the window")}
+
+# extra settings after the window's (estimators.window.window_settings)
+P_THRESHOLD = N_FLOAT_SETTINGS  # change_threshold
+(I_M, I_N, I_L, I_COMPLETION, I_HOLD) = range(N_INT_SETTINGS, N_INT_SETTINGS + 5)
+I_OFFSETS = N_INT_SETTINGS + 5  # then the offsets of the float state's pieces
+# pieces of the float state, in order (their shapes: IRLSState.shapes); rows of the grouped ones
+F_T, F_SAMPLE, F_VN, F_VM, F_BH, F_H, F_M, F_R0, F_J, F_MEDIAN = range(10)
+N_PIECES = 10
+S_P, S_V, S_W, S_R = 0, 1, 2, 3  # F_SAMPLE (6, 3): the previous sample's p, v, w; R (rows 3-5)
+# F_VN (n-vectors): the previous command, the estimate, its sd, the reported estimate, the
+# window's solution and sd, the completion's anchor, direction and scratch (3 rows), then the
+# window solver's vectors (estimators.window)
+(VN_LAST_F, VN_ETA, VN_SD, VN_OUT, VN_X, VN_SD_X, VN_ANCHOR, VN_DIRECTION, VN_SCRATCH) = range(9)
+VN_WINDOW = VN_SCRATCH + 3
+# F_VM (m-vectors): the ring's energy constants and thrusts, the final weights, then the window
+# solver's segment rows; F_BH: the ring's b and the completion's history; F_MEDIAN: the
+# output median's ring and its sorted copy
+VM_C, VM_THRUST, VM_WEIGHTS, VM_WINDOW = 0, 1, 2, 3
+BH_B, BH_HISTORY = 0, 1
+# the int state: counters, then the completion's (estimators.change_completion), then the
+# interior-point iterations of each IRLS round
+K_HEAD, K_COUNT, K_HAS_LAST, K_HAS_SD, K_MEDIAN_K, K_MEDIAN_FRESH = range(6)
+K_COMPLETION = 6
+K_ITERS = K_COMPLETION + N_COUNTERS
+# the vehicle constants: mass, gravity, rotor_max_thrust, clip, min_thrust, J, J^-1, A, G
+C_MASS, C_G, C_FMAX, C_CLIP, C_MIN_THRUST, C_J, C_JINV, C_A = 0, 1, 2, 3, 4, 5, 14, 23
 
 
-def condition_number_1(A) -> float:
-    """``||A||_1 ||A^-1||_1`` (inf when singular); MATLAB's ``1/rcond`` up to its estimate."""
-    A = np.asarray(A, dtype=float)
-    try:
-        Ainv = np.linalg.inv(A)
-    except np.linalg.LinAlgError:
-        return math.inf
-    value = float(np.abs(A).sum(0).max() * np.abs(Ainv).sum(0).max())
-    return value if math.isfinite(value) else math.inf
+class IRLSState(FlatState):
+    """The state of ``N`` online IRLS estimators (one for :class:`SlidingWindowIRLS`, a batch
+    for :class:`estimators.batched.BatchedIRLS`) in a float and an int buffer
+    (:class:`estimators.state.FlatState`), with numpy views of its pieces, each
+    ``(N, *shape)``; the compiled update reads the same pieces through :func:`state_pieces`
+    and the offsets in ``ip``.
 
-
-def _weighted_sum(w, H) -> np.ndarray:
-    """``sum_i w_i H_i`` of (m, n, n) blocks as one matrix-vector product (less call overhead
-    than ``tensordot``)."""
-    m, n = H.shape[0], H.shape[1]
-    return (w @ H.reshape(m, n * n)).reshape(n, n)
-
-
-def segment_energies(c, b, H, x, scale: float = 1.0) -> np.ndarray:
-    """``e_i = r_i^T G_i r_i = c_i + 2 b_i . x + x^T H_i x`` (eq. 26), times ``scale``."""
-    return (c + 2.0 * (b @ x) + (H @ x) @ x) * scale
-
-
-def window_uncertainty(c, b, H, w, x, gamma: float, scale: float = 1.0,
-                       info=None) -> np.ndarray:
-    """One-sigma uncertainty of ``x`` from the window's information matrix (module doc);
-    ``info`` is that matrix when the caller has it already."""
-    e = segment_energies(c, b, H, x, scale)
-    n = len(x)
-    active = int(np.count_nonzero(w > 0))
-    s2 = max(float(w @ e), 0.0) / max(10 * active - n, 1)
-    if info is None:
-        info = _weighted_sum(w, H) * scale + gamma * np.eye(n)
-    try:
-        cov = np.linalg.inv(info)
-    except np.linalg.LinAlgError:
-        return np.full(n, np.nan)
-    return np.sqrt(np.maximum(np.diag(cov), 0.0) * s2)
-
-
-def solve_window(c, b, H, x_prev, config: IRLSConfig, record_history: bool = False):
-    """Algorithm 2 on one window given its per-segment quadratic terms.
-
-    Args:
-        c, b, H: ``quadratic_terms`` of the window's segments, (m,), (m, n), (m, n, n).
-        x_prev: previous estimate (warm start and smoothness anchor), (n,).
-
-    Returns:
-        ``(eta, sd, diagnostics)``; on a guard ``eta`` is ``x_prev`` and ``sd`` is None.
+    Float pieces: the previous sample's time, its state and (clipped) command, the ring of
+    segment terms (``c, b, H, thrust``; ``ints[:, K_HEAD]`` is the slot written next, the oldest
+    segment of a full window), the unfiltered estimate ``eta`` and its ``sd``, the reported
+    ``out``, the last window solve (``x, sd_x, weights``) and its workspace, the change
+    completion (``history, anchor, direction``) and the output median's ring. Pieces of the
+    same length are grouped (the ``VN_*``, ``VM_*`` rows), so the compiled update forms few
+    views.
     """
-    cfg = config
-    m, n = b.shape
-    lo, hi = cfg.lower, cfg.upper
-    scale = 1.0 / m if cfg.scaling == "paper" else 1.0
-    paper = cfg.scaling == "paper"
-    x_prev = np.asarray(x_prev, dtype=float)
-    x_cur = np.clip(x_prev, lo + _START_MARGIN, hi - _START_MARGIN)
-    gI = cfg.gamma * np.eye(n)
-    iters, hist = [], ([], [], [], []) if record_history else None
-    converged, cond, w = True, math.nan, None
-    for _ in range(cfg.max_irls):
-        e = segment_energies(c, b, H, x_cur, scale)  # eq. 26
-        w, _z = mad_weights(e, z_soft=cfg.z_soft, power=cfg.soft_power, z_hard=cfg.z_hard,
-                            hard_drop=cfg.hard_drop, w_min=cfg.w_min, mad_eps=cfg.mad_eps,
-                            median_normalize=not paper, floor=paper)
-        if not np.any(w > 0):
-            return x_prev, None, _diag(STATUS_REJECTED, "every segment rejected", iters, w,
-                                       cond, hist)
-        JGJ = _weighted_sum(w, H) * scale
-        cond = condition_number_1(JGJ)
-        if not cond <= cfg.cond_max:
-            return x_prev, None, _diag(STATUS_ILL_CONDITIONED, f"cond(J^T G J) = {cond:.3g} > "
-                                       f"{cfg.cond_max:g}", iters, w, cond, hist)
-        q = (w @ b) * scale - cfg.gamma * x_prev
-        info = JGJ + gI  # J^T W G J + gamma I: the Newton matrix, and the information matrix
-        res = solve_box_qp(info, q, lo, hi, x_cur, cfg.ipm, record_history)
-        iters.append(res.iterations)
-        converged = res.converged
-        if hist is not None:
-            rr = [math.sqrt(max(float(w @ segment_energies(c, b, H, xk, scale)), 0.0))
-                  for xk in res.x_history]
-            for lst, arr in zip(hist, (res.dual_history, res.cent_history, res.gap_history, rr)):
-                lst.append(np.asarray(arr))
-        step = float(np.max(np.abs(res.x - x_cur)))
-        x_cur = res.x
-        if step < cfg.irls_tol:
-            break
-    sd = window_uncertainty(c, b, H, w, x_cur, cfg.gamma, scale, info)  # w of the last round
-    status = STATUS_OK if converged else STATUS_MAX_ITER
-    msg = "" if converged else f"interior point stopped at {cfg.ipm.max_iter} iterations"
-    return x_cur, sd, _diag(status, msg, iters, w, cond, hist)
+
+    @staticmethod
+    def shapes(m: int, n: int, L: int) -> tuple:
+        return ((1,), (6, 3), (VN_WINDOW + N_VECTORS, n), (VM_WINDOW + 3, m), (2, m, n),
+                (m, n, n), (N_MATRICES, n, n), (10,), (10, n), (2, L, n))
+
+    def __init__(self, m: int, n: int, L: int, rounds: int, num: int = 1):
+        super().__init__(self.shapes(m, n, L), num, K_ITERS + rounds)
 
 
-def _diag(status, message, iters, w, cond, hist) -> IRLSDiagnostics:
-    rejected = () if w is None else tuple(int(i) for i in np.flatnonzero(w == 0))
-    kw = {}
-    if hist is not None:
-        kw = dict(dual_history=tuple(hist[0]), cent_history=tuple(hist[1]),
-                  gap_history=tuple(hist[2]), residual_history=tuple(hist[3]))
-    return IRLSDiagnostics(status, message, tuple(iters), w, rejected, cond, **kw)
+def irls_parameters(vehicle: Vehicle, cfg: IRLSConfig, offsets: np.ndarray):
+    """``(const, fp, ip)`` of :func:`irls_update`: the vehicle constants, the float and the
+    int settings (with the state's piece offsets)."""
+    m, n = cfg.window - 1, vehicle.n_rotors
+    const = np.concatenate([np.asarray(a, dtype=np.float64).ravel() for a in (
+        [vehicle.mass, vehicle.gravity, vehicle.rotor_max_thrust, float(cfg.clip_commands),
+         cfg.min_thrust], vehicle.inertia, vehicle.inertia_inverse, vehicle.allocation,
+        cfg.segment_weights)])
+    fp, ip = window_settings(cfg, m)
+    fp = np.concatenate((fp, [cfg.change_threshold]))
+    ip = np.concatenate((ip, [m, n, cfg.output_median, int(cfg.change_completion),
+                              cfg.change_hold], offsets)).astype(np.int64)
+    return const, fp, ip
 
 
-def numba_available() -> bool:
-    try:
-        import numba  # noqa: F401
-    except ImportError:
-        return False
-    return True
+@jit
+def state_pieces(fs, ip, N):
+    """The pieces of the float state of ``N`` estimators (:class:`IRLSState`), each
+    ``(N, *shape)``, in the order of the ``F_*`` constants."""
+    m, n, L = ip[I_M], ip[I_N], ip[I_L]
+    o = ip[I_OFFSETS:]
+    return (piece_rows(fs, o[F_T], o[F_T + 1], N),
+            piece_rows(fs, o[F_SAMPLE], o[F_SAMPLE + 1], N).reshape((N, 6, 3)),
+            piece_rows(fs, o[F_VN], o[F_VN + 1], N).reshape((N, VN_WINDOW + N_VECTORS, n)),
+            piece_rows(fs, o[F_VM], o[F_VM + 1], N).reshape((N, VM_WINDOW + 3, m)),
+            piece_rows(fs, o[F_BH], o[F_BH + 1], N).reshape((N, 2, m, n)),
+            piece_rows(fs, o[F_H], o[F_H + 1], N).reshape((N, m, n, n)),
+            piece_rows(fs, o[F_M], o[F_M + 1], N).reshape((N, N_MATRICES, n, n)),
+            piece_rows(fs, o[F_R0], o[F_R0 + 1], N),
+            piece_rows(fs, o[F_J], o[F_J + 1], N).reshape((N, 10, n)),
+            piece_rows(fs, o[F_MEDIAN], o[F_MEDIAN + 1], N).reshape((N, 2, L, n)))
+
+
+@jit
+def constant_arrays(const, ip):
+    """``(J (3, 3), J^-1 (3, 3), A (4, n), G (10))``: the vehicle's array constants of
+    :func:`irls_step`, as views of ``const`` (:func:`irls_parameters`)."""
+    n = ip[I_N]
+    return (const[C_J:C_JINV].reshape((3, 3)), const[C_JINV:C_A].reshape((3, 3)),
+            const[C_A:C_A + 4 * n].reshape((4, n)), const[C_A + 4 * n:C_A + 4 * n + 10])
+
+
+@jit
+def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist):
+    """One online update of the sliding-window IRLS (module docstring) of row ``i`` of the
+    state ``(S, ks)`` (:func:`state_pieces`, int state (N, K)), in place (``arrays``:
+    :func:`constant_arrays` of ``const``). Returns ``(status
+    code, why, rounds, cond)``: ``why`` is :data:`WHY_NONFINITE` or :data:`WHY_TIME` for a
+    ``bad_sample``, else 0; ``rounds`` and ``cond`` describe the window solve (0 and NaN when
+    none ran)."""
+    m, n, L = ip[I_M], ip[I_N], ip[I_L]
+    last_t, sample, VN, VM, BH = S[F_T][i], S[F_SAMPLE][i], S[F_VN][i], S[F_VM][i], S[F_BH][i]
+    last_p, last_v, last_w, last_R = sample[S_P], sample[S_V], sample[S_W], sample[S_R:]
+    last_f, eta, sd, out, x, sd_x = (VN[VN_LAST_F], VN[VN_ETA], VN[VN_SD], VN[VN_OUT],
+                                     VN[VN_X], VN[VN_SD_X])
+    c, thrust, b, history_, H, M = VM[VM_C], VM[VM_THRUST], BH[BH_B], BH[BH_HISTORY], S[F_H][i], \
+        S[F_M][i]
+    k_row = ks[i]
+    completion = k_row[K_COMPLETION:K_ITERS]
+    code, why, rounds, cond = WARMUP, 0, 0, np.nan
+    finite = (math.isfinite(t) and all_finite(p) and all_finite(v) and all_finite(R)
+              and all_finite(w) and all_finite(f))
+    if not finite or (k_row[K_HAS_LAST] == 1 and not t > last_t[0]):
+        k_row[K_COUNT] = 0
+        k_row[K_HAS_LAST] = 0
+        code, why = BAD_SAMPLE, (WHY_TIME if finite else WHY_NONFINITE)
+    else:
+        if k_row[K_HAS_LAST] == 1:  # the segment last -> this sample into the ring (eqs. 13-26)
+            slot = k_row[K_HEAD]
+            Jmat, Jinv, A, G = arrays
+            c[slot], thrust[slot] = segment_terms_into(
+                t - last_t[0], last_p, p, last_v, v, last_R, R, last_w, w, last_f,
+                const[C_MASS], const[C_G], Jmat, Jinv, A, G, S[F_R0][i], S[F_J][i], b[slot],
+                H[slot])
+            k_row[K_HEAD] = (slot + 1) % m
+            k_row[K_COUNT] = min(k_row[K_COUNT] + 1, m)
+        last_t[0] = t
+        for a in range(3):
+            last_p[a], last_v[a], last_w[a] = p[a], v[a], w[a]
+            for k in range(3):
+                last_R[a, k] = R[a, k]
+        for j in range(n):
+            last_f[j] = min(max(f[j], 0.0), const[C_FMAX]) if const[C_CLIP] != 0.0 else f[j]
+        k_row[K_HAS_LAST] = 1
+        if k_row[K_COUNT] == m:
+            mean = 0.0
+            for s in range(m):
+                mean += thrust[(k_row[K_HEAD] + s) % m]
+            if mean / m < const[C_MIN_THRUST]:
+                code = NO_EXCITATION
+            else:
+                code, rounds, cond = solve_window_into(
+                    c, b, H, k_row[K_HEAD], eta, fp, ip, VN[VN_WINDOW:], M, VM[VM_WINDOW:],
+                    VM[VM_WEIGHTS], k_row[K_ITERS:], hist, x, sd_x)
+            if code == OK or code == MAX_ITER:
+                if ip[I_COMPLETION] == 1:
+                    complete_into(x, M[M_JGJ], history_, VN[VN_ANCHOR], VN[VN_DIRECTION],
+                                  completion, fp[P_THRESHOLD], ip[I_HOLD], fp[P_GAMMA],
+                                  fp[P_LO], fp[P_HI], M[M_A], M[M_B],
+                                  VN[VN_SCRATCH:VN_SCRATCH + 3])
+                for j in range(n):
+                    eta[j] = x[j]
+                    sd[j] = sd_x[j]
+                k_row[K_HAS_SD] = 1
+            elif ip[I_COMPLETION] == 1:  # a held window: the completion sees the kept estimate
+                observe_into(eta, history_, completion)
+    if L > 1:
+        median = S[F_MEDIAN][i]
+        median_push_into(median[0], median[1], k_row[K_MEDIAN_K], eta,
+                         k_row[K_MEDIAN_FRESH] == 1, out)
+        k_row[K_MEDIAN_K] = (k_row[K_MEDIAN_K] + 1) % L
+        k_row[K_MEDIAN_FRESH] = 0
+    else:
+        for j in range(n):
+            out[j] = eta[j]
+    return code, why, rounds, cond
+
+
+@jit
+def irls_update(t, p, v, R, w, f, const, fp, ip, fs, ks, hist):
+    """:func:`irls_step` of a single estimator (state of one row): the online update."""
+    S = state_pieces(fs, ip, ks.shape[0])
+    return irls_step(t, p, v, R, w, f, const, constant_arrays(const, ip), fp, ip, S, ks,
+                     ks.shape[0] - 1, hist)  # row 0, a run-time value like the batch's rows
+
+
+@jit
+def irls_reset(eta0, ip, fs, ks, rows) -> None:
+    """Forget everything of the estimators ``rows``; start them from ``eta0`` (N, n)."""
+    N = ks.shape[0]
+    S = state_pieces(fs, ip, N)
+    n = ip[I_N]
+    for i in rows:
+        for k in range(ks.shape[1]):
+            ks[i, k] = 0
+        for k in range(N_PIECES):
+            row = piece_rows(fs, ip[I_OFFSETS + k], ip[I_OFFSETS + k + 1], N)[i]
+            for a in range(row.shape[0]):
+                row[a] = 0.0
+        VN, history_ = S[F_VN][i], S[F_BH][i, BH_HISTORY]
+        eta, out, sd = VN[VN_ETA], VN[VN_OUT], VN[VN_SD]
+        for j in range(n):
+            eta[j] = eta0[i, j]
+            out[j] = eta0[i, j]
+            sd[j] = np.nan
+            for s in range(history_.shape[0]):
+                history_[s, j] = eta0[i, j]
+        ks[i, K_MEDIAN_FRESH] = 1
+
+
+@jit
+def irls_run(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, eta, sd, code):
+    """:func:`irls_step` over the rows of a recording (a single estimator's state): the
+    reported estimate, its sd (NaN until a window is solved) and the status code of every
+    row."""
+    n = ip[I_N]
+    S = state_pieces(fs, ip, ks.shape[0])
+    row = ks.shape[0] - 1  # 0, a run-time value like the batch's rows
+    out, sd_now = S[F_VN][row, VN_OUT], S[F_VN][row, VN_SD]
+    arrays = constant_arrays(const, ip)
+    for k in range(t.shape[0]):
+        code[k], _why, _rounds, _cond = irls_step(t[k], p[k], v[k], R[k], w[k], f[k], const,
+                                                  arrays, fp, ip, S, ks, row, hist)
+        for j in range(n):
+            eta[k, j] = out[j]
+            sd[k, j] = sd_now[j] if ks[0, K_HAS_SD] == 1 else np.nan
 
 
 class SlidingWindowIRLS:
@@ -196,26 +332,17 @@ class SlidingWindowIRLS:
         self.config = config or IRLSConfig()
         if not isinstance(self.config, IRLSConfig):
             raise ConfigError("config must be an IRLSConfig")
-        backend = self.config.backend
-        if backend == "numba" and not numba_available():
-            raise ConfigError("IRLS backend 'numba' needs numba (install the 'fast' extra)")
-        if backend == "auto":
-            backend = "numba" if numba_available() and not self.config.record_history else "numpy"
-        self.backend = "numpy" if self.config.record_history else backend
-        self._G = self.config.segment_weights
-        self._kernel_params = None
-        if self.backend == "numba":
-            from estimators._irls_numba import kernel_parameters
-            from estimators._irls_online_numba import online_constants, online_update
-
-            cfg = self.config
-            self._kernel_params = kernel_parameters(cfg, cfg.window - 1)
-            # the arguments of online_update that never change: vehicle, settings
-            self._const = online_constants(vehicle, self._G, cfg.clip_commands, cfg.min_thrust)
-            self._online_update = online_update
+        cfg, n = self.config, vehicle.n_rotors
+        self._state = IRLSState(cfg.window - 1, n, cfg.output_median, cfg.max_irls)
+        self._const, self._fp, self._ip = irls_parameters(vehicle, cfg, self._state.offsets)
+        self._hist = history(cfg, n) if cfg.record_history else no_history(n)
+        self._nan_sample = (np.full(3, np.nan), np.full(3, np.nan), np.full((3, 3), np.nan),
+                            np.full(3, np.nan), np.full(n, np.nan))
+        self._shape_f = (n,)
+        self._row = self._state.views[F_VN][0]  # the n-vectors of the state (estimate, sd, ...)
+        self._weights = self._state.views[F_VM][0, VM_WEIGHTS]
         self.reset()
 
-    # online ---------------------------------------------------------------------------
     def reset(self, eta0=None) -> None:
         """Forget the window; start from ``eta0`` (default: all ones)."""
         n = self.vehicle.n_rotors
@@ -225,251 +352,77 @@ class SlidingWindowIRLS:
             eta = np.array(eta0, dtype=float).reshape(-1)
             if eta.shape != (n,) or not np.all(np.isfinite(eta)):
                 raise ConfigError(f"eta0 must be {n} finite numbers, got {eta0!r}")
-        self._eta = eta
-        self._sd = None
-        self._last: Sample | None = None
-        m = self.config.window - 1  # ring of the window's segment terms, oldest first
-        cfg = self.config
-        if self.backend == "numba":  # the compiled online state (estimators._irls_online_numba)
-            from estimators._irls_online_numba import online_state
-
-            self._fstate, self._istate, self._online = online_state(m, n, cfg.max_irls)
-        else:
-            self._c, self._b = np.zeros(m), np.zeros((m, n))
-            self._H, self._thrust = np.zeros((m, n, n)), np.zeros(m)
-            self._count = 0
-        self._completion = ChangeCompletion(cfg.change_threshold, cfg.change_hold, cfg.gamma,
-                                            cfg.lower, cfg.upper, span=m)
-        self._completion.reset(eta)
-        median = None
-        if self.backend == "numba" and cfg.output_median > 1:
-            from estimators._irls_online_numba import median_columns as median
-        self._median = CausalMedian(cfg.output_median, median)
-
-    def _segment_terms(self, a: Sample, z: Sample):
-        """``(c, b, H, thrust)`` of the segment from sample ``a`` to ``z``."""
-        if self.backend == "numba":
-            from estimators._irls_numba import segment_terms
-
-            v = self.vehicle
-            return segment_terms(z.t - a.t, a.p, z.p, a.v, z.v, a.R, z.R, a.w, z.w, a.f,
-                                 v.mass, v.gravity, v.inertia, v.inertia_inverse, v.allocation,
-                                 self._G)
-        seg = segment_models(self.vehicle, (a.t, z.t), (a.p, z.p), (a.v, z.v), (a.R, z.R),
-                             (a.w, z.w), (a.f, z.f))
-        c, b, H = quadratic_terms(seg, self._G)
-        return c[0], b[0], H[0], seg.thrust[0]
-
-    def _commands(self, f: np.ndarray) -> np.ndarray:
-        if not self.config.clip_commands:
-            return f
-        return np.clip(f, 0.0, self.vehicle.rotor_max_thrust)
+        irls_reset(eta[None], self._ip, self._state.floats, self._state.ints, _ROW0)
 
     @property
     def eta(self) -> np.ndarray:
-        """The current estimate (a copy)."""
-        return self._eta.copy()
+        """The current (unfiltered) estimate, a copy."""
+        return self._state.views[F_VN][0, VN_ETA].copy()
 
-    def _keep(self, t, status, message="") -> Estimate:
-        return Estimate(float(t), self._median.push(self._eta),
-                        None if self._sd is None else self._sd.copy(),
-                        status, IRLSDiagnostics(status, message))
+    @property
+    def change_events(self) -> int:
+        """Changes the change completion has started since the last reset."""
+        return int(self._state.ints[0, K_COMPLETION + 3])
 
     def update(self, sample: Sample) -> Estimate:
         """Add one measurement row; returns the estimate of the window ending at it."""
-        if self.backend == "numba":
-            return self._update_compiled(sample)
-        n = self.vehicle.n_rotors
         try:
             t = float(sample.t)
-            arrays = [np.asarray(a, dtype=float) for a in sample[1:]]
-            shapes_ok = [a.shape for a in arrays] == [(3,), (3,), (3, 3), (3,), (n,)]
-            finite = shapes_ok and math.isfinite(t) and all(np.all(np.isfinite(a))
-                                                            for a in arrays)
-        except (AttributeError, TypeError, ValueError, IndexError):
-            t, finite = math.nan, False
-        if not finite or (self._last is not None and not t > self._last.t):
-            self._last = None
-            self._count = 0
-            why = "non-finite or malformed sample" if not finite else "time not increasing"
-            return self._keep(t, STATUS_BAD_SAMPLE, f"{why}; window restarted")
-        sample = Sample(float(t), *arrays[:4], self._commands(arrays[4]))
-        if self._last is not None:
-            for ring, new in zip((self._c, self._b, self._H, self._thrust),
-                                 self._segment_terms(self._last, sample)):
-                ring[:-1] = ring[1:]
-                ring[-1] = new
-            self._count = min(self._count + 1, len(self._c))
-        self._last = sample
-        if self._count < len(self._c):
-            return self._keep(t, STATUS_WARMUP)
-        c, b, H = self._c, self._b, self._H
-        if self._thrust.mean() < self.config.min_thrust:
-            self._completion.observe(self._eta)
-            return self._keep(t, STATUS_NO_EXCITATION, "commanded thrust ~ 0 in the window")
-        if self.backend == "numba":
-            from estimators._irls_numba import kernel_parameters, solve_window_numba
-
-            if self._kernel_params is None:
-                self._kernel_params = kernel_parameters(self.config, len(c))
-            eta, sd, diag = solve_window_numba(c, b, H, self._eta, self.config,
-                                               self._kernel_params)
-        else:
-            eta, sd, diag = solve_window(c, b, H, self._eta, self.config,
-                                         self.config.record_history)
-        if sd is None:
-            self._completion.observe(self._eta)
-            return Estimate(float(t), self._median.push(self._eta), None if self._sd is None
-                            else self._sd.copy(), diag.status, diag)
-        if self.config.change_completion:
-            eta = self._completion.step(eta, lambda: _window_information(H, diag.weights,
-                                                                         self.config))
-        self._eta, self._sd = eta, sd
-        return Estimate(float(t), self._median.push(eta), sd.copy(), diag.status, diag)
-
-    def _update_compiled(self, sample: Sample) -> Estimate:
-        """:meth:`update` in one compiled call (``_irls_online_numba.online_update``): the same
-        rules, ring and window solver as the numpy path; Python only checks shapes and
-        applies the options beyond the paper."""
-        try:
-            t = float(sample.t)
-            p, v, R, w, f = [np.asarray(a, dtype=_F64) for a in sample[1:]]
+            p, v, R, w, f = [np.ascontiguousarray(a, dtype=np.float64) for a in sample[1:]]
             malformed = (p.shape != (3,) or v.shape != (3,) or R.shape != (3, 3)
-                         or w.shape != (3,) or f.shape != self._eta.shape)
+                         or w.shape != (3,) or f.shape != self._shape_f)
         except (AttributeError, TypeError, ValueError, IndexError):
             t, malformed = math.nan, True
-        state = self._online
         if malformed:
-            state["ints"][1:3] = 0  # window restarted
-            return self._keep(t, STATUS_BAD_SAMPLE,
-                              "non-finite or malformed sample; window restarted")
-        code, why, rounds, cond = self._online_update(
-            t, p, v, R, w, f, self._const, *self._kernel_params, self._fstate, self._istate,
-            self._eta)
-        status = STATUSES[code]
-        if code in _HELD_CODES:  # warm-up, bad sample, no excitation: nothing solved
-            if status == STATUS_BAD_SAMPLE:
-                why = "time not increasing" if why == _WHY_TIME \
-                    else "non-finite or malformed sample"
-                return self._keep(t, STATUS_BAD_SAMPLE, f"{why}; window restarted")
-            if status == STATUS_WARMUP:
-                return self._keep(t, STATUS_WARMUP)
-            self._completion.observe(self._eta)
-            return self._keep(t, STATUS_NO_EXCITATION, "commanded thrust ~ 0 in the window")
-        cfg = self.config
-        diag = CompiledWindowDiagnostics(code, rounds, cond, state["iters"].copy(),
-                                         state["weights"].copy(), cfg)
-        if status not in (STATUS_OK, STATUS_MAX_ITER):
-            self._completion.observe(self._eta)
-            return Estimate(t, self._median.push(self._eta), None if self._sd is None
-                            else self._sd.copy(), status, diag)
-        eta, sd = state["x_out"].copy(), state["sd_out"].copy()
-        if cfg.change_completion:
-            head, m = state["ints"][0], cfg.window - 1
-            eta = self._completion.step(eta, lambda: _window_information(
-                state["H"][(head + np.arange(m)) % m], diag.weights, cfg))
-        self._eta, self._sd = eta, sd
-        return Estimate(t, self._median.push(eta), sd.copy(), status, diag)
+            p, v, R, w, f = self._nan_sample
+        st = self._state
+        code, why, rounds, cond = irls_update(math.nan if malformed else t, p, v, R, w, f,
+                                              self._const, self._fp, self._ip, st.floats,
+                                              st.ints, self._hist)
+        row, ints = self._row, st.ints[0]
+        sd = row[VN_SD].copy() if ints[K_HAS_SD] == 1 else None
+        if code in _HELD:
+            diag = _HELD[code]
+        elif code == BAD_SAMPLE:
+            diag = IRLSDiagnostics(STATUSES[code], f"{_WHY[why]}; window restarted")
+        else:  # a window was solved (or held by a guard)
+            cfg = self.config
+            if cfg.record_history:
+                diag = window_diagnostics(code, rounds, cond, ints[K_ITERS:], self._weights, cfg,
+                                          self._hist)
+            else:
+                diag = LazyWindowDiagnostics(code, rounds, cond, ints[K_ITERS:].copy(),
+                                             self._weights.copy(), cfg)
+        return Estimate(t, row[VN_OUT].copy(), sd, STATUSES[code], diag)
 
-    # offline --------------------------------------------------------------------------
     def run(self, recording: Recording, progress: bool = False) -> EstimateSeries:
         """Estimate over a whole recording, one row per sample (the first ``window - 1`` rows
         are ``warmup``); starts from the current estimate and leaves the estimator reset."""
+        from quadfault.progress import progress_bar
+
         start = time.perf_counter()
         t, p, v, R, w, f = _recording_arrays(recording, self.vehicle, self.config.window)
-        models = segment_models(self.vehicle, t, p, v, R, w, self._commands(f))
-        c, b, H = quadratic_terms(models, self._G)
-        m = self.config.window - 1
-        kernel = np.ones(m) / m
-        excited = np.convolve(models.thrust, kernel, mode="valid") >= self.config.min_thrust
-        x0 = self._eta.copy()
-        if self.config.change_completion:
-            eta_w, sd_w, status_w = self._run_completed(c, b, H, excited, x0)
-        elif self.backend == "numba":
-            from estimators._irls_numba import run_windows_numba
-
-            eta_w, sd_w, code_w = run_windows_numba(c, b, H, excited, x0, self.config,
-                                                    progress=progress)
-            status_w = np.asarray(STATUSES, dtype=object)[code_w]
-        else:
-            eta_w, sd_w, status_w = _run_windows_numpy(c, b, H, excited, x0, self.config, progress)
-        N, n = len(t), len(x0)
-        eta = np.empty((N, n))
-        sd = np.full((N, n), np.nan)
-        status = np.empty(N, dtype=object)
-        eta[:m], status[:m] = x0, STATUS_WARMUP
-        eta[m:], sd[m:], status[m:] = eta_w, sd_w, status_w
-        eta = causal_median(eta, self.config.output_median)
+        self.reset(self.eta)
+        st, N, n = self._state, len(t), self.vehicle.n_rotors
+        eta, sd, code = np.empty((N, n)), np.empty((N, n)), np.empty(N, dtype=np.int64)
+        chunk = 20000
+        bar = progress_bar(total=N, desc="irls", unit="sample",
+                           disable=None if progress else True)
+        for k0 in range(0, N, chunk):
+            k = slice(k0, min(k0 + chunk, N))
+            irls_run(t[k], p[k], v[k], R[k], w[k], f[k], self._const, self._fp, self._ip,
+                     st.floats, st.ints, self._hist, eta[k], sd[k], code[k])
+            bar.update(k.stop - k0)
+        bar.close()
         self.reset()
-        return EstimateSeries(t=t.copy(), eta=eta, sd=sd, status=status.astype(str),
+        return EstimateSeries(t=t.copy(), eta=eta, sd=sd,
+                              status=np.asarray(STATUSES)[code],
                               estimator=self.name, config=asdict(self.config),
                               seconds=time.perf_counter() - start)
 
 
-    def _run_completed(self, c, b, H, excited, x0):
-        """Windows with the change completion (compiled/numpy chunks between changes)."""
-        cfg = self.config
-        if self.backend == "numba":
-            from estimators._irls_numba import (
-                kernel_parameters,
-                run_windows_numba,
-                solve_window_numba,
-            )
-
-            params = kernel_parameters(cfg, cfg.window - 1)
-
-            def run_chunk(c_, b_, H_, ex, x):
-                eta_w, sd_w, code_w = run_windows_numba(c_, b_, H_, ex, x, cfg)
-                return eta_w, sd_w, np.asarray(STATUSES, dtype=object)[code_w]
-
-            def solve_one(c_, b_, H_, x):
-                return solve_window_numba(c_, b_, H_, x, cfg, params)
-        else:
-            def run_chunk(c_, b_, H_, ex, x):
-                return _run_windows_numpy(c_, b_, H_, ex, x, cfg, False)
-
-            def solve_one(c_, b_, H_, x):
-                return solve_window(c_, b_, H_, x, cfg)
-        completion = ChangeCompletion(cfg.change_threshold, cfg.change_hold, cfg.gamma,
-                                      cfg.lower, cfg.upper, span=cfg.window - 1)
-        return run_completed(c, b, H, excited, x0, completion, run_chunk, solve_one,
-                             lambda Hw, w: _window_information(Hw, w, cfg))
-
-
-def _window_information(H, w, cfg: IRLSConfig) -> np.ndarray:
-    """``J^T W G J`` of a window (segment terms ``H`` (m, n, n), weights ``w`` (m,))."""
-    scale = 1.0 / len(H) if cfg.scaling == "paper" else 1.0
-    return np.tensordot(np.asarray(w, dtype=float), H, 1) * scale
-
-
-def _run_windows_numpy(c, b, H, excited, x0, cfg: IRLSConfig, progress: bool):
-    from quadfault.progress import progress_bar
-
-    m = cfg.window - 1
-    n_win = len(c) - m + 1
-    n = len(x0)
-    eta = np.empty((n_win, n))
-    sd = np.full((n_win, n), np.nan)
-    status = np.empty(n_win, dtype=object)
-    x, s = x0.copy(), np.full(n, np.nan)
-    bar = progress_bar(total=n_win, desc="irls", unit="win", disable=None if progress else True)
-    for k in range(n_win):
-        if excited[k]:
-            xk, sk, diag = solve_window(c[k:k + m], b[k:k + m], H[k:k + m], x, cfg)
-            if sk is not None:
-                x, s = xk, sk
-            status[k] = diag.status
-        else:
-            status[k] = STATUS_NO_EXCITATION
-        eta[k], sd[k] = x, s
-        if k % 2000 == 1999:
-            bar.update(2000)
-    bar.close()
-    return eta, sd, status
-
-
 def _recording_arrays(recording: Recording, vehicle: Vehicle, window: int):
-    """Measurement arrays of a recording (never its truth columns), validated."""
+    """Measurement arrays of a recording (never its truth columns), validated, contiguous."""
     if not isinstance(recording, Recording):
         raise ConfigError(f"run() needs a Recording, got {type(recording).__name__}")
     where = recording.path or "recording"
@@ -496,5 +449,6 @@ def _recording_arrays(recording: Recording, vehicle: Vehicle, window: int):
     if np.any(np.diff(t) <= 0):
         k = int(np.flatnonzero(np.diff(t) <= 0)[0])
         raise ConfigError(f"{where}: time must be strictly increasing (row {k + 2})")
-    return (t, recording.position, recording.velocity, recording.rotation, recording.omega,
-            recording.thrust_cmd)
+    return tuple(np.ascontiguousarray(a, dtype=np.float64) for a in (
+        t, recording.position, recording.velocity, recording.rotation, recording.omega,
+        recording.thrust_cmd))

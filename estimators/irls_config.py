@@ -2,14 +2,16 @@
 
 :class:`IRLSConfig` holds every setting of :class:`estimators.irls.SlidingWindowIRLS`
 (defaults: the authors' reference code; :meth:`IRLSConfig.improved` the options beyond the
-paper); :class:`IRLSDiagnostics` says what happened in one window update, and
-:class:`CompiledWindowDiagnostics` is the same built lazily from a compiled solve. Both are
-re-exported by :mod:`estimators.irls`.
+paper); :class:`IRLSDiagnostics` says what happened in one window update
+(:func:`window_diagnostics` builds it from the outcome of the compiled window solve), and
+:class:`LazyWindowDiagnostics` is the same built on first read. All are re-exported by
+:mod:`estimators.irls`.
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -20,7 +22,19 @@ from estimators.residuals import residual_weights
 from quadfault.errors import ConfigError
 
 SCALINGS = ("reference", "paper")
+#: accepted values of the deprecated ``backend`` setting (there is one implementation)
 BACKENDS = ("auto", "numpy", "numba")
+
+
+def deprecated_backend(owner: str, backend) -> None:
+    """Check a deprecated ``backend=`` value and warn that it does nothing."""
+    if backend is None:
+        return
+    if backend not in BACKENDS:
+        raise ConfigError(f"{owner} backend must be one of {BACKENDS}, got {backend!r}")
+    warnings.warn(f"{owner}(backend=...) is deprecated and does nothing: every estimator runs "
+                  "its one compiled implementation; the option goes in the next release",
+                  DeprecationWarning, stacklevel=4)
 
 
 @dataclass(frozen=True)
@@ -46,8 +60,9 @@ class IRLSConfig:
         clip_commands: clip the commanded thrusts to ``[0, vehicle.rotor_max_thrust]`` before
             use (a rotor cannot deliver more than its limit; without this a saturated weak
             motor looks weaker than it is). ``False`` = the reference code (no clipping).
-        record_history: keep per-round KKT histories in the diagnostics (slower; uses numpy).
-        backend: "auto" (numba when importable), "numpy" or "numba"; same results.
+        record_history: keep per-round KKT histories in the diagnostics (slower).
+        backend: deprecated, does nothing (one implementation); a value other than None
+            warns. Removed in the next release.
         change_completion: beyond the paper (off = the paper/reference): when the estimate
             moves by more than ``change_threshold`` [1] on some motor over ``window - 1``
             windows, complete the
@@ -83,7 +98,7 @@ class IRLSConfig:
     min_thrust: float = 1e-3
     clip_commands: bool = True
     record_history: bool = False
-    backend: str = "auto"
+    backend: str | None = None
     change_completion: bool = False
     change_threshold: float = 0.2
     change_hold: int = 20
@@ -112,8 +127,7 @@ class IRLSConfig:
                               f"{self.eta_max!r}")
         if self.scaling not in SCALINGS:
             raise ConfigError(f"IRLS scaling must be one of {SCALINGS}, got {self.scaling!r}")
-        if self.backend not in BACKENDS:
-            raise ConfigError(f"IRLS backend must be one of {BACKENDS}, got {self.backend!r}")
+        deprecated_backend("IRLSConfig", self.backend)
         if not (isinstance(self.max_irls, int) and self.max_irls >= 1):
             raise ConfigError(f"IRLS max_irls must be an integer >= 1, got {self.max_irls!r}")
         if not isinstance(self.ipm, IPMSettings):
@@ -170,14 +184,39 @@ class IRLSDiagnostics:
     residual_history: tuple | None = None
 
 
-class CompiledWindowDiagnostics(IRLSDiagnostics):
-    """The :class:`IRLSDiagnostics` of a compiled online window solve, built on first read.
+def window_diagnostics(code: int, rounds: int, cond: float, iters, weights, cfg: IRLSConfig,
+                       hist=None) -> IRLSDiagnostics:
+    """The :class:`IRLSDiagnostics` of a window solve (:func:`estimators.window.solve_window_into`:
+    status ``code``, ``rounds`` IRLS rounds with ``iters`` interior-point iterations each,
+    final weights, condition number, and the per-round histories ``hist`` when recorded)."""
+    status = STATUSES[code]
+    message = ""
+    if status == "rejected":
+        message = "every segment rejected"
+    elif status == "max_iter":
+        message = f"interior point stopped at {cfg.ipm.max_iter} iterations"
+    elif status == "ill_conditioned":
+        message = f"cond(J^T G J) = {cond:.3g} > {cfg.cond_max:g}"
+    w = np.array(weights, dtype=float)
+    its = tuple(int(k) for k in np.asarray(iters)[:rounds])
+    kw = {}
+    if hist is not None:
+        n = hist.shape[2] - 4
+        kw = {name: tuple(hist[r, :k, col].copy() for r, k in enumerate(its))
+              for name, col in (("dual_history", 0), ("cent_history", 1), ("gap_history", 2),
+                                ("residual_history", 3 + n))}
+    return IRLSDiagnostics(status, message, its, w, tuple(int(i) for i in np.flatnonzero(w == 0)),
+                           float(cond), **kw)
+
+
+class LazyWindowDiagnostics(IRLSDiagnostics):
+    """The :class:`IRLSDiagnostics` of an online window solve, built on first read.
 
     The online update runs at every physics substep while its diagnostics are mostly
     ignored, so it keeps only the raw outcome (status code, IRLS rounds, condition number, a
     copy of the interior-point iteration counts and of the final weights); any field read
-    builds them (:func:`estimators._irls_numba.window_diagnostics`). It is an
-    ``IRLSDiagnostics`` in every respect: same fields, ``dataclasses.fields`` / ``asdict``.
+    builds them (:func:`window_diagnostics`). It is an ``IRLSDiagnostics`` in every respect:
+    same fields, ``dataclasses.fields`` / ``asdict``.
     """
 
     def __init__(self, code: int, rounds: int, cond: float, iters, weights, config):
@@ -187,8 +226,6 @@ class CompiledWindowDiagnostics(IRLSDiagnostics):
     def _get(self, name):
         built = self._built
         if built is None:
-            from estimators._irls_numba import window_diagnostics
-
             built = window_diagnostics(*self._raw)
             object.__setattr__(self, "_built", built)
         return getattr(built, name)
@@ -204,6 +241,6 @@ class CompiledWindowDiagnostics(IRLSDiagnostics):
 
 for _name in IRLSDiagnostics.__dataclass_fields__:
     if _name not in ("status", "weights"):
-        setattr(CompiledWindowDiagnostics, _name,
+        setattr(LazyWindowDiagnostics, _name,
                 property(lambda self, _n=_name: self._get(_n)))
 del _name

@@ -20,10 +20,14 @@ follows from ``tr(dR^T [w]x) = 2 w . vee(dR)`` (``vee`` of the antisymmetric par
 ``r_R = 1/2 (3 - tr dR) - dt vee(dR) . W_hat``; the Jacobian row equals the reference code's
 analytic ``(dt^2/2) [...]`` row for the paper's layout. The Jacobian is therefore constant per
 window (computed once), and per segment the weighted energy ``e_i(eta) = r_i^T G_i r_i`` is a
-quadratic ``c_i + 2 b_i . eta + eta^T H_i eta`` (:func:`quadratic_terms`), which is all the
-window solver needs.
+quadratic ``c_i + 2 b_i . eta + eta^T H_i eta`` with ``c = r0^T G r0``, ``b = J^T G r0``,
+``H = J^T G J`` (eq. 26), which is all the window solver needs.
 
 Row order of a segment's residual (``RESIDUAL_ROWS`` = 10): v (3), x (3), Omega (3), R (1).
+
+:func:`segment_terms_into` is the model, plain Python compiled by :func:`quadfault.jit.jit`
+with 3 x 3 algebra on scalars and no allocation (the estimator calls it once per new sample);
+:func:`segment_terms` evaluates it over arrays of samples.
 """
 
 from __future__ import annotations
@@ -32,84 +36,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from quadfault.dynamics import E3
-from quadfault.rotation import cross, vee
+from quadfault.jit import jit
 from quadfault.vehicle import Vehicle
 
 RESIDUAL_ROWS = 10
-
-
-@dataclass(frozen=True)
-class SegmentModels:
-    """Affine residual models of consecutive segments: ``r_k(eta) = r0[k] + J[k] @ eta``.
-
-    Attributes:
-        r0: residuals at ``eta = 0``, shape (S, 10) [m/s, m, rad/s, 1].
-        J: constant Jacobians d r / d eta, shape (S, 10, n).
-        dt: segment durations [s], shape (S,).
-        thrust: commanded collective thrust of each segment [N], shape (S,).
-    """
-
-    r0: np.ndarray
-    J: np.ndarray
-    dt: np.ndarray
-    thrust: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.dt)
-
-    def residuals(self, eta) -> np.ndarray:
-        """``(S, 10)`` residuals at efficiency ``eta`` (n,)."""
-        return self.r0 + self.J @ np.asarray(eta, dtype=float)
-
-    def window(self, start: int, stop: int) -> "SegmentModels":
-        sl = slice(start, stop)
-        return SegmentModels(self.r0[sl], self.J[sl], self.dt[sl], self.thrust[sl])
-
-
-def segment_models(vehicle: Vehicle, t, p, v, R, w, f) -> SegmentModels:
-    """Residual models of the segments between consecutive samples (vectorised).
-
-    Args:
-        vehicle: the nominal vehicle (mass, inertia, allocation, gravity).
-        t: (N,) sample times [s]; p, v: (N, 3) world NED [m], [m/s]; R: (N, 3, 3) body->world;
-        w: (N, 3) body rate [rad/s]; f: (N, n) commanded rotor thrusts [N].
-
-    Returns:
-        the ``N - 1`` segment models (segment k uses samples k and k+1 and command ``f[k]``).
-    """
-    t = np.asarray(t, dtype=float)
-    p, v, R, w, f = (np.asarray(a, dtype=float) for a in (p, v, R, w, f))
-    dt = np.diff(t)
-    m, g = vehicle.mass, vehicle.gravity
-    A = vehicle.allocation
-    Jmat, Jinv = vehicle.inertia, vehicle.inertia_inverse
-    S, n = len(dt), f.shape[1]
-    Ri, fi, wi = R[:-1], f[:-1], w[:-1]
-    dtc = dt[:, None]
-    b3 = Ri[:, :, 2]  # R_i e3
-    thrust_gain = fi * A[0]  # dT / d eta_j  (S, n)
-    r0 = np.empty((S, RESIDUAL_ROWS))
-    J = np.empty((S, RESIDUAL_ROWS, n))
-    # velocity and position (eqs. 13, 14, 17, 18): a = g e3 - T R e3 / m
-    r0[:, 0:3] = v[1:] - v[:-1] - g * E3 * dtc
-    r0[:, 3:6] = p[1:] - p[:-1] - v[:-1] * dtc - g * E3 * (0.5 * dtc**2)
-    dv = b3[:, :, None] * thrust_gain[:, None, :] / m  # -(d a / d eta)  (S, 3, n)
-    J[:, 0:3] = dv * dt[:, None, None]
-    J[:, 3:6] = dv * (0.5 * dt**2)[:, None, None]
-    # angular rate (eqs. 15, 19): W_hat = W + J^-1 (M - W x J W) dt
-    gyro = cross(wi, wi @ Jmat.T) @ Jinv.T
-    w_hat0 = wi - gyro * dtc  # predicted rate at eta = 0
-    # d W_hat / d eta = dt J^-1 A_M diag(f_i)  (S, 3, n), A_M = moment rows of the allocation
-    dw = (Jinv @ A[1:4])[None] * (fi * dtc)[:, None, :]
-    r0[:, 6:9] = w[1:] - w_hat0
-    J[:, 6:9] = -dw
-    # rotation (eqs. 20-22): r_R = 1/2 (3 - tr dR) - dt vee(dR) . W_hat
-    dR = np.einsum("sji,sjk->sik", Ri, R[1:])
-    u = vee(dR) * dtc
-    r0[:, 9] = 0.5 * (3.0 - np.trace(dR, axis1=1, axis2=2)) - np.einsum("si,si->s", u, w_hat0)
-    J[:, 9] = -np.einsum("si,sij->sj", u, dw)
-    return SegmentModels(r0, J, dt, fi @ A[0])
 
 
 def residual_weights(g_v: float, g_x: float, g_omega: float, g_R: float) -> np.ndarray:
@@ -117,18 +47,120 @@ def residual_weights(g_v: float, g_x: float, g_omega: float, g_R: float) -> np.n
     return np.array([g_v] * 3 + [g_x] * 3 + [g_omega] * 3 + [g_R], dtype=float)
 
 
-def quadratic_terms(models: SegmentModels, G_diag) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per-segment quadratic form of the weighted energy (eq. 26).
+@jit
+def segment_terms_into(dt, p0, p1, v0, v1, R0, R1, w0, w1, f, mass, g, Jmat, Jinv, A, G,
+                       r0, J, b, H):
+    """The segment from sample 0 to sample 1 (``dt`` [s] apart, command ``f`` [N] held):
+    its affine residual model ``r(eta) = r0 + J eta`` into ``r0`` (10,) and ``J`` (10, n),
+    its weighted-energy terms ``b`` (n,) and ``H`` (n, n); returns ``(c, thrust)``, the
+    energy at ``eta = 0`` and the commanded collective thrust [N].
 
-    ``e_k(eta) = r_k^T G r_k = c[k] + 2 b[k] . eta + eta^T H[k] eta`` with
-    ``c = r0^T G r0``, ``b = J^T G r0`` and ``H = J^T G J``.
+    Vehicle: ``mass`` [kg], gravity ``g`` [m/s^2], inertia ``Jmat`` and its inverse ``Jinv``
+    [kg m^2], allocation ``A`` (4, n); ``G`` (10,) the diagonal of the weight (eq. 23)."""
+    n = f.size
+    thrust = 0.0
+    for j in range(n):
+        thrust += A[0, j] * f[j]
+    # velocity / position (eqs. 13, 14, 17, 18)
+    for a in range(3):
+        ge = g if a == 2 else 0.0
+        r0[a] = v1[a] - v0[a] - ge * dt
+        r0[3 + a] = p1[a] - p0[a] - v0[a] * dt - ge * 0.5 * dt * dt
+        for j in range(n):
+            dv = R0[a, 2] * f[j] * A[0, j] / mass
+            J[a, j] = dv * dt
+            J[3 + a, j] = dv * (0.5 * dt * dt)
+    # rate (eqs. 15, 19): gyro = W x (J W), W_hat0 = W - J^-1 gyro dt
+    jw0 = Jmat[0, 0] * w0[0] + Jmat[0, 1] * w0[1] + Jmat[0, 2] * w0[2]
+    jw1 = Jmat[1, 0] * w0[0] + Jmat[1, 1] * w0[1] + Jmat[1, 2] * w0[2]
+    jw2 = Jmat[2, 0] * w0[0] + Jmat[2, 1] * w0[1] + Jmat[2, 2] * w0[2]
+    gy0 = w0[1] * jw2 - w0[2] * jw1
+    gy1 = w0[2] * jw0 - w0[0] * jw2
+    gy2 = w0[0] * jw1 - w0[1] * jw0
+    wh0 = w0[0] - (Jinv[0, 0] * gy0 + Jinv[0, 1] * gy1 + Jinv[0, 2] * gy2) * dt
+    wh1 = w0[1] - (Jinv[1, 0] * gy0 + Jinv[1, 1] * gy1 + Jinv[1, 2] * gy2) * dt
+    wh2 = w0[2] - (Jinv[2, 0] * gy0 + Jinv[2, 1] * gy1 + Jinv[2, 2] * gy2) * dt
+    r0[6] = w1[0] - wh0
+    r0[7] = w1[1] - wh1
+    r0[8] = w1[2] - wh2
+    for a in range(3):
+        for j in range(n):
+            ja = 0.0
+            for k in range(3):
+                ja += Jinv[a, k] * A[1 + k, j]
+            J[6 + a, j] = -ja * f[j] * dt
+    # rotation (eqs. 20-22): r_R = 1/2 (3 - tr dR) - dt vee(dR) . W_hat, dR = R0^T R1
+    d00 = R0[0, 0] * R1[0, 0] + R0[1, 0] * R1[1, 0] + R0[2, 0] * R1[2, 0]
+    d11 = R0[0, 1] * R1[0, 1] + R0[1, 1] * R1[1, 1] + R0[2, 1] * R1[2, 1]
+    d22 = R0[0, 2] * R1[0, 2] + R0[1, 2] * R1[1, 2] + R0[2, 2] * R1[2, 2]
+    d21 = R0[0, 2] * R1[0, 1] + R0[1, 2] * R1[1, 1] + R0[2, 2] * R1[2, 1]
+    d12 = R0[0, 1] * R1[0, 2] + R0[1, 1] * R1[1, 2] + R0[2, 1] * R1[2, 2]
+    d02 = R0[0, 0] * R1[0, 2] + R0[1, 0] * R1[1, 2] + R0[2, 0] * R1[2, 2]
+    d20 = R0[0, 2] * R1[0, 0] + R0[1, 2] * R1[1, 0] + R0[2, 2] * R1[2, 0]
+    d10 = R0[0, 1] * R1[0, 0] + R0[1, 1] * R1[1, 0] + R0[2, 1] * R1[2, 0]
+    d01 = R0[0, 0] * R1[0, 1] + R0[1, 0] * R1[1, 1] + R0[2, 0] * R1[2, 1]
+    u0 = 0.5 * (d21 - d12) * dt
+    u1 = 0.5 * (d02 - d20) * dt
+    u2 = 0.5 * (d10 - d01) * dt
+    r0[9] = 0.5 * (3.0 - (d00 + d11 + d22)) - (u0 * wh0 + u1 * wh1 + u2 * wh2)
+    for j in range(n):
+        J[9, j] = u0 * J[6, j] + u1 * J[7, j] + u2 * J[8, j]
+    # weighted energy c + 2 b.eta + eta^T H eta (eq. 26)
+    c = 0.0
+    for j in range(n):
+        b[j] = 0.0
+        for k in range(n):
+            H[j, k] = 0.0
+    for r in range(10):
+        c += r0[r] * G[r] * r0[r]
+        for j in range(n):
+            gj = G[r] * J[r, j]
+            b[j] += gj * r0[r]
+            for k in range(n):
+                H[j, k] += gj * J[r, k]
+    return c, thrust
 
-    Returns:
-        ``c`` (S,), ``b`` (S, n), ``H`` (S, n, n).
+
+@dataclass(frozen=True)
+class SegmentTerms:
+    """The segments between consecutive samples (:func:`segment_terms`).
+
+    Attributes:
+        r0: residuals at ``eta = 0``, (S, 10) [m/s, m, rad/s, 1]; J: Jacobians (S, 10, n),
+            so ``r_k(eta) = r0[k] + J[k] @ eta``.
+        c, b, H: weighted-energy terms (S,), (S, n), (S, n, n) (eq. 26).
+        dt: segment durations [s] (S,); thrust: commanded collective thrust [N] (S,).
     """
-    G = np.asarray(G_diag, dtype=float)
-    GJ = models.J * G[None, :, None]
-    c = np.einsum("si,i,si->s", models.r0, G, models.r0)
-    b = np.einsum("sin,si->sn", GJ, models.r0)
-    H = np.einsum("sin,sim->snm", models.J, GJ)
-    return c, b, H
+
+    r0: np.ndarray
+    J: np.ndarray
+    c: np.ndarray
+    b: np.ndarray
+    H: np.ndarray
+    dt: np.ndarray
+    thrust: np.ndarray
+
+    def residuals(self, eta) -> np.ndarray:
+        """``(S, 10)`` residuals at efficiency ``eta`` (n,)."""
+        return self.r0 + self.J @ np.asarray(eta, dtype=float)
+
+
+def segment_terms(vehicle: Vehicle, t, p, v, R, w, f, G) -> SegmentTerms:
+    """:func:`segment_terms_into` for the ``N - 1`` segments of ``N`` samples: times ``t``
+    (N,) [s], positions / velocities ``p``, ``v`` (N, 3) world NED, attitudes ``R``
+    (N, 3, 3) body to world, rates ``w`` (N, 3) [rad/s], commands ``f`` (N, n) [N]
+    (segment k uses samples k, k + 1 and command ``f[k]``) and weights ``G`` (10,)."""
+    t = np.asarray(t, dtype=float)
+    p, v, w, f = (np.ascontiguousarray(a, dtype=float) for a in (p, v, w, f))
+    R = np.ascontiguousarray(R, dtype=float)
+    G = np.ascontiguousarray(G, dtype=float)
+    S, n = len(t) - 1, f.shape[1]
+    r0, J = np.empty((S, RESIDUAL_ROWS)), np.empty((S, RESIDUAL_ROWS, n))
+    c, b, H, thrust = np.empty(S), np.empty((S, n)), np.empty((S, n, n)), np.empty(S)
+    veh = (vehicle.mass, vehicle.gravity, np.ascontiguousarray(vehicle.inertia),
+           np.ascontiguousarray(vehicle.inertia_inverse), np.ascontiguousarray(vehicle.allocation))
+    for k in range(S):
+        c[k], thrust[k] = segment_terms_into(t[k + 1] - t[k], p[k], p[k + 1], v[k], v[k + 1],
+                                             R[k], R[k + 1], w[k], w[k + 1], f[k], *veh, G,
+                                             r0[k], J[k], b[k], H[k])
+    return SegmentTerms(r0, J, c, b, H, np.diff(t), thrust)

@@ -77,6 +77,9 @@ class ObservationLayout:
             self._slices[s.name] = slice(start, start + s.size)
             start += s.size
         self.size = start
+        per = (lambda f: np.concatenate([np.full(s.size, f(s), dtype=float) for s in self.slots]))
+        self._low, self._high = per(lambda s: s.low), per(lambda s: s.high)
+        self._fill = per(lambda s: SD_MAX if s.name == "eta_sd" else 0.0)
 
     @property
     def names(self) -> list[str]:
@@ -96,37 +99,56 @@ class ObservationLayout:
                                                shape=(s.size,), dtype=np.float32)
                             for s in self.slots})
 
-    def values(self, *, pos_err, vel_err, R, omega, eta_hat, eta_sd, ref_acc=None) -> dict:
-        """Slot values (float32, clipped into their bounds, NaN/inf made finite)."""
-        raw = {"pos_err": pos_err, "vel_err": vel_err,
-               "rot6": np.concatenate((R[:, 0], R[:, 1])), "omega": omega,
-               "eta_hat": eta_hat, "eta_sd": SD_MAX if eta_sd is None else eta_sd,
-               "ref_acc": ref_acc}
-        out = {}
-        big = np.finfo(np.float32).max / 2
+    def flat(self, *, pos_err, vel_err, R, omega, eta_hat, eta_sd=None,
+             ref_acc=None) -> np.ndarray:
+        """The flat observation, float32 ``(..., size)`` for a leading batch shape: the slots'
+        values concatenated, NaN replaced by the slot's fill (``SD_MAX`` for ``eta_sd``, else
+        0), everything (infinities included) clipped into the slot's bounds. ``eta_sd`` None
+        means "none given" (``SD_MAX``)."""
+        R = np.asarray(R, dtype=float)
+        batch = R.shape[:-2]
+        raw = {"pos_err": pos_err, "vel_err": vel_err, "omega": omega, "eta_hat": eta_hat,
+               "eta_sd": SD_MAX if eta_sd is None else eta_sd, "ref_acc": ref_acc}
+        parts = []
         for s in self.slots:
-            value = np.broadcast_to(np.asarray(raw[s.name], dtype=float), (s.size,))
-            fill = SD_MAX if s.name == "eta_sd" else 0.0
-            value = np.nan_to_num(value, nan=fill, posinf=big, neginf=-big)
-            out[s.name] = np.clip(value, max(s.low, -big), min(s.high, big)).astype(np.float32)
-        return out
+            if s.name == "rot6":
+                parts += [R[..., :, 0], R[..., :, 1]]
+                continue
+            x = np.asarray(raw[s.name], dtype=float)
+            parts.append(x if x.shape == batch + (s.size,) else
+                         np.broadcast_to(x, batch + (s.size,)))
+        return self._bounded(np.concatenate(parts, axis=-1))
+
+    def _bounded(self, x: np.ndarray, where=None) -> np.ndarray:
+        """``x`` (elements ``where`` of the flat layout; all by default) with NaN -> fill,
+        clipped, float32."""
+        sl = where if where is not None else Ellipsis
+        x = np.where(np.isnan(x), self._fill[sl], x)
+        return np.minimum(np.maximum(x, self._low[sl]), self._high[sl]).astype(np.float32)
+
+    def values(self, **slots) -> dict:
+        """Slot values (float32, NaN filled, clipped into their bounds) as a dict; the
+        keywords of :meth:`flat`."""
+        return self.split(self.flat(**slots))
+
+    def split(self, flat: np.ndarray) -> dict:
+        """A flat observation ``(..., size)`` as a dict of slots."""
+        return {s.name: flat[..., self._slices[s.name]].copy() for s in self.slots}
 
     def flatten(self, values: dict) -> np.ndarray:
-        return np.concatenate([values[s.name] for s in self.slots]).astype(np.float32)
+        return np.concatenate([values[s.name] for s in self.slots], axis=-1).astype(np.float32)
 
     def replace(self, obs, name: str, value):
         """A copy of ``obs`` (flat vector or dict) with slot ``name`` set to ``value``
-        (clipped like :meth:`values`)."""
-        slot = next(s for s in self.slots if s.name == name)
-        value = np.asarray(value, dtype=float)
-        fill = SD_MAX if name == "eta_sd" else 0.0
-        value = np.clip(np.nan_to_num(value, nan=fill), slot.low, slot.high).astype(np.float32)
+        (filled and clipped like :meth:`flat`)."""
+        sl = self._slices[name]
+        value = self._bounded(np.asarray(value, dtype=float), sl)
         if isinstance(obs, dict):
             out = dict(obs)
             out[name] = value
             return out
         out = np.array(obs, dtype=np.float32, copy=True)
-        out[self._slices[name]] = value
+        out[..., sl] = value
         return out
 
     def get(self, obs, name: str) -> np.ndarray:

@@ -18,6 +18,7 @@ import numpy as np
 
 from quad_fault_env.envs.episode_start import RowTrajectories
 from quadfault.controller import ControllerConfig, GeometricController
+from quadfault.scenarios import at_times
 from quadfault.vehicle import Vehicle
 
 #: control steps per window
@@ -46,17 +47,19 @@ class RowTimeTables:
             physics step [s].
         vehicle, controller: the nominal vehicle and the geometric controller's configuration
             (for the feed-forward rates).
+        window: control steps per window (:data:`WINDOW`; the single env's one row takes
+            longer windows: fewer refills).
     """
 
     def __init__(self, n_rows: int, substeps: int, dt: float, vehicle: Vehicle,
-                 controller: ControllerConfig):
-        self.S, self.dt = int(substeps), float(dt)
+                 controller: ControllerConfig, window: int = WINDOW):
+        self.S, self.dt, self.window = int(substeps), float(dt), int(window)
         self.vehicle, self.config = vehicle, controller
         n_rotors = vehicle.n_rotors
         self.k0 = np.full(n_rows, _STALE, dtype=np.int64)
         #: rows: position, velocity, acceleration, b1d, Omega_d, Omega_d' at the boundaries
-        self.refs = np.zeros((n_rows, WINDOW + 1, 6, 3))
-        self.eta = np.zeros((n_rows, WINDOW * self.S + 1, n_rotors))
+        self.refs = np.zeros((n_rows, self.window + 1, 6, 3))
+        self.eta = np.zeros((n_rows, self.window * self.S + 1, n_rotors))
         self._rows = np.arange(n_rows)
 
     def invalidate(self, rows) -> None:
@@ -74,13 +77,13 @@ class RowTimeTables:
         rows = np.flatnonzero((off < 0) | (off > last))
         if not len(rows):
             return
-        S, dt, kr = self.S, self.dt, k[rows]
+        S, dt, kr, W = self.S, self.dt, k[rows], self.window
         for _, k0, idx in _combo_groups(np.zeros(len(rows), dtype=np.int64), kr):
             r = rows[idx]
             keys, inv = np.unique(traj_key[r], return_inverse=True)
             traj = RowTrajectories([trajectories[key] for key in keys.tolist()], inv.ravel())
-            ts = (np.arange(k0, k0 + WINDOW + 1) * S) * dt  # t = (k S) dt
-            block = np.zeros((len(r), WINDOW + 1, 6, 3))
+            ts = (np.arange(k0, k0 + W + 1) * S) * dt  # t = (k S) dt
+            block = np.zeros((len(r), W + 1, 6, 3))
             if self.config.angular_feedforward:  # its times (t - h, t, t + h) hold ts
                 h = self.config.ff_step
                 ref = [x[:, :, 1] for x in traj(np.stack((ts - h, ts, ts + h), axis=-1))]
@@ -92,13 +95,17 @@ class RowTimeTables:
                 block[:, :, c] = ref[c]
             self.refs[r] = block
         for key, k0, idx in _combo_groups(sched_key[rows], kr):
-            tsub = (k0 * S + np.arange(WINDOW * S + 1)) * dt  # t = (k S + j) dt
-            self.eta[rows[idx]] = _as_rows(schedules[key](tsub), len(tsub))
+            tsub = (k0 * S + np.arange(W * S + 1)) * dt  # t = (k S + j) dt
+            self.eta[rows[idx]] = _as_rows(at_times(schedules[key], tsub), len(tsub))
         self.k0[rows] = kr
 
     def references(self, k: np.ndarray) -> np.ndarray:
         """(N, 6, 3) reference rows at the start of step ``k`` (N,) (t = k S dt)."""
         return self.refs[self._rows, k - self.k0]
+
+    def efficiency_at(self, k: np.ndarray, j: int) -> np.ndarray:
+        """(N, n) true efficiency at substep ``j`` of step ``k`` (N,) (``j = S``: its end)."""
+        return self.eta[self._rows, (k - self.k0) * self.S + j]
 
     def efficiency(self, k: np.ndarray) -> np.ndarray:
         """(N, S + 1, n) true efficiency at step ``k``'s substeps and at its end."""

@@ -3,16 +3,19 @@
 The core model lives in this package and imports neither the estimators nor the
 Gymnasium environment:
 
-* :mod:`quadfault.rotation`   -- SO(3) / quaternion helpers (batched)
-* :mod:`quadfault.vehicle`    -- vehicle parameters and thrust allocation
-* :mod:`quadfault.dynamics`   -- rigid-body dynamics and integrators (paper eqs. 1-4)
-* :mod:`quadfault.motors`     -- motor efficiency, thrust noise, saturation (eqs. 11, 13)
-* :mod:`quadfault.scenarios`  -- efficiency schedules and named scenarios
-* :mod:`quadfault.trajectory` -- reference trajectories
-* :mod:`quadfault.controller` -- geometric SE(3) tracking controller (eqs. 5-10)
-* :mod:`quadfault.plant`      -- the true vehicle: dynamics + motors + effects
-* :mod:`quadfault.simulator`  -- the explicit closed-loop simulation
-* :mod:`quadfault.recording`  -- the ``quadfault-recording/1`` file format
+* :mod:`quadfault.jit`         -- the one compile decorator (numba) and its cache
+* :mod:`quadfault.rotation`    -- SO(3) / quaternion helpers: kernels and array forms
+* :mod:`quadfault.vehicle`     -- vehicle parameters and thrust allocation
+* :mod:`quadfault.dynamics`    -- rigid-body dynamics and integrators (paper eqs. 1-4)
+* :mod:`quadfault.motors`      -- motor efficiency, thrust noise, saturation (eqs. 11, 13)
+* :mod:`quadfault.sensors`     -- measurement noise on the state and the accelerometer
+* :mod:`quadfault.scenarios`   -- efficiency schedules and named scenarios
+* :mod:`quadfault.trajectory`  -- reference trajectories
+* :mod:`quadfault.controller`  -- geometric SE(3) tracking controller (eqs. 5-10)
+* :mod:`quadfault.plant`       -- the true vehicle(s): parameters, state, the effects hook
+* :mod:`quadfault.closed_loop` -- the one closed loop (simulator, environments, agents)
+* :mod:`quadfault.simulator`   -- ``simulate``: a scenario through the loop into a recording
+* :mod:`quadfault.recording`   -- the ``quadfault-recording/1`` file format
 
 Heavy modules are imported lazily so ``quadfault --help`` stays instant.
 """

@@ -14,7 +14,7 @@ import sys
 
 #: name -> (module, one-line help)
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
-    "reproduce": ("estimators.reproduce", "the paper's evaluation: IRLS vs EKF on the paper's "
+    "reproduce": ("estimators.paper.reproduce", "the paper's evaluation: IRLS vs EKF on the paper's "
                   "scenarios; writes metrics.json, report.md and figures"),
     "simulate": ("quadfault.cli_simulate", "fly the quadrotor through a scenario and write a "
                  "recording"),

@@ -6,7 +6,10 @@ Every algorithm is written once, as plain allocation-free Python, and decorated 
 in numpy, never an exception inside a parallel loop; no ``fastmath``, so results do not
 depend on the compiler's reassociation). Without numba the decorator leaves the function as
 Python -- slow but correct -- and warns once. Batched paths run the same kernel under
-:data:`prange`.
+:data:`prange`. :func:`python` gives a kernel's interpreted form (the same code, with every
+kernel it calls interpreted too): the closed loop runs that way when it must call Python
+objects (the effects of ``quadfault.effects``), and a kernel written with plain arithmetic
+runs over whole arrays that way (``quadfault.dynamics.step_rk4`` with a Python wrench).
 
 Cache: numba's on-disk cache checks only the source file of the function it compiled. Our
 kernels call compiled functions of other modules, so after an update that changes only a
@@ -22,6 +25,7 @@ from __future__ import annotations
 import hashlib
 import os
 import sys
+import types
 import warnings
 from pathlib import Path
 
@@ -31,6 +35,7 @@ PACKAGES = ("quadfault", "estimators", "quad_fault_env", "agents")
 _MARKERS = (b"quadfault.jit", b"numba")
 
 _warned = False
+_INTERPRETED: dict = {}  # (kernel id, replacements) -> its interpreted form
 _numba_module = False  # not looked up yet
 
 
@@ -81,6 +86,59 @@ def jit(*args, **kwargs):
     if len(args) == 1 and callable(args[0]):
         return nb.njit(**kwargs)(args[0])
     return nb.njit(*args, **kwargs)
+
+
+def python(fn, replace: dict | None = None):
+    """The interpreted form of kernel ``fn``: its own code run by Python, every kernel it
+    calls (recursively) interpreted as well, and the globals named in ``replace`` swapped for
+    the given objects. Arguments may then be any Python objects the code can handle (an
+    effects hook, numpy arrays in place of floats); results equal the compiled kernel's
+    (the same IEEE operations in the same order, no ``fastmath``)."""
+    return _python(fn, tuple(sorted((replace or {}).items())), _INTERPRETED)
+
+
+def _python(fn, replace: tuple, memo: dict):
+    key = (id(fn), replace)
+    if key in memo:
+        return memo[key]
+    f = getattr(fn, "py_func", fn)
+    env = dict(f.__globals__)
+    out = types.FunctionType(f.__code__, env, f.__name__, f.__defaults__, f.__closure__)
+    out.__doc__ = f.__doc__
+    memo[key] = out
+    swap = dict(replace)
+    for name in f.__code__.co_names:
+        if name in swap:
+            env[name] = swap[name]
+        elif hasattr(env.get(name), "py_func"):  # a compiled callee
+            env[name] = _python(env[name], replace, memo)
+    return out
+
+
+def typed_list(items):
+    """``items`` as a list a compiled kernel takes cheaply (numba's typed list, built by a
+    cached kernel; a Python list without numba), e.g. one ``numpy.random.Generator`` per
+    vehicle: passing a Generator itself to a kernel costs about 10 us per call."""
+    nb = _numba()
+    if nb is None:
+        return list(items)
+    global _make_list
+    if _make_list is None:
+        from numba.typed import List
+
+        @nb.njit(cache=True)
+        def _make_list(xs):
+            out = List()
+            for x in xs:
+                out.append(x)
+            return out
+
+    with warnings.catch_warnings():  # numba's reflected list of the argument (read once)
+        warnings.simplefilter("ignore", nb.NumbaPendingDeprecationWarning)
+        return _make_list(list(items))
+
+
+_make_list = None
 
 
 def set_threads(n: int | None) -> int:
@@ -156,4 +214,5 @@ def configure_cache() -> str | None:
     return str(target)
 
 
-__all__ = ["AVAILABLE", "jit", "prange", "set_threads", "configure_cache", "sources_digest"]
+__all__ = ["AVAILABLE", "jit", "prange", "python", "typed_list", "set_threads", "configure_cache",
+           "sources_digest"]

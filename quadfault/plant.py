@@ -2,21 +2,44 @@
 
 The plant is what the controller and the estimators do *not* know. Per physics step of
 length ``dt`` it takes the rotor commands [N] (held constant over the step, zero-order hold),
-applies saturation, efficiency and thrust noise (:class:`~quadfault.motors.MotorModel`), then
-any effects (motor lag, delay, drag, wind, ...), and integrates the rigid body.
+applies saturation, efficiency and thrust noise (:func:`quadfault.motors.motor_thrust`), then
+the effects, and integrates the rigid body (:func:`quadfault.dynamics.rkmk4_step`, or the
+authors' Euler step). The loop that does this is :mod:`quadfault.closed_loop`; this module
+says what a plant is and how effects act on it.
 
-Effects follow the small :class:`Effect` protocol, so the mismatch diagnosis can model the
-same physics with the same code.
+Effects (the hook)
+------------------
+An effect is any object with these methods (numpy form; :mod:`quadfault.effects` has the
+built-in ones)::
+
+    reset(n_rotors) -> None                    # start of a flight
+    rotor_thrust(f, t, dt, state) -> f_new     # produced rotor thrusts [N] (n,) after the
+                                               # motor model, for the step [t, t + dt); may
+                                               # keep internal state (lag, delay)
+    wrench(state, f, t) -> (F_world, M_body)   # extra force [N] (world) and moment [N m]
+                                               # (body), evaluated at every RK stage's state
+    true_vehicle(vehicle) -> Vehicle           # optional: the vehicle the plant flies (e.g.
+                                               # another mass or inertia), applied at reset;
+                                               # the controller and the recording keep the
+                                               # nominal vehicle
+
+``state`` is a :class:`~quadfault.dynamics.RigidBodyState` of numpy arrays (world NED, body
+FRD) -- the state at the step's start for ``rotor_thrust``, the stage's state for ``wrench``.
+Effects act in the order given: ``rotor_thrust`` chained, wrenches summed.
+
+A plant with effects runs the same closed loop interpreted by Python
+(:func:`quadfault.jit.python`), whose kernels call :class:`EffectsHook` at those two
+points; without effects the loop is compiled and the hook is compiled out (``fx is None``).
 """
 
 from __future__ import annotations
 
-from typing import NamedTuple, Protocol
+from typing import Protocol
 
 import numpy as np
 
-from quadfault.dynamics import ReferenceEuler, RigidBodyState, specific_force_body, step_rk4
-from quadfault.dynamics import translational_acceleration
+from quadfault.closed_loop import Vehicles
+from quadfault.dynamics import RigidBodyState
 from quadfault.errors import ConfigError
 from quadfault.motors import MotorModel
 from quadfault.vehicle import Vehicle
@@ -25,7 +48,7 @@ INTEGRATORS = ("rk4", "reference")
 
 
 class Effect(Protocol):
-    """An unmodelled physical effect of the true plant (see ``quadfault.effects``)."""
+    """An unmodelled physical effect of the true plant (see the module docstring)."""
 
     def reset(self, n_rotors: int) -> None: ...
 
@@ -35,44 +58,75 @@ class Effect(Protocol):
     def wrench(self, state: RigidBodyState, f: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
         """External force (world) [N] and moment (body) [N m] at ``state``."""
 
-    # optional: ``true_vehicle(vehicle) -> Vehicle``, the rigid body the plant flies (another
-    # mass or inertia), applied once at reset; the controller keeps the nominal vehicle.
+
+def _state(p, v, R, w) -> RigidBodyState:
+    """The kernels' tuples as a RigidBodyState of arrays."""
+    return RigidBodyState(np.array(p, dtype=float), np.array(v, dtype=float),
+                          np.array(R, dtype=float).reshape(3, 3), np.array(w, dtype=float))
 
 
 def flown_vehicle(vehicle: Vehicle, effects) -> Vehicle:
     """The vehicle the plant flies: ``vehicle`` passed through every effect's optional
-    ``true_vehicle`` hook, in order."""
+    ``true_vehicle`` hook, in order (the controller keeps the nominal one)."""
+    n = vehicle.n_rotors
     for e in effects:
         hook = getattr(e, "true_vehicle", None)
-        if hook is not None:
+        if callable(hook):
             vehicle = hook(vehicle)
+            if not isinstance(vehicle, Vehicle) or vehicle.n_rotors != n:
+                raise ConfigError(f"effect {type(e).__name__}.true_vehicle must return a "
+                                  f"Vehicle with {n} rotors")
     return vehicle
 
 
-class PlantStep(NamedTuple):
-    rotor_thrust: np.ndarray  # thrust each rotor produced over the step [N]
-    eta: np.ndarray  # true efficiency used [-]
-    specific_force: np.ndarray  # accelerometer truth at the step start, body FRD [m/s^2]
+class EffectsHook:
+    """What the interpreted loop calls (``fx``): the effects in numpy form.
+
+    ``rotor_thrust(f, t, dt, p, v, R, w)`` replaces the produced thrusts ``f`` (an array,
+    in place) by the effects' chain; ``wrench(p, v, R, w, f, t)`` returns the summed
+    external force and moment as 3-tuples.
+    """
+
+    def __init__(self, effects):
+        self.effects = tuple(effects)
+
+    def rotor_thrust(self, f, t, dt, p, v, R, w) -> None:
+        state = _state(p, v, R, w)
+        out = f.copy()
+        for e in self.effects:
+            out = e.rotor_thrust(out, t, dt, state)
+        f[:] = out
+
+    def wrench(self, p, v, R, w, f, t):
+        state = _state(p, v, R, w)
+        F, M = np.zeros(3), np.zeros(3)
+        for e in self.effects:
+            dF, dM = e.wrench(state, f, t)
+            F = F + dF
+            M = M + dM
+        return (F[0], F[1], F[2]), (M[0], M[1], M[2])
 
 
 class Plant:
-    """The true multirotor.
+    """The true multirotor(s): what the closed loop flies, and their state.
 
     Args:
-        vehicle: true vehicle parameters (the controller may hold different, nominal ones);
-            effects with a ``true_vehicle`` hook modify it at every reset (``self.vehicle`` is
-            the one flown, ``self.nominal_vehicle`` the one given).
-        efficiency: callable ``t -> (4,)`` true motor efficiency.
-        motor: saturation and thrust noise.
-        effects: unmodelled effects applied in order.
+        vehicle: the vehicle's parameters (the controller may hold different, nominal ones);
+            effects with ``true_vehicle`` change it at :meth:`reset`.
+        efficiency: callable ``t -> (n,)`` true motor efficiency (arrays of times give rows).
+        motor: saturation and thrust noise (sigma_f of every vehicle; see ``vehicles.sigma``).
+        effects: unmodelled effects applied in order (see the module docstring).
         integrator: ``"rk4"`` (default) or ``"reference"`` (the authors' Euler step).
         dt: physics step [s].
-        rng: the plant's random generator (thrust noise).
+        n_vehicles: how many vehicles of these parameters (the vector env flies N).
+
+    ``vehicles`` (:class:`~quadfault.closed_loop.Vehicles`) holds their state between calls
+    of the loop; :attr:`state` is vehicle 0's.
     """
 
-    def __init__(self, vehicle: Vehicle, efficiency, motor: MotorModel | None = None,
+    def __init__(self, vehicle: Vehicle, efficiency=None, motor: MotorModel | None = None,
                  effects: tuple = (), integrator: str = "rk4", dt: float = 1e-3,
-                 rng: np.random.Generator | None = None):
+                 n_vehicles: int = 1):
         if integrator not in INTEGRATORS:
             raise ConfigError(f"integrator must be one of {INTEGRATORS}, got {integrator!r}")
         if not (dt > 0):
@@ -86,58 +140,27 @@ class Plant:
         self.vehicle = flown_vehicle(vehicle, self.effects)
         self.integrator = integrator
         self.dt = float(dt)
-        self.rng = rng if rng is not None else np.random.default_rng()
-        self.state = RigidBodyState.at_rest()
-        self._reference = ReferenceEuler(vehicle, dt) if integrator == "reference" else None
+        self.vehicles = Vehicles.empty(int(n_vehicles), vehicle.n_rotors)
+        self.vehicles.sigma[:] = self.motor.thrust_noise
 
-    def reset(self, state: RigidBodyState) -> None:
-        self.state = state.copy()
+    @property
+    def state(self) -> RigidBodyState:
+        """A copy of vehicle 0's true state."""
+        return self.vehicles.state(0)
+
+    def reset(self, state: RigidBodyState | None = None) -> None:
+        """Start a flight (from ``state``, vehicle 0, when given): the effects' ``reset``
+        and ``true_vehicle``."""
+        if state is not None:
+            self.vehicles.set_state(0, state)
         for e in self.effects:
             e.reset(self.nominal_vehicle.n_rotors)
         self.vehicle = flown_vehicle(self.nominal_vehicle, self.effects)
-        if self._reference is not None:
-            self._reference = ReferenceEuler(self.vehicle, self.dt)
 
-    def _external(self, f_rotor, t):
-        if not self.effects:
-            return None
+    @property
+    def hook(self) -> EffectsHook | None:
+        """The loop's effects hook (None without effects: the compiled loop)."""
+        return EffectsHook(self.effects) if self.effects else None
 
-        def external(state):
-            F = np.zeros(state.p.shape)
-            M = np.zeros(state.w.shape)
-            for e in self.effects:
-                dF, dM = e.wrench(state, f_rotor, t)
-                F = F + dF
-                M = M + dM
-            return F, M
 
-        return external
-
-    def produced_thrust(self, f_cmd: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """Rotor thrusts [N] actually produced for commands ``f_cmd`` at time ``t``."""
-        eta = np.asarray(self.efficiency(t), dtype=float)
-        f = self.motor.apply(f_cmd, eta, self.vehicle.rotor_max_thrust, self.rng)
-        for e in self.effects:
-            f = e.rotor_thrust(f, t, self.dt, self.state)
-        return f, eta
-
-    def step(self, f_cmd: np.ndarray, t: float) -> PlantStep:
-        """Advance one physics step from time ``t`` with rotor commands ``f_cmd`` [N]."""
-        f, eta = self.produced_thrust(f_cmd, t)
-        wrench = self.vehicle.wrench(f)
-        thrust, moment = wrench[..., 0], wrench[..., 1:]
-        external = self._external(f, t)
-        F_ext = None if external is None else external(self.state)[0]
-        acc = translational_acceleration(self.state.R, thrust, self.vehicle, F_ext)
-        sf = specific_force_body(self.state.R, acc, self.vehicle.gravity)
-        if self._reference is None:
-            self.state = step_rk4(self.state, thrust, moment, self.vehicle, self.dt, external)
-        else:
-            # The reference stores the wrench after its (lagged) step: see ReferenceEuler.
-            self._reference.apply(thrust, moment, self.state.R)
-        return PlantStep(f, eta, sf)
-
-    def advance_reference(self) -> RigidBodyState:
-        """Reference mode only: the authors' step, run *before* the controller each sample."""
-        self.state = self._reference.step(self.state)
-        return self.state
+__all__ = ["INTEGRATORS", "Effect", "EffectsHook", "Plant", "flown_vehicle"]

@@ -34,6 +34,25 @@ def _times(t) -> np.ndarray:
     return np.asarray(t, dtype=float)
 
 
+def at_times(fn, times) -> np.ndarray | tuple:
+    """``fn`` (a function of time: an efficiency schedule, a trajectory) on a 1-D array of
+    ``times`` [s]: one vectorised call when ``fn`` takes arrays, else one call per time.
+    Returns its array (or tuple of arrays) with a leading axis of ``len(times)``."""
+    times = np.asarray(times, dtype=float)
+    try:
+        out = fn(times)
+        parts = out if isinstance(out, tuple) else (out,)
+        if all(np.ndim(a) >= 2 and np.shape(a)[0] == len(times) for a in parts):
+            return out
+    except (TypeError, ValueError, IndexError):
+        pass
+    each = [fn(float(t)) for t in times]
+    if isinstance(each[0], tuple):
+        return type(each[0])(*(np.array([np.asarray(e[j], dtype=float) for e in each])
+                               for j in range(len(each[0]))))
+    return np.array([np.asarray(e, dtype=float) for e in each])
+
+
 @dataclass(frozen=True)
 class ConstantEfficiency:
     """Fixed per-motor efficiency."""

@@ -4,16 +4,38 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from support import oracles
 from quadfault.dynamics import (
-    ReferenceEuler,
     RigidBodyState,
     angular_acceleration,
+    reference_euler_step,
+    reference_euler_store,
+    rigid_body,
     specific_force_body,
     step_rk4,
     translational_acceleration,
 )
 from quadfault.rotation import expm_so3, hat
 from quadfault.vehicle import Vehicle
+
+
+class ReferenceEuler:
+    """The reference-integrator kernels with their memory, stepped on RigidBodyStates."""
+
+    def __init__(self, vehicle, dt):
+        self.rigid, self.dt, self.memory = rigid_body(vehicle), dt, np.zeros((4, 3))
+
+    @property
+    def a(self):
+        return self.memory[0]
+
+    def step(self, s):
+        p, v, R, w = reference_euler_step(tuple(s.p), tuple(s.v), tuple(s.R.ravel()),
+                                          tuple(s.w), self.memory, self.rigid, self.dt)
+        return RigidBodyState(np.array(p), np.array(v), np.array(R).reshape(3, 3), np.array(w))
+
+    def apply(self, thrust, moment, R):
+        reference_euler_store(self.memory, thrust, tuple(moment), tuple(R.ravel()))
 
 
 @pytest.fixture
@@ -150,3 +172,72 @@ def test_reference_euler_reproduces_hand_computed_steps(vehicle):
     np.testing.assert_allclose(s3.w, wdot * dt)
     R3 = s2.R @ (np.eye(3) + hat(s3.w * dt))
     np.testing.assert_allclose(s3.R, R3, atol=1e-12)  # orthonormalisation is second order here
+
+
+def test_reference_euler_kernels_equal_the_readable_form(vehicle):
+    rng = np.random.default_rng(4)
+    dt = 1e-3
+    kernel, oracle = ReferenceEuler(vehicle, dt), oracles.ReferenceEuler(vehicle, dt)
+    s = RigidBodyState(rng.normal(size=3), rng.normal(size=3), expm_so3(rng.normal(size=3)),
+                       rng.normal(size=3))
+    x = (s.p, s.v, s.R, s.w)
+    for _ in range(50):
+        s = kernel.step(s)
+        x = oracle.step(*x)
+        for got, want in zip(s, x):
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-13)
+        T, M = 9.0 + rng.normal(), 0.01 * rng.normal(size=3)
+        kernel.apply(T, M, s.R)
+        oracle.apply(T, M, x[2])
+
+
+def test_rk4_kernel_equals_the_readable_form_with_and_without_a_wrench(vehicle):
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        s = RigidBodyState(rng.normal(size=3), rng.normal(size=3), expm_so3(rng.normal(size=3)),
+                           rng.normal(scale=3.0, size=3))
+        T, M, dt = 5 + 5 * rng.random(), 0.05 * rng.normal(size=3), 10 ** rng.uniform(-4, -2)
+        want = oracles.step_rk4(*s, T, M, vehicle, dt)
+        for got, ref in zip(step_rk4(s, T, M, vehicle, dt), want):
+            np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
+
+        def drag(p, v, R, w):
+            return -0.3 * v + 0.01 * p, 0.002 * w
+
+        want = oracles.step_rk4(*s, T, M, vehicle, dt, drag)
+        got = step_rk4(s, T, M, vehicle, dt, lambda st: drag(st.p, st.v, st.R, st.w))
+        for a, b in zip(got, want):
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+
+
+def test_rk4_with_a_python_wrench_batches_and_calls_it_once_per_stage(vehicle):
+    rng = np.random.default_rng(6)
+    B = 7
+    s = RigidBodyState(rng.normal(size=(B, 3)), rng.normal(size=(B, 3)),
+                       expm_so3(rng.normal(size=(B, 3))), rng.normal(size=(B, 3)))
+    T, M = 9 + rng.random(B), 0.01 * rng.normal(size=(B, 3))
+    dt = np.full((B, 1), 2e-3)  # one step per row, as a column
+    calls = []
+
+    def wind(st):
+        calls.append(st.p.shape)
+        return np.broadcast_to([0.2, -0.1, 0.0], st.p.shape), 0.001 * st.w
+
+    out = step_rk4(s, T, M, vehicle, dt, wind)
+    assert calls == [(B, 3)] * 4
+    for i in range(B):
+        one = step_rk4(RigidBodyState(*(x[i] for x in s)), T[i], M[i], vehicle, 2e-3,
+                       lambda st: (np.array([0.2, -0.1, 0.0]), 0.001 * st.w))
+        for a, b in zip(out, one):
+            np.testing.assert_allclose(a[i], b, rtol=0, atol=1e-15)
+
+
+def test_accelerations_equal_the_readable_forms(vehicle):
+    rng = np.random.default_rng(7)
+    R, w = expm_so3(rng.normal(size=(6, 3))), rng.normal(size=(6, 3))
+    T, M, F, Mx = rng.random(6) * 10, rng.normal(size=(6, 3)), rng.normal(size=(6, 3)), \
+        rng.normal(size=(6, 3))
+    np.testing.assert_allclose(translational_acceleration(R, T, vehicle, F),
+                               oracles.translational_acceleration(R, T, vehicle, F), atol=1e-13)
+    np.testing.assert_allclose(angular_acceleration(w, M, vehicle, Mx),
+                               oracles.angular_acceleration(w, M, vehicle, Mx), atol=1e-10)

@@ -22,8 +22,7 @@ CHANNELS = {"acc_x", "acc_y", "acc_z", "sf_x", "sf_y", "sf_z", "alpha_x", "alpha
 def com_recording():
     sc = named_scenario("nominal", 5.0, 4e-3).replace(
         trajectory=Lissajous(amplitude=(1.5, 1.0, 0.2), frequency=0.2))
-    kw = {"backend": "numpy"} if "backend" in SimConfig.__dataclass_fields__ else {}
-    cfg = SimConfig(dt=4e-3, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001), **kw)
+    cfg = SimConfig(dt=4e-3, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001))
     return simulate(sc, config=cfg, seed=3, effects=(fx.ComOffset((0.015, 0.0)),),
                     thrust_noise=0.02)
 

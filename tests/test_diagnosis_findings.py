@@ -25,7 +25,7 @@ TRAJ = Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.15)
 
 def fly(effects=(), seed=1, duration=8.0, **kw):
     sc = named_scenario("nominal", duration, DT).replace(trajectory=TRAJ)
-    cfg = SimConfig(dt=DT, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001), backend="numpy")
+    cfg = SimConfig(dt=DT, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001))
     return simulate(sc, config=cfg, seed=seed, effects=tuple(effects), thrust_noise=0.02,
                     **kw).without_truth()
 

@@ -26,8 +26,7 @@ DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real"
 def _flight(seed, duration=4.0):
     sc = named_scenario("nominal", duration, DT).replace(
         trajectory=Lissajous(amplitude=(1.5, 1.0, 0.2), frequency=0.2))
-    cfg = SimConfig(dt=DT, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001, 0.02),
-                    backend="numpy")
+    cfg = SimConfig(dt=DT, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001, 0.02))
     return simulate(sc, config=cfg, seed=seed, thrust_noise=0.02).without_truth()
 
 

@@ -21,8 +21,7 @@ LOW_TRAJ = Lissajous(amplitude=(1.0, 1.0, 0.15), frequency=0.15, altitude=0.35)
 
 def fly(effects=(), seed=1, duration=8.0, traj=FAST_TRAJ):
     sc = named_scenario("nominal", duration, DT).replace(trajectory=traj)
-    kw = {"backend": "numpy"} if "backend" in SimConfig.__dataclass_fields__ else {}
-    cfg = SimConfig(dt=DT, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001), **kw)
+    cfg = SimConfig(dt=DT, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001))
     return simulate(sc, config=cfg, seed=seed, effects=tuple(effects), thrust_noise=0.02)
 
 

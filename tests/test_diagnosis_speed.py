@@ -27,7 +27,7 @@ from quadfault.vehicle import PAPER_YAW_SIGNS, Vehicle
 def drag_recording():
     sc = named_scenario("nominal", 6.0, 4e-3).replace(
         trajectory=Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.2))
-    cfg = SimConfig(dt=4e-3, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001), backend="numpy")
+    cfg = SimConfig(dt=4e-3, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001))
     return simulate(sc, config=cfg, seed=4, effects=(fx.Drag(0.3),), thrust_noise=0.02).without_truth()
 
 
@@ -125,7 +125,7 @@ def test_heavy_vehicle_thrust_noise_inertia_bias_is_caught_by_the_iv_check():
                               gravity=9.81, thrust_to_weight=2.3)
     sc = named_scenario("nominal", 12.0, 4e-3).replace(
         trajectory=Lissajous(amplitude=(1.6, 1.1, 0.2), frequency=0.18))
-    cfg = SimConfig(dt=4e-3, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001), backend="numpy")
+    cfg = SimConfig(dt=4e-3, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001))
     rec = simulate(sc, vehicle=veh, config=cfg, seed=0, thrust_noise=0.045).without_truth()
     rp = prepare(rec)
     inertia = next(c for c in build_library(rp) if c.name == "inertia")

@@ -121,7 +121,7 @@ def test_library_with_the_true_parameters_reproduces_the_plant(effect):
     traj = LOW if effect.name == "ground_effect" else TRAJ
     volt = LinearVoltage(12.0, 11.0, 3.0) if effect.name == "battery_thrust" else None
     sc = named_scenario("nominal", 3.0, 4e-3).replace(trajectory=traj, voltage=volt)
-    rec = simulate(sc, config=SimConfig(dt=4e-3, backend="numpy"), seed=0, effects=(effect,),
+    rec = simulate(sc, config=SimConfig(dt=4e-3), seed=0, effects=(effect,),
                    thrust_noise=0.0).without_truth()
     rp = prepare(rec)
     cand = next(c for c in build_library(rp, fx.EFFECT_NAMES) if c.name == effect.name)

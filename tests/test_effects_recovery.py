@@ -29,7 +29,7 @@ REAL = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real"
 
 def fly(effects, seed=1, duration=8.0, voltage=None, u_curve=None, vehicle=None):
     sc = named_scenario("nominal", duration, DT).replace(trajectory=TRAJ, voltage=voltage)
-    cfg = SimConfig(dt=DT, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001), backend="numpy")
+    cfg = SimConfig(dt=DT, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001))
     rec = simulate(sc, vehicle=vehicle, config=cfg, seed=seed, effects=tuple(effects),
                    thrust_noise=0.02)
     if u_curve is not None:

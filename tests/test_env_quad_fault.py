@@ -3,6 +3,7 @@ truth isolation and action validation. Episodes are kept short (each step = 10 s
 
 from __future__ import annotations
 
+import copy
 import importlib.util
 import math
 import re
@@ -14,6 +15,7 @@ from gymnasium.utils.env_checker import check_env
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
+from support import oracles
 
 import quad_fault_env
 from estimators.base import Estimate
@@ -402,15 +404,8 @@ def test_fault_events_are_reported_in_the_step_they_happen():
     assert out[16][4]["eta_true_samples"][-1, 0] == 1.0
 
 
-def test_default_estimator_rate_does_not_depend_on_numba(monkeypatch):
-    """The same observations on every install: 1 kHz estimator by default, a warning without numba."""
-    import quad_fault_env.envs.quad_fault as qf
-
-    assert QuadFaultEnv(estimator="irls").estimator_rate == "physics"
-    monkeypatch.setattr(qf, "_numba_available", lambda: False)
-    monkeypatch.setattr(qf, "_SLOW_ESTIMATOR_WARNED", False)
-    with pytest.warns(RuntimeWarning, match="estimator_rate='control'"):
-        env = QuadFaultEnv(estimator="irls")
+def test_estimator_rate_physics_by_default_control_on_request():
+    env = QuadFaultEnv(estimator="irls")
     assert env.estimator_rate == "physics" and env.estimator_stride == 1
     assert QuadFaultEnv(estimator="irls", estimator_rate="control").estimator_stride == env.substeps
 
@@ -434,88 +429,68 @@ def test_random_faults_rejects_bad_specs(spec, word):
         QuadFaultEnv("none", "random", random_faults=spec)
 
 
-# -- physics="numba": the compiled control step equals the numpy plant ----------------------
-needs_numba = pytest.mark.skipif(not _have("numba"), reason="numba (the 'fast' extra) missing")
+# -- the physics: the model's closed loop, one call per control step --------------------------
 FAULT_NOISE = dict(scenario="combined", duration=1.2, thrust_noise=0.07,
                    sensor_noise=SensorNoise(position=0.01, velocity=0.02, attitude=0.002,
                                             gyro=0.01, accel=0.1))
 
 
-def _assert_same_step(a, b, where):
-    """Two env.step results agree to 1e-9 (the numba-vs-numpy tolerance of the simulator and
-    vector env tests), samples and truth streams included."""
-    (o0, r0, te0, tr0, i0), (o1, r1, te1, tr1, i1) = a, b
-    np.testing.assert_allclose(o1, o0, rtol=0, atol=1e-9, err_msg=where)
-    assert abs(r1 - r0) <= 1e-9 and (te1, tr1) == (te0, tr0), where
-    assert len(i1["samples"]) == len(i0["samples"]), where
-    for s0, s1 in zip(i0["samples"], i1["samples"]):
-        assert s1.t == s0.t, where
-        for x0, x1 in zip(s0[1:], s1[1:]):
-            np.testing.assert_allclose(x1, x0, rtol=0, atol=1e-9, err_msg=where)
-    for key in ("eta_true", "eta_hat", "eta_true_samples", "specific_force_samples",
-                "motor_command", "position_error"):
-        np.testing.assert_allclose(np.asarray(i1[key], float), np.asarray(i0[key], float),
-                                   rtol=0, atol=1e-9, err_msg=f"{where} {key}")
-    for key in ("termination_reason", "estimator_status", "fault_events", "faults", "t"):
-        assert i1[key] == i0[key], f"{where} {key}"
-
-
-@needs_numba
-@pytest.mark.parametrize("estimator, kw", [
-    ("none", FAULT_NOISE),
-    ("irls", dict(FAULT_NOISE, duration=0.6, compensate=True)),
-    ("truth", dict(scenario="random", duration=1.0, action_mode="motor")),
-    ("none", dict(scenario="lissajous", duration=0.4, thrust_noise=0.0,
-                  sensor_noise=SensorNoise(accel=0.1))),  # no thrust noise; accel noise only
-])
-def test_compiled_physics_matches_numpy_over_an_episode(estimator, kw):
-    """Same seed and actions: physics='numba' gives the numpy path's observations, rewards
-    and infos (fault, thrust noise and sensor noise drawn from the same stream), and leaves
-    the generator in the same state."""
-    envs = [QuadFaultEnv(estimator, physics=p, **kw) for p in ("numpy", "numba")]
-    assert [e.physics for e in envs] == ["numpy", "numba"]
-    first = [e.reset(seed=7) for e in envs]
-    np.testing.assert_array_equal(first[1][0], first[0][0])
+@pytest.mark.parametrize("kw", [FAULT_NOISE, dict(scenario="lissajous", duration=0.4,
+                                                   thrust_noise=0.0,
+                                                   sensor_noise=SensorNoise(accel=0.1))])
+def test_substeps_are_the_readable_loop_with_the_env_generator(kw):
+    """Every substep sample and accelerometer reading equals the loop written out with numpy
+    (tests/support/oracles.py: sensors, motors with the step's held command, RKMK4,
+    accelerometer) drawing from a twin of the env's generator in the same order, with the
+    end-of-step measurement drawn after the step."""
+    env = QuadFaultEnv("none", **kw)
+    env.reset(seed=7)
+    twin = copy.deepcopy(env.np_random)
+    x = tuple(np.array(a) for a in env.plant.state)
+    veh, noise, dt = env.vehicle, env.sensor_noise, env.dt
+    sigma = env.scenario.thrust_noise
     rng = np.random.default_rng(1)
-    n_events = 0
-    for k in range(300):
-        a = rng.uniform(-0.3, 0.3, 4).astype(np.float32)
-        out = [e.step(a) for e in envs]
-        _assert_same_step(*out, f"step {k}")
-        n_events += len(out[0][4]["fault_events"])
-        if out[0][2] or out[0][3]:
-            break
-    states = [e.np_random.bit_generator.state for e in envs]
-    assert states[1] == states[0]
-    assert k >= min(30, envs[0].max_steps - 1)  # a real episode, not an immediate termination
-    if kw["scenario"] == "combined":
-        assert n_events >= 4  # the faults' onsets and ends fell inside the episode
+    x_meas = None  # the reset's measurement (drawn before the twin was made)
+    for k in range(40):
+        _, _, term, _, info = env.step(rng.uniform(-0.3, 0.3, 4).astype(np.float32))
+        f_cmd = info["motor_command"]
+        for j, sample in enumerate(info["samples"]):
+            if j > 0:
+                x_meas = oracles.measure(*x, noise, twin)
+            for got, want in zip(sample[1:5], x_meas or sample[1:5]):
+                np.testing.assert_allclose(got, want, rtol=0, atol=1e-9, err_msg=f"{k} {j}")
+            eta = info["eta_true_samples"][j]
+            z = twin.standard_normal(4) if sigma > 0 else 0.0
+            f = oracles.motor_thrust(f_cmd, eta, veh.rotor_max_thrust, True, sigma, z)
+            T, *M = veh.allocation @ f
+            acc = oracles.translational_acceleration(x[2], T, veh)
+            sf = x[2].T @ (acc - veh.gravity * oracles.E3)
+            x = oracles.step_rk4(*x, T, np.array(M), veh, dt)
+            if noise.accel:
+                sf = sf + noise.accel * twin.standard_normal(3)
+            np.testing.assert_allclose(info["specific_force_samples"][j], sf, atol=1e-9)
+        x_meas = oracles.measure(*x, noise, twin)  # the end-of-step measurement
+        assert not term
+    assert env.np_random.bit_generator.state == twin.bit_generator.state
 
 
-@needs_numba
-def test_compiled_physics_stops_and_rewinds_the_noise_where_numpy_does_on_divergence():
-    """A state that overflows mid-step: both paths stop after the same substep with the same
-    samples, terminate as non_finite, and leave the generator at the same draw."""
-    envs = [QuadFaultEnv("none", physics=p, **FAULT_NOISE) for p in ("numpy", "numba")]
-    out = []
-    for env in envs:
-        env.reset(seed=3)
-        env.step(np.zeros(4, np.float32))
-        s = env.plant.state
-        s.w[:] = (1e80, -2e80, 3e80)  # finite, but its gyroscopic term overflows
-        with np.errstate(over="ignore", invalid="ignore"):
-            out.append(env.step(np.zeros(4, np.float32)))
-    _assert_same_step(*out, "diverging step")
-    assert out[0][4]["termination_reason"] == "non_finite"
-    assert 0 < len(out[0][4]["samples"]) < envs[0].substeps
-    assert envs[1].np_random.bit_generator.state == envs[0].np_random.bit_generator.state
+def test_a_diverging_state_stops_the_substeps_and_terminates_non_finite():
+    env = QuadFaultEnv("none", **FAULT_NOISE)
+    env.reset(seed=3)
+    env.step(np.zeros(4, np.float32))
+    env.plant.vehicles.w[0] = (1e80, -2e80, 3e80)  # finite, but its gyroscopic term overflows
+    with np.errstate(over="ignore", invalid="ignore"):
+        _, _, term, _, info = env.step(np.zeros(4, np.float32))
+    assert term and info["termination_reason"] == "non_finite"
+    assert 0 < len(info["samples"]) < env.substeps
+    assert len(info["specific_force_samples"]) == len(info["samples"])
 
 
 def test_observation_is_the_layouts_values_even_for_nan_and_inf():
     """The env's one-vector observation equals ObservationLayout.values (NaN -> fill,
     +-inf -> bound, clipped) for the flat and the dict layouts."""
     for kind in ("flat", "dict"):
-        env = QuadFaultEnv("none", "hover", observation=kind, physics="numpy")
+        env = QuadFaultEnv("none", "hover", observation=kind)
         env.reset(seed=0)
         env._meas.p[:] = (np.nan, np.inf, -3.0)
         env._meas.w[:] = (-np.inf, 60.0, 0.1)
@@ -535,14 +510,10 @@ def test_observation_is_the_layouts_values_even_for_nan_and_inf():
                 np.testing.assert_array_equal(got[name], want[name])
 
 
-def test_physics_keyword_is_validated_and_auto_follows_numba(monkeypatch):
+def test_physics_keyword_is_a_deprecated_no_op():
     with pytest.raises(ConfigError, match="physics must be one of"):
         QuadFaultEnv("none", physics="gpu")
-    want = "numba" if _have("numba") else "numpy"
-    assert QuadFaultEnv("none").physics == want
-    from quadfault import _numba_kernels
-
-    monkeypatch.setattr(_numba_kernels, "AVAILABLE", False)
-    assert QuadFaultEnv("none", physics="auto").physics == "numpy"
-    with pytest.raises(ConfigError, match="physics='numba' needs numba"):
-        QuadFaultEnv("none", physics="numba")
+    with pytest.warns(DeprecationWarning, match="physics"):
+        env = QuadFaultEnv("none", "hover", physics="numpy")
+    a = env.reset(seed=1)[0]
+    np.testing.assert_array_equal(a, QuadFaultEnv("none", "hover").reset(seed=1)[0])

@@ -1,4 +1,5 @@
-"""Batched estimators: row i of a batch gives the single estimator's estimates on vehicle i."""
+"""Batched estimators: row i of a batch gives the single estimator's estimates on vehicle i
+(the batch runs the single estimators' compiled steps over its rows)."""
 
 from __future__ import annotations
 
@@ -7,8 +8,8 @@ import pytest
 
 from estimators.base import STATUSES, Sample, samples
 from estimators.batched import BatchedEKF, BatchedIRLS, make_batched_estimator
-from estimators.ekf import EKFConfig, MotorEfficiencyEKF
-from estimators.irls import IRLSConfig, SlidingWindowIRLS, numba_available
+from estimators.ekf import MotorEfficiencyEKF
+from estimators.irls import IRLSConfig, SlidingWindowIRLS
 from quadfault.errors import ConfigError
 from quadfault.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
 from quadfault.simulator import simulate
@@ -58,58 +59,70 @@ def _compare(flights, single_factory, batched, corrupt=None, reset_at=None):
         for i, est in enumerate(singles):
             e = est.update(Sample(*(a[i] for a in sample)))
             assert STATUSES[out.status[i]] == e.status, (k, i)
-            np.testing.assert_allclose(out.eta[i], e.eta, rtol=0, atol=1e-6)
+            np.testing.assert_array_equal(out.eta[i], e.eta)  # the same kernel: bit for bit
             if e.sd is None:
                 assert np.all(np.isnan(out.sd[i]))
             else:
-                np.testing.assert_allclose(out.sd[i], e.sd, rtol=0, atol=1e-6)
+                np.testing.assert_array_equal(out.sd[i], e.sd)
             n_ok += e.status == "ok"
     return n_ok, singles
 
 
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
-def test_batched_irls_matches_single(flights, backend):
-    if backend == "numba":
-        pytest.importorskip("numba")
+def test_batched_irls_matches_single(flights):
     veh = flights[0].vehicle
-    cfg = IRLSConfig(backend=backend)
-    batched = BatchedIRLS(veh, N_VEHICLES, cfg)
-    assert batched.backend == backend
-    n_ok, _ = _compare(flights, lambda: SlidingWindowIRLS(veh, cfg), batched, corrupt=40)
+    batched = BatchedIRLS(veh, N_VEHICLES)
+    n_ok, _ = _compare(flights, lambda: SlidingWindowIRLS(veh), batched, corrupt=40)
     assert n_ok > 100  # the windows were really solved, not held by a guard
 
 
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
-def test_batched_improved_irls_matches_single(flights, backend):
+def test_batched_improved_irls_matches_single(flights):
     """Change completion and output median (IRLSConfig.improved()) row by row, through a
     bad sample and a reset of one row in the middle."""
-    if backend == "numba":
-        pytest.importorskip("numba")
     veh = flights[0].vehicle
-    cfg = IRLSConfig.improved(backend=backend)
+    cfg = IRLSConfig.improved()
     batched = BatchedIRLS(veh, N_VEHICLES, cfg)
     n_ok, singles = _compare(flights, lambda: SlidingWindowIRLS(veh, cfg), batched,
                              corrupt=40, reset_at=(70, 2))
     assert n_ok > 100
-    events = [s._completion.events for s in singles]
+    events = [s.change_events for s in singles]
     assert sum(events) >= 2  # the faults triggered the completion
-    np.testing.assert_array_equal(batched._completion.events, events)
+    np.testing.assert_array_equal(batched.change_events, events)
 
 
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
-def test_batched_ekf_matches_single(flights, backend):
-    if backend == "numba":
-        pytest.importorskip("numba")
+def test_batched_ekf_matches_single(flights):
     veh = flights[0].vehicle
-    cfg = EKFConfig(backend=backend)
-    batched = BatchedEKF(veh, N_VEHICLES, cfg)
-    n_ok, _ = _compare(flights, lambda: MotorEfficiencyEKF(veh, cfg), batched, corrupt=40)
+    batched = BatchedEKF(veh, N_VEHICLES)
+    n_ok, _ = _compare(flights, lambda: MotorEfficiencyEKF(veh), batched, corrupt=40,
+                       reset_at=(70, 1))
     assert n_ok > 100
+
+
+def test_batched_ekf_follows_the_single_rules_for_idle_rotors_and_repeated_times(flights):
+    """An idle rotor holds the efficiencies (no_excitation) and a repeated time stamp is a
+    bad sample, in every row, as in the single filter."""
+    veh = flights[0].vehicle
+    rows = [list(samples(rec))[:30] for rec in flights]
+    for k in range(12, 16):
+        rows[0][k] = rows[0][k]._replace(f=np.array([0.0, 2.0, 2.0, 2.0]))
+    rows[2][20] = rows[2][20]._replace(t=rows[2][19].t)
+    batched = BatchedEKF(veh, N_VEHICLES)
+    singles = [MotorEfficiencyEKF(veh) for _ in flights]
+    seen = set()
+    for k in range(30):
+        batch = [r[k] for r in rows]
+        out = batched.update(*(np.array([getattr(s, f) for s in batch])
+                               for f in ("t", "p", "v", "R", "w", "f")))
+        for i, est in enumerate(singles):
+            e = est.update(batch[i])
+            assert STATUSES[out.status[i]] == e.status
+            np.testing.assert_array_equal(out.eta[i], e.eta)
+            seen.add(e.status)
+    assert {"no_excitation", "bad_sample"} <= seen
 
 
 def test_batched_irls_reset_restarts_only_masked_rows(flights):
     veh = flights[0].vehicle
-    est = BatchedIRLS(veh, N_VEHICLES, IRLSConfig(backend="numpy"))
+    est = BatchedIRLS(veh, N_VEHICLES)
     for k, sample in enumerate(_stack(flights)):
         out = est.update(*sample)
         if k == 12:
@@ -133,44 +146,3 @@ def test_bad_shapes_and_names_raise_config_errors(flights):
         BatchedEKF(veh, 0)
     with pytest.raises(ConfigError, match="no batched estimator"):
         make_batched_estimator("kalman", veh, 2)
-
-
-@pytest.mark.parametrize("length", [1, 4, 21])
-def test_batched_causal_median_equals_single_medians(length):
-    """Both pushes (numpy sort, compiled incremental) give N single CausalMedians' values
-    exactly, through ties and resets of some rows."""
-    from estimators.change_completion import BatchedCausalMedian, CausalMedian
-
-    rng = np.random.default_rng(3)
-    N, n = 7, 4
-    kernels = [None]
-    if numba_available():
-        from estimators._irls_online_numba import median_push_rows
-        kernels.append(median_push_rows)
-    batches = [BatchedCausalMedian(N, n, length, kernel) for kernel in kernels]
-    singles = [CausalMedian(length) for _ in range(N)]
-    for step in range(60):
-        x = np.round(rng.random((N, n)), 1)  # many ties
-        if step in (10, 33):
-            mask = rng.random(N) < 0.5
-            for b in batches:
-                b.reset(mask)
-            for i in np.flatnonzero(mask):
-                singles[i].reset()
-        want = np.array([s.push(x[i]) for i, s in enumerate(singles)])
-        for b in batches:
-            np.testing.assert_array_equal(b.push(x), want)
-
-
-def test_l1_completion_rows_equals_the_single_completion():
-    from estimators.change_completion import l1_completion, l1_completion_rows
-
-    rng = np.random.default_rng(4)
-    v = rng.standard_normal((50, 4))
-    v /= np.linalg.norm(v, axis=1, keepdims=True)
-    v[3] = [0.0, 0.0, 0.6, 0.8]  # entries the completion must skip
-    v[4] = [0.5, -0.5, 0.5, -0.5]  # the yaw mode: ties in the weighted median
-    delta = rng.standard_normal((50, 4))
-    delta[4] = [0.0, -0.4, 0.0, 0.0]
-    want = np.array([l1_completion(d, vi) for d, vi in zip(delta, v)])
-    np.testing.assert_allclose(l1_completion_rows(delta, v), want, rtol=0, atol=1e-12)

@@ -1,14 +1,16 @@
-"""EKF baseline: Jacobians vs finite differences, the update vs a textbook linear KF,
-numpy vs numba, seeded accuracy and clear errors."""
+"""EKF baseline: the numpy oracle's Jacobians vs finite differences and its update vs a
+textbook KF, the compiled filter vs a hand-written linear KF and vs the oracle over a flight,
+seeded accuracy and clear errors."""
 
 import dataclasses
 
 import numpy as np
 import pytest
+from oracles.ekf_numpy import (NOISE_REFERENCE_DT, attitude_jacobian, kalman_update,
+                               measurement_update, predict)
 
-from estimators.base import Sample
-from estimators.ekf import (EKFConfig, MotorEfficiencyEKF, attitude_jacobian, kalman_update,
-                            predict)
+from estimators.base import Sample, samples
+from estimators.ekf import EKFConfig, MotorEfficiencyEKF
 from quadfault.errors import ConfigError
 from quadfault.rotation import expm_so3, hat, logm_so3, vee
 from quadfault.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario
@@ -104,7 +106,7 @@ def test_ekf_step_equals_linear_kalman_filter_at_level_attitude(vehicle):
     (zero moment), so the model is linear at this point and one EKF cycle must equal a plain
     KF written here by hand (F and H derived independently of the EKF code)."""
     dt, m, f0 = 1e-3, vehicle.mass, 2.0
-    cfg = EKFConfig(q_eta=1e-3, backend="numpy")
+    cfg = EKFConfig(q_eta=1e-3)
     ekf = MotorEfficiencyEKF(vehicle, cfg)
     z0 = Sample(0.0, np.array([1.0, 2.0, -1.0]), np.array([0.5, -0.2, 0.1]), np.eye(3),
                 np.zeros(3), np.full(4, f0))
@@ -148,20 +150,28 @@ def test_ekf_step_equals_linear_kalman_filter_at_level_attitude(vehicle):
     np.testing.assert_allclose(ekf.P, P_new, atol=1e-9)
 
 
-def test_numba_and_numpy_paths_agree(recording):
-    pytest.importorskip("numba")
+def test_compiled_filter_equals_the_numpy_oracle_over_a_flight(recording):
+    """The one compiled filter (square-root update, structured F P F^T) against the numpy
+    oracle (dense F, Joseph form) over 400 samples, offline and online."""
     rec = recording.slice(0, 400).without_truth()
-    a = MotorEfficiencyEKF(rec.vehicle, EKFConfig(backend="numpy", q_eta=1e-4)).run(rec)
-    b = MotorEfficiencyEKF(rec.vehicle, EKFConfig(backend="numba", q_eta=1e-4)).run(rec)
-    np.testing.assert_allclose(a.eta, b.eta, atol=1e-9, rtol=0)
-    np.testing.assert_allclose(a.sd, b.sd, atol=1e-9, rtol=0)
-    assert list(a.status) == list(b.status)
-    # the online path through the compiled kernel agrees too
-    ekf = MotorEfficiencyEKF(rec.vehicle, EKFConfig(backend="numba", q_eta=1e-4))
-    from estimators.base import samples
-
-    last = [ekf.update(s) for s in samples(rec)][-1]
-    np.testing.assert_allclose(last.eta, a.eta[-1], atol=1e-9, rtol=0)
+    ekf = MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=1e-4))
+    offline = ekf.run(rec)
+    rows = list(samples(rec))
+    x = np.concatenate((rows[0].p, rows[0].v, rows[0].w, rows[0].R.reshape(9, order="F"),
+                        np.ones(4)))
+    P = ekf.config.p0 * np.eye(22)
+    for k in range(1, len(rows)):
+        dt = rows[k].t - rows[k - 1].t
+        Q = np.diag(ekf.q_diag * (dt / NOISE_REFERENCE_DT))
+        f = np.clip(rows[k - 1].f, 0.0, rec.vehicle.rotor_max_thrust)
+        x, P, _ = predict(x, P, f, dt, rec.vehicle, Q)
+        x, P = measurement_update(x, P, rows[k], ekf.r_diag, ekf.config.eta_bounds)
+        np.testing.assert_allclose(offline.eta[k], x[18:], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(offline.sd[k], np.sqrt(np.diag(P)[18:]), rtol=1e-9)
+    np.testing.assert_allclose(ekf.P, P, rtol=0, atol=1e-9 * np.abs(P).max())
+    online = MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=1e-4))
+    etas = np.array([online.update(s).eta for s in rows])
+    np.testing.assert_array_equal(etas, offline.eta)  # one kernel: bit for bit
 
 
 def test_seeded_accuracy_on_constant_efficiencies(recording):
@@ -195,7 +205,7 @@ def test_bad_config_is_a_clear_error(changes):
 
 
 def test_time_must_increase_and_bad_samples_are_skipped(vehicle):
-    ekf = MotorEfficiencyEKF(vehicle, EKFConfig(backend="numpy"))
+    ekf = MotorEfficiencyEKF(vehicle, EKFConfig())
     s = Sample(0.0, np.zeros(3), np.zeros(3), np.eye(3), np.zeros(3), np.full(4, 2.45))
     assert ekf.update(s).status == "warmup"
     bad = s._replace(t=0.001, p=np.array([np.nan, 0, 0]))
@@ -207,7 +217,7 @@ def test_time_must_increase_and_bad_samples_are_skipped(vehicle):
 
 
 def test_malformed_sample_is_a_clear_error(vehicle):
-    ekf = MotorEfficiencyEKF(vehicle, EKFConfig(backend="numpy"))
+    ekf = MotorEfficiencyEKF(vehicle, EKFConfig())
     s = Sample(0.0, np.zeros(3), np.zeros(3), np.eye(3), np.zeros(3), np.full(3, 2.45))
     with pytest.raises(ConfigError, match="shapes"):
         ekf.update(s)
@@ -216,4 +226,12 @@ def test_malformed_sample_is_a_clear_error(vehicle):
 def test_imu_only_recording_is_refused(recording):
     imu = dataclasses.replace(recording, position=None, velocity=None, quaternion=None)
     with pytest.raises(ConfigError, match="IMU-only"):
-        MotorEfficiencyEKF(recording.vehicle, EKFConfig(backend="numpy")).run(imu)
+        MotorEfficiencyEKF(recording.vehicle, EKFConfig()).run(imu)
+
+
+def test_backend_is_a_deprecated_no_op(recording):
+    rec = recording.slice(0, 50).without_truth()
+    with pytest.warns(DeprecationWarning, match="does nothing"):
+        cfg = EKFConfig(backend="numba")
+    np.testing.assert_array_equal(MotorEfficiencyEKF(rec.vehicle, cfg).run(rec).eta,
+                                  MotorEfficiencyEKF(rec.vehicle).run(rec).eta)

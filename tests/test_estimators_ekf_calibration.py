@@ -1,12 +1,12 @@
-"""Calibration of the EKF's reported sd (estimators.calibration.calibrate_sd_scale): a scale
+"""Calibration of the EKF's reported sd (estimators.paper.calibration.calibrate_sd_scale): a scale
 fitted on one seed gives about one-sigma coverage on held-out seeds; clear errors."""
 
 import numpy as np
 import pytest
 
-from estimators.calibration import ONE_SIGMA, SdCalibration, calibrate_sd_scale
 from estimators.ekf import EKFConfig, MotorEfficiencyEKF
 from estimators.metrics import score
+from estimators.paper.calibration import ONE_SIGMA, SdCalibration, calibrate_sd_scale
 from quadfault.errors import ConfigError
 from quadfault.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario
 from quadfault.simulator import simulate

@@ -102,7 +102,7 @@ def test_irls_stream_of_a_seeded_abrupt_flight():
     """End to end: simulated abrupt faults (12 s, schedule scaled), IRLS, the detector."""
     from estimators.irls import SlidingWindowIRLS
     from estimators.metrics import fault_windows
-    from estimators.reproduce import flight_check, sim_config
+    from estimators.paper.reproduce import flight_check, sim_config
     from quadfault.scenarios import named_scenario
     from quadfault.simulator import simulate
 

@@ -1,13 +1,15 @@
-"""Sliding-window IRLS: residual model, robust weights, accuracy, guards and bad input."""
+"""Sliding-window IRLS: residual model (compiled kernel vs the reference loop and the numpy
+oracle), robust weights, accuracy, guards and bad input."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from oracles import irls_numpy as oracle
 
 from estimators.base import Sample, samples
 from estimators.irls import IRLSConfig, SlidingWindowIRLS, solve_window
-from estimators.residuals import quadratic_terms, residual_weights, segment_models
+from estimators.residuals import residual_weights, segment_terms
 from estimators.robust import mad_weights
 from quadfault.errors import ConfigError, QuadfaultError
 from quadfault.recording import Recording, read_recording, write_recording
@@ -18,8 +20,8 @@ from quadfault.trajectory import Circle, Hover
 from quadfault.vehicle import Vehicle
 
 ETA = (0.9, 0.75, 0.95, 0.85)
-NUMPY = IRLSConfig(backend="numpy")
-AUTO = IRLSConfig()  # numba when installed (identical results, see test_estimators_irls_numba)
+AUTO = IRLSConfig()
+G = residual_weights(50, 50, 1, 50)
 
 
 def _flight(duration=3.0, eta=ETA, vehicle=None, seed=1, trajectory=None):
@@ -63,11 +65,16 @@ def _direct_residuals(veh, t, p, v, R, w, f, eta):
     return np.array(out)
 
 
+def _terms(rec, sl):
+    return segment_terms(rec.vehicle, rec.t[sl], rec.position[sl], rec.velocity[sl],
+                         rec.rotation[sl], rec.omega[sl], rec.thrust_cmd[sl], G)
+
+
 def test_residuals_are_affine_and_match_the_reference_loop(flight):
     sl = slice(300, 310)
     args = (flight.t[sl], flight.position[sl], flight.velocity[sl], flight.rotation[sl],
             flight.omega[sl], flight.thrust_cmd[sl])
-    models = segment_models(flight.vehicle, *args)
+    models = _terms(flight, sl)
     rng = np.random.default_rng(0)
     for eta in (np.zeros(4), np.ones(4), rng.uniform(0, 1, 4)):
         direct = _direct_residuals(flight.vehicle, *args, eta)
@@ -78,9 +85,7 @@ def test_jacobian_equals_reference_analytic_rows(flight):
     """The MATLAB analytic Jacobian for the paper layout (diag inertia)."""
     veh = flight.vehicle
     k = 500
-    models = segment_models(veh, flight.t[k:k + 2], flight.position[k:k + 2],
-                            flight.velocity[k:k + 2], flight.rotation[k:k + 2],
-                            flight.omega[k:k + 2], flight.thrust_cmd[k:k + 2])
+    models = _terms(flight, slice(k, k + 2))
     J = models.J[0]
     dt, m = models.dt[0], veh.mass
     f1, f2, f3, f4 = flight.thrust_cmd[k]
@@ -104,12 +109,25 @@ def test_jacobian_equals_reference_analytic_rows(flight):
     np.testing.assert_allclose(J[9], rrow, rtol=1e-9, atol=1e-20)
 
 
+def test_compiled_segment_terms_equal_the_numpy_oracle(flight):
+    """The one compiled residual model against the vectorised numpy form (eqs. 13-26)."""
+    sl = slice(100, 140)
+    terms = _terms(flight, sl)
+    models = oracle.segment_models(flight.vehicle, flight.t[sl], flight.position[sl],
+                                   flight.velocity[sl], flight.rotation[sl], flight.omega[sl],
+                                   flight.thrust_cmd[sl])
+    c, b, H = oracle.quadratic_terms(models, G)
+    np.testing.assert_allclose(terms.r0, models.r0, rtol=1e-9, atol=1e-16)
+    np.testing.assert_allclose(terms.J, models.J, rtol=1e-9, atol=1e-18)
+    np.testing.assert_allclose(terms.c, c, rtol=1e-9)
+    np.testing.assert_allclose(terms.b, b, rtol=1e-9, atol=1e-18)
+    np.testing.assert_allclose(terms.H, H, rtol=1e-9, atol=1e-18)
+    np.testing.assert_allclose(terms.thrust, models.thrust, rtol=1e-12)
+
+
 def test_quadratic_terms_reproduce_segment_energies(flight):
-    G = residual_weights(50, 50, 1, 50)
-    models = segment_models(flight.vehicle, flight.t[:20], flight.position[:20],
-                            flight.velocity[:20], flight.rotation[:20], flight.omega[:20],
-                            flight.thrust_cmd[:20])
-    c, b, H = quadratic_terms(models, G)
+    models = _terms(flight, slice(0, 20))
+    c, b, H = models.c, models.b, models.H
     x = np.array([0.8, 0.9, 0.7, 1.0])
     r = models.residuals(x)
     e_direct = np.einsum("si,i,si->s", r, G, r)
@@ -118,6 +136,21 @@ def test_quadratic_terms_reproduce_segment_energies(flight):
 
 
 # --- robust weights -------------------------------------------------------------------
+def test_mad_weights_equal_the_numpy_oracle():
+    rng = np.random.default_rng(7)
+    for case in range(40):
+        e = rng.gamma(2.0, 1.0, 9) * 10.0 ** rng.uniform(-8, 2)
+        if case % 5 == 0:
+            e[rng.integers(9)] *= 100  # an outlier
+        if case % 7 == 0:
+            e[:] = 3.0  # MAD = 0
+        for kw in ({}, {"floor": True, "median_normalize": False}, {"hard_drop": False}):
+            w, z = mad_weights(e, **kw)
+            w_ref, z_ref = oracle.mad_weights(e, **kw)
+            np.testing.assert_allclose(w, w_ref, rtol=1e-12, atol=0)
+            np.testing.assert_allclose(z, z_ref, rtol=1e-12, atol=0)
+
+
 def test_mad_weights_reject_outlier_and_normalise_by_median():
     e = np.array([1.0, 1.1, 0.9, 1.05, 0.95, 1.02, 0.98, 1.01, 50.0])
     w, z = mad_weights(e)
@@ -157,9 +190,9 @@ def test_paper_scaling_is_also_accurate(flight, flight_estimates):
 
 def test_run_equals_online_updates(flight):
     rec = flight.slice(100, 160)
-    est = SlidingWindowIRLS(rec.vehicle, NUMPY)
+    est = SlidingWindowIRLS(rec.vehicle, AUTO)
     online = [est.update(s) for s in samples(rec)]
-    batch = SlidingWindowIRLS(rec.vehicle, NUMPY).run(rec)
+    batch = SlidingWindowIRLS(rec.vehicle, AUTO).run(rec)
     np.testing.assert_allclose(np.array([e.eta for e in online]), batch.eta, atol=1e-12)
     assert [e.status for e in online] == list(batch.status)
     assert [e.t for e in online] == list(rec.t)  # causal: t of the newest sample used
@@ -178,20 +211,19 @@ def test_bounds_respected_near_the_bounds():
 
 def test_outlier_segment_is_rejected(flight):
     k = 600
-    models = segment_models(flight.vehicle, flight.t[k:k + 10], flight.position[k:k + 10],
-                            flight.velocity[k:k + 10], flight.rotation[k:k + 10],
-                            flight.omega[k:k + 10], flight.thrust_cmd[k:k + 10])
-    G = residual_weights(50, 50, 1, 50)
+    models = oracle.segment_models(flight.vehicle, flight.t[k:k + 10], flight.position[k:k + 10],
+                                   flight.velocity[k:k + 10], flight.rotation[k:k + 10],
+                                   flight.omega[k:k + 10], flight.thrust_cmd[k:k + 10])
     x_prev = np.array(ETA)
-    clean = solve_window(*quadratic_terms(models, G), x_prev, NUMPY)
+    clean = solve_window(*oracle.quadratic_terms(models, G), x_prev, AUTO)
     r0 = models.r0.copy()
     r0[4, 0:3] += 0.05  # a velocity glitch of 5 cm/s in one segment
     bad = type(models)(r0, models.J, models.dt, models.thrust)
-    robust = solve_window(*quadratic_terms(bad, G), x_prev, NUMPY)
+    robust = solve_window(*oracle.quadratic_terms(bad, G), x_prev, AUTO)
     assert 4 in robust[2].rejected
     assert np.max(np.abs(robust[0] - clean[0])) < 0.02
-    naive = solve_window(*quadratic_terms(bad, G), x_prev,
-                         IRLSConfig(backend="numpy", hard_drop=False, z_soft=1e9))
+    naive = solve_window(*oracle.quadratic_terms(bad, G), x_prev,
+                         IRLSConfig(hard_drop=False, z_soft=1e9))
     assert np.max(np.abs(naive[0] - clean[0])) > 5 * np.max(np.abs(robust[0] - clean[0]))
 
 
@@ -236,7 +268,7 @@ def test_non_paper_allocation_is_as_accurate():
 
 # --- guards and bad input ---------------------------------------------------------------
 def test_no_excitation_and_bad_samples_keep_the_previous_estimate(flight):
-    est = SlidingWindowIRLS(flight.vehicle, NUMPY)
+    est = SlidingWindowIRLS(flight.vehicle, AUTO)
     est.reset(eta0=[0.9, 0.9, 0.9, 0.9])
     for s in list(samples(flight.slice(0, 12))):
         out = est.update(s._replace(f=np.zeros(4)))
@@ -249,7 +281,7 @@ def test_no_excitation_and_bad_samples_keep_the_previous_estimate(flight):
 
 
 def test_ill_conditioned_window_keeps_previous_estimate(flight):
-    est = SlidingWindowIRLS(flight.vehicle, NUMPY)
+    est = SlidingWindowIRLS(flight.vehicle, AUTO)
     for s in samples(flight.slice(0, 10)):
         out = est.update(s._replace(f=np.array([2.5, 0.0, 2.5, 2.5])))  # rotor 2 silent
     assert out.status == "ill_conditioned" and np.all(out.eta == 1.0)
@@ -257,7 +289,7 @@ def test_ill_conditioned_window_keeps_previous_estimate(flight):
 
 
 def test_recording_errors(flight):
-    est = SlidingWindowIRLS(flight.vehicle, NUMPY)
+    est = SlidingWindowIRLS(flight.vehicle, AUTO)
     imu = Recording(t=flight.t[:20], omega=flight.omega[:20], thrust_cmd=flight.thrust_cmd[:20],
                     vehicle=flight.vehicle, accel=np.zeros((20, 3)))
     with pytest.raises(ConfigError, match="IMU-only"):
@@ -275,6 +307,7 @@ def test_recording_errors(flight):
 
 @pytest.mark.parametrize("kwargs", [dict(window=2), dict(gamma=-1.0), dict(eta_min=1, eta_max=0),
                                     dict(scaling="other"), dict(backend="gpu"),
+                                    {"change_hold": 0}, {"output_median": 1.5},
                                     dict(max_irls=0), dict(g_v=float("nan"))])
 def test_config_errors(kwargs):
     with pytest.raises(QuadfaultError):
@@ -282,7 +315,7 @@ def test_config_errors(kwargs):
 
 
 def test_eta0_validation_and_truth_never_read(flight):
-    est = SlidingWindowIRLS(flight.vehicle, NUMPY)
+    est = SlidingWindowIRLS(flight.vehicle, AUTO)
     with pytest.raises(ConfigError):
         est.reset(eta0=[1, 2])
     poisoned = Recording(t=flight.t[:40], omega=flight.omega[:40],
@@ -291,3 +324,11 @@ def test_eta0_validation_and_truth_never_read(flight):
                          quaternion=flight.quaternion[:40], eta_true=np.full((40, 4), np.nan))
     clean = flight.slice(0, 40).without_truth()
     np.testing.assert_array_equal(est.run(poisoned).eta, est.run(clean).eta)
+
+
+def test_backend_is_a_deprecated_no_op(flight):
+    rec = flight.slice(0, 60).without_truth()
+    with pytest.warns(DeprecationWarning, match="does nothing"):
+        cfg = IRLSConfig(backend="numpy")
+    np.testing.assert_array_equal(SlidingWindowIRLS(rec.vehicle, cfg).run(rec).eta,
+                                  SlidingWindowIRLS(rec.vehicle).run(rec).eta)

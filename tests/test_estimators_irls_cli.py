@@ -30,8 +30,8 @@ def flight_csv(tmp_path_factory):
 
 def test_simulate_then_estimate_round_trip(flight_csv, tmp_path):
     est = tmp_path / "est.csv"
-    r = _quadfault("estimate", flight_csv, "--estimator", "irls", "--out", est,
-                   "--backend", "numpy", "--quiet", cwd=tmp_path)
+    r = _quadfault("estimate", flight_csv, "--estimator", "irls", "--out", est, "--quiet",
+                   cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     rec = read_recording(flight_csv)
     header = est.read_text().splitlines()[0].split(",")
@@ -45,20 +45,28 @@ def test_simulate_then_estimate_round_trip(flight_csv, tmp_path):
     assert np.sqrt(np.mean(err ** 2)) < 0.05
     side = json.loads((tmp_path / "est.json").read_text())
     assert side["estimator"] == "irls" and side["config"]["window"] == 10
-    assert side["input"] == str(flight_csv) and side["backend_used"] == "numpy"
+    assert side["input"] == str(flight_csv) and "backend_used" not in side
     # no overwrite without --force; with --force it succeeds
-    again = _quadfault("estimate", flight_csv, "--out", est, "--backend", "numpy", "--quiet",
-                       cwd=tmp_path)
+    again = _quadfault("estimate", flight_csv, "--out", est, "--quiet", cwd=tmp_path)
     assert again.returncode == 2 and "--force" in again.stderr
     assert len(again.stderr.strip().splitlines()) == 1
-    forced = _quadfault("estimate", flight_csv, "--out", est, "--backend", "numpy", "--force",
-                        "--quiet", cwd=tmp_path)
+    forced = _quadfault("estimate", flight_csv, "--out", est, "--force", "--quiet",
+                        cwd=tmp_path)
     assert forced.returncode == 0, forced.stderr
+
+
+def test_backend_option_is_a_deprecated_no_op(flight_csv, tmp_path):
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    r = _quadfault("estimate", flight_csv, "--out", a, "--backend", "numpy", "--quiet",
+                   cwd=tmp_path)
+    assert r.returncode == 0 and "deprecated" in r.stderr and "does nothing" in r.stderr
+    assert _quadfault("estimate", flight_csv, "--out", b, "--quiet", cwd=tmp_path).returncode == 0
+    np.testing.assert_array_equal(read_estimate_csv(a)["eta"], read_estimate_csv(b)["eta"])
 
 
 def test_estimate_improved_irls_records_its_options(flight_csv, tmp_path):
     est = tmp_path / "imp.csv"
-    r = _quadfault("estimate", flight_csv, "--improved", "--out", est, "--backend", "numpy",
+    r = _quadfault("estimate", flight_csv, "--improved", "--out", est,
                    "--quiet", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     config = json.loads((tmp_path / "imp.json").read_text())["config"]
@@ -73,8 +81,8 @@ def test_estimate_improved_irls_records_its_options(flight_csv, tmp_path):
 def test_estimate_ekf_through_the_registry(flight_csv, tmp_path):
     pytest.importorskip("estimators.ekf")
     est = tmp_path / "ekf.csv"
-    r = _quadfault("estimate", flight_csv, "--estimator", "ekf", "--out", est, "--backend",
-                   "numpy", "--quiet", cwd=tmp_path)
+    r = _quadfault("estimate", flight_csv, "--estimator", "ekf", "--out", est, "--quiet",
+                   cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     assert json.loads((tmp_path / "ekf.json").read_text())["estimator"] == "ekf"
     assert len(read_estimate_csv(est)["t"]) == len(read_recording(flight_csv))

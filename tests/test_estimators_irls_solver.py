@@ -1,13 +1,14 @@
-"""Interior-point solver of the IRLS estimator: SciPy cross-check, KKT convergence."""
+"""Interior-point solver of the IRLS estimator: SciPy cross-check, the full-KKT numpy oracle
+(its Newton steps), KKT convergence, histories and guards."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from oracles import irls_numpy as oracle
 from scipy.optimize import lsq_linear
 
-from estimators.ipm import (IPMSettings, constraint_values, kkt_matrix, kkt_residual,
-                            newton_step, solve_box_qp)
+from estimators.ipm import IPMSettings, ipm_parameters, solve_box_qp
 from estimators.irls import IRLSConfig, solve_window
 from quadfault.errors import ConfigError
 
@@ -55,22 +56,38 @@ def test_kkt_convergence_histories():
     assert res.gap_history[-1] < 1e-4 * res.gap_history[0]
     assert np.all(res.lam > 0)
     # complementary slackness: multipliers of inactive bounds vanish
-    phi = constraint_values(res.x, LO, HI)
+    phi = np.concatenate((res.x - HI, LO - res.x))
     assert np.max(np.abs(res.lam * phi)) < 1e-6
-    r_dual, _ = kkt_residual(H, q, res.x, res.lam, LO, HI, t=1e12)
+    r_dual = H @ res.x + q + res.lam[:4] - res.lam[4:]
     assert np.linalg.norm(r_dual) < 1e-6
 
 
-def test_reduced_newton_step_equals_full_kkt_system():
-    rng = np.random.default_rng(5)
-    H, q, _, _ = _problem(4, (0.5, 0.5, 0.5, 0.5))
-    x = rng.uniform(0.0, 1.0, 4)
-    phi = constraint_values(x, LO, HI)
-    lam = rng.uniform(0.1, 3.0, 8)
-    r_dual, r_cent = rng.standard_normal(4), rng.standard_normal(8)
-    dx, dlam = newton_step(H, r_dual, r_cent, phi, lam)
-    full = np.linalg.solve(kkt_matrix(H, phi, lam), -np.concatenate((r_dual, r_cent)))
-    np.testing.assert_allclose(np.concatenate((dx, dlam)), full, rtol=1e-9, atol=1e-12)
+@pytest.mark.parametrize("seed", range(6))
+def test_reduced_newton_steps_follow_the_full_kkt_system(seed):
+    """The kernel eliminates dlambda and factors by Cholesky; the oracle solves the full
+    3n x 3n system of eq. (42) with numpy. Same iterates to rounding, same count."""
+    x_true = np.random.default_rng(100 + seed).uniform(-0.5, 1.5, 4)  # some bounds active
+    H, q, _, _ = _problem(seed, x_true)
+    x0 = np.random.default_rng(seed).uniform(0.05, 0.95, 4)
+    for cfg in (IPMSettings(), TIGHT, IPMSettings(max_iter=3)):
+        res = solve_box_qp(H, q, LO, HI, x0, cfg, record_history=True)
+        _x, it, converged, iterates = oracle.ipm(H, q, LO, HI, x0, ipm_parameters(cfg),
+                                                 cfg.max_iter)
+        assert (res.iterations, res.converged) == (it, converged)
+        np.testing.assert_allclose(res.x_history, iterates, rtol=0, atol=1e-10)
+
+
+@pytest.mark.parametrize("n", [2, 6])
+def test_other_sizes_equal_the_oracle(n):
+    rng = np.random.default_rng(n)
+    J = rng.standard_normal((40, n)) * 0.1
+    H = J.T @ J + 5e-3 * np.eye(n)
+    q = J.T @ (-J @ rng.uniform(-0.2, 1.2, n))
+    x0 = np.full(n, 0.5)
+    res = solve_box_qp(H, q, LO, HI, x0)
+    x, it, converged, _ = oracle.ipm(H, q, LO, HI, x0, ipm_parameters(IPMSettings()))
+    assert res.converged and converged and res.iterations == it
+    np.testing.assert_allclose(res.x, x, rtol=0, atol=1e-10)
 
 
 def test_ipm_rejects_infeasible_start_and_bad_settings():
@@ -83,63 +100,53 @@ def test_ipm_rejects_infeasible_start_and_bad_settings():
         IPMSettings(max_iter=0)
 
 
-def test_window_history_records_each_round():
-    """The diagnostics carry the paper's KKT figure data when record_history is on."""
-    rng = np.random.default_rng(7)
-    m = 9
+def _window(seed, m):
+    """``(c, b, H)`` of a synthetic window of ``m`` segments (eq. 26's quadratic terms)."""
+    rng = np.random.default_rng(seed)
     J = rng.standard_normal((m, 10, 4)) * 0.01
     G = np.array([50.0] * 6 + [1.0] * 3 + [50.0])
     r0 = -J @ np.array([0.8, 0.7, 0.9, 0.6]) + 1e-4 * rng.standard_normal((m, 10))
     c = np.einsum("si,i,si->s", r0, G, r0)
     b = np.einsum("sin,i,si->sn", J, G, r0)
     H = np.einsum("sin,i,sim->snm", J, G, J)
-    cfg = IRLSConfig(backend="numpy", record_history=True)
+    return c, b, H
+
+
+def test_window_history_records_each_round():
+    """The diagnostics carry the paper's KKT figure data when record_history is on."""
+    m = 9
+    c, b, H = _window(7, m)
+    cfg = IRLSConfig(record_history=True)
     eta, sd, diag = solve_window(c, b, H, np.full(4, 0.5), cfg, record_history=True)
     assert diag.status == "ok" and 1 <= len(diag.inner_iterations) <= 3
     assert len(diag.gap_history) == len(diag.inner_iterations)
     assert all(len(g) == n for g, n in zip(diag.gap_history, diag.inner_iterations))
     assert diag.gap_history[-1][-1] < 1e-6 and diag.residual_history[0][-1] > 0
     assert diag.weights.shape == (m,) and np.all(np.isfinite(sd)) and np.all(sd > 0)
-    fast = solve_window(c, b, H, np.full(4, 0.5), IRLSConfig(backend="numpy"))
+    fast = solve_window(c, b, H, np.full(4, 0.5), IRLSConfig())
     np.testing.assert_array_equal(fast[0], eta)
     assert fast[2].gap_history is None
 
 
 def test_iteration_limit_gives_usable_max_iter_estimate():
-    rng = np.random.default_rng(8)
-    J = rng.standard_normal((9, 10, 4)) * 0.01
-    G = np.array([50.0] * 6 + [1.0] * 3 + [50.0])
-    r0 = -J @ np.array([0.8, 0.7, 0.9, 0.6]) + 1e-4 * rng.standard_normal((9, 10))
-    c = np.einsum("si,i,si->s", r0, G, r0)
-    b = np.einsum("sin,i,si->sn", J, G, r0)
-    H = np.einsum("sin,i,sim->snm", J, G, J)
-    cfg = IRLSConfig(backend="numpy", ipm=IPMSettings(max_iter=2))
+    c, b, H = _window(8, 9)
+    cfg = IRLSConfig(ipm=IPMSettings(max_iter=2))
     eta, sd, diag = solve_window(c, b, H, np.ones(4), cfg)
     assert diag.status == "max_iter" and "2 iterations" in diag.message
     assert all(n == 2 for n in diag.inner_iterations)
     assert np.all(np.isfinite(eta)) and np.all((eta > cfg.lower) & (eta < cfg.upper))
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_unrolled_four_variable_ipm_is_bit_identical_to_the_general_loop(seed):
-    from estimators.ipm import _solve_box_qp4, _solve_box_qp_general
-
-    x_true = np.random.default_rng(100 + seed).uniform(-0.5, 1.5, 4)  # some bounds active
-    H, q, _, _ = _problem(seed, x_true)
-    x0 = np.random.default_rng(seed).uniform(0.05, 0.95, 4).tolist()
-    for cfg in (IPMSettings(), TIGHT, IPMSettings(max_iter=3)):
-        a = _solve_box_qp4(H.tolist(), q.tolist(), LO, HI, x0, cfg, True)
-        b = _solve_box_qp_general(H.tolist(), q.tolist(), LO, HI, x0, cfg, True)
-        assert (a.iterations, a.converged) == (b.iterations, b.converged)
-        for u, v in ((a.x, b.x), (a.lam, b.lam), (a.dual_history, b.dual_history),
-                     (a.cent_history, b.cent_history), (a.gap_history, b.gap_history),
-                     (a.x_history, b.x_history)):
-            np.testing.assert_array_equal(u, v)
-
-
-def test_unrolled_ipm_reports_a_non_positive_definite_newton_matrix():
-    from estimators.ipm import _solve_box_qp4
-
+def test_a_non_positive_definite_newton_matrix_is_reported():
     H = -20.0 * np.eye(4)  # not convex: the first Newton matrix H + diag(~8) is indefinite
     with pytest.raises(np.linalg.LinAlgError):
-        _solve_box_qp4(H.tolist(), [0.0] * 4, LO, HI, [0.5] * 4, IPMSettings(), False)
+        solve_box_qp(H, np.zeros(4), LO, HI, np.full(4, 0.5), IPMSettings())
+
+
+def test_window_residual_history_is_the_weighted_residual_norm_of_each_iterate():
+    c, b, H = _window(9, 9)
+    cfg = IRLSConfig(record_history=True, max_irls=1)
+    eta, _sd, diag = solve_window(c, b, H, np.full(4, 0.5), cfg, record_history=True)
+    w = diag.weights
+    e = c + 2 * b @ eta + np.einsum("snm,n,m->s", H, eta, eta)
+    assert diag.residual_history[0][-1] == pytest.approx(np.sqrt(w @ e), rel=1e-9)

@@ -13,8 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from estimators.flight_efficiency import irls_efficiency
 from quadfault import effects as fx
-from quadfault.importers.flight_analysis import efficiency_fit, irls_efficiency, rotational_check
+from quadfault.importers.flight_analysis import efficiency_fit, rotational_check
 from quadfault.rotation import quat_to_rot
 from quadfault.scenarios import named_scenario
 from quadfault.simulator import SensorNoise, SimConfig, simulate

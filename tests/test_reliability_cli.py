@@ -22,7 +22,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from quadfault.cli import SUBCOMMANDS, main
-from quadfault.fuzzing import (MUTATIONS, bad_case, csv_bytes, error_is_clean, json_bytes,
+from support.fuzzing import (MUTATIONS, bad_case, csv_bytes, error_is_clean, json_bytes,
                                time_limit, valid_recording, write_case)
 
 FIXTURES = Path(__file__).parent / "fixtures"
@@ -33,7 +33,7 @@ FUZZ = settings(max_examples=25, deadline=None, derandomize=True,
 def run_cli(argv, timeout: float = 600.0):
     """``(exit code, stdout, stderr)`` of ``quadfault.cli.main(argv)`` run in-process; a run
     longer than ``timeout`` [s] (generous: a first call may JIT-compile kernels on a loaded
-    machine) fails as a hang (:class:`quadfault.fuzzing.Hang`)."""
+    machine) fails as a hang (:class:`support.fuzzing.Hang`)."""
     out, err = io.StringIO(), io.StringIO()
     with time_limit(timeout), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         try:
@@ -331,7 +331,7 @@ def test_import_refuses_to_overwrite(tmp_path):
 
 
 def test_reproduce_refuses_to_overwrite_before_running(tmp_path):
-    from estimators.reproduce import planned_files
+    from estimators.paper.reproduce import planned_files
 
     for victim in planned_files(tmp_path)[:2]:
         _plant([victim])

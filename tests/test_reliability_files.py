@@ -26,8 +26,6 @@ WRITE_PATTERNS = {
 #: (file, pattern) -> why it is allowed
 WRITE_ALLOWED = {
     ("quadfault/fileio.py", "savefig"): "atomic_savefig renders into a buffer",
-    ("quadfault/fuzzing.py", "write_text/write_bytes"): "writes broken test files into a "
-                                                         "caller's temporary folder",
     ("agents/train_eval.py", "numpy save"): "np.savez into an in-memory buffer that "
                                             "atomic_write_bytes then writes",
     ("benchmarks/bench_diagnosis.py", "write_text/write_bytes"): "the reference revision's "

@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from quadfault.errors import QuadfaultError, RecordingError
-from quadfault.fuzzing import (BASE_COLUMNS, MUTATIONS, bad_case, csv_bytes, error_is_clean,
+from support.fuzzing import (BASE_COLUMNS, MUTATIONS, bad_case, csv_bytes, error_is_clean,
                                json_bytes, time_limit, valid_recording, write_case)
 from quadfault.recording import read_recording
 

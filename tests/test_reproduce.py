@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from estimators.calibration import match_larger_root
+from estimators.paper.calibration import match_larger_root
 from quadfault.errors import ConfigError
 
 

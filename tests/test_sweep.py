@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from agents.evaluate import AgentSpec, aggregate, markdown_table
-from agents.sweep import evaluate_sweep, main, run_sweep
+from agents.evaluate import AgentSpec, aggregate, evaluate, markdown_table
+from agents.sweep import run_sweep
+from quadfault.cli import main
 from quadfault.errors import ConfigError
 
 AGENTS = [AgentSpec.parse("geometric"), AgentSpec.parse("estimate-aware:none")]
@@ -16,8 +17,8 @@ def _square(x):
 
 
 def _table(backend, workers=2):
-    flights = evaluate_sweep(AGENTS, "quick", [0, 1], scenarios=["abrupt_20s"], duration=0.3,
-                             backend=backend, workers=workers)
+    flights = evaluate(AGENTS, "quick", [0, 1], scenarios=["abrupt_20s"], duration=0.3,
+                       backend=backend, workers=workers)
     return markdown_table(aggregate(flights)), [f.metrics.rmse for f in flights]
 
 
@@ -56,17 +57,16 @@ def test_bad_backend_and_workers_are_config_errors(capsys):
         run_sweep(_square, [1], backend="slurm")
     with pytest.raises(ConfigError, match="workers"):
         run_sweep(_square, [1], workers=0)
-    assert main(["blinded", "--n", "0"]) == 2
+    assert main(["evaluate", "--out", "unused", "--workers", "0", "--quiet"]) == 2
     assert "error:" in capsys.readouterr().err
 
 
-def test_sweep_cli_evaluates_through_the_backend_parameter(tmp_path, monkeypatch):
-    """``python -m agents.sweep evaluate`` hands --backend/--workers to agents.evaluate.evaluate
-    (no patching of the module): the same results file as ``quadfault evaluate``."""
+def test_evaluate_cli_hands_backend_and_workers_to_evaluate(tmp_path, monkeypatch):
+    """``quadfault evaluate --backend --workers`` reaches agents.evaluate.evaluate and gives
+    the serial run's results file."""
     import json
 
     import agents.evaluate as ev
-    import agents.sweep as sweep
 
     seen = []
     original = ev.evaluate
@@ -78,11 +78,9 @@ def test_sweep_cli_evaluates_through_the_backend_parameter(tmp_path, monkeypatch
     monkeypatch.setattr(ev, "evaluate", spy)
     common = ["--agents", "geometric", "--suite", "quick", "--scenarios", "abrupt_20s",
               "--seeds", "0", "--duration", "0.3", "--no-plots", "--quiet"]
-    assert sweep.main(["evaluate", *common, "--out", str(tmp_path / "a"), "--backend", "serial",
-                       "--workers", "1"]) == 0
-    assert seen == [("serial", 1)]
-    from quadfault.cli import main as cli_main
-
-    assert cli_main(["evaluate", *common, "--out", str(tmp_path / "b")]) == 0
+    assert main(["evaluate", *common, "--out", str(tmp_path / "a"), "--backend", "local",
+                 "--workers", "1"]) == 0
+    assert main(["evaluate", *common, "--out", str(tmp_path / "b")]) == 0
+    assert seen == [("local", 1), ("serial", None)]
     runs = [json.loads((tmp_path / d / "results.json").read_text())["runs"] for d in "ab"]
     assert runs[0] == runs[1] and len(runs[0]) == 1

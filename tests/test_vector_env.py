@@ -20,12 +20,6 @@ from quadfault.simulator import SensorNoise
 NOISE = SensorNoise(position=0.01, velocity=0.02, attitude=0.002, gyro=0.01, accel=0.1)
 
 
-def _numba_available() -> bool:
-    from quadfault import _sim_numba
-
-    return _sim_numba.AVAILABLE
-
-
 def _estimator_kwargs(name):
     if name == "irls":
         return {"config": IRLSConfig(backend="numpy")}
@@ -37,9 +31,7 @@ def _estimator_kwargs(name):
 def _run_side_by_side(n_envs, steps, seed, estimator, action_scale=1.0, **kw):
     """Step a vector env and ``n_envs`` single envs with the same actions; compare all."""
     ekw = _estimator_kwargs(estimator)
-    physics = kw.pop("physics", "numpy")
-    vec = QuadFaultVectorEnv(n_envs, estimator, estimator_kwargs=ekw, physics=physics, **kw)
-    assert vec.physics == physics
+    vec = QuadFaultVectorEnv(n_envs, estimator, estimator_kwargs=ekw, **kw)
     singles = [QuadFaultEnv(estimator, estimator_kwargs=ekw, **kw) for _ in range(n_envs)]
     obs, info = vec.reset(seed=seed)
     single_obs = [e.reset(seed=seed + i)[0] for i, e in enumerate(singles)]
@@ -67,29 +59,21 @@ def _run_side_by_side(n_envs, steps, seed, estimator, action_scale=1.0, **kw):
     return n_done
 
 
-needs_numba = pytest.mark.skipif(not _numba_available(), reason="numba (the 'fast' extra) missing")
-PHYSICS = ["numpy", pytest.param("numba", marks=needs_numba)]
-
-
-@pytest.mark.parametrize("physics", PHYSICS)
-def test_matches_single_envs_with_noise_random_scenarios_and_autoreset(physics):
+def test_matches_single_envs_with_noise_random_scenarios_and_autoreset():
     """Random scenarios (per-env trajectories, schedules, thrust noise), every sensor noise,
-    the IRLS estimate in the loop, truncation after 0.3 s and the autoreset after it; the
-    compiled physics (``step_batch``) too."""
+    the IRLS estimate in the loop, truncation after 0.3 s and the autoreset after it."""
     n_done = _run_side_by_side(3, 70, seed=7, estimator="irls", scenario="random",
-                               duration=0.3, sensor_noise=NOISE, estimator_rate="control",
-                               physics=physics)
+                               duration=0.3, sensor_noise=NOISE, estimator_rate="control")
     assert n_done >= 6  # every sub-env went through at least two episodes
 
 
-@pytest.mark.parametrize("physics", PHYSICS)
-def test_rows_sharing_a_scenario_do_not_leak_it_to_other_rows(physics):
+def test_rows_sharing_a_scenario_do_not_leak_it_to_other_rows():
     """Rows that repeat a reset seed share one interned schedule; the other rows must keep
     their own (a grouping bug once gave row 1 the schedule of rows 0 and 2)."""
     kw = dict(scenario="random", random_trajectory="hover", duration=0.2,
               estimator_rate="control")
     seeds = [10001, 10002, 10001]
-    vec = QuadFaultVectorEnv(len(seeds), "truth", physics=physics, **kw)
+    vec = QuadFaultVectorEnv(len(seeds), "truth", **kw)
     singles = [QuadFaultEnv("truth", **kw) for _ in seeds]
     obs, info = vec.reset(seed=seeds)
     assert [e.reset(seed=s)[0] for e, s in zip(singles, seeds)]  # same seeds, same scenarios
@@ -102,15 +86,12 @@ def test_rows_sharing_a_scenario_do_not_leak_it_to_other_rows(physics):
 
 
 @pytest.mark.parametrize("estimator", ["ekf", "truth", "none"])
-@pytest.mark.parametrize("physics", PHYSICS)
-def test_matches_single_envs_in_motor_mode_until_crashes(estimator, physics):
+def test_matches_single_envs_in_motor_mode_until_crashes(estimator):
     """Full-range random motor commands crash or tilt the vehicles: termination reasons,
-    penalties and resets must agree too (the compiled physics: estimator at every substep,
-    between kernel calls, or none: one kernel call per control step)."""
+    penalties and resets must agree too (the estimator at every substep or none)."""
     n_done = _run_side_by_side(2, 60, seed=3, estimator=estimator, scenario="abrupt",
                                duration=2.0, action_mode="motor", estimator_rate="physics",
-                               reward=gym.make("QuadFault-v0").unwrapped.reward_config,
-                               physics=physics)
+                               reward=gym.make("QuadFault-v0").unwrapped.reward_config)
     assert n_done >= 1
 
 
@@ -178,21 +159,25 @@ def test_bad_input_raises_clear_errors():
         env.step(np.full((2, 4), 2.0))
 
 
-@pytest.mark.slow  # compiles / starts a framework on the first run
-def test_noise_streams_shared_is_seeded_and_physics_numba_matches_numpy():
+def test_physics_and_noise_streams_are_deprecated_no_op_keywords():
     kw = dict(scenario="combined", duration=1.0, estimator_rate="control")
     runs = []
-    for physics in ("numpy", "numpy", "numba"):
-        if physics == "numba":
-            pytest.importorskip("numba")
-        env = QuadFaultVectorEnv(3, "none", noise_streams="shared", physics=physics, **kw)
+    for extra in ({}, {"physics": "numpy"}, {"noise_streams": "shared"}):
+        if extra:
+            with pytest.warns(DeprecationWarning, match=next(iter(extra))):
+                env = QuadFaultVectorEnv(3, "none", **kw, **extra)
+        else:
+            env = QuadFaultVectorEnv(3, "none", **kw)
         env.reset(seed=4)
         for _ in range(5):
             obs, *_ = env.step(np.full((3, 4), 0.1, dtype=np.float32))
         runs.append(obs)
-    np.testing.assert_array_equal(runs[0], runs[1])
-    assert not np.allclose(runs[0][0], runs[0][1])  # sub-envs get different noise
-    np.testing.assert_allclose(runs[2], runs[0], rtol=0, atol=1e-6)
+    for obs in runs[1:]:
+        np.testing.assert_array_equal(obs, runs[0])
+    with pytest.raises(ConfigError, match="physics must be one of"):
+        QuadFaultVectorEnv(2, "none", physics="gpu", **kw)
+    with pytest.raises(ConfigError, match="noise_streams must be one of"):
+        QuadFaultVectorEnv(2, "none", noise_streams="global", **kw)
 
 
 @pytest.mark.slow  # compiles / starts a framework on the first run
@@ -217,18 +202,6 @@ def test_sb3_adapter_trains_ppo():
     env.close()
 
 
-def test_physics_auto_follows_numba_availability(monkeypatch):
-    from quadfault import _sim_numba
-
-    kw = {"scenario": "combined", "duration": 0.5}
-    want = "numba" if _sim_numba.AVAILABLE else "numpy"
-    assert QuadFaultVectorEnv(2, "none", **kw).physics == want  # "auto" is the default
-    monkeypatch.setattr(_sim_numba, "AVAILABLE", False)
-    assert QuadFaultVectorEnv(2, "none", physics="auto", **kw).physics == "numpy"
-    with pytest.raises(ConfigError, match="physics='numba' needs numba"):
-        QuadFaultVectorEnv(2, "none", physics="numba", **kw)
-
-
 def test_sub_envs_built_from_one_template_share_no_episode_state():
     """Sub-envs 1.. are copies of sub-env 0: after a reset each owns its generator, scenario
     and controller (nothing mutable is shared)."""
@@ -251,10 +224,10 @@ def test_batched_reset_equals_single_env_resets(kw):
     """The batched reset gives every row the single env's episode start for seed s + i:
     scenario, true and measured initial state, the generator's position after the draws."""
     n = 12
-    vec = QuadFaultVectorEnv(n, "none", physics="numpy", **kw)
+    vec = QuadFaultVectorEnv(n, "none", **kw)
     obs, _ = vec.reset(seed=40)
     for i in range(n):
-        env = QuadFaultEnv("none", physics="numpy", **kw)
+        env = QuadFaultEnv("none", **kw)
         o, info = env.reset(seed=40 + i)
         np.testing.assert_allclose(obs[i], o, rtol=0, atol=1e-12, err_msg=f"row {i}")
         assert vec.envs[i].scenario == env.scenario
@@ -314,10 +287,9 @@ def test_time_tables_equal_the_functions_of_time():
     assert tables.k0[1] < 0
 
 
-@pytest.mark.skipif(not _numba_available(), reason="needs numba")
 @pytest.mark.parametrize("estimator", ["irls", "ekf"])
 def test_numba_thread_count_does_not_change_the_flight(estimator):
-    """The compiled batch kernels split rows across threads; each row is computed alone, so
+    """The parallel loop splits rows across threads; each row is computed alone, so
     one thread (training's default, ``TrainConfig.numba_threads``) and several give the
     same observations bit for bit."""
     import numba
@@ -329,7 +301,7 @@ def test_numba_thread_count_does_not_change_the_flight(estimator):
             numba.set_num_threads(threads)
             venv = QuadFaultVectorEnv(6, scenario="random", random_trajectory="random",
                                       estimator=estimator, estimator_rate="physics",
-                                      duration=1.0, physics="numba")
+                                      duration=1.0)
             obs, _ = venv.reset(seed=11)
             trace = [obs]
             for k in range(40):

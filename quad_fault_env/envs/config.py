@@ -8,16 +8,20 @@ The physics parameters live in the core package (:class:`quadfault.vehicle.Vehic
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from quadfault.errors import ConfigError
+from quadfault.jit import jit
 
 ACTION_MODES = ("motor", "residual", "wrench")
 ESTIMATOR_RATES = ("physics", "control")
 OBSERVATION_KINDS = ("flat", "dict")
 TERMINATION_REASONS = ("crash", "out_of_bounds", "excessive_tilt", "non_finite")
+#: trajectories of random scenarios (``quadfault.scenarios.random_scenario``)
+RANDOM_TRAJECTORIES = ("random", "circle", "hover", "lissajous")
 
 
 def _check_nonnegative(obj, names):
@@ -60,6 +64,24 @@ class ActionConfig:
                               f"got {self.moment_scale!r}")
         object.__setattr__(self, "moment_scale", ms)
 
+    def commands(self, action: np.ndarray, vehicle, f_ctrl=None, eta_hat=None,
+                 compensate: bool = False) -> np.ndarray:
+        """Rotor thrust commands [N] for checked actions ``(..., 4)`` (one vehicle or a
+        batch); ``f_ctrl`` the geometric controller's commands [N] (residual mode), divided by
+        ``eta_hat`` (floored at 0.1) with ``compensate``."""
+        f_max = vehicle.rotor_max_thrust
+        if self.mode == "motor":
+            f = 0.5 * (action + 1.0) * f_max
+        elif self.mode == "wrench":
+            thrust = 0.5 * (action[..., :1] + 1.0) * vehicle.n_rotors * f_max
+            f = vehicle.rotor_thrust(np.concatenate(
+                (thrust, action[..., 1:] * np.asarray(self.moment_scale)), axis=-1))
+        else:
+            if compensate:
+                f_ctrl = f_ctrl / np.maximum(eta_hat, 0.1)
+            f = f_ctrl + self.residual_scale * action
+        return np.minimum(np.maximum(f, 0.0), f_max)
+
 
 @dataclass(frozen=True)
 class RewardConfig:
@@ -88,11 +110,35 @@ class RewardConfig:
         if not (math.isfinite(self.position_scale) and self.position_scale > 0):
             raise ConfigError(f"position_scale must be positive [m], got {self.position_scale!r}")
 
-    def __call__(self, pos_err, vel_err, f_cmd, f_max: float, terminated: bool) -> float:
-        track = np.linalg.norm(pos_err) + self.velocity_weight * np.linalg.norm(vel_err)
-        effort = float(np.mean((np.asarray(f_cmd) / f_max) ** 2))
-        r = math.exp(-track / self.position_scale) - self.effort_weight * effort
-        return float(r - (self.termination_penalty if terminated else 0.0))
+    def __call__(self, pos_err, vel_err, f_cmd, f_max: float, terminated):
+        """The reward (0 where it is not finite): a float for one vehicle, an array for rows
+        (the vector env: ``pos_err`` (N, 3), ``terminated`` (N,))."""
+        pe = np.ascontiguousarray(pos_err, dtype=float)
+        f = np.ascontiguousarray(f_cmd, dtype=float)
+        out = np.empty(pe.shape[:-1])
+        _rewards(pe.reshape(-1, 3), np.ascontiguousarray(vel_err, dtype=float).reshape(-1, 3),
+                 f.reshape(-1, f.shape[-1]), float(f_max),
+                 np.ascontiguousarray(terminated, dtype=np.bool_).reshape(-1),
+                 float(self.position_scale), float(self.velocity_weight),
+                 float(self.effort_weight), float(self.termination_penalty), out.reshape(-1))
+        return float(out) if out.ndim == 0 else out
+
+
+@jit
+def _rewards(pos_err, vel_err, f_cmd, f_max, terminated, scale, w_vel, w_effort, penalty, out):
+    """:class:`RewardConfig` per row."""
+    for i in range(out.shape[0]):
+        pe, ve = pos_err[i], vel_err[i]
+        track = (math.sqrt(pe[0] * pe[0] + pe[1] * pe[1] + pe[2] * pe[2])
+                 + w_vel * math.sqrt(ve[0] * ve[0] + ve[1] * ve[1] + ve[2] * ve[2]))
+        effort = 0.0
+        for j in range(f_cmd.shape[1]):
+            u = f_cmd[i, j] / f_max
+            effort += u * u
+        r = math.exp(-track / scale) - w_effort * (effort / f_cmd.shape[1])
+        if terminated[i]:
+            r -= penalty
+        out[i] = r if np.isfinite(r) else 0.0
 
 
 @dataclass(frozen=True)
@@ -120,17 +166,47 @@ class TerminationLimits:
         if not (0 < self.max_tilt <= math.pi):
             raise ConfigError(f"max_tilt must be in (0, pi] [rad], got {self.max_tilt!r}")
 
+    def reasons(self, p, R, p_ref) -> np.ndarray:
+        """Termination reasons of true positions ``p`` (N, 3), attitudes ``R`` (N, 3, 3)
+        against the references ``p_ref`` (N, 3): an object array of names or None."""
+        codes = np.empty(len(p), dtype=np.int64)
+        _termination_codes(np.ascontiguousarray(p, dtype=float),
+                           np.ascontiguousarray(R, dtype=float),
+                           np.ascontiguousarray(p_ref, dtype=float), float(self.ground_altitude),
+                           float(self.max_position_error), float(self.max_tilt), codes)
+        return _REASONS[codes]
+
     def reason(self, p, R, p_ref) -> str | None:
-        """The termination reason for true position ``p``, attitude ``R``, or None."""
-        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(R))):
-            return "non_finite"
-        if -p[2] < self.ground_altitude:
-            return "crash"
-        if np.linalg.norm(p - p_ref) > self.max_position_error:
-            return "out_of_bounds"
-        if math.acos(float(np.clip(R[2, 2], -1.0, 1.0))) > self.max_tilt:
-            return "excessive_tilt"
-        return None
+        """The termination reason for one true position ``p``, attitude ``R``, or None."""
+        return self.reasons(np.asarray(p)[None], np.asarray(R)[None], np.asarray(p_ref)[None])[0]
+
+
+#: termination codes of :func:`_termination_codes` -> reasons
+_REASONS = np.array([None, "excessive_tilt", "out_of_bounds", "crash", "non_finite"],
+                    dtype=object)
+
+
+@jit
+def _termination_codes(p, R, p_ref, ground, max_error, max_tilt, out):
+    """:class:`TerminationLimits` per row, in order of precedence: non_finite (4), crash (3),
+    out_of_bounds (2), excessive_tilt (1); 0 = none."""
+    for i in range(out.shape[0]):
+        finite = True
+        for k in range(3):
+            finite = finite and np.isfinite(p[i, k])
+            for m in range(3):
+                finite = finite and np.isfinite(R[i, k, m])
+        d0, d1, d2 = p[i, 0] - p_ref[i, 0], p[i, 1] - p_ref[i, 1], p[i, 2] - p_ref[i, 2]
+        if not finite:
+            out[i] = 4
+        elif -p[i, 2] < ground:
+            out[i] = 3
+        elif math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) > max_error:
+            out[i] = 2
+        elif math.acos(min(max(R[i, 2, 2], -1.0), 1.0)) > max_tilt:
+            out[i] = 1
+        else:
+            out[i] = 0
 
 
 @dataclass(frozen=True)
@@ -172,3 +248,67 @@ def validate_action(action, shape: tuple, name: str = "action") -> np.ndarray:
     if np.any(np.abs(a) > 1.0 + 1e-6):
         raise ValueError(f"{name} outside [-1, 1]: {a.tolist()} (the agent must clip)")
     return np.clip(a, -1.0, 1.0)
+
+
+def number_at_least(value, low: float) -> bool:
+    """Whether ``value`` is a finite real number >= ``low``."""
+    return (isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+            and math.isfinite(value) and value >= low)
+
+
+#: keywords of ``random_faults``: (low, high) ranges and probabilities of ``random_scenario``
+_RANGE_KEYS = ("n_faults", "severity", "xi_range", "thrust_noise")
+_PROB_KEYS = ("degradation_prob", "ramp_prob")
+
+
+def check_random_faults(spec) -> dict:
+    """Validate ``random_faults`` (None: the defaults of ``random_scenario``)."""
+    if spec is None:
+        return {}
+    if not isinstance(spec, dict):
+        raise ConfigError(f"random_faults must be a dict of random_scenario keywords, got {spec!r}")
+    out = {}
+    for key, value in spec.items():
+        if key in _PROB_KEYS:
+            if not (number_at_least(value, 0.0) and value <= 1.0):
+                raise ConfigError(f"random_faults[{key!r}] must be a probability in [0, 1], "
+                                  f"got {value!r}")
+            out[key] = float(value)
+        elif key in _RANGE_KEYS:
+            try:
+                low, high = (float(v) for v in value)
+            except (TypeError, ValueError):
+                raise ConfigError(f"random_faults[{key!r}] must be a (low, high) pair, "
+                                  f"got {value!r}") from None
+            if not (math.isfinite(low) and math.isfinite(high) and 0.0 <= low <= high):
+                raise ConfigError(f"random_faults[{key!r}] must satisfy 0 <= low <= high, "
+                                  f"got {value!r}")
+            if key == "n_faults":
+                if low != int(low) or high != int(high):
+                    raise ConfigError(f"random_faults['n_faults'] must be whole numbers, "
+                                      f"got {value!r}")
+                out[key] = (int(low), int(high))
+            elif key == "severity" and high > 1.0:
+                raise ConfigError(f"random_faults['severity'] levels are efficiencies in "
+                                  f"[0, 1], got {value!r}")
+            else:
+                out[key] = (low, high)
+        else:
+            raise ConfigError(f"random_faults has unknown key {key!r}; choose from "
+                              f"{', '.join(_RANGE_KEYS + _PROB_KEYS)}")
+    return out
+
+
+#: values the deprecated ``physics`` keyword of the environments accepted
+PHYSICS_BACKENDS = ("auto", "numpy", "numba")
+
+
+def deprecated_physics(physics) -> None:
+    """Accept the deprecated ``physics`` keyword (no effect) with a ``DeprecationWarning``."""
+    if physics is None:
+        return
+    if not isinstance(physics, str) or physics not in PHYSICS_BACKENDS:
+        raise ConfigError(f"physics must be one of {PHYSICS_BACKENDS}, got {physics!r}")
+    warnings.warn("the 'physics' keyword is deprecated and has no effect: the environment has "
+                  "one (compiled) implementation of the physics", DeprecationWarning,
+                  stacklevel=3)

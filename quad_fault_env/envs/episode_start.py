@@ -19,6 +19,7 @@ import numpy as np
 from quadfault.controller import ControllerConfig, GeometricController
 from quadfault.dynamics import RigidBodyState
 from quadfault.rotation import expm_so3
+from quadfault.scenarios import at_times
 from quadfault.simulator import initial_state
 from quadfault.trajectory import FlatOutput
 from quadfault.vehicle import Vehicle
@@ -36,7 +37,8 @@ class RowTrajectories:
     """N reference trajectories as one callable: row i follows ``items[keys[i]]``.
 
     ``self(t)`` returns a :class:`~quadfault.trajectory.FlatOutput` of arrays
-    ``(N,) + shape(t) + (3,)``; each distinct trajectory is called once, with ``t`` as given.
+    ``(N,) + shape(t) + (3,)``; each distinct trajectory is evaluated once on the times
+    (:func:`quadfault.scenarios.at_times`: one call when it takes arrays).
     """
 
     def __init__(self, items, keys: np.ndarray):
@@ -50,9 +52,11 @@ class RowTrajectories:
             self._memo[t_key] = self._scalar_from_memo(t)
         if self._memo[t_key] is None:
             shape = np.shape(t) + (3,)
-            outs = [traj(t) for traj in self.items]
+            flat = np.asarray(t, dtype=float).reshape(-1)
+            outs = [at_times(traj, flat) for traj in self.items]
             self._memo[t_key] = FlatOutput(*(
-                np.stack([_as_shape(o[f], shape) for o in outs])[self.keys] for f in range(4)))
+                np.stack([_as_shape(np.reshape(o[f], shape), shape) for o in outs])[self.keys]
+                for f in range(4)))
         return FlatOutput(*(x.copy() for x in self._memo[t_key]))
 
     def _scalar_from_memo(self, t):
@@ -87,8 +91,9 @@ def start_states(items, keys, vehicle: Vehicle, controller: ControllerConfig, sp
     s = initial_state(SimpleNamespace(trajectory=traj), 0.0,
                       GeometricController(vehicle, traj, controller))
     pos, vel, att, rate = (u[:, 3 * k:3 * k + 3] for k in range(4))
-    state = RigidBodyState(s.p + spread.position * pos, s.v + spread.velocity * vel,
-                           s.R @ expm_so3(spread.attitude * att), s.w + spread.rate * rate)
+    R = s.R if spread.attitude == 0 else s.R @ expm_so3(spread.attitude * att)  # R I == R
+    state = RigidBodyState(s.p + spread.position * pos, s.v + spread.velocity * vel, R,
+                           s.w + spread.rate * rate)
     return state, traj(0.0)
 
 

@@ -3,19 +3,18 @@ observation.
 
 Data flow per control step (100 Hz by default)::
 
-    action -> rotor commands (held) -> 10 x [sensors -> Sample; Plant.step] (1 kHz)
-           -> estimator.update(samples) -> observation (+ truth only in info)
+    action -> rotor commands (held) -> the closed loop over the physics substeps (1 kHz)
+           -> samples -> estimator.update(samples) -> observation (+ truth only in info)
 
-The physics is the core :class:`quadfault.plant.Plant` (rigid body, motor saturation,
-efficiency, thrust noise drawn per physics substep) and the baseline controller is the core
-:class:`quadfault.controller.GeometricController` on the *nominal* vehicle: a fault reaches the
-controller only through the estimator (``compensate=True``) or through the agent.
+The physics is the core model's one closed loop (:mod:`quadfault.closed_loop`: motor
+saturation, efficiency and thrust noise, RKMK4, the sensors and the accelerometer, the random
+numbers drawn from ``self.np_random`` in loop order), one call per control step, and the
+baseline controller is the core :class:`quadfault.controller.GeometricController` on the
+*nominal* vehicle: a fault reaches the controller only through the estimator
+(``compensate=True``) or through the agent.
 """
 
 from __future__ import annotations
-
-import math
-import warnings
 
 import gymnasium as gym
 import numpy as np
@@ -24,10 +23,14 @@ from estimators.base import Estimate, Sample
 from quad_fault_env.envs.config import (
     ESTIMATOR_RATES,
     OBSERVATION_KINDS,
+    RANDOM_TRAJECTORIES,
     ActionConfig,
     InitialStateSpread,
     RewardConfig,
     TerminationLimits,
+    check_random_faults,
+    deprecated_physics,
+    number_at_least,
     validate_action,
 )
 from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
@@ -39,103 +42,26 @@ from quad_fault_env.estimation import (
     estimate_sd,
     make_estimator,
 )
-from quad_fault_env.observation import SD_MAX, ObservationLayout
+from quad_fault_env.observation import ObservationLayout
+from quad_fault_env.time_tables import RowTimeTables
+from quadfault import closed_loop
 from quadfault.controller import ControllerConfig, GeometricController
 from quadfault.dynamics import RigidBodyState
 from quadfault.errors import ConfigError
 from quadfault.motors import MotorModel
 from quadfault.plant import Plant
 from quadfault.scenarios import SCENARIO_NAMES, Scenario, named_scenario, random_scenario
-from quadfault.simulator import SensorNoise
+from quadfault.sensors import SensorNoise
+from quadfault.trajectory import FlatOutput
 from quadfault.vehicle import Vehicle
 
 DEFAULT_DURATION = 20.0  # [s] episode length for named and random scenarios
 #: a fault event at time t_k belongs to the step whose interval [t0, t1) holds it (same
 #: tolerance as the fault windows of quadfault.scenarios) [s]
 EVENT_TOL = 1e-9
-#: trajectories of random scenarios (``quadfault.scenarios.random_scenario``)
-RANDOM_TRAJECTORIES = ("random", "circle", "hover", "lissajous")
-
-
-def _number_at_least(value, low: float) -> bool:
-    """Whether ``value`` is a finite real number >= ``low``."""
-    return (isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
-            and math.isfinite(value) and value >= low)
-
-
-#: keywords of ``random_faults``: (low, high) ranges and probabilities of ``random_scenario``
-_RANGE_KEYS = ("n_faults", "severity", "xi_range", "thrust_noise")
-_PROB_KEYS = ("degradation_prob", "ramp_prob")
-
-
-def _check_random_faults(spec) -> dict:
-    """Validate ``random_faults`` (None: the defaults of ``random_scenario``)."""
-    if spec is None:
-        return {}
-    if not isinstance(spec, dict):
-        raise ConfigError(f"random_faults must be a dict of random_scenario keywords, got {spec!r}")
-    out = {}
-    for key, value in spec.items():
-        if key in _PROB_KEYS:
-            if not (_number_at_least(value, 0.0) and value <= 1.0):
-                raise ConfigError(f"random_faults[{key!r}] must be a probability in [0, 1], "
-                                  f"got {value!r}")
-            out[key] = float(value)
-        elif key in _RANGE_KEYS:
-            try:
-                low, high = (float(v) for v in value)
-            except (TypeError, ValueError):
-                raise ConfigError(f"random_faults[{key!r}] must be a (low, high) pair, "
-                                  f"got {value!r}") from None
-            if not (math.isfinite(low) and math.isfinite(high) and 0.0 <= low <= high):
-                raise ConfigError(f"random_faults[{key!r}] must satisfy 0 <= low <= high, "
-                                  f"got {value!r}")
-            if key == "n_faults":
-                if low != int(low) or high != int(high):
-                    raise ConfigError(f"random_faults['n_faults'] must be whole numbers, "
-                                      f"got {value!r}")
-                out[key] = (int(low), int(high))
-            elif key == "severity" and high > 1.0:
-                raise ConfigError(f"random_faults['severity'] levels are efficiencies in "
-                                  f"[0, 1], got {value!r}")
-            else:
-                out[key] = (low, high)
-        else:
-            raise ConfigError(f"random_faults has unknown key {key!r}; choose from "
-                              f"{', '.join(_RANGE_KEYS + _PROB_KEYS)}")
-    return out
-
-
-def _numba_available() -> bool:
-    try:
-        import numba  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-#: ``physics`` values: the plant's substeps in numpy or on the compiled plant step
-PHYSICS_BACKENDS = ("auto", "numpy", "numba")
-
-
-def _compiled_physics_available() -> bool:
-    from quadfault import _numba_kernels
-
-    return _numba_kernels.AVAILABLE
-
-
-_SLOW_ESTIMATOR_WARNED = False
-
-
-def _warn_slow_estimator_once() -> None:
-    """Tell a user without numba once that the 1 kHz estimator runs in pure numpy."""
-    global _SLOW_ESTIMATOR_WARNED
-    if not _SLOW_ESTIMATOR_WARNED:
-        _SLOW_ESTIMATOR_WARNED = True
-        warnings.warn("QuadFaultEnv: the estimator runs at the physics rate in pure numpy "
-                      "(numba not installed), which is several times slower; install "
-                      "'quadfault[fast]' or pass estimator_rate='control' for a decimated "
-                      "100 Hz stream", RuntimeWarning, stacklevel=3)
+_KEY0 = np.zeros(1, dtype=np.int64)  # the single env's row of the time tables
+TABLE_WINDOW = 64  # control steps per refill of the time tables (one row: cheap to hold)
+_NO_REFS = np.zeros((1, 0, 6, 3))  # the loop's reference table (the env sets the commands)
 
 
 def _fault_dict(f) -> dict:
@@ -198,8 +124,7 @@ class QuadFaultEnv(gym.Env):
         sensor_noise: a :class:`~quadfault.simulator.SensorNoise` (default noise-free).
         action_mode, residual_scale, moment_scale: see ``ActionConfig``.
         control_rate: agent / controller rate [Hz] (100). physics_rate: plant rate [Hz] (1000).
-        estimator_rate: ``"physics"`` (every substep; the default, whether or not numba is
-            installed, so observations do not depend on the install) or ``"control"`` (the
+        estimator_rate: ``"physics"`` (every substep, the default) or ``"control"`` (the
             first substep of each control step only).
         compensate: divide the geometric controller's commands by eta_hat (fault-tolerant
             allocation through the estimate).
@@ -210,13 +135,8 @@ class QuadFaultEnv(gym.Env):
             with the scenario's efficiency).
         controller: ``ControllerConfig`` of the baseline controller.
         render_mode: ``"rgb_array"`` or ``"human"``.
-        physics: ``"auto"`` (default: ``"numba"`` when numba is importable, else
-            ``"numpy"``), ``"numpy"`` (the core :class:`~quadfault.plant.Plant`, one call
-            per substep) or ``"numba"`` (the substeps of a control step in one compiled call
-            on the same plant step as the simulator and the vector env,
-            ``quadfault._numba_kernels.plant_step``, and the compiled twin of the geometric
-            controller). Both give the same observations, rewards and infos to rounding
-            (tested to 1e-9) and draw the same random numbers.
+        physics: deprecated, no effect (there is one implementation of the physics);
+            accepted for one release with a ``DeprecationWarning``.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
@@ -233,7 +153,7 @@ class QuadFaultEnv(gym.Env):
                  limits: TerminationLimits | None = None,
                  initial_spread: InitialStateSpread | None = None,
                  vehicle: Vehicle | None = None, controller: ControllerConfig | None = None,
-                 render_mode: str | None = None, physics: str = "auto"):
+                 render_mode: str | None = None, physics: str | None = None):
         self.vehicle = vehicle or Vehicle()
         if not isinstance(self.vehicle, Vehicle) or self.vehicle.n_rotors != 4:
             raise ConfigError("vehicle must be a quadfault Vehicle with 4 rotors (the scenarios "
@@ -245,10 +165,10 @@ class QuadFaultEnv(gym.Env):
         self.sensor_noise = sensor_noise or SensorNoise()
         if not isinstance(self.sensor_noise, SensorNoise):
             raise ConfigError(f"sensor_noise must be a SensorNoise, got {sensor_noise!r}")
-        if thrust_noise is not None and not _number_at_least(thrust_noise, 0.0):
+        if thrust_noise is not None and not number_at_least(thrust_noise, 0.0):
             raise ConfigError(f"thrust_noise must be a number >= 0, got {thrust_noise!r}")
         self.thrust_noise = thrust_noise
-        if not (_number_at_least(control_rate, 0.0) and _number_at_least(physics_rate, 0.0)
+        if not (number_at_least(control_rate, 0.0) and number_at_least(physics_rate, 0.0)
                 and control_rate > 0 and physics_rate > 0):
             raise ConfigError(f"control_rate and physics_rate must be positive [Hz], got "
                               f"{control_rate!r} and {physics_rate!r}")
@@ -276,13 +196,11 @@ class QuadFaultEnv(gym.Env):
             raise ConfigError(f"random_trajectory must be one of {RANDOM_TRAJECTORIES}, "
                               f"got {random_trajectory!r}")
         self.random_trajectory = random_trajectory
-        self.random_faults = _check_random_faults(random_faults)
-        if duration is not None and not (_number_at_least(duration, 0.0) and duration > 0):
+        self.random_faults = check_random_faults(random_faults)
+        if duration is not None and not (number_at_least(duration, 0.0) and duration > 0):
             raise ConfigError(f"duration must be positive [s], got {duration!r}")
         self.duration = duration
         self.estimator = make_estimator(estimator, self.vehicle, **(estimator_kwargs or {}))
-        if estimator_rate == "physics" and estimator in ("irls", "ekf") and not _numba_available():
-            _warn_slow_estimator_once()
         self.compensate = bool(compensate)
         self.controller_config = controller or ControllerConfig()
         if observation not in OBSERVATION_KINDS:
@@ -292,29 +210,17 @@ class QuadFaultEnv(gym.Env):
         self.layout = ObservationLayout(reference_acceleration)
         self.observation_space = (self.layout.flat_space() if observation == "flat"
                                   else self.layout.dict_space())
-        # per element of the flat layout: lower and upper bound, NaN fill (see _observation)
-        self._obs_bounds = tuple(np.concatenate([np.full(s.size, x(s), dtype=float)
-                                                 for s in self.layout.slots])
-                                 for x in (lambda s: s.low, lambda s: s.high,
-                                           lambda s: SD_MAX if s.name == "eta_sd" else 0.0))
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(self.vehicle.n_rotors,),
                                            dtype=np.float32)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ConfigError(f"render_mode must be one of {self.metadata['render_modes']}, "
                               f"got {render_mode!r}")
         self.render_mode = render_mode
-        if not isinstance(physics, str) or physics not in PHYSICS_BACKENDS:
-            raise ConfigError(f"physics must be one of {PHYSICS_BACKENDS}, got {physics!r}")
-        if physics == "numba" and not _compiled_physics_available():
-            raise ConfigError("physics='numba' needs numba (install the 'fast' extra)")
-        if physics == "auto":
-            physics = "numba" if _compiled_physics_available() else "numpy"
-        #: ``"numpy"`` or ``"numba"``: how the plant's substeps run (``physics`` resolved)
-        self.physics = physics
-        self._compiled = None
+        deprecated_physics(physics)
         self._renderer = None
         self.scenario: Scenario | None = None
         self.plant: Plant | None = None
+        self._tables: RowTimeTables | None = None
 
     # -- public helpers ----------------------------------------------------------------------
     @property
@@ -368,11 +274,13 @@ class QuadFaultEnv(gym.Env):
         self.controller = GeometricController(self.vehicle, self.scenario.trajectory,
                                               self.controller_config)
         self.plant = Plant(self.vehicle, self.scenario.efficiency,
-                           MotorModel(self.scenario.thrust_noise), dt=self.dt,
-                           rng=self.np_random)
+                           MotorModel(self.scenario.thrust_noise), dt=self.dt)
         self.plant.reset(self._initial_state())
+        self._loop = closed_loop.constants(self.plant, self.sensor_noise)
+        self._gens, self._gens_of = closed_loop.generators([self.np_random]), self.np_random
+        self._tables = RowTimeTables(1, self.substeps, self.dt, self.vehicle,
+                                     self.controller_config, TABLE_WINDOW)
         self.max_steps = int(round(self.scenario.duration / self.control_period))
-        self._compiled = None  # the compiled path's CompiledStep, built at the first step
         self._step_count = 0
         self._f_cmd = np.zeros(self.vehicle.n_rotors)
         self._terminal = False
@@ -388,7 +296,7 @@ class QuadFaultEnv(gym.Env):
             self._estimate = Estimate(0.0, np.ones(n), np.full(n, NOMINAL_PRIOR_SD))
         else:
             self._estimate = Estimate(0.0, np.ones(n), None, "warmup")
-        self._meas = self._measure(self.plant.state)
+        closed_loop.sense(self._gens, self._loop, self.plant.vehicles)
         self.history = [self.plant.state.p.copy()]
         events = [dict(_fault_dict(f), kind="onset", t=f.onset)
                   for f in self.scenario.efficiency.faults if f.onset < -EVENT_TOL]
@@ -399,75 +307,83 @@ class QuadFaultEnv(gym.Env):
         return self._observation(ref), info
 
     # -- step --------------------------------------------------------------------------------
+    def _generators(self):
+        """The loop's list holding ``self.np_random`` (the env's one generator)."""
+        if self._gens_of is not self.np_random:  # replaced since the reset
+            self._gens, self._gens_of = closed_loop.generators([self.np_random]), self.np_random
+        return self._gens
+
+    @property
+    def _state(self) -> RigidBodyState:
+        """The true state now (views of the plant's arrays: read them at once)."""
+        V = self.plant.vehicles
+        return RigidBodyState(V.p[0], V.v[0], V.R[0], V.w[0])
+
+    @property
+    def _meas(self) -> RigidBodyState:
+        """The measurement the agent and the controller see now (end of the last step;
+        views of the plant's arrays)."""
+        V = self.plant.vehicles
+        return RigidBodyState(V.mp[0], V.mv[0], V.mR[0], V.mw[0])
+
     def _check_action(self, action) -> np.ndarray:
         return validate_action(action, self.action_space.shape)
-
-    def _measure(self, state: RigidBodyState) -> RigidBodyState:
-        return self.sensor_noise.measure(state, None, self.np_random)[0]
 
     def _sample(self, t: float, meas: RigidBodyState) -> Sample:
         return Sample(t, meas.p.copy(), meas.v.copy(), meas.R.copy(), meas.w.copy(),
                       self._f_cmd.copy())
 
+    def _table_row(self, k: int) -> int:
+        """Control step ``k``'s row in the time tables (filled so that it and its end are
+        there)."""
+        i = k - int(self._tables.k0[0])
+        if not 0 <= i < TABLE_WINDOW:
+            sc = self.scenario
+            self._tables.ensure(np.array([k], dtype=np.int64), _KEY0, _KEY0, [sc.trajectory],
+                                [sc.efficiency], TABLE_WINDOW - 1)
+            i = k - int(self._tables.k0[0])
+        return i
+
     def motor_commands(self, action: np.ndarray, t: float, meas: RigidBodyState) -> np.ndarray:
         """Rotor thrust commands [N] for a checked ``action`` (see ``ActionConfig``)."""
-        cfg, f_max = self.action_config, self.f_max
-        if cfg.mode == "motor":
-            f = 0.5 * (action + 1.0) * f_max
-        elif cfg.mode == "wrench":
-            thrust = 0.5 * (action[0] + 1.0) * self.vehicle.n_rotors * f_max
-            moment = action[1:] * np.asarray(cfg.moment_scale)
-            f = self.vehicle.rotor_thrust(np.concatenate(([thrust], moment)))
-        else:
-            f_ctrl = self._controller_commands(t, meas)
-            if self.compensate:
-                f_ctrl = f_ctrl / np.clip(self._estimate.eta, 0.1, None)
-            f = f_ctrl + cfg.residual_scale * action
-        return np.clip(f, 0.0, f_max)
+        cfg = self.action_config
+        f_ctrl = self._controller_commands(t, meas) if cfg.mode == "residual" else None
+        return cfg.commands(action, self.vehicle, f_ctrl, self._estimate.eta, self.compensate)
 
     def _controller_commands(self, t: float, meas: RigidBodyState) -> np.ndarray:
-        """The geometric controller's rotor commands [N] (eqs. 5-10, nominal allocation)."""
-        if self._compiled is not None and t == self._step_count * self.substeps * self.dt:
-            return self._compiled.controller_commands(self._step_count, meas)
+        """The geometric controller's rotor commands [N] (eqs. 5-10, nominal allocation); at
+        a control step's start the reference comes from the time tables."""
+        k = self._step_count
+        if t == k * self.substeps * self.dt:
+            refs = self._tables.refs[0, self._table_row(k)]
+            return self.controller.commands(meas.p, meas.v, meas.R, meas.w, refs)
         return self.controller.motor_commands(t, meas.p, meas.v, meas.R, meas.w)[0]
 
-    def _substeps_numpy(self, k0: int):
-        """The control step's physics substeps through the core ``Plant`` (numpy)."""
-        samples, eta_true, sf = [], [], []
-        meas = self._meas
-        for j in range(self.substeps):
-            t = (k0 + j) * self.dt
-            if j > 0:
-                meas = self._measure(self.plant.state)
-            samples.append(self._sample(t, meas))
-            out = self.plant.step(self._f_cmd, t)
-            eta_true.append(out.eta)
-            if self.sensor_noise.accel:
-                sf.append(out.specific_force + self.sensor_noise.accel
-                          * self.np_random.standard_normal(3))
-            else:
-                sf.append(out.specific_force)
-            if not self.plant.state.is_finite():
-                break
-        n = self.vehicle.n_rotors
-        return samples, np.array(eta_true).reshape(-1, n), np.array(sf).reshape(-1, 3), None
+    def _substeps(self, k: int):
+        """Control step ``k``'s physics substeps through the closed loop: the samples, the
+        true efficiency and accelerometer reading of each, and the efficiency at the end."""
+        S, n = self.substeps, self.vehicle.n_rotors
+        row = self._table_row(k)
+        vehicles = self.plant.vehicles
+        vehicles.f_cmd[0] = self._f_cmd
+        out = closed_loop.Records.empty(1, S, n)
+        tables = closed_loop.Tables(self._tables.k0 * S, self._tables.eta, _NO_REFS)
+        done = closed_loop.fly(self._generators(), k * S, k * S + S, False, self._loop, vehicles,
+                               tables, out, self.plant.hook)
+        t = ((k * S + np.arange(done)) * self.dt).tolist()
+        samples = [Sample(t[j], out.p[0, j], out.v[0, j], out.R[0, j], out.w[0, j],
+                          self._f_cmd.copy()) for j in range(done)]
+        eta = self._tables.eta[0, row * S:row * S + S + 1]
+        return samples, eta[:done].copy(), out.accel[0, :done], eta[S].copy()
 
     def step(self, action):
         if self.plant is None or self._terminal:
             raise gym.error.ResetNeeded("call reset() before step() (the episode has ended)")
         a = self._check_action(action)
-        k0 = self._step_count * self.substeps
-        t0 = k0 * self.dt
-        if self.physics == "numba" and self._compiled is None:
-            from quad_fault_env.envs.compiled_substeps import CompiledStep
-
-            self._compiled = CompiledStep(self)
+        k = self._step_count
+        t0 = k * self.substeps * self.dt
         self._f_cmd = self.motor_commands(a, t0, self._meas)
-        if self._compiled is not None:
-            samples, eta_true, sf, eta_t1 = self._compiled.substeps(self._step_count,
-                                                                    self._f_cmd, self.np_random)
-        else:
-            samples, eta_true, sf, eta_t1 = self._substeps_numpy(k0)
+        samples, eta_true, sf, eta_t1 = self._substeps(k)
         self._step_count += 1
         t1 = self.time
         if self._stateless_estimator:  # a pure function of the sample: the last one decides
@@ -476,14 +392,19 @@ class QuadFaultEnv(gym.Env):
         else:
             for s in samples[::self.estimator_stride]:
                 self._estimate = self.estimator.update(s)
-        state = self.plant.state
-        ref = (self.scenario.trajectory(t1) if self._compiled is None
-               else self._compiled.reference(self._step_count))
+        state = self._state
+        refs = self._tables.refs[0, self._step_count - int(self._tables.k0[0])]
+        ref = FlatOutput(refs[0].copy(), refs[1].copy(), refs[2].copy(), refs[3].copy())
         reason = self.limits.reason(state.p, state.R, ref.position)
         terminated = reason is not None
         self._terminal = terminated
         truncated = (not terminated) and self._step_count >= self.max_steps
-        self._meas = self._measure(state) if not terminated else state
+        vehicles = self.plant.vehicles
+        if terminated:  # the agent sees the true state; no measurement is drawn
+            for dst, src in zip((vehicles.mp, vehicles.mv, vehicles.mR, vehicles.mw), state):
+                dst[0] = src
+        else:
+            closed_loop.sense(self._generators(), self._loop, vehicles)
         self.history.append(np.array(state.p, dtype=float))
         reward = self.reward_config(state.p - ref.position, state.v - ref.velocity,
                                     self._f_cmd, self.f_max, terminated)
@@ -495,33 +416,21 @@ class QuadFaultEnv(gym.Env):
         info = self._info(samples, eta_true, sf, events, reason, ref, eta_t1)
         if self.render_mode == "human":
             self.render()
-        return self._observation(ref), (0.0 if not math.isfinite(reward) else reward), \
-            terminated, truncated, info
+        return self._observation(ref), reward, terminated, truncated, info
 
     # -- observation and info ----------------------------------------------------------------
     def _observation(self, ref):
-        """The observation at the end of the step; ``ref`` is the reference at that time.
-
-        The numbers of ``ObservationLayout.values`` (NaN -> the slot's fill, clipped into the
-        slot's bounds, float32) in one vector operation over the flat layout."""
+        """The observation at the end of the step (``ObservationLayout.flat``); ``ref`` is
+        the reference at that time."""
         m, n = self._meas, self.vehicle.n_rotors
-        sd = estimate_sd(self._estimate, n)
-        lo, hi, fill = self._obs_bounds
-        raw = {"pos_err": m.p - ref.position, "vel_err": m.v - ref.velocity,
-               "rot6": (m.R[:, 0], m.R[:, 1]), "omega": m.w,
-               "eta_hat": np.broadcast_to(np.asarray(self._estimate.eta, dtype=float), (n,)),
-               "eta_sd": np.full(n, SD_MAX) if sd is None else sd, "ref_acc": ref.acceleration}
-        x = np.concatenate([a for s in self.layout.slots
-                            for a in (raw[s.name] if s.name == "rot6" else (raw[s.name],))])
-        x = np.where(np.isnan(x), fill, x)
-        flat = np.clip(x, lo, hi).astype(np.float32)
-        if self.observation_kind == "flat":
-            return flat
-        return {s.name: flat[self.layout.slice(s.name)].copy() for s in self.layout.slots}
+        flat = self.layout.flat(pos_err=m.p - ref.position, vel_err=m.v - ref.velocity, R=m.R,
+                                omega=m.w, eta_hat=self._estimate.eta,
+                                eta_sd=estimate_sd(self._estimate, n), ref_acc=ref.acceleration)
+        return flat if self.observation_kind == "flat" else self.layout.split(flat)
 
     def _info(self, samples, eta_true, sf, events, reason, ref, eta_t=None) -> dict:
         t = self.time
-        state = self.plant.state
+        state = self._state
         est = self._estimate
         return {
             "t": t,

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from quadfault import effects as fx
-from quadfault.diagnosis import candidates as cd
+import quadfault.diagnosis.candidates as cd
 from quadfault.diagnosis.candidates import Candidate, PublicContext, WrenchInputs
 from quadfault.diagnosis.residuals import Replay, model_channels
 from quadfault.effects.model import frame_vectors

@@ -14,25 +14,58 @@ from quadfault.errors import ConfigError
 
 
 # the simulator's plant, one step at a time: the only calls into it ----------------------
-def _plant(vehicle, effects, dt):
-    from quadfault.motors import MotorModel
-    from quadfault.plant import Plant
+class _OpenLoop:
+    """The plant (nominal motors without noise, efficiency 1, the given effects) flown by the
+    one closed loop (:mod:`quadfault.closed_loop`) without a controller: the recorded command
+    of each row held over that row's interval."""
 
-    n = vehicle.n_rotors
-    return Plant(vehicle, lambda t: np.ones(n), MotorModel(0.0, True), tuple(effects), dt=dt)
+    def __init__(self, vehicle, effects, dt):
+        from quadfault import closed_loop
+        from quadfault.motors import MotorModel
+        from quadfault.plant import Plant
+        from quadfault.sensors import SensorNoise
+
+        n = vehicle.n_rotors
+        self.plant = Plant(vehicle, None, MotorModel(0.0, True), tuple(effects), dt=dt)
+        self._cl, self._sensors = closed_loop, SensorNoise()
+        self._loop = closed_loop.constants(self.plant, self._sensors, record_accel=False)
+        self._tables = closed_loop.Tables(np.zeros(1, dtype=np.int64), np.ones((1, 1, n)),
+                                          np.zeros((1, 0, 6, 3)))
+        self._out = closed_loop.Records.none(1, n)
+        self._gen = np.random.default_rng(0)  # noise-free: never drawn from
+
+    def reset(self, state) -> None:
+        """Start from ``state``: the effects' memory cleared, the flown vehicle set."""
+        self.plant.reset(state)
+        self._loop = self._cl.constants(self.plant, self._sensors, record_accel=False)
+
+    def set_state(self, state) -> None:
+        self.plant.vehicles.set_state(0, state)
+
+    def step(self, f_cmd, t, dt):
+        """One physics step of the command ``f_cmd`` held from ``t`` for ``dt``; the new
+        state."""
+        V = self.plant.vehicles
+        V.f_cmd[0] = f_cmd
+        loop = self._loop._replace(dt=float(dt), t0=float(t))
+        self._cl.fly(self._gen, 0, 1, True, loop, V, self._tables, self._out,
+                     hook=self.plant.hook)
+        return V.state(0)
+
+
+def _plant(vehicle, effects, dt):
+    return _OpenLoop(vehicle, effects, dt)
 
 
 def _warm(plant, state, f_cmd, t, dt) -> None:
-    """Advance the effects' memory by one step of command ``f_cmd`` at ``state``."""
-    plant.state, plant.dt = state, dt
-    plant.produced_thrust(f_cmd, t)
+    """Advance the effects' memory by one step of command ``f_cmd`` from ``state``."""
+    plant.set_state(state)
+    plant.step(f_cmd, t, dt)
 
 
 def _step(plant, f_cmd, t, dt):
     """One physics step of the plant with command ``f_cmd`` held; its new state."""
-    plant.dt = dt
-    plant.step(f_cmd, t)
-    return plant.state
+    return plant.step(f_cmd, t, dt)
 
 
 def _state(rec, k):
@@ -79,7 +112,7 @@ def replay_errors(recording, vehicle, effects=(), horizons=(0.05, 0.1, 0.2, 0.5)
         plant.reset(_state(recording, k - nw))
         for j in range(k - nw, k):  # the effects' memory: commands before the start
             _warm(plant, _state(recording, j), recording.thrust_cmd[j], float(t[j]), float(dt[j]))
-        plant.state = _state(recording, k)
+        plant.set_state(_state(recording, k))
         for j in range(nh):
             s = _step(plant, recording.thrust_cmd[k + j], float(t[k + j]), float(dt[k + j]))
             for h, n in enumerate(steps):

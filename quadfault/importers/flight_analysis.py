@@ -8,9 +8,8 @@
 * :func:`effect_fit` -- the same for any set of library effects fitted jointly (e.g. ``drag``
   and ``motor_lag`` on every flight, whether or not the diagnosis' selection accepts them),
   with held-out improvements per channel group.
-* :func:`irls_efficiency` -- the same quantity from the project's IRLS estimator
-  (``estimators.irls``, paper eqs. 23-30) run offline over the flight: the median over the
-  airborne samples with status ``ok``.
+* :func:`airborne` -- which times of a flight are airborne (the estimators' cross-check
+  ``estimators.flight_efficiency.irls_efficiency`` takes its medians over them).
 * :func:`rotational_check` -- why a nominal rotational model disagrees with a log: the gain
   of measured over modelled angular acceleration in a frequency band (from the commands and,
   when logged, from the measured rotor speeds), and how much of the slow moment the model
@@ -172,25 +171,6 @@ def efficiency_fit(rec: Recording, min_height: float | None = MIN_HEIGHT,
     ef = effect_fit(rec, ("motor_efficiency",), min_height, folds)
     return EfficiencyFit(eta=ef.x[0], sd=ef.sd[0], improvement=ef.improvement["all"],
                          improvement_angular=ef.improvement["angular"], blocks=ef.blocks)
-
-
-def irls_efficiency(rec: Recording, min_height: float | None = MIN_HEIGHT,
-                    eta_max: float = 1.6) -> tuple:
-    """Median IRLS efficiency per rotor over the airborne ``ok`` estimates of ``rec``.
-
-    The upper bound is raised from the paper's 1 to ``eta_max``: on a real flight the
-    nominal thrust curve is only calibrated on average, so some rotors are above it.
-    Returns ``(eta tuple, number of estimates used)``.
-    """
-    from estimators.base import STATUS_OK
-    from estimators.irls import IRLSConfig, SlidingWindowIRLS
-
-    rec = rec.without_truth()
-    est = SlidingWindowIRLS(rec.vehicle, IRLSConfig(eta_max=eta_max)).run(rec)
-    ok = (est.status == STATUS_OK) & airborne(rec, est.t, min_height)
-    if not ok.any():
-        return (float("nan"),) * rec.thrust_cmd.shape[1], 0
-    return tuple(float(x) for x in np.median(est.eta[ok], axis=0)), int(ok.sum())
 
 
 @dataclass(frozen=True)

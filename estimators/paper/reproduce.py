@@ -3,13 +3,14 @@
 Steps (``docs/reproduce.md``):
 
 1. calibrate the EKF's ``Q_eta`` so its RMSE matches the IRLS RMSE on a calibration flight of
-   the combined scenario with seed ``K + 1000`` (:mod:`estimators.calibration`);
+   the combined scenario with seed ``K + 1000`` (:mod:`estimators.paper.calibration`);
 2. fly degradation, abrupt, combined and clipping (sigma_f = 0.07) with seed ``K``, run both
    estimators, score them (:mod:`estimators.metrics`) and run the fault detector
    (:mod:`estimators.fdi`) on both estimate streams;
 3. the same on flights of the ``reference`` integration mode (the authors' Euler step with its
    input lag), calibrated separately, for a like-for-like table beside the paper's numbers;
-4. write ``metrics.json`` (CONTRACT.md sec. 2), ``report.md`` and PNG figures; print the table.
+4. write ``metrics.json`` (CONTRACT.md sec. 2), ``report.md`` and PNG figures
+   (:mod:`estimators.paper.report`); print the table.
 
 Scenario jobs run in parallel processes (``--workers``, default 2).
 """
@@ -26,17 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
+from estimators.paper.report import STATIC_FIGURES, table, write_report
 from quadfault.errors import ConfigError
 
 SCENARIOS = ("degradation", "abrupt", "combined", "clipping")
 REFERENCE_SCENARIOS = ("degradation", "abrupt", "combined")
 MODES = ("rk4", "reference")
-#: Estimator keys of a scenario block: the paper pair (the contract's ``irls``/``ekf``) and the
-#: beyond-the-paper IRLS (``IRLSConfig.improved()``) with an EKF calibrated to *its* RMSE.
-ESTIMATOR_KEYS = ("irls", "ekf", "irls_improved", "ekf_improved")
 FIGURES = ("estimates_{s}.png", "errors_{s}.png")
-STATIC_FIGURES = ("rmse_std_bars.png", "spikes_per_motor.png", "calibration_curve.png",
-                  "irls_convergence.png", "kkt_convergence.png")
 
 #: The reference code's hard-coded results (facts sec. 6): motor-averaged RMSE / std per case
 #: and the per-motor max spikes.
@@ -84,7 +81,7 @@ class ReproduceConfig:
     improved: bool = True
 
     @classmethod
-    def quick(cls, **changes) -> "ReproduceConfig":
+    def quick(cls, **changes) -> ReproduceConfig:
         """~1 minute: 12 s flights (schedule scaled) and a coarser calibration."""
         return replace(cls(duration=12.0, calibration_duration=12.0, q_range=(1e-3, 10.0),
                            bisection_steps=4), **changes)
@@ -131,9 +128,9 @@ def flight_check(rec) -> dict:
 def _calibration_job(mode: str, cfg: ReproduceConfig, variant: str = "paper") -> dict:
     """IRLS RMSE on the calibration flight, then the EKF's Q_eta matching it (``variant``
     "paper": the reference IRLS; "improved": ``IRLSConfig.improved()``)."""
-    from estimators.calibration import calibrate_q_eta
     from estimators.irls import IRLSConfig, SlidingWindowIRLS
     from estimators.metrics import score
+    from estimators.paper.calibration import calibrate_q_eta
 
     rec = _fly(cfg.calibration_scenario, cfg.calibration_duration, cfg.calibration_seed, mode,
                cfg.thrust_noise)
@@ -244,7 +241,7 @@ def irls_history(cfg: ReproduceConfig) -> dict:
     from estimators.base import samples
     from estimators.ipm import solve_box_qp
     from estimators.irls import IRLSConfig, SlidingWindowIRLS
-    from estimators.residuals import quadratic_terms, segment_models
+    from estimators.residuals import segment_terms
     from estimators.robust import mad_weights
 
     rec = _fly("combined", min(cfg.duration, 12.0), cfg.seed, "rk4", cfg.thrust_noise)
@@ -262,16 +259,15 @@ def irls_history(cfg: ReproduceConfig) -> dict:
     # first round of the same window, from x0 = 0.5, keeping the iterates (x_history)
     sl = slice(k0, k_end + 1)
     f = np.clip(rec.thrust_cmd[sl], 0.0, rec.vehicle.rotor_max_thrust)
-    models = segment_models(rec.vehicle, rec.t[sl], rec.position[sl], rec.velocity[sl],
-                            rec.rotation[sl], rec.omega[sl], f)
-    c, b, H = quadratic_terms(models, est._G)
-    e = c + 2.0 * (b @ x_prev) + np.einsum("snm,n,m->s", H, x_prev, x_prev)  # eq. 26
+    seg = segment_terms(rec.vehicle, rec.t[sl], rec.position[sl], rec.velocity[sl],
+                        rec.rotation[sl], rec.omega[sl], f, icfg.segment_weights)
+    e = seg.c + 2.0 * (seg.b @ x_prev) + np.einsum("snm,n,m->s", seg.H, x_prev, x_prev)  # eq. 26
     w, _ = mad_weights(e, z_soft=icfg.z_soft, power=icfg.soft_power, z_hard=icfg.z_hard,
                        hard_drop=icfg.hard_drop, w_min=icfg.w_min, mad_eps=icfg.mad_eps)
-    JGJ = np.einsum("s,snm->nm", w, H) + icfg.gamma * np.eye(4)
+    JGJ = np.einsum("s,snm->nm", w, seg.H) + icfg.gamma * np.eye(4)
     x0 = np.full(4, 0.5)
-    ipm = solve_box_qp(JGJ, w @ b - icfg.gamma * x_prev, icfg.lower, icfg.upper, x0, icfg.ipm,
-                       record_history=True)
+    ipm = solve_box_qp(JGJ, w @ seg.b - icfg.gamma * x_prev, icfg.lower, icfg.upper, x0,
+                       icfg.ipm, record_history=True)
     return {"t": float(rec.t[k_end]), "truth": rec.eta_true[k_end].tolist(),
             "x_history": np.vstack((x0, ipm.x_history)), "x_prev": x_prev.tolist(),
             "dual": d.dual_history, "cent": d.cent_history, "gap": d.gap_history,
@@ -325,26 +321,6 @@ def spike_ratios(scenarios: dict) -> dict:
     return out
 
 
-def _fmt(x, digits=4):
-    return "-" if x is None else f"{x:.{digits}f}"
-
-
-def table(scenarios: dict) -> str:
-    """Markdown table: motor-averaged RMSE, std, spike (and excess spike), wall time."""
-    from estimators.metrics import mean_or_none
-
-    lines = ["| scenario | estimator | RMSE | std | spike | excess spike | 1-sigma coverage "
-             "| seconds |", "|---|---|---|---|---|---|---|---|"]
-    for name, per in scenarios.items():
-        for est in (k for k in ESTIMATOR_KEYS if k in per):
-            s = per[est]
-            lines.append(f"| {name} | {est} | {_fmt(np.mean(s['rmse']))} | "
-                         f"{_fmt(np.mean(s['std']))} | {_fmt(mean_or_none(s['spike']))} | "
-                         f"{_fmt(mean_or_none(s['excess_spike']))} | "
-                         f"{_fmt(mean_or_none(s.get('coverage')), 2)} | {s['seconds']:.2f} |")
-    return "\n".join(lines)
-
-
 def planned_files(out: Path) -> list[Path]:
     names = ["metrics.json", "report.md", *STATIC_FIGURES]
     names += [f.format(s=s) for s in SCENARIOS for f in FIGURES]
@@ -367,7 +343,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from estimators.reproduce_report import write_report
     from quadfault.fileio import atomic_write_text, check_writable
     from quadfault.progress import enabled
 

@@ -1,12 +1,9 @@
-"""Compiled twin of :mod:`estimators.ekf` (the optional ``fast`` extra, numba).
+"""The EKF's step: one predict and one update, compiled (the model of :mod:`estimators.ekf`).
 
-The same predict / update as ``ekf.predict`` and ``ekf.measurement_update``, written in the
-subset of numpy that numba compiles, so a whole recording runs in one compiled loop.
-``tests/test_estimators_ekf.py`` checks that both paths agree to 1e-9; change them together.
-
-The step (:func:`step_ws`) allocates nothing but the core's ``expm_so3`` result: its matrices
-live in a :func:`workspace` made once per recording or per batch chunk, and it uses the
-structure of the 22-state filter instead of dense 22 x 22 products:
+State ``x = [p (3); v (3); Omega (3); vec(R) (9, column-major); eta (n)]`` and covariance
+``P``. :func:`predict_update_into` is the filter, plain Python compiled by
+:func:`quadfault.jit.jit`; it uses the structure of the ``18 + n``-state filter instead of
+dense products:
 
 * the transition Jacobian ``F`` is never formed: it is the identity plus a few blocks (p and
   v rows: dt, the thrust direction ``R e3`` and a rank-one eta coupling; Omega rows:
@@ -17,54 +14,27 @@ structure of the 22-state filter instead of dense 22 x 22 products:
 * the measurement Jacobian is ``[I_9 0]`` plus a 3 x 9 attitude block, so ``H P`` and
   ``H P H^T`` read rows of ``P``;
 * the update uses the square-root form of the optimal gain (:func:`_update`):
-  ``S = L L^T``, ``W = L^-1 H P``, ``x += W^T L^-1 y``, ``P -= W^T W``: no explicit gain, no
-  Joseph products; equal to the numpy path's Joseph form for this gain up to rounding.
+  ``S = L L^T``, ``W = L^-1 H P``, ``x += W^T L^-1 y``, ``P -= W^T W``: no explicit gain,
+  symmetric by construction.
 
-fastmath: the loops use :data:`FAST` (reassociation, contraction; not ``nnan``/``ninf``);
-the Cholesky factorisation uses none, so its positive-definiteness test sees NaN.
+The online rules around it (first sample, bad samples, idle rotors, command clipping) are
+:func:`estimators.ekf.ekf_step`.
 """
 
 from __future__ import annotations
 
 import math
 
-import numpy as np
-from numba import njit
-
-from estimators.ekf import IDLE_THRUST
-from quadfault._sim_numba import expm_so3  # the core's compiled mirror
-
-#: fastmath flags of the step's loops: reassociation (vectorised sums), FMA contraction, no
-#: signed zeros, reciprocals -- but not ``nnan`` / ``ninf``, so NaN and inf still propagate and
-#: are tested as in numpy (results differ from the numpy path by rounding only, tested).
-FAST = {"reassoc", "contract", "nsz", "arcp"}
+from estimators.linalg import cholesky_into, gauss_jordan_into, symmetric_eigen_into
+from quadfault.rotation import expm3  # the core's SO(3) exponential (kernel)
+from quadfault.jit import jit
 
 # workspace slots: ns x ns matrices, 3 x 3 blocks, vectors of length ns
 _FP, _FPT, _PP = range(3)
 _R, _RN, _JR, _G, _MR, _C, _FW, _MW = range(8)
 _XP, _ZE, _PHI = range(3)
 
-
-@njit(cache=True)
-def workspace(ns):
-    """Scratch of one EKF step for ``ns`` states (18 + rotors); a step overwrites all of it
-    before reading it, so one workspace serves any sequence of steps (and vehicles)."""
-    nr = ns - 18
-    return (np.zeros((3, ns, ns)),  # F P, (F P)^T, predicted P
-            np.zeros((ns, 12)),  # W^T
-            np.zeros((2, 12, 12)),  # S, L
-            np.zeros((12, ns)),  # H P, then W
-            np.zeros((8, 3, 3)),  # R, R_pred, Jr, G, Mr, C, I + dt G, dt I + dt^2 G / 2
-            np.zeros((9, 3)),  # d vec(R_pred) / d phi
-            np.zeros((2, nr, 3)),  # (dt B)^T, (dt^2 B / 2)^T
-            np.zeros((3, 9)),  # attitude rows of H
-            np.zeros((3, ns)),  # x_pred, eta coupling of the p / v rows, phi
-            np.zeros((3, ns)),  # Z: the vec(R) rows' rank-3 factor
-            np.zeros(12),  # innovation
-            np.zeros(nr))  # d T / d eta
-
-
-@njit(cache=True)
+@jit
 def _right_jacobian_into(phi0, phi1, phi2, Jr):
     """Right Jacobian of SO(3) (``ekf.right_jacobian_so3``): ``I - a K + b K^2``."""
     th2 = phi0 * phi0 + phi1 * phi1 + phi2 * phi2
@@ -84,26 +54,29 @@ def _right_jacobian_into(phi0, phi1, phi2, Jr):
             Jr[i, j] = (1.0 if i == j else 0.0) - a * K[i][j] + b * kk
 
 
-@njit(cache=True)
+@jit
 def _det3(M):
     return (M[0, 0] * (M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1])
             - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
             + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]))
 
 
-@njit(cache=True)
-def _project_so3_into(M, C):
+@jit
+def _project_so3_into(M, A, D, V):
     """Closest rotation (polar factor) of ``M`` in place, as
     ``quadfault.rotation.orthonormalize``: Newton iterations ``M <- (M + M^-T) / 2`` when ``M``
-    is near SO(3) (the EKF's case), else SVD. ``C`` is 3 x 3 scratch."""
+    is near SO(3) (the EKF's case), else from the eigen-decomposition of ``M^T M`` (the SVD
+    of ``M``). ``A``, ``D``, ``V`` are 3 x 3 scratch."""
     err = 0.0
     for i in range(3):
         for j in range(3):
             s = 0.0
             for k in range(3):
                 s += M[k, i] * M[k, j]
+            A[i, j] = s
             err = max(err, abs(s - (1.0 if i == j else 0.0)))
     if err < 1e-3 and _det3(M) > 0:
+        C = A
         for _ in range(3):
             for i in range(3):  # C = cofactor matrix^T = adj(M); inv(M) = C / det
                 for j in range(3):
@@ -114,13 +87,30 @@ def _project_so3_into(M, C):
                 for j in range(3):
                     M[i, j] = 0.5 * (M[i, j] + C[j, i] / det)
         return
-    U, _, Vt = np.linalg.svd(M)
-    D = np.eye(3)
-    D[2, 2] = np.sign(np.linalg.det(U @ Vt))
-    M[:, :] = U @ D @ Vt
+    # M = U S V^T: V and S^2 from M^T M; the two largest singular directions give
+    # u_k = M v_k / s_k, the third completes a right-handed pair; R = U V^T
+    symmetric_eigen_into(A, D, V)
+    lo = 0
+    for k in range(1, 3):
+        if D[k, k] < D[lo, lo]:
+            lo = k
+    a, b = (lo + 1) % 3, (lo + 2) % 3
+    for k in (a, b):
+        sk = math.sqrt(max(D[k, k], 1e-300))
+        for i in range(3):
+            A[i, k] = (M[i, 0] * V[0, k] + M[i, 1] * V[1, k] + M[i, 2] * V[2, k]) / sk
+    for i in range(3):  # u_lo = u_a x u_b, with V's orientation: det(U V^T) = +1
+        i1, i2 = (i + 1) % 3, (i + 2) % 3
+        A[i, lo] = A[i1, a] * A[i2, b] - A[i2, a] * A[i1, b]
+    if _det3(V) < 0:
+        for i in range(3):
+            A[i, lo] = -A[i, lo]
+    for i in range(3):
+        for j in range(3):
+            M[i, j] = A[i, 0] * V[j, 0] + A[i, 1] * V[j, 1] + A[i, 2] * V[j, 2]
 
 
-@njit(cache=True, fastmath=FAST, error_model="numpy")
+@jit(inline="always")
 def _jacobian_times(Pin, out, lower, dt, cp, cv, up, uv, dT, Fw, BwT, E, dR, Mw, BrT, ze, Z):
     """``out = F Pin`` over the blocks of the transition Jacobian ``F`` (``ekf.predict``),
     only ``out[i, :i + 1]`` when ``lower``. Blocks: p row i: ``e_i + dt e_{v,i} +
@@ -160,7 +150,7 @@ def _jacobian_times(Pin, out, lower, dt, cp, cv, up, uv, dT, Fw, BwT, E, dR, Mw,
             for k in range(n18):
                 Z[a, k] += b * Pin[18 + j, k]
     for jb in range(3):  # vec(R) rows: vec(R E) = (E^T kron I3) vec(R), plus dR Z
-        e0, e1, e2 = E[0, jb], E[1, jb], E[2, jb]
+        e0, e1, e2 = E[jb], E[3 + jb], E[6 + jb]  # column jb of the row-major 9-tuple
         for kk in range(3):
             row = 3 * jb + kk
             d0, d1, d2 = dR[row, 0], dR[row, 1], dR[row, 2]
@@ -175,40 +165,15 @@ def _jacobian_times(Pin, out, lower, dt, cp, cv, up, uv, dT, Fw, BwT, E, dR, Mw,
             out[i, k] = Pin[i, k]
 
 
-@njit(cache=True, error_model="numpy")
-def _cholesky_into(S, L):
-    """Lower Cholesky factor ``S = L L^T`` of the symmetric matrix ``S`` (only its lower
-    triangle is read) into ``L``'s lower triangle; False when ``S`` is not positive definite
-    (or not finite). No fastmath, so the test ``not d > 0`` keeps seeing NaN. (The compiled
-    IRLS has its own copy, ``_irls_numba._cholesky_solve_into``, which also solves.)"""
-    n = S.shape[0]
-    for j in range(n):
-        d = S[j, j]
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        if not d > 0.0:
-            return False
-        L[j, j] = math.sqrt(d)
-        for i in range(j + 1, n):
-            acc = S[i, j]
-            for k in range(j):
-                acc -= L[i, k] * L[j, k]
-            L[i, j] = acc / L[j, j]
-    return True
-
-
-@njit(cache=True)
-def step_inplace(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi):
-    """One predict + update; ``x`` and ``P`` are overwritten (a fresh workspace)."""
-    step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi,
-            workspace(x.shape[0]))
-
-
-@njit(cache=True, fastmath=FAST, error_model="numpy")
-def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
-    """One predict + update with the scratch ``ws`` (:func:`workspace`); ``x`` and ``P`` are
-    overwritten."""
-    mats, WT, s12, HP, M3, dR, Bs, HR, vecs, Z, y, dT = ws
+@jit
+def predict_update_into(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, mats, WT,
+                        s12, HP, M3, dR, Bs, HR, vecs, Z, y, dT):
+    """One predict over ``dt`` [s] with the rotor commands ``f`` [N] held (eqs. 1-4, 12) and one
+    update with the measured position ``zp``, velocity ``zv``, rate ``zw`` and attitude ``zR``;
+    ``x`` and ``P`` are overwritten. Vehicle: allocation ``A``, mass ``m``, gravity ``g``,
+    inertia ``J`` and its inverse; ``qc`` process-noise variance rates per second, ``r``
+    measurement-noise variances, ``[lo, hi]`` the efficiency clamp. The rest is the
+    workspace (:data:`EKFState.shapes`)."""
     FP, FPT, Pp = mats[_FP], mats[_FPT], mats[_PP]
     S, L = s12[0], s12[1]
     R, Rn, Jr, G, Mr, C = M3[_R], M3[_RN], M3[_JR], M3[_G], M3[_MR], M3[_C]
@@ -240,10 +205,10 @@ def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
     phi1 = w1 * dt + 0.5 * wdot[1] * dt * dt
     phi2 = w2 * dt + 0.5 * wdot[2] * dt * dt
     phi[0], phi[1], phi[2] = phi0, phi1, phi2
-    E = expm_so3(phi)
+    E = expm3((phi0, phi1, phi2))  # row-major 9-tuple
     for i in range(3):
         for j in range(3):
-            Rn[i, j] = R[i, 0] * E[0, j] + R[i, 1] * E[1, j] + R[i, 2] * E[2, j]
+            Rn[i, j] = R[i, 0] * E[j] + R[i, 1] * E[3 + j] + R[i, 2] * E[6 + j]
     for i in range(3):
         a = -(T / m) * R[i, 2] + (g if i == 2 else 0.0)
         xp[i] = x[i] + x[3 + i] * dt + 0.5 * a * dt * dt
@@ -319,7 +284,7 @@ def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
     for j in range(3):  # project R back to SO(3), clamp eta
         for i in range(3):
             C[i, j] = x[9 + 3 * j + i]
-    _project_so3_into(C, Mr)
+    _project_so3_into(C, Mr, Jr, G)
     for j in range(3):
         for i in range(3):
             x[9 + 3 * j + i] = C[i, j]
@@ -327,7 +292,7 @@ def step_ws(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, ws):
         x[18 + j] = min(max(x[18 + j], lo), hi)
 
 
-@njit(cache=True, fastmath=FAST, error_model="numpy")
+@jit(inline="always")
 def _update(x, P, xp, Pp, HR, y, r, HP, WT, S, L):
     """Measurement update of ``(xp, Pp)`` into ``(x, P)`` with ``H = [I_9 0; 0 HR 0]`` and
     ``R = diag(r)``, in the square-root form of the optimal gain::
@@ -339,7 +304,8 @@ def _update(x, P, xp, Pp, HR, y, r, HP, WT, S, L):
     symmetric by construction (lower triangle computed, mirrored) and positive
     semi-definite up to rounding. ``HP`` (12 x ns) becomes ``W``, ``WT`` is its transpose,
     ``y`` becomes ``L^-1 y``. If ``S`` is not positive definite (a corrupted covariance;
-    it has ``diag(r) > 0`` added) the general solver and ``P = sym(Pp - K H Pp)`` are used."""
+    it has ``diag(r) > 0`` added) the general solver and ``P = sym(Pp - K H Pp)`` are used.
+    ``S`` is factored by :func:`estimators.linalg.cholesky_into` with ``r`` as its shift."""
     ns = Pp.shape[0]
     for i in range(9):  # H P: rows of P, and the attitude rows
         for k in range(ns):
@@ -352,7 +318,7 @@ def _update(x, P, xp, Pp, HR, y, r, HP, WT, S, L):
             if h != 0.0:
                 for k in range(ns):
                     HP[9 + i, k] += h * Pp[9 + j, k]
-    for i in range(12):  # lower triangle of S = H P H^T + R
+    for i in range(12):  # lower triangle of S = H P H^T (+ R in the factorisation)
         for k in range(min(i + 1, 9)):
             S[i, k] = HP[i, k]
         for k in range(9, i + 1):
@@ -360,9 +326,10 @@ def _update(x, P, xp, Pp, HR, y, r, HP, WT, S, L):
             for j in range(9):
                 acc += HP[i, 9 + j] * HR[k - 9, j]
             S[i, k] = acc
-        S[i, i] += r[i]
-    if not _cholesky_into(S, L):
-        _update_general(x, P, xp, Pp, y, HP, S)
+    if not cholesky_into(S, r, L):
+        for i in range(12):
+            S[i, i] += r[i]
+        _update_general(x, P, xp, Pp, y, HP, S, WT.reshape((12, ns)))
         return
     for i in range(12):  # W = L^-1 H P (forward substitution on whole rows, in place)
         for k in range(i):
@@ -392,15 +359,23 @@ def _update(x, P, xp, Pp, HR, y, r, HP, WT, S, L):
             P[k, i] = P[i, k]
 
 
-@njit(cache=True)
-def _update_general(x, P, xp, Pp, y, HP, S):
+@jit
+def _update_general(x, P, xp, Pp, y, HP, S, KT):
     """Fallback of :func:`_update` for an ``S`` that is not positive definite: ``K^T`` by
-    LU (``np.linalg.solve``, allocates), ``x = xp + K y``, ``P = sym(Pp - K H Pp)``."""
+    Gauss-Jordan elimination into ``KT`` (12, ns), ``x = xp + K y``,
+    ``P = sym(Pp - K H Pp)``; nothing changes if ``S`` is singular."""
     ns, m = Pp.shape[0], S.shape[0]
     for i in range(m):
         for k in range(i + 1, m):
             S[i, k] = S[k, i]
-    KT = np.linalg.solve(S, HP)
+        for k in range(ns):
+            KT[i, k] = HP[i, k]
+    if not gauss_jordan_into(S, KT):
+        for i in range(ns):
+            x[i] = xp[i]
+            for k in range(ns):
+                P[i, k] = Pp[i, k]
+        return
     for i in range(ns):
         acc = 0.0
         for c in range(m):
@@ -413,77 +388,3 @@ def _update_general(x, P, xp, Pp, y, HP, S):
                 a -= KT[c, i] * HP[c, k] + KT[c, k] * HP[c, i]
             P[i, k] = 0.5 * a
             P[k, i] = P[i, k]
-
-
-@njit(cache=True)
-def _finite_row(t, p, v, R, w, f, k):
-    ok = math.isfinite(t[k])
-    for i in range(3):
-        ok = ok and math.isfinite(p[k, i]) and math.isfinite(v[k, i]) and math.isfinite(w[k, i])
-        for j in range(3):
-            ok = ok and math.isfinite(R[k, i, j])
-    for j in range(f.shape[1]):
-        ok = ok and math.isfinite(f[k, j])
-    return ok
-
-
-@njit(cache=True)
-def freeze_eta(x, P, eta_keep, P_keep, qc, dt):
-    """Mirror of ``ekf._freeze_eta``: a step without excitation leaves eta where it was."""
-    ns = x.shape[0]
-    for i in range(18, ns):
-        x[i] = eta_keep[i - 18]
-        for j in range(18):
-            P[i, j] = 0.0
-            P[j, i] = 0.0
-        for j in range(18, ns):
-            P[i, j] = P_keep[i - 18, j - 18]
-        P[i, i] += qc[i] * dt
-
-
-@njit(cache=True)
-def run_series(t, p, v, R, w, f, eta0, x, P0, A, m, g, J, Jinv, qc, r, lo, hi):
-    """Filter a whole recording; returns ``(eta, sd, ok, x, P, last_good_row)``."""
-    n, nr = t.shape[0], f.shape[1]
-    ws = workspace(x.shape[0])
-    eta = np.empty((n, nr))
-    sd = np.full((n, nr), np.nan)
-    ok = np.zeros(n, dtype=np.bool_)
-    P = P0.copy()
-    last = -1
-    for k in range(n):
-        if not _finite_row(t, p, v, R, w, f, k):
-            if last < 0:
-                eta[k] = eta0
-            else:
-                eta[k] = x[18:]
-                for j in range(nr):
-                    sd[k, j] = math.sqrt(P[18 + j, 18 + j])
-            continue
-        ok[k] = True
-        if last < 0:
-            x[0:3] = p[k]
-            x[3:6] = v[k]
-            x[6:9] = w[k]
-            for jj in range(3):
-                for ii in range(3):
-                    x[9 + 3 * jj + ii] = R[k, ii, jj]
-            x[18:] = eta0
-        else:
-            dt = t[k] - t[last]
-            idle = False
-            for j in range(nr):
-                if f[last, j] <= IDLE_THRUST:
-                    idle = True
-            if idle:
-                eta_keep = x[18:].copy()
-                P_keep = P[18:, 18:].copy()
-            step_ws(x, P, f[last], dt, p[k], v[k], w[k], R[k], A, m, g, J, Jinv, qc, r, lo, hi,
-                    ws)
-            if idle:
-                freeze_eta(x, P, eta_keep, P_keep, qc, dt)
-        last = k
-        eta[k] = x[18:]
-        for j in range(nr):
-            sd[k, j] = math.sqrt(P[18 + j, 18 + j])
-    return eta, sd, ok, x, P, last

@@ -88,7 +88,7 @@ def valid_recording(rows: int = 40, rate: float = 100.0) -> tuple[list[str], lis
     side = {"format": FORMAT, "frame": "NED", "gravity": PAPER_GRAVITY,
             "vehicle": {"mass": PAPER_MASS, "inertia": list(PAPER_INERTIA),
                         "allocation": paper_allocation().tolist()},
-            "source": "quadfault.fuzzing hover"}
+            "source": "fuzzing hover"}
     return list(BASE_COLUMNS), table, side
 
 

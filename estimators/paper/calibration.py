@@ -24,8 +24,8 @@ calibrated error bar for that tuning (docs/ekf.md, "Uncertainty").
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Callable
 
 import numpy as np
 
@@ -134,7 +134,7 @@ def median_filtered(series, length: int):
     """``series`` with its ``eta`` replaced by the causal running median of ``length`` rows."""
     from dataclasses import replace
 
-    from estimators.change_completion import causal_median
+    from estimators.median import causal_median
 
     return replace(series, eta=causal_median(series.eta, length))
 

@@ -1,23 +1,16 @@
-"""Compiled EKF step (estimators/ekf_numba.py) against the numpy predict + update, one step
-from random states (every block of the structured F P F^T and the square-root update), its
-fallback for a covariance that is not positive definite, and the covariance invariants over a
-whole recording."""
+"""The compiled EKF step (estimators/ekf_filter.py) against the numpy oracle's predict +
+update, one step from random states (every block of the structured F P F^T and the
+square-root update), its fallbacks (a covariance that is not positive definite, an attitude far
+from SO(3)), and the covariance invariants over a whole recording."""
 
 import numpy as np
 import pytest
-
-pytest.importorskip("numba")
+from oracles.ekf_numpy import NOISE_REFERENCE_DT, measurement_update, predict
 
 from estimators.base import Sample
-from estimators.ekf import (
-    NOISE_REFERENCE_DT,
-    EKFConfig,
-    MotorEfficiencyEKF,
-    measurement_update,
-    predict,
-)
-from estimators.ekf_numba import step_inplace
-from quadfault.rotation import expm_so3
+from estimators.ekf import EKFConfig, EKFState, MotorEfficiencyEKF
+from estimators.ekf_filter import _project_so3_into, predict_update_into
+from quadfault.rotation import expm_so3, orthonormalize
 from quadfault.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario
 from quadfault.simulator import simulate
 from quadfault.trajectory import Circle
@@ -48,7 +41,13 @@ def _numpy_step(ekf, x, P, f, dt, z):
 
 def _compiled_step(ekf, x, P, f, dt, z):
     x, P = x.copy(), P.copy()
-    step_inplace(x, P, f, dt, z.p, z.v, z.w, np.ascontiguousarray(z.R), *ekf._kernel_args())
+    veh, b, n = ekf.vehicle, ekf.config.eta_bounds, ekf.n_rotors
+    lo, hi = (-np.inf, np.inf) if b is None else b
+    ws = EKFState(n).views[7:]  # the workspace pieces, (1, ...) each
+    predict_update_into(x, P, f, dt, z.p, z.v, z.w, np.ascontiguousarray(z.R),
+                        veh.allocation, veh.mass, veh.gravity, veh.inertia,
+                        veh.inertia_inverse, ekf.q_diag / NOISE_REFERENCE_DT, ekf.r_diag,
+                        lo, hi, *(w[0] for w in ws))
     return x, P
 
 
@@ -76,7 +75,8 @@ def test_compiled_step_equals_numpy_step_from_random_states(seed):
 
 def test_indefinite_covariance_takes_the_general_solver_and_still_matches_numpy():
     """S = H P H^T + R not positive definite (a corrupted P): the compiled step falls back to
-    LU and ``P - K H P``, which equals the numpy Joseph form for ``K = P H^T S^-1``."""
+    Gauss-Jordan and ``P - K H P``, which equals the numpy Joseph form for
+    ``K = P H^T S^-1``."""
     rng = np.random.default_rng(11)
     ekf = MotorEfficiencyEKF(Vehicle(), EKFConfig(eta_bounds=None))
     x, P, f, dt, z = _random_case(rng)
@@ -92,8 +92,23 @@ def test_covariance_stays_symmetric_and_positive_definite_over_a_flight():
                   Circle(), thrust_noise=0.07)
     rec = simulate(sc, seed=5).without_truth()
     for q_eta in (1e-6, 0.5, 10.0):  # slow, default and very fast random walk
-        ekf = MotorEfficiencyEKF(rec.vehicle, EKFConfig(backend="numba", q_eta=q_eta))
+        ekf = MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_eta))
         series = ekf.run(rec)
         assert np.all(np.isfinite(series.sd[1:])) and np.all(series.sd[1:] > 0)
         np.testing.assert_array_equal(ekf.P, ekf.P.T)
         assert np.linalg.eigvalsh(ekf.P).min() > 0
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_attitude_projection_is_the_closest_rotation(seed):
+    """Near SO(3) (Newton iterations) and far from it (the SVD through M^T M), as
+    quadfault.rotation.orthonormalize."""
+    rng = np.random.default_rng(seed)
+    R = expm_so3(rng.normal(size=3))
+    for M in (R + 1e-5 * rng.normal(size=(3, 3)), R + 0.3 * rng.normal(size=(3, 3)),
+              R @ np.diag([1.0, 1.0, -1.0]) + 0.1 * rng.normal(size=(3, 3))):
+        out = M.copy()
+        _project_so3_into(out, np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)))
+        np.testing.assert_allclose(out, orthonormalize(M), rtol=0, atol=1e-9)
+        np.testing.assert_allclose(out.T @ out, np.eye(3), atol=1e-12)
+        assert np.linalg.det(out) == pytest.approx(1.0)

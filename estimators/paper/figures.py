@@ -10,10 +10,10 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from quadfault.fileio import atomic_savefig  # noqa: E402
+from quadfault.fileio import atomic_savefig
 
 COLORS = {"irls": "tab:blue", "ekf": "tab:orange", "truth": "tab:red",
           "irls_improved": "tab:green", "ekf_improved": "tab:brown"}
