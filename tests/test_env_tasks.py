@@ -101,3 +101,20 @@ def test_a_crazyflie_flies_the_track_task_scaled_to_its_size():
         if term or trunc:
             break
     assert not term and len(errors) == 500 and max(errors[200:]) < 0.01
+
+
+def test_sensor_noise_as_a_dict_equals_the_dataclass_and_bad_keys_are_named():
+    """JSON keywords (``quadfault train --env-kwargs``) can switch the sensor noise on."""
+    a = QuadFaultEnv("none", "rotor_loss", duration=0.2, sensor_noise={"position": 0.01,
+                                                                       "gyro": 0.02})
+    b = QuadFaultEnv("none", "rotor_loss", duration=0.2,
+                     sensor_noise=SensorNoise(position=0.01, gyro=0.02))
+    assert a.sensor_noise == b.sensor_noise
+    oa, ob = a.reset(seed=5)[0], b.reset(seed=5)[0]
+    for _ in range(5):
+        oa, ob = a.step(np.zeros(4))[0], b.step(np.zeros(4))[0]
+    np.testing.assert_array_equal(oa, ob)
+    with pytest.raises(ConfigError, match="sensor_noise has unknown keys"):
+        QuadFaultEnv("none", "hover", sensor_noise={"pos": 0.01})
+    with pytest.raises(ConfigError, match="sensor noise gyro"):
+        QuadFaultEnv("none", "hover", sensor_noise={"gyro": -1.0})

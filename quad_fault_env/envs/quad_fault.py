@@ -133,7 +133,8 @@ class QuadFaultEnv(gym.Env):
         duration: episode length [s] of named and random scenarios (default 20 s); a
             Scenario object brings its own ``duration``.
         thrust_noise: sigma_f overriding the scenario's (None keeps it).
-        sensor_noise: a :class:`~quadfault.simulator.SensorNoise` (default noise-free).
+        sensor_noise: a :class:`~quadfault.simulator.SensorNoise` or a dict of its fields
+            (``{"position": 0.01, "gyro": 0.005}``; default noise-free).
         action_mode, residual_scale, moment_scale: see ``ActionConfig``.
         control_rate: agent / controller rate [Hz] (100). physics_rate: plant rate [Hz] (1000).
         estimator_rate: ``"physics"`` (every substep, the default) or ``"control"`` (the
@@ -175,9 +176,7 @@ class QuadFaultEnv(gym.Env):
         self.reward_config = config_of(reward, RewardConfig, "reward")
         self.limits = config_of(limits, TerminationLimits, "limits")
         self.initial_spread = config_of(initial_spread, InitialStateSpread, "initial_spread")
-        self.sensor_noise = sensor_noise or SensorNoise()
-        if not isinstance(self.sensor_noise, SensorNoise):
-            raise ConfigError(f"sensor_noise must be a SensorNoise, got {sensor_noise!r}")
+        self.sensor_noise = config_of(sensor_noise, SensorNoise, "sensor_noise")
         if thrust_noise is not None and not number_at_least(thrust_noise, 0.0):
             raise ConfigError(f"thrust_noise must be a number >= 0, got {thrust_noise!r}")
         self.thrust_noise = thrust_noise
