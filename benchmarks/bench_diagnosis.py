@@ -1,4 +1,4 @@
-"""Speed of the model-mismatch diagnosis: 60 s recordings at 1 kHz (issue 6 target <= 10 s).
+"""Speed of the model-mismatch diagnosis: 60 s recordings at 1 kHz (target <= 10 s).
 
 Flies the paper vehicle (Lissajous, sensor noise, thrust noise 0.02) for each case -- ``none``,
 ``drag`` (0.3 N s/m), ``motor_lag`` (0.04 s), ``drag+motor_lag`` -- and times

@@ -20,9 +20,9 @@ Prints, measured in one run (ratios are what to compare; the machine may be shar
 This script installs nothing. Peers, in a separate virtual environment so they cannot touch
 the project's environment::
 
-    python -m venv --system-site-packages /tmp/peers
-    /tmp/peers/bin/pip install rotorpy crazyflow torchdiffeq roma
-    python benchmarks/throughput.py --peer-python /tmp/peers/bin/python
+    python -m venv --system-site-packages ../peers
+    ../peers/bin/pip install rotorpy crazyflow torchdiffeq roma
+    python benchmarks/throughput.py --peer-python ../peers/bin/python
 
 Flags: ``--full`` (N up to 16384), ``--max-n``, ``--horizon`` (physics steps per timing),
 ``--skip-peers``, ``--skip-ppo``, ``--skip-profile``, ``--skip-table`` (peers / profile / PPO
