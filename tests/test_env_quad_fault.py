@@ -76,8 +76,7 @@ def test_check_env_every_registered_id(env_id, estimator):
     if estimator == "default":
         from estimators.irls import IRLSConfig
 
-        # the registered estimator (IRLS) on its numpy backend: same results, no numba compile
-        kw = {"estimator_kwargs": {"config": IRLSConfig(backend="numpy")}}
+        kw = {"estimator_kwargs": {"config": IRLSConfig()}}  # the registered estimator
     else:
         kw = {"estimator": estimator}
     env = gym.make(env_id, duration=0.5, **kw)
@@ -99,7 +98,7 @@ def test_make_with_namespace_prefix_and_default_estimator(env_id):
     from estimators.irls import IRLSConfig
 
     env = gym.make(f"quad_fault_env:{env_id}", duration=0.2,
-                   estimator_kwargs={"config": IRLSConfig(backend="numpy")})
+                   estimator_kwargs={"config": IRLSConfig()})
     obs, info = env.reset(seed=0)
     assert env.unwrapped.estimator.name == "irls"
     assert env.spec.max_episode_steps == quad_fault_env.ENVIRONMENTS[env_id][0]
