@@ -224,4 +224,24 @@ def simulate(scenario: Scenario, *, vehicle: Vehicle | None = None,
                      frame="NED", source=f"quadfault simulate ({cfg.integrator})", meta=meta)
 
 
-__all__ = ["SensorNoise", "SimConfig", "initial_state", "simulate"]
+#: tracking error [m] above which a flight has lost the vehicle (:func:`flight_end`)
+LOST_CONTROL_ERROR = 2.0
+
+
+def flight_end(rec: Recording, scenario: Scenario,
+               lost_error: float = LOST_CONTROL_ERROR) -> tuple[int, str] | None:
+    """Where a simulated flight stops being a flight: ``(row, reason)`` of the first row where
+    the vehicle is below the scenario's ground (``"below_ground"``: altitude ``-p_z`` under
+    ``scenario.ground_altitude``) or farther than ``lost_error`` [m] from the reference
+    (``"lost_control"``), or None when neither happens."""
+    err = np.linalg.norm(rec.position - scenario.trajectory(rec.t).position, axis=1)
+    events = [(np.flatnonzero(err > lost_error), "lost_control")]
+    if scenario.ground_altitude is not None:
+        events.append((np.flatnonzero(-rec.position[:, 2] < scenario.ground_altitude),
+                       "below_ground"))
+    first = [(int(rows[0]), reason) for rows, reason in events if rows.size]
+    return min(first) if first else None
+
+
+__all__ = ["LOST_CONTROL_ERROR", "SensorNoise", "SimConfig", "flight_end", "initial_state",
+           "simulate"]
