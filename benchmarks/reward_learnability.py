@@ -109,10 +109,11 @@ def evaluate(env_id: str, policy, seeds) -> tuple[np.ndarray, int]:
 
 def learning_part(args) -> None:
     from agents.train import load_agent, main as train_main
+    from ppo_residual_study import t_interval  # benchmarks/ (this script's folder)
 
     out = Path(args.out or tempfile.mkdtemp(prefix="reward_learnability_"))
     t0 = time.perf_counter()
-    code = train_main(["--env", "QuadFaultHover-v1", "--env-kwargs", json.dumps(ENV_KWARGS),
+    code = 0 if args.trained else train_main(["--env", "QuadFaultHover-v1", "--env-kwargs", json.dumps(ENV_KWARGS),
                        "--vector-env", "--n-envs", "8", "--timesteps", str(args.timesteps),
                        "--eval-freq", str(args.timesteps), "--eval-episodes", "3",
                        "--algo-kwargs", json.dumps(PPO_KWARGS), "--seeds", str(args.seed),
@@ -139,15 +140,17 @@ def learning_part(args) -> None:
             policy = {"ppo": Trained(), "random": RandomPolicy(args.seed),
                       "zero": ZeroPolicy()}[arm]
             ret, crashes = evaluate(env_id, policy, seeds)
-            rows[env_id[-2:], arm] = ret.mean()
+            rows[env_id[-2:], arm] = ret
             print(f"{env_id[-2:]:>7} {arm:>8} {ret.mean():9.1f} {ret.std(ddof=1):8.1f} "
                   f"{crashes:>4}/{len(seeds)}")
     for v in ("v1", "v0"):
-        zero, rand = rows[v, "zero"], rows[v, "random"]
+        zero, rand = rows[v, "zero"].mean(), rows[v, "random"].mean()
         print(f"{v}: random actions score {100 * (zero - rand) / abs(zero):.1f} % below the "
               f"zero action")
-    print(f"v1: PPO - random = {rows['v1', 'ppo'] - rows['v1', 'random']:.1f}, "
-          f"PPO - zero = {rows['v1', 'ppo'] - rows['v1', 'zero']:.1f}")
+    for other in ("random", "zero"):  # paired over the same episodes
+        mean, half = t_interval(rows["v1", "ppo"] - rows["v1", other])
+        print(f"v1: PPO - {other} = {mean:.1f} +- {half:.1f} (95 % CI, paired), PPO ahead in "
+              f"{int(np.sum(rows['v1', 'ppo'] > rows['v1', other]))}/{len(seeds)} episodes")
 
 
 def main(argv=None) -> int:
@@ -158,6 +161,8 @@ def main(argv=None) -> int:
     p.add_argument("--crash-seeds", type=int, nargs="+", default=[1, 2, 3])
     p.add_argument("--out", help="training folder (default: a temporary one)")
     p.add_argument("--skip-training", action="store_true", help="part 1 only")
+    p.add_argument("--trained", action="store_true",
+                   help="evaluate the run already in --out (no training)")
     args = p.parse_args(argv)
     import quad_fault_env  # noqa: F401
 
