@@ -16,8 +16,9 @@ id                         task
                            onset, severity, ramp), degradation rate, thrust noise and initial
                            state; the observation carries the IRLS estimate
 ``QuadFault-v0``,          deprecated: the same tasks with the first reward (no action
-``QuadFaultHover-v0``      effort, no termination penalty) and a registered step limit
-                           (2,000 and 1,000 steps); kept unchanged for reproducibility
+``QuadFaultHover-v0``      effort, no survival bonus, no termination penalty) and a
+                           registered step limit (2,000 and 1,000 steps); kept unchanged for
+                           reproducibility
 =========================  =============================================================
 
 Every keyword of :class:`~quad_fault_env.envs.quad_fault.QuadFaultEnv` can be passed to
