@@ -52,8 +52,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="clip rotor commands only at 0 (the reference code; the default for "
                         "the paper's scenarios)")
     p.add_argument("--max-thrust", type=float, default=None,
-                   help="per-rotor thrust limit [N] (default: none for the paper's scenarios "
-                        "nominal, degradation, abrupt and combined, as the paper flies them; "
+                   help="per-rotor thrust limit [N] (default: none for the paper's fault scenarios "
+                        "degradation, abrupt and combined, as the paper flies them; "
                         "thrust-to-weight 2 for the others)")
     p.add_argument("--no-accel-feedforward", action="store_true",
                    help="the reference's a_d = 0 in the controller")
@@ -211,7 +211,7 @@ def _end_at_loss(rec, scenario, saturated: bool):
                 "(agents).")
     what = {"lost_control": f"the controller lost the vehicle (tracking error > "
                             f"{LOST_CONTROL_ERROR:g} m)",
-            "below_ground": "the vehicle went below the ground"}[reason]
+            "below_ground": "the controller lost the vehicle below the ground"}[reason]
     print(f"warning: {what} at t = {t_end:.3f} s; the recording ends there ({len(cut)} of "
           f"{len(rec)} rows; the sidecar's \"end\" says why).{hint}", file=sys.stderr)
     return cut

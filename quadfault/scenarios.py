@@ -206,9 +206,9 @@ class Scenario:
 
 SCENARIO_NAMES = ("nominal", "degradation", "abrupt", "combined", "clipping", "hover",
                   "hover_fault", "lissajous")
-#: the paper's scenarios: flown without an upper thrust limit, as in the paper (its rotors at
+#: the paper's fault scenarios: flown without an upper thrust limit, as in the paper (its rotors at
 #: eta = 0.5 on the circle need more than thrust-to-weight 2)
-PAPER_SCENARIOS = ("nominal", "degradation", "abrupt", "combined")
+PAPER_SCENARIOS = ("degradation", "abrupt", "combined")
 
 #: The clipping scenario: a circle twice as fast (centripetal 4.7 m/s^2) and faults to 0.6, so
 #: with the default f_max (thrust-to-weight 2) the weak motor's command saturates in part of

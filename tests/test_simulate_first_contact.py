@@ -50,7 +50,7 @@ def test_the_readme_example_stays_physical_for_80_s(tmp_path):
     limited = tmp_path / "limited.csv"
     code, err = _cli(["simulate", "--scenario", "combined", "--duration", "80", "--seed", "0",
                       "--max-thrust", Vehicle().rotor_max_thrust, "--out", limited, "--quiet"])
-    assert code == 0 and err.startswith("warning: the vehicle went below the ground")
+    assert code == 0 and err.startswith("warning: the controller lost the vehicle below the ground")
     cut = read_recording(limited)
     end = json.loads(limited.with_suffix(".json").read_text())["end"]
     assert end["reason"] == "below_ground" and end["planned_duration"] == 80.0
