@@ -15,6 +15,11 @@ id                         task
 ``QuadFaultHover-v1``      hover at a set-point for 10 s with randomised faults (motor,
                            onset, severity, ramp), degradation rate, thrust noise and initial
                            state; the observation carries the IRLS estimate
+``QuadFaultTrack-v0``      follow a random smooth trajectory for 20 s (per horizontal axis
+                           0.5-2 m/s peak speed, curvature 0.3-1 /m, heading rate within
+                           0.3 rad/s; Froude-scaled to the vehicle), healthy motors
+``QuadFaultRotorLoss-v0``  hover for 10 s; at 3-6 s one rotor drops abruptly to an
+                           efficiency of 0-0.5 for good; survive and hold the set-point
 ``QuadFault-v0``,          deprecated: the same tasks with the first reward (no action
 ``QuadFaultHover-v0``      effort, no survival bonus, no termination penalty) and a
                            registered step limit (2,000 and 1,000 steps); kept unchanged for

@@ -40,9 +40,12 @@ class Task:
     Attributes:
         id: the Gymnasium id (``Name-vN``).
         summary: one line for the docs and ``repr``.
-        scenario: a name of :data:`quadfault.scenarios.SCENARIO_NAMES` or ``"random"``.
+        scenario: a name of :data:`quadfault.scenarios.SCENARIO_NAMES` or a generator
+            (``"random"``, ``"track"``, ``"rotor_loss"``).
         duration: episode length [s].
         random_trajectory: trajectory of random scenarios.
+        scenario_options: keywords of the ``track`` / ``rotor_loss`` generator (None: its
+            defaults).
         initial_spread: spread of the initial state, or None (none).
         estimator: the estimator in the observation.
         reward: the reward.
@@ -57,6 +60,7 @@ class Task:
     scenario: str
     duration: float
     random_trajectory: str = "random"
+    scenario_options: dict | None = None
     initial_spread: InitialStateSpread | None = None
     estimator: str = "irls"
     reward: RewardConfig = field(default_factory=RewardConfig)
@@ -74,6 +78,8 @@ class Task:
                "duration": float(self.duration), "reward": self.reward}
         if self.scenario == "random":
             out["random_trajectory"] = self.random_trajectory
+        if self.scenario_options is not None:
+            out["scenario_options"] = dict(self.scenario_options)
         if self.initial_spread is not None:
             out["initial_spread"] = self.initial_spread
         if self.limits is not None:
@@ -86,10 +92,21 @@ _CIRCLE = ("the paper's circle (radius 3 m, 0.1 Hz) for 20 s with battery degrad
 _HOVER = ("hover at a set-point for 10 s with randomised faults, degradation, thrust noise and "
           "initial state; IRLS estimate in the observation")
 
+_TRACK = ("follow a random smooth trajectory for 20 s (each horizontal axis 0.5-2 m/s peak "
+          "speed, curvature 0.3-1 /m; heading rate within 0.3 rad/s; scaled to the vehicle's "
+          "size), healthy motors; IRLS estimate in the observation")
+_ROTOR_LOSS = ("hover for 10 s; between 3 and 6 s one rotor drops abruptly to an efficiency of "
+               "0-0.5 and stays there; survive and hold the set-point; IRLS estimate in the "
+               "observation")
+#: small initial-state spread of the new tasks
+TASK_SPREAD = InitialStateSpread(position=0.1, velocity=0.1, attitude=0.05, rate=0.1)
+
 TASKS = (
     Task("QuadFault-v1", _CIRCLE, "combined", 20.0),
     Task("QuadFaultHover-v1", _HOVER, "random", 10.0, random_trajectory="hover",
          initial_spread=HOVER_SPREAD),
+    Task("QuadFaultTrack-v0", _TRACK, "track", 20.0, initial_spread=TASK_SPREAD),
+    Task("QuadFaultRotorLoss-v0", _ROTOR_LOSS, "rotor_loss", 10.0, initial_spread=TASK_SPREAD),
     Task("QuadFault-v0", _CIRCLE, "combined", 20.0, reward=REWARD_V0, max_episode_steps=2000,
          deprecated_by="QuadFault-v1"),
     Task("QuadFaultHover-v0", _HOVER, "random", 10.0, random_trajectory="hover",
@@ -106,4 +123,4 @@ def task(env_id: str) -> Task:
     raise KeyError(f"unknown task {env_id!r}; known: {', '.join(t.id for t in TASKS)}")
 
 
-__all__ = ["HOVER_SPREAD", "REWARD_V0", "REWARD_V1", "TASKS", "Task", "task"]
+__all__ = ["HOVER_SPREAD", "TASK_SPREAD", "REWARD_V0", "REWARD_V1", "TASKS", "Task", "task"]

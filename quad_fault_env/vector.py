@@ -33,7 +33,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from quad_fault_env import VECTOR_ENTRY_POINT
-from quad_fault_env.envs.config import deprecated_physics, validate_action
+from quad_fault_env.envs.config import GENERATORS, deprecated_physics, validate_action
 from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.estimation import NOMINAL_PRIOR_SD
@@ -273,7 +273,8 @@ class QuadFaultVectorEnv(VectorEnv):
             return None
         e0, n = self.envs[0], self.vehicle.n_rotors
         spec = e0._scenario_option(options)
-        shared = None if (isinstance(spec, str) and spec == "random") else e0._make_scenario(spec)
+        drawn = isinstance(spec, str) and spec in GENERATORS  # a new scenario per row
+        shared = None if drawn else e0._make_scenario(spec)
         u = np.empty((len(rows), SPREAD_DRAWS))
         for k, i in enumerate(rows.tolist()):
             env = self.envs[i]

@@ -76,7 +76,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     import numpy as np
 
-    from quadfault.controller import ControllerConfig
+    from quadfault.controller import ControllerConfig, GeometricGains
     from quadfault.recording import write_recording
     from quadfault.scenarios import PAPER_SCENARIOS, named_scenario
     from quadfault.simulator import SensorNoise, SimConfig, simulate
@@ -127,7 +127,10 @@ def run(args) -> int:
     if args.integrator == "reference":
         cfg = SimConfig.reference(dt=args.dt, sensor_noise=noise)
     else:
-        ctrl = ControllerConfig(acceleration_feedforward=not args.no_accel_feedforward)
+        # a model's vehicle flies the paper's gains carried over to its mass and inertia
+        gains = GeometricGains() if model is None else GeometricGains().scaled(vehicle)
+        ctrl = ControllerConfig(gains=gains,
+                                acceleration_feedforward=not args.no_accel_feedforward)
         period = None if args.control_rate is None else 1.0 / args.control_rate
         cfg = SimConfig(dt=args.dt, control_period=period, saturate=saturate,
                         sensor_noise=noise, controller=ctrl)

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from quadfault.effects.physics import curve_thrust
 from quadfault.errors import ConfigError, RecordingError
 from quadfault.fileio import atomic_write_files, check_writable
 from quadfault.rotation import ENU_TO_NED, FLU_TO_FRD, quat_multiply, quat_to_rot, rot_to_quat
@@ -433,8 +434,7 @@ def read_recording(csv_path) -> Recording:
         thrust_cmd = get(F_COLUMNS)
     else:
         commands_u = get(U_COLUMNS)
-        a, b, c = curve
-        thrust_cmd = a + b * commands_u + c * commands_u ** 2
+        thrust_cmd = curve_thrust(curve, commands_u)
     if meta["frame"] == "ENU":
         position, velocity, quat, omega, accel = enu_flu_to_ned_frd(position, velocity, quat,
                                                                     omega, accel)

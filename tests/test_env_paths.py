@@ -124,7 +124,8 @@ def test_v0_ids_keep_their_step_limit_and_reward():
                                      action_weight=0.0, survival_bonus=0.0,
                                      termination_penalty=0.0)
     assert {t.id for t in TASKS} == {"QuadFault-v0", "QuadFaultHover-v0", "QuadFault-v1",
-                                     "QuadFaultHover-v1"}
+                                     "QuadFaultHover-v1", "QuadFaultTrack-v0",
+                                     "QuadFaultRotorLoss-v0"}
 
 
 def _returns(reward: RewardConfig, rng, steps=500, crash_at=None):

@@ -373,9 +373,10 @@ def test_any_valid_action_gives_an_observation_in_the_box(action, seed, mode):
     for _ in range(3):
         obs, r, terminated, truncated, info = env.step(action)
         assert env.observation_space.contains(obs)
-        cfg = env.reward_config
-        low = -(cfg.effort_weight + cfg.action_weight + cfg.termination_penalty)
-        assert low <= r <= 1.0 + cfg.survival_bonus
+        w = env.reward_config
+        low = -(w.effort_weight + w.action_weight) + w.survival_bonus
+        assert (low - 1e-12 <= r <= 1.0 + w.survival_bonus if not terminated
+                else r <= 1.0 - w.termination_penalty)
         assert np.all((info["motor_command"] >= 0) & (info["motor_command"] <= env.f_max))
         if terminated:
             break

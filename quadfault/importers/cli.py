@@ -105,13 +105,13 @@ def _vehicle_from_flags(args):
 
 def with_vehicle(rec, vehicle, curve, source: str):
     """``rec`` with its nominal vehicle (and thrust curve) replaced by a user's file."""
-    from quadfault.importers.crazyflie import thrust_from_curve
+    from quadfault.effects import curve_thrust
 
     changes = {"vehicle": vehicle}
     meta = dict(rec.meta)
     meta["constants"] = {"vehicle": f"from {source}"}
     if curve is not None and rec.commands_u is not None:
-        changes.update(thrust_curve=curve, thrust_cmd=thrust_from_curve(rec.commands_u, curve))
+        changes.update(thrust_curve=curve, thrust_cmd=curve_thrust(curve, rec.commands_u))
         meta.pop("calibration", None)
     changes["meta"] = meta
     return replace(rec, **changes)
