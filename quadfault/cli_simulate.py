@@ -139,10 +139,11 @@ def run(args) -> int:
     # non-finite-state check turns that into the one-line error, so numpy's warnings are noise
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         rec = simulate(scenario, vehicle=vehicle, config=cfg, seed=args.seed, effects=effects,
-                       thrust_noise=args.thrust_noise, progress=not args.quiet)
+                       thrust_noise=args.thrust_noise, progress=not args.quiet,
+                       stop_at_loss=True)
     if model is not None:
         rec.meta["truth"] = {"model": model.source}
-    rec = _end_at_loss(rec, scenario, saturate and args.integrator != "reference")
+    _warn_if_ended(rec, saturate and args.integrator != "reference")
     if args.commands == "u":
         from quadfault.effects import curve_command, curve_thrust
 
@@ -187,22 +188,17 @@ def _effects(args, model, scenario):
     return canonical_order(effects), scenario
 
 
-def _end_at_loss(rec, scenario, saturated: bool):
-    """The recording up to the row where the flight lost the vehicle or went below the ground
-    (``quadfault.simulator.flight_end``), with the reason in the sidecar (``end``), and a
-    warning on stderr; the recording itself when neither happens."""
+def _warn_if_ended(rec, saturated: bool) -> None:
+    """A warning on stderr when the flight ended early because it lost the vehicle or went
+    below the ground (``simulate(..., stop_at_loss=True)``: the recording stops at that row and
+    its sidecar's ``end`` says why)."""
     import sys
 
-    from quadfault.simulator import LOST_CONTROL_ERROR, flight_end
+    from quadfault.simulator import LOST_CONTROL_ERROR
 
-    end = flight_end(rec, scenario)
+    end = rec.meta.get("end")
     if end is None:
-        return rec
-    row, reason = end
-    cut = rec.slice(0, row + 1)
-    t_end = float(cut.t[-1])
-    cut = dataclasses.replace(cut, meta=dict(rec.meta, end={
-        "reason": reason, "t": t_end, "planned_duration": float(scenario.duration)}))
+        return
     hint = ""
     names = {e["name"] for e in rec.meta.get("effects", ())}
     if "rotor_inertia" in names and "motor_lag" not in names:
@@ -214,7 +210,7 @@ def _end_at_loss(rec, scenario, saturated: bool):
                 "(agents).")
     what = {"lost_control": f"the controller lost the vehicle (tracking error > "
                             f"{LOST_CONTROL_ERROR:g} m)",
-            "below_ground": "the controller lost the vehicle below the ground"}[reason]
-    print(f"warning: {what} at t = {t_end:.3f} s; the recording ends there ({len(cut)} of "
-          f"{len(rec)} rows; the sidecar's \"end\" says why).{hint}", file=sys.stderr)
-    return cut
+            "below_ground": "the controller lost the vehicle below the ground"}[end["reason"]]
+    print(f"warning: {what} at t = {end['t']:.3f} s; the recording ends there ({len(rec)} rows "
+          f"of a planned {end['planned_duration']:g} s; the sidecar's \"end\" says why).{hint}",
+          file=sys.stderr)

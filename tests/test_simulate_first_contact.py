@@ -92,3 +92,16 @@ def test_flight_end_reasons():
     assert flight_end(moved, scenario) == (700, "below_ground")
     assert flight_end(moved, scenario.replace(ground_altitude=None)) is None
     assert flight_end(moved, scenario.replace(ground_altitude=-0.5)) is None
+
+
+def test_stop_at_loss_is_the_same_flight_cut_at_the_event():
+    scenario = named_scenario("hover", 3.0)
+    weak = Vehicle(max_thrust=2.0)  # below hover thrust: it falls
+    full = simulate(scenario, vehicle=weak, seed=4)
+    cut = simulate(scenario, vehicle=weak, seed=4, stop_at_loss=True)
+    row, reason = flight_end(full, scenario)
+    assert len(cut) == row + 1 and cut.meta["end"] == {
+        "reason": reason, "t": full.t[row], "planned_duration": 3.0}
+    for name in ("t", "position", "velocity", "quaternion", "omega", "thrust_cmd", "eta_true"):
+        np.testing.assert_array_equal(getattr(cut, name), getattr(full, name)[:row + 1])
+    assert "end" not in simulate(scenario, seed=4, stop_at_loss=True).meta
