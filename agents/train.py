@@ -3,7 +3,7 @@
 ``python -m agents.train`` or ``quadfault train``. Settings come from flags or a JSON config
 file (``--config``; the same keys as :class:`TrainConfig`, flags given explicitly win)::
 
-    quadfault train --algo ppo --env QuadFaultHover-v0 \\
+    quadfault train --algo ppo --env QuadFaultHover-v1 \\
         --env-kwargs '{"estimator": "irls", "action_mode": "residual", "duration": 5}' \\
         --timesteps 20000 --seeds 0 1 2 --n-envs 2 --out runs/ppo_residual
 
@@ -59,7 +59,7 @@ class TrainConfig:
 
     Attributes:
         algo: ``"ppo"`` or ``"sac"``.
-        env_id: a registered Gymnasium id (``QuadFault-v0``, ``QuadFaultHover-v0``, ...).
+        env_id: a registered Gymnasium id (``QuadFault-v1``, ``QuadFaultHover-v1``, ...).
         env_kwargs: keywords of the environment (estimator, action_mode, duration, ...).
         timesteps: environment steps per seed, rounded to the nearest whole rollout (the
             steps run are printed and saved as ``timesteps_run``; :mod:`agents.train_eval`).
@@ -96,7 +96,7 @@ class TrainConfig:
     """
 
     algo: str = "ppo"
-    env_id: str = "QuadFaultHover-v0"
+    env_id: str = "QuadFaultHover-v1"
     env_kwargs: dict = field(default_factory=lambda: {"action_mode": "residual"})
     timesteps: int = 20_000
     seeds: tuple = (0,)

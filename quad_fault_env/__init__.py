@@ -21,8 +21,9 @@ id                         task
 ``QuadFaultRotorLoss-v0``  hover for 10 s; at 3-6 s one rotor drops abruptly to an
                            efficiency of 0-0.5 for good; survive and hold the set-point
 ``QuadFault-v0``,          deprecated: the same tasks with the first reward (no action
-``QuadFaultHover-v0``      effort, no termination penalty) and a registered step limit
-                           (2,000 and 1,000 steps); kept unchanged for reproducibility
+``QuadFaultHover-v0``      effort, no survival bonus, no termination penalty) and a
+                           registered step limit (2,000 and 1,000 steps); kept unchanged for
+                           reproducibility
 =========================  =============================================================
 
 Every keyword of :class:`~quad_fault_env.envs.quad_fault.QuadFaultEnv` can be passed to
