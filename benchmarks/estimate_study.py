@@ -135,6 +135,7 @@ def main(argv=None) -> int:
 
     import quad_fault_env  # noqa: F401
     from agents.train import load_agent
+    from quadfault.fileio import atomic_write_text
 
     seeds = [EVAL_SEED + i for i in range(args.episodes)]
     results = {}
@@ -176,12 +177,12 @@ def main(argv=None) -> int:
     text = "\n".join(rows) + summary + "\n"
     print(text)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "study.md").write_text(text)
-    (out / "study.json").write_text(json.dumps(
+    atomic_write_text(out / "study.md", text, force=True)
+    atomic_write_text(out / "study.json", json.dumps(
         {"env_id": ENV_ID, "arms": {a: arm_kwargs(a, args.effects) for a in ARMS},
          "timesteps": args.timesteps, "seeds": args.seeds, "episodes": seeds,
          "results": results, "train_wall_s": costs,
-         "paired_rmse": [m, h], "paired_crash": [mc, hc]}, indent=1))
+         "paired_rmse": [m, h], "paired_crash": [mc, hc]}, indent=1), force=True)
     return 0
 
 

@@ -227,6 +227,9 @@ def simulate(scenario: Scenario, *, vehicle: Vehicle | None = None,
         "integrator": cfg.integrator,
         "dt": cfg.dt,
         "thrust_noise": sigma,
+        # whether the plant limited each rotor's thrust to the vehicle's max_thrust: the
+        # estimators clip the commands at that limit only when it did
+        "saturated": bool(cfg.saturate),
         "fault_windows": [[m, a, b if math.isfinite(b) else None]
                           for m, a, b in scenario.fault_windows()],
     }
