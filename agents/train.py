@@ -3,7 +3,7 @@
 ``python -m agents.train`` or ``quadfault train``. Settings come from flags or a JSON config
 file (``--config``; the same keys as :class:`TrainConfig`, flags given explicitly win)::
 
-    quadfault train --algo ppo --env QuadFaultHover-v0 \\
+    quadfault train --algo ppo --env QuadFaultHover-v1 \\
         --env-kwargs '{"estimator": "irls", "action_mode": "residual", "duration": 5}' \\
         --timesteps 20000 --seeds 0 1 2 --n-envs 2 --out runs/ppo_residual
 
@@ -59,7 +59,7 @@ class TrainConfig:
 
     Attributes:
         algo: ``"ppo"`` or ``"sac"``.
-        env_id: a registered Gymnasium id (``QuadFault-v0``, ``QuadFaultHover-v0``, ...).
+        env_id: a registered Gymnasium id (``QuadFault-v1``, ``QuadFaultHover-v1``, ...).
         env_kwargs: keywords of the environment (estimator, action_mode, duration, ...).
         timesteps: environment steps per seed, rounded to the nearest whole rollout (the
             steps run are printed and saved as ``timesteps_run``; :mod:`agents.train_eval`).
@@ -87,15 +87,16 @@ class TrainConfig:
         device: torch device (``"cpu"`` by default).
         torch_threads: CPU threads torch may use (1 is fastest for these small networks and
             leaves the other cores to the environments).
-        numba_threads: threads of numba's parallel kernels (the vector env's batched
-            estimator and physics) in the training process, when numba is installed. 1 by
-            default: training envs have tens of rows, where a parallel region costs more
-            than it saves and idle OpenMP workers spin, burning CPU that parallel runs need
-            (docs/agents.md, "numba threads"). None keeps numba's own setting.
+        numba_threads: threads of numba's parallel kernels (the batched estimator and
+            physics) in the vector env's steps (``vector_env``). None: the vector env's rule
+            (one thread below ``quad_fault_env.vector.THREADS_MIN_BATCH`` sub-envs, numba's
+            count when ``NUMBA_NUM_THREADS`` is set): training envs have tens of rows, where a
+            parallel region costs more than it saves and idle workers spin, burning CPU that
+            parallel runs need (docs/throughput.md, "numba threads").
     """
 
     algo: str = "ppo"
-    env_id: str = "QuadFaultHover-v0"
+    env_id: str = "QuadFaultHover-v1"
     env_kwargs: dict = field(default_factory=lambda: {"action_mode": "residual"})
     timesteps: int = 20_000
     seeds: tuple = (0,)
@@ -112,7 +113,7 @@ class TrainConfig:
     algo_kwargs: dict = field(default_factory=dict)
     device: str = "cpu"
     torch_threads: int = 1
-    numba_threads: int | None = 1
+    numba_threads: int | None = None
 
     def __post_init__(self):
         if self.algo not in ALGORITHMS:
@@ -205,19 +206,14 @@ def make_vec_env(config: TrainConfig, seed: int, n_envs: int, monitor_dir=None):
 def _array_vec_env(config: TrainConfig, seed: int, n_envs: int, monitor_dir=None):
     """``n_envs`` sub-envs of the registered id's :class:`QuadFaultVectorEnv` as an SB3
     VecEnv, monitored (``VecMonitor``: episode returns and lengths in ``monitor_dir``)."""
-    import gymnasium as gym
     from stable_baselines3.common.vec_env import VecMonitor
 
-    import quad_fault_env  # noqa: F401  (registers the ids)
     from quad_fault_env.sb3_vec import make_sb3_vec_env
 
-    spec = gym.spec(config.env_id)
-    if spec.vector_entry_point != "quad_fault_env.vector:QuadFaultVectorEnv":
-        raise ConfigError(f"vector_env needs a QuadFault environment id, got {config.env_id!r}")
-    kwargs = dict(spec.kwargs, **config.env_kwargs)
-    kwargs.setdefault("max_episode_steps", spec.max_episode_steps)
+    threads = "auto" if config.numba_threads is None else config.numba_threads
     try:
-        venv = make_sb3_vec_env(n_envs, seed=seed, **kwargs)
+        venv = make_sb3_vec_env(n_envs, seed=seed, env_id=config.env_id,
+                                numba_threads=threads, **config.env_kwargs)
     except TypeError as exc:
         raise ConfigError(f"environment {config.env_id!r} (vector) rejected env_kwargs: "
                           f"{exc}") from None
@@ -234,15 +230,16 @@ def _installed(module: str) -> bool:
 
 
 def set_numba_threads(n: int | None) -> None:
-    """Use ``n`` threads in numba's parallel kernels (capped at numba's maximum; nothing
-    when ``n`` is None or numba is not installed)."""
+    """Use ``n`` threads in numba's parallel kernels on the calling thread (capped at numba's
+    maximum; nothing when ``n`` is None or numba is not installed)."""
     if n is None:
         return
-    try:
+    from quadfault import jit
+
+    if jit.AVAILABLE:
         import numba
-    except ImportError:
-        return
-    numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+
+        jit.set_threads(min(n, numba.config.NUMBA_NUM_THREADS))
 
 
 def train_one(config: TrainConfig, seed: int, run_dir: Path, *, force: bool = False,
@@ -256,7 +253,6 @@ def train_one(config: TrainConfig, seed: int, run_dir: Path, *, force: bool = Fa
     from stable_baselines3.common.vec_env import VecNormalize
 
     torch.set_num_threads(config.torch_threads)
-    set_numba_threads(config.numba_threads)
     if config.tensorboard and not _installed("tensorboard"):
         raise QuadfaultError("--tensorboard needs the tensorboard package (pip install "
                              "tensorboard)")
@@ -384,7 +380,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--algo-kwargs", help="JSON object of algorithm keywords")
     parser.add_argument("--tensorboard", help="TensorBoard log folder")
     parser.add_argument("--numba-threads", type=int,
-                        help=f"threads of numba's parallel kernels (default {d.numba_threads})")
+                        help="threads of numba's parallel kernels in the vector env's steps "
+                        "(default: the vector env's rule by batch size, docs/throughput.md)")
     parser.add_argument("--progress", action="store_true",
                         help="SB3's progress bar (needs rich; quadfault's bar otherwise)")
     parser.add_argument("--out", required=True, help="output folder (one seed_<k>/ per seed)")

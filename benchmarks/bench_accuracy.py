@@ -36,7 +36,8 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from estimators.paper.calibration import calibrate_q_eta, median_filtered
+from estimators.median import median_series
+from estimators.paper.calibration import calibrate_q_eta
 from estimators.ekf import EKFConfig, MotorEfficiencyEKF
 from estimators.fdi import detect, evaluate
 from estimators.irls import IRLSConfig, SlidingWindowIRLS
@@ -79,7 +80,7 @@ def flight(name: str, seed: int, duration: float, q_eta: float,
     for key, est in runs:
         s = est.run(blind)
         if key == "ekf+m":
-            s = median_filtered(s, IRLSConfig.improved().output_median)
+            s = median_series(s, IRLSConfig.improved().output_median)
         sc = score(rec, s)
         out[key] = {"rmse": float(np.mean(sc.rmse)), "spike": mean_or_none(sc.spike),
                     "excess": mean_or_none(sc.excess_spike),

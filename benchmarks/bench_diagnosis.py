@@ -1,4 +1,4 @@
-"""Speed of the model-mismatch diagnosis: 60 s recordings at 1 kHz (issue 6 target <= 10 s).
+"""Speed of the model-mismatch diagnosis: 60 s recordings at 1 kHz (target <= 10 s).
 
 Flies the paper vehicle (Lissajous, sensor noise, thrust noise 0.02) for each case -- ``none``,
 ``drag`` (0.3 N s/m), ``motor_lag`` (0.04 s), ``drag+motor_lag`` -- and times
@@ -44,7 +44,7 @@ def recording(case, duration, rate, cache):
     dt = 1.0 / rate
     sc = named_scenario("nominal", duration, dt).replace(
         trajectory=Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.15))
-    cfg = SimConfig(dt=dt, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001), backend="numpy")
+    cfg = SimConfig(dt=dt, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001))
     rec = simulate(sc, config=cfg, seed=1, effects=CASES[case], thrust_noise=0.02).without_truth()
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -54,18 +54,32 @@ def recording(case, duration, rate, cache):
 
 
 def reference_package(rev: str):
-    """``quadfault.diagnosis`` as of git revision ``rev``, imported as ``_diagnosis_ref``."""
+    """``quadfault.diagnosis`` as of git revision ``rev``, imported as ``_diagnosis_ref``,
+    with the effects module of the same revision (``quadfault/effects.py`` or the package
+    ``quadfault/effects/``) inside it as ``_diagnosis_ref._effects``."""
     tmp = Path(tempfile.mkdtemp(prefix="diag_ref_")) / "_diagnosis_ref"
     tmp.mkdir()
-    names = subprocess.run(["git", "-C", str(REPO), "ls-tree", "--name-only", rev,
-                            "quadfault/diagnosis/"], check=True, capture_output=True,
-                           text=True).stdout.split()
-    for name in names:
+
+    def files(path):
+        return subprocess.run(["git", "-C", str(REPO), "ls-tree", "-r", "--name-only", rev,
+                               path], check=True, capture_output=True, text=True).stdout.split()
+
+    def rewrite(text):
+        return (text.replace("from quadfault import effects as", "from _diagnosis_ref import "
+                             "_effects as").replace("quadfault.effects", "_diagnosis_ref._effects")
+                .replace("quadfault.diagnosis", "_diagnosis_ref"))
+
+    copies = [(name, tmp / Path(name).name) for name in files("quadfault/diagnosis/")]
+    copies += [(name, tmp / "_effects" / Path(name).relative_to("quadfault/effects"))
+               for name in files("quadfault/effects/")]
+    copies += [(name, tmp / "_effects.py") for name in files("quadfault/effects.py")]
+    for name, dest in copies:
         if not name.endswith(".py"):
             continue
         text = subprocess.run(["git", "-C", str(REPO), "show", f"{rev}:{name}"], check=True,
                               capture_output=True, text=True).stdout
-        (tmp / Path(name).name).write_text(text.replace("quadfault.diagnosis", "_diagnosis_ref"))
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        dest.write_text(rewrite(text))
     sys.path.insert(0, str(tmp.parent))
     pkg = importlib.import_module("_diagnosis_ref")
     importlib.import_module("_diagnosis_ref.locate")

@@ -11,12 +11,12 @@
 
 Every timing is the best of repeated runs. Numba's thread count is its default (one per
 core) -- what users get. With ``--baseline PATH`` (another checkout, e.g. ``git worktree add
-/tmp/qf-base <commit>``) each measure runs in both, rounds alternated, and the table gives the
+../qf-base <commit>``) each measure runs in both, rounds alternated, and the table gives the
 ratio this / baseline for rates (above 1 = this checkout is faster) and baseline / this for
 times. On a shared machine read the per-CPU-second columns; every table carries the load.
 
     python benchmarks/bench_env_step.py
-    python benchmarks/bench_env_step.py --baseline /tmp/qf-base --rounds 3
+    python benchmarks/bench_env_step.py --baseline ../qf-base --rounds 3
 """
 
 from __future__ import annotations

@@ -11,13 +11,13 @@ Workloads (each on the same cached recording, 80 s of the combined scenario by d
 
 Each measurement runs in its own process (the fastest of ``--inner`` passes after a warm-up
 pass). With ``--reference DIR`` (a checkout of another
-commit, e.g. ``git worktree add /tmp/qf-ref <commit>``) the same workloads run with that
+commit, e.g. ``git worktree add ../qf-ref <commit>``) the same workloads run with that
 checkout's code, alternating with this one's, ``--repeat`` times; the table gives the median
 rates of both and their ratio (above 1: this checkout is faster), and the load average
 before and after.
 
     python benchmarks/bench_irls.py                                   # this checkout
-    python benchmarks/bench_irls.py --reference /tmp/qf-ref --cold    # side by side
+    python benchmarks/bench_irls.py --reference ../qf-ref --cold      # side by side
     python benchmarks/bench_irls.py --only run --only ekf --duration 20
     python benchmarks/bench_irls.py --accuracy --no-speed             # the accuracy table
 """

@@ -7,11 +7,11 @@ first 10 ms flight in a fresh process with an empty numba cache (CPU seconds: th
 which a busy machine does not inflate as much as the wall time).
 
 With ``--baseline PATH`` (another checkout of the project, e.g. ``git worktree add
-/tmp/qf-base <commit>``) every number is measured in both, rounds alternated, and the table
+../qf-base <commit>``) every number is measured in both, rounds alternated, and the table
 gives the ratio (baseline / this checkout: above 1 = this checkout is faster).
 
     python benchmarks/bench_simulator.py
-    python benchmarks/bench_simulator.py --baseline /tmp/qf-base --rounds 3
+    python benchmarks/bench_simulator.py --baseline ../qf-base --rounds 3
 """
 
 from __future__ import annotations

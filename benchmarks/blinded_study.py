@@ -149,7 +149,8 @@ def make_effect(name, delta, veh, rng_params, nominal_curve=None, duration=15.0)
         return fx.Mass(float(np.clip(1.0 + p["sign"] * 0.04 * delta, 0.7, 1.5)))
     if name == "rate_damping":
         lin = np.minimum(J * 0.5 * delta * np.array([1.0, p["ky"], p["kz"]]), J / 0.03)
-        return fx.RateDamping(tuple(lin), tuple(p["quad"] * lin / 2.0))
+        quad = np.minimum(p["quad"] * lin / 2.0, 0.5 * J)  # well inside the plausible [0, J]
+        return fx.RateDamping(tuple(lin), tuple(quad))
     raise KeyError(name)
 
 
@@ -227,7 +228,8 @@ def draw_case(seed, i):
 
 
 def param_error(true, found, veh):
-    """Relative error of the effect's main magnitude (deviation from nominal)."""
+    """Relative error of the effect's main magnitude (deviation from nominal); ``found``'s
+    direction parameters in NED / FRD, as the truth."""
     n = true.name
     p = found.params
     if n == "motor_efficiency":

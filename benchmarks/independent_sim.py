@@ -18,9 +18,11 @@ rotor drag as proportional to thrust): rotor drag is linear in velocity with a c
 linear equivalent over the flight is reported); ``tau_m`` acts on the rotor speed, so for small
 changes the thrust follows with the same time constant.
 
-Nothing in the diagnosis was tuned on these recordings: this is a held-out check.
+Nothing in the diagnosis was tuned on these recordings: this is a held-out check. ``PYTHON``
+is any interpreter where ``rotorpy`` and ``quadfault`` are importable (RotorPy installed in
+its own environment).
 
-    /tmp/peers/bin/python benchmarks/independent_sim.py [--out DIR] [--duration 15]
+    PYTHON benchmarks/independent_sim.py [--out DIR] [--duration 15]
         [--rate 200] [--settle S] [--cases NAME,...] [--reuse] [--force] [--quiet]
 
 Skips with a one-line message when RotorPy is not importable.

@@ -1,10 +1,12 @@
 """Vector-env step cost with one numba thread vs numba's default, by batch size.
 
 Steps ``QuadFaultVectorEnv(N, estimator=E, estimator_rate="control")`` on the PPO study's
-environment (``QuadFaultHover-v0``, one fault of eta 0.5-0.85, residual actions, zero
-action) with ``numba.set_num_threads(1)`` and with numba's default thread count, rounds
-interleaved, and prints wall and CPU microseconds per vehicle-step and the ratios
-(default / one thread: above 1 means the extra threads cost more than they save).
+environment (``QuadFaultHover-v1``, one fault of eta 0.5-0.85, residual actions, zero
+action) with ``numba_threads=1`` and with numba's default thread count, rounds interleaved,
+and prints wall and CPU microseconds per vehicle-step and the ratios (default / one thread:
+above 1 means the extra threads cost more than they save). The vector env's default
+(``numba_threads="auto"``, ``quad_fault_env.vector.THREADS_MIN_BATCH``) comes from these
+numbers, taken on an idle and on a loaded machine.
 
 CPU time counts every thread of this process, so idle OpenMP workers that spin between
 parallel regions show up there even when the wall time looks fine. On a shared machine read
@@ -29,7 +31,7 @@ def _env(n: int, estimator: str):
     import quad_fault_env  # noqa: F401
     from quad_fault_env.vector import QuadFaultVectorEnv
 
-    kwargs = dict(gym.spec("QuadFaultHover-v0").kwargs, action_mode="residual",
+    kwargs = dict(gym.spec("QuadFaultHover-v1").kwargs, action_mode="residual",
                   residual_scale=2.45, estimator_rate="control", duration=10.0,
                   estimator=estimator, random_faults={"n_faults": [1, 1],
                                                       "severity": [0.5, 0.85]})
@@ -40,9 +42,7 @@ def _env(n: int, estimator: str):
 
 def _time(venv, steps: int, threads: int) -> tuple[float, float]:
     """Wall and CPU seconds of ``steps`` vector steps with ``threads`` numba threads."""
-    import numba
-
-    numba.set_num_threads(threads)
+    venv.numba_threads = threads  # the env sets it on this thread for its own calls
     action = np.zeros((venv.num_envs, 4))
     for _ in range(5):
         venv.step(action)
@@ -82,7 +82,6 @@ def main(argv=None) -> int:
                         wall, cpu = _time(venv, steps, threads)
                         best[threads] = [min(best[threads][0], wall), min(best[threads][1], cpu)]
             finally:
-                numba.set_num_threads(default)
                 venv.close()
             per = 1e6 / (steps * n)
             w1, c1 = (x * per for x in best[1])

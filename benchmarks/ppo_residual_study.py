@@ -9,9 +9,9 @@ Two training arms on ``QuadFaultHover-v0`` (hover, random motor faults, residual
 
 The arms differ only in the estimator: same environment and fault distribution
 (``--random-faults``, default :data:`RANDOM_FAULTS`: one motor at efficiency 0.5-0.85),
-reward (the environment's default), residual scale, VecNormalize, PPO hyperparameters
-(:data:`PPO_KWARGS`), timesteps and seeds. Each arm trains ``--seeds`` PPO runs of
-``--timesteps`` steps on ``--n-envs`` quadrotors stepped as arrays
+reward (the ``-v0`` reward of ``QuadFaultHover-v0``), residual scale, VecNormalize, PPO
+hyperparameters (:data:`PPO_KWARGS`), timesteps and seeds. Each arm trains ``--seeds`` PPO
+runs of ``--timesteps`` steps on ``--n-envs`` quadrotors stepped as arrays
 (:class:`quad_fault_env.vector.QuadFaultVectorEnv`, the same episodes as the single env).
 ``--timesteps`` is rounded *up* to whole rollouts of ``n_envs x n_steps`` (10^6 -> 1,007,616
 with the defaults), the steps the documented runs trained.
@@ -23,7 +23,7 @@ on, skipping any whose scenario has no fault), hence the same scenario, initial 
 noise for every agent. Each agent flies the episodes as the rows of its own vector env.
 Scores per episode: the tracking RMSE [m] of the true position error after each control
 step over the flown part (primary; crashes are counted separately as the crash rate) and,
-as a secondary column, the session-2 score in which a crash counts 5 m. Reported with 95 %
+as a secondary column, the same score with a crash counted as 5 m. Reported with 95 %
 confidence intervals (Student t over the seeds of the per-seed mean paired differences;
 with one seed, over the episodes instead):
 
@@ -36,8 +36,8 @@ the headroom, what a policy could gain from the estimate at this residual scale.
 ``--check-distribution`` flies only the baseline and this reference (no training): the
 first check of a fault distribution (the baseline must not crash, the reference must gain).
 
-The study of issue 5 (>= 3 seeds per arm, each run within 30 min of CPU; session 4,
-docs/agents.md)::
+The documented study (>= 3 seeds per arm, each run within 30 min of CPU; docs/agents.md,
+"PPO residual studies")::
 
     python benchmarks/ppo_residual_study.py --check-distribution --episodes 40 --out runs/ppo_s3
     python benchmarks/ppo_residual_study.py --timesteps 1000000 --seeds 0 1 2 \\
@@ -407,8 +407,8 @@ def _paired(a_minus_b_by_seed: list[np.ndarray]):
 
 
 #: the scores of an episode [m]: ``rmse`` the flown part's RMSE (primary; crashes are
-#: reported separately as the crash rate), ``rmse_crash5`` the session-2 score (a crash
-#: scores CRASH_RMSE)
+#: reported separately as the crash rate), ``rmse_crash5`` the same with a crashed episode
+#: scored CRASH_RMSE
 SCORES = ("rmse", "rmse_crash5")
 
 

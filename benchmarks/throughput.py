@@ -20,9 +20,9 @@ Prints, measured in one run (ratios are what to compare; the machine may be shar
 This script installs nothing. Peers, in a separate virtual environment so they cannot touch
 the project's environment::
 
-    python -m venv --system-site-packages /tmp/peers
-    /tmp/peers/bin/pip install rotorpy crazyflow torchdiffeq roma
-    python benchmarks/throughput.py --peer-python /tmp/peers/bin/python
+    python -m venv --system-site-packages ../peers
+    ../peers/bin/pip install rotorpy crazyflow torchdiffeq roma
+    python benchmarks/throughput.py --peer-python ../peers/bin/python
 
 Flags: ``--full`` (N up to 16384), ``--max-n``, ``--horizon`` (physics steps per timing),
 ``--skip-peers``, ``--skip-ppo``, ``--skip-profile``, ``--skip-table`` (peers / profile / PPO
@@ -126,9 +126,12 @@ def core_compiled(N: int, horizon: int, rng, control_every: int = 0, cpu: bool =
 
 
 def make_env(N: int, estimator: str = "none", **kw):
-    """A reset ``QuadFaultVectorEnv`` (combined scenario) and the seconds building + reset took."""
+    """A reset ``QuadFaultVectorEnv`` (combined scenario) and the seconds building + reset took;
+    numba's thread count is the process's (``numba_threads=None``: this table measures the
+    kernels at numba's threads, not the env's default by batch size)."""
     from quad_fault_env.vector import QuadFaultVectorEnv
 
+    kw.setdefault("numba_threads", None)
     t0 = time.perf_counter()
     env = QuadFaultVectorEnv(N, estimator, scenario="combined", duration=600.0, **kw)
     env.reset(seed=0)

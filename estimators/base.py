@@ -14,6 +14,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from quadfault.errors import ConfigError
 from quadfault.recording import Recording
 from quadfault.sample import Sample, samples  # the measurement record lives in the core
 
@@ -59,6 +60,28 @@ class EstimateSeries:
     estimator: str
     config: dict = field(default_factory=dict)
     seconds: float = float("nan")  # wall time of the run [s]
+    #: post-processing of ``eta``: ``"none"`` or ``"median:N"`` (causal running median of the
+    #: last N estimates, :mod:`estimators.median`)
+    postprocess: str = "none"
+
+
+#: Sidecar key saying whether the flight's plant limited each rotor's thrust to the vehicle's
+#: ``max_thrust`` (``true``) or had no upper limit (``false``); ``quadfault simulate`` writes it.
+SATURATED_KEY = "saturated"
+
+
+def command_limit(recording: Recording, vehicle) -> float:
+    """The upper clip of the commanded rotor thrust [N] an estimator applies over
+    ``recording``: ``vehicle.rotor_max_thrust`` unless the recording says its flight was not
+    saturated (sidecar ``"saturated": false``), then none (``inf``). A recording without the
+    key keeps the vehicle's limit. Commands are always clipped below at 0."""
+    flag = recording.meta.get(SATURATED_KEY)
+    if flag is None or flag is True:
+        return float(vehicle.rotor_max_thrust)
+    if flag is False:
+        return float("inf")
+    raise ConfigError(f"{recording.path or 'recording'}: sidecar key {SATURATED_KEY!r} must be "
+                      f"true or false, got {flag!r}")
 
 
 @runtime_checkable
@@ -73,6 +96,7 @@ class OnlineEstimator(Protocol):
 
 
 __all__ = [
+    "SATURATED_KEY",
     "STATUSES",
     "STATUS_BAD_SAMPLE",
     "STATUS_ILL_CONDITIONED",
@@ -85,5 +109,6 @@ __all__ = [
     "EstimateSeries",
     "OnlineEstimator",
     "Sample",
+    "command_limit",
     "samples",
 ]

@@ -23,6 +23,12 @@ happened. From the estimate ``span`` windows before (the anchor ``x_a``), until
 i.e. the weak-direction component of the change is not taken from the smoothness prior but
 completed by the sparsest change consistent with the observed components: faults hit one
 motor at a time. ``alpha*`` is a weighted median (exact L1 minimiser in one dimension).
+
+A change that is not a single-motor one is left alone (the completion stands down for that
+window, :func:`single_motor`): when the completed change moves a second motor by more than
+half the largest move. A collective change (all motors stepped at once) has no weak-direction
+component to complete -- its observable part is the whole change -- and the L1 minimum is
+then a tie whose median picks a two-motor drop of twice the size.
 The completion applies only when the weak direction is really prior-dominated (smallest
 eigenvalue of the window information ``J^T W G J`` below ``gamma``). The corrected estimate
 is fed back as the next window's anchor ``eta_prev``, after which the data agree with it.
@@ -86,6 +92,26 @@ def l1_completion_into(delta, v, r, wts, out) -> None:
         out[i] += alpha * v[i]
 
 
+#: the completed change counts as a single-motor change when no other motor moves by more than
+#: this fraction of the largest move
+SINGLE_MOTOR_RATIO = 0.5
+
+
+@jit
+def single_motor(change) -> bool:
+    """True when ``change`` (n,) moves one motor: its second-largest ``|entry|`` is at most
+    :data:`SINGLE_MOTOR_RATIO` times the largest."""
+    first = 0.0
+    second = 0.0
+    for j in range(change.shape[0]):
+        a = abs(change[j])
+        if a > first:
+            first, second = a, first
+        elif a > second:
+            second = a
+    return second <= SINGLE_MOTOR_RATIO * first
+
+
 @jit
 def observe_into(x, history, counters) -> None:
     """Record the estimate ``x`` of a window (every window, solved or held)."""
@@ -123,8 +149,9 @@ def complete_into(x, info, history, anchor, v, counters, threshold, hold, gamma,
             for j in range(n):
                 delta[j] = x[j] - anchor[j]
             l1_completion_into(delta, v, scratch[2], E[0], out)
-            for j in range(n):
-                x[j] = min(max(anchor[j] + out[j], lower), upper)
+            if single_motor(out):
+                for j in range(n):
+                    x[j] = min(max(anchor[j] + out[j], lower), upper)
     observe_into(x, history, counters)
 
 
@@ -154,5 +181,6 @@ __all__ = [
     "l1_completion",
     "l1_completion_into",
     "observe_into",
+    "single_motor",
     "weak_direction",
 ]

@@ -48,6 +48,7 @@ from estimators.base import (
     Estimate,
     EstimateSeries,
     Sample,
+    command_limit,
 )
 from estimators.ekf_filter import predict_update_into
 from estimators.irls_config import BACKENDS, deprecated_backend  # noqa: F401  (re-exported)
@@ -90,8 +91,9 @@ class EKFConfig:
         eta0: initial efficiency (one value for all rotors, or one per rotor).
         eta_bounds: clamp of the efficiency after each update, or None for no clamp.
         clip_commands: clip the commanded thrusts to ``[0, vehicle.rotor_max_thrust]`` before
-            use (as IRLS does: a saturated rotor cannot deliver its command); ``False`` = the
-            reference code.
+            use (as IRLS does: a saturated rotor cannot deliver its command; ``run(recording)``
+            clips above only when the recording does not say its flight was unsaturated,
+            :func:`estimators.base.command_limit`); ``False`` = the reference code.
         backend: deprecated, does nothing (one implementation); a value other than None
             warns. Removed in the next release.
     """
@@ -404,6 +406,8 @@ class MotorEfficiencyEKF:
             raise ConfigError(f"{recording.path or 'recording'}: "
                               f"{recording.thrust_cmd.shape[1]} rotor commands, the vehicle has "
                               f"{self.n_rotors} rotors")
+        const = self._const.copy()
+        const[C_FMAX] = command_limit(recording, self.vehicle)  # the recording's saturation
         self.reset(self._state.views[F_ETA0][0].copy())
         t, p, v, R, w, f = (np.ascontiguousarray(a, dtype=np.float64) for a in (
             recording.t, recording.position, recording.velocity, recording.rotation,
@@ -414,7 +418,7 @@ class MotorEfficiencyEKF:
         bar = progress_bar(total=N, desc="ekf", unit="sample", disable=None if progress else True)
         for k0 in range(0, N, chunk):
             k = slice(k0, min(k0 + chunk, N))
-            ekf_run(t[k], p[k], v[k], R[k], w[k], f[k], self._const, st.offsets, st.floats,
+            ekf_run(t[k], p[k], v[k], R[k], w[k], f[k], const, st.offsets, st.floats,
                     st.ints, eta[k], sd[k], code[k])
             bar.update(k.stop - k0)
         bar.close()

@@ -2,9 +2,9 @@
 
 :func:`irls_efficiency` runs :class:`~estimators.irls.SlidingWindowIRLS` offline over a
 flight and takes the median of its ``ok`` estimates while airborne
-(:func:`quadfault.importers.flight_analysis.airborne`). It is the estimator's cross-check of
-the diagnosis' ``motor_efficiency`` effect
-(:func:`quadfault.importers.flight_analysis.efficiency_fit`) in ``benchmarks/real_flights.py``.
+(:func:`quadfault.importers.flight_analysis.airborne`): the estimator's cross-check of the
+diagnosis' ``motor_efficiency`` effect
+(:func:`quadfault.importers.flight_analysis.efficiency_fit`).
 """
 
 from __future__ import annotations

@@ -119,8 +119,8 @@ def ipm_parameters(settings: IPMSettings) -> np.ndarray:
 
 
 #: rows of the interior point's workspace ``W`` (:func:`ipm_into`)
-W_LAM_HI, W_LAM_LO, W_D, W_RHS, W_DX, W_DLAM_HI, W_DLAM_LO = range(7)
-N_WORK_ROWS = 7
+W_LAM_HI, W_LAM_LO, W_D, W_RHS, W_DX, W_DLAM_HI, W_DLAM_LO, W_HX, W_HDX = range(9)
+N_WORK_ROWS = 9
 
 
 @jit
@@ -131,7 +131,7 @@ def ipm_into(H, q, lo, hi, x, settings, max_iter, W, L, hist):
         H: (n, n) symmetric positive definite; q: (n,).
         x: the start on entry, strictly inside the box; the last iterate on return.
         settings: :func:`ipm_parameters`; max_iter: at most this many Newton iterations.
-        W: (7, n) workspace; on return its rows ``W_LAM_HI``, ``W_LAM_LO`` hold the
+        W: (9, n) workspace; on return its rows ``W_LAM_HI``, ``W_LAM_LO`` hold the
             multipliers of ``x <= hi`` and ``lo <= x``. L: (n, n) scratch.
         hist: (max_iter, >= 3 + n) receives ``||r_dual||, ||r_cent||, gap, x`` after each
             iteration, or a (0, 3 + n) array to record nothing.
@@ -158,9 +158,11 @@ def ipm_into(H, q, lo, hi, x, settings, max_iter, W, L, hist):
             pu = x[i] - hi
             pl = lo - x[i]
             lu, ll = W[W_LAM_HI, i], W[W_LAM_LO, i]
-            rd = q[i] + lu - ll
+            hx = 0.0
             for k in range(n):
-                rd += H[i, k] * x[k]
+                hx += H[i, k] * x[k]
+            W[W_HX, i] = hx
+            rd = q[i] + lu - ll + hx
             cu = -lu * pu - inv_t
             cl = -ll * pl - inv_t
             r2 += rd * rd + cu * cu + cl * cl
@@ -187,14 +189,17 @@ def ipm_into(H, q, lo, hi, x, settings, max_iter, W, L, hist):
                 s_max = min(s_max, -pu / dx)
             elif dx < 0:
                 s_max = min(s_max, pl / dx)
+        for i in range(n):  # H dx: the trial points' H x is then H x + s H dx
+            hdx = 0.0
+            for k in range(n):
+                hdx += H[i, k] * W[W_DX, k]
+            W[W_HDX, i] = hdx
         s = step_fraction * s_max
         while True:  # backtracking, eq. (44), on the KKT residual at the trial point
             d2 = 0.0
             for i in range(n):
                 v = q[i] + (W[W_LAM_HI, i] + s * W[W_DLAM_HI, i]) \
-                    - (W[W_LAM_LO, i] + s * W[W_DLAM_LO, i])
-                for k in range(n):
-                    v += H[i, k] * (x[k] + s * W[W_DX, k])
+                    - (W[W_LAM_LO, i] + s * W[W_DLAM_LO, i]) + W[W_HX, i] + s * W[W_HDX, i]
                 d2 += v * v
             c2 = 0.0
             for i in range(n):

@@ -4,7 +4,9 @@ One update per measurement sample (:func:`irls_update`, plain Python compiled by
 :func:`quadfault.jit.jit`, allocation-free, one call):
 
 1. check the sample (finite, time increasing; otherwise ``bad_sample`` and the window
-   restarts) and clip its command to ``[0, rotor_max_thrust]`` (``clip_commands``);
+   restarts) and clip its command to ``[0, rotor_max_thrust]`` (``clip_commands``; ``run``
+   clips above only when the recording's flight was saturated,
+   :func:`estimators.base.command_limit`);
 2. write the segment previous sample -> this sample into a ring of the last ``window - 1``
    segments' quadratic terms (:mod:`estimators.residuals`, eqs. 13-26);
 3. when the ring is full (else ``warmup``) and the window's mean commanded thrust reaches
@@ -37,6 +39,7 @@ from estimators.base import (
     Estimate,
     EstimateSeries,
     Sample,
+    command_limit,
 )
 from estimators.change_completion import N_COUNTERS, complete_into, observe_into
 from estimators.irls_config import (  # noqa: F401  (re-exported)
@@ -47,7 +50,7 @@ from estimators.irls_config import (  # noqa: F401  (re-exported)
     LazyWindowDiagnostics,
     window_diagnostics,
 )
-from estimators.median import median_push_into
+from estimators.median import median_push_into, postprocess_label
 from estimators.residuals import segment_terms_into
 from estimators.state import FlatState, all_finite, piece_rows
 from estimators.window import (
@@ -402,6 +405,8 @@ class SlidingWindowIRLS:
 
         start = time.perf_counter()
         t, p, v, R, w, f = _recording_arrays(recording, self.vehicle, self.config.window)
+        const = self._const.copy()
+        const[C_FMAX] = command_limit(recording, self.vehicle)  # the recording's saturation
         self.reset(self.eta)
         st, N, n = self._state, len(t), self.vehicle.n_rotors
         eta, sd, code = np.empty((N, n)), np.empty((N, n)), np.empty(N, dtype=np.int64)
@@ -410,7 +415,7 @@ class SlidingWindowIRLS:
                            disable=None if progress else True)
         for k0 in range(0, N, chunk):
             k = slice(k0, min(k0 + chunk, N))
-            irls_run(t[k], p[k], v[k], R[k], w[k], f[k], self._const, self._fp, self._ip,
+            irls_run(t[k], p[k], v[k], R[k], w[k], f[k], const, self._fp, self._ip,
                      st.floats, st.ints, self._hist, eta[k], sd[k], code[k])
             bar.update(k.stop - k0)
         bar.close()
@@ -418,7 +423,8 @@ class SlidingWindowIRLS:
         return EstimateSeries(t=t.copy(), eta=eta, sd=sd,
                               status=np.asarray(STATUSES)[code],
                               estimator=self.name, config=asdict(self.config),
-                              seconds=time.perf_counter() - start)
+                              seconds=time.perf_counter() - start,
+                              postprocess=postprocess_label(self.config.output_median))
 
 
 def _recording_arrays(recording: Recording, vehicle: Vehicle, window: int):

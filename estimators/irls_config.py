@@ -59,7 +59,10 @@ class IRLSConfig:
             no information (``no_excitation``).
         clip_commands: clip the commanded thrusts to ``[0, vehicle.rotor_max_thrust]`` before
             use (a rotor cannot deliver more than its limit; without this a saturated weak
-            motor looks weaker than it is). ``False`` = the reference code (no clipping).
+            motor looks weaker than it is); ``run(recording)`` clips above only when the
+            recording does not say its flight was unsaturated (sidecar ``saturated``,
+            :func:`estimators.base.command_limit`). ``False`` = the reference code (no
+            clipping).
         record_history: keep per-round KKT histories in the diagnostics (slower).
         backend: deprecated, does nothing (one implementation); a value other than None
             warns. Removed in the next release.

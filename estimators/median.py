@@ -9,7 +9,9 @@ estimate. It delays a step by about ``L / 2`` samples.
 :func:`median_push_into` is one push, plain Python compiled by :func:`quadfault.jit.jit`,
 allocation-free: a ring of the last ``L`` values per motor and the same values kept sorted (one
 removal and one insertion per push instead of a sort). The online estimators push once per
-update; :func:`causal_median` runs it over a whole series.
+update; :func:`causal_median` runs it over a whole series, and :func:`median_series` over an
+estimator's output (the post-processing ``quadfault estimate --median N`` gives every
+estimator).
 """
 
 from __future__ import annotations
@@ -70,4 +72,27 @@ def causal_median(x, length: int) -> np.ndarray:
     return out
 
 
-__all__ = ["causal_median", "median_push_into"]
+def postprocess_label(length: int) -> str:
+    """How a series was post-processed: ``"none"`` or ``"median:<length>"``."""
+    return "none" if length <= 1 else f"median:{int(length)}"
+
+
+def median_series(series, length: int):
+    """``series`` (an :class:`~estimators.base.EstimateSeries` not yet post-processed) with
+    ``eta`` replaced by its causal running median over ``length`` rows (``sd`` and ``status``
+    kept); ``length <= 1`` returns it unchanged. The same kernel as an estimator's online
+    output median (``IRLSConfig.output_median``), so both give identical numbers."""
+    from dataclasses import replace
+
+    if isinstance(length, bool) or not isinstance(length, (int, np.integer)) or length < 1:
+        raise ConfigError(f"median length must be an integer >= 1 samples, got {length!r}")
+    if length <= 1:
+        return series
+    if series.postprocess != "none":
+        raise ConfigError(f"the {series.estimator} series is already post-processed "
+                          f"({series.postprocess})")
+    return replace(series, eta=causal_median(series.eta, int(length)),
+                   postprocess=postprocess_label(length))
+
+
+__all__ = ["causal_median", "median_push_into", "median_series", "postprocess_label"]

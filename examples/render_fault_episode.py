@@ -54,7 +54,7 @@ def collect_frames(seconds: float, fps: float, estimator: str, seed: int,
                    compensate: bool = True) -> tuple[list[np.ndarray], int]:
     """``(frames, frame_ms)``: frames at reset and after every k-th control step (and the
     last step), k from :func:`frame_stride`; each covers ``frame_ms`` of flight."""
-    env = gym.make("QuadFault-v0", estimator=estimator, scenario=fault_scenario(seconds),
+    env = gym.make("QuadFault-v1", estimator=estimator, scenario=fault_scenario(seconds),
                    compensate=compensate, render_mode="rgb_array")
     period = env.unwrapped.control_period
     every = frame_stride(fps, period)

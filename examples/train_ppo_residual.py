@@ -2,7 +2,7 @@
 
 The policy adds up to 2.45 N per rotor (the hover thrust of one rotor) to the geometric
 controller's commands, sees the IRLS efficiency estimate in its observation and learns on
-the hover task with one random motor fault of efficiency 0.5-0.85 (``QuadFaultHover-v0``,
+the hover task with one random motor fault of efficiency 0.5-0.85 (``QuadFaultHover-v1``,
 ``random_faults`` as in ``benchmarks/ppo_residual_study.py``, episodes shortened to 5 s).
 ``--n-envs`` quadrotors are stepped as arrays in one process (``TrainConfig(vector_env=True)``,
 :class:`quad_fault_env.vector.QuadFaultVectorEnv`). With the defaults it finishes in a few
@@ -40,7 +40,7 @@ def main(argv=None) -> int:
     from quadfault.errors import QuadfaultError
 
     config = TrainConfig(
-        algo="ppo", env_id="QuadFaultHover-v0",
+        algo="ppo", env_id="QuadFaultHover-v1",
         env_kwargs={"estimator": args.estimator, "estimator_rate": "control",
                     "action_mode": "residual", "residual_scale": 2.45,
                     "random_faults": {"n_faults": [1, 1], "severity": [0.5, 0.85]},

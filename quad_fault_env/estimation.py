@@ -20,6 +20,7 @@ import importlib
 import numpy as np
 
 from estimators.base import STATUS_OK, Estimate, EstimateSeries, Sample, samples
+from quad_fault_env.observation import SD_MAX
 from quadfault.errors import ConfigError
 from quadfault.vehicle import Vehicle
 
@@ -142,5 +143,54 @@ def diagnostics_dict(diagnostics):
     return diagnostics
 
 
+def diagnostics_template(estimator) -> dict:
+    """The ``info["estimator_diagnostics"]`` of ``estimator`` before its first estimate: the
+    keys and value types every later one has (a vector env batches info values by their first
+    type and shape). The IRLS: the fields of :class:`estimators.irls_config.IRLSDiagnostics`
+    with ``weights`` NaN over the window's segments; estimators without diagnostics: ``{}``."""
+    config = getattr(estimator, "config", None)
+    if getattr(estimator, "name", None) == "irls" and hasattr(config, "window"):
+        from estimators.irls_config import IRLSDiagnostics
+
+        return diagnostics_dict(IRLSDiagnostics("warmup",
+                                                weights=np.full(config.window - 1, np.nan)))
+    return {}
+
+
+def _fixed_diagnostics(diagnostics, template: dict) -> dict:
+    """``diagnostics`` as a dict with the template's keys: a value the estimate lacks (None,
+    or an array of another shape) is the template's."""
+    d = diagnostics_dict(diagnostics)
+    if not template:
+        return dict(d) if isinstance(d, dict) else {}
+    d = d if isinstance(d, dict) else {}
+    out = {}
+    for key, default in template.items():
+        value = d.get(key)
+        if value is None or (isinstance(default, np.ndarray)
+                             and np.shape(value) != default.shape):
+            value = default.copy() if isinstance(default, np.ndarray) else default
+        out[key] = value
+    return out
+
+
+def estimate_info(estimate: Estimate, estimator, n: int, template: dict) -> dict:
+    """The estimator's fields of ``info``, with the same keys, types and shapes at every reset
+    and step (``gym.make_vec`` batches them): ``eta_hat`` (n,), ``eta_sd`` (n,) (the
+    observation's value: :data:`~quad_fault_env.observation.SD_MAX` where the estimator reports
+    no uncertainty), ``estimator`` (name), ``estimator_status`` (str) and
+    ``estimator_diagnostics`` (a dict with the keys of ``template``,
+    :func:`diagnostics_template`)."""
+    sd = estimate_sd(estimate, n)
+    return {
+        "eta_hat": np.array(estimate.eta, dtype=float),
+        "eta_sd": np.full(n, SD_MAX) if sd is None else sd.copy(),
+        "estimator": getattr(estimator, "name", type(estimator).__name__),
+        "estimator_status": str(estimate.status),
+        "estimator_diagnostics": _fixed_diagnostics(estimate.diagnostics, template),
+    }
+
+
 __all__ = ["make_estimator", "estimator_class", "NominalBelief", "TruthOracle", "ESTIMATOR_NAMES",
-           "NOMINAL_PRIOR_SD", "STATUS_OK", "estimate_sd", "diagnostics_dict"]
+           "NOMINAL_PRIOR_SD", "STATUS_OK", "estimate_sd", "diagnostics_dict",
+           "diagnostics_template", "estimate_info"]

@@ -8,9 +8,10 @@ N quadrotors stepped as arrays (no subprocesses)::
     env = make_sb3_vec_env(64, seed=0, estimator="none", scenario="combined")
     PPO("MlpPolicy", env, n_steps=64).learn(100_000)
 
-SB3 conventions: the vector env runs in ``same_step`` autoreset mode; a finished sub-env's
-last observation is ``infos[i]["terminal_observation"]`` and ``infos[i]["TimeLimit.truncated"]``
-tells truncation from termination; infos are one dict per sub-env. Needs the ``rl`` extra.
+SB3 conventions: the vector env runs in ``same_step`` autoreset mode; infos are one dict per
+sub-env; a finished sub-env's info is that of its episode's last step, with its last
+observation in ``infos[i]["terminal_observation"]`` and ``infos[i]["TimeLimit.truncated"]``
+telling truncation from termination. Needs the ``rl`` extra.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
-from quad_fault_env.vector import QuadFaultVectorEnv
+from quad_fault_env.vector import QuadFaultVectorEnv, registered_kwargs
 from quadfault.errors import ConfigError
 
 try:
@@ -72,13 +73,15 @@ class QuadFaultSB3VecEnv(VecEnv if VecEnv is not None else object):
         obs, rew, term, trunc, info = self.venv.step(self._actions)
         infos = self._split(info)
         done = term | trunc
-        for i in np.flatnonzero(done):
+        for i in np.flatnonzero(done):  # SB3: the info of the episode's last step
+            infos[i] = self._split(info["final_info"], [i])[0]
             infos[i]["terminal_observation"] = _row(info["final_obs"], i)
             infos[i]["TimeLimit.truncated"] = bool(trunc[i] and not term[i])
         return obs, rew.astype(np.float32), done, infos
 
-    def _split(self, info: dict) -> list[dict]:
-        return [{k: info[k][i] for k in _INFO_KEYS if k in info} for i in range(self.num_envs)]
+    def _split(self, info: dict, rows=None) -> list[dict]:
+        rows = range(self.num_envs) if rows is None else rows
+        return [{k: info[k][i] for k in _INFO_KEYS if k in info} for i in rows]
 
     def close(self) -> None:
         self.venv.close()
@@ -113,9 +116,17 @@ def _row(obs, i):
     return obs[i]
 
 
-def make_sb3_vec_env(num_envs: int, seed: int | None = None, **kwargs) -> QuadFaultSB3VecEnv:
-    """A :class:`QuadFaultSB3VecEnv` of ``num_envs`` sub-envs (``kwargs`` as for
-    :class:`QuadFaultVectorEnv`), seeded with ``seed .. seed + num_envs - 1``."""
+def make_sb3_vec_env(num_envs: int, seed: int | None = None, env_id: str | None = None,
+                     **kwargs) -> QuadFaultSB3VecEnv:
+    """A :class:`QuadFaultSB3VecEnv` of ``num_envs`` sub-envs, seeded with ``seed .. seed +
+    num_envs - 1``.
+
+    ``env_id``: a registered QuadFault id (``"QuadFaultHover-v1"``): its task's keywords, and
+    its step limit when it registers one (``-v0``), as ``gym.make`` and ``gym.make_vec`` use
+    them; ``kwargs`` (keywords of :class:`QuadFaultVectorEnv`) override them. Without an id,
+    ``kwargs`` alone (the class defaults: the ``-v1`` reward and episode rule)."""
+    if env_id is not None:
+        kwargs = registered_kwargs(env_id, **kwargs)
     venv = QuadFaultVectorEnv(num_envs, autoreset_mode="same_step", **kwargs)
     env = QuadFaultSB3VecEnv(venv)
     if seed is not None:

@@ -24,6 +24,7 @@ rendering; only the named estimators (``"irls" | "ekf" | "truth" | "none"``).
 from __future__ import annotations
 
 import copy
+import os
 import warnings
 
 import gymnasium as gym
@@ -31,12 +32,14 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from quad_fault_env.envs.config import deprecated_physics, validate_action
+from quad_fault_env import VECTOR_ENTRY_POINT
+from quad_fault_env.envs.config import GENERATORS, deprecated_physics, validate_action
 from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.estimation import NOMINAL_PRIOR_SD
+from quad_fault_env.observation import SD_MAX
 from quad_fault_env.time_tables import WINDOW, RowTimeTables
-from quadfault import closed_loop
+from quadfault import closed_loop, jit
 from quadfault.controller import GeometricController
 from quadfault.dynamics import RigidBodyState
 from quadfault.effects.sampling import describe
@@ -45,7 +48,37 @@ from quadfault.motors import MotorModel
 from quadfault.plant import Plant
 
 NOISE_STREAMS = ("per_env", "shared")
+#: batch size from which the vector env runs numba's parallel kernels on numba's threads by
+#: default; below it, on the calling thread alone (measured: ``benchmarks/numba_threads.py``,
+#: docs/throughput.md "numba threads")
+THREADS_MIN_BATCH = 16384
 AUTORESET_MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
+
+
+def default_threads(num_envs: int) -> int | None:
+    """The numba thread count a vector env of ``num_envs`` sub-envs steps with by default: 1
+    below :data:`THREADS_MIN_BATCH`, else None (numba's count); None as well when the user set
+    ``NUMBA_NUM_THREADS`` (their choice is kept)."""
+    if os.environ.get("NUMBA_NUM_THREADS") or num_envs >= THREADS_MIN_BATCH:
+        return None
+    return 1
+
+
+def registered_kwargs(env_id: str, **overrides) -> dict:
+    """The :class:`QuadFaultVectorEnv` keywords of a registered QuadFault id, as
+    ``gym.make_vec`` passes them: the task's keywords, then ``overrides``, and the id's step
+    limit as ``max_episode_steps`` when it registers one (``-v0``) and none is given."""
+    try:
+        spec = gym.spec(env_id)
+    except gym.error.Error as exc:
+        raise ConfigError(f"environment {env_id!r}: {exc}") from None
+    if spec.vector_entry_point != VECTOR_ENTRY_POINT:
+        raise ConfigError(f"{env_id!r} is not a QuadFault environment id (its vector entry "
+                          f"point is {spec.vector_entry_point!r})")
+    kwargs = dict(spec.kwargs, **overrides)
+    if spec.max_episode_steps is not None:
+        kwargs.setdefault("max_episode_steps", spec.max_episode_steps)
+    return kwargs
 
 
 def _groups(keys: np.ndarray):
@@ -94,11 +127,19 @@ class QuadFaultVectorEnv(VectorEnv):
         autoreset_mode: ``"next_step"`` (gymnasium's default: the step after an episode's end
             returns the reset observation, reward 0) or ``"same_step"`` (the reset observation
             is returned at once; the last one is in ``info["final_obs"]``).
+        numba_threads: threads of numba's parallel kernels (the physics over the vehicles,
+            the batched estimator) during this env's ``reset`` and ``step``: ``"auto"``
+            (:func:`default_threads`: one below :data:`THREADS_MIN_BATCH` sub-envs, numba's
+            count from there on, numba's count whenever ``NUMBA_NUM_THREADS`` is set), an
+            integer, or None (the caller's count). Set on the calling thread for the call only
+            (``quadfault.jit.threads``): nothing else in the process changes, and the flights
+            are the same for every count.
         **kwargs: every other keyword of ``QuadFaultEnv`` (scenario, action_mode, rates, ...);
             ``render_mode`` is not supported.
 
     ``info`` (arrays over the sub-envs, with gymnasium's ``"_<key>"`` masks): ``t`` [s],
-    ``eta_true``, ``eta_hat``, ``eta_sd`` (NaN = none), ``estimator_status``,
+    ``eta_true``, ``eta_hat``, ``eta_sd`` (10 = none, as in the observation),
+    ``estimator_status``,
     ``position_error`` [m], ``tracking_error`` [m], ``motor_command`` [N],
     ``termination_reason``, ``scenario``; with ``effects`` / ``model``, ``effects`` (each
     sub-env's drawn effects, as the single env reports them).
@@ -108,8 +149,8 @@ class QuadFaultVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, estimator: str = "irls", scenario="combined", *,
                  estimator_kwargs=None, max_episode_steps: int | None = None,
-                 autoreset_mode: str = "next_step", physics: str | None = None,
-                 noise_streams: str | None = None, **kwargs):
+                 autoreset_mode: str = "next_step", numba_threads="auto",
+                 physics: str | None = None, noise_streams: str | None = None, **kwargs):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
                 or num_envs < 1:
             raise ConfigError(f"num_envs must be an integer >= 1, got {num_envs!r}")
@@ -125,6 +166,14 @@ class QuadFaultVectorEnv(VectorEnv):
                                                   and max_episode_steps >= 1):
             raise ConfigError(f"max_episode_steps must be an integer >= 1, "
                               f"got {max_episode_steps!r}")
+        if numba_threads == "auto":
+            numba_threads = default_threads(int(num_envs))
+        elif numba_threads is not None and (isinstance(numba_threads, bool) or not isinstance(
+                numba_threads, (int, np.integer)) or numba_threads < 1):
+            raise ConfigError(f"numba_threads must be 'auto', None or an integer >= 1, "
+                              f"got {numba_threads!r}")
+        #: numba threads of this env's steps and resets (None: the caller's count)
+        self.numba_threads = None if numba_threads is None else int(numba_threads)
         deprecated_physics(physics)
         if noise_streams is not None:
             if noise_streams not in NOISE_STREAMS:
@@ -228,7 +277,8 @@ class QuadFaultVectorEnv(VectorEnv):
             return None
         e0, n = self.envs[0], self.vehicle.n_rotors
         spec = e0._scenario_option(options)
-        shared = None if (isinstance(spec, str) and spec == "random") else e0._make_scenario(spec)
+        drawn = isinstance(spec, str) and spec in GENERATORS  # a new scenario per row
+        shared = None if drawn else e0._make_scenario(spec)
         u = np.empty((len(rows), SPREAD_DRAWS))
         for k, i in enumerate(rows.tolist()):
             env = self.envs[i]
@@ -309,7 +359,8 @@ class QuadFaultVectorEnv(VectorEnv):
                 raise ConfigError(f"reset needs {N} seeds, got {len(seeds)}")
         self._trajectories, self._schedules, self._controllers = _Table(), _Table(), {}
         self._rng_list = None
-        refs = self._reset_rows(np.arange(N), seeds, options)  # every row at t = 0
+        with jit.threads(self.numba_threads):
+            refs = self._reset_rows(np.arange(N), seeds, options)  # every row at t = 0
         self._needs_reset[:] = False
         self._started = True
         return self._observations(refs), self._infos(refs, np.full(N, None, dtype=object))
@@ -372,7 +423,8 @@ class QuadFaultVectorEnv(VectorEnv):
         if not self._started:
             raise gym.error.ResetNeeded("call reset() before step()")
         a = self._check_actions(actions)
-        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"), \
+                jit.threads(self.numba_threads):
             return self._step(a)
 
     def _step(self, a: np.ndarray):
@@ -402,9 +454,8 @@ class QuadFaultVectorEnv(VectorEnv):
         for m, x in zip(self.meas, state):
             m[terminated] = x[terminated]
         self.eta_true = self._tables.efficiency_at(self.steps - 1, S)
-        reward = self.envs[0].reward_config(state.p - refs[0],
-                                state.v - refs[1], self.f_cmd, self.vehicle.rotor_max_thrust,
-                                terminated)
+        reward = self.envs[0].reward_config(state.p - refs[0], state.v - refs[1], self.f_cmd,
+                                            self.vehicle.rotor_max_thrust, terminated, a)
         done = terminated | truncated
         mode = self.metadata["autoreset_mode"]
         if resetting.any():
@@ -442,7 +493,7 @@ class QuadFaultVectorEnv(VectorEnv):
             "t": self.steps * self.substeps * self.dt,
             "eta_true": self.eta_true.copy(),
             "eta_hat": self.eta_hat.copy(),
-            "eta_sd": self.eta_sd.copy(),
+            "eta_sd": np.where(np.isnan(self.eta_sd), SD_MAX, self.eta_sd),
             "estimator_status": np.asarray(self.status, dtype=object).copy(),
             "position_error": err,
             "tracking_error": np.linalg.norm(err, axis=-1),
@@ -461,4 +512,5 @@ class QuadFaultVectorEnv(VectorEnv):
             env.close()
 
 
-__all__ = ["AUTORESET_MODES", "QuadFaultVectorEnv"]
+__all__ = ["AUTORESET_MODES", "THREADS_MIN_BATCH", "QuadFaultVectorEnv", "default_threads",
+           "registered_kwargs"]

@@ -2,8 +2,9 @@
 
 Every step of :class:`~quad_fault_env.envs.quad_fault.QuadFaultEnv` puts the measurements
 of its physics substeps in ``info["samples"]`` (a list of :class:`estimators.base.Sample`,
-one per substep, the command held over it), aligned with ``info["eta_true_samples"]`` and
-``info["specific_force_samples"]``. The env's own estimator reads every
+one per substep, the command held over it), aligned with the first ``len(info["samples"])``
+rows of ``info["eta_true_samples"]`` and ``info["specific_force_samples"]`` (one row per
+substep of the step; NaN rows for substeps not flown). The env's own estimator reads every
 ``env.unwrapped.estimator_stride``-th sample; the wrappers below read the same stream.
 
 * :class:`EfficiencyEstimateObservation` -- fills the ``eta_hat`` / ``eta_sd`` slots from any
@@ -21,8 +22,9 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
-from quad_fault_env.estimation import (TruthOracle, diagnostics_dict, estimate_sd,
-                                       make_estimator)
+from estimators.base import Estimate
+from quad_fault_env.estimation import (TruthOracle, diagnostics_template, estimate_info,
+                                       estimate_sd, make_estimator)
 from quad_fault_env.observation import SD_MAX
 from quadfault.errors import ConfigError
 from quadfault.recording import Recording, write_recording
@@ -31,6 +33,11 @@ from quadfault.rotation import rot_to_quat
 
 def _stream(info: dict, stride: int):
     return info.get("samples", [])[::stride]
+
+
+def _flown(info: dict, key: str) -> np.ndarray:
+    """The rows of a per-substep ``info`` array that belong to ``info["samples"]``."""
+    return np.asarray(info[key])[:len(info.get("samples", []))]
 
 
 def _prepare(estimator, env):
@@ -62,20 +69,15 @@ class EfficiencyEstimateObservation(gym.Wrapper):
         if self.stride < 1:
             raise ConfigError(f"stride must be >= 1, got {stride!r}")
         self.estimate = None
+        self._template = diagnostics_template(self.estimator)
 
     def _fill(self, obs, info):
         n = self.env.unwrapped.vehicle.n_rotors
-        if self.estimate is None:
-            eta, sd, status, diag = np.ones(n), None, "warmup", None
-        else:
-            eta, sd = self.estimate.eta, estimate_sd(self.estimate, n)
-            status = self.estimate.status
-            diag = diagnostics_dict(self.estimate.diagnostics)
-        obs = self.layout.replace(obs, "eta_hat", eta)
+        est = self.estimate or Estimate(0.0, np.ones(n), None, "warmup")
+        sd = estimate_sd(est, n)
+        obs = self.layout.replace(obs, "eta_hat", est.eta)
         obs = self.layout.replace(obs, "eta_sd", SD_MAX if sd is None else sd)
-        info = dict(info, eta_hat=np.asarray(eta, dtype=float), eta_sd=sd,
-                    estimator=getattr(self.estimator, "name", type(self.estimator).__name__),
-                    estimator_status=status, estimator_diagnostics=diag)
+        info = dict(info, **estimate_info(est, self.estimator, n, self._template))
         return obs, info
 
     def reset(self, **kwargs):
@@ -193,7 +195,7 @@ class EstimatorComparison(gym.Wrapper):
     def step(self, action):
         obs, reward, terminated, truncated, info = self.env.step(action)
         stream = _stream(info, self.stride)
-        truth = np.asarray(info["eta_true_samples"])[::self.stride]
+        truth = _flown(info, "eta_true_samples")[::self.stride]
         report = {}
         for name, est in self.estimators.items():
             estimate = None
@@ -278,8 +280,8 @@ class RecordFlight(gym.Wrapper):
         obs, reward, terminated, truncated, info = self.env.step(action)
         if self._rows is not None:
             self._rows["samples"] += info["samples"]
-            self._rows["eta"].append(np.asarray(info["eta_true_samples"]))
-            self._rows["acc"].append(np.asarray(info["specific_force_samples"]))
+            self._rows["eta"].append(_flown(info, "eta_true_samples"))
+            self._rows["acc"].append(_flown(info, "specific_force_samples"))
             if terminated or truncated:
                 self._write()
         return obs, reward, terminated, truncated, info

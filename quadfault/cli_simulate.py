@@ -49,9 +49,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="white measurement noise std: position [m], velocity [m/s], attitude "
                         "[rad], gyro [rad/s], accelerometer [m/s^2] (default: none)")
     p.add_argument("--no-saturation", action="store_true",
-                   help="clip rotor commands only at 0 (the reference code)")
+                   help="clip rotor commands only at 0 (the reference code; the default for "
+                        "the paper's scenarios)")
     p.add_argument("--max-thrust", type=float, default=None,
-                   help="per-rotor thrust limit [N] (default: thrust-to-weight 2)")
+                   help="per-rotor thrust limit [N] (default: none for the paper's fault scenarios "
+                        "degradation, abrupt and combined, as the paper flies them; "
+                        "thrust-to-weight 2 for the others)")
     p.add_argument("--no-accel-feedforward", action="store_true",
                    help="the reference's a_d = 0 in the controller")
     p.add_argument("--frame", choices=("NED", "ENU"), default="NED", help="output world frame")
@@ -73,9 +76,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     import numpy as np
 
-    from quadfault.controller import ControllerConfig
+    from quadfault.controller import ControllerConfig, GeometricGains
     from quadfault.recording import write_recording
-    from quadfault.scenarios import named_scenario
+    from quadfault.scenarios import PAPER_SCENARIOS, named_scenario
     from quadfault.simulator import SensorNoise, SimConfig, simulate
     from quadfault.vehicle import Vehicle
 
@@ -118,22 +121,29 @@ def run(args) -> int:
     vehicle = Vehicle() if model is None else model.vehicle
     if args.max_thrust is not None:
         vehicle = vehicle.replace(max_thrust=args.max_thrust)
+    # the paper's scenarios fly as the paper (and `reproduce`) fly them: no upper thrust limit
+    saturate = not (args.no_saturation or (args.scenario in PAPER_SCENARIOS
+                                           and args.max_thrust is None))
     if args.integrator == "reference":
         cfg = SimConfig.reference(dt=args.dt, sensor_noise=noise)
     else:
-        ctrl = ControllerConfig(acceleration_feedforward=not args.no_accel_feedforward)
+        # a model's vehicle flies the paper's gains carried over to its mass and inertia
+        gains = GeometricGains() if model is None else GeometricGains().scaled(vehicle)
+        ctrl = ControllerConfig(gains=gains,
+                                acceleration_feedforward=not args.no_accel_feedforward)
         period = None if args.control_rate is None else 1.0 / args.control_rate
-        cfg = SimConfig(dt=args.dt, control_period=period, saturate=not args.no_saturation,
+        cfg = SimConfig(dt=args.dt, control_period=period, saturate=saturate,
                         sensor_noise=noise, controller=ctrl)
     effects, scenario = _effects(args, model, scenario)
     # an absurd parameter (wind=1e308) overflows inside numpy; the simulator's own
     # non-finite-state check turns that into the one-line error, so numpy's warnings are noise
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         rec = simulate(scenario, vehicle=vehicle, config=cfg, seed=args.seed, effects=effects,
-                       thrust_noise=args.thrust_noise, progress=not args.quiet)
+                       thrust_noise=args.thrust_noise, progress=not args.quiet,
+                       stop_at_loss=True)
     if model is not None:
         rec.meta["truth"] = {"model": model.source}
-    _warn_if_control_lost(rec, scenario, args)
+    _warn_if_ended(rec, saturate and args.integrator != "reference")
     if args.commands == "u":
         from quadfault.effects import curve_command, curve_thrust
 
@@ -178,29 +188,29 @@ def _effects(args, model, scenario):
     return canonical_order(effects), scenario
 
 
-#: Tracking error [m] above which ``simulate`` warns that the controller lost the vehicle.
-LOST_CONTROL_ERROR = 2.0
-
-
-def _warn_if_control_lost(rec, scenario, args) -> None:
-    """Say so on stderr when the plain controller lost the vehicle (the recording is still
-    written: it is what the physics gives)."""
+def _warn_if_ended(rec, saturated: bool) -> None:
+    """A warning on stderr when the flight ended early because it lost the vehicle or went
+    below the ground (``simulate(..., stop_at_loss=True)``: the recording stops at that row and
+    its sidecar's ``end`` says why)."""
     import sys
 
-    import numpy as np
+    from quadfault.simulator import LOST_CONTROL_ERROR
 
-    err = np.linalg.norm(rec.position - scenario.trajectory(rec.t).position, axis=1)
-    lost = np.flatnonzero(err > LOST_CONTROL_ERROR)
-    if lost.size == 0:
+    end = rec.meta.get("end")
+    if end is None:
         return
     hint = ""
     names = {e["name"] for e in rec.meta.get("effects", ())}
     if "rotor_inertia" in names and "motor_lag" not in names:
         hint = (" rotor_inertia without motor_lag makes every thrust step a yaw kick; a rotor "
                 "with inertia has a lag: add --effect motor_lag=TAU (docs/effects.md).")
-    elif not args.no_saturation and args.integrator != "reference":
-        hint = (" With thrust-to-weight 2 a rotor at eta = 0.5 cannot hold the paper's circle;"
-                " the paper's scenarios assume no upper thrust limit (--no-saturation), or use"
-                " the estimate-aware controller (agents).")
-    print(f"warning: the controller lost the vehicle at t = {rec.t[lost[0]]:.2f} s (tracking "
-          f"error > {LOST_CONTROL_ERROR:g} m, max {err.max():.3g} m).{hint}", file=sys.stderr)
+    elif saturated:
+        hint = (" With a rotor thrust limit the rotors may not carry the vehicle: fly without "
+                "one (--no-saturation), raise --max-thrust, or use the estimate-aware controller "
+                "(agents).")
+    what = {"lost_control": f"the controller lost the vehicle (tracking error > "
+                            f"{LOST_CONTROL_ERROR:g} m)",
+            "below_ground": "the controller lost the vehicle below the ground"}[end["reason"]]
+    print(f"warning: {what} at t = {end['t']:.3f} s; the recording ends there ({len(rec)} rows "
+          f"of a planned {end['planned_duration']:g} s; the sidecar's \"end\" says why).{hint}",
+          file=sys.stderr)

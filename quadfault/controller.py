@@ -47,6 +47,21 @@ class GeometricGains:
     kR: tuple = (10.0, 10.0, 10.0)
     kW: tuple = (2.0, 2.0, 2.0)
 
+    def scaled(self, vehicle: Vehicle, reference: Vehicle | None = None) -> "GeometricGains":
+        """These gains, written for ``reference`` (the paper's F450 by default), carried over
+        to ``vehicle``: ``kx``, ``kv`` times the mass ratio and ``kR``, ``kW`` times the
+        inertia ratio of each axis, so the closed loop keeps the same natural frequencies and
+        damping (eqs. 9-10 divide the force by the mass and the moment by the inertia). The
+        F450's gains on a 30 g Crazyflie are 60x too stiff in position and ~10^3 x in attitude.
+        """
+        ref = reference or Vehicle()
+        m = vehicle.mass / ref.mass
+        J = np.diag(vehicle.inertia) / np.diag(ref.inertia)
+        return GeometricGains(tuple(float(k) * m for k in self.kx),
+                              tuple(float(k) * m for k in self.kv),
+                              tuple(float(k) * float(j) for k, j in zip(self.kR, J)),
+                              tuple(float(k) * float(j) for k, j in zip(self.kW, J)))
+
 
 @dataclass(frozen=True)
 class ControllerConfig:

@@ -22,6 +22,7 @@ user set ``NUMBA_CACHE_DIR`` themselves or when no writable cache directory exis
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import sys
@@ -142,10 +143,11 @@ _make_list = None
 
 
 def set_threads(n: int | None) -> int:
-    """Set numba's worker-thread count for this process (``None``: leave it); return it.
+    """Set numba's worker-thread count for the calling thread (``None``: leave it); return it.
 
     numba's OpenMP-style workers spin between parallel regions, so a small batch on a busy
     machine runs faster on one thread (docs/throughput.md has the measured crossover).
+    :func:`threads` sets it for a block only.
     """
     nb = _numba()
     if nb is None:
@@ -158,6 +160,23 @@ def set_threads(n: int | None) -> int:
             raise ConfigError(f"numba threads must be an integer in 1..{most}, got {n!r}")
         nb.set_num_threads(n)
     return int(nb.get_num_threads())
+
+
+@contextlib.contextmanager
+def threads(n: int | None):
+    """Run the block with ``n`` numba threads on the calling thread, then restore the caller's
+    count (``None``: leave it). numba's thread count belongs to the thread that sets it, so
+    this changes nothing for other threads or for code after the block."""
+    nb = _numba()
+    before = None if (nb is None or n is None) else nb.get_num_threads()
+    if before is None or before == n:
+        yield
+        return
+    set_threads(n)
+    try:
+        yield
+    finally:
+        nb.set_num_threads(before)
 
 
 # ----------------------------------------------------------------------------------------
@@ -214,5 +233,5 @@ def configure_cache() -> str | None:
     return str(target)
 
 
-__all__ = ["AVAILABLE", "jit", "prange", "python", "typed_list", "set_threads", "configure_cache",
-           "sources_digest"]
+__all__ = ["AVAILABLE", "jit", "prange", "python", "typed_list", "set_threads", "threads",
+           "configure_cache", "sources_digest"]

@@ -20,12 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
+from quadfault.effects.physics import curve_thrust
 from quadfault.errors import ConfigError, RecordingError
 from quadfault.fileio import atomic_write_files, check_writable
-from quadfault.rotation import ENU_TO_NED, FLU_TO_FRD, quat_multiply, quat_to_rot, rot_to_quat
-from quadfault.vehicle import Vehicle, paper_allocation
+from quadfault.frames import enu_flu_to_ned_frd, vehicle_flu_to_frd  # noqa: F401 (re-exported)
+from quadfault.rotation import FLU_TO_FRD, quat_to_rot
+from quadfault.sidecar import FORMAT, parse_sidecar, sidecar_path, vehicle_from_sidecar
+from quadfault.vehicle import Vehicle
 
-FORMAT = "quadfault-recording/1"
 POSE_COLUMNS = ("px", "py", "pz", "vx", "vy", "vz", "qw", "qx", "qy", "qz")
 RATE_COLUMNS = ("wx", "wy", "wz")
 ACC_COLUMNS = ("ax", "ay", "az")
@@ -37,15 +39,6 @@ QUAT_NORM_TOL = 1e-3
 #: Every column the contract defines; other columns are extras, kept and ignored.
 KNOWN_COLUMNS = frozenset(("t", "vbat") + POSE_COLUMNS + RATE_COLUMNS + ACC_COLUMNS + F_COLUMNS
                           + U_COLUMNS + OMEGA_COLUMNS + ETA_COLUMNS)
-
-# Quaternions of the fixed frame changes (exact matrices in rotation.py).
-_Q_ENU_TO_NED = rot_to_quat(ENU_TO_NED)
-_Q_FLU_TO_FRD = rot_to_quat(FLU_TO_FRD)
-
-
-def _conj(q):
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
-
 
 @dataclass(frozen=True, eq=False)
 class Recording:
@@ -143,146 +136,11 @@ class Recording:
 
 
 # ----------------------------------------------------------------------------------------
-# frame conversion (ENU/FLU <-> NED/FRD); the maps are involutions
-def enu_flu_to_ned_frd(position, velocity, quaternion, omega, accel):
-    """Convert world ENU / body FLU quantities to world NED / body FRD (and back: the same
-    map is its own inverse)."""
-    P, B = ENU_TO_NED, FLU_TO_FRD
-    pos = None if position is None else position @ P.T
-    vel = None if velocity is None else velocity @ P.T
-    quat = None
-    if quaternion is not None:
-        quat = quat_multiply(quat_multiply(_Q_ENU_TO_NED, quaternion), _conj(_Q_FLU_TO_FRD))
-        quat = quat * np.where(quat[..., :1] < 0, -1.0, 1.0)
-    om = None if omega is None else omega @ B.T
-    acc = None if accel is None else accel @ B.T
-    return pos, vel, quat, om, acc
-
-
-def vehicle_flu_to_frd(mass, inertia, allocation, **kw) -> Vehicle:
-    """A vehicle described in FLU body axes, expressed in FRD (the map is an involution)."""
-    B = FLU_TO_FRD
-    J = np.asarray(inertia, dtype=float)
-    if J.shape == (3,):
-        J = np.diag(J)
-    A = np.asarray(allocation, dtype=float)
-    T = np.diag([1.0, 1.0, -1.0, -1.0])  # [T, Mx, My, Mz]: moments transform with B
-    return Vehicle(mass=mass, inertia=B @ J @ B, allocation=T @ A, **kw)
-
-
-# ----------------------------------------------------------------------------------------
 # reading
 def _open_text(path: Path):
     if path.suffix == ".gz":
         return io.TextIOWrapper(gzip.open(path, "rb"), encoding="utf-8-sig", newline="")
     return open(path, encoding="utf-8-sig", newline="")  # a BOM (Excel) is not a column name
-
-
-def sidecar_path(csv_path) -> Path:
-    p = Path(csv_path)
-    name = p.name
-    for suf in (".csv.gz", ".csv"):
-        if name.endswith(suf):
-            return p.with_name(name[: -len(suf)] + ".json")
-    return p.with_suffix(".json")
-
-
-def _number(path, key, value, *, positive=False):
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise RecordingError(path, f"must be a number, got {value!r}", key=key)
-    if not math.isfinite(value):
-        raise RecordingError(path, f"must be finite, got {value!r}", key=key)
-    if positive and value <= 0:
-        raise RecordingError(path, f"must be positive, got {value!r}", key=key)
-    return float(value)
-
-
-def _matrix(path, key, value, shape_ok):
-    try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise RecordingError(path, "must be a list of numbers", key=key) from None
-    if not shape_ok(arr.shape):
-        raise RecordingError(path, f"has the wrong shape {arr.shape}", key=key)
-    if not np.all(np.isfinite(arr)):
-        raise RecordingError(path, "contains NaN or inf", key=key)
-    return arr
-
-
-def _parse_sidecar(path: Path) -> dict:
-    if not path.exists():
-        raise RecordingError(path, "sidecar JSON not found (every recording needs FILE.json "
-                                   "beside FILE.csv)")
-    try:
-        text = path.read_text(encoding="utf-8")
-        meta = json.loads(text)
-    except UnicodeDecodeError:
-        raise RecordingError(path, "sidecar is not UTF-8 text") from None
-    except json.JSONDecodeError as exc:
-        raise RecordingError(path, f"invalid JSON at line {exc.lineno}, column {exc.colno}: "
-                                   f"{exc.msg}") from None
-    except RecursionError:
-        raise RecordingError(path, "invalid JSON: nested too deeply") from None
-    if not isinstance(meta, dict):
-        raise RecordingError(path, "sidecar must be a JSON object")
-    fmt = meta.get("format")
-    if fmt != FORMAT:
-        raise RecordingError(path, f"expected {FORMAT!r}, got {fmt!r}", key="format")
-    frame = meta.get("frame")
-    if frame not in ("NED", "ENU"):
-        raise RecordingError(path, f"must be 'NED' or 'ENU', got {frame!r}", key="frame")
-    if not isinstance(meta.get("vehicle"), dict):
-        raise RecordingError(path, "missing or not an object", key="vehicle")
-    return meta
-
-
-def _vehicle_from_sidecar(path: Path, meta: dict, has_u: bool):
-    vd = meta["vehicle"]
-    frame = meta["frame"]
-    gravity = _number(path, "gravity", meta.get("gravity", 9.81), positive=True)
-    mass = _number(path, "vehicle.mass", vd.get("mass"), positive=True) if "mass" in vd else None
-    if mass is None:
-        raise RecordingError(path, "missing", key="vehicle.mass")
-    if "inertia" not in vd:
-        raise RecordingError(path, "missing", key="vehicle.inertia")
-    J = _matrix(path, "vehicle.inertia", vd["inertia"], lambda s: s in ((3,), (3, 3)))
-    if J.shape == (3,):
-        J = np.diag(J)
-    if "allocation" in vd:
-        A = _matrix(path, "vehicle.allocation", vd["allocation"],
-                    lambda s: len(s) == 2 and s[0] == 4 and s[1] >= 4)
-    elif "arm" in vd and "torque_coefficient" in vd:
-        d = _number(path, "vehicle.arm", vd["arm"], positive=True)
-        c = _number(path, "vehicle.torque_coefficient", vd["torque_coefficient"], positive=True)
-        A = paper_allocation(d, c)
-        if frame == "ENU":
-            # the arm/torque layout is defined in FRD; express it in FLU for the common path
-            A = np.diag([1.0, 1.0, -1.0, -1.0]) @ A
-    else:
-        raise RecordingError(path, "needs 'allocation' or both 'arm' and 'torque_coefficient'",
-                             key="vehicle")
-    kw = {"gravity": gravity}
-    if "max_thrust" in vd:
-        kw["max_thrust"] = _number(path, "vehicle.max_thrust", vd["max_thrust"], positive=True)
-    try:
-        if frame == "ENU":
-            vehicle = vehicle_flu_to_frd(mass, J, A, **kw)
-        else:
-            vehicle = Vehicle(mass=mass, inertia=J, allocation=A, **kw)
-    except ConfigError as exc:
-        raise RecordingError(path, str(exc), key="vehicle") from None
-    curve = None
-    if has_u:
-        if "thrust_curve" in vd:
-            c3 = _matrix(path, "vehicle.thrust_curve", vd["thrust_curve"], lambda s: s == (3,))
-            curve = tuple(float(x) for x in c3)
-        elif "thrust_coefficient" in vd:
-            k = _number(path, "vehicle.thrust_coefficient", vd["thrust_coefficient"], positive=True)
-            curve = (0.0, 0.0, k)
-        else:
-            raise RecordingError(path, "u1..u4 commands need 'thrust_coefficient' or "
-                                       "'thrust_curve'", key="vehicle")
-    return vehicle, curve
 
 
 #: rows converted to numbers at a time (the reader streams: memory ~ the numeric table)
@@ -372,7 +230,7 @@ def read_recording(csv_path) -> Recording:
         raise RecordingError(path, "file not found")
     if path.is_dir():
         raise RecordingError(path, "is a directory, expected a CSV file")
-    meta = _parse_sidecar(sidecar_path(path))
+    meta = parse_sidecar(sidecar_path(path))
     header, data = _read_table(path)
     cols = {h: i for i, h in enumerate(header)}
 
@@ -411,7 +269,7 @@ def read_recording(csv_path) -> Recording:
     def get(names):
         return data[:, [cols[c] for c in names]]
 
-    vehicle, curve = _vehicle_from_sidecar(sidecar_path(path), meta, has_u and not has_f)
+    vehicle, curve = vehicle_from_sidecar(sidecar_path(path), meta, has_u and not has_f)
     if vehicle.n_rotors != 4:
         raise RecordingError(sidecar_path(path), f"allocation has {vehicle.n_rotors} rotor "
                              "columns, but the CSV carries 4", key="vehicle.allocation")
@@ -433,8 +291,7 @@ def read_recording(csv_path) -> Recording:
         thrust_cmd = get(F_COLUMNS)
     else:
         commands_u = get(U_COLUMNS)
-        a, b, c = curve
-        thrust_cmd = a + b * commands_u + c * commands_u ** 2
+        thrust_cmd = curve_thrust(curve, commands_u)
     if meta["frame"] == "ENU":
         position, velocity, quat, omega, accel = enu_flu_to_ned_frd(position, velocity, quat,
                                                                     omega, accel)

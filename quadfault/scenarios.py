@@ -185,6 +185,8 @@ class Scenario:
         trajectory: reference trajectory for the controller.
         thrust_noise: sigma_f of the multiplicative thrust noise.
         voltage: battery voltage profile (recorded as ``vbat``), or None.
+        ground_altitude: altitude ``-p_z`` of the ground [m] (NED), or None (no ground): a
+            simulated flight that goes below it ends there (:func:`quadfault.simulator.flight_end`).
     """
 
     name: str
@@ -193,6 +195,7 @@ class Scenario:
     trajectory: Trajectory
     thrust_noise: float = 0.07
     voltage: LinearVoltage | None = None
+    ground_altitude: float | None = 0.0
 
     def replace(self, **changes) -> "Scenario":
         return replace(self, **changes)
@@ -203,6 +206,9 @@ class Scenario:
 
 SCENARIO_NAMES = ("nominal", "degradation", "abrupt", "combined", "clipping", "hover",
                   "hover_fault", "lissajous")
+#: the paper's fault scenarios: flown without an upper thrust limit, as in the paper (its rotors at
+#: eta = 0.5 on the circle need more than thrust-to-weight 2)
+PAPER_SCENARIOS = ("degradation", "abrupt", "combined")
 
 #: The clipping scenario: a circle twice as fast (centripetal 4.7 m/s^2) and faults to 0.6, so
 #: with the default f_max (thrust-to-weight 2) the weak motor's command saturates in part of

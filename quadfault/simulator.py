@@ -141,7 +141,7 @@ def simulate(scenario: Scenario, *, vehicle: Vehicle | None = None,
              config: SimConfig | None = None, seed: int | None = 0,
              effects: tuple = (), thrust_noise: float | None = None,
              controller: GeometricController | None = None, nominal: Vehicle | None = None,
-             progress: bool = False) -> Recording:
+             progress: bool = False, stop_at_loss: bool = False) -> Recording:
     """Fly ``scenario`` and return the recording (with the true ``eta`` for scoring).
 
     Args:
@@ -157,6 +157,10 @@ def simulate(scenario: Scenario, *, vehicle: Vehicle | None = None,
         nominal: the vehicle the controller and the recording's sidecar know (default: the
             true vehicle; differs when an effect such as an inertia error is simulated).
         progress: show a progress bar.
+        stop_at_loss: end the flight at the first row where it loses the vehicle or goes
+            below the scenario's ground (:func:`flight_end`); the recording stops there and
+            its ``meta["end"]`` gives ``reason``, ``t`` and ``planned_duration`` [s]. A
+            flight that diverges after such a row is returned up to it instead of raising.
     """
     cfg = config or SimConfig()
     true_vehicle = vehicle or Vehicle()
@@ -200,12 +204,23 @@ def simulate(scenario: Scenario, *, vehicle: Vehicle | None = None,
                                ctrl.constants)
         if bar is not None:
             bar.update(k1 - k0)
+        event = None if not stop_at_loss else _first_event(
+            times[k0:k0 + done], out.p[0, k0:k0 + done], scenario, LOST_CONTROL_ERROR)
+        if event is not None:
+            n = k0 + event[0] + 1
+            end = {"reason": event[1], "t": float(times[n - 1]),
+                   "planned_duration": float(scenario.duration)}
+            break
         if not vehicles.state().is_finite():
             raise ConfigError(f"simulation diverged at t = {times[k0 + done - 1]:.3f} s "
                               f"(non-finite state)")
+    else:
+        end = None
     if bar is not None:
         bar.close()
     plant.check_effects()
+    times, eta = times[:n], eta[:n]
+    out = closed_loop.Records(1, *(None if a is None else a[:, :n] for a in out[1:]))
     vbat = None if scenario.voltage is None else scenario.voltage(times)
     meta = {
         "scenario": scenario.name,
@@ -213,16 +228,46 @@ def simulate(scenario: Scenario, *, vehicle: Vehicle | None = None,
         "integrator": cfg.integrator,
         "dt": cfg.dt,
         "thrust_noise": sigma,
+        # whether the plant limited each rotor's thrust to the vehicle's max_thrust: the
+        # estimators clip the commands at that limit only when it did
+        "saturated": bool(cfg.saturate),
         "fault_windows": [[m, a, b if math.isfinite(b) else None]
                           for m, a, b in scenario.fault_windows()],
     }
     if effects:
         meta["effects"] = [e.describe() if hasattr(e, "describe") else
                            {"name": type(e).__name__} for e in effects]
+    if end is not None:
+        meta["end"] = end
     return Recording(t=times, omega=out.w[0], thrust_cmd=out.f_cmd[0], vehicle=nominal,
                      position=out.p[0], velocity=out.v[0], quaternion=rot_to_quat(out.R[0]),
                      accel=out.accel[0] if cfg.record_accel else None, vbat=vbat, eta_true=eta,
                      frame="NED", source=f"quadfault simulate ({cfg.integrator})", meta=meta)
 
 
-__all__ = ["SensorNoise", "SimConfig", "initial_state", "simulate"]
+#: tracking error [m] above which a flight has lost the vehicle (:func:`flight_end`)
+LOST_CONTROL_ERROR = 2.0
+
+
+def flight_end(rec: Recording, scenario: Scenario,
+               lost_error: float = LOST_CONTROL_ERROR) -> tuple[int, str] | None:
+    """Where a simulated flight stops being a flight: ``(row, reason)`` of the first row where
+    the vehicle is below the scenario's ground (``"below_ground"``: altitude ``-p_z`` under
+    ``scenario.ground_altitude``) or farther than ``lost_error`` [m] from the reference
+    (``"lost_control"``), or None when neither happens."""
+    return _first_event(rec.t, rec.position, scenario, lost_error)
+
+
+def _first_event(t, position, scenario: Scenario, lost_error: float):
+    """:func:`flight_end` of times ``t`` (N,) and true positions (N, 3) [m]."""
+    err = np.linalg.norm(position - scenario.trajectory(t).position, axis=1)
+    events = [(np.flatnonzero(err > lost_error), "lost_control")]
+    if scenario.ground_altitude is not None:
+        events.append((np.flatnonzero(-position[:, 2] < scenario.ground_altitude),
+                       "below_ground"))
+    first = [(int(rows[0]), reason) for rows, reason in events if rows.size]
+    return min(first) if first else None
+
+
+__all__ = ["LOST_CONTROL_ERROR", "SensorNoise", "SimConfig", "flight_end", "initial_state",
+           "simulate"]

@@ -132,7 +132,7 @@ def test_best_model_comes_from_fixed_seeded_episodes(tmp_path, capsys):
     seeds = list(range(10_000, 10_010))
     assert data["episode_seeds"].tolist() == seeds
     assert data["results"].shape == (3, 10)
-    env = gym.make("QuadFaultHover-v0", **TINY_ENV)
+    env = gym.make("QuadFaultHover-v1", **TINY_ENV)  # quadfault train's default id
     returns, lengths = evaluate_episodes(GeometricPolicy.from_env(env), env, seeds)
     np.testing.assert_array_equal(data["baseline_results"], returns)
     np.testing.assert_array_equal(data["baseline_ep_lengths"], lengths)

@@ -126,3 +126,36 @@ def test_cli_help_is_instant_and_lists_commands(tmp_path):
         assert cmd in r.stdout
     r = _quadfault("simulate", "--help", cwd=tmp_path)
     assert r.returncode == 0 and "--scenario" in r.stdout
+
+
+def test_gains_scaled_to_a_small_vehicle_fly_it_where_the_f450_gains_saturate():
+    """The paper's gains carried over by mass and inertia: identical on the F450; on a 30 g
+    Crazyflie with 30 ms motor lag and sensor noise they hover it within centimetres with no
+    rotor at a limit, while the F450's own gains (about 10^3 x too stiff in attitude for its
+    inertia) drive the rotors bang-bang between their limits."""
+    from quadfault.controller import GeometricGains
+    from quadfault.effects import parse_effect
+    from quadfault.sensors import SensorNoise
+    from quadfault.trajectory import Hover
+
+    assert GeometricGains().scaled(Vehicle()) == GeometricGains()
+    cf = Vehicle.from_arm(0.046, 0.006, mass=0.03, inertia=np.diag([1.4e-5, 1.4e-5, 2.2e-5]))
+    g = GeometricGains().scaled(cf)
+    assert np.allclose(np.array(g.kx) / GeometricGains().kx, 0.03 / Vehicle().mass)
+    assert np.allclose(np.array(g.kW) / GeometricGains().kW, np.diag(cf.inertia)
+                       / np.diag(Vehicle().inertia))
+    sc = named_scenario("nominal", 4.0).replace(trajectory=Hover())
+    lag, noise = (parse_effect("motor_lag=0.03"),), SensorNoise(0.002, 0.005, 0.002, 0.005)
+
+    def fly(gains):
+        rec = simulate(sc, vehicle=cf, seed=0, effects=lag, config=SimConfig(
+            sensor_noise=noise, controller=ControllerConfig(gains=gains)))
+        err = np.linalg.norm(rec.position - (0.0, 0.0, -1.0), axis=1)
+        f = rec.thrust_cmd
+        at_limit = np.mean((f >= cf.rotor_max_thrust - 1e-9) | (f <= 1e-9))
+        return len(rec), err.max(), at_limit
+
+    n, err, at_limit = fly(g)
+    assert n == 4000 and err < 0.03 and at_limit == 0.0
+    n, err, at_limit = fly(GeometricGains())
+    assert at_limit > 0.5 and err > 0.05

@@ -15,15 +15,14 @@ from quadfault.scenarios import named_scenario
 from quadfault.simulator import SensorNoise, SimConfig, simulate
 from quadfault.trajectory import Lissajous
 
-CHANNELS = {"acc_x", "acc_y", "acc_z", "alpha_x", "alpha_y", "alpha_z"}
+CHANNELS = {"acc_x", "acc_y", "acc_z", "sf_x", "sf_y", "sf_z", "alpha_x", "alpha_y", "alpha_z"}
 
 
 @pytest.fixture(scope="module")
 def com_recording():
     sc = named_scenario("nominal", 5.0, 4e-3).replace(
         trajectory=Lissajous(amplitude=(1.5, 1.0, 0.2), frequency=0.2))
-    kw = {"backend": "numpy"} if "backend" in SimConfig.__dataclass_fields__ else {}
-    cfg = SimConfig(dt=4e-3, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001), **kw)
+    cfg = SimConfig(dt=4e-3, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001))
     return simulate(sc, config=cfg, seed=3, effects=(fx.ComOffset((0.015, 0.0)),),
                     thrust_noise=0.02)
 
@@ -45,7 +44,8 @@ def validate_contract(doc: dict) -> None:
         assert _number(w["t0"]) and _number(w["t1"]) and w["t0"] <= w["t1"]
     imps = []
     for e in doc["effects"]:
-        assert set(e) == {"name", "params", "uncertainty", "improvement", "explanation"}
+        assert set(e) >= {"name", "params", "uncertainty", "improvement", "explanation",
+                          "bounds", "folds"}
         assert isinstance(e["name"], str) and e["name"] == e["name"].lower()
         assert isinstance(e["params"], dict) and isinstance(e["uncertainty"], dict)
         assert _number(e["improvement"]) and e["improvement"] <= 1.0
@@ -80,7 +80,7 @@ def test_json_validates_and_cli_writes_report(com_recording, tmp_path):
     validate_contract(json.loads(out.read_text()))
 
 
-def test_cli_errors_are_one_line(tmp_path, capsys):
+def test_cli_errors_are_one_line(tmp_path, capsys, com_recording):
     assert main(["diagnose", str(tmp_path / "none.csv"), "--json", str(tmp_path / "o.json")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "not found" in err
@@ -88,6 +88,34 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
     bad.write_text("t,wx\n0,1\n")
     assert main(["diagnose", str(bad), "--json", str(tmp_path / "o.json")]) == 2
     assert "sidecar" in capsys.readouterr().err
+    csv = tmp_path / "flight.csv"
+    write_recording(com_recording, csv)
+    side = (tmp_path / "flight.json").read_text()
+    # the recording's own sidecar is never the output, not even with --force
+    assert main(["diagnose", str(csv), "--json", str(tmp_path / "flight.json"), "--force"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "sidecar" in err
+    assert (tmp_path / "flight.json").read_text() == side
+    assert main(["diagnose", str(csv), "--json", str(tmp_path / "o.json"), "--effects",
+                 "vortex"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "vortex" in err
+
+
+def test_no_mask_flag_and_json_additions(com_recording, tmp_path):
+    csv = tmp_path / "flight.csv"
+    write_recording(com_recording, csv, frame="ENU")
+    out = tmp_path / "d.json"
+    assert main(["diagnose", str(csv), "--json", str(out), "--quiet", "--no-mask"]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["format"] == "quadfault-diagnosis/2" and doc["frame"] == "ENU"
+    assert doc["vehicle"] == json.loads((tmp_path / "flight.json").read_text())["vehicle"]
+    assert doc["scoring"]["excluded"] == [] and doc["scoring"]["excluded_fraction"] == 0.0
+    assert set(doc["model"]["channels"]) == set(doc["baseline"]["rmse"])
+    for key in ("suspect", "rejected"):
+        assert isinstance(doc[key], list)
+    for e in doc["effects"] + doc["suspect"] + doc["rejected"]:
+        assert set(e["bounds"]) and set(e["folds"])
 
 
 def test_malformed_recordings_give_clear_errors(com_recording):
@@ -119,7 +147,10 @@ def test_imu_only_log_lists_untestable_effects(com_recording):
                                    "battery_thrust"}
     assert set(res.baseline_rmse) == {"sf_x", "sf_y", "sf_z", "alpha_x", "alpha_y", "alpha_z"}
     assert res.effect_names[0] == "com_offset"
-    assert res.prediction == {}
+    # no pose to start from: the prediction is of the body rate and the attitude change
+    p = res.prediction
+    assert "position_rmse_m" not in p and set(p["rate_rmse_rad_per_s"]) == {
+        "nominal", "model", "constant_velocity", "constant_acceleration"}
 
 
 def test_gaps_and_jitter_are_handled(com_recording):

@@ -60,7 +60,8 @@ def test_least_squares_fits_a_lag_to_noise_and_the_iv_check_sees_through_it(nois
     scale = noise_scale(rp, rp.measured - base)
     f = fit(rp, [_lag(rp)], scale)
     assert f.x[0][0] > 0.01  # least squares "finds" a lag that is not there
-    slope, se = iv_slope(rp, [], f.terms, scale, (rp.measured - base) / scale, [0, 1, 2, 3, 4, 5])
+    slope, se = iv_slope(rp, [], f.terms, scale, (rp.measured - base) / scale,
+                         np.arange(len(rp.channels)))
     assert slope + 2 * se < 0.5
 
 
@@ -79,7 +80,8 @@ def test_motor_lag_on_a_merged_1khz_log_is_unbiased(tau):
     scale = noise_scale(rp, rp.measured - base)
     f = fit(rp, [_lag(rp)], scale)
     assert f.x[0][0] == pytest.approx(tau, rel=0.01)
-    slope, se = iv_slope(rp, [], f.terms, scale, (rp.measured - base) / scale, [0, 1, 2, 3, 4, 5])
+    slope, se = iv_slope(rp, [], f.terms, scale, (rp.measured - base) / scale,
+                         np.arange(len(rp.channels)))
     assert slope == pytest.approx(1.0, abs=0.1)
 
 

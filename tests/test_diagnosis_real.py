@@ -1,49 +1,84 @@
-"""The diagnosis on real Crazyflie logs (Eschmann et al. 2024, IMU-only, 1 kHz).
+"""The diagnosis on real Crazyflie flights, exactly as a user runs it.
 
-Reads ../shared/data/real (never copied into the repository) and skips when it is absent.
-The literature and the data README's reference fit give a motor time constant of about
-0.07-0.08 s; the issue asks for 0.05-0.11 s. Fits and scores exclude the importer's
-calibration segment (``without_calibration``), as benchmarks/real_flights.py does.
+Each test runs ``quadfault import`` and ``quadfault diagnose`` (defaults or documented flags)
+through the console script's entry point and reads the JSON it wrote. The data are read from
+../shared/data/real (never copied into the repository); every test skips when it is absent.
 """
 
+import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from quadfault.cli import main
+
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real"
-ESCHMANN = DATA / "eschmann-cf21-sysid"
 
 
-def _load(name):
-    if not (ESCHMANN / f"{name}.csv.gz").exists():
+def diagnose(kind, rel, tmp_path, *flags):
+    path = DATA / rel
+    if not path.exists():
         pytest.skip("../shared/data/real is not available")
-    from quadfault.importers import get_importer
-    from quadfault.importers.flight_analysis import without_calibration
+    tmp_path.mkdir(parents=True, exist_ok=True)
+    csv = tmp_path / "flight.csv"
+    assert main(["import", kind, str(path), "--out", str(csv), "--quiet"]) == 0
+    out = tmp_path / "diag.json"
+    assert main(["diagnose", str(csv), "--json", str(out), "--quiet", *flags]) == 0
+    return json.loads(out.read_text())
 
-    return without_calibration(get_importer("eschmann")(ESCHMANN / f"{name}.csv.gz"))
 
-
-@pytest.mark.slow
-def test_eschmann_motor_lag():
-    from quadfault.diagnosis import Diagnosis
-
-    res = Diagnosis().fit(_load("log10"))
-    assert set(res.untestable) == {"drag", "wind", "ground_effect", "blade_flapping",
-                                   "battery_thrust"}
-    assert res.verdict == "mismatch"
-    timing = [e for e in res.effects if e.name == "motor_lag"]
-    assert timing, res.effect_names
-    assert 0.05 <= timing[0].params["tau_s"] <= 0.11
-    assert timing[0].improvement > 0.0
+def test_skips_cleanly_without_the_data(monkeypatch, tmp_path):
+    monkeypatch.setattr(__import__(__name__), "DATA", tmp_path / "absent")
+    with pytest.raises(pytest.skip.Exception):
+        diagnose("eschmann", "eschmann-cf21-sysid/log10.csv.gz", tmp_path)
 
 
 @pytest.mark.slow
-def test_eschmann_motor_lag_on_the_roll_pitch_log():
-    """log15 (roll/pitch excitation): the timing class alone explains most of the residual."""
-    from quadfault.diagnosis import Diagnosis, DiagnosisConfig
+@pytest.mark.parametrize("log", ["log10", "log16"])
+def test_eschmann_motor_lag_and_its_vertical_gain(log, tmp_path):
+    """The paper's motor time constant (0.07-0.08 s) and a held-out vertical gain >= 30 %
+    whose 95 % interval is above 0; log10's crash and log16's stay on the ground are
+    excluded, not scored."""
+    doc = diagnose("eschmann", f"eschmann-cf21-sysid/{log}.csv.gz", tmp_path)
+    assert set(doc["untestable"]) == {"drag", "wind", "ground_effect", "blade_flapping",
+                                      "battery_thrust"}
+    lag = [e for e in doc["effects"] if e["name"] == "motor_lag"]
+    assert lag and 0.05 <= lag[0]["params"]["tau_s"] <= 0.11
+    sf_z = doc["model"]["channels"]["sf_z"]
+    assert sf_z["improvement"] >= 0.3 and sf_z["ci95"][0] > 0.0
+    reasons = " ".join(e["reason"] for e in doc["scoring"]["excluded"])
+    assert ("impact" in reasons) if log == "log10" else ("supported" in reasons)
+    assert all(not e["at_bound"] for e in doc["effects"])
 
-    res = Diagnosis(DiagnosisConfig(effects=("motor_lag",))).fit(_load("log15"))
-    assert res.effect_names == ["motor_lag"]
-    tau = res.effects[0].params["tau_s"]
-    assert 0.05 <= tau <= 0.11
-    assert res.effects[0].improvement > 0.3
+
+@pytest.mark.slow
+def test_nanodrone_drag_from_the_accelerometer_and_rotor_speeds(tmp_path):
+    """The drag the accelerometer shows (0.017-0.022 N s/m) and the motor lag the rotor
+    speeds show (0.03-0.04 s)."""
+    doc = diagnose("nanodrone", "nanodrone-cf21bl/random1_20251017_run4.csv.gz", tmp_path)
+    assert {"sf_x", "rotor_1"} <= set(doc["model"]["channels"])
+    # the horizontal drag, as drag or as rotor drag proportional to thrust (at hover thrust)
+    k = [np.mean(e["params"]["k_N_s_per_m"][:2]) if e["name"] == "drag"
+         else e["params"]["drag_at_hover_N_s_per_m"] for e in doc["effects"]
+         if e["name"] in ("drag", "blade_flapping")]
+    assert len(k) == 1 and 0.014 <= k[0] <= 0.026
+    lag = next(e for e in doc["effects"] if e["name"] == "motor_lag")
+    assert 0.02 <= lag["params"]["tau_s"] <= 0.06
+    assert doc["scoring"]["rotor_thrust_coefficient"]["source"] == "sidecar"
+    # inertia, driven to its bound by what the library lacks: suspect, never accepted
+    assert "inertia" not in [e["name"] for e in doc["effects"]]
+
+
+@pytest.mark.slow
+def test_crazypad_pad_is_excluded_and_inertia_at_its_bound_is_suspect(tmp_path):
+    doc = diagnose("crazypad", "crazypad-cf21-faults/motor_data/normal_flight/E8_log05.csv.gz",
+                   tmp_path)
+    assert any("motors off" in e["reason"] for e in doc["scoring"]["excluded"])
+    assert all(not e["at_bound"] for e in doc["effects"])
+    inertia = next(e for e in doc["suspect"] if e["name"] == "inertia")
+    assert inertia["at_bound"] and "bound" in inertia["explanation"]
+    eff = diagnose("crazypad", "crazypad-cf21-faults/motor_data/normal_flight/E8_log05.csv.gz",
+                   tmp_path / "eff", "--effects", "motor_efficiency")
+    fitted = eff["effects"] + eff["suspect"] + eff["rejected"]
+    assert [e["name"] for e in fitted] == ["motor_efficiency"]

@@ -95,15 +95,16 @@ def test_calibration_segment_is_fitted_on_but_not_scored(drag_recording):
     rec = dataclasses.replace(drag_recording, meta={"calibration": {"segment": [0.0, 2.0]}})
     res = Diagnosis().fit(rec)
     sc = res.scoring
-    assert sc["excluded_s"] == [[0.0, 2.0]]
+    cal = [e for e in sc["excluded"] if "calibration" in e["reason"]]
+    assert [[e["t0"], e["t1"]] for e in cal] == [[0.0, 2.0]]
+    assert sc["excluded_fraction"] == pytest.approx(2.0 / drag_recording.duration, rel=1e-6)
     assert sc["blocks"] == plain.scoring["blocks"]
     assert sc["scored_blocks"] < sc["blocks"] and sc["scored_blocks"] == pytest.approx(
         sc["blocks"] * 4 / 6, abs=3)
-    assert "calibration" in sc["note"]
     assert res.effect_names[:1] == ["drag"]
     assert res.baseline_rmse != plain.baseline_rmse  # scored on other blocks
     doc = json.loads(res.to_json())
-    assert doc["scoring"]["excluded_s"] == [[0.0, 2.0]]
+    assert doc["scoring"]["excluded"][0]["t0"] == 0.0
 
 
 @pytest.mark.parametrize("segment", [[3.0, 1.0], "0-2", [0.0, math.inf]])
@@ -134,7 +135,8 @@ def test_heavy_vehicle_thrust_noise_inertia_bias_is_caught_by_the_iv_check():
     assert np.all(f.x[0][:2] > 1.2)  # the bias is real and large
     sig = (predict(rp, f.terms) - base) / scale
     assert sig.any()
-    slope, se = iv_slope(rp, [], f.terms, scale, (rp.measured - base) / scale, [3, 4, 5])
+    slope, se = iv_slope(rp, [], f.terms, scale, (rp.measured - base) / scale,
+                         rp.channel_index("alpha"))
     assert slope + 2 * se < 0.5
     res = Diagnosis().fit(rec)
     assert "inertia" not in res.effect_names

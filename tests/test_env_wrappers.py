@@ -131,8 +131,8 @@ def test_estimator_comparison_runs_irls_and_ekf():
     # the numpy backends: same results, and no numba compilation inside this test
     v = base.vehicle
     env = EstimatorComparison(base, {
-        "irls": SlidingWindowIRLS(v, IRLSConfig(backend="numpy")),
-        "ekf": MotorEfficiencyEKF(v, EKFConfig(backend="numpy"))})
+        "irls": SlidingWindowIRLS(v, IRLSConfig()),
+        "ekf": MotorEfficiencyEKF(v, EKFConfig())})
     steps = _episode(env, 60)
     assert set(steps[-1][1]["comparison"]) == {"irls", "ekf"}
     cur = env.summary()["current"]

@@ -11,10 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from quadfault.effects import curve_thrust
 from quadfault.errors import ConfigError, RecordingError
 from quadfault.importers.crazyflie import (CF21_BRUSHED, CRAZYFLIE_ROTOR_XY_FLU,
                                            CRAZYFLIE_YAW_SIGNS_FLU, FOERSTER_THRUST_CURVE,
-                                           crazyflie_allocation, thrust_from_curve)
+                                           crazyflie_allocation)
 from quadfault.importers.crazypad import import_crazypad, power_distribution_legacy
 from quadfault.importers.eschmann import import_eschmann
 from quadfault.importers.nanodrone import import_nanodrone
@@ -72,7 +73,7 @@ def test_eschmann_fixture_units_frames_trim_and_duplicates():
                                -CF21_BRUSHED.mass * rec.accel[sel, 2].mean(), rtol=1e-9)
     scale = cal["fitted"]["thrust_scale"]
     np.testing.assert_allclose(rec.thrust_curve, np.array(FOERSTER_THRUST_CURVE) * scale)
-    np.testing.assert_allclose(rec.thrust_cmd, thrust_from_curve(rec.commands_u, rec.thrust_curve))
+    np.testing.assert_allclose(rec.thrust_cmd, curve_thrust(rec.thrust_curve, rec.commands_u))
 
 
 def test_eschmann_keep_all_and_explicit_calibration():

@@ -104,7 +104,7 @@ def _first_order(t, u, tau):
 def test_eschmann_log10_shows_the_readme_motor_lag(eschmann):
     # README: on the thrust segment (35-65 s) the fit of m a_z to the summed thrust improves
     # by ~63 % when the commands pass through a ~0.08 s first-order lag
-    from quadfault.importers.crazyflie import thrust_from_curve
+    from quadfault.effects import curve_thrust
 
     rec = eschmann["log10"]
     seg = (rec.t >= 35.0) & (rec.t <= 65.0)
@@ -112,7 +112,7 @@ def test_eschmann_log10_shows_the_readme_motor_lag(eschmann):
 
     def rmse(tau):
         u = rec.commands_u if tau == 0 else _first_order(rec.t, rec.commands_u, tau)
-        return np.sqrt(np.mean((measured - thrust_from_curve(u[seg], rec.thrust_curve).sum(1))
+        return np.sqrt(np.mean((measured - curve_thrust(rec.thrust_curve, u[seg]).sum(1))
                                ** 2))
 
     taus = [0.03, 0.05, 0.08, 0.11, 0.15]

@@ -106,12 +106,28 @@ def test_quick_reproduce_writes_the_contract_outputs(tmp_path):
     # the IRLS detector finds every abrupt fault on the right motor
     assert doc["fdi"]["abrupt"]["irls"]["detected"] == 4
     assert doc["fdi"]["abrupt"]["irls"]["false_alarms"] == 0
-    # the improved IRLS and the EKF calibrated to it sit beside the paper's pair
-    assert {"irls_improved", "ekf_improved"} <= set(doc["scenarios"]["combined"])
+    # every IRLS variant beside its EKF partner, with the identical post-processing
+    per = doc["scenarios"]["combined"]
+    assert set(per) == {"irls", "ekf", "irls_median", "ekf_median", "irls_improved",
+                        "ekf_improved"}
+    for key, entry in per.items():
+        partner = per[entry["partner"]]
+        assert partner["partner"] == key and partner["postprocess"] == entry["postprocess"]
+        assert entry["cli"][:2] == ["--estimator", key.split("_")[0]]
+        assert ("q_eta" in entry) == key.startswith("ekf")
+    assert per["ekf"]["postprocess"] == "none" and per["ekf_improved"]["postprocess"] == \
+        "median:21"
+    assert per["ekf_improved"]["cli"][-2:] == ["--median", "21"]
     assert doc["config"]["ekf_q_eta_improved"] > 0
-    assert set(doc["spike_ratio"]["abrupt"]) == {"paper", "improved"}
+    assert set(doc["spike_ratio"]["abrupt"]) == {"paper", "median", "improved"}
+    assert set(doc["ratios"]["abrupt"]["paper"]) == {"spike", "excess_spike", "rmse"}
+    cal = doc["config"]["calibration"]["rk4_improved"]
+    q_min = cal["curve_q"][int(np.argmin(cal["curve_rmse"]))]
+    feasible = [e for q, r, e in zip(cal["curve_q"], cal["curve_rmse"], cal["curve_excess"])
+                if r <= cal["target_rmse"] and q >= q_min]
+    assert cal["matched"] and cal["excess_spike"] == min(feasible)
     assert doc["fdi"]["abrupt"]["irls_improved"]["detected"] == 4
-    assert "| combined | irls_improved |" in r.stdout and "spike ratio" in r.stdout
+    assert "| combined | irls_improved |" in r.stdout and "excess" in r.stdout
     # a second run refuses to overwrite
     r2 = _cli("--quick", "--out", str(out), "--quiet")
     assert r2.returncode == 2 and "already exists" in r2.stderr

@@ -22,9 +22,9 @@ NOISE = SensorNoise(position=0.01, velocity=0.02, attitude=0.002, gyro=0.01, acc
 
 def _estimator_kwargs(name):
     if name == "irls":
-        return {"config": IRLSConfig(backend="numpy")}
+        return {"config": IRLSConfig()}
     if name == "ekf":
-        return {"config": EKFConfig(backend="numpy")}
+        return {"config": EKFConfig()}
     return None
 
 

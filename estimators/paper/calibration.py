@@ -30,6 +30,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from estimators.ekf import EKFConfig, MotorEfficiencyEKF
+from estimators.median import median_series
 from estimators.metrics import aligned_truth, score
 from quadfault.errors import ConfigError
 from quadfault.recording import Recording
@@ -126,17 +127,8 @@ def ekf_rmse(recording: Recording, q_eta: float, base: EKFConfig | None = None,
     cfg = (base or EKFConfig()).replace(q_eta=float(q_eta))
     est = MotorEfficiencyEKF(recording.vehicle, cfg).run(recording.without_truth())
     if post_median > 1:
-        est = median_filtered(est, post_median)
+        est = median_series(est, post_median)
     return float(np.mean(score(recording, est, align=align).rmse))
-
-
-def median_filtered(series, length: int):
-    """``series`` with its ``eta`` replaced by the causal running median of ``length`` rows."""
-    from dataclasses import replace
-
-    from estimators.median import causal_median
-
-    return replace(series, eta=causal_median(series.eta, length))
 
 
 def calibrate_q_eta(recording: Recording, target_rmse: float, *, base: EKFConfig | None = None,

@@ -16,10 +16,12 @@ import numpy as np
 from quadfault.fileio import atomic_savefig
 
 COLORS = {"irls": "tab:blue", "ekf": "tab:orange", "truth": "tab:red",
+          "irls_median": "tab:cyan", "ekf_median": "tab:pink",
           "irls_improved": "tab:green", "ekf_improved": "tab:brown"}
-LABELS = {"irls": "IRLS (proposed)", "ekf": "EKF (calibrated)",
-          "irls_improved": "IRLS improved (ours)", "ekf_improved": "EKF (calibrated to it)"}
-ORDER = ("irls", "ekf", "irls_improved", "ekf_improved")
+LABELS = {"irls": "IRLS (proposed)", "ekf": "EKF (its partner)",
+          "irls_median": "IRLS + median 21", "ekf_median": "EKF + median 21 (partner)",
+          "irls_improved": "IRLS improved (ours)", "ekf_improved": "EKF + median 21 (partner)"}
+ORDER = ("irls", "ekf", "irls_median", "ekf_median", "irls_improved", "ekf_improved")
 
 
 def _present(d: dict) -> list[str]:
@@ -66,7 +68,8 @@ def plot_errors(path, series: dict, windows, title: str, force: bool = False):
     for m in range(4):
         ax = axes[m]
         _shade(ax, windows)
-        for est in [k for k in ("ekf", "irls", "irls_improved") if k in series]:
+        for est in [k for k in ("ekf", "irls", "ekf_improved", "irls_improved")
+                    if k in series]:
             ax.plot(t, series["truth"][:, m] - series[est][:, m], color=COLORS[est], lw=0.7,
                     label=LABELS[est], alpha=0.85)
         ax.set_ylabel(f"$e_{m + 1}$")

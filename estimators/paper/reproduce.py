@@ -2,13 +2,17 @@
 
 Steps (``docs/reproduce.md``):
 
-1. calibrate the EKF's ``Q_eta`` so its RMSE matches the IRLS RMSE on a calibration flight of
-   the combined scenario with seed ``K + 1000`` (:mod:`estimators.paper.calibration`);
-2. fly degradation, abrupt, combined and clipping (sigma_f = 0.07) with seed ``K``, run both
-   estimators, score them (:mod:`estimators.metrics`) and run the fault detector
-   (:mod:`estimators.fdi`) on both estimate streams;
-3. the same on flights of the ``reference`` integration mode (the authors' Euler step with its
-   input lag), calibrated separately, for a like-for-like table beside the paper's numbers;
+1. on a calibration flight of the combined scenario with seed ``K + 1000``, choose for every
+   IRLS variant (:data:`estimators.paper.pairing.VARIANTS`) its EKF partner: the same output
+   post-processing, and the ``Q_eta`` with the smallest excess spike among those whose RMSE
+   is at most the IRLS's (:func:`estimators.paper.pairing.choose_partner`);
+2. fly degradation, abrupt, combined and clipping (sigma_f = 0.07) with seed ``K``, run every
+   pair, score them (:mod:`estimators.metrics`) and run the fault detector
+   (:mod:`estimators.fdi`) on every estimate stream;
+3. the paper's pair on flights of the ``reference`` integration mode (the authors' Euler step
+   with its input lag), its EKF calibrated to equal RMSE as in the paper
+   (:mod:`estimators.paper.calibration`), for a like-for-like table beside the paper's
+   numbers;
 4. write ``metrics.json`` (CONTRACT.md sec. 2), ``report.md`` and PNG figures
    (:mod:`estimators.paper.report`); print the table.
 
@@ -27,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from estimators.paper.pairing import pair_ratios
 from estimators.paper.report import STATIC_FIGURES, table, write_report
 from quadfault.errors import ConfigError
 
@@ -63,8 +68,12 @@ class ReproduceConfig:
         workers: parallel processes (1 = in this process).
         history_offset: the convergence figure's window ends this long after motor 1's fault
             onset [s].
-        improved: also run ``IRLSConfig.improved()`` (change completion and output median,
-            docs/irls.md) on the RK4 flights, with an EKF calibrated to its RMSE.
+        improved: also run the IRLS variants beyond the paper (the output median alone, and
+            ``IRLSConfig.improved()``: change completion and output median, docs/irls.md) on
+            the RK4 flights, each with its EKF partner.
+        partner_q_range, partner_points_per_decade, partner_refine: the partner's ``Q_eta``
+            scan and its refinement rounds
+            (:func:`estimators.paper.pairing.choose_partner`).
     """
 
     duration: float = 80.0
@@ -79,12 +88,24 @@ class ReproduceConfig:
     workers: int = 2
     history_offset: float = 0.02
     improved: bool = True
+    partner_q_range: tuple = (1e-4, 1e3)
+    partner_points_per_decade: float = 3.0
+    partner_refine: int = 3
 
     @classmethod
     def quick(cls, **changes) -> ReproduceConfig:
         """~1 minute: 12 s flights (schedule scaled) and a coarser calibration."""
         return replace(cls(duration=12.0, calibration_duration=12.0, q_range=(1e-3, 10.0),
-                           bisection_steps=4), **changes)
+                           bisection_steps=4, partner_q_range=(1e-3, 1e3),
+                           partner_points_per_decade=2.0, partner_refine=2),
+                       **changes)
+
+    @property
+    def variants(self) -> tuple:
+        """The IRLS variants run on the RK4 flights."""
+        from estimators.paper.pairing import VARIANTS
+
+        return VARIANTS if self.improved else VARIANTS[:1]
 
     @property
     def calibration_seed(self) -> int:
@@ -125,48 +146,46 @@ def flight_check(rec) -> dict:
             "diverged": bool(wild > 0.01 or drift > 10.0)}
 
 
-def _calibration_job(mode: str, cfg: ReproduceConfig, variant: str = "paper") -> dict:
-    """IRLS RMSE on the calibration flight, then the EKF's Q_eta matching it (``variant``
-    "paper": the reference IRLS; "improved": ``IRLSConfig.improved()``)."""
-    from estimators.irls import IRLSConfig, SlidingWindowIRLS
-    from estimators.metrics import score
+def _calibration_job(mode: str, cfg: ReproduceConfig) -> dict:
+    """The calibration flight of ``mode``. ``rk4``: every variant's IRLS RMSE on it and its EKF
+    partner (:func:`estimators.paper.pairing.choose_partner`, one EKF scan shared by all);
+    ``reference``: the paper pair's EKF matched to the IRLS's RMSE, as in the paper
+    (:func:`estimators.paper.calibration.calibrate_q_eta`)."""
     from estimators.paper.calibration import calibrate_q_eta
+    from estimators.paper.pairing import VARIANTS, choose_partner, irls_target, shared_scan
 
     rec = _fly(cfg.calibration_scenario, cfg.calibration_duration, cfg.calibration_seed, mode,
                cfg.thrust_noise)
-    icfg = IRLSConfig.improved() if variant == "improved" else IRLSConfig()
-    irls = SlidingWindowIRLS(rec.vehicle, icfg).run(rec.without_truth())
-    target = float(np.mean(score(rec, irls).rmse))
-    cal = calibrate_q_eta(rec, target, q_range=cfg.q_range,
-                          points_per_decade=cfg.points_per_decade,
-                          bisection_steps=cfg.bisection_steps)
-    return {"mode": mode if variant == "paper" else f"{mode}_improved", "calibration": cal}
+    if mode == "reference":
+        cal = calibrate_q_eta(rec, irls_target(rec, VARIANTS[0]), q_range=cfg.q_range,
+                              points_per_decade=cfg.points_per_decade,
+                              bisection_steps=cfg.bisection_steps)
+        return {"reference": cal}
+    scan = shared_scan(rec)
+    return {("rk4" if v.name == "paper" else f"rk4_{v.name}"): choose_partner(
+        rec, irls_target(rec, v), v.median, q_range=cfg.partner_q_range,
+        points_per_decade=cfg.partner_points_per_decade, refine=cfg.partner_refine,
+        evaluate=scan(v.median)) for v in cfg.variants}
 
 
-def _scenario_job(mode: str, name: str, cfg: ReproduceConfig, q_eta: float,
-                  keep_series: bool, q_eta_improved: float | None = None) -> dict:
-    """Fly one scenario; score IRLS and the EKF (and, with ``q_eta_improved``, the improved
-    IRLS and the EKF calibrated to it)."""
-    from estimators.ekf import EKFConfig, MotorEfficiencyEKF
+def _scenario_job(mode: str, name: str, cfg: ReproduceConfig, q_etas: dict,
+                  keep_series: bool) -> dict:
+    """Fly one scenario; run and score every variant's pair (``q_etas``: variant name -> its
+    EKF partner's Q_eta; the reference mode runs the paper's pair only)."""
     from estimators.fdi import detect, evaluate
-    from estimators.irls import IRLSConfig, SlidingWindowIRLS
     from estimators.metrics import fault_windows, score
+    from estimators.paper.pairing import VARIANTS, run_pair
 
     rec = _fly(name, cfg.duration, cfg.seed, mode, cfg.thrust_noise)
-    blind = rec.without_truth()
-    out = {"mode": mode, "name": name, "scores": {}, "fdi": {}, "flight": flight_check(rec)}
+    out = {"mode": mode, "name": name, "scores": {}, "extra": {}, "fdi": {},
+           "flight": flight_check(rec)}
     series = {}
-    runs = [("irls", SlidingWindowIRLS(rec.vehicle)),
-            ("ekf", MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_eta)))]
-    if q_eta_improved is not None:
-        runs += [("irls_improved", SlidingWindowIRLS(rec.vehicle, IRLSConfig.improved())),
-                 ("ekf_improved", MotorEfficiencyEKF(rec.vehicle,
-                                                     EKFConfig(q_eta=q_eta_improved)))]
-    for key, est in runs:
-        s = est.run(blind)
-        out["scores"][key] = score(rec, s)
-        out["fdi"][key] = evaluate(detect(s), fault_windows(rec)).to_dict()
-        series[key] = s.eta
+    for v in (x for x in VARIANTS if x.name in q_etas):
+        for key, (s, extra) in run_pair(rec, v, q_etas[v.name]).items():
+            out["scores"][key] = score(rec, s)
+            out["extra"][key] = extra
+            out["fdi"][key] = evaluate(detect(s), fault_windows(rec)).to_dict()
+            series[key] = s.eta
     if keep_series:
         out["series"] = {"t": rec.t, "truth": rec.eta_true, **series}
         out["windows"] = fault_windows(rec)
@@ -213,24 +232,26 @@ def reproduce(cfg: ReproduceConfig, progress: bool = False) -> dict:
     modes = MODES if cfg.reference_mode else ("rk4",)
     start = time.perf_counter()
     _warm_up()
-    cal_jobs = [(m, cfg) for m in modes] + ([("rk4", cfg, "improved")] if cfg.improved
-                                              else [])
+    cal_jobs = [(m, cfg) for m in modes]
     n_jobs = len(cal_jobs) + len(SCENARIOS) + (len(REFERENCE_SCENARIOS) if cfg.reference_mode
                                                else 0)
     bar = progress_bar(total=n_jobs + 1, desc="reproduce", unit="job",
                        disable=None if progress else True)
     try:
-        cals = _map(_calibration_job, cal_jobs, cfg.workers, bar)
-        q = {c["mode"]: c["calibration"].q_eta for c in cals}
-        jobs = [("rk4", s, cfg, q["rk4"], True, q.get("rk4_improved")) for s in SCENARIOS]
+        cals = {k: c for block in _map(_calibration_job, cal_jobs, cfg.workers, bar)
+                for k, c in block.items()}
+        q = {v.name: cals["rk4" if v.name == "paper" else f"rk4_{v.name}"].q_eta
+             for v in cfg.variants}
+        jobs = [("rk4", s, cfg, q, True) for s in SCENARIOS]
         if cfg.reference_mode:
-            jobs += [("reference", s, cfg, q["reference"], False) for s in REFERENCE_SCENARIOS]
+            jobs += [("reference", s, cfg, {"paper": cals["reference"].q_eta}, False)
+                     for s in REFERENCE_SCENARIOS]
         results = _map(_scenario_job, jobs, cfg.workers, bar)
         history = irls_history(cfg)
         bar.update(1)
     finally:
         bar.close()
-    return {"config": cfg, "calibration": {c["mode"]: c["calibration"] for c in cals},
+    return {"config": cfg, "calibration": cals,
             "results": results, "history": history, "seconds": time.perf_counter() - start}
 
 
@@ -285,40 +306,27 @@ def metrics_document(run: dict) -> dict:
         ref = r["mode"] == "reference"
         scen = doc["reference_mode"]["scenarios"] if ref else doc["scenarios"]
         fdi = doc["reference_mode_fdi"] if ref else doc["fdi"]
-        scen[r["name"]] = {k: v.to_contract() for k, v in r["scores"].items()}
+        scen[r["name"]] = {k: {**v.to_contract(), **r["extra"][k]}
+                           for k, v in r["scores"].items()}
         fdi[r["name"]] = r["fdi"]
         doc["reference_mode_flights" if ref else "flights"][r["name"]] = r["flight"]
     if not cfg.reference_mode:
         del doc["reference_mode"], doc["reference_mode_fdi"], doc["reference_mode_flights"]
-    doc["spike_ratio"] = spike_ratios(doc["scenarios"])
-    doc["config"] = {**asdict(cfg), "q_range": list(cfg.q_range), "integrator": "rk4",
+    doc["ratios"] = pair_ratios(doc["scenarios"])
+    doc["spike_ratio"] = {n: {v: r["spike"] for v, r in per.items() if r["spike"] is not None}
+                          for n, per in doc["ratios"].items()}
+    doc["config"] = {**asdict(cfg), "q_range": list(cfg.q_range),
+                     "partner_q_range": list(cfg.partner_q_range), "integrator": "rk4",
                      "upper_thrust_limit": "only in clipping (the paper has none)",
                      "align": "end", "ekf_q_eta": run["calibration"]["rk4"].q_eta,
                      "ekf_q_eta_improved": (run["calibration"]["rk4_improved"].q_eta
                                             if "rk4_improved" in run["calibration"] else None),
+                     "ekf_q_eta_median": (run["calibration"]["rk4_median"].q_eta
+                                          if "rk4_median" in run["calibration"] else None),
                      "calibration": {m: c.to_dict() for m, c in run["calibration"].items()},
                      "seconds_total": run["seconds"]}
     doc["paper"] = PAPER
     return doc
-
-
-def spike_ratios(scenarios: dict) -> dict:
-    """Per scenario with fault windows: motor-averaged IRLS spike / EKF spike, for the paper
-    pair (``irls`` / ``ekf``) and the improved pair when present (target: <= 0.5)."""
-    from estimators.metrics import mean_or_none
-
-    out = {}
-    for name, per in scenarios.items():
-        ratios = {}
-        for label, (a, b) in (("paper", ("irls", "ekf")),
-                              ("improved", ("irls_improved", "ekf_improved"))):
-            if a in per and b in per:
-                sa, sb = mean_or_none(per[a]["spike"]), mean_or_none(per[b]["spike"])
-                if sa is not None and sb:
-                    ratios[label] = sa / sb
-        if ratios:
-            out[name] = ratios
-    return out
 
 
 def planned_files(out: Path) -> list[Path]:
@@ -339,7 +347,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-reference-mode", action="store_true",
                    help="skip the flights of the reference integration mode")
     p.add_argument("--no-improved", action="store_true",
-                   help="skip the beyond-the-paper IRLS (IRLSConfig.improved()) and its EKF")
+                   help="skip the IRLS variants beyond the paper (output median, "
+                        "IRLSConfig.improved()) and their EKF partners")
 
 
 def run(args) -> int:
@@ -366,9 +375,10 @@ def run(args) -> int:
     print(f"quadfault reproduce ({'quick' if args.quick else 'full'}, seed {cfg.seed}, "
           f"integrator rk4, EKF Q_eta = {doc['config']['ekf_q_eta']:.4g})")
     print(table(doc["scenarios"]))
-    for name, ratios in doc["spike_ratio"].items():
-        print(f"spike ratio IRLS/EKF {name}: " + ", ".join(f"{k} {v:.2f}x"
-                                                         for k, v in ratios.items()))
+    for name, per in doc["ratios"].items():
+        print(f"IRLS/EKF {name}: " + "; ".join(
+            f"{v} spike {r['spike']:.2f}x, excess {r['excess_spike']:.2f}x, RMSE {r['rmse']:.2f}x"
+            for v, r in per.items() if r["spike"] is not None))
     bad = [f"{n} ({m})" for m, key in (("rk4", "flights"), ("reference", "reference_mode_flights"))
            for n, fl in doc.get(key, {}).items() if fl["diverged"]]
     if bad:

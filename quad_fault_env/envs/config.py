@@ -22,6 +22,11 @@ OBSERVATION_KINDS = ("flat", "dict")
 TERMINATION_REASONS = ("crash", "out_of_bounds", "excessive_tilt", "non_finite")
 #: trajectories of random scenarios (``quadfault.scenarios.random_scenario``)
 RANDOM_TRAJECTORIES = ("random", "circle", "hover", "lissajous")
+#: scenario generators drawn from at every reset (``scenario=`` one of these)
+GENERATORS = ("random", "track", "rotor_loss")
+#: keywords of ``scenario_options`` per generator (``quadfault.task_scenarios``)
+SCENARIO_OPTIONS = {"track": ("speed", "curvature", "yaw_rate", "altitude"),
+                    "rotor_loss": ("level", "onset", "altitude")}
 
 
 def _check_nonnegative(obj, names):
@@ -85,47 +90,70 @@ class ActionConfig:
 
 @dataclass(frozen=True)
 class RewardConfig:
-    """Per-step reward, bounded in ``[-effort_weight - termination_penalty, 1]``::
+    """Per-step reward::
 
-        r = exp(-(|e_x| + velocity_weight |e_v|) / position_scale) - effort_weight * effort
+        r = exp(-(|e_x| + velocity_weight |e_v|) / position_scale)      tracking, in (0, 1]
+            - effort_weight * mean((f_cmd / f_max)^2)                   thrust effort
+            - action_weight * mean(a^2)                                 action effort
+            + survival_bonus        (on every step that does not terminate)
+            - termination_penalty   (on the step that terminates; not on truncation)
 
-    with the *true* tracking errors at the end of the step and
-    ``effort = mean((f_cmd / f_max)^2)`` in [0, 1]; ``termination_penalty`` is subtracted on
-    the step that terminates (not on truncation).
+    with the *true* tracking errors ``e_x`` [m], ``e_v`` [m/s] at the end of the step, the
+    rotor commands ``f_cmd`` held over it and the agent's action ``a`` in [-1, 1]^4 (in
+    residual mode the correction it adds to the geometric controller). A step whose terms are
+    not finite (a diverged state) counts 0 before the penalty.
+
+    With ``survival_bonus >= effort_weight + action_weight`` (the defaults) every step that
+    does not terminate earns at least 0, and a terminating one at most
+    ``1 - termination_penalty``: an episode that terminates at any step scores below one that
+    flies on with the same tracking and effort, by the penalty plus what the remaining steps
+    would have earned. The defaults are the ``-v1`` reward; the ``-v0`` ids use
+    ``position_scale=1``, no action effort, no survival bonus and no penalty
+    (:data:`quad_fault_env.tasks.REWARD_V0`).
 
     Attributes:
         position_scale: error at which the tracking term falls to 1/e [m].
         velocity_weight: weight of |e_v| relative to |e_x| [s].
-        effort_weight: weight of the effort term [-].
+        effort_weight: weight of the thrust effort term [-].
+        action_weight: weight of the action effort term [-].
+        survival_bonus: added on every step that does not terminate [-].
         termination_penalty: subtracted once on termination [-].
     """
 
-    position_scale: float = 1.0
+    position_scale: float = 0.5
     velocity_weight: float = 0.1
     effort_weight: float = 0.01
-    termination_penalty: float = 0.0
+    action_weight: float = 0.1
+    survival_bonus: float = 0.11
+    termination_penalty: float = 100.0
 
     def __post_init__(self):
-        _check_nonnegative(self, ("velocity_weight", "effort_weight", "termination_penalty"))
+        _check_nonnegative(self, ("velocity_weight", "effort_weight", "action_weight",
+                                  "survival_bonus", "termination_penalty"))
         if not (math.isfinite(self.position_scale) and self.position_scale > 0):
             raise ConfigError(f"position_scale must be positive [m], got {self.position_scale!r}")
 
-    def __call__(self, pos_err, vel_err, f_cmd, f_max: float, terminated):
-        """The reward (0 where it is not finite): a float for one vehicle, an array for rows
-        (the vector env: ``pos_err`` (N, 3), ``terminated`` (N,))."""
+    def __call__(self, pos_err, vel_err, f_cmd, f_max: float, terminated, action=None):
+        """The reward: a float for one vehicle, an array for rows (the vector env:
+        ``pos_err`` (N, 3), ``terminated`` (N,), ``action`` (N, 4)). ``action`` None counts
+        as zero."""
         pe = np.ascontiguousarray(pos_err, dtype=float)
         f = np.ascontiguousarray(f_cmd, dtype=float)
+        a = np.zeros_like(f) if action is None else np.ascontiguousarray(action, dtype=float)
         out = np.empty(pe.shape[:-1])
         _rewards(pe.reshape(-1, 3), np.ascontiguousarray(vel_err, dtype=float).reshape(-1, 3),
                  f.reshape(-1, f.shape[-1]), float(f_max),
                  np.ascontiguousarray(terminated, dtype=np.bool_).reshape(-1),
-                 float(self.position_scale), float(self.velocity_weight),
-                 float(self.effort_weight), float(self.termination_penalty), out.reshape(-1))
+                 a.reshape(-1, a.shape[-1]), float(self.position_scale),
+                 float(self.velocity_weight), float(self.effort_weight),
+                 float(self.action_weight), float(self.survival_bonus),
+                 float(self.termination_penalty), out.reshape(-1))
         return float(out) if out.ndim == 0 else out
 
 
 @jit
-def _rewards(pos_err, vel_err, f_cmd, f_max, terminated, scale, w_vel, w_effort, penalty, out):
+def _rewards(pos_err, vel_err, f_cmd, f_max, terminated, action, scale, w_vel, w_effort,
+             w_action, bonus, penalty, out):
     """:class:`RewardConfig` per row."""
     for i in range(out.shape[0]):
         pe, ve = pos_err[i], vel_err[i]
@@ -136,9 +164,14 @@ def _rewards(pos_err, vel_err, f_cmd, f_max, terminated, scale, w_vel, w_effort,
             u = f_cmd[i, j] / f_max
             effort += u * u
         r = math.exp(-track / scale) - w_effort * (effort / f_cmd.shape[1])
-        if terminated[i]:
-            r -= penalty
-        out[i] = r if np.isfinite(r) else 0.0
+        if w_action != 0.0:
+            act = 0.0
+            for j in range(action.shape[1]):
+                act += action[i, j] * action[i, j]
+            r -= w_action * (act / action.shape[1])
+        if not np.isfinite(r):
+            r = 0.0
+        out[i] = r - penalty if terminated[i] else r + bonus
 
 
 @dataclass(frozen=True)
@@ -229,6 +262,47 @@ class InitialStateSpread:
 
     def __post_init__(self):
         _check_nonnegative(self, ("position", "velocity", "attitude", "rate"))
+
+
+def check_scenario_options(options, scenario) -> dict:
+    """Validate ``scenario_options`` (keywords of the ``track`` / ``rotor_loss`` generators;
+    None: their defaults) by drawing one scenario with them."""
+    if options is None:
+        return {}
+    if not isinstance(options, dict):
+        raise ConfigError(f"scenario_options must be a dict, got {options!r}")
+    if scenario not in SCENARIO_OPTIONS:
+        raise ConfigError(f"scenario_options applies to scenario 'track' or 'rotor_loss', "
+                          f"not {scenario!r}")
+    unknown = sorted(set(options) - set(SCENARIO_OPTIONS[scenario]))
+    if unknown:
+        raise ConfigError(f"scenario_options has unknown keys {unknown} for {scenario!r}; "
+                          f"choose from {', '.join(SCENARIO_OPTIONS[scenario])}")
+    from quadfault import task_scenarios
+
+    draw = getattr(task_scenarios, f"{scenario}_scenario")
+    try:
+        draw(np.random.default_rng(0), **options)  # ranges checked once, here
+    except TypeError as err:
+        raise ConfigError(f"scenario_options: {err}") from None
+    return dict(options)
+
+
+def config_of(value, cls, name: str):
+    """An environment keyword that takes a configuration dataclass: None (its defaults), an
+    instance of ``cls``, or a dict of its fields (``quadfault train --env-kwargs`` JSON)."""
+    if value is None:
+        return cls()
+    if isinstance(value, cls):
+        return value
+    if isinstance(value, dict):
+        try:
+            return cls(**value)
+        except TypeError:
+            known = ", ".join(cls.__dataclass_fields__)
+            raise ConfigError(f"{name} has unknown keys {sorted(value)}; choose from "
+                              f"{known}") from None
+    raise ConfigError(f"{name} must be a {cls.__name__} or a dict of its fields, got {value!r}")
 
 
 def validate_action(action, shape: tuple, name: str = "action") -> np.ndarray:

@@ -28,7 +28,10 @@ from quad_fault_env.envs.config import (
     InitialStateSpread,
     RewardConfig,
     TerminationLimits,
+    GENERATORS,
     check_random_faults,
+    check_scenario_options,
+    config_of,
     deprecated_physics,
     number_at_least,
     validate_action,
@@ -38,20 +41,22 @@ from quad_fault_env.estimation import (
     NOMINAL_PRIOR_SD,
     NominalBelief,
     TruthOracle,
-    diagnostics_dict,
+    diagnostics_template,
+    estimate_info,
     estimate_sd,
     make_estimator,
 )
 from quad_fault_env.observation import ObservationLayout
 from quad_fault_env.time_tables import RowTimeTables
 from quadfault import closed_loop
-from quadfault.controller import ControllerConfig, GeometricController
+from quadfault.controller import ControllerConfig, GeometricController, GeometricGains
 from quadfault.dynamics import RigidBodyState
 from quadfault.effects.sampling import PhysicsDraws, describe
 from quadfault.errors import ConfigError
 from quadfault.motors import MotorModel
 from quadfault.plant import Plant
 from quadfault.scenarios import SCENARIO_NAMES, Scenario, named_scenario, random_scenario
+from quadfault.task_scenarios import rotor_loss_scenario, track_scenario
 from quadfault.sensors import SensorNoise
 from quadfault.trajectory import FlatOutput
 from quadfault.vehicle import Vehicle
@@ -112,8 +117,15 @@ class QuadFaultEnv(gym.Env):
         estimator: ``"irls" | "ekf" | "truth" | "none"`` or an estimator object.
         estimator_kwargs: passed to the estimator's constructor.
         scenario: a name of :data:`quadfault.scenarios.SCENARIO_NAMES`, a
-            :class:`~quadfault.scenarios.Scenario`, or ``"random"``
-            (:func:`~quadfault.scenarios.random_scenario` with ``self.np_random``).
+            :class:`~quadfault.scenarios.Scenario`, or a generator drawn from at every reset
+            with ``self.np_random``: ``"random"``
+            (:func:`~quadfault.scenarios.random_scenario`), ``"track"``
+            (:func:`~quadfault.task_scenarios.track_scenario`: a random smooth trajectory) or
+            ``"rotor_loss"`` (:func:`~quadfault.task_scenarios.rotor_loss_scenario`: hover,
+            one rotor drops abruptly); the last two scale with the vehicle's size.
+        scenario_options: keyword arguments of the ``"track"`` or ``"rotor_loss"`` generator
+            (e.g. ``{"speed": (0.5, 1.0), "curvature": (0.5, 1.0), "yaw_rate": (0, 0)}`` or
+            ``{"level": (0.1, 0.3)}``); None keeps its defaults.
         random_trajectory: trajectory of random scenarios (``"random"``, ``"hover"``, ...).
         random_faults: keyword arguments of :func:`~quadfault.scenarios.random_scenario` for
             random scenarios (``n_faults``, ``severity``, ``degradation_prob``, ``xi_range``,
@@ -122,7 +134,8 @@ class QuadFaultEnv(gym.Env):
         duration: episode length [s] of named and random scenarios (default 20 s); a
             Scenario object brings its own ``duration``.
         thrust_noise: sigma_f overriding the scenario's (None keeps it).
-        sensor_noise: a :class:`~quadfault.simulator.SensorNoise` (default noise-free).
+        sensor_noise: a :class:`~quadfault.simulator.SensorNoise` or a dict of its fields
+            (``{"position": 0.01, "gyro": 0.005}``; default noise-free).
         action_mode, residual_scale, moment_scale: see ``ActionConfig``.
         control_rate: agent / controller rate [Hz] (100). physics_rate: plant rate [Hz] (1000).
         estimator_rate: ``"physics"`` (every substep, the default) or ``"control"`` (the
@@ -152,6 +165,7 @@ class QuadFaultEnv(gym.Env):
 
     def __init__(self, estimator="irls", scenario="combined", *, estimator_kwargs=None,
                  random_trajectory: str = "random", random_faults: dict | None = None,
+                 scenario_options: dict | None = None,
                  duration: float | None = None,
                  thrust_noise: float | None = None, sensor_noise: SensorNoise | None = None,
                  action_mode: str = "residual", residual_scale: float = 1.0,
@@ -174,12 +188,10 @@ class QuadFaultEnv(gym.Env):
             raise ConfigError("vehicle must be a quadfault Vehicle with 4 rotors (the scenarios "
                               "and the observation have four motors)")
         self.action_config = ActionConfig(action_mode, residual_scale, moment_scale)
-        self.reward_config = reward or RewardConfig()
-        self.limits = limits or TerminationLimits()
-        self.initial_spread = initial_spread or InitialStateSpread()
-        self.sensor_noise = sensor_noise or SensorNoise()
-        if not isinstance(self.sensor_noise, SensorNoise):
-            raise ConfigError(f"sensor_noise must be a SensorNoise, got {sensor_noise!r}")
+        self.reward_config = config_of(reward, RewardConfig, "reward")
+        self.limits = config_of(limits, TerminationLimits, "limits")
+        self.initial_spread = config_of(initial_spread, InitialStateSpread, "initial_spread")
+        self.sensor_noise = config_of(sensor_noise, SensorNoise, "sensor_noise")
         if thrust_noise is not None and not number_at_least(thrust_noise, 0.0):
             raise ConfigError(f"thrust_noise must be a number >= 0, got {thrust_noise!r}")
         self.thrust_noise = thrust_noise
@@ -203,21 +215,25 @@ class QuadFaultEnv(gym.Env):
         self.estimator_stride = 1 if estimator_rate == "physics" else self.substeps
         if not (isinstance(scenario, (str, Scenario))):
             raise ConfigError(f"scenario must be a name, 'random' or a Scenario, got {scenario!r}")
-        if isinstance(scenario, str) and scenario not in SCENARIO_NAMES + ("random",):
+        if isinstance(scenario, str) and scenario not in SCENARIO_NAMES + GENERATORS:
             raise ConfigError(f"unknown scenario {scenario!r}; choose from "
-                              f"{', '.join(SCENARIO_NAMES + ('random',))}")
+                              f"{', '.join(SCENARIO_NAMES + GENERATORS)}")
         self.scenario_spec = scenario
         if random_trajectory not in RANDOM_TRAJECTORIES:
             raise ConfigError(f"random_trajectory must be one of {RANDOM_TRAJECTORIES}, "
                               f"got {random_trajectory!r}")
         self.random_trajectory = random_trajectory
         self.random_faults = check_random_faults(random_faults)
+        self.scenario_options = check_scenario_options(scenario_options, scenario)
         if duration is not None and not (number_at_least(duration, 0.0) and duration > 0):
             raise ConfigError(f"duration must be positive [s], got {duration!r}")
         self.duration = duration
         self.estimator = make_estimator(estimator, self.vehicle, **(estimator_kwargs or {}))
+        self._diagnostics_template = diagnostics_template(self.estimator)
         self.compensate = bool(compensate)
-        self.controller_config = controller or ControllerConfig()
+        # the paper's gains carried over to the vehicle's mass and inertia (any vehicle flies)
+        self.controller_config = controller or ControllerConfig(
+            gains=GeometricGains().scaled(self.vehicle))
         if observation not in OBSERVATION_KINDS:
             raise ConfigError(f"observation must be one of {OBSERVATION_KINDS}, "
                               f"got {observation!r}")
@@ -259,6 +275,10 @@ class QuadFaultEnv(gym.Env):
         elif spec == "random":
             sc = random_scenario(self.np_random, self.duration or DEFAULT_DURATION,
                                  trajectory=self.random_trajectory, **self.random_faults)
+        elif spec in ("track", "rotor_loss"):
+            draw = track_scenario if spec == "track" else rotor_loss_scenario
+            sc = draw(self.np_random, self.duration or DEFAULT_DURATION, vehicle=self.vehicle,
+                      **self.scenario_options)
         elif isinstance(spec, str) and spec in SCENARIO_NAMES:
             sc = named_scenario(spec, self.duration or DEFAULT_DURATION, self.dt)
         else:
@@ -424,7 +444,7 @@ class QuadFaultEnv(gym.Env):
             closed_loop.sense(self._generators(), self._loop, vehicles)
         self.history.append(np.array(state.p, dtype=float))
         reward = self.reward_config(state.p - ref.position, state.v - ref.velocity,
-                                    self._f_cmd, self.f_max, terminated)
+                                    self._f_cmd, self.f_max, terminated, a)
         events = []
         for f in self.scenario.efficiency.faults:
             for kind, tk in (("onset", f.onset), ("end", f.end)):
@@ -446,28 +466,29 @@ class QuadFaultEnv(gym.Env):
         return flat if self.observation_kind == "flat" else self.layout.split(flat)
 
     def _info(self, samples, eta_true, sf, events, reason, ref, eta_t=None) -> dict:
+        """The step's (or the reset's) ``info``: the same keys, types and shapes every time
+        (``gym.make_vec`` batches them); per-substep rows that were not flown are NaN."""
         t = self.time
         state = self._state
-        est = self._estimate
+        S, n = self.substeps, self.vehicle.n_rotors
+        eta_rows, sf_rows = np.full((S, n), np.nan), np.full((S, 3), np.nan)
+        eta_rows[:len(samples)] = np.reshape(eta_true, (-1, n))
+        sf_rows[:len(samples)] = np.reshape(sf, (-1, 3))
         return {
-            "t": t,
+            "t": float(t),
             "eta_true": (np.asarray(self.scenario.efficiency(t), dtype=float) if eta_t is None
                          else eta_t),
-            "eta_hat": np.asarray(est.eta, dtype=float),
-            "eta_sd": estimate_sd(est, self.vehicle.n_rotors),
-            "estimator": getattr(self.estimator, "name", type(self.estimator).__name__),
-            "estimator_status": est.status,
-            "estimator_diagnostics": diagnostics_dict(est.diagnostics),
+            **estimate_info(self._estimate, self.estimator, n, self._diagnostics_template),
             "position_error": state.p - ref.position,
             "tracking_error": float(np.linalg.norm(state.p - ref.position)),
             "motor_command": self._f_cmd.copy(),
             "fault_events": events,
             "faults": [_fault_dict(f) for f in self.scenario.efficiency.faults],
             "scenario": self.scenario.name,
-            "thrust_noise": self.scenario.thrust_noise,
+            "thrust_noise": float(self.scenario.thrust_noise),
             "samples": samples,
-            "eta_true_samples": np.array(eta_true).reshape(-1, self.vehicle.n_rotors),
-            "specific_force_samples": np.array(sf).reshape(-1, 3),
+            "eta_true_samples": eta_rows,
+            "specific_force_samples": sf_rows,
             "termination_reason": reason,
         } | ({"effects": describe(self.effects)} if self.physics_draws else {})
 

@@ -112,6 +112,12 @@ class Candidate:
         return (rp.has_pose or not self.needs_pose) and all(
             getattr(rp, need, None) is not None for need in self.requires)
 
+    def compatible(self, others) -> bool:
+        """Whether this effect may be in one model with ``others`` (no one contains another,
+        ``excludes``)."""
+        names = {o.name for o in others}
+        return not names & set(self.excludes) and not any(self.name in o.excludes for o in others)
+
     # hooks -------------------------------------------------------------------------------
     def thrust(self, x, rp, f, t, dt):
         raise TypeError(f"{self.name} is not a thrust-stage effect")
@@ -322,6 +328,14 @@ class BladeFlappingCandidate(Candidate):
 
     def wrench(self, x, inp):
         return fx.blade_flapping_wrench(inp.R, inp.v, inp.thrust, float(x[0]), float(x[1]))
+
+    def public(self, x, sd, ctx):
+        """Also the force's drag coefficient at hover thrust, ``k_force m g`` [N s/m] (what a
+        ``drag`` fit of the same flight reads as its horizontal ``k``)."""
+        params, unc = super().public(x, sd, ctx)
+        params["drag_at_hover_N_s_per_m"] = float(x[0]) * ctx.vehicle.weight
+        unc["drag_at_hover_N_s_per_m"] = float(sd[0]) * ctx.vehicle.weight
+        return params, unc
 
 
 @dataclass(frozen=True)

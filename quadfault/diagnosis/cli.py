@@ -20,6 +20,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--block", type=float, default=0.02,
                    help="smoothing block length [s] (default 0.02)")
     p.add_argument("--max-effects", type=int, default=3, help="most effects accepted (default 3)")
+    p.add_argument("--no-mask", action="store_true",
+                   help="fit and score every block: do not exclude what is not free flight "
+                        "(motors off, ground or pad contact, impacts; see docs/diagnosis.md)")
 
 
 def run(args) -> int:
@@ -28,9 +31,14 @@ def run(args) -> int:
     from quadfault.progress import progress_bar
     from quadfault.recording import read_recording
 
+    from quadfault.recording import sidecar_path
+
     out = Path(args.json)
     if out.suffix != ".json":
         raise ConfigError(f"--json must end in .json, got {args.json!r}")
+    if out.resolve() == sidecar_path(Path(args.recording)).resolve():
+        raise ConfigError(f"--json {args.json} is the recording's own sidecar; choose another "
+                          "name (it would be overwritten)")
     check_writable([out], force=args.force)
     if args.report is not None:
         from quadfault.diagnosis.report import FILES
@@ -41,7 +49,8 @@ def run(args) -> int:
     effects = None
     if args.effects:
         effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
-    cfg = DiagnosisConfig(block_seconds=args.block, max_effects=args.max_effects, effects=effects)
+    cfg = DiagnosisConfig(block_seconds=args.block, max_effects=args.max_effects, effects=effects,
+                          mask=not args.no_mask)
     rec = read_recording(args.recording).without_truth()
     bar = progress_bar(total=None, desc="diagnose", unit="fit", disable=None if not args.quiet else True)
     try:
@@ -55,6 +64,12 @@ def run(args) -> int:
         write_report(res, args.report, source=Path(args.recording).name, force=args.force)
     if not args.quiet:
         names = ", ".join(f"{e.name} ({100 * e.improvement:.0f}%)" for e in res.effects) or "none"
-        print(f"{res.verdict}: effects {names}; held-out improvement "
+        extra = ""
+        if res.suspect:
+            extra += "; suspect (at a bound): " + ", ".join(e.name for e in res.suspect)
+        frac = res.scoring.get("masked_fraction", 0.0)
+        if frac:
+            extra += f"; {100 * frac:.0f}% not free flight (excluded)"
+        print(f"{res.verdict}: effects {names}{extra}; held-out improvement "
               f"{100 * res.model_improvement:.1f}%; wrote {out}")
     return 0

@@ -1,4 +1,4 @@
-"""The diagnosis model: replay -> residuals -> locate -> library fit -> selection -> result.
+"""The diagnosis model: mask -> replay -> residuals -> library fit -> selection -> result.
 
 ``Diagnosis(config).fit(recording, vehicle=None) -> DiagnosisResult``.
 """
@@ -10,20 +10,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from quadfault.diagnosis.library import EXPLANATIONS, build_library, predict, public_params
-from quadfault.diagnosis.residuals import noise_scale, prepare
-from quadfault.diagnosis.result import DiagnosisResult, EffectFinding
-from quadfault.diagnosis.select import (
-    IV_MIN,
-    IV_UNVERIFIED_GAIN,
-    cross_validate,
-    folds_of,
-    scored_rows,
-    select,
-)
+from quadfault.diagnosis.crossval import cross_validate, fit_at_bound, fit_bound_mask, folds_of
+from quadfault.diagnosis.feedback import IV_MIN, IV_UNVERIFIED_GAIN
+from quadfault.diagnosis.findings import base_explanation, finding
+from quadfault.diagnosis.library import build_library, predict, public_params
+from quadfault.diagnosis.phases import excluded_fraction, flight_phases
+from quadfault.diagnosis.prediction import HORIZONS
+from quadfault.diagnosis.residuals import prepare
+from quadfault.diagnosis.result import DiagnosisResult
+from quadfault.diagnosis.scores import fixed_scoring
+from quadfault.diagnosis.select import select
 from quadfault.effects import EFFECT_NAMES
-from quadfault.errors import ConfigError
+from quadfault.errors import ConfigError, RecordingError
 from quadfault.recording import Recording
+
+#: a located interval whose nominal residual RMS reaches this many noise scales for at least
+#: ``STRONG_SECONDS`` makes the verdict ``mismatch`` even when nothing in the library explains
+#: it (see :func:`_unexplained`)
+STRONG_INTERVAL, STRONG_SECONDS = 3.0, 0.5
 
 
 @dataclass(frozen=True)
@@ -38,11 +42,13 @@ class DiagnosisConfig:
         min_improvement: least held-out RMS reduction (relative to the current model) for
             accepting an effect [-].
         bic_margin: least BIC decrease for accepting an effect.
-        screen_top: most candidates cross-validated per step (in BIC order).
+        screen_top: most single candidates cross-validated per step (in BIC order).
+        pair_top: pairs among this many best single candidates are tried per step.
         effects: restrict the library to these names (None: all).
-        horizon: open-loop prediction horizon [s].
+        horizons: open-loop prediction horizons [s].
         saturate: clip commands to [0, max_thrust] as the nominal motor model does.
         internal_step: faster logs are merged to about this step [s] (see ``residuals``).
+        mask: exclude what is not free flight (:mod:`~quadfault.diagnosis.phases`).
     """
 
     block_seconds: float = 0.02
@@ -52,10 +58,12 @@ class DiagnosisConfig:
     min_improvement: float = 0.05
     bic_margin: float = 10.0
     screen_top: int = 3
+    pair_top: int = 3
     effects: tuple | None = None
-    horizon: float = 0.5
+    horizons: tuple = HORIZONS
     saturate: bool = True
     internal_step: float = 0.004
+    mask: bool = True
 
     def __post_init__(self):
         if not (0 < self.block_seconds <= 1.0):
@@ -66,22 +74,20 @@ class DiagnosisConfig:
             raise ConfigError(f"folds must be in [2, 20], got {self.folds!r}")
         if not (0 <= self.max_effects <= 9):
             raise ConfigError("max_effects must be in [0, 9]")
+        if not (0 <= self.pair_top <= 9):
+            raise ConfigError("pair_top must be in [0, 9]")
         if self.effects is not None:
             bad = [e for e in self.effects if e not in EFFECT_NAMES]
             if bad:
                 raise ConfigError(f"unknown effect {bad[0]!r}; choose from {', '.join(EFFECT_NAMES)}")
-        if not (self.horizon > 0):
-            raise ConfigError("horizon must be positive [s]")
-
-
-def _rms(x, axis=None):
-    return np.sqrt(np.mean(np.square(x), axis=axis))
+        if not self.horizons or not all(h > 0 for h in self.horizons):
+            raise ConfigError("horizons must be positive [s]")
 
 
 def _explain(step, selected_names, params) -> str:
     name = step.candidate.name
-    text = EXPLANATIONS[name] + f"; held-out residual RMS -{100 * step.improvement_step:.0f}% " \
-                                "when added."
+    text = base_explanation(name) + f"; held-out residual RMS -{100 * step.improvement_step:.0f}% " \
+                                    "when added."
     partners = {"thrust_scale": "motor_efficiency", "motor_efficiency": "thrust_scale",
                 "delay": "motor_lag", "motor_lag": "delay"}
     other = partners.get(name)
@@ -96,7 +102,7 @@ def _explain(step, selected_names, params) -> str:
         text += (f" {other} fits almost as well (in-sample SSE ratio {ratio:.2f}): the data "
                  "cannot separate delay from motor_lag (one timing class).")
     if name == "wind" and "drag" not in selected_names:
-        text += " Force in the world frame; no drag identified, so no air velocity."
+        text += " Force on the vehicle; no drag identified, so no air velocity."
     if name == "wind" and "drag" in selected_names:
         text += " Air velocity = force / drag coefficient (horizontal mean of kx, ky)."
     if step.iv is not None and np.isfinite(step.iv):
@@ -108,19 +114,44 @@ def _explain(step, selected_names, params) -> str:
         text += (" The instrumental-variable check could not vouch for this signal (no "
                  "predictable part), so it was accepted only on a held-out gain of at least "
                  f"{IV_UNVERIFIED_GAIN:.0%}.")
+    if step.agreement:
+        text += f" Fold agreement: {step.agreement}."
     if name == "ground_effect":
         text += " Height above the ground is taken as -z of the recording (ground at z = 0)."
     return text
 
 
-def _scoring(rp, rows) -> dict:
-    out = {"scored_blocks": int(rows.sum()), "blocks": int(rp.n_blocks),
-           "excluded_s": [list(seg) for seg in rp.excluded]}
-    if rp.excluded:
-        out["note"] = ("meta.calibration.segment: the importer fitted constants on these rows; "
-                       "they are used for fitting but not for any held-out score")
-    elif rp.scoring_note:
-        out["note"] = rp.scoring_note
+def _unexplained(rp, sc, base_res, where) -> bool:
+    """A mismatch no library effect explains: a strong localised interval (its nominal
+    residual at least ``STRONG_INTERVAL`` noise scales, lasting ``STRONG_SECONDS`` but less
+    than half the scored flight), or a nominal residual beyond ``STRONG_INTERVAL`` noise scales
+    over the whole flight (weighted RMS) where the locate step finds intervals."""
+    scored = float(np.sum(rp.block_dur[sc.rows]))
+    for w in where:
+        if w.excess >= STRONG_INTERVAL and STRONG_SECONDS <= w.t1 - w.t0 < 0.5 * scored:
+            return True
+    z = sc.normalised(base_res) / np.sqrt(sc.weight)  # in noise units
+    return bool(where) and float(np.sqrt(np.mean(z * z))) > STRONG_INTERVAL
+
+
+def _scoring_dict(rp, sc, recording, mask_note="") -> dict:
+    t0, t1 = float(recording.t[0]), float(recording.t[-1])
+    spans = [{"t0": a, "t1": b, "reason": why} for a, b, why in rp.masked]
+    spans += [{"t0": a, "t1": b, "reason": "calibration segment of the importer (fitted on, "
+               "not scored)"} for a, b in rp.excluded]
+    spans.sort(key=lambda s: s["t0"])
+    out = {"excluded": spans,
+           "excluded_fraction": excluded_fraction([(s["t0"], s["t1"]) for s in spans], t0, t1),
+           "masked_fraction": excluded_fraction(rp.masked, t0, t1),
+           "scored_blocks": int(sc.rows.sum()), "blocks": int(rp.n_blocks),
+           "weights": "fixed before any fit: noise scale per channel from the measured channel "
+                      "and the nominal residual; each measured quantity weighs as 3 channels; "
+                      "residuals winsorised at 5 robust sd of the nominal residual"}
+    if rp.has_rotor:
+        out["rotor_thrust_coefficient"] = {"value": rp.rotor_k, "source": rp.rotor_k_source}
+    notes = [n for n in (mask_note, rp.scoring_note) if n]
+    if notes:
+        out["note"] = "; ".join(notes)
     return out
 
 
@@ -144,67 +175,117 @@ class Diagnosis:
     def _fit(self, recording: Recording, vehicle, progress) -> DiagnosisResult:
         from quadfault.diagnosis.locate import locate
         from quadfault.diagnosis.prediction import open_loop_errors
+        from quadfault.recording import recording_sidecar
 
         t_start = time.perf_counter()
         cfg = self.config
         rec = recording.without_truth() if isinstance(recording, Recording) else recording
-        rp = prepare(rec, vehicle, block_seconds=cfg.block_seconds, gap_factor=cfg.gap_factor,
-                     saturate=cfg.saturate, internal_step=cfg.internal_step)
+        kw = dict(block_seconds=cfg.block_seconds, gap_factor=cfg.gap_factor,
+                  saturate=cfg.saturate, internal_step=cfg.internal_step)
+        rp = prepare(rec, vehicle, **kw)
+        mask_note = ""
+        if cfg.mask:
+            spans = flight_phases(rp)
+            if spans:
+                try:
+                    rp = prepare(rec, vehicle, exclude=[s.as_tuple() for s in spans], **kw)
+                except RecordingError:  # too little would be left: keep everything, say so
+                    frac = excluded_fraction([s.as_tuple() for s in spans], float(rec.t[0]),
+                                             float(rec.t[-1]))
+                    why = "; ".join(sorted({s.reason for s in spans}))
+                    mask_note = (f"nothing excluded: what does not look like free flight "
+                                 f"({why}; {100 * frac:.0f}% of the recording) would leave "
+                                 "too few blocks")
         library = build_library(rp, cfg.effects)
         untestable = [c.name for c in library if not c.testable(rp)]
         base_res = rp.measured - predict(rp, [])
-        scale = noise_scale(rp, base_res)
-        kw = dict(folds=cfg.folds, max_effects=cfg.max_effects,
-                  min_improvement=cfg.min_improvement, bic_margin=cfg.bic_margin,
-                  screen_top=cfg.screen_top, progress=progress)
-        sel = select(rp, library, scale, **kw)
-        if sel.final is not None:
-            # the first noise scale contains the effects' own fast content: re-estimate it from
-            # what the selected model leaves and select again if it changed materially
-            scale2 = noise_scale(rp, rp.measured - predict(rp, sel.final.terms))
-            if np.any(np.abs(np.log(scale2 / scale)) > np.log(1.3)):
-                scale = scale2
-                sel = select(rp, library, scale, **kw)
-        rows = scored_rows(rp)  # held-out scores never use calibration blocks
-        before = _rms(sel.baseline.residual[rows] / scale)
+        sc = fixed_scoring(rp, base_res, rp.scored)
+        sel = select(rp, library, sc, folds=cfg.folds, max_effects=cfg.max_effects,
+                     min_improvement=cfg.min_improvement, bic_margin=cfg.bic_margin,
+                     screen_top=cfg.screen_top, pair_top=cfg.pair_top, progress=progress)
         fl = folds_of(rp.n_blocks, cfg.folds)
-        selected = {s.candidate.name: x for s, x in zip(sel.steps, sel.final.x)} if sel.final else {}
-        findings = []
+        frame = rec.frame if rec.frame in ("NED", "ENU") else "NED"
+        selected = ({s.candidate.name: x for s, x in zip(sel.steps, sel.final.x)}
+                    if sel.final else {})
+
+        def alone_cv(c, x=None):
+            """Held-out result of nominal + ``c`` alone: fitted alone, or from ``x`` (an
+            accepted effect's value in the final model, so the fit stays in its basin)."""
+            if x is not None:
+                return cross_validate(rp, [c], sc, [x], fl)
+            f = sel.alone.get(c.name)
+            return None if f is None else cross_validate(rp, [c], sc, None, fl, full=f)
+
+        def improvement(cv):
+            if cv is None or sel.baseline.sse <= 0:
+                return 0.0
+            return 1.0 - float(np.sqrt(cv.sse / sel.baseline.sse))
+
+        common = dict(vehicle=rp.vehicle, selected=selected, frame=frame)
+        effects = []
         for k, step in enumerate(sel.steps):
             c = step.candidate
             x, sd = sel.final.x[k], sel.final.sd[k]
-            if k == 0:
-                alone = step.cv
+            params, _ = public_params(c, x, sd, rp.vehicle, selected)
+            effects.append(finding(
+                c, x, sd, improvement=improvement(alone_cv(c, x)),
+                explanation=_explain(step, selected, params),
+                fold_x=[fx[k] for fx in sel.final_cv.fold_x], gain=step.improvement_step,
+                at_bound=fit_at_bound(rp, sc, sel.final, k),
+                bound=lambda xf, k=k: fit_bound_mask(rp, sc, sel.final, k, xf), **common))
+        effects.sort(key=lambda e: -e.improvement)
+        suspect, rejected = [], []
+        for name, v in sel.verdicts.items():
+            c = v.candidate
+            cv_alone = alone_cv(c)
+            if v.status == "suspect":
+                j = list(v.fit.candidates).index(c)
+                folds = [] if v.cv is None else [fx[j] for fx in v.cv.fold_x]
+                suspect.append(finding(
+                    c, v.x, v.sd, improvement=improvement(cv_alone),
+                    explanation=f"{base_explanation(c.name)}. {v.reason}.", fold_x=folds,
+                    status="suspect", reason=v.reason, at_bound=True, gain=v.gain,
+                    bound=lambda xf, f=v.fit, j=j: fit_bound_mask(rp, sc, f, j, xf), **common))
             else:
-                alone = cross_validate(rp, [c], scale, [x], fl)
-            imp = 1.0 - _rms(alone.residual[rows] / scale) / before
-            params, unc = public_params(c, x, sd, rp.vehicle, selected)
-            findings.append((imp, EffectFinding(c.name, params, unc, float(imp),
-                                                _explain(step, selected, params))))
-        findings.sort(key=lambda item: -item[0])
-        after = _rms(sel.final_cv.residual[rows] / scale)
-        model_imp = 1.0 - after / before if before > 0 else 0.0
-        terms = sel.final.terms if sel.final else []
-        where, regimes = locate(rp, base_res, scale)
-        unexplained = before > 3.0 and not findings and len(where) > 0
-        verdict = "mismatch" if findings or unexplained else "consistent"
-        prediction = open_loop_errors(rec, rp, terms, cfg.horizon) if rp.has_pose else {}
+                f = sel.alone.get(name, v.fit)
+                j = list(f.candidates).index(c)
+                rejected.append(finding(
+                    c, f.x[j], f.sd[j], improvement=improvement(cv_alone),
+                    explanation=base_explanation(c.name), status="rejected", reason=v.reason,
+                    fold_x=[] if cv_alone is None else [fx[0] for fx in cv_alone.fold_x],
+                    at_bound=fit_at_bound(rp, sc, f, j), gain=v.gain,
+                    bound=lambda xf, f=f, j=j: fit_bound_mask(rp, sc, f, j, xf), **common))
+        suspect.sort(key=lambda e: -e.improvement)
+        rejected.sort(key=lambda e: -e.improvement)
+        table, model_ci = sc.channel_table(sel.baseline.residual, sel.final_cv.residual,
+                                           rp.block_dur[sc.rows])
+        model_imp = sc.improvement(sel.baseline.residual, sel.final_cv.residual)
+        where, regimes = locate(rp, base_res, sc.noise)
+        verdict = "mismatch" if effects or suspect or _unexplained(rp, sc, base_res, where) \
+            else "consistent"
+        fold_of_block = np.zeros(rp.n_blocks, dtype=int)
+        for i, idx in enumerate(fl):
+            fold_of_block[idx] = i
+        cands = [s.candidate for s in sel.steps]
+        fold_terms = ([list(zip(cands, fx)) for fx in sel.final_cv.fold_x] if cands
+                      else [[] for _ in fl])
+        prediction = open_loop_errors(rec, rp, fold_terms, fold_of_block, cfg.horizons)
         series = {"block_t": rp.block_t, "baseline": sel.baseline.residual,
                   "model": sel.final_cv.residual, "channels": rp.channels, "regimes": regimes,
-                  "replay": rp, "prediction": prediction}
+                  "replay": rp, "prediction": prediction, "scored": sc.rows,
+                  "masked": rp.masked, "calibration": rp.excluded}
+        side = recording_sidecar(rec, frame=frame)
+        rmse_b = {ch: v["rmse_before"] for ch, v in table.items()}
+        rmse_a = {ch: v["rmse_after"] for ch, v in table.items()}
         return DiagnosisResult(
-            verdict=verdict,
-            baseline_rmse=dict(zip(rp.channels, map(float, _rms(sel.baseline.residual[rows], 0)))),
-            model_rmse=dict(zip(rp.channels, map(float, _rms(sel.final_cv.residual[rows], 0)))),
-            model_improvement=float(model_imp),
-            effects=tuple(f for _, f in findings),
-            untestable=tuple(untestable),
-            where=tuple(where),
-            regimes=tuple(r for r in regimes),
+            verdict=verdict, baseline_rmse=rmse_b, model_rmse=rmse_a,
+            model_improvement=float(model_imp), effects=tuple(effects),
+            untestable=tuple(untestable), where=tuple(where), regimes=tuple(regimes),
             prediction={k: v for k, v in prediction.items() if not k.startswith("_")},
-            channels=rp.channels,
-            scale=tuple(float(s) for s in scale),
+            channels=rp.channels, scale=tuple(float(s) for s in sc.noise),
             seconds=float(time.perf_counter() - t_start),
-            scoring=_scoring(rp, rows),
-            series=series,
-        )
+            scoring=_scoring_dict(rp, sc, rec, mask_note),
+            suspect=tuple(suspect), rejected=tuple(rejected), channel_scores=table,
+            model_ci95=tuple(model_ci), weights=tuple(float(w) for w in sc.weight),
+            vehicle=side["vehicle"], frame=frame, gravity=float(side["gravity"]),
+            series=series)

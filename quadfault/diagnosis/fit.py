@@ -32,6 +32,9 @@ class Fit:
         sse: sum of squared normalised residuals over the fitted blocks.
         n: number of residuals (blocks x channels).
         status, message: of the optimizer.
+        n_fixed: parameters of the fixed terms (they count in :meth:`bic`).
+        s2: residual variance ``sd`` was scaled with (``sd / sqrt(s2)`` is the geometry
+            alone: how well the model's structure determines each parameter).
     """
 
     candidates: tuple
@@ -42,6 +45,7 @@ class Fit:
     status: int = 0
     message: str = ""
     n_fixed: int = 0
+    s2: float = 1.0  # residual variance the uncertainties were scaled with
 
     @property
     def terms(self) -> list:
@@ -267,4 +271,4 @@ def fit(rp: Replay, candidates: list[Candidate], scale: np.ndarray, mask=None, i
         sd = np.full(p, np.nan)
     return Fit(tuple(cands), tuple(_split(res.x, cands)), tuple(_split(sd, cands)),
                float(r @ r), n, int(res.status), str(res.message),
-               sum(c.size for c, _ in fixed))
+               sum(c.size for c, _ in fixed), s2)

@@ -71,7 +71,8 @@ def build_library(rp: Replay, names=None) -> list[Candidate]:
     u_h = float(fx.curve_command(nominal, f_h))
     lib = [
         cd.EfficiencyCandidate("motor_efficiency", ("eta1 [-]", "eta2 [-]", "eta3 [-]", "eta4 [-]"),
-                               (0.2,) * 4, (1.5,) * 4, one4, (one4,), "thrust", 2, affine=True),
+                               (0.2,) * 4, (1.5,) * 4, one4, (one4,), "thrust", 2, affine=True,
+                               excludes=("thrust_scale",)),
         cd.ScaleCandidate("thrust_scale", ("scale [-]",), (0.5,), (1.5,), (1.0,), ((1.0,),),
                           "thrust", 2, affine=True),
         cd.GroundEffectCandidate("ground_effect", ("rotor_radius^2 [m^2]",), (0.0,), (arm ** 2,),
@@ -179,7 +180,9 @@ def needs_rate(terms) -> bool:
 
 
 def predict_intervals(rp: Replay, terms) -> np.ndarray:
-    """Model channels (M, 6) per interval for the nominal model plus ``terms``."""
+    """Model channels (M, C) per interval for the nominal model plus ``terms``: the six
+    acceleration channels, then the accelerometer's, then (with measured rotor speeds) the
+    rotor thrusts seen through only the effects before the rotor speed (``rotor_side``)."""
     terms = list(terms)
     rate = None
     if needs_rate(terms):
@@ -191,11 +194,14 @@ def predict_intervals(rp: Replay, terms) -> np.ndarray:
     T, M = W[:, 0], W[:, 1:]
     inp = WrenchInputs(rp.vehicle, rp.R, rp.v, rp.w, T, M, rate)
     F, Mx = external_wrench(terms, inp, rp)
-    return model_channels(rp, f, F, Mx, T, M, vehicle=body_vehicle(rp.vehicle, terms))
+    out = model_channels(rp, f, F, Mx, T, M, vehicle=body_vehicle(rp.vehicle, terms))
+    if rp.has_rotor:
+        out = np.hstack((out, thrust_series(rp, [t for t in terms if t[0].rotor_side])))
+    return out
 
 
 def predict(rp: Replay, terms) -> np.ndarray:
-    """Block-mean model channels (B, 6)."""
+    """Block-mean model channels (B, C)."""
     return rp.block_mean(predict_intervals(rp, terms))
 
 

@@ -104,11 +104,12 @@ def locate(rp: Replay, residual: np.ndarray, scale: np.ndarray, per_channel: int
         unit = channel_unit(ch)
         for a, b in merged[:per_channel]:
             seg = residual[a:b, j]
+            excess = float(np.sqrt(np.mean(seg ** 2)) / scale[j])
             where.append(Interval(ch, float(rp.block_t[a] - 0.5 * rp.block_dur[a]),
                                   float(rp.block_t[b - 1] + 0.5 * rp.block_dur[b - 1]),
                                   f"mean residual {np.mean(seg):+.3g} {unit}, "
                                   f"peak {seg[np.argmax(np.abs(seg))]:+.3g} {unit}, "
-                                  f"{np.sqrt(np.mean(seg ** 2)) / scale[j]:.1f}x noise"))
+                                  f"{excess:.1f}x noise", excess))
     where.sort(key=lambda w: (w.t0, w.channel))
     regimes = []
     variables = regime_variables(rp)

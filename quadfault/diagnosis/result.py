@@ -1,4 +1,4 @@
-"""The diagnosis result record and its JSON form (CONTRACT.md sec. 4)."""
+"""The diagnosis result record and its JSON form (CONTRACT.md secs. 4 and 5)."""
 
 from __future__ import annotations
 
@@ -8,17 +8,29 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+FORMAT = "quadfault-diagnosis/2"
+
 
 @dataclass(frozen=True)
 class EffectFinding:
-    """One accepted effect.
+    """One fitted effect (accepted, suspect or rejected).
 
     Attributes:
         name: canonical effect name.
-        params: physical parameters (units in the keys).
+        params: physical parameters (units in the keys; directions in the recording's frame).
         uncertainty: one-sigma uncertainty of ``params`` (same keys).
-        improvement: held-out residual RMS reduction of nominal + this effect alone [0..1].
+        improvement: held-out residual RMS reduction of nominal + this effect alone [-]
+            (may be negative for a rejected candidate).
         explanation: one or two sentences, including effects it cannot be told apart from.
+        bounds: ``{key: [lo, hi]}`` the fit was confined to (shaped like each parameter).
+        folds: ``{key: [value per fold]}``: the fit without each cross-validation fold.
+        status: ``"accepted"``, ``"suspect"`` or ``"rejected"``.
+        reason: why a suspect or rejected effect was not accepted.
+        at_bound: a parameter sits at (or within 2 % of the span of) a bound.
+        improvement_when_added: held-out RMS reduction when it was added to (or tested on
+            top of) the model before it, or None.
+        fold_agreement: the fold-agreement rule's reading of ``folds``, or "".
+        folds_agree: whether the folds pass that rule (None without folds).
     """
 
     name: str
@@ -26,6 +38,27 @@ class EffectFinding:
     uncertainty: dict
     improvement: float
     explanation: str
+    bounds: dict = field(default_factory=dict)
+    folds: dict = field(default_factory=dict)
+    status: str = "accepted"
+    reason: str = ""
+    at_bound: bool = False
+    improvement_when_added: float | None = None
+    fold_agreement: str = ""
+    folds_agree: bool | None = None
+
+    def to_dict(self) -> dict:
+        out = {"name": self.name, "params": self.params, "uncertainty": self.uncertainty,
+               "improvement": self.improvement, "explanation": self.explanation,
+               "bounds": self.bounds, "folds": self.folds, "at_bound": self.at_bound}
+        if self.status != "accepted":
+            out["reason"] = self.reason
+        if self.improvement_when_added is not None:
+            out["improvement_when_added"] = self.improvement_when_added
+        if self.fold_agreement:
+            out["fold_agreement"] = self.fold_agreement
+            out["folds_agree"] = self.folds_agree
+        return out
 
 
 @dataclass(frozen=True)
@@ -34,6 +67,7 @@ class Interval:
     t0: float  # [s]
     t1: float  # [s]
     note: str
+    excess: float = 0.0  # RMS of the nominal residual over the interval / noise scale
 
 
 @dataclass(frozen=True)
@@ -44,15 +78,22 @@ class DiagnosisResult:
         verdict: ``"mismatch"`` or ``"consistent"``.
         baseline_rmse: held-out residual RMS of the nominal model per channel (channel units).
         model_rmse: held-out residual RMS of nominal + accepted effects per channel.
-        model_improvement: 1 - RMS(after)/RMS(before), all channels (normalised), held out.
+        model_improvement: 1 - RMS(after)/RMS(before), all channels (weighted), held out.
         effects: accepted effects, most important first.
         untestable: effects this recording cannot reveal.
         where: intervals where the nominal model disagrees.
         regimes: per disagreeing channel, the regime variable that explains it best.
-        prediction: open-loop multi-step prediction errors before/after (pose logs).
-        channels, scale: channel names and their noise scales (normalisation).
-        scoring: which blocks held-out scores use (``scored_blocks`` of ``blocks``;
-            ``excluded_s``: calibration segments [s] fitted on but not scored).
+        prediction: open-loop multi-step prediction errors (held out), per horizon.
+        channels, scale: channel names and their noise scales.
+        suspect: effects that improved the fit only with a parameter at a bound.
+        rejected: candidates fitted and not accepted, with the reason.
+        channel_scores: ``{channel: {"rmse_before", "rmse_after", "improvement", "ci95"}}``.
+        model_ci95: 95 % interval of ``model_improvement``.
+        weights: relative weight of each channel in pooled scores.
+        scoring: what held-out scores use (``excluded`` spans with reasons,
+            ``excluded_fraction``, blocks, weights, ...).
+        vehicle: the sidecar's vehicle object the diagnosis started from (recording's frame);
+            frame, gravity: the recording's world frame and gravity.
         series: arrays for plots (times, residuals before/after, regime variables).
     """
 
@@ -69,25 +110,39 @@ class DiagnosisResult:
     scale: tuple = ()
     seconds: float = 0.0
     scoring: dict = field(default_factory=dict)
+    suspect: tuple = ()
+    rejected: tuple = ()
+    channel_scores: dict = field(default_factory=dict)
+    model_ci95: tuple = ()
+    weights: tuple = ()
+    vehicle: dict = field(default_factory=dict)
+    frame: str = "NED"
+    gravity: float = 9.81
     series: dict = field(default_factory=dict, repr=False, compare=False)
 
     def to_dict(self) -> dict:
         """The contract's JSON object (plus extra informative fields)."""
         return _clean({
+            "format": FORMAT,
             "verdict": self.verdict,
             "baseline": {"rmse": dict(self.baseline_rmse)},
             "untestable": list(self.untestable),
             "where": [{"channel": w.channel, "t0": w.t0, "t1": w.t1, "note": w.note}
                       for w in self.where],
-            "effects": [{"name": e.name, "params": e.params, "uncertainty": e.uncertainty,
-                         "improvement": e.improvement, "explanation": e.explanation}
-                        for e in self.effects],
-            "model": {"rmse": dict(self.model_rmse), "improvement": self.model_improvement},
+            "effects": [e.to_dict() for e in self.effects],
+            "suspect": [e.to_dict() for e in self.suspect],
+            "rejected": [e.to_dict() for e in self.rejected],
+            "model": {"rmse": dict(self.model_rmse), "improvement": self.model_improvement,
+                      "ci95": list(self.model_ci95), "channels": dict(self.channel_scores)},
             "regimes": list(self.regimes),
             "prediction": dict(self.prediction),
             "normalisation": dict(zip(self.channels, self.scale)),
+            "weights": dict(zip(self.channels, self.weights)),
             "seconds": self.seconds,
             "scoring": dict(self.scoring),
+            "vehicle": dict(self.vehicle),
+            "frame": self.frame,
+            "gravity": self.gravity,
         })
 
     def to_json(self) -> str:

@@ -146,7 +146,7 @@ def _load(source) -> tuple[dict, str]:
 
 
 def _vehicle(doc: dict, where: str, frame: str):
-    from quadfault.recording import _vehicle_from_sidecar
+    from quadfault.sidecar import vehicle_from_sidecar
 
     vd = doc.get("vehicle")
     if not isinstance(vd, dict):
@@ -155,7 +155,7 @@ def _vehicle(doc: dict, where: str, frame: str):
     gravity = doc.get("gravity", vd.get("gravity", 9.81))
     has_u = "thrust_curve" in vd or "thrust_coefficient" in vd
     try:
-        return _vehicle_from_sidecar(where, {"vehicle": vd, "frame": frame, "gravity": gravity},
+        return vehicle_from_sidecar(where, {"vehicle": vd, "frame": frame, "gravity": gravity},
                                      has_u)
     except QuadfaultError as exc:
         raise ConfigError(str(exc)) from None

@@ -51,7 +51,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def load_vehicle_file(path) -> tuple:
     """``(Vehicle in FRD, thrust curve (a, b, c) or None)`` from a vehicle JSON file."""
-    from quadfault.recording import _vehicle_from_sidecar
+    from quadfault.sidecar import vehicle_from_sidecar
 
     path = Path(path)
     if not path.exists():
@@ -72,7 +72,7 @@ def load_vehicle_file(path) -> tuple:
         raise RecordingError(path, f"must be 'NED' or 'ENU', got {frame!r}", key="frame")
     has_curve = "thrust_curve" in data or "thrust_coefficient" in data
     meta = {"frame": frame, "gravity": data.get("gravity", 9.81), "vehicle": data}
-    vehicle, curve = _vehicle_from_sidecar(path, meta, has_curve)
+    vehicle, curve = vehicle_from_sidecar(path, meta, has_curve)
     return vehicle, curve
 
 
@@ -105,13 +105,13 @@ def _vehicle_from_flags(args):
 
 def with_vehicle(rec, vehicle, curve, source: str):
     """``rec`` with its nominal vehicle (and thrust curve) replaced by a user's file."""
-    from quadfault.importers.crazyflie import thrust_from_curve
+    from quadfault.effects import curve_thrust
 
     changes = {"vehicle": vehicle}
     meta = dict(rec.meta)
     meta["constants"] = {"vehicle": f"from {source}"}
     if curve is not None and rec.commands_u is not None:
-        changes.update(thrust_curve=curve, thrust_cmd=thrust_from_curve(rec.commands_u, curve))
+        changes.update(thrust_curve=curve, thrust_cmd=curve_thrust(curve, rec.commands_u))
         meta.pop("calibration", None)
     changes["meta"] = meta
     return replace(rec, **changes)

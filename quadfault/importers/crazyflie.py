@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from quadfault.effects import curve_thrust
 from quadfault.vehicle import Vehicle, allocation_from_rotors
 
 #: Standard Crazyflie rotor order in FLU, in units of the per-axis offset:
@@ -128,13 +129,6 @@ CF21_BRUSHLESS = CrazyflieSpec(
 BRUSHLESS_KF = 3.72e-8
 
 
-def thrust_from_curve(u, curve) -> np.ndarray:
-    """f = a + b u + c u^2 [N] for commands ``u`` (any shape)."""
-    a, b, c = curve
-    u = np.asarray(u, dtype=float)
-    return a + b * u + c * u * u
-
-
 def scale_curve_on_segment(curve, u: np.ndarray, thrust_measured: np.ndarray,
                            mask: np.ndarray) -> tuple[tuple, float]:
     """Scale a thrust curve so the summed rotor thrust matches the measured collective thrust
@@ -144,7 +138,7 @@ def scale_curve_on_segment(curve, u: np.ndarray, thrust_measured: np.ndarray,
     [N] (m g in hover; any manoeuvre works, as long as the vehicle is airborne and drag along
     the thrust axis is small). Returns the scaled curve and the scale factor.
     """
-    predicted = thrust_from_curve(u[mask], curve).sum(axis=1)
+    predicted = curve_thrust(curve, u[mask]).sum(axis=1)
     ok = np.isfinite(predicted) & np.isfinite(thrust_measured[mask])
     if ok.sum() < 5 or np.mean(predicted[ok]) <= 0:
         from quadfault.errors import ConfigError

@@ -34,12 +34,12 @@ from pathlib import Path
 
 import numpy as np
 
+from quadfault.effects import curve_thrust
 from quadfault.errors import ConfigError
 from quadfault.importers import (gap_stats, increasing_time_mask, read_raw_table,
                                  require_columns, require_finite, running_span, select)
 from quadfault.importers.crazyflie import (CF21_BRUSHED, FOERSTER_THRUST_CURVE, G_CRAZYFLIE,
-                                           calibration_mask, scale_curve_on_segment,
-                                           thrust_from_curve)
+                                           calibration_mask, scale_curve_on_segment)
 from quadfault.recording import Recording, enu_flu_to_ned_frd
 from quadfault.rotation import euler_zyx_to_rot, expm_so3, logm_so3, rot_to_quat
 
@@ -169,7 +169,7 @@ def _finish(path, kind, t, arrays, cal_segment, mass, measured, extra_meta, **re
     m = DEFAULT_MASS if mass is None else float(mass)
     cal = calibration_mask(t, cal_segment)
     curve, scale = scale_curve_on_segment(FOERSTER_THRUST_CURVE, arrays["u"], m * measured, cal)
-    vehicle = CF21_BRUSHED.vehicle(mass=m, max_thrust=float(thrust_from_curve(1.0, curve)))
+    vehicle = CF21_BRUSHED.vehicle(mass=m, max_thrust=float(curve_thrust(curve, 1.0)))
     rel = path.parent.parent.name + "/" + path.parent.name + "/" + path.name
     meta = {
         "dataset": DATASET,
@@ -190,7 +190,7 @@ def _finish(path, kind, t, arrays, cal_segment, mass, measured, extra_meta, **re
         "truth": _condition(path),
         "import": extra_meta,
     }
-    return Recording(t=t, thrust_cmd=thrust_from_curve(arrays["u"], curve),
+    return Recording(t=t, thrust_cmd=curve_thrust(curve, arrays["u"]),
                      commands_u=arrays["u"], thrust_curve=curve, vehicle=vehicle, frame="NED",
                      source=f"{DATASET}/{rel}: Crazyflie 2.1 on-board log (Masalimov et al. "
                             "2024, Data 9, 79), imported by quadfault",

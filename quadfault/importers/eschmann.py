@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
+from quadfault.effects import curve_thrust
 from quadfault.errors import ConfigError
 from quadfault.importers import (gap_stats, increasing_time_mask, read_raw_table,
                                  require_columns, require_finite, running_span, select)
 from quadfault.importers.crazyflie import (CF21_BRUSHED, FOERSTER_THRUST_CURVE, G_CRAZYFLIE,
-                                           calibration_mask, scale_curve_on_segment,
-                                           thrust_from_curve)
+                                           calibration_mask, scale_curve_on_segment)
 from quadfault.recording import Recording, enu_flu_to_ned_frd
 
 DATASET = "eschmann-cf21-sysid"
@@ -88,7 +88,7 @@ def import_eschmann(path, *, keep_all: bool = False, calibration=None, mass: flo
     measured = -m * accel[:, 2]
     cal = calibration_mask(t, calibration)
     curve, scale = scale_curve_on_segment(FOERSTER_THRUST_CURVE, arrays["u"], measured, cal)
-    vehicle = CF21_BRUSHED.vehicle(mass=m, max_thrust=float(thrust_from_curve(1.0, curve)))
+    vehicle = CF21_BRUSHED.vehicle(mass=m, max_thrust=float(curve_thrust(curve, 1.0)))
 
     stem = path.name.split(".")[0]
     meta = {
@@ -118,7 +118,7 @@ def import_eschmann(path, *, keep_all: bool = False, calibration=None, mass: flo
             "commands": "u = motor.m* / 65536 (firmware motor power command)",
         },
     }
-    thrust_cmd = thrust_from_curve(arrays["u"], curve)
+    thrust_cmd = curve_thrust(curve, arrays["u"])
     return Recording(t=t, omega=omega, accel=accel, thrust_cmd=thrust_cmd,
                      commands_u=arrays["u"], thrust_curve=curve, vehicle=vehicle, frame="NED",
                      source=f"{DATASET}/{path.name}: Crazyflie 2.1 on-board log (Eschmann et al. "

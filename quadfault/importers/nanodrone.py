@@ -19,11 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
+from quadfault.effects import curve_thrust
 from quadfault.errors import ConfigError
 from quadfault.importers import (gap_stats, increasing_time_mask, read_raw_table,
                                  require_columns, require_finite, running_span, select)
 from quadfault.importers.crazyflie import (BRUSHLESS_KF, CF21_BRUSHLESS, ERPM_TO_RAD_S,
-                                           calibration_mask, thrust_from_curve)
+                                           calibration_mask)
 from quadfault.recording import QUAT_NORM_TOL, Recording, enu_flu_to_ned_frd
 from quadfault.rotation import quat_to_rot
 
@@ -134,16 +135,19 @@ def import_nanodrone(path, *, keep_all: bool = False, calibration=None,
         raise ConfigError(f"{path}: columns m1_erpm..m4_erpm are needed to fit the thrust curve")
     curve = fit_command_curve(arrays["u"][cal], BRUSHLESS_KF * arrays["omega_rotor"][cal] ** 2)
     m = CF21_BRUSHLESS.mass if mass is None else float(mass)
-    vehicle = CF21_BRUSHLESS.vehicle(mass=m, max_thrust=float(thrust_from_curve(1.0, curve)))
+    vehicle = CF21_BRUSHLESS.vehicle(mass=m, max_thrust=float(curve_thrust(curve, 1.0)))
     if arrays["vbat"] is None:
         missing.append("battery voltage")
-    thrust_cmd = thrust_from_curve(arrays["u"], curve)
+    thrust_cmd = curve_thrust(curve, arrays["u"])
     check = -m * accel[:, 2]
     rest = ~cal
     meta = {
         "dataset": DATASET,
         "file": path.name,
         "licence": LICENCE,
+        # thrust per squared measured rotor speed [N/(rad/s)^2]: the diagnosis' rotor_*
+        # channels compare k omega_i^2 with the commanded thrust (docs/importers.md)
+        "rotor_thrust_coefficient": BRUSHLESS_KF,
         "constants": dict(CF21_BRUSHLESS.sources),
         "calibration": {
             "segment": list(calibration),

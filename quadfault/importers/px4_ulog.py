@@ -32,10 +32,10 @@ from pathlib import Path
 
 import numpy as np
 
+from quadfault.effects import curve_thrust
 from quadfault.errors import ConfigError, QuadfaultError, RecordingError
 from quadfault.importers import gap_stats, running_span
-from quadfault.importers.crazyflie import (calibration_mask, scale_curve_on_segment,
-                                           thrust_from_curve)
+from quadfault.importers.crazyflie import (calibration_mask, scale_curve_on_segment)
 from quadfault.recording import Recording
 from quadfault.vehicle import Vehicle, allocation_from_rotors
 
@@ -290,7 +290,7 @@ def import_px4_ulog(path, *, vehicle=None, thrust_curve=None, keep_all: bool = F
         meta["calibration"] = meta_cal
     return Recording(t=t, omega=res["w"], accel=res.get("acc"), position=res.get("pos"),
                      velocity=res.get("vel"), quaternion=res["q"] if "pos" in res else None,
-                     vbat=res.get("vbat"), thrust_cmd=thrust_from_curve(res["u"], thrust_curve),
+                     vbat=res.get("vbat"), thrust_cmd=curve_thrust(thrust_curve, res["u"]),
                      commands_u=res["u"], thrust_curve=thrust_curve, vehicle=vehicle,
                      frame="NED", source=f"PX4 ULog {path.name}, imported by quadfault",
                      meta=meta)

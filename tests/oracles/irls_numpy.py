@@ -368,8 +368,10 @@ class ChangeCompletion:
         if self.left > 0:
             self.left -= 1
             if self.v is not None:
-                x = np.clip(self.anchor + l1_completion(x_raw - self.anchor, self.v),
-                            self.lower, self.upper)
+                change = l1_completion(x_raw - self.anchor, self.v)
+                moves = np.sort(np.abs(change))
+                if moves[-2] <= 0.5 * moves[-1]:  # a single-motor change; else stand down
+                    x = np.clip(self.anchor + change, self.lower, self.upper)
         self.observe(x)
         return x
 

@@ -1,0 +1,105 @@
+"""Fair pairs of ``quadfault reproduce``: the EKF partner's Q_eta rule, identical
+post-processing, and ``cli`` arguments that reproduce each series through
+``quadfault estimate``."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from estimators.paper.pairing import VARIANTS, Variant, choose_partner, pair_ratios, run_pair
+from estimators.paper.reproduce import sim_config
+from estimators.series_io import read_estimate_csv
+from quadfault.errors import ConfigError
+from quadfault.recording import write_recording
+from quadfault.scenarios import named_scenario
+from quadfault.simulator import simulate
+
+
+def _curve(q):
+    """U-shaped RMSE (minimum 0.02 at q = 1e-2) and an excess spike with its minimum at
+    q = 1 (a hump elsewhere)."""
+    x = math.log10(q)
+    return 0.02 + 0.01 * (x + 2.0) ** 2, 0.05 + 0.02 * x ** 2
+
+
+def test_partner_is_the_least_excess_spike_within_the_rmse_target():
+    res = choose_partner(None, 0.065, evaluate=_curve, q_range=(1e-5, 1e2), refine=4)
+    assert res.matched and res.q_eta == pytest.approx(1.0, rel=0.05)
+    # a tighter target cuts the feasible interval below q = 1: its upper edge wins
+    res = choose_partner(None, 0.035, evaluate=_curve, q_range=(1e-5, 1e2), refine=6)
+    edge = 10 ** (-2 + math.sqrt(1.5))
+    assert res.matched and res.rmse <= 0.035 and res.q_eta == pytest.approx(edge, rel=0.1)
+    assert all(r > 0.035 or e >= res.excess_spike - 1e-12
+               for r, e in zip(res.curve_rmse, res.curve_excess))
+
+
+def test_partner_keeps_to_the_fast_branch():
+    """A slow filter (left of the RMSE minimum) with a lower excess spike is not chosen."""
+    def curve(q):
+        r, e = _curve(q)
+        return r, (0.0 if q < 1e-2 else e)
+    res = choose_partner(None, 0.065, evaluate=curve, q_range=(1e-5, 1e2), refine=4)
+    assert res.matched and res.q_eta == pytest.approx(1.0, rel=0.05)
+    assert min(res.curve_excess) == 0.0 and res.excess_spike > 0.0
+
+
+def test_partner_falls_back_to_the_most_accurate_q_eta():
+    res = choose_partner(None, 0.01, evaluate=_curve, q_range=(1e-5, 1e2))
+    assert not res.matched and res.q_eta == pytest.approx(1e-2, rel=0.2)
+    assert "most accurate" in res.message
+    with pytest.raises(ConfigError, match="target"):
+        choose_partner(None, -1.0, evaluate=_curve)
+    with pytest.raises(ConfigError, match="q_range"):
+        choose_partner(None, 0.03, evaluate=_curve, q_range=(1.0, 0.1))
+
+
+def test_variants_share_post_processing_and_keys():
+    keys = {(v.irls_key, v.ekf_key) for v in VARIANTS}
+    assert ("irls", "ekf") in keys and ("irls_improved", "ekf_improved") in keys
+    for v in VARIANTS:
+        assert v.ekf_args(1.0)["median"] == (v.median if v.median > 1 else None)
+
+
+@pytest.fixture(scope="module")
+def flight(tmp_path_factory):
+    rec = simulate(named_scenario("abrupt", 3.0), config=sim_config("rk4", "abrupt"), seed=5,
+                   thrust_noise=0.07)
+    path = tmp_path_factory.mktemp("pair") / "abrupt.csv"
+    write_recording(rec, path)
+    return rec, path
+
+
+def test_each_entry_cli_reproduces_its_series(flight, tmp_path):
+    rec, path = flight
+    variant = Variant("improved", improved=True, median=21)
+    pair = run_pair(rec, variant, 0.3)
+    assert set(pair) == {"irls_improved", "ekf_improved"}
+    for key, (series, extra) in pair.items():
+        assert extra["postprocess"] == "median:21" and extra["partner"] in pair
+        assert extra["partner"] != key
+        out = tmp_path / f"{key}.csv"
+        r = subprocess.run([sys.executable, "-m", "quadfault.cli", "estimate", str(path),
+                            *extra["cli"], "--out", str(out), "--quiet"],
+                           capture_output=True, text=True, timeout=600)
+        assert r.returncode == 0, r.stderr
+        np.testing.assert_array_equal(read_estimate_csv(out)["eta"], series.eta)
+        assert json.loads(out.with_suffix(".json").read_text())["postprocess"] == "median:21"
+    assert pair["ekf_improved"][1]["q_eta"] == 0.3
+    assert pair["ekf_improved"][1]["cli"] == ["--estimator", "ekf", "--q-eta", "0.3",
+                                              "--median", "21"]
+
+
+def test_pair_ratios():
+    per = {"irls": {"rmse": [0.02] * 4, "spike": [0.1] * 4, "excess_spike": [0.02] * 4},
+           "ekf": {"rmse": [0.025] * 4, "spike": [0.2] * 4, "excess_spike": [0.08] * 4}}
+    r = pair_ratios({"abrupt": per, "degradation": {
+        k: {**v, "spike": None, "excess_spike": None} for k, v in per.items()}})
+    assert r["abrupt"]["paper"] == pytest.approx({"spike": 0.5, "excess_spike": 0.25,
+                                                  "rmse": 0.8})
+    assert r["degradation"]["paper"]["spike"] is None
