@@ -42,6 +42,7 @@ from quad_fault_env.time_tables import WINDOW, RowTimeTables
 from quadfault import closed_loop, jit
 from quadfault.controller import GeometricController
 from quadfault.dynamics import RigidBodyState
+from quadfault.effects.sampling import describe
 from quadfault.errors import ConfigError
 from quadfault.motors import MotorModel
 from quadfault.plant import Plant
@@ -140,7 +141,8 @@ class QuadFaultVectorEnv(VectorEnv):
     ``eta_true``, ``eta_hat``, ``eta_sd`` (10 = none, as in the observation),
     ``estimator_status``,
     ``position_error`` [m], ``tracking_error`` [m], ``motor_command`` [N],
-    ``termination_reason``, ``scenario``.
+    ``termination_reason``, ``scenario``; with ``effects`` / ``model``, ``effects`` (each
+    sub-env's drawn effects, as the single env reports them).
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
@@ -225,6 +227,8 @@ class QuadFaultVectorEnv(VectorEnv):
         self._rngs: list = [None] * N  # each sub-env's generator (set by its reset)
         self._rng_list = None  # the same as the loop's typed list, built lazily
         self._scenario_names = np.full(N, None, dtype=object)
+        self.physics_draws = e0.physics_draws  # per-vehicle physics drawn at each reset
+        self._effects = np.full(N, None, dtype=object)
         self._started = False
 
     # -- the vehicles' arrays (views of the plant's state) -----------------------------------
@@ -282,6 +286,10 @@ class QuadFaultVectorEnv(VectorEnv):
             rng = env.np_random
             sc = shared if shared is not None else env._make_scenario(spec)
             env.scenario = sc
+            if self.physics_draws is not None:  # the single env's draw, at the same point
+                env.effects = self.physics_draws.draw(rng)
+                self.plant.assign(i, env.effects)
+                self._effects[i] = describe(env.effects)
             u[k] = rng.uniform(-1.0, 1.0, SPREAD_DRAWS)
             self._rngs[i] = rng
             self._scenario_names[i] = sc.name
@@ -398,7 +406,7 @@ class QuadFaultVectorEnv(VectorEnv):
                 rec[~active] = m[~active, None]
         tables = closed_loop.Tables(self._tables.k0 * S, self._tables.eta, self._no_refs)
         closed_loop.fly_batch(self._generators(), active, self.steps * S, S, False, self._loop,
-                              V, tables, out)
+                              V, tables, out, fx=self.plant.hook)
         if self.estimator is not None:
             for r, j in enumerate(range(0, S, stride)):
                 res = self.estimator.update(ts[:, j], out.p[:, r], out.v[:, r], out.R[:, r],
@@ -493,6 +501,8 @@ class QuadFaultVectorEnv(VectorEnv):
             "termination_reason": np.asarray(reason, dtype=object),
             "scenario": self._scenario_names.copy(),
         }
+        if self.physics_draws is not None:
+            info["effects"] = self._effects.copy()
         for key in list(info):
             info["_" + key] = np.ones(N, dtype=bool)
         return info

@@ -24,12 +24,18 @@ Who calls it:
   vehicles (``prange``), each with its own generator;
 * :func:`agents.rollout.fly` -- one call per physics step between the estimator's updates.
 
-A plant with effects (:mod:`quadfault.plant`) runs :func:`fly_vehicle` interpreted by Python
-with the effects hook; results equal the compiled loop's where the effects are neutral.
+Effects (``fx``): the built-in effects of :mod:`quadfault.effects` run compiled, each vehicle
+its own (:class:`~quadfault.effects.chain.EffectRows`: parameters per vehicle, memory per
+vehicle, applied by :func:`~quadfault.effects.chain.thrust_effects` after the motors and
+:func:`~quadfault.effects.chain.effects_wrench` at every RK stage); a plant with effects
+written in Python runs :func:`fly_vehicle` interpreted with its
+:class:`~quadfault.plant.EffectsHook` at the same two points (one vehicle at a time).
 
-State between calls lives in :class:`Vehicles` (arrays the kernel updates in place); the
-functions of time (efficiency per step, controller references) in :class:`Tables`; what a
-caller wants kept in :class:`Records`.
+State between calls lives in :class:`Vehicles` (arrays the kernel updates in place), with
+each vehicle's physical parameters (mass, inertia, rotor thrust limit, thrust noise: they
+may differ from vehicle to vehicle); the functions of time (efficiency per step, controller
+references) in :class:`Tables`; what a caller wants kept in :class:`Records`; the constants
+of the batch -- and each vehicle's sensor noise -- in :class:`LoopConstants`.
 """
 
 from __future__ import annotations
@@ -46,12 +52,14 @@ from quadfault.controller import (
     rotor_commands,
 )
 from quadfault.dynamics import (
+    call_wrench,
     reference_euler_step,
     reference_euler_store,
     rkmk4_step,
     specific_force3,
     translational_acceleration3,
 )
+from quadfault.effects.chain import EffectRows, thrust_effects, wrench_terms
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange, python
 from quadfault.motors import motor_thrust
@@ -60,26 +68,24 @@ from quadfault.sensors import accelerometer3, measure3
 
 
 class LoopConstants(NamedTuple):
-    """Everything fixed over a flight, as scalars and arrays (numba's parallel loops take no
-    tuples inside a tuple; :func:`fly_vehicle` builds the kernels' tuples once per call)."""
+    """What is fixed over a flight, as scalars and arrays (numba's parallel loops take no
+    tuples inside a tuple; :func:`fly_vehicle` builds the kernels' tuples once per call).
+    ``sensors`` has a row per vehicle (set a row to give that vehicle other noise)."""
 
     dt: float  # physics step [s]
     t0: float  # time of step 0 [s]
     reference: bool  # the authors' Euler step instead of RKMK4
     decimation: int  # controller every this many steps; 0: the caller sets the commands
-    sensors: np.ndarray  # (6,) SensorNoise.constants (the last: 1.0 when any noise)
+    sensors: np.ndarray  # (N, 6) SensorNoise.constants per vehicle (the last: 1.0 when any noise)
     record_accel: bool  # measure the accelerometer (its noise drawn only then)
     saturate: bool  # clip commands to [0, f_max] (else only at 0)
-    f_max: float  # per-rotor thrust limit of the true plant [N]
-    mass: float  # true plant [kg]
     gravity: float  # [m/s^2]
-    inertia: np.ndarray  # (3, 3) true plant [kg m^2]
-    inertia_inverse: np.ndarray  # (3, 3)
     allocation: np.ndarray  # (4, n) of the true plant
 
 
 class Vehicles(NamedTuple):
-    """The state of N vehicles carried from call to call (updated in place)."""
+    """The N true vehicles: their state carried from call to call (updated in place) and
+    each one's physical parameters (the flown vehicle; :meth:`set_body`)."""
 
     p: np.ndarray  # (N, 3) true position [m]
     v: np.ndarray  # (N, 3) true velocity [m/s]
@@ -93,15 +99,31 @@ class Vehicles(NamedTuple):
     f_cmd: np.ndarray  # (N, n) rotor commands held [N]
     f: np.ndarray  # (N, n) thrusts produced over the last step [N]
     sigma: np.ndarray  # (N,) thrust noise sigma_f
+    mass: np.ndarray  # (N,) true mass [kg]
+    inertia: np.ndarray  # (N, 3, 3) true inertia [kg m^2]
+    inertia_inverse: np.ndarray  # (N, 3, 3)
+    f_max: np.ndarray  # (N,) per-rotor thrust limit [N]
 
     @classmethod
-    def empty(cls, n_vehicles: int, n_rotors: int) -> "Vehicles":
+    def empty(cls, n_vehicles: int, n_rotors: int, vehicle=None) -> "Vehicles":
+        """N vehicles at the origin, at rest; all of ``vehicle``'s parameters when given."""
         N = n_vehicles
         eye = np.broadcast_to(np.eye(3), (N, 3, 3))
-        return cls(np.zeros((N, 3)), np.zeros((N, 3)), eye.copy(), np.zeros((N, 3)),
-                   np.zeros((N, 4, 3)), np.zeros((N, 3)), np.zeros((N, 3)), eye.copy(),
-                   np.zeros((N, 3)), np.zeros((N, n_rotors)), np.zeros((N, n_rotors)),
-                   np.zeros(N))
+        out = cls(np.zeros((N, 3)), np.zeros((N, 3)), eye.copy(), np.zeros((N, 3)),
+                  np.zeros((N, 4, 3)), np.zeros((N, 3)), np.zeros((N, 3)), eye.copy(),
+                  np.zeros((N, 3)), np.zeros((N, n_rotors)), np.zeros((N, n_rotors)),
+                  np.zeros(N), np.ones(N), eye.copy(), eye.copy(), np.full(N, np.inf))
+        if vehicle is not None:
+            out.set_body(slice(None), vehicle)
+        return out
+
+    def set_body(self, rows, vehicle) -> None:
+        """Vehicles ``rows`` fly ``vehicle``'s mass, inertia and rotor thrust limit (its
+        allocation must be the batch's, :attr:`LoopConstants.allocation`)."""
+        self.mass[rows] = vehicle.mass
+        self.inertia[rows] = vehicle.inertia
+        self.inertia_inverse[rows] = vehicle.inertia_inverse
+        self.f_max[rows] = vehicle.rotor_max_thrust
 
     def set_state(self, rows, state) -> None:
         """Set the true state of ``rows`` (and clear the reference integrator's memory)."""
@@ -180,11 +202,11 @@ def _allocate(A, f):
 
 
 @jit(inline="always")
-def _tuples(C):
-    """The kernels' tuples of :class:`LoopConstants`: the true rigid body and the sensors."""
-    rigid = (C.mass, C.gravity, mat3(C.inertia), mat3(C.inertia_inverse))
+def _tuples(C, V, i):
+    """The kernels' tuples of vehicle ``i``: its true rigid body and its sensors."""
+    rigid = (V.mass[i], C.gravity, mat3(V.inertia[i]), mat3(V.inertia_inverse[i]))
     s = C.sensors
-    return rigid, (s[0], s[1], s[2], s[3], s[4], s[5] != 0.0)
+    return rigid, (s[i, 0], s[i, 1], s[i, 2], s[i, 3], s[i, 4], s[i, 5] != 0.0)
 
 
 @jit
@@ -193,16 +215,17 @@ def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx, memory=None)
     ``gen``; ``C`` the :class:`LoopConstants`, ``K`` the controller's
     :class:`~quadfault.controller.ControllerConstants` of the controller in the loop (None: the
     caller sets ``V.f_cmd``), ``V`` the :class:`Vehicles` (updated), ``T``
-    the :class:`Tables`, ``out`` the :class:`Records`, ``fx`` the effects hook (None: none).
+    the :class:`Tables`, ``out`` the :class:`Records`, ``fx`` the effects (None: none; the
+    :class:`~quadfault.effects.chain.EffectRows`, or in the interpreted loop the hook).
     With ``measure_first`` False the first step uses the carried measurement ``V.m*[i]``.
     ``memory`` (``V.memory``) flies the authors' Euler step (``C.reference``), None RKMK4
     (the branch not taken is compiled out). Returns the number of steps run: it stops after
     the first step whose state is not finite."""
     p, v, R, w = vec3(V.p[i]), vec3(V.v[i]), mat3(V.R[i]), vec3(V.w[i])
     mp, mv, mR, mw = vec3(V.mp[i]), vec3(V.mv[i]), mat3(V.mR[i]), vec3(V.mw[i])
-    f_cmd, f, sigma = V.f_cmd[i], V.f[i], V.sigma[i]
+    f_cmd, f, sigma, f_max = V.f_cmd[i], V.f[i], V.sigma[i], V.f_max[i]
     eta, refs, first = T.eta[i], T.refs[i], T.first[i]
-    rigid, sensors = _tuples(C)
+    rigid, sensors = _tuples(C, V, i)
     rec = out.p.shape[1] > 0
     rec_accel = out.accel.shape[1] > 0
     done = 0
@@ -218,16 +241,19 @@ def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx, memory=None)
                 gains, nominal = controller_tuples(K)
                 u = geometric_control(mp, mv, mR, mw, reference_row(refs, row), gains, nominal)
                 rotor_commands(u[0], u[1], K.allocation_inverse, f_cmd)
-        motor_thrust(f_cmd, eta, row, C.f_max, C.saturate, sigma, gen, f)
+        motor_thrust(f_cmd, eta, row, f_max, C.saturate, sigma, gen, f)
         if fx is not None:
-            fx.rotor_thrust(f, t, C.dt, p, v, R, w)
+            thrust_effects(fx, i, f, t, C.dt, p, v, R, w, gen)
         thrust, M = _allocate(C.allocation, f)
         if memory is not None:
             reference_euler_store(memory[i], thrust, M, R)
             p1, v1, R1, w1 = p, v, R, w
             a0 = translational_acceleration3(R, thrust, rigid)
-        else:
-            p1, v1, R1, w1, a0 = rkmk4_step(p, v, R, w, thrust, M, rigid, C.dt, fx, f, t)
+        elif fx is None:
+            p1, v1, R1, w1, a0 = rkmk4_step(p, v, R, w, thrust, M, rigid, C.dt)
+        else:  # the stages get the step's wrench terms: numbers, no arrays
+            p1, v1, R1, w1, a0 = rkmk4_step(p, v, R, w, thrust, M, rigid, C.dt,
+                                            wrench_terms(fx, i, f, t))
         sf = a0
         if C.record_accel:
             sf = accelerometer3(specific_force3(R, a0, C.gravity), sensors, gen)
@@ -258,27 +284,27 @@ def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx, memory=None)
 
 
 @jit(parallel=True)
-def _fly_parallel(gens, active, k0, n_steps, measure_first, C, K, V, T, out, done):
+def _fly_parallel(gens, active, k0, n_steps, measure_first, C, K, V, T, out, fx, done):
     for r in prange(active.shape[0]):
         i = np.int64(r)  # the same specialisation of fly_vehicle as the serial loop's
         if active[i]:
             done[i] = fly_vehicle(i, gens[i], k0[i], k0[i] + n_steps, measure_first, C, K, V,
-                                  T, out, None)
+                                  T, out, fx)
 
 
 @jit
-def _fly_serial(gens, active, k0, n_steps, measure_first, C, K, V, T, out, done):
+def _fly_serial(gens, active, k0, n_steps, measure_first, C, K, V, T, out, fx, done):
     for i in range(active.shape[0]):
         if active[i]:
             done[i] = fly_vehicle(i, gens[i], k0[i], k0[i] + n_steps, measure_first, C, K, V,
-                                  T, out, None)
+                                  T, out, fx)
 
 
 @jit
 def sense_vehicle(i, gen, C, V):
     """Measure vehicle ``i``'s true state into its carried measurement (the sensors' draws)."""
     mp, mv, mR, mw = measure3(vec3(V.p[i]), vec3(V.v[i]), mat3(V.R[i]), vec3(V.w[i]),
-                              _tuples(C)[1], gen)
+                              _tuples(C, V, i)[1], gen)
     store3(V.mp[i], mp)
     store3(V.mv[i], mv)
     store33(V.mR[i], mR)
@@ -297,8 +323,35 @@ PARALLEL_MIN_VEHICLES = 64
 
 
 @jit
-def _fly_one(gens, i, k0, k1, measure_first, C, K, V, T, out, memory):
-    return fly_vehicle(i, gens[i], k0, k1, measure_first, C, K, V, T, out, None, memory)
+def _fly_one(gens, i, k0, k1, measure_first, C, K, V, T, out, fx, memory):
+    return fly_vehicle(i, gens[i], k0, k1, measure_first, C, K, V, T, out, fx, memory)
+
+
+def _call_thrust(fx, i, f, t, dt, p, v, R, w, gen):
+    fx.rotor_thrust(f, t, dt, p, v, R, w, gen)
+
+
+class _StepHook:
+    """The interpreted loop's wrench terms: the hook with the step's thrusts and time."""
+
+    def __init__(self, hook, i, f, t):
+        self.hook, self.f, self.t = hook, f, t
+
+    def wrench(self, p, v, R, w, f, t):
+        return self.hook.wrench(p, v, R, w, self.f, self.t)
+
+
+#: the interpreted loop's calls at the chain's two points: the hook's methods
+HOOK_CALLS = {"thrust_effects": _call_thrust,
+              "wrench_terms": _StepHook,
+              "effects_wrench": call_wrench}
+
+
+def _interpreted():
+    """:func:`fly_vehicle` run by Python, calling an effects hook (an object with
+    ``rotor_thrust(f, t, dt, p, v, R, w, gen)`` -- ``f`` replaced in place -- and ``wrench(p,
+    v, R, w, f, t)``, :class:`quadfault.plant.EffectsHook`) at the chain's two points."""
+    return python(fly_vehicle, HOOK_CALLS)
 
 
 def fly(gens, k0: int, k1: int, measure_first: bool, C: LoopConstants, V: Vehicles, T: Tables,
@@ -306,35 +359,40 @@ def fly(gens, k0: int, k1: int, measure_first: bool, C: LoopConstants, V: Vehicl
     """:func:`fly_vehicle` for vehicle ``i`` with its generator ``gens[i]`` (a
     :func:`generators` list, cheap to pass per call) or ``gens`` itself (a
     ``numpy.random.Generator``); ``K``: the controller in the loop, every ``C.decimation``
-    steps (None: the commands in ``V.f_cmd`` are held). With an effects ``hook`` the loop
-    runs interpreted by Python (see :mod:`quadfault.plant`)."""
+    steps (None: the commands in ``V.f_cmd`` are held). ``hook``: the plant's effects
+    (:attr:`quadfault.plant.Plant.hook`) -- compiled rows, or a hook of effects written in
+    Python, with which the loop runs interpreted (see :mod:`quadfault.plant`)."""
     if K is not None and C.decimation < 1:
         raise ConfigError(f"a controller in the loop needs a decimation >= 1, got {C.decimation}")
     gen = gens if isinstance(gens, np.random.Generator) else None
     memory = V.memory if C.reference else None
-    if hook is not None:
+    if hook is not None and not isinstance(hook, EffectRows):
         gen = gens[i] if gen is None else gen
-        return python(fly_vehicle)(i, gen, k0, k1, measure_first, C, K, V, T, out, hook, memory)
+        return _interpreted()(i, gen, k0, k1, measure_first, C, K, V, T, out, hook, memory)
     if gen is not None:  # a Generator: ~10 us per call to pass (fine for long calls)
-        return fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, None, memory)
-    return _fly_one(gens, i, k0, k1, measure_first, C, K, V, T, out, memory)
+        return fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, hook, memory)
+    return _fly_one(gens, i, k0, k1, measure_first, C, K, V, T, out, hook, memory)
 
 
 def fly_batch(gens, active: np.ndarray, k0: np.ndarray, n_steps: int, measure_first: bool,
               C: LoopConstants, V: Vehicles, T: Tables, out: Records,
-              K: ControllerConstants | None = None) -> np.ndarray:
+              K: ControllerConstants | None = None, fx: EffectRows | None = None) -> np.ndarray:
     """``n_steps`` steps of every active vehicle ``i`` from its step ``k0[i]``, each with its
     generator ``gens[i]`` (a :func:`generators` list), in parallel from
-    :data:`PARALLEL_MIN_VEHICLES` on (``K``: a controller in the loop, as for :func:`fly`).
-    Returns the steps each vehicle ran (N,). The reference integrator and effects are single-
-    vehicle features (:func:`fly`)."""
+    :data:`PARALLEL_MIN_VEHICLES` on (``K``: a controller in the loop, as for :func:`fly`;
+    ``fx``: the vehicles' compiled effects, :attr:`quadfault.plant.Plant.hook`). Returns the
+    steps each vehicle ran (N,). The reference integrator and effects written in Python fly
+    one vehicle at a time (:func:`fly`)."""
     if C.reference:
         raise ConfigError("the reference integrator flies one vehicle at a time (fly)")
     if K is not None and C.decimation < 1:
         raise ConfigError(f"a controller in the loop needs a decimation >= 1, got {C.decimation}")
+    if fx is not None and not isinstance(fx, EffectRows):
+        raise ConfigError("effects written in Python fly one vehicle at a time (fly); a batch "
+                          "flies the built-in effects of quadfault.effects")
     done = np.zeros(len(active), dtype=np.int64)
     kernel = _fly_parallel if len(active) >= PARALLEL_MIN_VEHICLES else _fly_serial
-    kernel(gens, active, k0, int(n_steps), bool(measure_first), C, K, V, T, out, done)
+    kernel(gens, active, k0, int(n_steps), bool(measure_first), C, K, V, T, out, fx, done)
     return done
 
 
@@ -343,7 +401,7 @@ def sense(gens, C: LoopConstants, V: Vehicles, i: int = 0) -> None:
     :func:`sense_vehicle`;
     noise-free sensors draw nothing and measure the state itself, copied here without a
     kernel call)."""
-    if C.sensors[5] == 0.0:
+    if C.sensors[i, 5] == 0.0:
         V.mp[i], V.mv[i], V.mR[i], V.mw[i] = V.p[i], V.v[i], V.R[i], V.w[i]
     elif isinstance(gens, np.random.Generator):
         sense_vehicle(i, gens, C, V)
@@ -356,7 +414,7 @@ def sense_rows(gens, rows: np.ndarray, C: LoopConstants, V: Vehicles) -> None:
     a few draws per vehicle cost less than a parallel launch); noise-free sensors measure
     the state itself (copied here; ``gens`` is then not used and may be None)."""
     rows = np.asarray(rows, dtype=np.int64)
-    if C.sensors[5] == 0.0:
+    if not C.sensors[rows, 5].any():
         for m, x in ((V.mp, V.p), (V.mv, V.v), (V.mR, V.R), (V.mw, V.w)):
             m[rows] = x[rows]
     else:
@@ -374,16 +432,17 @@ def generators(rngs):
 
 def constants(plant, sensors, decimation: int = 0, record_accel: bool = True,
               t0: float = 0.0) -> LoopConstants:
-    """The :class:`LoopConstants` of a flight of ``plant`` (a :class:`~quadfault.plant.Plant`)
-    measured by ``sensors`` (a SensorNoise), with the controller in the loop every
-    ``decimation`` steps (0: the caller sets the commands)."""
+    """The :class:`LoopConstants` of a flight of ``plant`` (a :class:`~quadfault.plant.Plant`;
+    its vehicles' physical parameters are in ``plant.vehicles``) measured by ``sensors`` (a
+    SensorNoise, for every vehicle), with the controller in the loop every ``decimation``
+    steps (0: the caller sets the commands)."""
     veh = plant.vehicle
-    arr = (lambda a: np.array(a, dtype=float, order="C"))  # writable: one specialisation
+    N = len(plant.vehicles.p)
+    sensor_rows = np.array(np.broadcast_to(np.asarray(sensors.constants, dtype=float), (N, 6)))
     return LoopConstants(
         float(plant.dt), float(t0), plant.integrator == "reference", int(decimation),
-        arr(sensors.constants), bool(record_accel), bool(plant.motor.saturate),
-        float(veh.rotor_max_thrust), float(veh.mass), float(veh.gravity), arr(veh.inertia),
-        arr(veh.inertia_inverse), arr(veh.allocation))
+        sensor_rows, bool(record_accel), bool(plant.motor.saturate), float(veh.gravity),
+        np.array(veh.allocation, dtype=float, order="C"))
 
 
 __all__ = ["LoopConstants", "Vehicles", "Tables", "Records", "fly_vehicle", "fly", "fly_batch",

@@ -35,6 +35,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+from quadfault.effects.chain import effects_wrench
 from quadfault.jit import jit, python
 from quadfault.rotation import (
     axpy3,
@@ -143,14 +144,14 @@ def dexpinv3(theta, w):
             w[2] + 0.5 * tw[2] + ttw[2] / 12.0)
 
 
-@jit
+@jit(inline="always")
 def _accelerations(p, v, R, w, thrust, moment, rigid, fx, f, t):
-    """(v', Omega') of eqs. 2 and 4 at one stage's state; the hook ``fx`` (None: none) adds
-    the external wrench of the effects at that state."""
+    """(v', Omega') of eqs. 2 and 4 at one stage's state; the effects ``fx`` (None: none)
+    add their external wrench at that state."""
     if fx is None:
         return (translational_acceleration3(R, thrust, rigid),
                 angular_acceleration3(w, moment, rigid))
-    F, Mx = fx.wrench(p, v, R, w, f, t)
+    F, Mx = effects_wrench(fx, p, v, R, w, f, t)
     return (translational_acceleration3(R, thrust, rigid, F),
             angular_acceleration3(w, moment, rigid, Mx))
 
@@ -168,8 +169,10 @@ def rkmk4_step(p0, v0, R0, w0, thrust, moment, rigid, dt, fx=None, f=None, t=0.0
     """One RKMK4 step of length ``dt`` [s] with thrust [N] and moment [N m] held constant:
     ``R(t) = R0 exp([theta(t)]x)``, ``theta' = dexp^-1_{-theta}(Omega)``; order 4 in ``dt``.
 
-    ``fx`` (the effects hook, None for none) gives the external wrench at each stage for
-    the produced rotor thrusts ``f`` and the step's start time ``t`` [s]. Returns
+    ``fx`` (the effects, None for none: a vehicle's compiled effects over the step,
+    :func:`quadfault.effects.chain.wrench_terms`, or in the interpreted kernel any object
+    with a ``wrench`` method) gives the external wrench at each stage for the produced rotor
+    thrusts ``f`` and the step's start time ``t`` [s]. Returns
     ``(p, v, R, w, a0)``: the new state and eq. 2's acceleration at the start (what the
     accelerometer measures, :func:`specific_force3`).
     """
@@ -319,6 +322,12 @@ def _expm3_columns(phi):
     return tuple(R[..., r, c] for r in range(3) for c in range(3))
 
 
+def call_wrench(fx, p, v, R, w, f, t):
+    """The interpreted kernels' external wrench: the hook's ``wrench`` method (in place of
+    the compiled chain's :func:`~quadfault.effects.chain.effects_wrench`)."""
+    return fx.wrench(p, v, R, w, f, t)
+
+
 class _ExternalHook:
     """Adapter of a batched ``external(state) -> (F, M)`` to the kernels' ``fx.wrench``."""
 
@@ -353,7 +362,7 @@ def step_rk4(state: RigidBodyState, thrust, moment, vehicle: Vehicle, dt,
         _rk4_rows(vec(p), vec(v), mat(R), vec(w), T, vec(moment), rigid, dts, *out)
         return RigidBodyState(out[0].reshape(batch + (3,)), out[1].reshape(batch + (3,)),
                               out[2].reshape(batch + (3, 3)), out[3].reshape(batch + (3,)))
-    kernel = python(rkmk4_step, {"expm3": _expm3_columns})
+    kernel = python(rkmk4_step, {"expm3": _expm3_columns, "effects_wrench": call_wrench})
     cols = (lambda a: tuple(a[:, j] for j in range(a.shape[1])))
     M = vec(moment)
     p1, v1, R1, w1, _ = kernel(cols(vec(p)), cols(vec(v)), cols(mat(R).reshape(-1, 9)),

@@ -7,10 +7,9 @@ the effects, and integrates the rigid body (:func:`quadfault.dynamics.rkmk4_step
 authors' Euler step). The loop that does this is :mod:`quadfault.closed_loop`; this module
 says what a plant is and how effects act on it.
 
-Effects (the hook)
-------------------
-An effect is any object with these methods (numpy form; :mod:`quadfault.effects` has the
-built-in ones)::
+Effects
+-------
+An effect is any object with these methods (:mod:`quadfault.effects` has the built-in ones)::
 
     reset(n_rotors) -> None                    # start of a flight
     rotor_thrust(f, t, dt, state) -> f_new     # produced rotor thrusts [N] (n,) after the
@@ -27,9 +26,18 @@ built-in ones)::
 FRD) -- the state at the step's start for ``rotor_thrust``, the stage's state for ``wrench``.
 Effects act in the order given: ``rotor_thrust`` chained, wrenches summed.
 
-A plant with effects runs the same closed loop interpreted by Python
-(:func:`quadfault.jit.python`), whose kernels call :class:`EffectsHook` at those two
-points; without effects the loop is compiled and the hook is compiled out (``fx is None``).
+The built-in effects (the classes of ``quadfault.effects.EFFECTS``) always run compiled: their
+parameters become each vehicle's row of the compiled effect chain
+(:class:`~quadfault.effects.chain.EffectRows`, :attr:`Plant.hook`), their memory lives in the
+plant, and mass and inertia effects set the vehicles' physical parameters. A plant with an
+effect written in Python (any other object of the protocol) runs the same closed loop
+interpreted by Python (:func:`quadfault.jit.python`), calling :class:`EffectsHook` at the same
+two points for every effect (the built-in ones through their compiled entries); it flies one
+vehicle at a time. Without effects the hook is compiled out (``fx is None``).
+
+Per-vehicle physics: a plant of N vehicles flies them all alike; :meth:`Plant.assign` gives
+vehicles their own built-in effects, vehicle parameters (mass, inertia, rotor thrust limit)
+and thrust noise, e.g. drawn per episode (:mod:`quadfault.effects.sampling`).
 """
 
 from __future__ import annotations
@@ -40,6 +48,8 @@ import numpy as np
 
 from quadfault.closed_loop import Vehicles
 from quadfault.dynamics import RigidBodyState
+from quadfault.effects import rows as fx_rows
+from quadfault.effects.spec import EFFECTS
 from quadfault.errors import ConfigError
 from quadfault.motors import MotorModel
 from quadfault.vehicle import Vehicle
@@ -79,22 +89,38 @@ def flown_vehicle(vehicle: Vehicle, effects) -> Vehicle:
     return vehicle
 
 
-class EffectsHook:
-    """What the interpreted loop calls (``fx``): the effects in numpy form.
+def compiled(effect) -> bool:
+    """Whether ``effect`` is a built-in effect (runs compiled; not a subclass)."""
+    return type(effect) is EFFECTS.get(getattr(effect, "name", None))
 
-    ``rotor_thrust(f, t, dt, p, v, R, w)`` replaces the produced thrusts ``f`` (an array,
-    in place) by the effects' chain; ``wrench(p, v, R, w, f, t)`` returns the summed
-    external force and moment as 3-tuples.
+
+def entries(effects, vehicle: Vehicle, dt: float) -> list:
+    """The compiled chain's entries of the built-in ``effects`` on the flown ``vehicle``."""
+    signs = np.sign(vehicle.allocation[3])
+    out = [fx_rows.entry(e, vehicle.n_rotors, dt, signs) for e in effects]
+    return [e for e in out if e is not None]
+
+
+class EffectsHook:
+    """What the interpreted loop calls (``fx``): every effect through its protocol.
+
+    ``rotor_thrust(f, t, dt, p, v, R, w, gen)`` replaces the produced thrusts ``f`` (an array,
+    in place) by the effects' chain (a built-in effect runs its compiled entry, a wind without
+    a seed drawing from the vehicle's generator ``gen``); ``wrench(p, v, R, w, f, t)`` returns
+    the summed external force and moment as 3-tuples.
     """
 
     def __init__(self, effects):
         self.effects = tuple(effects)
 
-    def rotor_thrust(self, f, t, dt, p, v, R, w) -> None:
+    def rotor_thrust(self, f, t, dt, p, v, R, w, gen) -> None:
         state = _state(p, v, R, w)
         out = f.copy()
         for e in self.effects:
-            out = e.rotor_thrust(out, t, dt, state)
+            if compiled(e):
+                out = e.rotor_thrust(out, t, dt, state, gen)
+            else:
+                out = e.rotor_thrust(out, t, dt, state)
         f[:] = out
 
     def wrench(self, p, v, R, w, f, t):
@@ -140,8 +166,14 @@ class Plant:
         self.vehicle = flown_vehicle(vehicle, self.effects)
         self.integrator = integrator
         self.dt = float(dt)
-        self.vehicles = Vehicles.empty(int(n_vehicles), vehicle.n_rotors)
+        N = int(n_vehicles)
+        self.vehicles = Vehicles.empty(N, vehicle.n_rotors, self.vehicle)
         self.vehicles.sigma[:] = self.motor.thrust_noise
+        self._python = not all(compiled(e) for e in self.effects)
+        self._rows = None
+        built = [] if self._python else entries(self.effects, self.vehicle, self.dt)
+        if built:
+            self._rows = fx_rows.build([built] * N)
 
     @property
     def state(self) -> RigidBodyState:
@@ -149,18 +181,64 @@ class Plant:
         return self.vehicles.state(0)
 
     def reset(self, state: RigidBodyState | None = None) -> None:
-        """Start a flight (from ``state``, vehicle 0, when given): the effects' ``reset``
-        and ``true_vehicle``."""
+        """Start a flight of every vehicle (from ``state``, vehicle 0, when given): the
+        effects' ``reset`` and ``true_vehicle``, the compiled effects' memory cleared."""
         if state is not None:
             self.vehicles.set_state(0, state)
         for e in self.effects:
             e.reset(self.nominal_vehicle.n_rotors)
         self.vehicle = flown_vehicle(self.nominal_vehicle, self.effects)
+        self.vehicles.set_body(slice(None), self.vehicle)
+        if self._rows is not None:
+            fx_rows.reset(self._rows, np.arange(len(self._rows.code)))
+
+    def assign(self, rows, effects=None, *, vehicle: Vehicle | None = None,
+               thrust_noise: float | None = None) -> None:
+        """Vehicles ``rows`` start a flight with their own physics: the built-in ``effects``
+        (default: the plant's) on ``vehicle`` (default: the nominal one; the same rotor
+        layout) -- the flown vehicle's mass, inertia and rotor thrust limit, the effects'
+        parameters with their memory cleared -- and thrust noise ``thrust_noise`` (sigma_f;
+        default: unchanged). Their state is the caller's to set."""
+        effects = self.effects if effects is None else tuple(effects)
+        bad = [e for e in effects if not compiled(e)]
+        if bad:
+            raise ConfigError(f"per-vehicle effects must be built-in effects of "
+                              f"quadfault.effects, got {type(bad[0]).__name__}")
+        base = self.nominal_vehicle if vehicle is None else vehicle
+        if base.n_rotors != self.nominal_vehicle.n_rotors or not np.allclose(
+                base.allocation, self.vehicle.allocation):
+            raise ConfigError("a vehicle of the batch must keep the plant's rotor layout "
+                              "(allocation)")
+        flown = flown_vehicle(base, effects)
+        chain = entries(effects, flown, self.dt)
+        if self._rows is None and chain:
+            self._rows = fx_rows.empty(len(self.vehicles.p), 0, 0, 0)
+        if self._rows is not None:
+            self._rows = fx_rows.grown(self._rows, chain)
+        for i in np.atleast_1d(np.arange(len(self.vehicles.p))[rows]):
+            if self._rows is not None:
+                fx_rows.write(self._rows, i, chain)
+            self.vehicles.set_body(i, flown)
+            if thrust_noise is not None:
+                self.vehicles.sigma[i] = float(thrust_noise)
 
     @property
-    def hook(self) -> EffectsHook | None:
-        """The loop's effects hook (None without effects: the compiled loop)."""
-        return EffectsHook(self.effects) if self.effects else None
+    def hook(self):
+        """The loop's effects: None without effects (the compiled loop pays nothing), the
+        compiled :class:`~quadfault.effects.chain.EffectRows` of the built-in effects, or an
+        :class:`EffectsHook` (the interpreted loop) when an effect is written in Python."""
+        if self._python:
+            return EffectsHook(self.effects)
+        return self._rows
+
+    def check_effects(self) -> None:
+        """A one-line error when a vehicle's delay effect lost a knot it needed (steps much
+        shorter than ``dt``; see :func:`quadfault.effects.rows.delay_capacity`)."""
+        if self._rows is not None and fx_rows.lost(self._rows).any():
+            raise ConfigError(f"delay effect: physics steps much shorter than the plant's "
+                              f"dt = {self.dt:g} s dropped history it needed; build the plant "
+                              "with the shortest step")
 
 
-__all__ = ["INTEGRATORS", "Effect", "EffectsHook", "Plant", "flown_vehicle"]
+__all__ = ["INTEGRATORS", "Effect", "EffectsHook", "Plant", "compiled", "entries",
+           "flown_vehicle"]

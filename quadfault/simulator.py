@@ -30,7 +30,7 @@ from quadfault.controller import ControllerConfig, GeometricController
 from quadfault.dynamics import RigidBodyState
 from quadfault.errors import ConfigError
 from quadfault.motors import MotorModel
-from quadfault.plant import INTEGRATORS, Plant
+from quadfault.plant import INTEGRATORS, EffectsHook, Plant
 from quadfault.recording import Recording
 from quadfault.rotation import rot_to_quat
 from quadfault.scenarios import Scenario, at_times
@@ -196,7 +196,7 @@ def simulate(scenario: Scenario, *, vehicle: Vehicle | None = None,
     out = closed_loop.Records.empty(1, n, n_rot, accel=cfg.record_accel)
     hook = plant.hook
     bar = _progress(n, progress, f"simulate {scenario.name}")
-    chunk = CHUNK if hook is None else CHUNK // 10
+    chunk = CHUNK // 10 if isinstance(hook, EffectsHook) else CHUNK
     for k0 in range(0, n, chunk):
         k1 = min(n, k0 + chunk)
         rows = closed_loop.Records(1, *(a[:, k0:k1] for a in out[1:]))
@@ -218,6 +218,7 @@ def simulate(scenario: Scenario, *, vehicle: Vehicle | None = None,
         end = None
     if bar is not None:
         bar.close()
+    plant.check_effects()
     times, eta = times[:n], eta[:n]
     out = closed_loop.Records(1, *(None if a is None else a[:, :n] for a in out[1:]))
     vbat = None if scenario.voltage is None else scenario.voltage(times)

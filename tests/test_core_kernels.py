@@ -137,16 +137,18 @@ def test_per_step_cores_take_no_arrays():
     C = closed_loop.constants(plant, SensorNoise(0.1, 0.1, 0.1, 0.1, 0.1))
     K = GeometricController(Vehicle(), None).constants
 
+    V = plant.vehicles
+
     @numba.njit(cache=False)  # types the kernels afresh (a cached caller does not)
-    def one_step(C, K, gen):
-        rigid, noise = closed_loop._tuples(C)
+    def one_step(C, V, K, gen):
+        rigid, noise = closed_loop._tuples(C, V, 0)
         gains, nominal = controller.controller_tuples(K)
         z, R = (0.0, 0.0, -1.0), (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
         x = dynamics.rkmk4_step(z, z, R, z, 9.8, z, rigid, 1e-3)
         u = controller.geometric_control(z, z, R, z, (z, z, z, z, z, z), gains, nominal)
         return x, u, sensors.measure3(z, z, R, z, noise, gen)
 
-    one_step(C, K, np.random.default_rng(0))
+    one_step(C, V, K, np.random.default_rng(0))
     # the signatures this caller typed for the cores (not the dispatchers' state: with a
     # warm cache the cores may never have been compiled in this process)
     ta = one_step.overloads[one_step.signatures[0]].type_annotation

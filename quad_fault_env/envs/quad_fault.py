@@ -51,6 +51,7 @@ from quad_fault_env.time_tables import RowTimeTables
 from quadfault import closed_loop
 from quadfault.controller import ControllerConfig, GeometricController, GeometricGains
 from quadfault.dynamics import RigidBodyState
+from quadfault.effects.sampling import PhysicsDraws, describe
 from quadfault.errors import ConfigError
 from quadfault.motors import MotorModel
 from quadfault.plant import Plant
@@ -148,6 +149,14 @@ class QuadFaultEnv(gym.Env):
             with the scenario's efficiency).
         controller: ``ControllerConfig`` of the baseline controller.
         render_mode: ``"rgb_array"`` or ``"human"``.
+        effects: domain randomisation: ``quadfault simulate --effect`` specs, values or
+            ranges ``a:b`` drawn from ``self.np_random`` at each reset (e.g.
+            ``["mass=0.8:1.2", "drag=0.1:0.5", "wind=-2:2,-2:2,0"]``); ``info["effects"]``
+            says what was drawn (:mod:`quadfault.effects.sampling`).
+        model: a diagnosis JSON (path or parsed object; ``quadfault.effects.from_diagnosis``):
+            fly its nominal vehicle (instead of ``vehicle``) and its accepted effects.
+        model_uncertainty: draw the model's fitted parameters from their reported
+            uncertainty at each reset.
         physics: deprecated, no effect (there is one implementation of the physics);
             accepted for one release with a ``DeprecationWarning``.
     """
@@ -167,7 +176,13 @@ class QuadFaultEnv(gym.Env):
                  limits: TerminationLimits | None = None,
                  initial_spread: InitialStateSpread | None = None,
                  vehicle: Vehicle | None = None, controller: ControllerConfig | None = None,
-                 render_mode: str | None = None, physics: str | None = None):
+                 render_mode: str | None = None, physics: str | None = None,
+                 effects=None, model=None, model_uncertainty: bool = False):
+        self.physics_draws = PhysicsDraws.of(effects, model, model_uncertainty)
+        if self.physics_draws is not None and self.physics_draws.vehicle is not None:
+            if vehicle is not None:
+                raise ConfigError("give either vehicle or model (the model brings its vehicle)")
+            vehicle = self.physics_draws.vehicle
         self.vehicle = vehicle or Vehicle()
         if not isinstance(self.vehicle, Vehicle) or self.vehicle.n_rotors != 4:
             raise ConfigError("vehicle must be a quadfault Vehicle with 4 rotors (the scenarios "
@@ -293,8 +308,10 @@ class QuadFaultEnv(gym.Env):
         self.scenario = self._make_scenario(self._scenario_option(options))
         self.controller = GeometricController(self.vehicle, self.scenario.trajectory,
                                               self.controller_config)
+        self.effects = self.physics_draws.draw(self.np_random) if self.physics_draws else ()
         self.plant = Plant(self.vehicle, self.scenario.efficiency,
-                           MotorModel(self.scenario.thrust_noise), dt=self.dt)
+                           MotorModel(self.scenario.thrust_noise), effects=self.effects,
+                           dt=self.dt)
         self.plant.reset(self._initial_state())
         self._loop = closed_loop.constants(self.plant, self.sensor_noise)
         self._gens, self._gens_of = closed_loop.generators([self.np_random]), self.np_random
@@ -473,7 +490,7 @@ class QuadFaultEnv(gym.Env):
             "eta_true_samples": eta_rows,
             "specific_force_samples": sf_rows,
             "termination_reason": reason,
-        }
+        } | ({"effects": describe(self.effects)} if self.physics_draws else {})
 
     # -- rendering ---------------------------------------------------------------------------
     def render(self):

@@ -77,6 +77,53 @@ class Effect:
         return {"name": self.name, "params": self.params()}
 
 
+#: the physics step a standalone effect's chain is built for when ``wrench`` comes first [s]
+_STANDALONE_DT = 1e-3
+
+
+class Compiled(Effect):
+    """A built-in effect with an entry in the compiled effect chain
+    (:mod:`quadfault.effects.chain`). The closed loop runs that entry compiled, from the
+    plant's rows; the protocol methods here run the same entry for one vehicle from Python
+    (its memory -- lag, delay, gusts -- kept on the object from one call to the next and
+    cleared by ``reset``). ``rotor_thrust`` takes the loop's generator as ``gen`` (a wind
+    without a seed draws its gusts from it; alone, from a generator seeded 0)."""
+
+    def reset(self, n_rotors: int) -> None:
+        for key in ("_single", "_fallback"):
+            self.__dict__.pop(key, None)
+
+    def _yaw_signs(self, n_rotors: int):
+        return None
+
+    def chain(self, n_rotors: int, dt: float):
+        """This effect's one-vehicle chain (:class:`quadfault.effects.rows.Single`), built at
+        the first call after ``reset``."""
+        single = self.__dict__.get("_single")
+        if single is None:
+            from quadfault.effects.rows import Single, entry
+
+            single = Single([entry(self, n_rotors, dt, self._yaw_signs(n_rotors))])
+            self.__dict__["_single"] = single  # frozen dataclass: memory beside the fields
+            self.__dict__["_fallback"] = np.random.default_rng(0)
+        return single
+
+    def rotor_thrust(self, f, t, dt, state, gen=None):
+        out = np.array(f, dtype=float).ravel()
+        single = self.chain(len(out), dt)
+        single.rotor_thrust(out, t, dt, state.p, state.v, state.R, state.w,
+                            self.__dict__["_fallback"] if gen is None else gen)
+        return out
+
+    def wrench(self, state, f, t):
+        F, M = self.chain(len(np.ravel(f)), _STANDALONE_DT).wrench(
+            state.p, state.v, state.R, state.w, f, t)
+        return np.array(F), np.array(M)
+
+    def __getstate__(self):  # the memory stays behind (a copy starts a new flight)
+        return {k: v for k, v in self.__dict__.items() if k not in ("_single", "_fallback")}
+
+
 def param(params: dict, key: str, name: str):
     """``params[key]``, or a one-line error naming the effect and the key."""
     if not isinstance(params, dict) or key not in params:

@@ -1,38 +1,85 @@
-"""The physics of the effects: pure functions, batched over leading axes.
+"""The physics of the effects over arrays: compiled loops over the kernels.
 
-The simulator's plant calls them one step at a time (through the effect classes of
-:mod:`quadfault.effects`) and the mismatch diagnosis calls them over a whole recording
-(:mod:`quadfault.diagnosis.library`): one implementation of each effect. Frames: world NED,
-body FRD; rotor thrusts ``f`` [N] have the rotors on the last axis.
+Each function applies the kernel of :mod:`quadfault.effects.kernels` -- the code the closed
+loop runs step by step for the simulator and the environments -- to every row of its
+(broadcast) arguments: the mismatch diagnosis (:mod:`quadfault.diagnosis.library`) calls them
+over a whole recording, so there is one implementation of each effect. Frames: world NED,
+body FRD; rotor thrusts ``f`` [N] have the rotors on the last axis; a scalar argument gives a
+scalar.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from quadfault.rotation import cross
+from quadfault.effects.kernels import (
+    battery_factor1,
+    blade_flapping3,
+    com_offset_moment3,
+    curve_command1,
+    curve_thrust1,
+    drag_force3,
+    ground_effect_factor1,
+    lag_gain1,
+    lag_step1,
+    rate_damping3,
+    recurve1,
+    rotor_inertia_moment1,
+    thrust_rate1,
+    zoh_integral,
+    zoh_next1,
+)
+from quadfault.jit import jit
+from quadfault.rotation import mat3, store3, vec3
 
 E3 = np.array([0.0, 0.0, 1.0])
 
 
+def _rows(batch: tuple, *arrays):
+    """Each ``(array, width)`` broadcast to ``batch + width`` as C-contiguous float rows."""
+    out = []
+    for a, width in arrays:
+        a = np.broadcast_to(np.asarray(a, dtype=float), batch + width)
+        out.append(np.ascontiguousarray(a.reshape((-1,) + width)))
+    return out
+
+
+def _batch(*arrays) -> tuple:
+    """The common batch shape of ``(array, width)`` pairs (``width`` trailing axes each)."""
+    return np.broadcast_shapes(*(np.shape(a)[:np.ndim(a) - len(w)] for a, w in arrays))
+
+
+def _shaped(out: np.ndarray, batch: tuple, width: tuple = ()):
+    out = out.reshape(batch + width)
+    return out[()] if out.ndim == 0 else out
+
+
 # ----------------------------------------------------------------------------------------
 # thrust stage: produced rotor thrust from the commanded one
+@jit
+def _curve_rows(curve, x, inverse, out):
+    a, b, c = curve[0], curve[1], curve[2]
+    for i in range(x.shape[0]):
+        out[i] = curve_command1(a, b, c, x[i]) if inverse else curve_thrust1(a, b, c, x[i])
+
+
+def _curve(curve, x, inverse: bool):
+    c = np.array([float(v) for v in curve])
+    (xs,) = _rows(np.shape(x), (x, ()))
+    out = np.empty(len(xs))
+    _curve_rows(c, xs, inverse, out)
+    return _shaped(out, np.shape(x))
+
+
 def curve_thrust(curve, u) -> np.ndarray:
     """Rotor thrust [N] of the command ``u`` through the curve ``f = a + b u + c u^2``."""
-    a, b, c = (float(x) for x in curve)
-    u = np.asarray(u, dtype=float)
-    return a + u * (b + c * u)
+    return _curve(curve, u, False)
 
 
 def curve_command(curve, f) -> np.ndarray:
     """The command ``u >= 0`` that the curve ``(a, b, c)`` maps to thrust ``f`` [N] (the
     larger root; ``u = 0`` where ``f`` is below the curve's value at 0)."""
-    a, b, c = (float(x) for x in curve)
-    f = np.asarray(f, dtype=float) - a
-    if c == 0.0:
-        return np.maximum(f / b, 0.0)
-    disc = np.maximum(b * b + 4.0 * c * f, 0.0)
-    return np.maximum((np.sqrt(disc) - b) / (2.0 * c), 0.0)
+    return _curve(curve, f, True)
 
 
 def curve_from_changes(nominal, f_hover: float, changes) -> np.ndarray:
@@ -46,31 +93,77 @@ def curve_from_changes(nominal, f_hover: float, changes) -> np.ndarray:
         [d0 - d1 + d2, (d1 - 2 * d2) / uh, d2 / uh ** 2])
 
 
+@jit
+def _recurve_rows(f, nominal, curve, out):
+    nom = (nominal[0], nominal[1], nominal[2])
+    cur = (curve[0], curve[1], curve[2])
+    for i in range(f.shape[0]):
+        out[i] = recurve1(f[i], nom, cur)
+
+
 def recurve(f, nominal, curve) -> np.ndarray:
     """Thrust [N] produced through ``curve`` by the command that the ``nominal`` curve maps to
     the commanded thrust ``f`` [N] (never negative)."""
-    return np.maximum(curve_thrust(curve, curve_command(nominal, f)), 0.0)
+    (fs,) = _rows(np.shape(f), (f, ()))
+    out = np.empty(len(fs))
+    _recurve_rows(fs, np.array(nominal, dtype=float), np.array(curve, dtype=float), out)
+    return _shaped(out, np.shape(f))
+
+
+@jit
+def _factor_rows(x, p, q, kind, out):
+    for i in range(x.shape[0]):
+        if kind == 0:
+            out[i] = ground_effect_factor1(x[i], p)
+        elif kind == 1:
+            out[i] = battery_factor1(x[i], p, q)
+        else:
+            out[i] = lag_gain1(x[i], p)
+
+
+def _factor(x, p: float, q: float, kind: int):
+    (xs,) = _rows(np.shape(x), (x, ()))
+    out = np.empty(len(xs))
+    _factor_rows(xs, float(p), float(q), kind, out)
+    return _shaped(out, np.shape(x))
 
 
 def ground_effect_factor(height, rotor_radius: float) -> np.ndarray:
     """Cheeseman-Bennett thrust ratio ``1 / (1 - (r / 4h)^2)`` for height ``h`` [m] above the
     ground and rotor radius ``r`` [m]; ``h`` is clipped to ``r / 2`` (ratio at most 4/3)."""
-    h = np.maximum(np.asarray(height, dtype=float), max(0.5 * rotor_radius, 1e-6))
-    return 1.0 / (1.0 - (rotor_radius / (4.0 * h)) ** 2)
+    return _factor(height, rotor_radius, 0.0, 0)
 
 
 def battery_factor(voltage, v_ref: float, exponent: float) -> np.ndarray:
     """Thrust ratio ``(V / V_ref)^n`` at battery voltage ``V`` [V] (``n`` = 2 for a motor whose
     speed is proportional to its voltage, 0 for perfect voltage compensation)."""
-    v = np.maximum(np.asarray(voltage, dtype=float), 1e-6)
-    return (v / v_ref) ** exponent
+    return _factor(voltage, v_ref, exponent, 1)
+
+
+@jit
+def _zoh_cumulative_rows(t, values, out):
+    for j in range(1, t.shape[0]):
+        for m in range(values.shape[1]):
+            out[j, m] = zoh_next1(out[j - 1, m], values[j - 1, m], t[j - 1], t[j])
 
 
 def zoh_cumulative(t_knots: np.ndarray, values: np.ndarray) -> np.ndarray:
     """Cumulative integrals of a zero-order-hold signal at its knots (see :func:`zoh_mean`)."""
-    out = np.zeros_like(values, dtype=float)
-    out[1:] = np.cumsum(values[:-1] * np.diff(t_knots)[:, None], axis=0)
+    t = np.ascontiguousarray(t_knots, dtype=float)
+    v = np.ascontiguousarray(values, dtype=float)
+    out = np.zeros(v.shape)
+    if len(t):
+        _zoh_cumulative_rows(t, v.reshape(len(t), -1), out.reshape(len(t), -1))
     return out
+
+
+@jit
+def _zoh_mean_rows(buf, cap, n, a, b, out):
+    for i in range(a.shape[0]):
+        for m in range(n):
+            hi = zoh_integral(buf, 0, 0, cap, n, 0, cap, b[i], m)
+            lo = zoh_integral(buf, 0, 0, cap, n, 0, cap, a[i], m)
+            out[i, m] = (hi - lo) / (b[i] - a[i])
 
 
 def zoh_mean(t_knots: np.ndarray, values: np.ndarray, cumulative: np.ndarray,
@@ -81,70 +174,114 @@ def zoh_mean(t_knots: np.ndarray, values: np.ndarray, cumulative: np.ndarray,
     ``cumulative[j]`` is the integral from ``t_knots[0]`` to ``t_knots[j]``. A pure delay
     ``d`` over a step ``[t, t + dt]`` is ``zoh_mean(..., t - d, t + dt - d)``.
     """
-    a = np.asarray(a, dtype=float)
-    b = np.asarray(b, dtype=float)
-
-    def integral(x):
-        j = np.clip(np.searchsorted(t_knots, x, side="right") - 1, 0, len(t_knots) - 1)
-        return cumulative[j] + values[j] * (x - t_knots[j])[..., None]
-
-    return (integral(b) - integral(a)) / (b - a)[..., None]
+    t = np.asarray(t_knots, dtype=float)
+    v = np.asarray(values, dtype=float).reshape(len(t), -1)
+    c = np.asarray(cumulative, dtype=float).reshape(len(t), -1)
+    buf = np.concatenate((t, c.ravel(), v.ravel()))[None]
+    batch = _batch((a, ()), (b, ()))
+    ra, rb = _rows(batch, (a, ()), (b, ()))
+    out = np.empty((len(ra), v.shape[1]))
+    _zoh_mean_rows(buf, len(t), v.shape[1], ra, rb, out)
+    return out.reshape(batch + np.shape(values)[1:])
 
 
 def lag_gain(dt, tau: float) -> np.ndarray:
     """First-order-lag update gain ``1 - exp(-dt / tau)`` for a held input."""
-    return -np.expm1(-np.asarray(dt, dtype=float) / max(tau, 1e-9))
+    return _factor(dt, tau, 0.0, 2)
+
+
+@jit
+def _lag_rows(f, dt, tau, y0, out):
+    for m in range(f.shape[1]):
+        y = y0[m]
+        for k in range(f.shape[0]):
+            y = lag_step1(y, f[k, m], lag_gain1(dt[k], tau))
+            out[k, m] = y
 
 
 def lag_series(f: np.ndarray, dt: np.ndarray, tau: float, y0=None) -> np.ndarray:
     """Rotor thrust after a first-order lag ``tau f'' = f - f'`` with time constant ``tau``
     [s], exact for commands ``f`` (N, n) held for ``dt`` (N,) [s]:
-    ``y_k = y_{k-1} + g_k (f_k - y_{k-1})``, ``g_k = 1 - exp(-dt_k / tau)``.
+    ``y_k = g_k f_k + (1 - g_k) y_{k-1}``, ``g_k = 1 - exp(-dt_k / tau)``.
 
     ``y0`` is the thrust before the first step (default: the first command, as the plant
-    starts). The linear recurrence is solved by a parallel prefix scan (log2 N vectorised
-    passes), so one call over a recording and one call per plant step are the same function.
-    """
-    f = np.atleast_2d(np.asarray(f, dtype=float))
-    g = lag_gain(np.atleast_1d(dt), tau)
-    a = np.repeat((1.0 - g)[:, None], f.shape[1], axis=1)
-    b = g[:, None] * f
+    starts). One call over a recording and one call per plant step are the same kernel
+    (:func:`~quadfault.effects.kernels.lag_step1`)."""
+    f = np.ascontiguousarray(np.atleast_2d(np.asarray(f, dtype=float)))
+    dt = np.ascontiguousarray(np.broadcast_to(np.asarray(dt, dtype=float).ravel(), (len(f),)))
     start = f[0] if y0 is None else np.asarray(y0, dtype=float)
-    b[0] += a[0] * start
-    a[0] = 0.0
-    s = 1
-    while s < len(f):
-        b[s:] += a[s:] * b[:-s]
-        a[s:] *= a[:-s]
-        s *= 2
-    return b
+    out = np.empty_like(f)
+    _lag_rows(f, dt, float(tau), np.ascontiguousarray(np.broadcast_to(start, f.shape[1:])), out)
+    return out
+
+
+@jit
+def _rate_rows(f_end, dt, out):
+    for k in range(1, f_end.shape[0]):
+        for m in range(f_end.shape[1]):
+            out[k, m] = thrust_rate1(f_end[k, m], f_end[k - 1, m], dt[k])
 
 
 def thrust_rate(f_end: np.ndarray, dt: np.ndarray) -> np.ndarray:
     """Mean rate of change [N/s] of a thrust held over each interval: the step from the
     previous interval's final thrust to this one's, ``(f_end_k - f_end_{k-1}) / dt_k`` (0 for
     the first), so block means of the rate telescope exactly."""
-    f_end = np.asarray(f_end, dtype=float)
-    out = np.zeros_like(f_end)
-    out[1:] = (f_end[1:] - f_end[:-1]) / np.asarray(dt, dtype=float)[1:, None]
+    f = np.ascontiguousarray(f_end, dtype=float)
+    out = np.zeros_like(f)
+    if len(f) > 1:
+        d = np.ascontiguousarray(np.broadcast_to(np.asarray(dt, dtype=float), (len(f),)))
+        _rate_rows(f.reshape(len(f), -1), d, out.reshape(len(f), -1))
     return out
 
 
 # ----------------------------------------------------------------------------------------
 # wrench stage: external force (world) [N] and moment (body) [N m]
+@jit
+def _wrench_rows(kind, R, v, T, p, q, out_F, out_M):
+    for i in range(R.shape[0]):
+        if kind == 0:
+            store3(out_F[i], drag_force3(mat3(R[i]), vec3(v[i]), vec3(p[i])))
+        elif kind == 1:
+            F, M = blade_flapping3(mat3(R[i]), vec3(v[i]), T[i], p[i, 0], q[i, 0])
+            store3(out_F[i], F)
+            store3(out_M[i], M)
+        elif kind == 2:
+            store3(out_M[i], com_offset_moment3(T[i], p[i, 0], p[i, 1]))
+        elif kind == 3:
+            store3(out_M[i], rate_damping3(vec3(v[i]), vec3(p[i]), vec3(q[i])))
+        else:
+            s = 0.0
+            for m in range(p.shape[1]):
+                s += v[i, m] * q[i, m]
+            store3(out_M[i], (0.0, 0.0, rotor_inertia_moment1(s, T[i])))
+
+
+def _wrench(kind, batch, R, v, T, p, q):
+    """:func:`_wrench_rows` over ``batch``: ``(R, width), ...`` pairs; returns (F, M)."""
+    rR, rv, rT, rp, rq = _rows(batch, R, v, T, p, q)
+    n = int(np.prod(batch))
+    F, M = np.zeros((n, 3)), np.zeros((n, 3))
+    _wrench_rows(kind, rR, rv, rT, rp, rq, F, M)
+    return F.reshape(batch + (3,)), M.reshape(batch + (3,))
+
+
+_NO_T, _NO_P = (0.0, ()), (0.0, (1,))  # unused thrust / parameter rows
+
+
 def drag_force(R: np.ndarray, v_air: np.ndarray, k) -> np.ndarray:
     """``-R diag(k) R^T v_air`` [N] for air-relative velocity ``v_air`` (world) [m/s]."""
-    R = np.asarray(R, dtype=float)
-    vb = (np.swapaxes(R, -1, -2) @ np.asarray(v_air, dtype=float)[..., None])[..., 0]
-    return -(R @ (vb * np.asarray(k, dtype=float))[..., None])[..., 0]
+    k = np.asarray(k, dtype=float)
+    k = np.broadcast_to(k, k.shape[:-1] + (3,)) if k.ndim else np.full(3, float(k))
+    batch = _batch((R, (3, 3)), (v_air, (3,)), (k, (3,)))
+    return _wrench(0, batch, (R, (3, 3)), (v_air, (3,)), _NO_T, (k, (3,)), _NO_P)[0]
 
 
 def com_offset_moment(thrust, offset) -> np.ndarray:
     """Extra body moment [N m] of collective thrust ``thrust`` [N] when the CoM sits at
     ``offset`` = (r_x, r_y) [m] from the rotor-plane centre: ``r x (0, 0, T)``."""
-    T = np.asarray(thrust, dtype=float)
-    r = np.asarray(offset, dtype=float)
-    return np.stack((r[1] * T, -r[0] * T, np.zeros_like(T)), axis=-1)
+    batch = _batch((thrust, ()), (offset, (2,)))
+    return _wrench(2, batch, (np.eye(3), (3, 3)), ((0.0,) * 3, (3,)), (thrust, ()),
+                   (offset, (2,)), _NO_P)[1]
 
 
 def blade_flapping_wrench(R: np.ndarray, v_air: np.ndarray, thrust, k_force: float,
@@ -157,13 +294,9 @@ def blade_flapping_wrench(R: np.ndarray, v_air: np.ndarray, thrust, k_force: flo
     [s]; > 0: nose up when flying forward, as the flapped discs tilt back above the CoM).
     Returns ``(F_world, M_body)``.
     """
-    R = np.asarray(R, dtype=float)
-    T = np.asarray(thrust, dtype=float)[..., None]
-    vb = (np.swapaxes(R, -1, -2) @ np.asarray(v_air, dtype=float)[..., None])[..., 0]
-    inplane = vb * np.array([1.0, 1.0, 0.0])
-    F = -(R @ (k_force * T * inplane)[..., None])[..., 0]
-    M = k_moment * T * cross(E3, inplane)
-    return F, M
+    batch = _batch((R, (3, 3)), (v_air, (3,)), (thrust, ()))
+    return _wrench(1, batch, (R, (3, 3)), (v_air, (3,)), (thrust, ()),
+                   (float(k_force), (1,)), (float(k_moment), (1,)))
 
 
 def rotor_inertia_moment(rate: np.ndarray, yaw_signs: np.ndarray, kappa: float) -> np.ndarray:
@@ -171,20 +304,24 @@ def rotor_inertia_moment(rate: np.ndarray, yaw_signs: np.ndarray, kappa: float) 
     ``M_z = kappa sum_i s_i df_i/dt`` (``rate`` = df/dt [N/s], ``s_i`` = the sign of rotor
     i's drag torque on the body, ``kappa`` [m s] = J_r omega / (2 f) at the operating point,
     J_r the rotor inertia)."""
-    Mz = kappa * (np.asarray(rate, dtype=float) @ np.asarray(yaw_signs, dtype=float))
-    return np.stack((np.zeros_like(Mz), np.zeros_like(Mz), Mz), axis=-1)
+    rate = np.asarray(rate, dtype=float)
+    n = (rate.shape[-1],)
+    batch = _batch((rate, n), (yaw_signs, n))
+    return _wrench(4, batch, (np.eye(3), (3, 3)), (rate, n), (float(kappa), ()),
+                   (np.zeros(n), n), (yaw_signs, n))[1]
 
 
 def rate_damping_moment(w: np.ndarray, linear, quadratic) -> np.ndarray:
     """Aerodynamic damping of the body rate ``w`` [rad/s]:
     ``M = -(D1 + D2 |w|) w`` per body axis [N m] (``linear`` D1 [N m s/rad], ``quadratic``
     D2 [N m s^2/rad^2])."""
-    w = np.asarray(w, dtype=float)
-    return -(np.asarray(linear, dtype=float) + np.asarray(quadratic, dtype=float) * np.abs(w)) * w
+    batch = _batch((w, (3,)), (linear, (3,)), (quadratic, (3,)))
+    return _wrench(3, batch, (np.eye(3), (3, 3)), (w, (3,)), _NO_T, (linear, (3,)),
+                   (quadratic, (3,)))[1]
 
 
 # ----------------------------------------------------------------------------------------
-# vehicle stage: the rigid body the plant flies
+# vehicle stage: the rigid body the plant flies (set once per flight)
 def scaled_inertia(inertia: np.ndarray, scale) -> np.ndarray:
     """``D J D`` with ``D = diag(sqrt(scale))``: diagonal entries scaled by ``scale``."""
     d = np.sqrt(np.asarray(scale, dtype=float))

@@ -42,6 +42,10 @@ class _OpenLoop:
     def set_state(self, state) -> None:
         self.plant.vehicles.set_state(0, state)
 
+    def check(self) -> None:
+        """A one-line error if a delay lost history (intervals much shorter than ``dt``)."""
+        self.plant.check_effects()
+
     def step(self, f_cmd, t, dt):
         """One physics step of the command ``f_cmd`` held from ``t`` for ``dt``; the new
         state."""
@@ -121,6 +125,7 @@ def replay_errors(recording, vehicle, effects=(), horizons=(0.05, 0.1, 0.2, 0.5)
                     err["p"][i, h] = np.linalg.norm(s.p - recording.position[r])
                     err["v"][i, h] = np.linalg.norm(s.v - recording.velocity[r])
                     err["a"][i, h] = np.degrees(rotation_angle(s.R.T @ recording.rotation[r]))
+        plant.check()
 
     def rms(x):
         return np.sqrt(np.mean(x ** 2, axis=0)).tolist()

@@ -1,25 +1,18 @@
 """Thrust-stage effects: the thrust each rotor produces for its command.
 
 Canonical chain (``order``): command-to-thrust curve, battery voltage, efficiency or common
-scale, ground effect, delay, lag.
+scale, ground effect, delay, lag. Each is a frozen dataclass of parameters; its physics is
+its entry in the compiled effect chain (:mod:`quadfault.effects.chain`, the kernels of
+:mod:`quadfault.effects.kernels`).
 """
 
 from __future__ import annotations
 
-import bisect
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import ClassVar
 
-import numpy as np
 
-from quadfault.effects.base import Effect, number, param, vector
-from quadfault.effects.physics import (
-    battery_factor,
-    ground_effect_factor,
-    lag_series,
-    recurve,
-    zoh_mean,
-)
+from quadfault.effects.base import Compiled, number, param, vector
 from quadfault.errors import ConfigError
 
 IDENTITY_CURVE = (0.0, 1.0, 0.0)
@@ -34,7 +27,7 @@ def _curve(value, what) -> tuple:
 
 
 @dataclass(frozen=True)
-class ThrustCurve(Effect):
+class ThrustCurve(Compiled):
     """The rotors follow another command-to-thrust curve than the nominal one.
 
     The command is ``u = nominal^-1(f)`` (for the default identity nominal curve, the commanded
@@ -51,9 +44,6 @@ class ThrustCurve(Effect):
         object.__setattr__(self, "curve", _curve(self.curve, "thrust_curve curve"))
         object.__setattr__(self, "nominal", _curve(self.nominal, "thrust_curve nominal"))
 
-    def rotor_thrust(self, f, t, dt, state):
-        return recurve(f, self.nominal, self.curve)
-
     def params(self):
         return {"curve": list(self.curve), "nominal_curve": list(self.nominal)}
 
@@ -64,12 +54,13 @@ class ThrustCurve(Effect):
 
 
 @dataclass(frozen=True)
-class BatteryThrust(Effect):
+class BatteryThrust(Compiled):
     """Thrust that follows the battery voltage: ``f' = f (V / v_ref)^exponent``.
 
     The voltage falls linearly from ``v_start`` to ``v_end`` [V] over ``duration`` [s] (then
     stays); ``v_ref`` [V] is the voltage at which the nominal curve holds (default: the
-    middle of the discharge). ``quadfault simulate`` records the same voltage as ``vbat``.
+    middle of the discharge); over a physics step the thrust follows the voltage at the
+    step's middle. ``quadfault simulate`` records the same voltage as ``vbat``.
     """
 
     exponent: float = 2.0
@@ -89,14 +80,6 @@ class BatteryThrust(Effect):
             object.__setattr__(self, "v_ref", 0.5 * (self.v_start + self.v_end))
         number(self.v_ref, "battery_thrust v_ref [V]", 0.0, 1e3, open_lo=True)
 
-    def voltage(self, t) -> np.ndarray:
-        """Battery voltage [V] at time(s) ``t`` [s]."""
-        frac = np.clip(np.asarray(t, dtype=float) / self.duration, 0.0, 1.0)
-        return self.v_start + (self.v_end - self.v_start) * frac
-
-    def rotor_thrust(self, f, t, dt, state):
-        return f * battery_factor(self.voltage(t + 0.5 * dt), self.v_ref, self.exponent)
-
     def params(self):
         return {"exponent": self.exponent, "v_ref_V": self.v_ref, "v_start_V": self.v_start,
                 "v_end_V": self.v_end, "duration_s": self.duration}
@@ -110,7 +93,7 @@ class BatteryThrust(Effect):
 
 
 @dataclass(frozen=True)
-class MotorEfficiency(Effect):
+class MotorEfficiency(Compiled):
     """Per-rotor thrust factor ``eta`` [-] (1 = nominal; paper eq. 13)."""
 
     eta: tuple = (1.0, 1.0, 1.0, 1.0)
@@ -123,9 +106,6 @@ class MotorEfficiency(Effect):
             raise ConfigError(f"motor_efficiency eta must be in [0, 2], got {eta}")
         object.__setattr__(self, "eta", eta)
 
-    def rotor_thrust(self, f, t, dt, state):
-        return f * np.asarray(self.eta)
-
     def params(self):
         return {"eta": list(self.eta)}
 
@@ -135,7 +115,7 @@ class MotorEfficiency(Effect):
 
 
 @dataclass(frozen=True)
-class ThrustScale(Effect):
+class ThrustScale(Compiled):
     """Common thrust factor ``scale`` [-] of all rotors."""
 
     scale: float = 1.0
@@ -144,9 +124,6 @@ class ThrustScale(Effect):
 
     def __post_init__(self):
         number(self.scale, "thrust_scale", 0.0, 3.0, open_lo=True)
-
-    def rotor_thrust(self, f, t, dt, state):
-        return f * self.scale
 
     def params(self):
         return {"scale": self.scale}
@@ -157,7 +134,7 @@ class ThrustScale(Effect):
 
 
 @dataclass(frozen=True)
-class GroundEffect(Effect):
+class GroundEffect(Compiled):
     """Cheeseman-Bennett ground effect: rotor radius [m], ground plane ``z = ground_z`` [m]
     (world NED; 0 = the height where the recording's z is 0)."""
 
@@ -170,9 +147,6 @@ class GroundEffect(Effect):
         number(self.rotor_radius, "ground_effect rotor radius [m]", 0.0, 2.0)
         number(self.ground_z, "ground_effect ground_z [m]")
 
-    def rotor_thrust(self, f, t, dt, state):
-        return f * ground_effect_factor(self.ground_z - state.p[..., 2], self.rotor_radius)[..., None]
-
     def params(self):
         return {"rotor_radius_m": self.rotor_radius, "ground_z_m": self.ground_z}
 
@@ -182,44 +156,16 @@ class GroundEffect(Effect):
 
 
 @dataclass(frozen=True)
-class Delay(Effect):
+class Delay(Compiled):
     """Pure input delay [s] of the rotor thrust (over a step: the mean of the delayed
     zero-order-hold command, so fractional delays are exact)."""
 
     delay: float = 0.02
-    _hist: dict = field(default_factory=dict, repr=False, compare=False)
     name: ClassVar[str] = "delay"
     order: ClassVar[int] = 4
 
     def __post_init__(self):
         number(self.delay, "delay [s]", 0.0, 2.0)
-
-    def reset(self, n_rotors):
-        self._hist.clear()
-        self._hist.update(t=[], f=[], c=[])
-
-    def rotor_thrust(self, f, t, dt, state):
-        h = self._hist
-        if "t" not in h:
-            self.reset(len(f))
-        if h["t"]:
-            c = h["c"][-1] + h["f"][-1] * (t - h["t"][-1])
-        else:
-            c = np.zeros(len(f))
-        h["t"].append(float(t))
-        h["f"].append(np.array(f, dtype=float))
-        h["c"].append(c)
-        if self.delay == 0.0:
-            return f
-        # only the knots that can matter: those after t - delay - dt
-        lo = max(bisect.bisect_right(h["t"], t - self.delay - dt) - 1, 0)
-        tk = np.asarray(h["t"][lo:])
-        out = zoh_mean(tk, np.asarray(h["f"][lo:]), np.asarray(h["c"][lo:]),
-                       np.array([t - self.delay]), np.array([t + dt - self.delay]))[0]
-        if lo > 1000:  # forget the distant past
-            for key in ("t", "f", "c"):
-                del h[key][: lo - 1]
-        return out
 
     def params(self):
         return {"delay_s": self.delay}
@@ -230,25 +176,16 @@ class Delay(Effect):
 
 
 @dataclass(frozen=True)
-class MotorLag(Effect):
+class MotorLag(Compiled):
     """First-order rotor thrust dynamics ``tau f'' = f - f'`` with time constant ``tau`` [s],
-    exact for a held command (:func:`~quadfault.effects.physics.lag_series`)."""
+    exact for a held command (the kernel of :func:`~quadfault.effects.physics.lag_series`)."""
 
     tau: float = 0.05
-    _state: dict = field(default_factory=dict, repr=False, compare=False)
     name: ClassVar[str] = "motor_lag"
     order: ClassVar[int] = 5
 
     def __post_init__(self):
         number(self.tau, "motor_lag tau [s]", 0.0, 5.0, open_lo=True)
-
-    def reset(self, n_rotors):
-        self._state.clear()
-
-    def rotor_thrust(self, f, t, dt, state):
-        y = lag_series(f, dt, self.tau, self._state.get("y"))[0]
-        self._state["y"] = y
-        return y.copy()
 
     def params(self):
         return {"tau_s": self.tau}

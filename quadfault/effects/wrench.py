@@ -1,37 +1,23 @@
-"""Wrench-stage effects: extra force (world) [N] and moment (body) [N m] on the vehicle."""
+"""Wrench-stage effects: extra force (world) [N] and moment (body) [N m] on the vehicle.
+
+Each is a frozen dataclass of parameters; its physics is its entry in the compiled effect
+chain (:mod:`quadfault.effects.chain`, the kernels of :mod:`quadfault.effects.kernels`),
+evaluated at every stage of the integrator.
+"""
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 
-from quadfault.effects.base import Effect, number, param, vector
-from quadfault.effects.physics import (
-    blade_flapping_wrench,
-    com_offset_moment,
-    drag_force,
-    rate_damping_moment,
-    rotor_inertia_moment,
-    thrust_rate,
-)
+from quadfault.effects.base import Compiled, number, param, vector
 from quadfault.errors import ConfigError
-
-_ZERO3 = np.zeros(3)
-
-
-def _force_only(F, state):
-    return F, np.zeros(np.shape(state.w))
-
-
-def _moment_only(M, state):
-    return np.zeros(np.shape(state.p)), np.broadcast_to(M, np.shape(state.w)).copy()
 
 
 @dataclass(frozen=True)
-class Drag(Effect):
+class Drag(Compiled):
     """Linear (rotor) drag ``k`` [N s/m] per body axis, opposing the air-relative velocity;
     ``air_velocity`` [m/s] (world) is the steady air motion it sees (default still air)."""
 
@@ -47,10 +33,6 @@ class Drag(Effect):
         object.__setattr__(self, "k", k)
         object.__setattr__(self, "air_velocity", vector(self.air_velocity, 3, "drag air_velocity"))
 
-    def wrench(self, state, f, t):
-        return _force_only(drag_force(state.R, state.v - np.asarray(self.air_velocity), self.k),
-                           state)
-
     def params(self):
         return {"k_N_s_per_m": list(self.k)}
 
@@ -60,18 +42,19 @@ class Drag(Effect):
 
 
 @dataclass(frozen=True)
-class Wind(Effect):
+class Wind(Compiled):
     """Air moving at ``velocity`` [m/s] (world) plus Ornstein-Uhlenbeck gusts (std ``gust``
-    [m/s], correlation time ``gust_tau`` [s], seeded by ``seed``), pushing the vehicle through
-    the wind drag ``k`` [N s/m] (body axes): ``F = R diag(k) R^T v_air``. Combine with
-    :class:`Drag` of the same ``k`` for ``-R diag(k) R^T (v - v_air)``."""
+    [m/s], correlation time ``gust_tau`` [s]), pushing the vehicle through the wind drag
+    ``k`` [N s/m] (body axes): ``F = R diag(k) R^T v_air``. Combine with :class:`Drag` of the
+    same ``k`` for ``-R diag(k) R^T (v - v_air)``. The gusts advance once per physics step
+    with three standard normals drawn from the vehicle's generator after the motors' draws,
+    or from their own generator ``numpy.random.default_rng(seed)`` when ``seed`` is given."""
 
     velocity: tuple = (1.0, 0.0, 0.0)
     gust: float = 0.0
     gust_tau: float = 2.0
     k: tuple = (0.3, 0.3, 0.3)
-    seed: int = 0
-    _state: dict = field(default_factory=dict, repr=False, compare=False)
+    seed: int | None = None
     name: ClassVar[str] = "wind"
     order: ClassVar[int] = 10
 
@@ -83,27 +66,16 @@ class Wind(Effect):
         object.__setattr__(self, "k", k)
         if not (self.gust >= 0 and self.gust_tau > 0):
             raise ConfigError("wind gust must be >= 0 [m/s] and gust_tau > 0 [s]")
-
-    def reset(self, n_rotors):
-        self._state.clear()
-        self._state.update(rng=np.random.default_rng(self.seed), g=np.zeros(3))
+        if self.seed is not None and not (isinstance(self.seed, (int, np.integer))
+                                          and 0 <= self.seed < 2 ** 53):
+            raise ConfigError(f"wind seed must be a non-negative integer, got {self.seed!r}")
 
     def air_velocity(self) -> np.ndarray:
-        return np.asarray(self.velocity) + self._state.get("g", _ZERO3)
-
-    def rotor_thrust(self, f, t, dt, state):
-        if self.gust > 0:  # advance the gust process once per step
-            if "rng" not in self._state:
-                self.reset(len(f))
-            a = math.exp(-dt / self.gust_tau)
-            g = self._state["g"]
-            self._state["g"] = a * g + self.gust * math.sqrt(1 - a * a) * \
-                self._state["rng"].standard_normal(3)
-        return f
-
-    def wrench(self, state, f, t):
-        vw = np.broadcast_to(self.air_velocity(), np.shape(state.v))
-        return _force_only(-drag_force(state.R, vw, self.k), state)
+        """Air velocity now [m/s] (world): the steady wind plus the gusts (the protocol's
+        one-vehicle memory)."""
+        single = self.__dict__.get("_single")
+        gust = np.zeros(3) if single is None else single.rows.memory[0, :3]
+        return np.asarray(self.velocity) + gust
 
     def steady_force(self) -> np.ndarray:
         """Force [N] of the steady wind on a level vehicle (the diagnosis' ``force_N``)."""
@@ -131,7 +103,7 @@ class Wind(Effect):
 
 
 @dataclass(frozen=True)
-class ComOffset(Effect):
+class ComOffset(Compiled):
     """Centre of mass at ``offset`` = (r_x, r_y) [m] from the rotor-plane centre (body FRD):
     the rotors act about the CoM, ``M' = M + r x (0, 0, T)``."""
 
@@ -145,9 +117,6 @@ class ComOffset(Effect):
             raise ConfigError(f"com_offset must be within 1 m, got {off}")
         object.__setattr__(self, "offset", off)
 
-    def wrench(self, state, f, t):
-        return _moment_only(com_offset_moment(np.sum(f, axis=-1), self.offset), state)
-
     def params(self):
         return {"offset_m": list(self.offset)}
 
@@ -157,9 +126,9 @@ class ComOffset(Effect):
 
 
 @dataclass(frozen=True)
-class BladeFlapping(Effect):
+class BladeFlapping(Compiled):
     """Rotor drag and blade flapping proportional to thrust and in-plane airspeed
-    (:func:`~quadfault.effects.physics.blade_flapping_wrench`): force coefficient
+    (:func:`~quadfault.effects.kernels.blade_flapping3`): force coefficient
     ``k_force`` [s/m], moment coefficient ``k_moment`` [s], still air by default."""
 
     k_force: float = 0.05
@@ -174,10 +143,6 @@ class BladeFlapping(Effect):
         object.__setattr__(self, "air_velocity",
                            vector(self.air_velocity, 3, "blade_flapping air_velocity"))
 
-    def wrench(self, state, f, t):
-        v = state.v - np.asarray(self.air_velocity)
-        return blade_flapping_wrench(state.R, v, np.sum(f, axis=-1), self.k_force, self.k_moment)
-
     def params(self):
         return {"k_force_s_per_m": self.k_force, "k_moment_s": self.k_moment}
 
@@ -188,18 +153,16 @@ class BladeFlapping(Effect):
 
 
 @dataclass(frozen=True)
-class RotorInertia(Effect):
+class RotorInertia(Compiled):
     """Yaw reaction of the rotors' inertia when their thrust changes:
     ``M_z = kappa sum_i s_i df_i/dt`` (``kappa`` [m s]; ``s_i`` the sign of rotor i's yaw
     torque: ``yaw_signs``, by default read from the flown vehicle's allocation at reset). The
     rate over a step is the step from the previous step's produced thrust
-    (:func:`~quadfault.effects.physics.thrust_rate`), so a jump in thrust gives the yaw-rate
+    (:func:`~quadfault.effects.kernels.thrust_rate1`), so a jump in thrust gives the yaw-rate
     kick ``kappa sum_i s_i df_i / J_z``."""
 
     kappa: float = 0.001
     yaw_signs: tuple | None = None
-    _state: dict = field(default_factory=dict, repr=False, compare=False)
-    _signs: dict = field(default_factory=dict, repr=False, compare=False)
     name: ClassVar[str] = "rotor_inertia"
     order: ClassVar[int] = 10
 
@@ -210,36 +173,21 @@ class RotorInertia(Effect):
                                    "rotor_inertia yaw_signs"))
             object.__setattr__(self, "yaw_signs", tuple(float(s) for s in signs))
 
-    def reset(self, n_rotors):
-        self._state.clear()
-
     def true_vehicle(self, vehicle):
-        self._signs["s"] = np.sign(vehicle.allocation[3])  # the flown rotors' spin directions
+        self.__dict__["_signs"] = np.sign(vehicle.allocation[3])  # the flown rotors' spins
+        self.__dict__.pop("_single", None)
         return vehicle
 
     def signs(self, n_rotors: int) -> np.ndarray:
+        """Yaw-torque sign of each rotor: ``yaw_signs``, else the flown vehicle's (seen by
+        ``true_vehicle``), else alternating -1, +1."""
         if self.yaw_signs is not None:
             return np.asarray(self.yaw_signs)
-        s = self._signs.get("s")
+        s = self.__dict__.get("_signs")
         return s if s is not None and len(s) == n_rotors else np.resize([-1.0, 1.0], n_rotors)
 
-    def rotor_thrust(self, f, t, dt, state):
-        self._state.update(dt=float(dt), fresh=True)  # the next wrench call opens this step
-        return f
-
-    def wrench(self, state, f, t):
-        st = self._state
-        f = np.asarray(f, dtype=float)
-        if st.pop("fresh", False):  # first stage of a step: the rate of the final thrust
-            prev = st.get("f")
-            st["rate"] = (np.zeros_like(f) if prev is None
-                          else thrust_rate(np.stack((prev, f)), np.array([0.0, st["dt"]]))[1])
-            st["f"] = f.copy()
-        rate = st.get("rate")
-        if rate is None:
-            rate = np.zeros_like(f)
-        M = rotor_inertia_moment(rate, self.signs(f.shape[-1]), self.kappa)
-        return _moment_only(M, state)
+    def _yaw_signs(self, n_rotors):
+        return self.signs(n_rotors)
 
     def params(self):
         return {"kappa_m_s": self.kappa}
@@ -250,7 +198,7 @@ class RotorInertia(Effect):
 
 
 @dataclass(frozen=True)
-class RateDamping(Effect):
+class RateDamping(Compiled):
     """Aerodynamic damping of the body rate, ``M = -(D1 + D2 |w|) w`` per body axis:
     ``linear`` D1 [N m s/rad] and ``quadratic`` D2 [N m s^2/rad^2] (3 values each)."""
 
@@ -265,9 +213,6 @@ class RateDamping(Effect):
             if min(d) < 0:
                 raise ConfigError(f"rate_damping {key} must be >= 0, got {d}")
             object.__setattr__(self, key, d)
-
-    def wrench(self, state, f, t):
-        return _moment_only(rate_damping_moment(state.w, self.linear, self.quadratic), state)
 
     def params(self):
         return {"linear_N_m_s_per_rad": list(self.linear),

@@ -1,0 +1,159 @@
+"""What domain randomisation costs: the closed loop and the vector env with and without it.
+
+Measured in one run, rounds interleaved (the ratio is what to compare; the machine may be
+shared), at N vehicles (default 1024), with numba's default thread count (what a user gets):
+
+1. ``quadfault.closed_loop.fly_batch`` with the geometric controller at every step, hovering
+   vehicles with thrust noise: the nominal plant (no effects: the chain is compiled out)
+   against every vehicle flying its own draw of mass, inertia, drag, motor lag and wind with
+   gusts (``Plant.assign``: one row of the compiled effect chain per vehicle);
+2. ``QuadFaultVectorEnv`` steps (no estimator, zero residual action) without and with the
+   env keyword ``effects`` (the same ranges, drawn per sub-env at every reset).
+
+Prints vehicle-steps per wall second and per CPU second of this process, the cost of the
+randomisation (1 - randomised / nominal) and the load average::
+
+    python benchmarks/randomisation_cost.py            # N = 1024
+    python benchmarks/randomisation_cost.py --n 256 --rounds 5
+    python benchmarks/randomisation_cost.py --skip-env --ranges thrust_scale=1   # a no-op effect
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_WAIT_POLICY", "passive")  # as benchmarks/throughput.py
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+
+#: the randomised physics: ``quadfault simulate --effect`` specs with ``a:b`` ranges
+RANGES = ("mass=0.8:1.2", "inertia=0.8:1.2,0.8:1.2,0.8:1.2", "drag=0.1:0.5",
+          "motor_lag=0.01:0.05", "wind=-2:2,-2:2,0,gust=0.5")
+RATE = 1000.0  # physics rate [Hz]
+
+
+def _timed(fn, work: int, min_time: float) -> tuple[float, float]:
+    """``work`` units per wall second and per CPU second of ``fn()`` repeated >= min_time."""
+    calls, t0, c0 = 0, time.perf_counter(), time.process_time()
+    while True:
+        fn()
+        calls += 1
+        wall = time.perf_counter() - t0
+        if wall >= min_time:
+            break
+    return work * calls / wall, work * calls / max(time.process_time() - c0, 1e-9)
+
+
+def loop_batch(N: int, horizon: int, randomise: bool, ranges=RANGES):
+    """``fn`` advancing N hovering vehicles by ``horizon`` physics steps with the controller in
+    the loop (one ``fly_batch`` call); with ``randomise`` each vehicle flies its own draw of
+    ``ranges`` (default :data:`RANGES`)."""
+    from quadfault import closed_loop
+    from quadfault.controller import GeometricController
+    from quadfault.effects import parse_effect
+    from quadfault.motors import MotorModel
+    from quadfault.plant import Plant
+    from quadfault.sensors import SensorNoise
+    from quadfault.trajectory import Hover
+    from quadfault.vehicle import Vehicle
+
+    veh = Vehicle()
+    plant = Plant(veh, None, MotorModel(0.07), dt=1.0 / RATE, n_vehicles=N)
+    if randomise:
+        rng = np.random.default_rng(1)
+        for i in range(N):
+            plant.assign(i, [parse_effect(s, rng) for s in ranges])
+    V = plant.vehicles
+    ctrl = GeometricController(veh, Hover(position=(0.0, 0.0, -1.0)))
+    refs = np.zeros((N, horizon, 6, 3))
+    refs[:, :, 0, 2], refs[:, :, 3, 0] = -1.0, 1.0  # hover at 1 m, heading north
+    tables = closed_loop.Tables(np.zeros(N, np.int64), np.ones((N, horizon, 4)), refs)
+    consts = closed_loop.constants(plant, SensorNoise(), 1)
+    gens = closed_loop.generators([np.random.default_rng(i) for i in range(N)])
+    active, k0 = np.ones(N, dtype=bool), np.zeros(N, dtype=np.int64)
+    none = closed_loop.Records.none(N, 4)
+    start = [x.copy() for x in V]
+
+    def fn():
+        for x, x0 in zip(V, start):  # every call flies the same `horizon` steps from hover
+            x[...] = x0
+        closed_loop.fly_batch(gens, active, k0, horizon, True, consts, V, tables, none,
+                              ctrl.constants, plant.hook)
+
+    fn()  # compile (or load numba's cache)
+    return fn
+
+
+def env_batch(N: int, steps: int, randomise: bool, ranges=RANGES):
+    """``fn`` stepping a reset ``QuadFaultVectorEnv`` (no estimator) ``steps`` times."""
+    from quad_fault_env.vector import QuadFaultVectorEnv
+
+    kw = {"effects": list(ranges)} if randomise else {}
+    env = QuadFaultVectorEnv(N, "none", scenario="hover", duration=600.0, **kw)
+    env.reset(seed=0)
+    a = np.zeros((N, 4), dtype=np.float32)
+    env.step(a)
+
+    def fn():
+        for _ in range(steps):
+            env.step(a)
+
+    return fn, env.substeps
+
+
+def _compare(name: str, nominal, randomised, work: int, rounds: int, min_time: float) -> None:
+    best = {"nominal": (0.0, 0.0), "randomised": (0.0, 0.0)}
+    for _ in range(rounds):  # interleaved: load changes hit both alike
+        for key, fn in (("nominal", nominal), ("randomised", randomised)):
+            r = _timed(fn, work, min_time)
+            best[key] = tuple(max(a, b) for a, b in zip(best[key], r))
+    (w0, c0), (w1, c1) = best["nominal"], best["randomised"]
+    print(f"{name}")
+    print(f"  nominal     {w0:12.4g} vehicle-steps/s (wall)  {c0:12.4g} (CPU)")
+    print(f"  randomised  {w1:12.4g} vehicle-steps/s (wall)  {c1:12.4g} (CPU)")
+    print(f"  cost of randomisation: {100 * (1 - w1 / w0):5.1f} % (wall)  "
+          f"{100 * (1 - c1 / c0):5.1f} % (CPU)")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=1024, help="vehicles (default 1024)")
+    ap.add_argument("--horizon", type=int, default=100, help="physics steps per loop call")
+    ap.add_argument("--steps", type=int, default=5, help="env steps per timing call")
+    ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds (best kept)")
+    ap.add_argument("--min-time", type=float, default=0.5, help="seconds per timing")
+    ap.add_argument("--skip-env", action="store_true", help="only the closed loop")
+    ap.add_argument("--ranges", nargs="+", default=list(RANGES), metavar="SPEC",
+                    help="the randomised effects (--effect syntax with a:b ranges)")
+    args = ap.parse_args(argv)
+
+    import numba
+
+    N = args.n
+    nominal = loop_batch(N, args.horizon, False)
+    randomised = loop_batch(N, args.horizon, True, args.ranges)
+    print(f"N = {N}, physics {RATE:g} Hz, numba {numba.__version__}, "
+          f"{numba.get_num_threads()} threads ({numba.threading_layer()}), "
+          f"OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY')}, {os.cpu_count()} cpus")
+    print(f"randomised: {', '.join(args.ranges)}")
+    print(f"load average before: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    _compare("closed loop + controller (fly_batch)", nominal, randomised, N * args.horizon,
+             args.rounds, args.min_time)
+    if not args.skip_env:
+        (e0, S), (e1, _) = (env_batch(N, args.steps, False),
+                            env_batch(N, args.steps, True, args.ranges))
+        _compare("QuadFaultVectorEnv step (no estimator), effects= vs none", e0, e1,
+                 N * args.steps * S, args.rounds, args.min_time)
+    print(f"load average after: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
