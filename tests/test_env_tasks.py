@@ -118,3 +118,40 @@ def test_sensor_noise_as_a_dict_equals_the_dataclass_and_bad_keys_are_named():
         QuadFaultEnv("none", "hover", sensor_noise={"pos": 0.01})
     with pytest.raises(ConfigError, match="sensor noise gyro"):
         QuadFaultEnv("none", "hover", sensor_noise={"gyro": -1.0})
+
+
+@pytest.mark.slow
+def test_drag_learnt_by_the_diagnosis_flies_in_the_env_and_is_found_again(tmp_path):
+    """simulate a drag flight -> diagnose -> gym.make(model=...) + RecordFlight -> diagnose:
+    the calibrated env's recording gives back the same drag (within 20 % on every axis)."""
+    import json
+
+    from quad_fault_env.wrappers import RecordFlight
+    from quadfault.cli import main
+    from quadfault.scenarios import named_scenario
+    from quadfault.trajectory import Lissajous
+
+    first, diag1, diag2 = tmp_path / "drag.csv", tmp_path / "d1.json", tmp_path / "d2.json"
+    assert main(["simulate", "--scenario", "nominal", "--trajectory", "lissajous", "--effect",
+                 "drag=0.3", "--duration", "20", "--seed", "0", "--out", str(first),
+                 "--quiet"]) == 0
+    assert main(["diagnose", str(first), "--json", str(diag1), "--quiet"]) == 0
+    sc = named_scenario("nominal", 20.0).replace(trajectory=Lissajous())
+    env = RecordFlight(gym.make("QuadFault-v1", model=str(diag1), estimator="none", scenario=sc),
+                       tmp_path / "calibrated")
+    env.reset(seed=1)
+    while True:
+        *_, term, trunc, info = env.step(np.zeros(4))
+        if term or trunc:
+            break
+    env.close()
+    assert not term and [e["name"] for e in info["effects"]] == ["drag"]
+    assert main(["diagnose", str(env.paths[0]), "--json", str(diag2), "--quiet"]) == 0
+
+    def drag(path):
+        (fit,) = [e for e in json.loads(path.read_text())["effects"] if e["name"] == "drag"]
+        return np.array(fit["params"]["k_N_s_per_m"])
+
+    k1, k2 = drag(diag1), drag(diag2)
+    assert np.allclose(k1[:2], 0.3, rtol=0.05)
+    assert np.all(np.abs(k2 / k1 - 1.0) < 0.2), (k1, k2)
