@@ -33,3 +33,26 @@ def test_train_ppo_residual_example(tmp_path):
     assert res.returncode == 0, res.stderr
     assert (out / "learning_curve.png").stat().st_size > 1000
     assert (out / "seed_0" / "model.zip").exists()
+
+
+NANODRONE = ROOT.parent / "shared" / "data" / "real" / "nanodrone-cf21bl" / \
+    "square_20251017_run3.csv.gz"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not NANODRONE.exists(), reason="the real Crazyflie data (../shared) is absent")
+def test_train_calibrated_env_example(tmp_path):
+    """Real log -> import -> diagnose -> train in the calibrated env -> evaluate nominal and
+    calibrated: every agent flies every evaluation episode to its end."""
+    pytest.importorskip("stable_baselines3")
+    out = tmp_path / "calibrated"
+    res = _run(["examples/train_calibrated_env.py", "--log", str(NANODRONE), "--out", str(out),
+                "--timesteps", "1024", "--episodes", "1", "--duration", "2"], tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert (out / "diag.json").exists() and (out / "seed_0" / "model.zip").exists()
+    rows = [line.split() for line in res.stdout.splitlines()
+            if line.startswith(("nominal ", "calibrated ")) and "model:" not in line]
+    assert len(rows) == 4
+    for row in rows:  # a 2 s episode at 100 Hz survived earns > 200 x 0.11 (survival bonus)
+        assert float(row[-2]) > 22 and float(row[-1]) < 0.2
+    assert "calibrated model: motor_lag" in res.stdout
