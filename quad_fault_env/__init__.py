@@ -34,10 +34,8 @@ Every keyword of :class:`~quad_fault_env.envs.quad_fault.QuadFaultEnv` can be pa
 from gymnasium.envs.registration import register
 
 from quad_fault_env.estimation import make_estimator
-from quad_fault_env.tasks import TASKS
+from quad_fault_env.tasks import ENTRY_POINT, TASKS, VECTOR_ENTRY_POINT
 
-ENTRY_POINT = "quad_fault_env.envs.quad_fault:QuadFaultEnv"
-VECTOR_ENTRY_POINT = "quad_fault_env.vector:QuadFaultVectorEnv"
 
 #: id -> (max_episode_steps, kwargs): the registration table (from the tasks)
 ENVIRONMENTS = {t.id: (t.max_episode_steps, t.kwargs()) for t in TASKS}

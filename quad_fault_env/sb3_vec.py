@@ -19,7 +19,8 @@ from __future__ import annotations
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
-from quad_fault_env.vector import QuadFaultVectorEnv, registered_kwargs
+from quad_fault_env.tasks import registered_kwargs
+from quad_fault_env.vector import QuadFaultVectorEnv
 from quadfault.errors import ConfigError
 
 try:

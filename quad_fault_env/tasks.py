@@ -22,6 +22,11 @@ import math
 from dataclasses import dataclass, field
 
 from quad_fault_env.envs.config import InitialStateSpread, RewardConfig, TerminationLimits
+from quadfault.errors import ConfigError
+
+#: the classes every id registers (``gym.make`` / ``gym.make_vec``)
+ENTRY_POINT = "quad_fault_env.envs.quad_fault:QuadFaultEnv"
+VECTOR_ENTRY_POINT = "quad_fault_env.vector:QuadFaultVectorEnv"
 
 #: the reward of the -v0 ids: tracking and thrust effort only (no action effort, no survival
 #: bonus, no termination penalty)
@@ -115,6 +120,25 @@ TASKS = (
 )
 
 
+def registered_kwargs(env_id: str, **overrides) -> dict:
+    """The :class:`~quad_fault_env.vector.QuadFaultVectorEnv` keywords of a registered QuadFault id, as
+    ``gym.make_vec`` passes them: the task's keywords, then ``overrides``, and the id's step
+    limit as ``max_episode_steps`` when it registers one (``-v0``) and none is given."""
+    import gymnasium as gym
+
+    try:
+        spec = gym.spec(env_id)
+    except gym.error.Error as exc:
+        raise ConfigError(f"environment {env_id!r}: {exc}") from None
+    if spec.vector_entry_point != VECTOR_ENTRY_POINT:
+        raise ConfigError(f"{env_id!r} is not a QuadFault environment id (its vector entry "
+                          f"point is {spec.vector_entry_point!r})")
+    kwargs = dict(spec.kwargs, **overrides)
+    if spec.max_episode_steps is not None:
+        kwargs.setdefault("max_episode_steps", spec.max_episode_steps)
+    return kwargs
+
+
 def task(env_id: str) -> Task:
     """The task registered as ``env_id`` (``KeyError`` names the known ids)."""
     for t in TASKS:
@@ -123,4 +147,4 @@ def task(env_id: str) -> Task:
     raise KeyError(f"unknown task {env_id!r}; known: {', '.join(t.id for t in TASKS)}")
 
 
-__all__ = ["HOVER_SPREAD", "TASK_SPREAD", "REWARD_V0", "REWARD_V1", "TASKS", "Task", "task"]
+__all__ = ["HOVER_SPREAD", "TASK_SPREAD", "registered_kwargs", "REWARD_V0", "REWARD_V1", "TASKS", "Task", "task"]

@@ -114,3 +114,33 @@ class RowTimeTables:
 
 
 __all__ = ["WINDOW", "RowTimeTables"]
+
+
+def row_groups(keys: np.ndarray):
+    """``[(key, rows), ...]`` of an integer key array (rows sorted)."""
+    order = np.argsort(keys, kind="stable")
+    sk = keys[order]
+    cuts = np.flatnonzero(np.diff(sk)) + 1
+    return [(int(keys[idx[0]]), idx) for idx in np.split(order, cuts)]
+
+
+class InternTable:
+    """Interned hashable objects (trajectories, efficiency schedules): object -> small int."""
+
+    def __init__(self):
+        self.items: list = []
+        self.index: dict = {}
+
+    def key(self, obj) -> int:
+        try:
+            k = self.index.get(obj)
+        except TypeError:  # unhashable: one entry per object
+            k = None
+        if k is None:
+            k = len(self.items)
+            self.items.append(obj)
+            try:
+                self.index[obj] = k
+            except TypeError:
+                pass
+        return k

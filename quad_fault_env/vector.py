@@ -32,13 +32,13 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from quad_fault_env import VECTOR_ENTRY_POINT
-from quad_fault_env.envs.config import GENERATORS, deprecated_physics, validate_action
+from quad_fault_env.envs.config import deprecated_physics, validate_action
+from quad_fault_env.envs.scenario_source import GENERATORS
 from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.estimation import NOMINAL_PRIOR_SD
 from quad_fault_env.observation import SD_MAX
-from quad_fault_env.time_tables import WINDOW, RowTimeTables
+from quad_fault_env.time_tables import WINDOW, InternTable, RowTimeTables, row_groups
 from quadfault import closed_loop, jit
 from quadfault.controller import GeometricController
 from quadfault.dynamics import RigidBodyState
@@ -62,53 +62,6 @@ def default_threads(num_envs: int) -> int | None:
     if os.environ.get("NUMBA_NUM_THREADS") or num_envs >= THREADS_MIN_BATCH:
         return None
     return 1
-
-
-def registered_kwargs(env_id: str, **overrides) -> dict:
-    """The :class:`QuadFaultVectorEnv` keywords of a registered QuadFault id, as
-    ``gym.make_vec`` passes them: the task's keywords, then ``overrides``, and the id's step
-    limit as ``max_episode_steps`` when it registers one (``-v0``) and none is given."""
-    try:
-        spec = gym.spec(env_id)
-    except gym.error.Error as exc:
-        raise ConfigError(f"environment {env_id!r}: {exc}") from None
-    if spec.vector_entry_point != VECTOR_ENTRY_POINT:
-        raise ConfigError(f"{env_id!r} is not a QuadFault environment id (its vector entry "
-                          f"point is {spec.vector_entry_point!r})")
-    kwargs = dict(spec.kwargs, **overrides)
-    if spec.max_episode_steps is not None:
-        kwargs.setdefault("max_episode_steps", spec.max_episode_steps)
-    return kwargs
-
-
-def _groups(keys: np.ndarray):
-    """``[(key, rows), ...]`` of an integer key array (rows sorted)."""
-    order = np.argsort(keys, kind="stable")
-    sk = keys[order]
-    cuts = np.flatnonzero(np.diff(sk)) + 1
-    return [(int(keys[idx[0]]), idx) for idx in np.split(order, cuts)]
-
-
-class _Table:
-    """Interned hashable objects (trajectories, efficiency schedules): object -> small int."""
-
-    def __init__(self):
-        self.items: list = []
-        self.index: dict = {}
-
-    def key(self, obj) -> int:
-        try:
-            k = self.index.get(obj)
-        except TypeError:  # unhashable: one entry per object
-            k = None
-        if k is None:
-            k = len(self.items)
-            self.items.append(obj)
-            try:
-                self.index[obj] = k
-            except TypeError:
-                pass
-        return k
 
 
 class QuadFaultVectorEnv(VectorEnv):
@@ -208,7 +161,7 @@ class QuadFaultVectorEnv(VectorEnv):
         # the single env's plant (MotorModel(thrust_noise): its default saturation), N of it
         self.plant = Plant(self.vehicle, None, MotorModel(), dt=self.dt, n_vehicles=N)
         self._loop = closed_loop.constants(self.plant, e0.sensor_noise)
-        self._trajectories, self._schedules = _Table(), _Table()
+        self._trajectories, self._schedules = InternTable(), InternTable()
         self._controllers: dict = {}
         # the geometric controller's gains and options (shared by every row; references given)
         self._controller = GeometricController(self.vehicle, None, e0.controller_config)
@@ -339,7 +292,7 @@ class QuadFaultVectorEnv(VectorEnv):
         """Forget trajectories / schedules no sub-env uses any more."""
         for attr, keys in (("_trajectories", self._traj_key), ("_schedules", self._sched_key)):
             old = getattr(self, attr)
-            new = _Table()
+            new = InternTable()
             remap = {int(k): new.key(old.items[int(k)]) for k in np.unique(keys)}
             keys[:] = [remap[int(k)] for k in keys]
             setattr(self, attr, new)
@@ -357,7 +310,7 @@ class QuadFaultVectorEnv(VectorEnv):
             seeds = list(seed)
             if len(seeds) != N:
                 raise ConfigError(f"reset needs {N} seeds, got {len(seeds)}")
-        self._trajectories, self._schedules, self._controllers = _Table(), _Table(), {}
+        self._trajectories, self._schedules, self._controllers = InternTable(), InternTable(), {}
         self._rng_list = None
         with jit.threads(self.numba_threads):
             refs = self._reset_rows(np.arange(N), seeds, options)  # every row at t = 0
@@ -512,5 +465,4 @@ class QuadFaultVectorEnv(VectorEnv):
             env.close()
 
 
-__all__ = ["AUTORESET_MODES", "THREADS_MIN_BATCH", "QuadFaultVectorEnv", "default_threads",
-           "registered_kwargs"]
+__all__ = ["AUTORESET_MODES", "THREADS_MIN_BATCH", "QuadFaultVectorEnv", "default_threads"]

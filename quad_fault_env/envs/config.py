@@ -22,11 +22,7 @@ OBSERVATION_KINDS = ("flat", "dict")
 TERMINATION_REASONS = ("crash", "out_of_bounds", "excessive_tilt", "non_finite")
 #: trajectories of random scenarios (``quadfault.scenarios.random_scenario``)
 RANDOM_TRAJECTORIES = ("random", "circle", "hover", "lissajous")
-#: scenario generators drawn from at every reset (``scenario=`` one of these)
-GENERATORS = ("random", "track", "rotor_loss")
-#: keywords of ``scenario_options`` per generator (``quadfault.task_scenarios``)
-SCENARIO_OPTIONS = {"track": ("speed", "curvature", "yaw_rate", "altitude"),
-                    "rotor_loss": ("level", "onset", "altitude")}
+
 
 
 def _check_nonnegative(obj, names):
@@ -262,30 +258,6 @@ class InitialStateSpread:
 
     def __post_init__(self):
         _check_nonnegative(self, ("position", "velocity", "attitude", "rate"))
-
-
-def check_scenario_options(options, scenario) -> dict:
-    """Validate ``scenario_options`` (keywords of the ``track`` / ``rotor_loss`` generators;
-    None: their defaults) by drawing one scenario with them."""
-    if options is None:
-        return {}
-    if not isinstance(options, dict):
-        raise ConfigError(f"scenario_options must be a dict, got {options!r}")
-    if scenario not in SCENARIO_OPTIONS:
-        raise ConfigError(f"scenario_options applies to scenario 'track' or 'rotor_loss', "
-                          f"not {scenario!r}")
-    unknown = sorted(set(options) - set(SCENARIO_OPTIONS[scenario]))
-    if unknown:
-        raise ConfigError(f"scenario_options has unknown keys {unknown} for {scenario!r}; "
-                          f"choose from {', '.join(SCENARIO_OPTIONS[scenario])}")
-    from quadfault import task_scenarios
-
-    draw = getattr(task_scenarios, f"{scenario}_scenario")
-    try:
-        draw(np.random.default_rng(0), **options)  # ranges checked once, here
-    except TypeError as err:
-        raise ConfigError(f"scenario_options: {err}") from None
-    return dict(options)
 
 
 def config_of(value, cls, name: str):

@@ -28,14 +28,14 @@ from quad_fault_env.envs.config import (
     InitialStateSpread,
     RewardConfig,
     TerminationLimits,
-    GENERATORS,
     check_random_faults,
-    check_scenario_options,
     config_of,
     deprecated_physics,
     number_at_least,
     validate_action,
 )
+from quad_fault_env.envs.scenario_source import (GENERATORS, check_scenario_options, fault_dict,
+                                                  make_scenario)
 from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
 from quad_fault_env.estimation import (
     NOMINAL_PRIOR_SD,
@@ -55,8 +55,7 @@ from quadfault.effects.sampling import PhysicsDraws, describe
 from quadfault.errors import ConfigError
 from quadfault.motors import MotorModel
 from quadfault.plant import Plant
-from quadfault.scenarios import SCENARIO_NAMES, Scenario, named_scenario, random_scenario
-from quadfault.task_scenarios import rotor_loss_scenario, track_scenario
+from quadfault.scenarios import SCENARIO_NAMES, Scenario
 from quadfault.sensors import SensorNoise
 from quadfault.trajectory import FlatOutput
 from quadfault.vehicle import Vehicle
@@ -68,10 +67,6 @@ EVENT_TOL = 1e-9
 _KEY0 = np.zeros(1, dtype=np.int64)  # the single env's row of the time tables
 TABLE_WINDOW = 64  # control steps per refill of the time tables (one row: cheap to hold)
 _NO_REFS = np.zeros((1, 0, 6, 3))  # the loop's reference table (the env sets the commands)
-
-
-def _fault_dict(f) -> dict:
-    return {"motor": f.motor, "onset": f.onset, "end": f.end, "level": f.level, "ramp": f.ramp}
 
 
 class QuadFaultEnv(gym.Env):
@@ -270,23 +265,12 @@ class QuadFaultEnv(gym.Env):
 
     # -- scenario and reset ------------------------------------------------------------------
     def _make_scenario(self, spec) -> Scenario:
-        if isinstance(spec, Scenario):
-            sc = spec  # a Scenario object brings its own duration
-        elif spec == "random":
-            sc = random_scenario(self.np_random, self.duration or DEFAULT_DURATION,
-                                 trajectory=self.random_trajectory, **self.random_faults)
-        elif spec in ("track", "rotor_loss"):
-            draw = track_scenario if spec == "track" else rotor_loss_scenario
-            sc = draw(self.np_random, self.duration or DEFAULT_DURATION, vehicle=self.vehicle,
-                      **self.scenario_options)
-        elif isinstance(spec, str) and spec in SCENARIO_NAMES:
-            sc = named_scenario(spec, self.duration or DEFAULT_DURATION, self.dt)
-        else:
-            raise ConfigError(f"options['scenario'] must be a scenario name, 'random' or a "
-                              f"Scenario, got {spec!r}")
-        if self.thrust_noise is not None:
-            sc = sc.replace(thrust_noise=self.thrust_noise)
-        return sc
+        return make_scenario(spec, self.np_random, duration=self.duration or DEFAULT_DURATION,
+                             dt=self.dt, vehicle=self.vehicle,
+                             random_trajectory=self.random_trajectory,
+                             random_faults=self.random_faults,
+                             scenario_options=self.scenario_options,
+                             thrust_noise=self.thrust_noise)
 
     def _scenario_option(self, options):
         """The scenario spec of a reset (``options["scenario"]`` or the env's)."""
@@ -335,7 +319,7 @@ class QuadFaultEnv(gym.Env):
             self._estimate = Estimate(0.0, np.ones(n), None, "warmup")
         closed_loop.sense(self._gens, self._loop, self.plant.vehicles)
         self.history = [self.plant.state.p.copy()]
-        events = [dict(_fault_dict(f), kind="onset", t=f.onset)
+        events = [dict(fault_dict(f), kind="onset", t=f.onset)
                   for f in self.scenario.efficiency.faults if f.onset < -EVENT_TOL]
         ref = self.scenario.trajectory(0.0)
         info = self._info([], [], [], events, None, ref)
@@ -449,7 +433,7 @@ class QuadFaultEnv(gym.Env):
         for f in self.scenario.efficiency.faults:
             for kind, tk in (("onset", f.onset), ("end", f.end)):
                 if t0 - EVENT_TOL <= tk < t1 - EVENT_TOL:
-                    events.append(dict(_fault_dict(f), kind=kind, t=tk))
+                    events.append(dict(fault_dict(f), kind=kind, t=tk))
         info = self._info(samples, eta_true, sf, events, reason, ref, eta_t1)
         if self.render_mode == "human":
             self.render()
@@ -483,7 +467,7 @@ class QuadFaultEnv(gym.Env):
             "tracking_error": float(np.linalg.norm(state.p - ref.position)),
             "motor_command": self._f_cmd.copy(),
             "fault_events": events,
-            "faults": [_fault_dict(f) for f in self.scenario.efficiency.faults],
+            "faults": [fault_dict(f) for f in self.scenario.efficiency.faults],
             "scenario": self.scenario.name,
             "thrust_noise": float(self.scenario.thrust_noise),
             "samples": samples,
