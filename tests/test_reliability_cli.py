@@ -1,7 +1,5 @@
-"""Reliability of every ``quadfault`` subcommand: bad input ends in one line on stderr and exit 2
-(in-process through ``quadfault.cli.main`` and as real subprocesses), nothing existing is
-overwritten without ``--force``, and an interrupted run leaves no half-written file.
-"""
+"""Every ``quadfault`` subcommand: bad input -> one line on stderr and exit 2 (in-process and as
+subprocesses); nothing overwritten without ``--force``; no half-written file on interrupt."""
 
 from __future__ import annotations
 
