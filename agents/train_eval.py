@@ -98,24 +98,37 @@ def evaluation_seeds(config) -> list[int]:
     return [config.eval_seed + i for i in range(config.eval_episodes)]
 
 
-def evaluate_episodes(policy, env, seeds, normalizer=None) -> tuple[np.ndarray, np.ndarray]:
-    """``(returns, lengths)``: one deterministic episode of ``policy`` (anything with SB3's
-    ``predict``) in ``env`` per reset seed; ``normalizer`` (a ``VecNormalize``) normalises
-    the observations the policy sees (rewards are the environment's own)."""
-    returns, lengths = [], []
+def fly_episodes(policy, env, seeds, normalizer=None) -> dict:
+    """One deterministic episode of ``policy`` (anything with SB3's ``predict``; None: the
+    zero action) in ``env`` per reset seed; ``normalizer`` (a ``VecNormalize``) normalises the
+    observations the policy sees. Returns per episode ``returns`` (the environment's own
+    rewards), ``lengths`` (steps), ``crashed`` (terminated) and, for QuadFault environments,
+    ``rmse``: the RMS of ``info["tracking_error"]`` [m] over the flown steps (NaN otherwise)."""
+    out = {"returns": [], "lengths": [], "crashed": [], "rmse": []}
     for seed in seeds:
         obs, _ = env.reset(seed=int(seed))
-        total, n, done = 0.0, 0, False
+        total, errs, done, terminated = 0.0, [], False, False
         while not done:
-            o = obs if normalizer is None else normalizer.normalize_obs(obs)
-            action, _ = policy.predict(o, deterministic=True)
-            obs, reward, terminated, truncated, _ = env.step(action)
+            if policy is None:
+                action = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
+            else:
+                o = obs if normalizer is None else normalizer.normalize_obs(obs)
+                action, _ = policy.predict(o, deterministic=True)
+            obs, reward, terminated, truncated, info = env.step(action)
             total += float(reward)
-            n += 1
+            errs.append(float(info.get("tracking_error", np.nan)))
             done = terminated or truncated
-        returns.append(total)
-        lengths.append(n)
-    return np.asarray(returns), np.asarray(lengths, dtype=int)
+        out["returns"].append(total)
+        out["lengths"].append(len(errs))
+        out["crashed"].append(bool(terminated))
+        out["rmse"].append(float(np.sqrt(np.mean(np.square(errs)))))
+    return {k: np.asarray(v, dtype=int if k == "lengths" else None) for k, v in out.items()}
+
+
+def evaluate_episodes(policy, env, seeds, normalizer=None) -> tuple[np.ndarray, np.ndarray]:
+    """``(returns, lengths)`` of :func:`fly_episodes`."""
+    flown = fly_episodes(policy, env, seeds, normalizer)
+    return flown["returns"], flown["lengths"]
 
 
 def geometric_baseline(env):

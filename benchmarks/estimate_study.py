@@ -70,25 +70,11 @@ def train_command(arm: str, seed: int, args) -> list[str]:
 
 def fly(policy, env, seeds, normalizer=None) -> dict:
     """Per episode: crashed, RMS tracking error over the flown steps [m], return."""
-    crashed, rmse, returns = [], [], []
-    for seed in seeds:
-        obs, _ = env.reset(seed=int(seed))
-        errs, total, done, term = [], 0.0, False, False
-        while not done:
-            if policy is None:
-                action = np.zeros(4, dtype=np.float32)
-            else:
-                o = obs if normalizer is None else normalizer.normalize_obs(obs)
-                action, _ = policy.predict(o, deterministic=True)
-            obs, r, term, trunc, info = env.step(action)
-            errs.append(info["tracking_error"])
-            total += float(r)
-            done = term or trunc
-        crashed.append(bool(term))
-        e = np.asarray(errs, dtype=float)
-        rmse.append(float(np.sqrt(np.mean(np.where(np.isfinite(e), e, np.nan) ** 2))))
-        returns.append(total)
-    return {"crashed": crashed, "rmse": rmse, "return": returns}
+    from agents.train_eval import fly_episodes
+
+    flown = fly_episodes(policy, env, seeds, normalizer)
+    return {"crashed": flown["crashed"].tolist(), "rmse": flown["rmse"].tolist(),
+            "return": flown["returns"].tolist()}
 
 
 def t_interval(x) -> tuple[float, float]:

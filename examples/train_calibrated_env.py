@@ -31,23 +31,10 @@ ENV_ID = "QuadFaultTrack-v0"
 
 def fly(env, policy, seeds, normalizer=None) -> tuple[float, float]:
     """Mean return and mean tracking RMSE [m] over one episode per reset seed."""
-    returns, rmse = [], []
-    for seed in seeds:
-        obs, _ = env.reset(seed=int(seed))
-        total, errs, done = 0.0, [], False
-        while not done:
-            if policy is None:
-                action = np.zeros(4, dtype=np.float32)
-            else:
-                o = obs if normalizer is None else normalizer.normalize_obs(obs)
-                action, _ = policy.predict(o, deterministic=True)
-            obs, r, term, trunc, info = env.step(action)
-            total += float(r)
-            errs.append(info["tracking_error"])
-            done = term or trunc
-        returns.append(total)
-        rmse.append(float(np.sqrt(np.mean(np.square(errs)))))
-    return float(np.mean(returns)), float(np.mean(rmse))
+    from agents.train_eval import fly_episodes
+
+    flown = fly_episodes(policy, env, seeds, normalizer)
+    return float(np.mean(flown["returns"])), float(np.mean(flown["rmse"]))
 
 
 def main(argv=None) -> int:
