@@ -59,7 +59,7 @@ from quadfault.dynamics import (
     specific_force3,
     translational_acceleration3,
 )
-from quadfault.effects.chain import EffectRows, thrust_effects, wrench_terms
+from quadfault.effects.chain import NO_TERMS, EffectRows, step_effects
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange, python
 from quadfault.motors import motor_thrust
@@ -242,8 +242,10 @@ def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx, memory=None)
                 u = geometric_control(mp, mv, mR, mw, reference_row(refs, row), gains, nominal)
                 rotor_commands(u[0], u[1], K.allocation_inverse, f_cmd)
         motor_thrust(f_cmd, eta, row, f_max, C.saturate, sigma, gen, f)
-        if fx is not None:
-            thrust_effects(fx, i, f, t, C.dt, p, v, R, w, gen)
+        if fx is None:
+            W = NO_TERMS  # (not used)
+        else:  # the thrust stage, and the step's wrench terms the RK stages take (numbers)
+            W = step_effects(fx, i, f, t, C.dt, p, v, R, w, gen)
         thrust, M = _allocate(C.allocation, f)
         if memory is not None:
             reference_euler_store(memory[i], thrust, M, R)
@@ -251,9 +253,8 @@ def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx, memory=None)
             a0 = translational_acceleration3(R, thrust, rigid)
         elif fx is None:
             p1, v1, R1, w1, a0 = rkmk4_step(p, v, R, w, thrust, M, rigid, C.dt)
-        else:  # the stages get the step's wrench terms: numbers, no arrays
-            p1, v1, R1, w1, a0 = rkmk4_step(p, v, R, w, thrust, M, rigid, C.dt,
-                                            wrench_terms(fx, i, f, t))
+        else:
+            p1, v1, R1, w1, a0 = rkmk4_step(p, v, R, w, thrust, M, rigid, C.dt, W)
         sf = a0
         if C.record_accel:
             sf = accelerometer3(specific_force3(R, a0, C.gravity), sensors, gen)
@@ -327,8 +328,11 @@ def _fly_one(gens, i, k0, k1, measure_first, C, K, V, T, out, fx, memory):
     return fly_vehicle(i, gens[i], k0, k1, measure_first, C, K, V, T, out, fx, memory)
 
 
-def _call_thrust(fx, i, f, t, dt, p, v, R, w, gen):
+def _call_step(fx, i, f, t, dt, p, v, R, w, gen):
+    """The interpreted loop's step of the chain: the hook's thrust stage, then its wrench
+    with the step's thrusts and time (:class:`_StepHook`)."""
     fx.rotor_thrust(f, t, dt, p, v, R, w, gen)
+    return _StepHook(fx, i, f, t)
 
 
 class _StepHook:
@@ -342,9 +346,7 @@ class _StepHook:
 
 
 #: the interpreted loop's calls at the chain's two points: the hook's methods
-HOOK_CALLS = {"thrust_effects": _call_thrust,
-              "wrench_terms": _StepHook,
-              "effects_wrench": call_wrench}
+HOOK_CALLS = {"step_effects": _call_step, "effects_wrench": call_wrench}
 
 
 def _interpreted():
