@@ -59,7 +59,7 @@ from quadfault.dynamics import (
     specific_force3,
     translational_acceleration3,
 )
-from quadfault.effects.chain import NO_TERMS, EffectRows, step_effects
+from quadfault.effects.chain import NO_TERMS, EffectRows, has_wrench, step_effects
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange, python
 from quadfault.motors import motor_thrust
@@ -251,7 +251,7 @@ def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx, memory=None)
             reference_euler_store(memory[i], thrust, M, R)
             p1, v1, R1, w1 = p, v, R, w
             a0 = translational_acceleration3(R, thrust, rigid)
-        elif fx is None:
+        elif fx is None or not has_wrench(W):  # the stages add no wrench: none to call
             p1, v1, R1, w1, a0 = rkmk4_step(p, v, R, w, thrust, M, rigid, C.dt)
         else:
             p1, v1, R1, w1, a0 = rkmk4_step(p, v, R, w, thrust, M, rigid, C.dt, W)
@@ -344,9 +344,13 @@ class _StepHook:
     def wrench(self, p, v, R, w, f, t):
         return self.hook.wrench(p, v, R, w, self.f, self.t)
 
+    def has_wrench(self) -> bool:
+        return True  # (a hook's wrench is called at every stage)
+
 
 #: the interpreted loop's calls at the chain's two points: the hook's methods
-HOOK_CALLS = {"step_effects": _call_step, "effects_wrench": call_wrench}
+HOOK_CALLS = {"step_effects": _call_step, "has_wrench": _StepHook.has_wrench,
+              "effects_wrench": call_wrench}
 
 
 def _interpreted():

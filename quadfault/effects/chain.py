@@ -129,7 +129,7 @@ def _delay(P, Q, i, a, m, f, t, dt):
                 - zoh_integral(Q, i, base, cap, n, head, count, lo, r)) / (hi - lo)
 
 
-@jit
+@jit(inline="always")
 def _thrust_entry(c, P, Q, i, a, m, f, t, dt, p, gen):
     """One entry's thrust-stage work for vehicle ``i`` (see the module docstring)."""
     n = f.shape[0]
@@ -290,7 +290,7 @@ def wrench_terms(fx, i, f, t):
     return _terms(fx.code, fx.param, fx.mem, fx.params, fx.memory, i, f)
 
 
-@jit
+@jit(inline="always")
 def step_effects(fx, i, f, t, dt, p, v, R, w, gen):
     """The chain's work for one physics step of vehicle ``i``, in one call (the rows' arrays
     taken once: each array a call takes costs reference counting): the thrust stage
@@ -299,6 +299,13 @@ def step_effects(fx, i, f, t, dt, p, v, R, w, gen):
     code, param, mem, P, Q = fx.code, fx.param, fx.mem, fx.params, fx.memory
     _thrust_stage(code, param, mem, P, Q, fx.streams, i, f, t, dt, p, gen)
     return _terms(code, param, mem, P, Q, i, f)
+
+
+@jit(inline="always")
+def has_wrench(W) -> bool:
+    """Whether the step's terms ``W`` (:func:`step_effects`) hold a wrench entry (else the
+    RK stages need not call :func:`effects_wrench`)."""
+    return W[0][0] >= 0.0
 
 
 @jit(inline="always")
@@ -347,4 +354,4 @@ def effects_wrench(W, p, v, R, w, f, t):
 
 
 __all__ = ["CODES", "EffectRows", "WRENCH_TERMS", "thrust_effects",
-           "NO_TERMS", "wrench_terms", "step_effects", "effects_wrench"]
+           "NO_TERMS", "wrench_terms", "step_effects", "has_wrench", "effects_wrench"]
