@@ -26,8 +26,9 @@ Who calls it:
 
 Effects (``fx``): the built-in effects of :mod:`quadfault.effects` run compiled, each vehicle
 its own (:class:`~quadfault.effects.chain.EffectRows`: parameters per vehicle, memory per
-vehicle, applied by :func:`~quadfault.effects.chain.thrust_effects` after the motors and
-:func:`~quadfault.effects.chain.effects_wrench` at every RK stage); a plant with effects
+vehicle; :func:`~quadfault.effects.chain.step_effects` after the motors applies the thrust
+stage and gives the step's wrench terms, :func:`~quadfault.effects.chain.effects_wrench`
+adds them at every RK stage); a plant with effects
 written in Python runs :func:`fly_vehicle` interpreted with its
 :class:`~quadfault.plant.EffectsHook` at the same two points (one vehicle at a time).
 

@@ -3,15 +3,17 @@
 Per vehicle ``i`` the effects are a list of entries -- a code (which effect), the column of
 its first parameter and of its first memory slot -- over one row of numbers each
 (:class:`EffectRows`; built by :mod:`quadfault.effects.rows`). The closed loop
-(:func:`quadfault.closed_loop.fly_vehicle`) calls the chain at the two points of the effect
-protocol:
+(:func:`quadfault.closed_loop.fly_vehicle`) calls the chain once per physics step,
+:func:`step_effects` (inlined into the loop, so the rows' arrays are taken once per step
+and no call passes them: every array a compiled call takes costs reference counting), which
+does the two points of the effect protocol:
 
-* :func:`thrust_effects` once per physics step, on the thrusts the motor model produced
-  (in the order of the entries, each one's output the next one's input);
-* :func:`effects_wrench` at every stage of the RKMK4 step, the sum of the wrench entries'
-  external force (world) [N] and moment (body) [N m] at the stage's state, from the
-  numbers :func:`wrench_terms` takes from the rows once per step (the stages take no
-  arrays: an array argument costs reference counting at every call).
+* the thrust stage (:func:`thrust_effects`), on the thrusts the motor model produced (in
+  the order of the entries, each one's output the next one's input);
+* the step's wrench terms (:func:`wrench_terms`): the numbers the RK stages need, so that
+  :func:`effects_wrench` gives at every stage of the RKMK4 step the sum of the wrench
+  entries' external force (world) [N] and moment (body) [N m] from numbers alone; a step
+  without wrench entries skips the stages' call (:func:`has_wrench`).
 
 Each entry runs the kernels of :mod:`quadfault.effects.kernels`, the code the diagnosis runs
 over whole recordings (:mod:`quadfault.effects.physics`). Parameters (``P``, from the entry's
@@ -292,10 +294,10 @@ def wrench_terms(fx, i, f, t):
 
 @jit(inline="always")
 def step_effects(fx, i, f, t, dt, p, v, R, w, gen):
-    """The chain's work for one physics step of vehicle ``i``, in one call (the rows' arrays
-    taken once: each array a call takes costs reference counting): the thrust stage
-    (:func:`thrust_effects`), then the step's wrench terms (:func:`wrench_terms`) the RK
-    stages take."""
+    """The chain's work for physics step ``[t, t + dt)`` [s] of vehicle ``i``: the thrust
+    stage on ``f`` (:func:`thrust_effects`; same arguments), then the step's wrench terms
+    (:func:`wrench_terms`) returned for the RK stages. Inlined into the loop with the rows'
+    arrays taken once (each array a compiled call takes costs reference counting)."""
     code, param, mem, P, Q = fx.code, fx.param, fx.mem, fx.params, fx.memory
     _thrust_stage(code, param, mem, P, Q, fx.streams, i, f, t, dt, p, gen)
     return _terms(code, param, mem, P, Q, i, f)
