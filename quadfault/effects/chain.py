@@ -186,10 +186,9 @@ def _thrust_stage(code, param, mem, P, Q, streams, i, f, t, dt, p, gen):
         c = code[i, e]
         if c < 0:
             break
-        if c == WIND and P[i, param[i, e] + 8] != 0.0:
-            _thrust_entry(c, P, Q, i, param[i, e], mem[i, e], f, t, dt, p, streams[i])
-        else:
-            _thrust_entry(c, P, Q, i, param[i, e], mem[i, e], f, t, dt, p, gen)
+        a = param[i, e]
+        own = c == WIND and P[i, a + 8] != 0.0  # a seeded wind draws from its own stream
+        _thrust_entry(c, P, Q, i, a, mem[i, e], f, t, dt, p, streams[i] if own else gen)
 
 
 @jit
