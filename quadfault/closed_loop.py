@@ -26,8 +26,9 @@ Who calls it:
 
 Effects (``fx``): the built-in effects of :mod:`quadfault.effects` run compiled, each vehicle
 its own (:class:`~quadfault.effects.chain.EffectRows`: parameters per vehicle, memory per
-vehicle, applied by :func:`~quadfault.effects.chain.thrust_effects` after the motors and
-:func:`~quadfault.effects.chain.effects_wrench` at every RK stage); a plant with effects
+vehicle; :func:`~quadfault.effects.chain.step_effects` after the motors applies the thrust
+stage and gives the step's wrench terms, :func:`~quadfault.effects.chain.effects_wrench`
+adds them at every RK stage); a plant with effects
 written in Python runs :func:`fly_vehicle` interpreted with its
 :class:`~quadfault.plant.EffectsHook` at the same two points (one vehicle at a time).
 
@@ -59,7 +60,7 @@ from quadfault.dynamics import (
     specific_force3,
     translational_acceleration3,
 )
-from quadfault.effects.chain import EffectRows, thrust_effects, wrench_terms
+from quadfault.effects.chain import NO_TERMS, EffectRows, has_wrench, step_effects
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange, python
 from quadfault.motors import motor_thrust
@@ -242,18 +243,19 @@ def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx, memory=None)
                 u = geometric_control(mp, mv, mR, mw, reference_row(refs, row), gains, nominal)
                 rotor_commands(u[0], u[1], K.allocation_inverse, f_cmd)
         motor_thrust(f_cmd, eta, row, f_max, C.saturate, sigma, gen, f)
-        if fx is not None:
-            thrust_effects(fx, i, f, t, C.dt, p, v, R, w, gen)
+        if fx is None:
+            W = NO_TERMS  # (not used)
+        else:  # the thrust stage, and the step's wrench terms the RK stages take (numbers)
+            W = step_effects(fx, i, f, t, C.dt, p, v, R, w, gen)
         thrust, M = _allocate(C.allocation, f)
         if memory is not None:
             reference_euler_store(memory[i], thrust, M, R)
             p1, v1, R1, w1 = p, v, R, w
             a0 = translational_acceleration3(R, thrust, rigid)
-        elif fx is None:
+        elif fx is None or not has_wrench(W):  # the stages add no wrench: none to call
             p1, v1, R1, w1, a0 = rkmk4_step(p, v, R, w, thrust, M, rigid, C.dt)
-        else:  # the stages get the step's wrench terms: numbers, no arrays
-            p1, v1, R1, w1, a0 = rkmk4_step(p, v, R, w, thrust, M, rigid, C.dt,
-                                            wrench_terms(fx, i, f, t))
+        else:
+            p1, v1, R1, w1, a0 = rkmk4_step(p, v, R, w, thrust, M, rigid, C.dt, W)
         sf = a0
         if C.record_accel:
             sf = accelerometer3(specific_force3(R, a0, C.gravity), sensors, gen)
@@ -327,8 +329,11 @@ def _fly_one(gens, i, k0, k1, measure_first, C, K, V, T, out, fx, memory):
     return fly_vehicle(i, gens[i], k0, k1, measure_first, C, K, V, T, out, fx, memory)
 
 
-def _call_thrust(fx, i, f, t, dt, p, v, R, w, gen):
+def _call_step(fx, i, f, t, dt, p, v, R, w, gen):
+    """The interpreted loop's step of the chain: the hook's thrust stage, then its wrench
+    with the step's thrusts and time (:class:`_StepHook`)."""
     fx.rotor_thrust(f, t, dt, p, v, R, w, gen)
+    return _StepHook(fx, i, f, t)
 
 
 class _StepHook:
@@ -340,10 +345,12 @@ class _StepHook:
     def wrench(self, p, v, R, w, f, t):
         return self.hook.wrench(p, v, R, w, self.f, self.t)
 
+    def has_wrench(self) -> bool:
+        return True  # (a hook's wrench is called at every stage)
+
 
 #: the interpreted loop's calls at the chain's two points: the hook's methods
-HOOK_CALLS = {"thrust_effects": _call_thrust,
-              "wrench_terms": _StepHook,
+HOOK_CALLS = {"step_effects": _call_step, "has_wrench": _StepHook.has_wrench,
               "effects_wrench": call_wrench}
 
 

@@ -3,15 +3,17 @@
 Per vehicle ``i`` the effects are a list of entries -- a code (which effect), the column of
 its first parameter and of its first memory slot -- over one row of numbers each
 (:class:`EffectRows`; built by :mod:`quadfault.effects.rows`). The closed loop
-(:func:`quadfault.closed_loop.fly_vehicle`) calls the chain at the two points of the effect
-protocol:
+(:func:`quadfault.closed_loop.fly_vehicle`) calls the chain once per physics step,
+:func:`step_effects` (inlined into the loop, so the rows' arrays are taken once per step
+and no call passes them: every array a compiled call takes costs reference counting), which
+does the two points of the effect protocol:
 
-* :func:`thrust_effects` once per physics step, on the thrusts the motor model produced
-  (in the order of the entries, each one's output the next one's input);
-* :func:`effects_wrench` at every stage of the RKMK4 step, the sum of the wrench entries'
-  external force (world) [N] and moment (body) [N m] at the stage's state, from the
-  numbers :func:`wrench_terms` takes from the rows once per step (the stages take no
-  arrays: an array argument costs reference counting at every call).
+* the thrust stage (:func:`thrust_effects`), on the thrusts the motor model produced (in
+  the order of the entries, each one's output the next one's input);
+* the step's wrench terms (:func:`wrench_terms`): the numbers the RK stages need, so that
+  :func:`effects_wrench` gives at every stage of the RKMK4 step the sum of the wrench
+  entries' external force (world) [N] and moment (body) [N m] from numbers alone; a step
+  without wrench entries skips the stages' call (:func:`has_wrench`).
 
 Each entry runs the kernels of :mod:`quadfault.effects.kernels`, the code the diagnosis runs
 over whole recordings (:mod:`quadfault.effects.physics`). Parameters (``P``, from the entry's
@@ -129,7 +131,7 @@ def _delay(P, Q, i, a, m, f, t, dt):
                 - zoh_integral(Q, i, base, cap, n, head, count, lo, r)) / (hi - lo)
 
 
-@jit
+@jit(inline="always")
 def _thrust_entry(c, P, Q, i, a, m, f, t, dt, p, gen):
     """One entry's thrust-stage work for vehicle ``i`` (see the module docstring)."""
     n = f.shape[0]
@@ -177,20 +179,25 @@ def _thrust_entry(c, P, Q, i, a, m, f, t, dt, p, gen):
         Q[i, m], Q[i, m + 2] = 1.0, dt
 
 
+@jit(inline="always")
+def _thrust_stage(code, param, mem, P, Q, streams, i, f, t, dt, p, gen):
+    """The thrust stage of vehicle ``i`` over its entries, in chain order."""
+    for e in range(code.shape[1]):
+        c = code[i, e]
+        if c < 0:
+            break
+        a = param[i, e]
+        own = c == WIND and P[i, a + 8] != 0.0  # a seeded wind draws from its own stream
+        _thrust_entry(c, P, Q, i, a, mem[i, e], f, t, dt, p, streams[i] if own else gen)
+
+
 @jit
 def thrust_effects(fx, i, f, t, dt, p, v, R, w, gen):
     """The chain's thrust stage for the step ``[t, t + dt)`` [s]: ``f`` (n,), the thrusts
     [N] the motors produced, replaced in place; ``(p, v, R, w)`` the state at the step's
     start; ``gen`` the vehicle's generator; ``fx`` the rows, ``i`` the vehicle."""
-    code, param, mem, P, Q = fx.code, fx.param, fx.mem, fx.params, fx.memory  # once
-    for e in range(code.shape[1]):
-        c = code[i, e]
-        if c < 0:
-            break
-        if c == WIND and P[i, param[i, e] + 8] != 0.0:
-            _thrust_entry(c, P, Q, i, param[i, e], mem[i, e], f, t, dt, p, fx.streams[i])
-        else:
-            _thrust_entry(c, P, Q, i, param[i, e], mem[i, e], f, t, dt, p, gen)
+    _thrust_stage(fx.code, fx.param, fx.mem, fx.params, fx.memory, fx.streams, i, f, t, dt,
+                  p, gen)
 
 
 @jit
@@ -217,58 +224,89 @@ def _rotor_rate(P, Q, i, a, m, f):
 WRENCH_TERMS = 6
 TERM = 7
 _NO_TERM = (-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+#: the terms of a vehicle without wrench entries
+NO_TERMS = (_NO_TERM,) * WRENCH_TERMS
 
 
 @jit(inline="always")
-def _term(code, param, mem, P, Q, i, k, f):
-    """The ``k``-th wrench entry of vehicle ``i`` as the numbers the RK stages need, fixed
-    over the step: ``(code, six numbers)``; DRAG: k (3), air velocity (3); WIND: wind drag k
-    (3), air velocity with the step's gust (3); FLAPPING: k_force, k_moment, thrust, air
-    velocity (3); DAMPING: D1 (3), D2 (3); COM and ROTOR_INERTIA: their body moment (3),
-    fixed by the step's thrusts ``f`` (code COM). Code -1: no such entry."""
-    seen = 0
+def _term(c, P, Q, i, a, m, f):
+    """Wrench entry ``c`` (parameters from column ``a``, memory from ``m``) of vehicle ``i``
+    as the numbers the RK stages need, fixed over the step: ``(code, six numbers)``; DRAG:
+    k (3), air velocity (3); WIND: wind drag k (3), air velocity with the step's gust (3);
+    FLAPPING: k_force, k_moment, thrust, air velocity (3); DAMPING: D1 (3), D2 (3); COM and
+    ROTOR_INERTIA: their body moment (3), fixed by the step's thrusts ``f`` (code COM)."""
+    if c == DRAG or c == DAMPING:
+        return (float(c), P[i, a], P[i, a + 1], P[i, a + 2], P[i, a + 3], P[i, a + 4],
+                P[i, a + 5])
+    if c == WIND:
+        return (float(c), P[i, a + 5], P[i, a + 6], P[i, a + 7], P[i, a] + Q[i, m],
+                P[i, a + 1] + Q[i, m + 1], P[i, a + 2] + Q[i, m + 2])
+    if c == ROTOR_INERTIA:
+        Mz = rotor_inertia_moment1(_rotor_rate(P, Q, i, a, m, f), P[i, a])
+        return (float(COM), 0.0, 0.0, Mz, 0.0, 0.0, 0.0)
+    thrust = 0.0
+    for r in range(f.shape[0]):
+        thrust += f[r]
+    if c == COM:
+        M = com_offset_moment3(thrust, P[i, a], P[i, a + 1])
+        return (float(c), M[0], M[1], M[2], 0.0, 0.0, 0.0)
+    return (float(c), P[i, a], P[i, a + 1], thrust, P[i, a + 2], P[i, a + 3], P[i, a + 4])
+
+
+@jit(inline="always")
+def _terms(code, param, mem, P, Q, i, f):
+    """Vehicle ``i``'s wrench entries in chain order as :data:`WRENCH_TERMS` terms
+    (:func:`_term`; code -1 past the last), in one pass over the entries."""
+    W0, W1, W2, W3, W4, W5 = NO_TERMS
+    k = 0
     for e in range(code.shape[1]):
         c = code[i, e]
         if c < 0:
             break
         if c < DRAG:
             continue
-        if seen < k:
-            seen += 1
-            continue
-        a, m = param[i, e], mem[i, e]
-        if c == DRAG or c == DAMPING:
-            return (float(c), P[i, a], P[i, a + 1], P[i, a + 2], P[i, a + 3], P[i, a + 4],
-                    P[i, a + 5])
-        if c == WIND:
-            return (float(c), P[i, a + 5], P[i, a + 6], P[i, a + 7], P[i, a] + Q[i, m],
-                    P[i, a + 1] + Q[i, m + 1], P[i, a + 2] + Q[i, m + 2])
-        if c == ROTOR_INERTIA:
-            Mz = rotor_inertia_moment1(_rotor_rate(P, Q, i, a, m, f), P[i, a])
-            return (float(COM), 0.0, 0.0, Mz, 0.0, 0.0, 0.0)
-        thrust = 0.0
-        for r in range(f.shape[0]):
-            thrust += f[r]
-        if c == COM:
-            M = com_offset_moment3(thrust, P[i, a], P[i, a + 1])
-            return (float(c), M[0], M[1], M[2], 0.0, 0.0, 0.0)
-        if c == FLAPPING:
-            return (float(c), P[i, a], P[i, a + 1], thrust, P[i, a + 2], P[i, a + 3],
-                    P[i, a + 4])
-        return _NO_TERM
-    return _NO_TERM
+        s = _term(c, P, Q, i, param[i, e], mem[i, e], f)
+        if k == 0:
+            W0 = s
+        elif k == 1:
+            W1 = s
+        elif k == 2:
+            W2 = s
+        elif k == 3:
+            W3 = s
+        elif k == 4:
+            W4 = s
+        else:
+            W5 = s
+        k += 1
+    return (W0, W1, W2, W3, W4, W5)
 
 
-@jit(inline="always")
+@jit
 def wrench_terms(fx, i, f, t):
     """Vehicle ``i``'s wrench entries over the step starting at ``t`` [s] whose produced
     thrusts are ``f``: :data:`WRENCH_TERMS` terms (:func:`_term`), numbers only, so that the
     RK stages (:func:`effects_wrench`) take no arrays (an array argument costs reference
     counting at every call)."""
-    c, a, m, P, Q = fx.code, fx.param, fx.mem, fx.params, fx.memory  # each taken once
-    return (_term(c, a, m, P, Q, i, 0, f), _term(c, a, m, P, Q, i, 1, f),
-            _term(c, a, m, P, Q, i, 2, f), _term(c, a, m, P, Q, i, 3, f),
-            _term(c, a, m, P, Q, i, 4, f), _term(c, a, m, P, Q, i, 5, f))
+    return _terms(fx.code, fx.param, fx.mem, fx.params, fx.memory, i, f)
+
+
+@jit(inline="always")
+def step_effects(fx, i, f, t, dt, p, v, R, w, gen):
+    """The chain's work for physics step ``[t, t + dt)`` [s] of vehicle ``i``: the thrust
+    stage on ``f`` (:func:`thrust_effects`; same arguments), then the step's wrench terms
+    (:func:`wrench_terms`) returned for the RK stages. Inlined into the loop with the rows'
+    arrays taken once (each array a compiled call takes costs reference counting)."""
+    code, param, mem, P, Q = fx.code, fx.param, fx.mem, fx.params, fx.memory
+    _thrust_stage(code, param, mem, P, Q, fx.streams, i, f, t, dt, p, gen)
+    return _terms(code, param, mem, P, Q, i, f)
+
+
+@jit(inline="always")
+def has_wrench(W) -> bool:
+    """Whether the step's terms ``W`` (:func:`step_effects`) hold a wrench entry (else the
+    RK stages need not call :func:`effects_wrench`)."""
+    return W[0][0] >= 0.0
 
 
 @jit(inline="always")
@@ -317,4 +355,4 @@ def effects_wrench(W, p, v, R, w, f, t):
 
 
 __all__ = ["CODES", "EffectRows", "WRENCH_TERMS", "thrust_effects",
-           "wrench_terms", "effects_wrench"]
+           "NO_TERMS", "wrench_terms", "step_effects", "has_wrench", "effects_wrench"]
