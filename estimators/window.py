@@ -204,13 +204,13 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
         if w[s] > 0:
             active += 1
     s2 = max(s2, 0.0) / max(10 * active - n, 1)
-    if cholesky_into(Hq, zero, L):
+    if cholesky_into(Hq, zero, L, n):
         unit, col = V[V_UNIT], V[V_COL]
         for j in range(n):
             for k in range(n):
                 unit[k] = 0.0
             unit[j] = 1.0
-            cholesky_solve_into(L, unit, col)
+            cholesky_solve_into(L, unit, col, n)
             sd_out[j] = math.sqrt(max(col[j], 0.0) * s2)
     return (OK if converged else MAX_ITER), rounds, cond
 
