@@ -52,7 +52,7 @@ from estimators.irls_config import (  # noqa: F401  (re-exported)
 )
 from estimators.median import median_push_into, postprocess_label
 from estimators.residuals import segment_terms_into
-from estimators.state import FlatState, all_finite, piece_rows
+from estimators.state import FlatState, all_finite, piece, piece_rows
 from estimators.window import (
     M_A,
     M_B,
@@ -172,15 +172,15 @@ def state_pieces(fs, ip, N):
     m, n, L = ip[I_M], ip[I_N], ip[I_L]
     o = ip[I_OFFSETS:]
     return (piece_rows(fs, o[F_T], o[F_T + 1], N),
-            piece_rows(fs, o[F_SAMPLE], o[F_SAMPLE + 1], N).reshape((N, 6, 3)),
-            piece_rows(fs, o[F_VN], o[F_VN + 1], N).reshape((N, VN_WINDOW + N_VECTORS, n)),
-            piece_rows(fs, o[F_VM], o[F_VM + 1], N).reshape((N, VM_WINDOW + 3, m)),
-            piece_rows(fs, o[F_BH], o[F_BH + 1], N).reshape((N, 2, m, n)),
-            piece_rows(fs, o[F_H], o[F_H + 1], N).reshape((N, m, n, n)),
-            piece_rows(fs, o[F_M], o[F_M + 1], N).reshape((N, N_MATRICES, n, n)),
+            piece(fs, o, F_SAMPLE, (N, 6, 3)),
+            piece(fs, o, F_VN, (N, VN_WINDOW + N_VECTORS, n)),
+            piece(fs, o, F_VM, (N, VM_WINDOW + 3, m)),
+            piece(fs, o, F_BH, (N, 2, m, n)),
+            piece(fs, o, F_H, (N, m, n, n)),
+            piece(fs, o, F_M, (N, N_MATRICES, n, n)),
             piece_rows(fs, o[F_R0], o[F_R0 + 1], N),
-            piece_rows(fs, o[F_J], o[F_J + 1], N).reshape((N, 10, n)),
-            piece_rows(fs, o[F_MEDIAN], o[F_MEDIAN + 1], N).reshape((N, 2, L, n)))
+            piece(fs, o, F_J, (N, 10, n)),
+            piece(fs, o, F_MEDIAN, (N, 2, L, n)))
 
 
 @jit

@@ -96,11 +96,11 @@ def history(cfg: IRLSConfig, n: int) -> np.ndarray:
     return np.zeros((cfg.max_irls, cfg.ipm.max_iter, 4 + n))
 
 
-@jit
-def energies_into(c, b, H, start, x, scale, e) -> None:
+@jit(inline="always")
+def energies_into(c, b, H, start, x, scale, e, n) -> None:
     """Segment energies ``e_s = (c + 2 b . x + x^T H x) * scale`` of the ring window (eq. 26),
-    oldest segment first."""
-    m, n = b.shape[0], b.shape[1]
+    oldest segment first (``n``: the unknowns, ``b.shape[1]``)."""
+    m = b.shape[0]
     for s in range(m):
         i = (start + s) % m
         acc = 0.0
@@ -124,7 +124,19 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
     ``M[M_JGJ]`` keeps ``J^T W G J`` of the last round. Returns ``(status code, rounds,
     cond)``.
     """
-    m, n = b.shape[0], b.shape[1]
+    n = b.shape[1]
+    if n == 4:  # a quadrotor: the same steps compiled for a size known in advance
+        return _solve_window_steps(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist,
+                                   x_out, sd_out, 4)
+    return _solve_window_steps(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x_out,
+                               sd_out, n)
+
+
+@jit(inline="always")
+def _solve_window_steps(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x_out, sd_out,
+                        n):
+    """:func:`solve_window_into` for ``n`` unknowns (its loops' length)."""
+    m = b.shape[0]
     lo, hi, gamma, scale = fp[P_LO], fp[P_HI], fp[P_GAMMA], fp[P_SCALE]
     x_cur, q, zero = V[V_XCUR], V[V_Q], V[V_ZERO]
     JGJ, Hq, L = M[M_JGJ], M[M_HQ], M[M_L]
@@ -140,7 +152,7 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
     converged = True
     rounds = 0
     for _round in range(ip[I_MAX_IRLS]):
-        energies_into(c, b, H, start, x_cur, scale, e)  # eq. 26
+        energies_into(c, b, H, start, x_cur, scale, e, n)  # eq. 26
         mad_weights_into(e, fp[P_Z_SOFT], fp[P_POWER], fp[P_Z_HARD], fp[P_W_MIN],
                          fp[P_MAD_EPS], ip[I_HARD_DROP] == 1, ip[I_MEDIAN_NORMALIZE] == 1,
                          ip[I_FLOOR] == 1, w, z, tmp)
@@ -183,7 +195,7 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
         iters[rounds] = it
         if record:
             for k in range(it):  # the weighted residual norm of each iterate
-                energies_into(c, b, H, start, hist[rounds, k, 3:3 + n], scale, e)
+                energies_into(c, b, H, start, hist[rounds, k, 3:3 + n], scale, e, n)
                 acc = 0.0
                 for s in range(m):
                     acc += w[s] * e[s]
@@ -196,7 +208,7 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
         if step < fp[P_IRLS_TOL]:
             break
     # uncertainty: information matrix Hq = J^T W G J + gamma I of the final weights
-    energies_into(c, b, H, start, x_cur, scale, e)
+    energies_into(c, b, H, start, x_cur, scale, e, n)
     active = 0
     s2 = 0.0
     for s in range(m):
