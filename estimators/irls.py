@@ -165,7 +165,7 @@ def irls_parameters(vehicle: Vehicle, cfg: IRLSConfig, offsets: np.ndarray):
     return const, fp, ip
 
 
-@jit
+@jit(inline="always")
 def state_pieces(fs, ip, N):
     """The pieces of the float state of ``N`` estimators (:class:`IRLSState`), each
     ``(N, *shape)``, in the order of the ``F_*`` constants."""
@@ -183,7 +183,7 @@ def state_pieces(fs, ip, N):
             piece(fs, o, F_MEDIAN, (N, 2, L, n)))
 
 
-@jit
+@jit(inline="always")
 def constant_arrays(const, ip):
     """``(J (3, 3), J^-1 (3, 3), A (4, n), G (10))``: the vehicle's array constants of
     :func:`irls_step`, as views of ``const`` (:func:`irls_parameters`)."""
@@ -192,7 +192,7 @@ def constant_arrays(const, ip):
             const[C_A:C_A + 4 * n].reshape((4, n)), const[C_A + 4 * n:C_A + 4 * n + 10])
 
 
-@jit
+@jit(inline="always")
 def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist):
     """One online update of the sliding-window IRLS (module docstring) of row ``i`` of the
     state ``(S, ks)`` (:func:`state_pieces`, int state (N, K)), in place (``arrays``:
@@ -371,7 +371,7 @@ class SlidingWindowIRLS:
         """Add one measurement row; returns the estimate of the window ending at it."""
         try:
             t = float(sample.t)
-            p, v, R, w, f = [np.ascontiguousarray(a, dtype=np.float64) for a in sample[1:]]
+            p, v, R, w, f = [np.ascontiguousarray(a, dtype=float) for a in sample[1:]]
             malformed = (p.shape != (3,) or v.shape != (3,) or R.shape != (3, 3)
                          or w.shape != (3,) or f.shape != self._shape_f)
         except (AttributeError, TypeError, ValueError, IndexError):
