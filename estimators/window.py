@@ -124,19 +124,7 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
     ``M[M_JGJ]`` keeps ``J^T W G J`` of the last round. Returns ``(status code, rounds,
     cond)``.
     """
-    n = b.shape[1]
-    if n == 4:  # a quadrotor: the same steps compiled for a size known in advance
-        return _solve_window_steps(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist,
-                                   x_out, sd_out, 4)
-    return _solve_window_steps(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x_out,
-                               sd_out, n)
-
-
-@jit(inline="always")
-def _solve_window_steps(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x_out, sd_out,
-                        n):
-    """:func:`solve_window_into` for ``n`` unknowns (its loops' length)."""
-    m = b.shape[0]
+    m, n = b.shape[0], b.shape[1]
     lo, hi, gamma, scale = fp[P_LO], fp[P_HI], fp[P_GAMMA], fp[P_SCALE]
     x_cur, q, zero = V[V_XCUR], V[V_Q], V[V_ZERO]
     JGJ, Hq, L = M[M_JGJ], M[M_HQ], M[M_L]
