@@ -52,7 +52,7 @@ from estimators.base import (
 )
 from estimators.ekf_filter import predict_update_into
 from estimators.irls_config import BACKENDS, deprecated_backend  # noqa: F401  (re-exported)
-from estimators.state import FlatState, all_finite, piece_rows
+from estimators.state import FlatState, all_finite, piece, piece_rows
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
 from quadfault.recording import Recording
@@ -171,22 +171,22 @@ def state_pieces(fs, offsets, n, N):
     ns = 18 + n
     o = offsets
     return (piece_rows(fs, o[F_X], o[F_X + 1], N),
-            piece_rows(fs, o[F_P], o[F_P + 1], N).reshape((N, ns, ns)),
+            piece(fs, o, F_P, (N, ns, ns)),
             piece_rows(fs, o[F_LAST_T], o[F_LAST_T + 1], N),
             piece_rows(fs, o[F_LAST_F], o[F_LAST_F + 1], N),
             piece_rows(fs, o[F_ETA0], o[F_ETA0 + 1], N),
             piece_rows(fs, o[F_ETA_KEEP], o[F_ETA_KEEP + 1], N),
-            piece_rows(fs, o[F_P_KEEP], o[F_P_KEEP + 1], N).reshape((N, n, n)),
-            piece_rows(fs, o[F_MATS], o[F_MATS + 1], N).reshape((N, 3, ns, ns)),
-            piece_rows(fs, o[F_WT], o[F_WT + 1], N).reshape((N, ns, 12)),
-            piece_rows(fs, o[F_S12], o[F_S12 + 1], N).reshape((N, 2, 12, 12)),
-            piece_rows(fs, o[F_HP], o[F_HP + 1], N).reshape((N, 12, ns)),
-            piece_rows(fs, o[F_M3], o[F_M3 + 1], N).reshape((N, 8, 3, 3)),
-            piece_rows(fs, o[F_DR], o[F_DR + 1], N).reshape((N, 9, 3)),
-            piece_rows(fs, o[F_BS], o[F_BS + 1], N).reshape((N, 2, n, 3)),
-            piece_rows(fs, o[F_HR], o[F_HR + 1], N).reshape((N, 3, 9)),
-            piece_rows(fs, o[F_VECS], o[F_VECS + 1], N).reshape((N, 3, ns)),
-            piece_rows(fs, o[F_Z], o[F_Z + 1], N).reshape((N, 3, ns)),
+            piece(fs, o, F_P_KEEP, (N, n, n)),
+            piece(fs, o, F_MATS, (N, 3, ns, ns)),
+            piece(fs, o, F_WT, (N, ns, 12)),
+            piece(fs, o, F_S12, (N, 2, 12, 12)),
+            piece(fs, o, F_HP, (N, 12, ns)),
+            piece(fs, o, F_M3, (N, 8, 3, 3)),
+            piece(fs, o, F_DR, (N, 9, 3)),
+            piece(fs, o, F_BS, (N, 2, n, 3)),
+            piece(fs, o, F_HR, (N, 3, 9)),
+            piece(fs, o, F_VECS, (N, 3, ns)),
+            piece(fs, o, F_Z, (N, 3, ns)),
             piece_rows(fs, o[F_Y], o[F_Y + 1], N),
             piece_rows(fs, o[F_DT], o[F_DT + 1], N))
 

@@ -326,7 +326,7 @@ def _update(x, P, xp, Pp, HR, y, r, HP, WT, S, L):
             for j in range(9):
                 acc += HP[i, 9 + j] * HR[k - 9, j]
             S[i, k] = acc
-    if not cholesky_into(S, r, L):
+    if not cholesky_into(S, r, L, S.shape[0]):
         for i in range(12):
             S[i, i] += r[i]
         _update_general(x, P, xp, Pp, y, HP, S, WT.reshape((12, ns)))

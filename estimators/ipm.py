@@ -141,15 +141,27 @@ def ipm_into(H, q, lo, hi, x, settings, max_iter, W, L, hist):
         matrix was not positive definite (stopped there).
     """
     n = q.shape[0]
+    if n == 4:  # a quadrotor: the same steps compiled for a size known in advance
+        return _ipm_steps(H, q, lo, hi, x, settings, max_iter, W, L, hist, 4)
+    return _ipm_steps(H, q, lo, hi, x, settings, max_iter, W, L, hist, n)
+
+
+@jit(inline="always")
+def _ipm_steps(H, q, lo, hi, x, settings, max_iter, W, L, hist, n):
+    """:func:`ipm_into` for ``n`` unknowns (its loops' length; a constant lets the compiler
+    unroll them)."""
     mu, alpha, beta, step_fraction = settings[0], settings[1], settings[2], settings[3]
     bt_eps, min_step, tol_feas, tol_gap = settings[4], settings[5], settings[6], settings[7]
+    # the workspace rows as views made once (no reference counting in the loop)
+    lam_hi, lam_lo, d, rhs, dx_ = W[W_LAM_HI], W[W_LAM_LO], W[W_D], W[W_RHS], W[W_DX]
+    dlam_hi, dlam_lo, hx_, hdx_ = W[W_DLAM_HI], W[W_DLAM_LO], W[W_HX], W[W_HDX]
     gap = 0.0  # surrogate gap -phi^T lambda, eq. (45); phi = [x - hi; lo - x]
     for i in range(n):
         pu = x[i] - hi
         pl = lo - x[i]
-        W[W_LAM_HI, i] = -1.0 / pu
-        W[W_LAM_LO, i] = -1.0 / pl
-        gap -= pu * W[W_LAM_HI, i] + pl * W[W_LAM_LO, i]
+        lam_hi[i] = -1.0 / pu
+        lam_lo[i] = -1.0 / pl
+        gap -= pu * lam_hi[i] + pl * lam_lo[i]
     scale_t = mu * 2 * n
     for it in range(1, max_iter + 1):
         inv_t = max(gap, 1e-12) / scale_t  # 1/t, t = mu m / gap
@@ -157,30 +169,30 @@ def ipm_into(H, q, lo, hi, x, settings, max_iter, W, L, hist):
         for i in range(n):  # KKT residual, eq. (39), and the reduced Newton system, eq. (42)
             pu = x[i] - hi
             pl = lo - x[i]
-            lu, ll = W[W_LAM_HI, i], W[W_LAM_LO, i]
+            lu, ll = lam_hi[i], lam_lo[i]
             hx = 0.0
             for k in range(n):
                 hx += H[i, k] * x[k]
-            W[W_HX, i] = hx
+            hx_[i] = hx
             rd = q[i] + lu - ll + hx
             cu = -lu * pu - inv_t
             cl = -ll * pl - inv_t
             r2 += rd * rd + cu * cu + cl * cl
-            W[W_D, i] = -(lu / pu + ll / pl)  # (H + diag(d)) dx = rhs
-            W[W_RHS, i] = cl / pl - cu / pu - rd
+            d[i] = -(lu / pu + ll / pl)  # (H + diag(d)) dx = rhs
+            rhs[i] = cl / pl - cu / pu - rd
         r_norm = math.sqrt(r2)
-        if not cholesky_into(H, W[W_D], L):
+        if not cholesky_into(H, d, L, n):
             return it, -1
-        cholesky_solve_into(L, W[W_RHS], W[W_DX])
+        cholesky_solve_into(L, rhs, dx_, n)
         s_max = 1.0  # eq. (43): keep lambda > 0 and lo < x < hi
         for i in range(n):
             pu = x[i] - hi
             pl = lo - x[i]
-            lu, ll, dx = W[W_LAM_HI, i], W[W_LAM_LO, i], W[W_DX, i]
+            lu, ll, dx = lam_hi[i], lam_lo[i], dx_[i]
             dlu = (-lu * pu - inv_t - lu * dx) / pu
             dll = (-ll * pl - inv_t + ll * dx) / pl
-            W[W_DLAM_HI, i] = dlu
-            W[W_DLAM_LO, i] = dll
+            dlam_hi[i] = dlu
+            dlam_lo[i] = dll
             if dlu < 0:
                 s_max = min(s_max, -lu / dlu)
             if dll < 0:
@@ -189,23 +201,22 @@ def ipm_into(H, q, lo, hi, x, settings, max_iter, W, L, hist):
                 s_max = min(s_max, -pu / dx)
             elif dx < 0:
                 s_max = min(s_max, pl / dx)
-        for i in range(n):  # H dx: the trial points' H x is then H x + s H dx
-            hdx = 0.0
+            hdx = 0.0  # H dx: the trial points' H x is then H x + s H dx
             for k in range(n):
-                hdx += H[i, k] * W[W_DX, k]
-            W[W_HDX, i] = hdx
+                hdx += H[i, k] * dx_[k]
+            hdx_[i] = hdx
         s = step_fraction * s_max
         while True:  # backtracking, eq. (44), on the KKT residual at the trial point
             d2 = 0.0
-            for i in range(n):
-                v = q[i] + (W[W_LAM_HI, i] + s * W[W_DLAM_HI, i]) \
-                    - (W[W_LAM_LO, i] + s * W[W_DLAM_LO, i]) + W[W_HX, i] + s * W[W_HDX, i]
-                d2 += v * v
             c2 = 0.0
             for i in range(n):
-                xt = x[i] + s * W[W_DX, i]
-                cu = -(W[W_LAM_HI, i] + s * W[W_DLAM_HI, i]) * (xt - hi) - inv_t
-                cl = -(W[W_LAM_LO, i] + s * W[W_DLAM_LO, i]) * (lo - xt) - inv_t
+                lu = lam_hi[i] + s * dlam_hi[i]
+                ll = lam_lo[i] + s * dlam_lo[i]
+                v = q[i] + lu - ll + hx_[i] + s * hdx_[i]
+                d2 += v * v
+                xt = x[i] + s * dx_[i]
+                cu = -lu * (xt - hi) - inv_t
+                cl = -ll * (lo - xt) - inv_t
                 c2 += cu * cu + cl * cl
             r_try = math.sqrt(d2 + c2)
             if r_try <= (1.0 - alpha * s) * r_norm + bt_eps or s < min_step:
@@ -213,10 +224,10 @@ def ipm_into(H, q, lo, hi, x, settings, max_iter, W, L, hist):
             s *= beta
         gap = 0.0
         for i in range(n):
-            x[i] = x[i] + s * W[W_DX, i]
-            W[W_LAM_HI, i] = W[W_LAM_HI, i] + s * W[W_DLAM_HI, i]
-            W[W_LAM_LO, i] = W[W_LAM_LO, i] + s * W[W_DLAM_LO, i]
-            gap -= (x[i] - hi) * W[W_LAM_HI, i] + (lo - x[i]) * W[W_LAM_LO, i]
+            x[i] = x[i] + s * dx_[i]
+            lam_hi[i] = lam_hi[i] + s * dlam_hi[i]
+            lam_lo[i] = lam_lo[i] + s * dlam_lo[i]
+            gap -= (x[i] - hi) * lam_hi[i] + (lo - x[i]) * lam_lo[i]
         if hist.shape[0] > 0:
             hist[it - 1, 0] = math.sqrt(d2)
             hist[it - 1, 1] = math.sqrt(c2)

@@ -52,7 +52,7 @@ from estimators.irls_config import (  # noqa: F401  (re-exported)
 )
 from estimators.median import median_push_into, postprocess_label
 from estimators.residuals import segment_terms_into
-from estimators.state import FlatState, all_finite, piece_rows
+from estimators.state import FlatState, all_finite, piece, piece_rows
 from estimators.window import (
     M_A,
     M_B,
@@ -165,25 +165,25 @@ def irls_parameters(vehicle: Vehicle, cfg: IRLSConfig, offsets: np.ndarray):
     return const, fp, ip
 
 
-@jit
+@jit(inline="always")
 def state_pieces(fs, ip, N):
     """The pieces of the float state of ``N`` estimators (:class:`IRLSState`), each
     ``(N, *shape)``, in the order of the ``F_*`` constants."""
     m, n, L = ip[I_M], ip[I_N], ip[I_L]
     o = ip[I_OFFSETS:]
     return (piece_rows(fs, o[F_T], o[F_T + 1], N),
-            piece_rows(fs, o[F_SAMPLE], o[F_SAMPLE + 1], N).reshape((N, 6, 3)),
-            piece_rows(fs, o[F_VN], o[F_VN + 1], N).reshape((N, VN_WINDOW + N_VECTORS, n)),
-            piece_rows(fs, o[F_VM], o[F_VM + 1], N).reshape((N, VM_WINDOW + 3, m)),
-            piece_rows(fs, o[F_BH], o[F_BH + 1], N).reshape((N, 2, m, n)),
-            piece_rows(fs, o[F_H], o[F_H + 1], N).reshape((N, m, n, n)),
-            piece_rows(fs, o[F_M], o[F_M + 1], N).reshape((N, N_MATRICES, n, n)),
+            piece(fs, o, F_SAMPLE, (N, 6, 3)),
+            piece(fs, o, F_VN, (N, VN_WINDOW + N_VECTORS, n)),
+            piece(fs, o, F_VM, (N, VM_WINDOW + 3, m)),
+            piece(fs, o, F_BH, (N, 2, m, n)),
+            piece(fs, o, F_H, (N, m, n, n)),
+            piece(fs, o, F_M, (N, N_MATRICES, n, n)),
             piece_rows(fs, o[F_R0], o[F_R0 + 1], N),
-            piece_rows(fs, o[F_J], o[F_J + 1], N).reshape((N, 10, n)),
-            piece_rows(fs, o[F_MEDIAN], o[F_MEDIAN + 1], N).reshape((N, 2, L, n)))
+            piece(fs, o, F_J, (N, 10, n)),
+            piece(fs, o, F_MEDIAN, (N, 2, L, n)))
 
 
-@jit
+@jit(inline="always")
 def constant_arrays(const, ip):
     """``(J (3, 3), J^-1 (3, 3), A (4, n), G (10))``: the vehicle's array constants of
     :func:`irls_step`, as views of ``const`` (:func:`irls_parameters`)."""
@@ -192,7 +192,7 @@ def constant_arrays(const, ip):
             const[C_A:C_A + 4 * n].reshape((4, n)), const[C_A + 4 * n:C_A + 4 * n + 10])
 
 
-@jit
+@jit(inline="always")
 def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist):
     """One online update of the sliding-window IRLS (module docstring) of row ``i`` of the
     state ``(S, ks)`` (:func:`state_pieces`, int state (N, K)), in place (``arrays``:
@@ -371,7 +371,7 @@ class SlidingWindowIRLS:
         """Add one measurement row; returns the estimate of the window ending at it."""
         try:
             t = float(sample.t)
-            p, v, R, w, f = [np.ascontiguousarray(a, dtype=np.float64) for a in sample[1:]]
+            p, v, R, w, f = [np.ascontiguousarray(a, dtype=float) for a in sample[1:]]
             malformed = (p.shape != (3,) or v.shape != (3,) or R.shape != (3, 3)
                          or w.shape != (3,) or f.shape != self._shape_f)
         except (AttributeError, TypeError, ValueError, IndexError):

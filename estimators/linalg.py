@@ -22,11 +22,11 @@ from quadfault.jit import jit
 
 
 @jit(inline="always")
-def cholesky_into(A, shift, L) -> bool:
+def cholesky_into(A, shift, L, n) -> bool:
     """Lower Cholesky factor of ``A + diag(shift)`` into ``L``'s lower triangle (only ``A``'s
     lower triangle is read); False, with ``L`` undefined, when the matrix is not positive
-    definite (or not finite)."""
-    n = A.shape[0]
+    definite (or not finite). ``n``: the size, ``A.shape[0]`` (an argument, so a caller
+    that knows it at compile time gets loops of known length)."""
     for j in range(n):
         s = A[j, j] + shift[j]
         for k in range(j):
@@ -44,16 +44,16 @@ def cholesky_into(A, shift, L) -> bool:
 
 
 @jit(inline="always")
-def cholesky_solve_into(L, rhs, out) -> None:
+def cholesky_solve_into(L, rhs, out, n) -> None:
     """Solve ``L L^T out = rhs`` given the factor of :func:`cholesky_into`."""
-    _forward_into(L, rhs, out)
-    _backward_into(L, out)
+    _forward_into(L, rhs, out, n)
+    _backward_into(L, out, n)
 
 
 @jit(inline="always")
-def _forward_into(L, rhs, y) -> None:
+def _forward_into(L, rhs, y, n) -> None:
     """``L y = rhs``."""
-    for i in range(rhs.shape[0]):
+    for i in range(n):
         s = rhs[i]
         for k in range(i):
             s -= L[i, k] * y[k]
@@ -61,10 +61,9 @@ def _forward_into(L, rhs, y) -> None:
 
 
 @jit(inline="always")
-def _backward_into(L, y) -> None:
+def _backward_into(L, y, n) -> None:
     """``L^T x = y``, ``x`` over ``y``. (Its own function, with a forward range: numba then
     compiles both substitutions without reference counting on the arrays.)"""
-    n = y.shape[0]
     for back in range(n):
         i = n - 1 - back
         s = y[i]

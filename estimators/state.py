@@ -43,6 +43,13 @@ def piece_rows(fs, a, b, N):
 
 
 @jit
+def piece(fs, offsets, k, shape):
+    """Piece ``k`` of the float state (``offsets`` its start offsets) as an array of ``shape``
+    (leading axis: the estimators), in one reshape."""
+    return fs[offsets[k]:offsets[k + 1]].reshape(shape)
+
+
+@jit
 def all_finite(a) -> bool:
     """True when every entry of ``a`` is finite."""
     for x in a.flat:
@@ -51,4 +58,4 @@ def all_finite(a) -> bool:
     return True
 
 
-__all__ = ["FlatState", "all_finite", "piece_rows"]
+__all__ = ["FlatState", "all_finite", "piece", "piece_rows"]

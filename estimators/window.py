@@ -96,11 +96,11 @@ def history(cfg: IRLSConfig, n: int) -> np.ndarray:
     return np.zeros((cfg.max_irls, cfg.ipm.max_iter, 4 + n))
 
 
-@jit
-def energies_into(c, b, H, start, x, scale, e) -> None:
+@jit(inline="always")
+def energies_into(c, b, H, start, x, scale, e, n) -> None:
     """Segment energies ``e_s = (c + 2 b . x + x^T H x) * scale`` of the ring window (eq. 26),
-    oldest segment first."""
-    m, n = b.shape[0], b.shape[1]
+    oldest segment first (``n``: the unknowns, ``b.shape[1]``)."""
+    m = b.shape[0]
     for s in range(m):
         i = (start + s) % m
         acc = 0.0
@@ -140,7 +140,7 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
     converged = True
     rounds = 0
     for _round in range(ip[I_MAX_IRLS]):
-        energies_into(c, b, H, start, x_cur, scale, e)  # eq. 26
+        energies_into(c, b, H, start, x_cur, scale, e, n)  # eq. 26
         mad_weights_into(e, fp[P_Z_SOFT], fp[P_POWER], fp[P_Z_HARD], fp[P_W_MIN],
                          fp[P_MAD_EPS], ip[I_HARD_DROP] == 1, ip[I_MEDIAN_NORMALIZE] == 1,
                          ip[I_FLOOR] == 1, w, z, tmp)
@@ -183,7 +183,7 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
         iters[rounds] = it
         if record:
             for k in range(it):  # the weighted residual norm of each iterate
-                energies_into(c, b, H, start, hist[rounds, k, 3:3 + n], scale, e)
+                energies_into(c, b, H, start, hist[rounds, k, 3:3 + n], scale, e, n)
                 acc = 0.0
                 for s in range(m):
                     acc += w[s] * e[s]
@@ -196,7 +196,7 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
         if step < fp[P_IRLS_TOL]:
             break
     # uncertainty: information matrix Hq = J^T W G J + gamma I of the final weights
-    energies_into(c, b, H, start, x_cur, scale, e)
+    energies_into(c, b, H, start, x_cur, scale, e, n)
     active = 0
     s2 = 0.0
     for s in range(m):
@@ -204,13 +204,13 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
         if w[s] > 0:
             active += 1
     s2 = max(s2, 0.0) / max(10 * active - n, 1)
-    if cholesky_into(Hq, zero, L):
+    if cholesky_into(Hq, zero, L, n):
         unit, col = V[V_UNIT], V[V_COL]
         for j in range(n):
             for k in range(n):
                 unit[k] = 0.0
             unit[j] = 1.0
-            cholesky_solve_into(L, unit, col)
+            cholesky_solve_into(L, unit, col, n)
             sd_out[j] = math.sqrt(max(col[j], 0.0) * s2)
     return (OK if converged else MAX_ITER), rounds, cond
 

@@ -41,10 +41,13 @@ def samples(recording):
         raise ConfigError(f"{recording.path or 'recording'}: the estimators need position, "
                           "velocity and attitude columns (px..pz, vx..vz, qw..qz); this "
                           "recording is IMU-only")
-    R = recording.rotation
+    # each column once as a contiguous array: its rows are then contiguous views, which the
+    # compiled estimators take without a copy
+    p, v, R, w, f = (np.ascontiguousarray(a, dtype=float) for a in (
+        recording.position, recording.velocity, recording.rotation, recording.omega,
+        recording.thrust_cmd))
     for k in range(len(recording)):
-        yield Sample(float(recording.t[k]), recording.position[k], recording.velocity[k], R[k],
-                     recording.omega[k], recording.thrust_cmd[k])
+        yield Sample(float(recording.t[k]), p[k], v[k], R[k], w[k], f[k])
 
 
 __all__ = ["Sample", "samples"]
