@@ -2,31 +2,24 @@
 
 Each recording hides an effect drawn at random -- none, one of the effects of
 ``quadfault.effects.EFFECT_NAMES``, or a pair of effects from different classes -- on a
-randomised vehicle (mass 0.03-3 kg with inertia, arm and yaw coefficient scaled
-consistently), a randomised trajectory (circle or
-Lissajous; low altitude for ground effect), random sensor and thrust noise, written in NED or
-ENU with ``f`` or ``u`` commands and read back. The diagnosis sees only the recording file
-(truth stripped) and its nominal vehicle.
+randomised vehicle (mass 0.03-3 kg with inertia, arm and yaw coefficient scaled consistently),
+a randomised trajectory (circle or Lissajous; low altitude for ground effect), random sensor
+and thrust noise, written in NED or ENU with ``f`` or ``u`` commands and read back. The
+diagnosis sees only the recording file (truth stripped) and its nominal vehicle.
 
-Magnitude: "what the noise can hide" is an effect whose signal has the RMS of the residual
-noise (both in the diagnosis' normalised block channels, over all channels). A 5 s pilot
-flight with the effect at a unit magnitude measures that ratio; the effect is then scaled so
-its signal-to-noise ratio is a random 3-10 and the real flight is flown (magnitudes clipped
-to physical bounds; the achieved SNR is reported).
-
-Classes (``quadfault.diagnosis.library.EQUIVALENT``): ``thrust_scale``, ``motor_efficiency``,
-``thrust_curve`` and ``mass`` count as one class ("thrust"), ``delay`` and ``motor_lag`` as one
-("timing"); the report says so. Seeds 1-... were used while
-developing; the held-out seed (default 2026) was never used for tuning.
+Magnitude: a 5 s pilot flight with the effect at unit magnitude measures its signal against
+the residual noise (RMS in the diagnosis' normalised block channels); the effect is then scaled
+to a random signal-to-noise ratio of 3-10 (clipped to physical bounds; the achieved SNR is
+reported). Classes (``quadfault.diagnosis.library.EQUIVALENT``): ``thrust_scale``,
+``motor_efficiency``, ``thrust_curve`` and ``mass`` count as one ("thrust"), ``delay`` and
+``motor_lag`` as one ("timing"). The held-out seed (default 2026) was never used for tuning.
 
     python benchmarks/blinded_study.py --n 200 --seed 2026 --workers 2
     python benchmarks/blinded_study.py --n 200 --backend ray     # on a Ray cluster
 
-The simulator runs its loop interpreted by Python when a flight has effects (a few hundred
-microseconds per step), so the study uses 250 Hz physics and recording rate and 15 s flights
-by default (``--rate``, ``--duration``), parallel over ``--workers`` processes.
+Flights use 250 Hz physics and recording rate and 15 s by default (``--rate``,
+``--duration``), in parallel over ``--workers`` processes.
 """
-
 from __future__ import annotations
 
 import argparse
@@ -420,23 +413,6 @@ def print_summary(s, rows):
           ", ".join(f"{k} {v:.3f}" for k, v in sorted(s["median_param_error_by_effect"].items())))
 
 
-def timing(duration=60.0, rate=1000.0):
-    """CPU and wall time of one diagnosis of a ``duration`` s log at ``rate`` Hz with drag and
-    motor lag (pose log, paper vehicle, Lissajous)."""
-    veh = Vehicle()
-    traj = Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.15)
-    eff = (fx.Drag(0.3), fx.MotorLag(0.04))
-    t0 = time.perf_counter()
-    rec = fly(veh, traj, eff, SensorNoise(0.002, 0.005, 0.001, 0.001), 0.02, rate, duration, 1)
-    t_sim = time.perf_counter() - t0
-    w0, c0 = time.perf_counter(), time.process_time()
-    res = Diagnosis().fit(rec.without_truth())
-    wall, cpu = time.perf_counter() - w0, time.process_time() - c0
-    print(f"timing: {duration:.0f} s log at {rate:.0f} Hz ({len(rec)} rows): diagnosis "
-          f"{cpu:.1f} s CPU, {wall:.1f} s wall (simulation {t_sim:.0f} s); found "
-          f"{res.effect_names}, held-out improvement {res.model_improvement:.2f}")
-
-
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--n", type=int, default=200, help="number of recordings (default 200)")
@@ -459,12 +435,7 @@ def main(argv=None):
                          "kept there are simulated")
     ap.add_argument("--kept-only", action="store_true",
                     help="with --reuse: skip the cases not kept in --store DIR")
-    ap.add_argument("--timing", action="store_true",
-                    help="only time one diagnosis of a 60 s log at 1 kHz (drag + motor lag)")
     args = ap.parse_args(argv)
-    if args.timing:
-        timing()
-        return 0
     if args.n < 1 or args.workers < 1 or args.rate <= 0 or args.duration <= 5:
         print("blinded_study: --n, --workers >= 1, --rate > 0, --duration > 5 s", file=sys.stderr)
         return 2

@@ -43,17 +43,10 @@ The documented study (>= 3 seeds per arm, each run within 30 min of CPU; docs/ag
     python benchmarks/ppo_residual_study.py --timesteps 1000000 --seeds 0 1 2 \\
         --episodes 40 --out runs/ppo_s4m
 
-Variants, both arms alike: ``--trajectory`` (reference of the random scenarios),
-``--compensate`` (the residual is added to the geometric commands divided by eta_hat, a no-op
-in the arm without the estimate; its zero residual is one more row), ``--estimator truth``
-(the oracle efficiency), ``--ppo-kwargs`` (JSON over :data:`PPO_KWARGS`). Training uses one
-numba thread per run (``--numba-threads``; ``agents.train.TrainConfig.numba_threads``).
-
-The runs can train in separate processes (``--arms <arm> --seeds <k> --train-only``); the
-run without ``--train-only`` then reuses the trained models (``--retrain`` trains again) and
-evaluates. Writes ``OUT/study.json`` and ``OUT/study.md`` (``distribution.*`` with
-``--check-distribution``); per run ``OUT/<arm>/seed_<k>/`` (see ``agents.train``) and
-``train_time.json`` (wall and CPU seconds of the run).
+Variants (both arms alike) and options: ``--help``. Runs can train in separate processes
+(``--arms <arm> --seeds <k> --train-only``); a run without ``--train-only`` reuses the trained
+models and evaluates. Writes ``OUT/study.json`` and ``OUT/study.md``; per run
+``OUT/<arm>/seed_<k>/`` (see ``agents.train``) and ``train_time.json`` (wall and CPU seconds).
 """
 
 from __future__ import annotations

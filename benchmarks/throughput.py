@@ -2,12 +2,10 @@
 
 Prints, measured in one run (ratios are what to compare; the machine may be shared):
 
-1. physics vehicle-steps/s against N: the model's closed loop alone
-   (``quadfault.closed_loop.fly_batch``: motors with thrust noise + RKMK4, and with the
-   geometric controller at every step, the closed loop crazyflow also runs) and the full
-   ``QuadFaultVectorEnv`` step (controller, noise, physics, termination, observation), without
-   an estimator and with the batched IRLS; memory per vehicle (tracemalloc peak of building,
-   resetting and stepping the env / N) and the time to build and reset the env;
+1. physics vehicle-steps/s against N: the closed loop alone (``closed_loop.fly_batch``: motors,
+   thrust noise, RKMK4; with the geometric controller at every step, as crazyflow runs it) and
+   the full ``QuadFaultVectorEnv`` step, without an estimator and with the batched IRLS; memory
+   per vehicle (tracemalloc peak / N) and the time to build and reset the env;
 2. batched IRLS window updates/s (``estimators.batched.BatchedIRLS``);
 3. peers at the same physics rate (1 kHz) and horizon: RotorPy's ``BatchedMultirotor``
    (torch, CPU, rk4) and crazyflow's ``Sim`` (JAX, CPU); each runs in a subprocess of
@@ -24,12 +22,9 @@ the project's environment::
     ../peers/bin/pip install rotorpy crazyflow torchdiffeq roma
     python benchmarks/throughput.py --peer-python ../peers/bin/python
 
-Flags: ``--full`` (N up to 16384), ``--max-n``, ``--horizon`` (physics steps per timing),
-``--skip-peers``, ``--skip-ppo``, ``--skip-profile``, ``--skip-table`` (peers / profile / PPO
-only), ``--omp-spin`` (keep OpenMP's spin-waiting; by default the script sets
-``OMP_WAIT_POLICY=passive``, which is much faster on a shared machine). Every rate is the best
-of repeated timings of at least ``MIN_TIME`` seconds, per wall second and (peers table) per
-CPU second of the measuring process.
+Options: ``--help`` (by default the script sets ``OMP_WAIT_POLICY=passive``, much faster on a
+shared machine). Every rate is the best of repeated timings of at least ``MIN_TIME`` seconds,
+per wall second and (peers table) per CPU second of the measuring process.
 """
 
 from __future__ import annotations
@@ -47,9 +42,8 @@ from pathlib import Path
 import numpy as np
 
 if "--omp-spin" not in sys.argv:
-    # Idle OpenMP threads sleep instead of spinning: on a shared (oversubscribed) machine a
-    # spinning barrier waits for descheduled threads and costs 4-5x at N = 256 (measured).
-    # Before numba / torch start their thread pools; the peers' subprocesses inherit it.
+    # idle OpenMP threads sleep, not spin: on a shared machine a spinning barrier waits for
+    # descheduled threads (4-5x at N = 256); set before numba / torch start (peers inherit it)
     os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -78,11 +72,6 @@ def _rates(fn, work: int, repeats: int = 3) -> tuple[float, float]:
         best = max(best, work * calls / elapsed)
         best_cpu = max(best_cpu, work * calls / max(cpu, 1e-9))
     return best, best_cpu
-
-
-def _rate(fn, work: int, repeats: int = 3) -> float:
-    """Wall-clock rate of :func:`_rates`."""
-    return _rates(fn, work, repeats)[0]
 
 
 def compiled_batch(N: int, horizon: int, rng, control_every: int = 0, thrust_noise=0.07):
