@@ -7,7 +7,7 @@ and speeds times ``sqrt(s)``, so accelerations, tilt angles and the thrust margi
 for stay the same. A 30 g Crazyflie (arm 0.046 m) is then given metre-scale curves at about
 0.5 m/s instead of the F450's 3 m circle.
 
-* :class:`SmoothTrack` -- per horizontal axis ``p_i(t) = c_i + s_i A_i (1 - cos(w_i t))``
+* :class:`~quadfault.trajectory.SmoothTrack` -- per horizontal axis ``p_i(t) = c_i + s_i A_i (1 - cos(w_i t))``
   (it starts at rest at ``c``), heading turning at a constant rate. With peak axis speed
   ``v_i = A_i w_i`` and axis curvature ``kappa_i = 1 / A_i`` (the curvature of the path where
   the axis' speed peaks: when both axes share one frequency a quarter period apart the path
@@ -21,14 +21,13 @@ for stay the same. A 30 g Crazyflie (arm 0.046 m) is then given metre-scale curv
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from quadfault.errors import ConfigError
 from quadfault.scenarios import (AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario,
                                  N_MOTORS)
-from quadfault.trajectory import FlatOutput, Hover, _heading
+from quadfault.trajectory import Hover, SmoothTrack
 
 #: arm length of the paper's F450 [m]: the vehicle the tasks' default ranges are written for
 REFERENCE_ARM = 0.225
@@ -53,41 +52,6 @@ def size_scale(vehicle) -> float:
     if vehicle is None:
         return 1.0
     return arm_length(vehicle.allocation) / REFERENCE_ARM
-
-
-@dataclass(frozen=True)
-class SmoothTrack:
-    """``p_i(t) = center_i + amplitude_i (1 - cos(omega_i t))`` per axis (NED, signed
-    amplitudes [m], angular frequencies [rad/s]), heading ``yaw0 + yaw_rate t`` [rad].
-
-    Starts at rest at ``center``; smooth (every derivative is bounded); position, velocity
-    and acceleration are exact derivatives of each other (the controller's feed-forward).
-    """
-
-    center: tuple = (0.0, 0.0, -1.0)
-    amplitude: tuple = (1.0, 1.0, 0.0)
-    omega: tuple = (0.5, 0.5, 0.0)
-    yaw0: float = 0.0
-    yaw_rate: float = 0.0
-
-    def __post_init__(self):
-        for key in ("center", "amplitude", "omega"):
-            v = tuple(float(x) for x in getattr(self, key))
-            if len(v) != 3 or not all(math.isfinite(x) for x in v):
-                raise ConfigError(f"SmoothTrack {key} must be 3 finite numbers, got "
-                                  f"{getattr(self, key)!r}")
-            object.__setattr__(self, key, v)
-        if any(w < 0 for w in self.omega):
-            raise ConfigError(f"SmoothTrack omega must be >= 0 [rad/s], got {self.omega!r}")
-
-    def __call__(self, t) -> FlatOutput:
-        t = np.asarray(t, dtype=float)
-        A, w, c = (np.asarray(x) for x in (self.amplitude, self.omega, self.center))
-        ph = t[..., None] * w
-        pos = c + A * (1.0 - np.cos(ph))
-        vel = A * w * np.sin(ph)
-        acc = A * w * w * np.cos(ph)
-        return FlatOutput(pos, vel, acc, _heading(self.yaw0 + self.yaw_rate * t))
 
 
 def _range(name: str, value, low: float | None = None, high: float | None = None) -> tuple:

@@ -12,6 +12,8 @@ from typing import NamedTuple, Protocol
 
 import numpy as np
 
+from quadfault.errors import ConfigError
+
 
 class FlatOutput(NamedTuple):
     """Desired position [m], velocity [m/s], acceleration [m/s^2] and heading b1d."""
@@ -97,3 +99,38 @@ class Lissajous:
         vel = A * w * k * np.cos(ph)
         acc = -A * (w * k) ** 2 * np.sin(ph)
         return FlatOutput(pos, vel, acc, _heading(self.yaw_rate * t))
+
+
+@dataclass(frozen=True)
+class SmoothTrack:
+    """``p_i(t) = center_i + amplitude_i (1 - cos(omega_i t))`` per axis (NED, signed
+    amplitudes [m], angular frequencies [rad/s]), heading ``yaw0 + yaw_rate t`` [rad].
+
+    Starts at rest at ``center``; smooth (every derivative is bounded); position, velocity
+    and acceleration are exact derivatives of each other (the controller's feed-forward).
+    """
+
+    center: tuple = (0.0, 0.0, -1.0)
+    amplitude: tuple = (1.0, 1.0, 0.0)
+    omega: tuple = (0.5, 0.5, 0.0)
+    yaw0: float = 0.0
+    yaw_rate: float = 0.0
+
+    def __post_init__(self):
+        for key in ("center", "amplitude", "omega"):
+            v = tuple(float(x) for x in getattr(self, key))
+            if len(v) != 3 or not all(math.isfinite(x) for x in v):
+                raise ConfigError(f"SmoothTrack {key} must be 3 finite numbers, got "
+                                  f"{getattr(self, key)!r}")
+            object.__setattr__(self, key, v)
+        if any(w < 0 for w in self.omega):
+            raise ConfigError(f"SmoothTrack omega must be >= 0 [rad/s], got {self.omega!r}")
+
+    def __call__(self, t) -> FlatOutput:
+        t = np.asarray(t, dtype=float)
+        A, w, c = (np.asarray(x) for x in (self.amplitude, self.omega, self.center))
+        ph = t[..., None] * w
+        pos = c + A * (1.0 - np.cos(ph))
+        vel = A * w * np.sin(ph)
+        acc = A * w * w * np.cos(ph)
+        return FlatOutput(pos, vel, acc, _heading(self.yaw0 + self.yaw_rate * t))
