@@ -14,6 +14,8 @@ GENERATORS = ("random", "track", "rotor_loss")
 #: keywords of ``scenario_options`` per generator (``quadfault.task_scenarios``)
 SCENARIO_OPTIONS = {"track": ("speed", "curvature", "yaw_rate", "altitude"),
                     "rotor_loss": ("level", "onset", "altitude")}
+#: the generator behind each name that takes ``scenario_options``
+_DRAWS = {"track": track_scenario, "rotor_loss": rotor_loss_scenario}
 
 
 def check_scenario_options(options, scenario) -> dict:
@@ -30,11 +32,8 @@ def check_scenario_options(options, scenario) -> dict:
     if unknown:
         raise ConfigError(f"scenario_options has unknown keys {unknown} for {scenario!r}; "
                           f"choose from {', '.join(SCENARIO_OPTIONS[scenario])}")
-    from quadfault import task_scenarios
-
-    draw = getattr(task_scenarios, f"{scenario}_scenario")
     try:
-        draw(np.random.default_rng(0), **options)  # ranges checked once, here
+        _DRAWS[scenario](np.random.default_rng(0), **options)  # ranges checked once, here
     except TypeError as err:
         raise ConfigError(f"scenario_options: {err}") from None
     return dict(options)
@@ -50,9 +49,8 @@ def make_scenario(spec, rng: np.random.Generator, *, duration: float, dt: float,
         sc = spec
     elif spec == "random":
         sc = random_scenario(rng, duration, trajectory=random_trajectory, **random_faults)
-    elif spec in SCENARIO_OPTIONS:
-        draw = track_scenario if spec == "track" else rotor_loss_scenario
-        sc = draw(rng, duration, vehicle=vehicle, **scenario_options)
+    elif spec in _DRAWS:
+        sc = _DRAWS[spec](rng, duration, vehicle=vehicle, **scenario_options)
     elif isinstance(spec, str) and spec in SCENARIO_NAMES:
         sc = named_scenario(spec, duration, dt)
     else:
