@@ -1,7 +1,9 @@
-"""The effect protocol's defaults and parameter checks shared by every effect class."""
+"""The effect protocol's defaults, the identifiability record and the parameter checks shared
+by every effect class."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
@@ -35,6 +37,64 @@ def number(value, what, lo=-np.inf, hi=np.inf, *, open_lo=False) -> float:
     return x
 
 
+#: recording channel groups an :class:`Identifiability` names -> the recording columns
+#: (``quadfault-recording/1``) each stands for
+CHANNELS = {
+    "position": ("px", "py", "pz"),
+    "velocity": ("vx", "vy", "vz"),
+    "attitude": ("qw", "qx", "qy", "qz"),
+    "body_rate": ("wx", "wy", "wz"),
+    "accelerometer": ("ax", "ay", "az"),
+    "battery": ("vbat",),
+    "rotor_speed": ("omega1", "omega2", "omega3", "omega4"),
+}
+
+
+@dataclass(frozen=True)
+class Identifiability:
+    """What a recording needs for an effect to be identifiable from it (a declaration: the
+    diagnosis' gate reads it and skips, with a reason, the effects a log cannot reveal).
+
+    Attributes:
+        channels: channel groups (keys of :data:`CHANNELS`) that must all be present and
+            valid, e.g. ``("velocity",)`` for a force against the velocity.
+        any_of: alternatives: at least one of these channel groups must be present (empty:
+            no alternative needed).
+        min_command_rate: lowest rate of the commands (or of the measured rotor speeds, when
+            ``direct`` names them) at which the effect can show [Hz]; None: any rate.
+        timescale: the reported parameter key (e.g. ``"tau_s"``) of a time the samples must
+            resolve: a value shorter than about one command interval cannot be told from
+            zero (None: the effect has no time scale).
+        direct: channel groups that show the effect directly (e.g. measured rotor speeds
+            show a motor lag without going through the body's response).
+        excitation: what the flight must do for the effect to show (free text, empty: any
+            flight).
+        note: one line for a user: why these channels.
+    """
+
+    channels: tuple = ()
+    any_of: tuple = ()
+    min_command_rate: float | None = None
+    timescale: str | None = None
+    direct: tuple = ()
+    excitation: str = ""
+    note: str = ""
+
+    def __post_init__(self):
+        for group in (*self.channels, *self.any_of, *self.direct):
+            if group not in CHANNELS:
+                raise ValueError(f"unknown channel group {group!r}; choose from "
+                                 f"{', '.join(CHANNELS)}")
+
+    def columns(self) -> tuple:
+        """The recording columns :attr:`channels` stands for."""
+        return tuple(c for group in self.channels for c in CHANNELS[group])
+
+
+#: the pose channels a force in the world frame needs
+POSE = ("position", "velocity", "attitude")
+
+
 class Effect:
     """Default (no-op) plant hooks of an effect; subclasses are frozen dataclasses.
 
@@ -44,13 +104,15 @@ class Effect:
     (extra force, world [N], and moment, body [N m]); ``true_vehicle(vehicle)`` once at reset
     (the rigid body the plant flies; the controller and the recording keep the nominal one).
 
-    Class attributes: ``name`` (canonical, CONTRACT.md sec. 4) and ``order`` (the canonical
+    Class attributes: ``name`` (canonical snake_case), ``order`` (the canonical
     position of the effect in the chain command -> thrust -> wrench -> body, used to sort a
-    model's effects so that it means the same physics as the diagnosis' library).
+    model's effects so that it means the same physics as the diagnosis' library) and
+    ``identifiability`` (:class:`Identifiability`: what a recording needs to reveal it).
     """
 
     name: ClassVar[str] = ""
     order: ClassVar[int] = 0
+    identifiability: ClassVar[Identifiability] = Identifiability()
 
     def reset(self, n_rotors: int) -> None:
         pass

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-from quadfault.effects.base import Effect, number, param, vector
+from quadfault.effects.base import Effect, Identifiability, number, param, vector
 from quadfault.effects.physics import vehicle_with
 from quadfault.errors import ConfigError
 
@@ -24,6 +24,9 @@ class Inertia(Effect):
 
     scale: tuple = (1.0, 1.0, 1.0)
     name: ClassVar[str] = "inertia"
+    identifiability: ClassVar[Identifiability] = Identifiability(
+        excitation="angular manoeuvres",
+        note="the angular response to the rotor moments is scaled")
     order: ClassVar[int] = 20
 
     def __post_init__(self):
@@ -51,6 +54,10 @@ class Mass(Effect):
 
     scale: float = 1.0
     name: ClassVar[str] = "mass"
+    identifiability: ClassVar[Identifiability] = Identifiability(
+        excitation="thrust changes and angular manoeuvres (the angular response separates "
+                   "a payload from a thrust loss)",
+        note="a payload acts on translation only; at hover it is a thrust_scale")
     order: ClassVar[int] = 20
 
     def __post_init__(self):

@@ -4,23 +4,8 @@ from __future__ import annotations
 
 import math
 
-from quadfault.effects.body import Inertia, Mass
-from quadfault.effects.thrust import (
-    BatteryThrust,
-    Delay,
-    GroundEffect,
-    MotorEfficiency,
-    MotorLag,
-    ThrustCurve,
-    ThrustScale,
-)
-from quadfault.effects.wrench import BladeFlapping, ComOffset, Drag, RateDamping, RotorInertia, Wind
+from quadfault.effects.registry import EFFECT_NAMES, EFFECTS
 from quadfault.errors import ConfigError
-
-EFFECTS = {cls.name: cls for cls in (
-    MotorEfficiency, ThrustScale, Drag, MotorLag, Delay, Wind, GroundEffect, ComOffset, Inertia,
-    BladeFlapping, RotorInertia, BatteryThrust, ThrustCurve, Mass, RateDamping)}
-EFFECT_NAMES = tuple(EFFECTS)
 
 
 def _one(key):

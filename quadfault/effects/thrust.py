@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 
-from quadfault.effects.base import Compiled, number, param, vector
+from quadfault.effects.base import Compiled, Identifiability, number, param, vector
 from quadfault.errors import ConfigError
 
 IDENTITY_CURVE = (0.0, 1.0, 0.0)
@@ -38,6 +38,10 @@ class ThrustCurve(Compiled):
     curve: tuple = IDENTITY_CURVE
     nominal: tuple = IDENTITY_CURVE
     name: ClassVar[str] = "thrust_curve"
+    identifiability: ClassVar[Identifiability] = Identifiability(
+        direct=("rotor_speed",),
+        excitation="commands spanning a range of thrust (climbs, descents, manoeuvres)",
+        note="near hover a curve is a thrust scale; its slope and curvature need thrust changes")
     order: ClassVar[int] = 0
 
     def __post_init__(self):
@@ -69,6 +73,10 @@ class BatteryThrust(Compiled):
     duration: float = 80.0
     v_ref: float | None = None
     name: ClassVar[str] = "battery_thrust"
+    identifiability: ClassVar[Identifiability] = Identifiability(
+        channels=("battery",), direct=("rotor_speed",),
+        excitation="a battery voltage that changes over the log",
+        note="the thrust follows the logged voltage; without vbat there is nothing to follow")
     order: ClassVar[int] = 1
 
     def __post_init__(self):
@@ -98,6 +106,9 @@ class MotorEfficiency(Compiled):
 
     eta: tuple = (1.0, 1.0, 1.0, 1.0)
     name: ClassVar[str] = "motor_efficiency"
+    identifiability: ClassVar[Identifiability] = Identifiability(
+        note="a per-rotor loss shows as the unequal rotor split that keeps the moments "
+             "balanced; a loss common to all rotors is a thrust_scale")
     order: ClassVar[int] = 2
 
     def __post_init__(self):
@@ -120,6 +131,7 @@ class ThrustScale(Compiled):
 
     scale: float = 1.0
     name: ClassVar[str] = "thrust_scale"
+    identifiability: ClassVar[Identifiability] = Identifiability(note="shows in the vertical acceleration for the commanded thrust")
     order: ClassVar[int] = 2
 
     def __post_init__(self):
@@ -141,6 +153,10 @@ class GroundEffect(Compiled):
     rotor_radius: float = 0.1
     ground_z: float = 0.0
     name: ClassVar[str] = "ground_effect"
+    identifiability: ClassVar[Identifiability] = Identifiability(
+        channels=("position",),
+        excitation="heights that vary within a few rotor radii of the ground",
+        note="the gain depends on the height above the ground, z = 0")
     order: ClassVar[int] = 3
 
     def __post_init__(self):
@@ -162,6 +178,10 @@ class Delay(Compiled):
 
     delay: float = 0.02
     name: ClassVar[str] = "delay"
+    identifiability: ClassVar[Identifiability] = Identifiability(
+        min_command_rate=20.0, timescale="delay_s", direct=("rotor_speed",),
+        excitation="sharp command changes",
+        note="a delay shorter than about half a command interval cannot be told from none")
     order: ClassVar[int] = 4
 
     def __post_init__(self):
@@ -182,6 +202,12 @@ class MotorLag(Compiled):
 
     tau: float = 0.05
     name: ClassVar[str] = "motor_lag"
+    identifiability: ClassVar[Identifiability] = Identifiability(
+        min_command_rate=20.0, timescale="tau_s", direct=("rotor_speed",),
+        excitation="sharp command changes",
+        note="a lag shorter than about half a command interval cannot be told from none "
+             "(motor outputs at 10 Hz do not show a lag below about 50 ms); measured rotor "
+             "speeds show it directly")
     order: ClassVar[int] = 5
 
     def __post_init__(self):

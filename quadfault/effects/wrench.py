@@ -12,7 +12,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from quadfault.effects.base import Compiled, number, param, vector
+from quadfault.effects.base import Compiled, Identifiability, number, param, vector
 from quadfault.errors import ConfigError
 
 
@@ -24,6 +24,10 @@ class Drag(Compiled):
     k: tuple = (0.3, 0.3, 0.3)
     air_velocity: tuple = (0.0, 0.0, 0.0)
     name: ClassVar[str] = "drag"
+    identifiability: ClassVar[Identifiability] = Identifiability(
+        channels=("velocity", "attitude"),
+        excitation="speeds through the air of about 1 m/s or more",
+        note="the force opposes the velocity through the air: no valid velocity, no drag")
     order: ClassVar[int] = 10
 
     def __post_init__(self):
@@ -56,6 +60,10 @@ class Wind(Compiled):
     k: tuple = (0.3, 0.3, 0.3)
     seed: int | None = None
     name: ClassVar[str] = "wind"
+    identifiability: ClassVar[Identifiability] = Identifiability(
+        channels=("velocity", "attitude"),
+        note="a steady world force: it needs the attitude (and the velocity to tell it from "
+             "drag)")
     order: ClassVar[int] = 10
 
     def __post_init__(self):
@@ -109,6 +117,8 @@ class ComOffset(Compiled):
 
     offset: tuple = (0.0, 0.0)
     name: ClassVar[str] = "com_offset"
+    identifiability: ClassVar[Identifiability] = Identifiability(
+        note="a thrust-proportional moment: hover needs an unequal rotor split")
     order: ClassVar[int] = 10
 
     def __post_init__(self):
@@ -135,6 +145,10 @@ class BladeFlapping(Compiled):
     k_moment: float = 0.002
     air_velocity: tuple = (0.0, 0.0, 0.0)
     name: ClassVar[str] = "blade_flapping"
+    identifiability: ClassVar[Identifiability] = Identifiability(
+        channels=("velocity", "attitude"),
+        excitation="in-plane airspeed (forward flight)",
+        note="force and moment grow with the in-plane airspeed")
     order: ClassVar[int] = 10
 
     def __post_init__(self):
@@ -164,6 +178,9 @@ class RotorInertia(Compiled):
     kappa: float = 0.001
     yaw_signs: tuple | None = None
     name: ClassVar[str] = "rotor_inertia"
+    identifiability: ClassVar[Identifiability] = Identifiability(
+        excitation="thrust changes (the yaw kick of rotors speeding up or down)",
+        note="shows in the yaw rate when the rotors change speed")
     order: ClassVar[int] = 10
 
     def __post_init__(self):
@@ -205,6 +222,9 @@ class RateDamping(Compiled):
     linear: tuple = (0.0, 0.0, 0.0)
     quadratic: tuple = (0.0, 0.0, 0.0)
     name: ClassVar[str] = "rate_damping"
+    identifiability: ClassVar[Identifiability] = Identifiability(
+        excitation="body rotation (roll, pitch or yaw rates)",
+        note="the moment grows with the body rate")
     order: ClassVar[int] = 10
 
     def __post_init__(self):
