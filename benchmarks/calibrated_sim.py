@@ -4,7 +4,7 @@ For each recording (pose logs, e.g. written by ``quadfault import``): the first 
 of it (by time) is written to a file and diagnosed with ``quadfault diagnose`` (defaults, or
 ``--effects``); the diagnosis JSON is loaded with ``quadfault.effects.from_diagnosis`` (the
 loader of ``quadfault simulate --model``); then the held-out rest of the flight is replayed
-open loop through the simulator's plant (``quadfault.effects.replay.replay_errors``: from
+open loop through the simulator's plant (``quadfault.diagnosis.replay.replay_errors``: from
 ``--starts`` recorded states, the recorded commands over 0.05-0.5 s), once with the nominal
 vehicle and once with the calibrated model. Printed: the effects found and the RMS position,
 velocity and attitude errors at each horizon, nominal -> calibrated.
@@ -29,7 +29,7 @@ import numpy as np
 
 from quadfault.cli import main as cli
 from quadfault.effects import from_diagnosis
-from quadfault.effects.replay import replay_errors
+from quadfault.diagnosis.replay import replay_errors
 from quadfault.fileio import atomic_write_text
 from quadfault.recording import read_recording, sidecar_path, write_recording
 

@@ -14,7 +14,7 @@ import pytest
 
 from quadfault import effects as fx
 from quadfault.cli import main
-from quadfault.effects.replay import replay_errors
+from quadfault.diagnosis.replay import replay_errors
 from quadfault.recording import read_recording, write_recording
 from quadfault.scenarios import LinearVoltage, named_scenario
 from quadfault.simulator import SensorNoise, SimConfig, simulate

@@ -10,7 +10,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from quadfault import closed_loop
+from quadfault.dynamics import RigidBodyState
 from quadfault.errors import ConfigError
+from quadfault.motors import MotorModel
+from quadfault.plant import Plant
+from quadfault.rotation import rotation_angle
+from quadfault.sensors import SensorNoise
 
 
 # the simulator's plant, one step at a time: the only calls into it ----------------------
@@ -20,11 +26,6 @@ class _OpenLoop:
     of each row held over that row's interval."""
 
     def __init__(self, vehicle, effects, dt):
-        from quadfault import closed_loop
-        from quadfault.motors import MotorModel
-        from quadfault.plant import Plant
-        from quadfault.sensors import SensorNoise
-
         n = vehicle.n_rotors
         self.plant = Plant(vehicle, None, MotorModel(0.0, True), tuple(effects), dt=dt)
         self._cl, self._sensors = closed_loop, SensorNoise()
@@ -73,8 +74,6 @@ def _step(plant, f_cmd, t, dt):
 
 
 def _state(rec, k):
-    from quadfault.dynamics import RigidBodyState
-
     return RigidBodyState(rec.position[k].copy(), rec.velocity[k].copy(),
                           rec.rotation[k].copy(), rec.omega[k].copy())
 
@@ -93,8 +92,6 @@ def replay_errors(recording, vehicle, effects=(), horizons=(0.05, 0.1, 0.2, 0.5)
     "velocity_rmse_m_per_s": [...], "attitude_rmse_deg": [...]}`` (one RMS over the starts per
     horizon).
     """
-    from quadfault.rotation import rotation_angle
-
     if not recording.has_pose:
         raise ConfigError("open-loop replay needs a recording with pose (position, velocity, "
                           "attitude)")
