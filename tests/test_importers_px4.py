@@ -1,19 +1,22 @@
-"""PX4 ULog importer: the resampling functions on synthetic arrays, and a whole import of a
-tiny ULog written by a minimal ULog writer (pyulog can read ULogs but not build them)."""
+"""PX4 ULog importer on small ULogs written by the tests (tests/support/field_logs.py):
+multi-instance UAVCAN outputs, measured rotor speed, the land detector's flight span,
+invalid-velocity spans, the log's rotor geometry, and one-line errors on bad input."""
 
 from __future__ import annotations
 
-import struct
 import subprocess
 import sys
 
 import numpy as np
 import pytest
 
-from quadfault.errors import ConfigError, QuadfaultError
-from quadfault.importers.px4_ulog import (interp_linear, interp_quaternion, merge_topics,
+from quadfault.errors import QuadfaultError
+from quadfault.importers.resample import (interp_linear, interp_quaternion, merge_topics,
                                           zero_order_hold)
 from quadfault.rotation import quat_to_rot
+from tests.support.field_logs import (HOVER, OMEGA_PER_U, T_LAND, T_TAKEOFF, px4_flight)
+
+pyulog = pytest.importorskip("pyulog")
 
 
 # ----------------------------------------------------------------------------------------
@@ -35,7 +38,6 @@ def test_interp_linear_is_nan_outside_and_exact_inside():
 
 
 def test_interp_quaternion_handles_sign_flips():
-    # the same rotation stored as q and -q must not interpolate through zero
     ang = np.array([0.0, 0.2, 0.4])
     q = np.stack([np.cos(ang / 2), np.zeros(3), np.zeros(3), np.sin(ang / 2)], axis=1)
     q[1] *= -1.0
@@ -57,165 +59,130 @@ def test_merge_topics_sorts_and_drops_duplicate_source_stamps():
 
 
 # ----------------------------------------------------------------------------------------
-# a minimal ULog writer (file format: docs.px4.io "ULog File Format")
-_TYPES = {"uint64_t": "Q", "float": "f", "uint8_t": "B", "int32_t": "i"}
-
-
-def _msg(kind: str, payload: bytes) -> bytes:
-    return struct.pack("<HB", len(payload), ord(kind)) + payload
-
-
-def write_ulog(path, topics: dict, params: dict | None = None) -> None:
-    """``topics``: name -> (fields [(type, name, array_len)], rows [tuple of values])."""
-    out = bytearray(b"ULog\x01\x12\x35" + bytes([1]) + struct.pack("<Q", 0))
-    out += _msg("B", bytes(16) + struct.pack("<QQQ", 0, 0, 0))
-    for name, (fields, _) in topics.items():
-        spec = "".join(f"{t}[{n}] {f};" if n else f"{t} {f};" for t, f, n in fields)
-        out += _msg("F", f"{name}:{spec}".encode())
-    for key, value in (params or {}).items():
-        k = f"float {key}".encode()
-        out += _msg("P", bytes([len(k)]) + k + struct.pack("<f", value))
-    for msg_id, name in enumerate(topics):
-        out += _msg("A", struct.pack("<BH", 0, msg_id) + name.encode())
-    events = []
-    for msg_id, (name, (fields, rows)) in enumerate(topics.items()):
-        fmt = "<" + "".join(_TYPES[t] * (n or 1) for t, _, n in fields)
-        for row in rows:
-            flat = []
-            for v in row:
-                flat.extend(v if isinstance(v, (list, tuple, np.ndarray)) else [v])
-            events.append((row[0], _msg("D", struct.pack("<H", msg_id) + struct.pack(fmt, *flat))))
-    for _, blob in sorted(events, key=lambda e: e[0]):
-        out += blob
-    path.write_bytes(bytes(out))
-
-
-def _hover_log(path, *, n=200, with_battery=True):
-    """Hover at 2 m, yawed 0.5 rad, 250 Hz attitude, 500 Hz IMU, 100 Hz motors and position;
-    motors idle (NaN) for the first 0.1 s."""
-    yaw = 0.5
-    q = [np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)]
-    att = [(int(4000 * k), q) for k in range(n)]
-    imu = [(int(2000 * k), [0.01, -0.02, 0.0], [0.0, 0.0, -9.81]) for k in range(2 * n)]
-    pos = [(int(10000 * k), 1.0, 2.0, -2.0, 0.1, 0.0, 0.0) for k in range(n // 2 + 1)]
-    motors = [(int(10000 * k), [np.nan] * 4 if k < 10 else [0.5 + 0.01 * k, 0.5, 0.5, 0.5])
-              for k in range(n // 2 + 1)]
-    topics = {
-        "vehicle_attitude": ([("uint64_t", "timestamp", 0), ("float", "q", 4)], att),
-        "sensor_combined": ([("uint64_t", "timestamp", 0), ("float", "gyro_rad", 3),
-                             ("float", "accelerometer_m_s2", 3)], imu),
-        "vehicle_local_position": ([("uint64_t", "timestamp", 0), ("float", "x", 0),
-                                    ("float", "y", 0), ("float", "z", 0), ("float", "vx", 0),
-                                    ("float", "vy", 0), ("float", "vz", 0)], pos),
-        "actuator_motors": ([("uint64_t", "timestamp", 0), ("float", "control", 4)], motors),
-    }
-    if with_battery:
-        topics["battery_status"] = ([("uint64_t", "timestamp", 0), ("float", "voltage_v", 0)],
-                                    [(int(50000 * k), 12.0 - 0.01 * k) for k in range(n // 10)])
-    write_ulog(path, topics, {"THR_MDL_FAC": 0.3})
-
-
-def _vehicle():
-    from quadfault.importers.px4_ulog import px4_quad_x_vehicle
-
-    return px4_quad_x_vehicle(1.5, [0.03, 0.03, 0.05], 0.17, 0.016)
-
-
-def test_px4_quad_x_allocation_signs():
-    A = _vehicle().allocation  # motor order FR, RL, FL, RR
-    e = np.eye(4)
-    assert (A @ (e[2] + e[1]))[1] > 0  # left rotors up: +roll (FRD)
-    assert (A @ (e[0] + e[2]))[2] > 0  # front rotors up: +pitch (nose up)
-    assert (A @ (e[0] + e[1]))[3] > 0  # CCW rotors 1, 2 react clockwise: +yaw (FRD)
-    np.testing.assert_allclose(A @ np.ones(4), [4, 0, 0, 0], atol=1e-15)
-
-
-def test_px4_import_of_a_written_ulog(tmp_path):
-    pytest.importorskip("pyulog")
+def _import(path, **kw):
     from quadfault.importers.px4_ulog import import_px4_ulog
-    from quadfault.recording import read_recording, write_recording
 
-    path = tmp_path / "hover.ulg"
-    _hover_log(path)
-    rec = import_px4_ulog(path, vehicle=_vehicle())
-    # trimmed to the motors-running span (motors idle before t = 0.1 s)
-    assert rec.t[0] >= 0.1 - 1e-9
-    assert np.all(np.diff(rec.t) > 0)
-    np.testing.assert_allclose(rec.t[1] - rec.t[0], 0.004, rtol=1e-6)  # attitude time base
-    np.testing.assert_allclose(rec.position[:, :2], np.tile([1.0, 2.0], (len(rec), 1)), atol=1e-6)
-    np.testing.assert_allclose(rec.accel, np.tile([0.0, 0.0, -9.81], (len(rec), 1)), atol=1e-5)
-    R = quat_to_rot(rec.quaternion)
-    np.testing.assert_allclose(np.arctan2(R[:, 1, 0], R[:, 0, 0]), 0.5, atol=1e-6)
-    # commands are held, not interpolated: u1 only takes the logged values
-    logged = {round(0.5 + 0.01 * k, 6) for k in range(10, 101)}
-    assert {round(float(v), 6) for v in rec.commands_u[:, 0]} <= logged
-    # PX4 thrust model scaled so that hover thrust = m g on the calibration segment
-    cal = rec.meta["calibration"]
-    assert cal["fitted"]["THR_MDL_FAC"] == pytest.approx(0.3)
-    sel = (rec.t >= cal["segment"][0]) & (rec.t <= cal["segment"][1])
+    return import_px4_ulog(path, **kw)
+
+
+def test_uavcan_outputs_on_instance_1_rotor_speed_and_flight_span(tmp_path):
+    path = tmp_path / "uavcan.ulg"
+    px4_flight(path)
+    rec = _import(path, mass=1.5)
+    # flight span: land detector minus the take-off and landing transitions, never idle
+    assert rec.t[0] >= T_TAKEOFF + 0.5 + 1.0 - 1e-6 and rec.t[-1] <= T_LAND - 0.5 - 1.0 + 1e-6
+    assert np.all(rec.commands_u > 0.3)
+    # instance 1 normalised with UAVCAN's 0-8191, not instance 0's zeros
+    assert "instance 1" in rec.meta["import"]["commands"]
+    np.testing.assert_allclose(np.median(rec.commands_u), HOVER, atol=0.02)
+    # measured rotor speed from esc_status rpm, in rad/s
+    np.testing.assert_allclose(rec.rotor_speed / rec.commands_u, OMEGA_PER_U, rtol=0.02)
+    # invalid horizontal velocity (8-9 s) is never written: those rows are a gap
+    assert not np.any((rec.t > 8.0) & (rec.t < 9.0))
+    assert np.all(np.abs(rec.velocity[:, 0]) < 0.1)
+    # geometry and spin directions from CA_ROTOR*, thrust calibrated on free flight only
+    A = rec.vehicle.allocation
+    np.testing.assert_allclose(A[1], [-0.12, 0.12, 0.12, -0.12])
+    np.testing.assert_allclose(A[3], [0.02, 0.02, -0.02, -0.02])
+    seg = rec.meta["calibration"]["segment"]
+    spans = rec.meta["import"]["flight_spans"]
+    assert spans[0][0] <= seg[0] < seg[1] <= spans[0][1]
+    sel = (rec.t >= seg[0]) & (rec.t <= seg[1])
     assert rec.thrust_cmd[sel].sum(1).mean() == pytest.approx(1.5 * 9.81, rel=1e-6)
-    assert rec.vbat is not None and np.all(rec.vbat < 12.0 + 1e-6)
-    out = write_recording(rec, tmp_path / "hover.csv")
-    back = read_recording(out)
-    np.testing.assert_allclose(back.thrust_cmd, rec.thrust_cmd, rtol=1e-12)
+    assert rec.meta["assumed"] == ["inertia"]
+    assert rec.vbat is not None and rec.extra["current"].mean() == pytest.approx(10.0)
+    assert rec.meta["import"]["stream_rates_hz"]["u"] == pytest.approx(100.0, rel=1e-3)
 
 
-def test_px4_import_reports_missing_battery(tmp_path):
-    pytest.importorskip("pyulog")
-    from quadfault.importers.px4_ulog import import_px4_ulog
-
-    path = tmp_path / "nobat.ulg"
-    _hover_log(path, with_battery=False)
-    rec = import_px4_ulog(path, vehicle=_vehicle(), thrust_curve=(0.0, 0.0, 10.0))
-    assert any("battery" in m for m in rec.meta["import"]["missing"])
-    assert rec.thrust_curve == (0.0, 0.0, 10.0)
-    np.testing.assert_allclose(rec.thrust_cmd, 10.0 * rec.commands_u ** 2)
-    imu = import_px4_ulog(path, vehicle=_vehicle(), thrust_curve=(0.0, 0.0, 10.0),
-                          time_base="imu")
-    np.testing.assert_allclose(np.median(np.diff(imu.t)), 0.002, rtol=1e-6)
-    assert len(imu) == pytest.approx(2 * len(rec), abs=2)
-    with pytest.raises(ConfigError, match="time_base"):
-        import_px4_ulog(path, vehicle=_vehicle(), time_base="gps")
+def test_keep_all_keeps_the_ground(tmp_path):
+    path = tmp_path / "uavcan.ulg"
+    px4_flight(path, invalid_vxy=None)
+    rec = _import(path, keep_all=True, mass=1.5)
+    assert rec.t[0] < T_TAKEOFF and rec.t[-1] > T_LAND
+    seg = rec.meta["calibration"]["segment"]
+    assert seg[0] > T_TAKEOFF + 0.5  # still calibrated on free flight only
 
 
-def test_px4_import_errors(tmp_path):
-    pytest.importorskip("pyulog")
-    from quadfault.importers.px4_ulog import import_px4_ulog
-
-    with pytest.raises(ConfigError, match="vehicle file"):
-        import_px4_ulog(tmp_path / "x.ulg")
-    bad = tmp_path / "bad.ulg"
-    bad.write_bytes(b"not a ulog at all")
-    with pytest.raises(QuadfaultError, match="bad.ulg"):
-        import_px4_ulog(bad, vehicle=_vehicle())
-    with pytest.raises(QuadfaultError, match="not found"):
-        import_px4_ulog(tmp_path / "missing.ulg", vehicle=_vehicle())
+def test_a_tiny_command_is_not_running_and_low_rate_outputs(tmp_path):
+    path = tmp_path / "motors.ulg"
+    px4_flight(path, outputs="motors", disarmed_value=7e-10, motor_rate=10.0)
+    rec = _import(path)
+    assert rec.t[0] > T_TAKEOFF
+    assert rec.meta["import"]["stream_rates_hz"]["u"] == pytest.approx(10.0, rel=1e-3)
+    assert set(rec.meta["assumed"]) == {"mass", "inertia"}
 
 
-def test_px4_cli_with_vehicle_file(tmp_path):
-    pytest.importorskip("pyulog")
-    import json
+def test_mostly_invalid_velocity_gives_an_imu_only_recording(tmp_path):
+    path = tmp_path / "novel.ulg"
+    px4_flight(path, invalid_vxy=(0.0, 30.0))
+    rec = _import(path)
+    assert rec.position is None and rec.accel is not None
+    assert any("invalid" in m for m in rec.meta["import"]["missing"])
 
-    path = tmp_path / "hover.ulg"
-    _hover_log(path)
-    v = _vehicle()
-    (tmp_path / "veh.json").write_text(json.dumps({"mass": v.mass, "inertia": [0.03, 0.03, 0.05],
-                                                   "allocation": v.allocation.tolist()}))
-    cmd = [sys.executable, "-m", "quadfault.cli", "import", "px4", str(path), "--out",
-           str(tmp_path / "o.csv"), "--vehicle", str(tmp_path / "veh.json")]
-    res = subprocess.run(cmd, capture_output=True, text=True)
+
+def test_placeholder_geometry_is_flagged(tmp_path):
+    path = tmp_path / "generic.ulg"
+    params = {}
+    for i, (x, y) in enumerate(((1.0, 1.0), (-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0))):
+        params.update({f"CA_ROTOR{i}_PX": x, f"CA_ROTOR{i}_PY": y})
+    px4_flight(path, params=params)
+    rec = _import(path)
+    assert "geometry" in rec.meta["assumed"]
+    assert any("placeholder" in w for w in rec.meta["import"]["warnings"])
+    rec = _import(path, arm=0.2)
+    assert "geometry" not in rec.meta["assumed"]
+    np.testing.assert_allclose(np.abs(rec.vehicle.allocation[1:3]), 0.2)
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "quadfault.cli", "import", *map(str, args)],
+                          capture_output=True, text=True)
+
+
+def test_cli_detects_the_format_and_warns_on_one_line(tmp_path):
+    path = tmp_path / "flight.ulg"
+    px4_flight(path)
+    res = _cli(path, "--out", tmp_path / "o.csv")
     assert res.returncode == 0, res.stderr
-    assert "rows" in res.stdout and "Hz" in res.stdout
-    res = subprocess.run(cmd[:-2], capture_output=True, text=True)  # no --vehicle
-    assert res.returncode == 2
-    assert res.stderr.count("\n") == 1 and "vehicle" in res.stderr
-    flags = ["--mass", "1.5", "--arm", "0.17", "--torque-coefficient", "0.016",
-             "--inertia", "0.03,0.03,0.05"]
-    res = subprocess.run(cmd[:-2] + ["--force"] + flags, capture_output=True, text=True)
+    assert res.stderr.count("\n") == 1 and res.stderr.startswith("warning:")
+    assert "assumed mass, inertia" in res.stderr
+    res = _cli("px4", path, "--out", tmp_path / "o2.csv", "--mass", "1.5", "--inertia",
+               "0.01,0.01,0.02")
     assert res.returncode == 0, res.stderr
     from quadfault.recording import read_recording
 
-    np.testing.assert_allclose(read_recording(tmp_path / "o.csv").vehicle.allocation,
-                               v.allocation)
-    res = subprocess.run(cmd[:-2] + ["--force"] + flags[:-2], capture_output=True, text=True)
-    assert res.returncode == 2 and "--inertia" in res.stderr
+    rec = read_recording(tmp_path / "o2.csv")
+    assert rec.vehicle.mass == 1.5 and rec.rotor_speed is not None
+
+
+@pytest.mark.parametrize("case", ["truncated", "wrong_format", "forced_format", "no_motors"])
+def test_bad_input_gives_one_line(tmp_path, case):
+    path = tmp_path / "flight.ulg"
+    px4_flight(path)
+    extra = []
+    if case == "truncated":
+        path.write_bytes(path.read_bytes()[:3000])
+    elif case == "wrong_format":
+        path.write_text("time,a,b\n0,1,2\n")
+    elif case == "forced_format":
+        path.write_text("time,a,b\n0,1,2\n")
+        extra = ["--format", "px4"]
+    else:
+        px4_flight(path, outputs="none")
+    res = _cli(path, "--out", tmp_path / "o.csv", *extra)
+    assert res.returncode != 0
+    assert res.stderr.count("\n") == 1 and "Traceback" not in res.stderr, res.stderr
+    assert "flight.ulg" in res.stderr
+
+
+def test_commands_of_7e_10_never_run(tmp_path):
+    from quadfault.importers.field_log import build_recording
+    from quadfault.importers.px4_ulog import read_px4
+
+    path = tmp_path / "flight.ulg"
+    px4_flight(path, outputs="motors")
+    log = read_px4(path)
+    ts, u, kind = log.streams["u"]
+    log.streams["u"] = (ts, 0.0 * u + 7e-10, kind)
+    with pytest.raises(QuadfaultError, match="motors never run"):
+        build_recording(log)

@@ -7,6 +7,10 @@ One importer per source, each ``import_<name>(path, ...) -> Recording``:
 - :func:`quadfault.importers.crazypad.import_crazypad` (Crazyflie 2.1, propeller faults)
 - :func:`quadfault.importers.px4_ulog.import_px4_ulog` (any PX4 ULog, needs ``pyulog``)
 
+The autopilot importers share :mod:`quadfault.importers.field_log` (flight span, validity,
+vehicle assumptions, thrust calibration); :func:`detect_format` tells their logs apart by
+content.
+
 This module holds the small helpers they share: reading a raw table with errors that name
 the file, column and row; dropping duplicate time stamps; finding the motors-running span;
 describing gaps; and the one-line summary ``quadfault import`` prints.
@@ -30,6 +34,39 @@ IMPORTERS: dict[str, tuple[str, str]] = {
     "crazypad": ("quadfault.importers.crazypad", "import_crazypad"),
     "px4": ("quadfault.importers.px4_ulog", "import_px4_ulog"),
 }
+
+
+#: leading bytes of each autopilot log format
+ULOG_MAGIC = b"ULog\x01\x12\x35"
+DATAFLASH_MAGIC = b"\xa3\x95"
+BLACKBOX_MARK = b"H Product:Blackbox flight data recorder"
+
+
+def detect_format(path) -> str:
+    """``"px4"``, ``"ardupilot"`` or ``"blackbox"`` from the file's content (magic bytes or
+    first lines), or a one-line :class:`RecordingError`."""
+    path = Path(path)
+    if not path.exists():
+        raise RecordingError(path, "file not found")
+    if path.is_dir():
+        raise RecordingError(path, "is a directory, expected a log file")
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    if head.startswith(ULOG_MAGIC):
+        return "px4"
+    if head.startswith(DATAFLASH_MAGIC):
+        return "ardupilot"
+    if BLACKBOX_MARK in head:
+        return "blackbox"
+    text = head.decode("latin-1")
+    lines = [ln.strip() for ln in text.splitlines()[:200]]
+    if any(ln.startswith("FMT,") for ln in lines):
+        return "ardupilot"
+    if any(ln.startswith(("loopIteration", '"loopIteration"')) or
+           ln.startswith('"Product","Blackbox') for ln in lines):
+        return "blackbox"
+    raise RecordingError(path, "unknown log format (not a PX4 ULog, ArduPilot DataFlash or "
+                               "blackbox log); give --format or a data set name")
 
 
 def get_importer(name: str):

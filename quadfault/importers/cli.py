@@ -1,7 +1,9 @@
 """``quadfault import``: convert a real flight log into a recording (CONTRACT.md sec. 3).
 
-    quadfault import {eschmann,nanodrone,crazypad,px4} INPUT --out FILE.csv [--force]
-                     [--keep-all] [--vehicle VEHICLE.json] [--calibration T0,T1] [--mass KG]
+    quadfault import LOG --out FILE.csv [--format px4|ardupilot|blackbox] [--log N]
+    quadfault import DATASET INPUT --out FILE.csv
+                     [--force] [--keep-all] [--vehicle VEHICLE.json] [--calibration T0,T1]
+                     [--mass KG] [--arm D] [--torque-coefficient C] [--inertia JXX,JYY,JZZ]
 
 Writes FILE.csv + FILE.json atomically (never overwriting without ``--force``) and prints one
 summary line: rows, duration, rate, gaps, dropped samples and what the log is missing.
@@ -17,34 +19,44 @@ from pathlib import Path
 
 from quadfault.errors import ConfigError, RecordingError
 
+#: importers of autopilot logs (the rest are data sets with known vehicles)
+AUTOPILOTS = ("px4", "ardupilot", "blackbox")
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from quadfault.importers import IMPORTERS
 
-    p.add_argument("kind", choices=tuple(IMPORTERS), help="log format / data set")
-    p.add_argument("input", help="the raw log (CSV, CSV.gz or .ulg)")
+    p.add_argument("source", nargs="+", metavar="[DATASET] LOG",
+                   help="the log (PX4 .ulg, ArduPilot .bin/.log, Betaflight/INDIflight "
+                        ".bfl/.bbl or its decoded CSV: the format is read from the file), "
+                        f"or a data set name ({', '.join(IMPORTERS)}) and its file")
     p.add_argument("--out", required=True, help="output recording FILE.csv (+ FILE.json)")
+    p.add_argument("--format", choices=AUTOPILOTS, default=None,
+                   help="the log's format, instead of reading it from the file")
+    p.add_argument("--log", type=int, default=None, metavar="N",
+                   help="blackbox: which of several logs in one file (1-based; default the "
+                        "longest)")
     p.add_argument("--force", action="store_true", help="overwrite existing files")
     p.add_argument("--keep-all", action="store_true",
-                   help="keep the rows where the motors are off (default: trim to the "
-                        "motors-running span)")
+                   help="keep the rows outside the flight (default: trim to the free-flight "
+                        "span; see docs/importers.md)")
     p.add_argument("--vehicle", default=None, metavar="VEHICLE.json",
                    help="vehicle description (the sidecar's 'vehicle' object: mass, inertia, "
                         "allocation or arm + torque_coefficient, thrust_curve or "
-                        "thrust_coefficient; optional 'frame': NED|ENU). Required for px4")
+                        "thrust_coefficient; optional 'frame': NED|ENU)")
     p.add_argument("--calibration", default=None, metavar="T0,T1",
                    help="calibration segment [s, in the log's clock] for constants fitted by "
                         "the importer (default: see docs/importers.md)")
     p.add_argument("--mass", type=float, default=None, help="take-off mass [kg]")
     p.add_argument("--arm", type=float, default=None,
-                   help="px4 without --vehicle: per-axis rotor offset d [m] of a quad X")
+                   help="per-axis rotor offset d [m] of a quad X (autopilot logs)")
     p.add_argument("--torque-coefficient", type=float, default=None,
-                   help="px4 without --vehicle: yaw torque per newton of thrust [m]")
+                   help="yaw torque per newton of thrust [m] (autopilot logs)")
     p.add_argument("--inertia", default=None, metavar="JXX,JYY,JZZ",
-                   help="px4 without --vehicle: diagonal inertia [kg m^2]")
-    p.add_argument("--time-base", choices=("attitude", "imu"), default="attitude",
-                   help="px4 only: resample every topic onto the attitude (default) or the "
-                        "IMU time stamps")
+                   help="diagonal inertia [kg m^2] (autopilot logs)")
+    p.add_argument("--time-base", choices=("attitude", "imu"), default=None,
+                   help="px4 only: resample every topic onto the attitude or the IMU time "
+                        "stamps (default: the faster)")
     p.add_argument("--frame", choices=("NED", "ENU"), default="NED",
                    help="world frame of the written file (default NED)")
 
@@ -88,19 +100,36 @@ def _calibration(text):
     return (t0, t1)
 
 
-def _vehicle_from_flags(args):
-    from quadfault.importers.px4_ulog import px4_quad_x_vehicle
-
-    if args.mass is None or args.torque_coefficient is None or args.inertia is None:
-        raise ConfigError("a vehicle from flags needs --mass, --arm, --torque-coefficient and "
-                          "--inertia (or give --vehicle VEHICLE.json)")
+def _inertia(text):
+    if text is None:
+        return None
     try:
-        J = [float(x) for x in args.inertia.split(",")]
+        J = [float(x) for x in text.split(",")]
     except ValueError:
-        raise ConfigError(f"--inertia expects JXX,JYY,JZZ, got {args.inertia!r}") from None
-    if len(J) != 3:
-        raise ConfigError(f"--inertia expects 3 numbers, got {args.inertia!r}")
-    return px4_quad_x_vehicle(args.mass, J, args.arm, args.torque_coefficient)
+        raise ConfigError(f"--inertia expects JXX,JYY,JZZ, got {text!r}") from None
+    if len(J) != 3 or not all(math.isfinite(j) and j > 0 for j in J):
+        raise ConfigError(f"--inertia expects 3 positive numbers, got {text!r}")
+    return J
+
+
+def _positive(name, value):
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise ConfigError(f"--{name} must be a positive number, got {value}")
+
+
+def _kind_and_input(args) -> tuple:
+    from quadfault.importers import IMPORTERS, detect_format
+
+    if len(args.source) == 2:
+        kind, path = args.source
+        if kind not in IMPORTERS:
+            raise ConfigError(f"unknown data set {kind!r}; choose one of {', '.join(IMPORTERS)} "
+                              "or give only the log file")
+        return kind, path
+    if len(args.source) != 1:
+        raise ConfigError("give one log file (or a data set name and its file)")
+    path = args.source[0]
+    return (args.format or detect_format(path)), path
 
 
 def with_vehicle(rec, vehicle, curve, source: str):
@@ -124,20 +153,23 @@ def run(args) -> int:
     out = Path(args.out)
     if out.suffix != ".csv":
         raise ConfigError(f"{out}: --out must name a .csv file")
-    if args.mass is not None and not (math.isfinite(args.mass) and args.mass > 0):
-        raise ConfigError(f"--mass must be a positive number of kg, got {args.mass}")
+    for name in ("mass", "arm", "torque_coefficient"):
+        _positive(name.replace("_", "-"), getattr(args, name))
+    if args.log is not None and args.log < 1:
+        raise ConfigError(f"--log counts from 1, got {args.log}")
+    kind, source = _kind_and_input(args)
     vehicle = curve = None
     if args.vehicle is not None:
         vehicle, curve = load_vehicle_file(args.vehicle)
-    importer = get_importer(args.kind)
+    importer = get_importer(kind)
     kwargs = {"keep_all": args.keep_all, "calibration": _calibration(args.calibration),
               "mass": args.mass}
-    if args.kind == "px4" and vehicle is None and args.arm is not None:
-        vehicle = _vehicle_from_flags(args)
-    if args.kind == "px4":
-        kwargs.update(vehicle=vehicle, thrust_curve=curve, time_base=args.time_base)
-    rec = importer(args.input, **kwargs)
-    if vehicle is not None and args.kind != "px4":
+    if kind in AUTOPILOTS:
+        kwargs.update(vehicle=vehicle, thrust_curve=curve, inertia=_inertia(args.inertia),
+                      arm=args.arm, torque_coefficient=args.torque_coefficient,
+                      time_base=args.time_base, log=args.log)
+    rec = importer(source, **kwargs)
+    if vehicle is not None and kind not in AUTOPILOTS:
         rec = with_vehicle(rec, vehicle, curve, args.vehicle)
     write_recording(rec, out, frame=args.frame, force=args.force)
     if not args.quiet:

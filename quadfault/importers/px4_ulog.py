@@ -4,26 +4,21 @@ Topics read (PX4 uses NED world and FRD body frames, like quadfault; nothing is 
 
 | topic | fields | use |
 |---|---|---|
-| ``vehicle_attitude`` | ``q[0..3]`` (w, x, y, z; FRD -> NED) | attitude, and the time base |
-| ``vehicle_local_position`` | ``x, y, z, vx, vy, vz`` [m, m/s], NED | position, velocity |
-| ``vehicle_angular_velocity`` | ``xyz[0..2]`` [rad/s] FRD | body rates (or ``gyro_rad``) |
+| ``vehicle_attitude`` | ``q[0..3]`` (w, x, y, z; FRD -> NED) | attitude |
+| ``vehicle_local_position`` | ``x, y, z, vx, vy, vz``, ``xy_valid, z_valid, v_xy_valid, v_z_valid`` | pose; invalid rows never used |
+| ``vehicle_angular_velocity`` | ``xyz[0..2]`` [rad/s] FRD | body rates (or ``sensor_combined.gyro_rad``) |
 | ``sensor_combined`` | ``accelerometer_m_s2[0..2]``, ``gyro_rad[0..2]`` | specific force FRD |
 | ``actuator_motors`` | ``control[0..3]`` normalised 0..1 | commands ``u1..u4`` |
-| ``actuator_outputs`` | ``output[0..3]`` PWM [us] | fallback: u = (pwm - 1000) / 1000 |
-| ``battery_status`` | ``voltage_v`` (or ``voltage_filtered_v``) [V] | ``vbat`` |
+| ``actuator_outputs`` (any instance) | ``output[k]`` | else: the instance that drives the motors, normalised with its range |
+| ``esc_status`` | ``esc[i].esc_rpm`` | measured rotor speed ``omega1..4`` [rad/s] |
+| ``battery_status`` | ``voltage_v``, ``current_a`` | ``vbat`` [V], ``current`` [A] |
+| ``vehicle_land_detected`` | ``landed, maybe_landed, ground_contact`` | flight span |
 
-All topics are resampled onto one time base (the attitude stamps, or the IMU stamps with
-``time_base="imu"``): continuous signals by linear interpolation, the quaternion by
-normalised linear interpolation (nlerp, hemisphere-aligned), commands by zero-order hold
-(the command held since its last message). The recording covers the span where every needed
-topic has data. Motor order is the log's (``control[i]`` -> ``u{i+1}``); for a PX4 quad X that
-is front-right, rear-left, front-left, rear-right, and the vehicle file's allocation columns
-must follow it.
-
-ULogs carry no mass or inertia: the vehicle comes from a JSON file (``--vehicle``). If it has
-no thrust curve, PX4's own model is used, f = s ((1 - THR_MDL_FAC) u + THR_MDL_FAC u^2), with
-THR_MDL_FAC from the log's parameters and the scale s fitted on a calibration segment (mean
-summed thrust = -m mean a_z over the first 30 % of the motors-running span by default).
+Parameters: ``CA_ROTOR{i}_PX/PY/KM`` (geometry, motor order, spin direction, yaw torque per
+newton), ``THR_MDL_FAC`` (thrust model f ~ (1 - fac) u + fac u^2), the output ranges
+(``PWM_MAIN_MIN{k}/MAX{k}``, ``PWM_MIN/MAX``, ``UAVCAN_EC_MIN{k}/MAX{k}``, the ``*_FUNC{k}``
+motor assignment). The time base is the IMU's or the attitude's stamps, whichever is faster
+(``time_base`` chooses). The rest is :func:`quadfault.importers.field_log.build_recording`.
 """
 
 from __future__ import annotations
@@ -32,29 +27,26 @@ from pathlib import Path
 
 import numpy as np
 
-from quadfault.effects import curve_thrust
 from quadfault.errors import ConfigError, QuadfaultError, RecordingError
-from quadfault.importers import gap_stats, running_span
-from quadfault.importers.crazyflie import (calibration_mask, scale_curve_on_segment)
+from quadfault.importers.field_log import (QUAD_X_XY, QUAD_X_YAW, RUNNING, FieldLog, Geometry,
+                                           build_recording, quad_x)
 from quadfault.recording import Recording
 from quadfault.vehicle import Vehicle, allocation_from_rotors
 
 TOPICS = ("vehicle_attitude", "vehicle_local_position", "vehicle_angular_velocity",
-          "sensor_combined", "actuator_motors", "actuator_outputs", "battery_status")
+          "sensor_combined", "actuator_motors", "actuator_outputs", "battery_status",
+          "esc_status", "vehicle_land_detected")
 N_MOTORS = 4
-DEFAULT_CALIBRATION_FRACTION = (0.0, 0.3)
-PWM_MIN_US, PWM_MAX_US = 1000.0, 2000.0
-
-
-#: PX4 "quad x" geometry, motor order of actuator_motors (FRD, units of the per-axis offset):
-#: 1 front-right (CCW), 2 rear-left (CCW), 3 front-left (CW), 4 rear-right (CW). A CCW rotor
-#: (seen from above) reacts with a clockwise torque: +z in FRD.
-PX4_QUAD_X_XY = ((1.0, 1.0), (-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0))
-PX4_QUAD_X_YAW = (1.0, 1.0, -1.0, -1.0)
+RPM_TO_RAD_S = 2.0 * np.pi / 60.0
+#: output ranges by driver when the log's parameters do not give them
+PWM_RANGE, UAVCAN_RANGE, DSHOT_RANGE = (1000.0, 2000.0), (0.0, 8191.0), (1.0, 1999.0)
+#: the ``*_FUNC{k}`` value of Motor 1 (Motor i is 100 + i)
+MOTOR1_FUNCTION = 101
 
 
 def px4_quad_x_vehicle(mass: float, inertia, arm: float, torque_coefficient: float) -> Vehicle:
-    """A PX4 quad X vehicle in its actuator order.
+    """A PX4 quad X vehicle in its actuator order (front-right, rear-left, front-left,
+    rear-right; rotors 1 and 2 counter-clockwise).
 
     Args:
         mass: [kg]; inertia: (Jxx, Jyy, Jzz) [kg m^2]; arm: per-axis rotor offset d [m];
@@ -62,63 +54,10 @@ def px4_quad_x_vehicle(mass: float, inertia, arm: float, torque_coefficient: flo
     """
     if not (arm > 0 and torque_coefficient > 0):
         raise ConfigError("--arm and --torque-coefficient must be positive")
-    alloc = allocation_from_rotors(np.asarray(PX4_QUAD_X_XY) * arm, PX4_QUAD_X_YAW,
-                                   torque_coefficient)
+    alloc = allocation_from_rotors(np.asarray(QUAD_X_XY) * arm, QUAD_X_YAW, torque_coefficient)
     return Vehicle(mass=mass, inertia=inertia, allocation=alloc, name="PX4 quad X")
 
 
-# ----------------------------------------------------------------------------------------
-# resampling (pure numpy; the tests exercise these directly)
-def interp_linear(t_src: np.ndarray, x_src: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Linear interpolation of each column of ``x_src`` at ``t`` (NaN outside the source)."""
-    x_src = np.asarray(x_src, dtype=float)
-    x2 = x_src if x_src.ndim == 2 else x_src[:, None]
-    out = np.stack([np.interp(t, t_src, c, left=np.nan, right=np.nan) for c in x2.T], axis=1)
-    return out if x_src.ndim == 2 else out[:, 0]
-
-
-def zero_order_hold(t_src: np.ndarray, x_src: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """The most recent source sample at or before each ``t`` (NaN before the first)."""
-    x_src = np.asarray(x_src, dtype=float)
-    idx = np.searchsorted(t_src, t, side="right") - 1
-    out = x_src[np.clip(idx, 0, len(t_src) - 1)].astype(float)
-    out[idx < 0] = np.nan
-    return out
-
-
-def interp_quaternion(t_src: np.ndarray, q_src: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Normalised linear interpolation of unit quaternions, after flipping signs so that
-    consecutive samples lie in one hemisphere (q and -q are the same rotation)."""
-    q = np.array(q_src, dtype=float)
-    dots = np.sum(q[1:] * q[:-1], axis=1)
-    flips = np.cumprod(np.where(dots < 0, -1.0, 1.0))
-    q[1:] *= flips[:, None]
-    out = interp_linear(t_src, q, t)
-    out /= np.linalg.norm(out, axis=1, keepdims=True)
-    return out * np.where(out[:, :1] < 0, -1.0, 1.0)
-
-
-def merge_topics(t: np.ndarray, streams: dict) -> dict:
-    """Resample ``{name: (t_src [s], x_src, kind)}`` onto ``t``; ``kind`` is "linear",
-    "quaternion" or "hold"."""
-    out = {}
-    for name, (ts, xs, kind) in streams.items():
-        order = np.argsort(ts, kind="stable")
-        ts, xs = np.asarray(ts)[order], np.asarray(xs)[order]
-        uniq = np.r_[True, np.diff(ts) > 0]
-        ts, xs = ts[uniq], xs[uniq]
-        if kind == "linear":
-            out[name] = interp_linear(ts, xs, t)
-        elif kind == "quaternion":
-            out[name] = interp_quaternion(ts, xs, t)
-        elif kind == "hold":
-            out[name] = zero_order_hold(ts, xs, t)
-        else:
-            raise ValueError(f"unknown resampling kind {kind!r}")
-    return out
-
-
-# ----------------------------------------------------------------------------------------
 def _load_ulog(path: Path):
     try:
         from pyulog import ULog
@@ -127,17 +66,22 @@ def _load_ulog(path: Path):
             from None
     if not path.exists():
         raise RecordingError(path, "file not found")
+    with open(path, "rb") as fh:
+        if fh.read(7) != b"ULog\x01\x12\x35":
+            raise RecordingError(path, "not a ULog file (no ULog header)")
     try:
         return ULog(str(path), list(TOPICS))
     except Exception as exc:  # pyulog raises bare Exceptions on corrupt files
         raise RecordingError(path, f"not a readable ULog: {exc}") from None
 
 
+def _instances(ulog, name) -> list:
+    return sorted((d for d in ulog.data_list if d.name == name), key=lambda d: d.multi_id)
+
+
 def _topic(ulog, name):
-    sets = [d for d in ulog.data_list if d.name == name]
-    if not sets:
-        return None
-    return min(sets, key=lambda d: d.multi_id).data  # instance 0
+    sets = _instances(ulog, name)
+    return sets[0].data if sets else None
 
 
 def _fields(path, data, topic, names):
@@ -152,42 +96,116 @@ def _stamp(data, prefer_sample=False):
     return np.asarray(data[key], dtype=float) * 1e-6  # us -> s
 
 
-def import_px4_ulog(path, *, vehicle=None, thrust_curve=None, keep_all: bool = False,
-                    calibration=None, mass: float | None = None, time_base: str = "attitude",
-                    **_ignored) -> Recording:
-    """Import a PX4 ``.ulg`` flight log.
+# ----------------------------------------------------------------------------------------
+# geometry and motor outputs
+def geometry(params: dict) -> Geometry | None:
+    """Rotor layout from ``CA_ROTOR{i}_PX/PY/KM`` (None without them). Placeholder positions
+    (all at unit or zero offsets) are flagged."""
+    if "CA_ROTOR0_PX" not in params:
+        return None
+    count = int(params.get("CA_ROTOR_COUNT", N_MOTORS))
+    if count != N_MOTORS:
+        raise ConfigError(f"CA_ROTOR_COUNT is {count}: quadfault imports quadrotors")
+    xy = [(float(params.get(f"CA_ROTOR{i}_PX", 0.0)), float(params.get(f"CA_ROTOR{i}_PY", 0.0)))
+          for i in range(N_MOTORS)]
+    km = [float(params.get(f"CA_ROTOR{i}_KM", 0.05)) for i in range(N_MOTORS)]
+    a = np.abs(np.asarray(xy))
+    placeholder = bool(np.any(a.max(axis=1) == 0) or np.allclose(a, 1.0))
+    return Geometry(tuple(xy), tuple(float(np.sign(k) or 1.0) for k in km),
+                    float(np.mean(np.abs(km))), "CA_ROTOR*_PX/PY/KM", placeholder)
 
-    Args:
-        path: the ULog file.
-        vehicle: nominal :class:`quadfault.vehicle.Vehicle` (FRD, rotors in the log's motor
-            order); required, since ULogs carry no mass or inertia.
-        thrust_curve: ``(a, b, c)`` with f = a + b u + c u^2 [N]; default PX4's model scaled
-            on the calibration segment.
-        keep_all: keep rows where no motor runs.
-        calibration: ``(t0, t1)`` [s, log clock] for the thrust-scale fit.
-        mass: overrides ``vehicle.mass`` [kg].
-        time_base: "attitude" (default) or "imu".
-    """
+
+def _output_range(params: dict, channel: int, values: np.ndarray) -> tuple:
+    """``(lo, hi, how)`` of an ``actuator_outputs`` channel (1-based ``channel``): the driver
+    is told by the values (UAVCAN above 2100, DShot below 900 with ``DSHOT_CONFIG``, else
+    PWM), the range by its parameters."""
+    top = float(np.nanmax(values)) if values.size else 0.0
+    run = values[values > 0]
+    if top > PWM_RANGE[1] + 100:
+        keys, default, name = ("UAVCAN_EC_MIN", "UAVCAN_EC_MAX"), UAVCAN_RANGE, "UAVCAN"
+    elif params.get("DSHOT_CONFIG", 0) and run.size and np.nanmin(run) < 900:
+        keys, default, name = ("DSHOT_MIN", "DSHOT_MAX"), DSHOT_RANGE, "DShot"
+    else:
+        keys, default, name = ("PWM_MAIN_MIN", "PWM_MAIN_MAX"), PWM_RANGE, "PWM"
+    candidates = [(f"{keys[0]}{channel}", f"{keys[1]}{channel}"), keys]
+    if name == "PWM":
+        candidates.append(("PWM_MIN", "PWM_MAX"))
+    for lo_key, hi_key in candidates:
+        lo, hi = params.get(lo_key), params.get(hi_key)
+        if lo is not None and hi is not None and hi > lo:
+            return float(lo), float(hi), f"{name} {lo_key}/{hi_key}"
+    return (*default, f"{name} {default[0]:g}-{default[1]:g} (assumed)")
+
+
+def motor_outputs(path, ulog, params: dict) -> tuple:
+    """``(t [s], u (n, 4) normalised 0..1, note)`` from ``actuator_motors`` or the
+    ``actuator_outputs`` instance that drives the motors."""
+    for inst in _instances(ulog, "actuator_motors"):
+        u = _fields(path, inst.data, "actuator_motors", [f"control[{i}]" for i in range(N_MOTORS)])
+        if np.nanmax(np.nan_to_num(u, nan=0.0)) > RUNNING:
+            return (_stamp(inst.data), np.nan_to_num(u, nan=0.0),
+                    f"u = actuator_motors (instance {inst.multi_id}).control[0..3]")
+    best = None
+    funcs = {pre: [k for k in range(1, 17) if params.get(f"{pre}_FUNC{k}") == MOTOR1_FUNCTION]
+             for pre in ("PWM_MAIN", "PWM_AUX", "UAVCAN_EC", "DSHOT", "PCA9685")}
+    for inst in _instances(ulog, "actuator_outputs"):
+        data = inst.data
+        n_out = int(np.max(data.get("noutputs", [16])))
+        channels = list(range(1, N_MOTORS + 1))
+        for pre, first in funcs.items():  # motor functions assigned by parameter
+            if first:
+                assigned = [next((k for k in range(1, 17)
+                                  if params.get(f"{pre}_FUNC{k}") == MOTOR1_FUNCTION + i), None)
+                            for i in range(N_MOTORS)]
+                if None not in assigned and max(assigned) <= n_out:
+                    channels = assigned
+        if max(channels) > n_out or f"output[{max(channels) - 1}]" not in data:
+            continue
+        raw = _fields(path, data, "actuator_outputs", [f"output[{k - 1}]" for k in channels])
+        spread = float(np.nanmin(np.nanstd(raw, axis=0)))  # every motor must move
+        if spread > 0 and (best is None or spread > best[0]):
+            best = (spread, inst, raw, channels)
+    if best is None:
+        raise RecordingError(path, "no motor outputs (actuator_motors, or an actuator_outputs "
+                                   "instance whose first four outputs vary)",
+                             key="actuator_outputs")
+    _, inst, raw, channels = best
+    u = np.empty_like(raw)
+    ranges = []
+    for i, k in enumerate(channels):
+        lo, hi, how = _output_range(params, k, raw[:, i])
+        u[:, i] = np.clip((raw[:, i] - lo) / (hi - lo), 0.0, 1.0)
+        ranges.append(how)
+    note = (f"u = actuator_outputs (instance {inst.multi_id}) outputs {channels} normalised "
+            f"with {ranges[0] if len(set(ranges)) == 1 else '; '.join(ranges)}")
+    return _stamp(inst.data), np.nan_to_num(u, nan=0.0), note
+
+
+def rotor_speeds(esc) -> tuple | None:
+    """``(t [s], omega (n, 4) [rad/s])`` from ``esc_status`` (NaN where an ESC reports 0)."""
+    if esc is None or "esc[3].esc_rpm" not in esc:
+        return None
+    rpm = np.abs(np.stack([np.asarray(esc[f"esc[{i}].esc_rpm"], float)
+                           for i in range(N_MOTORS)], axis=1))
+    if not np.any(rpm > 0):
+        return None
+    return _stamp(esc), rpm * RPM_TO_RAD_S
+
+
+# ----------------------------------------------------------------------------------------
+def read_px4(path, time_base: str | None = None) -> FieldLog:
+    """The streams of a PX4 ULog (module docstring)."""
     path = Path(path)
-    if vehicle is None:
-        raise ConfigError("the PX4 importer needs a vehicle file (--vehicle VEHICLE.json): ULogs "
-                          "carry no mass, inertia or rotor geometry")
-    if vehicle.n_rotors != N_MOTORS:
-        raise ConfigError(f"the PX4 importer handles quadrotors; the vehicle has "
-                          f"{vehicle.n_rotors} rotors")
-    if mass is not None:
-        vehicle = vehicle.replace(mass=float(mass))
     ulog = _load_ulog(path)
+    params = dict(ulog.initial_parameters)
     att, pos = _topic(ulog, "vehicle_attitude"), _topic(ulog, "vehicle_local_position")
     angv, imu = _topic(ulog, "vehicle_angular_velocity"), _topic(ulog, "sensor_combined")
-    motors, outputs = _topic(ulog, "actuator_motors"), _topic(ulog, "actuator_outputs")
-    battery = _topic(ulog, "battery_status")
     if att is None:
         raise RecordingError(path, "no vehicle_attitude topic", key="vehicle_attitude")
     if angv is None and imu is None:
         raise RecordingError(path, "no body rates (vehicle_angular_velocity or sensor_combined)",
                              key="vehicle_angular_velocity")
-    streams, missing = {}, []
+    streams, missing, invalid = {}, [], {}
     streams["q"] = (_stamp(att), _fields(path, att, "vehicle_attitude",
                                          [f"q[{i}]" for i in range(4)]), "quaternion")
     if angv is not None:
@@ -203,94 +221,90 @@ def import_px4_ulog(path, *, vehicle=None, thrust_curve=None, keep_all: bool = F
     else:
         missing.append("accelerometer (sensor_combined)")
     if pos is not None:
-        streams["pos"] = (_stamp(pos), _fields(path, pos, "vehicle_local_position",
-                                               ["x", "y", "z"]), "linear")
-        streams["vel"] = (_stamp(pos), _fields(path, pos, "vehicle_local_position",
-                                               ["vx", "vy", "vz"]), "linear")
+        tp = _stamp(pos)
+        streams["pos"] = (tp, _fields(path, pos, "vehicle_local_position", ["x", "y", "z"]),
+                          "linear")
+        streams["vel"] = (tp, _fields(path, pos, "vehicle_local_position", ["vx", "vy", "vz"]),
+                          "linear")
+        for key, flags in (("pos", ("xy_valid", "z_valid")), ("vel", ("v_xy_valid", "v_z_valid"))):
+            present = [f for f in flags if f in pos]
+            if present:
+                invalid[key] = (tp, ~np.all([np.asarray(pos[f]) > 0 for f in present], axis=0))
     else:
         missing.append("position and velocity (vehicle_local_position)")
-    if motors is not None:
-        u_src = np.nan_to_num(_fields(path, motors, "actuator_motors",
-                                      [f"control[{i}]" for i in range(N_MOTORS)]), nan=0.0)
-        streams["u"] = (_stamp(motors), u_src, "hold")
-        cmd_note = "u = actuator_motors.control[0..3] (normalised 0..1)"
-    elif outputs is not None:
-        pwm = _fields(path, outputs, "actuator_outputs", [f"output[{i}]" for i in range(N_MOTORS)])
-        u_src = np.clip((pwm - PWM_MIN_US) / (PWM_MAX_US - PWM_MIN_US), 0.0, 1.0)
-        streams["u"] = (_stamp(outputs), u_src, "hold")
-        cmd_note = "u = (actuator_outputs.output[0..3] - 1000 us) / 1000 us"
+    tu, u, note = motor_outputs(path, ulog, params)
+    streams["u"] = (tu, u, "hold")
+    rotor = rotor_speeds(_topic(ulog, "esc_status"))
+    if rotor is not None:
+        streams["rotor"] = (*rotor, "linear")
     else:
-        raise RecordingError(path, "no motor commands (actuator_motors or actuator_outputs)",
-                             key="actuator_motors")
+        missing.append("rotor speed (esc_status)")
+    battery = _topic(ulog, "battery_status")
     if battery is not None:
         vkey = "voltage_v" if "voltage_v" in battery else "voltage_filtered_v"
         if vkey in battery:
-            streams["vbat"] = (_stamp(battery), np.asarray(battery[vkey], float), "linear")
+            v = np.asarray(battery[vkey], float)
+            streams["vbat"] = (_stamp(battery), np.where(v > 0, v, np.nan), "linear")
+        if "current_a" in battery:
+            c = np.asarray(battery["current_a"], float)
+            streams["current"] = (_stamp(battery), np.where(c >= 0, c, np.nan), "linear")
     if "vbat" not in streams:
         missing.append("battery voltage (battery_status)")
     if "acc" not in streams and "pos" not in streams:
         raise RecordingError(path, "needs vehicle_local_position or sensor_combined: a recording "
                                    "needs a pose or an accelerometer", key="sensor_combined")
-
-    if time_base == "imu" and imu is not None:
+    land = _topic(ulog, "vehicle_land_detected")
+    landed = None
+    if land is not None and "landed" in land:
+        flags = [np.asarray(land[k]) > 0 for k in ("landed", "maybe_landed", "ground_contact")
+                 if k in land]
+        landed = (_stamp(land), np.any(flags, axis=0))
+    if time_base is None:
+        stamps = _stamp(imu) if imu is not None and len(imu["timestamp"]) > len(att["timestamp"]) \
+            else _stamp(att)
+    elif time_base == "imu" and imu is not None:
         stamps = _stamp(imu)
     elif time_base in ("attitude", "imu"):
         stamps = _stamp(att)
     else:
         raise ConfigError(f"time_base must be 'attitude' or 'imu', got {time_base!r}")
-    t = np.unique(stamps)  # sorted, duplicates dropped
-    dropped = len(stamps) - len(t)
-    res = merge_topics(t, streams)
-    need = [k for k in ("q", "w", "acc", "pos", "vel", "u") if k in res]
-    ok = np.all(np.stack([np.all(np.isfinite(res[k]), axis=1) for k in need]), axis=0)
-    if ok.sum() < 2:
-        raise RecordingError(path, "the topics do not overlap in time")
-    first, last = np.flatnonzero(ok)[[0, -1]]
-    keep = slice(first, last + 1)
-    if not keep_all:
-        span = running_span(res["u"][keep])
-        if span is None:
-            raise ConfigError(f"{path}: the motors never run")
-        keep = slice(first + span[0], first + span[1])
-    t = t[keep]
-    res = {k: v[keep] for k, v in res.items()}
-    ok = np.all(np.stack([np.all(np.isfinite(res[k]), axis=1) for k in need]), axis=0)
-    if not ok.all():  # dropouts inside the span: keep the gap, drop the rows
-        t = t[ok]
-        res = {k: v[ok] for k, v in res.items()}
-    if len(t) < 2:
-        raise ConfigError(f"{path}: fewer than 2 usable rows")
+    fac = float(params.get("THR_MDL_FAC", 0.0))
+    geo = geometry(params)
+    if geo is None:
+        geo = quad_x("no CA_ROTOR* parameters: PX4 quad X order assumed "
+                     f"(SYS_AUTOSTART {int(params.get('SYS_AUTOSTART', 0))})")
+    keep = ("THR_MDL_FAC", "CA_ROTOR_COUNT", "SYS_AUTOSTART", "MPC_THR_HOVER")
+    recorded = {k: float(v) for k, v in params.items()
+                if k in keep or k.startswith(("CA_ROTOR", "PWM_MAIN_M", "UAVCAN_EC_M"))}
+    return FieldLog(path=path, importer="px4", streams=streams, time_base=stamps,
+                    thrust_model=(0.0, 1.0 - fac, fac),
+                    thrust_note=f"PX4 thrust model (1 - THR_MDL_FAC) u + THR_MDL_FAC u^2, "
+                                f"THR_MDL_FAC = {fac:g}",
+                    geometry=geo, landed=landed,
+                    landed_source="vehicle_land_detected (landed, maybe_landed, ground_contact)",
+                    invalid=invalid, commands=note, missing=missing, params=recorded,
+                    source=f"PX4 ULog {path.name}, imported by quadfault")
 
-    meta_cal = None
-    if thrust_curve is None:
-        fac = float(ulog.initial_parameters.get("THR_MDL_FAC", 0.0))
-        base = (0.0, 1.0 - fac, fac)
-        if calibration is None:
-            f0, f1 = DEFAULT_CALIBRATION_FRACTION
-            calibration = (t[0] + f0 * (t[-1] - t[0]), t[0] + f1 * (t[-1] - t[0]))
-        if "acc" not in res:
-            raise ConfigError(f"{path}: no thrust curve in the vehicle file and no accelerometer "
-                              "to fit one on")
-        measured = -vehicle.mass * res["acc"][:, 2]  # collective thrust from the IMU [N]
-        thrust_curve, scale = scale_curve_on_segment(base, res["u"], measured,
-                                                     calibration_mask(t, calibration))
-        meta_cal = {"segment": [float(x) for x in calibration],
-                    "fitted": {"thrust_scale": scale, "thrust_curve": list(thrust_curve),
-                               "THR_MDL_FAC": fac},
-                    "method": "PX4 thrust model x scale so that mean(sum f_i) = mean(-m a_z)",
-                    "score_on": "the rest of the recording; exclude this segment when scoring"}
-    thrust_curve = tuple(float(c) for c in thrust_curve)
-    meta = {"dataset": "px4-ulog", "file": path.name,
-            "import": {"importer": "px4", "segment": [float(t[0]), float(t[-1])],
-                       "trimmed": not keep_all, "time_base": time_base,
-                       "dropped_duplicate_times": dropped, **gap_stats(t), "missing": missing,
-                       "commands": cmd_note},
-            "constants": {"vehicle": "from the user's vehicle file"}}
-    if meta_cal:
-        meta["calibration"] = meta_cal
-    return Recording(t=t, omega=res["w"], accel=res.get("acc"), position=res.get("pos"),
-                     velocity=res.get("vel"), quaternion=res["q"] if "pos" in res else None,
-                     vbat=res.get("vbat"), thrust_cmd=curve_thrust(thrust_curve, res["u"]),
-                     commands_u=res["u"], thrust_curve=thrust_curve, vehicle=vehicle,
-                     frame="NED", source=f"PX4 ULog {path.name}, imported by quadfault",
-                     meta=meta)
+
+def import_px4_ulog(path, *, vehicle=None, thrust_curve=None, keep_all: bool = False,
+                    calibration=None, mass: float | None = None, time_base: str | None = None,
+                    inertia=None, arm=None, torque_coefficient=None, **_ignored) -> Recording:
+    """Import a PX4 ``.ulg`` flight log.
+
+    Args:
+        path: the ULog file.
+        vehicle: nominal :class:`quadfault.vehicle.Vehicle` (FRD, rotors in the log's motor
+            order); default: the log's ``CA_ROTOR*`` geometry with ``mass``, ``inertia``,
+            ``arm`` and ``torque_coefficient`` where given and stated assumptions elsewhere.
+        thrust_curve: ``(a, b, c)`` with f = a + b u + c u^2 [N]; default PX4's model scaled
+            on the calibration segment.
+        keep_all: keep rows outside the flight span.
+        calibration: ``(t0, t1)`` [s, log clock] for the thrust-scale fit.
+        mass: [kg]; inertia: (Jxx, Jyy, Jzz) [kg m^2]; arm: per-axis rotor offset [m];
+        torque_coefficient: yaw torque per newton [m].
+        time_base: "attitude", "imu" or None (the faster of the two).
+    """
+    log = read_px4(path, time_base)
+    return build_recording(log, vehicle=vehicle, thrust_curve=thrust_curve, mass=mass,
+                           inertia=inertia, arm=arm, torque_coefficient=torque_coefficient,
+                           keep_all=keep_all, calibration=calibration)

@@ -1,0 +1,157 @@
+"""Small synthetic autopilot flights for the importer tests, and a minimal ULog writer
+(file format: docs.px4.io "ULog File Format"; pyulog reads ULogs but does not write them).
+
+The flight (:func:`flight_profile`): disarmed on the ground, armed idle on the ground, a
+take-off, a hover with small per-rotor differences, a landing and idle again; the
+accelerometer reads -g along z throughout (the ground supports the vehicle at idle).
+"""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+
+G = 9.81
+HOVER = 0.5          # normalised hover command
+IDLE = 0.08          # armed idle command
+T_ARM, T_TAKEOFF, T_LAND, T_DISARM, T_END = 2.0, 4.0, 16.0, 18.0, 19.0
+OMEGA_PER_U = 2000.0  # measured rotor speed per unit command [rad/s]
+
+
+def flight_profile(t: np.ndarray) -> dict:
+    """Commands (n, 4) 0..1, landed flag, position, velocity of the synthetic flight."""
+    u = np.zeros((len(t), 4))
+    idle = (t >= T_ARM) & (t < T_DISARM)
+    u[idle] = IDLE
+    air = (t >= T_TAKEOFF) & (t < T_LAND)
+    ramp = np.clip(np.minimum(t - T_TAKEOFF, T_LAND - t) / 0.5, 0.0, 1.0)
+    level = IDLE + (HOVER - IDLE) * ramp
+    wiggle = 0.02 * np.sin(2 * np.pi * 1.3 * t)
+    u[air] = (level + np.outer(wiggle, [1.0, 1.0, -1.0, -1.0]).T).T[air]
+    landed = ~((t >= T_TAKEOFF + 0.5) & (t < T_LAND - 0.5))
+    z = np.where(landed, 0.0, -1.0)
+    pos = np.stack([0.1 * np.sin(0.3 * t), np.zeros_like(t), z], axis=1)
+    vel = np.stack([0.03 * np.cos(0.3 * t), np.zeros_like(t), np.zeros_like(t)], axis=1)
+    return {"u": u, "landed": landed, "pos": pos, "vel": vel}
+
+
+# ----------------------------------------------------------------------------------------
+_TYPES = {"uint64_t": "Q", "float": "f", "uint8_t": "B", "int32_t": "i", "uint16_t": "H"}
+
+
+def _msg(kind: str, payload: bytes) -> bytes:
+    return struct.pack("<HB", len(payload), ord(kind)) + payload
+
+
+def write_ulog(path, topics: list, params: dict | None = None, nested: dict | None = None):
+    """``topics``: ``[(name, multi_id, fields, rows)]`` with fields ``[(type, name, n)]``
+    (n = 0: scalar) and rows of values in field order (arrays for n > 0; a nested type's
+    element is a tuple). ``nested``: ``{type: [(type, name, n)]}`` of struct types."""
+    nested = nested or {}
+
+    def fmt_of(ftype):
+        if ftype in nested:
+            return "".join(fmt_of(t) * (n or 1) for t, _, n in nested[ftype])
+        return _TYPES[ftype]
+
+    out = bytearray(b"ULog\x01\x12\x35" + bytes([1]) + struct.pack("<Q", 0))
+    out += _msg("B", bytes(16) + struct.pack("<QQQ", 0, 0, 0))
+    for tname, fields in nested.items():
+        spec = "".join(f"{t}[{n}] {f};" if n else f"{t} {f};" for t, f, n in fields)
+        out += _msg("F", f"{tname}:{spec}".encode())
+    done = set()
+    for name, _, fields, _ in topics:
+        if name not in done:
+            spec = "".join(f"{t}[{n}] {f};" if n else f"{t} {f};" for t, f, n in fields)
+            out += _msg("F", f"{name}:{spec}".encode())
+            done.add(name)
+    for key, value in (params or {}).items():
+        if isinstance(value, int):
+            k = f"int32_t {key}".encode()
+            out += _msg("P", bytes([len(k)]) + k + struct.pack("<i", value))
+        else:
+            k = f"float {key}".encode()
+            out += _msg("P", bytes([len(k)]) + k + struct.pack("<f", value))
+    for msg_id, (name, multi_id, _, _) in enumerate(topics):
+        out += _msg("A", struct.pack("<BH", multi_id, msg_id) + name.encode())
+    events = []
+    for msg_id, (name, _, fields, rows) in enumerate(topics):
+        fmt = "<" + "".join(fmt_of(t) * (n or 1) for t, _, n in fields)
+        for row in rows:
+            flat = []
+            for v in row:
+                for item in (v if isinstance(v, (list, tuple, np.ndarray)) else [v]):
+                    flat.extend(item if isinstance(item, tuple) else [item])
+            events.append((row[0], _msg("D", struct.pack("<H", msg_id) + struct.pack(fmt, *flat))))
+    for _, blob in sorted(events, key=lambda e: e[0]):
+        out += blob
+    path.write_bytes(bytes(out))
+
+
+def px4_flight(path, *, outputs: str = "uavcan", invalid_vxy=(8.0, 9.0), motor_rate=100.0,
+               params: dict | None = None, disarmed_value: float = 0.0) -> dict:
+    """Write the synthetic flight as a ULog. ``outputs``: "uavcan" (actuator_outputs
+    instance 1, 0-8191, instance 0 all zeros, no actuator_motors), "motors"
+    (actuator_motors, ``disarmed_value`` before arming) or "none". Velocity flagged invalid on
+    ``invalid_vxy`` [s] (None: never). Returns the profile at the motor stamps."""
+    us = 1_000_000
+    t_att = np.arange(0.0, T_END, 0.004)
+    t_imu = np.arange(0.0, T_END, 0.002)
+    t_pos = np.arange(0.0, T_END, 0.01)
+    t_mot = np.arange(0.0, T_END, 1.0 / motor_rate)
+    prof = flight_profile(t_mot)
+    q = [1.0, 0.0, 0.0, 0.0]
+    topics = [
+        ("vehicle_attitude", 0, [("uint64_t", "timestamp", 0), ("float", "q", 4)],
+         [(int(t * us), q) for t in t_att]),
+        ("sensor_combined", 0, [("uint64_t", "timestamp", 0), ("float", "gyro_rad", 3),
+                                ("float", "accelerometer_m_s2", 3)],
+         [(int(t * us), [0.0, 0.0, 0.0], [0.0, 0.0, -G]) for t in t_imu])]
+    pp = flight_profile(t_pos)
+    bad = np.zeros(len(t_pos), dtype=bool)
+    if invalid_vxy is not None:
+        bad = (t_pos >= invalid_vxy[0]) & (t_pos < invalid_vxy[1])
+    vel = pp["vel"].copy()
+    vel[bad, 0] = 5.0 + t_pos[bad]  # an invalid estimate drifts
+    topics.append(("vehicle_local_position", 0,
+                   [("uint64_t", "timestamp", 0)] + [("float", k, 0) for k in
+                                                     ("x", "y", "z", "vx", "vy", "vz")]
+                   + [("uint8_t", k, 0) for k in ("xy_valid", "z_valid", "v_xy_valid",
+                                                   "v_z_valid")],
+                   [(int(t * us), *pp["pos"][k], *vel[k], 1, 1, int(not bad[k]), 1)
+                    for k, t in enumerate(t_pos)]))
+    if outputs == "uavcan":
+        fields = [("uint64_t", "timestamp", 0), ("float", "output", 8)]
+        zero = [(int(t * us), [0.0] * 8) for t in t_mot]
+        raw = [(int(t * us), list(8191.0 * prof["u"][k]) + [4095.5] * 4)
+               for k, t in enumerate(t_mot)]
+        topics += [("actuator_outputs", 0, fields, zero), ("actuator_outputs", 1, fields, raw)]
+    elif outputs == "motors":
+        u = prof["u"].copy()
+        u[t_mot < T_ARM] = disarmed_value
+        topics.append(("actuator_motors", 0, [("uint64_t", "timestamp", 0), ("float", "control", 4)],
+                       [(int(t * us), list(u[k])) for k, t in enumerate(t_mot)]))
+    rpm = prof["u"] * OMEGA_PER_U * 60.0 / (2 * np.pi)
+    topics.append(("esc_status", 0, [("uint64_t", "timestamp", 0), ("uint8_t", "esc_count", 0),
+                                     ("esc_report", "esc", 4)],
+                   [(int(t * us), 4, [(int(round(r)), 12.0) for r in rpm[k]])
+                    for k, t in enumerate(t_mot)]))
+    t_land = np.arange(0.0, T_END, 0.1)
+    pl = flight_profile(t_land)
+    topics.append(("vehicle_land_detected", 0,
+                   [("uint64_t", "timestamp", 0), ("uint8_t", "landed", 0),
+                    ("uint8_t", "maybe_landed", 0), ("uint8_t", "ground_contact", 0)],
+                   [(int(t * us), int(pl["landed"][k]), 0, 0) for k, t in enumerate(t_land)]))
+    t_bat = np.arange(0.0, T_END, 0.1)
+    topics.append(("battery_status", 0, [("uint64_t", "timestamp", 0), ("float", "voltage_v", 0),
+                                         ("float", "current_a", 0)],
+                   [(int(t * us), 16.0 - 0.05 * t, 10.0) for t in t_bat]))
+    base = {"THR_MDL_FAC": 0.3, "CA_ROTOR_COUNT": 4}
+    for i, ((x, y), km) in enumerate(zip(((0.12, 0.12), (-0.12, -0.12), (0.12, -0.12),
+                                          (-0.12, 0.12)), (0.02, 0.02, -0.02, -0.02))):
+        base.update({f"CA_ROTOR{i}_PX": x, f"CA_ROTOR{i}_PY": y, f"CA_ROTOR{i}_KM": km})
+    base.update(params or {})
+    write_ulog(path, topics, base,
+               nested={"esc_report": [("int32_t", "esc_rpm", 0), ("float", "esc_voltage", 0)]})
+    return prof
