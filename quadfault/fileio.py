@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import contextlib
 import os
+import secrets
 import signal
-import tempfile
 from pathlib import Path
 
 from quadfault.errors import QuadfaultError
@@ -23,8 +23,17 @@ def check_writable(paths, *, force: bool = False) -> None:
 
 
 def _write_temp(path: Path, data: bytes) -> str:
-    """``data`` in a synced temporary file beside ``path``; returns its name."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    """``data`` in a synced temporary file beside ``path``; returns its name. The file is
+    created with mode 0666 less the user's umask, as ``open()`` would create ``path`` itself
+    (``tempfile.mkstemp`` would make it 0600, unreadable to the user's group)."""
+    while True:
+        tmp = str(path.parent / f".{path.name}.{secrets.token_hex(4)}.tmp")
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0),
+                         0o666)
+            break
+        except FileExistsError:  # pragma: no cover - a 32-bit name collision
+            continue
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)

@@ -113,6 +113,26 @@ def test_fileio_writers_refuse_to_overwrite(tmp_path, name):
     assert [p.name for p in tmp_path.iterdir()] == ["out.png"]
 
 
+
+@pytest.mark.parametrize("umask", [0o022, 0o002, 0o077])
+def test_written_files_respect_the_umask(tmp_path, umask):
+    """Atomic writes create their files as ``open()`` would: mode 0666 less the umask (a
+    colleague in the group can read ``results/`` when the umask lets them)."""
+    import os
+    import stat
+
+    from quadfault import fileio
+
+    before = os.umask(umask)
+    try:
+        fileio.atomic_write_files({tmp_path / "a.csv": "t\n0\n", tmp_path / "a.json": "{}"})
+        fileio.atomic_write_text(tmp_path / "b.md", "x")
+        fileio.atomic_write_text(tmp_path / "b.md", "y", force=True)
+    finally:
+        os.umask(before)
+    modes = {p.name: stat.S_IMODE(p.stat().st_mode) for p in tmp_path.iterdir()}
+    assert modes == dict.fromkeys(["a.csv", "a.json", "b.md"], 0o666 & ~umask)
+
 class _FakeModel:
     """Stands in for an SB3 model: ``save`` writes into the file object it is given."""
 
