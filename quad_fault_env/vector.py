@@ -25,14 +25,13 @@ from __future__ import annotations
 
 import copy
 import os
-import warnings
 
 import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from quad_fault_env.envs.config import deprecated_physics, validate_action
+from quad_fault_env.envs.config import check_keywords, keywords_of, validate_action
 from quad_fault_env.envs.scenario_source import GENERATORS
 from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
@@ -47,7 +46,6 @@ from quadfault.errors import ConfigError
 from quadfault.motors import MotorModel
 from quadfault.plant import Plant
 
-NOISE_STREAMS = ("per_env", "shared")
 #: batch size from which the vector env runs numba's parallel kernels on numba's threads by
 #: default; below it, on the calling thread alone (measured: ``benchmarks/numba_threads.py``,
 #: docs/throughput.md "numba threads")
@@ -73,10 +71,6 @@ class QuadFaultVectorEnv(VectorEnv):
         estimator_kwargs: ``config=`` of the estimator.
         max_episode_steps: truncation after this many control steps (the registration's
             value through ``gym.make_vec``), like ``TimeLimit`` on the single env.
-        physics: deprecated, no effect (one implementation); a ``DeprecationWarning``.
-        noise_streams: deprecated, no effect: each sub-env draws from its own generator in
-            the single env's order, so it equals its single twin (``"shared"`` gave up that
-            equality for speed; the loop's in-kernel draws made it unnecessary).
         autoreset_mode: ``"next_step"`` (gymnasium's default: the step after an episode's end
             returns the reset observation, reward 0) or ``"same_step"`` (the reset observation
             is returned at once; the last one is in ``info["final_obs"]``).
@@ -88,7 +82,8 @@ class QuadFaultVectorEnv(VectorEnv):
             (``quadfault.jit.threads``): nothing else in the process changes, and the flights
             are the same for every count.
         **kwargs: every other keyword of ``QuadFaultEnv`` (scenario, action_mode, rates, ...);
-            ``render_mode`` is not supported.
+            ``render_mode`` is not supported. An unknown keyword raises a ``ConfigError``
+            naming the closest valid one.
 
     ``info`` (arrays over the sub-envs, with gymnasium's ``"_<key>"`` masks): ``t`` [s],
     ``eta_true``, ``eta_hat``, ``eta_sd`` (10 = none, as in the observation),
@@ -102,8 +97,9 @@ class QuadFaultVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, estimator: str = "irls", scenario="combined", *,
                  estimator_kwargs=None, max_episode_steps: int | None = None,
-                 autoreset_mode: str = "next_step", numba_threads="auto",
-                 physics: str | None = None, noise_streams: str | None = None, **kwargs):
+                 autoreset_mode: str = "next_step", numba_threads="auto", **kwargs):
+        check_keywords(kwargs, keywords_of(QuadFaultVectorEnv.__init__)
+                       + keywords_of(QuadFaultEnv.__init__), type(self).__name__)
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
                 or num_envs < 1:
             raise ConfigError(f"num_envs must be an integer >= 1, got {num_envs!r}")
@@ -127,14 +123,6 @@ class QuadFaultVectorEnv(VectorEnv):
                               f"got {numba_threads!r}")
         #: numba threads of this env's steps and resets (None: the caller's count)
         self.numba_threads = None if numba_threads is None else int(numba_threads)
-        deprecated_physics(physics)
-        if noise_streams is not None:
-            if noise_streams not in NOISE_STREAMS:
-                raise ConfigError(f"noise_streams must be one of {NOISE_STREAMS}, "
-                                  f"got {noise_streams!r}")
-            warnings.warn("the 'noise_streams' keyword is deprecated and has no effect: every "
-                          "sub-env draws from its own generator", DeprecationWarning,
-                          stacklevel=2)
         self.num_envs = N = int(num_envs)
         self.max_episode_steps = max_episode_steps
         self.metadata = dict(self.metadata, autoreset_mode=AUTORESET_MODES[autoreset_mode])

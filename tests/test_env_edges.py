@@ -54,10 +54,19 @@ def test_observation_is_the_layouts_values_even_for_nan_and_inf():
                 np.testing.assert_array_equal(got[name], want[name])
 
 
-def test_physics_keyword_is_a_deprecated_no_op():
-    with pytest.raises(ConfigError, match="physics must be one of"):
-        QuadFaultEnv("none", physics="gpu")
-    with pytest.warns(DeprecationWarning, match="physics"):
-        env = QuadFaultEnv("none", "hover", physics="numpy")
-    a = env.reset(seed=1)[0]
-    np.testing.assert_array_equal(a, QuadFaultEnv("none", "hover").reset(seed=1)[0])
+def test_unknown_keyword_is_a_one_line_error_naming_the_closest():
+    import gymnasium as gym
+
+    import quad_fault_env  # noqa: F401  (registers the ids)
+
+    with pytest.raises(ConfigError, match=r"unknown keyword 'estimater'; did you mean "
+                                          r"'estimator'\?") as err:
+        gym.make("QuadFault-v1", estimater="ekf")
+    assert "\n" not in str(err.value)
+    with pytest.raises(ConfigError, match="'sensor_nois'; did you mean 'sensor_noise'"):
+        QuadFaultEnv("none", "hover", sensor_nois={"position": 0.01})
+    # no close match: the valid keywords are listed; the removed no-op keyword is unknown
+    with pytest.raises(ConfigError, match="unknown keyword 'xyz'; valid keywords: .*estimator"):
+        QuadFaultEnv("none", xyz=1)
+    with pytest.raises(ConfigError, match="unknown keyword 'physics'"):
+        QuadFaultEnv("none", physics="numpy")

@@ -159,25 +159,21 @@ def test_bad_input_raises_clear_errors():
         env.step(np.full((2, 4), 2.0))
 
 
-def test_physics_and_noise_streams_are_deprecated_no_op_keywords():
-    kw = dict(scenario="combined", duration=1.0, estimator_rate="control")
-    runs = []
-    for extra in ({}, {"physics": "numpy"}, {"noise_streams": "shared"}):
-        if extra:
-            with pytest.warns(DeprecationWarning, match=next(iter(extra))):
-                env = QuadFaultVectorEnv(3, "none", **kw, **extra)
-        else:
-            env = QuadFaultVectorEnv(3, "none", **kw)
-        env.reset(seed=4)
-        for _ in range(5):
-            obs, *_ = env.step(np.full((3, 4), 0.1, dtype=np.float32))
-        runs.append(obs)
-    for obs in runs[1:]:
-        np.testing.assert_array_equal(obs, runs[0])
-    with pytest.raises(ConfigError, match="physics must be one of"):
-        QuadFaultVectorEnv(2, "none", physics="gpu", **kw)
-    with pytest.raises(ConfigError, match="noise_streams must be one of"):
-        QuadFaultVectorEnv(2, "none", noise_streams="global", **kw)
+def test_unknown_keywords_name_the_closest_of_either_env():
+    import gymnasium as gym
+
+    import quad_fault_env  # noqa: F401  (registers the ids)
+
+    kw = dict(scenario="combined", duration=1.0)
+    with pytest.raises(ConfigError, match="QuadFaultVectorEnv: unknown keyword "
+                                          "'autoreset_mod'; did you mean 'autoreset_mode'"):
+        QuadFaultVectorEnv(2, "none", autoreset_mod="same_step", **kw)
+    with pytest.raises(ConfigError, match="'estimator_rat'; did you mean 'estimator_rate'"):
+        gym.make_vec("QuadFault-v1", num_envs=2, vectorization_mode="vector_entry_point",
+                     estimator_rat="control")
+    for removed in ("physics", "noise_streams"):  # no-op keywords, removed
+        with pytest.raises(ConfigError, match=f"unknown keyword '{removed}'"):
+            QuadFaultVectorEnv(2, "none", **{removed: "numpy"}, **kw)
 
 
 @pytest.mark.slow  # compiles / starts a framework on the first run

@@ -7,8 +7,10 @@ The physics parameters live in the core package (:class:`quadfault.vehicle.Vehic
 
 from __future__ import annotations
 
+import difflib
+import functools
+import inspect
 import math
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,6 +25,36 @@ TERMINATION_REASONS = ("crash", "out_of_bounds", "excessive_tilt", "non_finite")
 #: trajectories of random scenarios (``quadfault.scenarios.random_scenario``)
 RANDOM_TRAJECTORIES = ("random", "circle", "hover", "lissajous")
 
+
+def keywords_of(init) -> tuple:
+    """The keyword names a constructor takes (``self`` and ``*args`` / ``**kwargs`` left out)."""
+    kinds = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    return tuple(name for name, p in inspect.signature(init).parameters.items()
+                 if p.kind in kinds and name != "self")
+
+
+def check_keywords(kwargs, valid, owner: str) -> None:
+    """Raise a one-line :class:`ConfigError` for the first keyword of ``kwargs`` not in
+    ``valid``, naming the closest valid one (``gym.make("QuadFault-v1", estimater="ekf")``)."""
+    for key in kwargs:
+        if key not in valid:
+            close = difflib.get_close_matches(str(key), valid, n=1, cutoff=0.6)
+            hint = (f"did you mean {close[0]!r}?" if close
+                    else f"valid keywords: {', '.join(sorted(valid))}")
+            raise ConfigError(f"{owner}: unknown keyword {key!r}; {hint}")
+
+
+def checked_keywords(init):
+    """Decorate an environment's ``__init__`` so that an unknown keyword (from ``gym.make``,
+    ``gym.make_vec`` or a direct call) is a :func:`check_keywords` error, not a ``TypeError``."""
+    valid = keywords_of(init)
+
+    @functools.wraps(init)
+    def checked(self, *args, **kwargs):
+        check_keywords(kwargs, valid, type(self).__name__)
+        return init(self, *args, **kwargs)
+
+    return checked
 
 
 def _check_nonnegative(obj, names):
@@ -344,17 +376,3 @@ def check_random_faults(spec) -> dict:
                               f"{', '.join(_RANGE_KEYS + _PROB_KEYS)}")
     return out
 
-
-#: values the deprecated ``physics`` keyword of the environments accepted
-PHYSICS_BACKENDS = ("auto", "numpy", "numba")
-
-
-def deprecated_physics(physics) -> None:
-    """Accept the deprecated ``physics`` keyword (no effect) with a ``DeprecationWarning``."""
-    if physics is None:
-        return
-    if not isinstance(physics, str) or physics not in PHYSICS_BACKENDS:
-        raise ConfigError(f"physics must be one of {PHYSICS_BACKENDS}, got {physics!r}")
-    warnings.warn("the 'physics' keyword is deprecated and has no effect: the environment has "
-                  "one (compiled) implementation of the physics", DeprecationWarning,
-                  stacklevel=3)

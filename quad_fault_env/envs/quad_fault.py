@@ -29,8 +29,8 @@ from quad_fault_env.envs.config import (
     RewardConfig,
     TerminationLimits,
     check_random_faults,
+    checked_keywords,
     config_of,
-    deprecated_physics,
     number_at_least,
     validate_action,
 )
@@ -152,12 +152,14 @@ class QuadFaultEnv(gym.Env):
             fly its nominal vehicle (instead of ``vehicle``) and its accepted effects.
         model_uncertainty: draw the model's fitted parameters from their reported
             uncertainty at each reset.
-        physics: deprecated, no effect (there is one implementation of the physics);
-            accepted for one release with a ``DeprecationWarning``.
+
+    An unknown keyword raises a :class:`~quadfault.errors.ConfigError` naming the closest
+    valid one.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
 
+    @checked_keywords
     def __init__(self, estimator="irls", scenario="combined", *, estimator_kwargs=None,
                  random_trajectory: str = "random", random_faults: dict | None = None,
                  scenario_options: dict | None = None,
@@ -171,8 +173,7 @@ class QuadFaultEnv(gym.Env):
                  limits: TerminationLimits | None = None,
                  initial_spread: InitialStateSpread | None = None,
                  vehicle: Vehicle | None = None, controller: ControllerConfig | None = None,
-                 render_mode: str | None = None, physics: str | None = None,
-                 effects=None, model=None, model_uncertainty: bool = False):
+                 render_mode: str | None = None, effects=None, model=None, model_uncertainty: bool = False):
         self.physics_draws = PhysicsDraws.of(effects, model, model_uncertainty)
         if self.physics_draws is not None and self.physics_draws.vehicle is not None:
             if vehicle is not None:
@@ -242,7 +243,6 @@ class QuadFaultEnv(gym.Env):
             raise ConfigError(f"render_mode must be one of {self.metadata['render_modes']}, "
                               f"got {render_mode!r}")
         self.render_mode = render_mode
-        deprecated_physics(physics)
         self._renderer = None
         self.scenario: Scenario | None = None
         self.plant: Plant | None = None
