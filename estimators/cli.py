@@ -46,18 +46,13 @@ def estimator_class(name: str):
 ONLINE_MEDIAN = ("irls",)
 
 
-def make_estimator(name: str, vehicle, backend: str | None = None, improved: bool = False,
-                   median: int | None = None, q_eta: float | None = None):
+def make_estimator(name: str, vehicle, improved: bool = False, median: int | None = None,
+                   q_eta: float | None = None):
     """Build an estimator with its default configuration; ``improved``: the IRLS with the
     options beyond the paper (``IRLSConfig.improved()``); ``median``: the IRLS's online output
     median [samples] (other estimators get it as post-processing, :func:`estimate_series`);
-    ``q_eta``: the EKF's efficiency random walk per 1 ms step. ``backend`` is deprecated and
-    ignored (there is one implementation)."""
+    ``q_eta``: the EKF's efficiency random walk per 1 ms step."""
     cls = estimator_class(name)
-    if backend is not None:
-        from estimators.irls_config import deprecated_backend
-
-        deprecated_backend("make_estimator", backend)
     check_options(name, improved, median, q_eta)
     if name == "irls":
         from estimators.irls import IRLSConfig
@@ -120,9 +115,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="irls (the paper's sliding-window IRLS, default) or ekf (baseline)")
     p.add_argument("--out", required=True, help="output EST.csv (+ EST.json)")
     p.add_argument("--force", action="store_true", help="overwrite existing files")
-    p.add_argument("--backend", choices=("auto", "numpy", "numba"), default=None,
-                   help="deprecated, does nothing (one compiled implementation); removed in "
-                        "the next release")
     p.add_argument("--improved", action="store_true",
                    help="IRLS with the options beyond the paper: change completion and a "
                         "21-sample causal output median (docs/irls.md)")
@@ -148,9 +140,6 @@ def run(args) -> int:
     if not rec.has_pose:
         raise ConfigError(f"{args.recording}: 'estimate' needs position, velocity and attitude "
                           "columns (px..pz, vx..vz, qw..qz); this recording is IMU-only")
-    if args.backend is not None:
-        print("quadfault estimate: --backend is deprecated and does nothing (one compiled "
-              "implementation); it goes in the next release", file=sys.stderr)
     series = estimate_series(rec, args.estimator, improved=args.improved, median=args.median,
                              q_eta=args.q_eta, progress=enabled())
     write_estimate_series(series, out, input_path=args.recording, force=args.force)

@@ -51,7 +51,6 @@ from estimators.base import (
     command_limit,
 )
 from estimators.ekf_filter import predict_update_into
-from estimators.irls_config import BACKENDS, deprecated_backend  # noqa: F401  (re-exported)
 from estimators.state import FlatState, all_finite, piece, piece_rows
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
@@ -94,8 +93,6 @@ class EKFConfig:
             use (as IRLS does: a saturated rotor cannot deliver its command; ``run(recording)``
             clips above only when the recording does not say its flight was unsaturated,
             :func:`estimators.base.command_limit`); ``False`` = the reference code.
-        backend: deprecated, does nothing (one implementation); a value other than None
-            warns. Removed in the next release.
     """
 
     q_eta: float = 0.5
@@ -111,7 +108,6 @@ class EKFConfig:
     eta0: float | tuple = 1.0
     eta_bounds: tuple | None = (-0.001, 1.001)
     clip_commands: bool = True
-    backend: str | None = None
 
     def __post_init__(self):
         for key in ("q_eta", "q_position", "q_velocity", "q_rate", "q_rotation", "r_position",
@@ -125,7 +121,6 @@ class EKFConfig:
             if not (lo < hi):
                 raise ConfigError(f"EKFConfig.eta_bounds must be (low, high) with low < high, "
                                   f"got {self.eta_bounds!r}")
-        deprecated_backend("EKFConfig", self.backend)
 
     @classmethod
     def reference(cls, **changes) -> EKFConfig:

@@ -43,7 +43,6 @@ from estimators.base import (
 )
 from estimators.change_completion import N_COUNTERS, complete_into, observe_into
 from estimators.irls_config import (  # noqa: F401  (re-exported)
-    BACKENDS,
     SCALINGS,
     IRLSConfig,
     IRLSDiagnostics,

@@ -11,7 +11,6 @@ paper); :class:`IRLSDiagnostics` says what happened in one window update
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -22,21 +21,6 @@ from estimators.residuals import residual_weights
 from quadfault.errors import ConfigError
 
 SCALINGS = ("reference", "paper")
-#: accepted values of the deprecated ``backend`` setting (there is one implementation)
-BACKENDS = ("auto", "numpy", "numba")
-
-
-def deprecated_backend(owner: str, backend) -> None:
-    """Check a deprecated ``backend=`` value and warn that it does nothing."""
-    if backend is None:
-        return
-    if backend not in BACKENDS:
-        raise ConfigError(f"{owner} backend must be one of {BACKENDS}, got {backend!r}")
-    warnings.warn(f"{owner}(backend=...) is deprecated and does nothing: every estimator runs "
-                  "its one compiled implementation; the option goes in the next release",
-                  DeprecationWarning, stacklevel=4)
-
-
 @dataclass(frozen=True)
 class IRLSConfig:
     """Settings of :class:`SlidingWindowIRLS` (defaults: the authors' reference code).
@@ -64,8 +48,6 @@ class IRLSConfig:
             :func:`estimators.base.command_limit`). ``False`` = the reference code (no
             clipping).
         record_history: keep per-round KKT histories in the diagnostics (slower).
-        backend: deprecated, does nothing (one implementation); a value other than None
-            warns. Removed in the next release.
         change_completion: beyond the paper (off = the paper/reference): when the estimate
             moves by more than ``change_threshold`` [1] on some motor over ``window - 1``
             windows, complete the
@@ -101,7 +83,6 @@ class IRLSConfig:
     min_thrust: float = 1e-3
     clip_commands: bool = True
     record_history: bool = False
-    backend: str | None = None
     change_completion: bool = False
     change_threshold: float = 0.2
     change_hold: int = 20
@@ -130,7 +111,6 @@ class IRLSConfig:
                               f"{self.eta_max!r}")
         if self.scaling not in SCALINGS:
             raise ConfigError(f"IRLS scaling must be one of {SCALINGS}, got {self.scaling!r}")
-        deprecated_backend("IRLSConfig", self.backend)
         if not (isinstance(self.max_irls, int) and self.max_irls >= 1):
             raise ConfigError(f"IRLS max_irls must be an integer >= 1, got {self.max_irls!r}")
         if not isinstance(self.ipm, IPMSettings):

@@ -20,7 +20,6 @@ one-sample lag is kept in the recording, as in the authors' data). Its times are
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -37,10 +36,6 @@ from quadfault.scenarios import Scenario, at_times
 from quadfault.sensors import SensorNoise
 from quadfault.vehicle import Vehicle
 
-#: values the deprecated ``SimConfig.backend`` accepted (it has no effect any more)
-BACKENDS = ("auto", "numpy", "numba")
-
-
 @dataclass(frozen=True)
 class SimConfig:
     """Simulation settings.
@@ -53,8 +48,6 @@ class SimConfig:
         sensor_noise: measurement noise.
         controller: geometric controller options.
         record_accel: add the accelerometer columns ``ax, ay, az``.
-        backend: deprecated, no effect (there is one implementation of the loop); accepted
-            for one release with a ``DeprecationWarning``.
     """
 
     dt: float = 1e-3
@@ -64,15 +57,8 @@ class SimConfig:
     sensor_noise: SensorNoise = field(default_factory=SensorNoise)
     controller: ControllerConfig = field(default_factory=ControllerConfig)
     record_accel: bool = True
-    backend: str | None = None
 
     def __post_init__(self):
-        if self.backend is not None:
-            if self.backend not in BACKENDS:
-                raise ConfigError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
-            warnings.warn("SimConfig(backend=...) is deprecated and has no effect: the "
-                          "simulator has one (compiled) implementation", DeprecationWarning,
-                          stacklevel=3)
         if not (math.isfinite(self.dt) and self.dt > 0):
             raise ConfigError(f"dt must be positive [s], got {self.dt!r}")
         if self.integrator not in INTEGRATORS:

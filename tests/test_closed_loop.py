@@ -1,7 +1,6 @@
 """The one closed loop (quadfault.closed_loop): the readable loop's results and random
 numbers, one vehicle or N in parallel, the effects hook, and bad input."""
 
-import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -236,19 +235,6 @@ def test_true_vehicle_must_keep_the_rotors():
 
     with pytest.raises(ConfigError, match="true_vehicle must return a Vehicle"):
         simulate(named_scenario("hover", duration=0.1), effects=(Tri(),))
-
-
-# --- keywords of other versions --------------------------------------------------------------
-def test_backend_keyword_is_a_deprecated_no_op():
-    sc = named_scenario("abrupt", duration=0.1)
-    with pytest.warns(DeprecationWarning, match="backend"):
-        cfg = SimConfig(backend="numpy")
-    np.testing.assert_array_equal(simulate(sc, config=cfg).position, simulate(sc).position)
-    with pytest.raises(ConfigError, match="backend must be one of"):
-        SimConfig(backend="cuda")
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        SimConfig()  # no warning without the keyword
 
 
 def test_controller_must_be_geometric():

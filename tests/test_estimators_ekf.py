@@ -198,7 +198,7 @@ def test_reference_clamp_and_default_bounds(recording):
 
 
 @pytest.mark.parametrize("changes", [{"q_eta": 0.0}, {"r_attitude": -1.0}, {"p0": float("nan")},
-                                     {"eta_bounds": (1.0, 0.0)}, {"backend": "gpu"}])
+                                     {"eta_bounds": (1.0, 0.0)}])
 def test_bad_config_is_a_clear_error(changes):
     with pytest.raises(ConfigError, match="EKFConfig"):
         EKFConfig(**changes)
@@ -228,10 +228,3 @@ def test_imu_only_recording_is_refused(recording):
     with pytest.raises(ConfigError, match="IMU-only"):
         MotorEfficiencyEKF(recording.vehicle, EKFConfig()).run(imu)
 
-
-def test_backend_is_a_deprecated_no_op(recording):
-    rec = recording.slice(0, 50).without_truth()
-    with pytest.warns(DeprecationWarning, match="does nothing"):
-        cfg = EKFConfig(backend="numba")
-    np.testing.assert_array_equal(MotorEfficiencyEKF(rec.vehicle, cfg).run(rec).eta,
-                                  MotorEfficiencyEKF(rec.vehicle).run(rec).eta)

@@ -306,7 +306,7 @@ def test_recording_errors(flight):
 
 
 @pytest.mark.parametrize("kwargs", [dict(window=2), dict(gamma=-1.0), dict(eta_min=1, eta_max=0),
-                                    dict(scaling="other"), dict(backend="gpu"),
+                                    dict(scaling="other"),
                                     {"change_hold": 0}, {"output_median": 1.5},
                                     dict(max_irls=0), dict(g_v=float("nan"))])
 def test_config_errors(kwargs):
@@ -325,10 +325,3 @@ def test_eta0_validation_and_truth_never_read(flight):
     clean = flight.slice(0, 40).without_truth()
     np.testing.assert_array_equal(est.run(poisoned).eta, est.run(clean).eta)
 
-
-def test_backend_is_a_deprecated_no_op(flight):
-    rec = flight.slice(0, 60).without_truth()
-    with pytest.warns(DeprecationWarning, match="does nothing"):
-        cfg = IRLSConfig(backend="numpy")
-    np.testing.assert_array_equal(SlidingWindowIRLS(rec.vehicle, cfg).run(rec).eta,
-                                  SlidingWindowIRLS(rec.vehicle).run(rec).eta)

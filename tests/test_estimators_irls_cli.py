@@ -55,13 +55,11 @@ def test_simulate_then_estimate_round_trip(flight_csv, tmp_path):
     assert forced.returncode == 0, forced.stderr
 
 
-def test_backend_option_is_a_deprecated_no_op(flight_csv, tmp_path):
-    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
-    r = _quadfault("estimate", flight_csv, "--out", a, "--backend", "numpy", "--quiet",
+def test_removed_backend_option_is_a_one_line_error(flight_csv, tmp_path):
+    r = _quadfault("estimate", flight_csv, "--out", tmp_path / "a.csv", "--backend", "numpy",
                    cwd=tmp_path)
-    assert r.returncode == 0 and "deprecated" in r.stderr and "does nothing" in r.stderr
-    assert _quadfault("estimate", flight_csv, "--out", b, "--quiet", cwd=tmp_path).returncode == 0
-    np.testing.assert_array_equal(read_estimate_csv(a)["eta"], read_estimate_csv(b)["eta"])
+    assert r.returncode == 2 and "--backend" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "a.csv").exists()
 
 
 def test_estimate_improved_irls_records_its_options(flight_csv, tmp_path):
