@@ -1,0 +1,216 @@
+"""The Python side of the recursive estimators whose whole state is one compiled filter
+(:mod:`estimators.rls`, :mod:`estimators.ukf`): sample checks, the offline loop over a
+recording, and the batch of N filters the vector environment runs.
+
+A recursive estimator module gives five compiled kernels over the flat state of
+:class:`estimators.state.FlatState` (``offsets``, ``fs``, ``ks``) and its constants
+``const``; all of them run the module's one step function on row ``i`` of the state:
+
+* ``reset(const, offsets, n, fs, ks, rows, eta0)``: forget the rows, start them from ``eta0`` (N, n);
+* ``update(t, p, v, R, w, f, const, offsets, fs, ks) -> code``: one sample into row 0;
+* ``run(t, p, v, R, w, f, const, offsets, fs, ks, eta, sd, code)``: every row of a recording;
+* ``update_rows(t, p, v, R, w, f, const, offsets, fs, ks, code)``: one sample per row, N rows;
+* ``estimate(offsets, n, fs, ks, eta, sd)``: every row's estimate and sd (N, n) (NaN sd
+  where the filter has none yet).
+
+:class:`RecursiveEstimator` and :class:`BatchedRecursive` are the same wrappers for every
+such module; a subclass names the kernels, the configuration class, the state's shapes and
+its constants.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict
+
+import numpy as np
+
+from estimators.base import STATUSES, Estimate, EstimateSeries, Sample, command_limit
+from estimators.state import FlatState
+from quadfault.errors import ConfigError
+from quadfault.recording import Recording
+from quadfault.vehicle import Vehicle
+
+_ROW0 = np.zeros(1, dtype=np.int64)
+
+
+def per_rotor(value, n: int, owner: str) -> np.ndarray:
+    """One value or ``n`` values as ``n`` finite floats (clean error otherwise)."""
+    try:
+        out = np.broadcast_to(np.asarray(value, dtype=float), (n,)).copy()
+    except (TypeError, ValueError):
+        raise ConfigError(f"{owner} must be one value or {n}, got {value!r}") from None
+    if not np.all(np.isfinite(out)):
+        raise ConfigError(f"{owner} must be finite, got {value!r}")
+    return out
+
+
+def recording_arrays(recording: Recording, n: int, name: str):
+    """``(t, p, v, R, w, f)`` of ``recording`` (never its truth), float64, contiguous;
+    clean errors for what an estimator cannot run on. Non-finite rows are left to the
+    estimator (``bad_sample``)."""
+    if not isinstance(recording, Recording):
+        raise ConfigError(f"run() needs a Recording, got {type(recording).__name__}")
+    where = recording.path or "recording"
+    if not recording.has_pose:
+        raise ConfigError(f"{where}: the {name} estimator needs position, velocity and "
+                          "attitude columns (px..pz, vx..vz, qw..qz); this recording is "
+                          "IMU-only")
+    if len(recording) == 0:
+        raise ConfigError(f"{where}: the recording is empty")
+    if recording.thrust_cmd.shape[1] != n:
+        raise ConfigError(f"{where}: {recording.thrust_cmd.shape[1]} rotor commands, the "
+                          f"vehicle has {n} rotors")
+    return tuple(np.ascontiguousarray(a, dtype=np.float64) for a in (
+        recording.t, recording.position, recording.velocity, recording.rotation,
+        recording.omega, recording.thrust_cmd))
+
+
+class _Kernels:
+    """What a subclass names: the configuration class, the kernels and the state layout."""
+
+    name = ""
+    config_class: type = object
+    #: ``kernels()`` -> the module's (reset, update, run, update_rows, estimate)
+    kernels = None
+
+    @staticmethod
+    def shapes(n: int) -> tuple:  # pragma: no cover - every subclass defines it
+        raise NotImplementedError
+
+    n_ints = 1
+
+    @staticmethod
+    def constants(vehicle: Vehicle, config) -> np.ndarray:  # pragma: no cover
+        raise NotImplementedError
+
+    #: index in ``const`` of the command's upper clip [N] (the recording may lift it)
+    fmax_index = 2
+
+    def _setup(self, vehicle, config, num: int) -> None:
+        cls = type(self).__name__
+        if not isinstance(vehicle, Vehicle):
+            raise ConfigError(f"{cls} needs a Vehicle, got {type(vehicle).__name__}")
+        self.vehicle = vehicle
+        self.config = self.config_class() if config is None else config
+        if not isinstance(self.config, self.config_class):
+            raise ConfigError(f"config must be a {self.config_class.__name__}, got "
+                              f"{type(self.config).__name__}")
+        self.n_rotors = vehicle.n_rotors
+        self._eta0_default = per_rotor(self.config.eta0, self.n_rotors,
+                                       f"{self.config_class.__name__}.eta0")
+        self._const = self.constants(vehicle, self.config)
+        self._state = FlatState(self.shapes(self.n_rotors), num, self.n_ints)
+        (self._k_reset, self._k_update, self._k_run, self._k_rows,
+         self._k_estimate) = self.kernels()
+
+    def describe(self) -> dict:
+        """JSON-ready description of the configuration (for sidecars and reports)."""
+        cfg = asdict(self.config)
+        for k, v in cfg.items():
+            if isinstance(v, tuple):
+                cfg[k] = list(v)
+        cfg["eta0"] = self._eta0_default.tolist()
+        return cfg
+
+
+class RecursiveEstimator(_Kernels):
+    """One filter (implements :class:`estimators.base.OnlineEstimator`)."""
+
+    def __init__(self, vehicle: Vehicle, config=None):
+        self._setup(vehicle, config, 1)
+        self._eta = np.empty((1, self.n_rotors))
+        self._sd = np.empty((1, self.n_rotors))
+        self.reset()
+
+    def reset(self, eta0=None) -> None:
+        """Forget everything; start from ``eta0`` (default: the configuration's)."""
+        eta = self._eta0_default if eta0 is None else np.asarray(eta0, dtype=float)
+        if eta.shape != (self.n_rotors,) or not np.all(np.isfinite(eta)):
+            raise ConfigError(f"eta0 must be {self.n_rotors} finite values, got {eta0!r}")
+        st = self._state
+        self._k_reset(self._const, st.offsets, self.n_rotors, st.floats, st.ints, _ROW0,
+                      eta[None])
+
+    def update(self, sample: Sample) -> Estimate:
+        """One sample in (the command it carries is held until the next one); the estimate."""
+        try:
+            t = float(sample.t)
+            arrays = [np.asarray(a, dtype=np.float64) for a in sample[1:]]
+        except (AttributeError, TypeError, ValueError, IndexError):
+            raise ConfigError(f"{self.name}: {sample!r} is not a sample (t, p, v, R, w, f of "
+                              "numbers)") from None
+        shapes = [a.shape for a in arrays]
+        if shapes != [(3,), (3,), (3, 3), (3,), (self.n_rotors,)]:
+            raise ConfigError(f"{self.name}: sample at t = {sample.t} has shapes {shapes}; "
+                              f"expected p, v, w (3,), R (3, 3), f ({self.n_rotors},)")
+        p, v, R, w, f = (np.ascontiguousarray(a) for a in arrays)
+        st = self._state
+        code = self._k_update(t, p, v, R, w, f, self._const, st.offsets, st.floats, st.ints)
+        self._k_estimate(st.offsets, self.n_rotors, st.floats, st.ints, self._eta, self._sd)
+        sd = None if np.isnan(self._sd[0, 0]) else self._sd[0].copy()
+        return Estimate(t=t, eta=self._eta[0].copy(), sd=sd, status=STATUSES[code])
+
+    def run(self, recording: Recording, progress: bool = False) -> EstimateSeries:
+        """Estimates at every row of ``recording`` (the first row is ``warmup``), from the
+        configuration's initial efficiency; the filter is left at the recording's end."""
+        from quadfault.progress import progress_bar
+
+        start = time.perf_counter()
+        t, p, v, R, w, f = recording_arrays(recording, self.n_rotors, self.name)
+        const = self._const.copy()
+        const[self.fmax_index] = command_limit(recording, self.vehicle)
+        self.reset()
+        N, n, st = len(t), self.n_rotors, self._state
+        eta, sd, code = np.empty((N, n)), np.empty((N, n)), np.empty(N, dtype=np.int64)
+        chunk = 50000
+        bar = progress_bar(total=N, desc=self.name, unit="sample",
+                           disable=None if progress else True)
+        for k0 in range(0, N, chunk):
+            k = slice(k0, min(k0 + chunk, N))
+            self._k_run(t[k], p[k], v[k], R[k], w[k], f[k], const, st.offsets, st.floats,
+                        st.ints, eta[k], sd[k], code[k])
+            bar.update(k.stop - k0)
+        bar.close()
+        return EstimateSeries(t=t.copy(), eta=eta, sd=sd, status=np.asarray(STATUSES)[code],
+                              estimator=self.name, config=self.describe(),
+                              seconds=time.perf_counter() - start)
+
+
+class BatchedRecursive(_Kernels):
+    """N filters updated together (one ``prange`` over the single filter's step): row i fed
+    vehicle i's samples gives the single filter's estimates (:mod:`estimators.batched`)."""
+
+    def __init__(self, vehicle: Vehicle, num: int, config=None):
+        from estimators.batched import _check_num
+
+        self._setup(vehicle, config, _check_num(num))
+        self.num = self._state.ints.shape[0]
+        self._code = np.zeros(self.num, dtype=np.int64)
+        self.reset()
+
+    def reset(self, mask=None, eta0=None) -> None:
+        """Forget the rows in ``mask`` (default all); start them from ``eta0`` ((n,) or
+        (N, n), default the configuration's)."""
+        from estimators.batched import _eta_rows, _rows
+
+        rows = _rows(self.num, mask)
+        n = self.n_rotors
+        eta = _eta_rows(self._eta0_default if eta0 is None else eta0, self.num, n)
+        st = self._state
+        self._k_reset(self._const, st.offsets, n, st.floats, st.ints, rows, eta)
+
+    def update(self, t, p, v, R, w, f):
+        """One sample per vehicle; the :class:`estimators.batched.BatchedEstimate`."""
+        from estimators.batched import BatchedEstimate, _check_batch
+
+        n = self.n_rotors
+        t, p, v, R, w, f = _check_batch(self.num, n, t, p, v, R, w, f)
+        st = self._state
+        self._k_rows(t, p, v, R, w, f, self._const, st.offsets, st.floats, st.ints, self._code)
+        eta, sd = np.empty((self.num, n)), np.empty((self.num, n))
+        self._k_estimate(st.offsets, n, st.floats, st.ints, eta, sd)
+        return BatchedEstimate(t.copy(), eta, sd, self._code.copy())
+
+
+__all__ = ["BatchedRecursive", "RecursiveEstimator", "per_rotor", "recording_arrays"]

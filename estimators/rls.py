@@ -1,0 +1,358 @@
+"""Recursive least squares with a forgetting factor (RLS), the estimator INDI controllers fly.
+
+The regression is the IRLS's (:mod:`estimators.residuals`, paper eqs. 13-19): the segment from
+sample k-1 to sample k, its command ``f`` held over ``dt_k``, has the residual
+``r_k(eta) = r0_k + J_k eta``, affine in the efficiencies. RLS uses its velocity rows (the
+thrust, eq. 17) and its rate rows (the moments, eq. 19): ``y = -r0``, regressor rows
+``phi_r^T = J_k[r]``, and fits the ``eta`` minimising the exponentially forgotten weighted sum
+of squares ``sum_i lambda^((t_k - t_i) / 1 ms) sum_r g_r (y_r - phi_r^T eta)^2``. One update
+per sample is the textbook covariance form (Ljung), the rows taken one at a time::
+
+    lambda_k = lambda^(dt_k / 1 ms)                    (per 1 ms step, so any rate works)
+    P  <- P / lambda_k
+    for each row r:
+        g_r = 1 / sum_j c_rj^2,   c_rj = J_k[r, j] / f_j   (row r's sensitivity to rotor j's thrust)
+        e   = y_r - phi_r^T theta
+        k   = P phi_r / (1 / g_r + phi_r^T P phi_r)
+        theta <- theta + k e
+        P   <- P - k phi_r^T P
+
+The weight ``g_r`` is the inverse of the variance a unit, independent noise on every rotor's
+thrust puts on row r: the rows are in the units of the actuator noise, so the yaw-rate row
+(whose signal and noise both scale with the small torque coefficient) counts as much as the
+roll row. With the IRLS's fixed weights instead, the yaw-differential direction is so weakly
+determined that, after an abrupt fault, the forgotten fit over data before and after it
+swings far outside both (docs/estimators.md). The position and rotation rows carry the same
+noise draws as the velocity and rate rows and are left out.
+
+The reported estimate is ``theta`` projected onto ``eta_bounds`` after each update (the
+IRLS's box). The one-sigma ``sd`` is ``sqrt(diag(P) s2)``, ``s2`` the forgotten mean of the
+weighted a-priori residual energy per row: the least-squares covariance with the noise scale
+estimated from the data.
+
+State (n rotors): ``theta`` (n), ``P`` (n x n), the noise scale and the previous sample (time,
+p, v, Omega, R, clipped command): no window and no kinematic states.
+
+Online rules, as the other estimators: a non-finite sample or a time that does not increase is
+``bad_sample`` and the next good sample starts afresh (no segment across the gap; the estimate
+and ``P`` are kept); the first sample is ``warmup``; a segment whose command has an idle rotor
+(``<= IDLE_THRUST``) carries no information on it: the update and the forgetting are skipped
+(``no_excitation``, so ``P`` does not wind up while the motors are off); commands are clipped
+to ``[0, rotor_max_thrust]`` (``run`` lifts the upper clip for an unsaturated flight,
+:func:`estimators.base.command_limit`).
+
+The step is :func:`rls_step` (plain Python compiled by :func:`quadfault.jit.jit`) on one row of a
+flat state; :class:`RecursiveLeastSquares`, its offline ``run`` and :class:`BatchedRLS` (the
+vector environment's) all run it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from estimators.base import STATUS_BAD_SAMPLE, STATUS_NO_EXCITATION, STATUS_OK, STATUS_WARMUP
+from estimators.base import STATUSES
+from estimators.ekf import IDLE_THRUST
+from estimators.recursive import BatchedRecursive, RecursiveEstimator
+from estimators.residuals import RESIDUAL_ROWS, segment_terms_into
+from estimators.state import all_finite, piece, piece_rows
+from quadfault.errors import ConfigError
+from quadfault.jit import jit, prange
+from quadfault.vehicle import Vehicle
+
+#: the sample period the forgetting factor refers to [s]
+FORGETTING_REFERENCE_DT = 1e-3
+
+OK = STATUSES.index(STATUS_OK)
+WARMUP = STATUSES.index(STATUS_WARMUP)
+NO_EXCITATION = STATUSES.index(STATUS_NO_EXCITATION)
+BAD_SAMPLE = STATUSES.index(STATUS_BAD_SAMPLE)
+
+
+@dataclass(frozen=True)
+class RLSConfig:
+    """RLS settings.
+
+    Attributes:
+        forgetting: the forgetting factor lambda per 1 ms step, in (0, 1]; the memory is about
+            ``1 ms / (1 - lambda)`` (0.99: 0.1 s). The tuning knob (``--forgetting``).
+        p0: initial covariance ``p0 * I`` [1].
+        eta0: initial efficiency (one value, or one per rotor).
+        eta_bounds: the box the estimate is projected onto (None: no projection).
+        clip_commands: clip the commanded thrusts to ``[0, rotor_max_thrust]`` (as IRLS).
+    """
+
+    forgetting: float = 0.99
+    p0: float = 1.0
+    eta0: float | tuple = 1.0
+    eta_bounds: tuple | None = (-0.001, 1.001)
+    clip_commands: bool = True
+
+    def __post_init__(self):
+        lam = self.forgetting
+        if isinstance(lam, bool) or not isinstance(lam, (int, float)) \
+                or not (0.0 < lam <= 1.0):
+            raise ConfigError(f"RLSConfig.forgetting must be in (0, 1], got {lam!r}")
+        if isinstance(self.p0, bool) or not isinstance(self.p0, (int, float)) \
+                or not (math.isfinite(self.p0) and self.p0 > 0):
+            raise ConfigError(f"RLSConfig.p0 must be a positive number, got {self.p0!r}")
+        check_bounds("RLSConfig", self.eta_bounds)
+
+    @classmethod
+    def from_options(cls, forgetting: float | None = None) -> RLSConfig:
+        """The configuration of ``quadfault estimate --estimator rls [--forgetting L]``."""
+        return cls() if forgetting is None else cls(forgetting=forgetting)
+
+    def replace(self, **changes) -> RLSConfig:
+        return replace(self, **changes)
+
+
+def check_bounds(owner: str, bounds) -> None:
+    """``bounds`` is None or ``(low, high)`` with ``low < high`` (clean error otherwise)."""
+    if bounds is None:
+        return
+    try:
+        lo, hi = (float(b) for b in bounds)
+    except (TypeError, ValueError):
+        lo = hi = math.nan
+    if not lo < hi:
+        raise ConfigError(f"{owner}.eta_bounds must be (low, high) with low < high, got "
+                          f"{bounds!r}")
+
+
+#: the residual rows RLS uses (estimators.residuals): velocity 0-2, rate 6-8
+ROWS = (0, 1, 2, 6, 7, 8)
+N_ROWS = len(ROWS)
+_ONES = np.ones(RESIDUAL_ROWS)
+
+# pieces of the float state, in order (shapes: _shapes)
+F_THETA, F_P, F_T, F_SAMPLE, F_LAST_F, F_ETA0, F_S2, F_R0, F_J, F_B, F_H, F_PPHI, F_G = range(13)
+N_PIECES = 13
+S_P, S_V, S_W, S_R = 0, 1, 2, 3  # rows of F_SAMPLE (6, 3): p, v, w, then R (rows 3-5)
+K_HAS_LAST, K_UPDATED = 0, 1  # the int state
+# constants: mass, gravity, rotor_max_thrust, clip, lo, hi, p0, ln(lambda) per second, then
+# J (9), J^-1 (9), A (4 n), ones (10: segment_terms_into's weight, its energy is unused)
+C_MASS, C_G, C_FMAX, C_CLIP, C_LO, C_HI, C_P0, C_LOG_LAMBDA, C_J = range(9)
+
+
+def _shapes(n: int) -> tuple:
+    return ((n,), (n, n), (1,), (6, 3), (n,), (n,), (2,), (RESIDUAL_ROWS,),
+            (RESIDUAL_ROWS, n), (n,), (n, n), (n,), (N_ROWS,))
+
+
+def rls_constants(vehicle: Vehicle, cfg: RLSConfig) -> np.ndarray:
+    """The constants of :func:`rls_step` (see the ``C_*`` names)."""
+    b = cfg.eta_bounds
+    lo, hi = (-np.inf, np.inf) if b is None else (float(b[0]), float(b[1]))
+    log_lambda = math.log(cfg.forgetting) / FORGETTING_REFERENCE_DT
+    return np.concatenate([np.asarray(a, dtype=np.float64).ravel() for a in (
+        [vehicle.mass, vehicle.gravity, vehicle.rotor_max_thrust, float(cfg.clip_commands), lo,
+         hi, cfg.p0, log_lambda], vehicle.inertia, vehicle.inertia_inverse, vehicle.allocation,
+        _ONES)])
+
+
+@jit
+def state_pieces(fs, offsets, n, N):
+    """The pieces of the float state of ``N`` filters, each ``(N, *shape)`` (``F_*`` order)."""
+    o = offsets
+    return (piece_rows(fs, o[F_THETA], o[F_THETA + 1], N),
+            piece(fs, o, F_P, (N, n, n)),
+            piece_rows(fs, o[F_T], o[F_T + 1], N),
+            piece(fs, o, F_SAMPLE, (N, 6, 3)),
+            piece_rows(fs, o[F_LAST_F], o[F_LAST_F + 1], N),
+            piece_rows(fs, o[F_ETA0], o[F_ETA0 + 1], N),
+            piece_rows(fs, o[F_S2], o[F_S2 + 1], N),
+            piece_rows(fs, o[F_R0], o[F_R0 + 1], N),
+            piece(fs, o, F_J, (N, RESIDUAL_ROWS, n)),
+            piece_rows(fs, o[F_B], o[F_B + 1], N),
+            piece(fs, o, F_H, (N, n, n)),
+            piece_rows(fs, o[F_PPHI], o[F_PPHI + 1], N),
+            piece_rows(fs, o[F_G], o[F_G + 1], N))
+
+
+@jit
+def rls_step(t, p, v, R, w, f, const, S, ks, i) -> int:
+    """One sample into filter ``i`` of the state ``(S, ks)`` (:func:`state_pieces`), in place;
+    returns the status code (module docstring)."""
+    n = f.shape[0]
+    theta, P, last_t, sample = S[F_THETA][i], S[F_P][i], S[F_T][i], S[F_SAMPLE][i]
+    last_f, s2 = S[F_LAST_F][i], S[F_S2][i]
+    last_p, last_v, last_w, last_R = sample[S_P], sample[S_V], sample[S_W], sample[S_R:]
+    if not (math.isfinite(t) and all_finite(p) and all_finite(v) and all_finite(R)
+            and all_finite(w) and all_finite(f)) \
+            or (ks[i, K_HAS_LAST] == 1 and not t > last_t[0]):
+        ks[i, K_HAS_LAST] = 0  # the next good sample starts afresh
+        return BAD_SAMPLE
+    code = WARMUP
+    if ks[i, K_HAS_LAST] == 1:
+        dt = t - last_t[0]
+        idle = False
+        for j in range(n):
+            idle = idle or last_f[j] <= IDLE_THRUST
+        if idle:
+            code = NO_EXCITATION
+        else:
+            r0, Jr, G = S[F_R0][i], S[F_J][i], const[C_J + 18 + 4 * n:C_J + 28 + 4 * n]
+            A = const[C_J + 18:C_J + 18 + 4 * n].reshape((4, n))
+            segment_terms_into(dt, last_p, p, last_v, v, last_R, R, last_w, w, last_f,
+                               const[C_MASS], const[C_G], const[C_J:C_J + 9].reshape((3, 3)),
+                               const[C_J + 9:C_J + 18].reshape((3, 3)), A, G, r0, Jr,
+                               S[F_B][i], S[F_H][i])
+            lam = math.exp(const[C_LOG_LAMBDA] * dt)
+            g = S[F_G][i]  # the rows' weights
+            energy = 0.0  # the weighted a-priori residual energy, per row
+            for q in range(N_ROWS):
+                r = ROWS[q]
+                c2 = 0.0
+                e = -r0[r]
+                for j in range(n):
+                    c = Jr[r, j] / last_f[j]  # d r / d f_j, the row's sensitivity to rotor j
+                    c2 += c * c
+                    e -= Jr[r, j] * theta[j]
+                g[q] = 1.0 / c2 if c2 > 0.0 else 0.0
+                energy += g[q] * e * e
+            s2[1] = lam * s2[1] + 1.0  # the forgotten sample count, then the mean
+            s2[0] += (energy / N_ROWS - s2[0]) / s2[1]
+            for a in range(n):
+                for b in range(n):
+                    P[a, b] /= lam
+            Pphi = S[F_PPHI][i]
+            for q in range(N_ROWS):
+                r = ROWS[q]
+                if g[q] == 0.0:
+                    continue
+                den = 1.0 / g[q]
+                e = -r0[r]
+                for a in range(n):
+                    acc = 0.0
+                    for b in range(n):
+                        acc += P[a, b] * Jr[r, b]
+                    Pphi[a] = acc
+                    den += Jr[r, a] * acc
+                    e -= Jr[r, a] * theta[a]
+                for a in range(n):
+                    theta[a] += Pphi[a] * (e / den)
+                for a in range(n):  # P - P phi phi^T P / den, symmetric
+                    for b in range(a + 1):
+                        P[a, b] -= Pphi[a] * Pphi[b] / den
+                        P[b, a] = P[a, b]
+            ks[i, K_UPDATED] = 1
+            code = OK
+    last_t[0] = t
+    for a in range(3):
+        last_p[a], last_v[a], last_w[a] = p[a], v[a], w[a]
+        for b in range(3):
+            last_R[a, b] = R[a, b]
+    for j in range(n):
+        last_f[j] = min(max(f[j], 0.0), const[C_FMAX]) if const[C_CLIP] != 0.0 else f[j]
+    ks[i, K_HAS_LAST] = 1
+    return code
+
+
+@jit(inline="always")
+def _estimate_row(S, ks, i, n, eta, sd) -> None:
+    theta, P, s2 = S[F_THETA][i], S[F_P][i], S[F_S2][i]
+    for j in range(n):
+        eta[j] = theta[j]
+        sd[j] = math.sqrt(max(P[j, j] * s2[0], 0.0)) if ks[i, K_UPDATED] == 1 else np.nan
+
+
+@jit
+def rls_estimate(offsets, n, fs, ks, eta, sd) -> None:
+    """Every row's estimate (``theta``, projected onto the box after each update) and its sd
+    (NaN before the first update)."""
+    S = state_pieces(fs, offsets, n, ks.shape[0])
+    for i in range(ks.shape[0]):
+        _estimate_row(S, ks, i, n, eta[i], sd[i])
+
+
+@jit
+def rls_reset(const, offsets, n, fs, ks, rows, eta0) -> None:
+    """Forget the filters ``rows``; start them from ``eta0`` (N, n) with ``P = p0 I``."""
+    N = ks.shape[0]
+    for i in rows:
+        for k in range(ks.shape[1]):
+            ks[i, k] = 0
+        for k in range(N_PIECES):
+            row = piece_rows(fs, offsets[k], offsets[k + 1], N)[i]
+            for a in range(row.shape[0]):
+                row[a] = 0.0
+        theta = piece_rows(fs, offsets[F_THETA], offsets[F_THETA + 1], N)[i]
+        e0 = piece_rows(fs, offsets[F_ETA0], offsets[F_ETA0 + 1], N)[i]
+        P = piece(fs, offsets, F_P, (N, n, n))[i]
+        for j in range(n):
+            theta[j] = eta0[i, j]
+            e0[j] = eta0[i, j]
+            P[j, j] = const[C_P0]
+
+
+@jit(inline="always")
+def _one(t, p, v, R, w, f, const, S, ks, i) -> int:
+    """:func:`rls_step`, then the projection of ``theta`` onto the box."""
+    code = rls_step(t, p, v, R, w, f, const, S, ks, i)
+    if code == OK:
+        theta = S[F_THETA][i]
+        for j in range(f.shape[0]):
+            theta[j] = min(max(theta[j], const[C_LO]), const[C_HI])
+    return code
+
+
+@jit
+def rls_update(t, p, v, R, w, f, const, offsets, fs, ks) -> int:
+    """One sample into the single filter (row 0)."""
+    S = state_pieces(fs, offsets, f.shape[0], ks.shape[0])
+    return _one(t, p, v, R, w, f, const, S, ks, ks.shape[0] - 1)
+
+
+@jit
+def rls_run(t, p, v, R, w, f, const, offsets, fs, ks, eta, sd, code) -> None:
+    """The single filter over the rows of a recording: estimate, sd and status of each row."""
+    n = f.shape[1]
+    S = state_pieces(fs, offsets, n, ks.shape[0])
+    row = ks.shape[0] - 1  # 0, a run-time value like the batch's rows
+    for k in range(t.shape[0]):
+        code[k] = _one(t[k], p[k], v[k], R[k], w[k], f[k], const, S, ks, row)
+        _estimate_row(S, ks, row, n, eta[k], sd[k])
+
+
+@jit(parallel=True)
+def rls_update_rows(t, p, v, R, w, f, const, offsets, fs, ks, code) -> None:
+    """One sample into every row of a batch, in parallel; status codes into ``code``."""
+    N = ks.shape[0]
+    S = state_pieces(fs, offsets, f.shape[1], N)
+    for i in prange(N):
+        code[i] = _one(t[i], p[i], v[i], R[i], w[i], f[i], const, S, ks, np.int64(i))
+
+
+def _kernels():
+    return rls_reset, rls_update, rls_run, rls_update_rows, rls_estimate
+
+
+class _RLS:
+    name = "rls"
+    config_class = RLSConfig
+    kernels = staticmethod(_kernels)
+    shapes = staticmethod(_shapes)
+    n_ints = 2
+    constants = staticmethod(rls_constants)
+    fmax_index = C_FMAX
+
+
+class RecursiveLeastSquares(_RLS, RecursiveEstimator):
+    """RLS with forgetting over the IRLS's segment regression (name ``"rls"``); see the module
+    docstring. Args: ``vehicle`` (the nominal one), ``config`` (:class:`RLSConfig`)."""
+
+    @property
+    def P(self) -> np.ndarray:
+        """The covariance of ``theta`` (n x n) as the filter holds it (``s2`` not applied)."""
+        return self._state.views[F_P][0]
+
+
+class BatchedRLS(_RLS, BatchedRecursive):
+    """N :class:`RecursiveLeastSquares` filters updated together."""
+
+
+__all__ = ["BatchedRLS", "RLSConfig", "RecursiveLeastSquares", "rls_step"]

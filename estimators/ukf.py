@@ -1,0 +1,448 @@
+"""Unscented Kalman filter (UKF) with the motor efficiencies in its state.
+
+State (n rotors, ``L = 6 + n``)::
+
+    x = [v (3, world [m/s]); Omega (3, body [rad/s]); eta (n)]
+
+Why this state: the efficiencies act on the vehicle only through the wrench
+``[T; M] = A diag(f) eta``, which the velocity (thrust, eq. 13) and the body rate (moments,
+eq. 15) integrate over one sample. The attitude is measured far more precisely than the
+filter could predict it and enters the thrust direction only, so the measured ``R`` of the
+previous sample is an input (as in the IRLS's regression), not a state: no rotation in the
+state, no manifold for the sigma points. Position is the integral of the velocity and adds
+no information on ``eta`` that the velocity lacks. The efficiencies are a random walk
+(``eta' = w_eta``, ``w_eta ~ N(0, Q_eta)``), ``Q_eta`` the tuning knob (as the EKF's).
+
+One update per sample, from row k-1 to row k over ``dt_k`` with the command of row k-1 held
+(zero-order hold):
+
+* predict: ``2 L + 1`` sigma points ``x +- sqrt(L + lambda) columns of chol(P)`` (the scaled
+  unscented transform, ``lambda = alpha^2 (L + kappa) - L``; weights ``W_m``, ``W_c``), each
+  propagated by ``v' = v + (g e3 - T(eta) R_{k-1} e3 / m) dt``,
+  ``Omega' = Omega + J^-1 (M(eta) - Omega x J Omega) dt``, ``eta' = eta``; the predicted mean
+  and covariance are their weighted mean and scatter plus ``Q dt``;
+* update with the measured ``z = [v_k; Omega_k]``: the measurement is linear (``H = [I_6 0]``),
+  so the unscented update equals the Kalman update of the predicted moments, done in the
+  square-root form of the optimal gain (as the EKF's): ``S = P_zz + R = L L^T``,
+  ``W = L^-1 P_zx``, ``x += W^T L^-1 (z - x_z)``, ``P -= W^T W``;
+* the efficiencies are clamped to ``eta_bounds`` (the IRLS's box).
+
+Online rules, as the EKF's: a non-finite sample or a time not after the previous one is
+skipped (``bad_sample``); the first sample sets ``v`` and ``Omega`` (``warmup``); a step whose
+command had an idle rotor (``<= IDLE_THRUST``) keeps the efficiencies, decorrelated, their
+variance grown by ``Q_eta dt`` (``no_excitation``); commands are clipped to
+``[0, rotor_max_thrust]`` (``run`` lifts the upper clip for an unsaturated flight).
+
+Process noise is per 1 ms step and scales with ``dt / 1 ms`` (the EKF's convention); the
+kinematic noise values are the EKF's defaults.
+
+The step is :func:`ukf_step` (plain Python compiled by :func:`quadfault.jit.jit`) on one row of a
+flat state; :class:`UnscentedKalmanFilter`, its offline ``run`` and :class:`BatchedUKF` (the
+vector environment's) all run it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from estimators.base import STATUS_BAD_SAMPLE, STATUS_NO_EXCITATION, STATUS_OK, STATUS_WARMUP
+from estimators.base import STATUS_ILL_CONDITIONED, STATUSES
+from estimators.ekf import IDLE_THRUST, NOISE_REFERENCE_DT
+from estimators.linalg import cholesky_into
+from estimators.recursive import BatchedRecursive, RecursiveEstimator
+from estimators.rls import check_bounds
+from estimators.state import all_finite, piece, piece_rows
+from quadfault.errors import ConfigError
+from quadfault.jit import jit, prange
+from quadfault.vehicle import Vehicle
+
+OK = STATUSES.index(STATUS_OK)
+WARMUP = STATUSES.index(STATUS_WARMUP)
+NO_EXCITATION = STATUSES.index(STATUS_NO_EXCITATION)
+BAD_SAMPLE = STATUSES.index(STATUS_BAD_SAMPLE)
+ILL_CONDITIONED = STATUSES.index(STATUS_ILL_CONDITIONED)
+#: the first state index of the efficiencies
+ETA_ = 6
+#: measured rows: v (3), Omega (3)
+M_ = 6
+
+
+@dataclass(frozen=True)
+class UKFConfig:
+    """UKF tuning. Process-noise variances are per 1 ms step and scale with ``dt / 1 ms``.
+
+    Attributes:
+        q_eta: random-walk variance of each efficiency per 1 ms step [1] (the tuning knob,
+            ``--q-eta``; the EKF's default).
+        q_velocity [(m/s)^2], q_rate [(rad/s)^2]: process noise of the kinematic states per
+            1 ms step (the EKF's defaults).
+        r_velocity [(m/s)^2], r_rate [(rad/s)^2]: measurement-noise variances (the EKF's).
+        p0: initial covariance ``p0 * I``.
+        alpha, beta, kappa: the scaled unscented transform's spread, prior-knowledge and
+            secondary scaling parameters (``alpha = 1, kappa = 0``: the sigma points at
+            ``+- sqrt(L)`` standard deviations, the central point's mean weight 0).
+        eta0: initial efficiency (one value for all rotors, or one per rotor).
+        eta_bounds: clamp of the efficiency after each update, or None for no clamp.
+        clip_commands: clip the commanded thrusts to ``[0, rotor_max_thrust]`` (as IRLS).
+    """
+
+    q_eta: float = 0.5
+    q_velocity: float = 1e-3
+    q_rate: float = 1e-4
+    r_velocity: float = 5e-2
+    r_rate: float = 5e-2
+    p0: float = 1e-2
+    alpha: float = 1.0
+    beta: float = 2.0
+    kappa: float = 0.0
+    eta0: float | tuple = 1.0
+    eta_bounds: tuple | None = (-0.001, 1.001)
+    clip_commands: bool = True
+
+    def __post_init__(self):
+        for key in ("q_eta", "q_velocity", "q_rate", "r_velocity", "r_rate", "p0", "alpha"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not (math.isfinite(value) and value > 0):
+                raise ConfigError(f"UKFConfig.{key} must be a positive number, got {value!r}")
+        for key in ("beta", "kappa"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not math.isfinite(value):
+                raise ConfigError(f"UKFConfig.{key} must be a finite number, got {value!r}")
+        check_bounds("UKFConfig", self.eta_bounds)
+
+    def weights(self, n: int) -> tuple[float, float, float, float]:
+        """``(scale, W_m0, W_c0, W_i)`` of ``L = 6 + n`` states: the sigma points are
+        ``x +- scale * columns of chol(P)``."""
+        L = M_ + n
+        lam = self.alpha ** 2 * (L + self.kappa) - L
+        if not L + lam > 0:
+            raise ConfigError(f"UKFConfig: alpha^2 (L + kappa) must be positive for L = {L} "
+                              f"states, got alpha = {self.alpha}, kappa = {self.kappa}")
+        wm0 = lam / (L + lam)
+        return (math.sqrt(L + lam), wm0, wm0 + 1.0 - self.alpha ** 2 + self.beta,
+                0.5 / (L + lam))
+
+    @classmethod
+    def from_options(cls, q_eta: float | None = None) -> UKFConfig:
+        """The configuration of ``quadfault estimate --estimator ukf [--q-eta Q]``."""
+        return cls() if q_eta is None else cls(q_eta=q_eta)
+
+    def replace(self, **changes) -> UKFConfig:
+        return replace(self, **changes)
+
+
+# pieces of the float state, in order (shapes: _shapes)
+(F_X, F_P, F_LAST_T, F_LAST_F, F_LAST_R, F_ETA0, F_KEEP, F_P_KEEP, F_SIGMA, F_CHOL, F_XP,
+ F_PP, F_S, F_SL, F_W, F_Y, F_SHIFT) = range(17)
+N_PIECES = 17
+K_INITIALISED = 0
+# constants: mass, gravity, rotor_max_thrust, clip, lo, hi, p0, scale, W_m0, W_c0, W_i, then
+# A (4 n), J (9), J^-1 (9), qc (L, per second), r (6)
+C_MASS, C_G, C_FMAX, C_CLIP, C_LO, C_HI, C_P0, C_SCALE, C_WM0, C_WC0, C_WI, C_A = range(12)
+
+
+def _shapes(n: int) -> tuple:
+    L = M_ + n
+    return ((L,), (L, L), (1,), (n,), (3, 3), (n,), (n,), (n, n), (2 * L + 1, L), (L, L), (L,),
+            (L, L), (M_, M_), (M_, M_), (M_, L), (M_,), (L,))
+
+
+def ukf_constants(vehicle: Vehicle, cfg: UKFConfig) -> np.ndarray:
+    """The constants of :func:`ukf_step` (see the ``C_*`` names)."""
+    n = vehicle.n_rotors
+    b = cfg.eta_bounds
+    lo, hi = (-np.inf, np.inf) if b is None else (float(b[0]), float(b[1]))
+    q = np.concatenate((np.full(3, cfg.q_velocity), np.full(3, cfg.q_rate), np.full(n, cfg.q_eta)))
+    r = np.concatenate((np.full(3, cfg.r_velocity), np.full(3, cfg.r_rate)))
+    return np.concatenate([np.asarray(a, dtype=np.float64).ravel() for a in (
+        [vehicle.mass, vehicle.gravity, vehicle.rotor_max_thrust, float(cfg.clip_commands), lo,
+         hi, cfg.p0, *cfg.weights(n)], vehicle.allocation, vehicle.inertia,
+        vehicle.inertia_inverse, q / NOISE_REFERENCE_DT, r)])
+
+
+@jit
+def state_pieces(fs, offsets, n, N):
+    """The pieces of the float state of ``N`` filters, each ``(N, *shape)`` (``F_*`` order)."""
+    L = M_ + n
+    o = offsets
+    return (piece_rows(fs, o[F_X], o[F_X + 1], N),
+            piece(fs, o, F_P, (N, L, L)),
+            piece_rows(fs, o[F_LAST_T], o[F_LAST_T + 1], N),
+            piece_rows(fs, o[F_LAST_F], o[F_LAST_F + 1], N),
+            piece(fs, o, F_LAST_R, (N, 3, 3)),
+            piece_rows(fs, o[F_ETA0], o[F_ETA0 + 1], N),
+            piece_rows(fs, o[F_KEEP], o[F_KEEP + 1], N),
+            piece(fs, o, F_P_KEEP, (N, n, n)),
+            piece(fs, o, F_SIGMA, (N, 2 * L + 1, L)),
+            piece(fs, o, F_CHOL, (N, L, L)),
+            piece_rows(fs, o[F_XP], o[F_XP + 1], N),
+            piece(fs, o, F_PP, (N, L, L)),
+            piece(fs, o, F_S, (N, M_, M_)),
+            piece(fs, o, F_SL, (N, M_, M_)),
+            piece(fs, o, F_W, (N, M_, L)),
+            piece_rows(fs, o[F_Y], o[F_Y + 1], N),
+            piece_rows(fs, o[F_SHIFT], o[F_SHIFT + 1], N))
+
+
+@jit(inline="always")
+def _propagate(X, f, R, dt, m, g, A, J, Jinv) -> None:
+    """One sigma point ``X = [v, Omega, eta]`` over ``dt`` with the command ``f`` held and the
+    attitude ``R``, in place (eqs. 13, 15; the efficiencies a random walk)."""
+    n = f.shape[0]
+    T = mo0 = mo1 = mo2 = 0.0  # wrench [T; M] = A diag(eta) f
+    for j in range(n):
+        ef = X[ETA_ + j] * f[j]
+        T += A[0, j] * ef
+        mo0 += A[1, j] * ef
+        mo1 += A[2, j] * ef
+        mo2 += A[3, j] * ef
+    w0, w1, w2 = X[3], X[4], X[5]
+    jw0 = J[0, 0] * w0 + J[0, 1] * w1 + J[0, 2] * w2
+    jw1 = J[1, 0] * w0 + J[1, 1] * w1 + J[1, 2] * w2
+    jw2 = J[2, 0] * w0 + J[2, 1] * w1 + J[2, 2] * w2
+    t0 = mo0 - (w1 * jw2 - w2 * jw1)
+    t1 = mo1 - (w2 * jw0 - w0 * jw2)
+    t2 = mo2 - (w0 * jw1 - w1 * jw0)
+    for a in range(3):
+        X[a] += ((g if a == 2 else 0.0) - T * R[a, 2] / m) * dt
+        X[3 + a] += (Jinv[a, 0] * t0 + Jinv[a, 1] * t1 + Jinv[a, 2] * t2) * dt
+
+
+@jit
+def ukf_step(t, p, v, R, w, f, const, S, ks, i) -> int:
+    """One sample into filter ``i`` of the state ``(S, ks)`` (:func:`state_pieces`), in place;
+    returns the status code (module docstring)."""
+    n = f.shape[0]
+    L = M_ + n
+    x, P, last_t, last_f, last_R = S[F_X][i], S[F_P][i], S[F_LAST_T][i], S[F_LAST_F][i], \
+        S[F_LAST_R][i]
+    if not (math.isfinite(t) and all_finite(p) and all_finite(v) and all_finite(R)
+            and all_finite(w) and all_finite(f)):
+        return BAD_SAMPLE
+    if ks[i, K_INITIALISED] == 0:  # the first sample sets the kinematic states
+        eta0 = S[F_ETA0][i]
+        for a in range(3):
+            x[a], x[3 + a] = v[a], w[a]
+        for j in range(n):
+            x[ETA_ + j] = eta0[j]
+        for a in range(L):
+            for b in range(L):
+                P[a, b] = const[C_P0] if a == b else 0.0
+        ks[i, K_INITIALISED] = 1
+        code = WARMUP
+    else:
+        dt = t - last_t[0]
+        if not dt > 0:
+            return BAD_SAMPLE
+        code = _predict_update(x, P, v, w, last_f, last_R, dt, const, S, i, n)
+        if code == OK:
+            idle = False
+            for j in range(n):
+                idle = idle or last_f[j] <= IDLE_THRUST
+            if idle:  # the efficiencies stay, decorrelated; their variance grows by Q_eta dt
+                keep, P_keep = S[F_KEEP][i], S[F_P_KEEP][i]
+                qc = const[C_A + 4 * n + 18:C_A + 4 * n + 18 + L]
+                for j in range(n):
+                    x[ETA_ + j] = keep[j]
+                    for k in range(ETA_):
+                        P[ETA_ + j, k] = 0.0
+                        P[k, ETA_ + j] = 0.0
+                    for k in range(n):
+                        P[ETA_ + j, ETA_ + k] = P_keep[j, k]
+                    P[ETA_ + j, ETA_ + j] += qc[ETA_ + j] * dt
+                code = NO_EXCITATION
+    last_t[0] = t
+    for a in range(3):
+        for b in range(3):
+            last_R[a, b] = R[a, b]
+    for j in range(n):
+        last_f[j] = min(max(f[j], 0.0), const[C_FMAX]) if const[C_CLIP] != 0.0 else f[j]
+    return code
+
+
+@jit(inline="always")
+def _predict_update(x, P, zv, zw, f, R, dt, const, S, i, n) -> int:
+    """The unscented predict over ``dt`` and the update with ``z = [zv, zw]``, in place;
+    ``ill_conditioned`` (nothing changed) when ``P`` or ``S`` is not positive definite."""
+    L = M_ + n
+    a4 = C_A + 4 * n
+    A = const[C_A:a4].reshape((4, n))
+    J, Jinv = const[a4:a4 + 9].reshape((3, 3)), const[a4 + 9:a4 + 18].reshape((3, 3))
+    qc, r = const[a4 + 18:a4 + 18 + L], const[a4 + 18 + L:a4 + 24 + L]
+    keep, P_keep = S[F_KEEP][i], S[F_P_KEEP][i]
+    for j in range(n):  # the efficiencies before the step (an idle step restores them)
+        keep[j] = x[ETA_ + j]
+        for k in range(n):
+            P_keep[j, k] = P[ETA_ + j, ETA_ + k]
+    X, C, xp, Pp, shift = S[F_SIGMA][i], S[F_CHOL][i], S[F_XP][i], S[F_PP][i], S[F_SHIFT][i]
+    for a in range(L):
+        shift[a] = 0.0
+    if not cholesky_into(P, shift, C, L):
+        return ILL_CONDITIONED
+    scale, wm0, wc0, wi = const[C_SCALE], const[C_WM0], const[C_WC0], const[C_WI]
+    for a in range(L):
+        X[0, a] = x[a]
+    for c in range(L):  # sigma points x +- scale C[:, c]
+        for a in range(L):
+            d = scale * C[a, c] if a >= c else 0.0
+            X[1 + c, a] = x[a] + d
+            X[1 + L + c, a] = x[a] - d
+    m, g = const[C_MASS], const[C_G]
+    for s in range(2 * L + 1):
+        _propagate(X[s], f, R, dt, m, g, A, J, Jinv)
+    for a in range(L):  # predicted mean and covariance
+        acc = wm0 * X[0, a]
+        for s in range(1, 2 * L + 1):
+            acc += wi * X[s, a]
+        xp[a] = acc
+    for s in range(2 * L + 1):
+        for a in range(L):
+            X[s, a] -= xp[a]
+    for a in range(L):
+        for b in range(a + 1):
+            acc = wc0 * X[0, a] * X[0, b]
+            for s in range(1, 2 * L + 1):
+                acc += wi * X[s, a] * X[s, b]
+            Pp[a, b] = acc
+            Pp[b, a] = acc
+        Pp[a, a] += qc[a] * dt
+    # update with z = [v, Omega] (H = [I_6 0]): S = Pp[:6, :6] + R = L L^T, W = L^-1 Pp[:6, :]
+    Sm, SL, W, y = S[F_S][i], S[F_SL][i], S[F_W][i], S[F_Y][i]
+    for a in range(M_):
+        for b in range(M_):
+            Sm[a, b] = Pp[a, b]
+    if not cholesky_into(Sm, r, SL, M_):
+        return ILL_CONDITIONED
+    for a in range(3):
+        y[a] = zv[a] - xp[a]
+        y[3 + a] = zw[a] - xp[3 + a]
+    for a in range(M_):  # forward substitution on W's rows and on y
+        for c in range(L):
+            acc = Pp[a, c]
+            for k in range(a):
+                acc -= SL[a, k] * W[k, c]
+            W[a, c] = acc / SL[a, a]
+        acc = y[a]
+        for k in range(a):
+            acc -= SL[a, k] * y[k]
+        y[a] = acc / SL[a, a]
+    for a in range(L):
+        acc = 0.0
+        for k in range(M_):
+            acc += W[k, a] * y[k]
+        x[a] = xp[a] + acc
+    for a in range(L):  # P = Pp - W^T W
+        for b in range(a + 1):
+            acc = 0.0
+            for k in range(M_):
+                acc += W[k, a] * W[k, b]
+            P[a, b] = Pp[a, b] - acc
+            P[b, a] = P[a, b]
+    for j in range(n):
+        x[ETA_ + j] = min(max(x[ETA_ + j], const[C_LO]), const[C_HI])
+    return OK
+
+
+@jit(inline="always")
+def _estimate_row(S, ks, i, n, eta, sd) -> None:
+    x, P, eta0 = S[F_X][i], S[F_P][i], S[F_ETA0][i]
+    for j in range(n):
+        if ks[i, K_INITIALISED] == 1:
+            eta[j] = x[ETA_ + j]
+            sd[j] = math.sqrt(max(P[ETA_ + j, ETA_ + j], 0.0))
+        else:
+            eta[j] = eta0[j]
+            sd[j] = np.nan
+
+
+@jit
+def ukf_estimate(offsets, n, fs, ks, eta, sd) -> None:
+    """Every row's estimate and sd (``sqrt(diag P)`` of the efficiencies; NaN before the
+    first sample)."""
+    S = state_pieces(fs, offsets, n, ks.shape[0])
+    for i in range(ks.shape[0]):
+        _estimate_row(S, ks, i, n, eta[i], sd[i])
+
+
+@jit
+def ukf_reset(const, offsets, n, fs, ks, rows, eta0) -> None:
+    """Forget the filters ``rows``; the next good sample initialises them, with the
+    efficiencies ``eta0`` (N, n)."""
+    N = ks.shape[0]
+    for i in rows:
+        ks[i, K_INITIALISED] = 0
+        for k in range(N_PIECES):
+            row = piece_rows(fs, offsets[k], offsets[k + 1], N)[i]
+            for a in range(row.shape[0]):
+                row[a] = 0.0
+        e0 = piece_rows(fs, offsets[F_ETA0], offsets[F_ETA0 + 1], N)[i]
+        for j in range(n):
+            e0[j] = eta0[i, j]
+
+
+@jit
+def ukf_update(t, p, v, R, w, f, const, offsets, fs, ks) -> int:
+    """One sample into the single filter (row 0)."""
+    S = state_pieces(fs, offsets, f.shape[0], ks.shape[0])
+    return ukf_step(t, p, v, R, w, f, const, S, ks, ks.shape[0] - 1)
+
+
+@jit
+def ukf_run(t, p, v, R, w, f, const, offsets, fs, ks, eta, sd, code) -> None:
+    """The single filter over the rows of a recording: estimate, sd and status of each row."""
+    n = f.shape[1]
+    S = state_pieces(fs, offsets, n, ks.shape[0])
+    row = ks.shape[0] - 1  # 0, a run-time value like the batch's rows
+    for k in range(t.shape[0]):
+        code[k] = ukf_step(t[k], p[k], v[k], R[k], w[k], f[k], const, S, ks, row)
+        _estimate_row(S, ks, row, n, eta[k], sd[k])
+
+
+@jit(parallel=True)
+def ukf_update_rows(t, p, v, R, w, f, const, offsets, fs, ks, code) -> None:
+    """One sample into every row of a batch, in parallel; status codes into ``code``."""
+    N = ks.shape[0]
+    S = state_pieces(fs, offsets, f.shape[1], N)
+    for i in prange(N):
+        code[i] = ukf_step(t[i], p[i], v[i], R[i], w[i], f[i], const, S, ks, np.int64(i))
+
+
+def _kernels():
+    return ukf_reset, ukf_update, ukf_run, ukf_update_rows, ukf_estimate
+
+
+class _UKF:
+    name = "ukf"
+    config_class = UKFConfig
+    kernels = staticmethod(_kernels)
+    shapes = staticmethod(_shapes)
+    n_ints = 1
+    constants = staticmethod(ukf_constants)
+    fmax_index = C_FMAX
+
+
+class UnscentedKalmanFilter(_UKF, RecursiveEstimator):
+    """UKF over ``[v, Omega, eta]`` (name ``"ukf"``); see the module docstring. Args:
+    ``vehicle`` (the nominal one), ``config`` (:class:`UKFConfig`)."""
+
+    @property
+    def x(self) -> np.ndarray | None:
+        """The state ``[v, Omega, eta]`` (None before the first good sample)."""
+        return self._state.views[F_X][0] if self._state.ints[0, K_INITIALISED] else None
+
+    @property
+    def P(self) -> np.ndarray | None:
+        """The state covariance (None before the first good sample)."""
+        return self._state.views[F_P][0] if self._state.ints[0, K_INITIALISED] else None
+
+
+class BatchedUKF(_UKF, BatchedRecursive):
+    """N :class:`UnscentedKalmanFilter` filters updated together."""
+
+
+__all__ = ["BatchedUKF", "UKFConfig", "UnscentedKalmanFilter", "ukf_step"]
