@@ -6,6 +6,9 @@ Workloads (each on the same cached recording, 80 s of the combined scenario by d
 * ``online`` / ``online_improved``: the single estimator's ``update()``, one sample per call (what
   the environment runs at every physics substep), reference and ``IRLSConfig.improved()``;
 * ``ekf``: ``MotorEfficiencyEKF.run()`` over the whole flight;
+* ``rls`` / ``ukf``: ``RecursiveLeastSquares.run()`` / ``UnscentedKalmanFilter.run()`` over
+  the whole flight; the table then gives each one's CPU time per update relative to the
+  EKF's, measured in the same process;
 * ``batched`` / ``batched_improved``: ``BatchedIRLS.update()`` at N vehicles (default 4096);
 * with ``--cold``: the time of the first call of each workload on a fresh numba cache (compile).
 
@@ -36,7 +39,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-WORKLOADS = ("run", "online", "online_improved", "ekf", "batched", "batched_improved")
+WORKLOADS = ("run", "online", "online_improved", "ekf", "rls", "ukf", "batched",
+             "batched_improved")
 
 
 def cached_flight(scenario: str, duration: float, integrator: str, cache: Path,
@@ -86,6 +90,12 @@ def _workload(name: str, rec, args):
 
         ekf = MotorEfficiencyEKF(veh)
         return len(rec), lambda: ekf.run(rec)
+    if name in ("rls", "ukf"):
+        from estimators.rls import RecursiveLeastSquares
+        from estimators.ukf import UnscentedKalmanFilter
+
+        est = {"rls": RecursiveLeastSquares, "ukf": UnscentedKalmanFilter}[name](veh)
+        return len(rec), lambda: est.run(rec)
     if name.startswith("online"):
         rows = list(samples(rec.slice(0, min(len(rec), args.online_updates + 9))))
         est = SlidingWindowIRLS(veh, cfg)
@@ -185,6 +195,13 @@ def side_by_side(args) -> None:
     _table(res, lambda v: v["wall"], "{:10.0f}")
     print(f"\nupdates per CPU-second, median of {args.repeat}")
     _table(res, lambda v: v["cpu"], "{:10.0f}")
+    if "ekf" in args.only:
+        for k, runs in res.items():
+            ratios = [f"{w} {np.median([r['ekf']['cpu'] / r[w]['cpu'] for r in runs]):.2f}x"
+                      for w in ("rls", "ukf") if w in args.only]
+            if ratios:
+                print(f"\nCPU time per update relative to the EKF ({k}), median of "
+                      f"{args.repeat}: " + ", ".join(ratios))
     if "run" in args.only:
         secs = {k: np.median([r["run"]["seconds"] for r in v]) for k, v in res.items()}
         print("\nrun() of the whole flight: " + ", ".join(f"{k} {s:.2f} s"
