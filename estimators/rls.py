@@ -22,7 +22,7 @@ thrust puts on row r: the rows are in the units of the actuator noise, so the ya
 (whose signal and noise both scale with the small torque coefficient) counts as much as the
 roll row. With the IRLS's fixed weights instead, the yaw-differential direction is so weakly
 determined that, after an abrupt fault, the forgotten fit over data before and after it
-swings far outside both (docs/estimators.md). The position and rotation rows carry the same
+swings far outside both (docs/rls.md). The position and rotation rows carry the same
 noise draws as the velocity and rate rows and are left out.
 
 The reported estimate is ``theta`` projected onto ``eta_bounds`` after each update (the
