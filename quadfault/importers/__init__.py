@@ -6,6 +6,8 @@ One importer per source, each ``import_<name>(path, ...) -> Recording``:
 - :func:`quadfault.importers.nanodrone.import_nanodrone` (Crazyflie 2.1 Brushless, full state)
 - :func:`quadfault.importers.crazypad.import_crazypad` (Crazyflie 2.1, propeller faults)
 - :func:`quadfault.importers.px4_ulog.import_px4_ulog` (any PX4 ULog, needs ``pyulog``)
+- :func:`quadfault.importers.ardupilot.import_ardupilot` (ArduPilot DataFlash ``.bin`` or
+  text ``.log``, needs ``pymavlink``)
 
 The autopilot importers share :mod:`quadfault.importers.field_log` (flight span, validity,
 vehicle assumptions, thrust calibration); :func:`detect_format` tells their logs apart by
@@ -33,6 +35,7 @@ IMPORTERS: dict[str, tuple[str, str]] = {
     "nanodrone": ("quadfault.importers.nanodrone", "import_nanodrone"),
     "crazypad": ("quadfault.importers.crazypad", "import_crazypad"),
     "px4": ("quadfault.importers.px4_ulog", "import_px4_ulog"),
+    "ardupilot": ("quadfault.importers.ardupilot", "import_ardupilot"),
 }
 
 

@@ -98,14 +98,15 @@ def _stamp(data, prefer_sample=False):
 
 # ----------------------------------------------------------------------------------------
 # geometry and motor outputs
-def geometry(params: dict) -> Geometry | None:
+def geometry(params: dict, path="log") -> Geometry | None:
     """Rotor layout from ``CA_ROTOR{i}_PX/PY/KM`` (None without them). Placeholder positions
     (all at unit or zero offsets) are flagged."""
     if "CA_ROTOR0_PX" not in params:
         return None
     count = int(params.get("CA_ROTOR_COUNT", N_MOTORS))
     if count != N_MOTORS:
-        raise ConfigError(f"CA_ROTOR_COUNT is {count}: quadfault imports quadrotors")
+        raise RecordingError(path, f"CA_ROTOR_COUNT is {count}: quadfault imports quadrotors",
+                             key="CA_ROTOR_COUNT")
     xy = [(float(params.get(f"CA_ROTOR{i}_PX", 0.0)), float(params.get(f"CA_ROTOR{i}_PY", 0.0)))
           for i in range(N_MOTORS)]
     km = [float(params.get(f"CA_ROTOR{i}_KM", 0.05)) for i in range(N_MOTORS)]
@@ -269,7 +270,7 @@ def read_px4(path, time_base: str | None = None) -> FieldLog:
     else:
         raise ConfigError(f"time_base must be 'attitude' or 'imu', got {time_base!r}")
     fac = float(params.get("THR_MDL_FAC", 0.0))
-    geo = geometry(params)
+    geo = geometry(params, path)
     if geo is None:
         geo = quad_x("no CA_ROTOR* parameters: PX4 quad X order assumed "
                      f"(SYS_AUTOSTART {int(params.get('SYS_AUTOSTART', 0))})")

@@ -155,3 +155,96 @@ def px4_flight(path, *, outputs: str = "uavcan", invalid_vxy=(8.0, 9.0), motor_r
     write_ulog(path, topics, base,
                nested={"esc_report": [("int32_t", "esc_rpm", 0), ("float", "esc_voltage", 0)]})
     return prof
+
+
+# ----------------------------------------------------------------------------------------
+# ArduPilot DataFlash (binary: 0xA3 0x95 type payload; the FMT messages describe the rest)
+_DF = {  # name: (type id, format, columns)
+    "PARM": (129, "QNf", "TimeUS,Name,Value"),
+    "IMU": (130, "QBffffff", "TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ"),
+    "ATT": (131, "Qfff", "TimeUS,Roll,Pitch,Yaw"),
+    "XKF1": (132, "QBffffff", "TimeUS,C,VN,VE,VD,PN,PE,PD"),
+    "XKF4": (133, "QBI", "TimeUS,C,SS"),
+    "RCOU": (134, "QHHHHHHHH", "TimeUS,C1,C2,C3,C4,C5,C6,C7,C8"),
+    "ESC": (135, "QBi", "TimeUS,Instance,RPM"),
+    "BAT": (136, "QBff", "TimeUS,Instance,Volt,Curr"),
+    "EV": (137, "QB", "TimeUS,Id"),
+}
+_STRUCT = {"Q": "Q", "B": "B", "f": "f", "I": "I", "H": "H", "i": "i", "N": "16s", "n": "4s",
+           "Z": "64s"}
+SS_OK = 0b111111  # attitude, velocities, positions valid
+
+
+def _df_messages(*, rcou_rate, invalid_vxy, params, motor_channels, imu_rate=400.0):
+    """``[(t, name, values)]`` of the synthetic flight."""
+    msgs = [(0.0, "PARM", (k.encode(), float(v))) for k, v in params.items()]
+    for t in np.arange(0.0, T_END, 1.0 / imu_rate):
+        msgs.append((t, "IMU", (0, 0.0, 0.0, 0.0, 0.0, 0.0, -G)))
+        msgs.append((t, "IMU", (1, 9.0, 9.0, 9.0, 9.0, 9.0, 9.0)))  # a second, broken IMU
+    t_pos = np.arange(0.0, T_END, 0.04)
+    pp = flight_profile(t_pos)
+    for k, t in enumerate(t_pos):
+        bad = invalid_vxy is not None and invalid_vxy[0] <= t < invalid_vxy[1]
+        vel = pp["vel"][k] + (np.array([5.0 + t, 0.0, 0.0]) if bad else 0.0)
+        msgs.append((t, "ATT", (0.0, 0.0, 30.0)))
+        msgs.append((t, "XKF1", (0, *vel, *pp["pos"][k])))
+        msgs.append((t, "XKF1", (1, 99.0, 99.0, 99.0, 99.0, 99.0, 99.0)))
+        msgs.append((t, "XKF4", (0, SS_OK & ~0b10 if bad else SS_OK)))
+    t_mot = np.arange(0.0, T_END, 1.0 / rcou_rate)
+    pm = flight_profile(t_mot)
+    for k, t in enumerate(t_mot):
+        pwm = [1000] * 8
+        for i, ch in enumerate(motor_channels):
+            pwm[ch - 1] = int(round(1000 + 1000 * pm["u"][k, i]))
+        msgs.append((t, "RCOU", tuple(pwm)))
+        for i, ch in enumerate(motor_channels):
+            rpm = int(round(pm["u"][k, i] * OMEGA_PER_U * 60 / (2 * np.pi)))
+            msgs.append((t, "ESC", (ch - 1, rpm)))
+    for t in np.arange(0.0, T_END, 0.1):
+        msgs.append((t, "BAT", (0, 16.0 - 0.05 * t, 10.0)))
+    for t, ev in ((2.0, 10), (T_TAKEOFF + 0.5, 28), (T_LAND - 0.5, 18), (T_DISARM, 11)):
+        msgs.append((t, "EV", (ev,)))
+    return sorted(msgs, key=lambda m: m[0])
+
+
+def dataflash_flight(path, *, text: bool = False, rcou_rate: float = 100.0,
+                     invalid_vxy=(8.0, 9.0), params: dict | None = None,
+                     motor_channels=(5, 6, 7, 8), imu_rate: float = 400.0) -> None:
+    """Write the synthetic flight as an ArduPilot DataFlash log: binary, or text with
+    ``text=True``. Motors on ``motor_channels`` (``SERVOn_FUNCTION``), ESC telemetry on
+    the same instances, a broken second IMU and EKF core, velocity flagged invalid on
+    ``invalid_vxy`` [s], land events."""
+    base = {"FRAME_CLASS": 1, "FRAME_TYPE": 1, "MOT_PWM_MIN": 1000, "MOT_PWM_MAX": 2000,
+            "MOT_SPIN_MIN": 0.1, "MOT_SPIN_MAX": 0.95, "MOT_THST_EXPO": 0.5}
+    for i, ch in enumerate(motor_channels):
+        base[f"SERVO{ch}_FUNCTION"] = 33 + i
+    base.update(params or {})
+    msgs = _df_messages(rcou_rate=rcou_rate, invalid_vxy=invalid_vxy, params=base,
+                        motor_channels=motor_channels, imu_rate=imu_rate)
+    if text:
+        lines = ["FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format,Columns"]
+        for name, (tid, fmt, cols) in _DF.items():
+            size = 3 + struct.calcsize("<" + "".join(_STRUCT[c] for c in fmt))
+            lines.append(f"FMT, {tid}, {size}, {name}, {fmt}, {cols}")
+        for t, name, vals in msgs:
+            cells = [str(int(round(t * 1e6)))] + [v.decode() if isinstance(v, bytes) else
+                                                   f"{v:g}" if isinstance(v, float) else str(v)
+                                                   for v in vals]
+            lines.append(f"{name}, " + ", ".join(cells))
+        path.write_text("\n".join(lines) + "\n")
+        return
+    out = bytearray()
+
+    def fmt_msg(tid, name, fmt, cols):
+        size = 3 + struct.calcsize("<" + "".join(_STRUCT[c] for c in fmt))
+        return b"\xa3\x95\x80" + struct.pack("<BB4s16s64s", tid, size, name.encode(),
+                                             fmt.encode(), cols.encode())
+
+    out += fmt_msg(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns")
+    for name, (tid, fmt, cols) in _DF.items():
+        out += fmt_msg(tid, name, fmt, cols)
+    for t, name, vals in msgs:
+        tid, fmt, _ = _DF[name]
+        pack = "<" + "".join(_STRUCT[c] for c in fmt)
+        out += b"\xa3\x95" + bytes([tid]) + struct.pack(pack, int(round(t * 1e6)), *vals)
+    path.write_bytes(bytes(out))

@@ -1,0 +1,130 @@
+"""ArduPilot DataFlash importer on small logs written by the tests (binary from FMT messages,
+and the same flight as a text log): motors on remapped servo channels, a second IMU and EKF
+core, ESC telemetry, invalid-velocity spans, land events, the thrust-curve parameters, and
+one-line errors on bad input."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from quadfault.errors import QuadfaultError
+from tests.support.field_logs import (G, HOVER, OMEGA_PER_U, T_LAND, T_TAKEOFF,
+                                      dataflash_flight)
+
+pytest.importorskip("pymavlink")
+
+
+def _import(path, **kw):
+    from quadfault.importers.ardupilot import import_ardupilot
+
+    return import_ardupilot(path, **kw)
+
+
+@pytest.mark.parametrize("text", [False, True], ids=["bin", "log"])
+def test_dataflash_flight(tmp_path, text):
+    path = tmp_path / ("flight.log" if text else "flight.bin")
+    dataflash_flight(path, text=text)
+    from quadfault.importers import detect_format
+
+    assert detect_format(path) == "ardupilot"
+    rec = _import(path, mass=1.5)
+    # land events: free flight only, take-off and landing cut
+    assert rec.t[0] >= T_TAKEOFF + 0.5 + 1.0 - 1e-6 and rec.t[-1] <= T_LAND - 0.5 - 1.0 + 1e-6
+    assert rec.meta["import"]["flight_span_from"] == "land detector"
+    # motors on SERVO5..8 (Motor1..4), not channels 1-4; IMU and EKF instance 0 only
+    np.testing.assert_allclose(np.median(rec.commands_u, axis=0), HOVER, atol=0.02)
+    np.testing.assert_allclose(rec.accel, np.tile([0, 0, -G], (len(rec), 1)), atol=1e-5)
+    assert np.all(np.abs(rec.position[:, 2] + 1.0) < 1e-6)
+    np.testing.assert_allclose(rec.rotor_speed / rec.commands_u, OMEGA_PER_U, rtol=0.02)
+    # invalid velocity (XKF4 SS bit 1 cleared on 8-9 s) is never written
+    assert not np.any((rec.t > 8.0) & (rec.t < 9.0))
+    assert np.all(np.abs(rec.velocity) < 0.1)
+    # ATT yaw 30 deg
+    from quadfault.rotation import quat_to_rot
+
+    R = quat_to_rot(rec.quaternion)
+    np.testing.assert_allclose(np.degrees(np.arctan2(R[:, 1, 0], R[:, 0, 0])), 30.0, atol=1e-3)
+    # the thrust-curve parameters shape the curve, the scale is calibrated on free flight
+    cal = rec.meta["calibration"]
+    assert "MOT_THST_EXPO = 0.5" in cal["thrust_model"]
+    a, b, c = rec.thrust_curve
+    s0, s1 = 0.1, 0.95
+    x = (0.6 - s0) / (s1 - s0)
+    ref = (a + b * 0.6 + c * 0.36) / (a + b * s1 + c * s1 ** 2)
+    assert ref == pytest.approx(0.5 * x + 0.5 * x * x, rel=1e-4)
+    assert a + b * s0 + c * s0 ** 2 == pytest.approx(0.0, abs=1e-5)
+    sel = (rec.t >= cal["segment"][0]) & (rec.t <= cal["segment"][1])
+    assert rec.thrust_cmd[sel].sum(1).mean() == pytest.approx(1.5 * G, rel=1e-6)
+    assert rec.meta["log_parameters"]["MOT_SPIN_MIN"] == pytest.approx(0.1)
+    assert "geometry" in rec.meta["assumed"]  # ArduPilot logs no arm length
+    assert rec.vbat is not None
+
+
+def test_low_rate_outputs_and_no_land_events(tmp_path):
+    path = tmp_path / "slow.bin"
+    dataflash_flight(path, rcou_rate=10.0, invalid_vxy=None, params={"FRAME_TYPE": 12})
+    rec = _import(path)
+    assert rec.meta["import"]["stream_rates_hz"]["u"] == pytest.approx(10.0, rel=1e-3)
+    # Betaflight X order: rotor 1 rear-right, reacting clockwise (-z)
+    A = rec.vehicle.allocation
+    assert A[2, 0] < 0 and A[1, 0] < 0 and A[3, 0] < 0
+
+
+def test_threshold_span_without_land_events(tmp_path):
+    from quadfault.importers.ardupilot import read_ardupilot
+    from quadfault.importers.field_log import build_recording
+
+    path = tmp_path / "flight.bin"
+    dataflash_flight(path)
+    log = read_ardupilot(path)
+    log.landed = None
+    rec = build_recording(log)
+    assert rec.meta["import"]["flight_span_from"].startswith("mean command above")
+    assert rec.t[0] > T_TAKEOFF and rec.t[-1] < T_LAND
+    assert np.all(rec.commands_u > 0.3)  # no armed idle
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "quadfault.cli", "import", *map(str, args)],
+                          capture_output=True, text=True)
+
+
+@pytest.mark.parametrize("case", ["truncated", "wrong_format", "no_motors", "no_imu",
+                                  "not_a_quad"])
+def test_bad_input_gives_one_line(tmp_path, case):
+    path = tmp_path / "flight.bin"
+    dataflash_flight(path)
+    args = []
+    if case == "truncated":
+        path.write_bytes(path.read_bytes()[:1500])
+    elif case == "wrong_format":
+        path.write_bytes(b"\x00\x01garbage" * 50)
+        args = ["--format", "ardupilot"]
+    elif case == "no_motors":
+        data = path.read_bytes().replace(b"RCOU", b"RCOX")
+        path.write_bytes(data)
+    elif case == "no_imu":
+        path.write_bytes(path.read_bytes().replace(b"IMU\x00", b"IMX\x00"))
+    else:
+        dataflash_flight(path, params={"FRAME_CLASS": 2})
+    res = _cli(path, "--out", tmp_path / "o.csv", *args)
+    assert res.returncode != 0
+    assert res.stderr.count("\n") == 1 and "Traceback" not in res.stderr, res.stderr
+    assert "flight.bin" in res.stderr or "FRAME_CLASS" in res.stderr
+
+
+def test_motors_never_running_is_an_error(tmp_path):
+    from quadfault.importers.ardupilot import read_ardupilot
+    from quadfault.importers.field_log import build_recording
+
+    path = tmp_path / "flight.bin"
+    dataflash_flight(path)
+    log = read_ardupilot(path)
+    ts, u, kind = log.streams["u"]
+    log.streams["u"] = (ts, 0.0 * u, kind)
+    with pytest.raises(QuadfaultError, match="motors never run"):
+        build_recording(log)
