@@ -80,6 +80,8 @@ class Candidate:
             rotor speed (propeller, aerodynamics, the body) leave them unchanged.
         frames: ``((param_key, "world" | "body"), ...)``: reported vector parameters in the
             world or body frame (reported in the recording's own frame).
+        resolvable: the shortest time constant the recording's commands resolve [s] (timing
+            effects; 0: no floor), set by :mod:`~quadfault.diagnosis.identifiability`.
     """
 
     name: str
@@ -97,6 +99,7 @@ class Candidate:
     excludes: tuple = ()
     rotor_side: bool = False
     frames: tuple = ()
+    resolvable: float = 0.0
     on_raw: ClassVar[bool] = False
     uses_thrust: ClassVar[bool] = False
     needs_rate: ClassVar[bool] = False
@@ -220,10 +223,24 @@ class BatteryCandidate(Candidate):
 
 @dataclass(frozen=True)
 class EfficiencyCandidate(Candidate):
+    """Per-rotor thrust factors ``eta``, reported relative to the median rotor: a factor
+    common to every rotor is a calibration (``thrust_scale``, ``thrust_curve``), not damage.
+    With ``absolute`` (thrust calibrated independently, e.g. measured rotor speeds with a
+    known thrust coefficient) the fitted factors are also given as ``eta_absolute``."""
+
+    absolute: bool = False
     keys: ClassVar[tuple] = (("eta", 0, 4),)
 
     def thrust(self, x, rp, f, t, dt):
         return f * np.asarray(x, dtype=float)[None, :]
+
+    def public(self, x, sd, ctx):
+        x, sd = np.asarray(x, dtype=float), np.asarray(sd, dtype=float)
+        ref = max(float(np.median(x)), 1e-9)
+        params, unc = {"eta": (x / ref).tolist()}, {"eta": (sd / ref).tolist()}
+        if self.absolute:
+            params["eta_absolute"], unc["eta_absolute"] = x.tolist(), sd.tolist()
+        return params, unc
 
 
 @dataclass(frozen=True)

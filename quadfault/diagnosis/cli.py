@@ -67,6 +67,9 @@ def run(args) -> int:
         extra = ""
         if res.suspect:
             extra += "; suspect (at a bound): " + ", ".join(e.name for e in res.suspect)
+        if res.not_identifiable:
+            extra += "; not identifiable from this log: " + ", ".join(
+                n["name"] for n in res.not_identifiable)
         frac = res.scoring.get("masked_fraction", 0.0)
         if frac:
             extra += f"; {100 * frac:.0f}% not free flight (excluded)"

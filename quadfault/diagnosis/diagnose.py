@@ -13,6 +13,7 @@ import numpy as np
 from quadfault.diagnosis.crossval import cross_validate, fit_at_bound, fit_bound_mask, folds_of
 from quadfault.diagnosis.feedback import IV_MIN, IV_UNVERIFIED_GAIN
 from quadfault.diagnosis.findings import base_explanation, finding
+from quadfault.diagnosis.identifiability import assumptions, evidence, gate, without_pose
 from quadfault.diagnosis.library import build_library, predict, public_params
 from quadfault.diagnosis.phases import excluded_fraction, flight_phases
 from quadfault.diagnosis.prediction import HORIZONS
@@ -95,9 +96,11 @@ def _explain(step, selected_names, params) -> str:
     if name == "thrust_scale":
         text += " Indistinguishable from motor_efficiency with equal eta (one class)."
     elif name == "motor_efficiency":
-        eta = np.asarray(params["eta"])
-        if np.ptp(eta) < 0.02:
-            text += " The rotors are about equal: the same as thrust_scale (one class)."
+        text += (" eta is relative to the median rotor (a factor common to every rotor is "
+                 "thrust_scale's or thrust_curve's); one flight cannot tell a weak rotor from "
+                 "the vehicle's own imbalance (compare with a flight of the healthy vehicle).")
+        if "eta_absolute" in params:
+            text += " eta_absolute: thrust calibrated by the measured rotor speeds."
     if other in ("delay", "motor_lag") and ratio is not None and ratio < 1.1:
         text += (f" {other} fits almost as well (in-sample SSE ratio {ratio:.2f}): the data "
                  "cannot separate delay from motor_lag (one timing class).")
@@ -132,6 +135,22 @@ def _unexplained(rp, sc, base_res, where) -> bool:
             return True
     z = sc.normalised(base_res) / np.sqrt(sc.weight)  # in noise units
     return bool(where) and float(np.sqrt(np.mean(z * z))) > STRONG_INTERVAL
+
+
+def _valid_pose(rec, ev) -> tuple:
+    """``(recording, spans)``: the recording without a pose that is mostly invalid (an IMU
+    log then), and the spans [s] where the log flags its velocity or position invalid (left
+    out of the diagnosis)."""
+    if not ev.invalid:
+        return rec, []
+    if not ev.pose_valid:
+        if rec.accel is None:
+            raise RecordingError(rec.path or "recording", f"velocity flagged invalid over "
+                                 f"{100 * ev.invalid_fraction:.0f}% of the log and no "
+                                 "accelerometer to diagnose from instead", key="invalid")
+        return without_pose(rec), []
+    why = "velocity or position flagged invalid by the log"
+    return rec, [(a, b, why) for k in ("velocity", "position") for a, b in ev.invalid.get(k, ())]
 
 
 def _scoring_dict(rp, sc, recording, mask_note="") -> dict:
@@ -182,13 +201,16 @@ class Diagnosis:
         rec = recording.without_truth() if isinstance(recording, Recording) else recording
         kw = dict(block_seconds=cfg.block_seconds, gap_factor=cfg.gap_factor,
                   saturate=cfg.saturate, internal_step=cfg.internal_step)
-        rp = prepare(rec, vehicle, **kw)
+        ev = evidence(rec)
+        rec, invalid = _valid_pose(rec, ev)
+        rp = prepare(rec, vehicle, exclude=invalid, **kw)
         mask_note = ""
         if cfg.mask:
             spans = flight_phases(rp)
             if spans:
                 try:
-                    rp = prepare(rec, vehicle, exclude=[s.as_tuple() for s in spans], **kw)
+                    rp = prepare(rec, vehicle, exclude=invalid + [s.as_tuple() for s in spans],
+                                 **kw)
                 except RecordingError:  # too little would be left: keep everything, say so
                     frac = excluded_fraction([s.as_tuple() for s in spans], float(rec.t[0]),
                                              float(rec.t[-1]))
@@ -198,6 +220,7 @@ class Diagnosis:
                                  "too few blocks")
         library = build_library(rp, cfg.effects)
         untestable = [c.name for c in library if not c.testable(rp)]
+        library, not_identifiable = gate(library, ev)
         base_res = rp.measured - predict(rp, [])
         sc = fixed_scoring(rp, base_res, rp.scored)
         sel = select(rp, library, sc, folds=cfg.folds, max_effects=cfg.max_effects,
@@ -280,7 +303,9 @@ class Diagnosis:
         return DiagnosisResult(
             verdict=verdict, baseline_rmse=rmse_b, model_rmse=rmse_a,
             model_improvement=float(model_imp), effects=tuple(effects),
-            untestable=tuple(untestable), where=tuple(where), regimes=tuple(regimes),
+            untestable=tuple(untestable), not_identifiable=tuple(not_identifiable),
+            assumptions=assumptions(ev, [e.name for e in effects]),
+            where=tuple(where), regimes=tuple(regimes),
             prediction={k: v for k, v in prediction.items() if not k.startswith("_")},
             channels=rp.channels, scale=tuple(float(s) for s in sc.noise),
             seconds=float(time.perf_counter() - t_start),

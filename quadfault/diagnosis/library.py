@@ -72,7 +72,8 @@ def build_library(rp: Replay, names=None) -> list[Candidate]:
     lib = [
         cd.EfficiencyCandidate("motor_efficiency", ("eta1 [-]", "eta2 [-]", "eta3 [-]", "eta4 [-]"),
                                (0.2,) * 4, (1.5,) * 4, one4, (one4,), "thrust", 2, affine=True,
-                               excludes=("thrust_scale",)),
+                               excludes=("thrust_scale",),
+                               absolute=rp.has_rotor and rp.rotor_k_source == "sidecar"),
         cd.ScaleCandidate("thrust_scale", ("scale [-]",), (0.5,), (1.5,), (1.0,), ((1.0,),),
                           "thrust", 2, affine=True),
         cd.GroundEffectCandidate("ground_effect", ("rotor_radius^2 [m^2]",), (0.0,), (arm ** 2,),

@@ -94,6 +94,20 @@ def markdown(res: DiagnosisResult, source: str) -> str:
     else:
         L.append("Not available: no free-flight stretch long enough.")
     L += ["", "![prediction](prediction.png)", ""]
+    if res.not_identifiable:
+        L += ["## Not identifiable from this log", "",
+              "Left out before any fit: the log lacks the evidence these effects need.", ""]
+        L += [f"- **{n['name']}**: {n['reason']}" for n in res.not_identifiable]
+        L.append("")
+    if res.assumptions:
+        a = res.assumptions
+        L += ["## Assumed constants", "", f"Note: {a['note']}.", ""]
+        if a.get("depends"):
+            L += [f"- {n} depends on the assumed {' and '.join(v)}"
+                  for n, v in a["depends"].items()]
+        if a.get("independent"):
+            L.append("- independent of them: " + ", ".join(a["independent"]))
+        L.append("")
     if res.untestable:
         L += ["## Untestable", "", "This recording cannot reveal: " + ", ".join(res.untestable)
               + " (they need position, velocity and attitude).", ""]

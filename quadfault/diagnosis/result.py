@@ -81,6 +81,11 @@ class DiagnosisResult:
         model_improvement: 1 - RMS(after)/RMS(before), all channels (weighted), held out.
         effects: accepted effects, most important first.
         untestable: effects this recording cannot reveal.
+        not_identifiable: ``({"name", "reason"}, ...)``: candidates left out before any fit
+            because the log lacks the evidence (channels, rates) they need
+            (:mod:`~quadfault.diagnosis.identifiability`).
+        assumptions: which results depend on an assumed mass or inertia (empty when none is
+            assumed): ``{"assumed", "depends", "independent", "note"}``.
         where: intervals where the nominal model disagrees.
         regimes: per disagreeing channel, the regime variable that explains it best.
         prediction: open-loop multi-step prediction errors (held out), per horizon.
@@ -103,6 +108,8 @@ class DiagnosisResult:
     model_improvement: float
     effects: tuple = ()
     untestable: tuple = ()
+    not_identifiable: tuple = ()
+    assumptions: dict = field(default_factory=dict)
     where: tuple = ()
     regimes: tuple = ()
     prediction: dict = field(default_factory=dict)
@@ -127,6 +134,8 @@ class DiagnosisResult:
             "verdict": self.verdict,
             "baseline": {"rmse": dict(self.baseline_rmse)},
             "untestable": list(self.untestable),
+            "not_identifiable": [dict(n) for n in self.not_identifiable],
+            "assumptions": dict(self.assumptions),
             "where": [{"channel": w.channel, "t0": w.t0, "t1": w.t1, "note": w.note}
                       for w in self.where],
             "effects": [e.to_dict() for e in self.effects],

@@ -45,6 +45,7 @@ from quadfault.diagnosis.crossval import (CrossValidation, cross_validate, fit_a
 from quadfault.diagnosis.feedback import (IV_MIN, IV_UNVERIFIED_GAIN, IV_Z, frozen_replay,
                                           iv_slope)
 from quadfault.diagnosis.fit import Fit, fit
+from quadfault.diagnosis.identifiability import too_short
 from quadfault.diagnosis.library import Candidate, predict
 from quadfault.diagnosis.residuals import Replay
 
@@ -146,7 +147,8 @@ def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, single
                   or _pair(opt, new, singles_cv, kw["min_improvement"])
                   or _feedback(rp, sc, opt, current, x_cur, cur_pred, signal)
                   or _bounds_and_trade(rp, sc, opt, current, new, cur_fit)
-                  or _folds(rp, sc, opt, new))
+                  or _folds(rp, sc, opt, new)
+                  or _rotors_differ(rp, sc, opt, current, x_cur, fl, kw["min_improvement"]))
 
 
 def _held_out(sc, opt, cur_cv, signal, m) -> str:
@@ -195,6 +197,9 @@ def _feedback(rp, sc, opt, current, x_cur, cur_pred, signal) -> str:
 
 
 def _bounds_and_trade(rp, sc, opt, current, new, cur_fit) -> str:
+    short = next((w for w in (too_short(c, opt.fit.x[j]) for j, c in new) if w), "")
+    if short:
+        return short
     if any(fit_at_bound(rp, sc, opt.fit, j) for j, _ in new):
         return "at a bound"
     pushed = [c.name for j, c in enumerate(current) if fit_at_bound(rp, sc, opt.fit, j)]
@@ -210,6 +215,32 @@ def _folds(rp, sc, opt, new) -> str:
         opt.agreement[c.name] = detail
         if not ok:
             return f"{c.name}: the folds disagree ({detail})"
+    return ""
+
+
+#: effects that already carry a thrust factor common to every rotor
+COMMON_THRUST = ("thrust_scale", "thrust_curve", "mass")
+
+
+def _rotors_differ(rp, sc, opt, current, x_cur, fl, m) -> str:
+    """Per-rotor ``motor_efficiency`` only where the rotors differ from each other: its held-out
+    RMS must beat the same model with one factor common to every rotor (``thrust_scale``) by
+    ``m``. A calibration error common to all rotors is not four weak motors."""
+    new = [c for c in opt.cands[len(current):] if c.name == "motor_efficiency"]
+    if not new or any(c.name in COMMON_THRUST for c in opt.cands):
+        return ""
+    from quadfault.diagnosis.library import build_library
+
+    common = build_library(rp, ("thrust_scale",))[0]
+    others = [c for c in opt.cands if c.name != "motor_efficiency"]
+    init = [x for c, x in zip(opt.cands, opt.fit.x) if c.name != "motor_efficiency"]
+    eta = np.asarray(opt.fit.x[list(opt.cands).index(new[0])], dtype=float)
+    f = fit(rp, others + [common], sc.divisor, init=init + [np.array([float(np.mean(eta))])])
+    cv = cross_validate(rp, others + [common], sc, None, fl, full=f)
+    if np.sqrt(opt.cv.sse / max(cv.sse, 1e-300)) > 1.0 - m:
+        return ("the rotors do not differ from each other: one thrust factor common to every "
+                f"rotor (thrust_scale {float(f.x[-1][0]):.3g}) fits the held-out data within "
+                f"{m:.0%}; that is a calibration or thrust-curve error, not per-rotor damage")
     return ""
 
 

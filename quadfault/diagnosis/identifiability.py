@@ -1,0 +1,269 @@
+"""What a recording can identify, decided before any fit.
+
+A candidate effect is fitted only when the recording carries the evidence it needs; the
+others are listed under ``not_identifiable`` with the reason, and no effect is ever accepted
+on evidence the log lacks. Each effect declares its needs (:class:`Needs`): the channels it
+reads and whether it is a time constant of the command path. The rules:
+
+``time constant`` (``motor_lag``, ``delay``)
+    a time constant is seen only through commands logged at two or more samples per time
+    constant: the shortest one a log resolves is two command periods (``TIMING_SAMPLES``).
+    The command period is the median time between changes of the logged rotor commands (an
+    importer that resamples a 10 Hz output onto a 250 Hz time base holds each command for 25
+    rows: the period stays 0.1 s). When two periods exceed half of the candidate's upper
+    bound the effect is not identifiable; otherwise a fitted value below two periods is
+    rejected ("shorter than two command periods").
+``velocity``, ``position`` (``drag``, ``wind``, ``blade_flapping``; ``ground_effect``)
+    position and velocity measured and valid. Spans the recording flags invalid are left
+    out of the diagnosis (:func:`invalid_spans`); when they cover more than
+    ``MAX_INVALID_FRACTION`` of the flight the pose is not used at all (an accelerometer log
+    is diagnosed from its IMU) and these effects are not identifiable.
+``vbat`` (``battery_thrust``)
+    a logged battery voltage.
+
+Invalid spans are read from the sidecar's ``invalid`` object (``{"velocity": [[t0, t1],
+...], "position": [...]}`` [s]) or from 0/1 columns ``velocity_valid`` / ``position_valid``.
+
+The nominal vehicle's mass and inertia may be assumed (the sidecar's ``assumed`` list, e.g.
+``["mass", "inertia"]``): :func:`assumptions` says which results scale with them and which do
+not (ratios between rotors, time constants).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from quadfault.recording import Recording
+
+TIMING_SAMPLES = 2.0
+MAX_INVALID_FRACTION = 0.5
+
+
+@dataclass(frozen=True)
+class Needs:
+    """What one effect needs from a recording to be identified.
+
+    Attributes:
+        channels: recorded quantities it reads (``"velocity"``, ``"position"``, ``"vbat"``).
+        time_constant: its parameter is a time constant of the command path [s] (needs
+            commands logged at ``TIMING_SAMPLES`` per time constant).
+        depends_on: assumed constants (``"mass"``, ``"inertia"``) its fitted value scales
+            with.
+    """
+
+    channels: tuple = ()
+    time_constant: bool = False
+    depends_on: tuple = ()
+
+
+#: each effect's needs (effects not listed need nothing beyond commands and body rates)
+NEEDS = {
+    "motor_lag": Needs(time_constant=True),
+    "delay": Needs(time_constant=True),
+    "drag": Needs(("velocity",), depends_on=("mass",)),
+    "wind": Needs(("velocity",), depends_on=("mass",)),
+    "blade_flapping": Needs(("velocity",), depends_on=("mass", "inertia")),
+    "ground_effect": Needs(("position",)),
+    "battery_thrust": Needs(("vbat",)),
+    "thrust_scale": Needs(depends_on=("mass",)),
+    "thrust_curve": Needs(depends_on=("mass",)),
+    "mass": Needs(depends_on=("mass",)),
+    "inertia": Needs(depends_on=("inertia",)),
+    "com_offset": Needs(depends_on=("mass", "inertia")),
+    "rotor_inertia": Needs(depends_on=("inertia",)),
+    "rate_damping": Needs(depends_on=("inertia",)),
+}
+
+
+def needs(name: str) -> Needs:
+    """The needs of effect ``name``: its own module's ``identifiability`` declaration when it
+    has one, else this module's table."""
+    from quadfault.effects import EFFECTS
+
+    declared = getattr(EFFECTS.get(name), "identifiability", None)
+    if isinstance(declared, Needs):
+        return declared
+    return NEEDS.get(name, Needs())
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """What a recording carries.
+
+    Attributes:
+        command_period: median time between changes of the rotor commands [s] (inf when they
+            never change).
+        sample_period: median row spacing [s].
+        rotor_speed_period: the same for measured rotor speeds [s], or None.
+        pose, accel, vbat: position/velocity/attitude, accelerometer, battery voltage logged.
+        invalid: ``{"velocity": ((t0, t1), ...), ...}`` spans flagged invalid [s].
+        invalid_fraction: fraction of the recording where the velocity is invalid.
+        assumed: nominal constants the recording says are assumed (``"mass"``, ``"inertia"``).
+    """
+
+    command_period: float
+    sample_period: float
+    rotor_speed_period: float | None
+    pose: bool
+    accel: bool
+    vbat: bool
+    invalid: dict
+    invalid_fraction: float
+    assumed: tuple = ()
+
+    @property
+    def shortest_time_constant(self) -> float:
+        """The shortest time constant the logged commands resolve [s]."""
+        return TIMING_SAMPLES * self.command_period
+
+    @property
+    def pose_valid(self) -> bool:
+        return self.pose and self.invalid_fraction <= MAX_INVALID_FRACTION
+
+
+def change_period(t: np.ndarray, x: np.ndarray | None) -> float | None:
+    """Median time between rows where any column of ``x`` changes [s] (inf when fewer than
+    two changes); None without ``x``."""
+    if x is None:
+        return None
+    x = np.asarray(x, dtype=float).reshape(len(t), -1)
+    d = np.diff(x, axis=0)
+    changed = np.flatnonzero(np.any((d != 0) & np.isfinite(d), axis=1)) + 1
+    if changed.size < 3:
+        return float("inf")
+    return float(np.median(np.diff(t[changed])))
+
+
+def _spans_from_column(t, flag) -> tuple:
+    bad = ~(np.asarray(flag, dtype=float) > 0.5)
+    if not bad.any():
+        return ()
+    edges = np.flatnonzero(np.diff(np.r_[0, bad.astype(int), 0]))
+    return tuple((float(t[a]), float(t[min(b, len(t) - 1)])) for a, b in zip(edges[::2],
+                                                                               edges[1::2]))
+
+
+def invalid_spans(rec: Recording) -> dict:
+    """``{"velocity": ((t0, t1), ...), "position": (...)}``: spans [s] the recording flags
+    invalid (sidecar ``invalid`` object, or 0/1 columns ``velocity_valid``/``position_valid``)."""
+    from quadfault.errors import RecordingError
+
+    out = {}
+    declared = (rec.meta or {}).get("invalid") or {}
+    if not isinstance(declared, dict):
+        raise RecordingError(rec.path or "recording", "must be an object {\"velocity\": "
+                             "[[t0, t1], ...]}", key="invalid")
+    for key in ("velocity", "position"):
+        spans = []
+        for s in declared.get(key) or ():
+            try:
+                a, b = (float(v) for v in s)
+            except (TypeError, ValueError):
+                raise RecordingError(rec.path or "recording", f"invalid.{key} must list "
+                                     f"[t0, t1] spans in seconds, got {s!r}",
+                                     key="invalid") from None
+            spans.append((a, b))
+        col = rec.extra.get(f"{key}_valid")
+        if col is not None:
+            spans += list(_spans_from_column(rec.t, col))
+        if spans:
+            out[key] = tuple(sorted(spans))
+    return out
+
+
+def evidence(rec: Recording) -> Evidence:
+    """What ``rec`` carries (:class:`Evidence`)."""
+    from quadfault.diagnosis.phases import excluded_fraction
+    from quadfault.diagnosis.residuals import rotor_speeds
+
+    if not isinstance(rec, Recording):
+        from quadfault.errors import ConfigError
+
+        raise ConfigError(f"diagnosis needs a Recording, got {type(rec).__name__}")
+    t = np.asarray(rec.t, dtype=float)
+    cmd = rec.commands_u if rec.commands_u is not None else rec.thrust_cmd
+    W = rotor_speeds(rec)
+    invalid = invalid_spans(rec) if rec.has_pose else {}
+    spans = [s for k in ("velocity", "position") for s in invalid.get(k, ())]
+    frac = excluded_fraction(spans, float(t[0]), float(t[-1])) if spans else 0.0
+    assumed = (rec.meta or {}).get("assumed") or ()
+    if isinstance(assumed, str):
+        assumed = (assumed,)
+    return Evidence(command_period=change_period(t, cmd),
+                    sample_period=float(np.median(np.diff(t))),
+                    rotor_speed_period=None if W is None else change_period(t, W),
+                    pose=rec.has_pose, accel=rec.accel is not None,
+                    vbat=rec.vbat is not None, invalid=invalid, invalid_fraction=frac,
+                    assumed=tuple(str(a) for a in assumed if a in ("mass", "inertia")))
+
+
+def without_pose(rec: Recording) -> Recording:
+    """``rec`` as an IMU-only log (its pose is not valid)."""
+    return dataclasses.replace(rec, position=None, velocity=None, quaternion=None)
+
+
+def _why_not(cand, ev: Evidence) -> str:
+    need = needs(cand.name)
+    for ch in need.channels:
+        if ch in ("velocity", "position"):
+            if not ev.pose:
+                return f"no {ch} in the log"
+            if not ev.pose_valid:
+                return (f"no valid {ch}: the log flags it invalid over "
+                        f"{100 * ev.invalid_fraction:.0f}% of the flight")
+        if ch == "vbat" and not ev.vbat:
+            return "no battery voltage in the log"
+    if need.time_constant:
+        upper = float(cand.upper[0])
+        if not np.isfinite(ev.command_period):
+            return "the rotor commands never change"
+        if ev.shortest_time_constant > 0.5 * upper:
+            rate = 1.0 / ev.command_period
+            return (f"rotor commands logged at {rate:.3g} Hz resolve no time constant below "
+                    f"{ev.shortest_time_constant:.3g} s ({TIMING_SAMPLES:g} samples per time "
+                    f"constant); the candidate's range ends at {upper:g} s")
+    return ""
+
+
+def gate(library, ev: Evidence) -> tuple[list, list]:
+    """``(candidates to fit, [{"name", "reason"}, ...])``: the timing candidates that stay
+    carry the shortest time constant the commands resolve (``resolvable``)."""
+    keep, out = [], []
+    for c in library:
+        why = _why_not(c, ev)
+        if why:
+            out.append({"name": c.name, "reason": why})
+            continue
+        if needs(c.name).time_constant and ev.shortest_time_constant > 0:
+            c = dataclasses.replace(c, resolvable=float(ev.shortest_time_constant))
+        keep.append(c)
+    return keep, out
+
+
+def too_short(cand, x) -> str:
+    """Why the fitted time constant ``x`` of ``cand`` is below what its commands resolve, or
+    ""."""
+    floor = getattr(cand, "resolvable", 0.0)
+    if floor > 0 and float(np.ravel(x)[0]) < floor:
+        return (f"{cand.name} {float(np.ravel(x)[0]):.3g} s is shorter than {TIMING_SAMPLES:g} "
+                f"command periods ({floor:.3g} s): the log cannot show it")
+    return ""
+
+
+def assumptions(ev: Evidence, names) -> dict:
+    """``{"assumed": [...], "depends": {name: [...]}, "independent": [...], "note"}`` for the
+    effects ``names`` (empty when nothing is assumed)."""
+    if not ev.assumed:
+        return {}
+    dep = {n: [a for a in needs(n).depends_on if a in ev.assumed] for n in names}
+    depends = {n: a for n, a in dep.items() if a}
+    independent = [n for n, a in dep.items() if not a]
+    note = (f"the vehicle's {' and '.join(ev.assumed)} {'are' if len(ev.assumed) > 1 else 'is'} "
+            "assumed: forces, thrust factors and inertia-scaled moments scale with "
+            f"{'them' if len(ev.assumed) > 1 else 'it'}; ratios between rotors "
+            "(motor_efficiency's relative eta) and time constants (motor_lag, delay) do not")
+    return {"assumed": list(ev.assumed), "depends": depends, "independent": independent,
+            "note": note}

@@ -1,0 +1,152 @@
+"""What a log can identify is decided before any fit, from its channels and rates.
+
+Synthetic recordings made here: commands held at 10 Hz (no lag or delay can be seen), a
+velocity the log flags invalid (no drag or wind), a thrust factor common to every rotor
+(``thrust_scale``, never four weak motors) and an assumed mass and inertia.
+"""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from quadfault import effects as fx
+from quadfault.diagnosis import Diagnosis, DiagnosisConfig
+from quadfault.diagnosis.identifiability import change_period, evidence, gate, invalid_spans
+from quadfault.diagnosis.library import build_library
+from quadfault.diagnosis.residuals import prepare
+from quadfault.errors import RecordingError
+from quadfault.scenarios import named_scenario
+from quadfault.simulator import SensorNoise, SimConfig, simulate
+from quadfault.trajectory import Lissajous
+
+DT = 4e-3
+TRAJ = Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.15)
+
+
+def fly(effects=(), seed=1, duration=8.0):
+    sc = named_scenario("nominal", duration, DT).replace(trajectory=TRAJ)
+    cfg = SimConfig(dt=DT, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001))
+    return simulate(sc, config=cfg, seed=seed, effects=tuple(effects),
+                    thrust_noise=0.02).without_truth()
+
+
+def held(rec, rate_hz):
+    """``rec`` with its rotor commands logged at ``rate_hz`` and held in between (what an
+    importer makes of a slow output topic on a faster time base)."""
+    idx = np.searchsorted(rec.t, np.floor(rec.t * rate_hz) / rate_hz, side="left")
+    return dataclasses.replace(rec, thrust_cmd=rec.thrust_cmd[idx])
+
+
+@pytest.fixture(scope="module")
+def plain():
+    return fly()
+
+
+def test_the_command_period_is_the_time_between_changes(plain):
+    assert change_period(plain.t, plain.thrust_cmd) == pytest.approx(DT, rel=0.01)
+    assert change_period(plain.t, held(plain, 10.0).thrust_cmd) == pytest.approx(0.1, rel=0.05)
+    flat = np.ones((len(plain.t), 4))
+    assert change_period(plain.t, flat) == float("inf")
+
+
+def test_commands_at_10_hz_cannot_show_a_lag_or_delay(plain):
+    res = Diagnosis().fit(held(plain, 10.0))
+    skipped = {n["name"]: n["reason"] for n in res.not_identifiable}
+    assert {"motor_lag", "delay"} <= set(skipped)
+    assert "10 Hz" in skipped["motor_lag"] and "0.2 s" in skipped["motor_lag"]
+    fitted = {e.name for e in res.effects + res.suspect + res.rejected}
+    assert not fitted & {"motor_lag", "delay"}
+    doc = res.to_dict()
+    assert {"name": "motor_lag", "reason": skipped["motor_lag"]} in doc["not_identifiable"]
+
+
+def test_a_lag_shorter_than_two_command_periods_is_never_accepted(plain):
+    """At 50 Hz a lag is identifiable from 0.04 s up; the library keeps that floor."""
+    rp = prepare(held(plain, 50.0))
+    lib, skipped = gate(build_library(rp), evidence(held(plain, 50.0)))
+    lag = next(c for c in lib if c.name == "motor_lag")
+    assert lag.resolvable == pytest.approx(0.04, rel=0.05)
+    assert not {"motor_lag", "delay"} & {s["name"] for s in skipped}
+    from quadfault.diagnosis.identifiability import too_short
+
+    assert "shorter than 2 command periods" in too_short(lag, [0.02])
+    assert too_short(lag, [0.06]) == ""
+
+
+@pytest.fixture(scope="module")
+def drag_flight():
+    return fly((fx.Drag(0.3),), seed=2)
+
+
+def test_an_invalid_velocity_gives_no_drag_or_wind(drag_flight):
+    t0, t1 = float(drag_flight.t[0]), float(drag_flight.t[-1])
+    rec = dataclasses.replace(drag_flight, meta={**drag_flight.meta,
+                                                "invalid": {"velocity": [[t0, t1]]}})
+    res = Diagnosis().fit(rec)
+    skipped = {n["name"]: n["reason"] for n in res.not_identifiable}
+    assert {"drag", "wind"} <= set(skipped) and "invalid" in skipped["drag"]
+    assert not {"drag", "wind"} & set(res.effect_names)
+    assert not any(c.startswith("acc_") for c in res.channels)  # diagnosed from the IMU
+    assert any(c.startswith("sf_") for c in res.channels)
+
+
+def test_a_short_invalid_span_is_left_out_and_named(drag_flight):
+    rec = dataclasses.replace(drag_flight, meta={**drag_flight.meta,
+                                                "invalid": {"velocity": [[2.0, 3.0]]}})
+    spans = invalid_spans(rec)
+    assert spans == {"velocity": ((2.0, 3.0),)}
+    rp = prepare(rec, exclude=[(2.0, 3.0, "x")])
+    assert not np.any((rp.block_t > 2.05) & (rp.block_t < 2.95))
+    res = Diagnosis(DiagnosisConfig(effects=("drag",))).fit(rec)
+    reasons = [e["reason"] for e in res.scoring["excluded"]]
+    assert any("flagged invalid" in r for r in reasons)
+    assert "drag" in res.effect_names
+
+
+def test_a_0_1_validity_column_flags_spans_and_a_bad_sidecar_entry_is_one_line(drag_flight):
+    flag = ((drag_flight.t < 1.0) | (drag_flight.t > 1.5)).astype(float)
+    rec = dataclasses.replace(drag_flight, extra={"velocity_valid": flag})
+    (a, b), = invalid_spans(rec)["velocity"]
+    assert a == pytest.approx(1.0, abs=DT) and b == pytest.approx(1.5, abs=2 * DT)
+    bad = dataclasses.replace(drag_flight, meta={"invalid": {"velocity": [["x"]]}})
+    with pytest.raises(RecordingError, match="invalid.velocity"):
+        invalid_spans(bad)
+
+
+@pytest.fixture(scope="module")
+def common_factor():
+    return fly((fx.ThrustScale(0.85),), seed=4)
+
+
+def test_a_common_thrust_factor_is_not_four_weak_motors(common_factor):
+    res = Diagnosis(DiagnosisConfig(effects=("motor_efficiency",))).fit(common_factor)
+    assert "motor_efficiency" not in res.effect_names
+    why = next(e.reason for e in res.rejected + res.suspect if e.name == "motor_efficiency")
+    assert "do not differ" in why and "thrust_scale" in why
+    res = Diagnosis(DiagnosisConfig(effects=("motor_efficiency", "thrust_scale"))).fit(
+        common_factor)
+    assert res.effect_names == ["thrust_scale"]
+    assert res.effects[0].params["scale"] == pytest.approx(0.85, abs=0.02)
+
+
+def test_one_weak_rotor_is_reported_relative_to_the_others():
+    """Every rotor at 0.8 of nominal and rotor 3 at 0.6: a common factor and one rotor 25 %
+    weaker than the others; the efficiency is reported relative to the median rotor."""
+    rec = fly((fx.MotorEfficiency((0.8, 0.8, 0.6, 0.8)),), seed=5)
+    res = Diagnosis(DiagnosisConfig(effects=("motor_efficiency",))).fit(rec)
+    assert res.effect_names == ["motor_efficiency"]
+    np.testing.assert_allclose(res.effects[0].params["eta"], [1.0, 1.0, 0.75, 1.0], atol=0.03)
+    assert "eta_absolute" not in res.effects[0].params
+    assert "relative to the median rotor" in res.effects[0].explanation
+
+
+def test_assumed_mass_and_inertia_say_what_depends_on_them(drag_flight):
+    rec = dataclasses.replace(drag_flight, meta={**drag_flight.meta,
+                                                "assumed": ["mass", "inertia"]})
+    res = Diagnosis(DiagnosisConfig(effects=("drag", "motor_lag"))).fit(rec)
+    a = res.to_dict()["assumptions"]
+    assert a["assumed"] == ["mass", "inertia"]
+    assert a["depends"].get("drag") == ["mass"]
+    assert "time constants" in a["note"] and "ratios between rotors" in a["note"]
+    assert Diagnosis(DiagnosisConfig(effects=("drag",))).fit(drag_flight).assumptions == {}
