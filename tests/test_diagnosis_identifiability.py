@@ -54,15 +54,17 @@ def test_commands_at_10_hz_cannot_show_a_lag_or_delay(plain):
     res = Diagnosis().fit(held(plain, 10.0))
     skipped = {n["name"]: n["reason"] for n in res.not_identifiable}
     assert {"motor_lag", "delay"} <= set(skipped)
-    assert "10 Hz" in skipped["motor_lag"] and "0.2 s" in skipped["motor_lag"]
+    assert "10 Hz" in skipped["motor_lag"] and "needs 20 Hz" in skipped["motor_lag"]
     fitted = {e.name for e in res.effects + res.suspect + res.rejected}
     assert not fitted & {"motor_lag", "delay"}
     doc = res.to_dict()
     assert {"name": "motor_lag", "reason": skipped["motor_lag"]} in doc["not_identifiable"]
+    assert doc["evidence"]["command_rate_hz"] == pytest.approx(10.0, rel=0.05)
 
 
 def test_a_lag_shorter_than_two_command_periods_is_never_accepted(plain):
-    """At 50 Hz a lag is identifiable from 0.04 s up; the library keeps that floor."""
+    """At 50 Hz a lag is identifiable from 0.04 s up (two command periods); at 25 Hz from
+    0.08 s; the library keeps that floor. At 4 Hz no lag is identifiable."""
     rp = prepare(held(plain, 50.0))
     lib, skipped = gate(build_library(rp), evidence(held(plain, 50.0)))
     lag = next(c for c in lib if c.name == "motor_lag")
@@ -72,6 +74,8 @@ def test_a_lag_shorter_than_two_command_periods_is_never_accepted(plain):
 
     assert "shorter than 2 command periods" in too_short(lag, [0.02])
     assert too_short(lag, [0.06]) == ""
+    ev = evidence(held(plain, 25.0))
+    assert ev.shortest_time_constant == pytest.approx(0.08, rel=0.05)
 
 
 @pytest.fixture(scope="module")

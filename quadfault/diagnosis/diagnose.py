@@ -304,7 +304,7 @@ class Diagnosis:
             verdict=verdict, baseline_rmse=rmse_b, model_rmse=rmse_a,
             model_improvement=float(model_imp), effects=tuple(effects),
             untestable=tuple(untestable), not_identifiable=tuple(not_identifiable),
-            assumptions=assumptions(ev, [e.name for e in effects]),
+            assumptions=assumptions(ev, [e.name for e in effects]), evidence=ev.to_dict(),
             where=tuple(where), regimes=tuple(regimes),
             prediction={k: v for k, v in prediction.items() if not k.startswith("_")},
             channels=rp.channels, scale=tuple(float(s) for s in sc.noise),

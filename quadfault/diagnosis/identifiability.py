@@ -2,31 +2,33 @@
 
 A candidate effect is fitted only when the recording carries the evidence it needs; the
 others are listed under ``not_identifiable`` with the reason, and no effect is ever accepted
-on evidence the log lacks. Each effect declares its needs (:class:`Needs`): the channels it
-reads and whether it is a time constant of the command path. The rules:
+on evidence the log lacks. Each effect declares its needs in its own module
+(:class:`quadfault.effects.base.Identifiability`, read through
+:func:`quadfault.effects.registry.identifiability`); this module holds the one gate that reads
+them:
 
-``time constant`` (``motor_lag``, ``delay``)
-    a time constant is seen only through commands logged at two or more samples per time
-    constant: the shortest one a log resolves is two command periods (``TIMING_SAMPLES``).
-    The command period is the median time between changes of the logged rotor commands (an
-    importer that resamples a 10 Hz output onto a 250 Hz time base holds each command for 25
-    rows: the period stays 0.1 s). When two periods exceed half of the candidate's upper
-    bound the effect is not identifiable; otherwise a fitted value below two periods is
-    rejected ("shorter than two command periods").
-``velocity``, ``position`` (``drag``, ``wind``, ``blade_flapping``; ``ground_effect``)
-    position and velocity measured and valid. Spans the recording flags invalid are left
-    out of the diagnosis (:func:`invalid_spans`); when they cover more than
-    ``MAX_INVALID_FRACTION`` of the flight the pose is not used at all (an accelerometer log
-    is diagnosed from its IMU) and these effects are not identifiable.
-``vbat`` (``battery_thrust``)
-    a logged battery voltage.
+``channels`` / ``any_of``
+    the channel groups must be logged (and valid: spans the recording flags invalid are left
+    out of the diagnosis, :func:`invalid_spans`; when they cover more than
+    ``MAX_INVALID_FRACTION`` of the flight the pose is not used at all -- an accelerometer
+    log is then diagnosed from its IMU -- and the effects that need position, velocity or
+    attitude are not identifiable).
+``min_command_rate``
+    the rotor commands must be logged at least this fast -- or, when the effect is shown
+    ``direct``-ly by measured rotor speeds the log has, the rotor speeds. The rate is that of
+    the changes (an importer that resamples a 10 Hz output onto a 250 Hz time base holds each
+    command for 25 rows: the rate stays 10 Hz).
+``timescale``
+    a time constant is seen only through commands logged at ``TIMING_SAMPLES`` (2) or more
+    samples per time constant: a fitted value below two command periods is rejected, and
+    the effect is not identifiable when two periods exceed half of the candidate's range.
 
 Invalid spans are read from the sidecar's ``invalid`` object (``{"velocity": [[t0, t1],
 ...], "position": [...]}`` [s]) or from 0/1 columns ``velocity_valid`` / ``position_valid``.
 
 The nominal vehicle's mass and inertia may be assumed (the sidecar's ``assumed`` list, e.g.
-``["mass", "inertia"]``): :func:`assumptions` says which results scale with them and which do
-not (ratios between rotors, time constants).
+``["mass", "inertia"]``): :func:`assumptions` says which results scale with them
+(:data:`DEPENDS_ON`) and which do not (ratios between rotors, time constants).
 """
 
 from __future__ import annotations
@@ -36,57 +38,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from quadfault.effects.registry import identifiability
 from quadfault.recording import Recording
 
 TIMING_SAMPLES = 2.0
 MAX_INVALID_FRACTION = 0.5
 
-
-@dataclass(frozen=True)
-class Needs:
-    """What one effect needs from a recording to be identified.
-
-    Attributes:
-        channels: recorded quantities it reads (``"velocity"``, ``"position"``, ``"vbat"``).
-        time_constant: its parameter is a time constant of the command path [s] (needs
-            commands logged at ``TIMING_SAMPLES`` per time constant).
-        depends_on: assumed constants (``"mass"``, ``"inertia"``) its fitted value scales
-            with.
-    """
-
-    channels: tuple = ()
-    time_constant: bool = False
-    depends_on: tuple = ()
-
-
-#: each effect's needs (effects not listed need nothing beyond commands and body rates)
-NEEDS = {
-    "motor_lag": Needs(time_constant=True),
-    "delay": Needs(time_constant=True),
-    "drag": Needs(("velocity",), depends_on=("mass",)),
-    "wind": Needs(("velocity",), depends_on=("mass",)),
-    "blade_flapping": Needs(("velocity",), depends_on=("mass", "inertia")),
-    "ground_effect": Needs(("position",)),
-    "battery_thrust": Needs(("vbat",)),
-    "thrust_scale": Needs(depends_on=("mass",)),
-    "thrust_curve": Needs(depends_on=("mass",)),
-    "mass": Needs(depends_on=("mass",)),
-    "inertia": Needs(depends_on=("inertia",)),
-    "com_offset": Needs(depends_on=("mass", "inertia")),
-    "rotor_inertia": Needs(depends_on=("inertia",)),
-    "rate_damping": Needs(depends_on=("inertia",)),
+#: assumed constants each effect's fitted value scales with (effects not listed: none --
+#: time constants, and motor_efficiency's eta relative to the median rotor)
+DEPENDS_ON = {
+    "drag": ("mass",), "wind": ("mass",), "blade_flapping": ("mass", "inertia"),
+    "thrust_scale": ("mass",), "thrust_curve": ("mass",), "mass": ("mass",),
+    "inertia": ("inertia",), "com_offset": ("mass", "inertia"),
+    "rotor_inertia": ("inertia",), "rate_damping": ("inertia",),
 }
-
-
-def needs(name: str) -> Needs:
-    """The needs of effect ``name``: its own module's ``identifiability`` declaration when it
-    has one, else this module's table."""
-    from quadfault.effects import EFFECTS
-
-    declared = getattr(EFFECTS.get(name), "identifiability", None)
-    if isinstance(declared, Needs):
-        return declared
-    return NEEDS.get(name, Needs())
 
 
 @dataclass(frozen=True)
@@ -118,6 +83,21 @@ class Evidence:
     def shortest_time_constant(self) -> float:
         """The shortest time constant the logged commands resolve [s]."""
         return TIMING_SAMPLES * self.command_period
+
+    def to_dict(self) -> dict:
+        """The rates and channels as reported in the diagnosis JSON (``evidence``)."""
+        def hz(period):
+            return None if period is None or not np.isfinite(period) else 1.0 / period
+
+        return {"command_rate_hz": hz(self.command_period),
+                "sample_rate_hz": hz(self.sample_period),
+                "rotor_speed_rate_hz": hz(self.rotor_speed_period),
+                "shortest_time_constant_s": (self.shortest_time_constant
+                                             if np.isfinite(self.command_period) else None),
+                "pose": self.pose, "pose_valid": self.pose_valid,
+                "velocity_invalid_fraction": self.invalid_fraction,
+                "accelerometer": self.accel, "battery": self.vbat,
+                "assumed": list(self.assumed)}
 
     @property
     def pose_valid(self) -> bool:
@@ -205,26 +185,48 @@ def without_pose(rec: Recording) -> Recording:
     return dataclasses.replace(rec, position=None, velocity=None, quaternion=None)
 
 
+def _present(group: str, ev: Evidence) -> str:
+    """Why channel group ``group`` is not usable, or ""."""
+    if group in ("position", "velocity", "attitude"):
+        if not ev.pose:
+            return f"no {group} in the log"
+        if not ev.pose_valid:
+            return (f"no valid {group}: the log flags the velocity or position invalid over "
+                    f"{100 * ev.invalid_fraction:.0f}% of the flight")
+        return ""
+    have = {"accelerometer": ev.accel, "battery": ev.vbat, "body_rate": True,
+            "rotor_speed": ev.rotor_speed_period is not None}
+    names = {"accelerometer": "accelerometer", "battery": "battery voltage",
+             "rotor_speed": "measured rotor speed", "body_rate": "body rates"}
+    return "" if have.get(group, False) else f"no {names.get(group, group)} in the log"
+
+
 def _why_not(cand, ev: Evidence) -> str:
-    need = needs(cand.name)
-    for ch in need.channels:
-        if ch in ("velocity", "position"):
-            if not ev.pose:
-                return f"no {ch} in the log"
-            if not ev.pose_valid:
-                return (f"no valid {ch}: the log flags it invalid over "
-                        f"{100 * ev.invalid_fraction:.0f}% of the flight")
-        if ch == "vbat" and not ev.vbat:
-            return "no battery voltage in the log"
-    if need.time_constant:
-        upper = float(cand.upper[0])
-        if not np.isfinite(ev.command_period):
+    need = identifiability(cand.name)
+    for group in need.channels:
+        why = _present(group, ev)
+        if why:
+            return why
+    if need.any_of and all(_present(g, ev) for g in need.any_of):
+        return "none of " + ", ".join(need.any_of) + " in the log"
+    direct = "rotor_speed" in need.direct and ev.rotor_speed_period is not None
+    if need.min_command_rate is not None:
+        period = ev.command_period
+        if not np.isfinite(period):
             return "the rotor commands never change"
+        if direct:  # rotor speeds show it directly: the faster of the two streams counts
+            period = min(period, ev.rotor_speed_period)
+        if 1.0 / period < need.min_command_rate:
+            return (f"rotor commands logged at {1.0 / ev.command_period:.3g} Hz (needs "
+                    f"{need.min_command_rate:g} Hz" + (")" if not direct else
+                                                      " from the commands or rotor speeds)"))
+    if need.timescale is not None:
+        upper = float(cand.upper[0])
         if ev.shortest_time_constant > 0.5 * upper:
-            rate = 1.0 / ev.command_period
-            return (f"rotor commands logged at {rate:.3g} Hz resolve no time constant below "
-                    f"{ev.shortest_time_constant:.3g} s ({TIMING_SAMPLES:g} samples per time "
-                    f"constant); the candidate's range ends at {upper:g} s")
+            return (f"rotor commands logged at {1.0 / ev.command_period:.3g} Hz resolve no "
+                    f"time constant below {ev.shortest_time_constant:.3g} s ("
+                    f"{TIMING_SAMPLES:g} samples per time constant); the candidate's range "
+                    f"ends at {upper:g} s")
     return ""
 
 
@@ -237,7 +239,7 @@ def gate(library, ev: Evidence) -> tuple[list, list]:
         if why:
             out.append({"name": c.name, "reason": why})
             continue
-        if needs(c.name).time_constant and ev.shortest_time_constant > 0:
+        if identifiability(c.name).timescale and ev.shortest_time_constant > 0:
             c = dataclasses.replace(c, resolvable=float(ev.shortest_time_constant))
         keep.append(c)
     return keep, out
@@ -258,7 +260,7 @@ def assumptions(ev: Evidence, names) -> dict:
     effects ``names`` (empty when nothing is assumed)."""
     if not ev.assumed:
         return {}
-    dep = {n: [a for a in needs(n).depends_on if a in ev.assumed] for n in names}
+    dep = {n: [a for a in DEPENDS_ON.get(n, ()) if a in ev.assumed] for n in names}
     depends = {n: a for n, a in dep.items() if a}
     independent = [n for n, a in dep.items() if not a]
     note = (f"the vehicle's {' and '.join(ev.assumed)} {'are' if len(ev.assumed) > 1 else 'is'} "

@@ -84,6 +84,8 @@ class DiagnosisResult:
         not_identifiable: ``({"name", "reason"}, ...)``: candidates left out before any fit
             because the log lacks the evidence (channels, rates) they need
             (:mod:`~quadfault.diagnosis.identifiability`).
+        evidence: what the log carries (rates of the commands, samples and rotor speeds
+            [Hz], the shortest time constant the commands resolve [s], which channels).
         assumptions: which results depend on an assumed mass or inertia (empty when none is
             assumed): ``{"assumed", "depends", "independent", "note"}``.
         where: intervals where the nominal model disagrees.
@@ -110,6 +112,7 @@ class DiagnosisResult:
     untestable: tuple = ()
     not_identifiable: tuple = ()
     assumptions: dict = field(default_factory=dict)
+    evidence: dict = field(default_factory=dict)
     where: tuple = ()
     regimes: tuple = ()
     prediction: dict = field(default_factory=dict)
@@ -136,6 +139,7 @@ class DiagnosisResult:
             "untestable": list(self.untestable),
             "not_identifiable": [dict(n) for n in self.not_identifiable],
             "assumptions": dict(self.assumptions),
+            "evidence": dict(self.evidence),
             "where": [{"channel": w.channel, "t0": w.t0, "t1": w.t1, "note": w.note}
                       for w in self.where],
             "effects": [e.to_dict() for e in self.effects],
