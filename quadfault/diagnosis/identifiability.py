@@ -26,8 +26,8 @@ them:
 Invalid spans are read from the sidecar's ``invalid`` object (``{"velocity": [[t0, t1],
 ...], "position": [...]}`` [s]) or from 0/1 columns ``velocity_valid`` / ``position_valid``.
 
-The nominal vehicle's mass and inertia may be assumed (the sidecar's ``assumed`` list, e.g.
-``["mass", "inertia"]``): :func:`assumptions` says which results scale with them
+The nominal vehicle's mass, inertia, geometry and yaw coefficient may be assumed (the
+sidecar's ``assumed`` list, e.g. ``["mass", "inertia"]``, written by the importers): :func:`assumptions` says which results scale with them
 (:data:`DEPENDS_ON`) and which do not (ratios between rotors, time constants).
 """
 
@@ -49,9 +49,12 @@ MAX_INVALID_FRACTION = 0.5
 DEPENDS_ON = {
     "drag": ("mass",), "wind": ("mass",), "blade_flapping": ("mass", "inertia"),
     "thrust_scale": ("mass",), "thrust_curve": ("mass",), "mass": ("mass",),
-    "inertia": ("inertia",), "com_offset": ("mass", "inertia"),
-    "rotor_inertia": ("inertia",), "rate_damping": ("inertia",),
+    "inertia": ("inertia", "geometry", "torque_coefficient"),
+    "com_offset": ("mass", "inertia"), "rotor_inertia": ("inertia", "torque_coefficient"),
+    "rate_damping": ("inertia",),
 }
+#: the constants an importer may assume (the sidecar's ``assumed`` list)
+ASSUMABLE = ("mass", "inertia", "geometry", "torque_coefficient")
 
 
 @dataclass(frozen=True)
@@ -177,7 +180,7 @@ def evidence(rec: Recording) -> Evidence:
                     rotor_speed_period=None if W is None else change_period(t, W),
                     pose=rec.has_pose, accel=rec.accel is not None,
                     vbat=rec.vbat is not None, invalid=invalid, invalid_fraction=frac,
-                    assumed=tuple(str(a) for a in assumed if a in ("mass", "inertia")))
+                    assumed=tuple(str(a) for a in assumed if a in ASSUMABLE))
 
 
 def without_pose(rec: Recording) -> Recording:
@@ -263,9 +266,10 @@ def assumptions(ev: Evidence, names) -> dict:
     dep = {n: [a for a in DEPENDS_ON.get(n, ()) if a in ev.assumed] for n in names}
     depends = {n: a for n, a in dep.items() if a}
     independent = [n for n, a in dep.items() if not a]
-    note = (f"the vehicle's {' and '.join(ev.assumed)} {'are' if len(ev.assumed) > 1 else 'is'} "
-            "assumed: forces, thrust factors and inertia-scaled moments scale with "
-            f"{'them' if len(ev.assumed) > 1 else 'it'}; ratios between rotors "
+    many = len(ev.assumed) > 1
+    note = (f"the vehicle's {', '.join(ev.assumed).replace('_', ' ')} "
+            f"{'are' if many else 'is'} assumed: forces, thrust factors and inertia-scaled "
+            f"moments scale with {'them' if many else 'it'}; ratios between rotors "
             "(motor_efficiency's relative eta) and time constants (motor_lag, delay) do not")
     return {"assumed": list(ev.assumed), "depends": depends, "independent": independent,
             "note": note}
