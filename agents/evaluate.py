@@ -93,7 +93,7 @@ def _sb3_setup(spec: AgentSpec):
 
 
 def fly_agent(spec: AgentSpec, scenario, seed: int, config: FlightConfig,
-              env_id: str = "QuadFault-v0") -> Flight:
+              env_id: str = "QuadFault-v1") -> Flight:
     """One flight of ``spec`` through ``scenario`` seeded with ``seed``."""
     if spec.kind == "controller":
         flight = fly(scenario, spec.controller, spec.estimator, seed, config=config)

@@ -1,6 +1,6 @@
 """Environment speed: single-env steps, vector-env steps and resets against N, cold start.
 
-* single env: ``gym.make("QuadFault-v0", estimator=E)`` stepped with the zero residual action
+* single env: ``gym.make("QuadFault-v1", estimator=E)`` stepped with the zero residual action
   (episodes reset when they end), env steps per CPU second of the process and per wall second,
   for E = none and irls;
 * vector env: ``QuadFaultVectorEnv(N, "none", "combined", duration=600)`` stepped with the
@@ -48,7 +48,7 @@ def single(estimators=("none", "irls"), steps: int = 400, repeat: int = 3) -> di
     out = {}
     a = np.zeros(4, dtype=np.float32)
     for est in estimators:
-        env = gym.make("QuadFault-v0", estimator=est)
+        env = gym.make("QuadFault-v1", estimator=est)
         env.reset(seed=0)
         for _ in range(5):  # compile / load the cache, first-step allocations
             env.step(a)
@@ -111,7 +111,7 @@ def cold_start() -> dict:
     from quad_fault_env.vector import QuadFaultVectorEnv
 
     c0 = time.process_time()
-    env = gym.make("QuadFault-v0", estimator="none")
+    env = gym.make("QuadFault-v1", estimator="none")
     env.reset(seed=0)
     env.step(np.zeros(4, dtype=np.float32))
     c1 = time.process_time()

@@ -1,6 +1,6 @@
 """Rendering speed: the time of one ``env.render()`` frame (``render_mode="rgb_array"``).
 
-Part 1 (the user's path): ``gym.make("QuadFault-v0", render_mode="rgb_array")`` (the paper's
+Part 1 (the user's path): ``gym.make("QuadFault-v1", render_mode="rgb_array")`` (the paper's
 circle, IRLS in the loop) flies ``--steps`` control steps with the zero residual action and
 renders after every step; prints the wall time per frame (median and 90th percentile), the
 CPU time per frame of this process, the first frame (figure set-up and the first full draw)
@@ -44,7 +44,7 @@ def user_path(steps: int) -> list:
     import quad_fault_env  # noqa: F401  (registers the ids)
     from quad_fault_env.rendering import frame_state
 
-    env = gym.make("QuadFault-v0", render_mode="rgb_array")
+    env = gym.make("QuadFault-v1", render_mode="rgb_array")
     env.reset(seed=0)
     t0 = time.perf_counter()
     env.render()

@@ -321,7 +321,7 @@ def ppo_rates(n_envs: int, total: int):
         if name == "native":
             env = make_sb3_vec_env(n_envs, seed=0, **kw)
         else:
-            env = make_vec_env(lambda: gym.make("quad_fault_env:QuadFault-v0", **kw),
+            env = make_vec_env(lambda: gym.make("quad_fault_env:QuadFault-v1", **kw),
                                n_envs=n_envs, seed=0, vec_env_cls=SubprocVecEnv)
         model = PPO("MlpPolicy", env, n_steps=128, batch_size=256, n_epochs=1, device="cpu",
                     seed=0)

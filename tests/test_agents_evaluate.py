@@ -67,3 +67,16 @@ def test_cli_duplicate_agent_is_an_error(tmp_path, capsys):
     assert main(["evaluate", "--agents", "geometric", "geometric", "--out",
                  str(tmp_path)]) == 2
     assert "twice" in capsys.readouterr().err
+
+
+def test_evaluate_flies_env_policies_on_current_ids():
+    """``quadfault evaluate`` of an environment policy makes a current id: no deprecation
+    warning of the project's own ``-v0`` ids."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        flights = evaluate([AgentSpec.parse("policy:geometric")], "smoke", [0], duration=0.3)
+    assert len(flights) == 1 and flights[0].metrics
+    assert not [w for w in caught if "out of date" in str(w.message)
+                or "-v0" in str(w.message)], [str(w.message) for w in caught]
