@@ -26,10 +26,6 @@ from scipy import stats
 from quadfault.fileio import atomic_write_text
 
 METRICS = ("spike", "excess_spike", "rmse")
-#: an excess-spike ratio is reported only when the EKF's excess spike exceeds this on every
-#: seed; below it the EKF's transient is within its own noise and the ratio is meaningless
-#: (the difference IRLS - EKF is reported instead, always)
-MIN_EXCESS = 0.01
 
 
 def seeds_of(text: str) -> list[int]:
@@ -77,23 +73,18 @@ def summarise(docs: dict) -> dict:
             if v.name not in first["ratios"][name]:
                 continue
             block = {}
-            for metric in METRICS:
-                vals = [d["ratios"][name][v.name][metric] for d in docs.values()]
+            for metric in METRICS + ("excess_spike_difference",):
+                vals = [d["ratios"][name][v.name].get(metric) for d in docs.values()]
+                if metric == "excess_spike" and all(
+                        d["ratios"][name][v.name].get("excess_spike_difference") is not None
+                        for d in docs.values()) and any(x is None for x in vals):
+                    # the EKF's excess is within its noise on some seed (pairing.MIN_EXCESS)
+                    block[metric] = {"per_seed": vals, "mean": None, "ci95": [None, None]}
+                    continue
                 if any(x is None for x in vals):
                     continue
                 m, lo, hi = interval(vals)
                 block[metric] = {"per_seed": vals, "mean": m, "ci95": [lo, hi]}
-            if "excess_spike" in block:
-                ekf = [mean_or_none(d["scenarios"][name][v.ekf_key]["excess_spike"])
-                       for d in docs.values()]
-                irls = [mean_or_none(d["scenarios"][name][v.irls_key]["excess_spike"])
-                        for d in docs.values()]
-                diff = [a - b for a, b in zip(irls, ekf)]
-                m, lo, hi = interval(diff)
-                block["excess_spike_difference"] = {"per_seed": diff, "mean": m,
-                                                    "ci95": [lo, hi]}
-                if min(ekf) <= MIN_EXCESS:
-                    block["excess_spike"]["mean"] = None  # undefined: see MIN_EXCESS
             for key, label in ((v.irls_key, "irls"), (v.ekf_key, "ekf")):
                 per = [d["scenarios"][name][key] for d in docs.values()]
                 block[label] = {

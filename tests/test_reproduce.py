@@ -120,7 +120,8 @@ def test_quick_reproduce_writes_the_contract_outputs(tmp_path):
     assert per["ekf_improved"]["cli"][-2:] == ["--median", "21"]
     assert doc["config"]["ekf_q_eta_improved"] > 0
     assert set(doc["spike_ratio"]["abrupt"]) == {"paper", "median", "improved"}
-    assert set(doc["ratios"]["abrupt"]["paper"]) == {"spike", "excess_spike", "rmse"}
+    assert set(doc["ratios"]["abrupt"]["paper"]) == {"spike", "excess_spike", "rmse",
+                                                     "excess_spike_difference"}
     cal = doc["config"]["calibration"]["rk4_improved"]
     q_min = cal["curve_q"][int(np.argmin(cal["curve_rmse"]))]
     feasible = [e for q, r, e in zip(cal["curve_q"], cal["curve_rmse"], cal["curve_excess"])

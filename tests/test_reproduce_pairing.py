@@ -101,5 +101,51 @@ def test_pair_ratios():
     r = pair_ratios({"abrupt": per, "degradation": {
         k: {**v, "spike": None, "excess_spike": None} for k, v in per.items()}})
     assert r["abrupt"]["paper"] == pytest.approx({"spike": 0.5, "excess_spike": 0.25,
+                                                  "excess_spike_difference": -0.06,
                                                   "rmse": 0.8})
     assert r["degradation"]["paper"]["spike"] is None
+    assert r["degradation"]["paper"]["excess_spike_difference"] is None
+
+
+def test_excess_ratio_over_an_ekf_excess_within_noise_is_not_a_number(tmp_path):
+    """An EKF whose excess spike is within its noise gives no ratio (the report says n/a, not
+    50x) but the difference IRLS - EKF."""
+    from estimators.paper.pairing import MIN_EXCESS
+    from estimators.paper.report import _ratio_lines, excess_ratio_text
+
+    per = {"irls": {"rmse": [0.02] * 4, "spike": [0.1] * 4, "excess_spike": [0.02] * 4},
+           "ekf": {"rmse": [0.025] * 4, "spike": [0.2] * 4,
+                   "excess_spike": [MIN_EXCESS / 25] * 4}}
+    r = pair_ratios({"combined": per})["combined"]["paper"]
+    assert r["excess_spike"] is None
+    assert r["excess_spike_difference"] == pytest.approx(0.02 - MIN_EXCESS / 25)
+    assert excess_ratio_text(r, "x") == "n/a"
+    assert excess_ratio_text({"excess_spike": None, "excess_spike_difference": None}) == "-"
+    assert excess_ratio_text({"excess_spike": 0.25, "excess_spike_difference": -0.06},
+                             "x") == "0.25x"
+    row = [line for line in _ratio_lines({"combined": {"paper": r}})
+           if line.startswith("| combined | paper |")]
+    assert row == ["| combined | paper | 0.50 | n/a | 0.020 | 0.80 |"]
+
+
+@pytest.mark.parametrize("plot", ["plot_rmse_std", "plot_spikes"])
+def test_bar_figures_label_every_series_once_and_hide_no_bar(plot, monkeypatch, tmp_path):
+    """The bar figures of ``quadfault reproduce``: one legend entry per series, all labels
+    different (each EKF partner named by its IRLS variant), the legend clear of every axes."""
+    from estimators.paper import figures
+
+    keys = ("irls", "ekf", "irls_median", "ekf_median", "irls_improved", "ekf_improved")
+    entry = {"rmse": [0.02] * 4, "std": [0.02] * 4, "spike": [0.1, 0.2, 0.15, 0.12]}
+    scenarios = {n: {k: dict(entry) for k in keys} for n in ("abrupt", "combined")}
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    saved = []
+    monkeypatch.setattr(figures, "atomic_savefig", lambda fig, path, **kw: saved.append(fig))
+    getattr(figures, plot)(tmp_path / "f.png", scenarios)
+    (fig,) = saved
+    (legend,) = fig.legends
+    labels = [t.get_text() for t in legend.get_texts()]
+    assert len(labels) == len(keys) == len(set(labels))
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    box = legend.get_window_extent(renderer)
+    assert not any(box.overlaps(ax.get_window_extent(renderer)) for ax in fig.axes)

@@ -18,19 +18,36 @@ from quadfault.fileio import atomic_savefig
 COLORS = {"irls": "tab:blue", "ekf": "tab:orange", "truth": "tab:red",
           "irls_median": "tab:cyan", "ekf_median": "tab:pink",
           "irls_improved": "tab:green", "ekf_improved": "tab:brown"}
-LABELS = {"irls": "IRLS (proposed)", "ekf": "EKF (its partner)",
-          "irls_median": "IRLS + median 21", "ekf_median": "EKF + median 21 (partner)",
-          "irls_improved": "IRLS improved (ours)", "ekf_improved": "EKF + median 21 (partner)"}
+#: one label per series: the two median-filtered EKFs are different partners (each with the
+#: Q_eta chosen for its IRLS variant)
+LABELS = {"irls": "IRLS (proposed)", "ekf": "EKF (partner of IRLS)",
+          "irls_median": "IRLS + median 21",
+          "ekf_median": "EKF + median 21 (partner of IRLS + median)",
+          "irls_improved": "IRLS improved (ours)",
+          "ekf_improved": "EKF + median 21 (partner of IRLS improved)"}
 ORDER = ("irls", "ekf", "irls_median", "ekf_median", "irls_improved", "ekf_improved")
+
+
+DPI = 120
 
 
 def _present(d: dict) -> list[str]:
     return [k for k in ORDER if k in d]
-DPI = 120
 
 
 def _save(fig, path, force):
     fig.tight_layout()
+    atomic_savefig(fig, path, force=force, dpi=DPI)
+    plt.close(fig)
+
+
+def _save_with_legend_below(fig, ax, path, force):
+    """Save with ``ax``'s legend under the axes, where it hides no bar."""
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 3), fontsize=8,
+               frameon=False)
+    rows = -(-len(labels) // 3)
+    fig.tight_layout(rect=(0, 0.045 * rows + 0.02, 1, 1))
     atomic_savefig(fig, path, force=force, dpi=DPI)
     plt.close(fig)
 
@@ -86,7 +103,7 @@ def plot_rmse_std(path, scenarios: dict, force: bool = False):
     x = np.arange(len(names))
     ests = _present(scenarios[names[0]]) if names else []
     width = 0.76 / max(len(ests), 1)
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.6))
     for ax, key, label in ((axes[0], "rmse", "RMSE"), (axes[1], "std", "std. dev.")):
         for i, est in enumerate(ests):
             vals = [np.mean(scenarios[n][est][key]) for n in names]
@@ -95,14 +112,13 @@ def plot_rmse_std(path, scenarios: dict, force: bool = False):
         ax.set_xticks(x, names)
         ax.set_ylabel(label)
         ax.grid(axis="y", alpha=0.3)
-    axes[0].legend(fontsize=8)
-    _save(fig, path, force)
+    _save_with_legend_below(fig, axes[0], path, force)
 
 
 def plot_spikes(path, scenarios: dict, force: bool = False):
     """Per-motor max spike in the other motors' fault windows (the paper's Fig. 7)."""
     names = [n for n in scenarios if scenarios[n]["irls"]["spike"] is not None]
-    fig, axes = plt.subplots(1, max(len(names), 1), figsize=(4.2 * max(len(names), 1), 3.8),
+    fig, axes = plt.subplots(1, max(len(names), 1), figsize=(4.2 * max(len(names), 1), 4.6),
                              squeeze=False)
     x = np.arange(4)
     for ax, name in zip(axes[0], names):
@@ -116,8 +132,7 @@ def plot_spikes(path, scenarios: dict, force: bool = False):
         ax.set_title(name)
         ax.set_ylabel("max |error| in others' windows")
         ax.grid(axis="y", alpha=0.3)
-    axes[0][0].legend(fontsize=8)
-    _save(fig, path, force)
+    _save_with_legend_below(fig, axes[0][0], path, force)
 
 
 def plot_calibration(path, calibrations: dict, force: bool = False):

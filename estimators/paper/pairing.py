@@ -30,6 +30,11 @@ from estimators.metrics import mean_or_none, score
 from quadfault.errors import ConfigError
 from quadfault.recording import Recording
 
+#: an excess-spike ratio IRLS / EKF is defined only when the EKF's motor-averaged excess spike
+#: exceeds this [1]: below it the EKF's transient is within its own noise and a ratio over it
+#: is meaningless (the difference IRLS - EKF, ``excess_spike_difference``, is always given)
+MIN_EXCESS = 0.01
+
 
 @dataclass(frozen=True)
 class Variant:
@@ -213,7 +218,9 @@ def run_pair(recording: Recording, variant: Variant, q_eta: float) -> dict:
 
 def pair_ratios(scenarios: dict, variants=VARIANTS) -> dict:
     """Per scenario and variant, IRLS / EKF of the motor-averaged ``spike``,
-    ``excess_spike`` and ``rmse`` (``None`` where undefined)."""
+    ``excess_spike`` and ``rmse`` (``None`` where undefined: no fault windows, or for
+    ``excess_spike`` an EKF excess spike of at most :data:`MIN_EXCESS`), and
+    ``excess_spike_difference``, IRLS - EKF (``None`` without fault windows)."""
     out = {}
     for name, per in scenarios.items():
         block = {}
@@ -226,11 +233,15 @@ def pair_ratios(scenarios: dict, variants=VARIANTS) -> dict:
                 x = float(np.mean(a[key])) if key == "rmse" else mean_or_none(a[key])
                 y = float(np.mean(b[key])) if key == "rmse" else mean_or_none(b[key])
                 r[key] = x / y if x is not None and y else None
+                if key == "excess_spike":
+                    r["excess_spike_difference"] = None if x is None or y is None else x - y
+                    if y is not None and y <= MIN_EXCESS:
+                        r[key] = None
             block[v.name] = r
         if block:
             out[name] = block
     return out
 
 
-__all__ = ["VARIANTS", "PartnerResult", "Variant", "choose_partner", "ekf_point",
+__all__ = ["MIN_EXCESS", "VARIANTS", "PartnerResult", "Variant", "choose_partner", "ekf_point",
            "irls_target", "pair_ratios", "run_pair", "shared_scan"]

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from estimators.paper.pairing import pair_ratios
-from estimators.paper.report import STATIC_FIGURES, table, write_report
+from estimators.paper.report import STATIC_FIGURES, excess_ratio_text, table, write_report
 from quadfault.errors import ConfigError
 
 SCENARIOS = ("degradation", "abrupt", "combined", "clipping")
@@ -376,9 +376,10 @@ def run(args) -> int:
           f"integrator rk4, EKF Q_eta = {doc['config']['ekf_q_eta']:.4g})")
     print(table(doc["scenarios"]))
     for name, per in doc["ratios"].items():
-        print(f"IRLS/EKF {name}: " + "; ".join(
-            f"{v} spike {r['spike']:.2f}x, excess {r['excess_spike']:.2f}x, RMSE {r['rmse']:.2f}x"
-            for v, r in per.items() if r["spike"] is not None))
+        pairs = [f"{v} spike {r['spike']:.2f}x, excess {excess_ratio_text(r, 'x')}, "
+                 f"RMSE {r['rmse']:.2f}x" for v, r in per.items() if r["spike"] is not None]
+        if pairs:
+            print(f"IRLS/EKF {name}: " + "; ".join(pairs))
     bad = [f"{n} ({m})" for m, key in (("rk4", "flights"), ("reference", "reference_mode_flights"))
            for n, fl in doc.get(key, {}).items() if fl["diverged"]]
     if bad:
