@@ -15,9 +15,17 @@ Cache: numba's on-disk cache checks only the source file of the function it comp
 kernels call compiled functions of other modules, so after an update that changes only a
 callee (a ``git pull`` in an editable install) numba would load a stale caller with the old
 callee inlined: wrong numbers or a crash. :func:`configure_cache` points ``NUMBA_CACHE_DIR``
-at ``<user cache>/quadfault-numba/<hash>``, the hash being that of every module that uses
-this decorator, so any change to any of them starts a fresh cache. It does nothing when the
-user set ``NUMBA_CACHE_DIR`` themselves or when no writable cache directory exists.
+at a folder named after the hash of every module that uses this decorator, so any change to
+any of them starts a fresh cache: ``quadfault-<hash>`` inside the user's own
+``NUMBA_CACHE_DIR`` when they set one, else ``<user cache>/quadfault-numba/<hash>``
+(``$XDG_CACHE_HOME`` or ``~/.cache``), else, when that is not writable either, a folder of the
+temporary directory. Never the package's own folder, which may be read-only (a system-wide
+install).
+
+The first compile: numba compiles a kernel the first time it runs, unless the cache holds it.
+When it does compile one of ours and stderr is a terminal, one line says so, once per process
+("compiling kernels, once per install ..."): a first run takes a minute or more, later runs
+load the kernels from the cache in a fraction of a second.
 """
 
 from __future__ import annotations
@@ -26,6 +34,7 @@ import contextlib
 import hashlib
 import os
 import sys
+import tempfile
 import types
 import warnings
 from pathlib import Path
@@ -35,7 +44,16 @@ PACKAGES = ("quadfault", "estimators", "quad_fault_env", "agents")
 #: a module whose source mentions one of these is hashed into the cache key
 _MARKERS = (b"quadfault.jit", b"numba")
 
+#: environment variables of :func:`configure_cache`: the ``NUMBA_CACHE_DIR`` it set and the
+#: user's own before it, so that a child process (of these or of other sources) does not take
+#: the one for the other
+_CONFIGURED, _USERS = "QUADFAULT_NUMBA_CACHE", "QUADFAULT_NUMBA_CACHE_USER"
+#: the one-line notice of a first compile (:func:`_compile_notice`)
+COMPILE_NOTICE = ("quadfault: compiling kernels, once per install (a minute or two; later "
+                  "runs load them from the cache{where})")
+
 _warned = False
+_noticed = False
 _INTERPRETED: dict = {}  # (kernel id, replacements) -> its interpreted form
 _numba_module = False  # not looked up yet
 
@@ -48,8 +66,48 @@ def _numba():
             import numba
         except ImportError:  # pragma: no cover - exercised only without numba
             numba = None
+        else:
+            _listen_for_compiles(numba)
         _numba_module = numba
     return _numba_module
+
+
+def _ours(dispatcher) -> bool:
+    module = getattr(getattr(dispatcher, "py_func", None), "__module__", None) or ""
+    return module.split(".")[0] in PACKAGES
+
+
+def _compile_notice(stream=None) -> bool:
+    """Print :data:`COMPILE_NOTICE` to ``stream`` (stderr) once per process, when it is a
+    terminal; return whether it was printed."""
+    global _noticed
+    stream = stream or sys.stderr
+    if _noticed or not getattr(stream, "isatty", lambda: False)():
+        return False
+    _noticed = True
+    cache = os.environ.get("NUMBA_CACHE_DIR")
+    print(COMPILE_NOTICE.format(where=f" in {cache}" if cache else ""), file=stream,
+          flush=True)
+    return True
+
+
+def _listen_for_compiles(numba) -> None:
+    """Call :func:`_compile_notice` when numba starts compiling one of our kernels: its
+    ``numba:compile`` event fires on a cache miss only, never when a kernel is loaded."""
+    try:
+        from numba.core import event
+    except ImportError:  # pragma: no cover - a numba without the event API
+        return
+
+    class _FirstCompile(event.Listener):
+        def on_start(self, ev):
+            if not _noticed and _ours((ev.data or {}).get("dispatcher")):
+                _compile_notice()
+
+        def on_end(self, ev):
+            pass
+
+    event.register("numba:compile", _FirstCompile())
 
 
 def __getattr__(name):
@@ -214,24 +272,45 @@ def _user_cache() -> Path:
     return Path(base) / "quadfault-numba"
 
 
+def cache_candidates(digest: str) -> list[Path]:
+    """Where the cache of sources ``digest`` may go, in order of preference (see the module
+    docstring)."""
+    user = _users_cache_dir()
+    uid = os.getuid() if hasattr(os, "getuid") else "user"
+    return ([Path(user) / f"quadfault-{digest}"] if user else []) + [
+        _user_cache() / digest, Path(tempfile.gettempdir()) / f"quadfault-numba-{uid}" / digest]
+
+
+def _users_cache_dir() -> str:
+    """The user's own ``NUMBA_CACHE_DIR`` ("" if none), also in a child process of one that
+    ran :func:`configure_cache`."""
+    value = os.environ.get("NUMBA_CACHE_DIR", "")
+    if value and value == os.environ.get(_CONFIGURED):
+        return os.environ.get(_USERS, "")
+    return value
+
+
+def _writable(folder: Path) -> bool:
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return False
+    return os.access(folder, os.W_OK | os.X_OK)
+
+
 def configure_cache() -> str | None:
     """Set ``NUMBA_CACHE_DIR`` for this process (see the module docstring); return it, or
-    None when left alone."""
-    if os.environ.get("NUMBA_CACHE_DIR"):
+    None when no candidate folder is writable (numba's own choice then stands)."""
+    target = next((c for c in cache_candidates(sources_digest()) if _writable(c)), None)
+    if target is None:
         return None
-    target = _user_cache() / sources_digest()
-    try:
-        target.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return None
-    if not os.access(target, os.W_OK):
-        return None
-    os.environ["NUMBA_CACHE_DIR"] = str(target)
+    os.environ[_USERS] = _users_cache_dir()
+    os.environ["NUMBA_CACHE_DIR"] = os.environ[_CONFIGURED] = str(target)
     config = sys.modules.get("numba.core.config")
     if config is not None:  # numba was imported first: make it read the variable again
         config.reload_config()
     return str(target)
 
 
-__all__ = ["AVAILABLE", "jit", "prange", "python", "typed_list", "set_threads", "threads",
-           "configure_cache", "sources_digest"]
+__all__ = ["AVAILABLE", "COMPILE_NOTICE", "jit", "prange", "python", "typed_list",
+           "set_threads", "threads", "cache_candidates", "configure_cache", "sources_digest"]

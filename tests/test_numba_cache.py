@@ -30,28 +30,108 @@ def test_digest_changes_with_any_compiled_source(tmp_path):
     assert jit.sources_digest(tmp_path) != d0
 
 
-def test_configure_sets_a_per_version_directory_and_respects_the_user(tmp_path, monkeypatch):
-    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
-    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+@pytest.fixture
+def clean_env(monkeypatch):
+    """No cache variables of the user's or of a parent's configure_cache."""
+    for name in ("NUMBA_CACHE_DIR", jit._CONFIGURED, jit._USERS):
+        monkeypatch.delenv(name, raising=False)
     monkeypatch.delitem(sys.modules, "numba.core.config", raising=False)
+    return monkeypatch
+
+
+def test_configure_sets_a_per_version_directory(tmp_path, clean_env):
+    clean_env.setenv("XDG_CACHE_HOME", str(tmp_path))
     got = jit.configure_cache()
     assert got == str(tmp_path / "quadfault-numba" / jit.sources_digest())
     assert os.environ["NUMBA_CACHE_DIR"] == got and Path(got).is_dir()
-    monkeypatch.setenv("NUMBA_CACHE_DIR", "/somewhere/of/mine")
-    assert jit.configure_cache() is None
-    assert os.environ["NUMBA_CACHE_DIR"] == "/somewhere/of/mine"
 
 
-def test_configure_leaves_numba_alone_without_a_writable_cache(tmp_path, monkeypatch):
-    if os.geteuid() == 0:
-        pytest.skip("root can write anywhere")
-    ro = tmp_path / "ro"
-    ro.mkdir()
-    ro.chmod(0o500)
-    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
-    monkeypatch.setenv("XDG_CACHE_HOME", str(ro))
-    assert jit.configure_cache() is None
-    assert "NUMBA_CACHE_DIR" not in os.environ
+def test_a_users_numba_cache_dir_is_honoured(tmp_path, clean_env):
+    """The cache goes inside the user's NUMBA_CACHE_DIR, one folder per source version; a
+    child process (which inherits the variable) uses the same folder, and one of other
+    sources (another checkout) gets its own folder inside the user's, not the parent's."""
+    mine = tmp_path / "mine"
+    clean_env.setenv("NUMBA_CACHE_DIR", str(mine))
+    got = jit.configure_cache()
+    assert got == str(mine / f"quadfault-{jit.sources_digest()}")
+    assert os.environ["NUMBA_CACHE_DIR"] == got
+    assert jit.configure_cache() == got  # a child of the same sources: not nested again
+    clean_env.setattr(jit, "sources_digest", lambda root=None: "0123456789abcdef")
+    assert jit.configure_cache() == str(mine / "quadfault-0123456789abcdef")
+
+
+@pytest.mark.skipif(os.name != "posix", reason="POSIX user id in the folder name")
+def test_an_unwritable_cache_falls_back_to_the_temporary_directory(tmp_path, clean_env):
+    blocked = tmp_path / "a-file"  # no folder can be made below a file (not even by root)
+    blocked.write_text("")
+    clean_env.setenv("XDG_CACHE_HOME", str(blocked))
+    clean_env.setattr(jit.tempfile, "tempdir", str(tmp_path / "tmp"))
+    got = jit.configure_cache()
+    assert got == str(tmp_path / "tmp" / f"quadfault-numba-{os.getuid()}" / jit.sources_digest())
+    # nothing writable at all: numba's own choice stands
+    clean_env.setattr(jit.tempfile, "tempdir", str(blocked))
+    clean_env.delenv("NUMBA_CACHE_DIR")
+    assert jit.configure_cache() is None and "NUMBA_CACHE_DIR" not in os.environ
+
+
+def _run_on_a_terminal(code: str, env: dict) -> tuple[int, str]:
+    """Run ``python -c code`` with stderr on a pseudo-terminal; its exit code and stderr."""
+    import pty
+    import subprocess
+
+    master, slave = pty.openpty()
+    try:
+        proc = subprocess.run([sys.executable, "-c", code], env=env, stdout=subprocess.PIPE,
+                              stderr=slave, timeout=300)
+    finally:
+        os.close(slave)
+    out = b""
+    while True:
+        try:
+            chunk = os.read(master, 65536)
+        except OSError:  # EIO: the terminal has no more to read
+            break
+        if not chunk:
+            break
+        out += chunk
+    os.close(master)
+    return proc.returncode, out.decode(errors="replace")
+
+
+@pytest.mark.skipif(os.name != "posix", reason="needs a POSIX pseudo-terminal")
+def test_read_only_install_caches_in_the_user_folder_and_notices_the_first_compile(tmp_path):
+    """A read-only copy of the package (a system-wide install): the kernels are cached in the
+    user's cache folder, never beside the sources; the first run, which compiles, says so in
+    one line on the terminal, the second, which loads them, says nothing."""
+    install = tmp_path / "site"
+    shutil.copytree(ROOT / "quadfault", install / "quadfault",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    for path in sorted(install.rglob("*"), reverse=True) + [install]:
+        path.chmod(0o555 if path.is_dir() else 0o444)
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("NUMBA_CACHE_DIR", jit._CONFIGURED, jit._USERS)}
+    env.update(PYTHONPATH=str(install), XDG_CACHE_HOME=str(tmp_path / "cache"))
+    code = ("import numpy as np; from quadfault.rotation import dot3; "
+            "assert dot3(np.ones(3), np.ones(3)) == 3.0")
+    try:
+        first, second = _run_on_a_terminal(code, env), _run_on_a_terminal(code, env)
+    finally:
+        for path in [install] + sorted(install.rglob("*")):
+            path.chmod(0o755 if path.is_dir() else 0o644)
+    assert first[0] == 0 and second[0] == 0, (first, second)
+    notices = [line for line in first[1].splitlines() if "compiling kernels" in line]
+    assert len(notices) == 1 and "once per install" in notices[0], first[1]
+    assert "compiling kernels" not in second[1], second[1]
+    assert list((tmp_path / "cache" / "quadfault-numba").rglob("*.nbi"))
+    assert not list(install.rglob("*.nbi"))
+
+
+def test_no_notice_when_stderr_is_not_a_terminal(monkeypatch):
+    import io
+
+    monkeypatch.setattr(jit, "_noticed", False)
+    quiet = io.StringIO()
+    assert jit._compile_notice(quiet) is False and quiet.getvalue() == ""
 
 
 def test_jit_compiles_and_falls_back_to_python(monkeypatch):
