@@ -253,3 +253,40 @@ def test_ardupilot_logs_import_or_say_what_is_missing(path):
         return
     assert np.median(rec.commands_u) > 0.1
     assert -1.3 * G < np.median(rec.accel[:, 2]) < -0.7 * G
+
+
+@pytest.mark.parametrize("path", _autopilot_logs(["*/*.bbl", "*/*.BBL", "*/*.bfl", "*/*.BFL"]),
+                         ids=lambda p: p.name)
+def test_blackbox_logs_decode_cleanly_and_import(path):
+    from quadfault.importers import detect_format, get_importer
+    from quadfault.importers.blackbox_format import decode_log, split_logs
+
+    assert detect_format(path) == "blackbox"
+    data = path.read_bytes()
+    for a, b in split_logs(data):
+        log = decode_log(data, a, b)
+        t = log.field("time")
+        assert log.corrupt <= 0.001 * len(log.main) and np.all(np.diff(t) > 0)
+    rec = get_importer("blackbox")(path)
+    assert -1.3 * G < np.median(rec.accel[:, 2]) < -0.7 * G  # FRD: specific force points up
+    assert np.median(rec.commands_u) > 0.1
+    if rec.rotor_speed is not None:  # the rotors spin faster when commanded more
+        level = rec.commands_u.mean(axis=1)
+        w = np.nanmean(rec.rotor_speed, axis=1)
+        high = level > np.median(level)
+        assert np.nanmean(w[high]) > np.nanmean(w[~high])
+    if rec.has_pose:  # the attitude agrees with the gyro (body rates from dq/dt, FRD)
+        from quadfault.rotation import quat_multiply
+
+        q = rec.quaternion
+        dq = np.gradient(q, rec.t, axis=0)
+        w_q = 2 * quat_multiply(q * np.array([1, -1, -1, -1]), dq)[:, 1:]
+        k = np.ones(25) / 25  # gyro noise: compare 50 ms means, on the axes that move
+
+        def smooth(x):
+            return np.convolve(x, k, mode="same")
+
+        moving = [i for i in range(3) if np.std(rec.omega[:, i]) > 0.1]
+        assert moving
+        for i in moving:
+            assert np.corrcoef(smooth(w_q[:, i]), smooth(rec.omega[:, i]))[0, 1] > 0.8

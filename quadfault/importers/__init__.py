@@ -8,6 +8,8 @@ One importer per source, each ``import_<name>(path, ...) -> Recording``:
 - :func:`quadfault.importers.px4_ulog.import_px4_ulog` (any PX4 ULog, needs ``pyulog``)
 - :func:`quadfault.importers.ardupilot.import_ardupilot` (ArduPilot DataFlash ``.bin`` or
   text ``.log``, needs ``pymavlink``)
+- :func:`quadfault.importers.blackbox.import_blackbox` (Betaflight / INDIflight blackbox
+  ``.bfl``/``.bbl`` or its decoded CSV; quadfault's own decoder)
 
 The autopilot importers share :mod:`quadfault.importers.field_log` (flight span, validity,
 vehicle assumptions, thrust calibration); :func:`detect_format` tells their logs apart by
@@ -36,6 +38,7 @@ IMPORTERS: dict[str, tuple[str, str]] = {
     "crazypad": ("quadfault.importers.crazypad", "import_crazypad"),
     "px4": ("quadfault.importers.px4_ulog", "import_px4_ulog"),
     "ardupilot": ("quadfault.importers.ardupilot", "import_ardupilot"),
+    "blackbox": ("quadfault.importers.blackbox", "import_blackbox"),
 }
 
 

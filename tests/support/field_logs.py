@@ -248,3 +248,186 @@ def dataflash_flight(path, *, text: bool = False, rcou_rate: float = 100.0,
         pack = "<" + "".join(_STRUCT[c] for c in fmt)
         out += b"\xa3\x95" + bytes([tid]) + struct.pack(pack, int(round(t * 1e6)), *vals)
     path.write_bytes(bytes(out))
+
+
+# ----------------------------------------------------------------------------------------
+# Betaflight blackbox: an encoder of the format (the inverse of the importer's decoder)
+def _uvb(v: int) -> bytes:
+    v &= 0xFFFFFFFF
+    out = bytearray()
+    while v >= 0x80:
+        out.append((v & 0x7F) | 0x80)
+        v >>= 7
+    out.append(v)
+    return bytes(out)
+
+
+def _svb(v: int) -> bytes:
+    return _uvb((v << 1) ^ (v >> 31))
+
+
+def _fits(v: int, bits: int) -> bool:
+    return -(1 << (bits - 1)) <= v < (1 << (bits - 1))
+
+
+def _tag2_3s32(vals) -> bytes:
+    if all(_fits(v, 2) for v in vals):
+        return bytes([((vals[0] & 3) << 4) | ((vals[1] & 3) << 2) | (vals[2] & 3)])
+    if all(_fits(v, 4) for v in vals):
+        return bytes([0x40 | (vals[0] & 0xF), ((vals[1] & 0xF) << 4) | (vals[2] & 0xF)])
+    if all(_fits(v, 6) for v in vals):
+        return bytes([0x80 | (vals[0] & 0x3F), vals[1] & 0x3F, vals[2] & 0x3F])
+    sel, body = 0, bytearray()
+    for i, v in enumerate(vals):
+        n = next(n for n in (1, 2, 3, 4) if _fits(v, 8 * n))
+        sel |= (n - 1) << (2 * i)
+        body += (v & ((1 << (8 * n)) - 1)).to_bytes(n, "little")
+    return bytes([0xC0 | sel]) + bytes(body)
+
+
+def _tag8_4s16(vals) -> bytes:
+    sel, nibbles = 0, []
+    for i, v in enumerate(vals):
+        if v == 0:
+            code = 0
+        elif _fits(v, 4):
+            code, nibbles = 1, nibbles + [v & 0xF]
+        elif _fits(v, 8):
+            code, nibbles = 2, nibbles + [(v >> 4) & 0xF, v & 0xF]
+        else:
+            code, nibbles = 3, nibbles + [(v >> s) & 0xF for s in (12, 8, 4, 0)]
+        sel |= code << (2 * i)
+    if len(nibbles) % 2:
+        nibbles.append(0)
+    return bytes([sel]) + bytes((a << 4) | b for a, b in zip(nibbles[::2], nibbles[1::2]))
+
+
+def _tag8_8svb(vals) -> bytes:
+    if len(vals) == 1:
+        return _svb(vals[0])
+    head = sum(1 << i for i, v in enumerate(vals) if v != 0)
+    return bytes([head]) + b"".join(_svb(v) for v in vals if v != 0)
+
+
+def encode_fields(values, encodings) -> bytes:
+    """One frame's field values (after prediction) in the given encodings."""
+    out, i, n = bytearray(), 0, len(values)
+    while i < n:
+        e = encodings[i]
+        if e == 0:
+            out += _svb(values[i]); i += 1
+        elif e == 1:
+            out += _uvb(values[i]); i += 1
+        elif e == 3:
+            out += _uvb((-values[i]) & 0x3FFF); i += 1
+        elif e == 9:
+            i += 1
+        elif e == 6:
+            c = 1
+            while c < 8 and i + c < n and encodings[i + c] == 6:
+                c += 1
+            out += _tag8_8svb(values[i:i + c]); i += c
+        elif e == 7:
+            out += _tag2_3s32(values[i:i + 3]); i += 3
+        elif e == 8:
+            out += _tag8_4s16(values[i:i + 4]); i += 4
+        else:
+            raise ValueError(e)
+    return bytes(out)
+
+
+BB_FIELDS = (["loopIteration", "time"] + [f"gyroADC[{i}]" for i in range(3)]
+             + [f"accSmooth[{i}]" for i in range(3)] + [f"motor[{i}]" for i in range(4)]
+             + [f"eRPM[{i}]" for i in range(4)] + ["vbatLatest"])
+#                    it  t  gyro     acc      motors       eRPM         vbat
+BB_I_PRED = [0, 0, 0, 0, 0, 0, 0, 0, 11, 5, 5, 5, 0, 0, 0, 0, 9]
+BB_I_ENC = [1, 1, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 1, 1, 1, 1, 3]
+BB_P_PRED = [6, 2, 1, 1, 1, 3, 3, 3, 1, 1, 1, 1, 1, 1, 1, 1, 1]
+BB_P_ENC = [9, 0, 7, 7, 7, 8, 8, 8, 8, 6, 6, 6, 6, 6, 6, 6, 0]
+BB_MOTOR_OUTPUT = (158, 2047)
+BB_POLES, BB_ACC_1G, BB_VBATREF = 14, 2048, 1600
+
+
+def _bb_rows(duration: float, rate: float) -> np.ndarray:
+    """Integer field rows of the synthetic flight (times from 0)."""
+    t = np.arange(0.0, duration, 1.0 / rate)
+    prof = flight_profile(t * (T_END / duration))
+    u = np.maximum(prof["u"], IDLE)  # the log starts at arming: idle, never off
+    lo, hi = BB_MOTOR_OUTPUT
+    motor = np.round(lo + (hi - lo) * u).astype(int)
+    omega = u * OMEGA_PER_U
+    erpm = np.round(omega * 60 / (2 * np.pi) * (BB_POLES / 2) / 100).astype(int)
+    rows = np.zeros((len(t), len(BB_FIELDS)), dtype=np.int64)
+    rows[:, 0] = np.arange(len(t)) * 2
+    rows[:, 1] = np.round(t * 1e6).astype(int) + 1_000_000
+    rows[:, 2] = np.round(20 * np.sin(2 * np.pi * 0.7 * t)).astype(int)  # deg/s, roll
+    rows[:, 7] = BB_ACC_1G  # +1 g along the FLU z axis
+    rows[:, 8:12] = motor
+    rows[:, 12:16] = erpm
+    rows[:, 16] = np.round(1600 - 20 * t / duration).astype(int)  # 0.01 V
+    return rows
+
+
+def _predict(row, prev, prev2, preds, motor0):
+    out = []
+    for i, (v, p) in enumerate(zip(row, preds)):
+        base = {0: 0, 1: prev[i] if prev is not None else 0,
+                2: 2 * prev[i] - prev2[i] if prev is not None else 0,
+                3: int((prev[i] + prev2[i]) / 2) if prev is not None else 0,
+                5: row[motor0], 6: v, 9: BB_VBATREF, 11: BB_MOTOR_OUTPUT[0]}[p]
+        out.append(int(v - base))
+    return out
+
+
+def blackbox_log(duration: float, rate: float = 500.0, *, i_interval: int = 32,
+                 corrupt_at: int | None = None) -> bytes:
+    """One log of the synthetic flight: header, I frames every ``i_interval`` frames, P
+    frames between, slow frames, a sync-beep event and the log-end event. ``corrupt_at``:
+    damage the frame with that index."""
+    header = [
+        "Product:Blackbox flight data recorder by Nicholas Sherlock", "Data version:2",
+        "I interval:" + str(2 * i_interval), "P interval:2",
+        "Field I name:" + ",".join(BB_FIELDS),
+        "Field I signed:" + ",".join(["0", "0"] + ["1"] * 6 + ["0"] * 9),
+        "Field I predictor:" + ",".join(map(str, BB_I_PRED)),
+        "Field I encoding:" + ",".join(map(str, BB_I_ENC)),
+        "Field P predictor:" + ",".join(map(str, BB_P_PRED)),
+        "Field P encoding:" + ",".join(map(str, BB_P_ENC)),
+        "Field S name:flightModeFlags,stateFlags", "Field S signed:0,0",
+        "Field S predictor:0,0", "Field S encoding:1,1",
+        "Firmware type:Cleanflight", "Firmware revision:Betaflight 4.4.0 (test) STM32F7X2",
+        f"motorOutput:{BB_MOTOR_OUTPUT[0]},{BB_MOTOR_OUTPUT[1]}", f"acc_1G:{BB_ACC_1G}",
+        "gyro_scale:0x3f800000", f"vbatref:{BB_VBATREF}", f"motor_poles:{BB_POLES}",
+        "motor_pwm_protocol:7", "minthrottle:1070"]
+    out = bytearray("".join(f"H {h}\n" for h in header).encode())
+    out += b"E" + bytes([0]) + _uvb(1234)  # sync beep
+    rows = _bb_rows(duration, rate)
+    motor0 = BB_FIELDS.index("motor[0]")
+    prev = prev2 = None
+    for k, row in enumerate(rows):
+        row = [int(v) for v in row]
+        if k % i_interval == 0:
+            frame = b"I" + encode_fields(_predict(row, None, None, BB_I_PRED, motor0), BB_I_ENC)
+            prev = prev2 = row
+        else:
+            frame = b"P" + encode_fields(_predict(row, prev, prev2, BB_P_PRED, motor0), BB_P_ENC)
+            prev2, prev = prev, row
+        if corrupt_at is not None and k == corrupt_at:
+            frame = frame[:1] + b"\xff\xff\xff" + frame[4:]
+        out += frame
+        if k % 100 == 0:
+            out += b"S" + _uvb(1) + _uvb(k)
+    out += b"E" + bytes([255]) + b"End of log\x00"
+    return bytes(out)
+
+
+def blackbox_csv(duration: float, rate: float = 500.0) -> str:
+    """The same flight as ``blackbox_decode`` writes it (units in the column names)."""
+    rows = _bb_rows(duration, rate)
+    names = [("time (us)" if n == "time" else "vbatLatest (V)" if n == "vbatLatest" else n)
+             for n in BB_FIELDS]
+    lines = [",".join(names)]
+    for r in rows:
+        cells = [str(v) for v in r[:-1]] + [f"{r[-1] / 100:.2f}"]
+        lines.append(",".join(cells))
+    return "\n".join(lines) + "\n"
