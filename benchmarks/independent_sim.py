@@ -5,7 +5,7 @@ RotorPy (github.com/spencerfolk/rotorpy) has its own rigid-body dynamics, rotor 
 translational lift), first-order motor *speed* dynamics (``tau_m``), its own SE(3)
 controller, z-up world and FLU body. Each case flies one of its bundled vehicles
 (``crazyflie_params``, ``hummingbird_params``) on a circle or a Lissajous curve with its
-effects on or off, and exports the flight to our recording format (CONTRACT.md section 3)
+effects on or off, and exports the flight to our recording format (docs/formats.md)
 with this script's own writer -- ENU/FLU, quaternion scalar first, commanded rotor speeds
 ``u1..u4`` [rad/s] with RotorPy's ``k_eta`` as ``thrust_coefficient``, the allocation taken
 from RotorPy's ``f_to_TM`` (its rotor geometry and yaw ratio ``k_m / k_eta``) and the

@@ -66,7 +66,7 @@ class Score:
     coverage: tuple | None = None
 
     def to_contract(self) -> dict:
-        """The ``metrics.json`` entry (CONTRACT.md sec. 2) plus ``excess_spike`` and ``n``."""
+        """The ``metrics.json`` entry (docs/reproduce.md) plus ``excess_spike`` and ``n``."""
         return {"rmse": list(self.rmse), "std": list(self.std),
                 "spike": None if self.spike is None else list(self.spike),
                 "seconds": float(self.seconds),

@@ -1,6 +1,6 @@
 """Writing an :class:`~estimators.base.EstimateSeries` as ``EST.csv`` + ``EST.json``.
 
-``EST.csv`` (CONTRACT.md sec. 2): columns ``t, eta1..etaN, sd1..sdN, status``, one row per
+``EST.csv`` (docs/formats.md): columns ``t, eta1..etaN, sd1..sdN, status``, one row per
 update; ``t`` is the time of the newest sample the estimate used. An unknown uncertainty (before
 the first solved window) is written as ``nan``. The JSON sidecar (same stem) names the
 estimator, its configuration and the input recording.

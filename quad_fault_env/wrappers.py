@@ -244,7 +244,7 @@ class EstimatorComparison(gym.Wrapper):
 
 
 class RecordFlight(gym.Wrapper):
-    """Write each episode as a recording (CONTRACT section 3): ``<path>_000.csv`` (+ JSON
+    """Write each episode as a recording (docs/formats.md): ``<path>_000.csv`` (+ JSON
     sidecar), ``<path>_001.csv``, ... at the physics rate, in ``frame``.
 
     Rows are the substep measurements of ``info["samples"]`` (state at ``t``, command held

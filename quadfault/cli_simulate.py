@@ -1,4 +1,4 @@
-"""``quadfault simulate``: fly a scenario and write a recording (CONTRACT.md sec. 3)."""
+"""``quadfault simulate``: fly a scenario and write a recording (docs/formats.md)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The ``quadfault-recording/1`` format: a CSV file plus a JSON sidecar (CONTRACT.md sec. 3).
+"""The ``quadfault-recording/1`` format: a CSV file plus a JSON sidecar (docs/formats.md).
 
 On load everything is converted to the internal convention (world NED, body FRD, rotor
 thrust commands in newtons); on save the caller chooses NED or ENU. The command in row k is
@@ -150,7 +150,7 @@ _CHUNK_ROWS = 5_000
 def _rows_to_array(path, header, rows, first_row):
     """``rows`` (lists of cells) as a float array; the error names the first bad cell of a
     contract column. Non-numeric cells of unknown extra columns become NaN (they are kept as
-    columns and ignored, CONTRACT.md sec. 3)."""
+    columns and ignored, docs/formats.md)."""
     try:
         return np.array(rows, dtype=float).reshape(len(rows), len(header))
     except ValueError:

@@ -1,4 +1,4 @@
-"""Diagnosis JSON contract (CONTRACT.md sec. 4), CLI, malformed input, IMU-only logs, gaps."""
+"""Diagnosis JSON format (docs/formats.md), CLI, malformed input, IMU-only logs, gaps."""
 
 import dataclasses
 import json
@@ -32,7 +32,7 @@ def _number(x):
 
 
 def validate_contract(doc: dict) -> None:
-    """A small validator of the diagnose output schema (CONTRACT.md sec. 4)."""
+    """A small validator of the diagnose output schema (docs/formats.md)."""
     assert set(doc) >= {"verdict", "baseline", "untestable", "where", "effects", "model"}
     assert doc["verdict"] in ("mismatch", "consistent")
     rm = doc["baseline"]["rmse"]

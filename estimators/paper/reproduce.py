@@ -13,7 +13,7 @@ Steps (``docs/reproduce.md``):
    with its input lag), its EKF calibrated to equal RMSE as in the paper
    (:mod:`estimators.paper.calibration`), for a like-for-like table beside the paper's
    numbers;
-4. write ``metrics.json`` (CONTRACT.md sec. 2), ``report.md`` and PNG figures
+4. write ``metrics.json`` (docs/reproduce.md), ``report.md`` and PNG figures
    (:mod:`estimators.paper.report`); print the table.
 
 Scenario jobs run in parallel processes (``--workers``, default 2).

@@ -1,4 +1,4 @@
-"""Model-mismatch diagnosis (issue 6, CONTRACT.md sec. 4).
+"""Model-mismatch diagnosis (method: docs/diagnosis.md; result format: docs/formats.md).
 
 ``Diagnosis(DiagnosisConfig()).fit(recording, vehicle=None) -> DiagnosisResult``: replay the
 recording through the nominal model, locate where and in which regime it disagrees, fit a

@@ -59,7 +59,7 @@ class Candidate:
     """One named effect of the library.
 
     Attributes:
-        name: canonical effect name (CONTRACT.md sec. 4).
+        name: canonical effect name (docs/formats.md).
         labels: name of each scalar parameter, with its unit.
         lower, upper: physically plausible bounds for the vehicle class; x0: neutral value
             (the nominal model).

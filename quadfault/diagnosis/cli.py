@@ -11,7 +11,7 @@ from quadfault.errors import ConfigError
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", metavar="FILE.csv", help="recording (quadfault-recording/1)")
     p.add_argument("--json", required=True, metavar="OUT.json",
-                   help="diagnosis result (CONTRACT.md section 4)")
+                   help="diagnosis result (format: docs/formats.md)")
     p.add_argument("--report", metavar="DIR", default=None,
                    help="also write DIR/report.md and PNG plots")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")

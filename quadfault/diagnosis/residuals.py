@@ -1,6 +1,6 @@
 """Replay a recording through the nominal model and form per-channel residuals.
 
-Channels (CONTRACT.md sec. 4), each present when the recording measures it:
+Channels (docs/formats.md), each present when the recording measures it:
 
 * ``acc_x, acc_y, acc_z`` -- translational acceleration from the pose, world NED [m/s^2];
 * ``sf_x, sf_y, sf_z`` -- accelerometer specific force, body FRD [m/s^2] (an IMU-only log has

@@ -1,4 +1,4 @@
-"""The diagnosis result record and its JSON form (CONTRACT.md secs. 4 and 5)."""
+"""The diagnosis result record and its JSON form (docs/formats.md)."""
 
 from __future__ import annotations
 

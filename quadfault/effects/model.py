@@ -8,14 +8,14 @@ bounds, so a caller can draw parameters with :meth:`DiagnosedModel.sample`).
 Fields read (everything else is ignored):
 
 * ``format`` -- must be ``"quadfault-diagnosis/2"``;
-* ``vehicle`` -- the recording sidecar's vehicle object (CONTRACT.md sec. 3: ``mass``,
+* ``vehicle`` -- the recording sidecar's vehicle object (docs/formats.md: ``mass``,
   ``inertia``, ``allocation`` or ``arm`` + ``torque_coefficient``, optional ``max_thrust``,
   ``thrust_curve`` / ``thrust_coefficient`` for ``u`` commands), in the recording's frame;
 * ``frame`` -- ``"NED"`` (default) or ``"ENU"``: the frame of ``vehicle`` and of the effects'
   direction parameters (world ``force_N``, ``air_velocity_m_per_s``; body ``offset_m``);
 * ``gravity`` [m/s^2] -- top level or in ``vehicle`` (default 9.81);
 * ``effects`` -- a list of ``{"name", "params", "uncertainty"?, "bounds"?}``; ``params`` use
-  the keys of the effect classes' ``params()`` (CONTRACT.md sec. 5).
+  the keys of the effect classes' ``params()`` (docs/formats.md, diagnosis results).
 """
 
 from __future__ import annotations

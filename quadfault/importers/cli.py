@@ -1,4 +1,4 @@
-"""``quadfault import``: convert a real flight log into a recording (CONTRACT.md sec. 3).
+"""``quadfault import``: convert a real flight log into a recording (docs/formats.md).
 
     quadfault import LOG --out FILE.csv [--format px4|ardupilot|blackbox] [--log N]
     quadfault import DATASET INPUT --out FILE.csv

@@ -3,7 +3,7 @@
 A *case* is a CSV payload plus an optional sidecar payload (bytes; ``None`` = no sidecar)
 built from one small valid recording (a noise-free hover, :func:`valid_recording`) by one
 named mutation. Every mutation here produces a file that breaks ``quadfault-recording/1``
-(CONTRACT.md sec. 3), so a reader must reject it with a one-line error; ``expect`` lists the
+(docs/formats.md), so a reader must reject it with a one-line error; ``expect`` lists the
 fragments that error must contain (which column / key / row), the file name being added by
 :func:`write_case`. Nothing here reads the true efficiency or any truth.
 """
