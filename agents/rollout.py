@@ -7,7 +7,8 @@ the measurement and the current ``eta_hat``, the loop steps the motors and the p
 the estimator gets the sample just sent (state at ``t_k``, command held from ``t_k``). The
 estimate is therefore causal: the command at ``t_k`` uses samples up to ``t_{k-1}``.
 
-Sources of ``eta_hat`` (the built-in ablation):
+Sources of ``eta_hat`` (the built-in ablation): every name of the estimator registry
+(:mod:`estimators.registry`), among them
 
 * ``"irls"`` -- :class:`estimators.irls.SlidingWindowIRLS` (the paper's estimator);
 * ``"ekf"`` -- :class:`estimators.ekf.MotorEfficiencyEKF`;
@@ -27,6 +28,7 @@ import numpy as np
 
 from agents.fault_tolerant import FaultTolerantConfig, make_controller
 from agents.metrics import CrashLimits, FlightMetrics, RecoveryConfig, flight_metrics, tilt_angle
+from estimators.registry import ESTIMATORS, make_estimator
 from quadfault.sample import Sample
 from quadfault import closed_loop
 from quadfault.controller import ControllerConfig
@@ -37,7 +39,8 @@ from quadfault.scenarios import Scenario, at_times
 from quadfault.simulator import SensorNoise, initial_state
 from quadfault.vehicle import Vehicle
 
-ESTIMATOR_SOURCES = ("irls", "ekf", "truth", "none")
+#: the estimator names a flight takes (the registry's)
+ESTIMATOR_SOURCES = tuple(ESTIMATORS)
 
 
 @dataclass(frozen=True)
@@ -119,22 +122,6 @@ class _Tabulated:
         return self.table[k]
 
 
-def make_estimator(source, vehicle: Vehicle, efficiency=None):
-    """An online estimator for ``source`` through the environment's factory
-    (:func:`quad_fault_env.estimation.make_estimator`); ``"truth"`` is bound to
-    ``efficiency`` (the oracle ablation)."""
-    from quad_fault_env.estimation import TruthOracle
-    from quad_fault_env.estimation import make_estimator as env_make_estimator
-
-    if isinstance(source, str) and source not in ESTIMATOR_SOURCES:
-        raise ConfigError(f"unknown estimator {source!r}; choose from "
-                          f"{', '.join(ESTIMATOR_SOURCES)}")
-    est = env_make_estimator(source, vehicle)
-    if isinstance(est, TruthOracle):
-        est.bind(efficiency)
-    return est
-
-
 def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any = "irls",
         seed: int = 0, *, vehicle: Vehicle | None = None, config: FlightConfig | None = None,
         progress_bar=None) -> Flight:
@@ -159,7 +146,7 @@ def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any =
     plant = Plant(veh, efficiency, MotorModel(scenario.thrust_noise, True), dt=cfg.dt)
     ctrl = make_controller(controller, veh, scenario.trajectory, cfg.controller,
                            cfg.fault_tolerant)
-    est = make_estimator(estimator, veh, efficiency)
+    est = make_estimator(estimator, veh, schedule=efficiency)  # the schedule: the oracle's
     source = estimator if isinstance(estimator, str) else getattr(est, "name", type(est).__name__)
     est.reset()
     refs = scenario.trajectory(times)

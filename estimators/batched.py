@@ -18,6 +18,7 @@ Inputs of :meth:`update` are the N samples of one instant: ``t`` (N,) [s], ``p``
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,6 +53,7 @@ from estimators.irls import (
     state_pieces,
 )
 from estimators.irls import constant_arrays as irls_constant_arrays
+from estimators.registry import make_estimator
 from estimators.window import no_history
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange
@@ -259,12 +261,11 @@ class BatchedEKF:
 
 
 def make_batched_estimator(name: str, vehicle: Vehicle, num: int, **kwargs):
-    """``"irls"`` -> :class:`BatchedIRLS`, ``"ekf"`` -> :class:`BatchedEKF` (``config=...``)."""
-    if name == "irls":
-        return BatchedIRLS(vehicle, num, **kwargs)
-    if name == "ekf":
-        return BatchedEKF(vehicle, num, **kwargs)
-    raise ConfigError(f"no batched estimator {name!r}; choose 'irls' or 'ekf'")
+    """Deprecated: ``estimators.registry.make_estimator(name, vehicle, num=num, ...)``."""
+    warnings.warn("make_batched_estimator is deprecated; use "
+                  "estimators.registry.make_estimator(name, vehicle, num=N)", DeprecationWarning,
+                  stacklevel=2)
+    return make_estimator(name, vehicle, num=num, **kwargs)
 
 
 __all__ = [

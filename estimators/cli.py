@@ -4,8 +4,8 @@
                        [--median N] [--q-eta Q]
 
 Writes ``EST.csv`` (``t, eta1..eta4, sd1..sd4, status``) and its sidecar ``EST.json``
-(:mod:`estimators.series_io`). Estimators are looked up in :data:`ESTIMATORS` and imported
-only when chosen. :func:`estimate_series` is the one path from options to a series (the CLI
+(:mod:`estimators.series_io`). Estimators are looked up in the registry
+(:mod:`estimators.registry`) and imported only when chosen. :func:`estimate_series` is the one path from options to a series (the CLI
 and ``quadfault reproduce`` both use it; :func:`cli_args` writes the options back as
 arguments).
 """
@@ -13,67 +13,27 @@ arguments).
 from __future__ import annotations
 
 import argparse
-import importlib
 import math
 import sys
-from dataclasses import replace
 
+from estimators.registry import ESTIMATORS, estimator_names, estimator_spec, make_estimator
 from quadfault.errors import ConfigError
 
-#: name -> "module:Class"; each class takes ``(vehicle, config=None)`` and implements
-#: :class:`estimators.base.OnlineEstimator`.
-ESTIMATORS: dict[str, str] = {
-    "irls": "estimators.irls:SlidingWindowIRLS",
-    "ekf": "estimators.ekf:MotorEfficiencyEKF",
-}
 
-
-def estimator_class(name: str):
-    """The estimator class registered under ``name`` (clean error if unknown or missing)."""
-    if name not in ESTIMATORS:
-        raise ConfigError(f"unknown estimator {name!r}; choose from {', '.join(ESTIMATORS)}")
-    module_name, class_name = ESTIMATORS[name].split(":")
-    try:
-        module = importlib.import_module(module_name)
-        return getattr(module, class_name)
-    except (ImportError, AttributeError) as exc:
-        raise ConfigError(f"estimator {name!r} is not available ({module_name}.{class_name}: "
-                          f"{exc})") from None
-
-
-#: estimators whose configuration has an online output median (``output_median``); the
-#: others get the same median on their output series (:func:`estimators.median.median_series`)
-ONLINE_MEDIAN = ("irls",)
-
-
-def make_estimator(name: str, vehicle, improved: bool = False, median: int | None = None,
-                   q_eta: float | None = None):
-    """Build an estimator with its default configuration; ``improved``: the IRLS with the
-    options beyond the paper (``IRLSConfig.improved()``); ``median``: the IRLS's online output
-    median [samples] (other estimators get it as post-processing, :func:`estimate_series`);
-    ``q_eta``: the EKF's efficiency random walk per 1 ms step."""
-    cls = estimator_class(name)
-    check_options(name, improved, median, q_eta)
-    if name == "irls":
-        from estimators.irls import IRLSConfig
-
-        cfg = IRLSConfig.improved() if improved else IRLSConfig()
-        if median is not None:
-            cfg = replace(cfg, output_median=int(median))
-        return cls(vehicle, cfg)
-    if name == "ekf" and q_eta is not None:
-        from estimators.ekf import EKFConfig
-
-        return cls(vehicle, EKFConfig(q_eta=float(q_eta)))
-    return cls(vehicle)
+def _choices() -> tuple[str, ...]:
+    """The estimators ``quadfault estimate`` offers: the registry's real estimators."""
+    return estimator_names(role="estimator")
 
 
 def check_options(name: str, improved: bool, median, q_eta) -> None:
-    """One-line errors for options that do not fit together or are out of range."""
-    if improved and name != "irls":
-        raise ConfigError(f"--improved applies to the irls estimator, not {name!r}")
-    if q_eta is not None and name != "ekf":
-        raise ConfigError(f"--q-eta applies to the ekf estimator, not {name!r}")
+    """One-line errors for options that do not fit together or are out of range (which
+    estimator takes which option: the registry's ``options``)."""
+    options = estimator_spec(name).options
+    for key, given in (("improved", improved), ("q_eta", q_eta)):
+        if given is not None and given is not False and key not in options:
+            takers = [s.name for s in ESTIMATORS.values() if key in s.options]
+            raise ConfigError(f"--{key.replace('_', '-')} applies to the "
+                              f"{', '.join(takers)} estimator, not {name!r}")
     if q_eta is not None and (isinstance(q_eta, bool) or not isinstance(q_eta, (int, float))
                               or not (math.isfinite(q_eta) and q_eta > 0)):
         raise ConfigError(f"--q-eta must be a positive number, got {q_eta!r}")
@@ -88,9 +48,12 @@ def estimate_series(recording, name: str, *, improved: bool = False, median: int
     ``quadfault estimate``; the series' ``postprocess`` says which median it got."""
     from estimators.median import median_series
 
-    est = make_estimator(name, recording.vehicle, improved=improved, median=median, q_eta=q_eta)
+    check_options(name, improved, median, q_eta)
+    online_median = "median" in estimator_spec(name).options
+    est = make_estimator(name, recording.vehicle, improved=improved, q_eta=q_eta,
+                         median=median if online_median else None)
     series = est.run(recording.without_truth(), progress=progress)
-    if median is not None and name not in ONLINE_MEDIAN:
+    if median is not None and not online_median:
         series = median_series(series, median)
     return series
 
@@ -111,8 +74,9 @@ def cli_args(name: str, *, improved: bool = False, median: int | None = None,
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", metavar="FILE.csv", help="input recording (+ FILE.json)")
-    p.add_argument("--estimator", choices=tuple(ESTIMATORS), default="irls",
-                   help="irls (the paper's sliding-window IRLS, default) or ekf (baseline)")
+    p.add_argument("--estimator", choices=_choices(), default="irls",
+                   help="; ".join(f"{s.name}: {s.summary}" for s in ESTIMATORS.values()
+                                  if s.name in _choices()))
     p.add_argument("--out", required=True, help="output EST.csv (+ EST.json)")
     p.add_argument("--force", action="store_true", help="overwrite existing files")
     p.add_argument("--improved", action="store_true",
@@ -137,7 +101,7 @@ def run(args) -> int:
     out, side = estimate_paths(args.out)
     check_writable([out, side], force=args.force)
     rec = read_recording(args.recording)
-    if not rec.has_pose:
+    if "pose" in estimator_spec(args.estimator).needs and not rec.has_pose:
         raise ConfigError(f"{args.recording}: 'estimate' needs position, velocity and attitude "
                           "columns (px..pz, vx..vz, qw..qz); this recording is IMU-only")
     series = estimate_series(rec, args.estimator, improved=args.improved, median=args.median,

@@ -123,6 +123,12 @@ class EKFConfig:
                                   f"got {self.eta_bounds!r}")
 
     @classmethod
+    def from_options(cls, q_eta: float | None = None) -> EKFConfig:
+        """The configuration of ``quadfault estimate``'s options (the registry's
+        ``from_options``): ``q_eta`` the efficiency random walk per 1 ms step."""
+        return cls() if q_eta is None else cls(q_eta=float(q_eta))
+
+    @classmethod
     def reference(cls, **changes) -> EKFConfig:
         """The reference code's settings, including its clamp ``[1e-3, 1 - 1e-3]``."""
         return replace(cls(eta_bounds=(1e-3, 1.0 - 1e-3), clip_commands=False), **changes)

@@ -94,6 +94,14 @@ class IRLSConfig:
         "Spikes"): change completion and a 21-sample causal output median."""
         return cls(**{"change_completion": True, "output_median": 21, **changes})
 
+    @classmethod
+    def from_options(cls, improved: bool = False, median: int | None = None) -> IRLSConfig:
+        """The configuration of ``quadfault estimate``'s options (the registry's
+        ``from_options``): ``improved`` the options beyond the paper (:meth:`improved`),
+        ``median`` the online output median [samples] (overrides ``improved``'s 21)."""
+        changes = {} if median is None else {"output_median": int(median)}
+        return cls.improved(**changes) if improved else cls(**changes)
+
     def __post_init__(self):
         if not (isinstance(self.window, int) and self.window >= 3):
             raise ConfigError(f"IRLS window must be an integer >= 3 samples, got {self.window!r}")

@@ -1,130 +1,26 @@
-"""Which efficiency estimator fills the observation: a factory and the two trivial ones.
+"""The estimator's part of the environment's observation and ``info``.
 
-``make_estimator(name, vehicle, **kw)``:
-
-* ``"irls"`` -- :class:`estimators.irls.SlidingWindowIRLS` (the paper's estimator);
-* ``"ekf"``  -- :class:`estimators.ekf.MotorEfficiencyEKF` (the baseline);
-* ``"truth"`` -- :class:`TruthOracle`, the explicitly labelled oracle that reads the true
-  efficiency schedule (the only way truth reaches an observation);
-* ``"none"`` -- :class:`NominalBelief`, always eta = 1 with a fixed prior uncertainty.
-
-The real estimators are imported lazily, by name, so the environment works without them.
-Every estimator gets the *nominal* vehicle and measurement samples only.
+Estimators are chosen by name through the one registry (:mod:`estimators.registry`,
+:func:`make_estimator`): ``"irls"``, ``"ekf"`` (and every other registered estimator), the
+nominal belief ``"none"`` and the labelled oracle ``"truth"`` (the only way truth reaches an
+observation; :mod:`estimators.baselines`). Every estimator gets the *nominal* vehicle and
+measurement samples only. This module turns an estimate into the observation's and ``info``'s
+fields.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import importlib
 
 import numpy as np
 
-from estimators.base import STATUS_OK, Estimate, EstimateSeries, Sample, samples
+from estimators.base import STATUS_OK, Estimate
+from estimators.baselines import NOMINAL_PRIOR_SD, NominalBelief, TruthOracle
+from estimators.registry import ESTIMATORS, estimator_class, make_estimator
 from quad_fault_env.observation import SD_MAX
-from quadfault.errors import ConfigError
-from quadfault.vehicle import Vehicle
 
-#: name -> ("module:Class") of the estimators that live in the ``estimators`` package.
-ESTIMATOR_CLASSES = {
-    "irls": "estimators.irls:SlidingWindowIRLS",
-    "ekf": "estimators.ekf:MotorEfficiencyEKF",
-}
-ESTIMATOR_NAMES = ("irls", "ekf", "truth", "none")
-
-#: the uncertainty the "none" belief reports for every motor [-]
-NOMINAL_PRIOR_SD = 0.25
-
-
-def _series(est, recording, progress=False) -> EstimateSeries:
-    est.reset()
-    rows = [est.update(s) for s in samples(recording)]
-    return EstimateSeries(t=np.array([r.t for r in rows]), eta=np.array([r.eta for r in rows]),
-                          sd=np.array([r.sd for r in rows]),
-                          status=np.array([r.status for r in rows]), estimator=est.name)
-
-
-class NominalBelief:
-    """The "no estimator" belief: eta = 1 for every motor, sd = :data:`NOMINAL_PRIOR_SD`."""
-
-    name = "none"
-
-    def __init__(self, vehicle: Vehicle):
-        self.n = vehicle.n_rotors
-
-    def reset(self, eta0=None) -> None:
-        pass
-
-    def update(self, sample: Sample) -> Estimate:
-        return Estimate(float(sample.t), np.ones(self.n), np.full(self.n, NOMINAL_PRIOR_SD))
-
-    def run(self, recording, progress: bool = False) -> EstimateSeries:
-        return _series(self, recording, progress)
-
-
-class TruthOracle:
-    """The labelled oracle: the true efficiency schedule evaluated at the sample time.
-
-    The environment binds the episode's schedule with :meth:`bind`; sd is 0.
-    """
-
-    name = "truth"
-
-    def __init__(self, vehicle: Vehicle, schedule=None):
-        self.n = vehicle.n_rotors
-        self.schedule = schedule
-
-    def bind(self, schedule) -> None:
-        """Use ``schedule`` (``t -> (4,)`` true efficiency) from now on."""
-        self.schedule = schedule
-
-    def reset(self, eta0=None) -> None:
-        pass
-
-    def update(self, sample: Sample) -> Estimate:
-        if self.schedule is None:
-            raise ConfigError("the truth oracle has no efficiency schedule bound (call bind)")
-        eta = np.asarray(self.schedule(float(sample.t)), dtype=float)
-        return Estimate(float(sample.t), eta, np.zeros(self.n))
-
-    def run(self, recording, progress: bool = False) -> EstimateSeries:
-        return _series(self, recording, progress)
-
-
-def estimator_class(name: str):
-    """The class of a lazily imported estimator (``"irls"`` or ``"ekf"``)."""
-    module_name, cls_name = ESTIMATOR_CLASSES[name].split(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ModuleNotFoundError as exc:
-        if exc.name != module_name:
-            raise
-        raise ConfigError(f"estimator {name!r} is not available: module {module_name} "
-                          "is not installed in this checkout") from None
-    try:
-        return getattr(module, cls_name)
-    except AttributeError:
-        raise ConfigError(f"estimator {name!r}: {module_name} has no {cls_name}") from None
-
-
-def make_estimator(name, vehicle: Vehicle, **kwargs):
-    """An online estimator by name (see the module docstring), or ``name`` itself when it is
-    already an estimator object (anything with ``reset`` and ``update``).
-
-    ``kwargs`` go to the estimator's constructor (``config=...`` for IRLS / EKF,
-    ``schedule=...`` for the oracle).
-    """
-    if not isinstance(name, str):
-        if callable(getattr(name, "update", None)) and callable(getattr(name, "reset", None)):
-            return name
-        raise ConfigError(f"estimator must be one of {ESTIMATOR_NAMES} or an object with "
-                          f"reset() and update(sample), got {name!r}")
-    if name == "none":
-        return NominalBelief(vehicle)
-    if name == "truth":
-        return TruthOracle(vehicle, **kwargs)
-    if name in ESTIMATOR_CLASSES:
-        return estimator_class(name)(vehicle, **kwargs)
-    raise ConfigError(f"unknown estimator {name!r}; choose from {', '.join(ESTIMATOR_NAMES)}")
+#: the names the environments accept (the registry's)
+ESTIMATOR_NAMES = tuple(ESTIMATORS)
 
 
 def estimate_sd(estimate: Estimate, n: int) -> np.ndarray | None:

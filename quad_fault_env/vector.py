@@ -18,7 +18,8 @@ end-of-step measurement after the termination check). Hence N single envs reset 
 
 Differences from the single env: ``info`` holds the per-env arrays below (no per-substep
 ``samples`` / ``eta_true_samples`` / ``specific_force_samples``, no ``fault_events``); no
-rendering; only the named estimators (``"irls" | "ekf" | "truth" | "none"``).
+rendering; only the named estimators with a batched form (:mod:`estimators.registry`), the
+nominal belief ``"none"`` and the oracle ``"truth"``.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from gymnasium.vector.utils import batch_space
 from quad_fault_env.envs.config import check_keywords, keywords_of, validate_action
 from quad_fault_env.envs.scenario_source import GENERATORS
 from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
+from estimators.registry import estimator_names, estimator_spec, make_estimator
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.estimation import NOMINAL_PRIOR_SD
 from quad_fault_env.observation import SD_MAX
@@ -50,6 +52,10 @@ from quadfault.plant import Plant
 #: default; below it, on the calling thread alone (measured: ``benchmarks/numba_threads.py``,
 #: docs/throughput.md "numba threads")
 THREADS_MIN_BATCH = 16384
+#: the estimators the vector env takes: those with a batched form, the nominal belief and the
+#: oracle (both computed here)
+VECTOR_ESTIMATORS = (estimator_names(batched=True) + estimator_names(role="nominal")
+                     + estimator_names(role="oracle"))
 AUTORESET_MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
 
 
@@ -67,7 +73,8 @@ class QuadFaultVectorEnv(VectorEnv):
 
     Args:
         num_envs: N.
-        estimator: ``"irls" | "ekf" | "truth" | "none"`` (batched: :mod:`estimators.batched`).
+        estimator: one of :data:`VECTOR_ESTIMATORS` (``"irls" | "ekf" | "truth" | "none"``;
+            batched: :mod:`estimators.batched`).
         estimator_kwargs: ``config=`` of the estimator.
         max_episode_steps: truncation after this many control steps (the registration's
             value through ``gym.make_vec``), like ``TimeLimit`` on the single env.
@@ -105,9 +112,9 @@ class QuadFaultVectorEnv(VectorEnv):
             raise ConfigError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         if kwargs.get("render_mode") is not None:
             raise ConfigError("QuadFaultVectorEnv does not render; use QuadFaultEnv")
-        if not isinstance(estimator, str) or estimator not in ("irls", "ekf", "truth", "none"):
-            raise ConfigError(f"estimator must be 'irls', 'ekf', 'truth' or 'none' in the vector "
-                              f"env, got {estimator!r}")
+        if not isinstance(estimator, str) or estimator not in VECTOR_ESTIMATORS:
+            raise ConfigError(f"estimator must be one of {', '.join(VECTOR_ESTIMATORS)} in the "
+                              f"vector env, got {estimator!r}")
         if autoreset_mode not in AUTORESET_MODES:
             raise ConfigError(f"autoreset_mode must be one of {sorted(AUTORESET_MODES)}, "
                               f"got {autoreset_mode!r}")
@@ -141,11 +148,9 @@ class QuadFaultVectorEnv(VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, N)
         self.action_space = batch_space(self.single_action_space, N)
         self.estimator = None
-        if estimator in ("irls", "ekf"):
-            from estimators.batched import make_batched_estimator
-
-            self.estimator = make_batched_estimator(estimator, self.vehicle, N,
-                                                    **(estimator_kwargs or {}))
+        if estimator_spec(estimator).batched is not None:
+            self.estimator = make_estimator(estimator, self.vehicle, num=N,
+                                            **(estimator_kwargs or {}))
         # the single env's plant (MotorModel(thrust_noise): its default saturation), N of it
         self.plant = Plant(self.vehicle, None, MotorModel(), dt=self.dt, n_vehicles=N)
         self._loop = closed_loop.constants(self.plant, e0.sensor_noise)

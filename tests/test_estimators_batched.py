@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from estimators.base import STATUSES, Sample, samples
-from estimators.batched import BatchedEKF, BatchedIRLS, make_batched_estimator
+from estimators.batched import BatchedEKF, BatchedIRLS
+from estimators.registry import make_estimator
 from estimators.ekf import MotorEfficiencyEKF
 from estimators.irls import IRLSConfig, SlidingWindowIRLS
 from quadfault.errors import ConfigError
@@ -144,5 +145,7 @@ def test_bad_shapes_and_names_raise_config_errors(flights):
         est.reset(np.ones(5, dtype=bool))
     with pytest.raises(ConfigError, match="integer >= 1"):
         BatchedEKF(veh, 0)
-    with pytest.raises(ConfigError, match="no batched estimator"):
-        make_batched_estimator("kalman", veh, 2)
+    with pytest.raises(ConfigError, match="unknown estimator"):
+        make_estimator("kalman", veh, num=2)
+    with pytest.raises(ConfigError, match="no batched form"):
+        make_estimator("none", veh, num=2)

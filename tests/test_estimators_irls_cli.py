@@ -109,11 +109,12 @@ def test_estimate_error_exits(flight_csv, tmp_path):
 
 
 def test_unknown_or_missing_estimator_is_a_clean_error(monkeypatch):
-    from estimators import cli
+    from estimators import registry
     from quadfault.errors import ConfigError
 
-    monkeypatch.setitem(cli.ESTIMATORS, "ghost", "estimators.not_there:Ghost")
+    monkeypatch.setitem(registry.ESTIMATORS, "ghost",
+                        registry.EstimatorSpec("ghost", "estimators.not_there:Ghost", "missing"))
     with pytest.raises(ConfigError, match="not available"):
-        cli.estimator_class("ghost")
+        registry.estimator_class("ghost")
     with pytest.raises(ConfigError, match="unknown estimator"):
-        cli.estimator_class("nope")
+        registry.estimator_class("nope")

@@ -33,6 +33,7 @@ import numpy as np
 
 from estimators.paper.pairing import pair_ratios
 from estimators.paper.report import STATIC_FIGURES, excess_ratio_text, table, write_report
+from estimators.registry import make_estimator
 from quadfault.errors import ConfigError
 
 SCENARIOS = ("degradation", "abrupt", "combined", "clipping")
@@ -194,12 +195,9 @@ def _scenario_job(mode: str, name: str, cfg: ReproduceConfig, q_etas: dict,
 
 def _warm_up() -> None:
     """Compile the numba kernels once in the parent so forked workers inherit them."""
-    from estimators.ekf import MotorEfficiencyEKF
-    from estimators.irls import SlidingWindowIRLS
-
     rec = _fly("hover", 0.05, 0, "rk4", 0.0)
-    SlidingWindowIRLS(rec.vehicle).run(rec)
-    MotorEfficiencyEKF(rec.vehicle).run(rec)
+    for name in ("irls", "ekf"):
+        make_estimator(name, rec.vehicle).run(rec)
     _fly("hover", 0.05, 0, "reference", 0.0)
 
 
