@@ -57,6 +57,7 @@ from quadfault.dynamics import (
     reference_euler_step,
     reference_euler_store,
     rkmk4_step,
+    rotor_wrench,
     specific_force3,
     translational_acceleration3,
 )
@@ -191,18 +192,6 @@ def _finite(p, v, R, w):
 
 
 @jit(inline="always")
-def _allocate(A, f):
-    """Collective thrust [N] and moment [N m] of rotor thrusts ``f`` (eq. 12)."""
-    T = m0 = m1 = m2 = 0.0
-    for i in range(f.shape[0]):
-        T += A[0, i] * f[i]
-        m0 += A[1, i] * f[i]
-        m1 += A[2, i] * f[i]
-        m2 += A[3, i] * f[i]
-    return T, (m0, m1, m2)
-
-
-@jit(inline="always")
 def _tuples(C, V, i):
     """The kernels' tuples of vehicle ``i``: its true rigid body and its sensors."""
     rigid = (V.mass[i], C.gravity, mat3(V.inertia[i]), mat3(V.inertia_inverse[i]))
@@ -247,7 +236,7 @@ def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx, memory=None)
             W = NO_TERMS  # (not used)
         else:  # the thrust stage, and the step's wrench terms the RK stages take (numbers)
             W = step_effects(fx, i, f, t, C.dt, p, v, R, w, gen)
-        thrust, M = _allocate(C.allocation, f)
+        thrust, M = rotor_wrench(C.allocation, f)
         if memory is not None:
             reference_euler_store(memory[i], thrust, M, R)
             p1, v1, R1, w1 = p, v, R, w

@@ -10,6 +10,7 @@ NED world frame, FRD body frame::
 Kernels (one vehicle; vectors are 3-tuples, ``R`` a row-major 9-tuple, the vehicle's rigid
 body the tuple ``rigid = (m, g, J, J^-1)`` of :func:`rigid_body`):
 
+* :func:`rotor_wrench` -- the thrust allocation (eq. 12): ``[T; M] = A diag(eta) f``;
 * :func:`translational_acceleration3` (eq. 2), :func:`angular_acceleration3` (eq. 4),
   :func:`specific_force3` (the accelerometer's reading ``R^T (v' - g e3)``);
 * :func:`rkmk4_step` -- Runge-Kutta-Munthe-Kaas of order 4: ``p, v, Omega`` by classical RK4,
@@ -104,6 +105,25 @@ def rigid_body(vehicle: Vehicle, inertia=None, inertia_inverse=None) -> tuple:
 
 
 # --- kernels -------------------------------------------------------------------------------
+@jit(inline="always")
+def rotor_wrench(A, f, eta=None):
+    """The thrust allocation (eq. 12): collective thrust ``T`` [N] and body moment ``M``
+    [N m] (a 3-tuple) of rotor thrusts ``f`` (n,) [N] through the allocation ``A`` (4, n),
+    ``[T; M] = A diag(eta) f``; ``eta`` (n,) the rotors' efficiencies (None: all 1). The one
+    allocation of the project: the closed loop, the IRLS residuals and the EKF use it."""
+    T = m0 = m1 = m2 = 0.0
+    for j in range(f.shape[0]):
+        if eta is None:
+            fj = f[j]
+        else:
+            fj = eta[j] * f[j]
+        T += A[0, j] * fj
+        m0 += A[1, j] * fj
+        m1 += A[2, j] * fj
+        m2 += A[3, j] * fj
+    return T, (m0, m1, m2)
+
+
 @jit
 def translational_acceleration3(R, thrust, rigid, F=None):
     """v' of eq. (2) [m/s^2] for collective thrust ``thrust`` [N] and an optional external
