@@ -1,70 +1,94 @@
-"""Every real-flight number of the README and docs/diagnosis.md, through the user's path.
+"""Every real-flight number of the docs, through the user's path, over every log in a folder.
 
-For each log this runs exactly what a user runs -- ``quadfault import KIND LOG --out
-DIR/NAME.csv`` and ``quadfault diagnose DIR/NAME.csv --json DIR/NAME.json`` with the defaults
-(and, for CrazyPAD, once more with ``--effects motor_efficiency``) -- through the console
-script's own entry point (``quadfault.cli.main``), prints each command, and builds the tables
-from the JSON files it wrote and nothing else. The only other computation is the reference of
-the nano-drone drag target: a least-squares fit of the body-frame accelerometer against the
-body-frame velocity, ``m a_b = -k v_b`` per horizontal axis, on the blocks the diagnosis scored
-(compared with ``drag``'s ``k`` or, when the diagnosis explains the same force as rotor drag
-proportional to thrust, ``blade_flapping``'s ``k_force m g``).
+For each log this runs exactly what a user runs, through the console script's own entry
+point (``quadfault.cli.main``): ``quadfault import LOG --out NAME.csv`` (the format read from
+the file; for the Crazyflie research data sets ``quadfault import DATASET LOG``) and
+``quadfault diagnose NAME.csv --json NAME.json`` with the defaults -- and, for the CrazyPAD
+propeller-fault flights, once more with ``--effects motor_efficiency``. The tables are built
+from the JSON files it wrote. Per log it prints the accepted effects with their figures, what
+was not identifiable and why, and a loud ``!! ABSURD`` line for any absurd accepted answer:
 
-Flights (the 30 of the targets): Eschmann et al. log10, log15, log16; the 9 nano-drone
-flights; CrazyPAD motor_data ``normal_flight`` (12) and ``cut_propeller_M3_3mm`` (6).
-``--crazypad-all`` adds the other CrazyPAD motor_data conditions. The CrazyPAD condition is
-read from the folder name, for the table only.
+* a parameter at a bound;
+* an inertia scale outside 0.5-2;
+* a rotor efficiency below 0.5, or all four below 0.85 (that is a common factor);
+* a steady external force above 20 % of the weight;
+* a lag or delay from commands logged slower than 2 samples per time constant.
 
-    python benchmarks/real_flights.py [--data DIR] [--out DIR] [--only eschmann,nanodrone,crazypad]
+An import that fails prints its one-line error (``!! IMPORT FAILED``). Two references are
+computed here, independently of the diagnosis: the nano-drone drag (a least-squares fit of the
+body-frame accelerometer against the body-frame velocity, ``m a_b = -k v_b`` per horizontal
+axis, on the blocks the diagnosis scored), and, on every log with measured rotor speeds, the
+motor lag from command to speed (a first-order lag from the commanded thrust to ``omega^2``,
+per rotor with its own gain and offset, one time constant for all four, on the scored span).
+
+    python benchmarks/real_flights.py [--data DIR] [--out DIR] [--only NAME,...]
                                       [--crazypad-all] [--json OUT.json] [--force] [--quiet]
     python benchmarks/real_flights.py --from-json OUT.json     # re-print the tables
 
-Reads ``../shared/data/real`` (never copied into the repository) and prints one line and
-exits 0 when it is absent.
+``--data`` defaults to ``../shared/data/real`` next to the repository (never copied into
+it); without it the script prints one line and exits 0. ``--only`` keeps the folders whose
+name contains one of the words.
 """
 
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import shutil
 import sys
 import tempfile
 import time
+from contextlib import redirect_stderr
 from pathlib import Path
 
 import numpy as np
 
 DEFAULT_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
-DATASETS = ("eschmann", "nanodrone", "crazypad")
-TARGET_CONDITIONS = ("normal_flight", "cut_propeller_M3_3mm")
+#: Crazyflie research data sets: folder -> ``quadfault import DATASET`` name, and the files
+DATASETS = {"eschmann-cf21-sysid": ("eschmann", "*.csv.gz"),
+            "nanodrone-cf21bl": ("nanodrone", "*.csv.gz"),
+            "crazypad-cf21-faults": ("crazypad", "motor_data/*/*.csv.gz")}
+#: CrazyPAD conditions of the default run (healthy, and graded propeller damage)
+TARGET_CONDITIONS = ("normal_flight", "cut_propeller_M3_1mm", "cut_propeller_M3_2mm",
+                     "cut_propeller_M3_3mm")
+LOG_SUFFIXES = (".ulg", ".bin", ".log", ".bbl", ".bfl", ".bfl.csv", ".bbl.csv")
+MAX_INERTIA, MIN_INERTIA, MIN_ETA, HEALTHY_ETA, MAX_FORCE, TIMING_SAMPLES = \
+    2.0, 0.5, 0.5, 0.85, 0.2, 2.0
 
 
 def jobs(data: Path, only, crazypad_all: bool) -> list:
+    """``(folder, dataset or None, path, name, condition)`` of every log under ``data``."""
     out = []
-    if "eschmann" in only:
-        out += [("eschmann", p, p.name.split(".")[0], None)
-                for p in sorted((data / "eschmann-cf21-sysid").glob("*.csv.gz"))]
-    if "nanodrone" in only:
-        out += [("nanodrone", p, p.name.split(".")[0], None)
-                for p in sorted((data / "nanodrone-cf21bl").glob("*.csv.gz"))]
-    if "crazypad" in only:
-        for p in sorted((data / "crazypad-cf21-faults" / "motor_data").glob("*/*.csv.gz")):
-            cond = p.parent.name
-            if crazypad_all or cond in TARGET_CONDITIONS:
-                out.append(("crazypad", p, f"{cond}_{p.name.split('.')[0]}", cond))
+    for folder in sorted(p for p in data.iterdir() if p.is_dir()):
+        if only and not any(w in folder.name for w in only):
+            continue
+        if folder.name in DATASETS:
+            kind, pattern = DATASETS[folder.name]
+            for p in sorted(folder.glob(pattern)):
+                cond = p.parent.name if kind == "crazypad" else None
+                if cond is None or crazypad_all or cond in TARGET_CONDITIONS:
+                    name = p.name.split(".")[0]
+                    out.append((folder.name, kind, p, f"{cond}_{name}" if cond else name, cond))
+            continue
+        for p in sorted(folder.rglob("*")):
+            if p.is_file() and p.name.lower().endswith(LOG_SUFFIXES):
+                out.append((folder.name, None, p, p.name.split(".")[0], None))
     return out
 
 
-def quadfault(args: list, quiet: bool) -> None:
-    """Run one ``quadfault`` command through the console script's entry point."""
+def quadfault(args: list, quiet: bool) -> tuple[int, str]:
+    """Run one ``quadfault`` command through the console script's entry point; returns the
+    exit code and the last line it wrote to stderr (its one-line error)."""
     from quadfault.cli import main
 
     if not quiet:
         print("$ quadfault " + " ".join(str(a) for a in args), flush=True)
-    code = main([str(a) for a in args] + ["--quiet"])
-    if code != 0:
-        raise SystemExit(f"real_flights: quadfault {args[0]} failed on {args[1]}")
+    err = io.StringIO()
+    with redirect_stderr(err):
+        code = main([str(a) for a in args] + ["--quiet"])
+    lines = [s for s in err.getvalue().splitlines() if s.strip()]
+    return code, (lines[-1] if lines else "")
 
 
 def drag_reference(csv: Path, doc: dict) -> list:
@@ -72,106 +96,236 @@ def drag_reference(csv: Path, doc: dict) -> list:
     from quadfault.recording import read_recording
 
     rec = read_recording(csv)
-    keep = np.ones(len(rec), dtype=bool)
-    for e in doc["scoring"]["excluded"]:
-        keep &= ~((rec.t >= e["t0"]) & (rec.t <= e["t1"]))
+    keep = _scored_rows(rec.t, doc)
     vb = np.einsum("nji,nj->ni", rec.rotation, rec.velocity)[keep]
     sf = rec.accel[keep]
     m = rec.vehicle.mass
     return [float(-m * np.sum(sf[:, i] * vb[:, i]) / np.sum(vb[:, i] ** 2)) for i in (0, 1)]
 
 
-def run_one(kind, path, name, cond, out: Path, quiet: bool) -> dict:
-    csv = out / f"{kind}_{name}.csv"
-    quadfault(["import", kind, path, "--out", csv, "--force"], quiet)
-    js = out / f"{kind}_{name}.diagnosis.json"
-    quadfault(["diagnose", csv, "--json", js, "--force"], quiet)
-    row = {"kind": kind, "name": name, "condition": cond, "diagnosis": json.loads(js.read_text())}
+def _scored_rows(t, doc) -> np.ndarray:
+    keep = np.ones(len(t), dtype=bool)
+    for e in doc["scoring"]["excluded"]:
+        keep &= ~((t >= e["t0"]) & (t <= e["t1"]))
+    return keep
+
+
+def rotor_lag_reference(csv: Path, doc: dict) -> float | None:
+    """The motor time constant [s] from command to measured rotor speed, or None without
+    rotor speeds: ``omega_i^2 ~ a_i y_i + b_i`` with ``y`` the commanded thrust through a
+    first-order lag (the effects' own ``lag_series``), one ``tau`` for all rotors, least
+    squares on the rows the diagnosis scored."""
+    from scipy.optimize import minimize_scalar
+
+    from quadfault.effects import lag_series
+    from quadfault.recording import read_recording
+
+    rec = read_recording(csv)
+    if rec.rotor_speed is None:
+        return None
+    W2 = np.asarray(rec.rotor_speed, dtype=float) ** 2
+    ok = np.all(np.isfinite(W2), axis=1)
+    if ok.sum() < 100:
+        return None
+    f, dt = rec.thrust_cmd[:-1], np.diff(rec.t)
+    use = (_scored_rows(rec.t, doc) & ok)[1:] & (dt <= 2.5 * np.median(dt))
+    target = W2[1:][use]
+
+    def sse(log_tau):
+        y = lag_series(f, dt, float(np.exp(log_tau)))[use]
+        total = 0.0
+        for i in range(y.shape[1]):
+            X = np.column_stack((y[:, i], np.ones(len(y))))
+            coef, *_ = np.linalg.lstsq(X, target[:, i], rcond=None)
+            r = target[:, i] - X @ coef
+            total += float(r @ r) / max(float(np.var(target[:, i])), 1e-300)
+        return total
+
+    grid = np.log(np.geomspace(0.003, 0.3, 25))
+    best = grid[int(np.argmin([sse(g) for g in grid]))]
+    res = minimize_scalar(sse, bounds=(best - 0.2, best + 0.2), method="bounded")
+    return float(np.exp(res.x))
+
+
+def run_one(folder, kind, path, name, cond, out: Path, quiet: bool) -> dict:
+    stem = f"{folder}_{name}"
+    csv = out / f"{stem}.csv"
+    args = ["import"] + ([kind] if kind else []) + [path, "--out", csv, "--force"]
+    row = {"folder": folder, "kind": kind or "", "name": name, "condition": cond}
+    code, err = quadfault(args, quiet)
+    if code != 0:
+        row["import_error"] = err or f"exit status {code}"
+        return row
+    js = out / f"{stem}.diagnosis.json"
+    code, err = quadfault(["diagnose", csv, "--json", js, "--force"], quiet)
+    if code != 0:
+        row["diagnose_error"] = err or f"exit status {code}"
+        return row
+    row["diagnosis"] = json.loads(js.read_text())
     if kind == "crazypad":
-        js2 = out / f"{kind}_{name}.efficiency.json"
-        quadfault(["diagnose", csv, "--json", js2, "--force", "--effects", "motor_efficiency"],
-                  quiet)
-        row["efficiency"] = json.loads(js2.read_text())
+        js2 = out / f"{stem}.efficiency.json"
+        code, err = quadfault(["diagnose", csv, "--json", js2, "--force", "--effects",
+                               "motor_efficiency"], quiet)
+        row["efficiency"] = json.loads(js2.read_text()) if code == 0 else None
     if kind == "nanodrone":
         row["drag_reference"] = drag_reference(csv, row["diagnosis"])
+    row["rotor_lag_reference"] = rotor_lag_reference(csv, row["diagnosis"])
     return row
 
 
-# ----------------------------------------------------------------------------- tables
+# ----------------------------------------------------------------------------- per log
 def _short(v) -> str:
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(_short(x) for x in v) + "]"
     return f"{v:.3g}" if isinstance(v, (int, float)) else str(v)
 
 
-def _effects(entries, skip=("inertia_diag_kg_m2", "ground_z_m")) -> str:
+SKIP_KEYS = ("inertia_diag_kg_m2", "ground_z_m", "nominal_curve", "v_ref_V", "v_start_V",
+             "v_end_V", "duration_s")
+
+
+def _effects(entries) -> str:
     parts = []
     for e in entries:
-        p = ", ".join(f"{k}={_short(v)}" for k, v in e["params"].items() if k not in skip)
+        p = ", ".join(f"{k}={_short(v)}" for k, v in e["params"].items() if k not in SKIP_KEYS)
         parts.append(f"{e['name']}({p}; {100 * e['improvement']:.0f}%)")
     return "; ".join(parts) or "none"
 
 
-def _vertical(doc):
-    ch = doc["model"]["channels"]
-    key = "sf_z" if "sf_z" in ch else "acc_z"
-    return key, ch[key]
+def absurd(doc: dict) -> list:
+    """The absurd accepted answers of one diagnosis (module docstring), one line each."""
+    out = []
+    weight = doc["vehicle"]["mass"] * doc["gravity"]
+    rate = (doc.get("evidence") or {}).get("command_rate_hz")
+    for e in doc["effects"]:
+        n, p = e["name"], e["params"]
+        if e.get("at_bound"):
+            out.append(f"{n}: a parameter at its bound ({_short(p)})")
+        if n == "inertia" and (min(p["scale"]) < MIN_INERTIA or max(p["scale"]) > MAX_INERTIA):
+            out.append(f"inertia scale {_short(p['scale'])} outside {MIN_INERTIA}-{MAX_INERTIA}")
+        if n == "motor_efficiency":
+            for key in ("eta", "eta_absolute"):
+                eta = p.get(key)
+                if eta and min(eta) < MIN_ETA:
+                    out.append(f"motor_efficiency {key} {_short(eta)}: a rotor below {MIN_ETA}")
+                if eta and max(eta) < HEALTHY_ETA:
+                    out.append(f"motor_efficiency {key} {_short(eta)}: all four below "
+                               f"{HEALTHY_ETA} (a common factor)")
+        if n == "wind" and np.linalg.norm(p["force_N"]) > MAX_FORCE * weight:
+            out.append(f"wind {_short(p['force_N'])} N: "
+                       f"{100 * np.linalg.norm(p['force_N']) / weight:.0f}% of the weight")
+        for key in ("tau_s", "delay_s"):
+            if key in p and rate and p[key] * rate < TIMING_SAMPLES:
+                out.append(f"{n} {p[key]:.3g} s from commands at {rate:.3g} Hz: "
+                           f"{p[key] * rate:.2g} samples per time constant")
+    return out
 
 
-def _prediction(doc) -> str:
-    p = doc.get("prediction") or {}
-    key = "position_rmse_m" if "position_rmse_m" in p else "attitude_rmse_deg"
-    if key not in p:
-        return "-"
-    e = {k: v[-1] for k, v in p[key].items()}
-    return (f"{e['nominal']:.3g} / {e['model']:.3g} / {e['constant_velocity']:.3g} / "
-            f"{e['constant_acceleration']:.3g}")
+def print_log(r) -> None:
+    head = f"\n### {r['folder']} {r['name']}"
+    if "import_error" in r:
+        print(f"{head}\n!! IMPORT FAILED: {r['import_error']}")
+        return
+    if "diagnose_error" in r:
+        print(f"{head}\n!! DIAGNOSE FAILED: {r['diagnose_error']}")
+        return
+    d = r["diagnosis"]
+    ev = d.get("evidence") or {}
+    rates = ", ".join(f"{k.replace('_rate_hz', '')} {v:.3g} Hz" for k, v in ev.items()
+                      if k.endswith("_rate_hz") and v)
+    print(f"{head} ({rates}; {100 * d['scoring']['masked_fraction']:.0f}% not free flight)")
+    print(f"{d['verdict']}: {_effects(d['effects'])}; held-out improvement "
+          f"{100 * d['model']['improvement']:.1f}%")
+    if d["suspect"]:
+        print("suspect (at a bound): " + ", ".join(e["name"] for e in d["suspect"]))
+    for n in d.get("not_identifiable", []):
+        print(f"not identifiable: {n['name']}: {n['reason']}")
+    if d.get("assumptions"):
+        print(f"assumed: {', '.join(d['assumptions']['assumed'])}")
+    if r.get("efficiency") is not None:
+        print(f"--effects motor_efficiency: {_effects(r['efficiency']['effects'])}")
+    if r.get("rotor_lag_reference") is not None:
+        print(f"lag from command to measured rotor speed: {r['rotor_lag_reference']:.3f} s")
+    for line in absurd(d):
+        print(f"!! ABSURD: {line}")
 
 
+# ----------------------------------------------------------------------------- tables
 def print_flights(rows) -> None:
-    print("\n## Every flight (quadfault diagnose, defaults)\n")
-    print("| flight | verdict | effects (params; held-out improvement alone) | suspect (at a "
-          "bound) | model improvement [95% CI] | vertical channel improvement [95% CI] | "
-          "excluded (not free flight) | open-loop error at the last horizon: nominal / model "
-          "/ const. velocity / const. acceleration |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("\n## Every log (quadfault import, quadfault diagnose with defaults)\n")
+    print("| log | verdict | accepted effects (params; held-out improvement alone) | "
+          "not identifiable | model improvement [95% CI] | excluded (not free flight) | "
+          "absurd |")
+    print("|---|---|---|---|---|---|---|")
     for r in rows:
+        if "diagnosis" not in r:
+            err = r.get("import_error") or r.get("diagnose_error")
+            print(f"| {r['folder']} {r['name']} | failed: {err} | - | - | - | - | - |")
+            continue
         d = r["diagnosis"]
-        key, v = _vertical(d)
         ci = d["model"]["ci95"]
-        print(f"| {r['kind']} {r['name']} | {d['verdict']} | {_effects(d['effects'])} | "
-              f"{', '.join(e['name'] for e in d['suspect']) or '-'} | "
-              f"{100 * d['model']['improvement']:.1f}% [{100 * ci[0]:.0f}, {100 * ci[1]:.0f}] | "
-              f"{key} {100 * v['improvement']:.0f}% [{100 * v['ci95'][0]:.0f}, "
-              f"{100 * v['ci95'][1]:.0f}] | {100 * d['scoring']['masked_fraction']:.1f}% | "
-              f"{_prediction(d)} |")
+        skipped = ", ".join(n["name"] for n in d.get("not_identifiable", [])) or "-"
+        print(f"| {r['folder']} {r['name']} | {d['verdict']} | {_effects(d['effects'])} | "
+              f"{skipped} | {100 * d['model']['improvement']:.1f}% [{100 * ci[0]:.0f}, "
+              f"{100 * ci[1]:.0f}] | {100 * d['scoring']['masked_fraction']:.1f}% | "
+              f"{len(absurd(d)) or '-'} |")
+
+
+def _eta(doc):
+    """Relative eta of the accepted motor_efficiency, or NaN x 4."""
+    eff = [e for e in (doc or {}).get("effects", []) if e["name"] == "motor_efficiency"]
+    return eff[0]["params"]["eta"] if eff else [np.nan] * 4
 
 
 def print_crazypad(rows) -> None:
-    sub = [r for r in rows if r["kind"] == "crazypad"]
-    nom = np.array([r["efficiency"]["effects"][0]["params"]["eta"] if r["efficiency"]["effects"]
-                    else [np.nan] * 4 for r in sub if r["condition"] == "normal_flight"])
-    if len(nom) < 2:
+    sub = [r for r in rows if r["kind"] == "crazypad" and r.get("efficiency") is not None]
+    if not sub:
         return
-    mu, sd = np.nanmean(nom, axis=0), np.nanstd(nom, axis=0, ddof=1)
-    print(f"\n## CrazyPAD, `--effects motor_efficiency` ({len(nom)} nominal flights; d = "
-          "(eta - nominal mean) / nominal sd)\n")
-    print("| condition | n | eta1 | eta2 | eta3 | eta4 | d(eta3) |")
-    print("|---|---|---|---|---|---|---|")
+    print("\n## CrazyPAD, `--effects motor_efficiency` (eta relative to the median rotor; "
+          "mean +- sd over flights; accepted on n of N)\n")
+    print("| condition | accepted | eta1 | eta2 | eta3 | eta4 |")
+    print("|---|---|---|---|---|---|")
     for cond in sorted({r["condition"] for r in sub}, key=lambda c: (c != "normal_flight", c)):
-        e = np.array([r["efficiency"]["effects"][0]["params"]["eta"]
-                      if r["efficiency"]["effects"] else [np.nan] * 4
-                      for r in sub if r["condition"] == cond])
+        e = np.array([_eta(r["efficiency"]) for r in sub if r["condition"] == cond])
+        n_ok = int(np.sum(np.all(np.isfinite(e), axis=1)))
+        if n_ok == 0:
+            print(f"| {cond} | 0 of {len(e)} | - | - | - | - |")
+            continue
         m = np.nanmean(e, axis=0)
-        s = np.nanstd(e, axis=0, ddof=1) if len(e) > 1 else np.zeros(4)
+        s = np.nanstd(e, axis=0, ddof=1) if n_ok > 1 else np.zeros(4)
         cells = " | ".join(f"{m[i]:.3f} +- {s[i]:.3f}" for i in range(4))
-        print(f"| {cond} | {len(e)} | {cells} | {(m[2] - mu[2]) / sd[2]:+.1f} |")
+        print(f"| {cond} | {n_ok} of {len(e)} | {cells} |")
+
+
+def lag_rows(rows) -> list:
+    """``(row, tau from commands or None, tau from rotor speeds)`` of logs with rotor speeds."""
+    out = []
+    for r in rows:
+        ref = r.get("rotor_lag_reference")
+        if "diagnosis" not in r or ref is None:
+            continue
+        lag = [e for e in r["diagnosis"]["effects"] if e["name"] == "motor_lag"]
+        out.append((r, lag[0]["params"]["tau_s"] if lag else None, ref))
+    return out
+
+
+def print_lags(rows) -> None:
+    lags = lag_rows(rows)
+    if not lags:
+        return
+    print("\n## Motor lag on logs with measured rotor speeds\n")
+    print("| log | motor_lag accepted (tau_s) | from command to rotor speed (tau_s) | "
+          "within 20% |")
+    print("|---|---|---|---|")
+    for r, tau, ref in lags:
+        ok = tau is not None and abs(tau - ref) <= 0.2 * ref
+        print(f"| {r['folder']} {r['name']} | {'-' if tau is None else f'{tau:.3f}'} | "
+              f"{ref:.3f} | {'yes' if ok else 'no'} |")
 
 
 def horizontal_drag(effects):
     """``(name, k)``: the accepted horizontal drag coefficient [N s/m] -- ``drag``'s mean x/y
-    ``k``, or ``blade_flapping``'s rotor drag at hover thrust (``drag_at_hover_N_s_per_m``,
-    its force ``-k_force T v`` with ``T = m g``) -- or None."""
+    ``k``, or ``blade_flapping``'s rotor drag at hover thrust -- or None."""
     for e in effects:
         if e["name"] == "drag":
             return "drag", float(np.mean(e["params"]["k_N_s_per_m"][:2]))
@@ -180,94 +334,74 @@ def horizontal_drag(effects):
     return None
 
 
-def _params(e) -> list:
-    out = []
-    for v in e["params"].values():
-        out += list(np.ravel(v))
-    return out
-
-
 def targets(rows) -> list:
-    """``(target, measured, met)`` of the issue's real-flight targets present in ``rows``."""
+    """``(target, measured, met)`` of the real-flight targets present in ``rows``."""
     out = []
-    accepted = [(r, e) for r in rows for e in r["diagnosis"]["effects"]]
-    at_bound = [f"{r['name']}:{e['name']}" for r, e in accepted if e.get("at_bound")]
-    out.append(("no accepted parameter at a bound", f"{len(at_bound)} ({', '.join(at_bound)})",
-                not at_bound))
-    inert = [(r["name"], e["params"]["scale"]) for r, e in accepted if e["name"] == "inertia"]
-    bad = [f"{n}: {_short(s)}" for n, s in inert if min(s) < 0.5 or max(s) > 2.0]
-    out.append(("no inertia scale outside 0.5-2", "; ".join(bad) or "none", not bad))
-    eff = [(r, e) for r, e in accepted if e["name"] == "motor_efficiency"
-           and r["condition"] in (None, "normal_flight")]
-    bad = [f"{r['name']}: {_short(e['params']['eta'])}" for r, e in eff
-           if min(e["params"]["eta"]) < 0.5]
-    out.append(("no efficiency below 0.5 without a known fault", "; ".join(bad) or "none",
-                not bad))
-    bad = []
-    for r, e in accepted:
-        if e["name"] == "wind":
-            m = r["diagnosis"]["vehicle"]["mass"]
-            frac = np.linalg.norm(e["params"]["force_N"]) / (m * r["diagnosis"]["gravity"])
-            if frac > 0.2:
-                bad.append(f"{r['name']}: {100 * frac:.0f}% of the weight")
-    out.append(("no steady external force above 20% of the weight", "; ".join(bad) or "none",
-                not bad))
-    esch = [r for r in rows if r["kind"] == "eschmann"]
+    done = [r for r in rows if "diagnosis" in r]
+    failed = [f"{r['folder']} {r['name']}: {r.get('import_error') or r.get('diagnose_error')}"
+              for r in rows if "diagnosis" not in r]
+    out.append(("every log imports and diagnoses, or fails with a one-line error",
+                f"{len(done)} of {len(rows)} diagnosed; failed: " + ("; ".join(failed) or
+                                                                     "none"), True))
+    bad = [f"{r['name']}: {line}" for r in done for line in absurd(r["diagnosis"])]
+    out.append(("no absurd accepted answer", "; ".join(bad) or "none", not bad))
+    lags = lag_rows(rows)
+    if lags:
+        n_ok = sum(tau is not None and abs(tau - ref) <= 0.2 * ref for _, tau, ref in lags)
+        out.append(("logs with rotor speeds: motor_lag accepted within 20% of the lag from "
+                    "command to rotor speed on >= 90%", f"{n_ok} of {len(lags)}",
+                    n_ok >= 0.9 * len(lags)))
+    esch = [r for r in done if r["kind"] == "eschmann"]
     if esch:
         cells, ok = [], True
         for r in esch:
             d = r["diagnosis"]
             lag = [e for e in d["effects"] if e["name"] == "motor_lag"]
-            key, v = _vertical(d)
+            ch = d["model"]["channels"]
+            v = ch.get("sf_z") or ch.get("acc_z")
             tau = lag[0]["params"]["tau_s"] if lag else None
             good = (tau is not None and 0.05 <= tau <= 0.11 and v["improvement"] >= 0.3
                     and v["ci95"][0] > 0)
             ok &= good
-            cells.append(f"{r['name']}: tau {'-' if tau is None else f'{tau:.3f} s'}, {key} "
+            cells.append(f"{r['name']}: tau {'-' if tau is None else f'{tau:.3f} s'}, vertical "
                          f"{100 * v['improvement']:.0f}% [{100 * v['ci95'][0]:.0f}, "
                          f"{100 * v['ci95'][1]:.0f}]")
         out.append(("Eschmann: motor_lag tau 0.05-0.11 s, vertical >= 30% with CI above 0",
                     "; ".join(cells), ok))
-    fitted = [(r, e) for r in rows for key in ("effects", "suspect", "rejected")
-              for e in r["diagnosis"][key]]
-    lags = [e.get("folds_agree") for r, e in fitted
-            if r["kind"] == "eschmann" and e["name"] == "motor_lag"]
-    inert = [e.get("folds_agree") for r, e in fitted
-             if r["kind"] == "crazypad" and e["name"] == "inertia"]
-    if lags or inert:
-        out.append(("fold agreement accepts the Eschmann lag, rejects the CrazyPAD inertia",
-                    f"lag folds agree on {sum(bool(a) for a in lags)} of {len(lags)} logs; "
-                    f"inertia folds agree on {sum(bool(a) for a in inert)} of {len(inert)} "
-                    "CrazyPAD flights", all(lags) and not any(inert)))
-    nano = [r for r in rows if r["kind"] == "nanodrone"]
+    nano = [r for r in done if r["kind"] == "nanodrone"]
     if nano:
-        n_ok, cells, taus = 0, [], []
+        n_ok, cells = 0, []
         for r in nano:
-            d = r["diagnosis"]
-            k = horizontal_drag(d["effects"])
+            k = horizontal_drag(r["diagnosis"]["effects"])
             ref = np.mean(r["drag_reference"])
             if k is not None:
                 n_ok += abs(k[1] - ref) <= 0.3 * ref
-                cells.append(f"{r['name']} {k[0]} {k[1]:.4f} (ref {ref:.4f})")
-            else:
-                cells.append(f"{r['name']} - (ref {ref:.4f})")
-            taus += [e["params"]["tau_s"] for e in d["effects"] if e["name"] == "motor_lag"]
-        out.append(("nano-drone: horizontal drag (drag, or blade_flapping's rotor drag at hover "
-                    "thrust) within 30% of the accelerometer fit on >= 7 of 9",
-                    f"{n_ok} of {len(nano)}: " + "; ".join(cells), n_ok >= 7))
-        out.append(("nano-drone: motor lag 0.02-0.06 s where found",
-                    f"{len(taus)} flights: " + ", ".join(f"{t:.3f}" for t in taus),
-                    all(0.02 <= t <= 0.06 for t in taus)))
-    pad = [r for r in rows if r["kind"] == "crazypad" and r["efficiency"]["effects"]]
-    nom = [r["efficiency"]["effects"][0]["params"]["eta"][2] for r in pad
-           if r["condition"] == "normal_flight"]
-    cut = [r["efficiency"]["effects"][0]["params"]["eta"][2] for r in pad
-           if r["condition"] == "cut_propeller_M3_3mm"]
-    if len(nom) > 1 and cut:
-        d = (np.mean(cut) - np.mean(nom)) / np.std(nom, ddof=1)
-        out.append(("CrazyPAD --effects motor_efficiency: cut M3 below nominal by > 2 sd",
-                    f"eta3 {np.mean(cut):.3f} ({len(cut)} cut) vs {np.mean(nom):.3f} +- "
-                    f"{np.std(nom, ddof=1):.3f} ({len(nom)} nominal): d = {d:+.1f}", d < -2))
+            cells.append(f"{r['name']} {'-' if k is None else f'{k[0]} {k[1]:.4f}'} "
+                         f"(ref {ref:.4f})")
+        out.append(("nano-drone: horizontal drag within 30% of the accelerometer fit on >= 7 "
+                    "of 9", f"{n_ok} of {len(nano)}: " + "; ".join(cells), n_ok >= 7))
+    pad = [r for r in done if r["kind"] == "crazypad" and r.get("efficiency") is not None]
+    healthy = [(r, _eta(r["efficiency"])) for r in pad if r["condition"] == "normal_flight"]
+    if healthy:
+        low = [f"{r['name']} {_short(e)}" for r, e in healthy if np.nanmin(e) < HEALTHY_ETA]
+        out.append((f"CrazyPAD healthy: no accepted rotor below {HEALTHY_ETA} relative",
+                    "; ".join(low) or "none", not low))
+    graded = {}
+    for r in pad:
+        c = r["condition"]
+        if c.startswith("cut_propeller_M3_"):
+            graded.setdefault(c, []).append(_eta(r["efficiency"]))
+    if graded:
+        cells, ok, last = [], True, 1.0
+        for c in sorted(graded, key=lambda c: float(c.rsplit("_", 1)[1].rstrip("m"))):
+            e = np.array(graded[c])
+            lowest = int(np.sum(np.nanargmin(np.where(np.isnan(e), np.inf, e), axis=1) == 2))
+            m3 = float(np.nanmean(e[:, 2])) if np.any(np.isfinite(e[:, 2])) else np.nan
+            ok &= lowest == len(e) and m3 < last
+            last = m3
+            cells.append(f"{c}: rotor 3 lowest on {lowest} of {len(e)}, mean eta3 {m3:.3f}")
+        out.append(("CrazyPAD cut propeller M3 (1/2/3 mm): rotor 3 lowest, falling as the "
+                    "damage grows", "; ".join(cells), ok))
     return out
 
 
@@ -285,9 +419,10 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=None,
                     help="keep the imported recordings and diagnosis JSON here (default: a "
                          "temporary folder)")
-    ap.add_argument("--only", default=",".join(DATASETS), help="comma-separated data sets")
+    ap.add_argument("--only", default="", help="comma-separated words: folders whose name "
+                                               "contains one of them")
     ap.add_argument("--crazypad-all", action="store_true",
-                    help="every CrazyPAD motor_data condition, not only nominal and 3 mm cut")
+                    help="every CrazyPAD motor_data condition, not only healthy and cut")
     ap.add_argument("--json", type=Path, default=None, help="also write all results here")
     ap.add_argument("--force", action="store_true", help="overwrite --json")
     ap.add_argument("--quiet", action="store_true", help="do not print the commands")
@@ -295,11 +430,6 @@ def main(argv=None) -> int:
                     help="print the tables of an earlier run's --json instead of computing")
     args = ap.parse_args(argv)
     only = tuple(s.strip() for s in args.only.split(",") if s.strip())
-    bad = [s for s in only if s not in DATASETS]
-    if bad:
-        print(f"error: unknown data set {bad[0]!r}; choose from {', '.join(DATASETS)}",
-              file=sys.stderr)
-        return 2
     if args.from_json is None and not args.data.is_dir():
         print(f"skipped: real data not available ({args.data} is absent)")
         return 0
@@ -307,24 +437,31 @@ def main(argv=None) -> int:
 
     t0 = time.perf_counter()
     if args.from_json is not None:
-        rows = [r for r in json.loads(args.from_json.read_text()) if r["kind"] in only]
+        rows = [r for r in json.loads(args.from_json.read_text())
+                if not only or any(w in r["folder"] for w in only)]
     else:
         if args.json is not None:
             check_writable([args.json], force=args.force)
         out = args.out or Path(tempfile.mkdtemp(prefix="real_flights_"))
         out.mkdir(parents=True, exist_ok=True)
+        rows = []
         try:
-            rows = [run_one(*job, out, args.quiet)
-                    for job in jobs(args.data, only, args.crazypad_all)]
+            for job in jobs(args.data, only, args.crazypad_all):
+                rows.append(run_one(*job, out, args.quiet))
+                print_log(rows[-1])
         finally:
             if args.out is None:
                 shutil.rmtree(out, ignore_errors=True)
         if args.json is not None:
             atomic_write_text(args.json, json.dumps(rows, indent=1), force=args.force)
+    if args.from_json is not None:
+        for r in rows:
+            print_log(r)
     print_flights(rows)
     print_crazypad(rows)
+    print_lags(rows)
     print_targets(rows)
-    print(f"\n{len(rows)} flights in {time.perf_counter() - t0:.0f} s")
+    print(f"\n{len(rows)} logs in {time.perf_counter() - t0:.0f} s")
     return 0
 
 

@@ -50,6 +50,16 @@ def test_the_command_period_is_the_time_between_changes(plain):
     assert change_period(plain.t, flat) == float("inf")
 
 
+def test_the_importers_stream_rate_counts_where_interpolation_hides_it(plain):
+    """An importer that interpolates a slow stream onto a fast time base records the stream's
+    own rate; the slower of it and the changes counts."""
+    meta = {**plain.meta, "import": {"stream_rates_hz": {"u": 10.0}}}
+    ev = evidence(dataclasses.replace(plain, meta=meta))
+    assert ev.command_period == pytest.approx(0.1)
+    meta = {**plain.meta, "import": {"stream_rates_hz": {"u": 1000.0}}}
+    assert evidence(dataclasses.replace(plain, meta=meta)).command_period == pytest.approx(DT)
+
+
 def test_commands_at_10_hz_cannot_show_a_lag_or_delay(plain):
     res = Diagnosis().fit(held(plain, 10.0))
     skipped = {n["name"]: n["reason"] for n in res.not_identifiable}

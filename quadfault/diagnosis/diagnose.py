@@ -153,6 +153,20 @@ def _valid_pose(rec, ev) -> tuple:
     return rec, [(a, b, why) for k in ("velocity", "position") for a, b in ev.invalid.get(k, ())]
 
 
+def _calibration_note(rp) -> str:
+    """What of the importer's calibration segment is not free flight (its thrust constant
+    then carries ground or impact forces; ``thrust_scale`` or ``thrust_curve`` absorb it)."""
+    if not rp.excluded or not rp.masked:
+        return ""
+    a, b = rp.excluded[0]
+    inside = excluded_fraction([s for s in rp.masked if s[1] > a and s[0] < b], a, b)
+    if inside < 0.05:
+        return ""
+    return (f"{100 * inside:.0f}% of the importer's calibration segment is not free flight: "
+            "its thrust constant is biased by it (a common factor that thrust_scale or "
+            "thrust_curve takes up)")
+
+
 def _scoring_dict(rp, sc, recording, mask_note="") -> dict:
     t0, t1 = float(recording.t[0]), float(recording.t[-1])
     spans = [{"t0": a, "t1": b, "reason": why} for a, b, why in rp.masked]
@@ -168,7 +182,7 @@ def _scoring_dict(rp, sc, recording, mask_note="") -> dict:
                       "residuals winsorised at 5 robust sd of the nominal residual"}
     if rp.has_rotor:
         out["rotor_thrust_coefficient"] = {"value": rp.rotor_k, "source": rp.rotor_k_source}
-    notes = [n for n in (mask_note, rp.scoring_note) if n]
+    notes = [n for n in (mask_note, rp.scoring_note, _calibration_note(rp)) if n]
     if notes:
         out["note"] = "; ".join(notes)
     return out

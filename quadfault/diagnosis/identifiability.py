@@ -17,7 +17,9 @@ them:
     the rotor commands must be logged at least this fast -- or, when the effect is shown
     ``direct``-ly by measured rotor speeds the log has, the rotor speeds. The rate is that of
     the changes (an importer that resamples a 10 Hz output onto a 250 Hz time base holds each
-    command for 25 rows: the rate stays 10 Hz).
+    command for 25 rows: the rate stays 10 Hz), or the rate of the stream as logged where the
+    importer records it (``meta.import.stream_rates_hz``: ``u``, ``rotor``), whichever is
+    slower: interpolated streams change at every row.
 ``timescale``
     a time constant is seen only through commands logged at ``TIMING_SAMPLES`` (2) or more
     samples per time constant: a fitted value below two command periods is rejected, and
@@ -175,12 +177,34 @@ def evidence(rec: Recording) -> Evidence:
     assumed = (rec.meta or {}).get("assumed") or ()
     if isinstance(assumed, str):
         assumed = (assumed,)
-    return Evidence(command_period=change_period(t, cmd),
+    command_period = change_period(t, cmd)
+    rotor_period = None if W is None else change_period(t, W)
+    source = _source_rates(rec)  # the importer's rates of the streams before resampling
+    if "u" in source:
+        command_period = max(command_period, 1.0 / source["u"])
+    if rotor_period is not None and "rotor" in source:
+        rotor_period = max(rotor_period, 1.0 / source["rotor"])
+    return Evidence(command_period=command_period,
                     sample_period=float(np.median(np.diff(t))),
-                    rotor_speed_period=None if W is None else change_period(t, W),
+                    rotor_speed_period=rotor_period,
                     pose=rec.has_pose, accel=rec.accel is not None,
                     vbat=rec.vbat is not None, invalid=invalid, invalid_fraction=frac,
                     assumed=tuple(str(a) for a in assumed if a in ASSUMABLE))
+
+
+def _source_rates(rec: Recording) -> dict:
+    """``{"u": Hz, "rotor": Hz}``: the rates of the command and rotor-speed streams as logged,
+    before an importer resampled them (``meta.import.stream_rates_hz``), where it says."""
+    rates = ((rec.meta or {}).get("import") or {}).get("stream_rates_hz") or {}
+    out = {}
+    for key in ("u", "rotor"):
+        try:
+            v = float(rates[key])
+        except (KeyError, TypeError, ValueError):
+            continue
+        if np.isfinite(v) and v > 0:
+            out[key] = v
+    return out
 
 
 def without_pose(rec: Recording) -> Recording:
