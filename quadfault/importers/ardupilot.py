@@ -6,16 +6,18 @@ parameters, and indexes the messages; the columns this importer needs are then d
 bulk with numpy from that index (binary logs) or collected message by message (text logs).
 ArduPilot logs NED world and FRD body frames, like quadfault.
 
-| message | fields | use |
-|---|---|---|
-| ``IMU`` (instance 0) | ``GyrX..Z`` [rad/s], ``AccX..Z`` [m/s^2] | body rates, specific force; the time base |
-| ``ATT`` | ``Roll, Pitch, Yaw`` [deg] | attitude (Z-Y-X Euler) |
-| ``XKF1`` / ``NKF1`` (core 0) | ``PN, PE, PD`` [m], ``VN, VE, VD`` [m/s] | position, velocity |
-| ``XKF4`` / ``NKF4`` (core 0) | ``SS`` (filter status bits) | validity: velocity needs bits 1, 2; position bit 3 or 4 and bit 5; bit 7 (constant position mode) invalidates both |
-| ``RCOU`` (``C1..``, or ``Chan1..``) / ``MOT`` | PWM [us] | motor commands, channels from ``SERVOn_FUNCTION`` = Motor 1..4 |
-| ``ESC`` | ``Instance``, ``RPM`` | measured rotor speed [rad/s] |
-| ``BAT`` / ``CURR`` | ``Volt``, ``Curr`` | ``vbat``, ``current`` |
-| ``EV`` | ``Id`` 28 (not landed), 18 (land complete), 17 (land complete maybe), 10/11 (armed/disarmed) | flight span |
+- ``IMU`` (instance 0): ``GyrX..Z`` [rad/s], ``AccX..Z`` [m/s^2] -> body rates, specific force;
+  the time base
+- ``ATT``: ``Roll, Pitch, Yaw`` [deg] -> attitude (Z-Y-X Euler)
+- ``XKF1`` / ``NKF1`` (core 0): ``PN, PE, PD`` [m], ``VN, VE, VD`` [m/s] -> position, velocity
+- ``XKF4`` / ``NKF4`` (core 0): ``SS`` (filter status bits) -> validity: velocity needs bits 1,
+  2; position bit 3 or 4 and bit 5; bit 7 (constant position mode) invalidates both
+- ``RCOU`` (``C1..``, or ``Chan1..``) / ``MOT``: PWM [us] -> motor commands, channels from
+  ``SERVOn_FUNCTION`` = Motor 1..4
+- ``ESC``: ``Instance``, ``RPM`` -> measured rotor speed [rad/s]
+- ``BAT`` / ``CURR``: ``Volt``, ``Curr`` -> ``vbat``, ``current``
+- ``EV``: ``Id`` 28 (not landed), 18 (land complete), 17 (land complete maybe), 10/11
+  (armed/disarmed) -> flight span
 
 Parameters: ``MOT_PWM_MIN/MAX`` (else ``RC3_MIN/MAX``, else 1000-2000 us) normalise the PWM
 to the actuator command u; ``MOT_SPIN_MIN/MAX`` and ``MOT_THST_EXPO`` give ArduPilot's thrust

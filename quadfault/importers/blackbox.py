@@ -2,16 +2,17 @@
 :mod:`quadfault.importers.blackbox_format`) and the CSV that ``blackbox_decode`` or Blackbox
 Explorer exports.
 
-| field | unit in the log | becomes |
-|---|---|---|
-| ``time`` | us | time [s] |
-| ``gyroADC[0..2]`` | deg/s x ``gyro_scale`` (INDIflight: 0.1 deg/s) | body rates; the Betaflight body axes are x forward, y left, z up, so FRD = (x, -y, -z) |
-| ``accSmooth[0..2]`` (else ``accUnfiltered``) | ``acc_1G`` per g | specific force FRD [m/s^2] |
-| ``motor[0..3]`` | ``motorOutput`` low..high | ``u1..u4`` = (motor - low) / (high - low) |
-| ``eRPM[0..3]`` | 100 eRPM | ``omega1..4`` = eRPM x 100 / (``motor_poles`` / 2) x 2 pi / 60 [rad/s] |
-| ``omega[0..3]`` (INDIflight) | rad/s | ``omega1..4`` |
-| ``quat[0..3]``, ``pos[0..2]``, ``vel[0..2]`` (INDIflight) | scaled unit quaternion FRD -> NED, mm, cm/s | attitude, position, velocity (NED) |
-| ``vbatLatest``, ``amperageLatest`` | 0.01 V, 0.01 A | ``vbat``, ``current`` |
+- ``time``: us -> time [s]
+- ``gyroADC[0..2]``: deg/s x ``gyro_scale`` (INDIflight: 0.1 deg/s) -> body rates; the
+  Betaflight body axes are x forward, y left, z up, so FRD = (x, -y, -z)
+- ``accSmooth[0..2]`` (else ``accUnfiltered``): ``acc_1G`` per g -> specific force FRD [m/s^2]
+- ``motor[0..3]``: ``motorOutput`` low..high -> ``u1..u4`` = (motor - low) / (high - low)
+- ``eRPM[0..3]``: 100 eRPM -> ``omega1..4`` = eRPM x 100 / (``motor_poles`` / 2) x 2 pi / 60
+  [rad/s]
+- ``omega[0..3]`` (INDIflight): rad/s -> ``omega1..4``
+- ``quat[0..3]``, ``pos[0..2]``, ``vel[0..2]`` (INDIflight): scaled unit quaternion FRD -> NED,
+  mm, cm/s -> attitude, position, velocity (NED)
+- ``vbatLatest``, ``amperageLatest``: 0.01 V, 0.01 A -> ``vbat``, ``current``
 
 Motor order and spin directions are Betaflight's quad X mixer (0 rear-right, 1 front-right,
 2 rear-left, 3 front-left; 0 and 3 clockwise, reversed with ``yaw_motors_reversed``); no arm

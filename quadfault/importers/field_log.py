@@ -322,7 +322,8 @@ def build_recording(log: FieldLog, *, vehicle: Vehicle | None = None, thrust_cur
         base = tuple(float(c) for c in log.thrust_model)
         longest = max(spans, key=lambda s: s[1] - s[0])
         if calibration is None:
-            calibration = (longest[0], longest[0] + CALIBRATION_FRACTION * (longest[1] - longest[0]))
+            span = longest[1] - longest[0]
+            calibration = (longest[0], longest[0] + CALIBRATION_FRACTION * span)
         measured = _measured_thrust(res, vehicle)
         mask = calibration_mask(t, calibration)
         if measured is None:  # no accelerometer: hover on average over the segment

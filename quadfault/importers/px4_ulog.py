@@ -2,17 +2,18 @@
 
 Topics read (PX4 uses NED world and FRD body frames, like quadfault; nothing is rotated):
 
-| topic | fields | use |
-|---|---|---|
-| ``vehicle_attitude`` | ``q[0..3]`` (w, x, y, z; FRD -> NED) | attitude |
-| ``vehicle_local_position`` | ``x, y, z, vx, vy, vz``, ``xy_valid, z_valid, v_xy_valid, v_z_valid`` | pose; invalid rows never used |
-| ``vehicle_angular_velocity`` | ``xyz[0..2]`` [rad/s] FRD | body rates (or ``sensor_combined.gyro_rad``) |
-| ``sensor_combined`` | ``accelerometer_m_s2[0..2]``, ``gyro_rad[0..2]`` | specific force FRD |
-| ``actuator_motors`` | ``control[0..3]`` normalised 0..1 | commands ``u1..u4`` |
-| ``actuator_outputs`` (any instance) | ``output[k]`` | else: the instance that drives the motors, normalised with its range |
-| ``esc_status`` | ``esc[i].esc_rpm`` | measured rotor speed ``omega1..4`` [rad/s] |
-| ``battery_status`` | ``voltage_v``, ``current_a`` | ``vbat`` [V], ``current`` [A] |
-| ``vehicle_land_detected`` | ``landed, maybe_landed, ground_contact`` | flight span |
+- ``vehicle_attitude``: ``q[0..3]`` (w, x, y, z; FRD -> NED) -> attitude
+- ``vehicle_local_position``: ``x, y, z, vx, vy, vz``, ``xy_valid, z_valid, v_xy_valid,
+  v_z_valid`` -> pose; invalid rows never used
+- ``vehicle_angular_velocity``: ``xyz[0..2]`` [rad/s] FRD -> body rates (else
+  ``vehicle_attitude.rollspeed..yawspeed``, else ``sensor_combined.gyro_rad``)
+- ``sensor_combined``: ``accelerometer_m_s2[0..2]``, ``gyro_rad[0..2]`` -> specific force FRD
+- ``actuator_motors``: ``control[0..3]`` normalised 0..1 -> commands ``u1..u4``
+- ``actuator_outputs`` (any instance): ``output[k]`` -> else: the instance that drives the
+  motors, normalised with its range
+- ``esc_status``: ``esc[i].esc_rpm`` -> measured rotor speed ``omega1..4`` [rad/s]
+- ``battery_status``: ``voltage_v``, ``current_a`` -> ``vbat`` [V], ``current`` [A]
+- ``vehicle_land_detected``: ``landed, maybe_landed, ground_contact`` -> flight span
 
 Parameters: ``CA_ROTOR{i}_PX/PY/KM`` (geometry, motor order, spin direction, yaw torque per
 newton), ``THR_MDL_FAC`` (thrust model f ~ (1 - fac) u + fac u^2), the output ranges
@@ -212,6 +213,9 @@ def read_px4(path, time_base: str | None = None) -> FieldLog:
     if angv is not None:
         streams["w"] = (_stamp(angv, True), _fields(path, angv, "vehicle_angular_velocity",
                                                      [f"xyz[{i}]" for i in range(3)]), "linear")
+    elif "rollspeed" in att:  # PX4 before 1.10 logs the rates with the attitude
+        streams["w"] = (_stamp(att), _fields(path, att, "vehicle_attitude",
+                                             ["rollspeed", "pitchspeed", "yawspeed"]), "linear")
     else:
         streams["w"] = (_stamp(imu), _fields(path, imu, "sensor_combined",
                                              [f"gyro_rad[{i}]" for i in range(3)]), "linear")

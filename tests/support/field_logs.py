@@ -90,17 +90,21 @@ def write_ulog(path, topics: list, params: dict | None = None, nested: dict | No
 
 
 def px4_flight(path, *, outputs: str = "uavcan", invalid_vxy=(8.0, 9.0), motor_rate=100.0,
-               params: dict | None = None, disarmed_value: float = 0.0) -> dict:
+               params: dict | None = None, disarmed_value: float = 0.0,
+               duration: float = T_END, imu_rate: float = 500.0) -> dict:
     """Write the synthetic flight as a ULog. ``outputs``: "uavcan" (actuator_outputs
     instance 1, 0-8191, instance 0 all zeros, no actuator_motors), "motors"
     (actuator_motors, ``disarmed_value`` before arming) or "none". Velocity flagged invalid on
-    ``invalid_vxy`` [s] (None: never). Returns the profile at the motor stamps."""
+    ``invalid_vxy`` [s] (None: never). ``duration`` stretches the flight (phases keep their
+    proportions; times in the arguments are in the unstretched flight). Returns the profile at
+    the motor stamps."""
     us = 1_000_000
-    t_att = np.arange(0.0, T_END, 0.004)
-    t_imu = np.arange(0.0, T_END, 0.002)
-    t_pos = np.arange(0.0, T_END, 0.01)
-    t_mot = np.arange(0.0, T_END, 1.0 / motor_rate)
-    prof = flight_profile(t_mot)
+    stretch = duration / T_END
+    t_att = np.arange(0.0, duration, 0.004)
+    t_imu = np.arange(0.0, duration, 1.0 / imu_rate)
+    t_pos = np.arange(0.0, duration, 0.01)
+    t_mot = np.arange(0.0, duration, 1.0 / motor_rate)
+    prof = flight_profile(t_mot / stretch)
     q = [1.0, 0.0, 0.0, 0.0]
     topics = [
         ("vehicle_attitude", 0, [("uint64_t", "timestamp", 0), ("float", "q", 4)],
@@ -108,10 +112,10 @@ def px4_flight(path, *, outputs: str = "uavcan", invalid_vxy=(8.0, 9.0), motor_r
         ("sensor_combined", 0, [("uint64_t", "timestamp", 0), ("float", "gyro_rad", 3),
                                 ("float", "accelerometer_m_s2", 3)],
          [(int(t * us), [0.0, 0.0, 0.0], [0.0, 0.0, -G]) for t in t_imu])]
-    pp = flight_profile(t_pos)
+    pp = flight_profile(t_pos / stretch)
     bad = np.zeros(len(t_pos), dtype=bool)
     if invalid_vxy is not None:
-        bad = (t_pos >= invalid_vxy[0]) & (t_pos < invalid_vxy[1])
+        bad = (t_pos / stretch >= invalid_vxy[0]) & (t_pos / stretch < invalid_vxy[1])
     vel = pp["vel"].copy()
     vel[bad, 0] = 5.0 + t_pos[bad]  # an invalid estimate drifts
     topics.append(("vehicle_local_position", 0,
@@ -129,21 +133,22 @@ def px4_flight(path, *, outputs: str = "uavcan", invalid_vxy=(8.0, 9.0), motor_r
         topics += [("actuator_outputs", 0, fields, zero), ("actuator_outputs", 1, fields, raw)]
     elif outputs == "motors":
         u = prof["u"].copy()
-        u[t_mot < T_ARM] = disarmed_value
-        topics.append(("actuator_motors", 0, [("uint64_t", "timestamp", 0), ("float", "control", 4)],
-                       [(int(t * us), list(u[k])) for k, t in enumerate(t_mot)]))
+        u[t_mot / stretch < T_ARM] = disarmed_value
+        topics.append(("actuator_motors", 0,
+                       [("uint64_t", "timestamp", 0), ("float", "control", 4)],
+                       [(int(t * us), list(u[j])) for j, t in enumerate(t_mot)]))
     rpm = prof["u"] * OMEGA_PER_U * 60.0 / (2 * np.pi)
     topics.append(("esc_status", 0, [("uint64_t", "timestamp", 0), ("uint8_t", "esc_count", 0),
                                      ("esc_report", "esc", 4)],
                    [(int(t * us), 4, [(int(round(r)), 12.0) for r in rpm[k]])
                     for k, t in enumerate(t_mot)]))
-    t_land = np.arange(0.0, T_END, 0.1)
-    pl = flight_profile(t_land)
+    t_land = np.arange(0.0, duration, 0.1)
+    pl = flight_profile(t_land / stretch)
     topics.append(("vehicle_land_detected", 0,
                    [("uint64_t", "timestamp", 0), ("uint8_t", "landed", 0),
                     ("uint8_t", "maybe_landed", 0), ("uint8_t", "ground_contact", 0)],
                    [(int(t * us), int(pl["landed"][k]), 0, 0) for k, t in enumerate(t_land)]))
-    t_bat = np.arange(0.0, T_END, 0.1)
+    t_bat = np.arange(0.0, duration, 0.1)
     topics.append(("battery_status", 0, [("uint64_t", "timestamp", 0), ("float", "voltage_v", 0),
                                          ("float", "current_a", 0)],
                    [(int(t * us), 16.0 - 0.05 * t, 10.0) for t in t_bat]))
@@ -175,23 +180,25 @@ _STRUCT = {"Q": "Q", "B": "B", "f": "f", "I": "I", "H": "H", "i": "i", "N": "16s
 SS_OK = 0b111111  # attitude, velocities, positions valid
 
 
-def _df_messages(*, rcou_rate, invalid_vxy, params, motor_channels, imu_rate=400.0):
+def _df_messages(*, rcou_rate, invalid_vxy, params, motor_channels, imu_rate=400.0,
+                 duration=T_END):
     """``[(t, name, values)]`` of the synthetic flight."""
+    s = duration / T_END
     msgs = [(0.0, "PARM", (k.encode(), float(v))) for k, v in params.items()]
-    for t in np.arange(0.0, T_END, 1.0 / imu_rate):
+    for t in np.arange(0.0, duration, 1.0 / imu_rate):
         msgs.append((t, "IMU", (0, 0.0, 0.0, 0.0, 0.0, 0.0, -G)))
         msgs.append((t, "IMU", (1, 9.0, 9.0, 9.0, 9.0, 9.0, 9.0)))  # a second, broken IMU
-    t_pos = np.arange(0.0, T_END, 0.04)
-    pp = flight_profile(t_pos)
+    t_pos = np.arange(0.0, duration, 0.04)
+    pp = flight_profile(t_pos / s)
     for k, t in enumerate(t_pos):
-        bad = invalid_vxy is not None and invalid_vxy[0] <= t < invalid_vxy[1]
+        bad = invalid_vxy is not None and invalid_vxy[0] <= t / s < invalid_vxy[1]
         vel = pp["vel"][k] + (np.array([5.0 + t, 0.0, 0.0]) if bad else 0.0)
         msgs.append((t, "ATT", (0.0, 0.0, 30.0)))
         msgs.append((t, "XKF1", (0, *vel, *pp["pos"][k])))
         msgs.append((t, "XKF1", (1, 99.0, 99.0, 99.0, 99.0, 99.0, 99.0)))
         msgs.append((t, "XKF4", (0, SS_OK & ~0b10 if bad else SS_OK)))
-    t_mot = np.arange(0.0, T_END, 1.0 / rcou_rate)
-    pm = flight_profile(t_mot)
+    t_mot = np.arange(0.0, duration, 1.0 / rcou_rate)
+    pm = flight_profile(t_mot / s)
     for k, t in enumerate(t_mot):
         pwm = [1000] * 8
         for i, ch in enumerate(motor_channels):
@@ -200,16 +207,17 @@ def _df_messages(*, rcou_rate, invalid_vxy, params, motor_channels, imu_rate=400
         for i, ch in enumerate(motor_channels):
             rpm = int(round(pm["u"][k, i] * OMEGA_PER_U * 60 / (2 * np.pi)))
             msgs.append((t, "ESC", (ch - 1, rpm)))
-    for t in np.arange(0.0, T_END, 0.1):
-        msgs.append((t, "BAT", (0, 16.0 - 0.05 * t, 10.0)))
+    for t in np.arange(0.0, duration, 0.1):
+        msgs.append((t, "BAT", (0, 16.0 - 0.05 * t / s, 10.0)))
     for t, ev in ((2.0, 10), (T_TAKEOFF + 0.5, 28), (T_LAND - 0.5, 18), (T_DISARM, 11)):
-        msgs.append((t, "EV", (ev,)))
+        msgs.append((t * s, "EV", (ev,)))
     return sorted(msgs, key=lambda m: m[0])
 
 
 def dataflash_flight(path, *, text: bool = False, rcou_rate: float = 100.0,
                      invalid_vxy=(8.0, 9.0), params: dict | None = None,
-                     motor_channels=(5, 6, 7, 8), imu_rate: float = 400.0) -> None:
+                     motor_channels=(5, 6, 7, 8), imu_rate: float = 400.0,
+                     duration: float = T_END) -> None:
     """Write the synthetic flight as an ArduPilot DataFlash log: binary, or text with
     ``text=True``. Motors on ``motor_channels`` (``SERVOn_FUNCTION``), ESC telemetry on
     the same instances, a broken second IMU and EKF core, velocity flagged invalid on
@@ -220,7 +228,7 @@ def dataflash_flight(path, *, text: bool = False, rcou_rate: float = 100.0,
         base[f"SERVO{ch}_FUNCTION"] = 33 + i
     base.update(params or {})
     msgs = _df_messages(rcou_rate=rcou_rate, invalid_vxy=invalid_vxy, params=base,
-                        motor_channels=motor_channels, imu_rate=imu_rate)
+                        motor_channels=motor_channels, imu_rate=imu_rate, duration=duration)
     if text:
         lines = ["FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format,Columns"]
         for name, (tid, fmt, cols) in _DF.items():
