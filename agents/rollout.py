@@ -1,8 +1,8 @@
 """Closed-loop flights with an estimator in the loop, without the Gymnasium environment.
 
-:func:`fly` flies the model's one closed loop (:mod:`quadfault.closed_loop`, the loop of
+:func:`fly` flies the model's one closed loop (:class:`quadfault.flight.Flight`, the loop of
 :func:`quadfault.simulator.simulate`) with Python acting between its steps: per physics
-step, the sensors measure (the loop's ``sense``), the controller computes the commands from
+step, the sensors measure (``Flight.sense``), the controller computes the commands from
 the measurement and the current ``eta_hat``, the loop steps the motors and the plant, then
 the estimator gets the sample just sent (state at ``t_k``, command held from ``t_k``). The
 estimate is therefore causal: the command at ``t_k`` uses samples up to ``t_{k-1}``.
@@ -30,12 +30,12 @@ from agents.fault_tolerant import FaultTolerantConfig, make_controller
 from agents.metrics import CrashLimits, FlightMetrics, RecoveryConfig, flight_metrics, tilt_angle
 from estimators.registry import ESTIMATORS, make_estimator
 from quadfault.sample import Sample
-from quadfault import closed_loop
+from quadfault import flight as loop
 from quadfault.controller import ControllerConfig
 from quadfault.errors import ConfigError
 from quadfault.motors import MotorModel
 from quadfault.plant import Plant
-from quadfault.scenarios import Scenario, at_times
+from quadfault.scenarios import Scenario
 from quadfault.simulator import SensorNoise, initial_state
 from quadfault.vehicle import Vehicle
 
@@ -141,9 +141,13 @@ def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any =
     if n < 2:
         raise ConfigError(f"scenario duration {scenario.duration} s is shorter than two steps")
     times = cfg.dt * np.arange(n)
-    eta_table = np.ascontiguousarray(at_times(scenario.efficiency, times), dtype=float)
+    plant = Plant(veh, MotorModel(scenario.thrust_noise, True), dt=cfg.dt)
+    plant.reset()
+    # the loop: the sensors without the accelerometer, the commands set here
+    flight = loop.Flight(plant, cfg.sensor_noise, record_accel=False)
+    flight.reset(rng)
+    eta_table = flight.plan(n, scenario.efficiency)
     efficiency = _Tabulated(cfg.dt, eta_table)
-    plant = Plant(veh, efficiency, MotorModel(scenario.thrust_noise, True), dt=cfg.dt)
     ctrl = make_controller(controller, veh, scenario.trajectory, cfg.controller,
                            cfg.fault_tolerant)
     est = make_estimator(estimator, veh, schedule=efficiency)  # the schedule: the oracle's
@@ -152,14 +156,8 @@ def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any =
     refs = scenario.trajectory(times)
     ffs = (ctrl.geometric.feedforward_rates(times) if cfg.controller.angular_feedforward
            else None)
-    plant.reset(initial_state(scenario, 0.0, ctrl.geometric))
+    flight.set_state(initial_state(scenario, 0.0, ctrl.geometric))
     ctrl.reset()
-    # the loop: the sensors without the accelerometer, the commands set here
-    loop = closed_loop.constants(plant, cfg.sensor_noise, record_accel=False)
-    tables = closed_loop.Tables(np.zeros(1, dtype=np.int64), eta_table[None],
-                                np.zeros((1, 0, 6, 3)))
-    vehicles, no_records = plant.vehicles, closed_loop.Records.none(1, veh.n_rotors)
-    gens = closed_loop.generators([rng])
     decim = cfg.control_decimation
     pos_err, tilt, f_hist = np.empty(n), np.empty(n), np.empty((n, 4))
     keep = np.arange(0, n, cfg.trace_every)
@@ -175,15 +173,15 @@ def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any =
     k_end = n
     for k in range(n):
         t = times[k]
-        state = plant.state
+        state = flight.state()
         p_ref = refs.position[k]
         e = float(np.linalg.norm(state.p - p_ref)) if state.is_finite() else math.inf
         if (not math.isfinite(e) or e > lim.max_position_error or state.R[2, 2] < cos_tilt
                 or state.p[2] > lim.ground_z):
             crash_time, k_end = float(t), k
             break
-        closed_loop.sense(gens, loop, vehicles)
-        meas = vehicles.measurement(0)
+        flight.sense()
+        meas = flight.measured()
         if k % decim == 0:
             ref_k = type(refs)(*(a[k] for a in refs))
             ff_k = None if ffs is None else (ffs[0][k], ffs[1][k])
@@ -197,8 +195,7 @@ def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any =
         if k % cfg.trace_every == 0:
             j = k // cfg.trace_every
             tr_p[j], tr_eta_hat[j], tr_wz[j] = state.p, eta_hat, state.w[2]
-        vehicles.f_cmd[0] = f_cmd
-        closed_loop.fly(gens, k, k + 1, False, loop, vehicles, tables, no_records)
+        flight.step(f_cmd)
         if k % cfg.trace_every == 0:
             tr_eta[k // cfg.trace_every] = eta_table[k]
         if k % cfg.estimator_every == 0:

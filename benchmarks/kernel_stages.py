@@ -135,7 +135,7 @@ def stage_ns(N: int = 4096, horizon: int = 50, repeats: int = 5) -> dict[str, fl
     rng = np.random.default_rng(0)
     veh = Vehicle()
     dt = 1e-3
-    plant = Plant(veh, None, MotorModel(0.07), dt=dt, n_vehicles=N)
+    plant = Plant(veh, MotorModel(0.07), dt=dt, n_vehicles=N)
     V = plant.vehicles
     V.p[:, 2] = -1.0
     V.v[:] = 0.1 * rng.standard_normal((N, 3))

@@ -65,7 +65,7 @@ def loop_batch(N: int, horizon: int, randomise: bool, ranges=RANGES):
     from quadfault.vehicle import Vehicle
 
     veh = Vehicle()
-    plant = Plant(veh, None, MotorModel(0.07), dt=1.0 / RATE, n_vehicles=N)
+    plant = Plant(veh, MotorModel(0.07), dt=1.0 / RATE, n_vehicles=N)
     if randomise:
         rng = np.random.default_rng(1)
         for i in range(N):

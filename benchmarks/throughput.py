@@ -86,7 +86,7 @@ def compiled_batch(N: int, horizon: int, rng, control_every: int = 0, thrust_noi
     from quadfault.trajectory import Hover
 
     veh = Vehicle()
-    plant = Plant(veh, None, MotorModel(thrust_noise), dt=1.0 / RATE, n_vehicles=N)
+    plant = Plant(veh, MotorModel(thrust_noise), dt=1.0 / RATE, n_vehicles=N)
     V = plant.vehicles
     V.p[:, 2] = -1.0
     V.f_cmd[:] = veh.weight / 4 + 0.01 * rng.standard_normal((N, 4))

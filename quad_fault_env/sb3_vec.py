@@ -88,17 +88,19 @@ class QuadFaultSB3VecEnv(VecEnv if VecEnv is not None else object):
         self.venv.close()
 
     def get_attr(self, attr_name, indices=None):
+        """An attribute of the sub-envs' one configuration (the vector env's ``single_env``:
+        its vehicle, spaces, action and reward settings), once per index."""
         if attr_name == "render_mode":
             return [None] * len(self._indices(indices))
-        return [getattr(self.venv.envs[i], attr_name) for i in self._indices(indices)]
+        return [getattr(self.venv.single_env, attr_name)] * len(self._indices(indices))
 
     def set_attr(self, attr_name, value, indices=None) -> None:
-        for i in self._indices(indices):
-            setattr(self.venv.envs[i], attr_name, value)
+        raise ConfigError("the sub-envs share one configuration, fixed when the vector env "
+                          "is made: pass keywords to make_sb3_vec_env instead of set_attr")
 
     def env_method(self, method_name, *method_args, indices=None, **method_kwargs):
-        return [getattr(self.venv.envs[i], method_name)(*method_args, **method_kwargs)
-                for i in self._indices(indices)]
+        raise ConfigError("the sub-envs are rows of one vector env, not env objects: call "
+                          "the vector env (QuadFaultSB3VecEnv.venv) instead of env_method")
 
     def env_is_wrapped(self, wrapper_class, indices=None):
         return [False] * len(self._indices(indices))

@@ -57,6 +57,8 @@ class RowTimeTables:
         self.vehicle, self.config = vehicle, controller
         n_rotors = vehicle.n_rotors
         self.k0 = np.full(n_rows, _STALE, dtype=np.int64)
+        #: the physics step of each row's first efficiency row (``k0 S``; what the loop reads)
+        self.first = np.full(n_rows, _STALE, dtype=np.int64)
         #: rows: position, velocity, acceleration, b1d, Omega_d, Omega_d' at the boundaries
         self.refs = np.zeros((n_rows, self.window + 1, 6, 3))
         self.eta = np.zeros((n_rows, self.window * self.S + 1, n_rotors))
@@ -65,6 +67,7 @@ class RowTimeTables:
     def invalidate(self, rows) -> None:
         """Forget the windows of ``rows`` (a reset changes their trajectory and schedule)."""
         self.k0[rows] = _STALE
+        self.first[rows] = _STALE
 
     def ensure(self, k: np.ndarray, traj_key, sched_key, trajectories, schedules,
                last: int) -> None:
@@ -98,6 +101,7 @@ class RowTimeTables:
             tsub = (k0 * S + np.arange(W * S + 1)) * dt  # t = (k S + j) dt
             self.eta[rows[idx]] = _as_rows(at_times(schedules[key], tsub), len(tsub))
         self.k0[rows] = kr
+        self.first[rows] = kr * S
 
     def references(self, k: np.ndarray) -> np.ndarray:
         """(N, 6, 3) reference rows at the start of step ``k`` (N,) (t = k S dt)."""

@@ -1,9 +1,11 @@
 """QuadFaultVectorEnv: N quadrotors stepped in one call (a gymnasium VectorEnv).
 
-The physics is the core model's one closed loop over the sub-envs:
-:func:`quadfault.closed_loop.fly_batch` runs the same per-vehicle kernel the single
+The physics is the core model's one closed loop over the sub-envs: one
+:class:`quadfault.flight.Flight` of N vehicles runs the same per-vehicle kernel the single
 :class:`~quad_fault_env.envs.quad_fault.QuadFaultEnv` runs, in parallel over the vehicles
-(``prange``), one call per control step. Resets are batched: per row only the seed, the
+(``prange``), one call per control step. The configuration is one: the keywords are those of
+the single env, validated once (:attr:`QuadFaultVectorEnv.single_env`, never stepped); the
+per-episode state is arrays over the rows. Resets are batched: per row only the seed, the
 scenario (``QuadFaultEnv._make_scenario``) and the row's draws; the initial states come from
 :func:`quad_fault_env.envs.episode_start.start_states` over all reset rows -- the function
 the single env's reset calls with one row -- so both envs share one definition of an episode
@@ -24,12 +26,12 @@ nominal belief ``"none"`` and the oracle ``"truth"``.
 
 from __future__ import annotations
 
-import copy
 import os
 
 import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.utils import seeding
 from gymnasium.vector.utils import batch_space
 
 from quad_fault_env.envs.config import check_keywords, keywords_of, validate_action
@@ -39,12 +41,13 @@ from estimators.registry import estimator_names, estimator_spec, make_estimator
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.estimation import NOMINAL_PRIOR_SD
 from quad_fault_env.observation import SD_MAX
-from quad_fault_env.time_tables import WINDOW, InternTable, RowTimeTables, row_groups
-from quadfault import closed_loop, jit
+from quad_fault_env.time_tables import WINDOW, InternTable, RowTimeTables
+from quadfault import jit
 from quadfault.controller import GeometricController
 from quadfault.dynamics import RigidBodyState
 from quadfault.effects.sampling import describe
 from quadfault.errors import ConfigError
+from quadfault.flight import Flight
 from quadfault.motors import MotorModel
 from quadfault.plant import Plant
 
@@ -133,12 +136,9 @@ class QuadFaultVectorEnv(VectorEnv):
         self.num_envs = N = int(num_envs)
         self.max_episode_steps = max_episode_steps
         self.metadata = dict(self.metadata, autoreset_mode=AUTORESET_MODES[autoreset_mode])
-        # one single env per sub-env: scenarios, controllers, resets, generators. The first is
-        # built (and validates the keywords); the others are shallow copies of it made before
-        # any reset, so they share only immutable configuration (every per-episode attribute,
-        # the generator included, is assigned anew by reset) -- O(1) each instead of a build.
-        e0 = QuadFaultEnv("none", scenario, **kwargs)
-        self.envs = [e0] + [copy.copy(e0) for _ in range(N - 1)]
+        # one configuration for every sub-env: the single env's keywords, validated once
+        #: the single env holding the configuration of every sub-env (never reset or stepped)
+        self.single_env = e0 = QuadFaultEnv("none", scenario, **kwargs)
         self.vehicle, self.layout = e0.vehicle, e0.layout
         self.substeps, self.dt = e0.substeps, e0.dt
         self.estimator_stride = e0.estimator_stride
@@ -152,15 +152,14 @@ class QuadFaultVectorEnv(VectorEnv):
             self.estimator = make_estimator(estimator, self.vehicle, num=N,
                                             **(estimator_kwargs or {}))
         # the single env's plant (MotorModel(thrust_noise): its default saturation), N of it
-        self.plant = Plant(self.vehicle, None, MotorModel(), dt=self.dt, n_vehicles=N)
-        self._loop = closed_loop.constants(self.plant, e0.sensor_noise)
+        self.plant = Plant(self.vehicle, MotorModel(), dt=self.dt, n_vehicles=N)
+        self.flight = Flight(self.plant, e0.sensor_noise)
         self._trajectories, self._schedules = InternTable(), InternTable()
-        self._controllers: dict = {}
         # the geometric controller's gains and options (shared by every row; references given)
         self._controller = GeometricController(self.vehicle, None, e0.controller_config)
         self._tables = RowTimeTables(N, self.substeps, self.dt, self.vehicle,
                                      e0.controller_config)
-        self._no_refs = np.zeros((N, 0, 6, 3))
+        self.flight.use_efficiency(self._tables.eta, self._tables.first)
         n = self.vehicle.n_rotors
         self.eta_hat, self.eta_sd = np.ones((N, n)), np.full((N, n), np.nan)
         self.status = np.full(N, "warmup", dtype=object)
@@ -171,39 +170,33 @@ class QuadFaultVectorEnv(VectorEnv):
         self._sched_key = np.zeros(N, dtype=np.int64)
         self._needs_reset = np.zeros(N, dtype=bool)
         self._rngs: list = [None] * N  # each sub-env's generator (set by its reset)
-        self._rng_list = None  # the same as the loop's typed list, built lazily
+        #: each sub-env's scenario of the current episode
+        self.scenarios = np.full(N, None, dtype=object)
         self._scenario_names = np.full(N, None, dtype=object)
         self.physics_draws = e0.physics_draws  # per-vehicle physics drawn at each reset
         self._effects = np.full(N, None, dtype=object)
         self._started = False
 
-    # -- the vehicles' arrays (views of the plant's state) -----------------------------------
+    # -- the vehicles' arrays (views of the flight's state) ----------------------------------
     @property
     def state(self) -> RigidBodyState:
         """True states (N,) -- views of the arrays the loop updates."""
-        V = self.plant.vehicles
-        return RigidBodyState(V.p, V.v, V.R, V.w)
+        return self.flight.truth
 
     @property
     def meas(self) -> RigidBodyState:
         """The measurements the agents see (N,) -- views."""
-        V = self.plant.vehicles
-        return RigidBodyState(V.mp, V.mv, V.mR, V.mw)
+        return self.flight.measurement
 
     @property
     def f_cmd(self) -> np.ndarray:
         """Rotor commands held over the current step (N, n) [N]."""
-        return self.plant.vehicles.f_cmd
+        return self.flight.commands
 
     @property
     def sigma(self) -> np.ndarray:
         """Each sub-env's thrust noise sigma_f (N,)."""
         return self.plant.vehicles.sigma
-
-    def _generators(self):
-        if self._rng_list is None:
-            self._rng_list = closed_loop.generators(self._rngs)
-        return self._rng_list
 
     # -- resets ------------------------------------------------------------------------------
     def _reset_rows(self, rows, seeds=None, options=None):
@@ -221,51 +214,40 @@ class QuadFaultVectorEnv(VectorEnv):
         rows = np.asarray(rows, dtype=np.int64).reshape(-1)
         if not len(rows):
             return None
-        e0, n = self.envs[0], self.vehicle.n_rotors
+        e0, n = self.single_env, self.vehicle.n_rotors
         spec = e0._scenario_option(options)
         drawn = isinstance(spec, str) and spec in GENERATORS  # a new scenario per row
         shared = None if drawn else e0._make_scenario(spec)
         u = np.empty((len(rows), SPREAD_DRAWS))
+        sigma = np.empty(len(rows))
         for k, i in enumerate(rows.tolist()):
-            env = self.envs[i]
-            gym.Env.reset(env, seed=None if seeds is None else seeds[k])
-            rng = env.np_random
-            sc = shared if shared is not None else env._make_scenario(spec)
-            env.scenario = sc
+            seed = None if seeds is None else seeds[k]
+            if seed is not None or self._rngs[i] is None:  # as gymnasium's Env.reset
+                self._rngs[i] = seeding.np_random(seed)[0]
+            rng = self._rngs[i]
+            sc = shared if shared is not None else e0._make_scenario(spec, rng)
+            self.scenarios[i] = sc
             if self.physics_draws is not None:  # the single env's draw, at the same point
-                env.effects = self.physics_draws.draw(rng)
-                self.plant.assign(i, env.effects)
-                self._effects[i] = describe(env.effects)
+                effects = self.physics_draws.draw(rng)
+                self.plant.assign(i, effects)
+                self._effects[i] = describe(effects)
             u[k] = rng.uniform(-1.0, 1.0, SPREAD_DRAWS)
-            self._rngs[i] = rng
             self._scenario_names[i] = sc.name
             self._traj_key[i] = self._trajectories.key(sc.trajectory)
             self._sched_key[i] = self._schedules.key(sc.efficiency)
-            self.sigma[i] = sc.thrust_noise
+            sigma[k] = sc.thrust_noise
             self.max_steps[i] = int(round(sc.duration / e0.control_period))
-        if self._rng_list is not None:  # the loop's typed list of the generators
-            if 4 * len(rows) > self.num_envs:
-                self._rng_list = None  # rebuilt when needed: cheaper than many setitems
-            else:
-                for i in rows.tolist():
-                    self._rng_list[i] = self._rngs[i]
+        self.flight.set_thrust_noise(rows, sigma)
         keys, inv = np.unique(self._traj_key[rows], return_inverse=True)
         items = [self._trajectories.items[int(key)] for key in keys]
-        for key, traj in zip(keys.tolist(), items):
-            if key not in self._controllers:
-                self._controllers[key] = GeometricController(self.vehicle, traj,
-                                                             e0.controller_config)
-        for i, key in zip(rows.tolist(), self._traj_key[rows].tolist()):
-            self.envs[i].controller = self._controllers[key]
         start, ref0 = start_states(items, inv.ravel(), self.vehicle, e0.controller_config,
                                    e0.initial_spread, u)
-        self.plant.vehicles.set_state(rows, start)
-        closed_loop.sense_rows(self._generators, rows, self._loop, self.plant.vehicles)
+        # the rows' flights: their generators, initial states, measurements, zero commands
+        self.flight.reset([self._rngs[i] for i in rows.tolist()], rows=rows, state=start)
         keys, inv = np.unique(self._sched_key[rows], return_inverse=True)
         eta0 = np.array([np.broadcast_to(np.asarray(self._schedules.items[key](0.0), float), (n,))
                          for key in keys.tolist()])
         self.eta_true[rows] = eta0[inv.ravel()]
-        self.f_cmd[rows] = 0.0
         self.steps[rows] = 0
         self._tables.invalidate(rows)
         self.eta_hat[rows], self.eta_sd[rows], self.status[rows] = 1.0, np.nan, "warmup"
@@ -289,8 +271,6 @@ class QuadFaultVectorEnv(VectorEnv):
             remap = {int(k): new.key(old.items[int(k)]) for k in np.unique(keys)}
             keys[:] = [remap[int(k)] for k in keys]
             setattr(self, attr, new)
-        self._controllers = {int(self._traj_key[i]): env.controller
-                             for i, env in enumerate(self.envs)}
 
     def reset(self, *, seed=None, options=None):
         """Reset every sub-env; ``seed`` an int (sub-env i gets ``seed + i``) or a list."""
@@ -303,8 +283,7 @@ class QuadFaultVectorEnv(VectorEnv):
             seeds = list(seed)
             if len(seeds) != N:
                 raise ConfigError(f"reset needs {N} seeds, got {len(seeds)}")
-        self._trajectories, self._schedules, self._controllers = InternTable(), InternTable(), {}
-        self._rng_list = None
+        self._trajectories, self._schedules = InternTable(), InternTable()
         with jit.threads(self.numba_threads):
             refs = self._reset_rows(np.arange(N), seeds, options)  # every row at t = 0
         self._needs_reset[:] = False
@@ -328,7 +307,7 @@ class QuadFaultVectorEnv(VectorEnv):
     def _motor_commands(self, a: np.ndarray, refs: np.ndarray) -> np.ndarray:
         """``QuadFaultEnv.motor_commands`` for every row (``ActionConfig.commands``); ``refs``
         (N, 6, 3) the controller's reference rows at the step's start (``time_tables``)."""
-        e0 = self.envs[0]
+        e0 = self.single_env
         cfg = e0.action_config
         f_ctrl = None
         if cfg.mode == "residual":
@@ -336,23 +315,17 @@ class QuadFaultVectorEnv(VectorEnv):
             f_ctrl = self._controller.commands(m.p, m.v, m.R, m.w, refs)
         return cfg.commands(a, self.vehicle, f_ctrl, self.eta_hat, e0.compensate)
 
-    def _substeps(self, ts: np.ndarray, active: np.ndarray) -> None:
-        """The control step's physics substeps of the ``active`` rows in one call of the loop
-        (:func:`quadfault.closed_loop.fly_batch`); then the batched estimator's updates on the
-        measurements it recorded every ``estimator_stride`` substeps (the estimate does not
-        act on the physics within a step)."""
+    def _substeps(self, commands: np.ndarray, ts: np.ndarray, active: np.ndarray) -> None:
+        """The control step's physics substeps of the ``active`` rows with ``commands`` held,
+        in one call of the loop (:meth:`quadfault.flight.Flight.step`); then the batched
+        estimator's updates on the measurements it recorded every ``estimator_stride``
+        substeps (the estimate does not act on the physics within a step)."""
         N, S, n = self.num_envs, self.substeps, self.vehicle.n_rotors
-        V = self.plant.vehicles
         stride = self.estimator_stride
-        if self.estimator is None:
-            out = closed_loop.Records.none(N, n)
-        else:
-            out = closed_loop.Records.empty(N, -(-S // stride), n, stride, accel=False)
-            for rec, m in zip(out[1:5], (V.mp, V.mv, V.mR, V.mw)):  # rows that do not run
-                rec[~active] = m[~active, None]
-        tables = closed_loop.Tables(self._tables.k0 * S, self._tables.eta, self._no_refs)
-        closed_loop.fly_batch(self._generators(), active, self.steps * S, S, False, self._loop,
-                              V, tables, out, fx=self.plant.hook)
+        out = None
+        if self.estimator is not None:
+            out = self.flight.records(S, stride, accel=False)
+        self.flight.step(commands, S, record=out, active=active)
         if self.estimator is not None:
             for r, j in enumerate(range(0, S, stride)):
                 res = self.estimator.update(ts[:, j], out.p[:, r], out.v[:, r], out.R[:, r],
@@ -378,14 +351,14 @@ class QuadFaultVectorEnv(VectorEnv):
         resetting = self._needs_reset.copy()
         k0 = self.steps * S
         self._ensure_tables(self.steps, WINDOW - 1)
-        self.f_cmd[:] = self._motor_commands(a, self._tables.references(self.steps))
+        commands = self._motor_commands(a, self._tables.references(self.steps))
         ts = (k0[:, None] + np.arange(S)[None, :]) * self.dt
-        self._substeps(ts, ~resetting)
+        self._substeps(commands, ts, ~resetting)
         self.steps = self.steps + 1
         state = self.state
         ref1 = self._tables.references(self.steps)  # k - k0 <= WINDOW: still in the window
         refs = ref1[:, 0], ref1[:, 1], ref1[:, 2]
-        reason = self.envs[0].limits.reasons(state.p, state.R, refs[0])
+        reason = self.single_env.limits.reasons(state.p, state.R, refs[0])
         reason[resetting] = None
         terminated = np.not_equal(reason, None) & ~resetting
         truncated = ~terminated & (self.steps >= self.max_steps)
@@ -396,11 +369,10 @@ class QuadFaultVectorEnv(VectorEnv):
         # a terminated one shows its true state
         on = np.flatnonzero(~(terminated | resetting))
         if len(on):
-            closed_loop.sense_rows(self._generators, on, self._loop, self.plant.vehicles)
-        for m, x in zip(self.meas, state):
-            m[terminated] = x[terminated]
+            self.flight.sense(on)
+        self.flight.sense(terminated, noise=False)
         self.eta_true = self._tables.efficiency_at(self.steps - 1, S)
-        reward = self.envs[0].reward_config(state.p - refs[0], state.v - refs[1], self.f_cmd,
+        reward = self.single_env.reward_config(state.p - refs[0], state.v - refs[1], self.f_cmd,
                                             self.vehicle.rotor_max_thrust, terminated, a)
         done = terminated | truncated
         mode = self.metadata["autoreset_mode"]
@@ -430,7 +402,7 @@ class QuadFaultVectorEnv(VectorEnv):
         m, (pos, vel, acc) = self.meas, refs
         flat = self.layout.flat(pos_err=m.p - pos, vel_err=m.v - vel, R=m.R, omega=m.w,
                                 eta_hat=self.eta_hat, eta_sd=self.eta_sd, ref_acc=acc)
-        return self.layout.split(flat) if self.envs[0].observation_kind == "dict" else flat
+        return self.layout.split(flat) if self.single_env.observation_kind == "dict" else flat
 
     def _infos(self, refs, reason) -> dict:
         N = self.num_envs
@@ -454,8 +426,7 @@ class QuadFaultVectorEnv(VectorEnv):
         return info
 
     def close_extras(self, **kwargs):
-        for env in self.envs:
-            env.close()
+        self.single_env.close()
 
 
 __all__ = ["AUTORESET_MODES", "THREADS_MIN_BATCH", "QuadFaultVectorEnv", "default_threads"]

@@ -1,10 +1,11 @@
-"""The true vehicle ("plant"): rigid body + motors + efficiency schedule + unmodelled effects.
+"""The true vehicle ("plant"): rigid body + motors + unmodelled effects.
 
 The plant is what the controller and the estimators do *not* know. Per physics step of
 length ``dt`` it takes the rotor commands [N] (held constant over the step, zero-order hold),
 applies saturation, efficiency and thrust noise (:func:`quadfault.motors.motor_thrust`), then
 the effects, and integrates the rigid body (:func:`quadfault.dynamics.rkmk4_step`, or the
-authors' Euler step). The loop that does this is :mod:`quadfault.closed_loop`; this module
+authors' Euler step). The loop that does this is :mod:`quadfault.closed_loop`, flown through
+:class:`quadfault.flight.Flight` (which also takes the true efficiency over time); this module
 says what a plant is and how effects act on it.
 
 Effects
@@ -139,7 +140,6 @@ class Plant:
     Args:
         vehicle: the vehicle's parameters (the controller may hold different, nominal ones);
             effects with ``true_vehicle`` change it at :meth:`reset`.
-        efficiency: callable ``t -> (n,)`` true motor efficiency (arrays of times give rows).
         motor: saturation and thrust noise (sigma_f of every vehicle; see ``vehicles.sigma``).
         effects: unmodelled effects applied in order (see the module docstring).
         integrator: ``"rk4"`` (default) or ``"reference"`` (the authors' Euler step).
@@ -150,9 +150,14 @@ class Plant:
     of the loop; :attr:`state` is vehicle 0's.
     """
 
-    def __init__(self, vehicle: Vehicle, efficiency=None, motor: MotorModel | None = None,
-                 effects: tuple = (), integrator: str = "rk4", dt: float = 1e-3,
-                 n_vehicles: int = 1):
+    def __init__(self, vehicle: Vehicle, motor: MotorModel | None = None, effects: tuple = (),
+                 integrator: str = "rk4", dt: float = 1e-3, n_vehicles: int = 1):
+        if (motor is not None and not isinstance(motor, MotorModel)) or isinstance(
+                effects, MotorModel):
+            raise ConfigError(f"Plant(vehicle, motor, effects, ...) takes a MotorModel and a "
+                              f"tuple of effects, got {type(motor).__name__} and "
+                              f"{type(effects).__name__} (the true efficiency over time is "
+                              f"the flight's: quadfault.flight.Flight)")
         if integrator not in INTEGRATORS:
             raise ConfigError(f"integrator must be one of {INTEGRATORS}, got {integrator!r}")
         if not (dt > 0):
@@ -160,7 +165,6 @@ class Plant:
         if integrator == "reference" and effects:
             raise ConfigError("the reference integrator does not support extra effects")
         self.nominal_vehicle = vehicle
-        self.efficiency = efficiency
         self.motor = motor or MotorModel()
         self.effects = tuple(effects)
         self.vehicle = flown_vehicle(vehicle, self.effects)

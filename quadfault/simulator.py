@@ -1,7 +1,7 @@
 """The closed-loop simulation: scenario -> plant -> sensors -> recording.
 
-:func:`simulate` flies one vehicle through :mod:`quadfault.closed_loop` (the loop every user
-of the model shares). Per physics step k (time t_k):
+:func:`simulate` flies one vehicle through :class:`quadfault.flight.Flight` (the closed loop
+every user of the model shares). Per physics step k (time t_k):
 
 1. the sensors measure the plant state (noise-free by default, as in the paper);
 2. every ``control_period`` the geometric controller computes rotor commands from the
@@ -24,15 +24,16 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from quadfault import closed_loop
+from quadfault.closed_loop import Records
 from quadfault.controller import ControllerConfig, GeometricController
 from quadfault.dynamics import RigidBodyState
+from quadfault.flight import Flight
 from quadfault.errors import ConfigError
 from quadfault.motors import MotorModel
 from quadfault.plant import INTEGRATORS, EffectsHook, Plant
 from quadfault.recording import Recording
 from quadfault.rotation import rot_to_quat
-from quadfault.scenarios import Scenario, at_times
+from quadfault.scenarios import Scenario
 from quadfault.sensors import SensorNoise
 from quadfault.vehicle import Vehicle
 
@@ -110,15 +111,6 @@ def _progress(total, enabled, desc):
     return progress_bar(total=total, desc=desc, unit="step")
 
 
-def _efficiency(schedule, times: np.ndarray, n_rotors: int) -> np.ndarray:
-    """The true efficiency (len(times), n) of a schedule on the step times."""
-    eta = np.asarray(at_times(schedule, times), dtype=float)
-    if eta.shape != (len(times), n_rotors):
-        raise ConfigError(f"the efficiency schedule gave shape {eta.shape} for {len(times)} "
-                          f"times, expected ({len(times)}, {n_rotors})")
-    return np.ascontiguousarray(eta)
-
-
 #: steps per call of the loop (the progress bar moves between calls)
 CHUNK = 5000
 
@@ -158,8 +150,8 @@ def simulate(scenario: Scenario, *, vehicle: Vehicle | None = None,
         raise ConfigError(f"seed must be a non-negative integer, got {seed!r}")
     rng = np.random.default_rng(seed)
     sigma = scenario.thrust_noise if thrust_noise is None else thrust_noise
-    plant = Plant(true_vehicle, scenario.efficiency, MotorModel(sigma, cfg.saturate), effects,
-                  cfg.integrator, cfg.dt)
+    plant = Plant(true_vehicle, MotorModel(sigma, cfg.saturate), effects, cfg.integrator,
+                  cfg.dt)
     ctrl = controller or GeometricController(nominal, scenario.trajectory, cfg.controller)
     if not isinstance(ctrl, GeometricController):
         raise ConfigError(f"controller must be a GeometricController, got "
@@ -171,33 +163,31 @@ def simulate(scenario: Scenario, *, vehicle: Vehicle | None = None,
         raise ConfigError(f"duration {scenario.duration} s is shorter than two steps")
     t0 = cfg.dt if reference else 0.0
     times = t0 + cfg.dt * np.arange(n)
-    n_rot = true_vehicle.n_rotors
-    plant.reset(initial_state(scenario, t0, None if reference else ctrl))
-    vehicles = plant.vehicles
-    eta = _efficiency(scenario.efficiency, times, n_rot)
-    tables = closed_loop.Tables(np.zeros(1, dtype=np.int64), eta[None],
-                                np.ascontiguousarray(ctrl.reference_rows(times)[None]))
-    consts = closed_loop.constants(plant, cfg.sensor_noise, cfg.control_decimation,
-                                   cfg.record_accel, t0)
-    out = closed_loop.Records.empty(1, n, n_rot, accel=cfg.record_accel)
-    hook = plant.hook
+    plant.reset()
+    flight = Flight(plant, cfg.sensor_noise, controller=ctrl,
+                    control_every=cfg.control_decimation, record_accel=cfg.record_accel, t0=t0)
+    flight.reset(rng)
+    flight.set_state(initial_state(scenario, t0, None if reference else ctrl))
+    eta = flight.plan(n, scenario.efficiency)
     bar = _progress(n, progress, f"simulate {scenario.name}")
-    chunk = CHUNK // 10 if isinstance(hook, EffectsHook) else CHUNK
+    chunk = CHUNK // 10 if isinstance(plant.hook, EffectsHook) else CHUNK
+    chunks = []
     for k0 in range(0, n, chunk):
         k1 = min(n, k0 + chunk)
-        rows = closed_loop.Records(1, *(a[:, k0:k1] for a in out[1:]))
-        done = closed_loop.fly(rng, k0, k1, True, consts, vehicles, tables, rows, hook,
-                               ctrl.constants)
+        rows = flight.step(None, k1 - k0, record=flight.records(k1 - k0, accel=cfg.record_accel),
+                           measure_first=True)
+        done = int(flight.steps_run[0])
+        chunks.append(rows)
         if bar is not None:
             bar.update(k1 - k0)
         event = None if not stop_at_loss else _first_event(
-            times[k0:k0 + done], out.p[0, k0:k0 + done], scenario, LOST_CONTROL_ERROR)
+            times[k0:k0 + done], rows.p[0, :done], scenario, LOST_CONTROL_ERROR)
         if event is not None:
             n = k0 + event[0] + 1
             end = {"reason": event[1], "t": float(times[n - 1]),
                    "planned_duration": float(scenario.duration)}
             break
-        if not vehicles.state().is_finite():
+        if not flight.state().is_finite():
             raise ConfigError(f"simulation diverged at t = {times[k0 + done - 1]:.3f} s "
                               f"(non-finite state)")
     else:
@@ -206,7 +196,7 @@ def simulate(scenario: Scenario, *, vehicle: Vehicle | None = None,
         bar.close()
     plant.check_effects()
     times, eta = times[:n], eta[:n]
-    out = closed_loop.Records(1, *(None if a is None else a[:, :n] for a in out[1:]))
+    out = Records(1, *(np.concatenate(parts, axis=1)[:, :n] for parts in list(zip(*chunks))[1:]))
     vbat = None if scenario.voltage is None else scenario.voltage(times)
     meta = {
         "scenario": scenario.name,

@@ -78,7 +78,7 @@ def test_kernel_draws_are_the_generators_own_stream():
     inside a kernel are the numbers (and leave the generator where) numpy would."""
     gen, twin = np.random.default_rng(11), np.random.default_rng(11)
     sc = named_scenario("hover", duration=0.01).replace(thrust_noise=0.1)
-    plant = Plant(Vehicle(), sc.efficiency, MotorModel(0.1), dt=1e-3)
+    plant = Plant(Vehicle(), MotorModel(0.1), dt=1e-3)
     consts = closed_loop.constants(plant, SensorNoise(gyro=0.1))
     tables = closed_loop.Tables(np.zeros(1, np.int64), np.ones((1, 5, 4)), np.zeros((1, 0, 6, 3)))
     closed_loop.fly(closed_loop.generators([gen]), 0, 5, True, consts, plant.vehicles, tables,
@@ -97,7 +97,7 @@ def test_seeded_runs_repeat_and_seeds_differ():
 def _fleet(N, seed=0, sigma=0.07):
     rng = np.random.default_rng(seed)
     veh = Vehicle()
-    plant = Plant(veh, None, MotorModel(sigma), dt=1e-3, n_vehicles=N)
+    plant = Plant(veh, MotorModel(sigma), dt=1e-3, n_vehicles=N)
     V = plant.vehicles
     V.p[:] = rng.normal(size=(N, 3))
     V.v[:] = rng.normal(size=(N, 3))

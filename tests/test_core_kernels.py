@@ -133,7 +133,7 @@ def test_per_step_cores_take_no_arrays():
 
     from quadfault.plant import Plant
 
-    plant = Plant(Vehicle(), None, MotorModel(0.07))
+    plant = Plant(Vehicle(), MotorModel(0.07))
     C = closed_loop.constants(plant, SensorNoise(0.1, 0.1, 0.1, 0.1, 0.1))
     K = GeometricController(Vehicle(), None).constants
 

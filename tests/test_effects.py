@@ -152,7 +152,7 @@ def test_body_effects_change_the_flown_vehicle_only():
     from quadfault.plant import Plant
 
     veh = Vehicle()
-    plant = Plant(veh, lambda t: np.ones(4), effects=(fx.Inertia((1.3, 0.8, 1.1)), fx.Mass(1.2)))
+    plant = Plant(veh, effects=(fx.Inertia((1.3, 0.8, 1.1)), fx.Mass(1.2)))
     plant.reset(RigidBodyState.at_rest())
     np.testing.assert_allclose(np.diag(plant.vehicle.inertia), np.diag(veh.inertia) * (1.3, 0.8, 1.1))
     assert plant.vehicle.mass == pytest.approx(1.2 * veh.mass)

@@ -54,7 +54,7 @@ def test_vector_env_matches_single_envs(scenario):
     obs, _ = vec.reset(seed=seed)
     ref = np.array([e.reset(seed=seed + i)[0] for i, e in enumerate(singles)])
     np.testing.assert_allclose(obs, ref, rtol=0, atol=1e-9)
-    assert len({repr(e.scenario) for e in vec.envs}) == n  # a scenario per row
+    assert len({repr(s) for s in vec.scenarios}) == n  # a scenario per row
     rng, done, episodes = np.random.default_rng(seed), np.zeros(n, bool), 0
     for k in range(60):
         a = rng.uniform(-1, 1, (n, 4)).astype(np.float32)

@@ -135,9 +135,9 @@ def test_make_vec_vector_entry_point_and_dict_observations():
     env.close()
 
 
-def test_single_sub_env_passes_check_env():
+def test_the_configuration_env_passes_check_env():
     vec = QuadFaultVectorEnv(2, "none", scenario="combined", duration=1.0)
-    check_env(vec.envs[0], skip_render_check=True)
+    check_env(vec.single_env, skip_render_check=True)
 
 
 def test_bad_input_raises_clear_errors():
@@ -198,15 +198,15 @@ def test_sb3_adapter_trains_ppo():
     env.close()
 
 
-def test_sub_envs_built_from_one_template_share_no_episode_state():
-    """Sub-envs 1.. are copies of sub-env 0: after a reset each owns its generator, scenario
-    and controller (nothing mutable is shared)."""
+def test_sub_envs_of_one_configuration_share_no_episode_state():
+    """The sub-envs share one configuration; after a reset each row owns its generator and
+    scenario (nothing mutable is shared)."""
     vec = QuadFaultVectorEnv(3, "none", scenario="random", duration=0.5)
     vec.reset(seed=5)
-    for attr in ("np_random", "scenario", "controller"):
-        assert len({id(getattr(e, attr)) for e in vec.envs}) == 3, attr
-    a = vec.envs[0].np_random.bit_generator.state["state"]["state"]
-    b = vec.envs[1].np_random.bit_generator.state["state"]["state"]
+    gens = [vec.flight.generator(i) for i in range(3)]
+    assert len({id(g) for g in gens}) == 3 and len({id(s) for s in vec.scenarios}) == 3
+    a = gens[0].bit_generator.state["state"]["state"]
+    b = gens[1].bit_generator.state["state"]["state"]
     assert a != b
 
 
@@ -226,14 +226,14 @@ def test_batched_reset_equals_single_env_resets(kw):
         env = QuadFaultEnv("none", **kw)
         o, info = env.reset(seed=40 + i)
         np.testing.assert_allclose(obs[i], o, rtol=0, atol=1e-12, err_msg=f"row {i}")
-        assert vec.envs[i].scenario == env.scenario
+        assert vec.scenarios[i] == env.scenario
         for got, want in zip(vec.state, env.plant.state):
             np.testing.assert_allclose(got[i], want, rtol=0, atol=1e-12)
         for got, want in zip(vec.meas, env._meas):
             np.testing.assert_allclose(got[i], want, rtol=0, atol=1e-12)
         assert vec.max_steps[i] == env.max_steps
         np.testing.assert_array_equal(vec.eta_true[i], info["eta_true"])
-        assert vec._rngs[i].bit_generator.state == env.np_random.bit_generator.state
+        assert vec.flight.generator(i).bit_generator.state == env.np_random.bit_generator.state
 
 
 def test_reset_options_and_seed_lists():

@@ -6,7 +6,7 @@ Data flow per control step (100 Hz by default)::
     action -> rotor commands (held) -> the closed loop over the physics substeps (1 kHz)
            -> samples -> estimator.update(samples) -> observation (+ truth only in info)
 
-The physics is the core model's one closed loop (:mod:`quadfault.closed_loop`: motor
+The physics is the core model's one closed loop (:class:`quadfault.flight.Flight`: motor
 saturation, efficiency and thrust noise, RKMK4, the sensors and the accelerometer, the random
 numbers drawn from ``self.np_random`` in loop order), one call per control step, and the
 baseline controller is the core :class:`quadfault.controller.GeometricController` on the
@@ -48,11 +48,11 @@ from quad_fault_env.estimation import (
 )
 from quad_fault_env.observation import ObservationLayout
 from quad_fault_env.time_tables import RowTimeTables
-from quadfault import closed_loop
 from quadfault.controller import ControllerConfig, GeometricController, GeometricGains
 from quadfault.dynamics import RigidBodyState
 from quadfault.effects.sampling import PhysicsDraws, describe
 from quadfault.errors import ConfigError
+from quadfault.flight import Flight
 from quadfault.motors import MotorModel
 from quadfault.plant import Plant
 from quadfault.scenarios import SCENARIO_NAMES, Scenario
@@ -66,7 +66,6 @@ DEFAULT_DURATION = 20.0  # [s] episode length for named and random scenarios
 EVENT_TOL = 1e-9
 _KEY0 = np.zeros(1, dtype=np.int64)  # the single env's row of the time tables
 TABLE_WINDOW = 64  # control steps per refill of the time tables (one row: cheap to hold)
-_NO_REFS = np.zeros((1, 0, 6, 3))  # the loop's reference table (the env sets the commands)
 
 
 class QuadFaultEnv(gym.Env):
@@ -246,6 +245,7 @@ class QuadFaultEnv(gym.Env):
         self._renderer = None
         self.scenario: Scenario | None = None
         self.plant: Plant | None = None
+        self.flight: Flight | None = None
         self._tables: RowTimeTables | None = None
 
     # -- public helpers ----------------------------------------------------------------------
@@ -264,8 +264,9 @@ class QuadFaultEnv(gym.Env):
         return self._step_count * self.substeps * self.dt
 
     # -- scenario and reset ------------------------------------------------------------------
-    def _make_scenario(self, spec) -> Scenario:
-        return make_scenario(spec, self.np_random, duration=self.duration or DEFAULT_DURATION,
+    def _make_scenario(self, spec, rng: np.random.Generator | None = None) -> Scenario:
+        """The scenario of ``spec`` (drawn from ``rng``, default ``self.np_random``)."""
+        return make_scenario(spec, rng or self.np_random, duration=self.duration or DEFAULT_DURATION,
                              dt=self.dt, vehicle=self.vehicle,
                              random_trajectory=self.random_trajectory,
                              random_faults=self.random_faults,
@@ -293,14 +294,14 @@ class QuadFaultEnv(gym.Env):
         self.controller = GeometricController(self.vehicle, self.scenario.trajectory,
                                               self.controller_config)
         self.effects = self.physics_draws.draw(self.np_random) if self.physics_draws else ()
-        self.plant = Plant(self.vehicle, self.scenario.efficiency,
-                           MotorModel(self.scenario.thrust_noise), effects=self.effects,
-                           dt=self.dt)
+        self.plant = Plant(self.vehicle, MotorModel(self.scenario.thrust_noise),
+                           effects=self.effects, dt=self.dt)
         self.plant.reset(self._initial_state())
-        self._loop = closed_loop.constants(self.plant, self.sensor_noise)
-        self._gens, self._gens_of = closed_loop.generators([self.np_random]), self.np_random
+        self.flight = Flight(self.plant, self.sensor_noise)
+        self.flight.reset(self.np_random)  # the loop draws from the env's generator
         self._tables = RowTimeTables(1, self.substeps, self.dt, self.vehicle,
                                      self.controller_config, TABLE_WINDOW)
+        self.flight.use_efficiency(self._tables.eta, self._tables.first)
         self.max_steps = int(round(self.scenario.duration / self.control_period))
         self._step_count = 0
         self._f_cmd = np.zeros(self.vehicle.n_rotors)
@@ -317,7 +318,7 @@ class QuadFaultEnv(gym.Env):
             self._estimate = Estimate(0.0, np.ones(n), np.full(n, NOMINAL_PRIOR_SD))
         else:
             self._estimate = Estimate(0.0, np.ones(n), None, "warmup")
-        closed_loop.sense(self._gens, self._loop, self.plant.vehicles)
+        self.flight.sense()
         self.history = [self.plant.state.p.copy()]
         events = [dict(fault_dict(f), kind="onset", t=f.onset)
                   for f in self.scenario.efficiency.faults if f.onset < -EVENT_TOL]
@@ -328,24 +329,27 @@ class QuadFaultEnv(gym.Env):
         return self._observation(ref), info
 
     # -- step --------------------------------------------------------------------------------
-    def _generators(self):
-        """The loop's list holding ``self.np_random`` (the env's one generator)."""
-        if self._gens_of is not self.np_random:  # replaced since the reset
-            self._gens, self._gens_of = closed_loop.generators([self.np_random]), self.np_random
-        return self._gens
+    @property
+    def np_random(self) -> np.random.Generator:
+        """The env's one generator (scenarios, initial states, and the flight's noise)."""
+        return gym.Env.np_random.fget(self)
+
+    @np_random.setter
+    def np_random(self, value: np.random.Generator) -> None:
+        gym.Env.np_random.fset(self, value)
+        if getattr(self, "flight", None) is not None:  # the loop draws from it
+            self.flight.seed(0, [value])
 
     @property
     def _state(self) -> RigidBodyState:
-        """The true state now (views of the plant's arrays: read them at once)."""
-        V = self.plant.vehicles
-        return RigidBodyState(V.p[0], V.v[0], V.R[0], V.w[0])
+        """The true state now (views of the flight's arrays: read them at once)."""
+        return RigidBodyState(*(x[0] for x in self.flight.truth))
 
     @property
     def _meas(self) -> RigidBodyState:
         """The measurement the agent and the controller see now (end of the last step;
-        views of the plant's arrays)."""
-        V = self.plant.vehicles
-        return RigidBodyState(V.mp[0], V.mv[0], V.mR[0], V.mw[0])
+        views of the flight's arrays)."""
+        return RigidBodyState(*(x[0] for x in self.flight.measurement))
 
     def _check_action(self, action) -> np.ndarray:
         return validate_action(action, self.action_space.shape)
@@ -383,14 +387,10 @@ class QuadFaultEnv(gym.Env):
     def _substeps(self, k: int):
         """Control step ``k``'s physics substeps through the closed loop: the samples, the
         true efficiency and accelerometer reading of each, and the efficiency at the end."""
-        S, n = self.substeps, self.vehicle.n_rotors
+        S = self.substeps
         row = self._table_row(k)
-        vehicles = self.plant.vehicles
-        vehicles.f_cmd[0] = self._f_cmd
-        out = closed_loop.Records.empty(1, S, n)
-        tables = closed_loop.Tables(self._tables.k0 * S, self._tables.eta, _NO_REFS)
-        done = closed_loop.fly(self._generators(), k * S, k * S + S, False, self._loop, vehicles,
-                               tables, out, self.plant.hook)
+        out = self.flight.step(self._f_cmd, S, record=self.flight.records(S))
+        done = int(self.flight.steps_run[0])
         t = ((k * S + np.arange(done)) * self.dt).tolist()
         samples = [Sample(t[j], out.p[0, j], out.v[0, j], out.R[0, j], out.w[0, j],
                           self._f_cmd.copy()) for j in range(done)]
@@ -420,12 +420,8 @@ class QuadFaultEnv(gym.Env):
         terminated = reason is not None
         self._terminal = terminated
         truncated = (not terminated) and self._step_count >= self.max_steps
-        vehicles = self.plant.vehicles
-        if terminated:  # the agent sees the true state; no measurement is drawn
-            for dst, src in zip((vehicles.mp, vehicles.mv, vehicles.mR, vehicles.mw), state):
-                dst[0] = src
-        else:
-            closed_loop.sense(self._generators(), self._loop, vehicles)
+        # the agent sees the true state of a terminated episode: no measurement is drawn
+        self.flight.sense(0, noise=not terminated)
         self.history.append(np.array(state.p, dtype=float))
         reward = self.reward_config(state.p - ref.position, state.v - ref.velocity,
                                     self._f_cmd, self.f_max, terminated, a)

@@ -10,38 +10,31 @@ from __future__ import annotations
 
 import numpy as np
 
-from quadfault import closed_loop
 from quadfault.dynamics import RigidBodyState
 from quadfault.errors import ConfigError
+from quadfault.flight import Flight
 from quadfault.motors import MotorModel
 from quadfault.plant import Plant
 from quadfault.rotation import rotation_angle
-from quadfault.sensors import SensorNoise
 
 
 # the simulator's plant, one step at a time: the only calls into it ----------------------
 class _OpenLoop:
     """The plant (nominal motors without noise, efficiency 1, the given effects) flown by the
-    one closed loop (:mod:`quadfault.closed_loop`) without a controller: the recorded command
-    of each row held over that row's interval."""
+    one closed loop (:class:`quadfault.flight.Flight`) without a controller: the recorded
+    command of each row held over that row's interval."""
 
     def __init__(self, vehicle, effects, dt):
-        n = vehicle.n_rotors
-        self.plant = Plant(vehicle, None, MotorModel(0.0, True), tuple(effects), dt=dt)
-        self._cl, self._sensors = closed_loop, SensorNoise()
-        self._loop = closed_loop.constants(self.plant, self._sensors, record_accel=False)
-        self._tables = closed_loop.Tables(np.zeros(1, dtype=np.int64), np.ones((1, 1, n)),
-                                          np.zeros((1, 0, 6, 3)))
-        self._out = closed_loop.Records.none(1, n)
-        self._gen = np.random.default_rng(0)  # noise-free: never drawn from
+        self.plant = Plant(vehicle, MotorModel(0.0, True), tuple(effects), dt=dt)
+        self.flight = Flight(self.plant, record_accel=False)
+        self.flight.reset(0)  # noise-free: never drawn from
 
     def reset(self, state) -> None:
         """Start from ``state``: the effects' memory cleared, the flown vehicle set."""
         self.plant.reset(state)
-        self._loop = self._cl.constants(self.plant, self._sensors, record_accel=False)
 
     def set_state(self, state) -> None:
-        self.plant.vehicles.set_state(0, state)
+        self.flight.set_state(state)
 
     def check(self) -> None:
         """A one-line error if a delay lost history (intervals much shorter than ``dt``)."""
@@ -50,12 +43,8 @@ class _OpenLoop:
     def step(self, f_cmd, t, dt):
         """One physics step of the command ``f_cmd`` held from ``t`` for ``dt``; the new
         state."""
-        V = self.plant.vehicles
-        V.f_cmd[0] = f_cmd
-        loop = self._loop._replace(dt=float(dt), t0=float(t))
-        self._cl.fly(self._gen, 0, 1, True, loop, V, self._tables, self._out,
-                     hook=self.plant.hook)
-        return V.state(0)
+        self.flight.step_at(f_cmd, t, dt)
+        return self.flight.state()
 
 
 def _plant(vehicle, effects, dt):
