@@ -10,7 +10,8 @@ for all of them:
 2. the **flight span**: rows where a motor runs (a normalised command above ``RUNNING``,
    1 %: a command of 7e-10 is not running) and the vehicle is airborne -- by the log's land
    detector where it has one, else by a collective command above idle (``IDLE_MARGIN`` of
-   the way from idle to the flight's typical command); spans shorter than ``MIN_FLIGHT_S``
+   the way from idle to the flight's typical command; a log whose lowest running command
+   is above ``NO_IDLE_RATIO`` of the typical one has no idle, and all of it flies); spans shorter than ``MIN_FLIGHT_S``
    are dropped and ``TRANSITION_S`` is cut from each end (take-off and landing). Armed idle,
    ground contact and the time between flights become gaps (``keep_all`` keeps them);
 3. **invalid position or velocity** (the log's validity flags) is never written: those rows
@@ -42,6 +43,7 @@ from quadfault.vehicle import Vehicle, allocation_from_rotors
 
 RUNNING = 0.01          # normalised command above which a motor runs
 IDLE_MARGIN = 0.4       # airborne without landed flags: this far from idle to typical flight
+NO_IDLE_RATIO = 0.6     # a lowest running command above this share of the typical is no idle
 MIN_FLIGHT_S = 2.0      # shorter airborne spans are not flights [s]
 TRANSITION_S = 1.0      # cut after take-off and before landing [s]
 POSE_VALID_FRACTION = 0.8
@@ -149,9 +151,14 @@ def flight_spans(t: np.ndarray, u: np.ndarray, landed: np.ndarray | None = None)
         level = np.mean(u, axis=1)
         idle = float(np.percentile(level[running], 2))
         typical = float(np.percentile(level[running], 75))
-        air = running & (level > idle + IDLE_MARGIN * (typical - idle))
-        how = (f"mean command above {idle + IDLE_MARGIN * (typical - idle):.3f} (idle "
-               f"{idle:.3f}, typical {typical:.3f})")
+        if idle > NO_IDLE_RATIO * typical:  # no idle plateau: the motors ran only in flight
+            air = running
+            how = f"motors running (no idle in the log: 2nd percentile {idle:.3f}, typical " \
+                  f"{typical:.3f})"
+        else:
+            air = running & (level > idle + IDLE_MARGIN * (typical - idle))
+            how = (f"mean command above {idle + IDLE_MARGIN * (typical - idle):.3f} (idle "
+                   f"{idle:.3f}, typical {typical:.3f})")
     spans = []
     for i0, i1 in _runs(air):
         a, b = float(t[i0]) + TRANSITION_S, float(t[i1 - 1]) - TRANSITION_S

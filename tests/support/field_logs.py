@@ -439,3 +439,110 @@ def blackbox_csv(duration: float, rate: float = 500.0) -> str:
         cells = [str(v) for v in r[:-1]] + [f"{r[-1] / 100:.2f}"]
         lines.append(",".join(cells))
     return "\n".join(lines) + "\n"
+
+
+# ----------------------------------------------------------------------------------------
+# a simulated flight written in each format (frames, units and motor order as each autopilot
+# logs them), for cross-checks of the importers against the simulator's truth
+SIM_CURVE = 9.8  # f = SIM_CURVE u^2 [N]: the commands written for thrusts f
+PX4_ORDER = (0, 2, 1, 3)        # PX4/ArduPilot quad X rotor i is the paper's rotor ORDER[i]
+BF_ORDER = (3, 0, 2, 1)         # Betaflight: rear-right, front-right, rear-left, front-left
+
+
+def _commands(rec, order):
+    return np.sqrt(np.clip(rec.thrust_cmd[:, list(order)], 0.0, None) / SIM_CURVE)
+
+
+def sim_to_px4(rec, path, every: int = 2) -> None:
+    """ULog of a simulated (NED/FRD) recording: attitude, rates, IMU, pose, actuator_motors,
+    airborne land detector, CA_ROTOR* from the vehicle, THR_MDL_FAC 1."""
+    us = 1_000_000
+    sel = np.arange(0, len(rec.t), every)
+    t = rec.t[sel]
+    u = _commands(rec, PX4_ORDER)[sel]
+    ts = [int(round(x * us)) + us for x in t]
+    topics = [
+        ("vehicle_attitude", 0, [("uint64_t", "timestamp", 0), ("float", "q", 4)],
+         [(s, list(rec.quaternion[k])) for s, k in zip(ts, sel)]),
+        ("vehicle_angular_velocity", 0, [("uint64_t", "timestamp", 0), ("float", "xyz", 3)],
+         [(s, list(rec.omega[k])) for s, k in zip(ts, sel)]),
+        ("sensor_combined", 0, [("uint64_t", "timestamp", 0),
+                                ("float", "accelerometer_m_s2", 3)],
+         [(s, list(rec.accel[k])) for s, k in zip(ts, sel)]),
+        ("vehicle_local_position", 0, [("uint64_t", "timestamp", 0)]
+         + [("float", c, 0) for c in ("x", "y", "z", "vx", "vy", "vz")],
+         [(s, *rec.position[k], *rec.velocity[k]) for s, k in zip(ts, sel)]),
+        ("actuator_motors", 0, [("uint64_t", "timestamp", 0), ("float", "control", 4)],
+         [(s, list(u[j])) for j, s in enumerate(ts)]),
+        ("vehicle_land_detected", 0, [("uint64_t", "timestamp", 0), ("uint8_t", "landed", 0)],
+         [(ts[0], 0)])]
+    A = rec.vehicle.allocation[:, list(PX4_ORDER)]
+    params = {"THR_MDL_FAC": 1.0, "CA_ROTOR_COUNT": 4}
+    for i in range(4):
+        params.update({f"CA_ROTOR{i}_PX": float(A[2, i]), f"CA_ROTOR{i}_PY": float(-A[1, i]),
+                       f"CA_ROTOR{i}_KM": float(A[3, i])})
+    write_ulog(path, topics, params)
+
+
+def sim_to_dataflash(rec, path, every: int = 2) -> None:
+    """DataFlash binary of a simulated recording (IMU, ATT, XKF1, RCOU PWM 1000-2000 with a
+    pure square thrust model, a not-landed event); the frame type (X, or H when rotor 1 spins
+    clockwise) from the vehicle's spin directions."""
+    from quadfault.rotation import quat_to_rot, rot_to_euler_zyx
+
+    sel = np.arange(0, len(rec.t), every)
+    u = _commands(rec, PX4_ORDER)[sel]
+    eul = np.degrees(rot_to_euler_zyx(quat_to_rot(rec.quaternion[sel])))
+    frame = 1 if rec.vehicle.allocation[3, PX4_ORDER[0]] > 0 else 3
+    params = {"FRAME_CLASS": 1, "FRAME_TYPE": frame, "MOT_PWM_MIN": 1000, "MOT_PWM_MAX": 2000,
+              "MOT_SPIN_MIN": 0.0, "MOT_SPIN_MAX": 1.0, "MOT_THST_EXPO": 1.0}
+    msgs = [(0.0, "PARM", (k.encode(), float(v))) for k, v in params.items()]
+    msgs.append((rec.t[0] + 0.5, "EV", (28,)))
+    for j, k in enumerate(sel):
+        t = rec.t[k] + 1.0
+        msgs.append((t, "IMU", (0, *rec.omega[k], *rec.accel[k])))
+        msgs.append((t, "ATT", tuple(float(x) for x in eul[j])))
+        msgs.append((t, "XKF1", (0, *rec.velocity[k], *rec.position[k])))
+        msgs.append((t, "XKF4", (0, SS_OK)))
+        pwm = [int(round(1000 + 1000 * x)) for x in u[j]] + [1000] * 4
+        msgs.append((t, "RCOU", tuple(pwm)))
+    out = bytearray()
+    for name, (tid, fmt, cols) in [("FMT", (128, "BBnNZ", "Type,Length,Name,Format,Columns"))] \
+            + list(_DF.items()):
+        size = 3 + struct.calcsize("<" + "".join(_STRUCT[c] for c in fmt))
+        out += b"\xa3\x95\x80" + struct.pack("<BB4s16s64s", tid, size, name.encode(),
+                                             fmt.encode(), cols.encode())
+    for t, name, vals in sorted(msgs, key=lambda m: m[0]):
+        tid, fmt, _ = _DF[name]
+        pack = "<" + "".join(_STRUCT[c] for c in fmt)
+        out += b"\xa3\x95" + bytes([tid]) + struct.pack(pack, int(round(t * 1e6)), *vals)
+    path.write_bytes(bytes(out))
+
+
+def sim_to_blackbox(rec, path, every: int = 2) -> None:
+    """Blackbox log of a simulated recording: gyro [deg/s] and accelerometer [acc_1G per g]
+    in Betaflight's axes (x forward, y left, z up), motors 48-2047 (DShot; thrust ~ u^2),
+    Betaflight's motor order (``yaw_motors_reversed`` when rotor 0 spins counter-clockwise);
+    I frames only (every field unsigned/signed variable byte)."""
+    sel = np.arange(0, len(rec.t), every)
+    u = _commands(rec, BF_ORDER)[sel]
+    flu = np.array([1.0, -1.0, -1.0])
+    names = ["loopIteration", "time"] + [f"gyroADC[{i}]" for i in range(3)] \
+        + [f"accSmooth[{i}]" for i in range(3)] + [f"motor[{i}]" for i in range(4)]
+    enc = [1, 1, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1]
+    head = ["Product:Blackbox flight data recorder by Nicholas Sherlock", "Data version:2",
+            "I interval:1", "P interval:1", "Field I name:" + ",".join(names),
+            "Field I signed:0,0,1,1,1,1,1,1,0,0,0,0",
+            "Field I predictor:" + ",".join("0" * len(names)),
+            "Field I encoding:" + ",".join(map(str, enc)),
+            "Firmware revision:Betaflight 4.4.0 (test)", "motorOutput:48,2047",
+            f"acc_1G:{BB_ACC_1G}", "gyro_scale:0x3f800000", "motor_pwm_protocol:7",
+            f"yaw_motors_reversed:{int(rec.vehicle.allocation[3, BF_ORDER[0]] > 0)}"]
+    out = bytearray("".join(f"H {h}\n" for h in head).encode())
+    for j, k in enumerate(sel):
+        gyro = np.round(np.degrees(rec.omega[k] * flu)).astype(int)  # deg/s, as Betaflight
+        acc = np.round(rec.accel[k] * flu / 9.80665 * BB_ACC_1G).astype(int)
+        motor = np.round(48 + 1999 * u[j]).astype(int)
+        row = [j, int(round((rec.t[k] + 1.0) * 1e6)), *gyro, *acc, *motor]
+        out += b"I" + encode_fields([int(v) for v in row], enc)
+    path.write_bytes(bytes(out))
