@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -158,6 +159,9 @@ def run(args) -> int:
     if args.log is not None and args.log < 1:
         raise ConfigError(f"--log counts from 1, got {args.log}")
     kind, source = _kind_and_input(args)
+    if args.log is not None and kind != "blackbox":
+        raise ConfigError(f"--log picks one of several logs in a blackbox file; a {kind} log "
+                          "holds one")
     vehicle = curve = None
     if args.vehicle is not None:
         vehicle, curve = load_vehicle_file(args.vehicle)
@@ -172,6 +176,9 @@ def run(args) -> int:
     if vehicle is not None and kind not in AUTOPILOTS:
         rec = with_vehicle(rec, vehicle, curve, args.vehicle)
     write_recording(rec, out, frame=args.frame, force=args.force)
+    warns = (rec.meta.get("import") or {}).get("warnings")
+    if warns:
+        print(f"warning: {Path(source).name}: " + "; ".join(warns), file=sys.stderr)
     if not args.quiet:
         print(f"{out}: {summary_line(rec)}")
     return 0

@@ -19,7 +19,8 @@ for all of them:
    IMU-only (``POSE_VALID_FRACTION``);
 4. the **vehicle**: the user's (``--vehicle`` or flags) over the log's geometry over
    assumptions, each constant's source in ``meta.constants`` and the assumed ones listed in
-   ``meta.assumed`` (one warning line);
+   ``meta.assumed``; what the user should know is in ``meta.import.warnings`` (``quadfault
+   import`` prints it as one line on stderr);
 5. the **thrust curve**: the log's thrust model (normalised command -> relative thrust)
    times a scale fitted on a calibration segment of free flight (default the first
    ``CALIBRATION_FRACTION`` of the longest flight span) so that the summed rotor thrust
@@ -349,10 +350,6 @@ def build_recording(log: FieldLog, *, vehicle: Vehicle | None = None, thrust_cur
     if top > 0 and "vehicle" not in constants:
         vehicle = vehicle.replace(max_thrust=top)
         constants["max_thrust"] = "the thrust curve at full command"
-    if notes:
-        import sys
-
-        print(f"warning: {path.name}: " + "; ".join(notes), file=sys.stderr)
     rates = {}
     for name, (ts, _, _) in log.streams.items():
         ts = np.unique(np.asarray(ts, dtype=float))
