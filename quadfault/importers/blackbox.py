@@ -12,7 +12,8 @@ Explorer exports.
 - ``omega[0..3]`` (INDIflight): rad/s -> ``omega1..4``
 - ``quat[0..3]``, ``pos[0..2]``, ``vel[0..2]`` (INDIflight): scaled unit quaternion FRD -> NED,
   mm, cm/s -> attitude, position, velocity (NED)
-- ``vbatLatest``, ``amperageLatest``: 0.01 V, 0.01 A -> ``vbat``, ``current``
+- ``vbatLatest``, ``amperageLatest``: 0.01 V, 0.01 A (Betaflight 4+, INDIflight; older firmware
+  logs ADC counts: left out) -> ``vbat``, ``current``
 
 Motor order and spin directions are Betaflight's quad X mixer (0 rear-right, 1 front-right,
 2 rear-left, 3 front-left; 0 and 3 clockwise, reversed with ``yaw_motors_reversed``); no arm
@@ -55,6 +56,21 @@ def _scale_hex(text, default=1.0) -> float:
         return float(np.frombuffer(int(str(text), 16).to_bytes(4, "little"), "<f4")[0])
     except (ValueError, OverflowError):
         return default
+
+
+def _centivolt_firmware(revision: str) -> bool:
+    """Betaflight 4 and later (and INDIflight) log ``vbatLatest`` in 0.01 V; older
+    firmware logs ADC counts."""
+    text = revision.lower()
+    if text.startswith("indiflight"):
+        return True
+    parts = text.split()
+    if len(parts) >= 2 and parts[0] == "betaflight":
+        try:
+            return int(parts[1].split(".")[0]) >= 4
+        except ValueError:
+            return False
+    return False
 
 
 class _Fields:
@@ -278,12 +294,15 @@ def read_blackbox(path, log: int | None = None) -> FieldLog:
     else:
         missing.append("position, velocity and attitude")
     vbat = f.get("vbatLatest")
-    if vbat is not None:
+    centivolts = _centivolt_firmware(firmware)
+    if vbat is not None and (f.units.get("vbatLatest") == "V" or centivolts):
         v = vbat if f.units.get("vbatLatest") == "V" else vbat * 0.01
         if 2.0 < np.nanmedian(v) < 70.0:
             streams["vbat"] = (t, np.where(v > 0, v, np.nan), "linear")
     if "vbat" not in streams:
-        missing.append("battery voltage (vbatLatest)")
+        missing.append("battery voltage (vbatLatest)" if vbat is None or centivolts else
+                       f"battery voltage (vbatLatest of {firmware or 'this firmware'} is in "
+                       "ADC units)")
     amps = f.get("amperageLatest")
     if amps is not None and "vbat" in streams:
         streams["current"] = (t, amps if f.units.get("amperageLatest") == "A" else amps * 0.01,
