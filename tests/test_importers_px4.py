@@ -94,6 +94,13 @@ def test_uavcan_outputs_on_instance_1_rotor_speed_and_flight_span(tmp_path):
     assert rec.meta["import"]["stream_rates_hz"]["u"] == pytest.approx(100.0, rel=1e-3)
 
 
+def test_esc_actuator_function_maps_esc_to_motor(tmp_path):
+    path = tmp_path / "esc.ulg"
+    px4_flight(path, outputs="motors", esc_motors=(2, 0, 3, 1))
+    rec = _import(path)
+    np.testing.assert_allclose(rec.rotor_speed / rec.commands_u, OMEGA_PER_U, rtol=0.01)
+
+
 def test_keep_all_keeps_the_ground(tmp_path):
     path = tmp_path / "uavcan.ulg"
     px4_flight(path, invalid_vxy=None)

@@ -184,11 +184,21 @@ def motor_outputs(path, ulog, params: dict) -> tuple:
 
 
 def rotor_speeds(esc) -> tuple | None:
-    """``(t [s], omega (n, 4) [rad/s])`` from ``esc_status`` (NaN where an ESC reports 0)."""
+    """``(t [s], omega (n, 4) [rad/s])`` from ``esc_status``: motor i is the ESC whose
+    ``actuator_function`` is Motor i where the log has that field (PX4 1.14 and later),
+    else ESC i."""
     if esc is None or "esc[3].esc_rpm" not in esc:
         return None
-    rpm = np.abs(np.stack([np.asarray(esc[f"esc[{i}].esc_rpm"], float)
-                           for i in range(N_MOTORS)], axis=1))
+    index = list(range(N_MOTORS))
+    n_esc = sum(1 for k in range(16) if f"esc[{k}].esc_rpm" in esc)
+    if "esc[0].actuator_function" in esc:
+        funcs = [int(np.median(esc[f"esc[{k}].actuator_function"])) for k in range(n_esc)]
+        found = [funcs.index(MOTOR1_FUNCTION + i) if MOTOR1_FUNCTION + i in funcs else None
+                 for i in range(N_MOTORS)]
+        if None not in found:
+            index = found
+    rpm = np.abs(np.stack([np.asarray(esc[f"esc[{k}].esc_rpm"], float) for k in index],
+                          axis=1))
     if not np.any(rpm > 0):
         return None
     return _stamp(esc), rpm * RPM_TO_RAD_S

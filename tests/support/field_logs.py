@@ -91,13 +91,15 @@ def write_ulog(path, topics: list, params: dict | None = None, nested: dict | No
 
 def px4_flight(path, *, outputs: str = "uavcan", invalid_vxy=(8.0, 9.0), motor_rate=100.0,
                params: dict | None = None, disarmed_value: float = 0.0,
-               duration: float = T_END, imu_rate: float = 500.0) -> dict:
+               duration: float = T_END, imu_rate: float = 500.0,
+               esc_motors=None) -> dict:
     """Write the synthetic flight as a ULog. ``outputs``: "uavcan" (actuator_outputs
     instance 1, 0-8191, instance 0 all zeros, no actuator_motors), "motors"
     (actuator_motors, ``disarmed_value`` before arming) or "none". Velocity flagged invalid on
     ``invalid_vxy`` [s] (None: never). ``duration`` stretches the flight (phases keep their
     proportions; times in the arguments are in the unstretched flight). Returns the profile at
-    the motor stamps."""
+    the motor stamps. ``esc_motors``: the motor (0-based) each ESC reports, with its
+    ``actuator_function`` (default: ESC i is motor i, no function field)."""
     us = 1_000_000
     stretch = duration / T_END
     t_att = np.arange(0.0, duration, 0.004)
@@ -138,10 +140,16 @@ def px4_flight(path, *, outputs: str = "uavcan", invalid_vxy=(8.0, 9.0), motor_r
                        [("uint64_t", "timestamp", 0), ("float", "control", 4)],
                        [(int(t * us), list(u[j])) for j, t in enumerate(t_mot)]))
     rpm = prof["u"] * OMEGA_PER_U * 60.0 / (2 * np.pi)
+    report = [("int32_t", "esc_rpm", 0), ("float", "esc_voltage", 0)]
+    if esc_motors is None:
+        esc = [(int(t * us), 4, [(int(round(r)), 12.0) for r in rpm[k]])
+               for k, t in enumerate(t_mot)]
+    else:
+        report.append(("uint8_t", "actuator_function", 0))
+        esc = [(int(t * us), 4, [(int(round(rpm[k, m])), 12.0, 101 + m) for m in esc_motors])
+               for k, t in enumerate(t_mot)]
     topics.append(("esc_status", 0, [("uint64_t", "timestamp", 0), ("uint8_t", "esc_count", 0),
-                                     ("esc_report", "esc", 4)],
-                   [(int(t * us), 4, [(int(round(r)), 12.0) for r in rpm[k]])
-                    for k, t in enumerate(t_mot)]))
+                                     ("esc_report", "esc", 4)], esc))
     t_land = np.arange(0.0, duration, 0.1)
     pl = flight_profile(t_land / stretch)
     topics.append(("vehicle_land_detected", 0,
@@ -157,8 +165,7 @@ def px4_flight(path, *, outputs: str = "uavcan", invalid_vxy=(8.0, 9.0), motor_r
                                           (-0.12, 0.12)), (0.02, 0.02, -0.02, -0.02))):
         base.update({f"CA_ROTOR{i}_PX": x, f"CA_ROTOR{i}_PY": y, f"CA_ROTOR{i}_KM": km})
     base.update(params or {})
-    write_ulog(path, topics, base,
-               nested={"esc_report": [("int32_t", "esc_rpm", 0), ("float", "esc_voltage", 0)]})
+    write_ulog(path, topics, base, nested={"esc_report": report})
     return prof
 
 
