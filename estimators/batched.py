@@ -24,35 +24,26 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimators.base import STATUSES
+from estimators.change_completion import C_EVENTS
+from estimators.ekf import COUNTERS as EKF_COUNTERS
 from estimators.ekf import (
-    F_ETA0,
-    F_P,
-    F_X,
-    K_INITIALISED,
     EKFConfig,
     EKFState,
     default_eta0,
     ekf_constants,
     ekf_reset,
-    ekf_step,
+    ekf_update_row,
 )
-from estimators.ekf import constant_arrays as ekf_constant_arrays
-from estimators.ekf import state_pieces as ekf_pieces
+from estimators.ekf_filter import X
 from estimators.irls import (
-    F_VN,
-    K_COMPLETION,
-    K_HAS_SD,
-    VN_ETA,
-    VN_OUT,
-    VN_SD,
+    COUNTERS,
+    VN_ROWS,
     IRLSConfig,
     IRLSState,
     irls_parameters,
     irls_reset,
-    irls_step,
-    state_pieces,
+    irls_update_row,
 )
-from estimators.irls import constant_arrays as irls_constant_arrays
 from estimators.registry import make_estimator
 from estimators.window import no_history
 from quadfault.errors import ConfigError
@@ -126,24 +117,18 @@ def _check_num(num) -> int:
 def irls_update_rows(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, code):
     """:func:`estimators.irls.irls_step` of every row, in parallel; status codes into
     ``code``."""
-    N = ks.shape[0]
-    S = state_pieces(fs, ip, N)
-    arrays = irls_constant_arrays(const, ip)
-    for i in prange(N):
-        code[i] = irls_step(t[i], p[i], v[i], R[i], w[i], f[i], const, arrays, fp, ip, S, ks,
-                            np.int64(i), hist)[0]
+    for i in prange(ks.shape[0]):
+        code[i] = irls_update_row(t[i], p[i], v[i], R[i], w[i], f[i], const, fp, ip, fs, ks,
+                                  hist, np.int64(i))[0]
 
 
 @jit(parallel=True)
 def ekf_update_rows(t, p, v, R, w, f, const, offsets, fs, ks, code):
     """:func:`estimators.ekf.ekf_step` of every row, in parallel; status codes into
     ``code``."""
-    N = ks.shape[0]
-    S = ekf_pieces(fs, offsets, f.shape[1], N)
-    arrays = ekf_constant_arrays(const, f.shape[1])
-    for i in prange(N):
-        code[i] = ekf_step(t[i], p[i], v[i], R[i], w[i], f[i], const, arrays, S, ks,
-                           np.int64(i))
+    for i in prange(ks.shape[0]):
+        code[i] = ekf_update_row(t[i], p[i], v[i], R[i], w[i], f[i], const, offsets, fs, ks,
+                                 np.int64(i))
 
 
 class BatchedIRLS:
@@ -179,12 +164,12 @@ class BatchedIRLS:
     @property
     def eta(self) -> np.ndarray:
         """The unfiltered estimates (the next windows' anchors), (N, n)."""
-        return self._state.views[F_VN][:, VN_ETA]
+        return self._state.views.vn[:, VN_ROWS.eta]
 
     @property
     def change_events(self) -> np.ndarray:
         """Per row, the changes the change completion has started since its last reset."""
-        return self._state.ints[:, K_COMPLETION + 3].copy()
+        return self._state.ints[:, COUNTERS.completion + C_EVENTS].copy()
 
     def reset(self, mask=None, eta0=None) -> None:
         """Forget the windows of the rows in ``mask`` (default all); start from ``eta0``
@@ -200,9 +185,9 @@ class BatchedIRLS:
         st = self._state
         irls_update_rows(t, p, v, R, w, f, self._const, self._fp, self._ip, st.floats, st.ints,
                          self._hist, self._code)
-        VN = st.views[F_VN]
-        sd = np.where(st.ints[:, K_HAS_SD, None] == 1, VN[:, VN_SD], np.nan)
-        return BatchedEstimate(t.copy(), VN[:, VN_OUT].copy(), sd, self._code.copy())
+        VN = st.views.vn
+        sd = np.where(st.ints[:, COUNTERS.has_sd, None] == 1, VN[:, VN_ROWS.sd], np.nan)
+        return BatchedEstimate(t.copy(), VN[:, VN_ROWS.out].copy(), sd, self._code.copy())
 
 
 class BatchedEKF:
@@ -233,11 +218,11 @@ class BatchedEKF:
 
     @property
     def x(self) -> np.ndarray:
-        return self._state.views[F_X]
+        return self._state.views.x
 
     @property
     def P(self) -> np.ndarray:
-        return self._state.views[F_P]
+        return self._state.views.P
 
     def reset(self, mask=None, eta0=None) -> None:
         """Forget the rows in ``mask`` (default all); the next sample initialises them."""
@@ -253,9 +238,9 @@ class BatchedEKF:
         st = self._state
         ekf_update_rows(t, p, v, R, w, f, self._const, st.offsets, st.floats, st.ints,
                         self._code)
-        init = st.ints[:, K_INITIALISED, None] == 1
-        eta = np.where(init, st.views[F_X][:, 18:], st.views[F_ETA0])
-        diag = np.diagonal(st.views[F_P], axis1=1, axis2=2)[:, 18:]
+        init = st.ints[:, EKF_COUNTERS.initialised, None] == 1
+        eta = np.where(init, st.views.x[:, X.eta:], st.views.eta0)
+        diag = np.diagonal(st.views.P, axis1=1, axis2=2)[:, X.eta:]
         sd = np.where(init, np.sqrt(np.where(init, diag, 0.0)), np.nan)
         return BatchedEstimate(t.copy(), eta, sd, self._code.copy())
 

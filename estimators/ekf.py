@@ -6,7 +6,7 @@ State (22 for four rotors), as in the paper and the reference ``motor_estimator_
 
 with the efficiencies as a random walk (``eta' = w_eta``, ``w_eta ~ N(0, Q_eta)``). One
 update per measurement row: predict from row k-1 to row k with the command of row k-1 held
-over ``dt_k = t_k - t_{k-1}`` (zero-order hold, docs/formats.md), then update with the
+over ``dt_k = t_k - t_{k-1}`` (zero-order hold, CONTRACT sec. 3), then update with the
 pose and rate measured at row k. The estimate's ``t`` is ``t_k``.
 
 Deviations from the reference code (each discussed in ``docs/ekf.md``):
@@ -50,8 +50,21 @@ from estimators.base import (
     Sample,
     command_limit,
 )
-from estimators.ekf_filter import predict_update_into
-from estimators.state import FlatState, all_finite, piece, piece_rows
+from estimators.ekf_filter import (
+    M3,
+    MATS,
+    N_VEC_R,
+    VECS,
+    WORKSPACE,
+    X,
+    Y,
+    Measurement,
+    Model,
+    Workspace,
+    predict_update_into,
+)
+from estimators.state import FlatState, Layout, all_finite, fields, pack, piece, piece_rows
+from quadfault.rotation import mat3
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
 from quadfault.recording import Recording
@@ -59,8 +72,6 @@ from quadfault.vehicle import Vehicle
 
 #: Sample period the per-step noise values refer to [s] (the reference's 1 kHz).
 NOISE_REFERENCE_DT = 1e-3
-#: The first state index of the efficiencies.
-ETA_ = 18
 
 #: A rotor commanded at most this thrust [N] carries no information on its efficiency. A step
 #: whose command has such a rotor leaves the whole efficiency vector where it was (status
@@ -137,14 +148,21 @@ class EKFConfig:
         return replace(self, **changes)
 
 
-# pieces of the float state (EKFState), in order, then the workspace of predict_update_into
-(F_X, F_P, F_LAST_T, F_LAST_F, F_ETA0, F_ETA_KEEP, F_P_KEEP, F_MATS, F_WT, F_S12, F_HP, F_M3,
- F_DR, F_BS, F_HR, F_VECS, F_Z, F_Y, F_DT) = range(19)
-N_PIECES = 19
-K_INITIALISED = 0  # the int state: 1 once the first good sample set the kinematic states
-# the constants: mass, gravity, rotor_max_thrust, clip, lo, hi, p0, then A (4 n), J (9),
-# J^-1 (9), qc (18 + n), r (12)
-C_MASS, C_G, C_FMAX, C_CLIP, C_LO, C_HI, C_P0, C_A = range(8)
+#: the float state of one filter: the state ``x`` (:data:`estimators.ekf_filter.X`) and its
+#: covariance ``P``, the previous sample's time and (clipped) command, the initial
+#: efficiency, the efficiencies kept across an idle step, then the workspace of
+#: :func:`predict_update_into` (dimensions: rotors ``n``, states ``ns = X.size + n``)
+FLOATS = Layout("EKFPieces", x=("ns",), P=("ns", "ns"), last_t=(1,), last_f=("n",),
+                eta0=("n",), eta_keep=("n",), P_keep=("n", "n"), **WORKSPACE.declared)
+F = FLOATS.index
+EKFPieces = FLOATS.pieces
+#: the int state: 1 once the first good sample set the kinematic states
+COUNTERS = fields("EKFCounters", "initialised")
+#: the constants: scalars, the inertia and its inverse, the measurement-noise variances
+#: ``r``; last the arrays sized by the rotors: the allocation ``A`` (4, n), then the
+#: process-noise variance rates ``qc`` (ns,) [1/s] (:func:`constant_arrays`)
+CONSTANTS = fields("EKFConstants", "mass", "gravity", "f_max", "clip", "lo", "hi", "p0",
+                   ("J", 9), ("Jinv", 9), ("r", Y.size), ("per_rotor", 0))
 
 
 class EKFState(FlatState):
@@ -154,82 +172,85 @@ class EKFState(FlatState):
     command, the initial efficiency, the efficiencies kept across an idle step, and the
     workspace of :func:`predict_update_into`."""
 
-    @staticmethod
-    def shapes(n: int) -> tuple:
-        ns = 18 + n
-        return ((ns,), (ns, ns), (1,), (n,), (n,), (n,), (n, n), (3, ns, ns), (ns, 12),
-                (2, 12, 12), (12, ns), (8, 3, 3), (9, 3), (2, n, 3), (3, 9), (3, ns), (3, ns),
-                (12,), (n,))
-
     def __init__(self, n: int, num: int = 1):
-        super().__init__(self.shapes(n), num, 1)
+        super().__init__(FLOATS.shapes(n=n, ns=X.size + n), num, COUNTERS.size,
+                         FLOATS.pieces)
 
 
 @jit
 def state_pieces(fs, offsets, n, N):
-    """The pieces of the float state of ``N`` filters (:class:`EKFState`), each
-    ``(N, *shape)``, in the order of the ``F_*`` constants."""
-    ns = 18 + n
-    o = offsets
-    return (piece_rows(fs, o[F_X], o[F_X + 1], N),
-            piece(fs, o, F_P, (N, ns, ns)),
-            piece_rows(fs, o[F_LAST_T], o[F_LAST_T + 1], N),
-            piece_rows(fs, o[F_LAST_F], o[F_LAST_F + 1], N),
-            piece_rows(fs, o[F_ETA0], o[F_ETA0 + 1], N),
-            piece_rows(fs, o[F_ETA_KEEP], o[F_ETA_KEEP + 1], N),
-            piece(fs, o, F_P_KEEP, (N, n, n)),
-            piece(fs, o, F_MATS, (N, 3, ns, ns)),
-            piece(fs, o, F_WT, (N, ns, 12)),
-            piece(fs, o, F_S12, (N, 2, 12, 12)),
-            piece(fs, o, F_HP, (N, 12, ns)),
-            piece(fs, o, F_M3, (N, 8, 3, 3)),
-            piece(fs, o, F_DR, (N, 9, 3)),
-            piece(fs, o, F_BS, (N, 2, n, 3)),
-            piece(fs, o, F_HR, (N, 3, 9)),
-            piece(fs, o, F_VECS, (N, 3, ns)),
-            piece(fs, o, F_Z, (N, 3, ns)),
-            piece_rows(fs, o[F_Y], o[F_Y + 1], N),
-            piece_rows(fs, o[F_DT], o[F_DT + 1], N))
+    """The pieces of the float state of ``N`` filters (:data:`FLOATS`) by name, each
+    ``(N, *shape)``."""
+    ns, o, nm = X.size + n, offsets, Y.size
+    return EKFPieces(x=piece_rows(fs, o[F.x], o[F.x + 1], N),
+                     P=piece(fs, o, F.P, (N, ns, ns)),
+                     last_t=piece_rows(fs, o[F.last_t], o[F.last_t + 1], N),
+                     last_f=piece_rows(fs, o[F.last_f], o[F.last_f + 1], N),
+                     eta0=piece_rows(fs, o[F.eta0], o[F.eta0 + 1], N),
+                     eta_keep=piece_rows(fs, o[F.eta_keep], o[F.eta_keep + 1], N),
+                     P_keep=piece(fs, o, F.P_keep, (N, n, n)),
+                     mats=piece(fs, o, F.mats, (N, MATS.size, ns, ns)),
+                     WT=piece(fs, o, F.WT, (N, ns, nm)),
+                     s12=piece(fs, o, F.s12, (N, 2, nm, nm)),
+                     HP=piece(fs, o, F.HP, (N, nm, ns)),
+                     M3=piece(fs, o, F.M3, (N, M3.size, 3, 3)),
+                     dR=piece(fs, o, F.dR, (N, N_VEC_R, 3)),
+                     Bs=piece(fs, o, F.Bs, (N, 2, n, 3)),
+                     HR=piece(fs, o, F.HR, (N, nm - Y.R, N_VEC_R)),
+                     vecs=piece(fs, o, F.vecs, (N, VECS.size, ns)),
+                     Z=piece(fs, o, F.Z, (N, 3, ns)),
+                     y=piece_rows(fs, o[F.y], o[F.y + 1], N),
+                     dT=piece_rows(fs, o[F.dT], o[F.dT + 1], N))
+
+
+@jit(inline="always")
+def workspace_row(S, i):
+    """The workspace of filter ``i`` (:class:`estimators.ekf_filter.Workspace`)."""
+    return Workspace(mats=S.mats[i], WT=S.WT[i], s12=S.s12[i], HP=S.HP[i], M3=S.M3[i],
+                     dR=S.dR[i], Bs=S.Bs[i], HR=S.HR[i], vecs=S.vecs[i], Z=S.Z[i], y=S.y[i],
+                     dT=S.dT[i])
 
 
 @jit
 def constant_arrays(const, n):
-    """``(A (4, n), J (3, 3), J^-1 (3, 3), qc (18 + n), r (12))``: the array constants of
-    :func:`ekf_step`, as views of ``const`` (:func:`ekf_constants`)."""
-    a4, ns = C_A + 4 * n, 18 + n
-    return (const[C_A:a4].reshape((4, n)), const[a4:a4 + 9].reshape((3, 3)),
-            const[a4 + 9:a4 + 18].reshape((3, 3)), const[a4 + 18:a4 + 18 + ns],
-            const[a4 + 18 + ns:a4 + 30 + ns])
+    """The filter's :class:`~estimators.ekf_filter.Model` from the constants (views of
+    ``const``, :func:`ekf_constants`)."""
+    C, ns = CONSTANTS, X.size + n
+    J, Jinv = const[C.J:C.Jinv].reshape((3, 3)), const[C.Jinv:C.r].reshape((3, 3))
+    a = C.per_rotor  # A (4, n), then qc (ns,)
+    return Model((const[C.mass], const[C.gravity], mat3(J), mat3(Jinv)), J, Jinv,
+                 const[a:a + 4 * n].reshape((4, n)), const[a + 4 * n:a + 4 * n + ns],
+                 const[C.r:C.per_rotor], const[C.lo], const[C.hi])
 
 
 @jit
-def ekf_step(t, p, v, R, w, f, const, arrays, S, ks, i) -> int:
+def ekf_step(t, p, v, R, w, f, const, model, S, ks, i) -> int:
     """One sample into filter ``i`` of the state ``(S, ks)`` (:func:`state_pieces`), in place;
     returns the status code. A non-finite sample or a time not after the previous one is
     skipped (``bad_sample``); the first good sample sets the kinematic states (``warmup``);
     later ones predict from the previous sample, its command held, and update
     (:func:`predict_update_into`); a step whose command had an idle rotor (``<= IDLE_THRUST``)
     keeps the efficiencies, decorrelated, their variance grown by ``Q_eta dt``
-    (``no_excitation``). ``arrays`` is :func:`constant_arrays` of ``const``."""
+    (``no_excitation``). ``model`` is :func:`constant_arrays` of ``const``."""
     n = f.shape[0]
-    ns = 18 + n
-    x, P, last_t, last_f = S[F_X][i], S[F_P][i], S[F_LAST_T][i], S[F_LAST_F][i]
-    clip, f_max = const[C_CLIP] != 0.0, const[C_FMAX]
+    ns = X.size + n
+    x, P, last_t, last_f = S.x[i], S.P[i], S.last_t[i], S.last_f[i]
+    clip, f_max = const[CONSTANTS.clip] != 0.0, const[CONSTANTS.f_max]
     if not (math.isfinite(t) and all_finite(p) and all_finite(v) and all_finite(R)
             and all_finite(w) and all_finite(f)):
         return BAD_SAMPLE
-    if ks[i, K_INITIALISED] == 0:  # the first sample sets the kinematic states
-        eta0 = S[F_ETA0][i]
+    if ks[i, COUNTERS.initialised] == 0:  # the first sample sets the kinematic states
+        eta0 = S.eta0[i]
         for a in range(3):
-            x[a], x[3 + a], x[6 + a] = p[a], v[a], w[a]
+            x[X.p + a], x[X.v + a], x[X.w + a] = p[a], v[a], w[a]
             for b in range(3):
-                x[9 + 3 * b + a] = R[a, b]  # vec(R), column-major
+                x[X.Re1 + 3 * b + a] = R[a, b]  # vec(R), column-major
         for j in range(n):
-            x[18 + j] = eta0[j]
+            x[X.eta + j] = eta0[j]
         for a in range(ns):
             for b in range(ns):
-                P[a, b] = const[C_P0] if a == b else 0.0
-        ks[i, K_INITIALISED] = 1
+                P[a, b] = const[CONSTANTS.p0] if a == b else 0.0
+        ks[i, COUNTERS.initialised] = 1
         code = WARMUP
     else:
         dt = t - last_t[0]
@@ -238,28 +259,24 @@ def ekf_step(t, p, v, R, w, f, const, arrays, S, ks, i) -> int:
         idle = False
         for j in range(n):
             idle = idle or last_f[j] <= IDLE_THRUST
-        keep, P_keep = S[F_ETA_KEEP][i], S[F_P_KEEP][i]
+        keep, P_keep, e = S.eta_keep[i], S.P_keep[i], X.eta
         if idle:
             for j in range(n):
-                keep[j] = x[18 + j]
+                keep[j] = x[e + j]
                 for k in range(n):
-                    P_keep[j, k] = P[18 + j, 18 + k]
-        A, J, Jinv, qc, r = arrays
-        predict_update_into(x, P, last_f, dt, p, v, w, R, A, const[C_MASS], const[C_G], J,
-                            Jinv, qc, r, const[C_LO], const[C_HI],
-                            S[F_MATS][i], S[F_WT][i], S[F_S12][i], S[F_HP][i], S[F_M3][i],
-                            S[F_DR][i], S[F_BS][i], S[F_HR][i], S[F_VECS][i], S[F_Z][i],
-                            S[F_Y][i], S[F_DT][i])
+                    P_keep[j, k] = P[e + j, e + k]
+        predict_update_into(x, P, last_f, dt, Measurement(p, v, w, R), model,
+                            workspace_row(S, i))
         code = OK
         if idle:  # the efficiencies stay, decorrelated; their variance grows by Q_eta dt
             for j in range(n):
-                x[18 + j] = keep[j]
-                for k in range(18):
-                    P[18 + j, k] = 0.0
-                    P[k, 18 + j] = 0.0
+                x[e + j] = keep[j]
+                for k in range(e):
+                    P[e + j, k] = 0.0
+                    P[k, e + j] = 0.0
                 for k in range(n):
-                    P[18 + j, 18 + k] = P_keep[j, k]
-                P[18 + j, 18 + j] += qc[18 + j] * dt
+                    P[e + j, e + k] = P_keep[j, k]
+                P[e + j, e + j] += model.qc[e + j] * dt
             code = NO_EXCITATION
     last_t[0] = t
     for j in range(n):
@@ -273,22 +290,29 @@ def ekf_reset(ip_offsets, n, fs, ks, rows, eta0) -> None:
     efficiencies ``eta0`` (N, n)."""
     N = ks.shape[0]
     for i in rows:
-        ks[i, K_INITIALISED] = 0
-        for k in range(N_PIECES):
+        ks[i, COUNTERS.initialised] = 0
+        for k in range(ip_offsets.shape[0] - 1):  # every piece
             row = piece_rows(fs, ip_offsets[k], ip_offsets[k + 1], N)[i]
             for a in range(row.shape[0]):
                 row[a] = 0.0
-        e0 = piece_rows(fs, ip_offsets[F_ETA0], ip_offsets[F_ETA0 + 1], N)[i]
+        e0 = piece_rows(fs, ip_offsets[F.eta0], ip_offsets[F.eta0 + 1], N)[i]
         for j in range(n):
             e0[j] = eta0[i, j]
 
 
 @jit
+def ekf_update_row(t, p, v, R, w, f, const, offsets, fs, ks, i) -> int:
+    """:func:`ekf_step` of filter ``i`` of the state ``(fs, ks)``, its pieces and model formed
+    here (a batch's rows run it under ``prange``: the records are formed inside the loop)."""
+    S = state_pieces(fs, offsets, f.shape[0], ks.shape[0])
+    return ekf_step(t, p, v, R, w, f, const, constant_arrays(const, f.shape[0]), S, ks, i)
+
+
+@jit
 def ekf_update(t, p, v, R, w, f, const, offsets, fs, ks) -> int:
     """:func:`ekf_step` of a single filter (the online update)."""
-    S = state_pieces(fs, offsets, f.shape[0], ks.shape[0])
-    return ekf_step(t, p, v, R, w, f, const, constant_arrays(const, f.shape[0]), S, ks,
-                    ks.shape[0] - 1)  # row 0, a run-time value like the batch's rows
+    return ekf_update_row(t, p, v, R, w, f, const, offsets, fs, ks,
+                          ks.shape[0] - 1)  # row 0, a run-time value like the batch's rows
 
 
 @jit
@@ -299,14 +323,14 @@ def ekf_run(t, p, v, R, w, f, const, offsets, fs, ks, eta, sd, code) -> None:
     n = f.shape[1]
     S = state_pieces(fs, offsets, n, ks.shape[0])
     row = ks.shape[0] - 1  # 0, a run-time value like the batch's rows
-    x, P, eta0 = S[F_X][row], S[F_P][row], S[F_ETA0][row]
-    arrays = constant_arrays(const, n)
+    x, P, eta0 = S.x[row], S.P[row], S.eta0[row]
+    model = constant_arrays(const, n)
     for k in range(t.shape[0]):
-        code[k] = ekf_step(t[k], p[k], v[k], R[k], w[k], f[k], const, arrays, S, ks, row)
+        code[k] = ekf_step(t[k], p[k], v[k], R[k], w[k], f[k], const, model, S, ks, row)
         for j in range(n):
-            if ks[row, K_INITIALISED] == 1:
-                eta[k, j] = x[18 + j]
-                sd[k, j] = math.sqrt(P[18 + j, 18 + j])
+            if ks[row, COUNTERS.initialised] == 1:
+                eta[k, j] = x[X.eta + j]
+                sd[k, j] = math.sqrt(P[X.eta + j, X.eta + j])
             else:
                 eta[k, j] = eta0[j]
                 sd[k, j] = np.nan
@@ -345,17 +369,17 @@ class MotorEfficiencyEKF:
 
     @property
     def n_states(self) -> int:
-        return 18 + self.n_rotors
+        return X.size + self.n_rotors
 
     @property
     def x(self) -> np.ndarray | None:
         """The state ``[p, v, Omega, vec(R), eta]`` (None before the first good sample)."""
-        return self._state.views[F_X][0] if self._state.ints[0, K_INITIALISED] else None
+        return self._state.views.x[0] if self._state.ints[0, COUNTERS.initialised] else None
 
     @property
     def P(self) -> np.ndarray | None:
         """The state covariance (None before the first good sample)."""
-        return self._state.views[F_P][0] if self._state.ints[0, K_INITIALISED] else None
+        return self._state.views.P[0] if self._state.ints[0, COUNTERS.initialised] else None
 
     def reset(self, eta0=None) -> None:
         """Forget everything; the next sample initialises the kinematic states."""
@@ -367,11 +391,11 @@ class MotorEfficiencyEKF:
 
     def _estimate(self, t, code) -> Estimate:
         views = self._state.views
-        if self._state.ints[0, K_INITIALISED]:
-            eta = views[F_X][0, ETA_:].copy()
-            sd = np.sqrt(np.diagonal(views[F_P][0])[ETA_:])
+        if self._state.ints[0, COUNTERS.initialised]:
+            eta = views.x[0, X.eta:].copy()
+            sd = np.sqrt(np.diagonal(views.P[0])[X.eta:])
         else:
-            eta, sd = views[F_ETA0][0].copy(), None
+            eta, sd = views.eta0[0].copy(), None
         return Estimate(t=float(t), eta=eta, sd=sd, status=STATUSES[code])
 
     def update(self, sample: Sample) -> Estimate:
@@ -408,8 +432,8 @@ class MotorEfficiencyEKF:
                               f"{recording.thrust_cmd.shape[1]} rotor commands, the vehicle has "
                               f"{self.n_rotors} rotors")
         const = self._const.copy()
-        const[C_FMAX] = command_limit(recording, self.vehicle)  # the recording's saturation
-        self.reset(self._state.views[F_ETA0][0].copy())
+        const[CONSTANTS.f_max] = command_limit(recording, self.vehicle)  # its saturation
+        self.reset(self._state.views.eta0[0].copy())
         t, p, v, R, w, f = (np.ascontiguousarray(a, dtype=np.float64) for a in (
             recording.t, recording.position, recording.velocity, recording.rotation,
             recording.omega, recording.thrust_cmd))
@@ -454,10 +478,12 @@ def ekf_constants(vehicle: Vehicle, cfg: EKFConfig) -> np.ndarray:
                         np.full(3, cfg.q_rate), np.full(9, cfg.q_rotation), np.full(n, cfg.q_eta)))
     r = np.concatenate((np.full(3, cfg.r_position), np.full(3, cfg.r_velocity),
                         np.full(3, cfg.r_rate), np.full(3, cfg.r_attitude)))
-    return np.concatenate([np.asarray(a, dtype=np.float64).ravel() for a in (
-        [vehicle.mass, vehicle.gravity, vehicle.rotor_max_thrust, float(cfg.clip_commands), lo,
-         hi, cfg.p0], vehicle.allocation, vehicle.inertia, vehicle.inertia_inverse,
-        q / NOISE_REFERENCE_DT, r)])
+    per_rotor = np.concatenate((np.asarray(vehicle.allocation, dtype=float).ravel(),
+                                q / NOISE_REFERENCE_DT))  # A, then qc (constant_arrays)
+    return pack(CONSTANTS, mass=vehicle.mass, gravity=vehicle.gravity,
+                f_max=vehicle.rotor_max_thrust, clip=float(cfg.clip_commands), lo=lo, hi=hi,
+                p0=cfg.p0, J=vehicle.inertia, Jinv=vehicle.inertia_inverse, r=r,
+                per_rotor=per_rotor)
 
 
 _ROW0 = np.zeros(1, dtype=np.int64)

@@ -25,14 +25,69 @@ from __future__ import annotations
 
 import math
 
-from estimators.linalg import cholesky_into, gauss_jordan_into, symmetric_eigen_into
-from quadfault.rotation import expm3  # the core's SO(3) exponential (kernel)
-from quadfault.jit import jit
+from typing import NamedTuple
 
-# workspace slots: ns x ns matrices, 3 x 3 blocks, vectors of length ns
-_FP, _FPT, _PP = range(3)
-_R, _RN, _JR, _G, _MR, _C, _FW, _MW = range(8)
-_XP, _ZE, _PHI = range(3)
+import numpy as np
+
+from estimators.linalg import cholesky_into, gauss_jordan_into, symmetric_eigen_into
+from estimators.state import Layout, fields
+from quadfault.dynamics import angular_acceleration3, rotor_wrench, translational_acceleration3
+from quadfault.jit import jit
+from quadfault.rotation import expm3, mat3, matvec3  # the core's kernels
+
+#: the filter's state vector: position, velocity, rate, vec(R) column by column (R e1, R e2,
+#: R e3), then the n efficiencies
+X = fields("EKFStates", ("p", 3), ("v", 3), ("w", 3), ("Re1", 3), ("Re2", 3), ("Re3", 3),
+           ("eta", 0))
+#: rows of the measurement: position, velocity, rate (each reads its state: ``H = I`` there),
+#: then the attitude's rotation error
+Y = fields("EKFMeasurementRows", ("p", 3), ("v", 3), ("w", 3), ("R", 3))
+N_VEC_R = X.eta - X.Re1  # the entries of vec(R)
+assert (X.p, X.v, X.w) == (Y.p, Y.v, Y.w) and X.Re1 == Y.R  # rows that read their state
+#: slots of the workspace's (ns, ns) matrices, 3 x 3 blocks and ns-vectors
+MATS = fields("EKFMatrices", "FP", "FPT", "Pp")
+M3 = fields("EKFBlocks", "R", "Rn", "Jr", "G", "Mr", "C", "Fw", "Mw")
+VECS = fields("EKFVectors", "xp", "ze", "phi")
+#: the workspace of one filter (dimensions: rotors ``n``, states ``ns = X.size + n``)
+WORKSPACE = Layout("EKFWorkspace", mats=(MATS.size, "ns", "ns"), WT=("ns", Y.size),
+                   s12=(2, Y.size, Y.size), HP=(Y.size, "ns"), M3=(M3.size, 3, 3),
+                   dR=(N_VEC_R, 3), Bs=(2, "n", 3), HR=(Y.size - Y.R, N_VEC_R),
+                   vecs=(VECS.size, "ns"), Z=(3, "ns"), y=(Y.size,), dT=("n",))
+Workspace = WORKSPACE.pieces
+
+
+class Measurement(NamedTuple):
+    """What the update measures: position ``p`` [m], velocity ``v`` [m/s] (world), body rate
+    ``w`` [rad/s] (3,) each, attitude ``R`` (3, 3) body -> world."""
+
+    p: np.ndarray
+    v: np.ndarray
+    w: np.ndarray
+    R: np.ndarray
+
+
+class Model(NamedTuple):
+    """The filter's model: the nominal rigid body ``rigid`` (the tuple of
+    :func:`quadfault.dynamics.rigid_body`: mass, gravity, J, J^-1), the inertia ``J`` and its
+    inverse ``Jinv`` as (3, 3) arrays (the Jacobian's blocks), the allocation ``A`` (4, n),
+    the process-noise variance rates ``qc`` (ns,) [1/s], the measurement-noise variances
+    ``r`` (:data:`Y`), and the efficiency clamp ``[lo, hi]``."""
+
+    rigid: tuple
+    J: np.ndarray
+    Jinv: np.ndarray
+    A: np.ndarray
+    qc: np.ndarray
+    r: np.ndarray
+    lo: float
+    hi: float
+
+
+def workspace(n: int) -> Workspace:
+    """A workspace of :func:`predict_update_into` for ``n`` rotors (arrays of zeros)."""
+    shapes = WORKSPACE.shapes(n=n, ns=X.size + n)
+    return Workspace(*(np.zeros(s) for s in shapes))
+
 
 @jit
 def _right_jacobian_into(phi0, phi1, phi2, Jr):
@@ -119,88 +174,85 @@ def _jacobian_times(Pin, out, lower, dt, cp, cv, up, uv, dT, Fw, BwT, E, dR, Mw,
     entries of R's columns plus ``dR [Mw, Br]`` on (Omega, eta); eta rows: the identity
     (``BwT``, ``BrT``: ``(dt B)^T``, ``(dt^2 B / 2)^T``). ``ze``, ``Z`` are scratch."""
     ns = Pin.shape[0]
-    nr = ns - 18
-    n6 = 6 if lower else ns  # columns the p / v rows need
-    n18 = 18 if lower else ns
+    nr = ns - X.eta
+    n6 = X.w if lower else ns  # columns the p / v rows need
+    n18 = X.eta if lower else ns
+    w, e = X.w, X.eta
     for k in range(n6):  # ze = dT^T Pin[eta]  (the rank-one eta coupling)
         acc = 0.0
         for j in range(nr):
-            acc += dT[j] * Pin[18 + j, k]
+            acc += dT[j] * Pin[e + j, k]
         ze[k] = acc
-    for i in range(3):
-        lp = i + 1 if lower else ns
+    for i in range(3):  # p and v rows (R e3: the thrust direction)
+        lp = X.p + i + 1 if lower else ns
         for k in range(lp):
-            out[i, k] = Pin[i, k] + dt * Pin[3 + i, k] + cp * Pin[15 + i, k] + up[i] * ze[k]
-        lv = i + 4 if lower else ns
+            out[X.p + i, k] = (Pin[X.p + i, k] + dt * Pin[X.v + i, k] + cp * Pin[X.Re3 + i, k]
+                               + up[i] * ze[k])
+        lv = X.v + i + 1 if lower else ns
         for k in range(lv):
-            out[3 + i, k] = Pin[3 + i, k] + cv * Pin[15 + i, k] + uv[i] * ze[k]
+            out[X.v + i, k] = Pin[X.v + i, k] + cv * Pin[X.Re3 + i, k] + uv[i] * ze[k]
     for i in range(3):  # Omega rows
-        lw = i + 7 if lower else ns
+        lw = w + i + 1 if lower else ns
         for k in range(lw):
-            out[6 + i, k] = Fw[i, 0] * Pin[6, k] + Fw[i, 1] * Pin[7, k] + Fw[i, 2] * Pin[8, k]
+            out[w + i, k] = (Fw[i, 0] * Pin[w, k] + Fw[i, 1] * Pin[w + 1, k]
+                             + Fw[i, 2] * Pin[w + 2, k])
         for j in range(nr):
             b = BwT[j, i]
             for k in range(lw):
-                out[6 + i, k] += b * Pin[18 + j, k]
+                out[w + i, k] += b * Pin[e + j, k]
     for a in range(3):  # Z = [Mw, Br] Pin[(Omega, eta)]
         for k in range(n18):
-            Z[a, k] = Mw[a, 0] * Pin[6, k] + Mw[a, 1] * Pin[7, k] + Mw[a, 2] * Pin[8, k]
+            Z[a, k] = Mw[a, 0] * Pin[w, k] + Mw[a, 1] * Pin[w + 1, k] + Mw[a, 2] * Pin[w + 2, k]
         for j in range(nr):
             b = BrT[j, a]
             for k in range(n18):
-                Z[a, k] += b * Pin[18 + j, k]
+                Z[a, k] += b * Pin[e + j, k]
     for jb in range(3):  # vec(R) rows: vec(R E) = (E^T kron I3) vec(R), plus dR Z
         e0, e1, e2 = E[jb], E[3 + jb], E[6 + jb]  # column jb of the row-major 9-tuple
         for kk in range(3):
             row = 3 * jb + kk
             d0, d1, d2 = dR[row, 0], dR[row, 1], dR[row, 2]
-            lr = row + 10 if lower else ns
+            lr = X.Re1 + row + 1 if lower else ns
             for k in range(lr):
-                out[9 + row, k] = (e0 * Pin[9 + kk, k] + e1 * Pin[12 + kk, k]
-                                   + e2 * Pin[15 + kk, k]
-                                   + d0 * Z[0, k] + d1 * Z[1, k] + d2 * Z[2, k])
-    for i in range(18, ns):  # eta rows: random walk
+                out[X.Re1 + row, k] = (e0 * Pin[X.Re1 + kk, k] + e1 * Pin[X.Re2 + kk, k]
+                                       + e2 * Pin[X.Re3 + kk, k]
+                                       + d0 * Z[0, k] + d1 * Z[1, k] + d2 * Z[2, k])
+    for i in range(e, ns):  # eta rows: random walk
         le = i + 1 if lower else ns
         for k in range(le):
             out[i, k] = Pin[i, k]
 
 
 @jit
-def predict_update_into(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo, hi, mats, WT,
-                        s12, HP, M3, dR, Bs, HR, vecs, Z, y, dT):
+def predict_update_into(x, P, f, dt, z, model, work):
     """One predict over ``dt`` [s] with the rotor commands ``f`` [N] held (eqs. 1-4, 12) and one
-    update with the measured position ``zp``, velocity ``zv``, rate ``zw`` and attitude ``zR``;
-    ``x`` and ``P`` are overwritten. Vehicle: allocation ``A``, mass ``m``, gravity ``g``,
-    inertia ``J`` and its inverse; ``qc`` process-noise variance rates per second, ``r``
-    measurement-noise variances, ``[lo, hi]`` the efficiency clamp. The rest is the
-    workspace (:data:`EKFState.shapes`)."""
-    FP, FPT, Pp = mats[_FP], mats[_FPT], mats[_PP]
-    S, L = s12[0], s12[1]
-    R, Rn, Jr, G, Mr, C = M3[_R], M3[_RN], M3[_JR], M3[_G], M3[_MR], M3[_C]
-    Fw, Mw = M3[_FW], M3[_MW]
-    BwT, BrT = Bs[0], Bs[1]
-    xp, ze, phi = vecs[_XP], vecs[_ZE], vecs[_PHI, 0:3]
+    update with the measurement ``z`` (:class:`Measurement`); ``x`` and ``P`` are overwritten.
+    ``model``: :class:`Model` (the nominal rigid body, allocation, noise, clamp); ``work``:
+    :class:`Workspace`. The rigid body is the model's (:mod:`quadfault.dynamics`: the thrust
+    allocation, eqs. 2 and 4); the step discretises it as the paper's EKF does."""
+    FP, FPT, Pp = work.mats[MATS.FP], work.mats[MATS.FPT], work.mats[MATS.Pp]
+    S, L = work.s12[0], work.s12[1]
+    M3_ = work.M3
+    R, Rn, Jr, G, Mr, C = (M3_[M3.R], M3_[M3.Rn], M3_[M3.Jr], M3_[M3.G], M3_[M3.Mr],
+                           M3_[M3.C])
+    Fw, Mw = M3_[M3.Fw], M3_[M3.Mw]
+    BwT, BrT = work.Bs[0], work.Bs[1]
+    xp, ze, phi = work.vecs[VECS.xp], work.vecs[VECS.ze], work.vecs[VECS.phi, 0:3]
+    dR, HR, y, dT, HP, WT, Z = work.dR, work.HR, work.y, work.dT, work.HP, work.WT, work.Z
+    A, J, Jinv, qc, r, rigid = model.A, model.J, model.Jinv, model.qc, model.r, model.rigid
+    m = rigid[0]
     ns = x.shape[0]
-    nr = ns - 18
+    nr = ns - X.eta
     for j in range(3):
         for i in range(3):
-            R[i, j] = x[9 + 3 * j + i]
+            R[i, j] = x[X.Re1 + 3 * j + i]
     # ---- predict (eqs. 1-4, 12)
-    T = mo0 = mo1 = mo2 = 0.0  # wrench [T; M] = A diag(eta) f
-    for j in range(nr):
-        ef = x[18 + j] * f[j]
-        T += A[0, j] * ef
-        mo0 += A[1, j] * ef
-        mo1 += A[2, j] * ef
-        mo2 += A[3, j] * ef
-    w0, w1, w2 = x[6], x[7], x[8]
-    jw = (J[0, 0] * w0 + J[0, 1] * w1 + J[0, 2] * w2, J[1, 0] * w0 + J[1, 1] * w1 + J[1, 2] * w2,
-          J[2, 0] * w0 + J[2, 1] * w1 + J[2, 2] * w2)
-    tq = (mo0 - (w1 * jw[2] - w2 * jw[1]), mo1 - (w2 * jw[0] - w0 * jw[2]),
-          mo2 - (w0 * jw[1] - w1 * jw[0]))
-    wdot = (Jinv[0, 0] * tq[0] + Jinv[0, 1] * tq[1] + Jinv[0, 2] * tq[2],
-            Jinv[1, 0] * tq[0] + Jinv[1, 1] * tq[1] + Jinv[1, 2] * tq[2],
-            Jinv[2, 0] * tq[0] + Jinv[2, 1] * tq[1] + Jinv[2, 2] * tq[2])
+    T, mo = rotor_wrench(A, f, x[X.eta:])  # [T; M] = A diag(eta) f
+    w = (x[X.w], x[X.w + 1], x[X.w + 2])
+    w0, w1, w2 = w
+    jw = matvec3(rigid[2], w)
+    wdot = angular_acceleration3(w, mo, rigid)  # eq. 4
+    acc = translational_acceleration3(mat3(R), T, rigid)  # eq. 2
     phi0 = w0 * dt + 0.5 * wdot[0] * dt * dt
     phi1 = w1 * dt + 0.5 * wdot[1] * dt * dt
     phi2 = w2 * dt + 0.5 * wdot[2] * dt * dt
@@ -210,15 +262,14 @@ def predict_update_into(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo
         for j in range(3):
             Rn[i, j] = R[i, 0] * E[j] + R[i, 1] * E[3 + j] + R[i, 2] * E[6 + j]
     for i in range(3):
-        a = -(T / m) * R[i, 2] + (g if i == 2 else 0.0)
-        xp[i] = x[i] + x[3 + i] * dt + 0.5 * a * dt * dt
-        xp[3 + i] = x[3 + i] + a * dt
-        xp[6 + i] = x[6 + i] + wdot[i] * dt
+        xp[X.p + i] = x[X.p + i] + x[X.v + i] * dt + 0.5 * acc[i] * dt * dt
+        xp[X.v + i] = x[X.v + i] + acc[i] * dt
+        xp[X.w + i] = x[X.w + i] + wdot[i] * dt
     for j in range(3):
         for i in range(3):
-            xp[9 + 3 * j + i] = Rn[i, j]
+            xp[X.Re1 + 3 * j + i] = Rn[i, j]
     for j in range(nr):
-        xp[18 + j] = x[18 + j]
+        xp[X.eta + j] = x[X.eta + j]
     # blocks of the Jacobian F = d x_pred / d x (ekf.predict); F itself is never formed
     for j in range(nr):  # B = J^-1 A_M diag(f) = d Omega' / d eta, dT = d T / d eta
         dT[j] = A[0, j] * f[j]
@@ -259,11 +310,12 @@ def predict_update_into(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo
             Pp[k, i] = Pp[i, k]
         Pp[i, i] += qc[i] * dt
     # ---- update (p, v, Omega, attitude rotation error); H = [I_9 0; 0 HR 0]
+    zR = z.R
     for i in range(3):
-        y[i] = zp[i] - xp[i]
-        y[3 + i] = zv[i] - xp[3 + i]
-        y[6 + i] = zw[i] - xp[6 + i]
-    for i in range(3):  # Mr = Rn^T zR, y[9:12] = log(Mr)
+        y[Y.p + i] = z.p[i] - xp[X.p + i]
+        y[Y.v + i] = z.v[i] - xp[X.v + i]
+        y[Y.w + i] = z.w[i] - xp[X.w + i]
+    for i in range(3):  # Mr = Rn^T zR, y[Y.R:] = log(Mr)
         for j in range(3):
             Mr[i, j] = Rn[0, i] * zR[0, j] + Rn[1, i] * zR[1, j] + Rn[2, i] * zR[2, j]
     s0 = 0.5 * (Mr[2, 1] - Mr[1, 2])
@@ -272,9 +324,9 @@ def predict_update_into(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo
     sn = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
     cs = 0.5 * (Mr[0, 0] + Mr[1, 1] + Mr[2, 2] - 1.0)
     scale = 1.0 if sn < 1e-12 else math.atan2(sn, cs) / sn
-    y[9], y[10], y[11] = s0 * scale, s1 * scale, s2 * scale
+    y[Y.R], y[Y.R + 1], y[Y.R + 2] = s0 * scale, s1 * scale, s2 * scale
     for k in range(3):
-        for i in range(9):
+        for i in range(N_VEC_R):
             HR[k, i] = 0.0
     for (k, ia, ib) in ((0, 2, 1), (1, 0, 2), (2, 1, 0)):
         for i in range(3):
@@ -283,13 +335,13 @@ def predict_update_into(x, P, f, dt, zp, zv, zw, zR, A, m, g, J, Jinv, qc, r, lo
     _update(x, P, xp, Pp, HR, y, r, HP, WT, S, L)
     for j in range(3):  # project R back to SO(3), clamp eta
         for i in range(3):
-            C[i, j] = x[9 + 3 * j + i]
+            C[i, j] = x[X.Re1 + 3 * j + i]
     _project_so3_into(C, Mr, Jr, G)
     for j in range(3):
         for i in range(3):
-            x[9 + 3 * j + i] = C[i, j]
+            x[X.Re1 + 3 * j + i] = C[i, j]
     for j in range(nr):
-        x[18 + j] = min(max(x[18 + j], lo), hi)
+        x[X.eta + j] = min(max(x[X.eta + j], model.lo), model.hi)
 
 
 @jit(inline="always")
@@ -307,31 +359,32 @@ def _update(x, P, xp, Pp, HR, y, r, HP, WT, S, L):
     it has ``diag(r) > 0`` added) the general solver and ``P = sym(Pp - K H Pp)`` are used.
     ``S`` is factored by :func:`estimators.linalg.cholesky_into` with ``r`` as its shift."""
     ns = Pp.shape[0]
-    for i in range(9):  # H P: rows of P, and the attitude rows
+    nm, nd = Y.size, Y.R  # measurement rows, those that read their state (H = I there)
+    for i in range(nd):  # H P: rows of P, and the attitude rows
         for k in range(ns):
             HP[i, k] = Pp[i, k]
-    for i in range(3):
+    for i in range(nm - nd):
         for k in range(ns):
-            HP[9 + i, k] = 0.0
-        for j in range(9):
+            HP[nd + i, k] = 0.0
+        for j in range(N_VEC_R):
             h = HR[i, j]
             if h != 0.0:
                 for k in range(ns):
-                    HP[9 + i, k] += h * Pp[9 + j, k]
-    for i in range(12):  # lower triangle of S = H P H^T (+ R in the factorisation)
-        for k in range(min(i + 1, 9)):
+                    HP[nd + i, k] += h * Pp[X.Re1 + j, k]
+    for i in range(nm):  # lower triangle of S = H P H^T (+ R in the factorisation)
+        for k in range(min(i + 1, nd)):
             S[i, k] = HP[i, k]
-        for k in range(9, i + 1):
+        for k in range(nd, i + 1):
             acc = 0.0
-            for j in range(9):
-                acc += HP[i, 9 + j] * HR[k - 9, j]
+            for j in range(N_VEC_R):
+                acc += HP[i, X.Re1 + j] * HR[k - nd, j]
             S[i, k] = acc
     if not cholesky_into(S, r, L, S.shape[0]):
-        for i in range(12):
+        for i in range(nm):
             S[i, i] += r[i]
-        _update_general(x, P, xp, Pp, y, HP, S, WT.reshape((12, ns)))
+        _update_general(x, P, xp, Pp, y, HP, S, WT.reshape((nm, ns)))
         return
-    for i in range(12):  # W = L^-1 H P (forward substitution on whole rows, in place)
+    for i in range(nm):  # W = L^-1 H P (forward substitution on whole rows, in place)
         for k in range(i):
             lik = L[i, k]
             for c in range(ns):
@@ -339,21 +392,21 @@ def _update(x, P, xp, Pp, HR, y, r, HP, WT, S, L):
         d = L[i, i]
         for c in range(ns):
             HP[i, c] = HP[i, c] / d
-    for i in range(12):  # y <- L^-1 y
+    for i in range(nm):  # y <- L^-1 y
         acc = y[i]
         for k in range(i):
             acc -= L[i, k] * y[k]
         y[i] = acc / L[i, i]
     for i in range(ns):
         acc = 0.0
-        for c in range(12):
+        for c in range(nm):
             WT[i, c] = HP[c, i]
             acc += HP[c, i] * y[c]
         x[i] = xp[i] + acc
     for i in range(ns):  # P = Pp - W^T W
         for k in range(i + 1):
             acc = 0.0
-            for c in range(12):
+            for c in range(nm):
                 acc += WT[i, c] * WT[k, c]
             P[i, k] = Pp[i, k] - acc
             P[k, i] = P[i, k]

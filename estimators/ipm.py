@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimators.linalg import cholesky_into, cholesky_solve_into
+from estimators.state import counts, fields, pack
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
 
@@ -110,17 +111,19 @@ class IPMResult:
     x_history: np.ndarray | None = None
 
 
-def ipm_parameters(settings: IPMSettings) -> np.ndarray:
-    """The float settings of :func:`ipm_into`, in its order: ``mu, alpha, beta,
-    step_fraction, backtrack_eps, min_step, tol_feas, tol_gap``."""
-    s = settings
-    return np.array([s.mu, s.alpha, s.beta, s.step_fraction, s.backtrack_eps, s.min_step,
-                     s.tol_feas, s.tol_gap], dtype=np.float64)
-
-
+#: the float settings of :func:`ipm_into`, by name (:func:`ipm_parameters` packs them)
+SETTINGS = fields("IPMSettingRows", "mu", "alpha", "beta", "step_fraction", "backtrack_eps",
+                  "min_step", "tol_feas", "tol_gap")
 #: rows of the interior point's workspace ``W`` (:func:`ipm_into`)
-W_LAM_HI, W_LAM_LO, W_D, W_RHS, W_DX, W_DLAM_HI, W_DLAM_LO, W_HX, W_HDX = range(9)
-N_WORK_ROWS = 9
+WORK = fields("IPMWorkRows", "lam_hi", "lam_lo", "d", "rhs", "dx", "dlam_hi", "dlam_lo", "hx",
+              "hdx")
+N_SETTINGS, N_WORK_ROWS = SETTINGS.size, WORK.size
+
+
+def ipm_parameters(settings: IPMSettings) -> np.ndarray:
+    """The float settings of :func:`ipm_into` (:data:`SETTINGS`): ``mu, alpha, beta,
+    step_fraction, backtrack_eps, min_step, tol_feas, tol_gap``."""
+    return pack(SETTINGS, **{key: getattr(settings, key) for key in counts(SETTINGS)})
 
 
 @jit
@@ -131,7 +134,7 @@ def ipm_into(H, q, lo, hi, x, settings, max_iter, W, L, hist):
         H: (n, n) symmetric positive definite; q: (n,).
         x: the start on entry, strictly inside the box; the last iterate on return.
         settings: :func:`ipm_parameters`; max_iter: at most this many Newton iterations.
-        W: (9, n) workspace; on return its rows ``W_LAM_HI``, ``W_LAM_LO`` hold the
+        W: (9, n) workspace; on return its rows ``WORK.lam_hi``, ``WORK.lam_lo`` hold the
             multipliers of ``x <= hi`` and ``lo <= x``. L: (n, n) scratch.
         hist: (max_iter, >= 3 + n) receives ``||r_dual||, ||r_cent||, gap, x`` after each
             iteration, or a (0, 3 + n) array to record nothing.
@@ -150,11 +153,14 @@ def ipm_into(H, q, lo, hi, x, settings, max_iter, W, L, hist):
 def _ipm_steps(H, q, lo, hi, x, settings, max_iter, W, L, hist, n):
     """:func:`ipm_into` for ``n`` unknowns (its loops' length; a constant lets the compiler
     unroll them)."""
-    mu, alpha, beta, step_fraction = settings[0], settings[1], settings[2], settings[3]
-    bt_eps, min_step, tol_feas, tol_gap = settings[4], settings[5], settings[6], settings[7]
+    mu, alpha = settings[SETTINGS.mu], settings[SETTINGS.alpha]
+    beta, step_fraction = settings[SETTINGS.beta], settings[SETTINGS.step_fraction]
+    bt_eps, min_step = settings[SETTINGS.backtrack_eps], settings[SETTINGS.min_step]
+    tol_feas, tol_gap = settings[SETTINGS.tol_feas], settings[SETTINGS.tol_gap]
     # the workspace rows as views made once (no reference counting in the loop)
-    lam_hi, lam_lo, d, rhs, dx_ = W[W_LAM_HI], W[W_LAM_LO], W[W_D], W[W_RHS], W[W_DX]
-    dlam_hi, dlam_lo, hx_, hdx_ = W[W_DLAM_HI], W[W_DLAM_LO], W[W_HX], W[W_HDX]
+    lam_hi, lam_lo, d, rhs, dx_ = (W[WORK.lam_hi], W[WORK.lam_lo], W[WORK.d], W[WORK.rhs],
+                                   W[WORK.dx])
+    dlam_hi, dlam_lo, hx_, hdx_ = W[WORK.dlam_hi], W[WORK.dlam_lo], W[WORK.hx], W[WORK.hdx]
     gap = 0.0  # surrogate gap -phi^T lambda, eq. (45); phi = [x - hi; lo - x]
     for i in range(n):
         pu = x[i] - hi
@@ -268,7 +274,7 @@ def solve_box_qp(H, q, lo: float, hi: float, x0, settings: IPMSettings | None = 
                         np.empty((n, n)), hist)
     if flag < 0:
         raise np.linalg.LinAlgError("Newton matrix is not positive definite")
-    lam = np.concatenate((W[W_LAM_HI], W[W_LAM_LO]))
+    lam = np.concatenate((W[WORK.lam_hi], W[WORK.lam_lo]))
     if not record_history:
         return IPMResult(x, lam, it, flag == 1)
     h = hist[:it]

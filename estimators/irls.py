@@ -41,7 +41,7 @@ from estimators.base import (
     Sample,
     command_limit,
 )
-from estimators.change_completion import N_COUNTERS, complete_into, observe_into
+from estimators.change_completion import C_EVENTS, N_COUNTERS, complete_into, observe_into
 from estimators.irls_config import (  # noqa: F401  (re-exported)
     SCALINGS,
     IRLSConfig,
@@ -50,21 +50,18 @@ from estimators.irls_config import (  # noqa: F401  (re-exported)
     window_diagnostics,
 )
 from estimators.median import median_push_into, postprocess_label
-from estimators.residuals import segment_terms_into
-from estimators.state import FlatState, all_finite, piece, piece_rows
+from estimators.residuals import RESIDUAL_ROWS, segment_terms_into
+from estimators.state import FlatState, Layout, all_finite, fields, pack, piece, piece_rows
 from estimators.window import (
-    M_A,
-    M_B,
-    M_JGJ,
+    MATRICES,
     MAX_ITER,
     N_FLOAT_SETTINGS,
     N_INT_SETTINGS,
     N_MATRICES,
+    N_SEGMENT_ROWS,
     N_VECTORS,
     OK,
-    P_GAMMA,
-    P_HI,
-    P_LO,
+    SETTINGS,
     history,
     no_history,
     solve_window,
@@ -97,31 +94,48 @@ _HELD = {WARMUP: IRLSDiagnostics(STATUS_WARMUP),
          NO_EXCITATION: IRLSDiagnostics(STATUS_NO_EXCITATION,
                                         "commanded thrust ~ 0 in the window")}
 
-# extra settings after the window's (estimators.window.window_settings)
-P_THRESHOLD = N_FLOAT_SETTINGS  # change_threshold
-(I_M, I_N, I_L, I_COMPLETION, I_HOLD) = range(N_INT_SETTINGS, N_INT_SETTINGS + 5)
-I_OFFSETS = N_INT_SETTINGS + 5  # then the offsets of the float state's pieces
-# pieces of the float state, in order (their shapes: IRLSState.shapes); rows of the grouped ones
-F_T, F_SAMPLE, F_VN, F_VM, F_BH, F_H, F_M, F_R0, F_J, F_MEDIAN = range(10)
-N_PIECES = 10
-S_P, S_V, S_W, S_R = 0, 1, 2, 3  # F_SAMPLE (6, 3): the previous sample's p, v, w; R (rows 3-5)
-# F_VN (n-vectors): the previous command, the estimate, its sd, the reported estimate, the
-# window's solution and sd, the completion's anchor, direction and scratch (3 rows), then the
-# window solver's vectors (estimators.window)
-(VN_LAST_F, VN_ETA, VN_SD, VN_OUT, VN_X, VN_SD_X, VN_ANCHOR, VN_DIRECTION, VN_SCRATCH) = range(9)
-VN_WINDOW = VN_SCRATCH + 3
-# F_VM (m-vectors): the ring's energy constants and thrusts, the final weights, then the window
-# solver's segment rows; F_BH: the ring's b and the completion's history; F_MEDIAN: the
-# output median's ring and its sorted copy
-VM_C, VM_THRUST, VM_WEIGHTS, VM_WINDOW = 0, 1, 2, 3
-BH_B, BH_HISTORY = 0, 1
-# the int state: counters, then the completion's (estimators.change_completion), then the
-# interior-point iterations of each IRLS round
-K_HEAD, K_COUNT, K_HAS_LAST, K_HAS_SD, K_MEDIAN_K, K_MEDIAN_FRESH = range(6)
-K_COMPLETION = 6
-K_ITERS = K_COMPLETION + N_COUNTERS
-# the vehicle constants: mass, gravity, rotor_max_thrust, clip, min_thrust, J, J^-1, A, G
-C_MASS, C_G, C_FMAX, C_CLIP, C_MIN_THRUST, C_J, C_JINV, C_A = 0, 1, 2, 3, 4, 5, 14, 23
+#: the float settings (``fp``): the window solve's (:data:`estimators.window.SETTINGS`), then
+#: the change completion's threshold
+FLOAT_SETTINGS = fields("IRLSFloatSettings", ("window", N_FLOAT_SETTINGS), "change_threshold")
+#: the int settings (``ip``): the window solve's, the sizes (segments ``m``, rotors ``n``, the
+#: output median's ``L``), the completion's, then the offsets of the float state's pieces
+INT_SETTINGS = fields("IRLSIntSettings", ("window", N_INT_SETTINGS), "m", "n", "L",
+                      "completion", "hold", ("offsets", 0))
+#: the vehicle constants (``const``); ``A`` (4 n) the allocation, last
+CONSTANTS = fields("IRLSConstants", "mass", "gravity", "f_max", "clip", "min_thrust", ("J", 9),
+                   ("Jinv", 9), ("G", RESIDUAL_ROWS), ("A", 0))
+#: rows of the piece ``sample``: the previous sample's p, v, w and R
+SAMPLE_ROWS = fields("IRLSSampleRows", "p", "v", "w", ("R", 3))
+#: rows of the piece ``vn`` (n each): the previous command, the estimate, its sd, the
+#: reported estimate, the window's solution and sd, the completion's anchor, direction and
+#: scratch, then the window solver's vectors (:data:`estimators.window.VECTORS`)
+VN_ROWS = fields("IRLSVectorRows", "last_f", "eta", "sd", "out", "x", "sd_x", "anchor",
+                 "direction", ("scratch", 3), ("window", N_VECTORS))
+#: rows of the piece ``vm`` (m each): the ring's energy constants and thrusts, the final
+#: weights, then the window solver's segment rows
+VM_ROWS = fields("IRLSSegmentRows", "c", "thrust", "weights", ("window", N_SEGMENT_ROWS))
+#: rows of the piece ``bh`` (m x n each): the ring's b, the completion's history
+BH_ROWS = fields("IRLSRingRows", "b", "history")
+#: the int state: counters, the completion's (:mod:`estimators.change_completion`), then the
+#: interior-point iterations of each IRLS round
+COUNTERS = fields("IRLSCounters", "head", "count", "has_last", "has_sd", "median_k",
+                  "median_fresh", ("completion", N_COUNTERS), ("iters", 0))
+#: the float state of one estimator: its pieces and their shapes in the window's segments
+#: ``m``, the rotors ``n`` and the output median's length ``L`` (offsets derived)
+FLOATS = Layout(
+    "IRLSPieces",
+    t=(1,),                                    # the previous sample's time [s]
+    sample=(SAMPLE_ROWS.size, 3),              # its p, v, w, R (SAMPLE_ROWS)
+    vn=(VN_ROWS.size, "n"),                    # n-vectors (VN_ROWS)
+    vm=(VM_ROWS.size, "m"),                    # m-vectors (VM_ROWS)
+    bh=(BH_ROWS.size, "m", "n"),               # (BH_ROWS)
+    H=("m", "n", "n"),                         # the ring's H
+    M=(N_MATRICES, "n", "n"),                  # the window solver's matrices
+    r0=(RESIDUAL_ROWS,),                       # a segment's residual at eta = 0 (scratch)
+    J=(RESIDUAL_ROWS, "n"),                    # its Jacobian (scratch)
+    median=(2, "L", "n"))                      # the output median's ring and sorted copy
+F = FLOATS.index
+IRLSPieces = FLOATS.pieces
 
 
 class IRLSState(FlatState):
@@ -131,64 +145,62 @@ class IRLSState(FlatState):
     ``(N, *shape)``; the compiled update reads the same pieces through :func:`state_pieces`
     and the offsets in ``ip``.
 
-    Float pieces: the previous sample's time, its state and (clipped) command, the ring of
-    segment terms (``c, b, H, thrust``; ``ints[:, K_HEAD]`` is the slot written next, the oldest
-    segment of a full window), the unfiltered estimate ``eta`` and its ``sd``, the reported
-    ``out``, the last window solve (``x, sd_x, weights``) and its workspace, the change
-    completion (``history, anchor, direction``) and the output median's ring. Pieces of the
-    same length are grouped (the ``VN_*``, ``VM_*`` rows), so the compiled update forms few
-    views.
+    Float pieces (:data:`FLOATS`): the previous sample's time, its state and (clipped)
+    command, the ring of segment terms (``c, b, H, thrust``; ``ints[:, COUNTERS.head]`` is the
+    slot written next, the oldest segment of a full window), the unfiltered estimate ``eta``
+    and its ``sd``, the reported ``out``, the last window solve (``x, sd_x, weights``) and its
+    workspace, the change completion (``history, anchor, direction``) and the output median's
+    ring. Pieces of the same length are grouped (rows :data:`VN_ROWS`, :data:`VM_ROWS`,
+    :data:`BH_ROWS`), so the compiled update forms few views.
     """
 
-    @staticmethod
-    def shapes(m: int, n: int, L: int) -> tuple:
-        return ((1,), (6, 3), (VN_WINDOW + N_VECTORS, n), (VM_WINDOW + 3, m), (2, m, n),
-                (m, n, n), (N_MATRICES, n, n), (10,), (10, n), (2, L, n))
-
     def __init__(self, m: int, n: int, L: int, rounds: int, num: int = 1):
-        super().__init__(self.shapes(m, n, L), num, K_ITERS + rounds)
+        super().__init__(FLOATS.shapes(m=m, n=n, L=L), num, COUNTERS.size + rounds,
+                         FLOATS.pieces)
 
 
 def irls_parameters(vehicle: Vehicle, cfg: IRLSConfig, offsets: np.ndarray):
     """``(const, fp, ip)`` of :func:`irls_update`: the vehicle constants, the float and the
     int settings (with the state's piece offsets)."""
     m, n = cfg.window - 1, vehicle.n_rotors
-    const = np.concatenate([np.asarray(a, dtype=np.float64).ravel() for a in (
-        [vehicle.mass, vehicle.gravity, vehicle.rotor_max_thrust, float(cfg.clip_commands),
-         cfg.min_thrust], vehicle.inertia, vehicle.inertia_inverse, vehicle.allocation,
-        cfg.segment_weights)])
+    const = pack(CONSTANTS, mass=vehicle.mass, gravity=vehicle.gravity,
+                 f_max=vehicle.rotor_max_thrust, clip=float(cfg.clip_commands),
+                 min_thrust=cfg.min_thrust, J=vehicle.inertia, Jinv=vehicle.inertia_inverse,
+                 G=cfg.segment_weights, A=vehicle.allocation)
     fp, ip = window_settings(cfg, m)
-    fp = np.concatenate((fp, [cfg.change_threshold]))
-    ip = np.concatenate((ip, [m, n, cfg.output_median, int(cfg.change_completion),
-                              cfg.change_hold], offsets)).astype(np.int64)
+    fp = pack(FLOAT_SETTINGS, window=fp, change_threshold=cfg.change_threshold)
+    ip = pack(INT_SETTINGS, window=ip, m=m, n=n, L=cfg.output_median,
+              completion=int(cfg.change_completion), hold=cfg.change_hold,
+              offsets=offsets).astype(np.int64)
     return const, fp, ip
 
 
 @jit(inline="always")
 def state_pieces(fs, ip, N):
-    """The pieces of the float state of ``N`` estimators (:class:`IRLSState`), each
-    ``(N, *shape)``, in the order of the ``F_*`` constants."""
-    m, n, L = ip[I_M], ip[I_N], ip[I_L]
-    o = ip[I_OFFSETS:]
-    return (piece_rows(fs, o[F_T], o[F_T + 1], N),
-            piece(fs, o, F_SAMPLE, (N, 6, 3)),
-            piece(fs, o, F_VN, (N, VN_WINDOW + N_VECTORS, n)),
-            piece(fs, o, F_VM, (N, VM_WINDOW + 3, m)),
-            piece(fs, o, F_BH, (N, 2, m, n)),
-            piece(fs, o, F_H, (N, m, n, n)),
-            piece(fs, o, F_M, (N, N_MATRICES, n, n)),
-            piece_rows(fs, o[F_R0], o[F_R0 + 1], N),
-            piece(fs, o, F_J, (N, 10, n)),
-            piece(fs, o, F_MEDIAN, (N, 2, L, n)))
+    """The pieces of the float state of ``N`` estimators (:data:`FLOATS`) by name, each
+    ``(N, *shape)``."""
+    m, n, L = ip[INT_SETTINGS.m], ip[INT_SETTINGS.n], ip[INT_SETTINGS.L]
+    o = ip[INT_SETTINGS.offsets:]
+    return IRLSPieces(t=piece_rows(fs, o[F.t], o[F.t + 1], N),
+                      sample=piece(fs, o, F.sample, (N, SAMPLE_ROWS.size, 3)),
+                      vn=piece(fs, o, F.vn, (N, VN_ROWS.size, n)),
+                      vm=piece(fs, o, F.vm, (N, VM_ROWS.size, m)),
+                      bh=piece(fs, o, F.bh, (N, BH_ROWS.size, m, n)),
+                      H=piece(fs, o, F.H, (N, m, n, n)),
+                      M=piece(fs, o, F.M, (N, N_MATRICES, n, n)),
+                      r0=piece_rows(fs, o[F.r0], o[F.r0 + 1], N),
+                      J=piece(fs, o, F.J, (N, RESIDUAL_ROWS, n)),
+                      median=piece(fs, o, F.median, (N, 2, L, n)))
 
 
 @jit(inline="always")
 def constant_arrays(const, ip):
     """``(J (3, 3), J^-1 (3, 3), A (4, n), G (10))``: the vehicle's array constants of
-    :func:`irls_step`, as views of ``const`` (:func:`irls_parameters`)."""
-    n = ip[I_N]
-    return (const[C_J:C_JINV].reshape((3, 3)), const[C_JINV:C_A].reshape((3, 3)),
-            const[C_A:C_A + 4 * n].reshape((4, n)), const[C_A + 4 * n:C_A + 4 * n + 10])
+    :func:`irls_step`, as views of ``const`` (:data:`CONSTANTS`)."""
+    n = ip[INT_SETTINGS.n]
+    C = CONSTANTS
+    return (const[C.J:C.Jinv].reshape((3, 3)), const[C.Jinv:C.G].reshape((3, 3)),
+            const[C.A:C.A + 4 * n].reshape((4, n)), const[C.G:C.A])
 
 
 @jit(inline="always")
@@ -199,80 +211,93 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist):
     code, why, rounds, cond)``: ``why`` is :data:`WHY_NONFINITE` or :data:`WHY_TIME` for a
     ``bad_sample``, else 0; ``rounds`` and ``cond`` describe the window solve (0 and NaN when
     none ran)."""
-    m, n, L = ip[I_M], ip[I_N], ip[I_L]
-    last_t, sample, VN, VM, BH = S[F_T][i], S[F_SAMPLE][i], S[F_VN][i], S[F_VM][i], S[F_BH][i]
-    last_p, last_v, last_w, last_R = sample[S_P], sample[S_V], sample[S_W], sample[S_R:]
-    last_f, eta, sd, out, x, sd_x = (VN[VN_LAST_F], VN[VN_ETA], VN[VN_SD], VN[VN_OUT],
-                                     VN[VN_X], VN[VN_SD_X])
-    c, thrust, b, history_, H, M = VM[VM_C], VM[VM_THRUST], BH[BH_B], BH[BH_HISTORY], S[F_H][i], \
-        S[F_M][i]
+    m, n, L = ip[INT_SETTINGS.m], ip[INT_SETTINGS.n], ip[INT_SETTINGS.L]
+    last_t, sample, VN, VM, BH = S.t[i], S.sample[i], S.vn[i], S.vm[i], S.bh[i]
+    last_p, last_v, last_w = sample[SAMPLE_ROWS.p], sample[SAMPLE_ROWS.v], sample[SAMPLE_ROWS.w]
+    last_R = sample[SAMPLE_ROWS.R:]
+    last_f, eta, sd, out, x, sd_x = (VN[VN_ROWS.last_f], VN[VN_ROWS.eta], VN[VN_ROWS.sd],
+                                     VN[VN_ROWS.out], VN[VN_ROWS.x], VN[VN_ROWS.sd_x])
+    c, thrust, b, history_ = VM[VM_ROWS.c], VM[VM_ROWS.thrust], BH[BH_ROWS.b], BH[BH_ROWS.history]
+    H, M = S.H[i], S.M[i]
     k_row = ks[i]
-    completion = k_row[K_COMPLETION:K_ITERS]
+    completion = k_row[COUNTERS.completion:COUNTERS.iters]
     code, why, rounds, cond = WARMUP, 0, 0, np.nan
     finite = (math.isfinite(t) and all_finite(p) and all_finite(v) and all_finite(R)
               and all_finite(w) and all_finite(f))
-    if not finite or (k_row[K_HAS_LAST] == 1 and not t > last_t[0]):
-        k_row[K_COUNT] = 0
-        k_row[K_HAS_LAST] = 0
+    if not finite or (k_row[COUNTERS.has_last] == 1 and not t > last_t[0]):
+        k_row[COUNTERS.count] = 0
+        k_row[COUNTERS.has_last] = 0
         code, why = BAD_SAMPLE, (WHY_TIME if finite else WHY_NONFINITE)
     else:
-        if k_row[K_HAS_LAST] == 1:  # the segment last -> this sample into the ring (eqs. 13-26)
-            slot = k_row[K_HEAD]
+        if k_row[COUNTERS.has_last] == 1:  # the segment last -> this sample into the ring
+            slot = k_row[COUNTERS.head]          # (eqs. 13-26)
             Jmat, Jinv, A, G = arrays
             c[slot], thrust[slot] = segment_terms_into(
                 t - last_t[0], last_p, p, last_v, v, last_R, R, last_w, w, last_f,
-                const[C_MASS], const[C_G], Jmat, Jinv, A, G, S[F_R0][i], S[F_J][i], b[slot],
-                H[slot])
-            k_row[K_HEAD] = (slot + 1) % m
-            k_row[K_COUNT] = min(k_row[K_COUNT] + 1, m)
+                const[CONSTANTS.mass], const[CONSTANTS.gravity], Jmat, Jinv, A, G, S.r0[i],
+                S.J[i], b[slot], H[slot])
+            k_row[COUNTERS.head] = (slot + 1) % m
+            k_row[COUNTERS.count] = min(k_row[COUNTERS.count] + 1, m)
         last_t[0] = t
         for a in range(3):
             last_p[a], last_v[a], last_w[a] = p[a], v[a], w[a]
             for k in range(3):
                 last_R[a, k] = R[a, k]
         for j in range(n):
-            last_f[j] = min(max(f[j], 0.0), const[C_FMAX]) if const[C_CLIP] != 0.0 else f[j]
-        k_row[K_HAS_LAST] = 1
-        if k_row[K_COUNT] == m:
+            last_f[j] = (min(max(f[j], 0.0), const[CONSTANTS.f_max])
+                         if const[CONSTANTS.clip] != 0.0 else f[j])
+        k_row[COUNTERS.has_last] = 1
+        if k_row[COUNTERS.count] == m:
             mean = 0.0
             for s in range(m):
-                mean += thrust[(k_row[K_HEAD] + s) % m]
-            if mean / m < const[C_MIN_THRUST]:
+                mean += thrust[(k_row[COUNTERS.head] + s) % m]
+            if mean / m < const[CONSTANTS.min_thrust]:
                 code = NO_EXCITATION
             else:
                 code, rounds, cond = solve_window_into(
-                    c, b, H, k_row[K_HEAD], eta, fp, ip, VN[VN_WINDOW:], M, VM[VM_WINDOW:],
-                    VM[VM_WEIGHTS], k_row[K_ITERS:], hist, x, sd_x)
+                    c, b, H, k_row[COUNTERS.head], eta, fp, ip, VN[VN_ROWS.window:], M,
+                    VM[VM_ROWS.window:], VM[VM_ROWS.weights], k_row[COUNTERS.iters:], hist, x,
+                    sd_x)
             if code == OK or code == MAX_ITER:
-                if ip[I_COMPLETION] == 1:
-                    complete_into(x, M[M_JGJ], history_, VN[VN_ANCHOR], VN[VN_DIRECTION],
-                                  completion, fp[P_THRESHOLD], ip[I_HOLD], fp[P_GAMMA],
-                                  fp[P_LO], fp[P_HI], M[M_A], M[M_B],
-                                  VN[VN_SCRATCH:VN_SCRATCH + 3])
+                if ip[INT_SETTINGS.completion] == 1:
+                    complete_into(x, M[MATRICES.JGJ], history_, VN[VN_ROWS.anchor],
+                                  VN[VN_ROWS.direction], completion,
+                                  fp[FLOAT_SETTINGS.change_threshold], ip[INT_SETTINGS.hold],
+                                  fp[SETTINGS.gamma], fp[SETTINGS.lo], fp[SETTINGS.hi],
+                                  M[MATRICES.A], M[MATRICES.B],
+                                  VN[VN_ROWS.scratch:VN_ROWS.window])
                 for j in range(n):
                     eta[j] = x[j]
                     sd[j] = sd_x[j]
-                k_row[K_HAS_SD] = 1
-            elif ip[I_COMPLETION] == 1:  # a held window: the completion sees the kept estimate
-                observe_into(eta, history_, completion)
+                k_row[COUNTERS.has_sd] = 1
+            elif ip[INT_SETTINGS.completion] == 1:  # a held window: the completion sees the
+                observe_into(eta, history_, completion)  # kept estimate
     if L > 1:
-        median = S[F_MEDIAN][i]
-        median_push_into(median[0], median[1], k_row[K_MEDIAN_K], eta,
-                         k_row[K_MEDIAN_FRESH] == 1, out)
-        k_row[K_MEDIAN_K] = (k_row[K_MEDIAN_K] + 1) % L
-        k_row[K_MEDIAN_FRESH] = 0
+        median = S.median[i]
+        median_push_into(median[0], median[1], k_row[COUNTERS.median_k], eta,
+                         k_row[COUNTERS.median_fresh] == 1, out)
+        k_row[COUNTERS.median_k] = (k_row[COUNTERS.median_k] + 1) % L
+        k_row[COUNTERS.median_fresh] = 0
     else:
         for j in range(n):
             out[j] = eta[j]
     return code, why, rounds, cond
 
 
+@jit(inline="always")
+def irls_update_row(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, i):
+    """:func:`irls_step` of estimator ``i`` of the state ``(fs, ks)``, its pieces formed here
+    (a batch's rows run it under ``prange``: the named pieces are formed inside the loop)."""
+    S = state_pieces(fs, ip, ks.shape[0])
+    return irls_step(t, p, v, R, w, f, const, constant_arrays(const, ip), fp, ip, S, ks, i,
+                     hist)
+
+
 @jit
 def irls_update(t, p, v, R, w, f, const, fp, ip, fs, ks, hist):
     """:func:`irls_step` of a single estimator (state of one row): the online update."""
-    S = state_pieces(fs, ip, ks.shape[0])
-    return irls_step(t, p, v, R, w, f, const, constant_arrays(const, ip), fp, ip, S, ks,
-                     ks.shape[0] - 1, hist)  # row 0, a run-time value like the batch's rows
+    return irls_update_row(t, p, v, R, w, f, const, fp, ip, fs, ks, hist,
+                           ks.shape[0] - 1)  # row 0, a run-time value like the batch's rows
 
 
 @jit
@@ -280,23 +305,24 @@ def irls_reset(eta0, ip, fs, ks, rows) -> None:
     """Forget everything of the estimators ``rows``; start them from ``eta0`` (N, n)."""
     N = ks.shape[0]
     S = state_pieces(fs, ip, N)
-    n = ip[I_N]
+    n = ip[INT_SETTINGS.n]
+    o = ip[INT_SETTINGS.offsets:]
     for i in rows:
         for k in range(ks.shape[1]):
             ks[i, k] = 0
-        for k in range(N_PIECES):
-            row = piece_rows(fs, ip[I_OFFSETS + k], ip[I_OFFSETS + k + 1], N)[i]
+        for k in range(o.shape[0] - 1):  # every piece
+            row = piece_rows(fs, o[k], o[k + 1], N)[i]
             for a in range(row.shape[0]):
                 row[a] = 0.0
-        VN, history_ = S[F_VN][i], S[F_BH][i, BH_HISTORY]
-        eta, out, sd = VN[VN_ETA], VN[VN_OUT], VN[VN_SD]
+        VN, history_ = S.vn[i], S.bh[i, BH_ROWS.history]
+        eta, out, sd = VN[VN_ROWS.eta], VN[VN_ROWS.out], VN[VN_ROWS.sd]
         for j in range(n):
             eta[j] = eta0[i, j]
             out[j] = eta0[i, j]
             sd[j] = np.nan
             for s in range(history_.shape[0]):
                 history_[s, j] = eta0[i, j]
-        ks[i, K_MEDIAN_FRESH] = 1
+        ks[i, COUNTERS.median_fresh] = 1
 
 
 @jit
@@ -304,17 +330,17 @@ def irls_run(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, eta, sd, code):
     """:func:`irls_step` over the rows of a recording (a single estimator's state): the
     reported estimate, its sd (NaN until a window is solved) and the status code of every
     row."""
-    n = ip[I_N]
+    n = ip[INT_SETTINGS.n]
     S = state_pieces(fs, ip, ks.shape[0])
     row = ks.shape[0] - 1  # 0, a run-time value like the batch's rows
-    out, sd_now = S[F_VN][row, VN_OUT], S[F_VN][row, VN_SD]
+    out, sd_now = S.vn[row, VN_ROWS.out], S.vn[row, VN_ROWS.sd]
     arrays = constant_arrays(const, ip)
     for k in range(t.shape[0]):
         code[k], _why, _rounds, _cond = irls_step(t[k], p[k], v[k], R[k], w[k], f[k], const,
                                                   arrays, fp, ip, S, ks, row, hist)
         for j in range(n):
             eta[k, j] = out[j]
-            sd[k, j] = sd_now[j] if ks[0, K_HAS_SD] == 1 else np.nan
+            sd[k, j] = sd_now[j] if ks[0, COUNTERS.has_sd] == 1 else np.nan
 
 
 class SlidingWindowIRLS:
@@ -341,8 +367,8 @@ class SlidingWindowIRLS:
         self._nan_sample = (np.full(3, np.nan), np.full(3, np.nan), np.full((3, 3), np.nan),
                             np.full(3, np.nan), np.full(n, np.nan))
         self._shape_f = (n,)
-        self._row = self._state.views[F_VN][0]  # the n-vectors of the state (estimate, sd, ...)
-        self._weights = self._state.views[F_VM][0, VM_WEIGHTS]
+        self._row = self._state.views.vn[0]  # the n-vectors of the state (estimate, sd, ...)
+        self._weights = self._state.views.vm[0, VM_ROWS.weights]
         self.reset()
 
     def reset(self, eta0=None) -> None:
@@ -359,12 +385,12 @@ class SlidingWindowIRLS:
     @property
     def eta(self) -> np.ndarray:
         """The current (unfiltered) estimate, a copy."""
-        return self._state.views[F_VN][0, VN_ETA].copy()
+        return self._state.views.vn[0, VN_ROWS.eta].copy()
 
     @property
     def change_events(self) -> int:
         """Changes the change completion has started since the last reset."""
-        return int(self._state.ints[0, K_COMPLETION + 3])
+        return int(self._state.ints[0, COUNTERS.completion + C_EVENTS])
 
     def update(self, sample: Sample) -> Estimate:
         """Add one measurement row; returns the estimate of the window ending at it."""
@@ -382,7 +408,7 @@ class SlidingWindowIRLS:
                                               self._const, self._fp, self._ip, st.floats,
                                               st.ints, self._hist)
         row, ints = self._row, st.ints[0]
-        sd = row[VN_SD].copy() if ints[K_HAS_SD] == 1 else None
+        sd = row[VN_ROWS.sd].copy() if ints[COUNTERS.has_sd] == 1 else None
         if code in _HELD:
             diag = _HELD[code]
         elif code == BAD_SAMPLE:
@@ -390,12 +416,12 @@ class SlidingWindowIRLS:
         else:  # a window was solved (or held by a guard)
             cfg = self.config
             if cfg.record_history:
-                diag = window_diagnostics(code, rounds, cond, ints[K_ITERS:], self._weights, cfg,
-                                          self._hist)
+                diag = window_diagnostics(code, rounds, cond, ints[COUNTERS.iters:],
+                                          self._weights, cfg, self._hist)
             else:
-                diag = LazyWindowDiagnostics(code, rounds, cond, ints[K_ITERS:].copy(),
+                diag = LazyWindowDiagnostics(code, rounds, cond, ints[COUNTERS.iters:].copy(),
                                              self._weights.copy(), cfg)
-        return Estimate(t, row[VN_OUT].copy(), sd, STATUSES[code], diag)
+        return Estimate(t, row[VN_ROWS.out].copy(), sd, STATUSES[code], diag)
 
     def run(self, recording: Recording, progress: bool = False) -> EstimateSeries:
         """Estimate over a whole recording, one row per sample (the first ``window - 1`` rows
@@ -405,7 +431,7 @@ class SlidingWindowIRLS:
         start = time.perf_counter()
         t, p, v, R, w, f = _recording_arrays(recording, self.vehicle, self.config.window)
         const = self._const.copy()
-        const[C_FMAX] = command_limit(recording, self.vehicle)  # the recording's saturation
+        const[CONSTANTS.f_max] = command_limit(recording, self.vehicle)  # its saturation
         self.reset(self.eta)
         st, N, n = self._state, len(t), self.vehicle.n_rotors
         eta, sd, code = np.empty((N, n)), np.empty((N, n)), np.empty(N, dtype=np.int64)

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from quadfault.dynamics import rotor_wrench
 from quadfault.jit import jit
 from quadfault.vehicle import Vehicle
 
@@ -58,9 +59,7 @@ def segment_terms_into(dt, p0, p1, v0, v1, R0, R1, w0, w1, f, mass, g, Jmat, Jin
     Vehicle: ``mass`` [kg], gravity ``g`` [m/s^2], inertia ``Jmat`` and its inverse ``Jinv``
     [kg m^2], allocation ``A`` (4, n); ``G`` (10,) the diagonal of the weight (eq. 23)."""
     n = f.size
-    thrust = 0.0
-    for j in range(n):
-        thrust += A[0, j] * f[j]
+    thrust, _moment = rotor_wrench(A, f)  # the collective thrust (eq. 12)
     # velocity / position (eqs. 13, 14, 17, 18)
     for a in range(3):
         ge = g if a == 2 else 0.0

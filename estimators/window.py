@@ -40,10 +40,12 @@ from estimators.base import (
     STATUS_REJECTED,
     STATUSES,
 )
+from estimators.ipm import N_SETTINGS as N_IPM_SETTINGS
 from estimators.ipm import N_WORK_ROWS, ipm_into, ipm_parameters
 from estimators.irls_config import IRLSConfig, window_diagnostics
 from estimators.linalg import cholesky_into, cholesky_solve_into, cond1_into
 from estimators.robust import mad_weights_into
+from estimators.state import fields, pack
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
 
@@ -54,36 +56,39 @@ ILL_CONDITIONED = STATUSES.index(STATUS_ILL_CONDITIONED)
 REJECTED = STATUSES.index(STATUS_REJECTED)
 MAX_ITER = STATUSES.index(STATUS_MAX_ITER)
 
-# float settings (fp) and integer settings (ip) of a window solve, by position
-(P_LO, P_HI, P_GAMMA, P_SCALE, P_Z_SOFT, P_POWER, P_Z_HARD, P_W_MIN, P_MAD_EPS, P_IRLS_TOL,
- P_COND_MAX, P_IPM) = range(12)  # P_IPM: the 8 settings of estimators.ipm.ipm_parameters
-N_FLOAT_SETTINGS = P_IPM + 8
-I_MAX_IRLS, I_IPM_MAX_ITER, I_HARD_DROP, I_MEDIAN_NORMALIZE, I_FLOOR = range(5)
-N_INT_SETTINGS = 5
-
-# rows of the workspace's vectors V (n each), matrices M (n x n each) and segment rows S (m)
-(V_XCUR, V_Q, V_ZERO, V_UNIT, V_COL, V_IPM) = range(6)  # V_IPM: the interior point's rows
-N_VECTORS = V_IPM + N_WORK_ROWS
-M_JGJ, M_HQ, M_L, M_A, M_B = range(5)
-N_MATRICES = 5
-S_E, S_Z, S_TMP = range(3)
+#: the float settings of a window solve (``fp``), by name; ``ipm``: the interior point's
+#: (:data:`estimators.ipm.SETTINGS`)
+SETTINGS = fields("WindowSettings", "lo", "hi", "gamma", "scale", "z_soft", "power", "z_hard",
+                  "w_min", "mad_eps", "irls_tol", "cond_max", ("ipm", N_IPM_SETTINGS))
+#: the integer settings of a window solve (``ip``), by name
+INT_SETTINGS = fields("WindowIntSettings", "max_irls", "ipm_max_iter", "hard_drop",
+                      "median_normalize", "floor")
+#: rows of the workspace's vectors ``V`` (n each; ``ipm``: the interior point's rows),
+#: matrices ``M`` (n x n each) and segment rows ``S`` (m each)
+VECTORS = fields("WindowVectors", "xcur", "q", "zero", "unit", "col", ("ipm", N_WORK_ROWS))
+MATRICES = fields("WindowMatrices", "JGJ", "Hq", "L", "A", "B")
+SEGMENT_ROWS = fields("WindowSegmentRows", "e", "z", "tmp")
+N_FLOAT_SETTINGS, N_INT_SETTINGS = SETTINGS.size, INT_SETTINGS.size
+N_VECTORS, N_MATRICES, N_SEGMENT_ROWS = VECTORS.size, MATRICES.size, SEGMENT_ROWS.size
 
 
 def window_settings(cfg: IRLSConfig, m: int) -> tuple[np.ndarray, np.ndarray]:
     """``(fp, ip)``: the settings of :func:`solve_window_into` for windows of ``m`` segments."""
     scale = 1.0 / m if cfg.scaling == "paper" else 1.0
     paper = cfg.scaling == "paper"
-    fp = np.concatenate(([cfg.lower, cfg.upper, cfg.gamma, scale, cfg.z_soft, cfg.soft_power,
-                          cfg.z_hard, cfg.w_min, cfg.mad_eps, cfg.irls_tol, cfg.cond_max],
-                         ipm_parameters(cfg.ipm)))
-    ip = np.array([cfg.max_irls, cfg.ipm.max_iter, int(cfg.hard_drop), int(not paper),
-                   int(paper)], dtype=np.int64)
+    fp = pack(SETTINGS, lo=cfg.lower, hi=cfg.upper, gamma=cfg.gamma, scale=scale,
+              z_soft=cfg.z_soft, power=cfg.soft_power, z_hard=cfg.z_hard, w_min=cfg.w_min,
+              mad_eps=cfg.mad_eps, irls_tol=cfg.irls_tol, cond_max=cfg.cond_max,
+              ipm=ipm_parameters(cfg.ipm))
+    ip = pack(INT_SETTINGS, max_irls=cfg.max_irls, ipm_max_iter=cfg.ipm.max_iter,
+              hard_drop=int(cfg.hard_drop), median_normalize=int(not paper),
+              floor=int(paper)).astype(np.int64)
     return fp, ip
 
 
 def workspace(m: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Scratch of one window solve of ``m`` segments and ``n`` rotors: ``(V, M, S)``."""
-    return np.zeros((N_VECTORS, n)), np.zeros((N_MATRICES, n, n)), np.zeros((3, m))
+    return np.zeros((N_VECTORS, n)), np.zeros((N_MATRICES, n, n)), np.zeros((N_SEGMENT_ROWS, m))
 
 
 def no_history(n: int) -> np.ndarray:
@@ -121,14 +126,15 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
     weights ``w`` (m,), the interior-point iterations of each round ``iters`` and, when
     ``hist`` is (rounds, ipm iterations, 4 + n), per round and iteration ``||r_dual||,
     ||r_cent||, gap, x, sqrt(sum w e(x))`` (a (1, 0, 4 + n) ``hist`` records nothing).
-    ``M[M_JGJ]`` keeps ``J^T W G J`` of the last round. Returns ``(status code, rounds,
+    ``M[MATRICES.JGJ]`` keeps ``J^T W G J`` of the last round. Returns ``(status code, rounds,
     cond)``.
     """
     m, n = b.shape[0], b.shape[1]
-    lo, hi, gamma, scale = fp[P_LO], fp[P_HI], fp[P_GAMMA], fp[P_SCALE]
-    x_cur, q, zero = V[V_XCUR], V[V_Q], V[V_ZERO]
-    JGJ, Hq, L = M[M_JGJ], M[M_HQ], M[M_L]
-    e, z, tmp = S[S_E], S[S_Z], S[S_TMP]
+    lo, hi, gamma, scale = fp[SETTINGS.lo], fp[SETTINGS.hi], fp[SETTINGS.gamma], \
+        fp[SETTINGS.scale]
+    x_cur, q, zero = V[VECTORS.xcur], V[VECTORS.q], V[VECTORS.zero]
+    JGJ, Hq, L = M[MATRICES.JGJ], M[MATRICES.Hq], M[MATRICES.L]
+    e, z, tmp = S[SEGMENT_ROWS.e], S[SEGMENT_ROWS.z], S[SEGMENT_ROWS.tmp]
     record = hist.shape[1] > 0
     for j in range(n):
         x_cur[j] = min(max(x_prev[j], lo + START_MARGIN), hi - START_MARGIN)
@@ -139,11 +145,12 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
     cond = np.nan
     converged = True
     rounds = 0
-    for _round in range(ip[I_MAX_IRLS]):
+    for _round in range(ip[INT_SETTINGS.max_irls]):
         energies_into(c, b, H, start, x_cur, scale, e, n)  # eq. 26
-        mad_weights_into(e, fp[P_Z_SOFT], fp[P_POWER], fp[P_Z_HARD], fp[P_W_MIN],
-                         fp[P_MAD_EPS], ip[I_HARD_DROP] == 1, ip[I_MEDIAN_NORMALIZE] == 1,
-                         ip[I_FLOOR] == 1, w, z, tmp)
+        mad_weights_into(e, fp[SETTINGS.z_soft], fp[SETTINGS.power], fp[SETTINGS.z_hard],
+                         fp[SETTINGS.w_min], fp[SETTINGS.mad_eps],
+                         ip[INT_SETTINGS.hard_drop] == 1, ip[INT_SETTINGS.median_normalize] == 1,
+                         ip[INT_SETTINGS.floor] == 1, w, z, tmp)
         any_kept = False
         for s in range(m):
             any_kept = any_kept or w[s] > 0
@@ -164,8 +171,8 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
         for j in range(n):
             for k in range(n):
                 JGJ[j, k] *= scale
-        cond = cond1_into(JGJ, M[M_A], M[M_B])
-        if not cond <= fp[P_COND_MAX]:
+        cond = cond1_into(JGJ, M[MATRICES.A], M[MATRICES.B])
+        if not cond <= fp[SETTINGS.cond_max]:
             for j in range(n):
                 x_out[j] = x_prev[j]
             return ILL_CONDITIONED, rounds, cond
@@ -177,8 +184,8 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
         for j in range(n):
             x_out[j] = x_cur[j]
         h = hist[rounds] if record else hist[0]
-        it, flag = ipm_into(Hq, q, lo, hi, x_out, fp[P_IPM:P_IPM + 8], ip[I_IPM_MAX_ITER],
-                            V[V_IPM:], L, h)
+        it, flag = ipm_into(Hq, q, lo, hi, x_out, fp[SETTINGS.ipm:SETTINGS.size],
+                            ip[INT_SETTINGS.ipm_max_iter], V[VECTORS.ipm:], L, h)
         converged = flag == 1
         iters[rounds] = it
         if record:
@@ -193,7 +200,7 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
         for j in range(n):
             step = max(step, abs(x_out[j] - x_cur[j]))
             x_cur[j] = x_out[j]
-        if step < fp[P_IRLS_TOL]:
+        if step < fp[SETTINGS.irls_tol]:
             break
     # uncertainty: information matrix Hq = J^T W G J + gamma I of the final weights
     energies_into(c, b, H, start, x_cur, scale, e, n)
@@ -205,7 +212,7 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
             active += 1
     s2 = max(s2, 0.0) / max(10 * active - n, 1)
     if cholesky_into(Hq, zero, L, n):
-        unit, col = V[V_UNIT], V[V_COL]
+        unit, col = V[VECTORS.unit], V[VECTORS.col]
         for j in range(n):
             for k in range(n):
                 unit[k] = 0.0

@@ -8,8 +8,8 @@ import pytest
 from oracles.ekf_numpy import NOISE_REFERENCE_DT, measurement_update, predict
 
 from estimators.base import Sample
-from estimators.ekf import EKFConfig, EKFState, MotorEfficiencyEKF
-from estimators.ekf_filter import _project_so3_into, predict_update_into
+from estimators.ekf import EKFConfig, MotorEfficiencyEKF, constant_arrays
+from estimators.ekf_filter import Measurement, _project_so3_into, predict_update_into, workspace
 from quadfault.rotation import expm_so3, orthonormalize
 from quadfault.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario
 from quadfault.simulator import simulate
@@ -41,13 +41,11 @@ def _numpy_step(ekf, x, P, f, dt, z):
 
 def _compiled_step(ekf, x, P, f, dt, z):
     x, P = x.copy(), P.copy()
-    veh, b, n = ekf.vehicle, ekf.config.eta_bounds, ekf.n_rotors
-    lo, hi = (-np.inf, np.inf) if b is None else b
-    ws = EKFState(n).views[7:]  # the workspace pieces, (1, ...) each
-    predict_update_into(x, P, f, dt, z.p, z.v, z.w, np.ascontiguousarray(z.R),
-                        veh.allocation, veh.mass, veh.gravity, veh.inertia,
-                        veh.inertia_inverse, ekf.q_diag / NOISE_REFERENCE_DT, ekf.r_diag,
-                        lo, hi, *(w[0] for w in ws))
+    model = constant_arrays(ekf._const, ekf.n_rotors)  # the filter's model of the vehicle
+    np.testing.assert_array_equal(model.qc, ekf.q_diag / NOISE_REFERENCE_DT)
+    np.testing.assert_array_equal(model.r, ekf.r_diag)
+    predict_update_into(x, P, f, dt, Measurement(z.p, z.v, z.w, np.ascontiguousarray(z.R)),
+                        model, workspace(ekf.n_rotors))
     return x, P
 
 
