@@ -4,7 +4,9 @@ For each log this runs exactly what a user runs, through the console script's ow
 point (``quadfault.cli.main``): ``quadfault import LOG --out NAME.csv`` (the format read from
 the file; for the Crazyflie research data sets ``quadfault import DATASET LOG``) and
 ``quadfault diagnose NAME.csv --json NAME.json`` with the defaults -- and, for the CrazyPAD
-propeller-fault flights, once more with ``--effects motor_efficiency``. The tables are built
+propeller-fault flights, with ``--effects motor_efficiency``, alone and against a healthy
+flight of the same airframe (``--baseline HEALTHY.json``, the first healthy flight; for that
+one, the second). The tables are built
 from the JSON files it wrote. Per log it prints the accepted effects with their figures, what
 was not identifiable and why, and a loud ``!! ABSURD`` line for any absurd accepted answer:
 
@@ -167,10 +169,34 @@ def run_one(folder, kind, path, name, cond, out: Path, quiet: bool) -> dict:
         code, err = quadfault(["diagnose", csv, "--json", js2, "--force", "--effects",
                                "motor_efficiency"], quiet)
         row["efficiency"] = json.loads(js2.read_text()) if code == 0 else None
+        row["files"] = {"csv": str(csv), "efficiency": str(js2)}
     if kind == "nanodrone":
         row["drag_reference"] = drag_reference(csv, row["diagnosis"])
     row["rotor_lag_reference"] = rotor_lag_reference(csv, row["diagnosis"])
     return row
+
+
+def vehicle_of(row) -> str:
+    """The CrazyPAD airframe of a flight (its file name's prefix, ``E8``, ``E9``)."""
+    return row["name"].split("_")[-2]
+
+
+def against_baseline(rows, quiet: bool) -> None:
+    """CrazyPAD, ``--effects motor_efficiency --baseline HEALTHY.json``: each flight against
+    a healthy flight of the same airframe (the first one; for that one, the second)."""
+    pad = [r for r in rows if r["kind"] == "crazypad" and r.get("efficiency") is not None]
+    for r in pad:
+        healthy = [h for h in pad if h["condition"] == "normal_flight"
+                   and vehicle_of(h) == vehicle_of(r) and h is not r]
+        if not healthy:
+            continue
+        base = healthy[0]
+        js = Path(r["files"]["efficiency"]).with_suffix(".baseline.json")
+        code, err = quadfault(["diagnose", r["files"]["csv"], "--json", js, "--force",
+                               "--effects", "motor_efficiency", "--baseline",
+                               base["files"]["efficiency"]], quiet)
+        r["baseline_flight"] = base["name"]
+        r["vs_baseline"] = json.loads(js.read_text()) if code == 0 else None
 
 
 # ----------------------------------------------------------------------------- per log
@@ -244,6 +270,8 @@ def print_log(r) -> None:
         print(f"assumed: {', '.join(d['assumptions']['assumed'])}")
     if r.get("efficiency") is not None:
         print(f"--effects motor_efficiency: {_effects(r['efficiency']['effects'])}")
+    if r.get("vs_baseline") is not None:
+        print(f"--baseline {r['baseline_flight']}: {_effects(r['vs_baseline']['effects'])}")
     if r.get("rotor_lag_reference") is not None:
         print(f"lag from command to measured rotor speed: {r['rotor_lag_reference']:.3f} s")
     for line in absurd(d):
@@ -278,15 +306,21 @@ def _eta(doc):
 
 
 def print_crazypad(rows) -> None:
-    sub = [r for r in rows if r["kind"] == "crazypad" and r.get("efficiency") is not None]
-    if not sub:
-        return
-    print("\n## CrazyPAD, `--effects motor_efficiency` (eta relative to the median rotor; "
-          "mean +- sd over flights; accepted on n of N)\n")
+    for key, what in (("efficiency", "one flight: eta relative to the median rotor"),
+                      ("vs_baseline", "`--baseline` a healthy flight of the same airframe: "
+                                      "eta relative to it")):
+        sub = [r for r in rows if r["kind"] == "crazypad" and r.get(key) is not None]
+        if sub:
+            _crazypad_table(sub, key, what)
+
+
+def _crazypad_table(sub, key, what) -> None:
+    print(f"\n## CrazyPAD, `--effects motor_efficiency`, {what} (mean +- sd over the flights "
+          "where it is accepted)\n")
     print("| condition | accepted | eta1 | eta2 | eta3 | eta4 |")
     print("|---|---|---|---|---|---|")
     for cond in sorted({r["condition"] for r in sub}, key=lambda c: (c != "normal_flight", c)):
-        e = np.array([_eta(r["efficiency"]) for r in sub if r["condition"] == cond])
+        e = np.array([_eta(r[key]) for r in sub if r["condition"] == cond])
         n_ok = int(np.sum(np.all(np.isfinite(e), axis=1)))
         if n_ok == 0:
             print(f"| {cond} | 0 of {len(e)} | - | - | - | - |")
@@ -380,17 +414,26 @@ def targets(rows) -> list:
                          f"(ref {ref:.4f})")
         out.append(("nano-drone: horizontal drag within 30% of the accelerometer fit on >= 7 "
                     "of 9", f"{n_ok} of {len(nano)}: " + "; ".join(cells), n_ok >= 7))
-    pad = [r for r in done if r["kind"] == "crazypad" and r.get("efficiency") is not None]
-    healthy = [(r, _eta(r["efficiency"])) for r in pad if r["condition"] == "normal_flight"]
+    for key, what in (("efficiency", "one flight"), ("vs_baseline", "against a healthy "
+                                                                    "flight (--baseline)")):
+        out += _crazypad_targets([r for r in done if r["kind"] == "crazypad"
+                                  and r.get(key) is not None], key, what)
+    return out
+
+
+def _crazypad_targets(pad, key, what) -> list:
+    out = []
+    healthy = [(r, _eta(r[key])) for r in pad if r["condition"] == "normal_flight"]
     if healthy:
         low = [f"{r['name']} {_short(e)}" for r, e in healthy if np.nanmin(e) < HEALTHY_ETA]
-        out.append((f"CrazyPAD healthy: no accepted rotor below {HEALTHY_ETA} relative",
-                    "; ".join(low) or "none", not low))
+        out.append((f"CrazyPAD healthy, {what}: no accepted rotor below {HEALTHY_ETA} "
+                    "relative", f"{len(low)} of {len(healthy)}: " + ("; ".join(low) or "none"),
+                    not low))
     graded = {}
     for r in pad:
         c = r["condition"]
         if c.startswith("cut_propeller_M3_"):
-            graded.setdefault(c, []).append(_eta(r["efficiency"]))
+            graded.setdefault(c, []).append(_eta(r[key]))
     if graded:
         cells, ok, last = [], True, 1.0
         for c in sorted(graded, key=lambda c: float(c.rsplit("_", 1)[1].rstrip("m"))):
@@ -400,8 +443,8 @@ def targets(rows) -> list:
             ok &= lowest == len(e) and m3 < last
             last = m3
             cells.append(f"{c}: rotor 3 lowest on {lowest} of {len(e)}, mean eta3 {m3:.3f}")
-        out.append(("CrazyPAD cut propeller M3 (1/2/3 mm): rotor 3 lowest, falling as the "
-                    "damage grows", "; ".join(cells), ok))
+        out.append((f"CrazyPAD cut propeller M3 (1/2/3 mm), {what}: rotor 3 lowest, falling "
+                    "as the damage grows", "; ".join(cells), ok))
     return out
 
 
@@ -449,6 +492,7 @@ def main(argv=None) -> int:
             for job in jobs(args.data, only, args.crazypad_all):
                 rows.append(run_one(*job, out, args.quiet))
                 print_log(rows[-1])
+            against_baseline(rows, args.quiet)
         finally:
             if args.out is None:
                 shutil.rmtree(out, ignore_errors=True)

@@ -144,10 +144,15 @@ def test_a_common_thrust_factor_is_not_four_weak_motors(common_factor):
     assert res.effects[0].params["scale"] == pytest.approx(0.85, abs=0.02)
 
 
-def test_one_weak_rotor_is_reported_relative_to_the_others():
+@pytest.fixture(scope="module")
+def weak_rotor():
+    return fly((fx.MotorEfficiency((0.8, 0.8, 0.6, 0.8)),), seed=5)
+
+
+def test_one_weak_rotor_is_reported_relative_to_the_others(weak_rotor):
     """Every rotor at 0.8 of nominal and rotor 3 at 0.6: a common factor and one rotor 25 %
     weaker than the others; the efficiency is reported relative to the median rotor."""
-    rec = fly((fx.MotorEfficiency((0.8, 0.8, 0.6, 0.8)),), seed=5)
+    rec = weak_rotor
     res = Diagnosis(DiagnosisConfig(effects=("motor_efficiency",))).fit(rec)
     assert res.effect_names == ["motor_efficiency"]
     np.testing.assert_allclose(res.effects[0].params["eta"], [1.0, 1.0, 0.75, 1.0], atol=0.03)
@@ -164,3 +169,32 @@ def test_assumed_mass_and_inertia_say_what_depends_on_them(drag_flight):
     assert a["depends"].get("drag") == ["mass"]
     assert "time constants" in a["note"] and "ratios between rotors" in a["note"]
     assert Diagnosis(DiagnosisConfig(effects=("drag",))).fit(drag_flight).assumptions == {}
+
+
+def test_a_healthy_baseline_flight_separates_damage_from_the_vehicles_own_imbalance(
+        weak_rotor, tmp_path):
+    """Rotor 3 is 25 % weaker than the others. Against a baseline in which it was already
+    that weak (the vehicle's own imbalance) nothing is accepted; against a baseline of equal
+    rotors it is, relative to the baseline."""
+    import json
+
+    from quadfault.diagnosis.cli import baseline_eta
+
+    same = Diagnosis(DiagnosisConfig(effects=("motor_efficiency",),
+                                     baseline_eta=(1.0, 1.0, 0.75, 1.0))).fit(weak_rotor)
+    assert "motor_efficiency" not in same.effect_names
+    why = next(e.reason for e in same.rejected if e.name == "motor_efficiency")
+    assert "match the healthy baseline" in why
+    other = Diagnosis(DiagnosisConfig(effects=("motor_efficiency",),
+                                      baseline_eta=(1.0, 1.05, 1.0, 0.95))).fit(weak_rotor)
+    p = other.effects[0].params
+    np.testing.assert_allclose(p["eta"][2] / p["eta"][0], 0.75, atol=0.03)
+    np.testing.assert_allclose(p["eta_flight"], [1.0, 1.0, 0.75, 1.0], atol=0.03)
+    path = tmp_path / "healthy.json"
+    path.write_text(other.to_json())
+    assert baseline_eta(path) == pytest.approx(tuple(p["eta_flight"]))
+    path.write_text(json.dumps({"effects": []}))
+    with pytest.raises(RecordingError, match="no motor_efficiency fit"):
+        baseline_eta(path)
+    with pytest.raises(Exception, match="4 positive numbers"):
+        DiagnosisConfig(baseline_eta=(1.0, 0.0, 1.0, 1.0))

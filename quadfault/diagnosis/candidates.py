@@ -229,15 +229,28 @@ class EfficiencyCandidate(Candidate):
     known thrust coefficient) the fitted factors are also given as ``eta_absolute``."""
 
     absolute: bool = False
+    baseline: tuple = ()
     keys: ClassVar[tuple] = (("eta", 0, 4),)
 
     def thrust(self, x, rp, f, t, dt):
         return f * np.asarray(x, dtype=float)[None, :]
 
+    def relative(self, x) -> np.ndarray:
+        """``eta`` as reported: relative to the median rotor, and with a ``baseline`` (a
+        healthy flight's relative eta) relative to it."""
+        x = np.asarray(x, dtype=float)
+        if self.baseline:
+            x = x / np.asarray(self.baseline, dtype=float)
+        return x / max(float(np.median(x)), 1e-9)
+
     def public(self, x, sd, ctx):
         x, sd = np.asarray(x, dtype=float), np.asarray(sd, dtype=float)
-        ref = max(float(np.median(x)), 1e-9)
-        params, unc = {"eta": (x / ref).tolist()}, {"eta": (sd / ref).tolist()}
+        rel = self.relative(x)
+        params, unc = {"eta": rel.tolist()}, {"eta": (sd * rel / np.maximum(x, 1e-9)).tolist()}
+        if self.baseline:
+            flight = x / max(float(np.median(x)), 1e-9)
+            params["eta_flight"], unc["eta_flight"] = flight.tolist(), (sd * flight / x).tolist()
+            params["baseline_eta"] = list(self.baseline)
         if self.absolute:
             params["eta_absolute"], unc["eta_absolute"] = x.tolist(), sd.tolist()
         return params, unc

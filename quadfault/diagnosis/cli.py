@@ -20,9 +20,47 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--block", type=float, default=0.02,
                    help="smoothing block length [s] (default 0.02)")
     p.add_argument("--max-effects", type=int, default=3, help="most effects accepted (default 3)")
+    p.add_argument("--baseline", metavar="HEALTHY.json", default=None,
+                   help="the diagnosis JSON of a flight of the healthy vehicle with a "
+                        "motor_efficiency fit: eta is then relative to it (one flight alone "
+                        "cannot tell a weak rotor from the vehicle's own imbalance)")
     p.add_argument("--no-mask", action="store_true",
                    help="fit and score every block: do not exclude what is not free flight "
                         "(motors off, ground or pad contact, impacts; see docs/diagnosis.md)")
+
+
+def baseline_eta(path) -> tuple:
+    """The healthy flight's relative rotor efficiencies from its diagnosis JSON (its
+    ``motor_efficiency`` fit: accepted, suspect or rejected; its own ``eta_flight`` when it
+    had a baseline itself)."""
+    import json
+
+    from quadfault.errors import RecordingError
+
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except OSError as exc:
+        raise RecordingError(path, f"cannot read: {exc.strerror or exc}") from None
+    except ValueError as exc:
+        raise RecordingError(path, f"not valid JSON: {exc}") from None
+    fits = [e for key in ("effects", "suspect", "rejected") for e in (doc.get(key) or [])
+            if isinstance(e, dict) and e.get("name") == "motor_efficiency"] \
+        if isinstance(doc, dict) else []
+    if not fits:
+        raise RecordingError(path, "no motor_efficiency fit in this diagnosis (run quadfault "
+                                   "diagnose --effects motor_efficiency on the healthy flight)",
+                             key="effects")
+    params = fits[0].get("params") or {}
+    eta = params.get("eta_flight", params.get("eta"))
+    try:
+        eta = tuple(float(v) for v in eta)
+    except (TypeError, ValueError):
+        eta = ()
+    if len(eta) != 4 or not all(v > 0 for v in eta):
+        raise RecordingError(path, f"motor_efficiency eta must be 4 positive numbers, got "
+                                   f"{params.get('eta')!r}", key="effects")
+    return eta
 
 
 def run(args) -> int:
@@ -50,7 +88,9 @@ def run(args) -> int:
     if args.effects:
         effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
     cfg = DiagnosisConfig(block_seconds=args.block, max_effects=args.max_effects, effects=effects,
-                          mask=not args.no_mask)
+                          mask=not args.no_mask,
+                          baseline_eta=None if args.baseline is None else baseline_eta(
+                              args.baseline))
     rec = read_recording(args.recording).without_truth()
     bar = progress_bar(total=None, desc="diagnose", unit="fit", disable=None if not args.quiet else True)
     try:

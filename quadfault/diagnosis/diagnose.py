@@ -5,6 +5,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
@@ -50,6 +51,11 @@ class DiagnosisConfig:
         saturate: clip commands to [0, max_thrust] as the nominal motor model does.
         internal_step: faster logs are merged to about this step [s] (see ``residuals``).
         mask: exclude what is not free flight (:mod:`~quadfault.diagnosis.phases`).
+        baseline_eta: the relative rotor efficiencies of a flight of the healthy vehicle
+            (its diagnosis' ``motor_efficiency`` ``eta``): ``motor_efficiency`` is then
+            reported relative to them and accepted only where a rotor differs from them by
+            more than ``BASELINE_TOLERANCE`` (one flight alone cannot tell a weak rotor from
+            the vehicle's own imbalance). None: no baseline.
     """
 
     block_seconds: float = 0.02
@@ -65,8 +71,15 @@ class DiagnosisConfig:
     saturate: bool = True
     internal_step: float = 0.004
     mask: bool = True
+    baseline_eta: tuple | None = None
 
     def __post_init__(self):
+        if self.baseline_eta is not None:
+            b = np.asarray(self.baseline_eta, dtype=float).ravel()
+            if b.size != 4 or not np.all(np.isfinite(b) & (b > 0)):
+                raise ConfigError(f"baseline_eta must be 4 positive numbers, got "
+                                  f"{self.baseline_eta!r}")
+            object.__setattr__(self, "baseline_eta", tuple(float(v) for v in b))
         if not (0 < self.block_seconds <= 1.0):
             raise ConfigError(f"block_seconds must be in (0, 1] s, got {self.block_seconds!r}")
         if not (self.gap_factor > 1):
@@ -96,9 +109,14 @@ def _explain(step, selected_names, params) -> str:
     if name == "thrust_scale":
         text += " Indistinguishable from motor_efficiency with equal eta (one class)."
     elif name == "motor_efficiency":
-        text += (" eta is relative to the median rotor (a factor common to every rotor is "
-                 "thrust_scale's or thrust_curve's); one flight cannot tell a weak rotor from "
-                 "the vehicle's own imbalance (compare with a flight of the healthy vehicle).")
+        if "baseline_eta" in params:
+            text += (" eta is relative to the healthy baseline flight (baseline_eta) and to "
+                     "the median rotor; eta_flight is this flight's own.")
+        else:
+            text += (" eta is relative to the median rotor (a factor common to every rotor is "
+                     "thrust_scale's or thrust_curve's); one flight cannot tell a weak rotor "
+                     "from the vehicle's own imbalance: compare with a flight of the healthy "
+                     "vehicle (--baseline).")
         if "eta_absolute" in params:
             text += " eta_absolute: thrust calibrated by the measured rotor speeds."
     if other in ("delay", "motor_lag") and ratio is not None and ratio < 1.1:
@@ -233,6 +251,9 @@ class Diagnosis:
                                  f"({why}; {100 * frac:.0f}% of the recording) would leave "
                                  "too few blocks")
         library = build_library(rp, cfg.effects)
+        if cfg.baseline_eta is not None:
+            library = [dataclasses.replace(c, baseline=cfg.baseline_eta)
+                       if c.name == "motor_efficiency" else c for c in library]
         untestable = [c.name for c in library if not c.testable(rp)]
         library, not_identifiable = gate(library, ev)
         base_res = rp.measured - predict(rp, [])

@@ -220,14 +220,25 @@ def _folds(rp, sc, opt, new) -> str:
 
 #: effects that already carry a thrust factor common to every rotor
 COMMON_THRUST = ("thrust_scale", "thrust_curve", "mass")
+#: with a healthy baseline flight, motor_efficiency needs a rotor this far from it [-]
+BASELINE_TOLERANCE = 0.05
 
 
 def _rotors_differ(rp, sc, opt, current, x_cur, fl, m) -> str:
     """Per-rotor ``motor_efficiency`` only where the rotors differ from each other: its held-out
     RMS must beat the same model with one factor common to every rotor (``thrust_scale``) by
-    ``m``. A calibration error common to all rotors is not four weak motors."""
+    ``m``. A calibration error common to all rotors is not four weak motors. With a healthy
+    baseline flight (``EfficiencyCandidate.baseline``) a rotor must also differ from it by
+    ``BASELINE_TOLERANCE``."""
     new = [c for c in opt.cands[len(current):] if c.name == "motor_efficiency"]
-    if not new or any(c.name in COMMON_THRUST for c in opt.cands):
+    if not new:
+        return ""
+    if new[0].baseline:
+        rel = new[0].relative(opt.fit.x[list(opt.cands).index(new[0])])
+        if np.max(np.abs(rel - 1.0)) < BASELINE_TOLERANCE:
+            return (f"the rotors match the healthy baseline within {BASELINE_TOLERANCE:.0%} "
+                    f"(eta relative to it {np.round(rel, 3).tolist()})")
+    if any(c.name in COMMON_THRUST for c in opt.cands):
         return ""
     from quadfault.diagnosis.library import build_library
 
