@@ -425,7 +425,8 @@ def _crazypad_targets(pad, key, what) -> list:
     out = []
     healthy = [(r, _eta(r[key])) for r in pad if r["condition"] == "normal_flight"]
     if healthy:
-        low = [f"{r['name']} {_short(e)}" for r, e in healthy if np.nanmin(e) < HEALTHY_ETA]
+        low = [f"{r['name']} {_short(e)}" for r, e in healthy
+               if np.any(np.asarray(e, dtype=float) < HEALTHY_ETA)]
         out.append((f"CrazyPAD healthy, {what}: no accepted rotor below {HEALTHY_ETA} "
                     "relative", f"{len(low)} of {len(healthy)}: " + ("; ".join(low) or "none"),
                     not low))
