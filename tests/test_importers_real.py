@@ -289,4 +289,12 @@ def test_blackbox_logs_decode_cleanly_and_import(path):
         moving = [i for i in range(3) if np.std(rec.omega[:, i]) > 0.1]
         assert moving
         for i in moving:
-            assert np.corrcoef(smooth(w_q[:, i]), smooth(rec.omega[:, i]))[0, 1] > 0.8
+            a, b = smooth(w_q[:, i]), smooth(rec.omega[:, i])
+            assert np.corrcoef(a, b)[0, 1] > 0.8
+            assert 0.8 < np.sum(a * b) / np.sum(b * b) < 1.25  # units, not just sign
+        # position and velocity in the same units: d(position)/dt against velocity
+        dp = np.gradient(rec.position, rec.t, axis=0)
+        for i in range(3):
+            a, b = smooth(dp[:, i]), smooth(rec.velocity[:, i])
+            if np.std(b) > 0.05:  # (gaps and held samples blur this one: a factor of 2)
+                assert 0.5 < np.sum(a * b) / np.sum(b * b) < 2.0

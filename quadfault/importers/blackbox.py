@@ -9,7 +9,7 @@ Explorer exports.
 - ``motor[0..3]``: ``motorOutput`` low..high -> ``u1..u4`` = (motor - low) / (high - low)
 - ``eRPM[0..3]``: 100 eRPM -> ``omega1..4`` = eRPM x 100 / (``motor_poles`` / 2) x 2 pi / 60
   [rad/s]
-- ``omega[0..3]`` (INDIflight): rad/s -> ``omega1..4``
+- ``omegaUnfiltered[0..3]`` (else ``omega[0..3]``, INDIflight): rad/s -> ``omega1..4``
 - ``quat[0..3]``, ``pos[0..2]``, ``vel[0..2]`` (INDIflight): scaled unit quaternion FRD -> NED,
   mm, cm/s -> attitude, position, velocity (NED)
 - ``vbatLatest``, ``amperageLatest``: 0.01 V, 0.01 A (Betaflight 4+, INDIflight; older firmware
@@ -264,8 +264,11 @@ def read_blackbox(path, log: int | None = None) -> FieldLog:
         missing.append("accelerometer (accSmooth)")
     u, dshot_curve, cmd_note, protocol = _motors(path, f, notes)
     streams["u"] = (t, u, "hold")
-    omega = f.stack("omega", 4)  # INDIflight: rad/s
-    rotor_note = "omega[0..3] [rad/s]"
+    # INDIflight [rad/s]: the telemetry as received; "omega" is the firmware's filtered copy,
+    # which lags the rotor by its filter
+    omega, rotor_note = f.stack("omegaUnfiltered", 4), "omegaUnfiltered[0..3] [rad/s]"
+    if omega is None:
+        omega, rotor_note = f.stack("omega", 4), "omega[0..3] [rad/s]"
     if omega is None:
         erpm = f.stack("eRPM", 4)
         if erpm is not None:
