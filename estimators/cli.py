@@ -1,7 +1,7 @@
 """``quadfault estimate``: run a motor-efficiency estimator over a recording.
 
-    quadfault estimate FILE.csv --estimator irls|ekf --out EST.csv [--force] [--improved]
-                       [--median N] [--q-eta Q]
+    quadfault estimate FILE.csv --estimator irls|ekf|rls|ukf --out EST.csv [--force]
+                       [--improved] [--median N] [--q-eta Q] [--forgetting L]
 
 Writes ``EST.csv`` (``t, eta1..eta4, sd1..sd4, status``) and its sidecar ``EST.json``
 (:mod:`estimators.series_io`). Estimators are looked up in the registry
@@ -25,11 +25,11 @@ def _choices() -> tuple[str, ...]:
     return estimator_names(role="estimator")
 
 
-def check_options(name: str, improved: bool, median, q_eta) -> None:
+def check_options(name: str, improved: bool, median, q_eta, forgetting=None) -> None:
     """One-line errors for options that do not fit together or are out of range (which
     estimator takes which option: the registry's ``options``)."""
     options = estimator_spec(name).options
-    for key, given in (("improved", improved), ("q_eta", q_eta)):
+    for key, given in (("improved", improved), ("q_eta", q_eta), ("forgetting", forgetting)):
         if given is not None and given is not False and key not in options:
             takers = [s.name for s in ESTIMATORS.values() if key in s.options]
             raise ConfigError(f"--{key.replace('_', '-')} applies to the "
@@ -37,21 +37,26 @@ def check_options(name: str, improved: bool, median, q_eta) -> None:
     if q_eta is not None and (isinstance(q_eta, bool) or not isinstance(q_eta, (int, float))
                               or not (math.isfinite(q_eta) and q_eta > 0)):
         raise ConfigError(f"--q-eta must be a positive number, got {q_eta!r}")
+    if forgetting is not None and (isinstance(forgetting, bool)
+                                   or not isinstance(forgetting, (int, float))
+                                   or not 0 < forgetting <= 1):
+        raise ConfigError(f"--forgetting must be in (0, 1], got {forgetting!r}")
     if median is not None and (isinstance(median, bool) or not isinstance(median, int)
                                or median < 1):
         raise ConfigError(f"--median must be an integer >= 1 samples, got {median!r}")
 
 
 def estimate_series(recording, name: str, *, improved: bool = False, median: int | None = None,
-                    q_eta: float | None = None, progress: bool = False):
+                    q_eta: float | None = None, forgetting: float | None = None,
+                    progress: bool = False):
     """Run estimator ``name`` over ``recording`` (never its truth) with the options of
     ``quadfault estimate``; the series' ``postprocess`` says which median it got."""
     from estimators.median import median_series
 
-    check_options(name, improved, median, q_eta)
+    check_options(name, improved, median, q_eta, forgetting)
     online_median = "median" in estimator_spec(name).options
     est = make_estimator(name, recording.vehicle, improved=improved, q_eta=q_eta,
-                         median=median if online_median else None)
+                         forgetting=forgetting, median=median if online_median else None)
     series = est.run(recording.without_truth(), progress=progress)
     if median is not None and not online_median:
         series = median_series(series, median)
@@ -59,7 +64,7 @@ def estimate_series(recording, name: str, *, improved: bool = False, median: int
 
 
 def cli_args(name: str, *, improved: bool = False, median: int | None = None,
-             q_eta: float | None = None) -> list[str]:
+             q_eta: float | None = None, forgetting: float | None = None) -> list[str]:
     """The ``quadfault estimate`` arguments of :func:`estimate_series`'s options (``q_eta``
     written with ``repr``, so the arguments reproduce the series exactly)."""
     args = ["--estimator", name]
@@ -67,6 +72,8 @@ def cli_args(name: str, *, improved: bool = False, median: int | None = None,
         args.append("--improved")
     if q_eta is not None:
         args += ["--q-eta", repr(float(q_eta))]
+    if forgetting is not None:
+        args += ["--forgetting", repr(float(forgetting))]
     if median is not None:
         args += ["--median", str(int(median))]
     return args
@@ -87,8 +94,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "estimates (the IRLS's output_median; 1 = none; overrides --improved's "
                         "21)")
     p.add_argument("--q-eta", type=float, default=None, metavar="Q",
-                   help="EKF: random-walk variance of each efficiency per 1 ms step "
+                   help="EKF, UKF: random-walk variance of each efficiency per 1 ms step "
                         "(default 0.5, the reference code's)")
+    p.add_argument("--forgetting", type=float, default=None, metavar="L",
+                   help="RLS: forgetting factor per 1 ms step, in (0, 1] (default 0.99)")
 
 
 def run(args) -> int:
@@ -97,7 +106,7 @@ def run(args) -> int:
     from quadfault.progress import enabled
     from quadfault.recording import read_recording
 
-    check_options(args.estimator, args.improved, args.median, args.q_eta)
+    check_options(args.estimator, args.improved, args.median, args.q_eta, args.forgetting)
     out, side = estimate_paths(args.out)
     check_writable([out, side], force=args.force)
     rec = read_recording(args.recording)
@@ -105,7 +114,8 @@ def run(args) -> int:
         raise ConfigError(f"{args.recording}: 'estimate' needs position, velocity and attitude "
                           "columns (px..pz, vx..vz, qw..qz); this recording is IMU-only")
     series = estimate_series(rec, args.estimator, improved=args.improved, median=args.median,
-                             q_eta=args.q_eta, progress=enabled())
+                             q_eta=args.q_eta, forgetting=args.forgetting,
+                             progress=enabled())
     write_estimate_series(series, out, input_path=args.recording, force=args.force)
     if not args.quiet:
         print(f"{series.estimator}: {len(series.t)} estimates in {series.seconds:.2f} s -> {out}",

@@ -24,7 +24,7 @@ from quadfault.errors import ConfigError
 #: (estimates nothing), or the labelled oracle (reads the true efficiency schedule)
 ROLES = ("estimator", "nominal", "oracle")
 #: the options of ``quadfault estimate`` a configuration may take (``Config.from_options``)
-OPTIONS = ("improved", "median", "q_eta")
+OPTIONS = ("improved", "median", "q_eta", "forgetting")
 
 
 @dataclass(frozen=True)
@@ -72,6 +72,15 @@ TABLE: tuple[EstimatorSpec, ...] = (
                   "extended Kalman filter over the rigid body and the efficiencies (baseline)",
                   config="estimators.ekf:EKFConfig",
                   batched="estimators.batched:BatchedEKF", options=("q_eta",)),
+    EstimatorSpec("rls", "estimators.rls:RecursiveLeastSquares",
+                  "recursive least squares with a forgetting factor on the IRLS's regression "
+                  "(what INDI controllers fly; baseline)",
+                  config="estimators.rls:RLSConfig",
+                  batched="estimators.rls:BatchedRLS", options=("forgetting",)),
+    EstimatorSpec("ukf", "estimators.ukf:UnscentedKalmanFilter",
+                  "unscented Kalman filter over velocity, rate and the efficiencies (baseline)",
+                  config="estimators.ukf:UKFConfig",
+                  batched="estimators.ukf:BatchedUKF", options=("q_eta",)),
     EstimatorSpec("none", "estimators.baselines:NominalBelief",
                   "no estimator: eta = 1 with a fixed prior uncertainty",
                   role="nominal", needs=()),
