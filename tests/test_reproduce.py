@@ -106,15 +106,23 @@ def test_quick_reproduce_writes_the_contract_outputs(tmp_path):
     # the IRLS detector finds every abrupt fault on the right motor
     assert doc["fdi"]["abrupt"]["irls"]["detected"] == 4
     assert doc["fdi"]["abrupt"]["irls"]["false_alarms"] == 0
-    # every IRLS variant beside its EKF partner, with the identical post-processing
+    # every IRLS variant beside its partners (EKF, RLS, UKF), with the identical post-processing
     per = doc["scenarios"]["combined"]
-    assert set(per) == {"irls", "ekf", "irls_median", "ekf_median", "irls_improved",
-                        "ekf_improved"}
+    assert set(per) == {f"{e}{v}" for e in ("irls", "ekf", "rls", "ukf")
+                        for v in ("", "_median", "_improved")}
     for key, entry in per.items():
         partner = per[entry["partner"]]
-        assert partner["partner"] == key and partner["postprocess"] == entry["postprocess"]
+        assert partner["postprocess"] == entry["postprocess"]
+        if key.startswith("irls"):
+            assert partner["partner"] == key and entry["partner"].startswith("ekf")
+        else:
+            assert entry["partner"].startswith("irls")
         assert entry["cli"][:2] == ["--estimator", key.split("_")[0]]
-        assert ("q_eta" in entry) == key.startswith("ekf")
+        assert ("q_eta" in entry) == key.startswith(("ekf", "ukf"))
+        assert ("forgetting" in entry) == key.startswith("rls")
+    assert set(doc["baseline_ratios"]) == {"ekf", "rls", "ukf"}
+    assert doc["baseline_ratios"]["ekf"] == doc["ratios"]
+    assert 0 < per["rls"]["forgetting"] < 1
     assert per["ekf"]["postprocess"] == "none" and per["ekf_improved"]["postprocess"] == \
         "median:21"
     assert per["ekf_improved"]["cli"][-2:] == ["--median", "21"]

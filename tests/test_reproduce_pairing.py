@@ -149,3 +149,52 @@ def test_bar_figures_label_every_series_once_and_hide_no_bar(plot, monkeypatch, 
     renderer = FigureCanvasAgg(fig).get_renderer()
     box = legend.get_window_extent(renderer)
     assert not any(box.overlaps(ax.get_window_extent(renderer)) for ax in fig.axes)
+
+
+def test_every_baseline_has_a_keyed_partner_with_the_same_post_processing():
+    from estimators.paper.pairing import BASELINES
+
+    assert list(BASELINES)[0] == "ekf" and {"rls", "ukf"} <= set(BASELINES)
+    for v in VARIANTS:
+        for b in BASELINES:
+            args = v.partner_args(b, 0.01)
+            assert args["median"] == (v.median if v.median > 1 else None)
+            assert v.key(b) == (b if v.name == "paper" else f"{b}_{v.name}")
+    assert VARIANTS[0].partner_args("rls", 0.01)["forgetting"] == pytest.approx(0.99)
+    with pytest.raises(ConfigError, match="baseline"):
+        VARIANTS[0].partner_args("kalman", 0.1)
+
+
+def test_partners_are_tuned_on_the_calibration_flight_never_on_the_scored_ones(monkeypatch):
+    """Every tuning search (choose_partner) sees the calibration flight only, and on the
+    scored flights each partner runs once per scenario with the tuning chosen there."""
+    from estimators.paper import pairing
+    from estimators.paper.reproduce import ReproduceConfig, calibration_key, reproduce
+
+    searched, runs = [], []
+    choose, estimate = pairing.choose_partner, pairing.estimate_series
+
+    def spy_choose(rec, *args, **kw):
+        searched.append((rec.meta["seed"], kw["baseline_name"]))
+        return choose(rec, *args, **kw)
+
+    def spy_estimate(rec, name, **kw):
+        runs.append((rec.meta["seed"], name, kw))
+        return estimate(rec, name, **kw)
+
+    monkeypatch.setattr(pairing, "choose_partner", spy_choose)
+    monkeypatch.setattr(pairing, "estimate_series", spy_estimate)
+    cfg = ReproduceConfig.quick(duration=1.0, calibration_duration=1.5, workers=1,
+                                reference_mode=False, improved=False, seed=3,
+                                partner_points_per_decade=1.0, partner_refine=1)
+    run = reproduce(cfg)
+    assert sorted(searched) == sorted((cfg.calibration_seed, b) for b in ("ekf", "rls", "ukf"))
+    tuning_runs = {(s, n) for s, n, _ in runs if n != "irls"}
+    assert (cfg.calibration_seed, "rls") in tuning_runs
+    scored = [(n, kw) for s, n, kw in runs if s == cfg.seed]
+    assert scored and all(s in (cfg.seed, cfg.calibration_seed) for s, _, _ in runs)
+    for b in ("ekf", "rls", "ukf"):
+        chosen = run["calibration"][calibration_key("paper", b)]
+        mine = [kw for n, kw in scored if n == b]
+        assert len(mine) == 4  # once per scored scenario, never a scan
+        assert all(kw == {**chosen.option, "median": None} for kw in mine)

@@ -1,16 +1,19 @@
-"""Fair pairs for ``quadfault reproduce``: every IRLS variant against an EKF given the same
-post-processing, the EKF tuned to the best it can do at the IRLS's accuracy.
+"""Fair pairs for ``quadfault reproduce``: every IRLS variant against each baseline (the EKF,
+RLS, the UKF) given the same post-processing, each baseline tuned to the best it can do at the
+IRLS's accuracy.
 
-A variant (:class:`Variant`) is a set of ``quadfault estimate`` options of the IRLS; its EKF
-partner gets the identical post-processing (the causal output median) and the ``Q_eta``
-chosen on a separate calibration flight by :func:`choose_partner`: among the ``Q_eta`` whose
-motor-averaged RMSE is at most the IRLS's, the one with the smallest motor-averaged excess
-spike (the EKF's RMSE-vs-``Q_eta`` curve is U-shaped, so "equal RMSE" alone has two answers
-and says nothing about spikes). The search keeps to the fast branch of the U (``Q_eta`` at
-least the most accurate one): on the slow branch the filter lags every fault, and its excess
-spike is deflated because the lag already inflates its error outside the fault windows, the
-baseline the excess is measured from. When no ``Q_eta`` reaches the IRLS's RMSE, the most
-accurate one is taken (and the result says so).
+A variant (:class:`Variant`) is a set of ``quadfault estimate`` options of the IRLS; each
+baseline (:data:`BASELINES`) partners it with the identical post-processing (the causal output
+median) and the value of its one tuning knob chosen on a separate calibration flight by
+:func:`choose_partner`. The knob is written as a speed ``q`` (larger reacts faster): the EKF's
+and the UKF's ``Q_eta``, RLS's ``1 - lambda``. Among the ``q`` whose motor-averaged RMSE is at
+most the IRLS's, the one with the smallest motor-averaged excess spike (the RMSE-vs-``q``
+curve is U-shaped, so "equal RMSE" alone has two answers and says nothing about spikes). The
+search keeps to the fast branch of the U (``q`` at least the most accurate one): on the slow
+branch the filter lags every fault, and its excess spike is deflated because the lag already
+inflates its error outside the fault windows, the baseline the excess is measured from. When
+no ``q`` reaches the IRLS's RMSE, the most accurate one is taken (and the result says so).
+The rule sees the calibration flight only; the scored flights never choose a tuning.
 
 Every series of a pair comes from :func:`estimators.cli.estimate_series`, the code behind
 ``quadfault estimate``, and each ``metrics.json`` entry records the arguments
@@ -37,6 +40,41 @@ MIN_EXCESS = 0.01
 
 
 @dataclass(frozen=True)
+class Baseline:
+    """An estimator the IRLS is compared with, and its one tuning knob.
+
+    Attributes:
+        name: its registered name.
+        option: the :func:`estimators.cli.estimate_series` option the knob sets.
+        label: the knob's name in messages.
+        q_range: the scan of the speed ``q`` (:func:`choose_partner`).
+    """
+
+    name: str
+    option: str
+    label: str
+    q_range: tuple
+
+    def value(self, q: float) -> float:
+        """The option's value at speed ``q`` (RLS: ``forgetting = 1 - q``)."""
+        return 1.0 - float(q) if self.option == "forgetting" else float(q)
+
+
+#: the baselines ``reproduce`` pairs with every IRLS variant, the EKF first (the paper's)
+BASELINES = {b.name: b for b in (
+    Baseline("ekf", "q_eta", "Q_eta", (1e-4, 1e3)),
+    Baseline("rls", "forgetting", "1 - lambda", (1e-4, 0.5)),
+    Baseline("ukf", "q_eta", "Q_eta", (1e-4, 1e3)),
+)}
+
+
+def baseline(name: str) -> Baseline:
+    if name not in BASELINES:
+        raise ConfigError(f"unknown baseline {name!r}; choose from {', '.join(BASELINES)}")
+    return BASELINES[name]
+
+
+@dataclass(frozen=True)
 class Variant:
     """An IRLS variant and the post-processing its EKF partner shares.
 
@@ -58,7 +96,11 @@ class Variant:
 
     @property
     def ekf_key(self) -> str:
-        return "ekf" if self.name == "paper" else f"ekf_{self.name}"
+        return self.key("ekf")
+
+    def key(self, baseline_name: str) -> str:
+        """The key of this variant's partner among the baseline ``baseline_name``."""
+        return baseline_name if self.name == "paper" else f"{baseline_name}_{self.name}"
 
     @property
     def postprocess(self) -> str:
@@ -71,7 +113,13 @@ class Variant:
 
     def ekf_args(self, q_eta: float) -> dict:
         """Options of :func:`estimate_series` for the EKF partner."""
-        return {"q_eta": float(q_eta), "median": self.median if self.median > 1 else None}
+        return self.partner_args("ekf", q_eta)
+
+    def partner_args(self, baseline_name: str, q: float) -> dict:
+        """Options of :func:`estimate_series` for the partner of ``baseline_name`` at speed
+        ``q``."""
+        b = baseline(baseline_name)
+        return {b.option: b.value(q), "median": self.median if self.median > 1 else None}
 
 
 #: The variants ``reproduce`` runs: the paper's estimator, the output median alone, and the
@@ -82,15 +130,17 @@ VARIANTS = (Variant("paper"), Variant("median", median=21),
 
 @dataclass(frozen=True)
 class PartnerResult:
-    """The EKF partner of an IRLS variant, chosen by :func:`choose_partner`.
+    """The partner of an IRLS variant among one baseline, chosen by :func:`choose_partner`.
 
     Attributes:
-        q_eta: the chosen random-walk variance per 1 ms step [1].
+        q_eta: the chosen speed ``q``: the random-walk variance per 1 ms step of the EKF and
+            the UKF, ``1 - lambda`` of RLS.
         target_rmse: the IRLS's motor-averaged RMSE on the calibration flight [1].
-        rmse, excess_spike: the EKF's at ``q_eta`` (motor averages) [1].
-        matched: True when some ``Q_eta`` reached the target (else the most accurate is used).
-        curve_q, curve_rmse, curve_excess: every evaluated point, sorted by ``Q_eta``.
+        rmse, excess_spike: the partner's at ``q_eta`` (motor averages) [1].
+        matched: True when some ``q`` reached the target (else the most accurate is used).
+        curve_q, curve_rmse, curve_excess: every evaluated point, sorted by ``q``.
         message: one line on what was chosen.
+        baseline: the baseline's name.
     """
 
     q_eta: float
@@ -102,14 +152,22 @@ class PartnerResult:
     curve_rmse: tuple
     curve_excess: tuple
     message: str
+    baseline: str = "ekf"
+
+    @property
+    def option(self) -> dict:
+        """The partner's tuning as an :func:`estimate_series` option."""
+        b = baseline(self.baseline)
+        return {b.option: b.value(self.q_eta)}
 
     def to_dict(self) -> dict:
-        return {"q_eta": self.q_eta, "target_rmse": self.target_rmse, "rmse": self.rmse,
+        return {"baseline": self.baseline, **self.option,
+                "q_eta": self.q_eta, "target_rmse": self.target_rmse, "rmse": self.rmse,
                 "excess_spike": self.excess_spike, "matched": self.matched,
                 "curve_q": list(self.curve_q), "curve_rmse": list(self.curve_rmse),
                 "curve_excess": list(self.curve_excess), "message": self.message,
-                "rule": "smallest excess spike with RMSE <= target, Q_eta >= the most "
-                        "accurate one"}
+                "rule": "smallest excess spike with RMSE <= target, q >= the most "
+                        "accurate one, on the calibration flight"}
 
 
 def _best(points: dict, target: float):
@@ -124,15 +182,17 @@ def _best(points: dict, target: float):
 
 
 def choose_partner(recording: Recording, target_rmse: float, median: int = 1, *,
-                   q_range: tuple = (1e-4, 10.0), points_per_decade: float = 3.0,
-                   refine: int = 3, evaluate=None) -> PartnerResult:
-    """The EKF's ``Q_eta`` on ``recording`` (which holds the truth) with the smallest
-    motor-averaged excess spike among those on the fast branch whose RMSE (of the output after
-    a ``median``-row causal median) is at most ``target_rmse``: a log-spaced scan of
-    ``q_range``, then
-    ``refine`` rounds of halving the log-spacing around the best point.
+                   q_range: tuple | None = None, points_per_decade: float = 3.0,
+                   refine: int = 3, evaluate=None, baseline_name: str = "ekf") -> PartnerResult:
+    """The speed ``q`` of baseline ``baseline_name`` (the EKF's ``Q_eta`` by default) on the
+    calibration ``recording`` (which holds the truth) with the smallest motor-averaged excess
+    spike among those on the fast branch whose RMSE (of the output after a ``median``-row
+    causal median) is at most ``target_rmse``: a log-spaced scan of ``q_range`` (default the
+    baseline's), then ``refine`` rounds of halving the log-spacing around the best point.
 
-    ``evaluate(q) -> (rmse, excess)`` replaces the EKF run (tests; shared scans)."""
+    ``evaluate(q) -> (rmse, excess)`` replaces the baseline's run (tests; shared scans)."""
+    b = baseline(baseline_name)
+    q_range = b.q_range if q_range is None else q_range
     lo, hi = q_range
     if not (0 < lo < hi):
         raise ConfigError(f"q_range must be (low, high) with 0 < low < high, got {q_range!r}")
@@ -140,7 +200,7 @@ def choose_partner(recording: Recording, target_rmse: float, median: int = 1, *,
         raise ConfigError(f"target RMSE must be positive, got {target_rmse!r}")
     if evaluate is None:
         def evaluate(q):
-            return ekf_point(recording, q, median)
+            return partner_point(recording, b.name, q, median)
     n = max(2, round(math.log10(hi / lo) * points_per_decade) + 1)
     points = {float(q): evaluate(float(q)) for q in np.logspace(math.log10(lo),
                                                                   math.log10(hi), n)}
@@ -154,21 +214,30 @@ def choose_partner(recording: Recording, target_rmse: float, median: int = 1, *,
     q, matched = _best(points, target_rmse)
     rmse, excess = points[q]
     order = sorted(points)
+    lab = f"{b.name} {b.label}"
     if matched:
-        msg = (f"Q_eta = {q:.4g}: least excess spike {excess:.4f} with RMSE {rmse:.4f} <= "
+        msg = (f"{lab} = {q:.4g}: least excess spike {excess:.4f} with RMSE {rmse:.4f} <= "
                f"{target_rmse:.4f} on the fast branch ({len(points)} evaluations)")
     else:
-        msg = (f"no Q_eta in [{lo:.3g}, {hi:.3g}] reaches RMSE {target_rmse:.4f}; using the most "
-               f"accurate, Q_eta = {q:.4g} (RMSE {rmse:.4f})")
+        msg = (f"no {lab} in [{lo:.3g}, {hi:.3g}] reaches RMSE {target_rmse:.4f}; using the "
+               f"most accurate, {b.label} = {q:.4g} (RMSE {rmse:.4f})")
     return PartnerResult(float(q), float(target_rmse), float(rmse), float(excess), matched,
                          tuple(order), tuple(points[k][0] for k in order),
-                         tuple(points[k][1] for k in order), msg)
+                         tuple(points[k][1] for k in order), msg, b.name)
 
 
 def ekf_point(recording: Recording, q_eta: float, median: int = 1) -> tuple[float, float]:
     """``(rmse, excess_spike)``, motor averages, of the EKF with ``q_eta`` and the output
     median ``median`` on ``recording``."""
-    s = estimate_series(recording, "ekf", q_eta=q_eta)
+    return partner_point(recording, "ekf", q_eta, median)
+
+
+def partner_point(recording: Recording, baseline_name: str, q: float,
+                  median: int = 1) -> tuple[float, float]:
+    """``(rmse, excess_spike)``, motor averages, of the baseline at speed ``q`` with the
+    output median ``median`` on ``recording``."""
+    b = baseline(baseline_name)
+    s = estimate_series(recording, b.name, **{b.option: b.value(q)})
     return _rmse_excess(recording, median_series(s, median))
 
 
@@ -178,14 +247,15 @@ def _rmse_excess(recording, series) -> tuple[float, float]:
     return float(np.mean(sc.rmse)), (math.inf if excess is None else float(excess))
 
 
-def shared_scan(recording: Recording):
+def shared_scan(recording: Recording, baseline_name: str = "ekf"):
     """``evaluate(median)``: per median, a ``q -> (rmse, excess)`` for :func:`choose_partner`
-    that runs the EKF once per ``Q_eta`` for every median (the median is post-processing)."""
+    that runs the baseline once per ``q`` for every median (the median is post-processing)."""
+    b = baseline(baseline_name)
     runs: dict = {}
 
     def run(q):
         if q not in runs:
-            runs[q] = estimate_series(recording, "ekf", q_eta=q)
+            runs[q] = estimate_series(recording, b.name, **{b.option: b.value(q)})
         return runs[q]
 
     def for_median(median):
@@ -203,29 +273,42 @@ def irls_target(recording: Recording, variant: Variant) -> float:
 def run_pair(recording: Recording, variant: Variant, q_eta: float) -> dict:
     """``{key: (series, entry extras)}`` of the IRLS variant and its EKF partner on
     ``recording`` (the extras: ``postprocess``, ``partner``, ``cli``, ``q_eta``)."""
+    return run_pairs(recording, variant, {"ekf": q_eta})
+
+
+def run_pairs(recording: Recording, variant: Variant, tunings: dict) -> dict:
+    """``{key: (series, entry extras)}`` of the IRLS variant and its partner of every baseline
+    in ``tunings`` (baseline name -> its chosen speed ``q``) on ``recording``. The extras:
+    ``postprocess``, ``partner`` (the IRLS's: its EKF partner, or the first baseline),
+    ``cli``, and the partner's tuning (``q_eta`` or ``forgetting``)."""
+    names = list(tunings)
+    first = variant.key("ekf" if "ekf" in tunings else names[0])
+    jobs = [(variant.irls_key, "irls", variant.irls_args(), first)]
+    jobs += [(variant.key(b), b, variant.partner_args(b, q), variant.irls_key)
+             for b, q in tunings.items()]
     out = {}
-    for key, name, kw, partner in (
-            (variant.irls_key, "irls", variant.irls_args(), variant.ekf_key),
-            (variant.ekf_key, "ekf", variant.ekf_args(q_eta), variant.irls_key)):
+    for key, name, kw, partner in jobs:
         series = estimate_series(recording, name, **kw)
         extra = {"postprocess": series.postprocess, "partner": partner,
                  "cli": cli_args(name, **kw)}
-        if name == "ekf":
-            extra["q_eta"] = float(q_eta)
+        if name != "irls":
+            option = baseline(name).option
+            extra[option] = kw[option]
         out[key] = (series, extra)
     return out
 
 
-def pair_ratios(scenarios: dict, variants=VARIANTS) -> dict:
-    """Per scenario and variant, IRLS / EKF of the motor-averaged ``spike``,
-    ``excess_spike`` and ``rmse`` (``None`` where undefined: no fault windows, or for
-    ``excess_spike`` an EKF excess spike of at most :data:`MIN_EXCESS`), and
-    ``excess_spike_difference``, IRLS - EKF (``None`` without fault windows)."""
+def pair_ratios(scenarios: dict, variants=VARIANTS, baseline_name: str = "ekf") -> dict:
+    """Per scenario and variant, IRLS / its partner of ``baseline_name`` (the EKF by default)
+    of the motor-averaged ``spike``, ``excess_spike`` and ``rmse`` (``None`` where undefined:
+    no fault windows, or for ``excess_spike`` a partner excess spike of at most
+    :data:`MIN_EXCESS`), and ``excess_spike_difference``, IRLS - partner (``None`` without
+    fault windows)."""
     out = {}
     for name, per in scenarios.items():
         block = {}
         for v in variants:
-            a, b = per.get(v.irls_key), per.get(v.ekf_key)
+            a, b = per.get(v.irls_key), per.get(v.key(baseline_name))
             if a is None or b is None:
                 continue
             r = {}
@@ -243,5 +326,6 @@ def pair_ratios(scenarios: dict, variants=VARIANTS) -> dict:
     return out
 
 
-__all__ = ["MIN_EXCESS", "VARIANTS", "PartnerResult", "Variant", "choose_partner", "ekf_point",
-           "irls_target", "pair_ratios", "run_pair", "shared_scan"]
+__all__ = ["BASELINES", "MIN_EXCESS", "VARIANTS", "Baseline", "PartnerResult", "Variant",
+           "baseline", "choose_partner", "ekf_point", "irls_target", "pair_ratios",
+           "partner_point", "run_pair", "run_pairs", "shared_scan"]

@@ -12,8 +12,10 @@ from estimators.paper.pairing import MIN_EXCESS
 from quadfault.fileio import atomic_write_text
 
 #: Estimator keys of a scenario block: the paper pair (the contract's ``irls``/``ekf``) and the
-#: beyond-the-paper IRLS variants, each with its EKF partner (same post-processing).
-ESTIMATOR_KEYS = figures.ORDER
+#: beyond-the-paper IRLS variants, each with its partners (same post-processing): the EKF, RLS
+#: and the UKF (the figures show the IRLS and EKF keys, :data:`figures.ORDER`).
+ESTIMATOR_KEYS = tuple(f"{e}{v}" for v in ("", "_median", "_improved")
+                       for e in ("irls", "ekf", "rls", "ukf"))
 STATIC_FIGURES = ("rmse_std_bars.png", "spikes_per_motor.png", "calibration_curve.png",
                   "irls_convergence.png", "kkt_convergence.png")
 
@@ -95,34 +97,45 @@ def _curve_note(cal: dict) -> str:
 def _pair_lines(doc: dict) -> list[str]:
     cal = doc["config"]["calibration"]
     lines = [
-        "Pairs: every IRLS variant runs against an EKF given the identical post-processing "
-        "(`postprocess` in metrics.json). The EKF partner's Q_eta is chosen on the calibration "
-        "flight: the smallest excess spike among the Q_eta whose RMSE is at most the IRLS's, "
-        "on the fast branch of its U-shaped RMSE curve. "
+        "Pairs: every IRLS variant runs against each baseline (the EKF; RLS and the UKF, "
+        "docs/rls.md, docs/ukf.md) given the identical post-processing (`postprocess` in "
+        "metrics.json). Each partner's tuning (Q_eta; RLS's 1 - lambda) is chosen on the "
+        "calibration flight, never on the scored ones: the smallest excess spike among the "
+        "values whose RMSE is at most the IRLS's, on the fast branch of its U-shaped RMSE "
+        "curve. "
         "*irls* is the paper's estimator (reference settings); *irls_median* adds a 21-sample "
         "causal output median; *irls_improved* adds the median and the change completion "
         "(`IRLSConfig.improved()`, docs/irls.md).", ""]
     for key in ("rk4", "rk4_median", "rk4_improved"):
-        if key in cal:
-            lines += [f"* partner of {key.replace('rk4', 'irls')}: {cal[key]['message']}."]
+        for suffix in ("", "/rls", "/ukf"):
+            if key + suffix in cal:
+                lines += [f"* {suffix[1:] or 'ekf'} partner of {key.replace('rk4', 'irls')}: "
+                          f"{cal[key + suffix]['message']}."]
     lines.append("")
-    return lines + _ratio_lines(doc.get("ratios", {}))
+    ratios = doc.get("baseline_ratios") or {"ekf": doc.get("ratios", {})}
+    for b, per_b in ratios.items():
+        lines += _ratio_lines(per_b, b)
+    return lines
 
 
-def _ratio_lines(ratios: dict) -> list[str]:
-    """The table of :func:`~estimators.paper.pairing.pair_ratios` with its note."""
+def _ratio_lines(ratios: dict, baseline_name: str = "ekf") -> list[str]:
+    """The table of :func:`~estimators.paper.pairing.pair_ratios` against ``baseline_name``
+    with its note."""
     if not ratios:
         return []
-    lines = ["| scenario | variant | spike ratio | excess-spike ratio | excess spike "
-             "IRLS - EKF | RMSE ratio |", "|---|---|---|---|---|---|"]
+    B = baseline_name.upper()
+    lines = [f"IRLS / its {B} partner:", "",
+             "| scenario | variant | spike ratio | excess-spike ratio | excess spike "
+             f"IRLS - {B} | RMSE ratio |", "|---|---|---|---|---|---|"]
     for name, per in ratios.items():
         for v, r in per.items():
             lines.append(f"| {name} | {v} | {_f(r['spike'], 2)} | {excess_ratio_text(r)} | "
                          f"{_f(r.get('excess_spike_difference'), 3)} | {_f(r['rmse'], 2)} |")
-    lines += ["", "Ratios are IRLS / its EKF partner, motor averages (the paper's claim: "
-              "spike ratio <= 0.5 at equal accuracy). n/a: the EKF's excess spike is at "
-              f"most {MIN_EXCESS:g}, within its noise, so a ratio over it says nothing; "
-              "the difference IRLS - EKF is given instead.", ""]
+    lines += ["", f"Ratios are IRLS / its {B} partner, motor averages (the paper's claim "
+              "against the EKF: spike ratio <= 0.5 at equal accuracy; above 1 the IRLS "
+              f"loses). n/a: the {B}'s excess spike is at most {MIN_EXCESS:g}, within its "
+              f"noise, so a ratio over it says nothing; the difference IRLS - {B} is given "
+              "instead.", ""]
     return lines
 
 
@@ -148,8 +161,9 @@ def write_figures(out: Path, doc: dict, run: dict, force: bool) -> list[str]:
             written.append(path.name)
     figures.plot_rmse_std(out / "rmse_std_bars.png", doc["scenarios"], force=force)
     figures.plot_spikes(out / "spikes_per_motor.png", doc["scenarios"], force=force)
-    figures.plot_calibration(out / "calibration_curve.png", doc["config"]["calibration"],
-                             force=force)
+    figures.plot_calibration(out / "calibration_curve.png",
+                             {k: c for k, c in doc["config"]["calibration"].items()
+                              if "/" not in k}, force=force)
     figures.plot_convergence(out / "irls_convergence.png", run["history"], force=force)
     figures.plot_kkt(out / "kkt_convergence.png", run["history"], force=force)
     written += list(STATIC_FIGURES)
@@ -161,7 +175,7 @@ def write_report(out: Path, doc: dict, run: dict, force: bool = False) -> Path:
     written = write_figures(out, doc, run, force)
     cal = cfg["calibration"]
     lines = [
-        "# quadfault reproduce: IRLS vs calibrated EKF",
+        "# quadfault reproduce: IRLS vs calibrated EKF, RLS and UKF",
         "",
         f"Flights of {cfg['duration']:g} s (the reference schedule scaled to this length), "
         f"sigma_f = {cfg['thrust_noise']}, seed {cfg['seed']}; the EKF is calibrated on a "

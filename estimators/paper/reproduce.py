@@ -1,11 +1,13 @@
-"""``quadfault reproduce``: the paper's evaluation, IRLS vs a calibrated EKF.
+"""``quadfault reproduce``: the paper's evaluation, IRLS vs a calibrated EKF (and RLS and a UKF).
 
 Steps (``docs/reproduce.md``):
 
 1. on a calibration flight of the combined scenario with seed ``K + 1000``, choose for every
-   IRLS variant (:data:`estimators.paper.pairing.VARIANTS`) its EKF partner: the same output
-   post-processing, and the ``Q_eta`` with the smallest excess spike among those whose RMSE
-   is at most the IRLS's (:func:`estimators.paper.pairing.choose_partner`);
+   IRLS variant (:data:`estimators.paper.pairing.VARIANTS`) its partner among each baseline
+   (:data:`estimators.paper.pairing.BASELINES`: the EKF, RLS, the UKF): the same output
+   post-processing, and the tuning (``Q_eta``, RLS's forgetting factor) with the smallest
+   excess spike among those whose RMSE is at most the IRLS's
+   (:func:`estimators.paper.pairing.choose_partner`);
 2. fly degradation, abrupt, combined and clipping (sigma_f = 0.07) with seed ``K``, run every
    pair, score them (:mod:`estimators.metrics`) and run the fault detector
    (:mod:`estimators.fdi`) on every estimate stream;
@@ -72,9 +74,11 @@ class ReproduceConfig:
         improved: also run the IRLS variants beyond the paper (the output median alone, and
             ``IRLSConfig.improved()``: change completion and output median, docs/irls.md) on
             the RK4 flights, each with its EKF partner.
-        partner_q_range, partner_points_per_decade, partner_refine: the partner's ``Q_eta``
-            scan and its refinement rounds
+        partner_q_range, partner_points_per_decade, partner_refine: the partners' ``Q_eta``
+            scan (EKF, UKF; RLS scans its own ``1 - lambda`` range) and its refinement rounds
             (:func:`estimators.paper.pairing.choose_partner`).
+        baselines: the estimators each IRLS variant is paired with (names of
+            :data:`estimators.paper.pairing.BASELINES`; the EKF always, the paper's).
     """
 
     duration: float = 80.0
@@ -92,6 +96,7 @@ class ReproduceConfig:
     partner_q_range: tuple = (1e-4, 1e3)
     partner_points_per_decade: float = 3.0
     partner_refine: int = 3
+    baselines: tuple = ("ekf", "rls", "ukf")
 
     @classmethod
     def quick(cls, **changes) -> ReproduceConfig:
@@ -153,7 +158,8 @@ def _calibration_job(mode: str, cfg: ReproduceConfig) -> dict:
     ``reference``: the paper pair's EKF matched to the IRLS's RMSE, as in the paper
     (:func:`estimators.paper.calibration.calibrate_q_eta`)."""
     from estimators.paper.calibration import calibrate_q_eta
-    from estimators.paper.pairing import VARIANTS, choose_partner, irls_target, shared_scan
+    from estimators.paper.pairing import (BASELINES, VARIANTS, choose_partner, irls_target,
+                                          shared_scan)
 
     rec = _fly(cfg.calibration_scenario, cfg.calibration_duration, cfg.calibration_seed, mode,
                cfg.thrust_noise)
@@ -162,27 +168,40 @@ def _calibration_job(mode: str, cfg: ReproduceConfig) -> dict:
                               points_per_decade=cfg.points_per_decade,
                               bisection_steps=cfg.bisection_steps)
         return {"reference": cal}
-    scan = shared_scan(rec)
-    return {("rk4" if v.name == "paper" else f"rk4_{v.name}"): choose_partner(
-        rec, irls_target(rec, v), v.median, q_range=cfg.partner_q_range,
-        points_per_decade=cfg.partner_points_per_decade, refine=cfg.partner_refine,
-        evaluate=scan(v.median)) for v in cfg.variants}
+    targets = {v.name: irls_target(rec, v) for v in cfg.variants}
+    out = {}
+    for b in cfg.baselines:
+        scan = shared_scan(rec, b)
+        q_range = cfg.partner_q_range if BASELINES[b].option == "q_eta" else None
+        for v in cfg.variants:
+            out[calibration_key(v.name, b)] = choose_partner(
+                rec, targets[v.name], v.median, q_range=q_range,
+                points_per_decade=cfg.partner_points_per_decade, refine=cfg.partner_refine,
+                evaluate=scan(v.median), baseline_name=b)
+    return out
 
 
-def _scenario_job(mode: str, name: str, cfg: ReproduceConfig, q_etas: dict,
+def calibration_key(variant: str, baseline_name: str) -> str:
+    """The key of a partner's calibration: ``rk4`` / ``rk4_<variant>`` for the EKF (as
+    before), with ``/<baseline>`` for the others."""
+    key = "rk4" if variant == "paper" else f"rk4_{variant}"
+    return key if baseline_name == "ekf" else f"{key}/{baseline_name}"
+
+
+def _scenario_job(mode: str, name: str, cfg: ReproduceConfig, tunings: dict,
                   keep_series: bool) -> dict:
-    """Fly one scenario; run and score every variant's pair (``q_etas``: variant name -> its
-    EKF partner's Q_eta; the reference mode runs the paper's pair only)."""
+    """Fly one scenario; run and score every variant's pairs (``tunings``: variant name ->
+    {baseline: its partner's speed q}; the reference mode runs the paper's EKF pair only)."""
     from estimators.fdi import detect, evaluate
     from estimators.metrics import fault_windows, score
-    from estimators.paper.pairing import VARIANTS, run_pair
+    from estimators.paper.pairing import VARIANTS, run_pairs
 
     rec = _fly(name, cfg.duration, cfg.seed, mode, cfg.thrust_noise)
     out = {"mode": mode, "name": name, "scores": {}, "extra": {}, "fdi": {},
            "flight": flight_check(rec)}
     series = {}
-    for v in (x for x in VARIANTS if x.name in q_etas):
-        for key, (s, extra) in run_pair(rec, v, q_etas[v.name]).items():
+    for v in (x for x in VARIANTS if x.name in tunings):
+        for key, (s, extra) in run_pairs(rec, v, tunings[v.name]).items():
             out["scores"][key] = score(rec, s)
             out["extra"][key] = extra
             out["fdi"][key] = evaluate(detect(s), fault_windows(rec)).to_dict()
@@ -196,7 +215,7 @@ def _scenario_job(mode: str, name: str, cfg: ReproduceConfig, q_etas: dict,
 def _warm_up() -> None:
     """Compile the numba kernels once in the parent so forked workers inherit them."""
     rec = _fly("hover", 0.05, 0, "rk4", 0.0)
-    for name in ("irls", "ekf"):
+    for name in ("irls", "ekf", "rls", "ukf"):
         make_estimator(name, rec.vehicle).run(rec)
     _fly("hover", 0.05, 0, "reference", 0.0)
 
@@ -238,11 +257,11 @@ def reproduce(cfg: ReproduceConfig, progress: bool = False) -> dict:
     try:
         cals = {k: c for block in _map(_calibration_job, cal_jobs, cfg.workers, bar)
                 for k, c in block.items()}
-        q = {v.name: cals["rk4" if v.name == "paper" else f"rk4_{v.name}"].q_eta
+        q = {v.name: {b: cals[calibration_key(v.name, b)].q_eta for b in cfg.baselines}
              for v in cfg.variants}
         jobs = [("rk4", s, cfg, q, True) for s in SCENARIOS]
         if cfg.reference_mode:
-            jobs += [("reference", s, cfg, {"paper": cals["reference"].q_eta}, False)
+            jobs += [("reference", s, cfg, {"paper": {"ekf": cals["reference"].q_eta}}, False)
                      for s in REFERENCE_SCENARIOS]
         results = _map(_scenario_job, jobs, cfg.workers, bar)
         history = irls_history(cfg)
@@ -311,10 +330,13 @@ def metrics_document(run: dict) -> dict:
     if not cfg.reference_mode:
         del doc["reference_mode"], doc["reference_mode_fdi"], doc["reference_mode_flights"]
     doc["ratios"] = pair_ratios(doc["scenarios"])
+    doc["baseline_ratios"] = {b: pair_ratios(doc["scenarios"], baseline_name=b)
+                              for b in cfg.baselines}
     doc["spike_ratio"] = {n: {v: r["spike"] for v, r in per.items() if r["spike"] is not None}
                           for n, per in doc["ratios"].items()}
     doc["config"] = {**asdict(cfg), "q_range": list(cfg.q_range),
                      "partner_q_range": list(cfg.partner_q_range), "integrator": "rk4",
+                     "baselines": list(cfg.baselines),
                      "upper_thrust_limit": "only in clipping (the paper has none)",
                      "align": "end", "ekf_q_eta": run["calibration"]["rk4"].q_eta,
                      "ekf_q_eta_improved": (run["calibration"]["rk4_improved"].q_eta
@@ -344,6 +366,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, default=2, help="parallel processes (default 2)")
     p.add_argument("--no-reference-mode", action="store_true",
                    help="skip the flights of the reference integration mode")
+    p.add_argument("--baselines", default="ekf,rls,ukf", metavar="NAMES",
+                   help="comma-separated estimators each IRLS variant is paired with, each "
+                        "tuned on the calibration flight (default ekf,rls,ukf; ekf always)")
     p.add_argument("--no-improved", action="store_true",
                    help="skip the IRLS variants beyond the paper (output median, "
                         "IRLSConfig.improved()) and their EKF partners")
@@ -362,6 +387,7 @@ def run(args) -> int:
         check_writable(planned_files(out), force=args.force)
     base = ReproduceConfig.quick() if args.quick else ReproduceConfig()
     cfg = replace(base, seed=args.seed, workers=args.workers,
+                  baselines=baselines_of(getattr(args, "baselines", "ekf,rls,ukf")),
                   reference_mode=not args.no_reference_mode,
                   improved=not getattr(args, "no_improved", False))
     result = reproduce(cfg, progress=not args.quiet and enabled())
@@ -373,11 +399,12 @@ def run(args) -> int:
     print(f"quadfault reproduce ({'quick' if args.quick else 'full'}, seed {cfg.seed}, "
           f"integrator rk4, EKF Q_eta = {doc['config']['ekf_q_eta']:.4g})")
     print(table(doc["scenarios"]))
-    for name, per in doc["ratios"].items():
-        pairs = [f"{v} spike {r['spike']:.2f}x, excess {excess_ratio_text(r, 'x')}, "
-                 f"RMSE {r['rmse']:.2f}x" for v, r in per.items() if r["spike"] is not None]
-        if pairs:
-            print(f"IRLS/EKF {name}: " + "; ".join(pairs))
+    for b, ratios in doc["baseline_ratios"].items():
+        for name, per in ratios.items():
+            pairs = [f"{v} spike {r['spike']:.2f}x, excess {excess_ratio_text(r, 'x')}, "
+                     f"RMSE {r['rmse']:.2f}x" for v, r in per.items() if r["spike"] is not None]
+            if pairs:
+                print(f"IRLS/{b.upper()} {name}: " + "; ".join(pairs))
     bad = [f"{n} ({m})" for m, key in (("rk4", "flights"), ("reference", "reference_mode_flights"))
            for n, fl in doc.get(key, {}).items() if fl["diverged"]]
     if bad:
@@ -389,6 +416,18 @@ def run(args) -> int:
     print(f"\nwrote {out / 'metrics.json'}, {out / 'report.md'} and figures "
           f"({result['seconds']:.0f} s)")
     return 0
+
+
+def baselines_of(text: str) -> tuple:
+    """``--baselines`` as names (the EKF first, always; clean error for unknown names)."""
+    from estimators.paper.pairing import BASELINES
+
+    names = [x.strip() for x in str(text).split(",") if x.strip()]
+    bad = [x for x in names if x not in BASELINES]
+    if bad:
+        raise ConfigError(f"--baselines: unknown {', '.join(map(repr, bad))}; choose from "
+                          f"{', '.join(BASELINES)}")
+    return ("ekf",) + tuple(dict.fromkeys(x for x in names if x != "ekf"))
 
 
 def _json(obj):
