@@ -1,14 +1,15 @@
-"""IRLS against its EKF partner over several seeds: the ratios of ``quadfault reproduce``
-with means and 95 % intervals.
+"""IRLS against its partners (the EKF, RLS, the UKF) over several seeds: the ratios of
+``quadfault reproduce`` with means and 95 % intervals.
 
     python benchmarks/fair_comparison.py --out DIR [--seeds 0-4] [--quick] [--workers 2]
 
 For every seed K it runs ``quadfault reproduce --seed K --no-reference-mode --out DIR/seed-K``
 (skipped when ``DIR/seed-K/metrics.json`` exists, so an interrupted study resumes), then
-prints, per scenario and variant, the IRLS / EKF ratios of the motor-averaged raw spike,
-excess spike and RMSE: each seed's value, the mean and the 95 % Student-t interval of the mean,
-and the motor-averaged numbers behind them. ``DIR/summary.json`` holds the same. Every ratio
-is against the EKF given the identical post-processing (docs/reproduce.md).
+prints, per baseline, scenario and variant, the IRLS / partner ratios of the motor-averaged raw
+spike, excess spike and RMSE: each seed's value, the mean and the 95 % Student-t interval of
+the mean, and the motor-averaged numbers behind them. ``DIR/summary.json`` holds the same
+(``ratios``: against the EKF; ``baselines``: every baseline). Every ratio is against a partner
+given the identical post-processing and tuned on the calibration flight (docs/reproduce.md).
 """
 
 from __future__ import annotations
@@ -60,39 +61,50 @@ def _mean(values):
     return None if any(v is None for v in values) else float(np.mean(values))
 
 
-def summarise(docs: dict) -> dict:
+def _ratios(doc: dict, baseline: str) -> dict:
+    return doc.get("baseline_ratios", {}).get(baseline) or (
+        doc["ratios"] if baseline == "ekf" else {})
+
+
+def summarise(docs: dict, baseline: str = "ekf") -> dict:
     """``{scenario: {variant: {metric: {"per_seed", "mean", "ci95"}, "irls": {...},
-    "ekf": {...}, "q_eta": [...]}}}`` over the seeds' metrics.json."""
+    "ekf": {...}, "tuning": [...]}}}`` over the seeds' metrics.json, against the partners of
+    ``baseline`` (the ``"ekf"`` key holds that partner's numbers whatever it is)."""
     from estimators.metrics import mean_or_none
-    from estimators.paper.pairing import VARIANTS
+    from estimators.paper.pairing import BASELINES, VARIANTS
 
     out: dict = {}
-    first = next(iter(docs.values()))
-    for name in first["ratios"]:
+    option = BASELINES[baseline].option
+    first = _ratios(next(iter(docs.values())), baseline)
+    for name in first:
         for v in VARIANTS:
-            if v.name not in first["ratios"][name]:
+            if v.name not in first[name]:
                 continue
             block = {}
+            ratios = [_ratios(d, baseline)[name][v.name] for d in docs.values()]
             for metric in METRICS + ("excess_spike_difference",):
-                vals = [d["ratios"][name][v.name].get(metric) for d in docs.values()]
+                vals = [r.get(metric) for r in ratios]
                 if metric == "excess_spike" and all(
-                        d["ratios"][name][v.name].get("excess_spike_difference") is not None
-                        for d in docs.values()) and any(x is None for x in vals):
-                    # the EKF's excess is within its noise on some seed (pairing.MIN_EXCESS)
+                        r.get("excess_spike_difference") is not None for r in ratios) \
+                        and any(x is None for x in vals):
+                    # the partner's excess is within its noise on some seed (pairing.MIN_EXCESS)
                     block[metric] = {"per_seed": vals, "mean": None, "ci95": [None, None]}
                     continue
                 if any(x is None for x in vals):
                     continue
                 m, lo, hi = interval(vals)
                 block[metric] = {"per_seed": vals, "mean": m, "ci95": [lo, hi]}
-            for key, label in ((v.irls_key, "irls"), (v.ekf_key, "ekf")):
+            for key, label in ((v.irls_key, "irls"), (v.key(baseline), "ekf")):
                 per = [d["scenarios"][name][key] for d in docs.values()]
                 block[label] = {
                     "rmse": _mean([float(np.mean(p["rmse"])) for p in per]),
                     "spike": _mean([mean_or_none(p["spike"]) for p in per]),
                     "excess_spike": _mean([mean_or_none(p["excess_spike"]) for p in per]),
                     "cli": per[0]["cli"]}
-            block["q_eta"] = [d["scenarios"][name][v.ekf_key]["q_eta"] for d in docs.values()]
+            block["tuning"] = [d["scenarios"][name][v.key(baseline)][option]
+                               for d in docs.values()]
+            if baseline == "ekf":
+                block["q_eta"] = block["tuning"]
             out.setdefault(name, {})[v.name] = block
     return out
 
@@ -105,8 +117,9 @@ def _cell(b, d=2) -> str:
     return f"{b['mean']:.{d}f} [{b['ci95'][0]:.{d}f}, {b['ci95'][1]:.{d}f}]"
 
 
-def print_summary(summary: dict, seeds: list[int]) -> None:
-    print(f"\nIRLS / EKF partner (identical post-processing), seeds {seeds[0]}-{seeds[-1]}: "
+def print_summary(summary: dict, seeds: list[int], baseline: str = "ekf") -> None:
+    B = baseline.upper()
+    print(f"\nIRLS / {B} partner (identical post-processing), seeds {seeds[0]}-{seeds[-1]}: "
           "mean [95 % interval] of the per-seed ratio")
     print(f"{'scenario':<10} {'variant':<9} " + " ".join(f"{m + ' ratio':>26}" for m in METRICS)
           + f" {'excess IRLS - EKF':>26}")
@@ -116,8 +129,9 @@ def print_summary(summary: dict, seeds: list[int]) -> None:
             if "excess_spike_difference" in b:
                 cells.append(_cell(b["excess_spike_difference"], 4))
             print(f"{name:<10} {v:<9} " + " ".join(f"{c:>26}" for c in cells))
-    print("\nmotor averages over the seeds (mean of IRLS / EKF)")
-    print(f"{'scenario':<10} {'variant':<9} {'RMSE':>15} {'spike':>15} {'excess':>17}  Q_eta")
+    print(f"\nmotor averages over the seeds (mean of IRLS / {B})")
+    knob = "forgetting" if baseline == "rls" else "Q_eta"
+    print(f"{'scenario':<10} {'variant':<9} {'RMSE':>15} {'spike':>15} {'excess':>17}  {knob}")
     for name, per in summary.items():
         for v, b in per.items():
             i, e = b["irls"], b["ekf"]
@@ -127,7 +141,7 @@ def print_summary(summary: dict, seeds: list[int]) -> None:
                 spikes = (f"{i['spike']:.4f}/{e['spike']:.4f} {i['excess_spike']:+.4f}/"
                           f"{e['excess_spike']:+.4f}")
             print(f"{name:<10} {v:<9} {i['rmse']:.4f}/{e['rmse']:.4f} {spikes}  "
-                  + ", ".join(f"{q:.3g}" for q in b["q_eta"]))
+                  + ", ".join(f"{q:.4g}" for q in b["tuning"]))
 
 
 def main(argv=None) -> int:
@@ -141,11 +155,17 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     seeds = seeds_of(args.seeds)
     docs = {k: run_seed(out, k, args.quick, args.workers) for k in seeds}
-    summary = summarise(docs)
+    from estimators.paper.pairing import BASELINES
+
+    first = next(iter(docs.values()))
+    baselines = [b for b in BASELINES if b == "ekf" or first.get("baseline_ratios", {}).get(b)]
+    summaries = {b: summarise(docs, b) for b in baselines}
     # summary.json is derived from the per-seed runs: rewritten on every call
     atomic_write_text(out / "summary.json", json.dumps(
-        {"seeds": seeds, "quick": args.quick, "ratios": summary}, indent=2) + "\n", force=True)
-    print_summary(summary, seeds)
+        {"seeds": seeds, "quick": args.quick, "ratios": summaries["ekf"],
+         "baselines": summaries}, indent=2) + "\n", force=True)
+    for b, summary in summaries.items():
+        print_summary(summary, seeds, b)
     return 0
 
 
