@@ -143,6 +143,20 @@ def test_estimator_comparison_runs_irls_and_ekf():
         assert steps[-1][1]["comparison"][name]["eta"][0] < 0.75
 
 
+def test_estimator_comparison_runs_any_set_of_registered_estimators():
+    """IRLS, the EKF, RLS and the UKF side by side on one measurement stream, by name."""
+    base = QuadFaultEnv("none", "hover_fault", duration=0.6, estimator_rate="control")
+    names = ("irls", "ekf", "rls", "ukf")
+    env = EstimatorComparison(base, {n: n for n in names})
+    steps = _episode(env, 60)
+    assert set(steps[-1][1]["comparison"]) == set(names)
+    cur = env.summary()["current"]
+    for name in names:
+        assert cur[name]["n_updates"] == 60 and all(np.isfinite(cur[name]["rmse"]))
+        # motor 1 drops to 50 % at 0.18 s: every estimator sees it
+        assert steps[-1][1]["comparison"][name]["eta"][0] < 0.75, name
+
+
 def test_record_flight_writes_loadable_recordings(tmp_path):
     base = QuadFaultEnv("none", _abrupt(0.3), thrust_noise=0.05)
     env = RecordFlight(base, tmp_path / "flight")
