@@ -193,3 +193,21 @@ def test_commands_of_7e_10_never_run(tmp_path):
     log.streams["u"] = (ts, 0.0 * u + 7e-10, kind)
     with pytest.raises(QuadfaultError, match="motors never run"):
         build_recording(log)
+
+
+def test_vehicle_flags_only_where_they_apply(tmp_path):
+    from tests.support.field_logs import blackbox_log
+
+    path = tmp_path / "flight.ulg"
+    px4_flight(path)
+    res = _cli(path, "--out", tmp_path / "o.csv", "--log", "2")
+    assert res.returncode == 2 and "--log" in res.stderr
+    bbl = tmp_path / "f.bbl"
+    bbl.write_bytes(blackbox_log(19.0))
+    res = _cli(bbl, "--out", tmp_path / "o.csv", "--time-base", "imu")
+    assert res.returncode == 2 and "--time-base" in res.stderr
+    from pathlib import Path
+
+    fixture = Path(__file__).parent / "fixtures" / "eschmann_log.csv"
+    res = _cli("eschmann", fixture, "--out", tmp_path / "o.csv", "--arm", "0.1")
+    assert res.returncode == 2 and "--arm" in res.stderr and res.stderr.count("\n") == 1

@@ -159,6 +159,14 @@ def run(args) -> int:
     if args.log is not None and args.log < 1:
         raise ConfigError(f"--log counts from 1, got {args.log}")
     kind, source = _kind_and_input(args)
+    given = [f for f in ("arm", "torque_coefficient", "inertia", "time_base")
+             if getattr(args, f) is not None]
+    if given and kind not in AUTOPILOTS:
+        raise ConfigError(f"--{given[0].replace('_', '-')} applies to autopilot logs; the {kind} "
+                          "data set's vehicle is known (give --vehicle VEHICLE.json to replace "
+                          "it)")
+    if args.time_base is not None and kind != "px4":
+        raise ConfigError("--time-base applies to PX4 logs")
     if args.log is not None and kind != "blackbox":
         raise ConfigError(f"--log picks one of several logs in a blackbox file; a {kind} log "
                           "holds one")
