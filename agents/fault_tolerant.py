@@ -6,7 +6,7 @@ Both wrap :class:`quadfault.controller.GeometricController` (paper eqs. 9-10) on
 * :class:`GeometricBaseline` -- the nominal allocation inverse (eq. 12), ``f = A^-1 w``,
   clipped to the rotor limits ``[0, f_max]``; it ignores ``eta_hat``.
 * :class:`EstimateAwareController` -- the estimate-aware allocation of
-  :mod:`agents.allocation`: ``A diag(eta_hat) f = w`` within ``[0, f_max]``, yaw given up
+  :mod:`quadfault.allocation`: ``A diag(eta_hat) f = w`` within ``[0, f_max]``, yaw given up
   first. Optionally (``max_heading_error``, off by default) the controller bounds the
   heading error it asks for: the desired heading ``b1d`` becomes the current heading turned
   toward the reference one by at most that angle. The motivation: when a weak motor forces
@@ -29,7 +29,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from agents.allocation import EXACT, AllocationConfig, EstimateAwareAllocator
+from quadfault.allocation import EXACT, AllocationConfig, EstimateAwareAllocator
 from quadfault.controller import ControllerConfig, ControlOutput, GeometricController
 from quadfault.errors import ConfigError
 from quadfault.trajectory import FlatOutput, Trajectory
@@ -39,7 +39,7 @@ from quadfault.vehicle import Vehicle
 class ControlStep(NamedTuple):
     f: np.ndarray  # rotor thrust commands [N], within [0, f_max]
     out: ControlOutput  # the geometric controller's details (errors, R_d)
-    mode: str  # allocation mode (agents.allocation.MODES)
+    mode: str  # allocation mode (quadfault.allocation.MODES)
     heading_clamped: bool  # True when the desired heading was bounded
 
 

@@ -13,7 +13,7 @@ acceleration but not the reference heading, so the policy holds the *current* he
 
 * ``"residual"``: the environment adds the action to its own geometric controller, so the
   plain policy returns zeros (exactly the baseline). With ``estimate_aware=True`` it returns
-  the difference between the estimate-aware allocation (:mod:`agents.allocation`, using the
+  the difference between the estimate-aware allocation (:mod:`quadfault.allocation`, using the
   observation's ``eta_hat``) and the nominal one, divided by ``residual_scale`` and clipped
   to [-1, 1] (so its authority is bounded by ``residual_scale`` [N] per rotor).
 * ``"motor"``: ``a_i = 2 f_i / f_max - 1`` for the (estimate-aware or nominal) commands.
@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents.allocation import AllocationConfig, EstimateAwareAllocator
+from quadfault.allocation import AllocationConfig, EstimateAwareAllocator
 from quadfault.controller import ControllerConfig, GeometricController
 from quadfault.errors import ConfigError
 from quadfault.trajectory import FlatOutput, Hover

@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from agents.allocation import EstimateAwareAllocator
+from quadfault.allocation import EstimateAwareAllocator
 from quadfault.vehicle import Vehicle
 
 

@@ -313,7 +313,7 @@ class QuadFaultVectorEnv(VectorEnv):
         if cfg.mode == "residual":
             m = self.meas
             f_ctrl = self._controller.commands(m.p, m.v, m.R, m.w, refs)
-        return cfg.commands(a, self.vehicle, f_ctrl, self.eta_hat, e0.compensate)
+        return cfg.commands(a, self.vehicle, f_ctrl, self.eta_hat, e0.compensate, e0.allocator)
 
     def _substeps(self, commands: np.ndarray, ts: np.ndarray, active: np.ndarray) -> None:
         """The control step's physics substeps of the ``active`` rows with ``commands`` held,

@@ -19,6 +19,9 @@ from quadfault.errors import ConfigError
 from quadfault.jit import jit
 
 ACTION_MODES = ("motor", "residual", "wrench")
+#: how a wrench becomes rotor commands: the nominal allocation inverse, or the estimate-aware
+#: allocation (quadfault.allocation) with the observation's estimate
+ALLOCATIONS = ("nominal", "estimate-aware")
 ESTIMATOR_RATES = ("physics", "control")
 OBSERVATION_KINDS = ("flat", "dict")
 TERMINATION_REASONS = ("crash", "out_of_bounds", "excessive_tilt", "non_finite")
@@ -98,22 +101,35 @@ class ActionConfig:
         object.__setattr__(self, "moment_scale", ms)
 
     def commands(self, action: np.ndarray, vehicle, f_ctrl=None, eta_hat=None,
-                 compensate: bool = False) -> np.ndarray:
+                 compensate: bool = False, allocator=None) -> np.ndarray:
         """Rotor thrust commands [N] for checked actions ``(..., 4)`` (one vehicle or a
         batch); ``f_ctrl`` the geometric controller's commands [N] (residual mode), divided by
-        ``eta_hat`` (floored at 0.1) with ``compensate``."""
+        ``eta_hat`` (floored at 0.1) with ``compensate``. With ``allocator`` (a
+        :class:`~quadfault.allocation.EstimateAwareAllocator`) the controller's wrench
+        (residual mode) or the agent's (wrench mode) is allocated with ``eta_hat`` instead,
+        giving up yaw first when the rotors cannot realise it."""
         f_max = vehicle.rotor_max_thrust
         if self.mode == "motor":
             f = 0.5 * (action + 1.0) * f_max
         elif self.mode == "wrench":
-            thrust = 0.5 * (action[..., :1] + 1.0) * vehicle.n_rotors * f_max
-            f = vehicle.rotor_thrust(np.concatenate(
-                (thrust, action[..., 1:] * np.asarray(self.moment_scale)), axis=-1))
+            wrench = np.concatenate((0.5 * (action[..., :1] + 1.0) * vehicle.n_rotors * f_max,
+                                     action[..., 1:] * np.asarray(self.moment_scale)), axis=-1)
+            f = (vehicle.rotor_thrust(wrench) if allocator is None
+                 else _allocated(allocator, wrench, eta_hat))
         else:
-            if compensate:
+            if allocator is not None:  # the controller's wrench (eq. 12: w = A f_ctrl)
+                f_ctrl = _allocated(allocator, f_ctrl @ vehicle.allocation.T, eta_hat)
+            elif compensate:
                 f_ctrl = f_ctrl / np.maximum(eta_hat, 0.1)
             f = f_ctrl + self.residual_scale * action
         return np.minimum(np.maximum(f, 0.0), f_max)
+
+
+def _allocated(allocator, wrench: np.ndarray, eta_hat) -> np.ndarray:
+    """Rotor commands [N] of wrenches ``(..., 4)`` through ``allocator`` with ``eta_hat``."""
+    rows = wrench.reshape(-1, wrench.shape[-1])
+    eta = np.broadcast_to(np.asarray(eta_hat, dtype=float), rows.shape)
+    return allocator.allocate_rows(rows, eta).f.reshape(wrench.shape)
 
 
 @dataclass(frozen=True)

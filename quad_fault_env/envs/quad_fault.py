@@ -11,7 +11,7 @@ saturation, efficiency and thrust noise, RKMK4, the sensors and the acceleromete
 numbers drawn from ``self.np_random`` in loop order), one call per control step, and the
 baseline controller is the core :class:`quadfault.controller.GeometricController` on the
 *nominal* vehicle: a fault reaches the controller only through the estimator
-(``compensate=True``) or through the agent.
+(``compensate=True``, ``allocation="estimate-aware"``) or through the agent.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import numpy as np
 
 from estimators.base import Estimate, Sample
 from quad_fault_env.envs.config import (
+    ALLOCATIONS,
     ESTIMATOR_RATES,
     OBSERVATION_KINDS,
     RANDOM_TRAJECTORIES,
@@ -48,6 +49,7 @@ from quad_fault_env.estimation import (
 )
 from quad_fault_env.observation import ObservationLayout
 from quad_fault_env.time_tables import RowTimeTables
+from quadfault.allocation import EstimateAwareAllocator
 from quadfault.controller import ControllerConfig, GeometricController, GeometricGains
 from quadfault.dynamics import RigidBodyState
 from quadfault.effects.sampling import PhysicsDraws, describe
@@ -136,6 +138,11 @@ class QuadFaultEnv(gym.Env):
             first substep of each control step only).
         compensate: divide the geometric controller's commands by eta_hat (fault-tolerant
             allocation through the estimate).
+        allocation: how the base controller's wrench (residual mode) or the agent's (wrench
+            mode) becomes rotor commands: ``"nominal"`` (the allocation inverse, eq. 12) or
+            ``"estimate-aware"`` (:mod:`quadfault.allocation`: ``A diag(eta_hat) f = w``
+            within the rotor limits, giving up yaw first to keep thrust, roll and pitch; fed
+            by the observation's estimate, never the truth unless ``estimator="truth"``).
         observation: ``"flat"`` or ``"dict"``. reference_acceleration: add the ``ref_acc`` slot.
         reward, limits, initial_spread: ``RewardConfig``, ``TerminationLimits``,
             ``InitialStateSpread``.
@@ -167,7 +174,8 @@ class QuadFaultEnv(gym.Env):
                  action_mode: str = "residual", residual_scale: float = 1.0,
                  moment_scale: tuple = (1.0, 1.0, 0.05), control_rate: float = 100.0,
                  physics_rate: float = 1000.0, estimator_rate: str = "physics",
-                 compensate: bool = False, observation: str = "flat",
+                 compensate: bool = False, allocation: str = "nominal",
+                 observation: str = "flat",
                  reference_acceleration: bool = True, reward: RewardConfig | None = None,
                  limits: TerminationLimits | None = None,
                  initial_spread: InitialStateSpread | None = None,
@@ -226,6 +234,19 @@ class QuadFaultEnv(gym.Env):
         self.estimator = make_estimator(estimator, self.vehicle, **(estimator_kwargs or {}))
         self._diagnostics_template = diagnostics_template(self.estimator)
         self.compensate = bool(compensate)
+        if allocation not in ALLOCATIONS:
+            raise ConfigError(f"allocation must be one of {ALLOCATIONS}, got {allocation!r}")
+        if allocation == "estimate-aware" and self.action_config.mode == "motor":
+            raise ConfigError("allocation='estimate-aware' allocates a wrench (the controller's "
+                              "in residual mode, the agent's in wrench mode); motor mode has "
+                              "none")
+        if allocation == "estimate-aware" and self.compensate:
+            raise ConfigError("choose compensate=True (the nominal split divided by eta_hat) or "
+                              "allocation='estimate-aware' (which already uses eta_hat), not both")
+        self.allocation = allocation
+        #: the estimate-aware allocation (None: the nominal allocation inverse)
+        self.allocator = (EstimateAwareAllocator(self.vehicle) if allocation == "estimate-aware"
+                          else None)
         # the paper's gains carried over to the vehicle's mass and inertia (any vehicle flies)
         self.controller_config = controller or ControllerConfig(
             gains=GeometricGains().scaled(self.vehicle))
@@ -373,7 +394,8 @@ class QuadFaultEnv(gym.Env):
         """Rotor thrust commands [N] for a checked ``action`` (see ``ActionConfig``)."""
         cfg = self.action_config
         f_ctrl = self._controller_commands(t, meas) if cfg.mode == "residual" else None
-        return cfg.commands(action, self.vehicle, f_ctrl, self._estimate.eta, self.compensate)
+        return cfg.commands(action, self.vehicle, f_ctrl, self._estimate.eta, self.compensate,
+                            self.allocator)
 
     def _controller_commands(self, t: float, meas: RigidBodyState) -> np.ndarray:
         """The geometric controller's rotor commands [N] (eqs. 5-10, nominal allocation); at

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.optimize import lsq_linear
 
-from agents.allocation import (EXACT, WEIGHTED, YAW_RELEASED, AllocationConfig,
+from quadfault.allocation import (EXACT, WEIGHTED, YAW_RELEASED, AllocationConfig,
                                EstimateAwareAllocator, guard_eta)
 from quadfault.errors import ConfigError
 from quadfault.vehicle import Vehicle
