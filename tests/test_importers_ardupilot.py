@@ -74,6 +74,20 @@ def test_low_rate_outputs_and_no_land_events(tmp_path):
     assert A[2, 0] < 0 and A[1, 0] < 0 and A[3, 0] < 0
 
 
+def test_a_land_detector_that_never_reports_flight_falls_back_to_the_threshold(tmp_path):
+    from quadfault.importers.ardupilot import read_ardupilot
+    from quadfault.importers.field_log import build_recording
+
+    path = tmp_path / "flight.bin"
+    dataflash_flight(path)
+    log = read_ardupilot(path)
+    ts, _ = log.landed
+    log.landed = (ts, np.ones(len(ts), dtype=bool))
+    rec = build_recording(log)
+    assert "never reports a flight" in rec.meta["import"]["flight_span_from"]
+    assert rec.t[0] > T_TAKEOFF and np.all(rec.commands_u > 0.3)
+
+
 def test_threshold_span_without_land_events(tmp_path):
     from quadfault.importers.ardupilot import read_ardupilot
     from quadfault.importers.field_log import build_recording

@@ -283,6 +283,9 @@ def build_recording(log: FieldLog, *, vehicle: Vehicle | None = None, thrust_cur
                                         "hold")})["l"]
         landed = np.nan_to_num(landed, nan=1.0) > 0.5  # before its first message: landed
     spans, how = flight_spans(t, res["u"], landed)
+    if landed is not None and not spans and np.any(res["u"] > RUNNING):
+        spans, how = flight_spans(t, res["u"], None)
+        how += f" (the land detector, {log.landed_source}, never reports a flight)"
     if not np.any(res["u"] > RUNNING):
         raise RecordingError(path, "the motors never run (no output above 1 % of its range)")
     if not spans:
