@@ -27,10 +27,12 @@ AUTOPILOTS = ("px4", "ardupilot", "blackbox")
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from quadfault.importers import IMPORTERS
 
-    p.add_argument("source", nargs="+", metavar="[DATASET] LOG",
+    p.add_argument("source", metavar="LOG|DATASET",
                    help="the log (PX4 .ulg, ArduPilot .bin/.log, Betaflight/INDIflight "
                         ".bfl/.bbl or its decoded CSV: the format is read from the file), "
-                        f"or a data set name ({', '.join(IMPORTERS)}) and its file")
+                        f"or a data set name ({', '.join(IMPORTERS)}) followed by its file")
+    p.add_argument("input", nargs="?", metavar="INPUT",
+                   help="the file, after a data set name")
     p.add_argument("--out", required=True, help="output recording FILE.csv (+ FILE.json)")
     p.add_argument("--format", choices=AUTOPILOTS, default=None,
                    help="the log's format, instead of reading it from the file")
@@ -121,16 +123,12 @@ def _positive(name, value):
 def _kind_and_input(args) -> tuple:
     from quadfault.importers import IMPORTERS, detect_format
 
-    if len(args.source) == 2:
-        kind, path = args.source
-        if kind not in IMPORTERS:
-            raise ConfigError(f"unknown data set {kind!r}; choose one of {', '.join(IMPORTERS)} "
-                              "or give only the log file")
-        return kind, path
-    if len(args.source) != 1:
-        raise ConfigError("give one log file (or a data set name and its file)")
-    path = args.source[0]
-    return (args.format or detect_format(path)), path
+    if args.input is not None:
+        if args.source not in IMPORTERS:
+            raise ConfigError(f"unknown data set {args.source!r}; choose one of "
+                              f"{', '.join(IMPORTERS)} or give only the log file")
+        return args.source, args.input
+    return (args.format or detect_format(args.source)), args.source
 
 
 def with_vehicle(rec, vehicle, curve, source: str):
