@@ -6,7 +6,7 @@ State (22 for four rotors), as in the paper and the reference ``motor_estimator_
 
 with the efficiencies as a random walk (``eta' = w_eta``, ``w_eta ~ N(0, Q_eta)``). One
 update per measurement row: predict from row k-1 to row k with the command of row k-1 held
-over ``dt_k = t_k - t_{k-1}`` (zero-order hold, CONTRACT sec. 3), then update with the
+over ``dt_k = t_k - t_{k-1}`` (zero-order hold, docs/formats.md), then update with the
 pose and rate measured at row k. The estimate's ``t`` is ``t_k``.
 
 Deviations from the reference code (each discussed in ``docs/ekf.md``):
