@@ -49,7 +49,11 @@ from quadfault.simulator import SensorNoise, SimConfig, simulate
 from quadfault.trajectory import Circle, Lissajous
 from quadfault.vehicle import PAPER_YAW_SIGNS, Vehicle
 
-NAMES = fx.EFFECT_NAMES
+#: the effects hidden, in the order the study's seeds draw them from (every registered effect)
+NAMES = ("motor_efficiency", "thrust_scale", "drag", "motor_lag", "delay", "wind", "ground_effect",
+         "com_offset", "inertia", "blade_flapping", "rotor_inertia", "battery_thrust",
+         "thrust_curve", "mass", "rate_damping")
+assert sorted(NAMES) == sorted(fx.EFFECT_NAMES), "a new effect: add it to the study's NAMES"
 
 
 def cls(name):
@@ -133,7 +137,7 @@ def make_effect(name, delta, veh, rng_params, nominal_curve=None, duration=15.0)
         return fx.BatteryThrust(float(np.clip(0.4 * delta, 0.2, 3.5)), v0, v0 * p["drop"],
                                 duration)
     if name == "thrust_curve":
-        nominal = nominal_curve or fx.thrust.IDENTITY_CURVE
+        nominal = nominal_curve or fx.thrust_curve.IDENTITY_CURVE
         changes = np.clip(np.array([p["s0"] * 0.02, p["sign"] * 0.05, p["s2"] * 0.05]) * delta,
                           -0.45, 0.45)  # inside the plausible bounds (+-0.5)
         return fx.ThrustCurve(tuple(fx.curve_from_changes(nominal, veh.hover_thrust, changes)),

@@ -194,6 +194,8 @@ def _warn_if_ended(rec, saturated: bool) -> None:
     its sidecar's ``end`` says why)."""
     import sys
 
+    from quadfault.effects.motor_lag import MotorLag
+    from quadfault.effects.rotor_inertia import RotorInertia
     from quadfault.simulator import LOST_CONTROL_ERROR
 
     end = rec.meta.get("end")
@@ -201,7 +203,7 @@ def _warn_if_ended(rec, saturated: bool) -> None:
         return
     hint = ""
     names = {e["name"] for e in rec.meta.get("effects", ())}
-    if "rotor_inertia" in names and "motor_lag" not in names:
+    if RotorInertia.name in names and MotorLag.name not in names:
         hint = (" rotor_inertia without motor_lag makes every thrust step a yaw kick; a rotor "
                 "with inertia has a lag: add --effect motor_lag=TAU (docs/effects.md).")
     elif saturated:

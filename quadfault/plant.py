@@ -50,7 +50,7 @@ import numpy as np
 from quadfault.closed_loop import Vehicles
 from quadfault.dynamics import RigidBodyState
 from quadfault.effects import rows as fx_rows
-from quadfault.effects.spec import EFFECTS
+from quadfault.effects.registry import EFFECTS
 from quadfault.errors import ConfigError
 from quadfault.motors import MotorModel
 from quadfault.vehicle import Vehicle

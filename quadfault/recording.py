@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from quadfault.effects.physics import curve_thrust
+from quadfault.effects.thrust_curve import curve_thrust
 from quadfault.errors import ConfigError, RecordingError
 from quadfault.fileio import atomic_write_files, check_writable
 from quadfault.frames import enu_flu_to_ned_frd, vehicle_flu_to_frd  # noqa: F401 (re-exported)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from quadfault import effects as fx
-from quadfault.diagnosis.candidates import PublicContext
+from quadfault.effects.candidate import PublicContext
 from quadfault.diagnosis.library import build_library, predict
 from quadfault.diagnosis.residuals import prepare
 from quadfault.dynamics import RigidBodyState

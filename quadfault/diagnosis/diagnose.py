@@ -10,21 +10,23 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from quadfault.diagnosis.crossval import cross_validate, fit_at_bound, fit_bound_mask, folds_of
 from quadfault.diagnosis.feedback import IV_MIN, IV_UNVERIFIED_GAIN
 from quadfault.diagnosis.findings import base_explanation, finding
 from quadfault.diagnosis.identifiability import assumptions, evidence, gate, without_pose
-from quadfault.diagnosis.library import build_library, predict, public_params
+from quadfault.diagnosis.library import EQUIVALENT, build_library, predict, public_params
+from quadfault.diagnosis.locate import locate
 from quadfault.diagnosis.phases import excluded_fraction, flight_phases
-from quadfault.diagnosis.prediction import HORIZONS
+from quadfault.diagnosis.prediction import HORIZONS, open_loop_errors
 from quadfault.diagnosis.residuals import prepare
 from quadfault.diagnosis.result import DiagnosisResult
 from quadfault.diagnosis.scores import fixed_scoring
 from quadfault.diagnosis.select import select
-from quadfault.effects import EFFECT_NAMES
+from quadfault.effects.registry import EFFECT_NAMES, effect_class
 from quadfault.errors import ConfigError, RecordingError
-from quadfault.recording import Recording
+from quadfault.recording import Recording, recording_sidecar
 
 #: a located interval whose nominal residual RMS reaches this many noise scales for at least
 #: ``STRONG_SECONDS`` makes the verdict ``mismatch`` even when nothing in the library explains
@@ -102,30 +104,14 @@ def _explain(step, selected_names, params) -> str:
     name = step.candidate.name
     text = base_explanation(name) + f"; held-out residual RMS -{100 * step.improvement_step:.0f}% " \
                                     "when added."
-    partners = {"thrust_scale": "motor_efficiency", "motor_efficiency": "thrust_scale",
-                "delay": "motor_lag", "motor_lag": "delay"}
-    other = partners.get(name)
-    ratio = step.rivals.get(other)
-    if name == "thrust_scale":
-        text += " Indistinguishable from motor_efficiency with equal eta (one class)."
-    elif name == "motor_efficiency":
-        if "baseline_eta" in params:
-            text += (" eta is relative to the healthy baseline flight (baseline_eta) and to "
-                     "the median rotor; eta_flight is this flight's own.")
-        else:
-            text += (" eta is relative to the median rotor (a factor common to every rotor is "
-                     "thrust_scale's or thrust_curve's); one flight cannot tell a weak rotor "
-                     "from the vehicle's own imbalance: compare with a flight of the healthy "
-                     "vehicle (--baseline).")
-        if "eta_absolute" in params:
-            text += " eta_absolute: thrust calibrated by the measured rotor speeds."
-    if other in ("delay", "motor_lag") and ratio is not None and ratio < 1.1:
-        text += (f" {other} fits almost as well (in-sample SSE ratio {ratio:.2f}): the data "
-                 "cannot separate delay from motor_lag (one timing class).")
-    if name == "wind" and "drag" not in selected_names:
-        text += " Force on the vehicle; no drag identified, so no air velocity."
-    if name == "wind" and "drag" in selected_names:
-        text += " Air velocity = force / drag coefficient (horizontal mean of kx, ky)."
+    text += effect_class(name).fit_note(params, selected_names)
+    kind = EQUIVALENT.get(name)
+    mates = [n for n, k in EQUIVALENT.items() if k == kind and n != name]
+    ratio = step.rivals.get(mates[0]) if len(mates) == 1 else None
+    if ratio is not None and ratio < 1.1:  # a class of two (timing): the rival's fit
+        a, b = sorted((name, mates[0]))
+        text += (f" {mates[0]} fits almost as well (in-sample SSE ratio {ratio:.2f}): the data "
+                 f"cannot separate {a} from {b} (one {kind} class).")
     if step.iv is not None and np.isfinite(step.iv):
         text += (f" Instrumental-variable check (instrument: the fitted signal with each "
                  f"block's inputs frozen at its start, blind to feedback on the block's own "
@@ -137,8 +123,6 @@ def _explain(step, selected_names, params) -> str:
                  f"{IV_UNVERIFIED_GAIN:.0%}.")
     if step.agreement:
         text += f" Fold agreement: {step.agreement}."
-    if name == "ground_effect":
-        text += " Height above the ground is taken as -z of the recording (ground at z = 0)."
     return text
 
 
@@ -218,16 +202,10 @@ class Diagnosis:
         BLAS runs single-threaded inside: the diagnosis multiplies many small matrices, for
         which a multi-threaded BLAS spends more CPU spinning than computing (about 2x the CPU
         time measured with ``benchmarks/bench_diagnosis.py``)."""
-        from threadpoolctl import threadpool_limits
-
         with threadpool_limits(limits=1, user_api="blas"):
             return self._fit(recording, vehicle, progress)
 
     def _fit(self, recording: Recording, vehicle, progress) -> DiagnosisResult:
-        from quadfault.diagnosis.locate import locate
-        from quadfault.diagnosis.prediction import open_loop_errors
-        from quadfault.recording import recording_sidecar
-
         t_start = time.perf_counter()
         cfg = self.config
         rec = recording.without_truth() if isinstance(recording, Recording) else recording

@@ -1,12 +1,14 @@
 """Unmodelled physical effects: one model for the simulator's plant and the diagnosis.
 
-Each effect is a small frozen dataclass of physical parameters; the physics are pure
-functions (:mod:`quadfault.effects.physics`, batched over leading axes). The plant calls them
-one step at a time through the effect protocol (``reset``, ``rotor_thrust``, ``wrench``,
-``true_vehicle``; :class:`quadfault.effects.base.Effect`), and the mismatch diagnosis
-(:mod:`quadfault.diagnosis.library`) calls the *same* functions over a whole recording.
-Internal frames: world NED, body FRD. docs/effects.md gives every equation, parameter,
-bound and ``--effect`` syntax.
+Each effect lives in one module of this package (``quadfault/effects/<name>.py``): a small
+frozen dataclass of physical parameters, its kernels (the physics the closed loop runs step
+by step and the diagnosis runs over whole recordings), its packing into the compiled chain,
+its diagnosis candidate and what a recording needs to reveal it. The registry
+(:mod:`quadfault.effects.registry`) names them all. The plant calls them through the effect
+protocol (``reset``, ``rotor_thrust``, ``wrench``, ``true_vehicle``;
+:class:`quadfault.effects.base.Effect`). Internal frames: world NED, body FRD.
+docs/effects.md gives every equation, parameter, bound and ``--effect`` syntax, and how to
+write a new effect.
 
 ==================  =======================================================================
 name                model
@@ -34,48 +36,41 @@ mass                the plant flies mass ``s m``
 syntax ``NAME=V1,V2,...[,key=value...]``; :func:`from_diagnosis` loads a fitted model.
 """
 
-from quadfault.effects.base import Effect
-from quadfault.effects.body import Inertia, Mass
+from quadfault.effects.base import Effect, Identifiability
+from quadfault.effects.battery_thrust import BatteryThrust, battery_factor
+from quadfault.effects.blade_flapping import BladeFlapping, blade_flapping_wrench
+from quadfault.effects.com_offset import ComOffset, com_offset_moment
+from quadfault.effects.delay import Delay, zoh_cumulative, zoh_mean
+from quadfault.effects.drag import Drag, drag_force
+from quadfault.effects.ground_effect import GroundEffect, ground_effect_factor
+from quadfault.effects.inertia import Inertia
+from quadfault.effects.mass import Mass
 from quadfault.effects.model import DiagnosedModel, FittedEffect, from_diagnosis
-from quadfault.effects.physics import (
-    battery_factor,
-    blade_flapping_wrench,
-    com_offset_moment,
+from quadfault.effects.motor_efficiency import MotorEfficiency
+from quadfault.effects.motor_lag import MotorLag, lag_gain, lag_series
+from quadfault.effects.physics import scaled_inertia, vehicle_with
+from quadfault.effects.rate_damping import RateDamping, rate_damping_moment
+from quadfault.effects.registry import EFFECT_NAMES, EFFECTS
+from quadfault.effects.rows import single as _single  # noqa: F401  (one-vehicle chain)
+from quadfault.effects.rotor_inertia import RotorInertia, rotor_inertia_moment, thrust_rate
+from quadfault.effects.spec import canonical_order, parse_effect
+from quadfault.effects.thrust_curve import (
+    ThrustCurve,
     curve_command,
     curve_from_changes,
     curve_thrust,
-    drag_force,
-    ground_effect_factor,
-    lag_gain,
-    lag_series,
-    rate_damping_moment,
     recurve,
-    rotor_inertia_moment,
-    scaled_inertia,
-    thrust_rate,
-    vehicle_with,
-    zoh_cumulative,
-    zoh_mean,
 )
-from quadfault.effects.spec import EFFECT_NAMES, EFFECTS, canonical_order, parse_effect
-from quadfault.effects.thrust import (
-    BatteryThrust,
-    Delay,
-    GroundEffect,
-    MotorEfficiency,
-    MotorLag,
-    ThrustCurve,
-    ThrustScale,
-)
-from quadfault.effects.wrench import BladeFlapping, ComOffset, Drag, RateDamping, RotorInertia, Wind
+from quadfault.effects.thrust_scale import ThrustScale
+from quadfault.effects.wind import Wind
 
 __all__ = [
     "EFFECTS", "EFFECT_NAMES", "BatteryThrust", "BladeFlapping", "ComOffset", "Delay",
-    "DiagnosedModel", "Drag", "Effect", "FittedEffect", "GroundEffect", "Inertia", "Mass",
-    "MotorEfficiency", "MotorLag", "RateDamping", "RotorInertia", "ThrustCurve", "ThrustScale",
-    "Wind", "battery_factor", "blade_flapping_wrench", "canonical_order", "com_offset_moment",
-    "curve_command", "curve_from_changes", "curve_thrust", "drag_force", "from_diagnosis", "ground_effect_factor",
-    "lag_gain", "lag_series", "parse_effect", "rate_damping_moment", "recurve",
-    "rotor_inertia_moment", "scaled_inertia", "thrust_rate", "vehicle_with", "zoh_cumulative",
-    "zoh_mean",
+    "DiagnosedModel", "Drag", "Effect", "FittedEffect", "GroundEffect", "Identifiability",
+    "Inertia", "Mass", "MotorEfficiency", "MotorLag", "RateDamping", "RotorInertia",
+    "ThrustCurve", "ThrustScale", "Wind", "battery_factor", "blade_flapping_wrench",
+    "canonical_order", "com_offset_moment", "curve_command", "curve_from_changes", "curve_thrust",
+    "drag_force", "from_diagnosis", "ground_effect_factor", "lag_gain", "lag_series",
+    "parse_effect", "rate_damping_moment", "recurve", "rotor_inertia_moment", "scaled_inertia",
+    "thrust_rate", "vehicle_with", "zoh_cumulative", "zoh_mean",
 ]

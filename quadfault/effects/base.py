@@ -96,7 +96,8 @@ POSE = ("position", "velocity", "attitude")
 
 
 class Effect:
-    """Default (no-op) plant hooks of an effect; subclasses are frozen dataclasses.
+    """Default (no-op) plant hooks of an effect; subclasses are frozen dataclasses, one module
+    each (the registry, :mod:`quadfault.effects.registry`, lists them).
 
     Protocol (called by :class:`quadfault.plant.Plant`): ``reset(n_rotors)`` at the start of a
     flight; ``rotor_thrust(f, t, dt, state)`` once per physics step (produced rotor thrusts
@@ -104,15 +105,27 @@ class Effect:
     (extra force, world [N], and moment, body [N m]); ``true_vehicle(vehicle)`` once at reset
     (the rigid body the plant flies; the controller and the recording keep the nominal one).
 
-    Class attributes: ``name`` (canonical snake_case), ``order`` (the canonical
-    position of the effect in the chain command -> thrust -> wrench -> body, used to sort a
-    model's effects so that it means the same physics as the diagnosis' library) and
-    ``identifiability`` (:class:`Identifiability`: what a recording needs to reveal it).
+    Class attributes: ``name`` (canonical snake_case), ``order`` (the canonical position of
+    the effect in the chain command -> thrust -> wrench -> body, used to sort a model's
+    effects so that it means the same physics as the diagnosis' library),
+    ``identifiability`` (:class:`Identifiability`: what a recording needs to reveal it),
+    ``explanation`` (one line the diagnosis reports), ``equivalent`` (the class of effects
+    the data cannot always tell it from, or None) and the ``--effect`` syntax: ``values``
+    (the allowed counts of positional values), ``syntax`` (their meaning, for errors) and
+    ``options`` (keyword options -> type); :meth:`from_values` maps them to the fields;
+    ``example`` is a spec the diagnosis recovers from a short simulated flight (the registry's
+    test flies every one).
     """
 
     name: ClassVar[str] = ""
     order: ClassVar[int] = 0
     identifiability: ClassVar[Identifiability] = Identifiability()
+    explanation: ClassVar[str] = ""
+    equivalent: ClassVar[str | None] = None
+    values: ClassVar[tuple] = (1,)
+    syntax: ClassVar[str] = ""
+    example: ClassVar[str] = ""
+    options: ClassVar[dict] = {}
 
     def reset(self, n_rotors: int) -> None:
         pass
@@ -134,6 +147,25 @@ class Effect:
         """The effect from its ``params()`` (the keys the diagnosis reports)."""
         raise NotImplementedError
 
+    @classmethod
+    def from_values(cls, values: list, options: dict) -> Effect:
+        """The effect from the ``--effect`` syntax: positional ``values`` (a count allowed
+        by :attr:`values`) and keyword ``options`` (checked against :attr:`options`)."""
+        raise NotImplementedError
+
+    @classmethod
+    def candidate(cls, ctx):
+        """The diagnosis' candidate of this effect for a recording
+        (:class:`~quadfault.effects.candidate.LibraryContext`), bounds scaled to its
+        nominal vehicle."""
+        raise NotImplementedError
+
+    @classmethod
+    def fit_note(cls, params: dict, selected) -> str:
+        """Sentences the diagnosis adds to this effect's explanation when it is accepted with
+        the reported ``params`` beside the ``selected`` effect names ("" for none)."""
+        return ""
+
     def describe(self) -> dict:
         """JSON-able ``{"name", "params"}`` (stored as truth in a recording's meta)."""
         return {"name": self.name, "params": self.params()}
@@ -144,12 +176,38 @@ _STANDALONE_DT = 1e-3
 
 
 class Compiled(Effect):
-    """A built-in effect with an entry in the compiled effect chain
-    (:mod:`quadfault.effects.chain`). The closed loop runs that entry compiled, from the
-    plant's rows; the protocol methods here run the same entry for one vehicle from Python
-    (its memory -- lag, delay, gusts -- kept on the object from one call to the next and
-    cleared by ``reset``). ``rotor_thrust`` takes the loop's generator as ``gen`` (a wind
-    without a seed draws its gusts from it; alone, from a generator seeded 0)."""
+    """An effect with an entry in the compiled effect chain (:mod:`quadfault.effects.chain`).
+
+    Its module holds the entry's kernels, which the chain's dispatcher calls by the effect's
+    code (:mod:`quadfault.effects.dispatch`): ``thrust_step`` (the thrust stage, once per
+    physics step) and/or ``wrench_term`` with ``wrench_stage`` (the step's numbers, then the
+    force and moment at each RK stage). :meth:`pack` lays the parameters out in the entry's
+    row. The closed loop runs that entry compiled, from the plant's rows; the protocol
+    methods here run the same entry for one vehicle from Python (its memory -- lag, delay,
+    gusts -- kept on the object from one call to the next and cleared by ``reset``).
+    ``rotor_thrust`` takes the loop's generator as ``gen`` (a wind without a seed draws its
+    gusts from it; alone, from a generator seeded 0)."""
+
+    #: ``(effect, n_rotors, dt, yaw_signs) -> runner`` of one vehicle's chain (set by
+    #: :mod:`quadfault.effects.rows`, which builds the chain's rows)
+    one_vehicle: ClassVar = None
+
+    def pack(self, n_rotors: int, dt: float, yaw_signs=None) -> tuple[tuple, int]:
+        """``(parameters, memory slots)`` of this effect's entry on a vehicle with
+        ``n_rotors`` flown at physics step ``dt`` [s] (``yaw_signs``: the flown rotors'
+        yaw-torque signs)."""
+        raise NotImplementedError
+
+    @classmethod
+    def stream_seed(cls, params) -> int | None:
+        """The seed of the entry's own random stream (``params``: its parameters), or None
+        when it draws from the vehicle's generator (or never)."""
+        return None
+
+    @classmethod
+    def lost(cls, memory) -> bool:
+        """Whether the entry (``memory``: its memory slots) lost history it needed."""
+        return False
 
     def reset(self, n_rotors: int) -> None:
         for key in ("_single", "_fallback"):
@@ -163,9 +221,7 @@ class Compiled(Effect):
         the first call after ``reset``."""
         single = self.__dict__.get("_single")
         if single is None:
-            from quadfault.effects.rows import Single, entry
-
-            single = Single([entry(self, n_rotors, dt, self._yaw_signs(n_rotors))])
+            single = Compiled.one_vehicle(self, n_rotors, dt, self._yaw_signs(n_rotors))
             self.__dict__["_single"] = single  # frozen dataclass: memory beside the fields
             self.__dict__["_fallback"] = np.random.default_rng(0)
         return single

@@ -27,8 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from quadfault.effects.spec import EFFECTS, canonical_order
-from quadfault.effects.thrust import IDENTITY_CURVE
+from quadfault.effects.thrust_curve import IDENTITY_CURVE, ThrustCurve
 from quadfault.errors import ConfigError, QuadfaultError
+from quadfault.sidecar import vehicle_from_sidecar
 
 FORMAT = "quadfault-diagnosis/2"
 #: direction parameters: world vectors (3) and in-plane body vectors (2)
@@ -146,8 +147,6 @@ def _load(source) -> tuple[dict, str]:
 
 
 def _vehicle(doc: dict, where: str, frame: str):
-    from quadfault.sidecar import vehicle_from_sidecar
-
     vd = doc.get("vehicle")
     if not isinstance(vd, dict):
         _fail(where, "vehicle", "missing or not an object (the diagnosis' nominal vehicle, "
@@ -194,7 +193,7 @@ def _fitted(entry, k: int, where: str, frame: str, curve) -> FittedEffect:
     unc = frame_vectors(parts["uncertainty"], frame, magnitude=True)
     unc = {p: [abs(x) for x in v] if isinstance(v, list) else v for p, v in unc.items()}
     bounds = {p: v for p, v in parts["bounds"].items() if isinstance(v, list) and len(v) == 2}
-    if name == "thrust_curve" and "nominal_curve" not in params:
+    if name == ThrustCurve.name and "nominal_curve" not in params:
         params["nominal_curve"] = list(curve or IDENTITY_CURVE)
     try:
         effect = EFFECTS[name].from_params(params)

@@ -1,9 +1,13 @@
 """The registry of effects: one table names every effect; codes and lookups derive from it.
 
-:data:`TABLE` lists the effect classes in the order of their codes (an effect's code is its
-position in the table: never written by hand). Everything that needs to know the effects --
-the ``--effect`` parser, the diagnosis JSON loader, the compiled chain, the diagnosis'
-library and its identifiability gate -- reads them from here:
+:data:`TABLE` lists the effect classes, one module each (``quadfault/effects/<name>.py``:
+the parameters, the kernels, the packing into the compiled chain, the diagnosis' candidate,
+what a recording needs). An effect's code is its row in the table, never written by hand;
+the compiled (numba) chain's dispatchers are generated from the table
+(:mod:`quadfault.effects.dispatch`). The order of the rows is the order of the diagnosis'
+library. Everything that needs to know the effects -- the ``--effect`` parser, the diagnosis
+JSON loader, the compiled chain, the diagnosis' library and its identifiability gate -- reads
+them from here:
 
 * :func:`names` -- the canonical names, in table order;
 * :func:`effect_class` -- the class of a name (a one-line :class:`~quadfault.errors.ConfigError`
@@ -24,28 +28,32 @@ Example::
 from __future__ import annotations
 
 from quadfault.effects.base import Identifiability
-from quadfault.effects.body import Inertia, Mass
-from quadfault.effects.thrust import (
-    BatteryThrust,
-    Delay,
-    GroundEffect,
-    MotorEfficiency,
-    MotorLag,
-    ThrustCurve,
-    ThrustScale,
-)
-from quadfault.effects.wrench import BladeFlapping, ComOffset, Drag, RateDamping, RotorInertia, Wind
+from quadfault.effects.battery_thrust import BatteryThrust
+from quadfault.effects.blade_flapping import BladeFlapping
+from quadfault.effects.com_offset import ComOffset
+from quadfault.effects.delay import Delay
+from quadfault.effects.drag import Drag
+from quadfault.effects.ground_effect import GroundEffect
+from quadfault.effects.inertia import Inertia
+from quadfault.effects.mass import Mass
+from quadfault.effects.motor_efficiency import MotorEfficiency
+from quadfault.effects.motor_lag import MotorLag
+from quadfault.effects.rate_damping import RateDamping
+from quadfault.effects.rotor_inertia import RotorInertia
+from quadfault.effects.thrust_curve import ThrustCurve
+from quadfault.effects.thrust_scale import ThrustScale
+from quadfault.effects.wind import Wind
 from quadfault.errors import ConfigError
 
 #: every effect, one row each; an effect's code is its row
 TABLE = (
     MotorEfficiency,
     ThrustScale,
-    Drag,
-    MotorLag,
-    Delay,
-    Wind,
     GroundEffect,
+    Delay,
+    MotorLag,
+    Drag,
+    Wind,
     ComOffset,
     Inertia,
     BladeFlapping,
@@ -84,5 +92,11 @@ def identifiability(name: str) -> Identifiability:
     return effect_class(name).identifiability
 
 
+def equivalence_classes() -> dict:
+    """``{name: class}`` of the effects the data cannot always tell apart (each effect's
+    ``equivalent``; docs/effects.md, "What the data cannot tell apart")."""
+    return {cls.name: cls.equivalent for cls in TABLE if cls.equivalent is not None}
+
+
 __all__ = ["TABLE", "EFFECTS", "EFFECT_NAMES", "names", "effect_class", "code",
-           "identifiability"]
+           "identifiability", "equivalence_classes"]

@@ -1,10 +1,11 @@
 """The compiled effect chain's numbers: each built-in effect as an entry, N vehicles as rows.
 
 :func:`entry` turns an effect (its parameters, the flown vehicle's rotors, the physics step)
-into the numbers the chain's kernels read (:mod:`quadfault.effects.chain` has the layout);
-:func:`build` makes the :class:`~quadfault.effects.chain.EffectRows` of N vehicles, each with
-its own effects; :func:`write` replaces one vehicle's effects (domain randomisation: new
-parameters per episode) and :func:`reset` clears vehicles' memory for a new flight.
+into the numbers the chain's kernels read: its code (the registry's) and what its ``pack``
+lays out (:mod:`quadfault.effects.chain` has the layout); :func:`build` makes the
+:class:`~quadfault.effects.chain.EffectRows` of N vehicles, each with its own effects;
+:func:`write` replaces one vehicle's effects (domain randomisation: new parameters per
+episode) and :func:`reset` clears vehicles' memory for a new flight.
 :class:`Single` runs one vehicle's chain from Python: the effect protocol's numpy form of the
 built-in effects (``rotor_thrust`` / ``wrench`` outside a loop, and inside the interpreted
 loop beside effects written in Python).
@@ -12,11 +13,13 @@ loop beside effects written in Python).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 import quadfault.effects.chain as C
+import quadfault.effects.registry as registry
+from quadfault.effects.base import Compiled
+from quadfault.effects.dispatch import has_term
+from quadfault.effects.delay import delay_capacity
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, typed_list
 
@@ -24,57 +27,17 @@ from quadfault.jit import jit, typed_list
 _NEVER = np.random.default_rng(0)
 
 
-def delay_capacity(delay: float, dt: float) -> int:
-    """Knots a delay of ``delay`` [s] keeps at physics step ``dt`` [s]: twice those its mean
-    needs at that step, so steps down to half as long stay exact (a replay's uneven
-    intervals); with shorter ones the loop flags the vehicle (:func:`lost`)."""
-    return 2 * int(math.ceil(delay / dt - 1e-9)) + 4
-
-
 def entry(effect, n_rotors: int, dt: float, yaw_signs=None):
     """``(code, parameters, memory slots)`` of a built-in ``effect`` on a vehicle with
     ``n_rotors`` flown at physics step ``dt`` [s] (``yaw_signs``: the flown rotors' yaw-torque
-    signs, for ``rotor_inertia``); None for mass and inertia (they set the flown vehicle)."""
-    e, n, name = effect, int(n_rotors), effect.name
-    if name in ("mass", "inertia"):
-        return None
-    if name == "thrust_curve":
-        return C.CURVE, (*e.curve, *e.nominal), 0
-    if name == "battery_thrust":
-        return C.BATTERY, (e.exponent, e.v_start, e.v_end, e.duration, e.v_ref), 0
-    if name == "motor_efficiency":
-        if len(e.eta) != n:
-            raise ConfigError(f"motor_efficiency has {len(e.eta)} rotors, the vehicle {n}")
-        return C.EFFICIENCY, tuple(e.eta), 0
-    if name == "thrust_scale":
-        return C.SCALE, (e.scale,), 0
-    if name == "ground_effect":
-        return C.GROUND, (e.rotor_radius, e.ground_z), 0
-    if name == "delay":
-        cap = delay_capacity(e.delay, dt)
-        return C.DELAY, (e.delay, float(cap)), C.DELAY_HEADER + cap * (1 + 2 * n)
-    if name == "motor_lag":
-        return C.LAG, (e.tau,), 3 + n
-    if name == "drag":
-        return C.DRAG, (*e.k, *e.air_velocity), 0
-    if name == "wind":
-        own = e.seed is not None
-        return C.WIND, (*e.velocity, e.gust, e.gust_tau, *e.k, float(own),
-                        float(e.seed if own else 0)), 6
-    if name == "com_offset":
-        return C.COM, tuple(e.offset), 0
-    if name == "blade_flapping":
-        return C.FLAPPING, (e.k_force, e.k_moment, *e.air_velocity), 0
-    if name == "rotor_inertia":
-        signs = e.yaw_signs if e.yaw_signs is not None else yaw_signs
-        if signs is None:
-            signs = np.resize([-1.0, 1.0], n)
-        if len(signs) != n:
-            raise ConfigError(f"rotor_inertia has {len(signs)} yaw signs, the vehicle {n} rotors")
-        return C.ROTOR_INERTIA, (e.kappa, *(float(s) for s in signs)), 3 + 2 * n
-    if name == "rate_damping":
-        return C.DAMPING, (*e.linear, *e.quadratic), 0
-    raise ConfigError(f"effect {name!r} has no compiled form")
+    signs, for effects that need them); None for an effect without an entry (mass and
+    inertia set the flown vehicle)."""
+    if effect.name not in C.CODES:
+        if registry.EFFECTS.get(effect.name) is type(effect):
+            return None
+        raise ConfigError(f"effect {effect.name!r} has no compiled form")
+    params, memory = effect.pack(int(n_rotors), dt, yaw_signs)
+    return C.CODES[effect.name], tuple(float(x) for x in params), int(memory)
 
 
 def _size(entries) -> tuple[int, int, int]:
@@ -103,10 +66,10 @@ def write(fx: C.EffectRows, i: int, entries) -> None:
     from a fresh start (memory cleared); they must :func:`fits`."""
     if not fits(fx, entries):
         raise ConfigError("these effects need more room than the rows were built with")
-    if sum(code >= C.DRAG for code, _, _ in entries) > C.WRENCH_TERMS:
+    if sum(has_term(registry.TABLE[code]) for code, _, _ in entries) > C.WRENCH_TERMS:
+        wrenches = ", ".join(cls.name for cls in registry.TABLE if has_term(cls))
         raise ConfigError(f"a vehicle flies at most {C.WRENCH_TERMS} effects with a wrench "
-                          "(drag, wind, com_offset, blade_flapping, rotor_inertia, "
-                          "rate_damping)")
+                          f"({wrenches})")
     fx.code[i] = -1
     a = m = 0
     for e, (code, params, memory) in enumerate(entries):
@@ -146,17 +109,20 @@ def reset(fx: C.EffectRows, rows) -> None:
         fx.memory[i] = 0.0
         fx.streams[i] = _NEVER
         for e in range(fx.code.shape[1]):
-            a = fx.param[i, e]
-            if fx.code[i, e] == C.WIND and fx.params[i, a + 8] != 0.0:
-                fx.streams[i] = np.random.default_rng(int(fx.params[i, a + 9]))
+            if fx.code[i, e] < 0:
+                break
+            seed = registry.TABLE[fx.code[i, e]].stream_seed(fx.params[i, fx.param[i, e]:])
+            if seed is not None:
+                fx.streams[i] = np.random.default_rng(seed)
 
 
 def lost(fx: C.EffectRows) -> np.ndarray:
-    """Vehicles (N,) bool whose delay needed a knot it had dropped: steps much shorter than
-    the physics step the rows were built for (:func:`delay_capacity`)."""
+    """Vehicles (N,) bool with an entry that lost history it needed (a delay flown at steps
+    much shorter than the physics step the rows were built for,
+    :func:`~quadfault.effects.delay.delay_capacity`)."""
     out = np.zeros(len(fx.code), dtype=bool)
-    for i, e in zip(*np.nonzero(fx.code == C.DELAY)):
-        out[i] |= fx.memory[i, fx.mem[i, e]] != 0.0
+    for i, e in zip(*np.nonzero(fx.code >= 0)):
+        out[i] |= registry.TABLE[fx.code[i, e]].lost(fx.memory[i, fx.mem[i, e]:])
     return out
 
 
@@ -192,5 +158,13 @@ def _vec(x, n=3) -> tuple:
     return tuple(float(a) for a in np.ravel(x)[:n])
 
 
+def single(effect, n_rotors: int, dt: float, yaw_signs=None) -> Single:
+    """One vehicle's chain of the one built-in ``effect`` (its protocol methods from Python)."""
+    return Single([entry(effect, n_rotors, dt, yaw_signs)])
+
+
+Compiled.one_vehicle = staticmethod(single)
+
+
 __all__ = ["entry", "empty", "fits", "write", "build", "grown", "reset", "lost", "Single",
-           "delay_capacity"]
+           "single", "delay_capacity"]

@@ -23,11 +23,18 @@ Estimators and the diagnosis never read truth; these functions strip it first.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.signal import butter, csd, filtfilt, welch
 
+from quadfault.diagnosis.fit import fit
+from quadfault.diagnosis.library import build_library, predict
+from quadfault.diagnosis.residuals import noise_scale, prepare
+from quadfault.effects.motor_efficiency import MotorEfficiency
+from quadfault.errors import ConfigError
 from quadfault.recording import Recording
+from quadfault.rotation import quat_to_rot
 
 MIN_HEIGHT = 0.3  # [m] above the first sample: "airborne"
 
@@ -71,8 +78,6 @@ def without_calibration(rec: Recording) -> Recording:
     """A copy without the rows of the importer's calibration segment
     (``meta["calibration"]["segment"]``), so that a fit on the copy is scored on data the
     importer did not use; the cut becomes a gap, which the diagnosis never bridges."""
-    from dataclasses import replace
-
     seg = (rec.meta.get("calibration") or {}).get("segment")
     if not seg:
         return rec
@@ -121,11 +126,6 @@ def effect_fit(rec: Recording, names, min_height: float | None = MIN_HEIGHT,
                folds: int = 5) -> EffectFit:
     """Fit the diagnosis' library effects ``names`` jointly on the blocks of ``rec`` where
     the vehicle is airborne (:func:`airborne`; IMU-only logs: where it carries its weight)."""
-    from quadfault.diagnosis.fit import fit
-    from quadfault.diagnosis.library import build_library, predict
-    from quadfault.diagnosis.residuals import noise_scale, prepare
-    from quadfault.errors import ConfigError
-
     rec = rec.without_truth()
     if min_height is not None and not rec.has_pose:
         raise ConfigError("a minimum height needs a recording with position; pass None")
@@ -168,7 +168,7 @@ def effect_fit(rec: Recording, names, min_height: float | None = MIN_HEIGHT,
 def efficiency_fit(rec: Recording, min_height: float | None = MIN_HEIGHT,
                    folds: int = 5) -> EfficiencyFit:
     """Fit the diagnosis' ``motor_efficiency`` effect on the airborne blocks of ``rec``."""
-    ef = effect_fit(rec, ("motor_efficiency",), min_height, folds)
+    ef = effect_fit(rec, (MotorEfficiency.name,), min_height, folds)
     return EfficiencyFit(eta=ef.x[0], sd=ef.sd[0], improvement=ef.improvement["all"],
                          improvement_angular=ef.improvement["angular"], blocks=ef.blocks)
 
@@ -205,8 +205,6 @@ class RotationalCheck:
 def _band_response(x: np.ndarray, y: np.ndarray, fs: float, band) -> tuple:
     """``(gain, phase [deg])`` of y on x over ``band``: summed cross-spectrum over summed
     auto-spectrum of x (Welch)."""
-    from scipy.signal import csd, welch
-
     n = int(min(256, len(x) // 4))
     f, pxy = csd(x, y, fs=fs, nperseg=n)
     _, pxx = welch(x, fs=fs, nperseg=n)
@@ -219,10 +217,6 @@ def rotational_check(rec: Recording, thrust_coefficient: float | None = None,
                      band=(2.0, 16.0), cutoff_hz: float = 1.0) -> RotationalCheck:
     """See :class:`RotationalCheck`; ``thrust_coefficient`` k [N/(rad/s)^2] turns the logged
     rotor speeds (``rec.rotor_speed``) into thrusts for the second gain."""
-    from scipy.signal import butter, filtfilt
-
-    from quadfault.rotation import quat_to_rot
-
     rec = rec.without_truth()
     veh = rec.vehicle
     dt = float(np.median(np.diff(rec.t)))

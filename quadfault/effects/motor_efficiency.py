@@ -1,0 +1,119 @@
+"""``motor_efficiency``: per-rotor thrust loss, ``f_i' = eta_i f_i`` (paper eq. 13)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from quadfault.effects.base import Compiled, Identifiability, param, vector
+from quadfault.effects.candidate import Candidate
+from quadfault.effects.thrust_scale import ThrustScale
+from quadfault.errors import ConfigError
+from quadfault.jit import jit
+
+
+@jit(inline="always")
+def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
+    """The chain's entry: parameters eta_1 .. eta_n."""
+    for r in range(f.shape[0]):
+        f[r] = f[r] * P[i, a + r]
+
+
+@dataclass(frozen=True)
+class MotorEfficiency(Compiled):
+    """Per-rotor thrust factor ``eta`` [-] (1 = nominal; paper eq. 13)."""
+
+    eta: tuple = (1.0, 1.0, 1.0, 1.0)
+    name: ClassVar[str] = "motor_efficiency"
+    order: ClassVar[int] = 2
+    identifiability: ClassVar[Identifiability] = Identifiability(
+        note="a per-rotor loss shows as the unequal rotor split that keeps the moments "
+             "balanced; a loss common to all rotors is a thrust_scale")
+    explanation: ClassVar[str] = ("rotor thrusts are eta_i times the commanded ones "
+                                  "(per-rotor thrust loss)")
+    equivalent: ClassVar[str] = "thrust"
+    values: ClassVar[tuple] = (1, 4)
+    syntax: ClassVar[str] = "ETA or ETA1,ETA2,ETA3,ETA4 [-]"
+    example: ClassVar[str] = "motor_efficiency=1,1,0.8,1"
+
+    def __post_init__(self):
+        eta = vector(self.eta, 4, "motor_efficiency eta")
+        if not all(0.0 <= e <= 2.0 for e in eta):
+            raise ConfigError(f"motor_efficiency eta must be in [0, 2], got {eta}")
+        object.__setattr__(self, "eta", eta)
+
+    def params(self):
+        return {"eta": list(self.eta)}
+
+    @classmethod
+    def from_params(cls, params):
+        return cls(param(params, "eta", cls.name))
+
+    @classmethod
+    def from_values(cls, values, options):
+        return cls(eta=tuple(values), **options)
+
+    @classmethod
+    def fit_note(cls, params, selected):
+        if "baseline_eta" in params:
+            text = (" eta is relative to the healthy baseline flight (baseline_eta) and to "
+                    "the median rotor; eta_flight is this flight's own.")
+        else:
+            text = (" eta is relative to the median rotor (a factor common to every rotor is "
+                    "thrust_scale's or thrust_curve's); one flight cannot tell a weak rotor "
+                    "from the vehicle's own imbalance: compare with a flight of the healthy "
+                    "vehicle (--baseline).")
+        if "eta_absolute" in params:
+            text += " eta_absolute: thrust calibrated by the measured rotor speeds."
+        return text
+
+    def pack(self, n_rotors, dt, yaw_signs=None):
+        if len(self.eta) != n_rotors:
+            raise ConfigError(f"motor_efficiency has {len(self.eta)} rotors, the vehicle "
+                              f"{n_rotors}")
+        return tuple(self.eta), 0
+
+    @classmethod
+    def candidate(cls, ctx):
+        one4, rp = (1.0,) * 4, ctx.rp
+        return EfficiencyCandidate(cls.name, ("eta1 [-]", "eta2 [-]", "eta3 [-]", "eta4 [-]"),
+                                   (0.2,) * 4, (1.5,) * 4, one4, (one4,), "thrust", cls.order,
+                                   affine=True, excludes=(ThrustScale.name,),
+                                   absolute=rp.has_rotor and rp.rotor_k_source == "sidecar")
+
+
+@dataclass(frozen=True)
+class EfficiencyCandidate(Candidate):
+    """Per-rotor thrust factors ``eta``, reported relative to the median rotor: a factor
+    common to every rotor is a calibration (``thrust_scale``, ``thrust_curve``), not damage.
+    With ``absolute`` (thrust calibrated independently, e.g. measured rotor speeds with a
+    known thrust coefficient) the fitted factors are also given as ``eta_absolute``."""
+
+    absolute: bool = False
+    baseline: tuple = ()
+    keys: ClassVar[tuple] = (("eta", 0, 4),)
+
+    def thrust(self, x, rp, f, t, dt):
+        return f * np.asarray(x, dtype=float)[None, :]
+
+    def relative(self, x) -> np.ndarray:
+        """``eta`` as reported: relative to the median rotor, and with a ``baseline`` (a
+        healthy flight's relative eta) relative to it."""
+        x = np.asarray(x, dtype=float)
+        if self.baseline:
+            x = x / np.asarray(self.baseline, dtype=float)
+        return x / max(float(np.median(x)), 1e-9)
+
+    def public(self, x, sd, ctx):
+        x, sd = np.asarray(x, dtype=float), np.asarray(sd, dtype=float)
+        rel = self.relative(x)
+        params, unc = {"eta": rel.tolist()}, {"eta": (sd * rel / np.maximum(x, 1e-9)).tolist()}
+        if self.baseline:
+            flight = x / max(float(np.median(x)), 1e-9)
+            params["eta_flight"], unc["eta_flight"] = flight.tolist(), (sd * flight / x).tolist()
+            params["baseline_eta"] = list(self.baseline)
+        if self.absolute:
+            params["eta_absolute"], unc["eta_absolute"] = x.tolist(), sd.tolist()
+        return params, unc
