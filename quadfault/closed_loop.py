@@ -53,6 +53,7 @@ from quadfault.controller import (
     rotor_commands,
 )
 from quadfault.dynamics import (
+    RigidBodyState,
     call_wrench,
     reference_euler_step,
     reference_euler_store,
@@ -63,7 +64,7 @@ from quadfault.dynamics import (
 )
 from quadfault.effects.chain import NO_TERMS, EffectRows, has_wrench, step_effects
 from quadfault.errors import ConfigError
-from quadfault.jit import jit, prange, python
+from quadfault.jit import jit, prange, python, typed_list
 from quadfault.motors import motor_thrust
 from quadfault.rotation import mat3, store3, store33, vec3
 from quadfault.sensors import accelerometer3, measure3
@@ -135,15 +136,11 @@ class Vehicles(NamedTuple):
 
     def state(self, i: int = 0):
         """A copy of vehicle ``i``'s true state (a RigidBodyState)."""
-        from quadfault.dynamics import RigidBodyState
-
         return RigidBodyState(self.p[i].copy(), self.v[i].copy(), self.R[i].copy(),
                               self.w[i].copy())
 
     def measurement(self, i: int = 0):
         """A copy of vehicle ``i``'s current measurement (a RigidBodyState)."""
-        from quadfault.dynamics import RigidBodyState
-
         return RigidBodyState(self.mp[i].copy(), self.mv[i].copy(), self.mR[i].copy(),
                               self.mw[i].copy())
 
@@ -421,8 +418,6 @@ def generators(rngs):
     """The list of generators the loop takes: one ``numpy.random.Generator`` per vehicle (a
     numba typed list: a kernel draws from them directly; passing it costs a fraction of
     passing a Generator)."""
-    from quadfault.jit import typed_list
-
     return typed_list(rngs)
 
 

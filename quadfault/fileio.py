@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import io
 import os
 import secrets
 import signal
@@ -107,8 +108,6 @@ def atomic_write_text(path, text: str, *, force: bool = False) -> Path:
 
 def atomic_savefig(fig, path, *, force: bool = False, **kwargs) -> Path:
     """Save a matplotlib figure atomically."""
-    import io
-
     buf = io.BytesIO()
     fmt = Path(path).suffix.lstrip(".") or "png"
     fig.savefig(buf, format=fmt, **kwargs)

@@ -39,6 +39,8 @@ import types
 import warnings
 from pathlib import Path
 
+from quadfault.errors import ConfigError
+
 #: the packages whose modules may hold compiled kernels
 PACKAGES = ("quadfault", "estimators", "quad_fault_env", "agents")
 #: a module whose source mentions one of these is hashed into the cache key
@@ -213,8 +215,6 @@ def set_threads(n: int | None) -> int:
     if n is not None:
         most = nb.config.NUMBA_NUM_THREADS
         if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= most:
-            from quadfault.errors import ConfigError
-
             raise ConfigError(f"numba threads must be an integer in 1..{most}, got {n!r}")
         nb.set_num_threads(n)
     return int(nb.get_num_threads())

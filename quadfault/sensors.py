@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from quadfault.dynamics import RigidBodyState
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
 from quadfault.rotation import expm3, mat3, matmul3, store3, store33, vec3
@@ -57,8 +58,6 @@ class SensorNoise:
     def measure(self, state, specific_force, rng: np.random.Generator):
         """Noisy copy of one ``state`` (a ``RigidBodyState``) and of the accelerometer
         reading ``specific_force`` (None: not measured), drawn from ``rng``."""
-        from quadfault.dynamics import RigidBodyState
-
         out = (np.empty(3), np.empty(3), np.empty((3, 3)), np.empty(3))
         _measure_one(*(np.asarray(x, dtype=float) for x in state), self.constants, rng, *out)
         sf = None

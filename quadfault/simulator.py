@@ -31,6 +31,7 @@ from quadfault.flight import Flight
 from quadfault.errors import ConfigError
 from quadfault.motors import MotorModel
 from quadfault.plant import INTEGRATORS, EffectsHook, Plant
+from quadfault.progress import progress_bar
 from quadfault.recording import Recording
 from quadfault.rotation import rot_to_quat
 from quadfault.scenarios import Scenario
@@ -106,8 +107,6 @@ def initial_state(scenario: Scenario, t0: float = 0.0,
 def _progress(total, enabled, desc):
     if not enabled:
         return None
-    from quadfault.progress import progress_bar
-
     return progress_bar(total=total, desc=desc, unit="step")
 
 

@@ -153,3 +153,110 @@ def test_the_core_does_not_load_the_estimators():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
                          check=False)
     assert out.stdout.strip() == "[]", out.stderr
+
+
+# the layers of the quadfault package ---------------------------------------------------
+#: lowest first: a module imports (lazy imports included) only its own layer and those below
+LAYERS = (
+    ("foundation", ("quadfault", "quadfault.errors", "quadfault.jit", "quadfault.progress",
+                    "quadfault.fileio", "quadfault.rotation", "quadfault.vehicle",
+                    "quadfault.frames", "quadfault.sidecar", "quadfault.sample",
+                    "quadfault.trajectory")),
+    ("effects", ("quadfault.effects",)),
+    ("model", ("quadfault.dynamics", "quadfault.motors", "quadfault.sensors",
+               "quadfault.controller", "quadfault.closed_loop", "quadfault.plant",
+               "quadfault.scenarios", "quadfault.task_scenarios", "quadfault.recording")),
+    ("applications", ("quadfault.simulator", "quadfault.diagnosis", "quadfault.importers",
+                      "quadfault.cli", "quadfault.cli_simulate")),
+)
+
+
+def _layer(module: str) -> int:
+    """The layer of a module of the quadfault package (a package counts for its modules)."""
+    best = None
+    for k, (_, members) in enumerate(LAYERS):
+        for m in members:
+            if (module == m or module.startswith(m + ".")) and (best is None
+                                                                 or len(m) > len(best[1])):
+                best = (k, m)
+    assert best is not None, f"{module} is in no layer of LAYERS"
+    return best[0]
+
+
+def test_the_model_sits_below_the_applications():
+    """foundation <- effects <- model <- applications: every import points down (or stays in
+    its layer), so the effects sit below the physics core and replay, the diagnosis and the
+    importers above it."""
+    graph = _import_graph()
+    bad = []
+    for name, deps in graph.items():
+        if name.split(".")[0] != "quadfault":
+            continue
+        for dep in deps:
+            if dep.split(".")[0] == "quadfault" and _layer(dep) > _layer(name):
+                bad.append(f"{name} ({LAYERS[_layer(name)][0]}) imports {dep} "
+                           f"({LAYERS[_layer(dep)][0]})")
+    assert _layer("quadfault.effects.motor_lag") < _layer("quadfault.dynamics")  # the check
+    assert not bad, "\n".join(sorted(bad))
+
+
+#: third-party modules a product module may import inside a function: optional extras and
+#: heavy ones only some commands need (plots, progress bars, the compiler's own loader)
+OPTIONAL = {"matplotlib", "pyulog", "numba", "tqdm"}
+
+
+def _function_imports(path: Path):
+    for fn in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            for node in ast.walk(fn):
+                if isinstance(node, ast.Import):
+                    yield from ((node.lineno, a.name) for a in node.names)
+                elif isinstance(node, ast.ImportFrom) and node.level == 0:
+                    yield node.lineno, node.module
+
+
+def test_only_optional_dependencies_are_imported_inside_functions():
+    """Outside the CLI's subcommand modules, imports are at the top of the module (a lazy
+    import hides a dependency, or a cycle)."""
+    bad = []
+    for path in sorted((ROOT / "quadfault").rglob("*.py")):
+        if path.name.startswith("cli"):
+            continue
+        for line, module in _function_imports(path):
+            if module.split(".")[0] not in OPTIONAL:
+                bad.append(f"{path.relative_to(ROOT)}:{line} imports {module} in a function")
+    assert not bad, "\n".join(bad)
+
+
+def test_each_effect_is_named_in_its_own_module():
+    """An effect's quoted name appears in its module, the registry and at most one other
+    product module (keys of JSON objects -- a vehicle's ``mass`` -- are not names)."""
+    from quadfault.effects import registry
+
+    def quoted(tree):
+        keys = set()
+        for n in ast.walk(tree):
+            if isinstance(n, ast.Dict):
+                keys.update(id(k) for k in n.keys if k is not None)
+            elif isinstance(n, ast.Subscript):
+                keys.add(id(n.slice))
+            elif isinstance(n, ast.Compare) and any(isinstance(o, (ast.In, ast.NotIn))
+                                                    for o in n.ops):
+                keys.add(id(n.left))
+            elif (isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute)
+                  and n.func.attr in ("get", "pop", "setdefault") and n.args):
+                keys.add(id(n.args[0]))
+        return {n.value for n in ast.walk(tree)
+                if isinstance(n, ast.Constant) and isinstance(n.value, str) and id(n) not in keys}
+
+    names = {p: quoted(ast.parse(p.read_text(encoding="utf-8")))
+             for pkg in ACYCLIC for p in sorted((ROOT / pkg).rglob("*.py"))}
+    effects = ROOT / "quadfault" / "effects"
+    bad = {}
+    for name in registry.names():
+        own = {effects / f"{name}.py", effects / "registry.py"}
+        hits = [str(p.relative_to(ROOT)) for p, s in names.items() if name in s and p not in own]
+        if len(hits) > 1:
+            bad[name] = hits
+    assert (effects / "motor_lag.py") in names and '"motor_lag"' in (effects / "motor_lag.py").read_text()
+    assert not bad, bad

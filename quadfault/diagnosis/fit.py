@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, lsq_linear
 
 from quadfault.diagnosis.library import Candidate, predict
 from quadfault.diagnosis.residuals import Replay
@@ -174,8 +174,6 @@ def solve_linear(lin: Linearisation, measured, scale, mask, x_start, lo, hi,
     problem of size p (``scipy.optimize.lsq_linear`` on the Cholesky factor of the weighted
     normal equations). Same optimum as ``scipy.optimize.least_squares`` with that loss.
     """
-    from scipy.optimize import lsq_linear
-
     A = (lin.phi[mask] / scale[None, :, None]).reshape(-1, lin.phi.shape[-1])
     z = ((measured - lin.base)[mask] / scale).ravel() + A @ lin.x0
     x = _clip_inside(np.asarray(x_start, dtype=float), lo, hi)

@@ -14,6 +14,7 @@ RMS in five quantile bins of that variable as evidence.
 from __future__ import annotations
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from quadfault.diagnosis.residuals import Replay, channel_unit
 from quadfault.diagnosis.result import Interval
@@ -31,8 +32,6 @@ def savgol_coeffs(window: int, order: int = 2) -> np.ndarray:
 def savgol_filter(z: np.ndarray, window: int, order: int = 2) -> np.ndarray:
     """Savitzky-Golay smoothing of ``z`` (n, k) along axis 0 (odd ``window`` <= n); the first
     and last ``window // 2`` rows take the polynomial fitted to the first / last window."""
-    from numpy.lib.stride_tricks import sliding_window_view
-
     z = np.asarray(z, dtype=float)
     n, h = len(z), window // 2
     out = np.empty_like(z)

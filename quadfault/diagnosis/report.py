@@ -22,8 +22,10 @@ from pathlib import Path
 import numpy as np
 
 from quadfault.diagnosis.locate import regime_variables
+from quadfault.diagnosis.report_text import markdown
 from quadfault.diagnosis.residuals import channel_unit
 from quadfault.diagnosis.result import DiagnosisResult
+from quadfault.errors import QuadfaultError
 from quadfault.fileio import atomic_savefig, atomic_write_text, check_writable
 
 FILES = ("report.md", "residuals.png", "regimes.png", "prediction.png")
@@ -173,12 +175,8 @@ def _prediction_png(res: DiagnosisResult, path, force):
 def write_report(res: DiagnosisResult, out_dir, *, source: str = "recording",
                  force: bool = False) -> Path:
     """Write ``report.md`` and the PNG plots into ``out_dir`` (created if missing)."""
-    from quadfault.diagnosis.report_text import markdown
-
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
-        from quadfault.errors import QuadfaultError
-
         raise QuadfaultError(f"{out}: exists and is not a directory")
     out.mkdir(parents=True, exist_ok=True)
     check_writable([out / f for f in FILES], force=force)

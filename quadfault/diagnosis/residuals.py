@@ -40,6 +40,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse import csr_matrix
 
 from quadfault.dynamics import E3, angular_acceleration, translational_acceleration
 from quadfault.errors import ConfigError, RecordingError
@@ -165,8 +166,6 @@ class Replay:
         """Duration-weighted block means of interval values ``x`` (M, k) -> (B, k)."""
         S = self.__dict__.get("_averager")
         if S is None:
-            from scipy.sparse import csr_matrix
-
             ok = np.flatnonzero(self.block >= 0)
             blk = self.block[ok]
             S = csr_matrix((self.dt[ok] / self.block_dur[blk], (blk, ok)),
@@ -285,8 +284,6 @@ def prepare(recording: Recording, vehicle: Vehicle | None = None, *,
     validk = bad[knots[1:]] == bad[knots[:-1]]
     M = len(dt)
     seg = np.searchsorted(knots, np.arange(M), side="right") - 1
-    from scipy.sparse import csr_matrix
-
     merge = csr_matrix((dt / dtk[seg], (seg, np.arange(M))), shape=(len(dtk), M))
 
     def mean(x):

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from quadfault.effects import curve_thrust
+from quadfault.errors import ConfigError
 from quadfault.vehicle import Vehicle, allocation_from_rotors
 
 #: Standard Crazyflie rotor order in FLU, in units of the per-axis offset:
@@ -141,8 +142,6 @@ def scale_curve_on_segment(curve, u: np.ndarray, thrust_measured: np.ndarray,
     predicted = curve_thrust(curve, u[mask]).sum(axis=1)
     ok = np.isfinite(predicted) & np.isfinite(thrust_measured[mask])
     if ok.sum() < 5 or np.mean(predicted[ok]) <= 0:
-        from quadfault.errors import ConfigError
-
         raise ConfigError("calibration segment has fewer than 5 usable airborne samples; "
                           "choose another one (--calibration T0,T1)")
     scale = float(np.mean(thrust_measured[mask][ok]) / np.mean(predicted[ok]))

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from quadfault.effects import curve_thrust
-from quadfault.errors import ConfigError
+from quadfault.errors import ConfigError, RecordingError
 from quadfault.importers import (gap_stats, increasing_time_mask, read_raw_table,
                                  require_columns, require_finite, running_span, select)
 from quadfault.importers.crazyflie import (CF21_BRUSHED, FOERSTER_THRUST_CURVE, G_CRAZYFLIE,
@@ -159,8 +159,6 @@ def import_crazypad(path, *, keep_all: bool = False, calibration=None,
         return _import_motor_log(path, table, keep_all, calibration, mass)
     if "controller.cmd_thrust" in table:
         return _import_controller_log(path, table, keep_all, calibration, mass)
-    from quadfault.errors import RecordingError
-
     raise RecordingError(path, "neither a motor_data log (motor.m1..m4) nor a controller_data "
                                "log (controller.cmd_thrust, ...)", column="motor.m1")
 

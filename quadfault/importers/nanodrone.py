@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from quadfault.effects import curve_thrust
-from quadfault.errors import ConfigError
+from quadfault.errors import ConfigError, RecordingError
 from quadfault.importers import (gap_stats, increasing_time_mask, read_raw_table,
                                  require_columns, require_finite, running_span, select)
 from quadfault.importers.crazyflie import (BRUSHLESS_KF, CF21_BRUSHLESS, ERPM_TO_RAD_S,
@@ -87,8 +87,6 @@ def import_nanodrone(path, *, keep_all: bool = False, calibration=None,
     norm = np.linalg.norm(q, axis=1)
     bad = np.flatnonzero(np.abs(norm - 1.0) > QUAT_NORM_TOL)
     if bad.size:
-        from quadfault.errors import RecordingError
-
         raise RecordingError(path, f"quaternion norm {norm[bad[0]]:.6g} is not 1", column="qw",
                              row=int(bad[0]) + 1)
     arrays = {
