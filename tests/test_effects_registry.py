@@ -6,7 +6,7 @@ import pytest
 from quadfault.diagnosis import Diagnosis, DiagnosisConfig
 from quadfault.diagnosis.library import build_library, predict_intervals
 from quadfault.diagnosis.residuals import prepare
-from quadfault.effects import parse_effect, registry, rows
+from quadfault.effects import chain, parse_effect, registry, rows
 from quadfault.effects.base import CHANNELS, Compiled, Identifiability
 from quadfault.errors import ConfigError
 from quadfault.scenarios import LinearVoltage, named_scenario
@@ -84,6 +84,26 @@ def test_every_effect_parses_packs_and_simulates(name):
     rec = _fly(effect, duration=1.0)
     assert np.all(np.isfinite(rec.position)) and len(rec) == len(nominal)
     assert np.max(np.abs(rec.position - nominal.position)) > 1e-6  # the effect acts
+
+
+def test_a_chain_of_some_effects_flies_their_rows_as_the_full_chain_does():
+    """``chain_for(names)`` compiles only those effects' kernels; on rows of those effects it
+    gives the full chain's numbers (the codes are the registry's)."""
+    effects = [parse_effect("motor_lag=0.05"), parse_effect("drag=0.3")]
+    some = chain.chain_for([e.name for e in effects])
+    assert some is not chain.chain_for(None) and some is chain.chain_for(["motor_lag", "drag"])
+    state = ((0.0, 0.0, -1.0), (1.0, -0.5, 0.2), tuple(np.eye(3).ravel()), (0.1, 0.2, -0.3))
+    out = []
+    for c in (some, chain.chain_for(None)):
+        fx = rows.build([[rows.entry(e, 4, 1e-3) for e in effects]])
+        f = np.array([2.0, 2.1, 2.2, 2.3])
+        for k in range(3):
+            c.thrust_effects(fx, 0, f, k * 1e-3, 1e-3, *state, np.random.default_rng(0))
+            f = f + 0.1
+        W = c.wrench_terms(fx, 0, f, 0.0)
+        out.append((f.copy(), c.effects_wrench(W, *state, f, 0.0)))
+    np.testing.assert_array_equal(out[0][0], out[1][0])
+    assert out[0][1] == out[1][1] and out[0][1][0] != (0.0, 0.0, 0.0)
 
 
 @pytest.mark.slow

@@ -8,7 +8,7 @@ with ``folds_agree`` / ``fold_agreement`` (the fold-agreement rule on them) and
 ``improvement`` (held-out, nominal model plus this effect alone).
 
 Frames: parameters that are vectors in the world or body frame
-(:attr:`~quadfault.diagnosis.candidates.Candidate.frames`) are given in the recording's own
+(:attr:`~quadfault.effects.candidate.Candidate.frames`) are given in the recording's own
 frame (``library.public_params(..., frame=)``: NED/FRD, or ENU/FLU for an ENU file) and the
 explanation says which. Bounds (``library.public_bounds``) are symmetric for direction
 parameters, so they read the same in every frame.

@@ -40,23 +40,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from quadfault.diagnosis.phases import excluded_fraction
+from quadfault.diagnosis.residuals import rotor_speeds
+from quadfault.effects.base import ASSUMABLE
 from quadfault.effects.registry import identifiability
+from quadfault.effects.registry import names as effect_names
+from quadfault.errors import ConfigError, RecordingError
 from quadfault.recording import Recording
 
 TIMING_SAMPLES = 2.0
 MAX_INVALID_FRACTION = 0.5
 
-#: assumed constants each effect's fitted value scales with (effects not listed: none --
-#: time constants, and motor_efficiency's eta relative to the median rotor)
-DEPENDS_ON = {
-    "drag": ("mass",), "wind": ("mass",), "blade_flapping": ("mass", "inertia"),
-    "thrust_scale": ("mass",), "thrust_curve": ("mass",), "mass": ("mass",),
-    "inertia": ("inertia", "geometry", "torque_coefficient"),
-    "com_offset": ("mass", "inertia"), "rotor_inertia": ("inertia", "torque_coefficient"),
-    "rate_damping": ("inertia",),
-}
-#: the constants an importer may assume (the sidecar's ``assumed`` list)
-ASSUMABLE = ("mass", "inertia", "geometry", "torque_coefficient")
+#: assumed constants each effect's fitted value scales with (each effect's declaration,
+#: ``Identifiability.scales_with``; effects not listed: none -- time constants, and
+#: motor_efficiency's eta relative to the median rotor)
+DEPENDS_ON = {n: identifiability(n).scales_with for n in effect_names()
+              if identifiability(n).scales_with}
 
 
 @dataclass(frozen=True)
@@ -134,8 +133,6 @@ def _spans_from_column(t, flag) -> tuple:
 def invalid_spans(rec: Recording) -> dict:
     """``{"velocity": ((t0, t1), ...), "position": (...)}``: spans [s] the recording flags
     invalid (sidecar ``invalid`` object, or 0/1 columns ``velocity_valid``/``position_valid``)."""
-    from quadfault.errors import RecordingError
-
     out = {}
     declared = (rec.meta or {}).get("invalid") or {}
     if not isinstance(declared, dict):
@@ -161,12 +158,7 @@ def invalid_spans(rec: Recording) -> dict:
 
 def evidence(rec: Recording) -> Evidence:
     """What ``rec`` carries (:class:`Evidence`)."""
-    from quadfault.diagnosis.phases import excluded_fraction
-    from quadfault.diagnosis.residuals import rotor_speeds
-
     if not isinstance(rec, Recording):
-        from quadfault.errors import ConfigError
-
         raise ConfigError(f"diagnosis needs a Recording, got {type(rec).__name__}")
     t = np.asarray(rec.t, dtype=float)
     cmd = rec.commands_u if rec.commands_u is not None else rec.thrust_cmd

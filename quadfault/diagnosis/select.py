@@ -46,8 +46,10 @@ from quadfault.diagnosis.feedback import (IV_MIN, IV_UNVERIFIED_GAIN, IV_Z, froz
                                           iv_slope)
 from quadfault.diagnosis.fit import Fit, fit
 from quadfault.diagnosis.identifiability import too_short
-from quadfault.diagnosis.library import Candidate, predict
+from quadfault.diagnosis.library import EQUIVALENT, Candidate, build_library, predict
 from quadfault.diagnosis.residuals import Replay
+from quadfault.effects.motor_efficiency import MotorEfficiency
+from quadfault.effects.thrust_scale import ThrustScale
 
 __all__ = ["Selection", "Step", "Verdict", "select", "frozen_replay", "iv_slope", "folds_of",
            "cross_validate", "CrossValidation"]
@@ -218,8 +220,10 @@ def _folds(rp, sc, opt, new) -> str:
     return ""
 
 
-#: effects that already carry a thrust factor common to every rotor
-COMMON_THRUST = ("thrust_scale", "thrust_curve", "mass")
+#: effects that already carry a thrust factor common to every rotor (the thrust class of
+#: effects the data cannot tell apart, but the per-rotor one)
+COMMON_THRUST = tuple(n for n, k in EQUIVALENT.items()
+                      if k == EQUIVALENT[MotorEfficiency.name] and n != MotorEfficiency.name)
 #: with a healthy baseline flight, motor_efficiency needs a rotor this far from it [-]
 BASELINE_TOLERANCE = 0.05
 
@@ -230,7 +234,7 @@ def _rotors_differ(rp, sc, opt, current, x_cur, fl, m) -> str:
     ``m``. A calibration error common to all rotors is not four weak motors. With a healthy
     baseline flight (``EfficiencyCandidate.baseline``) a rotor must also differ from it by
     ``BASELINE_TOLERANCE``."""
-    new = [c for c in opt.cands[len(current):] if c.name == "motor_efficiency"]
+    new = [c for c in opt.cands[len(current):] if c.name == MotorEfficiency.name]
     if not new:
         return ""
     if new[0].baseline:
@@ -240,11 +244,9 @@ def _rotors_differ(rp, sc, opt, current, x_cur, fl, m) -> str:
                     f"(eta relative to it {np.round(rel, 3).tolist()})")
     if any(c.name in COMMON_THRUST for c in opt.cands):
         return ""
-    from quadfault.diagnosis.library import build_library
-
-    common = build_library(rp, ("thrust_scale",))[0]
-    others = [c for c in opt.cands if c.name != "motor_efficiency"]
-    init = [x for c, x in zip(opt.cands, opt.fit.x) if c.name != "motor_efficiency"]
+    common = build_library(rp, (ThrustScale.name,))[0]
+    others = [c for c in opt.cands if c.name != MotorEfficiency.name]
+    init = [x for c, x in zip(opt.cands, opt.fit.x) if c.name != MotorEfficiency.name]
     eta = np.asarray(opt.fit.x[list(opt.cands).index(new[0])], dtype=float)
     f = fit(rp, others + [common], sc.divisor, init=init + [np.array([float(np.mean(eta))])])
     cv = cross_validate(rp, others + [common], sc, None, fl, full=f)

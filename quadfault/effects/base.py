@@ -50,6 +50,10 @@ CHANNELS = {
 }
 
 
+#: the nominal vehicle's constants an importer may assume (a sidecar's ``assumed`` list)
+ASSUMABLE = ("mass", "inertia", "geometry", "torque_coefficient")
+
+
 @dataclass(frozen=True)
 class Identifiability:
     """What a recording needs for an effect to be identifiable from it (a declaration: the
@@ -70,6 +74,9 @@ class Identifiability:
         excitation: what the flight must do for the effect to show (free text, empty: any
             flight).
         note: one line for a user: why these channels.
+        scales_with: the nominal vehicle's constants its fitted value scales with (of
+            :data:`ASSUMABLE`), so a result rests on them when a log's importer assumed them
+            (ratios between rotors and time constants scale with none).
     """
 
     channels: tuple = ()
@@ -79,12 +86,17 @@ class Identifiability:
     direct: tuple = ()
     excitation: str = ""
     note: str = ""
+    scales_with: tuple = ()
 
     def __post_init__(self):
         for group in (*self.channels, *self.any_of, *self.direct):
             if group not in CHANNELS:
                 raise ValueError(f"unknown channel group {group!r}; choose from "
                                  f"{', '.join(CHANNELS)}")
+        for const in self.scales_with:
+            if const not in ASSUMABLE:
+                raise ValueError(f"unknown vehicle constant {const!r}; choose from "
+                                 f"{', '.join(ASSUMABLE)}")
 
     def columns(self) -> tuple:
         """The recording columns :attr:`channels` stands for."""

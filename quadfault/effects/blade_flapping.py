@@ -83,6 +83,7 @@ class BladeFlapping(Compiled):
     name: ClassVar[str] = "blade_flapping"
     order: ClassVar[int] = 10
     identifiability: ClassVar[Identifiability] = Identifiability(
+        scales_with=("mass", "inertia"),
         channels=("velocity", "attitude"),
         excitation="in-plane airspeed (forward flight)",
         note="force and moment grow with the in-plane airspeed")

@@ -65,6 +65,7 @@ class ComOffset(Compiled):
     name: ClassVar[str] = "com_offset"
     order: ClassVar[int] = 10
     identifiability: ClassVar[Identifiability] = Identifiability(
+        scales_with=("mass", "inertia"),
         note="a thrust-proportional moment: hover needs an unequal rotor split")
     explanation: ClassVar[str] = ("the centre of mass is offset from the rotor-plane centre: "
                                   "thrust makes a moment")

@@ -66,6 +66,7 @@ class Drag(Compiled):
     name: ClassVar[str] = "drag"
     order: ClassVar[int] = 10
     identifiability: ClassVar[Identifiability] = Identifiability(
+        scales_with=("mass",),
         channels=("velocity", "attitude"),
         excitation="speeds through the air of about 1 m/s or more",
         note="the force opposes the velocity through the air: no valid velocity, no drag")

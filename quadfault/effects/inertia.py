@@ -26,6 +26,7 @@ class Inertia(Effect):
     name: ClassVar[str] = "inertia"
     order: ClassVar[int] = 20
     identifiability: ClassVar[Identifiability] = Identifiability(
+        scales_with=("inertia", "geometry", "torque_coefficient"),
         excitation="angular manoeuvres",
         note="the angular response to the rotor moments is scaled")
     explanation: ClassVar[str] = ("the inertia differs from the nominal value (angular "

@@ -28,6 +28,7 @@ class Mass(Effect):
     name: ClassVar[str] = "mass"
     order: ClassVar[int] = 20
     identifiability: ClassVar[Identifiability] = Identifiability(
+        scales_with=("mass",),
         excitation="thrust changes and angular manoeuvres (the angular response separates "
                    "a payload from a thrust loss)",
         note="a payload acts on translation only; at hover it is a thrust_scale")

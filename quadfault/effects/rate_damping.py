@@ -63,6 +63,7 @@ class RateDamping(Compiled):
     name: ClassVar[str] = "rate_damping"
     order: ClassVar[int] = 10
     identifiability: ClassVar[Identifiability] = Identifiability(
+        scales_with=("inertia",),
         excitation="body rotation (roll, pitch or yaw rates)",
         note="the moment grows with the body rate")
     explanation: ClassVar[str] = "the body rates are damped, M = -(D1 + D2 |w|) w per body axis"

@@ -129,6 +129,7 @@ class RotorInertia(Compiled):
     name: ClassVar[str] = "rotor_inertia"
     order: ClassVar[int] = 10
     identifiability: ClassVar[Identifiability] = Identifiability(
+        scales_with=("inertia", "torque_coefficient"),
         excitation="thrust changes (the yaw kick of rotors speeding up or down)",
         note="shows in the yaw rate when the rotors change speed")
     explanation: ClassVar[str] = "the rotors' inertia: changing rotor speeds kick the body in yaw"

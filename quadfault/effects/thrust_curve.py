@@ -137,6 +137,7 @@ class ThrustCurve(Compiled):
     name: ClassVar[str] = "thrust_curve"
     order: ClassVar[int] = 0
     identifiability: ClassVar[Identifiability] = Identifiability(
+        scales_with=("mass",),
         direct=("rotor_speed",),
         excitation="commands spanning a range of thrust (climbs, descents, manoeuvres)",
         note="near hover a curve is a thrust scale; its slope and curvature need thrust changes")

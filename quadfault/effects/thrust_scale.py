@@ -27,6 +27,7 @@ class ThrustScale(Compiled):
     name: ClassVar[str] = "thrust_scale"
     order: ClassVar[int] = 2
     identifiability: ClassVar[Identifiability] = Identifiability(
+        scales_with=("mass",),
         note="shows in the vertical acceleration for the commanded thrust")
     explanation: ClassVar[str] = "all rotors produce a common factor of the commanded thrust"
     equivalent: ClassVar[str] = "thrust"

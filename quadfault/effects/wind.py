@@ -73,6 +73,7 @@ class Wind(Compiled):
     name: ClassVar[str] = "wind"
     order: ClassVar[int] = 10
     identifiability: ClassVar[Identifiability] = Identifiability(
+        scales_with=("mass",),
         channels=("velocity", "attitude"),
         note="a steady world force: it needs the attitude (and the velocity to tell it from "
              "drag)")
