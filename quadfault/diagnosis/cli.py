@@ -35,6 +35,7 @@ def baseline_eta(path) -> tuple:
     had a baseline itself)."""
     import json
 
+    from quadfault.effects.motor_efficiency import MotorEfficiency
     from quadfault.errors import RecordingError
 
     path = Path(path)
@@ -45,7 +46,7 @@ def baseline_eta(path) -> tuple:
     except ValueError as exc:
         raise RecordingError(path, f"not valid JSON: {exc}") from None
     fits = [e for key in ("effects", "suspect", "rejected") for e in (doc.get(key) or [])
-            if isinstance(e, dict) and e.get("name") == "motor_efficiency"] \
+            if isinstance(e, dict) and e.get("name") == MotorEfficiency.name] \
         if isinstance(doc, dict) else []
     if not fits:
         raise RecordingError(path, "no motor_efficiency fit in this diagnosis (run quadfault "

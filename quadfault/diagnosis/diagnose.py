@@ -24,6 +24,7 @@ from quadfault.diagnosis.residuals import prepare
 from quadfault.diagnosis.result import DiagnosisResult
 from quadfault.diagnosis.scores import fixed_scoring
 from quadfault.diagnosis.select import select
+from quadfault.effects.motor_efficiency import MotorEfficiency
 from quadfault.effects.registry import EFFECT_NAMES, effect_class
 from quadfault.errors import ConfigError, RecordingError
 from quadfault.recording import Recording, recording_sidecar
@@ -231,7 +232,7 @@ class Diagnosis:
         library = build_library(rp, cfg.effects)
         if cfg.baseline_eta is not None:
             library = [dataclasses.replace(c, baseline=cfg.baseline_eta)
-                       if c.name == "motor_efficiency" else c for c in library]
+                       if c.name == MotorEfficiency.name else c for c in library]
         untestable = [c.name for c in library if not c.testable(rp)]
         library, not_identifiable = gate(library, ev)
         base_res = rp.measured - predict(rp, [])
