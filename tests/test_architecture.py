@@ -165,8 +165,8 @@ LAYERS = (
     ("effects", ("quadfault.effects",)),
     ("model", ("quadfault.dynamics", "quadfault.motors", "quadfault.sensors",
                "quadfault.controller", "quadfault.closed_loop", "quadfault.plant",
-               "quadfault.flight", "quadfault.scenarios", "quadfault.task_scenarios",
-               "quadfault.recording")),
+               "quadfault.flight", "quadfault.allocation", "quadfault.scenarios",
+               "quadfault.task_scenarios", "quadfault.recording")),
     ("applications", ("quadfault.simulator", "quadfault.diagnosis", "quadfault.importers",
                       "quadfault.cli", "quadfault.cli_simulate")),
 )
