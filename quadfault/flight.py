@@ -210,10 +210,11 @@ class Flight:
             self._nominal_tables(n)
         out = self._none if record is None else record
         if self.n_vehicles == 1 and active is None:
-            self.steps_run[0] = closed_loop.fly(
-                self._generators(), int(self.k[0]), int(self.k[0]) + n, measure_first,
-                self._C, V, self._tables, out, self.plant.hook, self._K)
-            self.k[0] += n
+            k0 = int(self.k[0])
+            gens = self._gens if self._gens is not None else self._generators()
+            self.steps_run[0] = closed_loop.fly(gens, k0, k0 + n, measure_first, self._C, V,
+                                                self._tables, out, self.plant.hook, self._K)
+            self.k[0] = k0 + n
             return record
         if active is None:
             active = np.ones(self.n_vehicles, dtype=bool)
@@ -248,8 +249,9 @@ class Flight:
         if not noise:
             for m, x in zip((V.mp, V.mv, V.mR, V.mw), (V.p, V.v, V.R, V.w)):
                 m[rows] = x[rows]
-        elif self.n_vehicles == 1 and (rows is None or np.ndim(rows) == 0):
-            closed_loop.sense(self._generators(), self._C, V)
+        elif rows is None and self.n_vehicles == 1:
+            gens = self._gens if self._gens is not None else self._generators()
+            closed_loop.sense(gens, self._C, V)
         else:
             rows = np.arange(self.n_vehicles) if rows is None else rows
             closed_loop.sense_rows(self._generators, rows, self._C, V)
@@ -271,6 +273,13 @@ class Flight:
         """Current measurements (N, ...) -- views."""
         V = self.plant.vehicles
         return RigidBodyState(V.mp, V.mv, V.mR, V.mw)
+
+    def views(self, i: int = 0) -> tuple[RigidBodyState, RigidBodyState]:
+        """Vehicle ``i``'s true state and measurement as views that stay current (the loop
+        writes them in place): take them once, read them when needed."""
+        V = self.plant.vehicles
+        return (RigidBodyState(V.p[i], V.v[i], V.R[i], V.w[i]),
+                RigidBodyState(V.mp[i], V.mv[i], V.mR[i], V.mw[i]))
 
     def state(self, i: int = 0) -> RigidBodyState:
         """A copy of vehicle ``i``'s true state."""

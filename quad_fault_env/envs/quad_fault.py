@@ -320,6 +320,7 @@ class QuadFaultEnv(gym.Env):
         self.plant.reset(self._initial_state())
         self.flight = Flight(self.plant, self.sensor_noise)
         self.flight.reset(self.np_random)  # the loop draws from the env's generator
+        self._views = self.flight.views(0)
         self._tables = RowTimeTables(1, self.substeps, self.dt, self.vehicle,
                                      self.controller_config, TABLE_WINDOW)
         self.flight.use_efficiency(self._tables.eta, self._tables.first)
@@ -364,13 +365,13 @@ class QuadFaultEnv(gym.Env):
     @property
     def _state(self) -> RigidBodyState:
         """The true state now (views of the flight's arrays: read them at once)."""
-        return RigidBodyState(*(x[0] for x in self.flight.truth))
+        return self._views[0]
 
     @property
     def _meas(self) -> RigidBodyState:
         """The measurement the agent and the controller see now (end of the last step;
         views of the flight's arrays)."""
-        return RigidBodyState(*(x[0] for x in self.flight.measurement))
+        return self._views[1]
 
     def _check_action(self, action) -> np.ndarray:
         return validate_action(action, self.action_space.shape)
@@ -443,7 +444,7 @@ class QuadFaultEnv(gym.Env):
         self._terminal = terminated
         truncated = (not terminated) and self._step_count >= self.max_steps
         # the agent sees the true state of a terminated episode: no measurement is drawn
-        self.flight.sense(0, noise=not terminated)
+        self.flight.sense(noise=not terminated)
         self.history.append(np.array(state.p, dtype=float))
         reward = self.reward_config(state.p - ref.position, state.v - ref.velocity,
                                     self._f_cmd, self.f_max, terminated, a)
