@@ -122,7 +122,7 @@ def print_summary(summary: dict, seeds: list[int], baseline: str = "ekf") -> Non
     print(f"\nIRLS / {B} partner (identical post-processing), seeds {seeds[0]}-{seeds[-1]}: "
           "mean [95 % interval] of the per-seed ratio")
     print(f"{'scenario':<10} {'variant':<9} " + " ".join(f"{m + ' ratio':>26}" for m in METRICS)
-          + f" {'excess IRLS - EKF':>26}")
+          + f" {'excess IRLS - ' + B:>26}")
     for name, per in summary.items():
         for v, b in per.items():
             cells = [_cell(b.get(m)) for m in METRICS]
