@@ -189,5 +189,7 @@ def test_measured_rotor_speeds_identify_the_motor_lag():
     assert {f"rotor_{i}" for i in range(1, 5)} <= set(res.channels)
     lag = next(e for e in res.effects if e.name == "motor_lag")
     assert lag.params["tau_s"] == pytest.approx(0.04, rel=0.05)
+    assert "from command to measured rotor speed directly" in lag.explanation
+    assert not lag.at_bound
     assert res.channel_scores["rotor_1"]["improvement"] > 0.8
     assert res.scoring["rotor_thrust_coefficient"] == {"value": k, "source": "sidecar"}

@@ -82,3 +82,23 @@ def test_crazypad_pad_is_excluded_and_inertia_at_its_bound_is_suspect(tmp_path):
                    tmp_path / "eff", "--effects", "motor_efficiency")
     fitted = eff["effects"] + eff["suspect"] + eff["rejected"]
     assert [e["name"] for e in fitted] == ["motor_efficiency"]
+
+
+@pytest.mark.slow
+def test_crazypad_cut_propeller_against_a_healthy_flight(tmp_path):
+    """One flight shows the airframe's own imbalance as unequal rotors; against a healthy
+    flight of the same airframe (--baseline) the healthy flights flag no rotor and the 3 mm
+    cut propeller's rotor 3 is the weakest."""
+    folder = "crazypad-cf21-faults/motor_data"
+    healthy = diagnose("crazypad", f"{folder}/normal_flight/E8_log00.csv.gz", tmp_path / "h",
+                       "--effects", "motor_efficiency")
+    base = tmp_path / "h" / "diag.json"
+    assert "one flight cannot tell a weak rotor" in healthy["effects"][0]["explanation"]
+    other = diagnose("crazypad", f"{folder}/normal_flight/E8_log01.csv.gz", tmp_path / "o",
+                     "--effects", "motor_efficiency", "--baseline", str(base))
+    for e in other["effects"]:
+        assert min(e["params"]["eta"]) >= 0.85
+    cut = diagnose("crazypad", f"{folder}/cut_propeller_M3_3mm/E8_log01.csv.gz",
+                   tmp_path / "c", "--effects", "motor_efficiency", "--baseline", str(base))
+    eta = cut["effects"][0]["params"]["eta"]
+    assert int(np.argmin(eta)) == 2 and eta[2] < 0.9

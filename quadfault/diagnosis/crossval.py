@@ -103,6 +103,8 @@ def cross_validate(rp: Replay, cands, sc, x_init, folds, *, full: Fit | None = N
 def _near_bound(cand, x) -> np.ndarray:
     """Per parameter: within ``BOUND_MARGIN`` of a bound that is not the neutral value."""
     x = np.asarray(x, dtype=float)
+    if cand.pinned:  # fixed by direct evidence: its bounds only hold it there
+        return np.zeros(x.shape, dtype=bool)
     lo, hi, x0 = (np.asarray(v, dtype=float) for v in (cand.lower, cand.upper, cand.x0))
     margin = BOUND_MARGIN * (hi - lo)
     tiny = 1e-9 * (hi - lo)

@@ -15,7 +15,8 @@ from threadpoolctl import threadpool_limits
 from quadfault.diagnosis.crossval import cross_validate, fit_at_bound, fit_bound_mask, folds_of
 from quadfault.diagnosis.feedback import IV_MIN, IV_UNVERIFIED_GAIN
 from quadfault.diagnosis.findings import base_explanation, finding
-from quadfault.diagnosis.identifiability import assumptions, evidence, gate, without_pose
+from quadfault.diagnosis.identifiability import (assumptions, evidence, gate,
+                                                 pin_to_rotor_speeds, without_pose)
 from quadfault.diagnosis.library import EQUIVALENT, build_library, predict, public_params
 from quadfault.diagnosis.locate import locate
 from quadfault.diagnosis.phases import excluded_fraction, flight_phases
@@ -124,6 +125,9 @@ def _explain(step, selected_names, params) -> str:
                  f"{IV_UNVERIFIED_GAIN:.0%}.")
     if step.agreement:
         text += f" Fold agreement: {step.agreement}."
+    if step.candidate.pinned:
+        text += (" Its time constant comes from command to measured rotor speed directly (the "
+                 "rotor channels alone); the other channels only decided that it is there.")
     return text
 
 
@@ -237,6 +241,7 @@ class Diagnosis:
         library, not_identifiable = gate(library, ev)
         base_res = rp.measured - predict(rp, [])
         sc = fixed_scoring(rp, base_res, rp.scored)
+        library = pin_to_rotor_speeds(rp, library, sc)
         sel = select(rp, library, sc, folds=cfg.folds, max_effects=cfg.max_effects,
                      min_improvement=cfg.min_improvement, bic_margin=cfg.bic_margin,
                      screen_top=cfg.screen_top, pair_top=cfg.pair_top, progress=progress)

@@ -20,6 +20,9 @@ them:
     command for 25 rows: the rate stays 10 Hz), or the rate of the stream as logged where the
     importer records it (``meta.import.stream_rates_hz``: ``u``, ``rotor``), whichever is
     slower: interpolated streams change at every row.
+``direct``
+    with measured rotor speeds, a time constant they show directly (``motor_lag``,
+    ``delay``) comes from command to speed (:func:`pin_to_rotor_speeds`).
 ``timescale``
     a time constant is seen only through commands logged at ``TIMING_SAMPLES`` (2) or more
     samples per time constant: a fitted value below two command periods is rejected, and
@@ -289,3 +292,40 @@ def assumptions(ev: Evidence, names) -> dict:
             "(motor_efficiency's relative eta) and time constants (motor_lag, delay) do not")
     return {"assumed": list(ev.assumed), "depends": depends, "independent": independent,
             "note": note}
+
+
+#: a parameter pinned by direct evidence may move this fraction inside its bounds
+PIN_WIDTH = 1e-3
+
+
+def pin_to_rotor_speeds(rp, library, sc) -> list:
+    """With measured rotor speeds, the time constants that the rotor speeds show directly
+    (the declaration's ``direct``: ``motor_lag``, ``delay``) come from command to speed: each
+    is fitted on the ``rotor_*`` channels alone (with the command curve, ``thrust_curve``, of
+    a ``u``-command log), and the candidate the selection sees is held
+    at that value (``Candidate.pinned``); the selection still decides from every channel
+    whether the effect is there."""
+    if not rp.has_rotor:
+        return list(library)
+    from quadfault.diagnosis.fit import fit
+
+    from quadfault.diagnosis.library import build_library
+
+    rotor = np.array([c.startswith("rotor_") for c in rp.channels])
+    scale = np.where(rotor, sc.divisor, 1e30)  # the other channels do not count
+    # the static map from command to speed is fitted with it (a curve left out would
+    # bend the time constant)
+    static = [c for c in build_library(rp, ("thrust_curve",)) if c.testable(rp)]
+    out = []
+    for c in library:
+        need = identifiability(c.name)
+        if need.timescale is None or "rotor_speed" not in need.direct or not c.rotor_side:
+            out.append(c)
+            continue
+        f = fit(rp, [c] + static, scale)
+        x, sd = np.asarray(f.x[0], dtype=float), np.asarray(f.sd[0], dtype=float)
+        lo = np.maximum(x * (1.0 - PIN_WIDTH), np.asarray(c.lower, dtype=float))
+        hi = np.minimum(np.maximum(x * (1.0 + PIN_WIDTH), lo + 1e-9), np.asarray(c.upper, float))
+        out.append(dataclasses.replace(c, lower=tuple(lo), upper=tuple(hi), starts=(tuple(x),),
+                                       pinned=(tuple(x), tuple(sd))))
+    return out

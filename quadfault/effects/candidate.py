@@ -110,6 +110,9 @@ class Candidate:
             world or body frame (reported in the recording's own frame).
         resolvable: the shortest time constant the recording's commands resolve [s] (timing
             effects; 0: no floor), set by :mod:`~quadfault.diagnosis.identifiability`.
+        pinned: ``(x, sd)`` when the parameters come from direct evidence (a motor lag from
+            command to measured rotor speed): the bounds then hold ``x`` and the reported
+            one-sigma is ``sd``; ``()`` otherwise.
     """
 
     name: str
@@ -128,6 +131,7 @@ class Candidate:
     rotor_side: bool = False
     frames: tuple = ()
     resolvable: float = 0.0
+    pinned: tuple = ()
     on_raw: ClassVar[bool] = False
     uses_thrust: ClassVar[bool] = False
     needs_rate: ClassVar[bool] = False
@@ -165,7 +169,7 @@ class Candidate:
 
     def public(self, x, sd, ctx: PublicContext) -> tuple[dict, dict]:
         """``params`` and ``uncertainty`` (one sigma) as reported in the diagnosis JSON."""
-        return self._split(x), self._split(sd)
+        return self._split(x), self._split(self.pinned[1] if self.pinned else sd)
 
     def public_bounds(self) -> dict:
         """``{"<param>": [lo, hi]}`` in the reported keys; for a vector parameter ``lo`` and
