@@ -198,3 +198,20 @@ def test_a_healthy_baseline_flight_separates_damage_from_the_vehicles_own_imbala
         baseline_eta(path)
     with pytest.raises(Exception, match="4 positive numbers"):
         DiagnosisConfig(baseline_eta=(1.0, 0.0, 1.0, 1.0))
+
+
+def test_the_report_lists_what_was_not_identifiable_and_the_assumed_constants():
+    from quadfault.diagnosis.report_text import markdown
+    from quadfault.diagnosis.result import DiagnosisResult
+
+    res = DiagnosisResult(
+        verdict="consistent", baseline_rmse={}, model_rmse={}, model_improvement=0.0,
+        not_identifiable=({"name": "motor_lag", "reason": "rotor commands logged at 10 Hz"},),
+        assumptions={"assumed": ["mass"], "depends": {"drag": ["mass"]},
+                     "independent": ["motor_lag"], "note": "the vehicle's mass is assumed"})
+    text = markdown(res, "flight.csv")
+    assert "## Not identifiable from this log" in text
+    assert "- **motor_lag**: rotor commands logged at 10 Hz" in text
+    assert "- drag depends on the assumed mass" in text
+    assert "## Not identifiable" not in markdown(DiagnosisResult(
+        verdict="consistent", baseline_rmse={}, model_rmse={}, model_improvement=0.0), "f.csv")
