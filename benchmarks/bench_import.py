@@ -29,6 +29,7 @@ BUDGET_S = 30.0
 
 
 def write(fmt: str, path: Path, minutes: float, rate: float) -> Path:
+    from quadfault.fileio import atomic_write_bytes
     from tests.support.field_logs import blackbox_log, dataflash_flight, px4_flight
 
     seconds = 60.0 * minutes
@@ -41,7 +42,7 @@ def write(fmt: str, path: Path, minutes: float, rate: float) -> Path:
                          invalid_vxy=None)
     else:
         path = path.with_suffix(".bbl")
-        path.write_bytes(blackbox_log(seconds, rate))
+        atomic_write_bytes(path, blackbox_log(seconds, rate), force=True)
     return path
 
 

@@ -91,9 +91,10 @@ def relative(x) -> np.ndarray:
 
 def run(data: Path, out: Path, quiet: bool) -> list:
     from estimators.series_io import read_estimate_csv
+    from quadfault.fileio import atomic_write_text
 
     vpath = out / "indiflight_vehicle.json"
-    vpath.write_text(json.dumps(vehicle(), indent=2) + "\n")
+    atomic_write_text(vpath, json.dumps(vehicle(), indent=2) + "\n", force=True)
     rows = []
     for log in sorted((data / FOLDER).glob("*.BFL")):
         name = log.stem

@@ -30,6 +30,8 @@ import tempfile
 import types
 from pathlib import Path
 
+from quadfault.fileio import atomic_write_text
+
 #: wrench entries a vehicle may have (e.g. one of each wrench effect); each becomes a term
 #: of :data:`TERM` numbers
 WRENCH_TERMS = 6
@@ -238,9 +240,8 @@ def compiled(table, codes) -> types.ModuleType:
     else:
         path = folder / f"chain_{digest}.py"
         if not path.is_file() or path.read_text(encoding="utf-8") != text:
-            tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-            tmp.write_text(text, encoding="utf-8")
-            os.replace(tmp, path)  # atomic: concurrent processes write the same text
+            # atomic: concurrent processes write the same text
+            atomic_write_text(path, text, force=True)
         spec = importlib.util.spec_from_file_location(name, path)
         module = importlib.util.module_from_spec(spec)
         sys.modules[name] = module
