@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimators.base import STATUSES
-from estimators.change_completion import C_EVENTS
+from estimators.change_completion import COUNTERS as COMPLETION_COUNTERS
 from estimators.ekf import COUNTERS as EKF_COUNTERS
 from estimators.ekf import (
     EKFConfig,
@@ -42,8 +42,11 @@ from estimators.irls import (
     IRLSState,
     irls_parameters,
     irls_reset,
-    irls_update_row,
+    irls_step,
+    named_pieces,
+    state_views,
 )
+from estimators.irls import constant_arrays as irls_constant_arrays
 from estimators.registry import make_estimator
 from estimators.window import no_history
 from quadfault.errors import ConfigError
@@ -117,9 +120,12 @@ def _check_num(num) -> int:
 def irls_update_rows(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, code):
     """:func:`estimators.irls.irls_step` of every row, in parallel; status codes into
     ``code``."""
-    for i in prange(ks.shape[0]):
-        code[i] = irls_update_row(t[i], p[i], v[i], R[i], w[i], f[i], const, fp, ip, fs, ks,
-                                  hist, np.int64(i))[0]
+    N = ks.shape[0]
+    views = state_views(fs, ip, N)  # formed once; a prange captures plain tuples only
+    arrays = irls_constant_arrays(const, ip)
+    for i in prange(N):
+        code[i] = irls_step(t[i], p[i], v[i], R[i], w[i], f[i], const, arrays, fp, ip,
+                            named_pieces(views), ks, np.int64(i), hist)[0]
 
 
 @jit(parallel=True)
@@ -169,7 +175,7 @@ class BatchedIRLS:
     @property
     def change_events(self) -> np.ndarray:
         """Per row, the changes the change completion has started since its last reset."""
-        return self._state.ints[:, COUNTERS.completion + C_EVENTS].copy()
+        return self._state.ints[:, COUNTERS.completion + COMPLETION_COUNTERS.events].copy()
 
     def reset(self, mask=None, eta0=None) -> None:
         """Forget the windows of the rows in ``mask`` (default all); start from ``eta0``

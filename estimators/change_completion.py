@@ -47,11 +47,13 @@ from __future__ import annotations
 import numpy as np
 
 from estimators.linalg import smallest_eigenpair_into
+from estimators.state import fields
 from quadfault.jit import jit
 
-#: positions in the counters of the completion state
-C_K, C_LEFT, C_HAS_V, C_EVENTS = range(4)
-N_COUNTERS = 4
+#: the counters of the completion state: ring slot, windows left to complete, whether the
+#: weak direction is prior-dominated, changes started
+COUNTERS = fields("CompletionCounters", "k", "left", "has_v", "events")
+N_COUNTERS = COUNTERS.size
 
 
 @jit
@@ -116,10 +118,10 @@ def single_motor(change) -> bool:
 def observe_into(x, history, counters) -> None:
     """Record the estimate ``x`` of a window (every window, solved or held)."""
     span = history.shape[0]
-    k = counters[C_K]
+    k = counters[COUNTERS.k]
     for j in range(x.shape[0]):
         history[k, j] = x[j]
-    counters[C_K] = (k + 1) % span
+    counters[COUNTERS.k] = (k + 1) % span
 
 
 @jit
@@ -130,21 +132,21 @@ def complete_into(x, info, history, anchor, v, counters, threshold, hold, gamma,
     information ``J^T W G J``; ``D``, ``E`` (n, n) and ``scratch`` (3, n) are scratch.
     Records the result (:func:`observe_into`)."""
     n = x.shape[0]
-    k = counters[C_K]
+    k = counters[COUNTERS.k]
     move = 0.0
     for j in range(n):  # the move against the estimate span windows ago
         move = max(move, abs(x[j] - history[k, j]))
     if move > threshold:
-        if counters[C_LEFT] == 0:  # a new change: its weak direction and anchor
+        if counters[COUNTERS.left] == 0:  # a new change: its weak direction and anchor
             lam = smallest_eigenpair_into(info, D, E, v)
-            counters[C_HAS_V] = 1 if lam < gamma else 0
+            counters[COUNTERS.has_v] = 1 if lam < gamma else 0
             for j in range(n):
                 anchor[j] = history[k, j]
-            counters[C_EVENTS] += 1
-        counters[C_LEFT] = hold
-    if counters[C_LEFT] > 0:
-        counters[C_LEFT] -= 1
-        if counters[C_HAS_V] == 1:
+            counters[COUNTERS.events] += 1
+        counters[COUNTERS.left] = hold
+    if counters[COUNTERS.left] > 0:
+        counters[COUNTERS.left] -= 1
+        if counters[COUNTERS.has_v] == 1:
             delta, out = scratch[0], scratch[1]
             for j in range(n):
                 delta[j] = x[j] - anchor[j]
@@ -176,6 +178,7 @@ def weak_direction(info) -> tuple[np.ndarray, float]:
 
 
 __all__ = [
+    "COUNTERS",
     "N_COUNTERS",
     "complete_into",
     "l1_completion",

@@ -41,7 +41,8 @@ from estimators.base import (
     Sample,
     command_limit,
 )
-from estimators.change_completion import C_EVENTS, N_COUNTERS, complete_into, observe_into
+from estimators.change_completion import COUNTERS as COMPLETION_COUNTERS
+from estimators.change_completion import N_COUNTERS, complete_into, observe_into
 from estimators.irls_config import (  # noqa: F401  (re-exported)
     SCALINGS,
     IRLSConfig,
@@ -176,21 +177,35 @@ def irls_parameters(vehicle: Vehicle, cfg: IRLSConfig, offsets: np.ndarray):
 
 
 @jit(inline="always")
+def state_views(fs, ip, N):
+    """The pieces of the float state of ``N`` estimators, each ``(N, *shape)``, as a plain
+    tuple in the order of :data:`FLOATS` (what a ``prange`` loop can capture;
+    :func:`named_pieces` names them)."""
+    m, n, L = ip[INT_SETTINGS.m], ip[INT_SETTINGS.n], ip[INT_SETTINGS.L]
+    o = ip[INT_SETTINGS.offsets:]
+    return (piece_rows(fs, o[F.t], o[F.t + 1], N),
+            piece(fs, o, F.sample, (N, SAMPLE_ROWS.size, 3)),
+            piece(fs, o, F.vn, (N, VN_ROWS.size, n)),
+            piece(fs, o, F.vm, (N, VM_ROWS.size, m)),
+            piece(fs, o, F.bh, (N, BH_ROWS.size, m, n)),
+            piece(fs, o, F.H, (N, m, n, n)),
+            piece(fs, o, F.M, (N, N_MATRICES, n, n)),
+            piece_rows(fs, o[F.r0], o[F.r0 + 1], N),
+            piece(fs, o, F.J, (N, RESIDUAL_ROWS, n)),
+            piece(fs, o, F.median, (N, 2, L, n)))
+
+
+@jit(inline="always")
+def named_pieces(views):
+    """:func:`state_views` by name (:data:`FLOATS`'s pieces)."""
+    return IRLSPieces(*views)
+
+
+@jit(inline="always")
 def state_pieces(fs, ip, N):
     """The pieces of the float state of ``N`` estimators (:data:`FLOATS`) by name, each
     ``(N, *shape)``."""
-    m, n, L = ip[INT_SETTINGS.m], ip[INT_SETTINGS.n], ip[INT_SETTINGS.L]
-    o = ip[INT_SETTINGS.offsets:]
-    return IRLSPieces(t=piece_rows(fs, o[F.t], o[F.t + 1], N),
-                      sample=piece(fs, o, F.sample, (N, SAMPLE_ROWS.size, 3)),
-                      vn=piece(fs, o, F.vn, (N, VN_ROWS.size, n)),
-                      vm=piece(fs, o, F.vm, (N, VM_ROWS.size, m)),
-                      bh=piece(fs, o, F.bh, (N, BH_ROWS.size, m, n)),
-                      H=piece(fs, o, F.H, (N, m, n, n)),
-                      M=piece(fs, o, F.M, (N, N_MATRICES, n, n)),
-                      r0=piece_rows(fs, o[F.r0], o[F.r0 + 1], N),
-                      J=piece(fs, o, F.J, (N, RESIDUAL_ROWS, n)),
-                      median=piece(fs, o, F.median, (N, 2, L, n)))
+    return named_pieces(state_views(fs, ip, N))
 
 
 @jit(inline="always")
@@ -284,20 +299,12 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist):
     return code, why, rounds, cond
 
 
-@jit(inline="always")
-def irls_update_row(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, i):
-    """:func:`irls_step` of estimator ``i`` of the state ``(fs, ks)``, its pieces formed here
-    (a batch's rows run it under ``prange``: the named pieces are formed inside the loop)."""
-    S = state_pieces(fs, ip, ks.shape[0])
-    return irls_step(t, p, v, R, w, f, const, constant_arrays(const, ip), fp, ip, S, ks, i,
-                     hist)
-
-
 @jit
 def irls_update(t, p, v, R, w, f, const, fp, ip, fs, ks, hist):
     """:func:`irls_step` of a single estimator (state of one row): the online update."""
-    return irls_update_row(t, p, v, R, w, f, const, fp, ip, fs, ks, hist,
-                           ks.shape[0] - 1)  # row 0, a run-time value like the batch's rows
+    S = state_pieces(fs, ip, ks.shape[0])
+    return irls_step(t, p, v, R, w, f, const, constant_arrays(const, ip), fp, ip, S, ks,
+                     ks.shape[0] - 1, hist)  # row 0, a run-time value like the batch's rows
 
 
 @jit
@@ -390,7 +397,7 @@ class SlidingWindowIRLS:
     @property
     def change_events(self) -> int:
         """Changes the change completion has started since the last reset."""
-        return int(self._state.ints[0, COUNTERS.completion + C_EVENTS])
+        return int(self._state.ints[0, COUNTERS.completion + COMPLETION_COUNTERS.events])
 
     def update(self, sample: Sample) -> Estimate:
         """Add one measurement row; returns the estimate of the window ending at it."""

@@ -9,8 +9,7 @@ from oracles import irls_numpy as oracle
 
 from estimators.base import samples
 from estimators.change_completion import (
-    C_EVENTS,
-    C_HAS_V,
+    COUNTERS,
     N_COUNTERS,
     complete_into,
     l1_completion,
@@ -46,11 +45,11 @@ class Completion:
 
     @property
     def events(self):
-        return int(self.counters[C_EVENTS])
+        return int(self.counters[COUNTERS.events])
 
     @property
     def has_v(self):
-        return bool(self.counters[C_HAS_V])
+        return bool(self.counters[COUNTERS.has_v])
 
 
 @pytest.fixture(scope="module")
