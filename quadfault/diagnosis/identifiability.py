@@ -43,6 +43,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from quadfault.diagnosis.fit import fit
+from quadfault.diagnosis.library import build_library
 from quadfault.diagnosis.phases import excluded_fraction
 from quadfault.diagnosis.residuals import rotor_speeds
 from quadfault.effects.base import ASSUMABLE
@@ -307,10 +309,6 @@ def pin_to_rotor_speeds(rp, library, sc) -> list:
     whether the effect is there."""
     if not rp.has_rotor:
         return list(library)
-    from quadfault.diagnosis.fit import fit
-
-    from quadfault.diagnosis.library import build_library
-
     rotor = np.array([c.startswith("rotor_") for c in rp.channels])
     scale = np.where(rotor, sc.divisor, 1e30)  # the other channels do not count
     # the static map from command to speed is fitted with it (a curve left out would
