@@ -85,8 +85,15 @@ class TrainConfig:
             shown on a terminal.
         algo_kwargs: extra keywords of the algorithm (``learning_rate``, ``n_steps``, ...).
         device: torch device (``"cpu"`` by default).
-        torch_threads: CPU threads torch may use (1 is fastest for these small networks and
-            leaves the other cores to the environments).
+        torch_threads: CPU threads torch may use. 1 by default: these networks are small
+            (two layers of 64), so a second thread adds synchronisation and no speed, and on a
+            loaded machine torch's threads wait on each other (measured with SB3 PPO under
+            load: 805 env steps per second on one thread, 97 on torch's default two;
+            ``benchmarks/train_speed.py --torch-threads 2`` measures it on yours).
+        frame_stack: observations of the last this many steps, oldest first, concatenated
+            (SB3's ``VecFrameStack`` in training, gymnasium's ``FrameStackObservation`` in
+            evaluation, zeros before the episode's first step): a policy with a short
+            memory. 1: the current observation only.
         numba_threads: threads of numba's parallel kernels (the batched estimator and
             physics) in the vector env's steps (``vector_env``). None: the vector env's rule
             (one thread below ``quad_fault_env.vector.THREADS_MIN_BATCH`` sub-envs, numba's
@@ -114,13 +121,15 @@ class TrainConfig:
     device: str = "cpu"
     torch_threads: int = 1
     numba_threads: int | None = None
+    frame_stack: int = 1
 
     def __post_init__(self):
         if self.algo not in ALGORITHMS:
             raise ConfigError(f"algo must be one of {ALGORITHMS}, got {self.algo!r}")
         if not isinstance(self.env_kwargs, dict) or not isinstance(self.algo_kwargs, dict):
             raise ConfigError("env_kwargs and algo_kwargs must be JSON objects")
-        for key in ("timesteps", "n_envs", "eval_freq", "eval_episodes", "torch_threads"):
+        for key in ("timesteps", "n_envs", "eval_freq", "eval_episodes", "torch_threads",
+                    "frame_stack"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ConfigError(f"{key} must be a positive integer, got {value!r}")
@@ -191,16 +200,31 @@ def _env_factory(env_id: str, env_kwargs: dict) -> EnvMaker:
 
 
 def make_vec_env(config: TrainConfig, seed: int, n_envs: int, monitor_dir=None):
-    """The (optionally subprocess or array-stepped) vectorised, monitored environment."""
+    """The (optionally subprocess or array-stepped) vectorised, monitored environment, its
+    observations stacked over ``config.frame_stack`` steps."""
     from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
 
     make = _env_factory(config.env_id, config.env_kwargs)
     if config.vector_env:
-        return _array_vec_env(config, seed, n_envs, monitor_dir)
-    vec_cls = SubprocVecEnv if n_envs > 1 else DummyVecEnv
-    return sb3_make_vec_env(make, n_envs=n_envs, seed=seed, vec_env_cls=vec_cls,
-                            monitor_dir=None if monitor_dir is None else str(monitor_dir))
+        env = _array_vec_env(config, seed, n_envs, monitor_dir)
+    else:
+        vec_cls = SubprocVecEnv if n_envs > 1 else DummyVecEnv
+        env = sb3_make_vec_env(make, n_envs=n_envs, seed=seed, vec_env_cls=vec_cls,
+                               monitor_dir=None if monitor_dir is None else str(monitor_dir))
+    return VecFrameStack(env, config.frame_stack) if config.frame_stack > 1 else env
+
+
+def make_eval_env(config: TrainConfig):
+    """One environment of the run's id and keywords, as its policy sees it (observations
+    stacked like the training env's)."""
+    env = _env_factory(config.env_id, config.env_kwargs)()
+    if config.frame_stack > 1:
+        from gymnasium.wrappers import FlattenObservation, FrameStackObservation
+
+        env = FlattenObservation(FrameStackObservation(env, config.frame_stack,
+                                                       padding_type="zero"))
+    return env
 
 
 def _array_vec_env(config: TrainConfig, seed: int, n_envs: int, monitor_dir=None):
@@ -242,6 +266,24 @@ def set_numba_threads(n: int | None) -> None:
         jit.set_threads(min(n, numba.config.NUMBA_NUM_THREADS))
 
 
+def set_threads(config: TrainConfig) -> None:
+    """Set torch's and (for the vector env) numba's CPU threads of the calling thread.
+
+    numba's OpenMP threading layer and torch share one OpenMP runtime. The vector env runs
+    its step on its own numba thread count and then restores the caller's
+    (``quadfault.jit.threads``), and restoring numba's default count also sets torch's: from
+    the 1 asked for to the number of cores, after the first env step. The calling thread's
+    numba count is therefore set to the env's own first, which makes the env's switch a
+    no-op, and torch's count after it."""
+    import torch
+
+    if config.vector_env:
+        from quad_fault_env.vector import default_threads
+
+        set_numba_threads(config.numba_threads or default_threads(config.n_envs))
+    torch.set_num_threads(config.torch_threads)
+
+
 def train_one(config: TrainConfig, seed: int, run_dir: Path, *, force: bool = False,
               quiet: bool = False):
     """Train one seed into ``run_dir``; returns the trained model.
@@ -249,10 +291,9 @@ def train_one(config: TrainConfig, seed: int, run_dir: Path, *, force: bool = Fa
     Runs ``config.timesteps`` rounded to the nearest whole rollout (one line says so when
     it differs, unless ``quiet``; ``train_config.json`` records ``timesteps_run``)."""
     sb3 = require_sb3()
-    import torch
     from stable_baselines3.common.vec_env import VecNormalize
 
-    torch.set_num_threads(config.torch_threads)
+    set_threads(config)
     if config.tensorboard and not _installed("tensorboard"):
         raise QuadfaultError("--tensorboard needs the tensorboard package (pip install "
                              "tensorboard)")
@@ -261,7 +302,7 @@ def train_one(config: TrainConfig, seed: int, run_dir: Path, *, force: bool = Fa
     for name in (MODEL_FILE, VECNORM_FILE, CONFIG_FILE):
         if (run_dir / name).exists() and not force:
             raise QuadfaultError(f"{run_dir / name}: already exists; pass --force to overwrite")
-    eval_env = _env_factory(config.env_id, config.env_kwargs)()
+    eval_env = make_eval_env(config)
     policy = choose_policy(config.policy, eval_env.observation_space, config.env_id)
     run_dir.mkdir(parents=True, exist_ok=True)
     env = make_vec_env(config, seed, config.n_envs, run_dir / "monitor")
@@ -382,6 +423,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--numba-threads", type=int,
                         help="threads of numba's parallel kernels in the vector env's steps "
                         "(default: the vector env's rule by batch size, docs/throughput.md)")
+    parser.add_argument("--frame-stack", type=int, help="stack the observations of the last "
+                        "this many steps (a policy with a short memory; default 1)")
+    parser.add_argument("--torch-threads", type=int, help="CPU threads of torch (default 1: "
+                        "fastest for these small networks, see TrainConfig)")
     parser.add_argument("--progress", action="store_true",
                         help="SB3's progress bar (needs rich; quadfault's bar otherwise)")
     parser.add_argument("--out", required=True, help="output folder (one seed_<k>/ per seed)")
@@ -402,7 +447,8 @@ def config_from_args(args) -> TrainConfig:
     cfg = TrainConfig.from_file(args.config) if args.config else TrainConfig()
     changes = {k: getattr(args, k) for k in ("algo", "env_id", "timesteps", "n_envs", "eval_freq",
                                              "eval_episodes", "eval_seed", "checkpoint_freq",
-                                             "tensorboard", "numba_threads", "policy")
+                                             "tensorboard", "numba_threads", "policy",
+                                             "frame_stack", "torch_threads")
                if getattr(args, k, None) is not None}
     if args.seeds is not None:
         changes["seeds"] = tuple(args.seeds)
