@@ -133,10 +133,12 @@ def evaluate_episodes(policy, env, seeds, normalizer=None) -> tuple[np.ndarray, 
 
 def geometric_baseline(env):
     """The geometric controller as a policy of ``env``, or None when ``env`` is not a
-    QuadFault environment."""
+    QuadFault environment or a wrapper changed its observation."""
     from agents.policies import GeometricPolicy
 
     try:
+        if env.observation_space.shape != env.unwrapped.observation_space.shape:
+            return None  # a wrapper (a frame stack) changed what a policy sees
         return GeometricPolicy.from_env(env)
     except AttributeError:
         return None

@@ -1,31 +1,45 @@
-"""Does the efficiency estimate in the observation help a PPO policy survive a rotor loss?
+"""Does the efficiency estimate in the observation help a PPO policy adapt to a fault?
 
-Two arms that differ only in the estimator of the observation: ``with_estimate`` (the online
-IRLS estimate and its sd) and ``without_estimate`` (``estimator="none"``: the eta_hat slot is
-constant 1). Everything else is the same: ``QuadFaultRotorLoss-v0`` (hover; one rotor drops
-abruptly to eta 0-0.5 at 3-6 s and stays there), sensor noise on the measured state, residual
-actions on top of the geometric controller, the task's -v1 reward, PPO settings, steps and
-seeds. Optional domain randomisation (``--effects``, the environment's ``effects`` keyword:
-the ``quadfault simulate --effect`` syntax with ``a:b`` ranges drawn at every reset).
+Five arms, trained and evaluated alike, differing only in what the policy observes:
 
-Each run is one command a user can rerun (printed before it starts)::
+* ``mlp_none``    -- MLP, no estimate (``estimator="none"``: the eta_hat slot is constant 1);
+* ``mlp_irls``    -- MLP with the online IRLS estimate and its sd;
+* ``mlp_ekf``     -- MLP with the EKF estimate and its sd;
+* ``mlp_truth``   -- MLP with the true efficiency (the oracle: the upper bound);
+* ``memory_none`` -- no estimate, the observations of the last ``FRAME_STACK`` steps stacked
+  (a policy with a short memory, which may infer the fault from how the vehicle responds).
 
-    quadfault train --env QuadFaultRotorLoss-v0 --env-kwargs '<arm's JSON>' --timesteps T \\
-        --seeds K --n-envs 16 --vector-env --out OUT/<arm>
+With ``--allocation estimate-aware`` (the default) the residual policy adds to a base that
+allocates the geometric controller's wrench by the arm's own estimate (the environment's
+``allocation`` keyword), so each arm's estimate feeds base and policy alike; ``mlp_none``
+and ``memory_none`` then fly the nominal-belief base.
 
-Evaluation (paired): every trained policy, the geometric controller (zero residual) and the
-estimate-aware allocation (``compensate=True`` with the IRLS estimate, zero residual) fly the
-same ``--episodes`` episodes (reset seeds 20000 on: the same rotor, level, onset, initial
-state and noise for every agent). Per episode: crashed (terminated), the RMS of the true
-tracking error over the flown steps [m], the return. Reported: crash rate and mean RMSE per
-agent; with vs without the estimate paired by seed and episode, the per-seed mean difference
-with a 95 % interval (Student t over the seeds).
+Tasks (``--tasks``): ``rotor_loss`` -- ``QuadFaultRotorLoss-v0`` (hover; one rotor drops
+abruptly to eta 0.1-0.5 at 3-6 s); ``tracking`` -- ``QuadFaultTrack-v0`` with every motor
+degrading gradually to eta 0.8-0.95 over the flight and one rotor dropping abruptly to
+0.3-0.6 at 30-60 % of it (``track_scenario``'s ``degradation`` and ``level`` options).
 
-    python benchmarks/estimate_study.py --timesteps 50000 --seeds 0 1 2 --episodes 20 \\
-        --out runs/estimate_study [--effects 'drag=0:0.3' 'motor_lag=0.01:0.04']
+Design. Every arm: the same PPO settings (:data:`PPO_KWARGS`), residual scale, reward (the
+task's ``-v1`` reward), steps, training seeds, number of vector-env quadrotors. During
+training each run is evaluated at about ``--curve-points`` points on the tuning episodes
+(reset seeds 10000+; they pick nothing but are the learning curve and the steps-to-crash-rate
+measure); the final model then flies the paired test episodes (reset seeds 20000+, the same
+rotor, level, onset, trajectory, initial state and noise for every arm, recorded per arm in
+the results so the pairing can be checked). Reported per arm: crash rate, tracking RMSE over
+the flown steps [m] and return, mean over the training seeds with a 95 % Student-t interval
+over the seeds; the same paired against ``mlp_none`` (per seed, same episodes); steps to
+reach a tuning-episode crash rate of ``--crash-target`` or lower (sample efficiency). The
+zero-residual bases of the arms' estimators fly the same test episodes as references.
 
-Trained runs are reused when their ``model.zip`` exists (``--retrain`` trains again).
-Writes ``OUT/study.json`` and ``OUT/study.md``.
+    python benchmarks/estimate_study.py --out runs/estimate_study          # full: 4 CPU-h
+    python benchmarks/estimate_study.py --quick --out runs/estimate_quick  # 1 task, 3 seeds
+    python benchmarks/estimate_study.py --tasks rotor_loss --seeds 0 --timesteps 16384 \\
+        --episodes 10 --out runs/estimate_tiny
+
+Writes ``OUT/study.json`` (design, every episode of every run, curves, summaries) and
+``OUT/study.png`` (learning curves and the test scores with their intervals). A run folder
+(``OUT/<task>/<arm>/seed_<k>/``, a ``quadfault train`` run) with a ``model.zip`` is reused
+unless ``--retrain``.
 """
 
 from __future__ import annotations
@@ -33,142 +47,287 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import shlex
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-ENV_ID = "QuadFaultRotorLoss-v0"
-ARMS = {"with_estimate": "irls", "without_estimate": "none"}
-#: the measured state's noise (position, velocity [m, m/s], attitude [rad], gyro [rad/s])
-SENSOR_NOISE = {"position": 0.01, "velocity": 0.02, "attitude": 0.005, "gyro": 0.01}
-#: both arms: residual authority of one rotor's hover thrust (m g / 4 for the F450), the
-#: estimate at the control rate (every 10th physics sample)
-BASE_KWARGS = {"action_mode": "residual", "residual_scale": 2.45, "estimator_rate": "control",
-               "sensor_noise": SENSOR_NOISE}
-EVAL_SEED = 20_000
+#: the tasks: registered id, environment keywords, training seeds of the full study
+TASKS = {
+    "rotor_loss": {"env_id": "QuadFaultRotorLoss-v0", "seeds": 5,
+                   "env_kwargs": {"scenario_options": {"level": [0.1, 0.5]}}},
+    "tracking": {"env_id": "QuadFaultTrack-v0", "seeds": 3,
+                 "env_kwargs": {"scenario_options": {"degradation": [0.8, 0.95],
+                                                     "level": [0.3, 0.6],
+                                                     "onset": [0.3, 0.6]}}},
+}
+FRAME_STACK = 8
+#: the arms: the estimator in the observation (and the base) and the memory
+ARMS = {"mlp_none": ("none", 1), "mlp_irls": ("irls", 1), "mlp_ekf": ("ekf", 1),
+        "mlp_truth": ("truth", 1), "memory_none": ("none", FRAME_STACK)}
+REFERENCE_ARM = "mlp_none"
+#: every arm: residual authority of one rotor's hover thrust (m g / 4 for the F450)
+BASE_KWARGS = {"action_mode": "residual", "residual_scale": 2.45}
+#: PPO settings of every arm (chosen on the tuning episodes, never on the test episodes)
+PPO_KWARGS = {"n_steps": 256, "batch_size": 1024, "learning_rate": 3e-4, "n_epochs": 10,
+              "policy_kwargs": {"net_arch": [64, 64], "log_std_init": -2.3}}
+TUNING_SEED, TEST_SEED = 10_000, 20_000
+FULL = {"timesteps": 300_000, "episodes": 50}
+QUICK = {"tasks": ["rotor_loss"], "seeds": [0, 1, 2], "timesteps": 200_000, "episodes": 20}
 
 
-def arm_kwargs(arm: str, effects: list[str] | None) -> dict:
-    kw = dict(BASE_KWARGS, estimator=ARMS[arm])
-    if effects:
-        kw["effects"] = list(effects)
+def env_kwargs(task: str, arm: str, args) -> dict:
+    kw = dict(BASE_KWARGS, **TASKS[task]["env_kwargs"], estimator=ARMS[arm][0],
+              estimator_rate=args.estimator_rate)
+    if args.duration is not None:
+        kw["duration"] = args.duration
+    if args.allocation != "nominal":
+        kw["allocation"] = args.allocation
     return kw
 
 
-def train_command(arm: str, seed: int, args) -> list[str]:
-    return ["quadfault", "train", "--env", ENV_ID,
-            "--env-kwargs", json.dumps(arm_kwargs(arm, args.effects)),
-            "--timesteps", str(args.timesteps), "--seeds", str(seed), "--n-envs",
-            str(args.n_envs), "--vector-env", "--eval-freq", str(max(args.timesteps // 4, 1)),
-            "--quiet", "--force", "--out",
-            str(Path(args.out) / arm)]
+def train_config(task: str, arm: str, args):
+    from agents.train import TrainConfig
+
+    ppo = dict(PPO_KWARGS, n_steps=args.n_steps, batch_size=min(PPO_KWARGS["batch_size"],
+                                                                args.n_steps * args.n_envs))
+    return TrainConfig(algo="ppo", env_id=TASKS[task]["env_id"],
+                       env_kwargs=env_kwargs(task, arm, args), timesteps=args.timesteps,
+                       n_envs=args.n_envs, vector_env=True, frame_stack=ARMS[arm][1],
+                       eval_freq=max(args.timesteps // args.curve_points, 1),
+                       eval_episodes=args.tuning_episodes, eval_seed=TUNING_SEED,
+                       algo_kwargs=ppo)
 
 
-def fly(policy, env, seeds, normalizer=None) -> dict:
-    """Per episode: crashed, RMS tracking error over the flown steps [m], return."""
-    from agents.train_eval import fly_episodes
-
-    flown = fly_episodes(policy, env, seeds, normalizer)
-    return {"crashed": flown["crashed"].tolist(), "rmse": flown["rmse"].tolist(),
-            "return": flown["returns"].tolist()}
-
-
-def t_interval(x) -> tuple[float, float]:
-    """Mean and 95 % half-width (Student t) of ``x``."""
+def t_interval(x) -> list[float]:
+    """[mean, 95 % half-width (Student t; NaN below two values)] of ``x``."""
     from scipy import stats
 
     x = np.asarray(x, dtype=float)
     if x.size < 2:
-        return float(x.mean()), math.nan
+        return [float(x.mean()), math.nan]
     half = stats.t.ppf(0.975, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size)
-    return float(x.mean()), float(half)
+    return [float(x.mean()), float(half)]
+
+
+def episode_faults(env, seeds) -> list:
+    """Per test episode, what the scenario drew (faults and trajectory), to check pairing."""
+    out = []
+    for s in seeds:
+        env.reset(seed=int(s))
+        sc = env.unwrapped.scenario
+        out.append(repr((sc.efficiency, sc.trajectory)))
+    return out
+
+
+def fly(policy, env, seeds, normalizer=None) -> dict:
+    from agents.train_eval import fly_episodes
+
+    flown = fly_episodes(policy, env, seeds, normalizer)
+    return {"crashed": flown["crashed"].astype(float).tolist(), "rmse": flown["rmse"].tolist(),
+            "return": flown["returns"].tolist()}
+
+
+def curve(run_dir: Path, full_length: int) -> dict:
+    """The tuning-episode learning curve: steps, mean return, crash rate (an episode shorter
+    than the task's steps was terminated)."""
+    data = np.load(run_dir / "evaluations.npz")
+    return {"timesteps": data["timesteps"].tolist(),
+            "return": data["results"].mean(axis=1).tolist(),
+            "crash_rate": (data["ep_lengths"] < full_length).mean(axis=1).tolist()}
+
+
+def steps_to(c: dict, target: float) -> float:
+    """The first evaluated step count with a crash rate <= ``target`` (None: never)."""
+    hit = [t for t, r in zip(c["timesteps"], c["crash_rate"]) if r <= target]
+    return int(hit[0]) if hit else None
+
+
+def run_arm(task: str, arm: str, args, test_seeds) -> dict:
+    """Train (or reuse) every seed of one arm and fly the test episodes."""
+    from agents.train import load_agent, make_eval_env, train_one
+
+    config = train_config(task, arm, args)
+    env = make_eval_env(config)
+    env.reset(seed=TEST_SEED)
+    full_length = env.unwrapped.max_steps  # steps of a flight that is not terminated
+    runs = {}
+    for seed in args.seeds:
+        run_dir = Path(args.out) / task / arm / f"seed_{seed}"
+        cpu = None
+        if args.retrain or not (run_dir / "model.zip").exists():
+            c0 = time.process_time()
+            train_one(config, seed, run_dir, force=True, quiet=True)
+            cpu = time.process_time() - c0
+        saved = json.loads((run_dir / "train_config.json").read_text())
+        model, venv = load_agent(run_dir, env=env)
+        r = fly(model, env, test_seeds, venv if hasattr(venv, "normalize_obs") else None)
+        r["curve"] = curve(run_dir, full_length)
+        r["steps_to_crash_target"] = steps_to(r["curve"], args.crash_target)
+        r.update(timesteps_run=saved["timesteps_run"], train_cpu_s=cpu,
+                 episode_seeds=list(test_seeds),
+                 episode_scenarios=episode_faults(env, test_seeds))
+        runs[str(seed)] = r
+    env.close()
+    return runs
+
+
+def summarise(arms: dict) -> tuple[dict, dict]:
+    """Per arm: mean and 95 % interval over seeds of the per-seed mean scores; per arm vs
+    :data:`REFERENCE_ARM`: the same of the per-seed paired differences (arm minus reference,
+    episode by episode)."""
+    keys = ("crashed", "rmse", "return")
+    summary, paired = {}, {}
+    for arm, runs in arms.items():
+        summary[arm] = {k: t_interval([np.nanmean(r[k]) for r in runs.values()]) for k in keys}
+        steps = [r["steps_to_crash_target"] for r in runs.values()]
+        summary[arm]["steps_to_crash_target"] = {"per_seed": steps,
+                                                 "reached": sum(s is not None for s in steps)}
+    ref = arms.get(REFERENCE_ARM)
+    for arm, runs in arms.items():
+        if ref is None or arm == REFERENCE_ARM:
+            continue
+        paired[arm] = {k: t_interval([np.nanmean(np.subtract(runs[s][k], ref[s][k]))
+                                      for s in runs if s in ref]) for k in keys}
+    return summary, paired
+
+
+def plot(results: dict, path: Path) -> None:
+    from agents.plots import _figure
+    from quadfault.fileio import atomic_savefig
+
+    tasks = list(results["tasks"])
+    plt, fig, axes = _figure(len(tasks), 3.6)
+    fig.set_figwidth(11)
+    for row, task in enumerate(tasks):
+        ax = axes[row]
+        fig.delaxes(ax)
+        a1 = fig.add_subplot(len(tasks), 2, 2 * row + 1)
+        a2 = fig.add_subplot(len(tasks), 2, 2 * row + 2)
+        res = results["tasks"][task]
+        for arm, runs in res["arms"].items():
+            curves = [r["curve"] for r in runs.values()]
+            n = min(len(c["timesteps"]) for c in curves)
+            ts = curves[0]["timesteps"][:n]
+            a1.plot(ts, np.mean([c["crash_rate"][:n] for c in curves], axis=0), marker=".",
+                    label=arm)
+        a1.set_xlabel("environment steps")
+        a1.set_ylabel("crash rate, tuning episodes")
+        a1.set_title(f"{task}: learning curves (mean of {len(args_seeds(res))} seeds)")
+        a1.grid(alpha=0.3)
+        a1.legend(fontsize=7)
+        names = list(res["summary"])
+        for j, key in enumerate(("crashed", "rmse")):
+            m = [res["summary"][a][key][0] for a in names]
+            h = [res["summary"][a][key][1] for a in names]
+            a2.errorbar(np.arange(len(names)) + 0.15 * j, m,
+                        yerr=np.nan_to_num(np.asarray(h, float)), fmt="o",
+                        capsize=3, label={"crashed": "crash rate", "rmse": "RMSE [m]"}[key])
+        a2.set_xticks(np.arange(len(names)), names, rotation=20, fontsize=7)
+        a2.set_title(f"{task}: test episodes, mean and 95 % interval over seeds")
+        a2.grid(alpha=0.3)
+        a2.legend(fontsize=7)
+    fig.tight_layout()
+    atomic_savefig(fig, path, force=True, dpi=110)
+    plt.close(fig)
+
+
+def _json(x):
+    """``x`` with NaN as None (strict JSON)."""
+    if isinstance(x, dict):
+        return {k: _json(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_json(v) for v in x]
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def args_seeds(res: dict) -> list:
+    return sorted({s for runs in res["arms"].values() for s in runs})
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--timesteps", type=int, default=50_000)
-    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    ap.add_argument("--episodes", type=int, default=20)
-    ap.add_argument("--n-envs", type=int, default=16)
-    ap.add_argument("--effects", nargs="*", default=None,
-                    help="domain randomisation: effect specs with a:b ranges")
+    ap.add_argument("--quick", action="store_true",
+                    help="one task (rotor_loss), 3 seeds, 2x10^5 steps, 20 test episodes")
+    ap.add_argument("--tasks", nargs="+", choices=list(TASKS))
+    ap.add_argument("--arms", nargs="+", choices=list(ARMS), default=list(ARMS))
+    ap.add_argument("--seeds", type=int, nargs="+", help="training seeds (default: the "
+                    "task's count in the full study, from 0)")
+    ap.add_argument("--timesteps", type=int, help="env steps per run (full study 3x10^5)")
+    ap.add_argument("--episodes", type=int, help="paired test episodes (full study 50)")
+    ap.add_argument("--tuning-episodes", type=int, default=10)
+    ap.add_argument("--curve-points", type=int, default=20,
+                    help="evaluations on the tuning episodes per run")
+    ap.add_argument("--crash-target", type=float, default=0.2)
+    ap.add_argument("--n-envs", type=int, default=64)
+    ap.add_argument("--n-steps", type=int, default=PPO_KWARGS["n_steps"])
+    ap.add_argument("--allocation", default="estimate-aware",
+                    choices=("nominal", "estimate-aware"))
+    ap.add_argument("--estimator-rate", default="physics", choices=("physics", "control"))
+    ap.add_argument("--duration", type=float,
+                    help="episode length [s] (default: the task's; shorter only for tests)")
     ap.add_argument("--out", default="runs/estimate_study")
     ap.add_argument("--retrain", action="store_true")
-    ap.add_argument("--evaluate-only", action="store_true")
     args = ap.parse_args(argv)
-    out = Path(args.out)
-    costs = {}
-    for arm in ARMS:
-        for seed in args.seeds:
-            run = out / arm / f"seed_{seed}"
-            if (run / "model.zip").exists() and not args.retrain:
-                continue
-            if args.evaluate_only:
-                raise SystemExit(f"{run}: not trained")
-            cmd = train_command(arm, seed, args)
-            print("+", shlex.join(cmd), flush=True)
-            t0 = time.time()
-            res = subprocess.run(cmd, check=False)
-            if res.returncode != 0:
-                raise SystemExit(f"training {arm} seed {seed} failed ({res.returncode})")
-            costs[f"{arm}/seed_{seed}"] = time.time() - t0
+    preset = QUICK if args.quick else FULL
+    tasks = args.tasks or preset.get("tasks", list(TASKS))
+    args.timesteps = args.timesteps or preset["timesteps"]
+    episodes = args.episodes or preset["episodes"]
+    test_seeds = [TEST_SEED + i for i in range(episodes)]
 
     import gymnasium as gym
 
-    import quad_fault_env  # noqa: F401
-    from agents.train import load_agent
+    import quad_fault_env  # noqa: F401  (registers the ids)
     from quadfault.fileio import atomic_write_text
 
-    seeds = [EVAL_SEED + i for i in range(args.episodes)]
-    results = {}
-    base = arm_kwargs("without_estimate", args.effects)
-    results["geometric"] = fly(None, gym.make(ENV_ID, **base), seeds)
-    ref_kw = dict(arm_kwargs("with_estimate", args.effects), compensate=True)
-    results["estimate-aware allocation (IRLS)"] = fly(None, gym.make(ENV_ID, **ref_kw), seeds)
-    for arm in ARMS:
-        for seed in args.seeds:
-            env = gym.make(ENV_ID, **arm_kwargs(arm, args.effects))
-            model, venv = load_agent(out / arm / f"seed_{seed}", env=env)
-            norm = venv if hasattr(venv, "normalize_obs") else None
-            results[f"{arm}/seed_{seed}"] = fly(model, env, seeds, norm)
-    rows = ["| agent | crash rate | mean RMSE [m] | mean return |", "|---|---|---|---|"]
-
-    def row(name, keys):
-        c = np.mean([np.mean(results[k]["crashed"]) for k in keys])
-        r = np.mean([np.nanmean(results[k]["rmse"]) for k in keys])
-        g = np.mean([np.mean(results[k]["return"]) for k in keys])
-        rows.append(f"| {name} | {c:.2f} | {r:.4f} | {g:.1f} |")
-
-    row("geometric (zero residual)", ["geometric"])
-    row("estimate-aware allocation, IRLS (zero residual)", ["estimate-aware allocation (IRLS)"])
-    for arm in ARMS:
-        row(f"PPO {arm.replace('_', ' ')} (seeds {', '.join(map(str, args.seeds))})",
-            [f"{arm}/seed_{s}" for s in args.seeds])
-    d_rmse = [np.nanmean(np.subtract(results[f"without_estimate/seed_{s}"]["rmse"],
-                                     results[f"with_estimate/seed_{s}"]["rmse"]))
-              for s in args.seeds]
-    d_crash = [np.mean(np.subtract(np.asarray(results[f"without_estimate/seed_{s}"]["crashed"],
-                                              float),
-                                   np.asarray(results[f"with_estimate/seed_{s}"]["crashed"],
-                                              float))) for s in args.seeds]
-    m, h = t_interval(d_rmse)
-    mc, hc = t_interval(d_crash)
-    summary = (f"\nwith vs without the estimate, paired by seed and episode (> 0: the estimate "
-               f"helps): RMSE {m:+.4f} +/- {h:.4f} m, crash rate {mc:+.3f} +/- {hc:.3f} "
-               f"(95 % intervals over {len(args.seeds)} seeds)")
-    text = "\n".join(rows) + summary + "\n"
-    print(text)
+    out = Path(args.out)
+    seed_arg = args.seeds
+    results = {"design": {"arms": {a: {"estimator": e, "frame_stack": k}
+                                   for a, (e, k) in ARMS.items() if a in args.arms},
+                          "reference_arm": REFERENCE_ARM, "ppo": PPO_KWARGS,
+                          "n_envs": args.n_envs, "n_steps": args.n_steps,
+                          "timesteps": args.timesteps, "allocation": args.allocation,
+                          "duration": args.duration,
+                          "estimator_rate": args.estimator_rate,
+                          "tuning_seeds": [TUNING_SEED, TUNING_SEED + args.tuning_episodes - 1],
+                          "test_seeds": test_seeds, "crash_target": args.crash_target},
+               "tasks": {}}
+    for task in tasks:
+        args.seeds = seed_arg or list(range(TASKS[task]["seeds"] if not args.quick
+                                            else len(QUICK["seeds"])))
+        arms = {}
+        for arm in args.arms:
+            print(f"{task} / {arm}: seeds {args.seeds}, {args.timesteps:,} steps each",
+                  flush=True)
+            arms[arm] = run_arm(task, arm, args, test_seeds)
+        references = {}
+        for est in sorted({ARMS[a][0] for a in args.arms}):
+            arm = next(a for a in args.arms if ARMS[a][0] == est and ARMS[a][1] == 1) \
+                if any(ARMS[a][0] == est and ARMS[a][1] == 1 for a in args.arms) else None
+            if arm is None:
+                continue
+            env = gym.make(TASKS[task]["env_id"], **env_kwargs(task, arm, args))
+            references[f"base_{est}"] = fly(None, env, test_seeds)
+            env.close()
+        summary, paired = summarise(arms)
+        results["tasks"][task] = {"env_id": TASKS[task]["env_id"],
+                                  "env_kwargs": TASKS[task]["env_kwargs"],
+                                  "seeds": args.seeds, "episode_seeds": test_seeds,
+                                  "arms": arms, "references": references,
+                                  "summary": summary, f"paired_vs_{REFERENCE_ARM}": paired}
+        for arm, s in summary.items():
+            line = ", ".join(f"{k} {m:.3f} +/- {h:.3f}" for k, (m, h) in
+                             ((k, s[k]) for k in ("crashed", "rmse", "return")))
+            print(f"  {arm}: {line}; steps to crash rate <= {args.crash_target}: "
+                  f"{s['steps_to_crash_target']['per_seed']}")
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "study.md", text, force=True)
-    atomic_write_text(out / "study.json", json.dumps(
-        {"env_id": ENV_ID, "arms": {a: arm_kwargs(a, args.effects) for a in ARMS},
-         "timesteps": args.timesteps, "seeds": args.seeds, "episodes": seeds,
-         "results": results, "train_wall_s": costs,
-         "paired_rmse": [m, h], "paired_crash": [mc, hc]}, indent=1), force=True)
+    atomic_write_text(out / "study.json", json.dumps(_json(results), indent=1,
+                                                          allow_nan=False), force=True)
+    plot(results, out / "study.png")
+    print(f"-> {out / 'study.json'}, {out / 'study.png'}")
     return 0
 
 

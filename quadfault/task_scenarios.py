@@ -25,8 +25,8 @@ import math
 import numpy as np
 
 from quadfault.errors import ConfigError
-from quadfault.scenarios import (AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario,
-                                 N_MOTORS)
+from quadfault.scenarios import (AbruptFault, ConstantEfficiency, EfficiencySchedule,
+                                 LinearVoltage, N_MOTORS, Scenario, VoltageDegradation)
 from quadfault.trajectory import Hover, SmoothTrack
 
 #: arm length of the paper's F450 [m]: the vehicle the tasks' default ranges are written for
@@ -77,8 +77,11 @@ def _duration(duration) -> float:
 def track_scenario(rng: np.random.Generator, duration: float = 20.0, *,
                    speed: tuple = TRACK_SPEED, curvature: tuple = TRACK_CURVATURE,
                    yaw_rate: tuple = TRACK_YAW_RATE, altitude: float = 1.0,
-                   thrust_noise: float = 0.07, vehicle=None) -> Scenario:
-    """A random smooth trajectory (:class:`SmoothTrack`), all motors healthy.
+                   degradation: tuple | None = None, level: tuple | None = None,
+                   onset: tuple = ROTOR_LOSS_ONSET, thrust_noise: float = 0.07,
+                   vehicle=None) -> Scenario:
+    """A random smooth trajectory (:class:`SmoothTrack`); all motors healthy by default, or
+    degrading gradually and/or losing one rotor abruptly.
 
     Args:
         rng: the generator every draw comes from.
@@ -89,9 +92,21 @@ def track_scenario(rng: np.random.Generator, duration: float = 20.0, *,
             F450; divided by ``size_scale(vehicle)``).
         yaw_rate: range of the heading rate [rad/s].
         altitude: height of the start above the origin [m] (times the size scale).
+        degradation: None (no degradation) or the range of every motor's efficiency at the
+            end of the flight, reached by a battery voltage falling linearly over the flight
+            (:class:`~quadfault.scenarios.VoltageDegradation`, ``xi`` 0.25 /V).
+        level: None (no fault) or the range of the efficiency one rotor (drawn uniformly)
+            drops to abruptly, as in :func:`rotor_loss_scenario`, at a time drawn from
+            ``onset`` (fractions of the flight); the other rotors keep degrading.
         vehicle: the flown vehicle (sets the size scale; None: the F450).
+
+    The draws of the trajectory come first and are those of the healthy task; the
+    degradation and the fault are drawn after them, only when asked for.
     """
     T = _duration(duration)
+    deg = None if degradation is None else _range("degradation", degradation, 0.05, 1.0)
+    lv = None if level is None else _range("level", level, 0.0, 1.0)
+    on = _range("onset", onset, 0.0, 1.0)
     v_lo, v_hi = _range("speed", speed, 0.0)
     k_lo, k_hi = _range("curvature", curvature, 0.0)
     if k_lo <= 0:
@@ -106,7 +121,17 @@ def track_scenario(rng: np.random.Generator, duration: float = 20.0, *,
         A[i], w[i] = sign / kappa, v * kappa
     traj = SmoothTrack((0.0, 0.0, -altitude * s), tuple(A), tuple(w),
                        float(rng.uniform(-math.pi, math.pi)), float(rng.uniform(r_lo, r_hi)))
-    return Scenario("track", T, EfficiencySchedule(), traj, thrust_noise=thrust_noise)
+    base, faults = ConstantEfficiency(), ()
+    if deg is not None:  # eta_end = exp(xi (V_end - V_start))
+        xi = VoltageDegradation.xi
+        v_end = LinearVoltage.v_start + math.log(float(rng.uniform(*deg))) / xi
+        base = VoltageDegradation(LinearVoltage(v_end=v_end, duration=T), xi=xi)
+    if lv is not None:
+        motor = int(rng.integers(1, N_MOTORS + 1))
+        t0 = float(rng.uniform(*on)) * T
+        faults = (AbruptFault(motor=motor, onset=t0, level=float(rng.uniform(*lv))),)
+    return Scenario("track", T, EfficiencySchedule(base, faults), traj,
+                    thrust_noise=thrust_noise)
 
 
 def rotor_loss_scenario(rng: np.random.Generator, duration: float = 10.0, *,

@@ -92,3 +92,24 @@ def test_rotor_loss_draws_one_rotor_level_and_onset_in_range():
 def test_bad_ranges_are_refused_with_a_clear_error(call, match):
     with pytest.raises(ConfigError, match=match):
         call(np.random.default_rng(0))
+
+
+def test_track_with_degradation_and_a_fault_keeps_the_healthy_tracks_trajectory():
+    healthy = track_scenario(np.random.default_rng(5))
+    faulty = track_scenario(np.random.default_rng(5), degradation=(0.8, 0.9), level=(0.3, 0.4),
+                            onset=(0.4, 0.5))
+    assert faulty.trajectory == healthy.trajectory
+    np.testing.assert_array_equal(healthy.efficiency(np.array([0.0, 19.9])), 1.0)
+    (fault,) = faulty.efficiency.faults
+    assert 0.4 * 20 <= fault.onset <= 0.5 * 20 and 0.3 <= fault.level <= 0.4
+    eta = faulty.efficiency(np.array([0.0, fault.onset - 0.01, 20.0]))
+    np.testing.assert_allclose(eta[0], 1.0)
+    others = np.delete(eta, fault.motor - 1, axis=1)
+    assert np.all(np.diff(others, axis=0) < 0)  # every motor degrades gradually
+    assert 0.8 <= others[-1, 0] <= 0.9  # to the drawn end level
+    assert eta[-1, fault.motor - 1] == pytest.approx(fault.level)
+
+
+def test_track_degradation_out_of_range_is_a_config_error():
+    with pytest.raises(ConfigError, match="degradation"):
+        track_scenario(np.random.default_rng(0), degradation=(0.0, 0.9))

@@ -12,7 +12,8 @@ from quadfault.task_scenarios import rotor_loss_scenario, track_scenario
 #: scenario generators drawn from at every reset (``scenario=`` one of these)
 GENERATORS = ("random", "track", "rotor_loss")
 #: keywords of ``scenario_options`` per generator (``quadfault.task_scenarios``)
-SCENARIO_OPTIONS = {"track": ("speed", "curvature", "yaw_rate", "altitude"),
+SCENARIO_OPTIONS = {"track": ("speed", "curvature", "yaw_rate", "altitude", "degradation",
+                              "level", "onset"),
                     "rotor_loss": ("level", "onset", "altitude")}
 #: the generator behind each name that takes ``scenario_options``
 _DRAWS = {"track": track_scenario, "rotor_loss": rotor_loss_scenario}
