@@ -87,9 +87,9 @@ class TrainConfig:
         device: torch device (``"cpu"`` by default).
         torch_threads: CPU threads torch may use. 1 by default: these networks are small
             (two layers of 64), so a second thread adds synchronisation and no speed, and on a
-            loaded machine torch's threads wait on each other (measured with SB3 PPO under
-            load: 805 env steps per second on one thread, 97 on torch's default two;
-            ``benchmarks/train_speed.py --torch-threads 2`` measures it on yours).
+            loaded machine torch's threads wait on each other (docs/agents.md, "torch
+            threads"; ``benchmarks/train_speed.py --torch-threads 2`` measures it on yours).
+            Kept through the vector env's steps by :func:`set_threads`.
         frame_stack: observations of the last this many steps, oldest first, concatenated
             (SB3's ``VecFrameStack`` in training, gymnasium's ``FrameStackObservation`` in
             evaluation, zeros before the episode's first step): a policy with a short
