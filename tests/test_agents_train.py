@@ -175,3 +175,23 @@ def test_flags_override_the_config_file(tmp_path):
     assert cfg.numba_threads == 1 and cfg.algo == "ppo"
     with pytest.raises(ConfigError, match="numba_threads"):
         config_from_args(parser.parse_args(["--numba-threads", "0", "--out", "x"]))
+
+
+def test_torch_keeps_its_thread_count_through_vector_env_steps():
+    # numba's OpenMP layer and torch share the OpenMP runtime: the vector env's per-step
+    # numba thread switch must not hand torch the core count back
+    torch = pytest.importorskip("torch")
+    from agents.train import TrainConfig, make_vec_env, set_threads
+
+    config = TrainConfig(env_id="QuadFaultRotorLoss-v0", env_kwargs=dict(TINY_ENV), n_envs=2,
+                         vector_env=True, torch_threads=1)
+    before = torch.get_num_threads()
+    try:
+        env = make_vec_env(config, 0, 2)
+        set_threads(config)
+        env.reset()
+        env.step(np.zeros((2, 4), dtype=np.float32))
+        assert torch.get_num_threads() == 1
+        env.close()
+    finally:
+        torch.set_num_threads(before)
