@@ -196,7 +196,7 @@ class QuadFaultVectorEnv(VectorEnv):
     @property
     def sigma(self) -> np.ndarray:
         """Each sub-env's thrust noise sigma_f (N,)."""
-        return self.plant.vehicles.sigma
+        return self.flight.thrust_noise
 
     # -- resets ------------------------------------------------------------------------------
     def _reset_rows(self, rows, seeds=None, options=None):

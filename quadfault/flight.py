@@ -102,6 +102,11 @@ class Flight:
         """Time of vehicle ``i``'s next step [s]."""
         return self._C.t0 + self._C.dt * int(self.k[i])
 
+    @property
+    def thrust_noise(self) -> np.ndarray:
+        """Each vehicle's thrust noise sigma_f [N] (N,) (a view)."""
+        return self.plant.vehicles.sigma
+
     def set_thrust_noise(self, rows, sigma) -> None:
         """Thrust noise sigma_f [N] of the vehicles ``rows`` (from their next step)."""
         self.plant.vehicles.sigma[rows] = sigma
@@ -290,4 +295,4 @@ class Flight:
         return self.plant.vehicles.measurement(i)
 
 
-__all__ = ["Flight", "tabulate"]
+__all__ = ["Flight", "Records", "tabulate"]

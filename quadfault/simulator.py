@@ -24,11 +24,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from quadfault.closed_loop import Records
 from quadfault.controller import ControllerConfig, GeometricController
 from quadfault.dynamics import RigidBodyState
-from quadfault.flight import Flight
 from quadfault.errors import ConfigError
+from quadfault.flight import Flight, Records
 from quadfault.motors import MotorModel
 from quadfault.plant import INTEGRATORS, EffectsHook, Plant
 from quadfault.progress import progress_bar

@@ -101,3 +101,22 @@ def test_bad_input_gives_clear_errors():
         flight.use_efficiency(np.ones((1, 5, 4)), np.zeros(1, dtype=np.int64))
     with pytest.raises(ConfigError, match="reset"):
         flight.step(np.zeros(4), 1)
+
+
+def test_an_env_whose_generator_is_replaced_flies_on_the_new_one():
+    """The single env's flight draws from the env's generator, also after a wrapper or a
+    user assigns ``env.np_random``."""
+    from quad_fault_env.envs.quad_fault import QuadFaultEnv
+
+    runs = []
+    for replace in (True, True, False):
+        env = QuadFaultEnv("none", "hover", duration=1.0, thrust_noise=0.1, sensor_noise=NOISY)
+        env.reset(seed=1)
+        if replace:
+            env.np_random = np.random.default_rng(99)
+        obs = [env.step(np.zeros(4, dtype=np.float32))[0] for _ in range(5)]
+        runs.append(np.array(obs))
+        if replace:
+            assert env.flight.generator(0) is env.np_random
+    np.testing.assert_array_equal(runs[0], runs[1])
+    assert not np.array_equal(runs[0], runs[2])
