@@ -55,6 +55,7 @@ from estimators.linalg import cholesky_into
 from estimators.recursive import BatchedRecursive, RecursiveEstimator
 from estimators.rls import check_bounds
 from estimators.state import all_finite, piece, piece_rows
+from quadfault.dynamics import angular_acceleration3, rotor_wrench, translational_acceleration3
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange
 from quadfault.vehicle import Vehicle
@@ -190,27 +191,17 @@ def state_pieces(fs, offsets, n, N):
 
 
 @jit(inline="always")
-def _propagate(X, f, R, dt, m, g, A, J, Jinv) -> None:
+def _propagate(X, f, R9, dt, rigid, A) -> None:
     """One sigma point ``X = [v, Omega, eta]`` over ``dt`` with the command ``f`` held and the
-    attitude ``R``, in place (eqs. 13, 15; the efficiencies a random walk)."""
+    attitude ``R9`` (row-major 9-tuple), in place: the model's allocation and rigid body
+    (:mod:`quadfault.dynamics`, eqs. 2, 4 and 12; the efficiencies a random walk)."""
     n = f.shape[0]
-    T = mo0 = mo1 = mo2 = 0.0  # wrench [T; M] = A diag(eta) f
-    for j in range(n):
-        ef = X[ETA_ + j] * f[j]
-        T += A[0, j] * ef
-        mo0 += A[1, j] * ef
-        mo1 += A[2, j] * ef
-        mo2 += A[3, j] * ef
-    w0, w1, w2 = X[3], X[4], X[5]
-    jw0 = J[0, 0] * w0 + J[0, 1] * w1 + J[0, 2] * w2
-    jw1 = J[1, 0] * w0 + J[1, 1] * w1 + J[1, 2] * w2
-    jw2 = J[2, 0] * w0 + J[2, 1] * w1 + J[2, 2] * w2
-    t0 = mo0 - (w1 * jw2 - w2 * jw1)
-    t1 = mo1 - (w2 * jw0 - w0 * jw2)
-    t2 = mo2 - (w0 * jw1 - w1 * jw0)
+    T, M = rotor_wrench(A, f, X[ETA_:ETA_ + n])
+    acc = translational_acceleration3(R9, T, rigid)
+    wdot = angular_acceleration3((X[3], X[4], X[5]), M, rigid)
     for a in range(3):
-        X[a] += ((g if a == 2 else 0.0) - T * R[a, 2] / m) * dt
-        X[3 + a] += (Jinv[a, 0] * t0 + Jinv[a, 1] * t1 + Jinv[a, 2] * t2) * dt
+        X[a] += acc[a] * dt
+        X[3 + a] += wdot[a] * dt
 
 
 @jit
@@ -272,7 +263,6 @@ def _predict_update(x, P, zv, zw, f, R, dt, const, S, i, n) -> int:
     L = M_ + n
     a4 = C_A + 4 * n
     A = const[C_A:a4].reshape((4, n))
-    J, Jinv = const[a4:a4 + 9].reshape((3, 3)), const[a4 + 9:a4 + 18].reshape((3, 3))
     qc, r = const[a4 + 18:a4 + 18 + L], const[a4 + 18 + L:a4 + 24 + L]
     keep, P_keep = S[F_KEEP][i], S[F_P_KEEP][i]
     for j in range(n):  # the efficiencies before the step (an idle step restores them)
@@ -292,9 +282,10 @@ def _predict_update(x, P, zv, zw, f, R, dt, const, S, i, n) -> int:
             d = scale * C[a, c] if a >= c else 0.0
             X[1 + c, a] = x[a] + d
             X[1 + L + c, a] = x[a] - d
-    m, g = const[C_MASS], const[C_G]
+    rigid = (const[C_MASS], const[C_G], const[a4:a4 + 9], const[a4 + 9:a4 + 18])
+    R9 = (R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2], R[2, 0], R[2, 1], R[2, 2])
     for s in range(2 * L + 1):
-        _propagate(X[s], f, R, dt, m, g, A, J, Jinv)
+        _propagate(X[s], f, R9, dt, rigid, A)
     for a in range(L):  # predicted mean and covariance
         acc = wm0 * X[0, a]
         for s in range(1, 2 * L + 1):
