@@ -84,6 +84,23 @@ def command_limit(recording: Recording, vehicle) -> float:
                       f"true or false, got {flag!r}")
 
 
+def sample_arrays(sample: Sample, n_rotors: int, who: str) -> tuple:
+    """``(t, p, v, R, w, f)`` of one online ``sample`` as a float and contiguous float64
+    arrays, for the compiled ``update`` of estimator ``who`` (its name in the error); a
+    sample that is not one, or has the wrong shapes, is a one-line ``ConfigError``."""
+    try:
+        t = float(sample.t)
+        arrays = [np.asarray(a, dtype=np.float64) for a in sample[1:]]
+    except (AttributeError, TypeError, ValueError, IndexError):
+        raise ConfigError(f"{who}: {sample!r} is not a sample (t, p, v, R, w, f of numbers)") \
+            from None
+    shapes = [a.shape for a in arrays]
+    if shapes != [(3,), (3,), (3, 3), (3,), (n_rotors,)]:
+        raise ConfigError(f"{who}: sample at t = {sample.t} has shapes {shapes}; expected "
+                          f"p, v, w (3,), R (3, 3), f ({n_rotors},)")
+    return (t, *(np.ascontiguousarray(a) for a in arrays))
+
+
 @runtime_checkable
 class OnlineEstimator(Protocol):
     name: str
@@ -108,6 +125,7 @@ __all__ = [
     "Estimate",
     "EstimateSeries",
     "OnlineEstimator",
+    "sample_arrays",
     "Sample",
     "command_limit",
     "samples",

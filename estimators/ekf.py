@@ -49,6 +49,7 @@ from estimators.base import (
     EstimateSeries,
     Sample,
     command_limit,
+    sample_arrays,
 )
 from estimators.ekf_filter import (
     M3,
@@ -400,17 +401,7 @@ class MotorEfficiencyEKF:
 
     def update(self, sample: Sample) -> Estimate:
         """One predict (from the previous sample, its command held) and one update."""
-        try:
-            t = float(sample.t)
-            arrays = [np.asarray(a, dtype=np.float64) for a in sample[1:]]
-        except (AttributeError, TypeError, ValueError, IndexError):
-            raise ConfigError(f"EKF: {sample!r} is not a sample (t, p, v, R, w, f of numbers)") \
-                from None
-        shapes = [a.shape for a in arrays]
-        if shapes != [(3,), (3,), (3, 3), (3,), (self.n_rotors,)]:
-            raise ConfigError(f"EKF: sample at t = {sample.t} has shapes {shapes}; expected "
-                              f"p, v, w (3,), R (3, 3), f ({self.n_rotors},)")
-        p, v, R, w, f = (np.ascontiguousarray(a) for a in arrays)
+        t, p, v, R, w, f = sample_arrays(sample, self.n_rotors, "EKF")
         st = self._state
         code = ekf_update(t, p, v, R, w, f, self._const, st.offsets, st.floats, st.ints)
         return self._estimate(t, code)

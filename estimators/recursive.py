@@ -25,7 +25,14 @@ from dataclasses import asdict
 
 import numpy as np
 
-from estimators.base import STATUSES, Estimate, EstimateSeries, Sample, command_limit
+from estimators.base import (
+    STATUSES,
+    Estimate,
+    EstimateSeries,
+    Sample,
+    command_limit,
+    sample_arrays,
+)
 from estimators.state import FlatState
 from quadfault.errors import ConfigError
 from quadfault.recording import Recording
@@ -134,17 +141,7 @@ class RecursiveEstimator(_Kernels):
 
     def update(self, sample: Sample) -> Estimate:
         """One sample in (the command it carries is held until the next one); the estimate."""
-        try:
-            t = float(sample.t)
-            arrays = [np.asarray(a, dtype=np.float64) for a in sample[1:]]
-        except (AttributeError, TypeError, ValueError, IndexError):
-            raise ConfigError(f"{self.name}: {sample!r} is not a sample (t, p, v, R, w, f of "
-                              "numbers)") from None
-        shapes = [a.shape for a in arrays]
-        if shapes != [(3,), (3,), (3, 3), (3,), (self.n_rotors,)]:
-            raise ConfigError(f"{self.name}: sample at t = {sample.t} has shapes {shapes}; "
-                              f"expected p, v, w (3,), R (3, 3), f ({self.n_rotors},)")
-        p, v, R, w, f = (np.ascontiguousarray(a) for a in arrays)
+        t, p, v, R, w, f = sample_arrays(sample, self.n_rotors, self.name)
         st = self._state
         code = self._k_update(t, p, v, R, w, f, self._const, st.offsets, st.floats, st.ints)
         self._k_estimate(st.offsets, self.n_rotors, st.floats, st.ints, self._eta, self._sd)
