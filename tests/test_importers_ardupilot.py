@@ -122,7 +122,7 @@ def test_bad_input_gives_one_line(tmp_path, case):
         data = path.read_bytes().replace(b"RCOU", b"RCOX")
         path.write_bytes(data)
     elif case == "no_imu":
-        path.write_bytes(path.read_bytes().replace(b"IMU\x00", b"IMX\x00"))
+        path.write_bytes(path.read_bytes().replace(b"GyrX", b"Gyr1"))  # no gyro, any name
     else:
         dataflash_flight(path, params={"FRAME_CLASS": 2})
     res = _cli(path, "--out", tmp_path / "o.csv", *args)
@@ -142,3 +142,57 @@ def test_motors_never_running_is_an_error(tmp_path):
     log.streams["u"] = (ts, 0.0 * u, kind)
     with pytest.raises(QuadfaultError, match="motors never run"):
         build_recording(log)
+
+
+# ------------------------------------------------------------------ old text logs (3.x)
+@pytest.mark.parametrize("gps", ["board", "tow"])
+def test_old_text_log_timed_by_gps_with_position_from_gps(tmp_path, gps):
+    """No time stamp in IMU/ATT/MOT: they are timed by their place between the GPS fixes
+    (board clock T, else GPS time of week); position and velocity come from the GPS."""
+    from tests.support.field_logs import BOARD_T0, old_text_log
+
+    path = tmp_path / "old.log"
+    old_text_log(path, gps=gps)
+    rec = _import(path)
+    t = rec.t - (BOARD_T0 if gps == "board" else 0.0)  # the time of week starts at 0
+    dt = np.diff(t)
+    assert np.median(dt) == pytest.approx(0.02, rel=0.02)  # the 50 Hz loop
+    assert np.max(dt[dt < 0.1]) < 0.03  # evenly timed between fixes
+    # the threshold span: hover only, take-off and landing cut
+    assert t[0] > T_TAKEOFF and t[-1] < T_LAND and np.all(rec.commands_u > 0.3)
+    expected = 0.1 * np.sin(0.3 * t)  # north [m] of the synthetic flight
+    np.testing.assert_allclose(rec.position[:, 0], expected, atol=0.03)
+    np.testing.assert_allclose(rec.position[:, 2], -1.0, atol=0.02)
+    np.testing.assert_allclose(rec.velocity[:, 0], 0.03 * np.cos(0.3 * t), atol=0.01)
+    np.testing.assert_allclose(rec.velocity[:, 2], 0.0, atol=0.02)
+    np.testing.assert_allclose(rec.accel[:, 2], -G, atol=1e-3)
+    assert rec.vbat is not None and 14.0 < np.median(rec.vbat) < 16.0  # centivolts
+    warnings = " ".join(rec.meta["import"]["warnings"])
+    assert "position and velocity from GPS" in warnings
+
+
+def test_old_text_log_with_a_second_imu_only(tmp_path):
+    from tests.support.field_logs import old_text_log
+
+    path = tmp_path / "old.log"
+    old_text_log(path, imu="IMU2")
+    rec = _import(path)
+    np.testing.assert_allclose(rec.accel[:, 2], -G, atol=1e-3)
+    assert "body rates from IMU2" in " ".join(rec.meta["import"]["warnings"])
+
+
+@pytest.mark.parametrize("case", ["no_gyro", "no_clock"])
+def test_old_text_log_says_what_is_missing(tmp_path, case):
+    from tests.support.field_logs import old_text_log
+
+    path = tmp_path / "old.log"
+    old_text_log(path, imu=None if case == "no_gyro" else "IMU",
+                 gps="board" if case == "no_gyro" else None)
+    res = _cli(path, "--out", tmp_path / "o.csv")
+    assert res.returncode != 0
+    assert res.stderr.count("\n") == 1 and "Traceback" not in res.stderr, res.stderr
+    assert "old.log" in res.stderr
+    if case == "no_gyro":  # names what is missing and what the log has instead
+        assert "no body rates" in res.stderr and "ATT, CURR, GPS, MOT" in res.stderr
+    else:
+        assert "no time stamps" in res.stderr

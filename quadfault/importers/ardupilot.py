@@ -1,15 +1,20 @@
 """ArduPilot DataFlash importer: binary ``.bin`` and text ``.log`` (needs ``pymavlink``:
 ``pip install 'quadfault[ardupilot]'``).
 
-pymavlink's ``DFReader`` opens the log, reads its self-description (``FMT`` messages) and its
-parameters, and indexes the messages; the columns this importer needs are then decoded in
-bulk with numpy from that index (binary logs) or collected message by message (text logs).
-ArduPilot logs NED world and FRD body frames, like quadfault.
+:mod:`quadfault.importers.dataflash` reads the log into tables (one per message type, from
+the log's own message definitions) and times them; this module turns them into streams.
+ArduPilot logs NED world and FRD body frames, like quadfault. Sources are chosen by their
+columns, so old and new logs alike give what they have:
 
-- ``IMU`` (instance 0): ``GyrX..Z`` [rad/s], ``AccX..Z`` [m/s^2] -> body rates, specific force;
-  the time base
-- ``ATT``: ``Roll, Pitch, Yaw`` [deg] -> attitude (Z-Y-X Euler)
-- ``XKF1`` / ``NKF1`` (core 0): ``PN, PE, PD`` [m], ``VN, VE, VD`` [m/s] -> position, velocity
+- body rates and specific force, the time base: ``IMU`` (instance 0; else ``IMU2``,
+  ``IMU3``, else any message with ``GyrX..Z``) ``GyrX..Z`` [rad/s], ``AccX..Z`` [m/s^2]; else
+  delta angles and velocities over their intervals (``IMT``: ``DelAngX..Z / DelAT``,
+  ``DelVelX..Z / DelVT``)
+- ``ATT`` (else ``AHR2``): ``Roll, Pitch, Yaw`` [deg] -> attitude (Z-Y-X Euler)
+- ``XKF1`` / ``NKF1`` / ``EKF1`` (core 0; any message with ``PN..PD``, ``VN..VD``) [m], [m/s]
+  -> position, velocity; without an EKF, the GPS (``Lat``, ``Lng``, ``Alt``, ``Status``):
+  position NED about the first 3D fix, velocity from ``Spd``, ``GCrs``, ``VZ`` (or the
+  position's slope), invalid without a 3D fix
 - ``XKF4`` / ``NKF4`` (core 0): ``SS`` (filter status bits) -> validity: velocity needs bits 1,
   2; position bit 3 or 4 and bit 5; bit 7 (constant position mode) invalidates both
 - ``RCOU`` (``C1..``, or ``Chan1..``) / ``MOT``: PWM [us] -> motor commands, channels from
@@ -18,6 +23,9 @@ ArduPilot logs NED world and FRD body frames, like quadfault.
 - ``BAT`` / ``CURR``: ``Volt``, ``Curr`` -> ``vbat``, ``current``
 - ``EV``: ``Id`` 28 (not landed), 18 (land complete), 17 (land complete maybe), 10/11
   (armed/disarmed) -> flight span
+
+A log without body rates or without motor outputs fails with one line naming what is missing
+and the messages the log does have.
 
 Parameters: ``MOT_PWM_MIN/MAX`` (else ``RC3_MIN/MAX``, else 1000-2000 us) normalise the PWM
 to the actuator command u; ``MOT_SPIN_MIN/MAX`` and ``MOT_THST_EXPO`` give ArduPilot's thrust
@@ -29,14 +37,12 @@ parameter: the positions are unit offsets, flagged as a placeholder unless ``--a
 
 from __future__ import annotations
 
-import contextlib
-import io
 from pathlib import Path
 
 import numpy as np
 
-from quadfault.errors import ConfigError, QuadfaultError, RecordingError
-from quadfault.importers import DATAFLASH_MAGIC
+from quadfault.errors import ConfigError, RecordingError
+from quadfault.importers.dataflash import read_tables, set_times
 from quadfault.importers.field_log import FieldLog, Geometry, build_recording
 from quadfault.recording import Recording
 from quadfault.rotation import euler_zyx_to_rot, rot_to_quat
@@ -58,102 +64,6 @@ QUAD_FRAMES = {
     14: ("clockwise X", ((1, 1, 1), (-1, 1, -1), (-1, -1, 1), (1, -1, -1))),
     18: ("Betaflight X reversed", ((-1, 1, 1), (1, 1, -1), (-1, -1, -1), (1, -1, 1))),
 }
-_NUMPY = {"b": "i1", "B": "u1", "h": "<i2", "H": "<u2", "i": "<i4", "I": "<u4", "f": "<f4",
-          "d": "<f8", "q": "<i8", "Q": "<u8", "e": "<f2"}
-
-
-def _open(path: Path):
-    try:
-        from pymavlink import DFReader
-    except ImportError:
-        raise QuadfaultError("the ArduPilot importer needs pymavlink: pip install "
-                             "'quadfault[ardupilot]'") from None
-    if not path.exists():
-        raise RecordingError(path, "file not found")
-    with open(path, "rb") as fh:
-        head = fh.read(8000)
-    binary = head.startswith(DATAFLASH_MAGIC)
-    if not binary and b"FMT," not in head:
-        raise RecordingError(path, "not an ArduPilot DataFlash log (no DataFlash header and no "
-                                   "FMT lines)")
-    class Binary(DFReader.DFReader_binary):
-        def init_clock(self):  # time comes from TimeUS: no pass over the whole log
-            self.clock = DFReader.DFReaderClock_usec()
-
-    chatter = io.StringIO()
-    try:
-        with contextlib.redirect_stderr(chatter), contextlib.redirect_stdout(chatter):
-            reader = Binary(str(path)) if binary else DFReader.DFReader_text(str(path))
-    except Exception as exc:  # DFReader raises bare Exceptions on corrupt logs
-        raise RecordingError(path, f"not a readable DataFlash log: {exc}") from None
-    return reader, binary
-
-
-def _binary_table(reader, name: str) -> dict | None:
-    """``{column: array}`` of every ``name`` message, decoded from DFReader's index."""
-    tid = reader.name_to_id.get(name)
-    if tid is None or not reader.offsets[tid]:
-        return None
-    fmt = reader.formats[tid]
-    from pymavlink.DFReader import FORMAT_TO_STRUCT
-
-    names, types, mults = [], [], []
-    for col, ch, mult in zip(fmt.columns, fmt.msg_fmts, fmt.msg_mults):
-        code = FORMAT_TO_STRUCT[ch][0]
-        names.append(col)
-        types.append("S" + code[:-1] if code.endswith("s") else _NUMPY[code])
-        mults.append(mult)
-    dtype = np.dtype({"names": names, "formats": types})
-    if dtype.itemsize != fmt.len - 3:
-        return None
-    buf = np.frombuffer(reader.data_map, dtype=np.uint8)
-    ofs = np.asarray(reader.offsets[tid], dtype=np.int64)
-    ofs = ofs[ofs + fmt.len <= len(buf)]  # a truncated last message is dropped
-    rows = buf[ofs[:, None] + 3 + np.arange(fmt.len - 3)].copy().view(dtype)[:, 0]
-    out = {}
-    for col, mult in zip(names, mults):
-        if rows[col].dtype.kind == "S":
-            out[col] = np.char.decode(rows[col], "latin-1")
-        else:
-            out[col] = rows[col].astype(float) * (mult if mult else 1.0)
-    return out
-
-
-def _text_tables(reader, names) -> dict:
-    """``{name: {column: array}}`` of a text log, message by message."""
-    rows = {n: [] for n in names}
-    cols = {}
-    while True:
-        try:
-            m = reader.recv_match(type=list(names))
-        except Exception:  # a malformed line ends what can be read
-            break
-        if m is None:
-            break
-        kind = m.get_type()
-        if kind not in cols:
-            cols[kind] = [c for c in m.get_fieldnames() if c not in ("Name", "Message")]
-        vals = []
-        for c in cols[kind]:
-            v = getattr(m, c, np.nan)
-            vals.append(float(v) if isinstance(v, (int, float)) else np.nan)
-        rows[kind].append(vals + [m._timestamp])
-    out = {}
-    for n, r in rows.items():
-        if r:
-            arr = np.asarray(r, dtype=float)
-            out[n] = {c: arr[:, i] for i, c in enumerate(cols[n] + ["_timestamp"])}
-    return out
-
-
-def _time(table: dict, path, name) -> np.ndarray:
-    if "TimeUS" in table:
-        return table["TimeUS"] * 1e-6
-    if "TimeMS" in table:
-        return table["TimeMS"] * 1e-3
-    if "_timestamp" in table:
-        return table["_timestamp"]
-    raise RecordingError(path, f"message {name} has no time stamp", key=name)
 
 
 def _instance(table: dict, key: str) -> dict:
@@ -227,76 +137,140 @@ def _validity(table: dict) -> dict:
     return {"pos": (table["_t"], ~pos_ok), "vel": (table["_t"], ~vel_ok)}
 
 
-MESSAGES = ("IMU", "ATT", "XKF1", "NKF1", "XKF4", "NKF4", "RCOU", "MOT", "ESC", "BAT", "CURR",
-            "EV")
+MESSAGES = ("IMU", "IMU2", "IMU3", "ATT", "AHR2", "XKF1", "NKF1", "EKF1", "XKF4", "NKF4",
+            "RCOU", "MOT", "ESC", "BAT", "CURR", "EV")
+#: column sets that make a message a source of its kind, whatever its name (module doc)
+GYRO, DELTA_ANGLE = ("GyrX", "GyrY", "GyrZ"), ("DelAngX", "DelAngY", "DelAngZ", "DelAT")
+ACCEL, DELTA_VEL = ("AccX", "AccY", "AccZ"), ("DelVelX", "DelVelY", "DelVelZ", "DelVT")
+EKF_STATE = ("PN", "PE", "PD", "VN", "VE", "VD")
+FIX = ("Lat", "Lng", "Alt")
+GPS_FIX_3D = 3
+EARTH_RADIUS = 6_378_137.0  # [m]
+
+
+def _pick(tables: dict, columns, prefer=()) -> tuple:
+    """``(name, table)`` of the message with all ``columns``: the first of ``prefer`` that
+    has them, else the one with the most rows; ``(None, None)`` when none has."""
+    have = [n for n, tb in tables.items() if all(c in tb for c in columns)]
+    if not have:
+        return None, None
+    name = next((n for n in prefer if n in have), None) or \
+        max(sorted(have), key=lambda n: len(tables[n]["_t"]))
+    return name, tables[name]
+
+
+def _imu(tables: dict) -> tuple:
+    """``(name, t, rates (n, 3) [rad/s], specific force (n, 3) or None)`` of the IMU-like
+    message (gyro columns, or delta angles over their interval), or None."""
+    name, imu = _pick(tables, GYRO, ("IMU", "IMU2", "IMU3"))
+    if imu is None:
+        name, imu = _pick(tables, DELTA_ANGLE, ("IMT",))
+    if imu is None:
+        return None
+    imu = _instance(imu, "I")
+    if "GyrX" in imu:
+        w = np.stack([imu[f"Gyr{a}"] for a in "XYZ"], axis=1)
+    else:
+        w = np.stack([imu[f"DelAng{a}"] for a in "XYZ"], axis=1) / imu["DelAT"][:, None]
+    acc = None
+    if all(c in imu for c in ACCEL):
+        acc = np.stack([imu[f"Acc{a}"] for a in "XYZ"], axis=1)
+    elif all(c in imu for c in DELTA_VEL):
+        acc = np.stack([imu[f"DelVel{a}"] for a in "XYZ"], axis=1) / imu["DelVT"][:, None]
+    ok = np.all(np.isfinite(w), axis=1)
+    return name, imu["_t"][ok], w[ok], None if acc is None else acc[ok]
+
+
+def _gps_pose(gps: dict) -> tuple:
+    """``(t, pos NED [m] about the first 3D fix, vel NED [m/s], invalid flags)`` of a GPS
+    message: ``Lat``, ``Lng`` [deg], ``Alt`` [m]; velocity from ``Spd`` [m/s], ``GCrs``
+    [deg] and ``VZ`` [m/s, down] (without them, from the position's slope); rows without a
+    3D fix (``Status``) are flagged invalid."""
+    gps = _instance(gps, "I")
+    t = gps["_t"]
+    fix = gps["Status"] >= GPS_FIX_3D if "Status" in gps else np.ones(len(t), dtype=bool)
+    fix &= np.isfinite(gps["Lat"]) & np.isfinite(gps["Lng"]) & (gps["Lat"] != 0)
+    if not fix.any():
+        return None
+    i0 = int(np.flatnonzero(fix)[0])
+    lat0, lng0, alt0 = (float(gps[k][i0]) for k in FIX)
+    north = np.radians(gps["Lat"] - lat0) * EARTH_RADIUS
+    east = np.radians(gps["Lng"] - lng0) * EARTH_RADIUS * np.cos(np.radians(lat0))
+    pos = np.stack([north, east, -(gps["Alt"] - alt0)], axis=1)
+    order = np.argsort(t, kind="stable")
+    slope = np.full_like(pos, np.nan)
+    if len(t) > 2:
+        slope[order] = np.gradient(pos[order], t[order], axis=0)
+    if "Spd" in gps and "GCrs" in gps:
+        crs = np.radians(gps["GCrs"])
+        vd = gps["VZ"] if "VZ" in gps else slope[:, 2]
+        vel = np.stack([gps["Spd"] * np.cos(crs), gps["Spd"] * np.sin(crs), vd], axis=1)
+    else:
+        vel = slope
+    bad = ~fix
+    return t, pos, vel, {"pos": (t, bad), "vel": (t, bad)}
+
+
+def _fail(path, missing: list, logged: list):
+    raise RecordingError(path, "cannot import: " + "; ".join(missing) + " (the log has "
+                         + ", ".join(logged) + ")")
 
 
 def read_ardupilot(path) -> FieldLog:
     """The streams of an ArduPilot DataFlash log (module docstring)."""
     path = Path(path)
-    reader, binary = _open(path)
-    if binary:
-        tables = {n: t for n in MESSAGES if (t := _binary_table(reader, n)) is not None}
-        parm = _binary_table(reader, "PARM") or {"Name": [], "Value": []}
-        params = {}
-        for k, v in zip(parm["Name"], parm["Value"]):
-            params.setdefault(str(k), float(v))  # the values at the start of the log
+    tables, params, logged = read_tables(
+        path, MESSAGES, also=(GYRO, DELTA_ANGLE, EKF_STATE, FIX + ("Status",)))
+    lacking = _missing_outputs(tables)
+    if not any(all(c in tb for c in GYRO) or all(c in tb for c in DELTA_ANGLE)
+               for tb in tables.values()):
+        lacking.insert(0, "no body rates (no message with GyrX, GyrY, GyrZ or delta angles)")
+    if lacking:
+        _fail(path, lacking, logged)
+    set_times(tables, path)
+    streams, missing, invalid, notes = {}, [], {}, []
+    imu = _imu(tables)
+    if len(imu[1]) < 2:
+        raise RecordingError(path, f"fewer than two {imu[0]} messages with body rates")
+    imu_name, t_imu, w, acc = imu
+    streams["w"] = (t_imu, w, "linear")
+    if acc is not None:
+        streams["acc"] = (t_imu, acc, "linear")
     else:
-        tables = _text_tables(reader, MESSAGES)
-        params = {k: float(v) for k, v in reader.params.items() if isinstance(v, (int, float))}
-    for name, table in tables.items():
-        table["_t"] = _time(table, path, name)
-    streams, missing, invalid = {}, [], {}
-    imu = tables.get("IMU")
-    if imu is None or "GyrX" not in imu:
-        raise RecordingError(path, "no IMU message (body rates and accelerometer)", key="IMU")
-    imu = _instance(imu, "I")
-    streams["w"] = (imu["_t"], np.stack([imu[f"Gyr{a}"] for a in "XYZ"], axis=1), "linear")
-    streams["acc"] = (imu["_t"], np.stack([imu[f"Acc{a}"] for a in "XYZ"], axis=1), "linear")
-    ekf = next((_instance(tables[n], "C") for n in ("XKF1", "NKF1") if n in tables
-                and "PN" in tables[n]), None)
-    att = tables.get("ATT")
-    if ekf is not None and att is not None:
-        R = euler_zyx_to_rot(*(np.radians(att[k]) for k in ("Roll", "Pitch", "Yaw")))
-        streams["q"] = (att["_t"], rot_to_quat(R), "quaternion")
-        streams["pos"] = (ekf["_t"], np.stack([ekf[k] for k in ("PN", "PE", "PD")], 1), "linear")
-        streams["vel"] = (ekf["_t"], np.stack([ekf[k] for k in ("VN", "VE", "VD")], 1), "linear")
+        missing.append(f"accelerometer ({imu_name} has none)")
+    if imu_name != "IMU":
+        notes.append(f"body rates from {imu_name} (no IMU message)")
+    att_name, att = _pick(tables, ("Roll", "Pitch", "Yaw"), ("ATT", "AHR2"))
+    ekf_name, ekf = _pick(tables, EKF_STATE, ("XKF1", "NKF1", "EKF1"))
+    gps_name, gps = _pick(tables, FIX + ("Status",), ("GPS",))
+    pose = None
+    if ekf is not None:
+        ekf = _instance(ekf, "C")
+        pose = (ekf["_t"], np.stack([ekf[k] for k in ("PN", "PE", "PD")], 1),
+                np.stack([ekf[k] for k in ("VN", "VE", "VD")], 1))
         status = next((_instance(tables[n], "C") for n in ("XKF4", "NKF4") if n in tables
                        and "SS" in tables[n]), None)
         if status is not None:
             invalid = _validity(status)
+    elif gps is not None and (got := _gps_pose(gps)) is not None:
+        pose, invalid = got[:3], got[3]
+        notes.append(f"position and velocity from {gps_name} (no EKF position): NED about "
+                     "its first 3D fix, invalid without a 3D fix")
+    if pose is not None and att is not None:
+        R = euler_zyx_to_rot(*(np.radians(att[k]) for k in ("Roll", "Pitch", "Yaw")))
+        streams["q"] = (att["_t"], rot_to_quat(R), "quaternion")
+        streams["pos"] = (pose[0], pose[1], "linear")
+        streams["vel"] = (pose[0], pose[2], "linear")
     else:
-        missing.append("position and velocity (XKF1/NKF1)" if ekf is None else "attitude (ATT)")
-    lo, hi, how = _pwm_range(params)
-    out = tables.get("RCOU")
-    if out is not None:
-        prefix = "C" if "C1" in out else "Chan"
-        chans = [next((k for k in range(1, 33) if params.get(f"SERVO{k}_FUNCTION")
-                       == MOTOR1_FUNCTION + i), i + 1) for i in range(4)]
-        if not all(f"{prefix}{k}" in out for k in chans):
-            raise RecordingError(path, f"RCOU lacks the motor channels {chans}", key="RCOU")
-        pwm = np.stack([out[f"{prefix}{k}"] for k in chans], axis=1)
-        note = f"u = (RCOU {prefix}{chans} - {lo:g}) / ({hi:g} - {lo:g}) us ({how})"
-    elif "MOT" in tables and "Mot1" in tables["MOT"]:
-        out = tables["MOT"]
-        chans = [1, 2, 3, 4]
-        pwm = np.stack([out[f"Mot{k}"] for k in chans], axis=1)
-        note = f"u = (MOT Mot1..4 - {lo:g}) / ({hi:g} - {lo:g}) us ({how})"
+        invalid = {}
+        missing.append("position and velocity (no EKF or GPS position)" if pose is None
+                       else "attitude (ATT)")
+    t_out, u, chans, note = _outputs(tables, params, path)
+    streams["u"] = (t_out, u, "hold")
+    rotor = _rotor_speeds(tables, chans)
+    if rotor is not None:
+        streams["rotor"] = rotor
     else:
-        raise RecordingError(path, "no motor outputs (RCOU or MOT messages)", key="RCOU")
-    streams["u"] = (out["_t"], np.clip((pwm - lo) / (hi - lo), 0.0, 1.0), "hold")
-    esc = tables.get("ESC")
-    if esc is not None and "RPM" in esc and "Instance" in esc:
-        cols = []
-        for i, k in enumerate(chans):
-            inst = k - 1 if np.any(esc["Instance"] == k - 1) else i
-            sel = esc["Instance"] == inst
-            cols.append((esc["_t"][sel], np.abs(esc["RPM"][sel]) * RPM_TO_RAD_S))
-        if all(len(c[0]) > 1 for c in cols):
-            t_esc = np.unique(np.concatenate([c[0] for c in cols]))
-            w = np.stack([np.interp(t_esc, tc, wc) for tc, wc in cols], axis=1)
-            streams["rotor"] = (t_esc, w, "linear")
-    if "rotor" not in streams:
         missing.append("rotor speed (ESC)")
     bat = tables.get("BAT") or tables.get("CURR")
     if bat is not None and "Volt" in bat:
@@ -312,11 +286,55 @@ def read_ardupilot(path) -> FieldLog:
     curve, curve_note = thrust_model(params)
     recorded = {k: v for k, v in params.items()
                 if k in DEFAULTS or k.startswith(("FRAME", "MOT_PWM", "MOT_BAT", "RC3_M"))}
-    return FieldLog(path=path, importer="ardupilot", streams=streams, time_base=imu["_t"],
+    return FieldLog(path=path, importer="ardupilot", streams=streams, time_base=t_imu,
                     thrust_model=curve, thrust_note=curve_note, geometry=geometry(params, path),
                     landed=_landed(tables), landed_source="EV (NOT_LANDED, LAND_COMPLETE)",
                     invalid=invalid, commands=note, missing=missing, params=recorded,
-                    source=f"ArduPilot DataFlash log {path.name}, imported by quadfault")
+                    source=f"ArduPilot DataFlash log {path.name}, imported by quadfault",
+                    warnings=notes)
+
+
+def _missing_outputs(tables: dict) -> list:
+    have = ("RCOU" in tables and any(k.startswith(("C", "Chan")) for k in tables["RCOU"])) or \
+        ("MOT" in tables and "Mot1" in tables["MOT"])
+    return [] if have else ["no motor outputs (no RCOU or MOT messages)"]
+
+
+def _outputs(tables: dict, params: dict, path) -> tuple:
+    """``(t, u (n, 4) 0..1, channels, note)`` from RCOU (else MOT; one of them is there)."""
+    lo, hi, how = _pwm_range(params)
+    out = tables.get("RCOU")
+    if out is not None:
+        prefix = "C" if "C1" in out else "Chan"
+        chans = [next((k for k in range(1, 33) if params.get(f"SERVO{k}_FUNCTION")
+                       == MOTOR1_FUNCTION + i), i + 1) for i in range(4)]
+        if not all(f"{prefix}{k}" in out for k in chans):
+            raise RecordingError(path, f"RCOU lacks the motor channels {chans}", key="RCOU")
+        pwm = np.stack([out[f"{prefix}{k}"] for k in chans], axis=1)
+        note = f"u = (RCOU {prefix}{chans} - {lo:g}) / ({hi:g} - {lo:g}) us ({how})"
+    else:
+        out = tables["MOT"]
+        chans = [1, 2, 3, 4]
+        pwm = np.stack([out[f"Mot{k}"] for k in chans], axis=1)
+        note = f"u = (MOT Mot1..4 - {lo:g}) / ({hi:g} - {lo:g}) us ({how})"
+    return out["_t"], np.clip((pwm - lo) / (hi - lo), 0.0, 1.0), chans, note
+
+
+def _rotor_speeds(tables: dict, chans) -> tuple | None:
+    """ESC telemetry of the motors' channels as a ``rotor`` stream [rad/s], or None."""
+    esc = tables.get("ESC")
+    if esc is None or "RPM" not in esc or "Instance" not in esc:
+        return None
+    cols = []
+    for i, k in enumerate(chans):
+        inst = k - 1 if np.any(esc["Instance"] == k - 1) else i
+        sel = esc["Instance"] == inst
+        cols.append((esc["_t"][sel], np.abs(esc["RPM"][sel]) * RPM_TO_RAD_S))
+    if not all(len(c[0]) > 1 for c in cols):
+        return None
+    t_esc = np.unique(np.concatenate([c[0] for c in cols]))
+    w = np.stack([np.interp(t_esc, tc, wc) for tc, wc in cols], axis=1)
+    return t_esc, w, "linear"
 
 
 def import_ardupilot(path, *, vehicle=None, thrust_curve=None, keep_all: bool = False,

@@ -265,6 +265,62 @@ def dataflash_flight(path, *, text: bool = False, rcou_rate: float = 100.0,
     path.write_bytes(bytes(out))
 
 
+OLD_TEXT_FMT = {  # ArduCopter 3.x text logs: no time stamp in most messages
+    "PARM": ("Nf", "Name,Value"),
+    "GPS": ("BIHBcLLeeEefI", "Status,TimeMS,Week,NSats,HDop,Lat,Lng,RelAlt,Alt,Spd,GCrs,VZ,T"),
+    "GPS_TOW": ("BIBcLLeeEe", "Status,Time,NSats,HDop,Lat,Lng,RelAlt,Alt,Spd,GCrs"),
+    "IMU": ("ffffff", "GyrX,GyrY,GyrZ,AccX,AccY,AccZ"),
+    "ATT": ("cccccCC", "RollIn,Roll,PitchIn,Pitch,YawIn,Yaw,NavYaw"),
+    "MOT": ("hhhh", "Mot1,Mot2,Mot3,Mot4"),
+    "CURR": ("hIhhhf", "ThrOut,ThrInt,Volt,Curr,Vcc,CurrTot"),
+}
+LAT0, LNG0, ALT0 = -39.49503, 176.74835, 46.8  # [deg], [deg], [m]
+BOARD_T0 = 66.937  # board clock at the start of the old text log [s]
+
+
+def old_text_log(path, *, gps: str | None = "board", imu: str | None = "IMU",
+                 rate: float = 50.0, gps_every: int = 10) -> None:
+    """An ArduCopter 3.x-style text log of the synthetic flight: IMU (named ``imu``; None
+    leaves it out), ATT and MOT once per loop at ``rate`` without time stamps, CURR, and a GPS
+    fix every ``gps_every`` loops: ``gps="board"`` with GPS week, time of week and the board
+    clock ``T``; ``"tow"`` with the time of week only (no week, no board clock, no vertical
+    speed); None: no GPS (nothing times the log)."""
+    R = 6378137.0
+    lines = ["FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format,Columns"]
+    kinds = {"PARM": "PARM", "ATT": "ATT", "MOT": "MOT", "CURR": "CURR"}
+    if imu:
+        kinds[imu] = "IMU"
+    if gps:
+        kinds["GPS"] = "GPS" if gps == "board" else "GPS_TOW"
+    for tid, (name, kind) in enumerate(kinds.items(), start=129):
+        fmt, cols = OLD_TEXT_FMT[kind]
+        lines.append(f"FMT, {tid}, 0, {name}, {fmt}, {cols}")
+    for k, v in {"FRAME": 1, "RC3_MIN": 1000, "RC3_MAX": 2000}.items():
+        lines.append(f"PARM, {k}, {v}")
+    t = np.arange(0.0, T_END, 1.0 / rate)
+    p = flight_profile(t)
+    for k, tk in enumerate(t):
+        if gps and k % gps_every == 0:
+            n, e, d = p["pos"][k]
+            lat = LAT0 + np.degrees(n / R)
+            lng = LNG0 + np.degrees(e / (R * np.cos(np.radians(LAT0))))
+            vn, ve, vd = p["vel"][k]
+            spd, crs = np.hypot(vn, ve), np.degrees(np.arctan2(ve, vn)) % 360.0
+            tow = 109206800 + int(round(1000 * tk))
+            fix = f"3, {tow}, 1774" if gps == "board" else f"3, {tow}"
+            tail = f", {vd:.6f}, {int(round(1000 * (BOARD_T0 + tk)))}" if gps == "board" else ""
+            lines.append(f"GPS, {fix}, 9, 2.42, {lat:.7f}, {lng:.7f}, 0.00, {ALT0 - d:.2f}, "
+                         f"{spd:.3f}, {crs:.2f}" + tail)
+        if imu:
+            lines.append(f"{imu}, 0.0000, 0.0000, 0.0000, 0.0000, 0.0000, {-G:.4f}")
+        lines.append("ATT, 0.00, 0.00, 0.00, 0.00, 0.00, 30.00, 30.00")
+        pwm = ", ".join(str(int(round(1000 + 1000 * u))) for u in p["u"][k])
+        lines.append(f"MOT, {pwm}")
+        if k % 25 == 0:
+            lines.append(f"CURR, 0, 0, {int(1600 - 5 * tk)}, 1000, 4962, 0.000000")
+    path.write_text("\n".join(lines) + "\n")
+
+
 # ----------------------------------------------------------------------------------------
 # Betaflight blackbox: an encoder of the format (the inverse of the importer's decoder)
 def _uvb(v: int) -> bytes:
