@@ -1,7 +1,8 @@
 """The one estimator interface shared by IRLS, the EKF and the oracle.
 
 Online: ``est.update(sample) -> Estimate``, one measurement row at a time (the environment
-calls this). Offline: ``est.run(recording) -> EstimateSeries`` over a whole recording.
+calls this); a batch of N estimators (the vector environment's) takes one sample per row and
+gives a :class:`BatchedEstimate`. Offline: ``est.run(recording) -> EstimateSeries`` over a whole recording.
 Estimators receive the *nominal* vehicle and measurements only; they never read the
 recording's true efficiency columns. The measurement record :class:`~quadfault.sample.Sample`
 and :func:`~quadfault.sample.samples` live in the core and are re-exported here.
@@ -101,6 +102,67 @@ def sample_arrays(sample: Sample, n_rotors: int, who: str) -> tuple:
     return (t, *(np.ascontiguousarray(a) for a in arrays))
 
 
+@dataclass(frozen=True)
+class BatchedEstimate:
+    """Estimates of N vehicles at one instant.
+
+    Attributes:
+        t: time of the newest sample used, (N,) [s].
+        eta: estimated efficiency, (N, n) [-] (1 = nominal).
+        sd: one-sigma uncertainty, (N, n); NaN where the single estimator reports None.
+        status: integer codes (N,), ``STATUSES[code]`` is the status name.
+    """
+
+    t: np.ndarray
+    eta: np.ndarray
+    sd: np.ndarray
+    status: np.ndarray
+
+    @property
+    def status_names(self) -> np.ndarray:
+        return np.asarray(STATUSES, dtype=object)[self.status]
+
+
+def batch_arrays(num: int, n: int, t, p, v, R, w, f):
+    """The arrays of one batched sample (one row per estimator), float64 and contiguous, checked for shape."""
+    t = np.ascontiguousarray(np.asarray(t, dtype=np.float64).reshape(-1))
+    arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (p, v, R, w, f)]
+    shapes = [(num, 3), (num, 3), (num, 3, 3), (num, 3), (num, n)]
+    if t.shape != (num,) or [a.shape for a in arrays] != shapes:
+        raise ConfigError(f"batched sample must have t {(num,)}, p, v {(num, 3)}, R "
+                          f"{(num, 3, 3)}, w {(num, 3)}, f {(num, n)}; got "
+                          f"{[t.shape] + [a.shape for a in arrays]}")
+    return (t, *arrays)
+
+
+def batch_eta0(eta, num: int, n: int) -> np.ndarray:
+    """``eta0`` given as (n,) or (num, n), broadcast to (num, n) and checked finite."""
+    try:
+        eta = np.broadcast_to(np.asarray(eta, dtype=float), (num, n))
+    except ValueError:
+        raise ConfigError(f"eta0 must be {n} or ({num}, {n}) numbers") from None
+    if not np.all(np.isfinite(eta)):
+        raise ConfigError("eta0 must be finite")
+    return np.ascontiguousarray(eta)
+
+
+def reset_rows(num: int, mask) -> np.ndarray:
+    """The rows selected by a reset mask (default: all)."""
+    if mask is None:
+        return np.arange(num, dtype=np.int64)
+    mask = np.asarray(mask, dtype=bool).reshape(-1)
+    if mask.shape != (num,):
+        raise ConfigError(f"reset mask must have {num} booleans, got shape {mask.shape}")
+    return np.flatnonzero(mask).astype(np.int64)
+
+
+def check_num(num) -> int:
+    """``num``, the number of estimators of a batch, as an int >= 1 (clean error otherwise)."""
+    if isinstance(num, bool) or not isinstance(num, (int, np.integer)) or num < 1:
+        raise ConfigError(f"number of estimators must be an integer >= 1, got {num!r}")
+    return int(num)
+
+
 @runtime_checkable
 class OnlineEstimator(Protocol):
     name: str
@@ -122,9 +184,14 @@ __all__ = [
     "STATUS_OK",
     "STATUS_REJECTED",
     "STATUS_WARMUP",
+    "BatchedEstimate",
     "Estimate",
     "EstimateSeries",
     "OnlineEstimator",
+    "batch_arrays",
+    "batch_eta0",
+    "check_num",
+    "reset_rows",
     "sample_arrays",
     "Sample",
     "command_limit",

@@ -23,7 +23,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimators.base import STATUSES
+from estimators.base import (
+    STATUSES,
+    BatchedEstimate,
+    batch_arrays,
+    batch_eta0,
+    check_num,
+    reset_rows,
+)
 from estimators.change_completion import COUNTERS as COMPLETION_COUNTERS
 from estimators.ekf import COUNTERS as EKF_COUNTERS
 from estimators.ekf import (
@@ -54,66 +61,6 @@ from quadfault.jit import jit, prange
 from quadfault.vehicle import Vehicle
 
 CODE = {name: k for k, name in enumerate(STATUSES)}  # status name -> integer code
-
-
-@dataclass(frozen=True)
-class BatchedEstimate:
-    """Estimates of N vehicles at one instant.
-
-    Attributes:
-        t: time of the newest sample used, (N,) [s].
-        eta: estimated efficiency, (N, n) [-] (1 = nominal).
-        sd: one-sigma uncertainty, (N, n); NaN where the single estimator reports None.
-        status: integer codes (N,), ``STATUSES[code]`` is the status name.
-    """
-
-    t: np.ndarray
-    eta: np.ndarray
-    sd: np.ndarray
-    status: np.ndarray
-
-    @property
-    def status_names(self) -> np.ndarray:
-        return np.asarray(STATUSES, dtype=object)[self.status]
-
-
-def _check_batch(num: int, n: int, t, p, v, R, w, f):
-    """The arrays of one batched sample, float64 and contiguous, checked for shape."""
-    t = np.ascontiguousarray(np.asarray(t, dtype=np.float64).reshape(-1))
-    arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (p, v, R, w, f)]
-    shapes = [(num, 3), (num, 3), (num, 3, 3), (num, 3), (num, n)]
-    if t.shape != (num,) or [a.shape for a in arrays] != shapes:
-        raise ConfigError(f"batched sample must have t {(num,)}, p, v {(num, 3)}, R "
-                          f"{(num, 3, 3)}, w {(num, 3)}, f {(num, n)}; got "
-                          f"{[t.shape] + [a.shape for a in arrays]}")
-    return (t, *arrays)
-
-
-def _eta_rows(eta, num: int, n: int) -> np.ndarray:
-    """``eta0`` given as (n,) or (num, n), broadcast to (num, n) and checked finite."""
-    try:
-        eta = np.broadcast_to(np.asarray(eta, dtype=float), (num, n))
-    except ValueError:
-        raise ConfigError(f"eta0 must be {n} or ({num}, {n}) numbers") from None
-    if not np.all(np.isfinite(eta)):
-        raise ConfigError("eta0 must be finite")
-    return np.ascontiguousarray(eta)
-
-
-def _rows(num: int, mask) -> np.ndarray:
-    """The rows selected by a reset mask (default: all)."""
-    if mask is None:
-        return np.arange(num, dtype=np.int64)
-    mask = np.asarray(mask, dtype=bool).reshape(-1)
-    if mask.shape != (num,):
-        raise ConfigError(f"reset mask must have {num} booleans, got shape {mask.shape}")
-    return np.flatnonzero(mask).astype(np.int64)
-
-
-def _check_num(num) -> int:
-    if isinstance(num, bool) or not isinstance(num, (int, np.integer)) or num < 1:
-        raise ConfigError(f"number of estimators must be an integer >= 1, got {num!r}")
-    return int(num)
 
 
 @jit(parallel=True)
@@ -154,7 +101,7 @@ class BatchedIRLS:
         if not isinstance(vehicle, Vehicle):
             raise ConfigError(f"BatchedIRLS needs a Vehicle, got {type(vehicle).__name__}")
         self.vehicle = vehicle
-        self.num = _check_num(num)
+        self.num = check_num(num)
         self.config = config or IRLSConfig()
         if not isinstance(self.config, IRLSConfig):
             raise ConfigError("config must be an IRLSConfig")
@@ -180,14 +127,14 @@ class BatchedIRLS:
     def reset(self, mask=None, eta0=None) -> None:
         """Forget the windows of the rows in ``mask`` (default all); start from ``eta0``
         ((n,) or (N, n), default ones)."""
-        rows = _rows(self.num, mask)
+        rows = reset_rows(self.num, mask)
         n = self.vehicle.n_rotors
-        eta = _eta_rows(np.ones(n) if eta0 is None else eta0, self.num, n)
+        eta = batch_eta0(np.ones(n) if eta0 is None else eta0, self.num, n)
         irls_reset(eta, self._ip, self._state.floats, self._state.ints, rows)
 
     def update(self, t, p, v, R, w, f) -> BatchedEstimate:
         """Add one sample per vehicle; returns the estimates of the windows ending at them."""
-        t, p, v, R, w, f = _check_batch(self.num, self.vehicle.n_rotors, t, p, v, R, w, f)
+        t, p, v, R, w, f = batch_arrays(self.num, self.vehicle.n_rotors, t, p, v, R, w, f)
         st = self._state
         irls_update_rows(t, p, v, R, w, f, self._const, self._fp, self._ip, st.floats, st.ints,
                          self._hist, self._code)
@@ -211,7 +158,7 @@ class BatchedEKF:
     def __init__(self, vehicle: Vehicle, num: int, config: EKFConfig | None = None):
         if not isinstance(vehicle, Vehicle):
             raise ConfigError(f"BatchedEKF needs a Vehicle, got {type(vehicle).__name__}")
-        self.num = _check_num(num)
+        self.num = check_num(num)
         self.vehicle = vehicle
         self.config = config or EKFConfig()
         if not isinstance(self.config, EKFConfig):
@@ -232,15 +179,15 @@ class BatchedEKF:
 
     def reset(self, mask=None, eta0=None) -> None:
         """Forget the rows in ``mask`` (default all); the next sample initialises them."""
-        rows = _rows(self.num, mask)
+        rows = reset_rows(self.num, mask)
         n = self.vehicle.n_rotors
-        eta = _eta_rows(self._eta0_default if eta0 is None else eta0, self.num, n)
+        eta = batch_eta0(self._eta0_default if eta0 is None else eta0, self.num, n)
         st = self._state
         ekf_reset(st.offsets, n, st.floats, st.ints, rows, eta)
 
     def update(self, t, p, v, R, w, f) -> BatchedEstimate:
         """One predict (previous sample's command held) and one update per vehicle."""
-        t, p, v, R, w, f = _check_batch(self.num, self.vehicle.n_rotors, t, p, v, R, w, f)
+        t, p, v, R, w, f = batch_arrays(self.num, self.vehicle.n_rotors, t, p, v, R, w, f)
         st = self._state
         ekf_update_rows(t, p, v, R, w, f, self._const, st.offsets, st.floats, st.ints,
                         self._code)

@@ -14,8 +14,8 @@ A recursive estimator module gives five compiled kernels over the flat state of
   where the filter has none yet).
 
 :class:`RecursiveEstimator` and :class:`BatchedRecursive` are the same wrappers for every
-such module; a subclass names the kernels, the configuration class, the state's shapes and
-its constants.
+such module; a subclass names the kernels, the configuration class, the state's declared
+layout (pieces, dimensions, counters) and its constants.
 """
 
 from __future__ import annotations
@@ -27,14 +27,20 @@ import numpy as np
 
 from estimators.base import (
     STATUSES,
+    BatchedEstimate,
     Estimate,
     EstimateSeries,
     Sample,
+    batch_arrays,
+    batch_eta0,
+    check_num,
     command_limit,
+    reset_rows,
     sample_arrays,
 )
-from estimators.state import FlatState
+from estimators.state import FlatState, Layout
 from quadfault.errors import ConfigError
+from quadfault.progress import progress_bar
 from quadfault.recording import Recording
 from quadfault.vehicle import Vehicle
 
@@ -74,25 +80,31 @@ def recording_arrays(recording: Recording, n: int, name: str):
 
 
 class _Kernels:
-    """What a subclass names: the configuration class, the kernels and the state layout."""
+    """What a subclass names: the configuration class, the kernels, the state's declared
+    layout and its constants."""
 
     name = ""
     config_class: type = object
     #: ``kernels()`` -> the module's (reset, update, run, update_rows, estimate)
     kernels = None
 
+    #: the float state's declared pieces (:class:`estimators.state.Layout`)
+    floats: Layout = None
+
     @staticmethod
-    def shapes(n: int) -> tuple:  # pragma: no cover - every subclass defines it
+    def dims(n: int) -> dict:  # pragma: no cover - every subclass defines it
+        """The layout's dimensions for ``n`` rotors (name -> int)."""
         raise NotImplementedError
 
-    n_ints = 1
+    #: the int counters (:func:`estimators.state.fields`)
+    counters = None
 
     @staticmethod
     def constants(vehicle: Vehicle, config) -> np.ndarray:  # pragma: no cover
         raise NotImplementedError
 
     #: index in ``const`` of the command's upper clip [N] (the recording may lift it)
-    fmax_index = 2
+    fmax_index: int = None
 
     def _setup(self, vehicle, config, num: int) -> None:
         cls = type(self).__name__
@@ -107,7 +119,8 @@ class _Kernels:
         self._eta0_default = per_rotor(self.config.eta0, self.n_rotors,
                                        f"{self.config_class.__name__}.eta0")
         self._const = self.constants(vehicle, self.config)
-        self._state = FlatState(self.shapes(self.n_rotors), num, self.n_ints)
+        self._state = FlatState(self.floats.shapes(**self.dims(self.n_rotors)), num,
+                                self.counters.size, self.floats.pieces)
         (self._k_reset, self._k_update, self._k_run, self._k_rows,
          self._k_estimate) = self.kernels()
 
@@ -151,8 +164,6 @@ class RecursiveEstimator(_Kernels):
     def run(self, recording: Recording, progress: bool = False) -> EstimateSeries:
         """Estimates at every row of ``recording`` (the first row is ``warmup``), from the
         configuration's initial efficiency; the filter is left at the recording's end."""
-        from quadfault.progress import progress_bar
-
         start = time.perf_counter()
         t, p, v, R, w, f = recording_arrays(recording, self.n_rotors, self.name)
         const = self._const.copy()
@@ -179,9 +190,7 @@ class BatchedRecursive(_Kernels):
     vehicle i's samples gives the single filter's estimates (:mod:`estimators.batched`)."""
 
     def __init__(self, vehicle: Vehicle, num: int, config=None):
-        from estimators.batched import _check_num
-
-        self._setup(vehicle, config, _check_num(num))
+        self._setup(vehicle, config, check_num(num))
         self.num = self._state.ints.shape[0]
         self._code = np.zeros(self.num, dtype=np.int64)
         self.reset()
@@ -189,20 +198,16 @@ class BatchedRecursive(_Kernels):
     def reset(self, mask=None, eta0=None) -> None:
         """Forget the rows in ``mask`` (default all); start them from ``eta0`` ((n,) or
         (N, n), default the configuration's)."""
-        from estimators.batched import _eta_rows, _rows
-
-        rows = _rows(self.num, mask)
+        rows = reset_rows(self.num, mask)
         n = self.n_rotors
-        eta = _eta_rows(self._eta0_default if eta0 is None else eta0, self.num, n)
+        eta = batch_eta0(self._eta0_default if eta0 is None else eta0, self.num, n)
         st = self._state
         self._k_reset(self._const, st.offsets, n, st.floats, st.ints, rows, eta)
 
     def update(self, t, p, v, R, w, f):
-        """One sample per vehicle; the :class:`estimators.batched.BatchedEstimate`."""
-        from estimators.batched import BatchedEstimate, _check_batch
-
+        """One sample per vehicle; the :class:`estimators.base.BatchedEstimate`."""
         n = self.n_rotors
-        t, p, v, R, w, f = _check_batch(self.num, n, t, p, v, R, w, f)
+        t, p, v, R, w, f = batch_arrays(self.num, n, t, p, v, R, w, f)
         st = self._state
         self._k_rows(t, p, v, R, w, f, self._const, st.offsets, st.floats, st.ints, self._code)
         eta, sd = np.empty((self.num, n)), np.empty((self.num, n))

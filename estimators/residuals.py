@@ -23,7 +23,8 @@ window (computed once), and per segment the weighted energy ``e_i(eta) = r_i^T G
 quadratic ``c_i + 2 b_i . eta + eta^T H_i eta`` with ``c = r0^T G r0``, ``b = J^T G r0``,
 ``H = J^T G J`` (eq. 26), which is all the window solver needs.
 
-Row order of a segment's residual (``RESIDUAL_ROWS`` = 10): v (3), x (3), Omega (3), R (1).
+Row order of a segment's residual (:data:`RESIDUAL`, ``RESIDUAL_ROWS`` = 10): v (3), x (3),
+Omega (3), R (1).
 
 :func:`segment_terms_into` is the model, plain Python compiled by :func:`quadfault.jit.jit`
 with 3 x 3 algebra on scalars and no allocation (the estimator calls it once per new sample);
@@ -36,16 +37,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimators.state import fields, pack
 from quadfault.dynamics import rotor_wrench
 from quadfault.jit import jit
 from quadfault.vehicle import Vehicle
 
-RESIDUAL_ROWS = 10
+#: the rows of a segment's residual: velocity, position, rate, rotation
+RESIDUAL = fields("ResidualRows", ("v", 3), ("x", 3), ("w", 3), "R")
+RESIDUAL_ROWS = RESIDUAL.size
 
 
 def residual_weights(g_v: float, g_x: float, g_omega: float, g_R: float) -> np.ndarray:
     """Diagonal of the per-segment weight matrix G_i (eq. 23), shape (10,)."""
-    return np.array([g_v] * 3 + [g_x] * 3 + [g_omega] * 3 + [g_R], dtype=float)
+    return pack(RESIDUAL, v=np.full(3, g_v), x=np.full(3, g_x), w=np.full(3, g_omega), R=g_R)
 
 
 @jit
@@ -59,16 +63,17 @@ def segment_terms_into(dt, p0, p1, v0, v1, R0, R1, w0, w1, f, mass, g, Jmat, Jin
     Vehicle: ``mass`` [kg], gravity ``g`` [m/s^2], inertia ``Jmat`` and its inverse ``Jinv``
     [kg m^2], allocation ``A`` (4, n); ``G`` (10,) the diagonal of the weight (eq. 23)."""
     n = f.size
+    V, X, W, RR = RESIDUAL.v, RESIDUAL.x, RESIDUAL.w, RESIDUAL.R
     thrust, _moment = rotor_wrench(A, f)  # the collective thrust (eq. 12)
     # velocity / position (eqs. 13, 14, 17, 18)
     for a in range(3):
         ge = g if a == 2 else 0.0
-        r0[a] = v1[a] - v0[a] - ge * dt
-        r0[3 + a] = p1[a] - p0[a] - v0[a] * dt - ge * 0.5 * dt * dt
+        r0[V + a] = v1[a] - v0[a] - ge * dt
+        r0[X + a] = p1[a] - p0[a] - v0[a] * dt - ge * 0.5 * dt * dt
         for j in range(n):
             dv = R0[a, 2] * f[j] * A[0, j] / mass
-            J[a, j] = dv * dt
-            J[3 + a, j] = dv * (0.5 * dt * dt)
+            J[V + a, j] = dv * dt
+            J[X + a, j] = dv * (0.5 * dt * dt)
     # rate (eqs. 15, 19): gyro = W x (J W), W_hat0 = W - J^-1 gyro dt
     jw0 = Jmat[0, 0] * w0[0] + Jmat[0, 1] * w0[1] + Jmat[0, 2] * w0[2]
     jw1 = Jmat[1, 0] * w0[0] + Jmat[1, 1] * w0[1] + Jmat[1, 2] * w0[2]
@@ -79,15 +84,15 @@ def segment_terms_into(dt, p0, p1, v0, v1, R0, R1, w0, w1, f, mass, g, Jmat, Jin
     wh0 = w0[0] - (Jinv[0, 0] * gy0 + Jinv[0, 1] * gy1 + Jinv[0, 2] * gy2) * dt
     wh1 = w0[1] - (Jinv[1, 0] * gy0 + Jinv[1, 1] * gy1 + Jinv[1, 2] * gy2) * dt
     wh2 = w0[2] - (Jinv[2, 0] * gy0 + Jinv[2, 1] * gy1 + Jinv[2, 2] * gy2) * dt
-    r0[6] = w1[0] - wh0
-    r0[7] = w1[1] - wh1
-    r0[8] = w1[2] - wh2
+    r0[W] = w1[0] - wh0
+    r0[W + 1] = w1[1] - wh1
+    r0[W + 2] = w1[2] - wh2
     for a in range(3):
         for j in range(n):
             ja = 0.0
             for k in range(3):
                 ja += Jinv[a, k] * A[1 + k, j]
-            J[6 + a, j] = -ja * f[j] * dt
+            J[W + a, j] = -ja * f[j] * dt
     # rotation (eqs. 20-22): r_R = 1/2 (3 - tr dR) - dt vee(dR) . W_hat, dR = R0^T R1
     d00 = R0[0, 0] * R1[0, 0] + R0[1, 0] * R1[1, 0] + R0[2, 0] * R1[2, 0]
     d11 = R0[0, 1] * R1[0, 1] + R0[1, 1] * R1[1, 1] + R0[2, 1] * R1[2, 1]
@@ -101,16 +106,16 @@ def segment_terms_into(dt, p0, p1, v0, v1, R0, R1, w0, w1, f, mass, g, Jmat, Jin
     u0 = 0.5 * (d21 - d12) * dt
     u1 = 0.5 * (d02 - d20) * dt
     u2 = 0.5 * (d10 - d01) * dt
-    r0[9] = 0.5 * (3.0 - (d00 + d11 + d22)) - (u0 * wh0 + u1 * wh1 + u2 * wh2)
+    r0[RR] = 0.5 * (3.0 - (d00 + d11 + d22)) - (u0 * wh0 + u1 * wh1 + u2 * wh2)
     for j in range(n):
-        J[9, j] = u0 * J[6, j] + u1 * J[7, j] + u2 * J[8, j]
+        J[RR, j] = u0 * J[W, j] + u1 * J[W + 1, j] + u2 * J[W + 2, j]
     # weighted energy c + 2 b.eta + eta^T H eta (eq. 26)
     c = 0.0
     for j in range(n):
         b[j] = 0.0
         for k in range(n):
             H[j, k] = 0.0
-    for r in range(10):
+    for r in range(RESIDUAL_ROWS):
         c += r0[r] * G[r] * r0[r]
         for j in range(n):
             gj = G[r] * J[r, j]

@@ -57,8 +57,8 @@ from estimators.base import STATUS_BAD_SAMPLE, STATUS_NO_EXCITATION, STATUS_OK, 
 from estimators.base import STATUSES
 from estimators.ekf import IDLE_THRUST
 from estimators.recursive import BatchedRecursive, RecursiveEstimator
-from estimators.residuals import RESIDUAL_ROWS, segment_terms_into
-from estimators.state import all_finite, piece, piece_rows
+from estimators.residuals import RESIDUAL, RESIDUAL_ROWS, segment_terms_into
+from estimators.state import Layout, all_finite, fields, pack, piece, piece_rows
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange
 from quadfault.vehicle import Vehicle
@@ -123,54 +123,82 @@ def check_bounds(owner: str, bounds) -> None:
                           f"{bounds!r}")
 
 
-#: the residual rows RLS uses (estimators.residuals): velocity 0-2, rate 6-8
-ROWS = (0, 1, 2, 6, 7, 8)
+#: the residual rows RLS fits (:data:`estimators.residuals.RESIDUAL`): velocity, then rate
+ROWS = tuple(RESIDUAL.v + a for a in range(3)) + tuple(RESIDUAL.w + a for a in range(3))
 N_ROWS = len(ROWS)
-_ONES = np.ones(RESIDUAL_ROWS)
 
-# pieces of the float state, in order (shapes: _shapes)
-F_THETA, F_P, F_T, F_SAMPLE, F_LAST_F, F_ETA0, F_S2, F_R0, F_J, F_B, F_H, F_PPHI, F_G = range(13)
-N_PIECES = 13
-S_P, S_V, S_W, S_R = 0, 1, 2, 3  # rows of F_SAMPLE (6, 3): p, v, w, then R (rows 3-5)
-K_HAS_LAST, K_UPDATED = 0, 1  # the int state
-# constants: mass, gravity, rotor_max_thrust, clip, lo, hi, p0, ln(lambda) per second, then
-# J (9), J^-1 (9), A (4 n), ones (10: segment_terms_into's weight, its energy is unused)
-C_MASS, C_G, C_FMAX, C_CLIP, C_LO, C_HI, C_P0, C_LOG_LAMBDA, C_J = range(9)
+#: rows of the previous sample's piece (3 columns): p, v, Omega, then R (3 rows)
+SAMPLE_ROWS = fields("RLSSampleRows", "p", "v", "w", ("R", 3))
+#: the noise scale: the forgotten mean of the weighted residual energy per row, and the
+#: forgotten sample count it is the mean of
+NOISE = fields("RLSNoise", "mean", "count")
+#: the float state of one filter (dimension: rotors ``n``): the estimate ``theta`` and its
+#: covariance ``P``, the previous sample's time, its p, v, Omega, R and (clipped) command,
+#: the initial efficiency, the noise scale, then scratch of one update (the segment's
+#: residual model ``r0``, ``J``, ``b``, ``H`` of :func:`segment_terms_into`, ``P phi`` and
+#: the rows' weights ``g``)
+FLOATS = Layout("RLSPieces", theta=("n",), P=("n", "n"), last_t=(1,),
+                sample=(SAMPLE_ROWS.size, 3), last_f=("n",), eta0=("n",), noise=(NOISE.size,),
+                r0=(RESIDUAL_ROWS,), J=(RESIDUAL_ROWS, "n"), b=("n",), H=("n", "n"),
+                Pphi=("n",), g=(N_ROWS,))
+F = FLOATS.index
+RLSPieces = FLOATS.pieces
+#: the int state: 1 once a previous sample is held; 1 once the first update was made
+COUNTERS = fields("RLSCounters", "has_last", "updated")
+#: the constants: scalars (the box ``lo``, ``hi``; ``log_lambda``: ln(lambda) per second),
+#: the inertia and its inverse, the residual weights ``G`` (ones: :func:`segment_terms_into`'s
+#: energy is unused), last the allocation ``A`` (4, n) (:func:`rls_constants`)
+CONSTANTS = fields("RLSConstants", "mass", "gravity", "f_max", "clip", "lo", "hi", "p0",
+                   "log_lambda", ("J", 9), ("Jinv", 9), ("G", RESIDUAL_ROWS), ("A", 0))
 
 
-def _shapes(n: int) -> tuple:
-    return ((n,), (n, n), (1,), (6, 3), (n,), (n,), (2,), (RESIDUAL_ROWS,),
-            (RESIDUAL_ROWS, n), (n,), (n, n), (n,), (N_ROWS,))
+def _dims(n: int) -> dict:
+    return {"n": n}
 
 
 def rls_constants(vehicle: Vehicle, cfg: RLSConfig) -> np.ndarray:
-    """The constants of :func:`rls_step` (see the ``C_*`` names)."""
+    """The constants of :func:`rls_step` (:data:`CONSTANTS`)."""
     b = cfg.eta_bounds
     lo, hi = (-np.inf, np.inf) if b is None else (float(b[0]), float(b[1]))
-    log_lambda = math.log(cfg.forgetting) / FORGETTING_REFERENCE_DT
-    return np.concatenate([np.asarray(a, dtype=np.float64).ravel() for a in (
-        [vehicle.mass, vehicle.gravity, vehicle.rotor_max_thrust, float(cfg.clip_commands), lo,
-         hi, cfg.p0, log_lambda], vehicle.inertia, vehicle.inertia_inverse, vehicle.allocation,
-        _ONES)])
+    return pack(CONSTANTS, mass=vehicle.mass, gravity=vehicle.gravity,
+                f_max=vehicle.rotor_max_thrust, clip=float(cfg.clip_commands), lo=lo, hi=hi,
+                p0=cfg.p0, log_lambda=math.log(cfg.forgetting) / FORGETTING_REFERENCE_DT,
+                J=vehicle.inertia, Jinv=vehicle.inertia_inverse, G=np.ones(RESIDUAL_ROWS),
+                A=vehicle.allocation)
 
 
 @jit
-def state_pieces(fs, offsets, n, N):
-    """The pieces of the float state of ``N`` filters, each ``(N, *shape)`` (``F_*`` order)."""
+def state_views(fs, offsets, n, N):
+    """The pieces of the float state of ``N`` filters, each ``(N, *shape)``, as a plain tuple
+    in the order of :data:`FLOATS` (what a ``prange`` loop can capture; :func:`named_pieces`
+    names them)."""
     o = offsets
-    return (piece_rows(fs, o[F_THETA], o[F_THETA + 1], N),
-            piece(fs, o, F_P, (N, n, n)),
-            piece_rows(fs, o[F_T], o[F_T + 1], N),
-            piece(fs, o, F_SAMPLE, (N, 6, 3)),
-            piece_rows(fs, o[F_LAST_F], o[F_LAST_F + 1], N),
-            piece_rows(fs, o[F_ETA0], o[F_ETA0 + 1], N),
-            piece_rows(fs, o[F_S2], o[F_S2 + 1], N),
-            piece_rows(fs, o[F_R0], o[F_R0 + 1], N),
-            piece(fs, o, F_J, (N, RESIDUAL_ROWS, n)),
-            piece_rows(fs, o[F_B], o[F_B + 1], N),
-            piece(fs, o, F_H, (N, n, n)),
-            piece_rows(fs, o[F_PPHI], o[F_PPHI + 1], N),
-            piece_rows(fs, o[F_G], o[F_G + 1], N))
+    return (piece_rows(fs, o[F.theta], o[F.theta + 1], N),
+            piece(fs, o, F.P, (N, n, n)),
+            piece_rows(fs, o[F.last_t], o[F.last_t + 1], N),
+            piece(fs, o, F.sample, (N, SAMPLE_ROWS.size, 3)),
+            piece_rows(fs, o[F.last_f], o[F.last_f + 1], N),
+            piece_rows(fs, o[F.eta0], o[F.eta0 + 1], N),
+            piece_rows(fs, o[F.noise], o[F.noise + 1], N),
+            piece_rows(fs, o[F.r0], o[F.r0 + 1], N),
+            piece(fs, o, F.J, (N, RESIDUAL_ROWS, n)),
+            piece_rows(fs, o[F.b], o[F.b + 1], N),
+            piece(fs, o, F.H, (N, n, n)),
+            piece_rows(fs, o[F.Pphi], o[F.Pphi + 1], N),
+            piece_rows(fs, o[F.g], o[F.g + 1], N))
+
+
+@jit(inline="always")
+def named_pieces(views):
+    """:func:`state_views` by name (:data:`FLOATS`'s pieces)."""
+    return RLSPieces(*views)
+
+
+@jit(inline="always")
+def state_pieces(fs, offsets, n, N):
+    """The pieces of the float state of ``N`` filters (:data:`FLOATS`) by name, each
+    ``(N, *shape)``."""
+    return named_pieces(state_views(fs, offsets, n, N))
 
 
 @jit
@@ -178,16 +206,18 @@ def rls_step(t, p, v, R, w, f, const, S, ks, i) -> int:
     """One sample into filter ``i`` of the state ``(S, ks)`` (:func:`state_pieces`), in place;
     returns the status code (module docstring)."""
     n = f.shape[0]
-    theta, P, last_t, sample = S[F_THETA][i], S[F_P][i], S[F_T][i], S[F_SAMPLE][i]
-    last_f, s2 = S[F_LAST_F][i], S[F_S2][i]
-    last_p, last_v, last_w, last_R = sample[S_P], sample[S_V], sample[S_W], sample[S_R:]
+    C = CONSTANTS
+    theta, P, last_t, sample = S.theta[i], S.P[i], S.last_t[i], S.sample[i]
+    last_f, s2 = S.last_f[i], S.noise[i]
+    last_p, last_v, last_w = sample[SAMPLE_ROWS.p], sample[SAMPLE_ROWS.v], sample[SAMPLE_ROWS.w]
+    last_R = sample[SAMPLE_ROWS.R:]
     if not (math.isfinite(t) and all_finite(p) and all_finite(v) and all_finite(R)
             and all_finite(w) and all_finite(f)) \
-            or (ks[i, K_HAS_LAST] == 1 and not t > last_t[0]):
-        ks[i, K_HAS_LAST] = 0  # the next good sample starts afresh
+            or (ks[i, COUNTERS.has_last] == 1 and not t > last_t[0]):
+        ks[i, COUNTERS.has_last] = 0  # the next good sample starts afresh
         return BAD_SAMPLE
     code = WARMUP
-    if ks[i, K_HAS_LAST] == 1:
+    if ks[i, COUNTERS.has_last] == 1:
         dt = t - last_t[0]
         idle = False
         for j in range(n):
@@ -195,14 +225,15 @@ def rls_step(t, p, v, R, w, f, const, S, ks, i) -> int:
         if idle:
             code = NO_EXCITATION
         else:
-            r0, Jr, G = S[F_R0][i], S[F_J][i], const[C_J + 18 + 4 * n:C_J + 28 + 4 * n]
-            A = const[C_J + 18:C_J + 18 + 4 * n].reshape((4, n))
+            r0, Jr = S.r0[i], S.J[i]
             segment_terms_into(dt, last_p, p, last_v, v, last_R, R, last_w, w, last_f,
-                               const[C_MASS], const[C_G], const[C_J:C_J + 9].reshape((3, 3)),
-                               const[C_J + 9:C_J + 18].reshape((3, 3)), A, G, r0, Jr,
-                               S[F_B][i], S[F_H][i])
-            lam = math.exp(const[C_LOG_LAMBDA] * dt)
-            g = S[F_G][i]  # the rows' weights
+                               const[C.mass], const[C.gravity],
+                               const[C.J:C.Jinv].reshape((3, 3)),
+                               const[C.Jinv:C.G].reshape((3, 3)),
+                               const[C.A:C.A + 4 * n].reshape((4, n)), const[C.G:C.A], r0, Jr,
+                               S.b[i], S.H[i])
+            lam = math.exp(const[C.log_lambda] * dt)
+            g = S.g[i]  # the rows' weights
             energy = 0.0  # the weighted a-priori residual energy, per row
             for q in range(N_ROWS):
                 r = ROWS[q]
@@ -214,12 +245,12 @@ def rls_step(t, p, v, R, w, f, const, S, ks, i) -> int:
                     e -= Jr[r, j] * theta[j]
                 g[q] = 1.0 / c2 if c2 > 0.0 else 0.0
                 energy += g[q] * e * e
-            s2[1] = lam * s2[1] + 1.0  # the forgotten sample count, then the mean
-            s2[0] += (energy / N_ROWS - s2[0]) / s2[1]
+            s2[NOISE.count] = lam * s2[NOISE.count] + 1.0  # the forgotten count, then the mean
+            s2[NOISE.mean] += (energy / N_ROWS - s2[NOISE.mean]) / s2[NOISE.count]
             for a in range(n):
                 for b in range(n):
                     P[a, b] /= lam
-            Pphi = S[F_PPHI][i]
+            Pphi = S.Pphi[i]
             for q in range(N_ROWS):
                 r = ROWS[q]
                 if g[q] == 0.0:
@@ -239,7 +270,7 @@ def rls_step(t, p, v, R, w, f, const, S, ks, i) -> int:
                     for b in range(a + 1):
                         P[a, b] -= Pphi[a] * Pphi[b] / den
                         P[b, a] = P[a, b]
-            ks[i, K_UPDATED] = 1
+            ks[i, COUNTERS.updated] = 1
             code = OK
     last_t[0] = t
     for a in range(3):
@@ -247,17 +278,17 @@ def rls_step(t, p, v, R, w, f, const, S, ks, i) -> int:
         for b in range(3):
             last_R[a, b] = R[a, b]
     for j in range(n):
-        last_f[j] = min(max(f[j], 0.0), const[C_FMAX]) if const[C_CLIP] != 0.0 else f[j]
-    ks[i, K_HAS_LAST] = 1
+        last_f[j] = min(max(f[j], 0.0), const[C.f_max]) if const[C.clip] != 0.0 else f[j]
+    ks[i, COUNTERS.has_last] = 1
     return code
 
 
 @jit(inline="always")
 def _estimate_row(S, ks, i, n, eta, sd) -> None:
-    theta, P, s2 = S[F_THETA][i], S[F_P][i], S[F_S2][i]
+    theta, P, s2 = S.theta[i], S.P[i], S.noise[i]
     for j in range(n):
         eta[j] = theta[j]
-        sd[j] = math.sqrt(max(P[j, j] * s2[0], 0.0)) if ks[i, K_UPDATED] == 1 else np.nan
+        sd[j] = math.sqrt(max(P[j, j] * s2[NOISE.mean], 0.0)) if ks[i, COUNTERS.updated] == 1 else np.nan
 
 
 @jit
@@ -276,17 +307,17 @@ def rls_reset(const, offsets, n, fs, ks, rows, eta0) -> None:
     for i in rows:
         for k in range(ks.shape[1]):
             ks[i, k] = 0
-        for k in range(N_PIECES):
+        for k in range(offsets.shape[0] - 1):  # every piece
             row = piece_rows(fs, offsets[k], offsets[k + 1], N)[i]
             for a in range(row.shape[0]):
                 row[a] = 0.0
-        theta = piece_rows(fs, offsets[F_THETA], offsets[F_THETA + 1], N)[i]
-        e0 = piece_rows(fs, offsets[F_ETA0], offsets[F_ETA0 + 1], N)[i]
-        P = piece(fs, offsets, F_P, (N, n, n))[i]
+        theta = piece_rows(fs, offsets[F.theta], offsets[F.theta + 1], N)[i]
+        e0 = piece_rows(fs, offsets[F.eta0], offsets[F.eta0 + 1], N)[i]
+        P = piece(fs, offsets, F.P, (N, n, n))[i]
         for j in range(n):
             theta[j] = eta0[i, j]
             e0[j] = eta0[i, j]
-            P[j, j] = const[C_P0]
+            P[j, j] = const[CONSTANTS.p0]
 
 
 @jit(inline="always")
@@ -294,9 +325,9 @@ def _one(t, p, v, R, w, f, const, S, ks, i) -> int:
     """:func:`rls_step`, then the projection of ``theta`` onto the box."""
     code = rls_step(t, p, v, R, w, f, const, S, ks, i)
     if code == OK:
-        theta = S[F_THETA][i]
+        theta = S.theta[i]
         for j in range(f.shape[0]):
-            theta[j] = min(max(theta[j], const[C_LO]), const[C_HI])
+            theta[j] = min(max(theta[j], const[CONSTANTS.lo]), const[CONSTANTS.hi])
     return code
 
 
@@ -322,9 +353,10 @@ def rls_run(t, p, v, R, w, f, const, offsets, fs, ks, eta, sd, code) -> None:
 def rls_update_rows(t, p, v, R, w, f, const, offsets, fs, ks, code) -> None:
     """One sample into every row of a batch, in parallel; status codes into ``code``."""
     N = ks.shape[0]
-    S = state_pieces(fs, offsets, f.shape[1], N)
+    views = state_views(fs, offsets, f.shape[1], N)  # formed once; named inside the loop
     for i in prange(N):
-        code[i] = _one(t[i], p[i], v[i], R[i], w[i], f[i], const, S, ks, np.int64(i))
+        code[i] = _one(t[i], p[i], v[i], R[i], w[i], f[i], const, named_pieces(views), ks,
+                       np.int64(i))
 
 
 def _kernels():
@@ -335,10 +367,11 @@ class _RLS:
     name = "rls"
     config_class = RLSConfig
     kernels = staticmethod(_kernels)
-    shapes = staticmethod(_shapes)
-    n_ints = 2
+    floats = FLOATS
+    dims = staticmethod(_dims)
+    counters = COUNTERS
     constants = staticmethod(rls_constants)
-    fmax_index = C_FMAX
+    fmax_index = CONSTANTS.f_max
 
 
 class RecursiveLeastSquares(_RLS, RecursiveEstimator):
@@ -348,7 +381,7 @@ class RecursiveLeastSquares(_RLS, RecursiveEstimator):
     @property
     def P(self) -> np.ndarray:
         """The covariance of ``theta`` (n x n) as the filter holds it (``s2`` not applied)."""
-        return self._state.views[F_P][0]
+        return self._state.views.P[0]
 
 
 class BatchedRLS(_RLS, BatchedRecursive):

@@ -54,7 +54,7 @@ from estimators.ekf import IDLE_THRUST, NOISE_REFERENCE_DT
 from estimators.linalg import cholesky_into
 from estimators.recursive import BatchedRecursive, RecursiveEstimator
 from estimators.rls import check_bounds
-from estimators.state import all_finite, piece, piece_rows
+from estimators.state import Layout, all_finite, fields, pack, piece, piece_rows
 from quadfault.dynamics import angular_acceleration3, rotor_wrench, translational_acceleration3
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange
@@ -65,10 +65,6 @@ WARMUP = STATUSES.index(STATUS_WARMUP)
 NO_EXCITATION = STATUSES.index(STATUS_NO_EXCITATION)
 BAD_SAMPLE = STATUSES.index(STATUS_BAD_SAMPLE)
 ILL_CONDITIONED = STATUSES.index(STATUS_ILL_CONDITIONED)
-#: the first state index of the efficiencies
-ETA_ = 6
-#: measured rows: v (3), Omega (3)
-M_ = 6
 
 
 @dataclass(frozen=True)
@@ -119,7 +115,7 @@ class UKFConfig:
     def weights(self, n: int) -> tuple[float, float, float, float]:
         """``(scale, W_m0, W_c0, W_i)`` of ``L = 6 + n`` states: the sigma points are
         ``x +- scale * columns of chol(P)``."""
-        L = M_ + n
+        L = X.eta + n
         lam = self.alpha ** 2 * (L + self.kappa) - L
         if not L + lam > 0:
             raise ConfigError(f"UKFConfig: alpha^2 (L + kappa) must be positive for L = {L} "
@@ -137,71 +133,115 @@ class UKFConfig:
         return replace(self, **changes)
 
 
-# pieces of the float state, in order (shapes: _shapes)
-(F_X, F_P, F_LAST_T, F_LAST_F, F_LAST_R, F_ETA0, F_KEEP, F_P_KEEP, F_SIGMA, F_CHOL, F_XP,
- F_PP, F_S, F_SL, F_W, F_Y, F_SHIFT) = range(17)
-N_PIECES = 17
-K_INITIALISED = 0
-# constants: mass, gravity, rotor_max_thrust, clip, lo, hi, p0, scale, W_m0, W_c0, W_i, then
-# A (4 n), J (9), J^-1 (9), qc (L, per second), r (6)
-C_MASS, C_G, C_FMAX, C_CLIP, C_LO, C_HI, C_P0, C_SCALE, C_WM0, C_WC0, C_WI, C_A = range(12)
+#: the filter's state: velocity (world), body rate, then the n efficiencies
+X = fields("UKFStates", ("v", 3), ("w", 3), ("eta", 0))
+#: rows of the measurement: velocity and rate, each reading its state (``H = [I 0]``)
+Y = fields("UKFMeasurementRows", ("v", 3), ("w", 3))
+assert (X.v, X.w) == (Y.v, Y.w) and X.eta == Y.size  # the rows read the first states
+#: the float state of one filter (dimensions: rotors ``n``, states ``L = X.eta + n``, sigma
+#: points ``sigma = 2 L + 1``): ``x`` and ``P``, the previous sample's time, (clipped)
+#: command and attitude, the initial efficiency, the efficiencies kept across an idle step,
+#: then the workspace of one update (the sigma points, chol(P), the predicted moments, the
+#: innovation's covariance and its factor, ``W``, the innovation, the factorisation's shift)
+FLOATS = Layout("UKFPieces", x=("L",), P=("L", "L"), last_t=(1,), last_f=("n",),
+                last_R=(3, 3), eta0=("n",), keep=("n",), P_keep=("n", "n"),
+                sigma=("sigma", "L"), chol=("L", "L"), xp=("L",), Pp=("L", "L"),
+                S=(Y.size, Y.size), SL=(Y.size, Y.size), W=(Y.size, "L"), y=(Y.size,),
+                shift=("L",))
+F = FLOATS.index
+UKFPieces = FLOATS.pieces
+#: the int state: 1 once the first good sample set the kinematic states
+COUNTERS = fields("UKFCounters", "initialised")
+#: the constants: scalars (the clamp ``lo``, ``hi``; the unscented transform's ``scale`` and
+#: weights, :meth:`UKFConfig.weights`), the inertia and its inverse, the measurement-noise
+#: variances ``r``; last the arrays sized by the rotors: the allocation ``A`` (4, n), then
+#: the process-noise variance rates ``qc`` (L,) [1/s] (:func:`ukf_constants`)
+CONSTANTS = fields("UKFConstants", "mass", "gravity", "f_max", "clip", "lo", "hi", "p0",
+                   "scale", "wm0", "wc0", "wi", ("J", 9), ("Jinv", 9), ("r", Y.size),
+                   ("per_rotor", 0))
 
 
-def _shapes(n: int) -> tuple:
-    L = M_ + n
-    return ((L,), (L, L), (1,), (n,), (3, 3), (n,), (n,), (n, n), (2 * L + 1, L), (L, L), (L,),
-            (L, L), (M_, M_), (M_, M_), (M_, L), (M_,), (L,))
+def _dims(n: int) -> dict:
+    L = X.eta + n
+    return {"n": n, "L": L, "sigma": 2 * L + 1}
 
 
 def ukf_constants(vehicle: Vehicle, cfg: UKFConfig) -> np.ndarray:
-    """The constants of :func:`ukf_step` (see the ``C_*`` names)."""
+    """The constants of :func:`ukf_step` (:data:`CONSTANTS`)."""
     n = vehicle.n_rotors
     b = cfg.eta_bounds
     lo, hi = (-np.inf, np.inf) if b is None else (float(b[0]), float(b[1]))
-    q = np.concatenate((np.full(3, cfg.q_velocity), np.full(3, cfg.q_rate), np.full(n, cfg.q_eta)))
-    r = np.concatenate((np.full(3, cfg.r_velocity), np.full(3, cfg.r_rate)))
-    return np.concatenate([np.asarray(a, dtype=np.float64).ravel() for a in (
-        [vehicle.mass, vehicle.gravity, vehicle.rotor_max_thrust, float(cfg.clip_commands), lo,
-         hi, cfg.p0, *cfg.weights(n)], vehicle.allocation, vehicle.inertia,
-        vehicle.inertia_inverse, q / NOISE_REFERENCE_DT, r)])
-
-
-@jit
-def state_pieces(fs, offsets, n, N):
-    """The pieces of the float state of ``N`` filters, each ``(N, *shape)`` (``F_*`` order)."""
-    L = M_ + n
-    o = offsets
-    return (piece_rows(fs, o[F_X], o[F_X + 1], N),
-            piece(fs, o, F_P, (N, L, L)),
-            piece_rows(fs, o[F_LAST_T], o[F_LAST_T + 1], N),
-            piece_rows(fs, o[F_LAST_F], o[F_LAST_F + 1], N),
-            piece(fs, o, F_LAST_R, (N, 3, 3)),
-            piece_rows(fs, o[F_ETA0], o[F_ETA0 + 1], N),
-            piece_rows(fs, o[F_KEEP], o[F_KEEP + 1], N),
-            piece(fs, o, F_P_KEEP, (N, n, n)),
-            piece(fs, o, F_SIGMA, (N, 2 * L + 1, L)),
-            piece(fs, o, F_CHOL, (N, L, L)),
-            piece_rows(fs, o[F_XP], o[F_XP + 1], N),
-            piece(fs, o, F_PP, (N, L, L)),
-            piece(fs, o, F_S, (N, M_, M_)),
-            piece(fs, o, F_SL, (N, M_, M_)),
-            piece(fs, o, F_W, (N, M_, L)),
-            piece_rows(fs, o[F_Y], o[F_Y + 1], N),
-            piece_rows(fs, o[F_SHIFT], o[F_SHIFT + 1], N))
+    q = pack(X, v=np.full(3, cfg.q_velocity), w=np.full(3, cfg.q_rate),
+             eta=np.full(n, cfg.q_eta))
+    r = pack(Y, v=np.full(3, cfg.r_velocity), w=np.full(3, cfg.r_rate))
+    scale, wm0, wc0, wi = cfg.weights(n)
+    per_rotor = np.concatenate((np.asarray(vehicle.allocation, dtype=float).ravel(),
+                                q / NOISE_REFERENCE_DT))  # A, then qc (_model)
+    return pack(CONSTANTS, mass=vehicle.mass, gravity=vehicle.gravity,
+                f_max=vehicle.rotor_max_thrust, clip=float(cfg.clip_commands), lo=lo, hi=hi,
+                p0=cfg.p0, scale=scale, wm0=wm0, wc0=wc0, wi=wi, J=vehicle.inertia,
+                Jinv=vehicle.inertia_inverse, r=r, per_rotor=per_rotor)
 
 
 @jit(inline="always")
-def _propagate(X, f, R9, dt, rigid, A) -> None:
-    """One sigma point ``X = [v, Omega, eta]`` over ``dt`` with the command ``f`` held and the
+def _model(const, n):
+    """``(A, qc, r)``: the allocation (4, n), the process-noise variance rates (L,) and the
+    measurement-noise variances (:data:`Y`), views of ``const``."""
+    a, L = CONSTANTS.per_rotor, X.eta + n
+    return (const[a:a + 4 * n].reshape((4, n)), const[a + 4 * n:a + 4 * n + L],
+            const[CONSTANTS.r:CONSTANTS.per_rotor])
+
+
+@jit
+def state_views(fs, offsets, n, N):
+    """The pieces of the float state of ``N`` filters, each ``(N, *shape)``, as a plain tuple
+    in the order of :data:`FLOATS` (what a ``prange`` loop can capture; :func:`named_pieces`
+    names them)."""
+    L, o, m = X.eta + n, offsets, Y.size
+    return (piece_rows(fs, o[F.x], o[F.x + 1], N),
+            piece(fs, o, F.P, (N, L, L)),
+            piece_rows(fs, o[F.last_t], o[F.last_t + 1], N),
+            piece_rows(fs, o[F.last_f], o[F.last_f + 1], N),
+            piece(fs, o, F.last_R, (N, 3, 3)),
+            piece_rows(fs, o[F.eta0], o[F.eta0 + 1], N),
+            piece_rows(fs, o[F.keep], o[F.keep + 1], N),
+            piece(fs, o, F.P_keep, (N, n, n)),
+            piece(fs, o, F.sigma, (N, 2 * L + 1, L)),
+            piece(fs, o, F.chol, (N, L, L)),
+            piece_rows(fs, o[F.xp], o[F.xp + 1], N),
+            piece(fs, o, F.Pp, (N, L, L)),
+            piece(fs, o, F.S, (N, m, m)),
+            piece(fs, o, F.SL, (N, m, m)),
+            piece(fs, o, F.W, (N, m, L)),
+            piece_rows(fs, o[F.y], o[F.y + 1], N),
+            piece_rows(fs, o[F.shift], o[F.shift + 1], N))
+
+
+@jit(inline="always")
+def named_pieces(views):
+    """:func:`state_views` by name (:data:`FLOATS`'s pieces)."""
+    return UKFPieces(*views)
+
+
+@jit(inline="always")
+def state_pieces(fs, offsets, n, N):
+    """The pieces of the float state of ``N`` filters (:data:`FLOATS`) by name, each
+    ``(N, *shape)``."""
+    return named_pieces(state_views(fs, offsets, n, N))
+
+
+@jit(inline="always")
+def _propagate(chi, f, R9, dt, rigid, A) -> None:
+    """One sigma point ``chi = [v, Omega, eta]`` (:data:`X`) over ``dt`` with the command ``f`` held and the
     attitude ``R9`` (row-major 9-tuple), in place: the model's allocation and rigid body
     (:mod:`quadfault.dynamics`, eqs. 2, 4 and 12; the efficiencies a random walk)."""
     n = f.shape[0]
-    T, M = rotor_wrench(A, f, X[ETA_:ETA_ + n])
+    T, M = rotor_wrench(A, f, chi[X.eta:X.eta + n])
     acc = translational_acceleration3(R9, T, rigid)
-    wdot = angular_acceleration3((X[3], X[4], X[5]), M, rigid)
+    wdot = angular_acceleration3((chi[X.w], chi[X.w + 1], chi[X.w + 2]), M, rigid)
     for a in range(3):
-        X[a] += acc[a] * dt
-        X[3 + a] += wdot[a] * dt
+        chi[X.v + a] += acc[a] * dt
+        chi[X.w + a] += wdot[a] * dt
 
 
 @jit
@@ -209,22 +249,21 @@ def ukf_step(t, p, v, R, w, f, const, S, ks, i) -> int:
     """One sample into filter ``i`` of the state ``(S, ks)`` (:func:`state_pieces`), in place;
     returns the status code (module docstring)."""
     n = f.shape[0]
-    L = M_ + n
-    x, P, last_t, last_f, last_R = S[F_X][i], S[F_P][i], S[F_LAST_T][i], S[F_LAST_F][i], \
-        S[F_LAST_R][i]
+    L = X.eta + n
+    x, P, last_t, last_f, last_R = S.x[i], S.P[i], S.last_t[i], S.last_f[i], S.last_R[i]
     if not (math.isfinite(t) and all_finite(p) and all_finite(v) and all_finite(R)
             and all_finite(w) and all_finite(f)):
         return BAD_SAMPLE
-    if ks[i, K_INITIALISED] == 0:  # the first sample sets the kinematic states
-        eta0 = S[F_ETA0][i]
+    if ks[i, COUNTERS.initialised] == 0:  # the first sample sets the kinematic states
+        eta0 = S.eta0[i]
         for a in range(3):
-            x[a], x[3 + a] = v[a], w[a]
+            x[X.v + a], x[X.w + a] = v[a], w[a]
         for j in range(n):
-            x[ETA_ + j] = eta0[j]
+            x[X.eta + j] = eta0[j]
         for a in range(L):
             for b in range(L):
-                P[a, b] = const[C_P0] if a == b else 0.0
-        ks[i, K_INITIALISED] = 1
+                P[a, b] = const[CONSTANTS.p0] if a == b else 0.0
+        ks[i, COUNTERS.initialised] = 1
         code = WARMUP
     else:
         dt = t - last_t[0]
@@ -236,23 +275,23 @@ def ukf_step(t, p, v, R, w, f, const, S, ks, i) -> int:
             for j in range(n):
                 idle = idle or last_f[j] <= IDLE_THRUST
             if idle:  # the efficiencies stay, decorrelated; their variance grows by Q_eta dt
-                keep, P_keep = S[F_KEEP][i], S[F_P_KEEP][i]
-                qc = const[C_A + 4 * n + 18:C_A + 4 * n + 18 + L]
+                keep, P_keep, e = S.keep[i], S.P_keep[i], X.eta
+                qc = _model(const, n)[1]
                 for j in range(n):
-                    x[ETA_ + j] = keep[j]
-                    for k in range(ETA_):
-                        P[ETA_ + j, k] = 0.0
-                        P[k, ETA_ + j] = 0.0
+                    x[e + j] = keep[j]
+                    for k in range(e):
+                        P[e + j, k] = 0.0
+                        P[k, e + j] = 0.0
                     for k in range(n):
-                        P[ETA_ + j, ETA_ + k] = P_keep[j, k]
-                    P[ETA_ + j, ETA_ + j] += qc[ETA_ + j] * dt
+                        P[e + j, e + k] = P_keep[j, k]
+                    P[e + j, e + j] += qc[e + j] * dt
                 code = NO_EXCITATION
     last_t[0] = t
     for a in range(3):
         for b in range(3):
             last_R[a, b] = R[a, b]
     for j in range(n):
-        last_f[j] = min(max(f[j], 0.0), const[C_FMAX]) if const[C_CLIP] != 0.0 else f[j]
+        last_f[j] = min(max(f[j], 0.0), const[CONSTANTS.f_max]) if const[CONSTANTS.clip] != 0.0 else f[j]
     return code
 
 
@@ -260,59 +299,57 @@ def ukf_step(t, p, v, R, w, f, const, S, ks, i) -> int:
 def _predict_update(x, P, zv, zw, f, R, dt, const, S, i, n) -> int:
     """The unscented predict over ``dt`` and the update with ``z = [zv, zw]``, in place;
     ``ill_conditioned`` (nothing changed) when ``P`` or ``S`` is not positive definite."""
-    L = M_ + n
-    a4 = C_A + 4 * n
-    A = const[C_A:a4].reshape((4, n))
-    qc, r = const[a4 + 18:a4 + 18 + L], const[a4 + 18 + L:a4 + 24 + L]
-    keep, P_keep = S[F_KEEP][i], S[F_P_KEEP][i]
+    L, e, m, C_ = X.eta + n, X.eta, Y.size, CONSTANTS
+    A, qc, r = _model(const, n)
+    keep, P_keep = S.keep[i], S.P_keep[i]
     for j in range(n):  # the efficiencies before the step (an idle step restores them)
-        keep[j] = x[ETA_ + j]
+        keep[j] = x[e + j]
         for k in range(n):
-            P_keep[j, k] = P[ETA_ + j, ETA_ + k]
-    X, C, xp, Pp, shift = S[F_SIGMA][i], S[F_CHOL][i], S[F_XP][i], S[F_PP][i], S[F_SHIFT][i]
+            P_keep[j, k] = P[e + j, e + k]
+    sig, C, xp, Pp, shift = S.sigma[i], S.chol[i], S.xp[i], S.Pp[i], S.shift[i]
     for a in range(L):
         shift[a] = 0.0
     if not cholesky_into(P, shift, C, L):
         return ILL_CONDITIONED
-    scale, wm0, wc0, wi = const[C_SCALE], const[C_WM0], const[C_WC0], const[C_WI]
+    scale, wm0, wc0, wi = const[C_.scale], const[C_.wm0], const[C_.wc0], const[C_.wi]
     for a in range(L):
-        X[0, a] = x[a]
+        sig[0, a] = x[a]
     for c in range(L):  # sigma points x +- scale C[:, c]
         for a in range(L):
             d = scale * C[a, c] if a >= c else 0.0
-            X[1 + c, a] = x[a] + d
-            X[1 + L + c, a] = x[a] - d
-    rigid = (const[C_MASS], const[C_G], const[a4:a4 + 9], const[a4 + 9:a4 + 18])
+            sig[1 + c, a] = x[a] + d
+            sig[1 + L + c, a] = x[a] - d
+    rigid = (const[C_.mass], const[C_.gravity], const[C_.J:C_.Jinv], const[C_.Jinv:C_.r])
     R9 = (R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2], R[2, 0], R[2, 1], R[2, 2])
     for s in range(2 * L + 1):
-        _propagate(X[s], f, R9, dt, rigid, A)
+        _propagate(sig[s], f, R9, dt, rigid, A)
     for a in range(L):  # predicted mean and covariance
-        acc = wm0 * X[0, a]
+        acc = wm0 * sig[0, a]
         for s in range(1, 2 * L + 1):
-            acc += wi * X[s, a]
+            acc += wi * sig[s, a]
         xp[a] = acc
     for s in range(2 * L + 1):
         for a in range(L):
-            X[s, a] -= xp[a]
+            sig[s, a] -= xp[a]
     for a in range(L):
         for b in range(a + 1):
-            acc = wc0 * X[0, a] * X[0, b]
+            acc = wc0 * sig[0, a] * sig[0, b]
             for s in range(1, 2 * L + 1):
-                acc += wi * X[s, a] * X[s, b]
+                acc += wi * sig[s, a] * sig[s, b]
             Pp[a, b] = acc
             Pp[b, a] = acc
         Pp[a, a] += qc[a] * dt
     # update with z = [v, Omega] (H = [I_6 0]): S = Pp[:6, :6] + R = L L^T, W = L^-1 Pp[:6, :]
-    Sm, SL, W, y = S[F_S][i], S[F_SL][i], S[F_W][i], S[F_Y][i]
-    for a in range(M_):
-        for b in range(M_):
+    Sm, SL, W, y = S.S[i], S.SL[i], S.W[i], S.y[i]
+    for a in range(m):
+        for b in range(m):
             Sm[a, b] = Pp[a, b]
-    if not cholesky_into(Sm, r, SL, M_):
+    if not cholesky_into(Sm, r, SL, m):
         return ILL_CONDITIONED
     for a in range(3):
-        y[a] = zv[a] - xp[a]
-        y[3 + a] = zw[a] - xp[3 + a]
-    for a in range(M_):  # forward substitution on W's rows and on y
+        y[Y.v + a] = zv[a] - xp[X.v + a]
+        y[Y.w + a] = zw[a] - xp[X.w + a]
+    for a in range(m):  # forward substitution on W's rows and on y
         for c in range(L):
             acc = Pp[a, c]
             for k in range(a):
@@ -324,28 +361,28 @@ def _predict_update(x, P, zv, zw, f, R, dt, const, S, i, n) -> int:
         y[a] = acc / SL[a, a]
     for a in range(L):
         acc = 0.0
-        for k in range(M_):
+        for k in range(m):
             acc += W[k, a] * y[k]
         x[a] = xp[a] + acc
     for a in range(L):  # P = Pp - W^T W
         for b in range(a + 1):
             acc = 0.0
-            for k in range(M_):
+            for k in range(m):
                 acc += W[k, a] * W[k, b]
             P[a, b] = Pp[a, b] - acc
             P[b, a] = P[a, b]
     for j in range(n):
-        x[ETA_ + j] = min(max(x[ETA_ + j], const[C_LO]), const[C_HI])
+        x[e + j] = min(max(x[e + j], const[C_.lo]), const[C_.hi])
     return OK
 
 
 @jit(inline="always")
 def _estimate_row(S, ks, i, n, eta, sd) -> None:
-    x, P, eta0 = S[F_X][i], S[F_P][i], S[F_ETA0][i]
+    x, P, eta0, e = S.x[i], S.P[i], S.eta0[i], X.eta
     for j in range(n):
-        if ks[i, K_INITIALISED] == 1:
-            eta[j] = x[ETA_ + j]
-            sd[j] = math.sqrt(max(P[ETA_ + j, ETA_ + j], 0.0))
+        if ks[i, COUNTERS.initialised] == 1:
+            eta[j] = x[e + j]
+            sd[j] = math.sqrt(max(P[e + j, e + j], 0.0))
         else:
             eta[j] = eta0[j]
             sd[j] = np.nan
@@ -366,12 +403,12 @@ def ukf_reset(const, offsets, n, fs, ks, rows, eta0) -> None:
     efficiencies ``eta0`` (N, n)."""
     N = ks.shape[0]
     for i in rows:
-        ks[i, K_INITIALISED] = 0
-        for k in range(N_PIECES):
+        ks[i, COUNTERS.initialised] = 0
+        for k in range(offsets.shape[0] - 1):  # every piece
             row = piece_rows(fs, offsets[k], offsets[k + 1], N)[i]
             for a in range(row.shape[0]):
                 row[a] = 0.0
-        e0 = piece_rows(fs, offsets[F_ETA0], offsets[F_ETA0 + 1], N)[i]
+        e0 = piece_rows(fs, offsets[F.eta0], offsets[F.eta0 + 1], N)[i]
         for j in range(n):
             e0[j] = eta0[i, j]
 
@@ -398,9 +435,10 @@ def ukf_run(t, p, v, R, w, f, const, offsets, fs, ks, eta, sd, code) -> None:
 def ukf_update_rows(t, p, v, R, w, f, const, offsets, fs, ks, code) -> None:
     """One sample into every row of a batch, in parallel; status codes into ``code``."""
     N = ks.shape[0]
-    S = state_pieces(fs, offsets, f.shape[1], N)
+    views = state_views(fs, offsets, f.shape[1], N)  # formed once; named inside the loop
     for i in prange(N):
-        code[i] = ukf_step(t[i], p[i], v[i], R[i], w[i], f[i], const, S, ks, np.int64(i))
+        code[i] = ukf_step(t[i], p[i], v[i], R[i], w[i], f[i], const, named_pieces(views), ks,
+                           np.int64(i))
 
 
 def _kernels():
@@ -411,10 +449,11 @@ class _UKF:
     name = "ukf"
     config_class = UKFConfig
     kernels = staticmethod(_kernels)
-    shapes = staticmethod(_shapes)
-    n_ints = 1
+    floats = FLOATS
+    dims = staticmethod(_dims)
+    counters = COUNTERS
     constants = staticmethod(ukf_constants)
-    fmax_index = C_FMAX
+    fmax_index = CONSTANTS.f_max
 
 
 class UnscentedKalmanFilter(_UKF, RecursiveEstimator):
@@ -424,12 +463,12 @@ class UnscentedKalmanFilter(_UKF, RecursiveEstimator):
     @property
     def x(self) -> np.ndarray | None:
         """The state ``[v, Omega, eta]`` (None before the first good sample)."""
-        return self._state.views[F_X][0] if self._state.ints[0, K_INITIALISED] else None
+        return self._state.views.x[0] if self._state.ints[0, COUNTERS.initialised] else None
 
     @property
     def P(self) -> np.ndarray | None:
         """The state covariance (None before the first good sample)."""
-        return self._state.views[F_P][0] if self._state.ints[0, K_INITIALISED] else None
+        return self._state.views.P[0] if self._state.ints[0, COUNTERS.initialised] else None
 
 
 class BatchedUKF(_UKF, BatchedRecursive):

@@ -1,13 +1,14 @@
 """Named state: the declared layouts of the estimators' flat buffers. Offsets come from the
 declarations, packing is by name, and the compiled views of every piece are the Python
-views (same memory, same shape) for the IRLS and the EKF, single and batched."""
+views (same memory, same shape) for every estimator with a flat state (IRLS, EKF, RLS, UKF),
+single and batched."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from estimators import ekf, irls
+from estimators import ekf, irls, rls, ukf
 from estimators.state import counts, fields, pack
 from quadfault.errors import ConfigError
 from quadfault.vehicle import Vehicle
@@ -50,6 +51,9 @@ def test_compiled_pieces_are_the_declared_pieces(num, n_rotors):
     _same_views(irls.state_pieces(st.floats, ip, num), st.views)
     est = ekf.EKFState(n_rotors, num)
     _same_views(ekf.state_pieces(est.floats, est.offsets, n_rotors, num), est.views)
+    for module, batched in ((rls, rls.BatchedRLS), (ukf, ukf.BatchedUKF)):
+        st = batched(veh, num)._state
+        _same_views(module.state_pieces(st.floats, st.offsets, n_rotors, num), st.views)
 
 
 def test_constants_are_read_by_name():
@@ -70,3 +74,14 @@ def test_constants_are_read_by_name():
     assert const[irls.CONSTANTS.mass] == veh.mass
     assert fp[irls.FLOAT_SETTINGS.change_threshold] == cfg.change_threshold
     assert ip[irls.INT_SETTINGS.m] == cfg.window - 1
+    for module, config in ((rls, rls.RLSConfig(forgetting=0.98)), (ukf, ukf.UKFConfig())):
+        const = getattr(module, f"{module.__name__.split('.')[-1]}_constants")(veh, config)
+        C = module.CONSTANTS
+        assert const[C.mass] == veh.mass and const[C.lo] == config.eta_bounds[0]
+        np.testing.assert_array_equal(const[C.Jinv:C.Jinv + 9], veh.inertia_inverse.ravel())
+    const = rls.rls_constants(veh, rls.RLSConfig())
+    np.testing.assert_array_equal(const[rls.CONSTANTS.A:], veh.allocation.ravel())
+    A, qc, r = ukf._model(ukf.ukf_constants(veh, ukf.UKFConfig(q_eta=0.3)), veh.n_rotors)
+    np.testing.assert_array_equal(A, veh.allocation)
+    assert qc[ukf.X.eta] == pytest.approx(0.3 / ekf.NOISE_REFERENCE_DT)
+    assert r[ukf.Y.w] == ukf.UKFConfig().r_rate
