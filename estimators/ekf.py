@@ -68,6 +68,7 @@ from estimators.state import FlatState, Layout, all_finite, fields, pack, piece,
 from quadfault.rotation import mat3
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
+from quadfault.progress import progress_bar
 from quadfault.recording import Recording
 from quadfault.vehicle import Vehicle
 
@@ -409,8 +410,6 @@ class MotorEfficiencyEKF:
     def run(self, recording: Recording, progress: bool = False) -> EstimateSeries:
         """Estimates at every row of ``recording`` (row 0 is the initial guess, ``warmup``);
         the filter is left at the end of the recording."""
-        from quadfault.progress import progress_bar
-
         start = time.perf_counter()
         if not isinstance(recording, Recording):
             raise ConfigError(f"run() needs a Recording, got {type(recording).__name__}")

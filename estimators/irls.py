@@ -71,6 +71,7 @@ from estimators.window import (
 )
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
+from quadfault.progress import progress_bar
 from quadfault.recording import Recording
 from quadfault.vehicle import Vehicle
 
@@ -433,8 +434,6 @@ class SlidingWindowIRLS:
     def run(self, recording: Recording, progress: bool = False) -> EstimateSeries:
         """Estimate over a whole recording, one row per sample (the first ``window - 1`` rows
         are ``warmup``); starts from the current estimate and leaves the estimator reset."""
-        from quadfault.progress import progress_bar
-
         start = time.perf_counter()
         t, p, v, R, w, f = _recording_arrays(recording, self.vehicle, self.config.window)
         const = self._const.copy()

@@ -16,6 +16,8 @@ estimator).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from quadfault.errors import ConfigError
@@ -82,8 +84,6 @@ def median_series(series, length: int):
     ``eta`` replaced by its causal running median over ``length`` rows (``sd`` and ``status``
     kept); ``length <= 1`` returns it unchanged. The same kernel as an estimator's online
     output median (``IRLSConfig.output_median``), so both give identical numbers."""
-    from dataclasses import replace
-
     if isinstance(length, bool) or not isinstance(length, (int, np.integer)) or length < 1:
         raise ConfigError(f"median length must be an integer >= 1 samples, got {length!r}")
     if length <= 1:

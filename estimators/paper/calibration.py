@@ -33,6 +33,7 @@ from estimators.ekf import EKFConfig, MotorEfficiencyEKF
 from estimators.median import median_series
 from estimators.metrics import aligned_truth, score
 from quadfault.errors import ConfigError
+from quadfault.progress import progress_bar
 from quadfault.recording import Recording
 
 
@@ -144,8 +145,6 @@ def calibrate_q_eta(recording: Recording, target_rmse: float, *, base: EKFConfig
     grid = np.logspace(math.log10(lo), math.log10(hi), n)
     bar = None
     if progress:
-        from quadfault.progress import progress_bar
-
         bar = progress_bar(total=n + bisection_steps, desc="calibrate EKF", unit="run")
 
     def rmse_of(q):
