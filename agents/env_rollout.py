@@ -9,8 +9,10 @@ quantity only, never shown to the policy.
 
 from __future__ import annotations
 
+import gymnasium as gym
 import numpy as np
 
+import quad_fault_env  # noqa: F401  (registers the ids)
 from agents.metrics import flight_metrics, tilt_angle
 from agents.rollout import Flight, FlightConfig
 from quadfault.controller import ControllerConfig, GeometricController
@@ -19,10 +21,6 @@ from quadfault.scenarios import Scenario
 
 def make_scenario_env(env_id: str, env_kwargs: dict, scenario: Scenario):
     """``gym.make(env_id)`` flying ``scenario`` for its whole duration."""
-    import gymnasium as gym
-
-    import quad_fault_env  # noqa: F401  (registers the ids)
-
     kwargs = dict(env_kwargs)
     kwargs.update(scenario=scenario, duration=scenario.duration)
     rate = float(kwargs.get("control_rate", 100.0))

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.plots import plot_learning_curve
 from agents.train_eval import EVALUATIONS_FILE
 
 CURVE_FILE = "learning_curve.png"
@@ -66,8 +67,6 @@ def curve_data(runs) -> dict:
 
 def write_learning_curve(runs, path, *, label: str = "policy", title: str | None = None):
     """Draw the learning curve of ``runs`` (run folders) to ``path``; returns the data used."""
-    from agents.plots import plot_learning_curve
-
     data = curve_data(runs)
     if not data["runs"]:
         return data

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from quad_fault_env.observation import ObservationLayout
 from quadfault.allocation import AllocationConfig, EstimateAwareAllocator
 from quadfault.controller import ControllerConfig, GeometricController
 from quadfault.errors import ConfigError
@@ -59,8 +60,6 @@ class GeometricPolicy:
             raise ConfigError("an estimate-aware policy cannot act in 'wrench' mode (the "
                               "environment allocates wrenches with the nominal inverse)")
         if layout is None:
-            from quad_fault_env.observation import ObservationLayout
-
             layout = ObservationLayout(True)
         self.vehicle = vehicle or Vehicle()
         self.action_mode = action_mode

@@ -20,8 +20,10 @@ Sweeps on it: :func:`agents.evaluate.evaluate` (agents x scenarios x seeds;
 from __future__ import annotations
 
 import os
+from concurrent.futures import ProcessPoolExecutor, as_completed
 
 from quadfault.errors import ConfigError
+from quadfault.progress import progress_bar
 
 BACKENDS = ("serial", "local", "ray")
 
@@ -49,8 +51,6 @@ def run_sweep(fn, tasks, *, backend: str = "local", workers: int | None = None,
         raise ConfigError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
     workers = _check_workers(workers)
     tasks = list(tasks)
-    from quadfault.progress import progress_bar
-
     bar = progress_bar(total=len(tasks), desc=desc, unit="task", disable=None if progress else True)
     try:
         if backend == "serial" or not tasks:
@@ -60,8 +60,6 @@ def run_sweep(fn, tasks, *, backend: str = "local", workers: int | None = None,
                 bar.update(1)
             return out
         if backend == "local":
-            from concurrent.futures import ProcessPoolExecutor, as_completed
-
             out = [None] * len(tasks)
             with ProcessPoolExecutor(max_workers=min(workers, len(tasks))) as pool:
                 futures = {pool.submit(fn, t): k for k, t in enumerate(tasks)}

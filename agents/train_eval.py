@@ -28,12 +28,16 @@ from __future__ import annotations
 
 import io
 import math
+import pickle
 from pathlib import Path
 
 import numpy as np
+from gymnasium import spaces
 
+from agents.policies import GeometricPolicy
 from quadfault.errors import ConfigError
 from quadfault.fileio import atomic_write_bytes, atomic_write_files
+from quadfault.progress import progress_bar
 
 VECNORM_FILE = "vecnormalize.pkl"
 EVALUATIONS_FILE = "evaluations.npz"
@@ -44,7 +48,6 @@ POLICIES = ("MlpPolicy", "MultiInputPolicy", "CnnPolicy")
 def choose_policy(requested: str | None, observation_space, env_id: str) -> str:
     """The SB3 policy for ``observation_space``: ``requested`` when it can read it (else a
     one-line :class:`ConfigError`), or the default for the space (None)."""
-    from gymnasium import spaces
     from stable_baselines3.common.preprocessing import is_image_space
 
     is_dict = isinstance(observation_space, spaces.Dict)
@@ -134,8 +137,6 @@ def evaluate_episodes(policy, env, seeds, normalizer=None) -> tuple[np.ndarray, 
 def geometric_baseline(env):
     """The geometric controller as a policy of ``env``, or None when ``env`` is not a
     QuadFault environment or a wrapper changed its observation."""
-    from agents.policies import GeometricPolicy
-
     try:
         if env.observation_space.shape != env.unwrapped.observation_space.shape:
             return None  # a wrapper (a frame stack) changed what a policy sees
@@ -147,8 +148,6 @@ def geometric_baseline(env):
 def model_files(model, zip_path: Path, vecnorm_path: Path | None) -> dict:
     """``{path: bytes}`` of a model's zip and (when it trains on one) its ``VecNormalize``
     pickle: what ``model.save`` and ``VecNormalize.save`` write, for one atomic write."""
-    import pickle
-
     buf = io.BytesIO()
     model.save(buf)
     files = {Path(zip_path): buf.getvalue()}
@@ -234,8 +233,6 @@ def callbacks(config, run_dir: Path, eval_env, total: int, progress: bool):
         """quadfault's progress bar (quiet off a terminal and with --quiet)."""
 
         def _on_training_start(self) -> None:
-            from quadfault.progress import progress_bar
-
             self.bar = progress_bar(total=total, desc=f"train {config.algo}", unit="step")
 
         def _on_step(self) -> bool:

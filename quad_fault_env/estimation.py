@@ -16,6 +16,7 @@ import numpy as np
 
 from estimators.base import STATUS_OK, Estimate
 from estimators.baselines import NOMINAL_PRIOR_SD, NominalBelief, TruthOracle
+from estimators.irls_config import IRLSDiagnostics
 from estimators.registry import ESTIMATORS, estimator_class, make_estimator
 from quad_fault_env.observation import SD_MAX
 
@@ -46,8 +47,6 @@ def diagnostics_template(estimator) -> dict:
     with ``weights`` NaN over the window's segments; estimators without diagnostics: ``{}``."""
     config = getattr(estimator, "config", None)
     if getattr(estimator, "name", None) == "irls" and hasattr(config, "window"):
-        from estimators.irls_config import IRLSDiagnostics
-
         return diagnostics_dict(IRLSDiagnostics("warmup",
                                                 weights=np.full(config.window - 1, np.nan)))
     return {}

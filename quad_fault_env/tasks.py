@@ -21,6 +21,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import gymnasium as gym
+
 from quad_fault_env.envs.config import InitialStateSpread, RewardConfig, TerminationLimits
 from quadfault.errors import ConfigError
 
@@ -124,8 +126,6 @@ def registered_kwargs(env_id: str, **overrides) -> dict:
     """The :class:`~quad_fault_env.vector.QuadFaultVectorEnv` keywords of a registered QuadFault id, as
     ``gym.make_vec`` passes them: the task's keywords, then ``overrides``, and the id's step
     limit as ``max_episode_steps`` when it registers one (``-v0``) and none is given."""
-    import gymnasium as gym
-
     try:
         spec = gym.spec(env_id)
     except gym.error.Error as exc:

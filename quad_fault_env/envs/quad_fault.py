@@ -48,6 +48,7 @@ from quad_fault_env.estimation import (
     make_estimator,
 )
 from quad_fault_env.observation import ObservationLayout
+from quad_fault_env.rendering import FlightRenderer
 from quad_fault_env.time_tables import RowTimeTables
 from quadfault.allocation import EstimateAwareAllocator
 from quadfault.controller import ControllerConfig, GeometricController, GeometricGains
@@ -503,8 +504,6 @@ class QuadFaultEnv(gym.Env):
         if self.plant is None:
             return None
         if self._renderer is None:
-            from quad_fault_env.rendering import FlightRenderer
-
             self._renderer = FlightRenderer(self.vehicle, human=self.render_mode == "human")
         frame = self._renderer.draw(self)
         return frame if self.render_mode == "rgb_array" else None
