@@ -9,8 +9,8 @@ dense products:
   v rows: dt, the thrust direction ``R e3`` and a rank-one eta coupling; Omega rows:
   ``I + dt G`` and ``dt B``; vec(R) rows: ``E^T kron I3`` and the rank-3 product
   ``dR/dphi [dphi/dOmega, dphi/deta]``; eta rows: the identity, a random walk), so
-  ``F P F^T`` is two passes of :func:`_jacobian_times` over those blocks, the second on the
-  lower triangle only (mirrored);
+  ``F P F^T`` is two passes of :func:`_jacobian_times` over those blocks (a
+  :class:`Transition`), the second on the lower triangle only (mirrored);
 * the measurement Jacobian is ``[I_9 0]`` plus a 3 x 9 attitude block, so ``H P`` and
   ``H P H^T`` read rows of ``P``;
 * the update uses the square-root form of the optimal gain (:func:`_update`):
@@ -165,14 +165,35 @@ def _project_so3_into(M, A, D, V):
             M[i, j] = A[i, 0] * V[j, 0] + A[i, 1] * V[j, 1] + A[i, 2] * V[j, 2]
 
 
+class Transition(NamedTuple):
+    """The blocks of the transition Jacobian ``F`` of one predict over ``dt`` [s]
+    (``ekf.predict``), which :func:`_jacobian_times` applies without forming ``F``. p row i:
+    ``e_i + dt e_{v,i} + cp e_{R e3, i} + up_i dT^T``; v row i:
+    ``e_{v,i} + cv e_{R e3, i} + uv_i dT^T``; Omega rows: ``[Fw, dt B]`` on (Omega, eta);
+    vec(R) row ``3 jb + k``: ``E[:, jb]`` (``E`` a row-major 9-tuple) on the k-th entries of
+    R's columns plus ``dR [Mw, Br]`` on (Omega, eta); eta rows: the identity. ``BwT``,
+    ``BrT``: ``(dt B)^T``, ``(dt^2 B / 2)^T`` (n, 3); ``dT`` (n,) the thrust's derivative."""
+
+    dt: float
+    cp: float
+    cv: float
+    up: tuple
+    uv: tuple
+    dT: np.ndarray
+    Fw: np.ndarray
+    BwT: np.ndarray
+    E: tuple
+    dR: np.ndarray
+    Mw: np.ndarray
+    BrT: np.ndarray
+
+
 @jit(inline="always")
-def _jacobian_times(Pin, out, lower, dt, cp, cv, up, uv, dT, Fw, BwT, E, dR, Mw, BrT, ze, Z):
-    """``out = F Pin`` over the blocks of the transition Jacobian ``F`` (``ekf.predict``),
-    only ``out[i, :i + 1]`` when ``lower``. Blocks: p row i: ``e_i + dt e_{v,i} +
-    cp e_{R e3, i} + up_i dT^T``; v row i: ``e_{v,i} + cv e_{R e3, i} + uv_i dT^T``; Omega
-    rows: ``[Fw, dt B]`` on (Omega, eta); vec(R) row ``3 jb + k``: ``E[:, jb]`` on the k-th
-    entries of R's columns plus ``dR [Mw, Br]`` on (Omega, eta); eta rows: the identity
-    (``BwT``, ``BrT``: ``(dt B)^T``, ``(dt^2 B / 2)^T``). ``ze``, ``Z`` are scratch."""
+def _jacobian_times(Pin, out, lower, F, ze, Z):
+    """``out = F Pin`` over the blocks of the transition Jacobian (:class:`Transition`), only
+    ``out[i, :i + 1]`` when ``lower``. ``ze``, ``Z`` are scratch."""
+    dt, cp, cv, up, uv, dT = F.dt, F.cp, F.cv, F.up, F.uv, F.dT
+    Fw, BwT, E, dR, Mw, BrT = F.Fw, F.BwT, F.E, F.dR, F.Mw, F.BrT
     ns = Pin.shape[0]
     nr = ns - X.eta
     n6 = X.w if lower else ns  # columns the p / v rows need
@@ -300,11 +321,12 @@ def predict_update_into(x, P, f, dt, z, model, work):
           -R[2, 2] * (0.5 * dt * dt / m))  # d (p, v) / d eta = up / uv (x) dT
     uv = (-R[0, 2] * (dt / m), -R[1, 2] * (dt / m), -R[2, 2] * (dt / m))
     # P_pred = F P F^T + Q: F P, then F (F P)^T on the lower triangle, mirrored
-    _jacobian_times(P, FP, False, dt, cp, cv, up, uv, dT, Fw, BwT, E, dR, Mw, BrT, ze, Z)
+    F = Transition(dt, cp, cv, up, uv, dT, Fw, BwT, E, dR, Mw, BrT)
+    _jacobian_times(P, FP, False, F, ze, Z)
     for i in range(ns):
         for k in range(ns):
             FPT[k, i] = FP[i, k]
-    _jacobian_times(FPT, Pp, True, dt, cp, cv, up, uv, dT, Fw, BwT, E, dR, Mw, BrT, ze, Z)
+    _jacobian_times(FPT, Pp, True, F, ze, Z)
     for i in range(ns):
         for k in range(i):
             Pp[k, i] = Pp[i, k]
