@@ -8,8 +8,11 @@ Prints, measured in one run (ratios are what to compare; the machine may be shar
    per vehicle (tracemalloc peak / N) and the time to build and reset the env;
 2. batched IRLS window updates/s (``estimators.batched.BatchedIRLS``);
 3. peers at the same physics rate (1 kHz) and horizon: RotorPy's ``BatchedMultirotor``
-   (torch, CPU, rk4) and crazyflow's ``Sim`` (JAX, CPU); each runs in a subprocess of
-   ``--peer-python`` and is skipped with the reason when it cannot be imported or run;
+   (torch, CPU, rk4) and crazyflow's ``Sim`` (JAX, CPU) against the compiled loop, and
+   crazyflow's gym env ``DroneReachPos-v0`` (its fitted default model and
+   ``dynamics="first_principles"``) against the vector env at one physics step per env step;
+   each peer runs in a subprocess of ``--peer-python`` and is skipped with the reason when it
+   cannot be imported or run;
 4. where the time goes: the kernels' stages (CPU ns per vehicle-step, each alone;
    ``benchmarks/kernel_stages.py``) and a profile of the env step (the loop, sensors,
    controller, the rest);
@@ -206,6 +209,37 @@ _CRAZYFLOW_SIM = textwrap.dedent("""
     print(json.dumps({"rate": best, "cpu_rate": best_cpu}))
 """)
 
+_CRAZYFLOW_ENV = textwrap.dedent("""
+    import json, sys, time
+    import numpy as np
+    import jax
+    jax.config.update("jax_platform_name", "cpu")
+    import gymnasium as gym
+    import crazyflow  # noqa: F401  (registers its ids)
+    N, H = int(sys.argv[1]), max(1, int(sys.argv[2]) // 10)
+    env = gym.make_vec("DroneReachPos-v0", num_envs=N, device="cpu", **KW)  # 500 Hz
+    env.reset(seed=0)
+    u = env.unwrapped
+    lo, hi = env.single_action_space.low, env.single_action_space.high
+    hover = float(np.ravel(u.sim.data.params.mass)[0]) * 9.81  # collective thrust [N], last
+    a = np.tile(np.where(np.arange(lo.size) == lo.size - 1, np.clip(hover, lo[-1], hi[-1]),
+                         0.0), (N, 1)).astype(np.float32)  # hover thrust, level attitude
+    for _ in range(2):
+        jax.block_until_ready(env.step(a)[0])  # compile
+    best, best_cpu = 0.0, 0.0
+    work = N * H * u.n_substeps  # physics vehicle-steps per timing call
+    for _ in range(3):
+        calls, t0, c0 = 0, time.perf_counter(), time.process_time()
+        while time.perf_counter() - t0 < 0.3:
+            for _ in range(H):
+                out = env.step(a)
+            jax.block_until_ready(out[0])
+            calls += 1
+        best = max(best, work * calls / (time.perf_counter() - t0))
+        best_cpu = max(best_cpu, work * calls / (time.process_time() - c0))
+    print(json.dumps({"rate": best, "cpu_rate": best_cpu}))
+""")
+
 #: what one step of each peer (and of the quadfault row it is compared with) includes
 PEER_STEPS = {
     "rotorpy": "RotorPy BatchedMultirotor (torch CPU): rk4, aero, motor-speed commands, no "
@@ -214,12 +248,16 @@ PEER_STEPS = {
                  "controller (computed every step, applied at 500 Hz), motor mixing",
     "crazyflow-rk4": "crazyflow Sim like-for-like: rk4, first-principles model, Mellinger "
                      "position + attitude controller at 1 kHz, motor mixing",
-    "crazyflow-env": "crazyflow ReachPosEnv (gymnasium VectorEnv) defaults: so_rpy model, "
-                     "1 physics step at 500 Hz per env step",
+    "crazyflow-env": "crazyflow DroneReachPos-v0 (gymnasium VectorEnv, JAX CPU) defaults: "
+                     "fitted so_rpy model, Euler, attitude commands, 1 physics step at 500 Hz "
+                     "per env step",
+    "crazyflow-env-fp": "crazyflow DroneReachPos-v0 with dynamics='first_principles': rotor "
+                        "model, Euler, attitude controller + mixing, 1 physics step per env "
+                        "step",
 }
 #: the quadfault row each peer is compared with: the compiled closed loop or the env
 PEER_VERSUS = {"rotorpy": "compiled", "crazyflow": "compiled", "crazyflow-rk4": "compiled",
-               "crazyflow-env": "env500"}
+               "crazyflow-env": "env1", "crazyflow-env-fp": "env1"}
 
 
 PEERS = {
@@ -252,33 +290,8 @@ PEERS = {
     "crazyflow": _CRAZYFLOW_SIM.replace("KW", "{}"),
     "crazyflow-rk4": _CRAZYFLOW_SIM.replace(
         "KW", "dict(control='state', integrator='rk4', state_freq=rate, attitude_freq=rate)"),
-    "crazyflow-env": textwrap.dedent("""
-        import json, sys, time
-        import numpy as np
-        import jax
-        jax.config.update("jax_platform_name", "cpu")
-        from crazyflow.envs import ReachPosEnv
-        N, H = int(sys.argv[1]), max(1, int(sys.argv[2]) // 10)
-        env = ReachPosEnv(num_envs=N, device="cpu")  # its defaults: so_rpy model, 500 Hz
-        env.reset(seed=0)
-        lo, hi = env.single_action_space.low, env.single_action_space.high
-        a = np.tile(np.where(np.arange(lo.size) == 0, (lo + hi) / 2, 0.0), (N, 1))
-        a = a.astype(np.float32)  # collective thrust mid-range, level attitude
-        for _ in range(2):
-            jax.block_until_ready(env.step(a)[0])  # compile
-        best, best_cpu = 0.0, 0.0
-        work = N * H * env.n_substeps  # physics vehicle-steps per timing call
-        for _ in range(3):
-            calls, t0, c0 = 0, time.perf_counter(), time.process_time()
-            while time.perf_counter() - t0 < 0.3:
-                for _ in range(H):
-                    out = env.step(a)
-                jax.block_until_ready(out[0])
-                calls += 1
-            best = max(best, work * calls / (time.perf_counter() - t0))
-            best_cpu = max(best_cpu, work * calls / (time.process_time() - c0))
-        print(json.dumps({"rate": best, "cpu_rate": best_cpu}))
-    """),
+    "crazyflow-env": _CRAZYFLOW_ENV.replace("KW", "{}"),
+    "crazyflow-env-fp": _CRAZYFLOW_ENV.replace("KW", "dict(dynamics='first_principles')"),
 }
 
 
@@ -374,6 +387,10 @@ def main(argv=None) -> int:
                     help="python that has the peers installed (default: this one)")
     ap.add_argument("--peer-timeout", type=float, default=600.0)
     ap.add_argument("--skip-peers", action="store_true")
+    ap.add_argument("--peers", nargs="+", choices=sorted(PEERS), default=None,
+                    help="the peers to run (default all)")
+    ap.add_argument("--peer-sizes", type=int, nargs="+", default=None,
+                    help="N of the peer table (default 1 256 4096 16384 up to --max-n)")
     ap.add_argument("--skip-ppo", action="store_true")
     ap.add_argument("--skip-profile", action="store_true")
     ap.add_argument("--skip-table", action="store_true",
@@ -385,8 +402,9 @@ def main(argv=None) -> int:
     ap.add_argument("--ppo-steps", type=int, default=4096)
     args = ap.parse_args(argv)
     max_n = (16384 if args.full else 4096) if args.max_n is None else args.max_n
-    if max_n < 1 or args.horizon < 10:
-        print("throughput: --max-n >= 1 and --horizon >= 10 required", file=sys.stderr)
+    if max_n < 1 or args.horizon < 10 or min(args.peer_sizes or [1]) < 1:
+        print("throughput: --max-n >= 1, --peer-sizes >= 1 and --horizon >= 10 required",
+              file=sys.stderr)
         return 2
     import numba
 
@@ -401,9 +419,10 @@ def main(argv=None) -> int:
           f"({numba.threading_layer() if _threading_started() else 'layer not started'}, "
           f"OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY', 'unset')}); load average "
           f"{', '.join(f'{x:.1f}' for x in os.getloadavg())} on {os.cpu_count()} cpus")
-    print("| N | loop (motors + RKMK4) | loop + controller | env | env + IRLS | "
-          "memory/vehicle (env + IRLS) | build + reset [s] |")
-    print("|---|---|---|---|---|---|---|")
+    if not args.skip_table:
+        print("| N | loop (motors + RKMK4) | loop + controller | env | env + IRLS | "
+              "memory/vehicle (env + IRLS) | build + reset [s] |")
+        print("|---|---|---|---|---|---|---|")
     results = {}
     for N in ([] if args.skip_table else Ns):
         comp = core_compiled(N, args.horizon, rng)
@@ -440,40 +459,52 @@ def main(argv=None) -> int:
         for label, share in profile_env(n_prof, steps):
             print(f"  {label:<56} {share:6.1%}")
     if not args.skip_peers:
+        peers = list(PEERS) if args.peers is None else args.peers
         print(f"\n# peers at {RATE:.0f} Hz, horizon {args.horizon} (python {args.peer_python}); "
-              f"vehicle-steps per wall second / per CPU second of each process (all threads)")
-        for name, what in PEER_STEPS.items():
-            print(f"  {name}: {what}")
-        print("  quadfault compiled + controller: closed_loop.fly_batch, geometric controller "
-              "every step, motor model with thrust noise, RKMK4 (4 derivatives, 5 SO(3) "
-              "exponentials)")
-        print("  quadfault env: QuadFaultVectorEnv.step (no estimator); env500 = at crazyflow's "
-              "env rates (control = physics = 500 Hz, 1 substep per step)")
+              f"vehicle-steps per wall second / per CPU second of each process (all threads); "
+              f"load average {', '.join(f'{x:.1f}' for x in os.getloadavg())}")
+        for name in peers:
+            print(f"  {name}: {PEER_STEPS[name]}")
+        wanted = {PEER_VERSUS[name] for name in peers}
+        if "compiled" in wanted:
+            print("  quadfault compiled + controller: closed_loop.fly_batch, geometric "
+                  "controller every step, motor model with thrust noise, RKMK4 (4 derivatives, "
+                  "5 SO(3) exponentials)")
+        if "env1" in wanted:
+            print("  quadfault env1: QuadFaultVectorEnv.step at control = physics = 1 kHz (1 "
+                  "substep per env step), motor commands, no estimator, combined scenario "
+                  "(thrust noise, degradation), the env's default numba threads; RKMK4")
         print("| N | system | vehicle-steps/s wall / CPU | quadfault / system, wall / CPU |")
         print("|---|---|---|---|")
         pair = lambda r: "n/a" if r is None else f"{r[0]:,.0f} / {r[1]:,.0f}"  # noqa: E731
         ratio = lambda a, b: ("n/a" if b is None  # noqa: E731
                               else f"**{a[0] / b[0]:.2f}x / {a[1] / b[1]:.2f}x**")
-        for N in [n for n in Ns if n in (1, 256, 4096, 16384)]:
-            # measured again right next to the peers (the machine's load drifts)
-            ours = {"compiled": core_compiled(N, args.horizon, rng, control_every=1, cpu=True),
-                    "env": env_rate(N, steps, cpu=True),
-                    "env500": env_rate(N, max(1, steps * 2), cpu=True, control_rate=500.0,
-                                       physics_rate=500.0)}
-            for key, label in (("compiled", "quadfault compiled + controller"),
-                               ("env", "quadfault env (100 Hz control, 1 kHz physics)"),
-                               ("env500", "quadfault env500")):
-                print(f"| {N} | {label} | {pair(ours[key])} | |")
-            for name in PEERS:
+        best = lambda a, b: (max(a[0], b[0]), max(a[1], b[1]))  # noqa: E731
+        measures = {
+            "compiled": lambda N: core_compiled(N, args.horizon, rng, control_every=1, cpu=True),
+            "env1": lambda N: env_rate(N, args.horizon, cpu=True, control_rate=RATE,
+                                       action_mode="motor", numba_threads="auto")}
+        labels = {"compiled": "quadfault compiled + controller", "env1": "quadfault env1"}
+        sizes = args.peer_sizes or [n for n in Ns if n in (1, 256, 4096, 16384)]
+        for N in sizes:
+            # measured right before and after the peers (the machine's load drifts)
+            ours = {key: measures[key](N) for key in sorted(wanted)}
+            got = {}
+            for name in peers:
                 if name == "rotorpy" and N > 4096:  # ~1,700 steps/s: minutes per timing
-                    print(f"| {N} | {name} | not run above N = 4096 (too slow) | |")
+                    got[name] = (None, "not run above N = 4096 (too slow)")
                     continue
-                got, why = peer_rate(args.peer_python, name, N, args.horizon, args.peer_timeout)
-                if got is None:
+                got[name] = peer_rate(args.peer_python, name, N, args.horizon, args.peer_timeout)
+            ours = {key: best(x, measures[key](N)) for key, x in ours.items()}
+            for key in sorted(wanted):
+                print(f"| {N} | {labels[key]} | {pair(ours[key])} | |")
+            for name in peers:
+                rate, why = got[name]
+                if rate is None:
                     print(f"| {N} | {name} | did not run: {why} | |", flush=True)
                     continue
-                print(f"| {N} | {name} | {pair(got)} | {PEER_VERSUS[name]}: "
-                      f"{ratio(ours[PEER_VERSUS[name]], got)} |", flush=True)
+                print(f"| {N} | {name} | {pair(rate)} | {PEER_VERSUS[name]}: "
+                      f"{ratio(ours[PEER_VERSUS[name]], rate)} |", flush=True)
     if not args.skip_ppo:
         rates, why = ppo_rates(args.ppo_envs, args.ppo_steps)
         if rates is None:
