@@ -156,7 +156,7 @@ def paired_scores(policies, kwargs: dict, seeds: list[int]):
     rmse = np.zeros((len(policies), n))
     crashed = np.zeros((len(policies), n), dtype=bool)
     for j, policy in enumerate(policies):
-        venv = QuadFaultVectorEnv(n, **dict(spec.kwargs, **kwargs))
+        venv = QuadFaultVectorEnv(n, info="full", **dict(spec.kwargs, **kwargs))
         try:
             obs, _ = venv.reset(seed=[int(s) for s in seeds])
             done = np.zeros(n, dtype=bool)

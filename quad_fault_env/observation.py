@@ -27,6 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 from gymnasium import spaces
 
+from quadfault.jit import jit
+
 # Bounds of the Box. Values are clipped into them; with the default termination limits
 # (5 m position error) only the step that terminates can reach the position bound.
 POS_MAX = 10.0  # [m]
@@ -109,22 +111,36 @@ class ObservationLayout:
         batch = R.shape[:-2]
         raw = {"pos_err": pos_err, "vel_err": vel_err, "omega": omega, "eta_hat": eta_hat,
                "eta_sd": SD_MAX if eta_sd is None else eta_sd, "ref_acc": ref_acc}
-        parts = []
+        rows = int(np.prod(batch, dtype=np.int64))
+        out = np.empty((rows, self.size), dtype=np.float32)
+        R = R.reshape(rows, 3, 3)
         for s in self.slots:
-            if s.name == "rot6":
-                parts += [R[..., :, 0], R[..., :, 1]]
+            sl = self._slices[s.name]
+            if s.name == "rot6":  # the first two columns of R
+                for c in range(2):
+                    part = slice(sl.start + 3 * c, sl.start + 3 * c + 3)
+                    _bound_rows(R[:, :, c], self._low[part], self._high[part],
+                                self._fill[part], out[:, part])
                 continue
             x = np.asarray(raw[s.name], dtype=float)
-            parts.append(x if x.shape == batch + (s.size,) else
-                         np.broadcast_to(x, batch + (s.size,)))
-        return self._bounded(np.concatenate(parts, axis=-1))
+            if x.shape != batch + (s.size,):
+                x = np.broadcast_to(x, batch + (s.size,))
+            _bound_rows(x.reshape(rows, s.size), self._low[sl], self._high[sl],
+                        self._fill[sl], out[:, sl])
+        return out.reshape(batch + (self.size,))
 
     def _bounded(self, x: np.ndarray, where=None) -> np.ndarray:
         """``x`` (elements ``where`` of the flat layout; all by default) with NaN -> fill,
         clipped, float32."""
-        sl = where if where is not None else Ellipsis
-        x = np.where(np.isnan(x), self._fill[sl], x)
-        return np.minimum(np.maximum(x, self._low[sl]), self._high[sl]).astype(np.float32)
+        sl = where if where is not None else slice(None)
+        low, high, fill = (np.ascontiguousarray(a[sl]) for a in (self._low, self._high,
+                                                                 self._fill))
+        x = np.asarray(x, dtype=float)
+        x = np.broadcast_to(x, x.shape[:-1] + low.shape) if x.shape[-1:] != low.shape else x
+        out = np.empty(x.shape, dtype=np.float32)
+        _bound_rows(x.reshape(-1, low.shape[0]), low, high, fill,
+                    out.reshape(-1, low.shape[0]))
+        return out
 
     def values(self, **slots) -> dict:
         """Slot values (float32, NaN filled, clipped into their bounds) as a dict; the
@@ -164,3 +180,15 @@ class ObservationLayout:
             rows.append(f"| `{s.name}` | {sl.start}..{sl.stop - 1} | [{s.low}, {s.high}] | "
                         f"{s.meaning} |")
         return "\n".join(rows)
+
+
+@jit
+def _bound_rows(x, low, high, fill, out):
+    """``out[i, j]``: ``x[i, j]`` with NaN -> ``fill[j]``, clipped into ``[low[j], high[j]]``,
+    as float32 (rows (B, w); the observation's one rule for every slot)."""
+    for i in range(x.shape[0]):
+        for j in range(x.shape[1]):
+            v = x[i, j]
+            if np.isnan(v):
+                v = fill[j]
+            out[i, j] = np.float32(min(max(v, low[j]), high[j]))

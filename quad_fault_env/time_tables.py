@@ -52,14 +52,17 @@ class RowTimeTables:
     """
 
     def __init__(self, n_rows: int, substeps: int, dt: float, vehicle: Vehicle,
-                 controller: ControllerConfig, window: int = WINDOW):
+                 controller: ControllerConfig, window: int = WINDOW, feedforward: bool = True):
         self.S, self.dt, self.window = int(substeps), float(dt), int(window)
         self.vehicle, self.config = vehicle, controller
+        #: tabulate b1d and the feed-forward rates (rows 3-5: only a controller reads them)
+        self.feedforward = bool(feedforward)
         n_rotors = vehicle.n_rotors
         self.k0 = np.full(n_rows, _STALE, dtype=np.int64)
         #: the physics step of each row's first efficiency row (``k0 S``; what the loop reads)
         self.first = np.full(n_rows, _STALE, dtype=np.int64)
         #: rows: position, velocity, acceleration, b1d, Omega_d, Omega_d' at the boundaries
+        #: (without ``feedforward`` only the first three are filled; the others stay 0)
         self.refs = np.zeros((n_rows, self.window + 1, 6, 3))
         self.eta = np.zeros((n_rows, self.window * self.S + 1, n_rotors))
         self._rows = np.arange(n_rows)
@@ -74,7 +77,8 @@ class RowTimeTables:
         """Make ``k - k0`` lie in ``[0, last]`` for every row (refilling from ``k``).
 
         ``trajectories[key]`` / ``schedules[key]`` are the callables of ``traj_key`` /
-        ``sched_key`` (N,).
+        ``sched_key`` (N,). Each distinct trajectory (schedule) is evaluated once per window
+        start and its rows copied to the rows that follow it.
         """
         off = k - self.k0
         rows = np.flatnonzero((off < 0) | (off > last))
@@ -84,28 +88,48 @@ class RowTimeTables:
         for _, k0, idx in _combo_groups(np.zeros(len(rows), dtype=np.int64), kr):
             r = rows[idx]
             keys, inv = np.unique(traj_key[r], return_inverse=True)
-            traj = RowTrajectories([trajectories[key] for key in keys.tolist()], inv.ravel())
-            ts = (np.arange(k0, k0 + W + 1) * S) * dt  # t = (k S) dt
-            block = np.zeros((len(r), W + 1, 6, 3))
-            if self.config.angular_feedforward:  # its times (t - h, t, t + h) hold ts
-                h = self.config.ff_step
-                ref = [x[:, :, 1] for x in traj(np.stack((ts - h, ts, ts + h), axis=-1))]
-                ctrl = GeometricController(self.vehicle, traj, self.config)
-                block[:, :, 4], block[:, :, 5] = ctrl.feedforward_rates(ts)
+            block = self._reference_block([trajectories[key] for key in keys.tolist()],
+                                          (np.arange(k0, k0 + W + 1) * S) * dt)  # t = (k S) dt
+            c = block.shape[2]
+            if len(r) == len(self.k0) and len(keys) == 1:
+                self.refs[:, :, :c] = block[0]
+            elif len(keys) == 1:
+                self.refs[r, :, :c] = block[0]
             else:
-                ref = traj(ts)
-            for c in range(4):
-                block[:, :, c] = ref[c]
-            self.refs[r] = block
+                self.refs[r, :, :c] = block[inv.ravel()]
         for key, k0, idx in _combo_groups(sched_key[rows], kr):
             tsub = (k0 * S + np.arange(W * S + 1)) * dt  # t = (k S + j) dt
-            self.eta[rows[idx]] = _as_rows(at_times(schedules[key], tsub), len(tsub))
+            eta = _as_rows(at_times(schedules[key], tsub), len(tsub))
+            if len(idx) == len(self.k0):
+                self.eta[:] = eta
+            else:
+                self.eta[rows[idx]] = eta
         self.k0[rows] = kr
         self.first[rows] = kr * S
 
-    def references(self, k: np.ndarray) -> np.ndarray:
-        """(N, 6, 3) reference rows at the start of step ``k`` (N,) (t = k S dt)."""
-        return self.refs[self._rows, k - self.k0]
+    def _reference_block(self, items, ts: np.ndarray) -> np.ndarray:
+        """(len(items), len(ts), 6 or 3, 3): the reference rows of each trajectory at ``ts``
+        (with :attr:`feedforward`: b1d and the feed-forward rates too, over the trajectories
+        at once)."""
+        traj = RowTrajectories(items, np.arange(len(items)))
+        block = np.zeros((len(items), len(ts), 6 if self.feedforward else 3, 3))
+        if self.feedforward and self.config.angular_feedforward:  # its times hold ts
+            h = self.config.ff_step
+            ref = [x[:, :, 1] for x in traj(np.stack((ts - h, ts, ts + h), axis=-1))]
+            ctrl = GeometricController(self.vehicle, traj, self.config)
+            block[:, :, 4], block[:, :, 5] = ctrl.feedforward_rates(ts)
+        else:
+            ref = traj(ts)
+        for c in range(block.shape[2] if block.shape[2] < 4 else 4):
+            block[:, :, c] = ref[c]
+        return block
+
+    def references(self, k: np.ndarray, parts: int = 6) -> np.ndarray:
+        """(N, parts, 3): the first ``parts`` reference rows at the start of step ``k`` (N,)
+        (t = k S dt)."""
+        if parts == self.refs.shape[2]:
+            return self.refs[self._rows, k - self.k0]
+        return self.refs[self._rows, k - self.k0, :parts]
 
     def efficiency_at(self, k: np.ndarray, j: int) -> np.ndarray:
         """(N, n) true efficiency at substep ``j`` of step ``k`` (N,) (``j = S``: its end)."""

@@ -60,6 +60,8 @@ THREADS_MIN_BATCH = 16384
 VECTOR_ESTIMATORS = (estimator_names(batched=True) + estimator_names(role="nominal")
                      + estimator_names(role="oracle"))
 AUTORESET_MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
+#: what ``info`` holds: the termination reasons only (cheap), or every per-env diagnostic
+INFO_LEVELS = ("light", "full")
 
 
 def default_threads(num_envs: int) -> int | None:
@@ -95,7 +97,13 @@ class QuadFaultVectorEnv(VectorEnv):
             ``render_mode`` is not supported. An unknown keyword raises a ``ConfigError``
             naming the closest valid one.
 
-    ``info`` (arrays over the sub-envs, with gymnasium's ``"_<key>"`` masks): ``t`` [s],
+        info: what ``info`` holds: ``"light"`` (default: ``termination_reason`` alone, cheap
+            at any N) or ``"full"`` (every diagnostic below; its copies cost about as much as
+            the physics at one substep per step). The flights are the same either way.
+
+    ``info`` (arrays over the sub-envs, with gymnasium's ``"_<key>"`` masks): with
+    ``info="light"`` ``termination_reason`` (a name, or None while the episode goes on);
+    with ``info="full"`` also ``t`` [s],
     ``eta_true``, ``eta_hat``, ``eta_sd`` (10 = none, as in the observation),
     ``estimator_status``,
     ``position_error`` [m], ``tracking_error`` [m], ``motor_command`` [N],
@@ -107,7 +115,8 @@ class QuadFaultVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, estimator: str = "irls", scenario="combined", *,
                  estimator_kwargs=None, max_episode_steps: int | None = None,
-                 autoreset_mode: str = "next_step", numba_threads="auto", **kwargs):
+                 autoreset_mode: str = "next_step", numba_threads="auto", info: str = "light",
+                 **kwargs):
         check_keywords(kwargs, keywords_of(QuadFaultVectorEnv.__init__)
                        + keywords_of(QuadFaultEnv.__init__), type(self).__name__)
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
@@ -121,6 +130,11 @@ class QuadFaultVectorEnv(VectorEnv):
         if autoreset_mode not in AUTORESET_MODES:
             raise ConfigError(f"autoreset_mode must be one of {sorted(AUTORESET_MODES)}, "
                               f"got {autoreset_mode!r}")
+        if info not in INFO_LEVELS:
+            raise ConfigError(f"info must be one of {', '.join(map(repr, INFO_LEVELS))}, "
+                              f"got {info!r}")
+        #: what ``info`` holds: ``"light"`` (the termination reasons) or ``"full"``
+        self.info_level = info
         if max_episode_steps is not None and not (isinstance(max_episode_steps, int)
                                                   and max_episode_steps >= 1):
             raise ConfigError(f"max_episode_steps must be an integer >= 1, "
@@ -157,8 +171,10 @@ class QuadFaultVectorEnv(VectorEnv):
         self._trajectories, self._schedules = InternTable(), InternTable()
         # the geometric controller's gains and options (shared by every row; references given)
         self._controller = GeometricController(self.vehicle, None, e0.controller_config)
+        #: the geometric controller runs in the step (residual actions)
+        self._uses_controller = e0.action_config.mode == "residual"
         self._tables = RowTimeTables(N, self.substeps, self.dt, self.vehicle,
-                                     e0.controller_config)
+                                     e0.controller_config, feedforward=self._uses_controller)
         self.flight.use_efficiency(self._tables.eta, self._tables.first)
         n = self.vehicle.n_rotors
         self.eta_hat, self.eta_sd = np.ones((N, n)), np.full((N, n), np.nan)
@@ -298,21 +314,22 @@ class QuadFaultVectorEnv(VectorEnv):
     def _references_now(self):
         """Reference position, velocity, acceleration (N, 3) at each row's current time."""
         self._ensure_tables(self.steps, WINDOW)
-        ref = self._tables.references(self.steps)
+        ref = self._tables.references(self.steps, 3)
         return ref[:, 0], ref[:, 1], ref[:, 2]
 
     def _check_actions(self, actions) -> np.ndarray:
         return validate_action(actions, self.action_space.shape, "actions")
 
-    def _motor_commands(self, a: np.ndarray, refs: np.ndarray) -> np.ndarray:
-        """``QuadFaultEnv.motor_commands`` for every row (``ActionConfig.commands``); ``refs``
-        (N, 6, 3) the controller's reference rows at the step's start (``time_tables``)."""
+    def _motor_commands(self, a: np.ndarray) -> np.ndarray:
+        """``QuadFaultEnv.motor_commands`` for every row (``ActionConfig.commands``), with the
+        controller's reference rows at the step's start (``time_tables``) in residual mode."""
         e0 = self.single_env
         cfg = e0.action_config
         f_ctrl = None
-        if cfg.mode == "residual":
+        if self._uses_controller:
             m = self.meas
-            f_ctrl = self._controller.commands(m.p, m.v, m.R, m.w, refs)
+            f_ctrl = self._controller.commands(m.p, m.v, m.R, m.w,
+                                               self._tables.references(self.steps))
         return cfg.commands(a, self.vehicle, f_ctrl, self.eta_hat, e0.compensate, e0.allocator)
 
     def _substeps(self, commands: np.ndarray, ts: np.ndarray, active: np.ndarray) -> None:
@@ -323,6 +340,7 @@ class QuadFaultVectorEnv(VectorEnv):
         N, S, n = self.num_envs, self.substeps, self.vehicle.n_rotors
         stride = self.estimator_stride
         out = None
+        active = None if active.all() else active
         if self.estimator is not None:
             out = self.flight.records(S, stride, accel=False)
         self.flight.step(commands, S, record=out, active=active)
@@ -349,34 +367,44 @@ class QuadFaultVectorEnv(VectorEnv):
     def _step(self, a: np.ndarray):
         S = self.substeps
         resetting = self._needs_reset.copy()
-        k0 = self.steps * S
+        any_resetting = resetting.any()
         self._ensure_tables(self.steps, WINDOW - 1)
-        commands = self._motor_commands(a, self._tables.references(self.steps))
-        ts = (k0[:, None] + np.arange(S)[None, :]) * self.dt
+        commands = self._motor_commands(a)
+        ts = None
+        if self.estimator is not None:
+            ts = ((self.steps * S)[:, None] + np.arange(S)[None, :]) * self.dt
         self._substeps(commands, ts, ~resetting)
         self.steps = self.steps + 1
         state = self.state
-        ref1 = self._tables.references(self.steps)  # k - k0 <= WINDOW: still in the window
+        ref1 = self._tables.references(self.steps, 3)  # k - k0 <= WINDOW: in the window
         refs = ref1[:, 0], ref1[:, 1], ref1[:, 2]
         reason = self.single_env.limits.reasons(state.p, state.R, refs[0])
-        reason[resetting] = None
-        terminated = np.not_equal(reason, None) & ~resetting
+        terminated = np.not_equal(reason, None)
+        if any_resetting:
+            reason[resetting] = None
+            terminated &= ~resetting
         truncated = ~terminated & (self.steps >= self.max_steps)
         if self.max_episode_steps is not None:
             truncated |= self.steps >= self.max_episode_steps
-        truncated &= ~resetting
+        if any_resetting:
+            truncated &= ~resetting
         # the end-of-step measurement of sub-envs that go on (after the termination check);
         # a terminated one shows its true state
-        on = np.flatnonzero(~(terminated | resetting))
-        if len(on):
-            self.flight.sense(on)
-        self.flight.sense(terminated, noise=False)
+        stopped = terminated | resetting
+        if not stopped.any():
+            self.flight.sense()
+        else:
+            on = np.flatnonzero(~stopped)
+            if len(on):
+                self.flight.sense(on)
+            if terminated.any():
+                self.flight.sense(terminated, noise=False)
         self.eta_true = self._tables.efficiency_at(self.steps - 1, S)
         reward = self.single_env.reward_config(state.p - refs[0], state.v - refs[1], self.f_cmd,
                                             self.vehicle.rotor_max_thrust, terminated, a)
         done = terminated | truncated
         mode = self.metadata["autoreset_mode"]
-        if resetting.any():
+        if any_resetting:
             self._reset_rows(np.flatnonzero(resetting))
             reward[resetting] = 0.0
             refs = self._references_now()
@@ -406,6 +434,9 @@ class QuadFaultVectorEnv(VectorEnv):
 
     def _infos(self, refs, reason) -> dict:
         N = self.num_envs
+        if self.info_level == "light":
+            return {"termination_reason": np.asarray(reason, dtype=object),
+                    "_termination_reason": np.ones(N, dtype=bool)}
         err = self.state.p - refs[0]
         info = {
             "t": self.steps * self.substeps * self.dt,
@@ -429,4 +460,4 @@ class QuadFaultVectorEnv(VectorEnv):
         self.single_env.close()
 
 
-__all__ = ["AUTORESET_MODES", "THREADS_MIN_BATCH", "QuadFaultVectorEnv", "default_threads"]
+__all__ = ["AUTORESET_MODES", "INFO_LEVELS", "THREADS_MIN_BATCH", "QuadFaultVectorEnv", "default_threads"]

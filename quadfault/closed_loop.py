@@ -402,14 +402,19 @@ def sense(gens, C: LoopConstants, V: Vehicles, i: int = 0) -> None:
         _sense_rows(gens, np.array([i], dtype=np.int64), C, V)
 
 
-def sense_rows(gens, rows: np.ndarray, C: LoopConstants, V: Vehicles) -> None:
-    """Measure the vehicles ``rows`` with their generators ``gens`` (on the calling thread:
-    a few draws per vehicle cost less than a parallel launch); noise-free sensors measure
-    the state itself (copied here; ``gens`` is then not used and may be None)."""
-    rows = np.asarray(rows, dtype=np.int64)
+def sense_rows(gens, rows: np.ndarray | None, C: LoopConstants, V: Vehicles) -> None:
+    """Measure the vehicles ``rows`` (None: all) with their generators ``gens`` (on the
+    calling thread: a few draws per vehicle cost less than a parallel launch); noise-free
+    sensors measure the state itself (copied here; ``gens`` is then not used and may be
+    None)."""
+    every = rows is None
+    rows = np.arange(len(V.p)) if every else np.asarray(rows, dtype=np.int64)
     if not C.sensors[rows, 5].any():
         for m, x in ((V.mp, V.p), (V.mv, V.v), (V.mR, V.R), (V.mw, V.w)):
-            m[rows] = x[rows]
+            if every:
+                m[...] = x
+            else:
+                m[rows] = x[rows]
     else:
         _sense_rows(gens() if callable(gens) else gens, rows, C, V)
 

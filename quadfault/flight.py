@@ -258,7 +258,6 @@ class Flight:
             gens = self._gens if self._gens is not None else self._generators()
             closed_loop.sense(gens, self._C, V)
         else:
-            rows = np.arange(self.n_vehicles) if rows is None else rows
             closed_loop.sense_rows(self._generators, rows, self._C, V)
 
     # -- what the vehicles are doing ---------------------------------------------------------

@@ -71,7 +71,7 @@ def test_vector_env_equals_single_envs_with_the_same_draws():
     N, seed = 3, 11
     kw = dict(scenario="random", random_trajectory="hover", duration=0.3, sensor_noise=NOISE,
               effects=RANGES + ["inertia=0.8:1.2,0.9:1.1,0.8:1.2", "delay=0:0.01"])
-    vec = QuadFaultVectorEnv(N, "none", **kw)
+    vec = QuadFaultVectorEnv(N, "none", info="full", **kw)
     singles = [QuadFaultEnv("none", **kw) for _ in range(N)]
     obs, info = vec.reset(seed=seed)
     infos = [e.reset(seed=seed + i)[1] for i, e in enumerate(singles)]

@@ -31,7 +31,7 @@ def _estimator_kwargs(name):
 def _run_side_by_side(n_envs, steps, seed, estimator, action_scale=1.0, **kw):
     """Step a vector env and ``n_envs`` single envs with the same actions; compare all."""
     ekw = _estimator_kwargs(estimator)
-    vec = QuadFaultVectorEnv(n_envs, estimator, estimator_kwargs=ekw, **kw)
+    vec = QuadFaultVectorEnv(n_envs, estimator, estimator_kwargs=ekw, info="full", **kw)
     singles = [QuadFaultEnv(estimator, estimator_kwargs=ekw, **kw) for _ in range(n_envs)]
     obs, info = vec.reset(seed=seed)
     single_obs = [e.reset(seed=seed + i)[0] for i, e in enumerate(singles)]
@@ -73,7 +73,7 @@ def test_rows_sharing_a_scenario_do_not_leak_it_to_other_rows():
     kw = dict(scenario="random", random_trajectory="hover", duration=0.2,
               estimator_rate="control")
     seeds = [10001, 10002, 10001]
-    vec = QuadFaultVectorEnv(len(seeds), "truth", **kw)
+    vec = QuadFaultVectorEnv(len(seeds), "truth", info="full", **kw)
     singles = [QuadFaultEnv("truth", **kw) for _ in seeds]
     obs, info = vec.reset(seed=seeds)
     assert [e.reset(seed=s)[0] for e, s in zip(singles, seeds)]  # same seeds, same scenarios
@@ -123,7 +123,7 @@ def test_same_step_autoreset_reports_the_final_observation():
 
 def test_make_vec_vector_entry_point_and_dict_observations():
     env = gym.make_vec("QuadFault-v0", num_envs=3, vectorization_mode="vector_entry_point",
-                       estimator="none", observation="dict")
+                       estimator="none", observation="dict", info="full")
     assert isinstance(env.unwrapped, QuadFaultVectorEnv)
     assert env.unwrapped.max_episode_steps == 2000  # the registration's limit
     obs, info = env.reset(seed=0)
@@ -133,6 +133,31 @@ def test_make_vec_vector_entry_point_and_dict_observations():
     assert rew.shape == (3,) and np.all(rew > 0.5)  # hovering on the circle's start
     assert set(info) >= {"t", "eta_true", "eta_hat", "tracking_error", "_t"}
     env.close()
+
+
+def test_light_info_holds_the_termination_reasons_of_the_same_flight():
+    """The default info is the termination reasons alone; ``info="full"`` adds the
+    diagnostics; the observations, rewards and reasons are the same either way."""
+    kw = dict(scenario="abrupt", duration=2.0, action_mode="motor")
+    light = QuadFaultVectorEnv(3, "none", **kw)
+    full = QuadFaultVectorEnv(3, "none", info="full", **kw)
+    (o1, i1), (o2, i2) = light.reset(seed=5), full.reset(seed=5)
+    assert set(i1) == {"termination_reason", "_termination_reason"}
+    assert set(i2) >= {"t", "eta_true", "eta_hat", "tracking_error", "motor_command"}
+    rng, ended = np.random.default_rng(5), 0
+    for _ in range(60):
+        a = rng.uniform(-1, 1, (3, 4)).astype(np.float32)
+        o1, r1, te1, tr1, i1 = light.step(a)
+        o2, r2, te2, tr2, i2 = full.step(a)
+        np.testing.assert_array_equal(o1, o2)
+        np.testing.assert_array_equal(r1, r2)
+        np.testing.assert_array_equal(te1, te2)
+        assert list(i1["termination_reason"]) == list(i2["termination_reason"])
+        assert all((r is not None) == t for r, t in zip(i1["termination_reason"], te1))
+        ended += int(te1.sum())
+    assert ended >= 1  # full-range motor commands crash
+    with pytest.raises(ConfigError, match="info must be one of"):
+        QuadFaultVectorEnv(2, "none", info="rich")
 
 
 def test_the_configuration_env_passes_check_env():
@@ -238,7 +263,7 @@ def test_batched_reset_equals_single_env_resets(kw):
 
 def test_reset_options_and_seed_lists():
     """options['scenario'] for every row (validated like the single env); a list of seeds."""
-    vec = QuadFaultVectorEnv(3, "none", scenario="random", duration=0.5)
+    vec = QuadFaultVectorEnv(3, "none", scenario="random", duration=0.5, info="full")
     _, info = vec.reset(seed=[7, 7, 9], options={"scenario": "hover"})
     assert list(info["scenario"]) == ["hover"] * 3
     obs, _ = vec.reset(seed=[7, 7, 9])
