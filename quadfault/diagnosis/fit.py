@@ -199,6 +199,9 @@ def solve_linear(lin: Linearisation, measured, scale, mask, x_start, lo, hi,
                                    method="bvls").x
             except np.linalg.LinAlgError:
                 x_new = np.clip(x_new, lo, hi)
+        if np.array_equal(x_new, x):  # a fixed point: every further step repeats this one
+            status, message = 1, "converged (fixed point)"
+            break
         # converged: the step is far below the statistical uncertainty of every parameter
         sd = np.sqrt(np.maximum(np.diag(np.linalg.pinv(H)), 1e-300))
         step = np.max(np.abs(x_new - x) / np.maximum(sd, 1e-12 * (hi - lo)))

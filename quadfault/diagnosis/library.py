@@ -27,7 +27,7 @@ from quadfault.effects.candidate import Candidate, LibraryContext, PublicContext
 from quadfault.effects.model import frame_vectors
 from quadfault.effects.rotor_inertia import thrust_rate
 from quadfault.effects.thrust_curve import IDENTITY_CURVE, curve_command
-from quadfault.diagnosis.residuals import Replay, model_channels
+from quadfault.diagnosis.residuals import Replay, model_parts
 
 __all__ = [
     "EQUIVALENT",
@@ -130,10 +130,8 @@ def needs_rate(terms) -> bool:
     return any(c.needs_rate for c, _ in terms)
 
 
-def predict_intervals(rp: Replay, terms) -> np.ndarray:
-    """Model channels (M, C) per interval for the nominal model plus ``terms``: the six
-    acceleration channels, then the accelerometer's, then (with measured rotor speeds) the
-    rotor thrusts seen through only the effects before the rotor speed (``rotor_side``)."""
+def _interval_parts(rp: Replay, terms) -> list:
+    """The interval channels of :func:`predict_intervals` as column groups (M, k)."""
     terms = list(terms)
     rate = None
     if needs_rate(terms):
@@ -145,15 +143,25 @@ def predict_intervals(rp: Replay, terms) -> np.ndarray:
     T, M = W[:, 0], W[:, 1:]
     inp = WrenchInputs(rp.vehicle, rp.R, rp.v, rp.w, T, M, rate)
     F, Mx = external_wrench(terms, inp, rp)
-    out = model_channels(rp, f, F, Mx, T, M, vehicle=body_vehicle(rp.vehicle, terms))
+    parts = model_parts(rp, f, F, Mx, T, M, vehicle=body_vehicle(rp.vehicle, terms))
     if rp.has_rotor:
-        out = np.hstack((out, thrust_series(rp, [t for t in terms if t[0].rotor_side])))
-    return out
+        rotor = [t for t in terms if t[0].rotor_side]
+        same = rate is None and all(c.rotor_side for c, _ in terms if c.stage == "thrust")
+        parts.append(f if same else thrust_series(rp, rotor))  # same stages: the same f
+    return parts
+
+
+def predict_intervals(rp: Replay, terms) -> np.ndarray:
+    """Model channels (M, C) per interval for the nominal model plus ``terms``: the six
+    acceleration channels, then the accelerometer's, then (with measured rotor speeds) the
+    rotor thrusts seen through only the effects before the rotor speed (``rotor_side``)."""
+    return np.hstack(_interval_parts(rp, terms))
 
 
 def predict(rp: Replay, terms) -> np.ndarray:
-    """Block-mean model channels (B, C)."""
-    return rp.block_mean(predict_intervals(rp, terms))
+    """Block-mean model channels (B, C) (each column group averaged before stacking: the
+    same numbers as averaging the stacked intervals, without copying them)."""
+    return np.hstack([rp.block_mean(p) for p in _interval_parts(rp, terms)])
 
 
 def public_params(cand: Candidate, x, sd, vehicle, selected: dict,

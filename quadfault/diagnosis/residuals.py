@@ -402,14 +402,14 @@ def calibration_segments(recording: Recording, where: str = "recording") -> tupl
     return ((t0, t1),)
 
 
-def model_channels(rp: Replay, f: np.ndarray, force=None, moment_ext=None,
-                   thrust=None, moment=None, vehicle: Vehicle | None = None) -> np.ndarray:
+def model_parts(rp: Replay, f: np.ndarray, force=None, moment_ext=None,
+                thrust=None, moment=None, vehicle: Vehicle | None = None) -> list:
     """Interval channels (M, C) the model predicts for produced rotor thrusts ``f`` [N] and
     external force (world; body for an IMU-only log) [N] / moment (body) [N m] (paper eqs. 2
     and 4), for the rigid body ``vehicle`` (default: the nominal one; another mass or inertia
     for body-stage effects). The ``rotor_*`` channels are not formed here (they need the
     command before the effects that act after the rotor speed; ``library.predict_intervals``
-    appends them)."""
+    appends them). :func:`model_channels` stacks the parts, (M, 3) each."""
     veh = rp.vehicle if vehicle is None else vehicle
     if thrust is None or moment is None:
         wrench = veh.wrench(f)
@@ -423,7 +423,13 @@ def model_channels(rp: Replay, f: np.ndarray, force=None, moment_ext=None,
             sf = sf + (np.einsum("mji,mj->mi", rp.R, force) if rp.has_pose else force) / veh.mass
         parts.append(sf)
     parts.append(angular_acceleration(rp.w, moment, veh, moment_ext))
-    return np.hstack(parts)
+    return parts
+
+
+def model_channels(rp: Replay, f: np.ndarray, force=None, moment_ext=None,
+                   thrust=None, moment=None, vehicle: Vehicle | None = None) -> np.ndarray:
+    """Interval channels (M, C) of :func:`model_parts`, stacked."""
+    return np.hstack(model_parts(rp, f, force, moment_ext, thrust, moment, vehicle))
 
 
 def noise_scale(rp: Replay, residual: np.ndarray) -> np.ndarray:

@@ -28,22 +28,35 @@ def zoh_next1(c, f, t_prev, t):
 
 
 @jit
-def zoh_integral(buf, row, base, cap, n, head, count, x, col):
-    """Integral up to ``x`` of column ``col`` of a zero-order-hold signal stored as knots in
-    row ``row`` of ``buf`` from column ``base``: times ``[0, cap)``, integrals up to each
-    knot ``[cap, cap + cap n)`` and values ``[cap + cap n, cap + 2 cap n)`` (``n`` columns
-    per knot), knot ``j`` (0 the oldest of ``count``) in slot ``(head + j) % cap``. The
-    signal holds its first value before the first knot and its last after the last."""
-    lo, hi = 0, count  # the number of knots at or before x, by bisection
+def zoh_knot(buf, row, base, cap, head, count, x):
+    """Slot of the last knot at or before ``x`` (the first knot when none is) of the knots
+    stored as in :func:`zoh_integral`, by bisection."""
+    lo, hi = 0, count  # the number of knots at or before x
     while lo < hi:
         mid = (lo + hi) // 2
         if buf[row, base + (head + mid) % cap] <= x:
             lo = mid + 1
         else:
             hi = mid
-    s = (head + max(lo - 1, 0)) % cap
+    return (head + max(lo - 1, 0)) % cap
+
+
+@jit
+def zoh_from(buf, row, base, cap, n, s, x, col):
+    """Integral up to ``x`` of column ``col`` from knot slot ``s`` at or before it."""
     k = base + cap + s * n + col
     return buf[row, k] + buf[row, k + cap * n] * (x - buf[row, base + s])
+
+
+@jit
+def zoh_integral(buf, row, base, cap, n, head, count, x, col):
+    """Integral up to ``x`` of column ``col`` of a zero-order-hold signal stored as knots in
+    row ``row`` of ``buf`` from column ``base``: times ``[0, cap)``, integrals up to each
+    knot ``[cap, cap + cap n)`` and values ``[cap + cap n, cap + 2 cap n)`` (``n`` columns
+    per knot), knot ``j`` (0 the oldest of ``count``) in slot ``(head + j) % cap``. The
+    signal holds its first value before the first knot and its last after the last."""
+    return zoh_from(buf, row, base, cap, n, zoh_knot(buf, row, base, cap, head, count, x), x,
+                    col)
 
 
 @jit
@@ -115,11 +128,25 @@ def zoh_cumulative(t_knots: np.ndarray, values: np.ndarray) -> np.ndarray:
 
 
 @jit
+def _knot_after(buf, cap, s, x):
+    """:func:`zoh_knot` of knots in order in ``buf[0, :cap]``, walking on from slot ``s``
+    (the answer for a nearby earlier ``x``); a bisection when ``x`` is before it."""
+    if buf[0, s] > x:
+        return zoh_knot(buf, 0, 0, cap, 0, cap, x)
+    while s + 1 < cap and buf[0, s + 1] <= x:
+        s += 1
+    return s
+
+
+@jit
 def _zoh_mean_rows(buf, cap, n, a, b, out):
-    for i in range(a.shape[0]):
+    sa = sb = 0
+    for i in range(a.shape[0]):  # one search per end of the interval, for every column
+        sb = _knot_after(buf, cap, sb, b[i])
+        sa = _knot_after(buf, cap, sa, a[i])
         for m in range(n):
-            hi = zoh_integral(buf, 0, 0, cap, n, 0, cap, b[i], m)
-            lo = zoh_integral(buf, 0, 0, cap, n, 0, cap, a[i], m)
+            hi = zoh_from(buf, 0, 0, cap, n, sb, b[i], m)
+            lo = zoh_from(buf, 0, 0, cap, n, sa, a[i], m)
             out[i, m] = (hi - lo) / (b[i] - a[i])
 
 
