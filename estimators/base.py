@@ -2,7 +2,8 @@
 
 Online: ``est.update(sample) -> Estimate``, one measurement row at a time (the environment
 calls this); a batch of N estimators (the vector environment's) takes one sample per row and
-gives a :class:`BatchedEstimate`. Offline: ``est.run(recording) -> EstimateSeries`` over a whole recording.
+gives a :class:`BatchedEstimate`. Offline: ``est.run(recording) -> EstimateSeries`` over a
+whole recording.
 Estimators receive the *nominal* vehicle and measurements only; they never read the
 recording's true efficiency columns. The measurement record :class:`~quadfault.sample.Sample`
 and :func:`~quadfault.sample.samples` live in the core and are re-exported here.
@@ -124,7 +125,8 @@ class BatchedEstimate:
 
 
 def batch_arrays(num: int, n: int, t, p, v, R, w, f):
-    """The arrays of one batched sample (one row per estimator), float64 and contiguous, checked for shape."""
+    """The arrays of one batched sample (one row per estimator), float64 and contiguous,
+    checked for shape."""
     t = np.ascontiguousarray(np.asarray(t, dtype=np.float64).reshape(-1))
     arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (p, v, R, w, f)]
     shapes = [(num, 3), (num, 3), (num, 3, 3), (num, 3), (num, n)]

@@ -51,7 +51,13 @@ from estimators.irls_config import (  # noqa: F401  (re-exported)
     window_diagnostics,
 )
 from estimators.median import median_push_into, postprocess_label
-from estimators.residuals import RESIDUAL_ROWS, segment_terms_into
+from estimators.residuals import (
+    RESIDUAL_ROWS,
+    Kinematics,
+    SegmentModel,
+    SegmentOut,
+    segment_terms_into,
+)
 from estimators.state import FlatState, Layout, all_finite, fields, pack, piece, piece_rows
 from estimators.window import (
     MATRICES,
@@ -249,9 +255,9 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist):
             slot = k_row[COUNTERS.head]          # (eqs. 13-26)
             Jmat, Jinv, A, G = arrays
             c[slot], thrust[slot] = segment_terms_into(
-                t - last_t[0], last_p, p, last_v, v, last_R, R, last_w, w, last_f,
-                const[CONSTANTS.mass], const[CONSTANTS.gravity], Jmat, Jinv, A, G, S.r0[i],
-                S.J[i], b[slot], H[slot])
+                t - last_t[0], Kinematics(last_p, last_v, last_R, last_w), Kinematics(p, v, R, w),
+                last_f, SegmentModel(const[CONSTANTS.mass], const[CONSTANTS.gravity], Jmat, Jinv,
+                                     A, G), SegmentOut(S.r0[i], S.J[i], b[slot], H[slot]))
             k_row[COUNTERS.head] = (slot + 1) % m
             k_row[COUNTERS.count] = min(k_row[COUNTERS.count] + 1, m)
         last_t[0] = t

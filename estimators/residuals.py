@@ -34,6 +34,7 @@ with 3 x 3 algebra on scalars and no allocation (the estimator calls it once per
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -52,16 +53,50 @@ def residual_weights(g_v: float, g_x: float, g_omega: float, g_R: float) -> np.n
     return pack(RESIDUAL, v=np.full(3, g_v), x=np.full(3, g_x), w=np.full(3, g_omega), R=g_R)
 
 
-@jit
-def segment_terms_into(dt, p0, p1, v0, v1, R0, R1, w0, w1, f, mass, g, Jmat, Jinv, A, G,
-                       r0, J, b, H):
-    """The segment from sample 0 to sample 1 (``dt`` [s] apart, command ``f`` [N] held):
-    its affine residual model ``r(eta) = r0 + J eta`` into ``r0`` (10,) and ``J`` (10, n),
-    its weighted-energy terms ``b`` (n,) and ``H`` (n, n); returns ``(c, thrust)``, the
-    energy at ``eta = 0`` and the commanded collective thrust [N].
+class Kinematics(NamedTuple):
+    """One sample's measured kinematics: position ``p`` [m] and velocity ``v`` [m/s] (3,)
+    in the world frame, attitude ``R`` (3, 3) body to world, body rate ``w`` [rad/s] (3,)."""
 
-    Vehicle: ``mass`` [kg], gravity ``g`` [m/s^2], inertia ``Jmat`` and its inverse ``Jinv``
-    [kg m^2], allocation ``A`` (4, n); ``G`` (10,) the diagonal of the weight (eq. 23)."""
+    p: np.ndarray
+    v: np.ndarray
+    R: np.ndarray
+    w: np.ndarray
+
+
+class SegmentModel(NamedTuple):
+    """What a segment's residual needs of the vehicle: ``mass`` [kg], gravity ``g``
+    [m/s^2], inertia ``Jmat`` and its inverse ``Jinv`` (3, 3) [kg m^2], allocation ``A``
+    (4, n); and ``G`` (10,), the diagonal of the residual's weight (eq. 23)."""
+
+    mass: float
+    g: float
+    Jmat: np.ndarray
+    Jinv: np.ndarray
+    A: np.ndarray
+    G: np.ndarray
+
+
+class SegmentOut(NamedTuple):
+    """Where :func:`segment_terms_into` writes: the affine residual model ``r0`` (10,),
+    ``J`` (10, n) and the weighted-energy terms ``b`` (n,), ``H`` (n, n)."""
+
+    r0: np.ndarray
+    J: np.ndarray
+    b: np.ndarray
+    H: np.ndarray
+
+
+@jit
+def segment_terms_into(dt, s0, s1, f, model, out):
+    """The segment from sample ``s0`` to sample ``s1`` (:class:`Kinematics`, ``dt`` [s]
+    apart, command ``f`` [N] held) under ``model`` (:class:`SegmentModel`): its affine
+    residual model ``r(eta) = r0 + J eta`` and its weighted-energy terms into ``out``
+    (:class:`SegmentOut`); returns ``(c, thrust)``, the energy at ``eta = 0`` and the
+    commanded collective thrust [N]."""
+    p0, v0, R0, w0 = s0.p, s0.v, s0.R, s0.w
+    p1, v1, R1, w1 = s1.p, s1.v, s1.R, s1.w
+    mass, g, Jmat, Jinv, A, G = model.mass, model.g, model.Jmat, model.Jinv, model.A, model.G
+    r0, J, b, H = out.r0, out.J, out.b, out.H
     n = f.size
     V, X, W, RR = RESIDUAL.v, RESIDUAL.x, RESIDUAL.w, RESIDUAL.R
     thrust, _moment = rotor_wrench(A, f)  # the collective thrust (eq. 12)
@@ -161,10 +196,13 @@ def segment_terms(vehicle: Vehicle, t, p, v, R, w, f, G) -> SegmentTerms:
     S, n = len(t) - 1, f.shape[1]
     r0, J = np.empty((S, RESIDUAL_ROWS)), np.empty((S, RESIDUAL_ROWS, n))
     c, b, H, thrust = np.empty(S), np.empty((S, n)), np.empty((S, n, n)), np.empty(S)
-    veh = (vehicle.mass, vehicle.gravity, np.ascontiguousarray(vehicle.inertia),
-           np.ascontiguousarray(vehicle.inertia_inverse), np.ascontiguousarray(vehicle.allocation))
+    model = SegmentModel(float(vehicle.mass), float(vehicle.gravity),
+                         np.ascontiguousarray(vehicle.inertia, dtype=float),
+                         np.ascontiguousarray(vehicle.inertia_inverse, dtype=float),
+                         np.ascontiguousarray(vehicle.allocation, dtype=float), G)
     for k in range(S):
-        c[k], thrust[k] = segment_terms_into(t[k + 1] - t[k], p[k], p[k + 1], v[k], v[k + 1],
-                                             R[k], R[k + 1], w[k], w[k + 1], f[k], *veh, G,
-                                             r0[k], J[k], b[k], H[k])
+        c[k], thrust[k] = segment_terms_into(
+            t[k + 1] - t[k], Kinematics(p[k], v[k], R[k], w[k]),
+            Kinematics(p[k + 1], v[k + 1], R[k + 1], w[k + 1]), f[k], model,
+            SegmentOut(r0[k], J[k], b[k], H[k]))
     return SegmentTerms(r0, J, c, b, H, np.diff(t), thrust)

@@ -57,7 +57,14 @@ from estimators.base import STATUS_BAD_SAMPLE, STATUS_NO_EXCITATION, STATUS_OK, 
 from estimators.base import STATUSES
 from estimators.ekf import IDLE_THRUST
 from estimators.recursive import BatchedRecursive, RecursiveEstimator
-from estimators.residuals import RESIDUAL, RESIDUAL_ROWS, segment_terms_into
+from estimators.residuals import (
+    RESIDUAL,
+    RESIDUAL_ROWS,
+    Kinematics,
+    SegmentModel,
+    SegmentOut,
+    segment_terms_into,
+)
 from estimators.state import Layout, all_finite, fields, pack, piece, piece_rows
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange
@@ -226,12 +233,13 @@ def rls_step(t, p, v, R, w, f, const, S, ks, i) -> int:
             code = NO_EXCITATION
         else:
             r0, Jr = S.r0[i], S.J[i]
-            segment_terms_into(dt, last_p, p, last_v, v, last_R, R, last_w, w, last_f,
-                               const[C.mass], const[C.gravity],
-                               const[C.J:C.Jinv].reshape((3, 3)),
-                               const[C.Jinv:C.G].reshape((3, 3)),
-                               const[C.A:C.A + 4 * n].reshape((4, n)), const[C.G:C.A], r0, Jr,
-                               S.b[i], S.H[i])
+            model = SegmentModel(const[C.mass], const[C.gravity],
+                                 const[C.J:C.Jinv].reshape((3, 3)),
+                                 const[C.Jinv:C.G].reshape((3, 3)),
+                                 const[C.A:C.A + 4 * n].reshape((4, n)), const[C.G:C.A])
+            segment_terms_into(dt, Kinematics(last_p, last_v, last_R, last_w),
+                               Kinematics(p, v, R, w), last_f, model,
+                               SegmentOut(r0, Jr, S.b[i], S.H[i]))
             lam = math.exp(const[C.log_lambda] * dt)
             g = S.g[i]  # the rows' weights
             energy = 0.0  # the weighted a-priori residual energy, per row
@@ -288,7 +296,8 @@ def _estimate_row(S, ks, i, n, eta, sd) -> None:
     theta, P, s2 = S.theta[i], S.P[i], S.noise[i]
     for j in range(n):
         eta[j] = theta[j]
-        sd[j] = math.sqrt(max(P[j, j] * s2[NOISE.mean], 0.0)) if ks[i, COUNTERS.updated] == 1 else np.nan
+        sd[j] = (math.sqrt(max(P[j, j] * s2[NOISE.mean], 0.0))
+                 if ks[i, COUNTERS.updated] == 1 else np.nan)
 
 
 @jit

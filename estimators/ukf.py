@@ -232,9 +232,10 @@ def state_pieces(fs, offsets, n, N):
 
 @jit(inline="always")
 def _propagate(chi, f, R9, dt, rigid, A) -> None:
-    """One sigma point ``chi = [v, Omega, eta]`` (:data:`X`) over ``dt`` with the command ``f`` held and the
-    attitude ``R9`` (row-major 9-tuple), in place: the model's allocation and rigid body
-    (:mod:`quadfault.dynamics`, eqs. 2, 4 and 12; the efficiencies a random walk)."""
+    """One sigma point ``chi = [v, Omega, eta]`` (:data:`X`) over ``dt`` with the command
+    ``f`` held and the attitude ``R9`` (row-major 9-tuple), in place: the model's allocation
+    and rigid body (:mod:`quadfault.dynamics`, eqs. 2, 4 and 12; the efficiencies a random
+    walk)."""
     n = f.shape[0]
     T, M = rotor_wrench(A, f, chi[X.eta:X.eta + n])
     acc = translational_acceleration3(R9, T, rigid)
@@ -291,7 +292,8 @@ def ukf_step(t, p, v, R, w, f, const, S, ks, i) -> int:
         for b in range(3):
             last_R[a, b] = R[a, b]
     for j in range(n):
-        last_f[j] = min(max(f[j], 0.0), const[CONSTANTS.f_max]) if const[CONSTANTS.clip] != 0.0 else f[j]
+        last_f[j] = (min(max(f[j], 0.0), const[CONSTANTS.f_max]) if const[CONSTANTS.clip] != 0.0
+                     else f[j])
     return code
 
 
