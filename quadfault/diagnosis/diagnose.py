@@ -237,8 +237,14 @@ class Diagnosis:
         if cfg.baseline_eta is not None:
             library = [dataclasses.replace(c, baseline=cfg.baseline_eta)
                        if c.name == MotorEfficiency.name else c for c in library]
-        untestable = [c.name for c in library if not c.testable(rp)]
-        library, not_identifiable = gate(library, ev)
+        lacks = {c.name: c.untestable_reason(rp) for c in library}
+        library, gated = gate(library, ev)
+        # one list of what this recording cannot reveal, in the library's order, each with
+        # its reason (the gate's, else what the effect itself lacks); untestable: the names
+        gated = {n["name"]: n["reason"] for n in gated}
+        not_identifiable = [{"name": n, "reason": gated.get(n) or why}
+                            for n, why in lacks.items() if n in gated or why]
+        untestable = [n["name"] for n in not_identifiable]
         base_res = rp.measured - predict(rp, [])
         sc = fixed_scoring(rp, base_res, rp.scored)
         library = pin_to_rotor_speeds(rp, library, sc)

@@ -108,7 +108,4 @@ def markdown(res: DiagnosisResult, source: str) -> str:
         if a.get("independent"):
             L.append("- independent of them: " + ", ".join(a["independent"]))
         L.append("")
-    if res.untestable:
-        L += ["## Untestable", "", "This recording cannot reveal: " + ", ".join(res.untestable)
-              + " (they need position, velocity and attitude).", ""]
     return "\n".join(L)

@@ -80,10 +80,10 @@ class DiagnosisResult:
         model_rmse: held-out residual RMS of nominal + accepted effects per channel.
         model_improvement: 1 - RMS(after)/RMS(before), all channels (weighted), held out.
         effects: accepted effects, most important first.
-        untestable: effects this recording cannot reveal.
+        untestable: the names of ``not_identifiable``, in the same order.
         not_identifiable: ``({"name", "reason"}, ...)``: candidates left out before any fit
-            because the log lacks the evidence (channels, rates) they need
-            (:mod:`~quadfault.diagnosis.identifiability`).
+            because the log lacks the evidence (channels, rates, a usable command curve) they
+            need (:mod:`~quadfault.diagnosis.identifiability`).
         evidence: what the log carries (rates of the commands, samples and rotor speeds
             [Hz], the shortest time constant the commands resolve [s], which channels).
         assumptions: which results depend on an assumed mass or inertia (empty when none is

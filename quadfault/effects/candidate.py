@@ -144,8 +144,17 @@ class Candidate:
 
     def testable(self, rp) -> bool:
         """Whether the recording has what this effect needs."""
-        return (rp.has_pose or not self.needs_pose) and all(
-            getattr(rp, need, None) is not None for need in self.requires)
+        return not self.untestable_reason(rp)
+
+    def untestable_reason(self, rp) -> str:
+        """What the recording lacks for this effect ("" when it has it all)."""
+        if self.needs_pose and not rp.has_pose:
+            return "no position, velocity and attitude in the log"
+        missing = [need for need in self.requires if getattr(rp, need, None) is None]
+        if missing:
+            names = {"vbat": "battery voltage"}
+            return "no " + ", ".join(names.get(m, m) for m in missing) + " in the log"
+        return ""
 
     def compatible(self, others) -> bool:
         """Whether this effect may be in one model with ``others`` (no one contains another,

@@ -193,9 +193,11 @@ class ThrustCurveCandidate(Candidate):
     keys: ClassVar[tuple] = (("hover_thrust_change", 0, 1), ("slope_change", 1, 2),
                              ("curvature_change", 2, 3))
 
-    def testable(self, rp) -> bool:
+    def untestable_reason(self, rp) -> str:
         """Also needs a nominal curve that reaches the hover thrust at a positive command."""
-        return self.u_hover > 0 and super().testable(rp)
+        if not self.u_hover > 0:
+            return "the command curve does not reach the hover thrust at a positive command"
+        return super().untestable_reason(rp)
 
     def curve(self, x) -> np.ndarray:
         return curve_from_changes(self.nominal, self.f_hover, x)
