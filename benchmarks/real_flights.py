@@ -4,9 +4,11 @@ For each log this runs exactly what a user runs, through the console script's ow
 point (``quadfault.cli.main``): ``quadfault import LOG --out NAME.csv`` (the format read from
 the file; for the Crazyflie research data sets ``quadfault import DATASET LOG``) and
 ``quadfault diagnose NAME.csv --json NAME.json`` with the defaults -- and, for the CrazyPAD
-propeller-fault flights, with ``--effects motor_efficiency``, alone and against a healthy
-flight of the same airframe (``--baseline HEALTHY.json``, the first healthy flight; for that
-one, the second). The tables are built
+propeller-fault flights, with ``--effects motor_efficiency``, alone and against the healthy
+flights of the same airframe (``--baseline HEALTHY.json ...``, every healthy flight but the
+one diagnosed). One flight alone reports a per-rotor pattern it cannot tell from the
+vehicle's own imbalance as that (``vehicle imbalance`` in the rejection); the tables give
+those patterns beside the accepted ones. The tables are built
 from the JSON files it wrote. Per log it prints the accepted effects with their figures, what
 was not identifiable and why, and a loud ``!! ABSURD`` line for any absurd accepted answer:
 
@@ -182,20 +184,19 @@ def vehicle_of(row) -> str:
 
 
 def against_baseline(rows, quiet: bool) -> None:
-    """CrazyPAD, ``--effects motor_efficiency --baseline HEALTHY.json``: each flight against
-    a healthy flight of the same airframe (the first one; for that one, the second)."""
+    """CrazyPAD, ``--effects motor_efficiency --baseline HEALTHY.json ...``: each flight
+    against every other healthy flight of the same airframe."""
     pad = [r for r in rows if r["kind"] == "crazypad" and r.get("efficiency") is not None]
     for r in pad:
         healthy = [h for h in pad if h["condition"] == "normal_flight"
                    and vehicle_of(h) == vehicle_of(r) and h is not r]
         if not healthy:
             continue
-        base = healthy[0]
         js = Path(r["files"]["efficiency"]).with_suffix(".baseline.json")
         code, err = quadfault(["diagnose", r["files"]["csv"], "--json", js, "--force",
                                "--effects", "motor_efficiency", "--baseline",
-                               base["files"]["efficiency"]], quiet)
-        r["baseline_flight"] = base["name"]
+                               *[h["files"]["efficiency"] for h in healthy]], quiet)
+        r["baseline_flight"] = f"{len(healthy)} healthy flights"
         r["vs_baseline"] = json.loads(js.read_text()) if code == 0 else None
 
 
@@ -269,7 +270,9 @@ def print_log(r) -> None:
     if d.get("assumptions"):
         print(f"assumed: {', '.join(d['assumptions']['assumed'])}")
     if r.get("efficiency") is not None:
-        print(f"--effects motor_efficiency: {_effects(r['efficiency']['effects'])}")
+        imb = _eta(r["efficiency"], imbalance=True)
+        print(f"--effects motor_efficiency: {_effects(r['efficiency']['effects'])}"
+              + (f"; vehicle imbalance, eta {_short(imb)}" if np.all(np.isfinite(imb)) else ""))
     if r.get("vs_baseline") is not None:
         print(f"--baseline {r['baseline_flight']}: {_effects(r['vs_baseline']['effects'])}")
     if r.get("rotor_lag_reference") is not None:
@@ -299,28 +302,41 @@ def print_flights(rows) -> None:
               f"{len(absurd(d)) or '-'} |")
 
 
-def _eta(doc):
-    """Relative eta of the accepted motor_efficiency, or NaN x 4."""
-    eff = [e for e in (doc or {}).get("effects", []) if e["name"] == "motor_efficiency"]
+def _eta(doc, imbalance: bool = False):
+    """Relative eta of the accepted motor_efficiency (with ``imbalance``: of the one rejected
+    as the vehicle's own imbalance), or NaN x 4."""
+    doc = doc or {}
+    if imbalance:
+        eff = [e for e in doc.get("rejected", []) if e["name"] == "motor_efficiency"
+               and e.get("reason", "").startswith("vehicle imbalance")]
+    else:
+        eff = [e for e in doc.get("effects", []) if e["name"] == "motor_efficiency"]
     return eff[0]["params"]["eta"] if eff else [np.nan] * 4
 
 
+#: the CrazyPAD tables: (result key, reported as imbalance, what)
+PAD_TABLES = (("efficiency", False, "one flight, accepted: eta relative to the median rotor"),
+              ("efficiency", True, "one flight, reported as the vehicle's own imbalance (not "
+                                   "accepted): eta relative to the median rotor"),
+              ("vs_baseline", False, "`--baseline` the other healthy flights of the same "
+                                     "airframe, accepted: eta relative to them"))
+
+
 def print_crazypad(rows) -> None:
-    for key, what in (("efficiency", "one flight: eta relative to the median rotor"),
-                      ("vs_baseline", "`--baseline` a healthy flight of the same airframe: "
-                                      "eta relative to it")):
+    for key, imbalance, what in PAD_TABLES:
         sub = [r for r in rows if r["kind"] == "crazypad" and r.get(key) is not None]
         if sub:
-            _crazypad_table(sub, key, what)
+            _crazypad_table(sub, key, imbalance, what)
 
 
-def _crazypad_table(sub, key, what) -> None:
+def _crazypad_table(sub, key, imbalance, what) -> None:
     print(f"\n## CrazyPAD, `--effects motor_efficiency`, {what} (mean +- sd over the flights "
-          "where it is accepted)\n")
-    print("| condition | accepted | eta1 | eta2 | eta3 | eta4 |")
+          "where it is so)\n")
+    print(f"| condition | {'as imbalance' if imbalance else 'accepted'} | eta1 | eta2 | eta3 | "
+          "eta4 |")
     print("|---|---|---|---|---|---|")
     for cond in sorted({r["condition"] for r in sub}, key=lambda c: (c != "normal_flight", c)):
-        e = np.array([_eta(r[key]) for r in sub if r["condition"] == cond])
+        e = np.array([_eta(r[key], imbalance) for r in sub if r["condition"] == cond])
         n_ok = int(np.sum(np.all(np.isfinite(e), axis=1)))
         if n_ok == 0:
             print(f"| {cond} | 0 of {len(e)} | - | - | - | - |")
@@ -418,11 +434,18 @@ def targets(rows) -> list:
                          f"(ref {ref:.4f})")
         out.append(("nano-drone: horizontal drag within 30% of the accelerometer fit on >= 7 "
                     "of 9", f"{n_ok} of {len(nano)}: " + "; ".join(cells), n_ok >= 7))
-    for key, what in (("efficiency", "one flight"), ("vs_baseline", "against a healthy "
-                                                                    "flight (--baseline)")):
+    for key, what in (("efficiency", "one flight"), ("vs_baseline", "against the other "
+                                                                    "healthy flights "
+                                                                    "(--baseline)")):
         out += _crazypad_targets([r for r in done if r["kind"] == "crazypad"
                                   and r.get(key) is not None], key, what)
     return out
+
+
+def _reported(doc):
+    """Relative eta of motor_efficiency, accepted or else reported as imbalance."""
+    e = np.asarray(_eta(doc), dtype=float)
+    return e if np.all(np.isfinite(e)) else np.asarray(_eta(doc, True), dtype=float)
 
 
 def _crazypad_targets(pad, key, what) -> list:
@@ -438,7 +461,8 @@ def _crazypad_targets(pad, key, what) -> list:
     for r in pad:
         c = r["condition"]
         if c.startswith("cut_propeller_M3_"):
-            graded.setdefault(c, []).append(_eta(r[key]))
+            graded.setdefault(c, []).append(_reported(r[key]) if key == "efficiency"
+                                            else _eta(r[key]))
     if graded:
         cells, ok, last = [], True, 1.0
         for c in sorted(graded, key=lambda c: float(c.rsplit("_", 1)[1].rstrip("m"))):
@@ -448,8 +472,9 @@ def _crazypad_targets(pad, key, what) -> list:
             ok &= lowest == len(e) and m3 < last
             last = m3
             cells.append(f"{c}: rotor 3 lowest on {lowest} of {len(e)}, mean eta3 {m3:.3f}")
-        out.append((f"CrazyPAD cut propeller M3 (1/2/3 mm), {what}: rotor 3 lowest, falling "
-                    "as the damage grows", "; ".join(cells), ok))
+        how = " (accepted or reported as imbalance)" if key == "efficiency" else " (accepted)"
+        out.append((f"CrazyPAD cut propeller M3 (1/2/3 mm), {what}{how}: rotor 3 lowest, "
+                    "falling as the damage grows", "; ".join(cells), ok))
     return out
 
 

@@ -160,6 +160,58 @@ def test_one_weak_rotor_is_reported_relative_to_the_others(weak_rotor):
     assert "relative to the median rotor" in res.effects[0].explanation
 
 
+@pytest.fixture(scope="module")
+def com_offset_flight():
+    return fly((fx.ComOffset((0.005, -0.003)),), seed=7)
+
+
+def test_a_centre_of_mass_offset_is_not_a_weak_rotor(com_offset_flight):
+    """Healthy rotors, the CoM 6 mm off centre: in hover a per-rotor efficiency pattern fits
+    it too, but not better than the vehicle's own imbalance on the same held-out folds, so
+    it is reported as imbalance (which rotor looks weakest), never accepted."""
+    res = Diagnosis(DiagnosisConfig(effects=("motor_efficiency",))).fit(com_offset_flight)
+    assert "motor_efficiency" not in res.effect_names
+    eff = next(e for e in res.rejected if e.name == "motor_efficiency")
+    k = int(np.argmin(eff.params["eta"]))
+    assert min(eff.params["eta"]) < 0.98  # the pattern is there ...
+    assert eff.reason.startswith(f"vehicle imbalance: rotor {k + 1} looks weakest")
+    assert "centre-of-mass offset of 5." in eff.reason or "offset of 6." in eff.reason
+    assert "one flight cannot tell a weak rotor from the vehicle's own imbalance" in eff.reason
+    assert "--baseline" in eff.reason
+    res = Diagnosis().fit(com_offset_flight)  # ... and the default library names the cause
+    assert "com_offset" in res.effect_names and "motor_efficiency" not in res.effect_names
+    np.testing.assert_allclose(res.effects[res.effect_names.index("com_offset")].params[
+        "offset_m"], [0.005, -0.003], atol=0.001)
+
+
+def test_a_weak_rotor_in_maneuvers_is_told_from_the_vehicles_imbalance():
+    """Rotor 3 at 0.7 over a Lissajous flight: the rotors' commands vary relative to each
+    other, and the per-rotor pattern explains the held-out data better than a CoM offset
+    with a yaw trim."""
+    res = Diagnosis(DiagnosisConfig(effects=("motor_efficiency",))).fit(
+        fly((fx.MotorEfficiency((1.0, 1.0, 0.7, 1.0)),), seed=6))
+    assert res.effect_names == ["motor_efficiency"]
+    eta = res.effects[0].params["eta"]
+    assert int(np.argmin(eta)) == 2
+    np.testing.assert_allclose(eta, [1.0, 1.0, 0.7, 1.0], atol=0.03)
+
+
+def test_the_healthy_pattern_of_several_flights_and_its_spread():
+    from quadfault.effects.motor_efficiency import EfficiencyCandidate, healthy_pattern
+
+    eta, spread = healthy_pattern([(1.0, 1.1, 0.8, 1.0)])
+    np.testing.assert_allclose(eta, [1.0, 1.1, 0.8, 1.0])
+    assert spread == ()
+    flights = [(1.0, 1.1, 0.8, 1.0), (2.0, 2.2, 1.76, 2.0), (1.0, 1.1, 0.84, 1.0)]
+    eta, spread = healthy_pattern(flights)  # a common factor is not a difference
+    np.testing.assert_allclose(eta, [1.0, 1.1, 0.8 * (1.1 * 1.05) ** (1 / 3), 1.0], rtol=1e-12)
+    sd3 = np.std(np.log([0.8, 0.88, 0.84]), ddof=1)
+    np.testing.assert_allclose(spread, [0.0, 0.0, sd3, 0.0], atol=1e-12)
+    cand = EfficiencyCandidate("motor_efficiency", ("a",) * 4, (0.2,) * 4, (1.5,) * 4,
+                               (1.0,) * 4, ((1.0,) * 4,), "thrust", spread=spread)
+    np.testing.assert_allclose(cand.tolerance(), [0.05, 0.05, 3 * sd3, 0.05])
+
+
 def test_assumed_mass_and_inertia_say_what_depends_on_them(drag_flight):
     rec = dataclasses.replace(drag_flight, meta={**drag_flight.meta,
                                                 "assumed": ["mass", "inertia"]})
@@ -184,10 +236,17 @@ def test_a_healthy_baseline_flight_separates_damage_from_the_vehicles_own_imbala
                                      baseline_eta=(1.0, 1.0, 0.75, 1.0))).fit(weak_rotor)
     assert "motor_efficiency" not in same.effect_names
     why = next(e.reason for e in same.rejected if e.name == "motor_efficiency")
-    assert "match the healthy baseline" in why
+    assert "match the healthy vehicle" in why
+    spread = Diagnosis(DiagnosisConfig(  # healthy flights whose rotor 3 varies by 10 %
+        effects=("motor_efficiency",), baseline_eta=[(1.0, 1.0, 0.85, 1.0),
+                                                     (1.0, 1.0, 1.0, 1.0)])).fit(weak_rotor)
+    assert "motor_efficiency" not in spread.effect_names
+    why = next(e.reason for e in spread.rejected if e.name == "motor_efficiency")
+    assert "match the healthy vehicle (2 flights)" in why
     other = Diagnosis(DiagnosisConfig(effects=("motor_efficiency",),
                                       baseline_eta=(1.0, 1.05, 1.0, 0.95))).fit(weak_rotor)
     p = other.effects[0].params
+    assert p["baseline_flights"] == 1 and "baseline_spread" not in p
     np.testing.assert_allclose(p["eta"][2] / p["eta"][0], 0.75, atol=0.03)
     np.testing.assert_allclose(p["eta_flight"], [1.0, 1.0, 0.75, 1.0], atol=0.03)
     path = tmp_path / "healthy.json"

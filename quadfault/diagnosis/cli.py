@@ -20,10 +20,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--block", type=float, default=0.02,
                    help="smoothing block length [s] (default 0.02)")
     p.add_argument("--max-effects", type=int, default=3, help="most effects accepted (default 3)")
-    p.add_argument("--baseline", metavar="HEALTHY.json", default=None,
-                   help="the diagnosis JSON of a flight of the healthy vehicle with a "
-                        "motor_efficiency fit: eta is then relative to it (one flight alone "
-                        "cannot tell a weak rotor from the vehicle's own imbalance)")
+    p.add_argument("--baseline", metavar="HEALTHY.json", nargs="+", default=None,
+                   help="the diagnosis JSON of one or more flights of the healthy vehicle, "
+                        "each with a motor_efficiency fit: eta is then relative to them (one "
+                        "flight alone cannot tell a weak rotor from the vehicle's own "
+                        "imbalance; several also give the flight-to-flight spread)")
     p.add_argument("--no-mask", action="store_true",
                    help="fit and score every block: do not exclude what is not free flight "
                         "(motors off, ground or pad contact, impacts; see docs/diagnosis.md)")
@@ -90,8 +91,8 @@ def run(args) -> int:
         effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
     cfg = DiagnosisConfig(block_seconds=args.block, max_effects=args.max_effects, effects=effects,
                           mask=not args.no_mask,
-                          baseline_eta=None if args.baseline is None else baseline_eta(
-                              args.baseline))
+                          baseline_eta=None if args.baseline is None else tuple(
+                              baseline_eta(b) for b in args.baseline))
     rec = read_recording(args.recording).without_truth()
     bar = progress_bar(total=None, desc="diagnose", unit="fit", disable=None if not args.quiet else True)
     try:

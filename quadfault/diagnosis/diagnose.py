@@ -25,7 +25,7 @@ from quadfault.diagnosis.residuals import prepare
 from quadfault.diagnosis.result import DiagnosisResult
 from quadfault.diagnosis.scores import fixed_scoring
 from quadfault.diagnosis.select import select
-from quadfault.effects.motor_efficiency import MotorEfficiency
+from quadfault.effects.motor_efficiency import MotorEfficiency, healthy_pattern
 from quadfault.effects.registry import EFFECT_NAMES, effect_class
 from quadfault.errors import ConfigError, RecordingError
 from quadfault.recording import Recording, recording_sidecar
@@ -55,11 +55,13 @@ class DiagnosisConfig:
         saturate: clip commands to [0, max_thrust] as the nominal motor model does.
         internal_step: faster logs are merged to about this step [s] (see ``residuals``).
         mask: exclude what is not free flight (:mod:`~quadfault.diagnosis.phases`).
-        baseline_eta: the relative rotor efficiencies of a flight of the healthy vehicle
-            (its diagnosis' ``motor_efficiency`` ``eta``): ``motor_efficiency`` is then
-            reported relative to them and accepted only where a rotor differs from them by
-            more than ``BASELINE_TOLERANCE`` (one flight alone cannot tell a weak rotor from
-            the vehicle's own imbalance). None: no baseline.
+        baseline_eta: the relative rotor efficiencies of one or more flights of the healthy
+            vehicle (their diagnoses' ``motor_efficiency`` ``eta``): 4 numbers, or one row of
+            4 per flight. ``motor_efficiency`` is then reported relative to their mean and
+            accepted only where a rotor departs from it by more than 5 % and by more than 3
+            times the healthy flights' flight-to-flight spread (:mod:`~quadfault.diagnosis.
+            rotors`; one flight alone cannot tell a weak rotor from the vehicle's own
+            imbalance). Stored as a tuple of 4-tuples. None: no baseline.
     """
 
     block_seconds: float = 0.02
@@ -79,11 +81,16 @@ class DiagnosisConfig:
 
     def __post_init__(self):
         if self.baseline_eta is not None:
-            b = np.asarray(self.baseline_eta, dtype=float).ravel()
-            if b.size != 4 or not np.all(np.isfinite(b) & (b > 0)):
-                raise ConfigError(f"baseline_eta must be 4 positive numbers, got "
-                                  f"{self.baseline_eta!r}")
-            object.__setattr__(self, "baseline_eta", tuple(float(v) for v in b))
+            try:
+                b = np.asarray(self.baseline_eta, dtype=float)
+            except (TypeError, ValueError):
+                b = np.zeros(0)
+            if b.ndim not in (1, 2) or b.shape[-1] != 4 or b.size == 0 \
+                    or not np.all(np.isfinite(b) & (b > 0)):
+                raise ConfigError(f"baseline_eta must be 4 positive numbers (or one row of 4 "
+                                  f"per healthy flight), got {self.baseline_eta!r}")
+            object.__setattr__(self, "baseline_eta",
+                               tuple(tuple(float(v) for v in row) for row in b.reshape(-1, 4)))
         if not (0 < self.block_seconds <= 1.0):
             raise ConfigError(f"block_seconds must be in (0, 1] s, got {self.block_seconds!r}")
         if not (self.gap_factor > 1):
@@ -235,7 +242,9 @@ class Diagnosis:
                                  "too few blocks")
         library = build_library(rp, cfg.effects)
         if cfg.baseline_eta is not None:
-            library = [dataclasses.replace(c, baseline=cfg.baseline_eta)
+            eta, spread = healthy_pattern(cfg.baseline_eta)
+            library = [dataclasses.replace(c, baseline=eta, spread=spread,
+                                           baseline_flights=len(cfg.baseline_eta))
                        if c.name == MotorEfficiency.name else c for c in library]
         lacks = {c.name: c.untestable_reason(rp) for c in library}
         library, gated = gate(library, ev)

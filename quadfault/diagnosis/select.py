@@ -17,8 +17,10 @@ Each round:
    ``min_improvement`` relative to the current model, or by three times that in one of the
    channels the option acts on (its fitted signal above the noise); the instrumental-variable
    check against closed-loop feedback bias (:mod:`~quadfault.diagnosis.feedback`); the fold
-   agreement of every new effect (:func:`~quadfault.diagnosis.crossval.fold_agreement`); and
-   for a pair, a held-out RMS lower by ``min_improvement`` than each of its members alone.
+   agreement of every new effect (:func:`~quadfault.diagnosis.crossval.fold_agreement`);
+   for a pair, a held-out RMS lower by ``min_improvement`` than each of its members alone;
+   and for ``motor_efficiency``, a pattern the rotors' common factor or the vehicle's own
+   imbalance does not explain as well (:mod:`~quadfault.diagnosis.rotors`).
 4. An option that passes but has a parameter at a bound
    (:func:`~quadfault.diagnosis.crossval.at_bound`) is a **suspect**: the data asks for more
    than the effect allows, so another effect is likely missing; it is never accepted. Among
@@ -46,10 +48,9 @@ from quadfault.diagnosis.feedback import (IV_MIN, IV_UNVERIFIED_GAIN, IV_Z, froz
                                           iv_slope)
 from quadfault.diagnosis.fit import Fit, fit
 from quadfault.diagnosis.identifiability import too_short
-from quadfault.diagnosis.library import EQUIVALENT, Candidate, build_library, predict
+from quadfault.diagnosis.library import Candidate, predict
 from quadfault.diagnosis.residuals import Replay
-from quadfault.effects.motor_efficiency import MotorEfficiency
-from quadfault.effects.thrust_scale import ThrustScale
+from quadfault.diagnosis.rotors import rotors_differ
 
 __all__ = ["Selection", "Step", "Verdict", "select", "frozen_replay", "iv_slope", "folds_of",
            "cross_validate", "CrossValidation"]
@@ -150,7 +151,7 @@ def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, single
                   or _feedback(rp, sc, opt, current, x_cur, cur_pred, signal)
                   or _bounds_and_trade(rp, sc, opt, current, new, cur_fit)
                   or _folds(rp, sc, opt, new)
-                  or _rotors_differ(rp, sc, opt, current, x_cur, fl, kw["min_improvement"]))
+                  or rotors_differ(rp, sc, opt, current, fl, kw["min_improvement"]))
 
 
 def _held_out(sc, opt, cur_cv, signal, m) -> str:
@@ -217,43 +218,6 @@ def _folds(rp, sc, opt, new) -> str:
         opt.agreement[c.name] = detail
         if not ok:
             return f"{c.name}: the folds disagree ({detail})"
-    return ""
-
-
-#: effects that already carry a thrust factor common to every rotor (the thrust class of
-#: effects the data cannot tell apart, but the per-rotor one)
-COMMON_THRUST = tuple(n for n, k in EQUIVALENT.items()
-                      if k == EQUIVALENT[MotorEfficiency.name] and n != MotorEfficiency.name)
-#: with a healthy baseline flight, motor_efficiency needs a rotor this far from it [-]
-BASELINE_TOLERANCE = 0.05
-
-
-def _rotors_differ(rp, sc, opt, current, x_cur, fl, m) -> str:
-    """Per-rotor ``motor_efficiency`` only where the rotors differ from each other: its held-out
-    RMS must beat the same model with one factor common to every rotor (``thrust_scale``) by
-    ``m``. A calibration error common to all rotors is not four weak motors. With a healthy
-    baseline flight (``EfficiencyCandidate.baseline``) a rotor must also differ from it by
-    ``BASELINE_TOLERANCE``."""
-    new = [c for c in opt.cands[len(current):] if c.name == MotorEfficiency.name]
-    if not new:
-        return ""
-    if new[0].baseline:
-        rel = new[0].relative(opt.fit.x[list(opt.cands).index(new[0])])
-        if np.max(np.abs(rel - 1.0)) < BASELINE_TOLERANCE:
-            return (f"the rotors match the healthy baseline within {BASELINE_TOLERANCE:.0%} "
-                    f"(eta relative to it {np.round(rel, 3).tolist()})")
-    if any(c.name in COMMON_THRUST for c in opt.cands):
-        return ""
-    common = build_library(rp, (ThrustScale.name,))[0]
-    others = [c for c in opt.cands if c.name != MotorEfficiency.name]
-    init = [x for c, x in zip(opt.cands, opt.fit.x) if c.name != MotorEfficiency.name]
-    eta = np.asarray(opt.fit.x[list(opt.cands).index(new[0])], dtype=float)
-    f = fit(rp, others + [common], sc.divisor, init=init + [np.array([float(np.mean(eta))])])
-    cv = cross_validate(rp, others + [common], sc, None, fl, full=f)
-    if np.sqrt(opt.cv.sse / max(cv.sse, 1e-300)) > 1.0 - m:
-        return ("the rotors do not differ from each other: one thrust factor common to every "
-                f"rotor (thrust_scale {float(f.x[-1][0]):.3g}) fits the held-out data within "
-                f"{m:.0%}; that is a calibration or thrust-curve error, not per-rotor damage")
     return ""
 
 

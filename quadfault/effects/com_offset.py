@@ -108,3 +108,36 @@ class ComOffsetCandidate(Candidate):
 
     def wrench(self, x, inp):
         return None, com_offset_moment(inp.thrust, x)
+
+
+@dataclass(frozen=True)
+class ImbalanceCandidate(Candidate):
+    """The vehicle's own moment imbalance, proportional to the collective thrust: the centre
+    of mass at ``(r_x, r_y)`` [m] (``r x (0, 0, T)``) and a yaw trim ``k_z`` [m] (``M_z = k_z
+    T``: a tilted motor, unequal drag torques). In near-hover it spans the same moments as a
+    per-rotor efficiency pattern (with a common thrust factor, the same four degrees of
+    freedom); only rotor commands that vary relative to each other, or measured rotor speeds,
+    tell the two apart. Not in the library: the diagnosis fits it only as the alternative to
+    ``motor_efficiency`` (over a recording, the moment of the commanded thrust, so the model
+    stays affine beside a thrust factor)."""
+
+    keys: ClassVar[tuple] = (("offset_m", 0, 2), ("yaw_trim_m", 2, 3))
+
+    @classmethod
+    def of(cls, ctx) -> "ImbalanceCandidate":
+        """Bounds as ``com_offset``'s (0.3 arm) and 0.3 yaw-torque coefficients."""
+        b = (0.3 * ctx.arm,) * 2 + (0.3 * ctx.c_yaw,)
+        return cls("imbalance", ("rx [m]", "ry [m]", "kz [m]"), tuple(-v for v in b), b,
+                   (0.0,) * 3, ((0.0,) * 3,), "wrench", affine=True, default=False,
+                   frames=(("offset_m", "body"),))
+
+    def _moment(self, x, thrust):
+        M = np.array(com_offset_moment(thrust, x[:2]), dtype=float)
+        M[..., 2] += float(x[2]) * np.asarray(thrust, dtype=float)
+        return M
+
+    def wrench(self, x, inp):
+        return None, self._moment(x, inp.thrust)
+
+    def wrench_series(self, x, rp, inp):
+        return None, self._moment(x, np.sum(rp.f, axis=1))

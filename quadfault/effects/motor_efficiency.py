@@ -30,7 +30,9 @@ class MotorEfficiency(Compiled):
     order: ClassVar[int] = 2
     identifiability: ClassVar[Identifiability] = Identifiability(
         note="a per-rotor loss shows as the unequal rotor split that keeps the moments "
-             "balanced; a loss common to all rotors is a thrust_scale")
+             "balanced; a loss common to all rotors is a thrust_scale; told from the "
+             "vehicle's own imbalance (CoM offset, yaw trim) only where the rotors' commands "
+             "vary relative to each other, or against flights of the healthy vehicle")
     explanation: ClassVar[str] = ("rotor thrusts are eta_i times the commanded ones "
                                   "(per-rotor thrust loss)")
     equivalent: ClassVar[str] = "thrust"
@@ -58,8 +60,9 @@ class MotorEfficiency(Compiled):
     @classmethod
     def fit_note(cls, params, selected):
         if "baseline_eta" in params:
-            text = (" eta is relative to the healthy baseline flight (baseline_eta) and to "
-                    "the median rotor; eta_flight is this flight's own.")
+            text = (" eta is relative to the healthy vehicle's flights (baseline_eta, their "
+                    "mean over baseline_flights; baseline_spread their flight-to-flight "
+                    "spread) and to the median rotor; eta_flight is this flight's own.")
         else:
             text = (" eta is relative to the median rotor (a factor common to every rotor is "
                     "thrust_scale's or thrust_curve's); one flight cannot tell a weak rotor "
@@ -84,16 +87,48 @@ class MotorEfficiency(Compiled):
                                    absolute=rp.has_rotor and rp.rotor_k_source == "sidecar")
 
 
+#: a rotor departs from the healthy baseline when it is this far from it [-], or this many
+#: flight-to-flight spreads of the healthy flights (when there are several)
+BASELINE_TOLERANCE, BASELINE_Z = 0.05, 3.0
+
+
+def healthy_pattern(flights) -> tuple[tuple, tuple]:
+    """``(eta, spread)`` of the healthy vehicle from the relative rotor efficiencies of one or
+    more of its flights (rows of 4): their geometric mean relative to its median rotor, and
+    per rotor the flight-to-flight standard deviation of ``log eta`` relative to that mean
+    (each flight relative to its own median rotor); ``()`` for one flight."""
+    L = np.log(np.asarray(flights, dtype=float).reshape(-1, 4))
+    mean = L.mean(axis=0)
+    mean -= np.median(mean)
+    if len(L) < 2:
+        return tuple(np.exp(mean).tolist()), ()
+    dev = L - mean
+    dev -= np.median(dev, axis=1, keepdims=True)
+    return tuple(np.exp(mean).tolist()), tuple(np.sqrt(np.sum(dev ** 2, axis=0)
+                                                       / (len(L) - 1)).tolist())
+
+
 @dataclass(frozen=True)
 class EfficiencyCandidate(Candidate):
     """Per-rotor thrust factors ``eta``, reported relative to the median rotor: a factor
     common to every rotor is a calibration (``thrust_scale``, ``thrust_curve``), not damage.
     With ``absolute`` (thrust calibrated independently, e.g. measured rotor speeds with a
-    known thrust coefficient) the fitted factors are also given as ``eta_absolute``."""
+    known thrust coefficient) the fitted factors are also given as ``eta_absolute``. With a
+    ``baseline`` (the healthy vehicle's relative eta, :func:`healthy_pattern` of
+    ``baseline_flights`` flights, with their flight-to-flight ``spread``) ``eta`` is relative
+    to it."""
 
     absolute: bool = False
     baseline: tuple = ()
+    spread: tuple = ()
+    baseline_flights: int = 0
     keys: ClassVar[tuple] = (("eta", 0, 4),)
+
+    def tolerance(self) -> np.ndarray:
+        """How far each rotor may be from the baseline and still match it [-]:
+        ``BASELINE_TOLERANCE``, or ``BASELINE_Z`` flight-to-flight spreads when larger."""
+        spread = np.asarray(self.spread or (0.0,) * 4, dtype=float)
+        return np.maximum(BASELINE_TOLERANCE, BASELINE_Z * spread)
 
     def thrust(self, x, rp, f, t, dt):
         return f * np.asarray(x, dtype=float)[None, :]
@@ -114,6 +149,9 @@ class EfficiencyCandidate(Candidate):
             flight = x / max(float(np.median(x)), 1e-9)
             params["eta_flight"], unc["eta_flight"] = flight.tolist(), (sd * flight / x).tolist()
             params["baseline_eta"] = list(self.baseline)
+            params["baseline_flights"] = int(self.baseline_flights)
+            if self.spread:
+                params["baseline_spread"] = list(self.spread)
         if self.absolute:
             params["eta_absolute"], unc["eta_absolute"] = x.tolist(), sd.tolist()
         return params, unc

@@ -1,0 +1,118 @@
+"""When a per-rotor efficiency pattern is evidence of a weak rotor.
+
+In near-hover a quadrotor's four rotor efficiencies have four degrees of freedom, and the
+vehicle's own build explains each of them as well: one factor common to every rotor (a
+thrust calibration, ``thrust_scale`` / ``thrust_curve``), two that trade roll and pitch
+moment (a centre-of-mass offset ``r`` makes the moment ``r x T``) and one yaw-moment pattern
+(a tilted motor, unequal drag torques: a yaw trim proportional to the thrust). The two
+explanations give different moments only where the rotors' commands vary relative to each
+other (``eta_i f_i`` against ``r x sum f``), or where measured rotor speeds separate them.
+
+So ``motor_efficiency`` (:func:`rotors_differ`) must beat, on the same held-out folds, the
+same model with
+
+1. one factor common to every rotor (``thrust_scale``), by ``min_improvement``: else it is
+   a calibration error, not per-rotor damage;
+2. the vehicle's own imbalance instead (the common factor, a centre-of-mass offset and a yaw
+   trim, :class:`~quadfault.effects.com_offset.ImbalanceCandidate`), by ``min_improvement``
+   overall or ``IMBALANCE_CHANNEL_GAIN`` in one channel: else one flight cannot tell a weak
+   rotor from the vehicle's own imbalance, and the rejection says which rotor looks weakest
+   and by how much.
+
+With flights of the healthy vehicle (``EfficiencyCandidate.baseline``) the baseline holds
+the vehicle's own imbalance, and the imbalance test is not needed: the efficiencies relative
+to it are accepted when a rotor departs from it by more than ``BASELINE_TOLERANCE`` (5 %) and
+by more than ``BASELINE_Z`` (3) times the healthy flights' flight-to-flight spread of that
+rotor (:func:`~quadfault.effects.motor_efficiency.healthy_pattern`; with one healthy flight
+the spread is unknown and 5 % is the only test).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from quadfault.diagnosis.crossval import cross_validate
+from quadfault.diagnosis.fit import fit
+from quadfault.diagnosis.library import EQUIVALENT, build_library, context
+from quadfault.effects.com_offset import ComOffset, ImbalanceCandidate
+from quadfault.effects.motor_efficiency import MotorEfficiency
+from quadfault.effects.thrust_scale import ThrustScale
+
+#: effects that already carry a thrust factor common to every rotor (the thrust class of
+#: effects the data cannot tell apart, but the per-rotor one)
+COMMON_THRUST = tuple(n for n, k in EQUIVALENT.items()
+                      if k == EQUIVALENT[MotorEfficiency.name] and n != MotorEfficiency.name)
+#: held-out gain over the vehicle's imbalance in one channel that also counts [-]
+IMBALANCE_CHANNEL_GAIN = 0.15
+#: what one flight cannot tell (the report's sentence)
+ONE_FLIGHT = ("one flight cannot tell a weak rotor from the vehicle's own imbalance (a "
+              "centre-of-mass offset, a tilted motor); a flight of the healthy vehicle "
+              "(--baseline HEALTHY.json) can")
+
+
+def rotors_differ(rp, sc, opt, current, fl, m) -> str:
+    """Why the option ``opt`` (its candidates, joint ``fit`` and held-out ``cv``) may not
+    accept ``motor_efficiency`` (module docstring), or ""."""
+    new = [c for c in opt.cands[len(current):] if c.name == MotorEfficiency.name]
+    if not new:
+        return ""
+    eff = new[0]
+    eta = np.asarray(opt.fit.x[list(opt.cands).index(eff)], dtype=float)
+    if eff.baseline:
+        rel, tol = eff.relative(eta), eff.tolerance()
+        if np.all(np.abs(rel - 1.0) <= tol):
+            n = eff.baseline_flights
+            return (f"the rotors match the healthy vehicle ({n} flight{'s' * (n != 1)}) within "
+                    f"{_percent(tol)} (eta relative to it {np.round(rel, 3).tolist()})")
+    others = [(c, x) for c, x in zip(opt.cands, opt.fit.x) if c.name != MotorEfficiency.name]
+    has_common = any(c.name in COMMON_THRUST for c, _ in others)
+    common = [] if has_common else [(build_library(rp, (ThrustScale.name,))[0],
+                                     np.array([float(np.mean(eta))]))]
+    if common:
+        cv, f = _held_out(rp, sc, others + common, fl)
+        if np.sqrt(opt.cv.sse / max(cv.sse, 1e-300)) > 1.0 - m:
+            return ("the rotors do not differ from each other: one thrust factor common to "
+                    f"every rotor (thrust_scale {float(f.x[-1][0]):.3g}) fits the held-out "
+                    f"data within {m:.0%}; that is a calibration or thrust-curve error, not "
+                    "per-rotor damage")
+    if eff.baseline:
+        return ""
+    imbalance = ImbalanceCandidate.of(context(rp))
+    terms = [(c, x) for c, x in others if c.name != ComOffset.name] + common
+    cv, f = _held_out(rp, sc, terms + [(imbalance, np.zeros(imbalance.size))], fl)
+    gain, best = _gains(sc, cv, opt.cv)
+    if gain < m and best < IMBALANCE_CHANNEL_GAIN:
+        return imbalance_reason(eff.relative(eta), gain, best, f.x[-1])
+    return ""
+
+
+def _percent(tol) -> str:
+    tol = np.round(100 * np.asarray(tol, dtype=float), 1)
+    if np.all(tol == tol[0]):
+        return f"{tol[0]:g}%"
+    return "[" + ", ".join(f"{v:g}" for v in tol) + "] %"
+
+
+def _held_out(rp, sc, terms, fl):
+    cands = [c for c, _ in terms]
+    f = fit(rp, cands, sc.divisor, init=[np.asarray(x, dtype=float) for _, x in terms])
+    return cross_validate(rp, cands, sc, None, fl, full=f), f
+
+
+def _gains(sc, before, after) -> tuple[float, float]:
+    """Held-out RMS reduction from ``before`` to ``after``: over all channels, and the best
+    single channel."""
+    total = 1.0 - float(np.sqrt(after.sse / max(before.sse, 1e-300)))
+    b, a = sc.channel_sse(before.residual), sc.channel_sse(after.residual)
+    return total, float(np.max(1.0 - np.sqrt(a / np.maximum(b, 1e-300))))
+
+
+def imbalance_reason(rel, gain, best, x_imbalance) -> str:
+    """The rejection of a per-rotor pattern that the vehicle's imbalance explains as well."""
+    rel = np.asarray(rel, dtype=float)
+    k = int(np.argmin(rel))
+    offset = 1000 * float(np.hypot(x_imbalance[0], x_imbalance[1]))
+    return (f"vehicle imbalance: rotor {k + 1} looks weakest ({rel[k]:.2f} of the median "
+            f"rotor), but a centre-of-mass offset of {offset:.1f} mm with a yaw trim explains "
+            f"the data as well (held-out gain of the per-rotor pattern over it {gain:.1%}, "
+            f"best channel {best:.1%}): {ONE_FLIGHT}")
