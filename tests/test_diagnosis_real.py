@@ -85,20 +85,26 @@ def test_crazypad_pad_is_excluded_and_inertia_at_its_bound_is_suspect(tmp_path):
 
 
 @pytest.mark.slow
-def test_crazypad_cut_propeller_against_a_healthy_flight(tmp_path):
-    """One flight shows the airframe's own imbalance as unequal rotors; against a healthy
-    flight of the same airframe (--baseline) the healthy flights flag no rotor and the 3 mm
-    cut propeller's rotor 3 is the weakest."""
+def test_crazypad_cut_propeller_against_healthy_flights(tmp_path):
+    """One flight reports the airframe's own imbalance as that, never as a weak rotor;
+    against healthy flights of the same airframe (--baseline) a healthy flight flags no rotor
+    and the 3 mm cut propeller's rotor 3 is the weakest."""
     folder = "crazypad-cf21-faults/motor_data"
-    healthy = diagnose("crazypad", f"{folder}/normal_flight/E8_log00.csv.gz", tmp_path / "h",
-                       "--effects", "motor_efficiency")
-    base = tmp_path / "h" / "diag.json"
-    assert "one flight cannot tell a weak rotor" in healthy["effects"][0]["explanation"]
+    bases = []
+    for name in ("E8_log00", "E8_log03"):
+        healthy = diagnose("crazypad", f"{folder}/normal_flight/{name}.csv.gz",
+                           tmp_path / name, "--effects", "motor_efficiency")
+        assert not healthy["effects"]
+        imb = next(e for e in healthy["rejected"] if e["name"] == "motor_efficiency")
+        assert imb["reason"].startswith("vehicle imbalance: rotor ")
+        assert "one flight cannot tell a weak rotor" in imb["reason"]
+        bases.append(str(tmp_path / name / "diag.json"))
     other = diagnose("crazypad", f"{folder}/normal_flight/E8_log01.csv.gz", tmp_path / "o",
-                     "--effects", "motor_efficiency", "--baseline", str(base))
+                     "--effects", "motor_efficiency", "--baseline", *bases)
     for e in other["effects"]:
         assert min(e["params"]["eta"]) >= 0.85
     cut = diagnose("crazypad", f"{folder}/cut_propeller_M3_3mm/E8_log01.csv.gz",
-                   tmp_path / "c", "--effects", "motor_efficiency", "--baseline", str(base))
+                   tmp_path / "c", "--effects", "motor_efficiency", "--baseline", *bases)
     eta = cut["effects"][0]["params"]["eta"]
     assert int(np.argmin(eta)) == 2 and eta[2] < 0.9
+    assert cut["effects"][0]["params"]["baseline_flights"] == 2

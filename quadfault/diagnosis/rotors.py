@@ -14,7 +14,7 @@ same model with
 1. one factor common to every rotor (``thrust_scale``), by ``min_improvement``: else it is
    a calibration error, not per-rotor damage;
 2. the vehicle's own imbalance instead (the common factor, a centre-of-mass offset and a yaw
-   trim, :class:`~quadfault.effects.com_offset.ImbalanceCandidate`), by ``min_improvement``
+   trim, ``com_offset``), by ``min_improvement``
    overall or ``IMBALANCE_CHANNEL_GAIN`` in one channel: else one flight cannot tell a weak
    rotor from the vehicle's own imbalance, and the rejection says which rotor looks weakest
    and by how much.
@@ -33,8 +33,8 @@ import numpy as np
 
 from quadfault.diagnosis.crossval import cross_validate
 from quadfault.diagnosis.fit import fit
-from quadfault.diagnosis.library import EQUIVALENT, build_library, context
-from quadfault.effects.com_offset import ComOffset, ImbalanceCandidate
+from quadfault.diagnosis.library import EQUIVALENT, build_library
+from quadfault.effects.com_offset import ComOffset
 from quadfault.effects.motor_efficiency import MotorEfficiency
 from quadfault.effects.thrust_scale import ThrustScale
 
@@ -77,12 +77,14 @@ def rotors_differ(rp, sc, opt, current, fl, m) -> str:
                     "per-rotor damage")
     if eff.baseline:
         return ""
-    imbalance = ImbalanceCandidate.of(context(rp))
-    terms = [(c, x) for c, x in others if c.name != ComOffset.name] + common
-    cv, f = _held_out(rp, sc, terms + [(imbalance, np.zeros(imbalance.size))], fl)
+    if not any(c.name == ComOffset.name for c, _ in others):
+        imbalance = build_library(rp, (ComOffset.name,))[0]
+        others = others + [(imbalance, np.zeros(imbalance.size))]
+    cv, f = _held_out(rp, sc, others + common, fl)
     gain, best = _gains(sc, cv, opt.cv)
     if gain < m and best < IMBALANCE_CHANNEL_GAIN:
-        return imbalance_reason(eff.relative(eta), gain, best, f.x[-1])
+        x_imb = f.x[[c.name for c in f.candidates].index(ComOffset.name)]
+        return imbalance_reason(eff.relative(eta), gain, best, x_imb)
     return ""
 
 

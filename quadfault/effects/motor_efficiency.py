@@ -63,6 +63,9 @@ class MotorEfficiency(Compiled):
             text = (" eta is relative to the healthy vehicle's flights (baseline_eta, their "
                     "mean over baseline_flights; baseline_spread their flight-to-flight "
                     "spread) and to the median rotor; eta_flight is this flight's own.")
+            if params.get("baseline_flights") == 1:
+                text += (" With one healthy flight the flight-to-flight spread is unknown "
+                         "(--baseline takes several).")
         else:
             text = (" eta is relative to the median rotor (a factor common to every rotor is "
                     "thrust_scale's or thrust_curve's); one flight cannot tell a weak rotor "
