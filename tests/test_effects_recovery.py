@@ -137,7 +137,7 @@ def test_simulate_model_round_trip_finds_the_same_parameters(tmp_path):
               "--quiet"]
     first = tmp_path / "first.csv"
     assert main(["simulate", *common, "--seed", "1", "--out", str(first), "--effect",
-                 "motor_efficiency=1,0.85,1,1", "--effect", "blade_flapping=0.04,0.006",
+                 "motor_efficiency=1,0.75,1,1", "--effect", "blade_flapping=0.04,0.006",
                  "--effect", "rate_damping=0.1"]) == 0
     d1 = diagnose(read_recording(first), tmp_path, name="d1")
     assert {e["name"] for e in d1["effects"]} == {"motor_efficiency", "blade_flapping",
