@@ -135,7 +135,9 @@ def curve(run_dir: Path, full_length: int) -> dict:
     data = np.load(run_dir / "evaluations.npz")
     return {"timesteps": data["timesteps"].tolist(),
             "return": data["results"].mean(axis=1).tolist(),
-            "crash_rate": (data["ep_lengths"] < full_length).mean(axis=1).tolist()}
+            "crash_rate": (data["ep_lengths"] < full_length).mean(axis=1).tolist(),
+            "base_return": (float(data["baseline_results"].mean())
+                            if "baseline_results" in data.files else None)}
 
 
 def steps_to(c: dict, target: float) -> float:
@@ -173,24 +175,29 @@ def run_arm(task: str, arm: str, args, test_seeds) -> dict:
     return runs
 
 
-def summarise(arms: dict) -> tuple[dict, dict]:
-    """Per arm: mean and 95 % interval over seeds of the per-seed mean scores; per arm vs
+def summarise(arms: dict, references: dict) -> tuple[dict, dict, dict]:
+    """Per arm: mean and 95 % interval over seeds of the per-seed mean scores. Per arm vs
     :data:`REFERENCE_ARM`: the same of the per-seed paired differences (arm minus reference,
-    episode by episode)."""
+    episode by episode). Per arm vs its own base (the zero-residual controller with the same
+    estimator, on the same test episodes): what the learned residual adds."""
     keys = ("crashed", "rmse", "return")
-    summary, paired = {}, {}
+    summary, paired, vs_base = {}, {}, {}
     for arm, runs in arms.items():
         summary[arm] = {k: t_interval([np.nanmean(r[k]) for r in runs.values()]) for k in keys}
         steps = [r["steps_to_crash_target"] for r in runs.values()]
         summary[arm]["steps_to_crash_target"] = {"per_seed": steps,
                                                  "reached": sum(s is not None for s in steps)}
+        base = references.get(f"base_{ARMS[arm][0]}")
+        if base is not None:
+            vs_base[arm] = {k: t_interval([np.nanmean(np.subtract(r[k], base[k]))
+                                           for r in runs.values()]) for k in keys}
     ref = arms.get(REFERENCE_ARM)
     for arm, runs in arms.items():
         if ref is None or arm == REFERENCE_ARM:
             continue
         paired[arm] = {k: t_interval([np.nanmean(np.subtract(runs[s][k], ref[s][k]))
                                       for s in runs if s in ref]) for k in keys}
-    return summary, paired
+    return summary, paired, vs_base
 
 
 def plot(results: dict, path: Path) -> None:
@@ -206,15 +213,20 @@ def plot(results: dict, path: Path) -> None:
         a1 = fig.add_subplot(len(tasks), 2, 2 * row + 1)
         a2 = fig.add_subplot(len(tasks), 2, 2 * row + 2)
         res = results["tasks"][task]
-        for arm, runs in res["arms"].items():
+        for j, (arm, runs) in enumerate(res["arms"].items()):
             curves = [r["curve"] for r in runs.values()]
             n = min(len(c["timesteps"]) for c in curves)
             ts = curves[0]["timesteps"][:n]
-            a1.plot(ts, np.mean([c["crash_rate"][:n] for c in curves], axis=0), marker=".",
-                    label=arm)
+            colour = f"C{j}"
+            a1.plot(ts, np.mean([c["return"][:n] for c in curves], axis=0), marker=".",
+                    color=colour, label=arm)
+            base = [c.get("base_return") for c in curves]
+            if all(b is not None for b in base):
+                a1.axhline(float(np.mean(base)), color=colour, ls="--", lw=0.8)
         a1.set_xlabel("environment steps")
-        a1.set_ylabel("crash rate, tuning episodes")
-        a1.set_title(f"{task}: learning curves (mean of {len(args_seeds(res))} seeds)")
+        a1.set_ylabel("mean return, tuning episodes")
+        a1.set_title(f"{task}: learning curves (mean of {len(args_seeds(res))} seeds; "
+                     "dashed: the arm's zero-residual base)", fontsize=9)
         a1.grid(alpha=0.3)
         a1.legend(fontsize=7)
         names = list(res["summary"])
@@ -271,7 +283,12 @@ def main(argv=None) -> int:
                     help="episode length [s] (default: the task's; shorter only for tests)")
     ap.add_argument("--out", default="runs/estimate_study")
     ap.add_argument("--retrain", action="store_true")
+    ap.add_argument("--replot", action="store_true",
+                    help="only recompute the summaries and the plot of OUT/study.json")
     args = ap.parse_args(argv)
+    if args.replot:
+        return replot(Path(args.out))
+    cpu0 = time.process_time()
     preset = QUICK if args.quick else FULL
     tasks = args.tasks or preset.get("tasks", list(TASKS))
     args.timesteps = args.timesteps or preset["timesteps"]
@@ -281,8 +298,6 @@ def main(argv=None) -> int:
     import gymnasium as gym
 
     import quad_fault_env  # noqa: F401  (registers the ids)
-    from quadfault.fileio import atomic_write_text
-
     out = Path(args.out)
     seed_arg = args.seeds
     results = {"design": {"arms": {a: {"estimator": e, "frame_stack": k}
@@ -312,24 +327,59 @@ def main(argv=None) -> int:
             env = gym.make(TASKS[task]["env_id"], **env_kwargs(task, arm, args))
             references[f"base_{est}"] = fly(None, env, test_seeds)
             env.close()
-        summary, paired = summarise(arms)
         results["tasks"][task] = {"env_id": TASKS[task]["env_id"],
                                   "env_kwargs": TASKS[task]["env_kwargs"],
                                   "seeds": args.seeds, "episode_seeds": test_seeds,
-                                  "arms": arms, "references": references,
-                                  "summary": summary, f"paired_vs_{REFERENCE_ARM}": paired}
+                                  "arms": arms, "references": references}
+    results["cpu_s"] = time.process_time() - cpu0
+    finish(results, out, args.crash_target)
+    return 0
+
+
+def finish(results: dict, out: Path, crash_target: float) -> None:
+    """Summarise every task of ``results``, print the summaries, write ``study.json`` and
+    ``study.png`` into ``out``."""
+    from quadfault.fileio import atomic_write_text
+
+    for task, res in results["tasks"].items():
+        summary, paired, vs_base = summarise(res["arms"], res["references"])
+        res.update({"summary": summary, f"paired_vs_{REFERENCE_ARM}": paired,
+                    "paired_vs_base": vs_base})
+        print(f"{task} (mean and 95 % interval over seeds; 'vs base': the arm minus its "
+              "zero-residual base, paired by episode)")
         for arm, s in summary.items():
             line = ", ".join(f"{k} {m:.3f} +/- {h:.3f}" for k, (m, h) in
                              ((k, s[k]) for k in ("crashed", "rmse", "return")))
-            print(f"  {arm}: {line}; steps to crash rate <= {args.crash_target}: "
+            b = vs_base.get(arm)
+            extra = (f"; vs base: rmse {b['rmse'][0]:+.4f} +/- {b['rmse'][1]:.4f}, return "
+                     f"{b['return'][0]:+.1f} +/- {b['return'][1]:.1f}" if b else "")
+            print(f"  {arm}: {line}{extra}; steps to crash rate <= {crash_target}: "
                   f"{s['steps_to_crash_target']['per_seed']}")
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "study.json", json.dumps(_json(results), indent=1,
                                                           allow_nan=False), force=True)
     plot(results, out / "study.png")
+    if results.get("cpu_s") is not None:
+        print(f"CPU time of the whole study (this process): {results['cpu_s'] / 60:.1f} min")
     print(f"-> {out / 'study.json'}, {out / 'study.png'}")
-    return 0
 
+
+def replot(out: Path) -> int:
+    """Recompute the summaries and the plot of ``OUT/study.json`` without flying anything (the
+    learning curves' base returns are read from the run folders where they are present)."""
+    path = out / "study.json"
+    if not path.is_file():
+        print(f"estimate_study: no {path} to replot", file=sys.stderr)
+        return 2
+    results = json.loads(path.read_text())
+    for task, res in results["tasks"].items():
+        for arm, runs in res["arms"].items():
+            for seed, r in runs.items():
+                npz = out / task / arm / f"seed_{seed}" / "evaluations.npz"
+                if npz.is_file() and "baseline_results" in np.load(npz).files:
+                    r["curve"]["base_return"] = float(np.load(npz)["baseline_results"].mean())
+    finish(results, out, results["design"]["crash_target"])
+    return 0
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -35,6 +35,19 @@ def test_every_arm_trains_and_flies_the_same_episodes(tmp_path):
     for arm, s in task["summary"].items():
         assert 0 <= s["crashed"][0] <= 1 and s["rmse"][0] > 0
     assert set(task["paired_vs_mlp_none"]) == set(estimate_study.ARMS) - {"mlp_none"}
+    # every arm is also paired with its own zero-residual base on the same episodes
+    assert set(task["paired_vs_base"]) == set(estimate_study.ARMS)
+    base = task["references"]["base_irls"]
+    irls = next(iter(task["arms"]["mlp_irls"].values()))
+    assert task["paired_vs_base"]["mlp_irls"]["return"][0] == pytest.approx(
+        sum(a - b for a, b in zip(irls["return"], base["return"])) / len(base["return"]))
+    assert result["cpu_s"] > 0
+    # --replot redraws from study.json alone, with the bases' returns on the learning curves
+    (out / "study.png").unlink()
+    assert estimate_study.main(["--replot", "--out", str(out)]) == 0
+    assert (out / "study.png").stat().st_size > 0
+    replotted = json.loads((out / "study.json").read_text())["tasks"]["rotor_loss"]
+    assert replotted["paired_vs_base"] == task["paired_vs_base"]
     # the memory arm saw stacked observations; the oracle arm the true efficiency
     cfg = json.loads((out / "rotor_loss" / "memory_none" / "seed_0" / "train_config.json")
                      .read_text())
