@@ -197,9 +197,9 @@ def _tuples(C, V, i):
 
 
 @jit
-def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx, memory=None):
-    """Steps ``k0 .. k1-1`` of vehicle ``i`` (see the module docstring), drawing from
-    ``gen``; ``C`` the :class:`LoopConstants`, ``K`` the controller's
+def fly_vehicle(i, gens, k0, k1, measure_first, C, K, V, T, out, fx, memory):
+    """Steps ``k0 .. k1-1`` of vehicle ``i`` (see the module docstring), drawing from its
+    generator ``gens[i]`` (a :func:`generators` list); ``C`` the :class:`LoopConstants`, ``K`` the controller's
     :class:`~quadfault.controller.ControllerConstants` of the controller in the loop (None: the
     caller sets ``V.f_cmd``), ``V`` the :class:`Vehicles` (updated), ``T``
     the :class:`Tables`, ``out`` the :class:`Records`, ``fx`` the effects (None: none; the
@@ -207,7 +207,11 @@ def fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, fx, memory=None)
     With ``measure_first`` False the first step uses the carried measurement ``V.m*[i]``.
     ``memory`` (``V.memory``) flies the authors' Euler step (``C.reference``), None RKMK4
     (the branch not taken is compiled out). Returns the number of steps run: it stops after
-    the first step whose state is not finite."""
+    the first step whose state is not finite.
+
+    The one entry point of the loop: :func:`fly` calls it, and the batch's loops call it with
+    the same argument types, so that one vehicle and a batch share its compiled form."""
+    gen = gens[i]
     p, v, R, w = vec3(V.p[i]), vec3(V.v[i]), mat3(V.R[i]), vec3(V.w[i])
     mp, mv, mR, mw = vec3(V.mp[i]), vec3(V.mv[i]), mat3(V.mR[i]), vec3(V.mw[i])
     f_cmd, f, sigma, f_max = V.f_cmd[i], V.f[i], V.sigma[i], V.f_max[i]
@@ -276,16 +280,16 @@ def _fly_parallel(gens, active, k0, n_steps, measure_first, C, K, V, T, out, fx,
     for r in prange(active.shape[0]):
         i = np.int64(r)  # the same specialisation of fly_vehicle as the serial loop's
         if active[i]:
-            done[i] = fly_vehicle(i, gens[i], k0[i], k0[i] + n_steps, measure_first, C, K, V,
-                                  T, out, fx)
+            done[i] = fly_vehicle(i, gens, k0[i], k0[i] + n_steps, measure_first, C, K, V, T,
+                                  out, fx, None)
 
 
 @jit
 def _fly_serial(gens, active, k0, n_steps, measure_first, C, K, V, T, out, fx, done):
     for i in range(active.shape[0]):
         if active[i]:
-            done[i] = fly_vehicle(i, gens[i], k0[i], k0[i] + n_steps, measure_first, C, K, V,
-                                  T, out, fx)
+            done[i] = fly_vehicle(i, gens, k0[i], k0[i] + n_steps, measure_first, C, K, V, T,
+                                  out, fx, None)
 
 
 @jit
@@ -308,11 +312,6 @@ def _sense_rows(gens, rows, C, V):
 #: below this many vehicles the batch runs on the calling thread (a parallel launch costs
 #: more than it saves for a handful of vehicles)
 PARALLEL_MIN_VEHICLES = 64
-
-
-@jit
-def _fly_one(gens, i, k0, k1, measure_first, C, K, V, T, out, fx, memory):
-    return fly_vehicle(i, gens[i], k0, k1, measure_first, C, K, V, T, out, fx, memory)
 
 
 def _call_step(fx, i, f, t, dt, p, v, R, w, gen):
@@ -351,20 +350,18 @@ def fly(gens, k0: int, k1: int, measure_first: bool, C: LoopConstants, V: Vehicl
         out: Records, hook=None, K: ControllerConstants | None = None, i: int = 0) -> int:
     """:func:`fly_vehicle` for vehicle ``i`` with its generator ``gens[i]`` (a
     :func:`generators` list, cheap to pass per call) or ``gens`` itself (a
-    ``numpy.random.Generator``); ``K``: the controller in the loop, every ``C.decimation``
+    ``numpy.random.Generator``, put in such a list on each call); ``K``: the controller in the loop, every ``C.decimation``
     steps (None: the commands in ``V.f_cmd`` are held). ``hook``: the plant's effects
     (:attr:`quadfault.plant.Plant.hook`) -- compiled rows, or a hook of effects written in
     Python, with which the loop runs interpreted (see :mod:`quadfault.plant`)."""
     if K is not None and C.decimation < 1:
         raise ConfigError(f"a controller in the loop needs a decimation >= 1, got {C.decimation}")
-    gen = gens if isinstance(gens, np.random.Generator) else None
     memory = V.memory if C.reference else None
-    if hook is not None and not isinstance(hook, EffectRows):
-        gen = gens[i] if gen is None else gen
-        return _interpreted()(i, gen, k0, k1, measure_first, C, K, V, T, out, hook, memory)
-    if gen is not None:  # a Generator: ~10 us per call to pass (fine for long calls)
-        return fly_vehicle(i, gen, k0, k1, measure_first, C, K, V, T, out, hook, memory)
-    return _fly_one(gens, i, k0, k1, measure_first, C, K, V, T, out, hook, memory)
+    interpreted = hook is not None and not isinstance(hook, EffectRows)
+    if isinstance(gens, np.random.Generator):  # vehicle i's own: in the list the loop takes
+        gens = [gens] * (i + 1) if interpreted else generators([gens] * (i + 1))
+    kernel = _interpreted() if interpreted else fly_vehicle
+    return kernel(i, gens, k0, k1, measure_first, C, K, V, T, out, hook, memory)
 
 
 def fly_batch(gens, active: np.ndarray, k0: np.ndarray, n_steps: int, measure_first: bool,

@@ -243,8 +243,9 @@ class Flight:
         self.k[:] = 0
         if self._nominal:
             self._nominal_tables(1)
-        closed_loop.fly(self._rngs[0], 0, 1, True, C, V, self._tables, self._none,
-                        self.plant.hook, self._K)
+        gens = self._gens if self._gens is not None else self._generators()
+        closed_loop.fly(gens, 0, 1, True, C, V, self._tables, self._none, self.plant.hook,
+                        self._K)
         self.k[:] = k
 
     def sense(self, rows=None, *, noise: bool = True) -> None:
