@@ -21,7 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from quadfault.jit import jit
+from quadfault.jit import jit, python
 from quadfault.rotation import (
     cross3,
     dot3,
@@ -279,6 +279,12 @@ def _feedforward_rows(acc, b1d, h, K, R_d, w_d, w_dot_d):
         store3(w_dot_d[i], wdd)
 
 
+#: from this many times on, :meth:`GeometricController.feedforward` runs its kernel over whole
+#: arrays in numpy (as fast as the compiled kernel there; a flight's table of references is
+#: made without compiling it)
+FEEDFORWARD_ARRAY_ROWS = 64
+
+
 class GeometricController:
     """The SE(3) tracking controller; the array methods work on a leading batch axis too.
 
@@ -311,18 +317,32 @@ class GeometricController:
                 arr(veh.allocation_inverse))
         return self._constants
 
-    def feedforward(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def feedforward(self, t, compiled: bool | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The feed-forward attitude R_d (the reference alone: ``f_n = m g e3 - m a_d``) and
-        its rates Omega_d [rad/s], Omega_d' [rad/s^2] at ``t`` (:func:`feedforward_rates3`)."""
+        its rates Omega_d [rad/s], Omega_d' [rad/s^2] at ``t`` (:func:`feedforward_rates3`).
+
+        ``compiled``: run the compiled kernel (True) or the same kernel over whole arrays in
+        numpy (False: the same numbers, nothing to compile; about 0.5 ms per call); None:
+        numpy from :data:`FEEDFORWARD_ARRAY_ROWS` times on (as fast as compiled there)."""
         h = self.config.ff_step
         t = np.asarray(t, dtype=float)
         ref = self.trajectory(np.stack((t - h, t, t + h), axis=-1))
-        acc = np.ascontiguousarray(np.asarray(ref.acceleration, float).reshape(-1, 3, 3))
-        b1d = np.ascontiguousarray(np.asarray(ref.b1d, float).reshape(-1, 3, 3))
-        R_d, w_d, w_dot_d = np.empty((len(acc), 3, 3)), np.empty((len(acc), 3)), \
-            np.empty((len(acc), 3))
-        _feedforward_rows(acc, b1d, float(h), self.constants, R_d, w_d, w_dot_d)
+        acc = np.asarray(ref.acceleration, float).reshape(-1, 3, 3)
+        b1d = np.asarray(ref.b1d, float).reshape(-1, 3, 3)
         shape = np.shape(ref.acceleration)[:-2]
+        if compiled or (compiled is None and len(acc) < FEEDFORWARD_ARRAY_ROWS):
+            acc, b1d = np.ascontiguousarray(acc), np.ascontiguousarray(b1d)
+            R_d, w_d, w_dot_d = (np.empty((len(acc), 3, 3)), np.empty((len(acc), 3)),
+                                 np.empty((len(acc), 3)))
+            _feedforward_rows(acc, b1d, float(h), self.constants, R_d, w_d, w_dot_d)
+            return (R_d.reshape(shape + (3, 3)), w_d.reshape(shape + (3,)),
+                    w_dot_d.reshape(shape + (3,)))
+        columns = [tuple(tuple(x[:, j, c] for c in range(3)) for j in range(3))
+                   for x in (acc, b1d)]
+        gains, nominal = python(controller_tuples)(self.constants)
+        R_d, w_d, w_dot_d = (np.stack(np.broadcast_arrays(*x), -1) for x in python(
+            feedforward_rates3, {"math": np})(*columns, float(h), gains, nominal))
         return (R_d.reshape(shape + (3, 3)), w_d.reshape(shape + (3,)),
                 w_dot_d.reshape(shape + (3,)))
 

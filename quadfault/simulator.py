@@ -97,7 +97,7 @@ def initial_state(scenario: Scenario, t0: float = 0.0,
     p, v = np.array(ref.position, float), np.array(ref.velocity, float)
     if controller is None:
         return RigidBodyState(p, v, np.eye(3), np.zeros(3))
-    Rd, w, _ = controller.feedforward(t0)
+    Rd, w, _ = controller.feedforward(t0, compiled=False)  # once: not worth compiling
     if not controller.config.angular_feedforward:
         w = np.zeros(np.shape(w))
     return RigidBodyState(p, v, Rd, np.array(w, float))
