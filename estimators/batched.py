@@ -48,7 +48,6 @@ from estimators.irls import (
     IRLSConfig,
     IRLSState,
     irls_parameters,
-    irls_reset,
     irls_step,
     named_pieces,
     state_views,
@@ -130,7 +129,7 @@ class BatchedIRLS:
         rows = reset_rows(self.num, mask)
         n = self.vehicle.n_rotors
         eta = batch_eta0(np.ones(n) if eta0 is None else eta0, self.num, n)
-        irls_reset(eta, self._ip, self._state.floats, self._state.ints, rows)
+        self._state.reset(rows, eta[rows])
 
     def update(self, t, p, v, R, w, f) -> BatchedEstimate:
         """Add one sample per vehicle; returns the estimates of the windows ending at them."""

@@ -166,6 +166,20 @@ class IRLSState(FlatState):
         super().__init__(FLOATS.shapes(m=m, n=n, L=L), num, COUNTERS.size + rounds,
                          FLOATS.pieces)
 
+    def reset(self, rows: np.ndarray, eta0: np.ndarray) -> None:
+        """Forget everything of the estimators ``rows`` (int64); start them from ``eta0``
+        (len(rows), n): their estimate, reported estimate and the completion's history. (A
+        few numpy writes per reset: nothing to compile for it.)"""
+        self.ints[rows] = 0
+        for view in self.views:
+            view[rows] = 0.0
+        V = self.views
+        V.vn[rows, VN_ROWS.eta] = eta0
+        V.vn[rows, VN_ROWS.out] = eta0
+        V.vn[rows, VN_ROWS.sd] = np.nan
+        V.bh[rows, BH_ROWS.history] = eta0[:, None, :]
+        self.ints[rows, COUNTERS.median_fresh] = 1
+
 
 def irls_parameters(vehicle: Vehicle, cfg: IRLSConfig, offsets: np.ndarray):
     """``(const, fp, ip)`` of :func:`irls_update`: the vehicle constants, the float and the
@@ -315,31 +329,6 @@ def irls_update(t, p, v, R, w, f, const, fp, ip, fs, ks, hist):
 
 
 @jit
-def irls_reset(eta0, ip, fs, ks, rows) -> None:
-    """Forget everything of the estimators ``rows``; start them from ``eta0`` (N, n)."""
-    N = ks.shape[0]
-    S = state_pieces(fs, ip, N)
-    n = ip[INT_SETTINGS.n]
-    o = ip[INT_SETTINGS.offsets:]
-    for i in rows:
-        for k in range(ks.shape[1]):
-            ks[i, k] = 0
-        for k in range(o.shape[0] - 1):  # every piece
-            row = piece_rows(fs, o[k], o[k + 1], N)[i]
-            for a in range(row.shape[0]):
-                row[a] = 0.0
-        VN, history_ = S.vn[i], S.bh[i, BH_ROWS.history]
-        eta, out, sd = VN[VN_ROWS.eta], VN[VN_ROWS.out], VN[VN_ROWS.sd]
-        for j in range(n):
-            eta[j] = eta0[i, j]
-            out[j] = eta0[i, j]
-            sd[j] = np.nan
-            for s in range(history_.shape[0]):
-                history_[s, j] = eta0[i, j]
-        ks[i, COUNTERS.median_fresh] = 1
-
-
-@jit
 def irls_run(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, eta, sd, code):
     """:func:`irls_step` over the rows of a recording (a single estimator's state): the
     reported estimate, its sd (NaN until a window is solved) and the status code of every
@@ -394,7 +383,7 @@ class SlidingWindowIRLS:
             eta = np.array(eta0, dtype=float).reshape(-1)
             if eta.shape != (n,) or not np.all(np.isfinite(eta)):
                 raise ConfigError(f"eta0 must be {n} finite numbers, got {eta0!r}")
-        irls_reset(eta[None], self._ip, self._state.floats, self._state.ints, _ROW0)
+        self._state.reset(_ROW0, eta[None])
 
     @property
     def eta(self) -> np.ndarray:
