@@ -91,6 +91,22 @@ def test_controller_kernel_equals_the_readable_form(config):
         np.testing.assert_array_equal(batch.moment[i], one.moment)
 
 
+@pytest.mark.parametrize("config", [ControllerConfig(), ControllerConfig.reference(),
+                                    ControllerConfig(acceleration_feedforward=False,
+                                                     normalize_b2d=False)])
+def test_feedforward_over_arrays_equals_the_compiled_kernel(config):
+    ctrl = GeometricController(Vehicle(), named_scenario("lissajous").trajectory, config)
+    for t in (0.3, np.linspace(0.0, 20.0, 7), np.linspace(0.0, 20.0, 200).reshape(4, 50)):
+        compiled, arrays = ctrl.feedforward(t, compiled=True), ctrl.feedforward(t, compiled=False)
+        for a, b in zip(compiled, arrays):
+            assert a.shape == b.shape == np.shape(t) + a.shape[np.ndim(t):]
+            np.testing.assert_array_equal(a, b)
+    # a flight's table (many times) takes the numpy form by default
+    t = np.linspace(0.0, 20.0, 500)
+    for a, b in zip(ctrl.feedforward(t), ctrl.feedforward(t, compiled=True)):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_sensor_kernel_draws_p_v_attitude_w_then_the_accelerometer():
     rng = np.random.default_rng(4)
     noise = SensorNoise(0.1, 0.2, 0.03, 0.4, 0.5)
