@@ -111,30 +111,22 @@ class ObservationLayout:
         batch = R.shape[:-2]
         raw = {"pos_err": pos_err, "vel_err": vel_err, "omega": omega, "eta_hat": eta_hat,
                "eta_sd": SD_MAX if eta_sd is None else eta_sd, "ref_acc": ref_acc}
-        rows = int(np.prod(batch, dtype=np.int64))
-        out = np.empty((rows, self.size), dtype=np.float32)
-        R = R.reshape(rows, 3, 3)
+        parts = []
         for s in self.slots:
-            sl = self._slices[s.name]
-            if s.name == "rot6":  # the first two columns of R
-                for c in range(2):
-                    part = slice(sl.start + 3 * c, sl.start + 3 * c + 3)
-                    _bound_rows(R[:, :, c], self._low[part], self._high[part],
-                                self._fill[part], out[:, part])
+            if s.name == "rot6":
+                parts += [R[..., :, 0], R[..., :, 1]]
                 continue
             x = np.asarray(raw[s.name], dtype=float)
-            if x.shape != batch + (s.size,):
-                x = np.broadcast_to(x, batch + (s.size,))
-            _bound_rows(x.reshape(rows, s.size), self._low[sl], self._high[sl],
-                        self._fill[sl], out[:, sl])
-        return out.reshape(batch + (self.size,))
+            parts.append(x if x.shape == batch + (s.size,) else
+                         np.broadcast_to(x, batch + (s.size,)))
+        return self._bounded(np.concatenate(parts, axis=-1))
 
     def _bounded(self, x: np.ndarray, where=None) -> np.ndarray:
         """``x`` (elements ``where`` of the flat layout; all by default) with NaN -> fill,
         clipped, float32."""
-        sl = where if where is not None else slice(None)
-        low, high, fill = (np.ascontiguousarray(a[sl]) for a in (self._low, self._high,
-                                                                 self._fill))
+        low, high, fill = self._low, self._high, self._fill
+        if where is not None:
+            low, high, fill = (np.ascontiguousarray(a[where]) for a in (low, high, fill))
         x = np.asarray(x, dtype=float)
         x = np.broadcast_to(x, x.shape[:-1] + low.shape) if x.shape[-1:] != low.shape else x
         out = np.empty(x.shape, dtype=np.float32)
