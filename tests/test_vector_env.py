@@ -275,10 +275,12 @@ def test_reset_options_and_seed_lists():
         vec.reset(seed=0, options={"scenario": 42})
 
 
-def test_time_tables_equal_the_functions_of_time():
+@pytest.mark.parametrize("feedforward", [True, False])
+def test_time_tables_equal_the_functions_of_time(feedforward):
     """RowTimeTables: the reference, the feed-forward rates and the efficiency of each row at
     its window's step boundaries / substeps, for rows with their own trajectories, shared ones
-    and different window starts; refilled when a row leaves its window or is invalidated."""
+    and different window starts; refilled when a row leaves its window or is invalidated.
+    Without ``feedforward`` (no controller in the step) only p, v, a are tabulated."""
     from quad_fault_env.time_tables import WINDOW, RowTimeTables
     from quadfault.controller import GeometricController
     from quadfault.scenarios import random_scenario
@@ -290,7 +292,7 @@ def test_time_tables_equal_the_functions_of_time():
     sched_key = np.array([0, 1, 2, 2])
     trajs, scheds = [s.trajectory for s in scs], [s.efficiency for s in scs]
     vehicle, cfg, S, dt = Vehicle(), ControllerConfig(), 10, 1e-3
-    tables = RowTimeTables(4, S, dt, vehicle, cfg)
+    tables = RowTimeTables(4, S, dt, vehicle, cfg, feedforward=feedforward)
     for k in (np.array([0, 0, 7, 3]), np.array([5, 15, 7, 20])):
         tables.ensure(k, traj_key, sched_key, trajs, scheds, WINDOW - 1)
         assert np.all((k - tables.k0 >= 0) & (k - tables.k0 < WINDOW))
@@ -300,8 +302,11 @@ def test_time_tables_equal_the_functions_of_time():
                 t = float(step[i] * S * dt)
                 want = trajs[traj_key[i]](t)
                 ff = GeometricController(vehicle, trajs[traj_key[i]], cfg).feedforward_rates(t)
-                for r, x in enumerate(tuple(want) + tuple(ff)):
+                rows = tuple(want) + tuple(ff)
+                for r, x in enumerate(rows if feedforward else rows[:3]):
                     np.testing.assert_allclose(refs[i, r], x, rtol=0, atol=1e-9)
+                if not feedforward:
+                    assert np.all(refs[i, 3:] == 0.0)
                 ts = (min(step[i], k[i]) * S + np.arange(S + 1)) * dt
                 np.testing.assert_allclose(eta[i], scheds[sched_key[i]](ts), rtol=0, atol=1e-12)
     tables.invalidate([1])
