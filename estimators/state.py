@@ -107,16 +107,18 @@ class FlatState:
         self.views = pieces(views) if pieces is tuple else pieces(*views)
 
 
-@jit
+@jit(inline="always")
 def piece_rows(fs, a, b, N):
     """The piece ``fs[a:b]`` of the float state of ``N`` estimators, one row each (N, size)."""
     return fs[a:b].reshape((N, (b - a) // N))
 
 
-@jit
+@jit(inline="always")
 def piece(fs, offsets, k, shape):
     """Piece ``k`` of the float state (``offsets`` its start offsets) as an array of ``shape``
-    (leading axis: the estimators), in one reshape."""
+    (leading axis: the estimators), in one reshape. (Inlined, as :func:`piece_rows`: each
+    caller's shapes -- tuples of different lengths and constants -- would otherwise compile a
+    specialisation of their own.)"""
     return fs[offsets[k]:offsets[k + 1]].reshape(shape)
 
 
