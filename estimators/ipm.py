@@ -149,10 +149,12 @@ def ipm_into(H, q, lo, hi, x, settings, max_iter, W, L, hist):
     return _ipm_steps(H, q, lo, hi, x, settings, max_iter, W, L, hist, n)
 
 
-@jit(inline="always")
+@jit
 def _ipm_steps(H, q, lo, hi, x, settings, max_iter, W, L, hist, n):
     """:func:`ipm_into` for ``n`` unknowns (its loops' length; a constant lets the compiler
-    unroll them)."""
+    unroll them). A call, not inlined: numba compiles it once per type of ``n`` (the literal
+    4 and int64); inlined twice into :func:`ipm_into`, the copies of its IR cost about a
+    CPU-second more to compile, with the same machine code."""
     mu, alpha = settings[SETTINGS.mu], settings[SETTINGS.alpha]
     beta, step_fraction = settings[SETTINGS.beta], settings[SETTINGS.step_fraction]
     bt_eps, min_step = settings[SETTINGS.backtrack_eps], settings[SETTINGS.min_step]
