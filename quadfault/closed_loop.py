@@ -62,7 +62,7 @@ from quadfault.dynamics import (
     specific_force3,
     translational_acceleration3,
 )
-from quadfault.effects.chain import NO_TERMS, EffectRows, has_wrench, step_effects
+from quadfault.effects.chain import EffectRows, has_wrench, step_effects
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange, python, typed_list
 from quadfault.motors import motor_thrust
@@ -233,10 +233,9 @@ def fly_vehicle(i, gens, k0, k1, measure_first, C, K, V, T, out, fx, memory):
                 u = geometric_control(mp, mv, mR, mw, reference_row(refs, row), gains, nominal)
                 rotor_commands(u[0], u[1], K.allocation_inverse, f_cmd)
         motor_thrust(f_cmd, eta, row, f_max, C.saturate, sigma, gen, f)
-        if fx is None:
-            W = NO_TERMS  # (not used)
-        else:  # the thrust stage, and the step's wrench terms the RK stages take (numbers)
-            W = step_effects(fx, i, f, t, C.dt, p, v, R, w, gen)
+        # the thrust stage, and the step's wrench terms the RK stages take (numbers; the
+        # chain compiled for the rows' effects alone, nothing without effects)
+        W = step_effects(fx, i, f, t, C.dt, p, v, R, w, gen)
         thrust, M = rotor_wrench(C.allocation, f)
         if memory is not None:
             reference_euler_store(memory[i], thrust, M, R)

@@ -106,6 +106,24 @@ def test_a_chain_of_some_effects_flies_their_rows_as_the_full_chain_does():
     assert out[0][1] == out[1][1] and out[0][1][0] != (0.0, 0.0, 0.0)
 
 
+def test_rows_are_typed_by_their_effects_and_grow_to_new_ones():
+    """Rows carry the effects they hold in their class (the loop compiles that chain alone);
+    a vehicle given an effect the rows lack grows them, keeping the other rows."""
+    lag, drag = rows.entry(parse_effect("motor_lag=0.05"), 4, 1e-3), \
+        rows.entry(parse_effect("drag=0.3"), 4, 1e-3)
+    fx = rows.build([[lag], []])
+    assert type(fx).effects == ("motor_lag",) and type(fx).n_terms == 0
+    assert type(fx) is chain.rows_class(["motor_lag"], 0)
+    assert not rows.fits(fx, [lag, drag])
+    grown = rows.grown(fx, [lag, drag])
+    assert type(grown).effects == ("motor_lag", "drag") and type(grown).n_terms == 1
+    rows.write(grown, 1, [drag, lag])
+    assert grown.code[0, 0] == fx.code[0, 0] and list(grown.code[1, :2]) == [
+        registry.code("drag"), registry.code("motor_lag")]
+    with pytest.raises(ConfigError, match="more room"):
+        rows.write(fx, 1, [drag])
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", registry.names())
 def test_every_effect_is_recovered_by_the_diagnosis(name):

@@ -41,7 +41,7 @@ _NO_TERM = (-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 NO_TERMS = (_NO_TERM,) * WRENCH_TERMS
 
 #: the chain over a vehicle's entries, the same for every set of effects (``_thrust_entry``,
-#: ``_is_wrench``, ``_term`` and ``_stage_term`` are the generated dispatchers)
+#: ``_is_wrench``, ``_term``, ``_stage_term``, ``_collect`` and ``_sum`` are generated)
 SKELETON = '''
 @jit(inline="always", cache=CACHE)
 def _thrust_stage(code, param, mem, P, Q, streams, i, f, t, dt, p, gen):
@@ -62,42 +62,13 @@ def thrust_effects(fx, i, f, t, dt, p, v, R, w, gen):
                   p, gen)
 
 
-@jit(inline="always", cache=CACHE)
-def _terms(code, param, mem, P, Q, i, f):
-    """Vehicle ``i``'s wrench entries in chain order as WRENCH_TERMS terms (code -1 past the
-    last), in one pass over the entries."""
-    W0, W1, W2, W3, W4, W5 = NO_TERMS
-    k = 0
-    for e in range(code.shape[1]):
-        c = code[i, e]
-        if c < 0:
-            break
-        if not _is_wrench(c):
-            continue
-        s = _term(c, P, Q, i, param[i, e], mem[i, e], f)
-        if k == 0:
-            W0 = s
-        elif k == 1:
-            W1 = s
-        elif k == 2:
-            W2 = s
-        elif k == 3:
-            W3 = s
-        elif k == 4:
-            W4 = s
-        else:
-            W5 = s
-        k += 1
-    return (W0, W1, W2, W3, W4, W5)
-
-
 @jit(cache=CACHE)
 def wrench_terms(fx, i, f, t):
     """Vehicle ``i``'s wrench entries over the step starting at ``t`` [s] whose produced
-    thrusts are ``f``: WRENCH_TERMS terms, numbers only, so that the RK stages
-    (``effects_wrench``) take no arrays (an array argument costs reference counting at
-    every call)."""
-    return _terms(fx.code, fx.param, fx.mem, fx.params, fx.memory, i, f)
+    thrusts are ``f``: the rows' terms (:data:`TERMS`, code -1 past the last), numbers only,
+    so that the RK stages (``effects_wrench``) take no arrays (an array argument costs
+    reference counting at every call)."""
+    return _collect(fx.code, fx.param, fx.mem, fx.params, fx.memory, i, f)
 
 
 @jit(inline="always", cache=CACHE)
@@ -108,14 +79,7 @@ def step_effects(fx, i, f, t, dt, p, v, R, w, gen):
     arrays taken once (each array a compiled call takes costs reference counting)."""
     code, param, mem, P, Q = fx.code, fx.param, fx.mem, fx.params, fx.memory
     _thrust_stage(code, param, mem, P, Q, fx.streams, i, f, t, dt, p, gen)
-    return _terms(code, param, mem, P, Q, i, f)
-
-
-@jit(inline="always", cache=CACHE)
-def has_wrench(W):
-    """Whether the step's terms ``W`` hold a wrench entry (else the RK stages need not call
-    ``effects_wrench``)."""
-    return W[0][0] >= 0.0
+    return _collect(code, param, mem, P, Q, i, f)
 
 
 @jit(inline="always", cache=CACHE)
@@ -133,14 +97,43 @@ def effects_wrench(W, p, v, R, w, f, t):
     """The summed external force (world) [N] and moment (body) [N m] of a vehicle's wrench
     entries at one RK stage's state, from the step's terms ``W`` (``p``, ``f``, ``t``: the
     protocol's arguments, already in the terms)."""
-    zero = (0.0, 0.0, 0.0)
-    F, M = _add_term(zero, zero, W[0], v, R, w)
-    F, M = _add_term(F, M, W[1], v, R, w)
-    F, M = _add_term(F, M, W[2], v, R, w)
-    F, M = _add_term(F, M, W[3], v, R, w)
-    F, M = _add_term(F, M, W[4], v, R, w)
-    return _add_term(F, M, W[5], v, R, w)
+    return _sum(W.terms, v, R, w)
 '''
+
+
+def _collect_source(n_terms: int) -> list:
+    """``_collect``: a vehicle's wrench entries as the ``n_terms`` terms of :data:`TERMS`."""
+    out = ['@jit(inline="always", cache=CACHE)', "def _collect(code, param, mem, P, Q, i, f):",
+           '    """Vehicle ``i``\'s wrench entries in chain order as the terms (code -1 past '
+           'the last), in one pass over the entries."""']
+    if n_terms == 0:
+        return out + ["    return TERMS(())", "", ""]
+    names = [f"W{k}" for k in range(n_terms)]
+    out += [f"    {' = '.join(names)} = NO_TERMS[0]", "    k = 0", "    for e in range(code.shape[1]):", "        c = code[i, e]",
+            "        if c < 0:", "            break", "        if not _is_wrench(c):",
+            "            continue", "        s = _term(c, P, Q, i, param[i, e], mem[i, e], f)"]
+    for k, name in enumerate(names):
+        if n_terms == 1:
+            out += [f"        {name} = s"]
+            break
+        out += ([f"        {'if' if k == 0 else 'elif'} k == {k}:"] if k < n_terms - 1
+                else ["        else:"])
+        out += [f"            {name} = s"]
+    out += ["        k += 1", f"    return TERMS(({', '.join(names)},))", "", ""]
+    return out
+
+
+def _sum_source(n_terms: int) -> list:
+    """``_sum`` and ``has_wrench`` over ``n_terms`` terms."""
+    out = ['@jit(inline="always", cache=CACHE)', "def has_wrench(W):",
+           '    """Whether the step\'s terms ``W`` hold a wrench entry (else the RK stages need '
+           'not call ``effects_wrench``)."""',
+           f"    return {'W.terms[0][0] >= 0.0' if n_terms else 'False'}", "", "",
+           '@jit(inline="always", cache=CACHE)', "def _sum(terms, v, R, w):",
+           '    """The summed force and moment of the terms at a stage\'s state."""',
+           "    F = M = (0.0, 0.0, 0.0)"]
+    out += [f"    F, M = _add_term(F, M, terms[{k}], v, R, w)" for k in range(n_terms)]
+    return out + ["    return F, M", "", ""]
 
 
 def kernels(cls) -> types.ModuleType:
@@ -158,17 +151,20 @@ def has_term(cls) -> bool:
     return hasattr(kernels(cls), "wrench_term")
 
 
-def source(table, codes, cache: bool = True) -> str:
+def source(table, codes, n_terms: int = WRENCH_TERMS, cache: bool = True) -> str:
     """The text of the chain's module for the effect classes ``table`` with their ``codes``
-    (both in registry order)."""
+    (both in registry order), a vehicle flying at most ``n_terms`` wrench entries."""
     rows = [(code, cls, f"e{code}") for code, cls in zip(codes, table)
             if has_thrust(cls) or has_term(cls)]
     names = ", ".join(cls.name for _, cls, _ in rows) or "no effects"
     out = [f'"""The compiled effect chain of {names} (generated by '
            'quadfault.effects.dispatch; do not edit)."""', "",
+           "from quadfault.effects.chain import terms_class",
            "from quadfault.jit import jit"]
     out += [f"import {cls.__module__} as {alias}" for _, cls, alias in rows]
-    out += ["", f"CACHE = {cache!r}", f"NO_TERMS = {NO_TERMS!r}", "", ""]
+    out += ["", f"CACHE = {cache!r}", f"NO_TERMS = {NO_TERMS!r}",
+            f"TERMS = terms_class({tuple(cls.name for _, cls, _ in rows)!r}, {n_terms})",
+            "", ""]
     out += ['@jit(inline="always", cache=CACHE)',
             "def _thrust_entry(c, P, Q, streams, i, a, m, f, t, dt, p, gen):",
             '    """Entry ``c``\'s thrust-stage kernel for vehicle ``i``."""']
@@ -200,7 +196,8 @@ def source(table, codes, cache: bool = True) -> str:
     for code, cls, alias in wrench:
         out += [f"    if c == {code}:  # {cls.name}",
                 f"        return {alias}.wrench_stage(s, v, R, w)"]
-    out += ["    return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)", ""]
+    out += ["    return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)", "", ""]
+    out += _collect_source(n_terms) + _sum_source(n_terms)
     return "\n".join(out) + SKELETON
 
 
@@ -221,11 +218,12 @@ def _directory() -> Path | None:
 _LOADED: dict = {}  # source hash -> module
 
 
-def compiled(table, codes) -> types.ModuleType:
-    """The chain's module for the effect classes ``table`` with their ``codes``: generated,
-    written to a file named by its hash and imported (numba caches it like any module); run
-    uncached from memory when no directory is writable."""
-    text = source(table, codes)
+def compiled(table, codes, n_terms: int = WRENCH_TERMS) -> types.ModuleType:
+    """The chain's module for the effect classes ``table`` with their ``codes`` and at most
+    ``n_terms`` wrench entries per vehicle: generated, written to a file named by its hash
+    and imported (numba caches it like any module); run uncached from memory when no
+    directory is writable."""
+    text = source(table, codes, n_terms)
     digest = hashlib.sha256(text.encode()).hexdigest()[:16]
     if digest in _LOADED:
         return _LOADED[digest]
@@ -235,7 +233,7 @@ def compiled(table, codes) -> types.ModuleType:
         module = types.ModuleType(name)
         module.__file__ = f"<{name}>"
         sys.modules[name] = module
-        exec(compile(source(table, codes, cache=False), module.__file__, "exec"),
+        exec(compile(source(table, codes, n_terms, cache=False), module.__file__, "exec"),
              module.__dict__)
     else:
         path = folder / f"chain_{digest}.py"

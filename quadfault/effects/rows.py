@@ -44,32 +44,42 @@ def _size(entries) -> tuple[int, int, int]:
     return (len(entries), sum(len(p) for _, p, _ in entries), sum(m for _, _, m in entries))
 
 
-def empty(n_rows: int, n_entries: int, n_params: int, n_memory: int) -> C.EffectRows:
+def _kinds(entries) -> tuple[set, int]:
+    """The effect names of ``entries`` and how many of them have a wrench."""
+    names = {registry.TABLE[code].name for code, _, _ in entries}
+    return names, sum(has_term(registry.TABLE[code]) for code, _, _ in entries)
+
+
+def empty(n_rows: int, n_entries: int, n_params: int, n_memory: int, effects=(),
+          n_terms: int = 0) -> C.EffectRows:
     """Rows without effects, room for ``n_entries`` entries of ``n_params`` parameters and
-    ``n_memory`` memory slots in all per vehicle."""
+    ``n_memory`` memory slots in all per vehicle, of ``effects`` (names) with at most
+    ``n_terms`` wrench entries per vehicle (:func:`~quadfault.effects.chain.rows_class`:
+    the loop compiles the chain of these effects alone)."""
     N = int(n_rows)
-    return C.EffectRows(np.full((N, n_entries), -1, dtype=np.int64),
-                        np.zeros((N, n_entries), dtype=np.int64),
-                        np.zeros((N, n_entries), dtype=np.int64),
-                        np.zeros((N, max(n_params, 1))), np.zeros((N, max(n_memory, 1))),
-                        typed_list([_NEVER] * N))
+    return C.rows_class(effects, n_terms)(
+        np.full((N, n_entries), -1, dtype=np.int64), np.zeros((N, n_entries), dtype=np.int64),
+        np.zeros((N, n_entries), dtype=np.int64), np.zeros((N, max(n_params, 1))),
+        np.zeros((N, max(n_memory, 1))), typed_list([_NEVER] * N))
 
 
 def fits(fx: C.EffectRows, entries) -> bool:
-    """Whether one vehicle's ``entries`` fit the rows' room."""
+    """Whether one vehicle's ``entries`` fit the rows' room and effects."""
     E, P, Q = _size(entries)
-    return E <= fx.code.shape[1] and P <= fx.params.shape[1] and Q <= fx.memory.shape[1]
+    names, wrenches = _kinds(entries)
+    return (E <= fx.code.shape[1] and P <= fx.params.shape[1] and Q <= fx.memory.shape[1]
+            and names <= set(type(fx).effects) and wrenches <= type(fx).n_terms)
 
 
 def write(fx: C.EffectRows, i: int, entries) -> None:
     """Vehicle ``i`` flies ``entries`` (a list of :func:`entry` results, in chain order)
     from a fresh start (memory cleared); they must :func:`fits`."""
-    if not fits(fx, entries):
-        raise ConfigError("these effects need more room than the rows were built with")
-    if sum(has_term(registry.TABLE[code]) for code, _, _ in entries) > C.WRENCH_TERMS:
+    if _kinds(entries)[1] > C.WRENCH_TERMS:
         wrenches = ", ".join(cls.name for cls in registry.TABLE if has_term(cls))
         raise ConfigError(f"a vehicle flies at most {C.WRENCH_TERMS} effects with a wrench "
                           f"({wrenches})")
+    if not fits(fx, entries):
+        raise ConfigError("these effects need more room than the rows were built with")
     fx.code[i] = -1
     a = m = 0
     for e, (code, params, memory) in enumerate(entries):
@@ -82,7 +92,9 @@ def write(fx: C.EffectRows, i: int, entries) -> None:
 def build(entries_per_row) -> C.EffectRows:
     """The rows of N vehicles, row ``i`` flying ``entries_per_row[i]``."""
     sizes = [_size(e) for e in entries_per_row]
-    fx = empty(len(sizes), *(max((s[k] for s in sizes), default=0) for k in range(3)))
+    kinds = [_kinds(e) for e in entries_per_row]
+    fx = empty(len(sizes), *(max((s[k] for s in sizes), default=0) for k in range(3)),
+               set().union(*(n for n, _ in kinds)), max((w for _, w in kinds), default=0))
     for i, e in enumerate(entries_per_row):
         write(fx, i, e)
     return fx
@@ -92,9 +104,11 @@ def grown(fx: C.EffectRows, entries) -> C.EffectRows:
     """``fx`` with room for ``entries`` too (a copy when it needs more; rows kept)."""
     if fits(fx, entries):
         return fx
+    names, wrenches = _kinds(entries)
     E, P, Q = (max(a, b) for a, b in zip(_size(entries), (fx.code.shape[1], fx.params.shape[1],
                                                            fx.memory.shape[1])))
-    out = empty(len(fx.code), E, P, Q)
+    out = empty(len(fx.code), E, P, Q, names | set(type(fx).effects),
+                min(max(wrenches, type(fx).n_terms), C.WRENCH_TERMS))
     for old, new in zip(fx[:5], out[:5]):
         new[:, :old.shape[1]] = old
     for i in range(len(fx.code)):
