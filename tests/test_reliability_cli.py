@@ -429,8 +429,14 @@ def test_sigint_between_the_renames_keeps_the_pair_consistent(tmp_path, monkeypa
         real(a, b)
 
     monkeypatch.setattr(os, "replace", replace)
-    with pytest.raises(KeyboardInterrupt):
-        write_recording(_recording(tmp_path, 5.0, "second"), path, force=True)
+    # Ctrl-C as at a terminal, whatever this process inherited (a job started in the
+    # background of a script starts with SIGINT ignored, and Python then raises nothing)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            write_recording(_recording(tmp_path, 5.0, "second"), path, force=True)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     monkeypatch.setattr(os, "replace", real)
     back = read_recording(path)
     assert (back.source, back.t[0]) in (("first", 0.0), ("second", 5.0))
@@ -480,7 +486,9 @@ def test_sigint_to_a_long_simulation_leaves_no_file(tmp_path):
     # a short flight first compiles the kernels (on an empty numba cache a SIGINT that lands
     # in one of llvmlite's finalizers during compilation is swallowed by Python, and the
     # flight then runs to its end): the signal is meant for the flight itself
-    code = ("import sys, tempfile, quadfault.cli, quadfault.simulator, quadfault.cli_simulate, "
+    # the child takes Ctrl-C as at a terminal, whatever this process inherited
+    code = ("import signal\nsignal.signal(signal.SIGINT, signal.default_int_handler)\n"
+            "import sys, tempfile, quadfault.cli, quadfault.simulator, quadfault.cli_simulate, "
             "quadfault.controller, quadfault.recording\n"
             "with tempfile.TemporaryDirectory() as warm:\n"
             "    quadfault.cli.main(['simulate', '--duration', '0.05', '--quiet', '--out', "
