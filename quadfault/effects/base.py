@@ -125,6 +125,7 @@ class Effect:
     the data cannot always tell it from, or None) and the ``--effect`` syntax: ``values``
     (the allowed counts of positional values), ``syntax`` (their meaning, for errors) and
     ``options`` (keyword options -> type); :meth:`from_values` maps them to the fields;
+    ``parameter`` names the field of a one-parameter effect and its reported key;
     ``example`` is a spec the diagnosis recovers from a short simulated flight (the registry's
     test flies every one).
     """
@@ -138,6 +139,9 @@ class Effect:
     syntax: ClassVar[str] = ""
     example: ClassVar[str] = ""
     options: ClassVar[dict] = {}
+    #: ``(field, reported key)`` of a one-parameter effect: the defaults of :meth:`params`,
+    #: :meth:`from_params` and :meth:`from_values` then serve (one value, or a tuple field)
+    parameter: ClassVar[tuple | None] = None
 
     def reset(self, n_rotors: int) -> None:
         pass
@@ -152,18 +156,33 @@ class Effect:
         return vehicle
 
     def params(self) -> dict:
-        raise NotImplementedError
+        """The parameters the diagnosis reports, by key (a tuple field as a list)."""
+        field, key = self._parameter()
+        value = getattr(self, field)
+        return {key: list(value) if isinstance(value, tuple) else value}
 
     @classmethod
     def from_params(cls, params: dict) -> Effect:
         """The effect from its ``params()`` (the keys the diagnosis reports)."""
-        raise NotImplementedError
+        field, key = cls._parameter()
+        return cls(**{field: param(params, key, cls.name)})
 
     @classmethod
     def from_values(cls, values: list, options: dict) -> Effect:
         """The effect from the ``--effect`` syntax: positional ``values`` (a count allowed
         by :attr:`values`) and keyword ``options`` (checked against :attr:`options`)."""
-        raise NotImplementedError
+        field, _ = cls._parameter()
+        return cls(**{field: values[0] if cls.values == (1,) else tuple(values)}, **options)
+
+    @classmethod
+    def _parameter(cls) -> tuple:
+        """``(field, reported key)`` of a one-parameter effect (:attr:`parameter`); an effect
+        with several parameters overrides :meth:`params`, :meth:`from_params` and
+        :meth:`from_values` instead."""
+        if cls.parameter is None:
+            raise NotImplementedError(f"effect {cls.name}: declare `parameter` or override "
+                                      "params / from_params / from_values")
+        return cls.parameter
 
     @classmethod
     def candidate(cls, ctx):

@@ -10,7 +10,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from quadfault.effects.base import Compiled, Identifiability, number, param
+from quadfault.effects.base import Compiled, Identifiability, number
 from quadfault.effects.candidate import Candidate
 from quadfault.effects.physics import batch_of, rows_of
 from quadfault.jit import jit
@@ -186,20 +186,10 @@ class Delay(Compiled):
     equivalent: ClassVar[str] = "timing"
     syntax: ClassVar[str] = "DELAY [s]"
     example: ClassVar[str] = "delay=0.03"
+    parameter: ClassVar[tuple] = ("delay", "delay_s")
 
     def __post_init__(self):
         number(self.delay, "delay [s]", 0.0, 2.0)
-
-    def params(self):
-        return {"delay_s": self.delay}
-
-    @classmethod
-    def from_params(cls, params):
-        return cls(param(params, "delay_s", cls.name))
-
-    @classmethod
-    def from_values(cls, values, options):
-        return cls(delay=values[0], **options)
 
     def pack(self, n_rotors, dt, yaw_signs=None):
         cap = delay_capacity(self.delay, dt)

@@ -8,7 +8,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from quadfault.effects.base import Compiled, Identifiability, param, vector
+from quadfault.effects.base import Compiled, Identifiability, vector
 from quadfault.effects.candidate import Candidate
 from quadfault.effects.kernels import body_velocity3, world_vector3
 from quadfault.effects.physics import batch_of, rows_of
@@ -75,6 +75,7 @@ class Drag(Compiled):
     values: ClassVar[tuple] = (1, 3)
     syntax: ClassVar[str] = "K or KX,KY,KZ [N s/m]"
     example: ClassVar[str] = "drag=0.3"
+    parameter: ClassVar[tuple] = ("k", "k_N_s_per_m")
 
     def __post_init__(self):
         k = vector(self.k, 3, "drag k")
@@ -82,17 +83,6 @@ class Drag(Compiled):
             raise ConfigError(f"drag coefficients must be >= 0 [N s/m], got {k}")
         object.__setattr__(self, "k", k)
         object.__setattr__(self, "air_velocity", vector(self.air_velocity, 3, "drag air_velocity"))
-
-    def params(self):
-        return {"k_N_s_per_m": list(self.k)}
-
-    @classmethod
-    def from_params(cls, params):
-        return cls(param(params, "k_N_s_per_m", cls.name))
-
-    @classmethod
-    def from_values(cls, values, options):
-        return cls(k=tuple(values), **options)
 
     def pack(self, n_rotors, dt, yaw_signs=None):
         return (*self.k, *self.air_velocity), 0

@@ -11,7 +11,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from quadfault.effects.base import Effect, Identifiability, param, vector
+from quadfault.effects.base import Effect, Identifiability, vector
 from quadfault.effects.candidate import Candidate
 from quadfault.effects.physics import vehicle_with
 from quadfault.errors import ConfigError
@@ -34,6 +34,7 @@ class Inertia(Effect):
     values: ClassVar[tuple] = (1, 3)
     syntax: ClassVar[str] = "S or SX,SY,SZ [-]"
     example: ClassVar[str] = "inertia=1.6,1.6,1"
+    parameter: ClassVar[tuple] = ("scale", "scale")
 
     def __post_init__(self):
         s = vector(self.scale, 3, "inertia scale")
@@ -43,17 +44,6 @@ class Inertia(Effect):
 
     def true_vehicle(self, vehicle):
         return vehicle_with(vehicle, inertia_scale=self.scale)
-
-    def params(self):
-        return {"scale": list(self.scale)}
-
-    @classmethod
-    def from_params(cls, params):
-        return cls(param(params, "scale", cls.name))
-
-    @classmethod
-    def from_values(cls, values, options):
-        return cls(scale=tuple(values), **options)
 
     @classmethod
     def candidate(cls, ctx):

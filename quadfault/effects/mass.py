@@ -13,7 +13,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from quadfault.effects.base import Effect, Identifiability, number, param
+from quadfault.effects.base import Effect, Identifiability, number
 from quadfault.effects.candidate import Candidate
 from quadfault.effects.physics import vehicle_with
 
@@ -37,23 +37,13 @@ class Mass(Effect):
     equivalent: ClassVar[str] = "thrust"
     syntax: ClassVar[str] = "SCALE [-]"
     example: ClassVar[str] = "mass=1.15"
+    parameter: ClassVar[tuple] = ("scale", "scale")
 
     def __post_init__(self):
         number(self.scale, "mass scale", 0.05, 20.0)
 
     def true_vehicle(self, vehicle):
         return vehicle_with(vehicle, mass_scale=self.scale)
-
-    def params(self):
-        return {"scale": self.scale}
-
-    @classmethod
-    def from_params(cls, params):
-        return cls(param(params, "scale", cls.name))
-
-    @classmethod
-    def from_values(cls, values, options):
-        return cls(scale=values[0], **options)
 
     @classmethod
     def candidate(cls, ctx):

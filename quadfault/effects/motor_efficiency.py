@@ -7,7 +7,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from quadfault.effects.base import Compiled, Identifiability, param, vector
+from quadfault.effects.base import Compiled, Identifiability, vector
 from quadfault.effects.candidate import Candidate
 from quadfault.effects.thrust_scale import ThrustScale
 from quadfault.errors import ConfigError
@@ -39,23 +39,13 @@ class MotorEfficiency(Compiled):
     values: ClassVar[tuple] = (1, 4)
     syntax: ClassVar[str] = "ETA or ETA1,ETA2,ETA3,ETA4 [-]"
     example: ClassVar[str] = "motor_efficiency=1,1,0.8,1"
+    parameter: ClassVar[tuple] = ("eta", "eta")
 
     def __post_init__(self):
         eta = vector(self.eta, 4, "motor_efficiency eta")
         if not all(0.0 <= e <= 2.0 for e in eta):
             raise ConfigError(f"motor_efficiency eta must be in [0, 2], got {eta}")
         object.__setattr__(self, "eta", eta)
-
-    def params(self):
-        return {"eta": list(self.eta)}
-
-    @classmethod
-    def from_params(cls, params):
-        return cls(param(params, "eta", cls.name))
-
-    @classmethod
-    def from_values(cls, values, options):
-        return cls(eta=tuple(values), **options)
 
     @classmethod
     def fit_note(cls, params, selected):

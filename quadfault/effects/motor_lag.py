@@ -10,7 +10,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from quadfault.effects.base import Compiled, Identifiability, number, param
+from quadfault.effects.base import Compiled, Identifiability, number
 from quadfault.effects.candidate import Candidate
 from quadfault.effects.physics import rows_of, shaped
 from quadfault.jit import jit
@@ -104,20 +104,10 @@ class MotorLag(Compiled):
     equivalent: ClassVar[str] = "timing"
     syntax: ClassVar[str] = "TAU [s]"
     example: ClassVar[str] = "motor_lag=0.05"
+    parameter: ClassVar[tuple] = ("tau", "tau_s")
 
     def __post_init__(self):
         number(self.tau, "motor_lag tau [s]", 0.0, 5.0, open_lo=True)
-
-    def params(self):
-        return {"tau_s": self.tau}
-
-    @classmethod
-    def from_params(cls, params):
-        return cls(param(params, "tau_s", cls.name))
-
-    @classmethod
-    def from_values(cls, values, options):
-        return cls(tau=values[0], **options)
 
     def pack(self, n_rotors, dt, yaw_signs=None):
         return (self.tau,), 3 + n_rotors

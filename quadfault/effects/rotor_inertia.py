@@ -8,7 +8,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from quadfault.effects.base import Compiled, Identifiability, number, param, vector
+from quadfault.effects.base import Compiled, Identifiability, number, vector
 from quadfault.effects.candidate import Candidate
 from quadfault.effects.physics import batch_of, rows_of
 from quadfault.errors import ConfigError
@@ -135,6 +135,7 @@ class RotorInertia(Compiled):
     explanation: ClassVar[str] = "the rotors' inertia: changing rotor speeds kick the body in yaw"
     syntax: ClassVar[str] = "KAPPA [m s]"
     example: ClassVar[str] = "rotor_inertia=0.005"
+    parameter: ClassVar[tuple] = ("kappa", "kappa_m_s")
 
     def __post_init__(self):
         number(self.kappa, "rotor_inertia kappa [m s]", 0.0, 10.0)
@@ -158,17 +159,6 @@ class RotorInertia(Compiled):
 
     def _yaw_signs(self, n_rotors):
         return self.signs(n_rotors)
-
-    def params(self):
-        return {"kappa_m_s": self.kappa}
-
-    @classmethod
-    def from_params(cls, params):
-        return cls(param(params, "kappa_m_s", cls.name))
-
-    @classmethod
-    def from_values(cls, values, options):
-        return cls(kappa=values[0], **options)
 
     def pack(self, n_rotors, dt, yaw_signs=None):
         signs = self.yaw_signs if self.yaw_signs is not None else yaw_signs

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 
-from quadfault.effects.base import Compiled, Identifiability, number, param
+from quadfault.effects.base import Compiled, Identifiability, number
 from quadfault.effects.candidate import Candidate
 from quadfault.jit import jit
 
@@ -33,20 +33,10 @@ class ThrustScale(Compiled):
     equivalent: ClassVar[str] = "thrust"
     syntax: ClassVar[str] = "SCALE [-]"
     example: ClassVar[str] = "thrust_scale=0.9"
+    parameter: ClassVar[tuple] = ("scale", "scale")
 
     def __post_init__(self):
         number(self.scale, "thrust_scale", 0.0, 3.0, open_lo=True)
-
-    def params(self):
-        return {"scale": self.scale}
-
-    @classmethod
-    def from_params(cls, params):
-        return cls(param(params, "scale", cls.name))
-
-    @classmethod
-    def from_values(cls, values, options):
-        return cls(scale=values[0], **options)
 
     @classmethod
     def fit_note(cls, params, selected):
