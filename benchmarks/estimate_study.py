@@ -376,8 +376,10 @@ def replot(out: Path) -> int:
         for arm, runs in res["arms"].items():
             for seed, r in runs.items():
                 npz = out / task / arm / f"seed_{seed}" / "evaluations.npz"
-                if npz.is_file() and "baseline_results" in np.load(npz).files:
-                    r["curve"]["base_return"] = float(np.load(npz)["baseline_results"].mean())
+                if npz.is_file():
+                    with np.load(npz) as data:
+                        if "baseline_results" in data.files:
+                            r["curve"]["base_return"] = float(data["baseline_results"].mean())
     finish(results, out, results["design"]["crash_target"])
     return 0
 
