@@ -1,6 +1,6 @@
 """What domain randomisation costs: the closed loop and the vector env with and without it.
 
-Measured in one run, rounds interleaved (the ratio is what to compare; the machine may be
+Measured in one run, rounds interleaved (the ratios are what to compare; the machine may be
 shared), at N vehicles (default 1024), with numba's default thread count (what a user gets):
 
 1. ``quadfault.closed_loop.fly_batch`` with the geometric controller at every step, hovering
@@ -10,18 +10,25 @@ shared), at N vehicles (default 1024), with numba's default thread count (what a
 2. ``QuadFaultVectorEnv`` steps (no estimator, zero residual action) without and with the
    env keyword ``effects`` (the same ranges, drawn per sub-env at every reset).
 
-Prints vehicle-steps per wall second and per CPU second of this process, the cost of the
-randomisation (1 - randomised / nominal) and the load average::
+The total against the nominal vehicles includes the physics of drag, lag and wind, which the
+nominal vehicles do not fly. So each effect is also measured alone, (a) with the same
+parameters for every vehicle (each range's midpoint) and (b) randomised per vehicle: (a)
+against nominal is the cost of that physics, (b) against (a) the cost of randomising it.
+
+Prints vehicle-steps per wall second and per CPU second of this process, the costs
+(1 - variant / nominal) and the load average::
 
     python benchmarks/randomisation_cost.py            # N = 1024
     python benchmarks/randomisation_cost.py --n 256 --rounds 5
     python benchmarks/randomisation_cost.py --skip-env --ranges thrust_scale=1   # a no-op effect
+    python benchmarks/randomisation_cost.py --total-only   # only the randomised set, no breakdown
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -37,6 +44,12 @@ import numpy as np  # noqa: E402
 RANGES = ("mass=0.8:1.2", "inertia=0.8:1.2,0.8:1.2,0.8:1.2", "drag=0.1:0.5",
           "motor_lag=0.01:0.05", "wind=-2:2,-2:2,0,gust=0.5")
 RATE = 1000.0  # physics rate [Hz]
+_RANGE = re.compile(r"(-?[0-9.]+(?:[eE][-+]?[0-9]+)?):(-?[0-9.]+(?:[eE][-+]?[0-9]+)?)")
+
+
+def fixed(spec: str) -> str:
+    """``spec`` with every range ``a:b`` replaced by its midpoint (every vehicle the same)."""
+    return _RANGE.sub(lambda m: repr((float(m.group(1)) + float(m.group(2))) / 2), spec)
 
 
 def _timed(fn, work: int, min_time: float) -> tuple[float, float]:
@@ -54,7 +67,7 @@ def _timed(fn, work: int, min_time: float) -> tuple[float, float]:
 def loop_batch(N: int, horizon: int, randomise: bool, ranges=RANGES):
     """``fn`` advancing N hovering vehicles by ``horizon`` physics steps with the controller in
     the loop (one ``fly_batch`` call); with ``randomise`` each vehicle flies its own draw of
-    ``ranges`` (default :data:`RANGES`)."""
+    ``ranges`` (default :data:`RANGES`; a spec without ranges: every vehicle the same)."""
     from quadfault import closed_loop
     from quadfault.controller import GeometricController
     from quadfault.effects import parse_effect
@@ -108,18 +121,38 @@ def env_batch(N: int, steps: int, randomise: bool, ranges=RANGES):
     return fn, env.substeps
 
 
-def _compare(name: str, nominal, randomised, work: int, rounds: int, min_time: float) -> None:
-    best = {"nominal": (0.0, 0.0), "randomised": (0.0, 0.0)}
-    for _ in range(rounds):  # interleaved: load changes hit both alike
-        for key, fn in (("nominal", nominal), ("randomised", randomised)):
-            r = _timed(fn, work, min_time)
+def _best(variants: dict, work: dict, rounds: int, min_time: float) -> dict:
+    """name -> best (wall, CPU) rate of each ``fn`` of ``variants``, rounds interleaved (load
+    changes hit every variant alike)."""
+    best = {key: (0.0, 0.0) for key in variants}
+    for _ in range(rounds):
+        for key, fn in variants.items():
+            r = _timed(fn, work[key], min_time)
             best[key] = tuple(max(a, b) for a, b in zip(best[key], r))
+    return best
+
+
+def _cost(rate: float, base: float) -> str:
+    return f"{100 * (1 - rate / base):5.1f} %"
+
+
+def _report(name: str, best: dict, specs) -> None:
+    """The total (the randomised set against nominal) and, per spec, the effect flown the
+    same by every vehicle and randomised per vehicle (CPU rates)."""
     (w0, c0), (w1, c1) = best["nominal"], best["randomised"]
     print(f"{name}")
     print(f"  nominal     {w0:12.4g} vehicle-steps/s (wall)  {c0:12.4g} (CPU)")
     print(f"  randomised  {w1:12.4g} vehicle-steps/s (wall)  {c1:12.4g} (CPU)")
-    print(f"  cost of randomisation: {100 * (1 - w1 / w0):5.1f} % (wall)  "
-          f"{100 * (1 - c1 / c0):5.1f} % (CPU)")
+    print(f"  cost of randomisation: {_cost(w1, w0)} (wall)  {_cost(c1, c0)} (CPU)")
+    if not specs:
+        return
+    print("  per effect, vehicle-steps per CPU-s (cost against nominal; randomising: "
+          "randomised against the same)")
+    print(f"    {'effect':36s} {'same for all':>21s} {'randomised':>21s} {'randomising':>11s}")
+    for spec in (*specs, "all"):
+        (_, a), (_, b) = best[("same", spec)], best.get(("randomised", spec), (w1, c1))
+        print(f"    {spec:36s} {a:11.4g} ({_cost(a, c0)}) {b:11.4g} ({_cost(b, c0)}) "
+              f"{_cost(b, a):>11s}")
 
 
 def main(argv=None) -> int:
@@ -130,27 +163,43 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds (best kept)")
     ap.add_argument("--min-time", type=float, default=0.5, help="seconds per timing")
     ap.add_argument("--skip-env", action="store_true", help="only the closed loop")
+    ap.add_argument("--total-only", action="store_true",
+                    help="only the randomised set against nominal (no per-effect breakdown)")
     ap.add_argument("--ranges", nargs="+", default=list(RANGES), metavar="SPEC",
                     help="the randomised effects (--effect syntax with a:b ranges)")
     args = ap.parse_args(argv)
 
     import numba
 
-    N = args.n
-    nominal = loop_batch(N, args.horizon, False)
-    randomised = loop_batch(N, args.horizon, True, args.ranges)
+    N, ranges = args.n, list(args.ranges)
+    specs = [] if args.total_only or len(ranges) < 2 else ranges
+
+    def variants(make):
+        out = {"nominal": make(False, ranges), "randomised": make(True, ranges)}
+        for spec in specs:
+            out[("same", spec)] = make(True, [fixed(spec)])
+            out[("randomised", spec)] = make(True, [spec])
+        if specs:
+            out[("same", "all")] = make(True, [fixed(s) for s in ranges])
+        return out
+
+    loops = variants(lambda r, x: loop_batch(N, args.horizon, r, x))
     print(f"N = {N}, physics {RATE:g} Hz, numba {numba.__version__}, "
           f"{numba.get_num_threads()} threads ({numba.threading_layer()}), "
           f"OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY')}, {os.cpu_count()} cpus")
-    print(f"randomised: {', '.join(args.ranges)}")
+    print(f"randomised: {', '.join(ranges)}")
+    if specs:
+        print(f"the same for all: {', '.join(fixed(s) for s in ranges)}")
     print(f"load average before: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
-    _compare("closed loop + controller (fly_batch)", nominal, randomised, N * args.horizon,
-             args.rounds, args.min_time)
+    _report("closed loop + controller (fly_batch)",
+            _best(loops, dict.fromkeys(loops, N * args.horizon), args.rounds, args.min_time),
+            specs)
     if not args.skip_env:
-        (e0, S), (e1, _) = (env_batch(N, args.steps, False),
-                            env_batch(N, args.steps, True, args.ranges))
-        _compare("QuadFaultVectorEnv step (no estimator), effects= vs none", e0, e1,
-                 N * args.steps * S, args.rounds, args.min_time)
+        envs = variants(lambda r, x: env_batch(N, args.steps, r, x))
+        work = {key: N * args.steps * S for key, (_, S) in envs.items()}
+        _report("QuadFaultVectorEnv step (no estimator), effects= vs none",
+                _best({key: fn for key, (fn, _) in envs.items()}, work, args.rounds,
+                      args.min_time), specs)
     print(f"load average after: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
     return 0
 
