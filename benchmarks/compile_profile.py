@@ -22,7 +22,7 @@ if __name__ == "__main__" and "NUMBA_CACHE_DIR" not in os.environ:
     # an empty cache, set before quadfault (and numba) are imported
     os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="qf-compile-profile-")
 
-LOOP_KERNELS = ("fly_vehicle", "_fly_serial", "_fly_parallel")
+LOOP_KERNELS = ("fly_vehicle", "_fly_rows", "_fly_parallel")
 
 
 def profile(case: str) -> tuple[float, list]:

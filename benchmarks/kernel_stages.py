@@ -159,7 +159,7 @@ def stage_ns(N: int = 4096, horizon: int = 50, repeats: int = 5) -> dict[str, fl
         "controller": lambda: controller(V.p, V.v, V.R, V.w, refs[:, 0], K, out, horizon),
         "sensors": lambda: sensors(V.p, V.v, V.R, V.w, C, gen, horizon),
     }
-    gens = jit.typed_list([np.random.default_rng(i) for i in range(N)])
+    gens = closed_loop.generators([np.random.default_rng(i) for i in range(N)])
     tables = closed_loop.Tables(np.zeros(N, np.int64), eta, refs)
     none = closed_loop.Records.none(N, 4)
     active, k0 = np.ones(N, dtype=bool), np.zeros(N, dtype=np.int64)

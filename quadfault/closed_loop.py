@@ -64,7 +64,8 @@ from quadfault.dynamics import (
 )
 from quadfault.effects.chain import EffectRows, has_wrench, step_effects
 from quadfault.errors import ConfigError
-from quadfault.jit import jit, prange, python, typed_list
+from quadfault.generator_table import generator_at, generator_at_python, generator_table
+from quadfault.jit import jit, prange, python
 from quadfault.motors import motor_thrust
 from quadfault.rotation import mat3, store3, store33, vec3
 from quadfault.sensors import accelerometer3, measure3
@@ -196,10 +197,10 @@ def _tuples(C, V, i):
     return rigid, (s[i, 0], s[i, 1], s[i, 2], s[i, 3], s[i, 4], s[i, 5] != 0.0)
 
 
-@jit
+@jit(inline="always")
 def fly_vehicle(i, gens, k0, k1, measure_first, C, K, V, T, out, fx, memory):
     """Steps ``k0 .. k1-1`` of vehicle ``i`` (see the module docstring), drawing from its
-    generator ``gens[i]`` (a :func:`generators` list); ``C`` the :class:`LoopConstants`, ``K`` the controller's
+    generator ``gens[i]`` (a :func:`generators` table); ``C`` the :class:`LoopConstants`, ``K`` the controller's
     :class:`~quadfault.controller.ControllerConstants` of the controller in the loop (None: the
     caller sets ``V.f_cmd``), ``V`` the :class:`Vehicles` (updated), ``T``
     the :class:`Tables`, ``out`` the :class:`Records`, ``fx`` the effects (None: none; the
@@ -211,7 +212,7 @@ def fly_vehicle(i, gens, k0, k1, measure_first, C, K, V, T, out, fx, memory):
 
     The one entry point of the loop: :func:`fly` calls it, and the batch's loops call it with
     the same argument types, so that one vehicle and a batch share its compiled form."""
-    gen = gens[i]
+    gen = generator_at(gens, i)
     p, v, R, w = vec3(V.p[i]), vec3(V.v[i]), mat3(V.R[i]), vec3(V.w[i])
     mp, mv, mR, mw = vec3(V.mp[i]), vec3(V.mv[i]), mat3(V.mR[i]), vec3(V.mw[i])
     f_cmd, f, sigma, f_max = V.f_cmd[i], V.f[i], V.sigma[i], V.f_max[i]
@@ -274,21 +275,23 @@ def fly_vehicle(i, gens, k0, k1, measure_first, C, K, V, T, out, fx, memory):
     return done
 
 
-@jit(parallel=True)
-def _fly_parallel(gens, active, k0, n_steps, measure_first, C, K, V, T, out, fx, done):
-    for r in prange(active.shape[0]):
-        i = np.int64(r)  # the same specialisation of fly_vehicle as the serial loop's
-        if active[i]:
-            done[i] = fly_vehicle(i, gens, k0[i], k0[i] + n_steps, measure_first, C, K, V, T,
-                                  out, fx, None)
-
-
 @jit
-def _fly_serial(gens, active, k0, n_steps, measure_first, C, K, V, T, out, fx, done):
-    for i in range(active.shape[0]):
+def _fly_rows(lo, hi, gens, active, k0, n_steps, measure_first, C, K, V, T, out, fx, done):
+    """:func:`fly_vehicle` for the active vehicles ``lo .. hi-1``, in order (inlined: the
+    arrays' reference counts are taken once per call, not once per vehicle)."""
+    for i in range(lo, hi):
         if active[i]:
             done[i] = fly_vehicle(i, gens, k0[i], k0[i] + n_steps, measure_first, C, K, V, T,
                                   out, fx, None)
+
+
+@jit(parallel=True)
+def _fly_parallel(gens, active, k0, n_steps, measure_first, C, K, V, T, out, fx, done, chunk):
+    N = active.shape[0]
+    for c in prange((N + chunk - 1) // chunk):
+        lo = np.int64(c) * chunk
+        _fly_rows(lo, min(lo + chunk, N), gens, active, k0, n_steps, measure_first, C, K, V, T,
+                  out, fx, done)
 
 
 @jit
@@ -305,12 +308,14 @@ def sense_vehicle(i, gen, C, V):
 @jit
 def _sense_rows(gens, rows, C, V):
     for r in range(rows.shape[0]):
-        sense_vehicle(rows[r], gens[rows[r]], C, V)
+        sense_vehicle(rows[r], generator_at(gens, rows[r]), C, V)
 
 
 #: below this many vehicles the batch runs on the calling thread (a parallel launch costs
 #: more than it saves for a handful of vehicles)
 PARALLEL_MIN_VEHICLES = 64
+#: vehicles per task of the parallel loop
+CHUNK = 64
 
 
 def _call_step(fx, i, f, t, dt, p, v, R, w, gen):
@@ -335,7 +340,7 @@ class _StepHook:
 
 #: the interpreted loop's calls at the chain's two points: the hook's methods
 HOOK_CALLS = {"step_effects": _call_step, "has_wrench": _StepHook.has_wrench,
-              "effects_wrench": call_wrench}
+              "effects_wrench": call_wrench, "generator_at": generator_at_python}
 
 
 def _interpreted():
@@ -348,7 +353,7 @@ def _interpreted():
 def fly(gens, k0: int, k1: int, measure_first: bool, C: LoopConstants, V: Vehicles, T: Tables,
         out: Records, hook=None, K: ControllerConstants | None = None, i: int = 0) -> int:
     """:func:`fly_vehicle` for vehicle ``i`` with its generator ``gens[i]`` (a
-    :func:`generators` list, cheap to pass per call) or ``gens`` itself (a
+    :func:`generators` table, cheap to pass per call) or ``gens`` itself (a
     ``numpy.random.Generator``, put in such a list on each call); ``K``: the controller in the loop, every ``C.decimation``
     steps (None: the commands in ``V.f_cmd`` are held). ``hook``: the plant's effects
     (:attr:`quadfault.plant.Plant.hook`) -- compiled rows, or a hook of effects written in
@@ -358,7 +363,7 @@ def fly(gens, k0: int, k1: int, measure_first: bool, C: LoopConstants, V: Vehicl
     memory = V.memory if C.reference else None
     interpreted = hook is not None and not isinstance(hook, EffectRows)
     if isinstance(gens, np.random.Generator):  # vehicle i's own: in the list the loop takes
-        gens = [gens] * (i + 1) if interpreted else generators([gens] * (i + 1))
+        gens = generators([gens] * (i + 1))
     kernel = _interpreted() if interpreted else fly_vehicle
     return kernel(i, gens, k0, k1, measure_first, C, K, V, T, out, hook, memory)
 
@@ -367,7 +372,7 @@ def fly_batch(gens, active: np.ndarray, k0: np.ndarray, n_steps: int, measure_fi
               C: LoopConstants, V: Vehicles, T: Tables, out: Records,
               K: ControllerConstants | None = None, fx: EffectRows | None = None) -> np.ndarray:
     """``n_steps`` steps of every active vehicle ``i`` from its step ``k0[i]``, each with its
-    generator ``gens[i]`` (a :func:`generators` list), in parallel from
+    generator ``gens[i]`` (a :func:`generators` table), in parallel from
     :data:`PARALLEL_MIN_VEHICLES` on (``K``: a controller in the loop, as for :func:`fly`;
     ``fx``: the vehicles' compiled effects, :attr:`quadfault.plant.Plant.hook`). Returns the
     steps each vehicle ran (N,). The reference integrator and effects written in Python fly
@@ -379,9 +384,14 @@ def fly_batch(gens, active: np.ndarray, k0: np.ndarray, n_steps: int, measure_fi
     if fx is not None and not isinstance(fx, EffectRows):
         raise ConfigError("effects written in Python fly one vehicle at a time (fly); a batch "
                           "flies the built-in effects of quadfault.effects")
-    done = np.zeros(len(active), dtype=np.int64)
-    kernel = _fly_parallel if len(active) >= PARALLEL_MIN_VEHICLES else _fly_serial
-    kernel(gens, active, k0, int(n_steps), bool(measure_first), C, K, V, T, out, fx, done)
+    N = len(active)
+    done = np.zeros(N, dtype=np.int64)
+    if N >= PARALLEL_MIN_VEHICLES:
+        _fly_parallel(gens, active, k0, int(n_steps), bool(measure_first), C, K, V, T, out, fx,
+                      done, CHUNK)
+    else:
+        _fly_rows(0, N, gens, active, k0, int(n_steps), bool(measure_first), C, K, V, T, out,
+                  fx, done)
     return done
 
 
@@ -416,10 +426,11 @@ def sense_rows(gens, rows: np.ndarray | None, C: LoopConstants, V: Vehicles) -> 
 
 
 def generators(rngs):
-    """The list of generators the loop takes: one ``numpy.random.Generator`` per vehicle (a
-    numba typed list: a kernel draws from them directly; passing it costs a fraction of
-    passing a Generator)."""
-    return typed_list(rngs)
+    """The generators the loop takes: one ``numpy.random.Generator`` per vehicle, as a
+    :class:`~quadfault.generator_table.GeneratorTable` (a kernel draws from them directly,
+    without the reference counts of a typed list; passing it costs a fraction of passing a
+    Generator)."""
+    return generator_table(rngs)
 
 
 def constants(plant, sensors, decimation: int = 0, record_accel: bool = True,

@@ -143,8 +143,7 @@ class Flight:
             if 4 * len(rows) > self.n_vehicles:
                 self._gens = None  # rebuilt when needed: cheaper than many setitems
             else:
-                for i in rows:
-                    self._gens[i] = self._rngs[i]
+                self._gens.put(rows, [self._rngs[i] for i in rows])
 
     def generator(self, i: int = 0):
         """Vehicle ``i``'s generator."""
