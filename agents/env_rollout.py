@@ -15,14 +15,16 @@ import numpy as np
 import quad_fault_env  # noqa: F401  (registers the ids)
 from agents.metrics import flight_metrics, tilt_angle
 from agents.rollout import Flight, FlightConfig
+from quad_fault_env.envs.config import require_full_info
 from quadfault.controller import ControllerConfig, GeometricController
 from quadfault.scenarios import Scenario
 
 
 def make_scenario_env(env_id: str, env_kwargs: dict, scenario: Scenario):
-    """``gym.make(env_id)`` flying ``scenario`` for its whole duration."""
+    """``gym.make(env_id)`` flying ``scenario`` for its whole duration, with the full
+    ``info`` that :func:`fly_env` scores."""
     kwargs = dict(env_kwargs)
-    kwargs.update(scenario=scenario, duration=scenario.duration)
+    kwargs.update(scenario=scenario, duration=scenario.duration, info="full")
     rate = float(kwargs.get("control_rate", 100.0))
     return gym.make(env_id, max_episode_steps=int(round(scenario.duration * rate)), **kwargs)
 
@@ -33,6 +35,7 @@ def fly_env(policy, env, scenario: Scenario, seed: int, *, label: str, estimator
 
     ``normalizer``: a ``VecNormalize`` whose frozen statistics normalise the observations.
     """
+    require_full_info(env, "fly_env")
     cfg = config or FlightConfig()
     inner = env.unwrapped
     obs, info = env.reset(seed=int(seed))

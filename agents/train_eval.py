@@ -35,6 +35,7 @@ import numpy as np
 from gymnasium import spaces
 
 from agents.policies import GeometricPolicy
+from quad_fault_env.envs.config import require_full_info
 from quadfault.errors import ConfigError
 from quadfault.fileio import atomic_write_bytes, atomic_write_files
 from quadfault.progress import progress_bar
@@ -101,12 +102,16 @@ def evaluation_seeds(config) -> list[int]:
     return [config.eval_seed + i for i in range(config.eval_episodes)]
 
 
-def fly_episodes(policy, env, seeds, normalizer=None) -> dict:
+def fly_episodes(policy, env, seeds, normalizer=None, *, tracking: bool = True) -> dict:
     """One deterministic episode of ``policy`` (anything with SB3's ``predict``; None: the
     zero action) in ``env`` per reset seed; ``normalizer`` (a ``VecNormalize``) normalises the
     observations the policy sees. Returns per episode ``returns`` (the environment's own
     rewards), ``lengths`` (steps), ``crashed`` (terminated) and, for QuadFault environments,
-    ``rmse``: the RMS of ``info["tracking_error"]`` [m] over the flown steps (NaN otherwise)."""
+    ``rmse``: the RMS of ``info["tracking_error"]`` [m] over the flown steps (NaN otherwise,
+    or without ``tracking``). ``tracking`` needs a QuadFault environment made with
+    ``info="full"`` (a light one is a ``ConfigError``)."""
+    if tracking:
+        require_full_info(env, "fly_episodes")
     out = {"returns": [], "lengths": [], "crashed": [], "rmse": []}
     for seed in seeds:
         obs, _ = env.reset(seed=int(seed))
@@ -119,7 +124,7 @@ def fly_episodes(policy, env, seeds, normalizer=None) -> dict:
                 action, _ = policy.predict(o, deterministic=True)
             obs, reward, terminated, truncated, info = env.step(action)
             total += float(reward)
-            errs.append(float(info.get("tracking_error", np.nan)))
+            errs.append(float(info.get("tracking_error", np.nan)) if tracking else np.nan)
             done = terminated or truncated
         out["returns"].append(total)
         out["lengths"].append(len(errs))
@@ -129,8 +134,8 @@ def fly_episodes(policy, env, seeds, normalizer=None) -> dict:
 
 
 def evaluate_episodes(policy, env, seeds, normalizer=None) -> tuple[np.ndarray, np.ndarray]:
-    """``(returns, lengths)`` of :func:`fly_episodes`."""
-    flown = fly_episodes(policy, env, seeds, normalizer)
+    """``(returns, lengths)`` of :func:`fly_episodes` (any ``info``)."""
+    flown = fly_episodes(policy, env, seeds, normalizer, tracking=False)
     return flown["returns"], flown["lengths"]
 
 

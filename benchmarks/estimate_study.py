@@ -49,6 +49,7 @@ import json
 import math
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -151,7 +152,8 @@ def run_arm(task: str, arm: str, args, test_seeds) -> dict:
     from agents.train import load_agent, make_eval_env, train_one
 
     config = train_config(task, arm, args)
-    env = make_eval_env(config)
+    # the test episodes score info["tracking_error"]: the full info (training keeps it light)
+    env = make_eval_env(replace(config, env_kwargs=dict(config.env_kwargs, info="full")))
     env.reset(seed=TEST_SEED)
     full_length = env.unwrapped.max_steps  # steps of a flight that is not terminated
     runs = {}
@@ -324,7 +326,8 @@ def main(argv=None) -> int:
                 if any(ARMS[a][0] == est and ARMS[a][1] == 1 for a in args.arms) else None
             if arm is None:
                 continue
-            env = gym.make(TASKS[task]["env_id"], **env_kwargs(task, arm, args))
+            env = gym.make(TASKS[task]["env_id"], **env_kwargs(task, arm, args),
+                           info="full")  # fly() scores info["tracking_error"]
             references[f"base_{est}"] = fly(None, env, test_seeds)
             env.close()
         results["tasks"][task] = {"env_id": TASKS[task]["env_id"],

@@ -33,7 +33,7 @@ ENV_KWARGS = {"allocation": "estimate-aware", "scenario_options": {"level": [0.1
 
 def fly(estimator: str, rate: str, seed: int) -> dict:
     """One zero-residual episode: the per-step estimate, truth and tracking error, CPU."""
-    env = gym.make(ENV_ID, estimator=estimator, estimator_rate=rate, **ENV_KWARGS)
+    env = gym.make(ENV_ID, estimator=estimator, estimator_rate=rate, info="full", **ENV_KWARGS)
     zero = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
     env.reset(seed=seed)  # compile and warm up outside the timing
     for _ in range(3):

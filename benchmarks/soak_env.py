@@ -69,7 +69,7 @@ class EnvPool:
                                       action_mode=mode, estimator=estimator,
                                       observation=observation, scenario="random",
                                       max_episode_steps=self.max_episode_steps,
-                                      **self.env_kwargs)
+                                      info="full", **self.env_kwargs)
         return self.envs[key]
 
     def close(self):

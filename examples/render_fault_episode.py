@@ -73,7 +73,8 @@ def collect_frames(seconds: float, fps: float, estimator: str, seed: int,
             frames.append(env.render())
     env.close()
     if info["termination_reason"]:
-        print(f"episode ended early: {info['termination_reason']} at t = {info['t']:.2f} s")
+        print(f"episode ended early: {info['termination_reason']} at t = "
+              f"{env.unwrapped.time:.2f} s")
     return frames, frame_ms
 
 

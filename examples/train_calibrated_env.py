@@ -81,8 +81,9 @@ def main(argv=None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     seeds = [30_000 + i for i in range(args.episodes)]
-    envs = {"nominal": gym.make(ENV_ID, vehicle=model.vehicle, **common),
-            "calibrated": gym.make(ENV_ID, model=str(diag), **common)}
+    scored = dict(common, info="full")  # fly() scores info["tracking_error"]
+    envs = {"nominal": gym.make(ENV_ID, vehicle=model.vehicle, **scored),
+            "calibrated": gym.make(ENV_ID, model=str(diag), **scored)}
     print(f"{'env':<11} {'agent':<22} {'mean return':>12} {'RMSE [m]':>9}")
     for name, env in envs.items():
         policy, venv = load_agent(out / "seed_0", env=env)

@@ -34,7 +34,8 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.utils import seeding
 from gymnasium.vector.utils import batch_space
 
-from quad_fault_env.envs.config import check_keywords, keywords_of, validate_action
+from quad_fault_env.envs.config import (INFO_LEVELS, check_choice, check_keywords, keywords_of,
+                                        light_info, validate_action)
 from quad_fault_env.envs.scenario_source import GENERATORS
 from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
 from estimators.registry import estimator_names, estimator_spec, make_estimator
@@ -60,8 +61,6 @@ THREADS_MIN_BATCH = 16384
 VECTOR_ESTIMATORS = (estimator_names(batched=True) + estimator_names(role="nominal")
                      + estimator_names(role="oracle"))
 AUTORESET_MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
-#: what ``info`` holds: the termination reasons only (cheap), or every per-env diagnostic
-INFO_LEVELS = ("light", "full")
 
 
 def default_threads(num_envs: int) -> int | None:
@@ -102,7 +101,8 @@ class QuadFaultVectorEnv(VectorEnv):
             the physics at one substep per step). The flights are the same either way.
 
     ``info`` (arrays over the sub-envs, with gymnasium's ``"_<key>"`` masks): with
-    ``info="light"`` ``termination_reason`` (a name, or None while the episode goes on);
+    ``info="light"`` ``termination_reason`` (a name, or None while the episode goes on; the
+    single env's light ``info``, :func:`~quad_fault_env.envs.config.light_info`);
     with ``info="full"`` also ``t`` [s],
     ``eta_true``, ``eta_hat``, ``eta_sd`` (10 = none, as in the observation),
     ``estimator_status``,
@@ -130,11 +130,8 @@ class QuadFaultVectorEnv(VectorEnv):
         if autoreset_mode not in AUTORESET_MODES:
             raise ConfigError(f"autoreset_mode must be one of {sorted(AUTORESET_MODES)}, "
                               f"got {autoreset_mode!r}")
-        if info not in INFO_LEVELS:
-            raise ConfigError(f"info must be one of {', '.join(map(repr, INFO_LEVELS))}, "
-                              f"got {info!r}")
         #: what ``info`` holds: ``"light"`` (the termination reasons) or ``"full"``
-        self.info_level = info
+        self.info_level = check_choice("info", info, INFO_LEVELS)
         if max_episode_steps is not None and not (isinstance(max_episode_steps, int)
                                                   and max_episode_steps >= 1):
             raise ConfigError(f"max_episode_steps must be an integer >= 1, "
@@ -434,11 +431,11 @@ class QuadFaultVectorEnv(VectorEnv):
 
     def _infos(self, refs, reason) -> dict:
         N = self.num_envs
+        light = light_info(np.asarray(reason, dtype=object))
         if self.info_level == "light":
-            return {"termination_reason": np.asarray(reason, dtype=object),
-                    "_termination_reason": np.ones(N, dtype=bool)}
+            return light | {"_" + key: np.ones(N, dtype=bool) for key in light}
         err = self.state.p - refs[0]
-        info = {
+        info = light | {
             "t": self.steps * self.substeps * self.dt,
             "eta_true": self.eta_true.copy(),
             "eta_hat": self.eta_hat.copy(),
@@ -447,7 +444,6 @@ class QuadFaultVectorEnv(VectorEnv):
             "position_error": err,
             "tracking_error": np.linalg.norm(err, axis=-1),
             "motor_command": self.f_cmd.copy(),
-            "termination_reason": np.asarray(reason, dtype=object),
             "scenario": self._scenario_names.copy(),
         }
         if self.physics_draws is not None:

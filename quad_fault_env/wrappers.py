@@ -4,8 +4,10 @@ Every step of :class:`~quad_fault_env.envs.quad_fault.QuadFaultEnv` puts the mea
 of its physics substeps in ``info["samples"]`` (a list of :class:`estimators.base.Sample`,
 one per substep, the command held over it), aligned with the first ``len(info["samples"])``
 rows of ``info["eta_true_samples"]`` and ``info["specific_force_samples"]`` (one row per
-substep of the step; NaN rows for substeps not flown). The env's own estimator reads every
-``env.unwrapped.estimator_stride``-th sample; the wrappers below read the same stream.
+substep of the step; NaN rows for substeps not flown) when made with ``info="full"``. The
+env's own estimator reads every ``env.unwrapped.estimator_stride``-th sample; the wrappers
+below read the same stream, so they need an env made with ``info="full"`` (a light one is a
+``ConfigError``).
 
 * :class:`EfficiencyEstimateObservation` -- fills the ``eta_hat`` / ``eta_sd`` slots from any
   online estimator object.
@@ -23,6 +25,7 @@ import gymnasium as gym
 import numpy as np
 
 from estimators.base import Estimate
+from quad_fault_env.envs.config import require_full_info
 from quad_fault_env.estimation import (TruthOracle, diagnostics_template, estimate_info,
                                        estimate_sd, make_estimator)
 from quad_fault_env.observation import SD_MAX
@@ -61,6 +64,7 @@ class EfficiencyEstimateObservation(gym.Wrapper):
     """
 
     def __init__(self, env, estimator, stride: int | None = None):
+        require_full_info(env, type(self).__name__)
         super().__init__(env)
         base = env.unwrapped
         self.estimator = make_estimator(estimator, base.vehicle)
@@ -167,6 +171,7 @@ class EstimatorComparison(gym.Wrapper):
 
     def __init__(self, env, estimators: dict | None = None, stride: int | None = None,
                  detection_fraction: float = 0.5, spike_pad: float = 0.03):
+        require_full_info(env, type(self).__name__)
         super().__init__(env)
         base = env.unwrapped
         spec = estimators if estimators is not None else {"irls": "irls", "ekf": "ekf"}
@@ -255,6 +260,7 @@ class RecordFlight(gym.Wrapper):
     """
 
     def __init__(self, env, path, frame: str = "NED"):
+        require_full_info(env, type(self).__name__)
         super().__init__(env)
         p = Path(path)
         self.stem = p.with_suffix("") if p.suffix == ".csv" else p

@@ -17,7 +17,7 @@ def _env(action_mode, estimator="truth", duration=1.0):
     sched = EfficiencySchedule(ConstantEfficiency(), (AbruptFault(1, 0.2, level=0.5),))
     sc = Scenario("hover_fault", duration, sched, Hover(), thrust_noise=0.0)
     return gym.make("QuadFault-v0", estimator=estimator, scenario=sc, duration=duration,
-                    action_mode=action_mode, max_episode_steps=int(duration * 100))
+                    action_mode=action_mode, max_episode_steps=int(duration * 100), info="full")
 
 
 def _episode(env, policy, seed=0):

@@ -49,7 +49,7 @@ def test_estimate_aware_base_allocates_with_the_estimate_after_the_loss():
     """With the true efficiency in the observation, after the rotor drops to 0.1-0.2 the
     base's commands are the allocator's (the exact split no longer fits), not the nominal
     split."""
-    env = QuadFaultEnv("truth", allocation="estimate-aware", **EARLY_LOSS)
+    env = QuadFaultEnv("truth", allocation="estimate-aware", **EARLY_LOSS, info="full")
     env.reset(seed=3)
     for _ in range(20):
         _, _, term, _, info = env.step(np.zeros(4, dtype=np.float32))

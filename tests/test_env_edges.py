@@ -15,7 +15,7 @@ FAULT_NOISE = dict(scenario="combined", duration=1.2, thrust_noise=0.07,
 
 
 def test_a_diverging_state_stops_the_substeps_and_terminates_non_finite():
-    env = QuadFaultEnv("none", **FAULT_NOISE)
+    env = QuadFaultEnv("none", **FAULT_NOISE, info="full")
     env.reset(seed=3)
     env.step(np.zeros(4, np.float32))
     env.plant.vehicles.w[0] = (1e80, -2e80, 3e80)  # finite, but its gyroscopic term overflows

@@ -33,9 +33,11 @@ def _structure(info: dict) -> dict:
     return out
 
 
+@pytest.mark.parametrize("info", ["light", "full"])
 @pytest.mark.parametrize("estimator", ESTIMATORS)
-def test_single_env_info_keeps_one_structure_across_reset_step_and_termination(estimator):
-    env = gym.make("QuadFaultHover-v1", estimator=estimator, action_mode="motor", duration=1.0)
+def test_single_env_info_keeps_one_structure_across_reset_step_and_termination(estimator, info):
+    env = gym.make("QuadFaultHover-v1", estimator=estimator, action_mode="motor", duration=1.0,
+                   info=info)
     _, info = env.reset(seed=0)
     first = _structure(info)
     for _ in range(100):  # zero thrust: free fall, crash after ~0.45 s
@@ -53,7 +55,7 @@ def test_make_vec_with_staggered_episode_ends(mode):
     estimator."""
     for estimator in ESTIMATORS:
         env = gym.make_vec("QuadFaultHover-v1", num_envs=2, vectorization_mode=mode,
-                           estimator=estimator, duration=1.0, action_mode="motor")
+                           estimator=estimator, duration=1.0, action_mode="motor", info="full")
         try:
             env.reset(seed=0)
             ends = []
@@ -157,7 +159,8 @@ def test_a_late_crash_scores_below_a_survived_episode_of_the_same_tracking():
 def test_v1_reward_terms_in_the_env():
     """Tracking, thrust and action effort, the survival bonus on every flown step and the
     penalty on the crash step, the same in the single and the vector env."""
-    env = gym.make("QuadFaultHover-v1", estimator="none", action_mode="motor", duration=1.0)
+    env = gym.make("QuadFaultHover-v1", estimator="none", action_mode="motor", duration=1.0,
+                   info="full")
     vec = gym.make_vec("QuadFaultHover-v1", 1, vectorization_mode="vector_entry_point",
                        estimator="none", action_mode="motor", duration=1.0)
     env.reset(seed=3)

@@ -135,7 +135,7 @@ def test_seeded_determinism_and_obs_in_box():
 
 
 def test_reset_options_fix_the_scenario_and_random_scenarios_vary():
-    env = QuadFaultEnv("none", "random", duration=1.0)
+    env = QuadFaultEnv("none", "random", duration=1.0, info="full")
     seen = {repr(env.reset(seed=s)[1]["faults"]) for s in range(6)}
     assert len(seen) > 1
     _, info = env.reset(seed=0, options={"scenario": "hover_fault"})
@@ -154,7 +154,7 @@ def test_reset_options_fix_the_scenario_and_random_scenarios_vary():
 def test_hover_residual_zero_action_stays_up_for_5_s_through_a_fault():
     # motor 1 drops to 50 % at 1.5 s; the nominal geometric controller must hold the hover
     env = gym.make("QuadFaultHover-v0", estimator="none", scenario="hover_fault",
-                   duration=5.0, thrust_noise=0.07)
+                   duration=5.0, thrust_noise=0.07, info="full")
     obs, info = env.reset(seed=3)
     z_ref = -1.0
     worst = 0.0
@@ -174,7 +174,8 @@ def test_hover_residual_zero_action_stays_up_for_5_s_through_a_fault():
 
 def test_fault_compensated_through_the_estimate_removes_the_sag():
     # same fault; the controller divides its commands by eta_hat (here the oracle's)
-    env = QuadFaultEnv("truth", "hover_fault", duration=3.0, thrust_noise=0.07, compensate=True)
+    env = QuadFaultEnv("truth", "hover_fault", duration=3.0, thrust_noise=0.07, compensate=True,
+                       info="full")
     out = run(env, [np.zeros(4)] * 300, seed=3)
     assert len(out) == 301 and out[-1][3]
     assert out[-1][4]["eta_true"][0] == 0.5
@@ -183,7 +184,7 @@ def test_fault_compensated_through_the_estimate_removes_the_sag():
 
 def test_physics_substeps_per_control_step_and_estimator_rates():
     est = CountingEstimator()
-    env = QuadFaultEnv(est, "hover", estimator_rate="physics", duration=1.0)
+    env = QuadFaultEnv(est, "hover", estimator_rate="physics", duration=1.0, info="full")
     _, _, _, _, info = run(env, [np.zeros(4)] * 3)[-1]
     assert len(info["samples"]) == 10 and est.n_updates == 30
     np.testing.assert_allclose(est.times[:11], np.arange(11) * 1e-3)
@@ -191,7 +192,8 @@ def test_physics_substeps_per_control_step_and_estimator_rates():
     f = np.array([s.f for s in info["samples"]])
     np.testing.assert_array_equal(f, np.broadcast_to(info["motor_command"], f.shape))
     est2 = CountingEstimator()
-    env2 = QuadFaultEnv(est2, "hover", estimator_rate="control", control_rate=50, duration=1.0)
+    env2 = QuadFaultEnv(est2, "hover", estimator_rate="control", control_rate=50, duration=1.0,
+                        info="full")
     _, _, _, _, info = run(env2, [np.zeros(4)] * 3)[-1]
     assert len(info["samples"]) == 20 and est2.n_updates == 3
     assert est2.times == pytest.approx([0.0, 0.02, 0.04])
@@ -206,7 +208,8 @@ def _terminate(env, action, n=300):
 
 
 def test_termination_reasons():
-    free_fall = _terminate(QuadFaultEnv("none", "hover", action_mode="motor", duration=3.0),
+    free_fall = _terminate(QuadFaultEnv("none", "hover", action_mode="motor", duration=3.0,
+                                        info="full"),
                            [-1, -1, -1, -1])
     assert free_fall[4]["termination_reason"] == "crash"
     # 1 m of free fall takes ~0.45 s
@@ -215,7 +218,7 @@ def test_termination_reasons():
                       [1, -1, -1, 1])
     assert roll[4]["termination_reason"] == "excessive_tilt"
     up = _terminate(QuadFaultEnv("none", "hover", action_mode="motor", duration=3.0,
-                                 limits=TerminationLimits(max_position_error=0.2)),
+                                 limits=TerminationLimits(max_position_error=0.2), info="full"),
                     [1, 1, 1, 1])
     assert up[4]["termination_reason"] == "out_of_bounds"
     assert up[4]["tracking_error"] > 0.2
@@ -246,7 +249,7 @@ def test_truth_only_in_the_observation_of_the_oracle():
     scenario = named_scenario("hover_fault", 1.0)  # motor 1 at 0.5 from 0.3 s
     actions = [np.zeros(4)] * 50
     for est, expect_truth in (("none", False), ("truth", True), (CountingEstimator(), False)):
-        env = QuadFaultEnv(est, scenario)
+        env = QuadFaultEnv(est, scenario, info="full")
         sl = env.layout.slice("eta_hat")
         sd = env.layout.slice("eta_sd")
         for obs, _, _, _, info in run(env, actions)[40:]:
@@ -263,8 +266,8 @@ def test_truth_only_in_the_observation_of_the_oracle():
 
 
 def test_compensate_divides_controller_commands_by_the_estimate():
-    a = QuadFaultEnv(CountingEstimator(), "hover", duration=1.0)
-    b = QuadFaultEnv(CountingEstimator(), "hover", duration=1.0, compensate=True)
+    a = QuadFaultEnv(CountingEstimator(), "hover", duration=1.0, info="full")
+    b = QuadFaultEnv(CountingEstimator(), "hover", duration=1.0, compensate=True, info="full")
     fa = run(a, [np.zeros(4)] * 2)[-1][4]["motor_command"]
     fb = run(b, [np.zeros(4)] * 2)[-1][4]["motor_command"]
     eta = np.array([0.9, 0.8, 0.7, 0.6])
@@ -359,7 +362,8 @@ def _property_env(mode="motor"):
     """One env per action mode, reused across hypothesis examples (reset each time)."""
     if mode not in _PROPERTY_ENVS:
         _PROPERTY_ENVS[mode] = QuadFaultEnv("none", "hover_fault", action_mode=mode,
-                                            duration=100.0, sensor_noise=SensorNoise(gyro=0.01))
+                                            duration=100.0, sensor_noise=SensorNoise(gyro=0.01),
+                                            info="full")
     return _PROPERTY_ENVS[mode]
 
 
@@ -394,7 +398,7 @@ def test_out_of_range_actions_always_raise(action):
 
 def test_fault_events_are_reported_in_the_step_they_happen():
     # abrupt, 1.2 s: motor 1 at 50 % on [0.1, 0.15] s, motor 2 from 0.4 s, ...
-    env = QuadFaultEnv("none", named_scenario("abrupt", 1.2).replace(thrust_noise=0.0))
+    env = QuadFaultEnv("none", named_scenario("abrupt", 1.2).replace(thrust_noise=0.0), info="full")
     out = run(env, [np.zeros(4)] * 20)
     events = [(k, e["motor"], e["kind"]) for k, s in enumerate(out) for e in s[4]["fault_events"]]
     # step k covers [(k - 1) / 100, k / 100) s; out[0] is the reset
@@ -445,7 +449,7 @@ def test_substeps_are_the_readable_loop_with_the_env_generator(kw):
     (tests/support/oracles.py: sensors, motors with the step's held command, RKMK4,
     accelerometer) drawing from a twin of the env's generator in the same order, with the
     end-of-step measurement drawn after the step."""
-    env = QuadFaultEnv("none", **kw)
+    env = QuadFaultEnv("none", **kw, info="full")
     env.reset(seed=7)
     twin = copy.deepcopy(env.np_random)
     x = tuple(np.array(a) for a in env.plant.state)

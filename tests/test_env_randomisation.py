@@ -26,7 +26,7 @@ def _drawn(info) -> dict:
 
 
 def test_reset_draws_every_range_from_the_env_generator():
-    env = QuadFaultEnv("none", "hover", effects=RANGES)
+    env = QuadFaultEnv("none", "hover", effects=RANGES, info="full")
     seen = []
     for seed in range(6):
         _, info = env.reset(seed=seed)
@@ -53,7 +53,7 @@ def test_the_drawn_physics_acts_on_the_flight():
     """A steady wind along +x (drag through the wind) pushes the hovering vehicle to +x."""
     errs = {}
     for name, effects in (("calm", None), ("wind", ["wind=4:5,0,0"])):
-        env = QuadFaultEnv("none", "hover", effects=effects, thrust_noise=0.0)
+        env = QuadFaultEnv("none", "hover", effects=effects, thrust_noise=0.0, info="full")
         env.reset(seed=0)
         for _ in range(50):
             info = env.step(np.zeros(4, dtype=np.float32))[4]
@@ -62,7 +62,7 @@ def test_the_drawn_physics_acts_on_the_flight():
 
 
 def test_no_effects_keeps_the_info_and_the_physics():
-    env = QuadFaultEnv("none", "hover")
+    env = QuadFaultEnv("none", "hover", info="full")
     _, info = env.reset(seed=0)
     assert "effects" not in info and env.plant.hook is None
 
@@ -72,7 +72,7 @@ def test_vector_env_equals_single_envs_with_the_same_draws():
     kw = dict(scenario="random", random_trajectory="hover", duration=0.3, sensor_noise=NOISE,
               effects=RANGES + ["inertia=0.8:1.2,0.9:1.1,0.8:1.2", "delay=0:0.01"])
     vec = QuadFaultVectorEnv(N, "none", info="full", **kw)
-    singles = [QuadFaultEnv("none", **kw) for _ in range(N)]
+    singles = [QuadFaultEnv("none", **kw, info="full") for _ in range(N)]
     obs, info = vec.reset(seed=seed)
     infos = [e.reset(seed=seed + i)[1] for i, e in enumerate(singles)]
     for i in range(N):
@@ -137,7 +137,7 @@ def _diagnosis(tmp_path):
 
 def test_make_with_a_model_flies_its_vehicle_and_fitted_effects(tmp_path):
     path = _diagnosis(tmp_path)
-    env = gym.make("QuadFaultHover-v0", model=str(path), estimator="none")
+    env = gym.make("QuadFaultHover-v0", model=str(path), estimator="none", info="full")
     _, info = env.reset(seed=0)
     assert env.unwrapped.vehicle == VEHICLE  # the model's nominal vehicle
     d = _drawn(info)
@@ -153,7 +153,7 @@ def test_make_with_a_model_flies_its_vehicle_and_fitted_effects(tmp_path):
 def test_model_uncertainty_draws_the_fitted_parameters_per_reset(tmp_path):
     path = _diagnosis(tmp_path)
     env = QuadFaultEnv("none", "hover", model=path, model_uncertainty=True,
-                       effects=["wind=-1:1,0,0"])
+                       effects=["wind=-1:1,0,0"], info="full")
     draws = [_drawn(env.reset(seed=s)[1]) for s in range(40)]
     taus = np.array([d["motor_lag"]["tau_s"] for d in draws])
     k = np.array([d["drag"]["k_N_s_per_m"] for d in draws])

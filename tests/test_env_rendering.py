@@ -149,7 +149,7 @@ def test_record_video_plays_in_real_time(tmp_path):
         assert clip.fps == 100
         # reset + one frame per step, at 100 frames per second of video
         assert clip.duration == pytest.approx((steps + 1) / 100, abs=0.011)
-    assert info["t"] == pytest.approx(steps / 100)
+    assert env.unwrapped.time == pytest.approx(steps / 100)
 
 
 @pytest.mark.slow

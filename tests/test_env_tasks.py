@@ -89,7 +89,7 @@ def test_a_crazyflie_flies_the_track_task_scaled_to_its_size():
     inertia: the geometric controller (zero residual) flies a 30 g vehicle through a whole
     episode: from its initial offset (the task's spread) to within 1 cm after 2 s."""
     cf = Vehicle.from_arm(0.046, 0.006, mass=0.03, inertia=np.diag([1.4e-5, 1.4e-5, 2.2e-5]))
-    env = gym.make("QuadFaultTrack-v0", vehicle=cf, estimator="none", duration=5.0)
+    env = gym.make("QuadFaultTrack-v0", vehicle=cf, estimator="none", duration=5.0, info="full")
     env.reset(seed=0)
     tr = env.unwrapped.scenario.trajectory
     assert isinstance(tr, SmoothTrack)
@@ -137,7 +137,8 @@ def test_drag_learnt_by_the_diagnosis_flies_in_the_env_and_is_found_again(tmp_pa
                  "--quiet"]) == 0
     assert main(["diagnose", str(first), "--json", str(diag1), "--quiet"]) == 0
     sc = named_scenario("nominal", 20.0).replace(trajectory=Lissajous())
-    env = RecordFlight(gym.make("QuadFault-v1", model=str(diag1), estimator="none", scenario=sc),
+    env = RecordFlight(gym.make("QuadFault-v1", model=str(diag1), estimator="none", scenario=sc,
+                                info="full"),
                        tmp_path / "calibrated")
     env.reset(seed=1)
     while True:

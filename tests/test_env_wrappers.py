@@ -53,7 +53,7 @@ def _abrupt(duration=1.2):
 
 
 def test_estimate_observation_replaces_slots_from_any_estimator():
-    base = QuadFaultEnv("none", "hover_fault", duration=1.0)
+    base = QuadFaultEnv("none", "hover_fault", duration=1.0, info="full")
     frozen = FrozenEstimator((0.7, 0.8, 0.9, 1.0))
     env = EfficiencyEstimateObservation(base, frozen)
     steps = _episode(env, 5)
@@ -67,14 +67,14 @@ def test_estimate_observation_replaces_slots_from_any_estimator():
         assert base.observation_space.contains(obs)
     assert frozen.n == 5 * 10 // base.estimator_stride
     # the rest of the observation is the env's
-    raw = _episode(QuadFaultEnv("none", "hover_fault", duration=1.0), 5)
+    raw = _episode(QuadFaultEnv("none", "hover_fault", duration=1.0, info="full"), 5)
     other = np.ones(base.observation_space.shape, bool)
     other[sl] = other[sd] = False
     np.testing.assert_array_equal(steps[-1][0][other], raw[-1][0][other])
 
 
 def test_estimate_observation_with_the_oracle_and_dict_observations():
-    base = QuadFaultEnv("none", "hover_fault", duration=1.0, observation="dict")
+    base = QuadFaultEnv("none", "hover_fault", duration=1.0, observation="dict", info="full")
     env = EfficiencyEstimateObservation(base, "truth", stride=1)
     for obs, info in _episode(env, 40)[35:]:
         np.testing.assert_allclose(obs["eta_hat"], info["eta_true_samples"][-1], rtol=1e-6)
@@ -83,7 +83,7 @@ def test_estimate_observation_with_the_oracle_and_dict_observations():
 
 def test_estimator_comparison_summary_keys_and_scores():
     truth_like = FrozenEstimator(name="ones")  # eta = 1: wrong during the fault windows
-    env = EstimatorComparison(QuadFaultEnv("none", _abrupt()),
+    env = EstimatorComparison(QuadFaultEnv("none", _abrupt(), info="full"),
                               {"oracle": "truth", "ones": truth_like})
     steps = _episode(env, 200)
     last = steps[-1][1]["comparison"]
@@ -111,7 +111,7 @@ def test_estimator_comparison_summary_keys_and_scores():
 
 
 def test_estimator_comparison_no_faults_gives_null_spike_and_latency():
-    env = EstimatorComparison(QuadFaultEnv("none", "hover", duration=0.1),
+    env = EstimatorComparison(QuadFaultEnv("none", "hover", duration=0.1, info="full"),
                               {"a": FrozenEstimator()})
     _episode(env, 20)
     cur = env.summary()["current"]["a"]
@@ -125,7 +125,8 @@ def test_estimator_comparison_runs_irls_and_ekf():
     from estimators.ekf import EKFConfig, MotorEfficiencyEKF
     from estimators.irls import IRLSConfig, SlidingWindowIRLS
 
-    base = QuadFaultEnv("none", "hover_fault", duration=0.6, estimator_rate="control")
+    base = QuadFaultEnv("none", "hover_fault", duration=0.6, estimator_rate="control",
+                        info="full")
     default = EstimatorComparison(base)
     assert {n: e.name for n, e in default.estimators.items()} == {"irls": "irls", "ekf": "ekf"}
     # the numpy backends: same results, and no numba compilation inside this test
@@ -145,7 +146,8 @@ def test_estimator_comparison_runs_irls_and_ekf():
 
 def test_estimator_comparison_runs_any_set_of_registered_estimators():
     """IRLS, the EKF, RLS and the UKF side by side on one measurement stream, by name."""
-    base = QuadFaultEnv("none", "hover_fault", duration=0.6, estimator_rate="control")
+    base = QuadFaultEnv("none", "hover_fault", duration=0.6, estimator_rate="control",
+                        info="full")
     names = ("irls", "ekf", "rls", "ukf")
     env = EstimatorComparison(base, {n: n for n in names})
     steps = _episode(env, 60)
@@ -158,7 +160,7 @@ def test_estimator_comparison_runs_any_set_of_registered_estimators():
 
 
 def test_record_flight_writes_loadable_recordings(tmp_path):
-    base = QuadFaultEnv("none", _abrupt(0.3), thrust_noise=0.05)
+    base = QuadFaultEnv("none", _abrupt(0.3), thrust_noise=0.05, info="full")
     env = RecordFlight(base, tmp_path / "flight")
     steps = _episode(env, 100, seed=4)
     assert len(steps) == 31  # 0.3 s at 100 Hz, truncated
@@ -180,14 +182,24 @@ def test_record_flight_writes_loadable_recordings(tmp_path):
     assert rec.vehicle == base.vehicle
     assert len(read_recording(env.paths[1])) == 70
     with pytest.raises(ConfigError, match="never overwrites"):
-        RecordFlight(QuadFaultEnv("none", "hover"), tmp_path / "flight.csv")
+        RecordFlight(QuadFaultEnv("none", "hover", info="full"), tmp_path / "flight.csv")
     with pytest.raises(ConfigError, match="folder does not exist"):
-        RecordFlight(QuadFaultEnv("none", "hover"), tmp_path / "missing" / "flight")
+        RecordFlight(QuadFaultEnv("none", "hover", info="full"), tmp_path / "missing" / "flight")
 
 
 def test_record_flight_enu_round_trip(tmp_path):
-    env = RecordFlight(QuadFaultEnv("none", "hover", duration=0.05), tmp_path / "f", frame="ENU")
+    env = RecordFlight(QuadFaultEnv("none", "hover", duration=0.05, info="full"), tmp_path / "f",
+                       frame="ENU")
     steps = _episode(env, 10)
     rec = read_recording(env.paths[0])
     assert rec.frame == "ENU"
     np.testing.assert_allclose(rec.position[-1], steps[-1][1]["samples"][-1].p, atol=1e-9)
+
+
+@pytest.mark.parametrize("wrap", [lambda env: EfficiencyEstimateObservation(env, "irls"),
+                                  EstimatorComparison,
+                                  lambda env: RecordFlight(env, "flight")])
+def test_wrappers_of_the_measurement_stream_refuse_a_light_info(wrap):
+    """The stream lives in the full info: a light env is a one-line error naming the fix."""
+    with pytest.raises(ConfigError, match="info='full'"):
+        wrap(QuadFaultEnv("none", "hover"))

@@ -32,7 +32,8 @@ def _run_side_by_side(n_envs, steps, seed, estimator, action_scale=1.0, **kw):
     """Step a vector env and ``n_envs`` single envs with the same actions; compare all."""
     ekw = _estimator_kwargs(estimator)
     vec = QuadFaultVectorEnv(n_envs, estimator, estimator_kwargs=ekw, info="full", **kw)
-    singles = [QuadFaultEnv(estimator, estimator_kwargs=ekw, **kw) for _ in range(n_envs)]
+    singles = [QuadFaultEnv(estimator, estimator_kwargs=ekw, info="full", **kw)
+               for _ in range(n_envs)]
     obs, info = vec.reset(seed=seed)
     single_obs = [e.reset(seed=seed + i)[0] for i, e in enumerate(singles)]
     np.testing.assert_allclose(obs, np.array(single_obs), rtol=0, atol=1e-9)
@@ -74,7 +75,7 @@ def test_rows_sharing_a_scenario_do_not_leak_it_to_other_rows():
               estimator_rate="control")
     seeds = [10001, 10002, 10001]
     vec = QuadFaultVectorEnv(len(seeds), "truth", info="full", **kw)
-    singles = [QuadFaultEnv("truth", **kw) for _ in seeds]
+    singles = [QuadFaultEnv("truth", **kw, info="full") for _ in seeds]
     obs, info = vec.reset(seed=seeds)
     assert [e.reset(seed=s)[0] for e, s in zip(singles, seeds)]  # same seeds, same scenarios
     for k in range(15):
@@ -248,7 +249,7 @@ def test_batched_reset_equals_single_env_resets(kw):
     vec = QuadFaultVectorEnv(n, "none", **kw)
     obs, _ = vec.reset(seed=40)
     for i in range(n):
-        env = QuadFaultEnv("none", **kw)
+        env = QuadFaultEnv("none", **kw, info="full")
         o, info = env.reset(seed=40 + i)
         np.testing.assert_allclose(obs[i], o, rtol=0, atol=1e-12, err_msg=f"row {i}")
         assert vec.scenarios[i] == env.scenario

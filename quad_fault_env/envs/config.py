@@ -27,6 +27,29 @@ OBSERVATION_KINDS = ("flat", "dict")
 TERMINATION_REASONS = ("crash", "out_of_bounds", "excessive_tilt", "non_finite")
 #: trajectories of random scenarios (``quadfault.scenarios.random_scenario``)
 RANDOM_TRAJECTORIES = ("random", "circle", "hover", "lissajous")
+#: what ``info`` holds (the single and the vector env): ``"light"`` the keys of
+#: :func:`light_info` alone, ``"full"`` every diagnostic as well
+INFO_LEVELS = ("light", "full")
+
+
+def light_info(termination_reason) -> dict:
+    """The light ``info`` of a reset or a step, the one definition both environments use
+    (the vector env passes arrays over its sub-envs): why the episode terminated (a name of
+    :data:`TERMINATION_REASONS`), or None while it goes on. A full ``info`` holds these keys
+    and more."""
+    return {"termination_reason": termination_reason}
+
+
+#: the keys of a light ``info``
+LIGHT_INFO_KEYS = tuple(light_info(None))
+
+
+def require_full_info(env, reader: str) -> None:
+    """A one-line :class:`ConfigError` when ``env`` (a QuadFault environment, possibly
+    wrapped) gives the light ``info`` and ``reader`` reads the full one."""
+    if getattr(getattr(env, "unwrapped", env), "info_level", "full") != "full":
+        raise ConfigError(f"{reader} reads the full info (the measurement stream and the "
+                          f"truth); make the environment with info='full'")
 
 
 def keywords_of(init) -> tuple:
@@ -36,15 +59,32 @@ def keywords_of(init) -> tuple:
                  if p.kind in kinds and name != "self")
 
 
+def _closest(word, valid) -> str | None:
+    """The entry of ``valid`` closest to ``word`` (difflib), or None when none is close."""
+    close = difflib.get_close_matches(str(word), [str(v) for v in valid], n=1, cutoff=0.6)
+    return close[0] if close else None
+
+
 def check_keywords(kwargs, valid, owner: str) -> None:
     """Raise a one-line :class:`ConfigError` for the first keyword of ``kwargs`` not in
     ``valid``, naming the closest valid one (``gym.make("QuadFault-v1", estimater="ekf")``)."""
     for key in kwargs:
         if key not in valid:
-            close = difflib.get_close_matches(str(key), valid, n=1, cutoff=0.6)
-            hint = (f"did you mean {close[0]!r}?" if close
+            close = _closest(key, valid)
+            hint = (f"did you mean {close!r}?" if close
                     else f"valid keywords: {', '.join(sorted(valid))}")
             raise ConfigError(f"{owner}: unknown keyword {key!r}; {hint}")
+
+
+def check_choice(name: str, value, valid: tuple):
+    """``value`` when it is one of ``valid``; otherwise a one-line :class:`ConfigError` that
+    names the keyword, the valid values and the closest one (``info="ful"``)."""
+    if isinstance(value, str) and value in valid:
+        return value
+    close = _closest(value, valid) if isinstance(value, str) else None
+    hint = f"; did you mean {close!r}?" if close else ""
+    raise ConfigError(f"{name} must be one of {', '.join(map(repr, valid))}, "
+                      f"got {value!r}{hint}")
 
 
 def checked_keywords(init):

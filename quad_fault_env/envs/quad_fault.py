@@ -23,15 +23,18 @@ from estimators.base import Estimate, Sample
 from quad_fault_env.envs.config import (
     ALLOCATIONS,
     ESTIMATOR_RATES,
+    INFO_LEVELS,
     OBSERVATION_KINDS,
     RANDOM_TRAJECTORIES,
     ActionConfig,
     InitialStateSpread,
     RewardConfig,
     TerminationLimits,
+    check_choice,
     check_random_faults,
     checked_keywords,
     config_of,
+    light_info,
     number_at_least,
     validate_action,
 )
@@ -98,17 +101,20 @@ class QuadFaultEnv(gym.Env):
     ``non_finite``; None otherwise). Truncation when the scenario's duration is reached (and
     through ``max_episode_steps`` of the registration).
 
-    ``info`` (truth lives here, never in the observation unless ``estimator="truth"``):
-    ``t`` [s]; ``eta_true`` at ``t``; ``eta_hat``, ``eta_sd`` (None if not reported),
-    ``estimator``, ``estimator_status``, ``estimator_diagnostics`` of the newest estimate;
-    ``position_error`` (true, world NED [m]) and its norm ``tracking_error``;
-    ``motor_command`` [N] held over the step; ``fault_events`` (faults whose onset or end lies
-    in the step's interval [t0, t1): dicts ``motor, onset, end, level, ramp, kind, t``);
-    ``faults`` (all faults of the episode); ``scenario``; ``thrust_noise``; ``samples`` (the step's measurement stream:
-    one :class:`estimators.base.Sample` per physics substep, the command held over it; the
-    env's estimator reads every ``estimator_stride``-th one); ``eta_true_samples`` and
+    ``info`` (truth lives here, never in the observation unless ``estimator="truth"``): with
+    ``info="light"`` (the default) ``termination_reason`` alone
+    (:func:`~quad_fault_env.envs.config.light_info`, the vector env's light ``info`` too);
+    with ``info="full"`` also ``t`` [s]; ``eta_true`` at ``t``; ``eta_hat``, ``eta_sd`` (None
+    if not reported), ``estimator``, ``estimator_status``, ``estimator_diagnostics`` of the
+    newest estimate; ``position_error`` (true, world NED [m]) and its norm
+    ``tracking_error``; ``motor_command`` [N] held over the step; ``fault_events`` (faults
+    whose onset or end lies in the step's interval [t0, t1): dicts ``motor, onset, end,
+    level, ramp, kind, t``); ``faults`` (all faults of the episode); ``scenario``;
+    ``thrust_noise``; ``samples`` (the step's measurement stream: one
+    :class:`estimators.base.Sample` per physics substep, the command held over it; the env's
+    estimator reads every ``estimator_stride``-th one); ``eta_true_samples`` and
     ``specific_force_samples`` (accelerometer, body FRD [m/s^2]) aligned with ``samples``;
-    ``termination_reason``.
+    with ``effects`` / ``model``, ``effects``.
 
     Keyword arguments:
         estimator: ``"irls" | "ekf" | "truth" | "none"`` or an estimator object.
@@ -159,6 +165,10 @@ class QuadFaultEnv(gym.Env):
             fly its nominal vehicle (instead of ``vehicle``) and its accepted effects.
         model_uncertainty: draw the model's fitted parameters from their reported
             uncertainty at each reset.
+        info: what ``info`` holds: ``"light"`` (the termination reason alone; cheap to build
+            and to copy) or ``"full"`` (every diagnostic above, the measurement stream the
+            wrappers of :mod:`quad_fault_env.wrappers` read included). The flights are the
+            same either way.
 
     An unknown keyword raises a :class:`~quadfault.errors.ConfigError` naming the closest
     valid one.
@@ -181,7 +191,10 @@ class QuadFaultEnv(gym.Env):
                  limits: TerminationLimits | None = None,
                  initial_spread: InitialStateSpread | None = None,
                  vehicle: Vehicle | None = None, controller: ControllerConfig | None = None,
-                 render_mode: str | None = None, effects=None, model=None, model_uncertainty: bool = False):
+                 render_mode: str | None = None, effects=None, model=None,
+                 model_uncertainty: bool = False, info: str = "light"):
+        #: what ``info`` holds: ``"light"`` (the termination reason) or ``"full"``
+        self.info_level = check_choice("info", info, INFO_LEVELS)
         self.physics_draws = PhysicsDraws.of(effects, model, model_uncertainty)
         if self.physics_draws is not None and self.physics_draws.vehicle is not None:
             if vehicle is not None:
@@ -343,9 +356,9 @@ class QuadFaultEnv(gym.Env):
             self._estimate = Estimate(0.0, np.ones(n), None, "warmup")
         self.flight.sense()
         self.history = [self.plant.state.p.copy()]
-        events = [dict(fault_dict(f), kind="onset", t=f.onset)
-                  for f in self.scenario.efficiency.faults if f.onset < -EVENT_TOL]
         ref = self.scenario.trajectory(0.0)
+        events = (self._fault_events(-np.inf, 0.0, ("onset",)) if self.info_level == "full"
+                  else None)  # the faults under way from the start
         info = self._info([], [], [], events, None, ref)
         if self.render_mode == "human":
             self.render()
@@ -449,11 +462,8 @@ class QuadFaultEnv(gym.Env):
         self.history.append(np.array(state.p, dtype=float))
         reward = self.reward_config(state.p - ref.position, state.v - ref.velocity,
                                     self._f_cmd, self.f_max, terminated, a)
-        events = []
-        for f in self.scenario.efficiency.faults:
-            for kind, tk in (("onset", f.onset), ("end", f.end)):
-                if t0 - EVENT_TOL <= tk < t1 - EVENT_TOL:
-                    events.append(dict(fault_dict(f), kind=kind, t=tk))
+        full = self.info_level == "full"
+        events = self._fault_events(t0, t1, ("onset", "end")) if full else None
         info = self._info(samples, eta_true, sf, events, reason, ref, eta_t1)
         if self.render_mode == "human":
             self.render()
@@ -469,16 +479,27 @@ class QuadFaultEnv(gym.Env):
                                 eta_sd=estimate_sd(self._estimate, n), ref_acc=ref.acceleration)
         return flat if self.observation_kind == "flat" else self.layout.split(flat)
 
+    def _fault_events(self, t0: float, t1: float, kinds: tuple) -> list[dict]:
+        """The ``info["fault_events"]`` of the interval [t0, t1): the faults' events of
+        ``kinds`` (``"onset"``, ``"end"``) at a time within it."""
+        return [dict(fault_dict(f), kind=kind, t=tk) for f in self.scenario.efficiency.faults
+                for kind, tk in (("onset", f.onset), ("end", f.end))
+                if kind in kinds and t0 - EVENT_TOL <= tk < t1 - EVENT_TOL]
+
     def _info(self, samples, eta_true, sf, events, reason, ref, eta_t=None) -> dict:
-        """The step's (or the reset's) ``info``: the same keys, types and shapes every time
-        (``gym.make_vec`` batches them); per-substep rows that were not flown are NaN."""
+        """The step's (or the reset's) ``info``: light
+        (:func:`~quad_fault_env.envs.config.light_info`) or full, with the same keys, types
+        and shapes every time (``gym.make_vec`` batches them); per-substep rows that were not
+        flown are NaN."""
+        if self.info_level == "light":
+            return light_info(reason)
         t = self.time
         state = self._state
         S, n = self.substeps, self.vehicle.n_rotors
         eta_rows, sf_rows = np.full((S, n), np.nan), np.full((S, 3), np.nan)
         eta_rows[:len(samples)] = np.reshape(eta_true, (-1, n))
         sf_rows[:len(samples)] = np.reshape(sf, (-1, 3))
-        return {
+        return light_info(reason) | {
             "t": float(t),
             "eta_true": (np.asarray(self.scenario.efficiency(t), dtype=float) if eta_t is None
                          else eta_t),
@@ -493,7 +514,6 @@ class QuadFaultEnv(gym.Env):
             "samples": samples,
             "eta_true_samples": eta_rows,
             "specific_force_samples": sf_rows,
-            "termination_reason": reason,
         } | ({"effects": describe(self.effects)} if self.physics_draws else {})
 
     # -- rendering ---------------------------------------------------------------------------
