@@ -345,6 +345,7 @@ def run_one(job):
             f = dataclasses.replace(match[0], params=frame_vectors(match[0].params, frame))
             errs[e.name] = param_error(e, f, veh)
     return dict(i=i, truth=c["names"], found=found, snr=achieved, target=c["target"],
+                indistinguishable=[n["names"] for n in res.indistinguishable],
                 mass=veh.mass, frame=c["frame"], commands=c["commands"],
                 improvement=res.model_improvement, param_errors=errs,
                 t_diag=t_diag, cpu_diag=cpu_diag, t_sim=t_sim, samples=len(blind),
@@ -401,6 +402,8 @@ def summarise(rows, rate, duration) -> dict:
                                           for r in below)
                                    for n in sorted({r["found"][0] for r in below
                                                     if r["found"]})},
+        "below_resolution_indistinguishable": sum(bool(r.get("indistinguishable"))
+                                                  for r in below),
         "top_effect_correct": float(np.mean(top_ok)) if top_ok else None,
         "top_effect_correct_every_concealed": float(np.mean(top_all)) if top_all else None,
         "top_effect_exact_name": float(np.mean(exact_top)) if exact_top else None,
@@ -446,8 +449,11 @@ def print_summary(s, rows):
     if s["n_below_resolution"]:
         print(f"{s['n_below_resolution']} concealed time constants shorter than "
               f"{TIMING_SAMPLES:g} sample periods (below what the recording resolves; left out "
-              f"of the scores above): nothing reported on {s['below_resolution_found_nothing']}"
+              f"of the scores above): nothing accepted on {s['below_resolution_found_nothing']}"
               + "".join(f", {k} on {v}" for k, v in s["below_resolution_found"].items())
+              + (f" (on {s['below_resolution_indistinguishable']} of them an effect named "
+                 "indistinguishable from the time constant, and not accepted)"
+                 if s["below_resolution_indistinguishable"] else "")
               + f"; top effect correct counting them: "
               f"{s['top_effect_correct_every_concealed']:.3f}")
     print("median parameter error by effect:",
@@ -507,7 +513,10 @@ def main(argv=None):
     for k, row in enumerate(done, 1):
         rows.append(row)
         print(f"[{k}/{args.n}] #{row['i']} truth={'+'.join(row['truth']) or 'none'} "
-              f"found={'+'.join(row['found']) or 'none'} snr={[round(x, 1) for x in row['snr']]} "
+              f"found={'+'.join(row['found']) or 'none'}"
+              + "".join(f" (indistinguishable: {' or '.join(n)})"
+                        for n in row["indistinguishable"])
+              + f" snr={[round(x, 1) for x in row['snr']]} "
               f"imp={row['improvement']:.2f} diag={row['t_diag']:.1f}s", flush=True)
     if args.backend == "pool":
         pool.close()

@@ -109,6 +109,9 @@ def run(args) -> int:
         extra = ""
         if res.suspect:
             extra += "; suspect (at a bound): " + ", ".join(e.name for e in res.suspect)
+        if res.indistinguishable:
+            extra += "; indistinguishable in this log: " + ", ".join(
+                " or ".join(n["names"]) for n in res.indistinguishable)
         if res.not_identifiable:
             extra += "; not identifiable from this log: " + ", ".join(
                 n["name"] for n in res.not_identifiable)

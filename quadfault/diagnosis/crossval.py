@@ -30,6 +30,7 @@ asking for anything.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -98,6 +99,41 @@ def cross_validate(rp: Replay, cands, sc, x_init, folds, *, full: Fit | None = N
         pred = lin.at(sol.x) if lin.exact else lin.model(rp, sol.x)
         res[idx] = rp.measured[idx] - pred[idx]
     return CrossValidation(res, sc.sse(res), tuple(fold_x))
+
+
+def held_out(rp: Replay, sc, terms, folds) -> tuple[CrossValidation, Fit]:
+    """Fit the terms ``[(cand, x_start), ...]`` jointly (started from their ``x``) and
+    cross-validate them on ``folds``: ``(held-out result, fit)``."""
+    cands = [c for c, _ in terms]
+    f = fit(rp, cands, sc.divisor, init=[np.asarray(x, dtype=float) for _, x in terms])
+    return cross_validate(rp, cands, sc, None, folds, full=f), f
+
+
+class Gain(NamedTuple):
+    """How much a model beats another on the same held-out folds.
+
+    Attributes:
+        gain: ``1 - RMS(after) / RMS(before)`` over all channels (fixed weights) [-].
+        best: the largest such gain of one channel [-].
+        lo: lower end of the 95 % interval of ``gain`` (segment bootstrap) [-].
+        passes: the bar every effect meets on top of a model: ``gain`` at least ``m`` or
+            ``best`` at least ``3 m``, with ``lo`` above 0.
+    """
+
+    gain: float
+    best: float
+    lo: float
+    passes: bool
+
+
+def gain_over(rp: Replay, sc, before: CrossValidation, after: CrossValidation,
+              m: float) -> Gain:
+    """The held-out :class:`Gain` of ``after`` over ``before`` (same folds), against the
+    bar ``m`` (``min_improvement``)."""
+    table, (lo, _) = sc.channel_table(before.residual, after.residual, rp.block_dur[sc.rows])
+    gain = 1.0 - float(np.sqrt(after.sse / max(before.sse, 1e-300)))
+    best = max(v["improvement"] for v in table.values())
+    return Gain(gain, best, lo, not (lo <= 0.0 or (gain < m and best < 3 * m)))
 
 
 def _near_bound(cand, x) -> np.ndarray:

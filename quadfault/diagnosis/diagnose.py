@@ -151,6 +151,24 @@ def _unexplained(rp, sc, base_res, where) -> bool:
     return bool(where) and float(np.sqrt(np.mean(z * z))) > STRONG_INTERVAL
 
 
+def _indistinguishable(verdicts, order) -> tuple:
+    """``({"names": [effect, timing effect], "reason"}, ...)``: the rejected effects this log
+    cannot tell from a motor lag or delay shorter than it resolves
+    (:mod:`~quadfault.diagnosis.resolution`), in the order of ``order``."""
+    out = []
+    for name in order:
+        v = verdicts.get(name)
+        if v is None or v.status != "rejected" or v.like is None:
+            continue
+        out.append({"names": [name, v.like.name],
+                    "reason": (f"this log cannot tell {name} from {v.like.describe()}: "
+                               f"{name} adds nothing held out to that time constant, and "
+                               "the log is too slow to confirm the time constant itself; "
+                               "one of the two is likely there, and faster commands or "
+                               "measured rotor speeds would tell which")})
+    return tuple(out)
+
+
 def _valid_pose(rec, ev) -> tuple:
     """``(recording, spans)``: the recording without a pose that is mostly invalid (an IMU
     log then), and the spans [s] where the log flags its velocity or position invalid (left
@@ -314,12 +332,13 @@ class Diagnosis:
                     bound=lambda xf, f=f, j=j: fit_bound_mask(rp, sc, f, j, xf), **common))
         suspect.sort(key=lambda e: -e.improvement)
         rejected.sort(key=lambda e: -e.improvement)
+        alike = _indistinguishable(sel.verdicts, [e.name for e in rejected])
         table, model_ci = sc.channel_table(sel.baseline.residual, sel.final_cv.residual,
                                            rp.block_dur[sc.rows])
         model_imp = sc.improvement(sel.baseline.residual, sel.final_cv.residual)
         where, regimes = locate(rp, base_res, sc.noise)
-        verdict = "mismatch" if effects or suspect or _unexplained(rp, sc, base_res, where) \
-            else "consistent"
+        verdict = "mismatch" if effects or suspect or alike \
+            or _unexplained(rp, sc, base_res, where) else "consistent"
         fold_of_block = np.zeros(rp.n_blocks, dtype=int)
         for i, idx in enumerate(fl):
             fold_of_block[idx] = i
@@ -344,7 +363,8 @@ class Diagnosis:
             channels=rp.channels, scale=tuple(float(s) for s in sc.noise),
             seconds=float(time.perf_counter() - t_start),
             scoring=_scoring_dict(rp, sc, rec, mask_note),
-            suspect=tuple(suspect), rejected=tuple(rejected), channel_scores=table,
+            suspect=tuple(suspect), rejected=tuple(rejected), indistinguishable=alike,
+            channel_scores=table,
             model_ci95=tuple(model_ci), weights=tuple(float(w) for w in sc.weight),
             vehicle=side["vehicle"], frame=frame, gravity=float(side["gravity"]),
             series=series)

@@ -49,6 +49,9 @@ def markdown(res: DiagnosisResult, source: str) -> str:
     L += _effect_rows(res.effects) if res.effects else \
         ["None accepted: no candidate improved held-out residuals by a meaningful margin with "
          "physically plausible parameters."]
+    if res.indistinguishable:
+        L += ["", "## Indistinguishable in this log", ""]
+        L += [f"- **{' or '.join(n['names'])}**: {n['reason']}" for n in res.indistinguishable]
     if res.suspect:
         L += ["", "## Suspect (a parameter at its bound: not identified)", ""]
         L += _effect_rows(res.suspect, reason=True)

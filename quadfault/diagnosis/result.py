@@ -94,6 +94,10 @@ class DiagnosisResult:
         channels, scale: channel names and their noise scales.
         suspect: effects that improved the fit only with a parameter at a bound.
         rejected: candidates fitted and not accepted, with the reason.
+        indistinguishable: ``({"names": [a, b], "reason"}, ...)``: effects this log cannot
+            tell apart and so names neither (a rejected effect that adds nothing to a motor
+            lag or delay shorter than the log resolves,
+            :mod:`~quadfault.diagnosis.resolution`).
         channel_scores: ``{channel: {"rmse_before", "rmse_after", "improvement", "ci95"}}``.
         model_ci95: 95 % interval of ``model_improvement``.
         weights: relative weight of each channel in pooled scores.
@@ -122,6 +126,7 @@ class DiagnosisResult:
     scoring: dict = field(default_factory=dict)
     suspect: tuple = ()
     rejected: tuple = ()
+    indistinguishable: tuple = ()
     channel_scores: dict = field(default_factory=dict)
     model_ci95: tuple = ()
     weights: tuple = ()
@@ -145,6 +150,7 @@ class DiagnosisResult:
             "effects": [e.to_dict() for e in self.effects],
             "suspect": [e.to_dict() for e in self.suspect],
             "rejected": [e.to_dict() for e in self.rejected],
+            "indistinguishable": [dict(n) for n in self.indistinguishable],
             "model": {"rmse": dict(self.model_rmse), "improvement": self.model_improvement,
                       "ci95": list(self.model_ci95), "channels": dict(self.channel_scores)},
             "regimes": list(self.regimes),

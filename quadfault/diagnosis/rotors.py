@@ -33,8 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from quadfault.diagnosis.crossval import cross_validate
-from quadfault.diagnosis.fit import fit
+from quadfault.diagnosis.crossval import gain_over, held_out
 from quadfault.diagnosis.library import EQUIVALENT, build_library
 from quadfault.effects.com_offset import ComOffset
 from quadfault.effects.motor_efficiency import MotorEfficiency
@@ -69,7 +68,7 @@ def rotors_differ(rp, sc, opt, current, fl, m) -> str:
     common = [] if has_common else [(build_library(rp, (ThrustScale.name,))[0],
                                      np.array([float(np.mean(eta))]))]
     if common:
-        cv, f = _held_out(rp, sc, others + common, fl)
+        cv, f = held_out(rp, sc, others + common, fl)
         if np.sqrt(opt.cv.sse / max(cv.sse, 1e-300)) > 1.0 - m:
             return ("the rotors do not differ from each other: one thrust factor common to "
                     f"every rotor (thrust_scale {float(f.x[-1][0]):.3g}) fits the held-out "
@@ -80,13 +79,11 @@ def rotors_differ(rp, sc, opt, current, fl, m) -> str:
     if not any(c.name == ComOffset.name for c, _ in others):
         imbalance = build_library(rp, (ComOffset.name,))[0]
         others = others + [(imbalance, np.zeros(imbalance.size))]
-    cv, f = _held_out(rp, sc, others + common, fl)
-    table, (lo, _) = sc.channel_table(cv.residual, opt.cv.residual, rp.block_dur[sc.rows])
-    gain = 1.0 - float(np.sqrt(opt.cv.sse / max(cv.sse, 1e-300)))
-    best = max(v["improvement"] for v in table.values())
-    if lo <= 0.0 or (gain < m and best < 3 * m):
+    cv, f = held_out(rp, sc, others + common, fl)
+    g = gain_over(rp, sc, cv, opt.cv, m)
+    if not g.passes:
         x_imb = f.x[[c.name for c in f.candidates].index(ComOffset.name)]
-        return imbalance_reason(eff.relative(eta), gain, best, lo, x_imb)
+        return imbalance_reason(eff.relative(eta), g.gain, g.best, g.lo, x_imb)
     return ""
 
 
@@ -95,12 +92,6 @@ def _percent(tol) -> str:
     if np.all(tol == tol[0]):
         return f"{tol[0]:g}%"
     return "[" + ", ".join(f"{v:g}" for v in tol) + "] %"
-
-
-def _held_out(rp, sc, terms, fl):
-    cands = [c for c, _ in terms]
-    f = fit(rp, cands, sc.divisor, init=[np.asarray(x, dtype=float) for _, x in terms])
-    return cross_validate(rp, cands, sc, None, fl, full=f), f
 
 
 def imbalance_reason(rel, gain, best, lo, x_imbalance) -> str:

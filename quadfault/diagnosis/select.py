@@ -20,7 +20,10 @@ Each round:
    agreement of every new effect (:func:`~quadfault.diagnosis.crossval.fold_agreement`);
    for a pair, a held-out RMS lower by ``min_improvement`` than each of its members alone;
    and for ``motor_efficiency``, a pattern the rotors' common factor or the vehicle's own
-   imbalance does not explain as well (:mod:`~quadfault.diagnosis.rotors`).
+   imbalance does not explain as well (:mod:`~quadfault.diagnosis.rotors`); and, when the
+   data asks for a motor lag or delay shorter than the log resolves, a gain over that time
+   constant held at the limit of resolution (:mod:`~quadfault.diagnosis.resolution`: else
+   the effect is indistinguishable from it in this log).
 4. An option that passes but has a parameter at a bound
    (:func:`~quadfault.diagnosis.crossval.at_bound`) is a **suspect**: the data asks for more
    than the effect allows, so another effect is likely missing; it is never accepted. Among
@@ -50,6 +53,7 @@ from quadfault.diagnosis.fit import Fit, fit
 from quadfault.diagnosis.identifiability import too_short
 from quadfault.diagnosis.library import Candidate, predict
 from quadfault.diagnosis.residuals import Replay
+from quadfault.diagnosis.resolution import TimingCheck, Unresolved, unresolved
 from quadfault.diagnosis.rotors import rotors_differ
 
 __all__ = ["Selection", "Step", "Verdict", "select", "frozen_replay", "iv_slope", "folds_of",
@@ -74,6 +78,8 @@ class Verdict:
         gain: held-out RMS reduction when added to the model before it (None if not tested).
         iv: instrumental-variable slope (None if not tested).
         agreement: fold-agreement detail ("" if not tested).
+        like: the time constant below the log's resolution it cannot be told from
+            (:class:`~quadfault.diagnosis.resolution.Unresolved`), or None.
     """
 
     candidate: Candidate
@@ -86,6 +92,7 @@ class Verdict:
     gain: float | None = None
     iv: float | None = None
     agreement: str = ""
+    like: Unresolved | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -126,6 +133,7 @@ class _Option:
     iv: float | None = None
     failed: str = ""
     agreement: dict = field(default_factory=dict)
+    like: Unresolved | None = None
 
 
 def _signal(rp, sc, current, x_cur, opt, cur_pred) -> np.ndarray:
@@ -136,9 +144,10 @@ def _signal(rp, sc, current, x_cur, opt, cur_pred) -> np.ndarray:
 
 
 def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, singles_cv,
-          cur_fit):
+          cur_fit, timing):
     """Run the acceptance tests of one option in order (module docstring); fills
-    ``opt.cv``, ``gain``, ``iv``, ``agreement`` and, on the first failure, ``failed``."""
+    ``opt.cv``, ``gain``, ``iv``, ``agreement`` and, on the first failure, ``failed``
+    (and ``like`` when it is the time constant the log cannot resolve)."""
     if opt.bic > cur_bic - kw["bic_margin"]:
         opt.failed = f"BIC not lower by more than {kw['bic_margin']:g}"
         return
@@ -152,6 +161,9 @@ def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, single
                   or _bounds_and_trade(rp, sc, opt, current, new, cur_fit)
                   or _folds(rp, sc, opt, new)
                   or rotors_differ(rp, sc, opt, current, fl, kw["min_improvement"]))
+    if not opt.failed:
+        opt.failed = timing.why_not(opt, [c for _, c in new])
+        opt.like = timing.un if opt.failed else None
 
 
 def _held_out(sc, opt, cur_cv, signal, m) -> str:
@@ -312,9 +324,11 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
                 single_cv[c.name] = (cross_validate(rp, current + [c], sc, None, fl, full=f), f)
             return single_cv[c.name]
 
+        timing = TimingCheck(rp, sc, fl, x_terms(current, x_cur),
+                             unresolved(singles, cur_bic, bic_margin), min_improvement)
         for opt in options:
             _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, singles_cv,
-                  final)
+                  final, timing)
         passed = []
         single_tested = set()
         for opt in sorted(options, key=lambda o: len(o.cands)):  # singles first
@@ -382,7 +396,7 @@ def verdicts_final(verdicts: dict) -> set:
 def _verdict(c, status, reason, opt, j) -> Verdict:
     return Verdict(c, status, reason, opt.fit, np.asarray(opt.fit.x[j]),
                    np.asarray(opt.fit.sd[j]), opt.cv, opt.gain if opt.cv is not None else None,
-                   opt.iv, opt.agreement.get(c.name, ""))
+                   opt.iv, opt.agreement.get(c.name, ""), opt.like)
 
 
 def _screen_reason(b, cur_bic, kw) -> str:

@@ -1,0 +1,75 @@
+"""A motor lag shorter than two command periods is below what the log resolves; another effect
+that only takes up part of its signal (an inertia scaled up: the lag attenuates the fast part
+of the commanded moments) is not named in its place.
+
+Synthetic flights of a 47 g quadrotor logged at 250 Hz (8 ms resolve a time constant), whose
+fast closed-loop moments make a 5 ms lag look like an inertia 1.6-1.7 times nominal when
+nothing checks it; a true inertia error on the same vehicle is still found.
+"""
+
+import numpy as np
+import pytest
+
+from quadfault import effects as fx
+from quadfault.diagnosis import Diagnosis
+from quadfault.diagnosis.report_text import markdown
+from quadfault.scenarios import named_scenario
+from quadfault.simulator import SensorNoise, SimConfig, simulate
+from quadfault.trajectory import Lissajous
+from quadfault.vehicle import PAPER_YAW_SIGNS, Vehicle
+
+DT = 4e-3  # 250 Hz: two command periods are 8 ms
+D, DY = 0.065, 0.07
+SMALL = Vehicle.from_rotors([(D, DY), (D, -DY), (-D, -DY), (-D, DY)], PAPER_YAW_SIGNS, 0.0037,
+                            mass=0.047, inertia=(7.8e-5, 1.0e-4, 1.6e-4), gravity=9.81,
+                            thrust_to_weight=2.4)
+TRAJ = Lissajous(amplitude=(0.58, 0.39, 0.067), frequency=0.146, altitude=1.5, yaw_rate=0.19)
+
+
+def fly(effect, seed=1):
+    sc = named_scenario("nominal", 12.0, DT).replace(trajectory=TRAJ)
+    cfg = SimConfig(dt=DT, sensor_noise=SensorNoise(0.005, 0.0065, 0.0012, 0.0017))
+    return simulate(sc, vehicle=SMALL, config=cfg, seed=seed, effects=(effect,),
+                    thrust_noise=0.012).without_truth()
+
+
+@pytest.fixture(scope="module")
+def sub_sample_lag():
+    return Diagnosis().fit(fly(fx.MotorLag(0.005)))
+
+
+def test_a_lag_below_the_resolution_is_not_named_as_inertia(sub_sample_lag):
+    res = sub_sample_lag
+    assert "inertia" not in res.effect_names
+    assert not {"motor_lag", "delay"} & set(res.effect_names)  # below the floor: never named
+    rejected = {e.name: e for e in res.rejected}
+    assert "shorter than 2 command periods" in rejected["motor_lag"].reason
+    assert rejected["inertia"].reason.startswith("indistinguishable in this log from a "
+                                                 "motor_lag of")
+    # both named, neither accepted: the mismatch is there, the log cannot say which
+    assert res.verdict == "mismatch"
+    (pair,) = res.indistinguishable
+    assert pair["names"] == ["inertia", "motor_lag"]
+    assert "8.0 ms" in pair["reason"]
+    assert res.to_dict()["indistinguishable"] == [pair]
+    assert "## Indistinguishable in this log" in markdown(res, "flight.csv")
+    assert "- **inertia or motor_lag**" in markdown(res, "flight.csv")
+
+
+def test_a_true_inertia_error_on_the_same_vehicle_is_still_found():
+    res = Diagnosis().fit(fly(fx.Inertia((1.5, 1.5, 1.2))))
+    assert res.effect_names == ["inertia"]
+    scale = np.asarray(res.effects[0].params["scale"])
+    assert np.allclose(scale, [1.5, 1.5, 1.2], rtol=0.03)
+    assert res.indistinguishable == ()
+
+
+def test_at_1_khz_the_same_lag_is_resolved_and_named():
+    """The floor is the log's, not the lag's: commands at 1 kHz resolve 2 ms."""
+    sc = named_scenario("nominal", 12.0, 1e-3).replace(trajectory=TRAJ)
+    cfg = SimConfig(dt=1e-3, sensor_noise=SensorNoise(0.005, 0.0065, 0.0012, 0.0017))
+    rec = simulate(sc, vehicle=SMALL, config=cfg, seed=1, effects=(fx.MotorLag(0.005),),
+                   thrust_noise=0.012).without_truth()
+    res = Diagnosis().fit(rec)
+    assert res.effect_names[:1] == ["motor_lag"]
+    assert res.effects[0].params["tau_s"] == pytest.approx(0.005, rel=0.1)
