@@ -73,3 +73,33 @@ def test_at_1_khz_the_same_lag_is_resolved_and_named():
     res = Diagnosis().fit(rec)
     assert res.effect_names[:1] == ["motor_lag"]
     assert res.effects[0].params["tau_s"] == pytest.approx(0.005, rel=0.1)
+
+
+def test_only_the_best_time_constant_decides_whether_one_is_unresolved():
+    """The check applies when the best timing fit (by BIC) is below the floor; a worse timing
+    fit below the floor beside a resolvable best one does not make it apply."""
+    from types import SimpleNamespace
+
+    from quadfault.diagnosis.identifiability import evidence, gate
+    from quadfault.diagnosis.library import build_library
+    from quadfault.diagnosis.residuals import prepare
+    from quadfault.diagnosis.resolution import unresolved
+
+    rec = fly(fx.MotorLag(0.005))
+    lib, _ = gate(build_library(prepare(rec), ("motor_lag", "delay", "inertia")),
+                  evidence(rec))
+    c = {x.name: x for x in lib}
+    assert c["motor_lag"].resolvable == pytest.approx(0.008, rel=0.01)
+
+    def fit(x):
+        return SimpleNamespace(x=[np.array(x)])
+
+    short = [(-90.0, c["motor_lag"], fit([0.005])), (-80.0, c["inertia"], fit([1.6] * 3)),
+             (-50.0, c["delay"], fit([0.002]))]
+    un = unresolved(short, cur_bic=0.0, margin=10.0)
+    assert un.name == "motor_lag" and un.floor == pytest.approx(0.008, rel=0.01)
+    assert float(un.candidate.upper[0]) == pytest.approx(un.floor)
+    assert "5.0 ms" in un.describe() and "8.0 ms" in un.describe()
+    resolved_best = [(-90.0, c["motor_lag"], fit([0.02])), (-50.0, c["delay"], fit([0.002]))]
+    assert unresolved(resolved_best, cur_bic=0.0, margin=10.0) is None
+    assert unresolved(short, cur_bic=-85.0, margin=10.0) is None  # lowers BIC by 5 only

@@ -67,12 +67,14 @@ def is_timing(cand) -> bool:
 
 def unresolved(singles, cur_bic: float, margin: float) -> Unresolved | None:
     """From one round's screening fits ``[(bic, candidate, fit), ...]`` (best BIC first), the
-    best timing candidate whose fit is shorter than its floor and lowers BIC by more than
-    ``margin``; None when there is none."""
+    best timing candidate when it lowers BIC by more than ``margin`` with a fit shorter than
+    its floor; None otherwise (also when the best time constant is one the log resolves)."""
     for b, c, f in singles:
         if b >= cur_bic - margin:
             break
-        if is_timing(c) and too_short(c, f.x[0]):
+        if not is_timing(c):
+            continue
+        if too_short(c, f.x[0]):
             floor = float(c.resolvable)
             upper = np.minimum(np.asarray(c.upper, dtype=float), floor)
             lower = np.minimum(np.asarray(c.lower, dtype=float), upper)
@@ -81,6 +83,7 @@ def unresolved(singles, cur_bic: float, margin: float) -> Unresolved | None:
                                           starts=starts, resolvable=0.0)
             return Unresolved(bounded, np.clip(np.asarray(f.x[0], dtype=float), lower, upper),
                               floor)
+        return None
     return None
 
 
