@@ -102,3 +102,20 @@ def test_an_unknown_info_level_names_the_closest(make):
         make("ful")
     with pytest.raises(ConfigError, match="got None$"):
         make(None)
+
+
+@pytest.mark.slow
+@pytest.mark.rl
+def test_the_info_benchmark_runs():
+    """``benchmarks/bench_info.py`` prints both tables (no timing assertion here)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    pytest.importorskip("stable_baselines3")
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_info.py"
+    res = subprocess.run([sys.executable, str(script), "--estimators", "none", "--rounds", "1",
+                          "--steps", "20", "--n-steps", "16", "--rollouts", "1"],
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+    assert "light/full" in res.stdout and "info copy" in res.stdout
