@@ -79,47 +79,61 @@ def test_every_effect_parses_packs_and_simulates(name):
         code, params, memory = entry
         assert code == registry.code(name) and len(params) > 0 and memory >= 0
         built = rows.build([[entry]])
-        assert built.code[0, 0] == code and np.all(built.params[0, :len(params)] == params)
+        a = built.param[0, 0]
+        assert built.code[0, 0] == code and np.all(built.params[0, a:a + len(params)] == params)
     nominal = _fly(parse_effect("thrust_scale=1"), duration=1.0)
     rec = _fly(effect, duration=1.0)
     assert np.all(np.isfinite(rec.position)) and len(rec) == len(nominal)
     assert np.max(np.abs(rec.position - nominal.position)) > 1e-6  # the effect acts
 
 
-def test_a_chain_of_some_effects_flies_their_rows_as_the_full_chain_does():
-    """``chain_for(names)`` compiles only those effects' kernels; on rows of those effects it
-    gives the full chain's numbers (the codes are the registry's)."""
-    effects = [parse_effect("motor_lag=0.05"), parse_effect("drag=0.3")]
-    some = chain.chain_for([e.name for e in effects])
-    assert some is not chain.chain_for(None) and some is chain.chain_for(["motor_lag", "drag"])
-    state = ((0.0, 0.0, -1.0), (1.0, -0.5, 0.2), tuple(np.eye(3).ravel()), (0.1, 0.2, -0.3))
-    out = []
-    for c in (some, chain.chain_for(None)):
-        fx = rows.build([[rows.entry(e, 4, 1e-3) for e in effects]])
-        f = np.array([2.0, 2.1, 2.2, 2.3])
-        for k in range(3):
-            c.thrust_effects(fx, 0, f, k * 1e-3, 1e-3, *state, np.random.default_rng(0))
-            f = f + 0.1
-        W = c.wrench_terms(fx, 0, f, 0.0)
-        out.append((f.copy(), c.effects_wrench(W, *state, f, 0.0)))
-    np.testing.assert_array_equal(out[0][0], out[1][0])
-    assert out[0][1] == out[1][1] and out[0][1][0] != (0.0, 0.0, 0.0)
-
-
-def test_rows_are_typed_by_their_effects_and_grow_to_new_ones():
-    """Rows carry the effects they hold in their class (the loop compiles that chain alone);
-    a vehicle given an effect the rows lack grows them, keeping the other rows."""
+def test_vehicles_flying_some_of_a_layouts_slots_fly_as_in_their_own_layout():
+    """A vehicle's numbers do not depend on the other slots of its rows' layout (slots it
+    does not fly are skipped), nor on a thrust-only and a wrench-only entry trading places."""
     lag, drag = rows.entry(parse_effect("motor_lag=0.05"), 4, 1e-3), \
         rows.entry(parse_effect("drag=0.3"), 4, 1e-3)
+    wind = rows.entry(parse_effect("wind=1,2,0,gust=0.5,seed=3"), 4, 1e-3)
+    delay = rows.entry(parse_effect("delay=0.01"), 4, 1e-3)
+    state = ((0.0, 0.0, -1.0), (1.0, -0.5, 0.2), tuple(np.eye(3).ravel()), (0.1, 0.2, -0.3))
+    out = []
+    for fx, i in ((rows.build([[lag, drag]]), 0), (rows.build([[delay, wind], [drag, lag]]), 1),
+                  (rows.build([[lag, wind, drag]] * 2 + [[lag, drag]]), 2)):
+        c = chain.chain_for(type(fx).layout)
+        f = np.array([2.0, 2.1, 2.2, 2.3])
+        for k in range(3):
+            c.thrust_effects(fx, i, f, k * 1e-3, 1e-3, *state, np.random.default_rng(0))
+            f = f + 0.1
+        W = c.wrench_terms(fx, i, f, 0.0)
+        out.append((f.copy(), c.effects_wrench(W, *state, f, 0.0)))
+    for other in out[1:]:
+        np.testing.assert_array_equal(out[0][0], other[0])
+        assert out[0][1] == other[1]
+    assert out[0][1][0] != (0.0, 0.0, 0.0)
+
+
+def test_rows_are_typed_by_their_layout_and_grow_to_new_effects():
+    """Rows carry their layout (slots of effect and parameter width) in their class: the
+    loop compiles that chain alone. A vehicle given an effect the rows lack grows them,
+    keeping the other rows' parameters and memory; a vehicle's own order is kept."""
+    lag, drag = rows.entry(parse_effect("motor_lag=0.05"), 4, 1e-3), \
+        rows.entry(parse_effect("drag=0.3"), 4, 1e-3)
+    wind = rows.entry(parse_effect("wind=1,2,0"), 4, 1e-3)
     fx = rows.build([[lag], []])
-    assert type(fx).effects == ("motor_lag",) and type(fx).n_terms == 0
-    assert type(fx) is chain.rows_class(["motor_lag"], 0)
+    assert type(fx).layout == (("motor_lag", 1),)
+    assert type(fx) is chain.rows_class([("motor_lag", 1)])
+    fx.memory[0, :] = 7.0  # a flight under way
     assert not rows.fits(fx, [lag, drag])
-    grown = rows.grown(fx, [lag, drag])
-    assert type(grown).effects == ("motor_lag", "drag") and type(grown).n_terms == 1
-    rows.write(grown, 1, [drag, lag])
-    assert grown.code[0, 0] == fx.code[0, 0] and list(grown.code[1, :2]) == [
-        registry.code("drag"), registry.code("motor_lag")]
+    grown = rows.grown(fx, [wind, lag, drag])
+    assert type(grown).layout == (("wind", 10), ("motor_lag", 1), ("drag", 6))
+    assert np.all(grown.memory[0, :fx.memory.shape[1]] == 7.0)
+    assert grown.code[0, 0] == fx.code[0, 0] and grown.params[0, grown.param[0, 0]] == 0.05
+    rows.write(grown, 1, [drag, lag])  # a wrench-only and a thrust-only entry: any order
+    assert type(grown).layout == (("wind", 10), ("motor_lag", 1), ("drag", 6))
+    assert list(grown.code[1, :2]) == [registry.code("drag"), registry.code("motor_lag")]
+    assert grown.params[1, grown.param[1, 0]] == 0.3 and grown.params[0, grown.param[0, 0]] == 0.05
+    assert not rows.fits(grown, [lag, wind])  # two thrust-stage entries in another order
+    assert type(rows.grown(grown, [lag, wind])).layout == (
+        ("wind", 10), ("motor_lag", 1), ("drag", 6), ("wind", 10))
     with pytest.raises(ConfigError, match="more room"):
         rows.write(fx, 1, [drag])
 

@@ -164,11 +164,16 @@ def test_model_uncertainty_draws_the_fitted_parameters_per_reset(tmp_path):
     assert _drawn(env.reset(seed=7)[1]) == draws[7]
 
 
-def test_more_wrench_effects_than_a_vehicle_holds_is_a_one_line_error():
-    from quadfault.effects import Drag, RateDamping
-    from quadfault.plant import Plant
+def test_a_vehicle_flies_any_number_of_wrench_effects():
+    """Seven drags of 0.1 N s/m push as one of 0.7 (every slot of the layout is summed)."""
+    from quadfault.effects import chain, parse_effect, rows
 
-    Plant(Vehicle(), effects=(Drag(0.1),) * 3 + (RateDamping(0.01),) * 3)  # six: fine
-    with pytest.raises(ConfigError) as err:
-        Plant(Vehicle(), effects=(Drag(0.1),) * 7)
-    assert "at most 6" in str(err.value) and "\n" not in str(err.value)
+    state = ((0.0, 0.0, -1.0), (1.0, -0.5, 0.2), tuple(np.eye(3).ravel()), (0.1, 0.2, -0.3))
+    f = np.full(4, 2.0)
+    out = []
+    for effects in ([parse_effect("drag=0.1")] * 7, [parse_effect("drag=0.7")]):
+        fx = rows.build([[rows.entry(e, 4, 1e-3) for e in effects]])
+        c = chain.chain_for(type(fx).layout)
+        out.append(c.effects_wrench(c.wrench_terms(fx, 0, f, 0.0), *state, f, 0.0)[0])
+    np.testing.assert_allclose(out[0], out[1], rtol=1e-12)
+    assert np.linalg.norm(out[1]) > 0.5

@@ -209,8 +209,8 @@ _STANDALONE_DT = 1e-3
 class Compiled(Effect):
     """An effect with an entry in the compiled effect chain (:mod:`quadfault.effects.chain`).
 
-    Its module holds the entry's kernels, which the chain's dispatcher calls by the effect's
-    code (:mod:`quadfault.effects.dispatch`): ``thrust_step`` (the thrust stage, once per
+    Its module holds the entry's kernels, which the compiled chain calls at the columns of
+    the effect's slot in the rows' layout (:mod:`quadfault.effects.dispatch`): ``thrust_step`` (the thrust stage, once per
     physics step) and/or ``wrench_term`` with ``wrench_stage`` (the step's numbers, then the
     force and moment at each RK stage). :meth:`pack` lays the parameters out in the entry's
     row. The closed loop runs that entry compiled, from the plant's rows; the protocol

@@ -1,29 +1,32 @@
 """The effect chain of the closed loop: the built-in effects of every vehicle, compiled.
 
-Per vehicle ``i`` the effects are a list of entries -- a code (which effect: its row in the
-registry, :mod:`quadfault.effects.registry`), the column of its first parameter and of its
-first memory slot -- over one row of numbers each (:class:`EffectRows`; built by
-:mod:`quadfault.effects.rows` from each effect's ``pack``). The closed loop
-(:func:`quadfault.closed_loop.fly_vehicle`) calls the chain once per physics step,
-:func:`step_effects` (inlined into the loop, so the rows' arrays are taken once per step
-and no call passes them: every array a compiled call takes costs reference counting), which
-does the two points of the effect protocol:
+The effects of N vehicles are rows of numbers (:class:`EffectRows`; built by
+:mod:`quadfault.effects.rows` from each effect's ``pack``) under one *layout*: slots in
+chain order, each an effect and the width of its parameters. A slot's columns are the same
+for every vehicle -- a marker (0: the vehicle does not fly it; else one more than the
+column of the entry's first memory slot) then the effect's parameters -- so the compiled
+chain reads them at constant columns. The rows are built as the class :func:`rows_class` of
+their layout, and this module's functions compile, for each layout, straight-line code over
+its slots (:mod:`quadfault.effects.dispatch`; :func:`chain_for`): an effect no vehicle
+flies costs the loop nothing, a flight without effects compiles none, and a vehicle pays,
+per step, one test of each slot it does not fly. Vehicles with other parameters, or flying
+fewer of the layout's effects, share the compiled chain: randomising parameters per vehicle
+costs what flying them costs.
+
+The closed loop (:func:`quadfault.closed_loop.fly_vehicle`) calls the chain once per
+physics step, :func:`step_effects` (inlined into the loop, so the rows' arrays are taken
+once per step and no call passes them: every array a compiled call takes costs reference
+counting), which does the two points of the effect protocol:
 
 * the thrust stage (:func:`thrust_effects`), on the thrusts the motor model produced (in
-  the order of the entries, each one's output the next one's input);
+  slot order, each one's output the next one's input);
 * the step's wrench terms (:func:`wrench_terms`): the numbers the RK stages need, so that
-  :func:`effects_wrench` gives at every stage of the RKMK4 step the sum of the wrench
-  entries' external force (world) [N] and moment (body) [N m] from numbers alone; a step
-  without wrench entries skips the stages' call (:func:`has_wrench`).
+  :func:`effects_wrench` gives at every stage of the RKMK4 step the sum of the flown wrench
+  slots' external force (world) [N] and moment (body) [N m] from numbers alone; a step
+  without a flown wrench skips the stages' call (:func:`has_wrench`).
 
-Each entry runs the kernels of its effect's module (``thrust_step``, ``wrench_term``,
-``wrench_stage``; each documents its parameters and memory), picked by code in dispatchers
-generated from the registry (:mod:`quadfault.effects.dispatch`) for the rows' effects alone:
-rows are built as the class :func:`rows_class` of the effects they hold (and of the most
-wrench entries a vehicle flies), and this module's functions compile, for each such class,
-the chain of :func:`chain_for` those effects (the step's terms likewise, :func:`terms_class`).
-So an effect no vehicle flies costs the loop nothing, a flight without effects compiles
-none, and the RK stages sum only as many terms as a vehicle may have.
+Each slot runs the kernels of its effect's module (``thrust_step``, ``wrench_term``,
+``wrench_stage``; each documents its parameters and memory).
 
 Random numbers: a wind's gusts draw three standard normals per step, after the motors'
 draws, from the vehicle's generator (the loop's), or from the wind's own seeded generator
@@ -32,13 +35,14 @@ draws, from the vehicle's generator (the loop's), or from the wind's own seeded 
 
 from __future__ import annotations
 
+import re
 from typing import NamedTuple
 
 import numpy as np
 
 import quadfault.effects.dispatch as dispatch
 import quadfault.effects.registry as registry
-from quadfault.effects.dispatch import NO_TERMS, TERM, WRENCH_TERMS
+from quadfault.effects.dispatch import NO_TERM, TERM
 import quadfault.jit as jit
 
 #: effect name -> code of its entry (body effects -- mass, inertia -- have none: they set
@@ -50,84 +54,81 @@ CODES = {cls.name: k for k, cls in enumerate(registry.TABLE)
 class EffectRows(NamedTuple):
     """The compiled effects of N vehicles (row ``i`` = vehicle ``i``; see the module
     docstring). ``memory`` is updated in place by the loop. Rows are built as the subclass
-    :func:`rows_class` of the effects they hold (its type picks the compiled chain)."""
+    :func:`rows_class` of their layout (its type picks the compiled chain). ``code``,
+    ``param`` and ``mem`` list each vehicle's entries in its own order, for Python (the
+    compiled chain reads the layout's columns)."""
 
-    code: np.ndarray  # (N, E) int64: entry codes in chain order, -1 after the last
+    code: np.ndarray  # (N, E) int64: entry codes in the vehicle's order, -1 after the last
     param: np.ndarray  # (N, E) int64: column of each entry's first parameter
     mem: np.ndarray  # (N, E) int64: column of each entry's first memory slot
-    params: np.ndarray  # (N, P) parameters
+    params: np.ndarray  # (N, P) the layout's columns: per slot a marker, then parameters
     memory: np.ndarray  # (N, Q) memory (zeros: a flight's start)
     streams: object  # typed list of N generators: a seeded wind's own (else never drawn)
 
-    #: the effects the rows may hold (names, registry order) and the most wrench entries a
-    #: vehicle flies (set on each :func:`rows_class`; class attributes, not fields)
-    effects = ()
-    n_terms = WRENCH_TERMS
+    #: the layout: ``(effect name, parameter width)`` per slot, in chain order (set on each
+    #: :func:`rows_class`; a class attribute, not a field)
+    layout = ()
 
 
 class Terms(NamedTuple):
     """A vehicle's wrench terms over one step (``terms``: one :data:`TERM`-number tuple per
-    wrench entry, code -1 past the last), as the subclass :func:`terms_class` of the rows'
-    effects (its type picks the compiled RK-stage sum)."""
+    wrench slot of the layout, code -1 when not flown), as the subclass :func:`terms_class`
+    of the rows' layout (its type picks the compiled RK-stage sum)."""
 
     terms: tuple
 
-    effects = ()
-    n_terms = WRENCH_TERMS
+    layout = ()
 
 
 _FAMILIES = {"EffectRows": EffectRows, "Terms": Terms}
 _CLASSES: dict = {}
 
 
-def _class(base: str, effects, n_terms: int) -> type:
-    """The subclass of ``base`` for ``effects`` (names) and ``n_terms``, made once and kept
-    in this module under its name (so that numba's cache finds it again by name)."""
-    effects = tuple(cls.name for cls in registry.TABLE if cls.name in set(effects))
-    name = "__".join((base, *effects, str(int(n_terms))))
+def _class(base: str, layout) -> type:
+    """The subclass of ``base`` for ``layout``, made once and kept in this module under its
+    name (so that numba's cache finds it again by name)."""
+    layout = tuple((str(name), int(width)) for name, width in layout)
+    name = "__".join((base, *(f"{n}{w}" for n, w in layout))) if layout else f"{base}__none"
     cls = _CLASSES.get(name)
     if cls is None:
         cls = type(name, (_FAMILIES[base],), {"__slots__": (), "__module__": __name__,
-                                               "effects": effects, "n_terms": int(n_terms)})
+                                               "layout": layout})
         _CLASSES[name] = globals()[name] = cls
     return cls
 
 
-def rows_class(effects, n_terms: int) -> type:
-    """The :class:`EffectRows` of vehicles flying entries of ``effects`` (names), at most
-    ``n_terms`` of them with a wrench."""
-    return _class("EffectRows", effects, n_terms)
+def rows_class(layout) -> type:
+    """The :class:`EffectRows` of the layout ``layout`` (``(effect name, parameter width)``
+    per slot, in chain order)."""
+    return _class("EffectRows", layout)
 
 
-def terms_class(effects, n_terms: int) -> type:
-    """The :class:`Terms` of a step of rows of :func:`rows_class` ``(effects, n_terms)``."""
-    return _class("Terms", effects, n_terms)
+def terms_class(layout) -> type:
+    """The :class:`Terms` of a step of rows of :func:`rows_class` ``(layout)``."""
+    return _class("Terms", layout)
 
 
 def __getattr__(name):  # a class of a family, asked for by name (numba's cache, pickle)
     base, _, rest = name.partition("__")
     if base in _FAMILIES and rest:
-        *effects, n_terms = rest.split("__")
-        if all(e in registry.EFFECTS for e in effects) and n_terms.isdigit():
-            return _class(base, effects, int(n_terms))
+        slots = [] if rest == "none" else [re.fullmatch(r"([a-z_]+?)(\d+)", s)
+                                           for s in rest.split("__")]
+        if all(m and m[1] in registry.EFFECTS for m in slots):
+            return _class(base, [(m[1], int(m[2])) for m in slots])
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def chain_for(names=None, n_terms: int = WRENCH_TERMS):
+def chain_for(layout):
     """The compiled chain (a module with ``thrust_effects``, ``wrench_terms``,
-    ``step_effects``, ``has_wrench``, ``effects_wrench``) of the effects ``names`` (default:
-    every registered effect), a vehicle flying at most ``n_terms`` wrench entries; rows with
-    other effects must not fly under it."""
-    table = registry.TABLE if names is None else tuple(
-        cls for cls in registry.TABLE if cls.name in {registry.effect_class(n).name
-                                                       for n in names})
-    return dispatch.compiled(table, [registry.TABLE.index(cls) for cls in table], n_terms)
+    ``step_effects``, ``has_wrench``, ``effects_wrench``) of ``layout``; rows of another
+    layout must not fly under it."""
+    return dispatch.compiled([(registry.code(name), registry.effect_class(name), width)
+                              for name, width in layout])
 
 
 def _chain_of(typ):
     """The compiled chain of a numba type of :func:`rows_class` or :func:`terms_class`."""
-    cls = typ.instance_class
-    return chain_for(cls.effects, cls.n_terms)
+    return chain_for(typ.instance_class.layout)
 
 
 # What the loop calls: each picks, by the type of its rows or terms, the chain compiled for
@@ -167,7 +168,7 @@ def _register() -> None:
     def pick(name):
         return lambda typ: getattr(_chain_of(typ), name).py_func
 
-    none = terms_class((), 0)
+    none = terms_class(())
 
     def nothing(fx, i, f, t, dt, p, v, R, w, gen):  # no effects: no terms
         return none(())
@@ -196,6 +197,6 @@ def _register() -> None:
 if jit.AVAILABLE:
     _register()
 
-__all__ = ["CODES", "EffectRows", "Terms", "WRENCH_TERMS", "TERM", "NO_TERMS", "chain_for",
-           "rows_class", "terms_class", "thrust_effects", "wrench_terms", "step_effects",
-           "has_wrench", "effects_wrench"]
+__all__ = ["CODES", "EffectRows", "Terms", "TERM", "NO_TERM", "chain_for", "rows_class",
+           "terms_class", "thrust_effects", "wrench_terms", "step_effects", "has_wrench",
+           "effects_wrench"]

@@ -1,23 +1,25 @@
-"""The compiled effect chain, generated from the registry: one dispatcher per set of effects.
+"""The compiled effect chain, generated from a layout: straight-line code per set of effects.
 
-numba compiles no call through a table of functions, so the chain picks an entry's kernels
-with an ``if`` on its code. Those ``if`` chains are written here, from the effect classes
-given (the registry's :data:`~quadfault.effects.registry.TABLE` by default, or only the
-effects a flight uses, which compiles less): :func:`source` is the text of a module with
+numba compiles no call through a table of functions, and a loop over a vehicle's entries
+that picks each one's kernels by its code costs more than the kernels of a cheap effect. So
+the chain is written out here for a *layout* (:mod:`quadfault.effects.chain`): its slots in
+chain order, each an effect and the width of its parameters. Slot ``k``'s columns of the
+parameter rows are fixed by the layout -- a marker (0: the vehicle does not fly the slot;
+else one more than the column of the entry's first memory slot) and then the effect's
+parameters -- so :func:`source` writes, with every column a constant:
 
-* ``_thrust_entry(c, ...)``: effect ``c``'s ``thrust_step`` (the effects whose module has
-  one: the thrust stage, once per physics step);
-* ``_is_wrench(c)``, ``_term(c, ...)`` and ``_stage_term(s, ...)``: effect ``c``'s
-  ``wrench_term`` (the step's numbers, a term ``(code, six numbers)``) and
-  ``wrench_stage`` (the force and moment at each RK stage from a term);
+* ``_thrust_stage``: for each slot whose module has ``thrust_step``, in slot order, that
+  kernel when the vehicle flies it (the thrust stage, once per physics step);
+* ``_collect``: for each slot whose module has ``wrench_term``, its term -- ``(code, six
+  numbers)``, or ``(-1, ...)`` when the vehicle does not fly it -- the numbers the RK stages
+  need; ``_sum``: each flown term's ``wrench_stage`` at one RK stage, added in slot order;
+  ``has_wrench``: whether any term is flown;
 
-and the chain over a vehicle's entries (:data:`SKELETON`: ``thrust_effects``,
-``wrench_terms``, ``step_effects``, ``has_wrench``, ``effects_wrench``; the layout of the
-rows is in :mod:`quadfault.effects.chain`). :func:`compiled` writes that text to a file
-named by its hash -- beside numba's cache, so numba caches it like any module -- and
-imports it; the same effects give the same module. An effect's code is its row in the
-registry, so rows built from the registry fly under every dispatcher that has their
-effects.
+and the chain's functions over them (:data:`SKELETON`: ``thrust_effects``, ``wrench_terms``,
+``step_effects``, ``has_wrench``, ``effects_wrench``). No loop over entries, no dispatch on
+codes and no array lookup of an offset at run time. :func:`compiled` writes that text to a
+file named by its hash -- beside numba's cache, so numba caches it like any module -- and
+imports it; the same layout gives the same module.
 """
 
 from __future__ import annotations
@@ -32,43 +34,27 @@ from pathlib import Path
 
 from quadfault.fileio import atomic_write_text
 
-#: wrench entries a vehicle may have (e.g. one of each wrench effect); each becomes a term
-#: of :data:`TERM` numbers
-WRENCH_TERMS = 6
+#: numbers in a wrench term: the effect's code (-1: not flown) and six numbers
 TERM = 7
-_NO_TERM = (-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-#: the terms of a vehicle without wrench entries
-NO_TERMS = (_NO_TERM,) * WRENCH_TERMS
+NO_TERM = (-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
-#: the chain over a vehicle's entries, the same for every set of effects (``_thrust_entry``,
-#: ``_is_wrench``, ``_term``, ``_stage_term``, ``_collect`` and ``_sum`` are generated)
+#: the chain's functions, the same for every layout (``_thrust_stage``, ``_collect``,
+#: ``_sum`` and ``has_wrench`` are generated)
 SKELETON = '''
-@jit(inline="always", cache=CACHE)
-def _thrust_stage(code, param, mem, P, Q, streams, i, f, t, dt, p, gen):
-    """The thrust stage of vehicle ``i`` over its entries, in chain order."""
-    for e in range(code.shape[1]):
-        c = code[i, e]
-        if c < 0:
-            break
-        _thrust_entry(c, P, Q, streams, i, param[i, e], mem[i, e], f, t, dt, p, gen)
-
-
 @jit(cache=CACHE)
 def thrust_effects(fx, i, f, t, dt, p, v, R, w, gen):
     """The chain's thrust stage for the step ``[t, t + dt)`` [s]: ``f`` (n,), the thrusts
     [N] the motors produced, replaced in place; ``(p, v, R, w)`` the state at the step's
     start; ``gen`` the vehicle's generator; ``fx`` the rows, ``i`` the vehicle."""
-    _thrust_stage(fx.code, fx.param, fx.mem, fx.params, fx.memory, fx.streams, i, f, t, dt,
-                  p, gen)
+    _thrust_stage(fx.params, fx.memory, fx.streams, i, f, t, dt, p, gen)
 
 
 @jit(cache=CACHE)
 def wrench_terms(fx, i, f, t):
-    """Vehicle ``i``'s wrench entries over the step starting at ``t`` [s] whose produced
-    thrusts are ``f``: the rows' terms (:data:`TERMS`, code -1 past the last), numbers only,
-    so that the RK stages (``effects_wrench``) take no arrays (an array argument costs
-    reference counting at every call)."""
-    return _collect(fx.code, fx.param, fx.mem, fx.params, fx.memory, i, f)
+    """Vehicle ``i``'s wrench terms over the step starting at ``t`` [s] whose produced
+    thrusts are ``f``: numbers only, so that the RK stages (``effects_wrench``) take no
+    arrays (an array argument costs reference counting at every call)."""
+    return _collect(fx.params, fx.memory, i, f)
 
 
 @jit(inline="always", cache=CACHE)
@@ -77,19 +63,9 @@ def step_effects(fx, i, f, t, dt, p, v, R, w, gen):
     stage on ``f`` (``thrust_effects``; same arguments), then the step's wrench terms
     (``wrench_terms``) returned for the RK stages. Inlined into the loop with the rows'
     arrays taken once (each array a compiled call takes costs reference counting)."""
-    code, param, mem, P, Q = fx.code, fx.param, fx.mem, fx.params, fx.memory
-    _thrust_stage(code, param, mem, P, Q, fx.streams, i, f, t, dt, p, gen)
-    return _collect(code, param, mem, P, Q, i, f)
-
-
-@jit(inline="always", cache=CACHE)
-def _add_term(F, M, s, v, R, w):
-    """``(F, M)`` plus term ``s``'s force and moment (unchanged past the last term)."""
-    if s[0] < 0.0:
-        return F, M
-    dF, dM = _stage_term(s, v, R, w)
-    return ((F[0] + dF[0], F[1] + dF[1], F[2] + dF[2]),
-            (M[0] + dM[0], M[1] + dM[1], M[2] + dM[2]))
+    P, Q = fx.params, fx.memory
+    _thrust_stage(P, Q, fx.streams, i, f, t, dt, p, gen)
+    return _collect(P, Q, i, f)
 
 
 @jit(inline="always", cache=CACHE)
@@ -99,41 +75,6 @@ def effects_wrench(W, p, v, R, w, f, t):
     protocol's arguments, already in the terms)."""
     return _sum(W.terms, v, R, w)
 '''
-
-
-def _collect_source(n_terms: int) -> list:
-    """``_collect``: a vehicle's wrench entries as the ``n_terms`` terms of :data:`TERMS`."""
-    out = ['@jit(inline="always", cache=CACHE)', "def _collect(code, param, mem, P, Q, i, f):",
-           '    """Vehicle ``i``\'s wrench entries in chain order as the terms (code -1 past '
-           'the last), in one pass over the entries."""']
-    if n_terms == 0:
-        return out + ["    return TERMS(())", "", ""]
-    names = [f"W{k}" for k in range(n_terms)]
-    out += [f"    {' = '.join(names)} = NO_TERMS[0]", "    k = 0", "    for e in range(code.shape[1]):", "        c = code[i, e]",
-            "        if c < 0:", "            break", "        if not _is_wrench(c):",
-            "            continue", "        s = _term(c, P, Q, i, param[i, e], mem[i, e], f)"]
-    for k, name in enumerate(names):
-        if n_terms == 1:
-            out += [f"        {name} = s"]
-            break
-        out += ([f"        {'if' if k == 0 else 'elif'} k == {k}:"] if k < n_terms - 1
-                else ["        else:"])
-        out += [f"            {name} = s"]
-    out += ["        k += 1", f"    return TERMS(({', '.join(names)},))", "", ""]
-    return out
-
-
-def _sum_source(n_terms: int) -> list:
-    """``_sum`` and ``has_wrench`` over ``n_terms`` terms."""
-    out = ['@jit(inline="always", cache=CACHE)', "def has_wrench(W):",
-           '    """Whether the step\'s terms ``W`` hold a wrench entry (else the RK stages need '
-           'not call ``effects_wrench``)."""',
-           f"    return {'W.terms[0][0] >= 0.0' if n_terms else 'False'}", "", "",
-           '@jit(inline="always", cache=CACHE)', "def _sum(terms, v, R, w):",
-           '    """The summed force and moment of the terms at a stage\'s state."""',
-           "    F = M = (0.0, 0.0, 0.0)"]
-    out += [f"    F, M = _add_term(F, M, terms[{k}], v, R, w)" for k in range(n_terms)]
-    return out + ["    return F, M", "", ""]
 
 
 def kernels(cls) -> types.ModuleType:
@@ -151,53 +92,67 @@ def has_term(cls) -> bool:
     return hasattr(kernels(cls), "wrench_term")
 
 
-def source(table, codes, n_terms: int = WRENCH_TERMS, cache: bool = True) -> str:
-    """The text of the chain's module for the effect classes ``table`` with their ``codes``
-    (both in registry order), a vehicle flying at most ``n_terms`` wrench entries."""
-    rows = [(code, cls, f"e{code}") for code, cls in zip(codes, table)
-            if has_thrust(cls) or has_term(cls)]
-    names = ", ".join(cls.name for _, cls, _ in rows) or "no effects"
-    out = [f'"""The compiled effect chain of {names} (generated by '
+def columns(widths) -> list:
+    """The column of each slot's marker for slots of parameter ``widths`` (its parameters
+    follow it)."""
+    out, a = [], 0
+    for width in widths:
+        out.append(a)
+        a += 1 + int(width)
+    return out
+
+
+def source(slots, cache: bool = True) -> str:
+    """The text of the chain's module for a layout: ``slots`` ``(code, effect class, width)``
+    in chain order (the code: the effect's row in the registry)."""
+    at = columns(width for _, _, width in slots)
+    names = ", ".join(cls.name for _, cls, _ in slots) or "no effects"
+    out = [f'"""The compiled effect chain of the slots {names} (generated by '
            'quadfault.effects.dispatch; do not edit)."""', "",
            "from quadfault.effects.chain import terms_class",
            "from quadfault.jit import jit"]
-    out += [f"import {cls.__module__} as {alias}" for _, cls, alias in rows]
-    out += ["", f"CACHE = {cache!r}", f"NO_TERMS = {NO_TERMS!r}",
-            f"TERMS = terms_class({tuple(cls.name for _, cls, _ in rows)!r}, {n_terms})",
-            "", ""]
+    modules = sorted({cls.__module__ for _, cls, _ in slots})
+    alias = {m: f"e{k}" for k, m in enumerate(modules)}
+    out += [f"import {m} as {alias[m]}" for m in modules]
+    layout = tuple((cls.name, int(width)) for _, cls, width in slots)
+    out += ["", f"CACHE = {cache!r}", f"NO_TERM = {NO_TERM!r}",
+            f"TERMS = terms_class({layout!r})", "", ""]
     out += ['@jit(inline="always", cache=CACHE)',
-            "def _thrust_entry(c, P, Q, streams, i, a, m, f, t, dt, p, gen):",
-            '    """Entry ``c``\'s thrust-stage kernel for vehicle ``i``."""']
-    branch = "if"
-    for code, cls, alias in rows:
+            "def _thrust_stage(P, Q, streams, i, f, t, dt, p, gen):",
+            '    """The thrust stage of vehicle ``i``: each flown slot\'s kernel, in slot '
+            'order."""']
+    for (code, cls, _), a in zip(slots, at):
         if has_thrust(cls):
-            out += [f"    {branch} c == {code}:  # {cls.name}",
-                    f"        {alias}.thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen)"]
-            branch = "elif"
+            out += [f"    on = P[i, {a}]  # {cls.name}", "    if on != 0.0:",
+                    f"        {alias[cls.__module__]}.thrust_step(P, Q, streams, i, {a + 1}, "
+                    "int(on) - 1, f, t, dt, p, gen)"]
     out += ["    return", "", ""]
-    wrench = [(code, cls, alias) for code, cls, alias in rows if has_term(cls)]
-    test = " or ".join(f"c == {code}" for code, _, _ in wrench) or "False"
-    out += ['@jit(inline="always", cache=CACHE)', "def _is_wrench(c):",
-            '    """Whether entry ``c`` has a wrench."""', f"    return {test}", "", ""]
-    out += ['@jit(inline="always", cache=CACHE)', "def _term(c, P, Q, i, a, m, f):",
-            '    """Wrench entry ``c`` as the numbers the RK stages need: ``(code, six '
-            'numbers)``."""',
-            "    s = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)"]
-    branch = "if"
-    for code, cls, alias in wrench:
-        out += [f"    {branch} c == {code}:  # {cls.name}",
-                f"        s = {alias}.wrench_term(P, Q, i, a, m, f)"]
-        branch = "elif"
-    out += ["    return (float(c), s[0], s[1], s[2], s[3], s[4], s[5])", "", ""]
-    out += ['@jit(inline="always", cache=CACHE)', "def _stage_term(s, v, R, w):",
-            '    """One term\'s external force (world) [N] and moment (body) [N m] at a '
-            'stage\'s state."""',
-            "    c = int(s[0])"]
-    for code, cls, alias in wrench:
-        out += [f"    if c == {code}:  # {cls.name}",
-                f"        return {alias}.wrench_stage(s, v, R, w)"]
-    out += ["    return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)", "", ""]
-    out += _collect_source(n_terms) + _sum_source(n_terms)
+    wrench = [(code, cls, a) for (code, cls, _), a in zip(slots, at) if has_term(cls)]
+    out += ['@jit(inline="always", cache=CACHE)', "def _collect(P, Q, i, f):",
+            '    """Vehicle ``i``\'s wrench terms, one per wrench slot (code -1: not '
+            'flown)."""']
+    for k, (code, cls, a) in enumerate(wrench):
+        out += [f"    W{k} = NO_TERM", f"    on = P[i, {a}]  # {cls.name}", "    if on != 0.0:",
+                f"        s = {alias[cls.__module__]}.wrench_term(P, Q, i, {a + 1}, "
+                "int(on) - 1, f)",
+                f"        W{k} = ({float(code)!r}, s[0], s[1], s[2], s[3], s[4], s[5])"]
+    terms = "".join(f"W{k}, " for k in range(len(wrench)))
+    out += [f"    return TERMS(({terms}))", "", ""]
+    out += ['@jit(inline="always", cache=CACHE)', "def has_wrench(W):",
+            '    """Whether the step\'s terms ``W`` hold a flown wrench (else the RK stages '
+            'need not call ``effects_wrench``)."""',
+            "    return " + (" or ".join(f"W.terms[{k}][0] >= 0.0" for k in range(len(wrench)))
+                            or "False"), "", ""]
+    out += ['@jit(inline="always", cache=CACHE)', "def _sum(terms, v, R, w):",
+            '    """The summed force and moment of the flown terms at a stage\'s state, in '
+            'slot order."""',
+            "    F = M = (0.0, 0.0, 0.0)"]
+    for k, (code, cls, a) in enumerate(wrench):
+        out += [f"    s = terms[{k}]  # {cls.name}", "    if s[0] >= 0.0:",
+                f"        dF, dM = {alias[cls.__module__]}.wrench_stage(s, v, R, w)",
+                "        F = (F[0] + dF[0], F[1] + dF[1], F[2] + dF[2])",
+                "        M = (M[0] + dM[0], M[1] + dM[1], M[2] + dM[2])"]
+    out += ["    return F, M", "", ""]
     return "\n".join(out) + SKELETON
 
 
@@ -218,12 +173,11 @@ def _directory() -> Path | None:
 _LOADED: dict = {}  # source hash -> module
 
 
-def compiled(table, codes, n_terms: int = WRENCH_TERMS) -> types.ModuleType:
-    """The chain's module for the effect classes ``table`` with their ``codes`` and at most
-    ``n_terms`` wrench entries per vehicle: generated, written to a file named by its hash
-    and imported (numba caches it like any module); run uncached from memory when no
-    directory is writable."""
-    text = source(table, codes, n_terms)
+def compiled(slots) -> types.ModuleType:
+    """The chain's module for the layout ``slots`` (see :func:`source`): generated, written
+    to a file named by its hash and imported (numba caches it like any module); run uncached
+    from memory when no directory is writable."""
+    text = source(slots)
     digest = hashlib.sha256(text.encode()).hexdigest()[:16]
     if digest in _LOADED:
         return _LOADED[digest]
@@ -233,7 +187,7 @@ def compiled(table, codes, n_terms: int = WRENCH_TERMS) -> types.ModuleType:
         module = types.ModuleType(name)
         module.__file__ = f"<{name}>"
         sys.modules[name] = module
-        exec(compile(source(table, codes, n_terms, cache=False), module.__file__, "exec"),
+        exec(compile(source(slots, cache=False), module.__file__, "exec"),
              module.__dict__)
     else:
         path = folder / f"chain_{digest}.py"
@@ -248,5 +202,5 @@ def compiled(table, codes, n_terms: int = WRENCH_TERMS) -> types.ModuleType:
     return module
 
 
-__all__ = ["SKELETON", "WRENCH_TERMS", "TERM", "NO_TERMS", "source", "compiled", "kernels",
+__all__ = ["SKELETON", "TERM", "NO_TERM", "columns", "source", "compiled", "kernels",
            "has_thrust", "has_term"]

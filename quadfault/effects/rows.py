@@ -18,7 +18,7 @@ import numpy as np
 import quadfault.effects.chain as C
 import quadfault.effects.registry as registry
 from quadfault.effects.base import Compiled
-from quadfault.effects.dispatch import has_term
+from quadfault.effects.dispatch import columns, has_term, has_thrust
 from quadfault.effects.delay import delay_capacity
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, typed_list
@@ -40,77 +40,135 @@ def entry(effect, n_rotors: int, dt: float, yaw_signs=None):
     return C.CODES[effect.name], tuple(float(x) for x in params), int(memory)
 
 
-def _size(entries) -> tuple[int, int, int]:
-    return (len(entries), sum(len(p) for _, p, _ in entries), sum(m for _, _, m in entries))
+def _slot(entry) -> tuple:
+    """The layout slot ``(effect name, parameter width)`` an entry flies in."""
+    code, params, _ = entry
+    return registry.TABLE[code].name, len(params)
 
 
-def _kinds(entries) -> tuple[set, int]:
-    """The effect names of ``entries`` and how many of them have a wrench."""
-    names = {registry.TABLE[code].name for code, _, _ in entries}
-    return names, sum(has_term(registry.TABLE[code]) for code, _, _ in entries)
+def _place(layout, entries) -> list | None:
+    """The slot of each of one vehicle's ``entries`` in ``layout``, or None when they do
+    not fit: each entry in a slot of its effect and width, the thrust-stage entries in
+    increasing slots in their order, and the wrench entries likewise (the order of the
+    thrust stage and of the wrench sum is the vehicle's; a wrench-only entry and a
+    thrust-only one may trade places)."""
+    used, last_thrust, last_wrench, out = set(), -1, -1, []
+    for entry in entries:
+        cls = registry.TABLE[entry[0]]
+        thrust, wrench = has_thrust(cls), has_term(cls)
+        low = max(last_thrust if thrust else -1, last_wrench if wrench else -1)
+        key = _slot(entry)
+        k = next((k for k in range(low + 1, len(layout))
+                  if k not in used and layout[k] == key), None)
+        if k is None:
+            return None
+        used.add(k)
+        out.append(k)
+        last_thrust, last_wrench = (k if thrust else last_thrust), (k if wrench else last_wrench)
+    return out
 
 
-def empty(n_rows: int, n_entries: int, n_params: int, n_memory: int, effects=(),
-          n_terms: int = 0) -> C.EffectRows:
-    """Rows without effects, room for ``n_entries`` entries of ``n_params`` parameters and
-    ``n_memory`` memory slots in all per vehicle, of ``effects`` (names) with at most
-    ``n_terms`` wrench entries per vehicle (:func:`~quadfault.effects.chain.rows_class`:
-    the loop compiles the chain of these effects alone)."""
-    N = int(n_rows)
-    return C.rows_class(effects, n_terms)(
+def _merged(layout, entries) -> tuple:
+    """The shortest layout holding ``layout`` and one vehicle's ``entries``, in their
+    orders (a shortest common supersequence)."""
+    a, b = list(layout), [_slot(e) for e in entries]
+    n, m = len(a), len(b)
+    L = [[0] * (m + 1) for _ in range(n + 1)]  # L[i][j]: SCS length of a[i:], b[j:]
+    for i in range(n, -1, -1):
+        for j in range(m, -1, -1):
+            L[i][j] = (m - j if i == n else n - i if j == m else
+                       1 + L[i + 1][j + 1] if a[i] == b[j] else
+                       1 + min(L[i + 1][j], L[i][j + 1]))
+    out, i, j = [], 0, 0
+    while i < n or j < m:
+        if i < n and j < m and a[i] == b[j]:
+            out.append(a[i])
+            i, j = i + 1, j + 1
+        elif j == m or (i < n and L[i + 1][j] <= L[i][j + 1]):
+            out.append(a[i])
+            i += 1
+        else:
+            out.append(b[j])
+            j += 1
+    return tuple(out)
+
+
+def _columns(layout) -> list:
+    return columns(width for _, width in layout)
+
+
+def empty(n_rows: int, n_entries: int, n_memory: int, layout=()) -> C.EffectRows:
+    """Rows without effects, room for ``n_entries`` entries and ``n_memory`` memory slots
+    per vehicle, of ``layout`` (``(effect name, parameter width)`` per slot: the loop
+    compiles the chain of this layout)."""
+    N, P = int(n_rows), sum(1 + width for _, width in layout)
+    return C.rows_class(layout)(
         np.full((N, n_entries), -1, dtype=np.int64), np.zeros((N, n_entries), dtype=np.int64),
-        np.zeros((N, n_entries), dtype=np.int64), np.zeros((N, max(n_params, 1))),
+        np.zeros((N, n_entries), dtype=np.int64), np.zeros((N, max(P, 1))),
         np.zeros((N, max(n_memory, 1))), typed_list([_NEVER] * N))
 
 
 def fits(fx: C.EffectRows, entries) -> bool:
-    """Whether one vehicle's ``entries`` fit the rows' room and effects."""
-    E, P, Q = _size(entries)
-    names, wrenches = _kinds(entries)
-    return (E <= fx.code.shape[1] and P <= fx.params.shape[1] and Q <= fx.memory.shape[1]
-            and names <= set(type(fx).effects) and wrenches <= type(fx).n_terms)
+    """Whether one vehicle's ``entries`` fit the rows' room and layout."""
+    return (len(entries) <= fx.code.shape[1]
+            and sum(m for _, _, m in entries) <= fx.memory.shape[1]
+            and _place(type(fx).layout, entries) is not None)
 
 
 def write(fx: C.EffectRows, i: int, entries) -> None:
     """Vehicle ``i`` flies ``entries`` (a list of :func:`entry` results, in chain order)
     from a fresh start (memory cleared); they must :func:`fits`."""
-    if _kinds(entries)[1] > C.WRENCH_TERMS:
-        wrenches = ", ".join(cls.name for cls in registry.TABLE if has_term(cls))
-        raise ConfigError(f"a vehicle flies at most {C.WRENCH_TERMS} effects with a wrench "
-                          f"({wrenches})")
-    if not fits(fx, entries):
+    slots = _place(type(fx).layout, entries) if fits(fx, entries) else None
+    if slots is None:
         raise ConfigError("these effects need more room than the rows were built with")
-    fx.code[i] = -1
-    a = m = 0
-    for e, (code, params, memory) in enumerate(entries):
-        fx.code[i, e], fx.param[i, e], fx.mem[i, e] = code, a, m
-        fx.params[i, a:a + len(params)] = params
-        a, m = a + len(params), m + memory
+    at = _columns(type(fx).layout)
+    fx.code[i], fx.params[i] = -1, 0.0
+    m = 0
+    for e, ((code, params, memory), k) in enumerate(zip(entries, slots)):
+        a = at[k]
+        fx.code[i, e], fx.param[i, e], fx.mem[i, e] = code, a + 1, m
+        fx.params[i, a] = m + 1.0  # flown, its memory from column m
+        fx.params[i, a + 1:a + 1 + len(params)] = params
+        m += memory
     reset(fx, [i])
 
 
 def build(entries_per_row) -> C.EffectRows:
     """The rows of N vehicles, row ``i`` flying ``entries_per_row[i]``."""
-    sizes = [_size(e) for e in entries_per_row]
-    kinds = [_kinds(e) for e in entries_per_row]
-    fx = empty(len(sizes), *(max((s[k] for s in sizes), default=0) for k in range(3)),
-               set().union(*(n for n, _ in kinds)), max((w for _, w in kinds), default=0))
+    layout = ()
+    for entries in entries_per_row:
+        if _place(layout, entries) is None:
+            layout = _merged(layout, entries)
+    fx = empty(len(entries_per_row), max((len(e) for e in entries_per_row), default=0),
+               max((sum(m for _, _, m in e) for e in entries_per_row), default=0), layout)
     for i, e in enumerate(entries_per_row):
         write(fx, i, e)
     return fx
 
 
 def grown(fx: C.EffectRows, entries) -> C.EffectRows:
-    """``fx`` with room for ``entries`` too (a copy when it needs more; rows kept)."""
+    """``fx`` with room for ``entries`` too (a copy when it needs more; rows, their memory
+    and generators kept)."""
     if fits(fx, entries):
         return fx
-    names, wrenches = _kinds(entries)
-    E, P, Q = (max(a, b) for a, b in zip(_size(entries), (fx.code.shape[1], fx.params.shape[1],
-                                                           fx.memory.shape[1])))
-    out = empty(len(fx.code), E, P, Q, names | set(type(fx).effects),
-                min(max(wrenches, type(fx).n_terms), C.WRENCH_TERMS))
-    for old, new in zip(fx[:5], out[:5]):
-        new[:, :old.shape[1]] = old
+    old = type(fx).layout
+    layout = old if _place(old, entries) is not None else _merged(old, entries)
+    out = empty(len(fx.code), max(len(entries), fx.code.shape[1]),
+                max(sum(m for _, _, m in entries), fx.memory.shape[1]), layout)
+    # the old slots keep their order in the merged layout: map their columns
+    cols, k = np.zeros(fx.params.shape[1], dtype=np.int64), 0
+    new_at = _columns(layout)
+    for (key, width), a in zip(old, _columns(old)):
+        while layout[k] != (key, width):
+            k += 1
+        cols[a:a + 1 + width] = np.arange(new_at[k], new_at[k] + 1 + width)
+        k += 1
+    if old:
+        out.params[:, cols] = fx.params[:, :len(cols)]
+    E = fx.code.shape[1]
+    out.code[:, :E], out.mem[:, :E] = fx.code, fx.mem
+    out.param[:, :E] = np.where(fx.code >= 0, cols[np.minimum(fx.param, len(cols) - 1)], 0)
+    out.memory[:, :fx.memory.shape[1]] = fx.memory
     for i in range(len(fx.code)):
         out.streams[i] = fx.streams[i]
     return out
