@@ -181,6 +181,12 @@ class IRLSState(FlatState):
         self.ints[rows, COUNTERS.median_fresh] = 1
 
 
+def beyond_paper(cfg: IRLSConfig):
+    """The ``beyond`` argument of the kernels (:func:`irls_step`): True when ``cfg`` turns on
+    an option beyond the paper (the change completion, an output median), else None."""
+    return True if (cfg.change_completion or cfg.output_median > 1) else None
+
+
 def irls_parameters(vehicle: Vehicle, cfg: IRLSConfig, offsets: np.ndarray):
     """``(const, fp, ip)`` of :func:`irls_update`: the vehicle constants, the float and the
     int settings (with the state's piece offsets)."""
@@ -240,13 +246,18 @@ def constant_arrays(const, ip):
 
 
 @jit(inline="always")
-def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist):
+def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond):
     """One online update of the sliding-window IRLS (module docstring) of row ``i`` of the
     state ``(S, ks)`` (:func:`state_pieces`, int state (N, K)), in place (``arrays``:
     :func:`constant_arrays` of ``const``). Returns ``(status
     code, why, rounds, cond)``: ``why`` is :data:`WHY_NONFINITE` or :data:`WHY_TIME` for a
     ``bad_sample``, else 0; ``rounds`` and ``cond`` describe the window solve (0 and NaN when
-    none ran)."""
+    none ran).
+
+    ``beyond`` (:func:`beyond_paper`): None for the paper's estimator, whose kernels then hold
+    neither the change completion nor the output median (numba drops the branches of a None
+    argument before compiling them: a first run compiles about 2 CPU-s less); True when
+    ``ip`` turns either on."""
     m, n, L = ip[INT_SETTINGS.m], ip[INT_SETTINGS.n], ip[INT_SETTINGS.L]
     last_t, sample, VN, VM, BH = S.t[i], S.sample[i], S.vn[i], S.vm[i], S.bh[i]
     last_p, last_v, last_w = sample[SAMPLE_ROWS.p], sample[SAMPLE_ROWS.v], sample[SAMPLE_ROWS.w]
@@ -295,7 +306,7 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist):
                     VM[VM_ROWS.window:], VM[VM_ROWS.weights], k_row[COUNTERS.iters:], hist, x,
                     sd_x)
             if code == OK or code == MAX_ITER:
-                if ip[INT_SETTINGS.completion] == 1:
+                if beyond is not None and ip[INT_SETTINGS.completion] == 1:
                     complete_into(x, M[MATRICES.JGJ], history_, VN[VN_ROWS.anchor],
                                   VN[VN_ROWS.direction], completion,
                                   fp[FLOAT_SETTINGS.change_threshold], ip[INT_SETTINGS.hold],
@@ -306,9 +317,9 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist):
                     eta[j] = x[j]
                     sd[j] = sd_x[j]
                 k_row[COUNTERS.has_sd] = 1
-            elif ip[INT_SETTINGS.completion] == 1:  # a held window: the completion sees the
-                observe_into(eta, history_, completion)  # kept estimate
-    if L > 1:
+            elif beyond is not None and ip[INT_SETTINGS.completion] == 1:  # a held window:
+                observe_into(eta, history_, completion)  # the completion sees the kept estimate
+    if beyond is not None and L > 1:
         median = S.median[i]
         median_push_into(median[0], median[1], k_row[COUNTERS.median_k], eta,
                          k_row[COUNTERS.median_fresh] == 1, out)
@@ -321,15 +332,15 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist):
 
 
 @jit
-def irls_update(t, p, v, R, w, f, const, fp, ip, fs, ks, hist):
+def irls_update(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, beyond):
     """:func:`irls_step` of a single estimator (state of one row): the online update."""
     S = state_pieces(fs, ip, ks.shape[0])
     return irls_step(t, p, v, R, w, f, const, constant_arrays(const, ip), fp, ip, S, ks,
-                     ks.shape[0] - 1, hist)  # row 0, a run-time value like the batch's rows
+                     ks.shape[0] - 1, hist, beyond)  # row 0, a run-time value like the batch's
 
 
 @jit
-def irls_run(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, eta, sd, code):
+def irls_run(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, beyond, eta, sd, code):
     """:func:`irls_step` over the rows of a recording (a single estimator's state): the
     reported estimate, its sd (NaN until a window is solved) and the status code of every
     row."""
@@ -340,7 +351,7 @@ def irls_run(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, eta, sd, code):
     arrays = constant_arrays(const, ip)
     for k in range(t.shape[0]):
         code[k], _why, _rounds, _cond = irls_step(t[k], p[k], v[k], R[k], w[k], f[k], const,
-                                                  arrays, fp, ip, S, ks, row, hist)
+                                                  arrays, fp, ip, S, ks, row, hist, beyond)
         for j in range(n):
             eta[k, j] = out[j]
             sd[k, j] = sd_now[j] if ks[0, COUNTERS.has_sd] == 1 else np.nan
@@ -367,6 +378,7 @@ class SlidingWindowIRLS:
         self._state = IRLSState(cfg.window - 1, n, cfg.output_median, cfg.max_irls)
         self._const, self._fp, self._ip = irls_parameters(vehicle, cfg, self._state.offsets)
         self._hist = history(cfg, n) if cfg.record_history else no_history(n)
+        self._beyond = beyond_paper(cfg)
         self._nan_sample = (np.full(3, np.nan), np.full(3, np.nan), np.full((3, 3), np.nan),
                             np.full(3, np.nan), np.full(n, np.nan))
         self._shape_f = (n,)
@@ -409,7 +421,7 @@ class SlidingWindowIRLS:
         st = self._state
         code, why, rounds, cond = irls_update(math.nan if malformed else t, p, v, R, w, f,
                                               self._const, self._fp, self._ip, st.floats,
-                                              st.ints, self._hist)
+                                              st.ints, self._hist, self._beyond)
         row, ints = self._row, st.ints[0]
         sd = row[VN_ROWS.sd].copy() if ints[COUNTERS.has_sd] == 1 else None
         if code in _HELD:
@@ -442,7 +454,7 @@ class SlidingWindowIRLS:
         for k0 in range(0, N, chunk):
             k = slice(k0, min(k0 + chunk, N))
             irls_run(t[k], p[k], v[k], R[k], w[k], f[k], const, self._fp, self._ip,
-                     st.floats, st.ints, self._hist, eta[k], sd[k], code[k])
+                     st.floats, st.ints, self._hist, self._beyond, eta[k], sd[k], code[k])
             bar.update(k.stop - k0)
         bar.close()
         self.reset()
