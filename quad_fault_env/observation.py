@@ -82,6 +82,9 @@ class ObservationLayout:
         per = (lambda f: np.concatenate([np.full(s.size, f(s), dtype=float) for s in self.slots]))
         self._low, self._high = per(lambda s: s.low), per(lambda s: s.high)
         self._fill = per(lambda s: SD_MAX if s.name == "eta_sd" else 0.0)
+        # where each of _ARGS starts in the flat vector (-1: not in this layout)
+        self._at = np.array([self._slices[name].start if name in self._slices else -1
+                             for name in _ARGS], dtype=np.int64)
 
     @property
     def names(self) -> list[str]:
@@ -109,17 +112,14 @@ class ObservationLayout:
         means "none given" (``SD_MAX``)."""
         R = np.asarray(R, dtype=float)
         batch = R.shape[:-2]
-        raw = {"pos_err": pos_err, "vel_err": vel_err, "omega": omega, "eta_hat": eta_hat,
-               "eta_sd": SD_MAX if eta_sd is None else eta_sd, "ref_acc": ref_acc}
-        parts = []
-        for s in self.slots:
-            if s.name == "rot6":
-                parts += [R[..., :, 0], R[..., :, 1]]
-                continue
-            x = np.asarray(raw[s.name], dtype=float)
-            parts.append(x if x.shape == batch + (s.size,) else
-                         np.broadcast_to(x, batch + (s.size,)))
-        return self._bounded(np.concatenate(parts, axis=-1))
+        shape = (-1, 3, 3)
+        values = (pos_err, vel_err, omega, eta_hat, SD_MAX if eta_sd is None else eta_sd,
+                  0.0 if ref_acc is None else ref_acc)
+        out = np.empty(batch + (self.size,), dtype=np.float32)
+        _observation_rows(tuple(_rows(x, batch, size) for x, size in zip(values, _SIZES)),
+                          np.ascontiguousarray(R.reshape(shape)), self._at, self._low,
+                          self._high, self._fill, out.reshape(-1, self.size))
+        return out
 
     def _bounded(self, x: np.ndarray, where=None) -> np.ndarray:
         """``x`` (elements ``where`` of the flat layout; all by default) with NaN -> fill,
@@ -175,12 +175,56 @@ class ObservationLayout:
 
 
 @jit
+def _bound(v, low, high, fill):
+    """One element: NaN -> ``fill``, clipped into ``[low, high]``, as float32 (the
+    observation's one rule for every slot; scalars only: arrays passed per element would
+    cost their reference counts)."""
+    if np.isnan(v):
+        v = fill
+    return np.float32(min(max(v, low), high))
+
+
+@jit
 def _bound_rows(x, low, high, fill, out):
-    """``out[i, j]``: ``x[i, j]`` with NaN -> ``fill[j]``, clipped into ``[low[j], high[j]]``,
-    as float32 (rows (B, w); the observation's one rule for every slot)."""
+    """``out[i, j]``: ``x[i, j]`` bounded (:func:`_bound`) by element j's bounds, rows (B, w)."""
     for i in range(x.shape[0]):
         for j in range(x.shape[1]):
-            v = x[i, j]
-            if np.isnan(v):
-                v = fill[j]
-            out[i, j] = np.float32(min(max(v, low[j]), high[j]))
+            out[i, j] = _bound(x[i, j], low[j], high[j], fill[j])
+
+
+#: the values :meth:`ObservationLayout.flat` takes, in the order :func:`_observation_rows` does
+_ARGS = ("pos_err", "vel_err", "rot6", "omega", "eta_hat", "eta_sd", "ref_acc")
+#: the sizes of the ``values`` of :func:`_observation_rows` (``_ARGS`` but rot6)
+_SIZES = tuple({s.name: s.size for s in SLOTS + (REF_ACC_SLOT,)}[name]
+               for name in _ARGS if name != "rot6")
+
+
+def _rows(x, batch: tuple, size: int) -> np.ndarray:
+    """``x`` broadcast to ``batch + (size,)`` as contiguous float rows (B, size)."""
+    x = np.asarray(x, dtype=float)
+    if x.shape != batch + (size,):
+        x = np.broadcast_to(x, batch + (size,))
+    return np.ascontiguousarray(x.reshape(-1, size))
+
+
+@jit
+def _observation_rows(values, R, at, low, high, fill, out):
+    """The flat observations (B, size) of B rows: ``values`` the slots of :data:`_ARGS` but
+    ``rot6`` ((B, size) each), ``R`` (B, 3, 3) whose first two columns are ``rot6``; each
+    element bounded (:func:`_bound`) and written where ``at`` says (the slots' starts in
+    :data:`_ARGS` order, -1 for a slot the layout does not hold)."""
+    for i in range(out.shape[0]):
+        for s in range(len(_ARGS)):
+            k0 = at[s]
+            if k0 < 0:
+                continue
+            if s == 2:
+                for c in range(2):
+                    for j in range(3):
+                        k = k0 + 3 * c + j
+                        out[i, k] = _bound(R[i, j, c], low[k], high[k], fill[k])
+                continue
+            x = values[s if s < 2 else s - 1]
+            for j in range(x.shape[1]):
+                k = k0 + j
+                out[i, k] = _bound(x[i, j], low[k], high[k], fill[k])

@@ -62,10 +62,13 @@ class RowTimeTables:
         #: the physics step of each row's first efficiency row (``k0 S``; what the loop reads)
         self.first = np.full(n_rows, _STALE, dtype=np.int64)
         #: rows: position, velocity, acceleration, b1d, Omega_d, Omega_d' at the boundaries
-        #: (without ``feedforward`` only the first three are filled; the others stay 0)
-        self.refs = np.zeros((n_rows, self.window + 1, 6, 3))
+        #: (without ``feedforward`` only the first three)
+        self.refs = np.zeros((n_rows, self.window + 1, 6 if self.feedforward else 3, 3))
         self.eta = np.zeros((n_rows, self.window * self.S + 1, n_rotors))
         self._rows = np.arange(n_rows)
+        # the tables with the rows' windows one after the other (views, for np.take)
+        self._refs_flat = self.refs.reshape(-1, *self.refs.shape[2:])
+        self._eta_flat = self.eta.reshape(-1, n_rotors)
 
     def invalidate(self, rows) -> None:
         """Forget the windows of ``rows`` (a reset changes their trajectory and schedule)."""
@@ -126,14 +129,24 @@ class RowTimeTables:
 
     def references(self, k: np.ndarray, parts: int = 6) -> np.ndarray:
         """(N, parts, 3): the first ``parts`` reference rows at the start of step ``k`` (N,)
-        (t = k S dt)."""
-        if parts == self.refs.shape[2]:
-            return self.refs[self._rows, k - self.k0]
-        return self.refs[self._rows, k - self.k0, :parts]
+        (t = k S dt). When every row is at the same place of its window this is a view of
+        the table: read it before the next :meth:`ensure`."""
+        off = k - self.k0
+        o = int(off[0])
+        if (off == o).all():
+            ref = self.refs[:, o]
+        else:
+            ref = self._refs_flat.take(self._rows * self.refs.shape[1] + off, axis=0)
+        return ref if parts == ref.shape[1] else ref[:, :parts]
 
     def efficiency_at(self, k: np.ndarray, j: int) -> np.ndarray:
-        """(N, n) true efficiency at substep ``j`` of step ``k`` (N,) (``j = S``: its end)."""
-        return self.eta[self._rows, (k - self.k0) * self.S + j]
+        """(N, n) true efficiency at substep ``j`` of step ``k`` (N,) (``j = S``: its end), a
+        copy."""
+        col = (k - self.k0) * self.S + j
+        c = int(col[0])
+        if (col == c).all():
+            return self.eta[:, c].copy()
+        return self._eta_flat.take(self._rows * self.eta.shape[1] + col, axis=0)
 
     def efficiency(self, k: np.ndarray) -> np.ndarray:
         """(N, S + 1, n) true efficiency at step ``k``'s substeps and at its end."""

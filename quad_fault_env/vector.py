@@ -34,8 +34,8 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.utils import seeding
 from gymnasium.vector.utils import batch_space
 
-from quad_fault_env.envs.config import (INFO_LEVELS, check_choice, check_keywords, keywords_of,
-                                        light_info, validate_action)
+from quad_fault_env.envs.config import (INFO_LEVELS, REASONS, check_choice, check_keywords,
+                                        keywords_of, light_info, validate_action)
 from quad_fault_env.envs.scenario_source import GENERATORS
 from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
 from estimators.registry import estimator_names, estimator_spec, make_estimator
@@ -176,7 +176,6 @@ class QuadFaultVectorEnv(VectorEnv):
         n = self.vehicle.n_rotors
         self.eta_hat, self.eta_sd = np.ones((N, n)), np.full((N, n), np.nan)
         self.status = np.full(N, "warmup", dtype=object)
-        self.eta_true = np.ones((N, n))
         self.steps = np.zeros(N, dtype=np.int64)
         self.max_steps = np.zeros(N, dtype=np.int64)
         self._traj_key = np.zeros(N, dtype=np.int64)
@@ -205,6 +204,14 @@ class QuadFaultVectorEnv(VectorEnv):
     def f_cmd(self) -> np.ndarray:
         """Rotor commands held over the current step (N, n) [N]."""
         return self.flight.commands
+
+    @property
+    def eta_true(self) -> np.ndarray:
+        """Each sub-env's true efficiency (N, n) now: at the end of its last step, at t = 0
+        after its reset (a copy, read from the time tables when asked)."""
+        if not self._started:
+            return np.ones((self.num_envs, self.vehicle.n_rotors))
+        return self._tables.efficiency_at(self.steps - 1, self.substeps)
 
     @property
     def sigma(self) -> np.ndarray:
@@ -260,12 +267,12 @@ class QuadFaultVectorEnv(VectorEnv):
         keys, inv = np.unique(self._sched_key[rows], return_inverse=True)
         eta0 = np.array([np.broadcast_to(np.asarray(self._schedules.items[key](0.0), float), (n,))
                          for key in keys.tolist()])
-        self.eta_true[rows] = eta0[inv.ravel()]
         self.steps[rows] = 0
         self._tables.invalidate(rows)
+        self._ensure_tables(self.steps, WINDOW - 1)  # the rows' windows from t = 0
         self.eta_hat[rows], self.eta_sd[rows], self.status[rows] = 1.0, np.nan, "warmup"
         if self.estimator_name == "truth":
-            self.eta_hat[rows], self.eta_sd[rows], self.status[rows] = self.eta_true[rows], 0.0, "ok"
+            self.eta_hat[rows], self.eta_sd[rows], self.status[rows] = eta0[inv.ravel()], 0.0, "ok"
         elif self.estimator_name == "none":
             self.eta_sd[rows], self.status[rows] = NOMINAL_PRIOR_SD, "ok"
         if self.estimator is not None:
@@ -301,7 +308,7 @@ class QuadFaultVectorEnv(VectorEnv):
             refs = self._reset_rows(np.arange(N), seeds, options)  # every row at t = 0
         self._needs_reset[:] = False
         self._started = True
-        return self._observations(refs), self._infos(refs, np.full(N, None, dtype=object))
+        return self._observations(refs), self._infos(refs, np.zeros(N, dtype=np.int64))
 
     # -- functions of time: per-row windows (quad_fault_env.time_tables) ---------------------
     def _ensure_tables(self, k: np.ndarray, last: int) -> None:
@@ -375,11 +382,10 @@ class QuadFaultVectorEnv(VectorEnv):
         state = self.state
         ref1 = self._tables.references(self.steps, 3)  # k - k0 <= WINDOW: in the window
         refs = ref1[:, 0], ref1[:, 1], ref1[:, 2]
-        reason = self.single_env.limits.reasons(state.p, state.R, refs[0])
-        terminated = np.not_equal(reason, None)
+        code = self.single_env.limits.codes(state.p, state.R, refs[0])  # 0: goes on
         if any_resetting:
-            reason[resetting] = None
-            terminated &= ~resetting
+            code[resetting] = 0
+        terminated = code != 0
         truncated = ~terminated & (self.steps >= self.max_steps)
         if self.max_episode_steps is not None:
             truncated |= self.steps >= self.max_episode_steps
@@ -396,7 +402,6 @@ class QuadFaultVectorEnv(VectorEnv):
                 self.flight.sense(on)
             if terminated.any():
                 self.flight.sense(terminated, noise=False)
-        self.eta_true = self._tables.efficiency_at(self.steps - 1, S)
         reward = self.single_env.reward_config(state.p - refs[0], state.v - refs[1], self.f_cmd,
                                             self.vehicle.rotor_max_thrust, terminated, a)
         done = terminated | truncated
@@ -406,14 +411,14 @@ class QuadFaultVectorEnv(VectorEnv):
             reward[resetting] = 0.0
             refs = self._references_now()
         obs = self._observations(refs)
-        infos = self._infos(refs, reason)
+        infos = self._infos(refs, code)
         if mode == AutoresetMode.SAME_STEP and done.any():
             rows = np.flatnonzero(done)
             final_obs, final_infos = obs, infos
             self._reset_rows(rows)
             refs = self._references_now()
             obs = self._observations(refs)
-            infos = self._infos(refs, np.where(done, None, reason))
+            infos = self._infos(refs, np.where(done, 0, code))
             infos["final_obs"] = final_obs
             infos["final_info"] = final_infos
             infos["_final_obs"] = infos["_final_info"] = done.copy()
@@ -429,15 +434,16 @@ class QuadFaultVectorEnv(VectorEnv):
                                 eta_hat=self.eta_hat, eta_sd=self.eta_sd, ref_acc=acc)
         return self.layout.split(flat) if self.single_env.observation_kind == "dict" else flat
 
-    def _infos(self, refs, reason) -> dict:
+    def _infos(self, refs, code) -> dict:
+        """The step's ``info``; ``code`` the rows' termination codes (``REASONS``; 0: none)."""
         N = self.num_envs
-        light = light_info(np.asarray(reason, dtype=object))
+        light = light_info(REASONS[code])
         if self.info_level == "light":
             return light | {"_" + key: np.ones(N, dtype=bool) for key in light}
         err = self.state.p - refs[0]
         info = light | {
             "t": self.steps * self.substeps * self.dt,
-            "eta_true": self.eta_true.copy(),
+            "eta_true": self.eta_true,
             "eta_hat": self.eta_hat.copy(),
             "eta_sd": np.where(np.isnan(self.eta_sd), SD_MAX, self.eta_sd),
             "estimator_status": np.asarray(self.status, dtype=object).copy(),

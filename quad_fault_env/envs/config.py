@@ -286,12 +286,17 @@ class TerminationLimits:
     def reasons(self, p, R, p_ref) -> np.ndarray:
         """Termination reasons of true positions ``p`` (N, 3), attitudes ``R`` (N, 3, 3)
         against the references ``p_ref`` (N, 3): an object array of names or None."""
+        return REASONS[self.codes(p, R, p_ref)]
+
+    def codes(self, p, R, p_ref) -> np.ndarray:
+        """:meth:`reasons` as integer codes (N,): the index of each reason in
+        :data:`REASONS` (0: none)."""
         codes = np.empty(len(p), dtype=np.int64)
         _termination_codes(np.ascontiguousarray(p, dtype=float),
                            np.ascontiguousarray(R, dtype=float),
                            np.ascontiguousarray(p_ref, dtype=float), float(self.ground_altitude),
                            float(self.max_position_error), float(self.max_tilt), codes)
-        return _REASONS[codes]
+        return codes
 
     def reason(self, p, R, p_ref) -> str | None:
         """The termination reason for one true position ``p``, attitude ``R``, or None."""
@@ -299,7 +304,7 @@ class TerminationLimits:
 
 
 #: termination codes of :func:`_termination_codes` -> reasons
-_REASONS = np.array([None, "excessive_tilt", "out_of_bounds", "crash", "non_finite"],
+REASONS = np.array([None, "excessive_tilt", "out_of_bounds", "crash", "non_finite"],
                     dtype=object)
 
 

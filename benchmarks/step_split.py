@@ -1,0 +1,120 @@
+"""Where a vector-env step's time goes at one physics step per env step: the loop kernel
+against the Python (and numpy) around it.
+
+``QuadFaultVectorEnv(N, "none", "combined", control_rate=1000, action_mode="motor",
+duration=600)`` (one physics substep per env step, as in the env-against-env comparison of
+``throughput.py``; the env's default numba threads) is stepped with the zero action; the calls
+of the compiled loop (``quadfault.closed_loop.fly_batch``, and ``fly`` for one vehicle) are
+timed apart. Printed per N: nanoseconds per vehicle-step of the whole step and of the kernel,
+per wall second and per CPU second of the process (all its threads), and the kernel's share.
+
+With ``--baseline PATH`` (another checkout: ``git worktree add ../qf-base <commit>``) each N
+runs in both checkouts in fresh processes, rounds alternated, best of each kept, so a busy
+machine slows both alike.
+
+    python benchmarks/step_split.py                       # N = 1, 1024, 16384
+    python benchmarks/step_split.py --baseline ../qf-base --rounds 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+if "--omp-spin" not in sys.argv:  # as throughput.py: idle OpenMP threads sleep
+    os.environ.setdefault("OMP_WAIT_POLICY", "passive")
+
+SIZES = (1, 1024, 16384)
+
+
+def split(N: int, seconds: float = 1.0, repeat: int = 3) -> dict:
+    """ns per vehicle-step of the env step and of the loop kernel inside it, wall and CPU
+    (best of ``repeat`` timings of at least ``seconds``)."""
+    import numpy as np
+
+    from quad_fault_env.vector import QuadFaultVectorEnv
+    from quadfault import closed_loop
+
+    spent = {"wall": 0.0, "cpu": 0.0}
+
+    def timed(fn):
+        def call(*args, **kwargs):
+            w, c = time.perf_counter(), time.process_time()
+            out = fn(*args, **kwargs)
+            spent["wall"] += time.perf_counter() - w
+            spent["cpu"] += time.process_time() - c
+            return out
+        return call
+
+    closed_loop.fly_batch = timed(closed_loop.fly_batch)
+    closed_loop.fly = timed(closed_loop.fly)
+    env = QuadFaultVectorEnv(N, "none", scenario="combined", duration=600.0,
+                             control_rate=1000.0, action_mode="motor")
+    env.reset(seed=0)
+    a = np.zeros((N, 4), dtype=np.float32)
+    for _ in range(3):  # compile / load the cache, first-step allocations
+        env.step(a)
+    best = None
+    for _ in range(repeat):
+        spent.update(wall=0.0, cpu=0.0)
+        steps, w, c = 0, time.perf_counter(), time.process_time()
+        while time.perf_counter() - w < seconds:
+            env.step(a)
+            steps += 1
+        per = 1e9 / (steps * N)
+        got = {"step_wall": (time.perf_counter() - w) * per,
+               "step_cpu": (time.process_time() - c) * per,
+               "kernel_wall": spent["wall"] * per, "kernel_cpu": spent["cpu"] * per}
+        if best is None or got["step_cpu"] < best["step_cpu"]:
+            best = got
+    return best
+
+
+def _row(N: int, r: dict) -> str:
+    return (f"| {N} | {r['step_wall']:,.0f} / {r['step_cpu']:,.0f} | "
+            f"{r['kernel_wall']:,.0f} / {r['kernel_cpu']:,.0f} | "
+            f"{r['step_wall'] - r['kernel_wall']:,.0f} / {r['step_cpu'] - r['kernel_cpu']:,.0f} | "
+            f"{r['kernel_cpu'] / r['step_cpu']:.0%} |")
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--sizes", type=int, nargs="+", default=list(SIZES))
+    p.add_argument("--seconds", type=float, default=1.0, help="length of each timing")
+    p.add_argument("--baseline", default=None, help="another checkout, measured side by side")
+    p.add_argument("--rounds", type=int, default=2)
+    p.add_argument("--omp-spin", action="store_true",
+                   help="keep OpenMP's spin-waiting (default: OMP_WAIT_POLICY=passive)")
+    args = p.parse_args(argv)
+    if min(args.sizes) < 1 or args.seconds <= 0 or args.rounds < 1:
+        print("step_split: --sizes >= 1, --seconds > 0, --rounds >= 1", file=sys.stderr)
+        return 2
+    sys.path.insert(1, os.path.dirname(os.path.abspath(__file__)))
+    import side_by_side as sbs
+
+    print(f"# ns per vehicle-step, wall / CPU (all threads); {sbs.load()} on "
+          f"{os.cpu_count()} cpus")
+    head = "| N | step | loop kernel | Python around it | kernel share (CPU) |"
+    rule = "|---|---|---|---|---|"
+    rows = {}
+    for N in args.sizes:
+        if args.baseline:
+            rows[N] = sbs.compare(args.baseline, "step_split", "split", args.rounds,
+                                  N=N, seconds=args.seconds)
+        else:
+            rows[N] = (sbs.measure(sbs.ROOT, "step_split", "split", N=N,
+                                   seconds=args.seconds), None)
+    for k, label in enumerate(("this checkout", "baseline") if args.baseline else ("",)):
+        if label:
+            print(f"\n{label}:")
+        print(head + "\n" + rule)
+        for N, pair in rows.items():
+            print(_row(N, pair[k]))
+    print(f"# {sbs.load()}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
