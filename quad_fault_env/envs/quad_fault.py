@@ -422,17 +422,31 @@ class QuadFaultEnv(gym.Env):
         return self.controller.motor_commands(t, meas.p, meas.v, meas.R, meas.w)[0]
 
     def _substeps(self, k: int):
-        """Control step ``k``'s physics substeps through the closed loop: the samples, the
-        true efficiency and accelerometer reading of each, and the efficiency at the end."""
+        """Control step ``k``'s physics substeps through the closed loop: the samples of the
+        ``info`` (every substep's with the full ``info``, none with the light one), the
+        samples the estimator reads (every ``estimator_stride``-th; the last of those alone
+        for an estimator that depends on the newest sample only), the true efficiency and
+        accelerometer reading of each substep, and the efficiency at the end."""
         S = self.substeps
         row = self._table_row(k)
         out = self.flight.step(self._f_cmd, S, record=self.flight.records(S))
         done = int(self.flight.steps_run[0])
         t = ((k * S + np.arange(done)) * self.dt).tolist()
-        samples = [Sample(t[j], out.p[0, j], out.v[0, j], out.R[0, j], out.w[0, j],
-                          self._f_cmd.copy()) for j in range(done)]
+
+        def sample(j: int) -> Sample:
+            return Sample(t[j], out.p[0, j], out.v[0, j], out.R[0, j], out.w[0, j],
+                          self._f_cmd.copy())
+
+        fed = range(0, done, self.estimator_stride)
+        if self._stateless_estimator:  # a pure function of the sample: the last one decides
+            fed = fed[-1:]
+        if self.info_level == "full":
+            samples = [sample(j) for j in range(done)]
+            fed = [samples[j] for j in fed]
+        else:
+            samples, fed = [], [sample(j) for j in fed]
         eta = self._tables.eta[0, row * S:row * S + S + 1]
-        return samples, eta[:done].copy(), out.accel[0, :done], eta[S].copy()
+        return samples, fed, eta[:done].copy(), out.accel[0, :done], eta[S].copy()
 
     def step(self, action):
         if self.plant is None or self._terminal:
@@ -441,15 +455,11 @@ class QuadFaultEnv(gym.Env):
         k = self._step_count
         t0 = k * self.substeps * self.dt
         self._f_cmd = self.motor_commands(a, t0, self._meas)
-        samples, eta_true, sf, eta_t1 = self._substeps(k)
+        samples, fed, eta_true, sf, eta_t1 = self._substeps(k)
         self._step_count += 1
         t1 = self.time
-        if self._stateless_estimator:  # a pure function of the sample: the last one decides
-            if samples[::self.estimator_stride]:
-                self._estimate = self.estimator.update(samples[::self.estimator_stride][-1])
-        else:
-            for s in samples[::self.estimator_stride]:
-                self._estimate = self.estimator.update(s)
+        for s in fed:
+            self._estimate = self.estimator.update(s)
         state = self._state
         refs = self._tables.refs[0, self._step_count - int(self._tables.k0[0])]
         ref = FlatOutput(refs[0].copy(), refs[1].copy(), refs[2].copy(), refs[3].copy())
