@@ -162,10 +162,11 @@ def _indistinguishable(verdicts, order) -> tuple:
             continue
         out.append({"names": [name, v.like.name],
                     "reason": (f"this log cannot tell {name} from {v.like.describe()}: "
-                               f"{name} adds nothing held out to that time constant, and "
-                               "the log is too slow to confirm the time constant itself; "
-                               "one of the two is likely there, and faster commands or "
-                               "measured rotor speeds would tell which")})
+                               f"on held-out data {name} adds too little to that time "
+                               "constant (its entry in rejected gives the figures), and the "
+                               "log is too slow to confirm the time constant itself; one of "
+                               "the two is likely there, and faster commands or measured "
+                               "rotor speeds would tell which")})
     return tuple(out)
 
 
