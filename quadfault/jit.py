@@ -4,7 +4,9 @@ Every algorithm is written once, as plain allocation-free Python, and decorated 
 :func:`jit`. With numba importable (a core dependency) the function is compiled
 (``nopython``, ``cache=True``, ``error_model="numpy"``: a division by zero gives inf / NaN as
 in numpy, never an exception inside a parallel loop; no ``fastmath``, so results do not
-depend on the compiler's reassociation). Without numba the decorator leaves the function as
+depend on the compiler's reassociation; ``no_cfunc_wrapper``: no kernel is called through a C
+function pointer, and the wrapper would cost every compiled kernel a few hundredths of a
+CPU-second on a first run). Without numba the decorator leaves the function as
 Python -- slow but correct -- and warns once. Batched paths run the same kernel under
 :data:`prange`. :func:`python` gives a kernel's interpreted form (the same code, with every
 kernel it calls interpreted too): the closed loop runs that way when it must call Python
@@ -132,8 +134,9 @@ def _warn_once() -> None:
 def jit(*args, **kwargs):
     """Compile a kernel with the project's options (``@jit`` or ``@jit(parallel=True)``).
 
-    Keyword arguments go to ``numba.njit`` (``cache``, ``error_model`` and ``nogil`` have
-    the project's defaults). Without numba the function is returned unchanged.
+    Keyword arguments go to ``numba.njit`` (``cache``, ``error_model``, ``nogil`` and
+    ``no_cfunc_wrapper`` have the project's defaults). Without numba the function is
+    returned unchanged.
     """
     nb = _numba()
     if nb is None:
@@ -144,6 +147,7 @@ def jit(*args, **kwargs):
     kwargs.setdefault("cache", True)
     kwargs.setdefault("error_model", "numpy")
     kwargs.setdefault("nogil", True)
+    kwargs.setdefault("no_cfunc_wrapper", True)
     if len(args) == 1 and callable(args[0]):
         return nb.njit(**kwargs)(args[0])
     return nb.njit(*args, **kwargs)
