@@ -31,7 +31,7 @@ over the seeds; the same paired against ``mlp_none`` (per seed, same episodes); 
 reach a tuning-episode crash rate of ``--crash-target`` or lower (sample efficiency). The
 zero-residual bases of the arms' estimators fly the same test episodes as references.
 
-    python benchmarks/estimate_study.py --out runs/estimate_study          # full: 4 CPU-h
+    python benchmarks/estimate_study.py --out runs/estimate_study          # full: about 2 CPU-h
     python benchmarks/estimate_study.py --quick --out runs/estimate_quick  # 1 task, 3 seeds
     python benchmarks/estimate_study.py --tasks rotor_loss --seeds 0 --timesteps 16384 \\
         --episodes 10 --out runs/estimate_tiny
@@ -39,7 +39,11 @@ zero-residual bases of the arms' estimators fly the same test episodes as refere
 Writes ``OUT/study.json`` (design, every episode of every run, curves, summaries) and
 ``OUT/study.png`` (learning curves and the test scores with their intervals). A run folder
 (``OUT/<task>/<arm>/seed_<k>/``, a ``quadfault train`` run) with a ``model.zip`` is reused
-unless ``--retrain``.
+unless ``--retrain``; its training CPU time is kept beside it (``train_cpu.json``), so the
+study's CPU total counts it however many processes trained the runs. ``--train-only`` trains
+the missing runs and stops, so several processes can train one study in parallel (a run being
+trained by another live process is waited for, not trained twice); the same command without
+``--train-only`` then evaluates everything. ``--markdown`` prints the summaries as tables.
 """
 
 from __future__ import annotations
@@ -47,6 +51,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from dataclasses import replace
@@ -147,11 +152,67 @@ def steps_to(c: dict, target: float) -> float:
     return int(hit[0]) if hit else None
 
 
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def train_run(config, seed: int, run_dir: Path, retrain: bool) -> None:
+    """Train one run unless it exists; ``train_cpu.json`` records its training CPU seconds.
+    A run that another live process is training (``.seed_<k>.training`` holds its pid) is
+    waited for."""
+    from agents.train import train_one
+
+    lock = run_dir.parent / f".{run_dir.name}.training"
+    while True:
+        if (run_dir / "model.zip").exists() and not retrain:
+            return
+        run_dir.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        except FileExistsError:
+            try:
+                owner = int(lock.read_text() or 0)
+            except (OSError, ValueError):
+                owner = 0
+            if owner and _alive(owner):
+                time.sleep(5)
+                continue
+            lock.unlink(missing_ok=True)  # left by a process that died
+            continue
+        break
+    try:
+        os.write(fd, str(os.getpid()).encode())
+        os.close(fd)
+        c0 = time.process_time()
+        train_one(config, seed, run_dir, force=True, quiet=True)
+        cpu = time.process_time() - c0
+        (run_dir / "train_cpu.json").write_text(json.dumps({"train_cpu_s": cpu}))
+    finally:
+        lock.unlink(missing_ok=True)
+
+
+def train_cpu(run_dir: Path):
+    """The recorded training CPU seconds of a run (None when it was not recorded)."""
+    path = run_dir / "train_cpu.json"
+    return json.loads(path.read_text())["train_cpu_s"] if path.is_file() else None
+
+
 def run_arm(task: str, arm: str, args, test_seeds) -> dict:
-    """Train (or reuse) every seed of one arm and fly the test episodes."""
-    from agents.train import load_agent, make_eval_env, train_one
+    """Train (or reuse) every seed of one arm and fly the test episodes (with
+    ``--train-only`` only train, and return None)."""
+    from agents.train import load_agent, make_eval_env
 
     config = train_config(task, arm, args)
+    if args.train_only:
+        for seed in args.seeds:
+            train_run(config, seed, Path(args.out) / task / arm / f"seed_{seed}", args.retrain)
+        return None
     # the test episodes score info["tracking_error"]: the full info (training keeps it light)
     env = make_eval_env(replace(config, env_kwargs=dict(config.env_kwargs, info="full")))
     env.reset(seed=TEST_SEED)
@@ -159,11 +220,8 @@ def run_arm(task: str, arm: str, args, test_seeds) -> dict:
     runs = {}
     for seed in args.seeds:
         run_dir = Path(args.out) / task / arm / f"seed_{seed}"
-        cpu = None
-        if args.retrain or not (run_dir / "model.zip").exists():
-            c0 = time.process_time()
-            train_one(config, seed, run_dir, force=True, quiet=True)
-            cpu = time.process_time() - c0
+        train_run(config, seed, run_dir, args.retrain)
+        cpu = train_cpu(run_dir)
         saved = json.loads((run_dir / "train_config.json").read_text())
         model, venv = load_agent(run_dir, env=env)
         r = fly(model, env, test_seeds, venv if hasattr(venv, "normalize_obs") else None)
@@ -285,11 +343,15 @@ def main(argv=None) -> int:
                     help="episode length [s] (default: the task's; shorter only for tests)")
     ap.add_argument("--out", default="runs/estimate_study")
     ap.add_argument("--retrain", action="store_true")
+    ap.add_argument("--train-only", action="store_true",
+                    help="train the missing runs and stop (for training in parallel)")
+    ap.add_argument("--markdown", action="store_true",
+                    help="print the summaries as markdown tables")
     ap.add_argument("--replot", action="store_true",
                     help="only recompute the summaries and the plot of OUT/study.json")
     args = ap.parse_args(argv)
     if args.replot:
-        return replot(Path(args.out))
+        return replot(Path(args.out), args.markdown)
     cpu0 = time.process_time()
     preset = QUICK if args.quick else FULL
     tasks = args.tasks or preset.get("tasks", list(TASKS))
@@ -320,6 +382,8 @@ def main(argv=None) -> int:
             print(f"{task} / {arm}: seeds {args.seeds}, {args.timesteps:,} steps each",
                   flush=True)
             arms[arm] = run_arm(task, arm, args, test_seeds)
+        if args.train_only:
+            continue
         references = {}
         for est in sorted({ARMS[a][0] for a in args.arms}):
             arm = next(a for a in args.arms if ARMS[a][0] == est and ARMS[a][1] == 1) \
@@ -334,12 +398,15 @@ def main(argv=None) -> int:
                                   "env_kwargs": TASKS[task]["env_kwargs"],
                                   "seeds": args.seeds, "episode_seeds": test_seeds,
                                   "arms": arms, "references": references}
+    if args.train_only:
+        print(f"trained; CPU of this process {(time.process_time() - cpu0) / 60:.1f} min")
+        return 0
     results["cpu_s"] = time.process_time() - cpu0
-    finish(results, out, args.crash_target)
+    finish(results, out, args.crash_target, args.markdown)
     return 0
 
 
-def finish(results: dict, out: Path, crash_target: float) -> None:
+def finish(results: dict, out: Path, crash_target: float, markdown: bool = False) -> None:
     """Summarise every task of ``results``, print the summaries, write ``study.json`` and
     ``study.png`` into ``out``."""
     from quadfault.fileio import atomic_write_text
@@ -358,16 +425,44 @@ def finish(results: dict, out: Path, crash_target: float) -> None:
                      f"{b['return'][0]:+.1f} +/- {b['return'][1]:.1f}" if b else "")
             print(f"  {arm}: {line}{extra}; steps to crash rate <= {crash_target}: "
                   f"{s['steps_to_crash_target']['per_seed']}")
+        if markdown:
+            print(markdown_table(res))
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "study.json", json.dumps(_json(results), indent=1,
                                                           allow_nan=False), force=True)
     plot(results, out / "study.png")
+    train = [r.get("train_cpu_s") for res in results["tasks"].values()
+             for runs in res["arms"].values() for r in runs.values()]
+    known = [c for c in train if c is not None]
+    if known:
+        print(f"training CPU, sum over the {len(known)} of {len(train)} runs that recorded it: "
+              f"{sum(known) / 60:.1f} min")
     if results.get("cpu_s") is not None:
-        print(f"CPU time of the whole study (this process): {results['cpu_s'] / 60:.1f} min")
+        print(f"CPU time of this process (evaluations, and the training it did): "
+              f"{results['cpu_s'] / 60:.1f} min")
     print(f"-> {out / 'study.json'}, {out / 'study.png'}")
 
 
-def replot(out: Path) -> int:
+def markdown_table(res: dict) -> str:
+    """One task's summary as a markdown table: mean +/- 95 % interval over seeds."""
+    def pm(v, digits):
+        m, h = v
+        return f"{m:.{digits}f} ± {h:.{digits}f}" if h is not None and math.isfinite(h) \
+            else f"{m:.{digits}f}"
+    rows = ["| arm | crash rate | tracking RMSE [m] | return | RMSE vs `mlp_none` [m] "
+            "| return vs `mlp_none` | RMSE vs base [m] | return vs base |",
+            "|---|---|---|---|---|---|---|---|"]
+    for arm, s in res["summary"].items():
+        p = res.get(f"paired_vs_{REFERENCE_ARM}", {}).get(arm)
+        b = res.get("paired_vs_base", {}).get(arm)
+        rows.append(f"| `{arm}` | {pm(s['crashed'], 2)} | {pm(s['rmse'], 3)} | "
+                    f"{pm(s['return'], 0)} | {pm(p['rmse'], 4) if p else '-'} | "
+                    f"{pm(p['return'], 1) if p else '-'} | {pm(b['rmse'], 4) if b else '-'} | "
+                    f"{pm(b['return'], 1) if b else '-'} |")
+    return "\n".join(rows)
+
+
+def replot(out: Path, markdown: bool = False) -> int:
     """Recompute the summaries and the plot of ``OUT/study.json`` without flying anything (the
     learning curves' base returns are read from the run folders where they are present)."""
     path = out / "study.json"
@@ -378,12 +473,15 @@ def replot(out: Path) -> int:
     for task, res in results["tasks"].items():
         for arm, runs in res["arms"].items():
             for seed, r in runs.items():
-                npz = out / task / arm / f"seed_{seed}" / "evaluations.npz"
+                run_dir = out / task / arm / f"seed_{seed}"
+                if r.get("train_cpu_s") is None:
+                    r["train_cpu_s"] = train_cpu(run_dir)
+                npz = run_dir / "evaluations.npz"
                 if npz.is_file():
                     with np.load(npz) as data:
                         if "baseline_results" in data.files:
                             r["curve"]["base_return"] = float(data["baseline_results"].mean())
-    finish(results, out, results["design"]["crash_target"])
+    finish(results, out, results["design"]["crash_target"], markdown)
     return 0
 
 if __name__ == "__main__":

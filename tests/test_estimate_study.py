@@ -53,3 +53,31 @@ def test_every_arm_trains_and_flies_the_same_episodes(tmp_path):
                      .read_text())
     assert cfg["frame_stack"] == estimate_study.FRAME_STACK
     assert cfg["env_kwargs"]["estimator"] == "none"
+
+
+def test_train_only_then_evaluate_reuses_the_runs_and_their_cpu(tmp_path, capsys):
+    """Runs trained by a --train-only process (here over a lock a dead process left behind)
+    are evaluated, not retrained, by the full command, which counts their training CPU."""
+    import subprocess
+
+    out = tmp_path / "study"
+    tiny = ["--tasks", "rotor_loss", "--arms", "mlp_none", "mlp_truth", "--seeds", "0",
+            "--timesteps", "64", "--n-envs", "2", "--n-steps", "32", "--episodes", "1",
+            "--tuning-episodes", "1", "--curve-points", "1", "--allocation", "nominal",
+            "--duration", "0.3", "--out", str(out)]
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    (out / "rotor_loss" / "mlp_none").mkdir(parents=True)
+    (out / "rotor_loss" / "mlp_none" / ".seed_0.training").write_text(str(dead.pid))
+    assert estimate_study.main(tiny + ["--train-only"]) == 0
+    assert not (out / "study.json").exists()
+    assert not list(out.rglob(".*.training"))
+    models = {p: p.stat().st_mtime_ns for p in out.rglob("seed_0/model.zip")}
+    assert len(models) == 2
+    capsys.readouterr()
+    assert estimate_study.main(tiny + ["--markdown"]) == 0
+    printed = capsys.readouterr().out
+    assert "| `mlp_truth` |" in printed and "| arm | crash rate |" in printed
+    assert {p: p.stat().st_mtime_ns for p in models} == models  # reused, not retrained
+    task = json.loads((out / "study.json").read_text())["tasks"]["rotor_loss"]
+    assert all(r["train_cpu_s"] > 0 for arm in task["arms"].values() for r in arm.values())
