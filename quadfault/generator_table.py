@@ -17,6 +17,7 @@ the same numbers, in the same order, as drawing from the Generator itself (teste
 
 from __future__ import annotations
 
+import copy
 import ctypes
 
 import numpy as np
@@ -37,6 +38,13 @@ class GeneratorTable(np.ndarray):
 
     def __array_finalize__(self, obj):
         self.generators = getattr(obj, "generators", None)
+
+    # a pickled or deep copy is the table of the copied generators (never these addresses)
+    def __reduce__(self):
+        return generator_table, (self.generators,)
+
+    def __deepcopy__(self, memo):
+        return generator_table(copy.deepcopy(self.generators, memo))
 
     def put(self, rows, generators) -> None:
         """Vehicles ``rows`` draw from ``generators`` from now on."""

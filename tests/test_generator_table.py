@@ -1,5 +1,8 @@
 """The generator table: a kernel's draws through it are the Generators' own."""
 
+import copy
+import pickle
+
 import numpy as np
 import pytest
 
@@ -46,3 +49,17 @@ def test_put_swaps_a_vehicles_generator():
 def test_only_generators():
     with pytest.raises(TypeError, match="numpy.random.Generator"):
         generator_table([np.random.RandomState(0)])
+
+
+@pytest.mark.parametrize("clone", [copy.deepcopy, lambda t: pickle.loads(pickle.dumps(t))])
+def test_a_copy_draws_from_the_copied_generators(clone):
+    table = generator_table([np.random.default_rng(s) for s in range(2)])
+    twin = clone(table)
+    assert twin.generators is not table.generators
+    out = np.empty((2, 3))
+    _draws(twin, np.arange(2), out)
+    np.testing.assert_array_equal(out, _expected([np.random.default_rng(s) for s in range(2)],
+                                                 range(2)))
+    # the original's generators did not move
+    assert [g.standard_normal() for g in table.generators] == \
+        [np.random.default_rng(s).standard_normal() for s in range(2)]
