@@ -346,6 +346,7 @@ def run_one(job):
             errs[e.name] = param_error(e, f, veh)
     return dict(i=i, truth=c["names"], found=found, snr=achieved, target=c["target"],
                 indistinguishable=[n["names"] for n in res.indistinguishable],
+                verdict=res.verdict,
                 mass=veh.mass, frame=c["frame"], commands=c["commands"],
                 improvement=res.model_improvement, param_errors=errs,
                 t_diag=t_diag, cpu_diag=cpu_diag, t_sim=t_sim, samples=len(blind),
@@ -512,8 +513,8 @@ def main(argv=None):
         done = pool.imap_unordered(run_one, jobs)
     for k, row in enumerate(done, 1):
         rows.append(row)
-        print(f"[{k}/{args.n}] #{row['i']} truth={'+'.join(row['truth']) or 'none'} "
-              f"found={'+'.join(row['found']) or 'none'}"
+        print(f"[{k}/{args.n}] #{row['i']} {row['verdict']} "
+              f"truth={'+'.join(row['truth']) or 'none'} found={'+'.join(row['found']) or 'none'}"
               + "".join(f" (indistinguishable: {' or '.join(n)})"
                         for n in row["indistinguishable"])
               + f" snr={[round(x, 1) for x in row['snr']]} "

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from quadfault import effects as fx
-from quadfault.diagnosis import Diagnosis
+from quadfault.diagnosis import Diagnosis, DiagnosisConfig
 from quadfault.diagnosis.report_text import markdown
 from quadfault.scenarios import named_scenario
 from quadfault.simulator import SensorNoise, SimConfig, simulate
@@ -29,8 +29,13 @@ TRAJ = Lissajous(amplitude=(0.58, 0.39, 0.067), frequency=0.146, altitude=1.5, y
 def fly(effect, seed=1):
     sc = named_scenario("nominal", 12.0, DT).replace(trajectory=TRAJ)
     cfg = SimConfig(dt=DT, sensor_noise=SensorNoise(0.005, 0.0065, 0.0012, 0.0017))
-    return simulate(sc, vehicle=SMALL, config=cfg, seed=seed, effects=(effect,),
+    return simulate(sc, vehicle=SMALL, config=cfg, seed=seed,
+                    effects=() if effect is None else (effect,),
                     thrust_noise=0.012).without_truth()
+
+
+#: a library without inertia: nothing else takes up the lag's signal
+NO_INERTIA = DiagnosisConfig(effects=("motor_lag", "delay", "drag", "mass", "thrust_scale"))
 
 
 @pytest.fixture(scope="module")
@@ -48,12 +53,44 @@ def test_a_lag_below_the_resolution_is_not_named_as_inertia(sub_sample_lag):
                                                  "motor_lag of")
     # both named, neither accepted: the mismatch is there, the log cannot say which
     assert res.verdict == "mismatch"
-    (pair,) = res.indistinguishable
+    pair, lacks = res.indistinguishable
     assert pair["names"] == ["inertia", "motor_lag"]
+    assert lacks["names"] == ["motor_lag", "delay"]  # and the lag itself is missing
     assert "8.0 ms" in pair["reason"]
-    assert res.to_dict()["indistinguishable"] == [pair]
+    assert res.to_dict()["indistinguishable"] == [pair, lacks]
     assert "## Indistinguishable in this log" in markdown(res, "flight.csv")
     assert "- **inertia or motor_lag**" in markdown(res, "flight.csv")
+
+
+def test_a_lag_below_the_resolution_that_explains_the_flight_is_a_mismatch():
+    """Nothing else tried: the lag explains most of the held-out residual, the log cannot
+    say which time constant it is, and the verdict says the model does not match."""
+    res = Diagnosis(NO_INERTIA).fit(fly(fx.MotorLag(0.005)))
+    assert res.effect_names == [] and res.suspect == ()
+    rejected = {e.name: e for e in res.rejected}
+    assert "shorter than 2 command periods" in rejected["motor_lag"].reason  # never named
+    assert res.verdict == "mismatch"
+    (lacks,) = res.to_dict()["indistinguishable"]
+    assert lacks["names"] == ["motor_lag", "delay"]
+    fig = lacks["held_out"]
+    assert fig["time_constant_s"] == pytest.approx(0.005, rel=0.2)
+    assert fig["shortest_time_constant_s"] == pytest.approx(0.008, rel=0.01)
+    assert fig["command_rate_hz"] == pytest.approx(250.0, rel=0.01)
+    # the bar of every effect, and the held-out gain the rejected lag itself reports
+    assert fig["improvement"] >= 0.05 and fig["ci95_low"] > 0.0
+    assert fig["improvement"] == pytest.approx(rejected["motor_lag"].improvement, abs=0.02)
+    assert fig["best_channel"] >= fig["improvement"]
+    for part in ("a time constant below the resolution (5.0 ms as a motor_lag",
+                 "commands at 250 Hz resolve 8.0 ms", f"explains {fig['improvement']:.1%}",
+                 "cannot tell motor_lag from delay or measure it"):
+        assert part in lacks["reason"]
+    assert "- **motor_lag or delay**" in markdown(res, "flight.csv")
+
+
+def test_a_healthy_flight_of_the_same_vehicle_stays_consistent():
+    res = Diagnosis(NO_INERTIA).fit(fly(None))
+    assert res.verdict == "consistent"
+    assert res.indistinguishable == () and res.effect_names == []
 
 
 def test_a_true_inertia_error_on_the_same_vehicle_is_still_found():

@@ -334,6 +334,8 @@ class Diagnosis:
         suspect.sort(key=lambda e: -e.improvement)
         rejected.sort(key=lambda e: -e.improvement)
         alike = _indistinguishable(sel.verdicts, [e.name for e in rejected])
+        if sel.unattributed is not None:  # a time constant the log cannot resolve is missing
+            alike += (sel.unattributed.entry(),)
         table, model_ci = sc.channel_table(sel.baseline.residual, sel.final_cv.residual,
                                            rp.block_dur[sc.rows])
         model_imp = sc.improvement(sel.baseline.residual, sel.final_cv.residual)

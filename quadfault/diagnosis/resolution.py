@@ -22,6 +22,13 @@ An effect that is there besides the lag (a true inertia error: a gain at every f
 which no lag of a few milliseconds gives) adds to it and passes; the same test in the other
 direction is the identifiability rule itself (a time constant shorter than the floor is
 never accepted).
+
+When the search stops with such a time constant still asked for -- its fit passes every test
+an effect meets before the resolution check (BIC, held-out gain, instrumental variables) and
+beats the final model on held-out data by the bar of every effect (:func:`below_resolution`)
+-- the model does not match the flight, though the log cannot say which time constant is
+missing: the diagnosis reports it (:meth:`Unattributed.entry`) and its verdict is not
+``consistent``, and the time constant is still not accepted.
 """
 
 from __future__ import annotations
@@ -31,9 +38,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from quadfault.diagnosis.crossval import gain_over, held_out
+from quadfault.diagnosis.crossval import Gain, gain_over, held_out
 from quadfault.diagnosis.identifiability import TIMING_SAMPLES, too_short
-from quadfault.effects.registry import identifiability
+from quadfault.effects.registry import EFFECT_NAMES, identifiability
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,6 +70,61 @@ class Unresolved:
 
 def is_timing(cand) -> bool:
     return identifiability(cand.name).timescale is not None
+
+
+def _pct(v) -> str:
+    return f"{round(v, 3) + 0.0:.1%}"  # no "-0.0%"
+
+
+@dataclass(frozen=True, eq=False)
+class Unattributed:
+    """A time constant below the resolution that the final model lacks (module docstring).
+
+    Attributes:
+        unresolved: the time constant (its best timing candidate and fit).
+        gain: its held-out :class:`~quadfault.diagnosis.crossval.Gain` over the final model.
+    """
+
+    unresolved: Unresolved
+    gain: Gain
+
+    def entry(self) -> dict:
+        """The ``indistinguishable`` entry: every timing effect of the library, the best fit
+        first, with the reason and the figures (``held_out``)."""
+        un, g = self.unresolved, self.gain
+        names = [un.name] + [n for n in EFFECT_NAMES
+                             if n != un.name and identifiability(n).timescale is not None]
+        rate = TIMING_SAMPLES / un.floor
+        x = float(un.x[0])
+        return {"names": names,
+                "reason": (f"a time constant below the resolution ({1000 * x:.1f} ms as a "
+                           f"{un.name}; commands at {rate:.0f} Hz resolve "
+                           f"{1000 * un.floor:.1f} ms and up) explains {_pct(g.gain)} of the "
+                           f"held-out residual (best channel {_pct(g.best)}, 95% interval "
+                           f"from {_pct(g.lo)}): the model does not match the flight, but "
+                           f"this log cannot tell {' from '.join(names)} or measure it; "
+                           "faster commands or measured rotor speeds would tell which, and how long"),
+                "held_out": {"time_constant_s": x, "shortest_time_constant_s": un.floor,
+                             "command_rate_hz": rate, "improvement": g.gain,
+                             "best_channel": g.best, "ci95_low": g.lo}}
+
+
+def below_resolution(rp, sc, options, n_current: int, cur_cv, m: float) -> Unattributed | None:
+    """Of one round's tested options, the single timing option that failed only because its
+    fit is shorter than the floor (every test before that one passed) and beats the current
+    model held out by the bar ``m`` of every effect (largest gain first); None otherwise."""
+    best = None
+    for opt in options:
+        new = opt.cands[n_current:]
+        if len(new) != 1 or not is_timing(new[0]) or opt.cv is None:
+            continue
+        x = np.asarray(opt.fit.x[n_current], dtype=float)
+        if not opt.failed or opt.failed != too_short(new[0], x):
+            continue
+        g = gain_over(rp, sc, cur_cv, opt.cv, m)
+        if g.passes and (best is None or g.gain > best.gain.gain):
+            best = Unattributed(Unresolved(new[0], x, float(new[0].resolvable)), g)
+    return best
 
 
 def unresolved(singles, cur_bic: float, margin: float) -> Unresolved | None:
@@ -111,10 +173,7 @@ class TimingCheck:
         if g.passes:
             return ""
         names = " + ".join(c.name for c in new)
-
-        def pct(v):
-            return f"{round(v, 3) + 0.0:.1%}"  # no "-0.0%"
-
+        pct = _pct
         return (f"indistinguishable in this log from {un.describe()}: with that time "
                 f"constant {names} improves the held-out fit by only {pct(g.gain)} (best "
                 f"channel {pct(g.best)}, 95% interval from {pct(g.lo)}); a log with faster "

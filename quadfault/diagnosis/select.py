@@ -23,7 +23,9 @@ Each round:
    imbalance does not explain as well (:mod:`~quadfault.diagnosis.rotors`); and, when the
    data asks for a motor lag or delay shorter than the log resolves, a gain over that time
    constant held at the limit of resolution (:mod:`~quadfault.diagnosis.resolution`: else
-   the effect is indistinguishable from it in this log).
+   the effect is indistinguishable from it in this log). When the search stops with such a
+   time constant passing every test up to its resolution, ``Selection.unattributed`` says so
+   (the model lacks a time constant the log cannot attribute).
 4. An option that passes but has a parameter at a bound
    (:func:`~quadfault.diagnosis.crossval.at_bound`) is a **suspect**: the data asks for more
    than the effect allows, so another effect is likely missing; it is never accepted. Among
@@ -53,7 +55,8 @@ from quadfault.diagnosis.fit import Fit, fit
 from quadfault.diagnosis.identifiability import too_short
 from quadfault.diagnosis.library import Candidate, predict
 from quadfault.diagnosis.residuals import Replay
-from quadfault.diagnosis.resolution import TimingCheck, Unresolved, unresolved
+from quadfault.diagnosis.resolution import (TimingCheck, Unattributed, Unresolved,
+                                            below_resolution, unresolved)
 from quadfault.diagnosis.rotors import rotors_differ
 
 __all__ = ["Selection", "Step", "Verdict", "select", "frozen_replay", "iv_slope", "folds_of",
@@ -117,6 +120,8 @@ class Selection:
     screening: tuple  # (name, bic) of the last screening round
     alone: dict  # name -> Fit of the candidate alone on the nominal model (first round)
     verdicts: dict  # name -> Verdict of every candidate fitted and not accepted
+    # a time constant below the resolution the final model lacks (the last round's), or None
+    unattributed: Unattributed | None = None
 
 
 def x_terms(cands, xs) -> list:
@@ -273,6 +278,7 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
     steps, verdicts, alone, last_x = [], {}, {}, {}
     final = None
     screening = ()
+    lacks = None
     testable = [c for c in library if c.testable(rp)]
     while len(current) < max_effects:
         chosen = {c.name for c in current}
@@ -329,6 +335,7 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
         for opt in options:
             _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, singles_cv,
                   final, timing)
+        lacks = below_resolution(rp, sc, options, len(current), cur_cv, min_improvement)
         passed = []
         single_tested = set()
         for opt in sorted(options, key=lambda o: len(o.cands)):  # singles first
@@ -379,13 +386,15 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
         current = list(best.cands)
         x_cur = list(best.fit.x)
         cur_cv, cur_bic, final = best.cv, best.bic, best.fit
+        lacks = None  # judged against the model before this round's acceptance
     for c in testable:  # never screened (the search stopped) or still pending
         if c.name not in verdicts and c.name not in {s.candidate.name for s in steps} \
                 and c.name in alone:
             f = alone[c.name]
             verdicts[c.name] = Verdict(c, "rejected", "not reached: the search stopped", f,
                                        f.x[0], f.sd[0])
-    return Selection(baseline, tuple(steps), final, cur_cv, screening, alone, verdicts)
+    return Selection(baseline, tuple(steps), final, cur_cv, screening, alone, verdicts,
+                     lacks)
 
 
 def verdicts_final(verdicts: dict) -> set:
