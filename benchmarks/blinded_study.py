@@ -347,6 +347,8 @@ def run_one(job):
     return dict(i=i, truth=c["names"], found=found, snr=achieved, target=c["target"],
                 indistinguishable=[n["names"] for n in res.indistinguishable],
                 verdict=res.verdict,
+                below_resolution=[n["held_out"] for n in res.indistinguishable
+                                  if "held_out" in n],
                 mass=veh.mass, frame=c["frame"], commands=c["commands"],
                 improvement=res.model_improvement, param_errors=errs,
                 t_diag=t_diag, cpu_diag=cpu_diag, t_sim=t_sim, samples=len(blind),
@@ -403,8 +405,16 @@ def summarise(rows, rate, duration) -> dict:
                                           for r in below)
                                    for n in sorted({r["found"][0] for r in below
                                                     if r["found"]})},
-        "below_resolution_indistinguishable": sum(bool(r.get("indistinguishable"))
-                                                  for r in below),
+        # an effect named indistinguishable from the time constant (the entries of the time
+        # constant itself, with their figures, are counted apart)
+        "below_resolution_indistinguishable": sum(
+            len(r.get("indistinguishable", [])) > len(r.get("below_resolution", []))
+            for r in below),
+        "below_resolution_mismatch": sum(r.get("verdict") == "mismatch" for r in below),
+        "below_resolution_gain": [min((b["improvement"] for r in below
+                                       for b in r.get("below_resolution", [])), default=None),
+                                  max((b["improvement"] for r in below
+                                       for b in r.get("below_resolution", [])), default=None)],
         "top_effect_correct": float(np.mean(top_ok)) if top_ok else None,
         "top_effect_correct_every_concealed": float(np.mean(top_all)) if top_all else None,
         "top_effect_exact_name": float(np.mean(exact_top)) if exact_top else None,
@@ -455,6 +465,11 @@ def print_summary(s, rows):
               + (f" (on {s['below_resolution_indistinguishable']} of them an effect named "
                  "indistinguishable from the time constant, and not accepted)"
                  if s["below_resolution_indistinguishable"] else "")
+              + f"; verdict mismatch on {s['below_resolution_mismatch']}"
+              + ("" if s["below_resolution_gain"][0] is None else
+                 " (a time constant below the resolution explains "
+                 f"{100 * s['below_resolution_gain'][0]:.0f}-"
+                 f"{100 * s['below_resolution_gain'][1]:.0f} % held out)")
               + f"; top effect correct counting them: "
               f"{s['top_effect_correct_every_concealed']:.3f}")
     print("median parameter error by effect:",

@@ -265,6 +265,8 @@ def print_log(r) -> None:
           f"{100 * d['model']['improvement']:.1f}%")
     if d["suspect"]:
         print("suspect (at a bound): " + ", ".join(e["name"] for e in d["suspect"]))
+    for n in d.get("indistinguishable", []):
+        print(f"indistinguishable: {' or '.join(n['names'])}: {n['reason']}")
     for n in d.get("not_identifiable", []):
         print(f"not identifiable: {n['name']}: {n['reason']}")
     if d.get("assumptions"):
