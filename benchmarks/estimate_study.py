@@ -167,6 +167,7 @@ def train_run(config, seed: int, run_dir: Path, retrain: bool) -> None:
     A run that another live process is training (``.seed_<k>.training`` holds its pid) is
     waited for."""
     from agents.train import train_one
+    from quadfault.fileio import atomic_write_text
 
     lock = run_dir.parent / f".{run_dir.name}.training"
     while True:
@@ -192,7 +193,8 @@ def train_run(config, seed: int, run_dir: Path, retrain: bool) -> None:
         c0 = time.process_time()
         train_one(config, seed, run_dir, force=True, quiet=True)
         cpu = time.process_time() - c0
-        (run_dir / "train_cpu.json").write_text(json.dumps({"train_cpu_s": cpu}))
+        atomic_write_text(run_dir / "train_cpu.json", json.dumps({"train_cpu_s": cpu}),
+                          force=True)
     finally:
         lock.unlink(missing_ok=True)
 
