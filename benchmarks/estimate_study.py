@@ -138,12 +138,16 @@ def fly(policy, env, seeds, normalizer=None) -> dict:
 def curve(run_dir: Path, full_length: int) -> dict:
     """The tuning-episode learning curve: steps, mean return, crash rate (an episode shorter
     than the task's steps was terminated)."""
-    data = np.load(run_dir / "evaluations.npz")
-    return {"timesteps": data["timesteps"].tolist(),
-            "return": data["results"].mean(axis=1).tolist(),
-            "crash_rate": (data["ep_lengths"] < full_length).mean(axis=1).tolist(),
-            "base_return": (float(data["baseline_results"].mean())
-                            if "baseline_results" in data.files else None)}
+    with np.load(run_dir / "evaluations.npz") as data:
+        return {"timesteps": data["timesteps"].tolist(),
+                "return": data["results"].mean(axis=1).tolist(),
+                "crash_rate": (data["ep_lengths"] < full_length).mean(axis=1).tolist(),
+                "base_return": base_return(data)}
+
+
+def base_return(data) -> float | None:
+    """The zero-residual base's mean return on the tuning episodes (None: not evaluated)."""
+    return float(data["baseline_results"].mean()) if "baseline_results" in data.files else None
 
 
 def steps_to(c: dict, target: float) -> float:
@@ -251,15 +255,20 @@ def summarise(arms: dict, references: dict) -> tuple[dict, dict, dict]:
                                                  "reached": sum(s is not None for s in steps)}
         base = references.get(f"base_{ARMS[arm][0]}")
         if base is not None:
-            vs_base[arm] = {k: t_interval([np.nanmean(np.subtract(r[k], base[k]))
-                                           for r in runs.values()]) for k in keys}
+            vs_base[arm] = paired_interval([(r, base) for r in runs.values()], keys)
     ref = arms.get(REFERENCE_ARM)
     for arm, runs in arms.items():
         if ref is None or arm == REFERENCE_ARM:
             continue
-        paired[arm] = {k: t_interval([np.nanmean(np.subtract(runs[s][k], ref[s][k]))
-                                      for s in runs if s in ref]) for k in keys}
+        paired[arm] = paired_interval([(runs[s], ref[s]) for s in runs if s in ref], keys)
     return summary, paired, vs_base
+
+
+def paired_interval(pairs, keys) -> dict:
+    """Per key: mean and 95 % interval over the pairs of each pair's mean episode-by-episode
+    difference (first minus second)."""
+    return {k: t_interval([np.nanmean(np.subtract(a[k], b[k])) for a, b in pairs])
+            for k in keys}
 
 
 def plot(results: dict, path: Path) -> None:
@@ -388,8 +397,7 @@ def main(argv=None) -> int:
             continue
         references = {}
         for est in sorted({ARMS[a][0] for a in args.arms}):
-            arm = next(a for a in args.arms if ARMS[a][0] == est and ARMS[a][1] == 1) \
-                if any(ARMS[a][0] == est and ARMS[a][1] == 1 for a in args.arms) else None
+            arm = next((a for a in args.arms if ARMS[a][0] == est and ARMS[a][1] == 1), None)
             if arm is None:
                 continue
             env = gym.make(TASKS[task]["env_id"], **env_kwargs(task, arm, args),
@@ -481,8 +489,9 @@ def replot(out: Path, markdown: bool = False) -> int:
                 npz = run_dir / "evaluations.npz"
                 if npz.is_file():
                     with np.load(npz) as data:
-                        if "baseline_results" in data.files:
-                            r["curve"]["base_return"] = float(data["baseline_results"].mean())
+                        base = base_return(data)
+                    if base is not None:
+                        r["curve"]["base_return"] = base
     finish(results, out, results["design"]["crash_target"], markdown)
     return 0
 
