@@ -113,7 +113,7 @@ class ControlOutput(NamedTuple):
 
 
 # --- kernels -------------------------------------------------------------------------------
-@jit
+@jit(inner=True)
 def desired_attitude3(f_n, b1d, normalize_b2d):
     """Desired attitude with columns ``(b2d x b3d, b2d, b3d)``, ``b3d = f_n / |f_n|``,
     ``b2d = b3d x b1d`` (normalised with ``normalize_b2d``)."""
@@ -170,7 +170,7 @@ def geometric_control(p, v, R, w, ref, gains, nominal):
     return thrust, M, ex, ev, eR, eW, Rd
 
 
-@jit
+@jit(inner=True)
 def _feedforward_attitude(acc, b1d, gains, nominal):
     """R_d of the reference alone: ``f_n = m g e3 - m a_d`` (a_d = 0 without acceleration
     feed-forward)."""
@@ -180,7 +180,7 @@ def _feedforward_attitude(acc, b1d, gains, nominal):
     return desired_attitude3(f_n, b1d, gains[6])
 
 
-@jit
+@jit(inner=True)
 def _combine9(A, B, C, b):
     """``A + b B + C`` element by element (9-tuples)."""
     return (A[0] + b * B[0] + C[0], A[1] + b * B[1] + C[1], A[2] + b * B[2] + C[2],
@@ -188,14 +188,14 @@ def _combine9(A, B, C, b):
             A[6] + b * B[6] + C[6], A[7] + b * B[7] + C[7], A[8] + b * B[8] + C[8])
 
 
-@jit
+@jit(inner=True)
 def _difference9(A, C):
     """``A - C`` element by element (9-tuples)."""
     return (A[0] - C[0], A[1] - C[1], A[2] - C[2], A[3] - C[3], A[4] - C[4], A[5] - C[5],
             A[6] - C[6], A[7] - C[7], A[8] - C[8])
 
 
-@jit
+@jit(inner=True)
 def feedforward_rates3(acc, b1d, h, gains, nominal):
     """The feed-forward attitude R_d(t) and its rates Omega_d [rad/s], Omega_d' [rad/s^2] by
     central differences of step ``h`` [s]: ``acc`` and ``b1d`` are the reference's at

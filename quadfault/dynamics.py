@@ -124,7 +124,7 @@ def rotor_wrench(A, f, eta=None):
     return T, (m0, m1, m2)
 
 
-@jit
+@jit(inner=True)
 def translational_acceleration3(R, thrust, rigid, F=None):
     """v' of eq. (2) [m/s^2] for collective thrust ``thrust`` [N] and an optional external
     force ``F`` (world) [N]."""
@@ -136,7 +136,7 @@ def translational_acceleration3(R, thrust, rigid, F=None):
     return (a[0] + F[0] / mass, a[1] + F[1] / mass, a[2] + F[2] / mass)
 
 
-@jit
+@jit(inner=True)
 def angular_acceleration3(w, moment, rigid, moment_ext=None):
     """Omega' of eq. (4) [rad/s^2]: ``J^-1 (M - Omega x J Omega + M_ext)``."""
     c = cross3(w, matvec3(rigid[2], w))
@@ -146,7 +146,7 @@ def angular_acceleration3(w, moment, rigid, moment_ext=None):
     return matvec3(rigid[3], m)
 
 
-@jit
+@jit(inner=True)
 def specific_force3(R, acc, gravity):
     """Accelerometer reading in FRD: ``R^T (a - g e3)`` [m/s^2] ((0, 0, -g) at rest)."""
     f2 = acc[2] - gravity
@@ -155,7 +155,7 @@ def specific_force3(R, acc, gravity):
             R[2] * acc[0] + R[5] * acc[1] + R[8] * f2)
 
 
-@jit
+@jit(inner=True)
 def dexpinv3(theta, w):
     """Inverse right-trivialised differential of exp, to 4th order: theta' given Omega."""
     tw = cross3(theta, w)
@@ -164,7 +164,7 @@ def dexpinv3(theta, w):
             w[2] + 0.5 * tw[2] + ttw[2] / 12.0)
 
 
-@jit
+@jit(inner=True)
 def _accelerations(p, v, R, w, thrust, moment, rigid, fx, f, t):
     """(v', Omega') of eqs. 2 and 4 at one stage's state; the effects ``fx`` (None: none)
     add their external wrench at that state. A call, not inlined into the four stages of
@@ -178,7 +178,7 @@ def _accelerations(p, v, R, w, thrust, moment, rigid, fx, f, t):
             angular_acceleration3(w, moment, rigid, Mx))
 
 
-@jit
+@jit(inner=True)
 def _rk_sum(x0, c, k1, k2, k3, k4):
     """``x0 + c (k1 + 2 k2 + 2 k3 + k4)``."""
     return (x0[0] + c * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0]),
@@ -221,7 +221,7 @@ def rkmk4_step(p0, v0, R0, w0, thrust, moment, rigid, dt, fx=None, f=None, t=0.0
             matmul3(R0, expm3(th)), _rk_sum(w0, c, k1w, k2w, k3w, k4w), k1v)
 
 
-@jit
+@jit(inner=True)
 def reference_euler_step(p0, v0, R0, w0, memory, rigid, dt):
     """The authors' step (``dynamics.m``) from the stored derivatives: ``W += W' dt;
     v += a dt; R <- orth(R (I + [W dt]x)); x += v dt``; then ``a`` and ``W'`` are recomputed
@@ -244,7 +244,7 @@ def reference_euler_step(p0, v0, R0, w0, memory, rigid, dt):
     return p, v, R, w
 
 
-@jit
+@jit(inner=True)
 def reference_euler_store(memory, thrust, moment, R):
     """Store the applied wrench (the reference's ``uav_dynamics.f = T R e3`` and ``.M``)."""
     memory[2, 0], memory[2, 1], memory[2, 2] = thrust * R[2], thrust * R[5], thrust * R[8]

@@ -6,7 +6,11 @@ Every algorithm is written once, as plain allocation-free Python, and decorated 
 in numpy, never an exception inside a parallel loop; no ``fastmath``, so results do not
 depend on the compiler's reassociation; ``no_cfunc_wrapper``: no kernel is called through a C
 function pointer, and the wrapper would cost every compiled kernel a few hundredths of a
-CPU-second on a first run). Without numba the decorator leaves the function as
+CPU-second on a first run). A kernel that only other kernels call is declared
+``@jit(inner=True)``: compiled without numba's CPython wrapper too (boxing and unboxing its
+arguments: LLVM code of its own, again a few hundredths of a CPU-second per kernel on a
+first run); a call from Python still works, through a form with the wrapper compiled on the
+first such call (:class:`InnerKernel`). Without numba the decorator leaves the function as
 Python -- slow but correct -- and warns once. Batched paths run the same kernel under
 :data:`prange`. :func:`python` gives a kernel's interpreted form (the same code, with every
 kernel it calls interpreted too): the closed loop runs that way when it must call Python
@@ -115,6 +119,8 @@ def _listen_for_compiles(numba) -> None:
 
 
 def __getattr__(name):
+    if name == "InnerKernel":  # numba's pickling of a dispatcher names its class
+        return _inner_kernel_class()
     if name == "AVAILABLE":
         return _numba() is not None
     if name == "prange":
@@ -144,13 +150,73 @@ def jit(*args, **kwargs):
         if len(args) == 1 and callable(args[0]) and not kwargs:
             return args[0]
         return lambda f: f
+    inner = kwargs.pop("inner", False)
     kwargs.setdefault("cache", True)
     kwargs.setdefault("error_model", "numpy")
     kwargs.setdefault("nogil", True)
     kwargs.setdefault("no_cfunc_wrapper", True)
+    if inner:
+        if args and not (len(args) == 1 and callable(args[0])):
+            raise TypeError("jit(inner=True) takes no signatures")
+        return _inner(args[0], kwargs) if args else lambda f: _inner(f, kwargs)
     if len(args) == 1 and callable(args[0]):
         return nb.njit(**kwargs)(args[0])
     return nb.njit(*args, **kwargs)
+
+
+def _inner(fn, options: dict):
+    """``fn`` compiled as an :class:`InnerKernel` with numba options ``options``."""
+    options = dict(options, nopython=True, no_cpython_wrapper=True)
+    cache = options.pop("cache")
+    kernel = _inner_kernel_class()(py_func=fn, locals=options.pop("locals", None) or {},
+                                   targetoptions=options)
+    if cache:
+        kernel.enable_caching()
+    return kernel
+
+
+_InnerKernel = None
+
+
+def _null_cache():
+    from numba.core.caching import NullCache
+
+    return NullCache
+
+
+def _inner_kernel_class():
+    """:class:`InnerKernel` (built on first use: it derives from numba's dispatcher)."""
+    global _InnerKernel
+    if _InnerKernel is None:
+        from numba.core.registry import CPUDispatcher
+
+        class InnerKernel(CPUDispatcher):
+            """A kernel that other kernels call (``@jit(inner=True)``): numba compiles it
+            without the CPython wrapper, so its compiled form cannot be called from Python.
+            A call from Python runs the same function compiled with the wrapper (cached
+            apart, as ``<name>.python``)."""
+
+            def __call__(self, *args, **kwargs):
+                form = self.__dict__.get("_python_form")
+                if form is None:
+                    form = self.__dict__["_python_form"] = self._with_wrapper()
+                return form(*args, **kwargs)
+
+            def _with_wrapper(self):
+                f = self.py_func
+                copy = types.FunctionType(f.__code__, f.__globals__, f.__name__,
+                                          f.__defaults__, f.__closure__)
+                copy.__qualname__ = f.__qualname__ + ".python"  # its own cache entry
+                copy.__doc__, copy.__kwdefaults__ = f.__doc__, f.__kwdefaults__
+                options = dict(self.targetoptions)
+                for name in ("no_cpython_wrapper", "nopython"):
+                    options.pop(name, None)
+                return _numba().njit(cache=not isinstance(self._cache, _null_cache()),
+                                     locals=self.locals, **options)(copy)
+
+        InnerKernel.__module__, InnerKernel.__qualname__ = __name__, "InnerKernel"
+        _InnerKernel = InnerKernel
+    return _InnerKernel
 
 
 def python(fn, replace: dict | None = None):
@@ -316,5 +382,5 @@ def configure_cache() -> str | None:
     return str(target)
 
 
-__all__ = ["AVAILABLE", "COMPILE_NOTICE", "jit", "prange", "python", "typed_list",
+__all__ = ["AVAILABLE", "COMPILE_NOTICE", "InnerKernel", "jit", "prange", "python", "typed_list",
            "set_threads", "threads", "cache_candidates", "configure_cache", "sources_digest"]

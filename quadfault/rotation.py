@@ -28,41 +28,41 @@ _SMALL = 1e-8
 
 
 # --- kernels: 3-tuples and row-major 9-tuples -------------------------------------------
-@jit
+@jit(inner=True)
 def dot3(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-@jit
+@jit(inner=True)
 def cross3(a, b):
     """``a x b``."""
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-@jit
+@jit(inner=True)
 def axpy3(x, a, y):
     """``x + a y``."""
     return (x[0] + a * y[0], x[1] + a * y[1], x[2] + a * y[2])
 
 
-@jit
+@jit(inner=True)
 def scale3(a, x):
     return (a * x[0], a * x[1], a * x[2])
 
 
-@jit
+@jit(inner=True)
 def hat3(w):
     """Skew-symmetric matrix of ``w`` (paper eq. 5)."""
     return (0.0, -w[2], w[1], w[2], 0.0, -w[0], -w[1], w[0], 0.0)
 
 
-@jit
+@jit(inner=True)
 def vee3(M):
     """Inverse of :func:`hat3` on the antisymmetric part of ``M``."""
     return (0.5 * (M[7] - M[5]), 0.5 * (M[2] - M[6]), 0.5 * (M[3] - M[1]))
 
 
-@jit
+@jit(inner=True)
 def matmul3(A, B):
     """``A @ B``."""
     return (A[0] * B[0] + A[1] * B[3] + A[2] * B[6], A[0] * B[1] + A[1] * B[4] + A[2] * B[7],
@@ -73,14 +73,14 @@ def matmul3(A, B):
             A[6] * B[2] + A[7] * B[5] + A[8] * B[8])
 
 
-@jit
+@jit(inner=True)
 def matvec3(A, x):
     """``A @ x``."""
     return (A[0] * x[0] + A[1] * x[1] + A[2] * x[2], A[3] * x[0] + A[4] * x[1] + A[5] * x[2],
             A[6] * x[0] + A[7] * x[1] + A[8] * x[2])
 
 
-@jit
+@jit(inner=True)
 def transpose3(A):
     return (A[0], A[3], A[6], A[1], A[4], A[7], A[2], A[5], A[8])
 
@@ -94,7 +94,7 @@ _A1, _A2, _A3, _A4, _A5 = -1 / 6, 1 / 120, -1 / 5040, 1 / 362880, -1 / 39916800
 _B0, _B1, _B2, _B3, _B4, _B5 = 0.5, -1 / 24, 1 / 720, -1 / 40320, 1 / 3628800, -1 / 479001600
 
 
-@jit
+@jit(inner=True)
 def expm3(phi):
     """Exponential map ``so(3) -> SO(3)`` (Rodrigues) of a rotation vector ``phi`` [rad]:
     ``I + a [phi]x + b (phi phi^T - |phi|^2 I)`` with ``a = sin(th)/th``,
@@ -114,7 +114,7 @@ def expm3(phi):
             b * (z * x) + a * -y, b * (z * y) + a * x, b * (z * z) + d)
 
 
-@jit
+@jit(inner=True)
 def dcm_renormalize3(R):
     """The reference code's first-order DCM renormalisation ("Direction Cosine Matrix IMU"):
     rows x, y share their orthogonality error, z = x' x y', each row rescaled to unit length

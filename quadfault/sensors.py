@@ -67,7 +67,7 @@ class SensorNoise:
         return RigidBodyState(*out), sf
 
 
-@jit
+@jit(inner=True)
 def _normal3(std, gen):
     """``std z`` with three standard normals drawn in component order."""
     a = std * gen.standard_normal()
@@ -76,7 +76,7 @@ def _normal3(std, gen):
     return (a, b, c)
 
 
-@jit
+@jit(inner=True)
 def _noisy3(x, std, gen):
     """``x + std z`` with three standard normals drawn in component order."""
     a = x[0] + std * gen.standard_normal()

@@ -126,6 +126,44 @@ def test_read_only_install_caches_in_the_user_folder_and_notices_the_first_compi
     assert not list(install.rglob("*.nbi"))
 
 
+_INNER = """
+from quadfault.jit import jit
+
+
+@jit(inner=True)
+def scaled(x, a):
+    return (a * x[0], a * x[1])
+
+
+@jit
+def outer(x):
+    y = scaled(x, 2.0)
+    return y[0] + y[1]
+"""
+
+
+def test_an_inner_kernel_runs_from_kernels_and_from_python_and_is_cached(tmp_path):
+    """``jit(inner=True)``: no CPython wrapper in the form kernels call; a call from Python
+    runs a form with one; both are cached, so a second process compiles nothing."""
+    if not jit.AVAILABLE:
+        pytest.skip("numba is not importable")
+    import subprocess
+
+    (tmp_path / "inner_mod.py").write_text(_INNER)
+    env = {k: v for k, v in os.environ.items() if k not in (jit._CONFIGURED, jit._USERS)}
+    env.update(PYTHONPATH=os.pathsep.join([str(ROOT), str(tmp_path)]),
+               NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    code = ("import inner_mod as m\n"
+            "assert m.scaled.targetoptions['no_cpython_wrapper']\n"
+            "assert m.outer((1.0, 2.0)) == 6.0 and m.scaled((1.0, 2.0), 3.0) == (3.0, 6.0)\n"
+            "print(sum(m.outer.stats.cache_misses.values()),"
+            " sum(m.scaled._python_form.stats.cache_misses.values()))\n")
+    runs = [subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                           text=True, timeout=300) for _ in range(2)]
+    assert [r.returncode for r in runs] == [0, 0], runs[0].stderr[-2000:]
+    assert runs[0].stdout.split() == ["1", "1"] and runs[1].stdout.split() == ["0", "0"]
+
+
 def test_no_notice_when_stderr_is_not_a_terminal(monkeypatch):
     import io
 
