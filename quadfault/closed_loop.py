@@ -350,6 +350,13 @@ def _interpreted():
     return python(fly_vehicle, HOOK_CALLS)
 
 
+def _check_rotors(fx, V: Vehicles) -> None:
+    """A one-line error when compiled effects ``fx`` were built for another rotor count."""
+    if fx is not None and type(fx).n_rotors != V.f.shape[1]:
+        raise ConfigError(f"the effects were built for {type(fx).n_rotors} rotors, the "
+                          f"vehicles have {V.f.shape[1]}")
+
+
 def fly(gens, k0: int, k1: int, measure_first: bool, C: LoopConstants, V: Vehicles, T: Tables,
         out: Records, hook=None, K: ControllerConstants | None = None, i: int = 0) -> int:
     """:func:`fly_vehicle` for vehicle ``i`` with its generator ``gens[i]`` (a
@@ -358,10 +365,12 @@ def fly(gens, k0: int, k1: int, measure_first: bool, C: LoopConstants, V: Vehicl
     steps (None: the commands in ``V.f_cmd`` are held). ``hook``: the plant's effects
     (:attr:`quadfault.plant.Plant.hook`) -- compiled rows, or a hook of effects written in
     Python, with which the loop runs interpreted (see :mod:`quadfault.plant`)."""
+    interpreted = hook is not None and not isinstance(hook, EffectRows)
+    if not interpreted:
+        _check_rotors(hook, V)
     if K is not None and C.decimation < 1:
         raise ConfigError(f"a controller in the loop needs a decimation >= 1, got {C.decimation}")
     memory = V.memory if C.reference else None
-    interpreted = hook is not None and not isinstance(hook, EffectRows)
     if isinstance(gens, np.random.Generator):  # vehicle i's own: in the list the loop takes
         gens = generators([gens] * (i + 1))
     kernel = _interpreted() if interpreted else fly_vehicle
@@ -384,6 +393,7 @@ def fly_batch(gens, active: np.ndarray, k0: np.ndarray, n_steps: int, measure_fi
     if fx is not None and not isinstance(fx, EffectRows):
         raise ConfigError("effects written in Python fly one vehicle at a time (fly); a batch "
                           "flies the built-in effects of quadfault.effects")
+    _check_rotors(fx, V)
     N = len(active)
     done = np.zeros(N, dtype=np.int64)
     if N >= PARALLEL_MIN_VEHICLES:

@@ -177,7 +177,7 @@ class Plant:
         self._rows = None
         built = [] if self._python else entries(self.effects, self.vehicle, self.dt)
         if built:
-            self._rows = fx_rows.build([built] * N)
+            self._rows = fx_rows.build([built] * N, vehicle.n_rotors)
 
     @property
     def state(self) -> RigidBodyState:
@@ -216,7 +216,7 @@ class Plant:
         flown = flown_vehicle(base, effects)
         chain = entries(effects, flown, self.dt)
         if self._rows is None and chain:
-            self._rows = fx_rows.empty(len(self.vehicles.p), 0, 0)
+            self._rows = fx_rows.empty(len(self.vehicles.p), 0, 0, n_rotors=base.n_rotors)
         if self._rows is not None:
             self._rows = fx_rows.grown(self._rows, chain)
         for i in np.atleast_1d(np.arange(len(self.vehicles.p))[rows]):

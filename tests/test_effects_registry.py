@@ -78,7 +78,7 @@ def test_every_effect_parses_packs_and_simulates(name):
     else:
         code, params, memory = entry
         assert code == registry.code(name) and len(params) > 0 and memory >= 0
-        built = rows.build([[entry]])
+        built = rows.build([[entry]], 4)
         a = built.param[0, 0]
         assert built.code[0, 0] == code and np.all(built.params[0, a:a + len(params)] == params)
     nominal = _fly(parse_effect("thrust_scale=1"), duration=1.0)
@@ -96,9 +96,10 @@ def test_vehicles_flying_some_of_a_layouts_slots_fly_as_in_their_own_layout():
     delay = rows.entry(parse_effect("delay=0.01"), 4, 1e-3)
     state = ((0.0, 0.0, -1.0), (1.0, -0.5, 0.2), tuple(np.eye(3).ravel()), (0.1, 0.2, -0.3))
     out = []
-    for fx, i in ((rows.build([[lag, drag]]), 0), (rows.build([[delay, wind], [drag, lag]]), 1),
-                  (rows.build([[lag, wind, drag]] * 2 + [[lag, drag]]), 2)):
-        c = chain.chain_for(type(fx).layout)
+    for fx, i in ((rows.build([[lag, drag]], 4), 0),
+                  (rows.build([[delay, wind], [drag, lag]], 4), 1),
+                  (rows.build([[lag, wind, drag]] * 2 + [[lag, drag]], 4), 2)):
+        c = chain.chain_for(type(fx).layout, type(fx).n_rotors)
         f = np.array([2.0, 2.1, 2.2, 2.3])
         for k in range(3):
             c.thrust_effects(fx, i, f, k * 1e-3, 1e-3, *state, np.random.default_rng(0))
@@ -111,6 +112,23 @@ def test_vehicles_flying_some_of_a_layouts_slots_fly_as_in_their_own_layout():
     assert out[0][1][0] != (0.0, 0.0, 0.0)
 
 
+def test_the_chain_carries_as_many_thrusts_as_the_rows_rotors():
+    """Rows are built for a rotor count: a hexacopter's chain scales its six thrusts, and a
+    loop whose vehicles have another count refuses the rows with a one-line error."""
+    from quadfault import closed_loop
+
+    scale = rows.entry(parse_effect("thrust_scale=0.5"), 6, 1e-3)
+    fx = rows.build([[scale]], 6)
+    state = ((0.0, 0.0, -1.0), (0.0, 0.0, 0.0), tuple(np.eye(3).ravel()), (0.0, 0.0, 0.0))
+    f = np.arange(1.0, 7.0)
+    chain.chain_for(type(fx).layout, 6).thrust_effects(fx, 0, f, 0.0, 1e-3, *state,
+                                                       np.random.default_rng(0))
+    np.testing.assert_array_equal(f, 0.5 * np.arange(1.0, 7.0))
+    V = closed_loop.Vehicles.empty(1, 4)
+    with pytest.raises(ConfigError, match="built for 6 rotors, the vehicles have 4"):
+        closed_loop.fly(np.random.default_rng(0), 0, 1, True, None, V, None, None, fx)
+
+
 def test_rows_are_typed_by_their_layout_and_grow_to_new_effects():
     """Rows carry their layout (slots of effect and parameter width) in their class: the
     loop compiles that chain alone. A vehicle given an effect the rows lack grows them,
@@ -118,9 +136,9 @@ def test_rows_are_typed_by_their_layout_and_grow_to_new_effects():
     lag, drag = rows.entry(parse_effect("motor_lag=0.05"), 4, 1e-3), \
         rows.entry(parse_effect("drag=0.3"), 4, 1e-3)
     wind = rows.entry(parse_effect("wind=1,2,0"), 4, 1e-3)
-    fx = rows.build([[lag], []])
+    fx = rows.build([[lag], []], 4)
     assert type(fx).layout == (("motor_lag", 1),)
-    assert type(fx) is chain.rows_class([("motor_lag", 1)])
+    assert type(fx) is chain.rows_class([("motor_lag", 1)], 4)
     fx.memory[0, :] = 7.0  # a flight under way
     assert not rows.fits(fx, [lag, drag])
     grown = rows.grown(fx, [wind, lag, drag])

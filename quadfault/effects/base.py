@@ -210,8 +210,9 @@ class Compiled(Effect):
     """An effect with an entry in the compiled effect chain (:mod:`quadfault.effects.chain`).
 
     Its module holds the entry's kernels, which the compiled chain calls at the columns of
-    the effect's slot in the rows' layout (:mod:`quadfault.effects.dispatch`): ``thrust_step`` (the thrust stage, once per
-    physics step) and/or ``wrench_term`` with ``wrench_stage`` (the step's numbers, then the
+    the effect's slot in the rows' layout (:mod:`quadfault.effects.dispatch`):
+    ``thrust_step`` (the thrust stage, once per physics step: the rotors' thrusts in, as a
+    tuple, the new tuple out; :mod:`quadfault.effects.kernels`) and/or ``wrench_term`` with ``wrench_stage`` (the step's numbers, then the
     force and moment at each RK stage). :meth:`pack` lays the parameters out in the entry's
     row. The closed loop runs that entry compiled, from the plant's rows; the protocol
     methods here run the same entry for one vehicle from Python (its memory -- lag, delay,

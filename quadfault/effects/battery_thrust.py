@@ -14,6 +14,7 @@ import numpy as np
 
 from quadfault.effects.base import Compiled, Identifiability, number, param
 from quadfault.effects.candidate import Candidate
+from quadfault.effects.kernels import scaled
 from quadfault.effects.physics import rows_of, shaped
 from quadfault.jit import jit
 
@@ -39,8 +40,7 @@ def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
     at the step's middle."""
     volts = battery_voltage1(t + 0.5 * dt, P[i, a + 1], P[i, a + 2], P[i, a + 3])
     k = battery_factor1(volts, P[i, a + 4], P[i, a])
-    for r in range(f.shape[0]):
-        f[r] = f[r] * k
+    return scaled(f, k)
 
 
 # over arrays -----------------------------------------------------------------------------

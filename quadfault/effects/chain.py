@@ -2,11 +2,12 @@
 
 The effects of N vehicles are rows of numbers (:class:`EffectRows`; built by
 :mod:`quadfault.effects.rows` from each effect's ``pack``) under one *layout*: slots in
-chain order, each an effect and the width of its parameters. A slot's columns are the same
+chain order, each an effect and the width of its parameters, on vehicles of n rotors (the
+thrust stage carries the n thrusts as a tuple). A slot's columns are the same
 for every vehicle -- a marker (0: the vehicle does not fly it; else one more than the
 column of the entry's first memory slot) then the effect's parameters -- so the compiled
 chain reads them at constant columns. The rows are built as the class :func:`rows_class` of
-their layout, and this module's functions compile, for each layout, straight-line code over
+their layout and rotor count, and this module's functions compile, for each, straight-line code over
 its slots (:mod:`quadfault.effects.dispatch`; :func:`chain_for`): an effect no vehicle
 flies costs the loop nothing, a flight without effects compiles none, and a vehicle pays,
 per step, one test of each slot it does not fly. Vehicles with other parameters, or flying
@@ -19,7 +20,8 @@ once per step and no call passes them: every array a compiled call takes costs r
 counting), which does the two points of the effect protocol:
 
 * the thrust stage (:func:`thrust_effects`), on the thrusts the motor model produced (in
-  slot order, each one's output the next one's input);
+  slot order, each one's output the next one's input: a tuple of the n thrusts, which
+  each ``thrust_step`` returns anew; the loop's array is written once, at the end);
 * the step's wrench terms (:func:`wrench_terms`): the numbers the RK stages need, so that
   :func:`effects_wrench` gives at every stage of the RKMK4 step the sum of the flown wrench
   slots' external force (world) [N] and moment (body) [N m] from numbers alone; a step
@@ -65,9 +67,11 @@ class EffectRows(NamedTuple):
     memory: np.ndarray  # (N, Q) memory (zeros: a flight's start)
     streams: object  # typed list of N generators: a seeded wind's own (else never drawn)
 
-    #: the layout: ``(effect name, parameter width)`` per slot, in chain order (set on each
-    #: :func:`rows_class`; a class attribute, not a field)
+    #: the layout: ``(effect name, parameter width)`` per slot, in chain order, and the
+    #: vehicles' number of rotors (set on each :func:`rows_class`; class attributes, not
+    #: fields)
     layout = ()
+    n_rotors = 0
 
 
 class Terms(NamedTuple):
@@ -78,57 +82,90 @@ class Terms(NamedTuple):
     terms: tuple
 
     layout = ()
+    n_rotors = 0
 
 
 _FAMILIES = {"EffectRows": EffectRows, "Terms": Terms}
 _CLASSES: dict = {}
 
 
-def _class(base: str, layout) -> type:
-    """The subclass of ``base`` for ``layout``, made once and kept in this module under its
-    name (so that numba's cache finds it again by name)."""
+def _class(base: str, layout, n_rotors: int) -> type:
+    """The subclass of ``base`` for ``layout`` on ``n_rotors`` rotors, made once and kept in
+    this module under its name (so that numba's cache finds it again by name)."""
     layout = tuple((str(name), int(width)) for name, width in layout)
-    name = "__".join((base, *(f"{n}{w}" for n, w in layout))) if layout else f"{base}__none"
+    n_rotors = int(n_rotors)
+    name = "__".join((base, f"r{n_rotors}", *(f"{n}{w}" for n, w in layout)))
     cls = _CLASSES.get(name)
     if cls is None:
         cls = type(name, (_FAMILIES[base],), {"__slots__": (), "__module__": __name__,
-                                               "layout": layout})
+                                               "layout": layout, "n_rotors": n_rotors})
         _CLASSES[name] = globals()[name] = cls
     return cls
 
 
-def rows_class(layout) -> type:
+def rows_class(layout, n_rotors: int) -> type:
     """The :class:`EffectRows` of the layout ``layout`` (``(effect name, parameter width)``
-    per slot, in chain order)."""
-    return _class("EffectRows", layout)
+    per slot, in chain order) on vehicles of ``n_rotors`` rotors."""
+    return _class("EffectRows", layout, n_rotors)
 
 
-def terms_class(layout) -> type:
-    """The :class:`Terms` of a step of rows of :func:`rows_class` ``(layout)``."""
-    return _class("Terms", layout)
+def terms_class(layout, n_rotors: int) -> type:
+    """The :class:`Terms` of a step of rows of :func:`rows_class` ``(layout, n_rotors)``."""
+    return _class("Terms", layout, n_rotors)
 
 
 def __getattr__(name):  # a class of a family, asked for by name (numba's cache, pickle)
     base, _, rest = name.partition("__")
-    if base in _FAMILIES and rest:
-        slots = [] if rest == "none" else [re.fullmatch(r"([a-z_]+?)(\d+)", s)
-                                           for s in rest.split("__")]
+    rotors, _, rest = rest.partition("__")
+    if base in _FAMILIES and re.fullmatch(r"r\d+", rotors):
+        slots = [re.fullmatch(r"([a-z_]+?)(\d+)", s) for s in rest.split("__") if rest]
         if all(m and m[1] in registry.EFFECTS for m in slots):
-            return _class(base, [(m[1], int(m[2])) for m in slots])
+            return _class(base, [(m[1], int(m[2])) for m in slots], int(rotors[1:]))
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def chain_for(layout):
+def chain_for(layout, n_rotors: int):
     """The compiled chain (a module with ``thrust_effects``, ``wrench_terms``,
-    ``step_effects``, ``has_wrench``, ``effects_wrench``) of ``layout``; rows of another
-    layout must not fly under it."""
+    ``step_effects``, ``has_wrench``, ``effects_wrench``) of ``layout`` on vehicles of
+    ``n_rotors`` rotors; rows of another layout must not fly under it."""
     return dispatch.compiled([(registry.code(name), registry.effect_class(name), width)
-                              for name, width in layout])
+                              for name, width in layout], n_rotors)
 
 
 def _chain_of(typ):
     """The compiled chain of a numba type of :func:`rows_class` or :func:`terms_class`."""
-    return chain_for(typ.instance_class.layout)
+    cls = typ.instance_class
+    return chain_for(cls.layout, cls.n_rotors)
+
+
+def borrowed(a):
+    """``a`` itself (compiled: the same array without its reference count, see
+    :func:`_compiled_borrowed`)."""
+    return a
+
+
+def _compiled_borrowed():
+    """``borrowed(a)`` for compiled code: array ``a`` as a view that holds no reference.
+
+    Each use of an array inside a branch of the loop's step takes and drops a reference to
+    it (atomic operations, which the threads of a parallel loop contend for when all the
+    vehicles read one array). The chain's rows stay alive while the loop runs (its caller
+    holds them), so the chain reads them through views without a reference count (as
+    :mod:`quadfault.generator_table` reads the generators)."""
+    from numba.core import cgutils
+    from numba.extending import intrinsic
+
+    @intrinsic
+    def _borrowed(typingctx, a):
+        def codegen(context, builder, sig, args):
+            view = context.make_array(sig.args[0])(context, builder, args[0])
+            view.meminfo = cgutils.get_null_value(view.meminfo.type)
+            view.parent = cgutils.get_null_value(view.parent.type)
+            return view._getvalue()
+
+        return a(a), codegen
+
+    return _borrowed
 
 
 # What the loop calls: each picks, by the type of its rows or terms, the chain compiled for
@@ -163,12 +200,24 @@ def effects_wrench(W, p, v, R, w, f, t):
 def _register() -> None:
     """Compile each of the functions above as the chain of its rows' (or terms') type."""
     from numba import types
+    from numba.core import ir_utils
     from numba.extending import overload
 
     def pick(name):
         return lambda typ: getattr(_chain_of(typ), name).py_func
 
-    none = terms_class(())
+    none = terms_class((), 0)
+    view = _compiled_borrowed()
+
+    @overload(borrowed)
+    def _borrow(a):
+        if isinstance(a, types.Array):
+            return lambda a: view(a)
+
+    def _aliases(lhs, args, alias_map, arg_aliases):  # the view is its argument
+        ir_utils._add_alias(lhs, args[0].name, alias_map, arg_aliases)
+
+    ir_utils.alias_func_extensions[("borrowed", __name__)] = _aliases
 
     def nothing(fx, i, f, t, dt, p, v, R, w, gen):  # no effects: no terms
         return none(())
@@ -197,6 +246,6 @@ def _register() -> None:
 if jit.AVAILABLE:
     _register()
 
-__all__ = ["CODES", "EffectRows", "Terms", "TERM", "NO_TERM", "chain_for", "rows_class",
-           "terms_class", "thrust_effects", "wrench_terms", "step_effects", "has_wrench",
-           "effects_wrench"]
+__all__ = ["CODES", "EffectRows", "Terms", "TERM", "NO_TERM", "borrowed", "chain_for",
+           "rows_class", "terms_class", "thrust_effects", "wrench_terms", "step_effects",
+           "has_wrench", "effects_wrench"]

@@ -12,6 +12,7 @@ import numpy as np
 
 from quadfault.effects.base import Compiled, Identifiability, number
 from quadfault.effects.candidate import Candidate
+from quadfault.effects.kernels import replaced
 from quadfault.effects.physics import batch_of, rows_of
 from quadfault.jit import jit
 
@@ -61,9 +62,9 @@ def zoh_integral(buf, row, base, cap, n, head, count, x, col):
 
 @jit
 def _delay(P, Q, i, a, m, f, t, dt):
-    """Store the step's thrusts as a knot, then replace them by the mean over the step of
-    the zero-order hold delayed by ``P[i, a]`` [s]."""
-    n = f.shape[0]
+    """Store the step's thrusts ``f`` (a tuple) as a knot, then return the mean over the
+    step of the zero-order hold delayed by ``P[i, a]`` [s]."""
+    n = len(f)
     cap = int(P[i, a + 1])
     base = m + HEADER
     head, count = int(Q[i, m + 2]), int(Q[i, m + 3])
@@ -86,20 +87,23 @@ def _delay(P, Q, i, a, m, f, t, dt):
     Q[i, m + 2], Q[i, m + 3] = head, count
     d = P[i, a]
     if d == 0.0:
-        return
+        return f
     lo, hi = t - d, t + dt - d
     if Q[i, m + 1] != 0.0 and lo < Q[i, base + head]:
         Q[i, m] = 1.0  # a knot the mean needs was dropped (see delay_capacity)
+    out = f
     for r in range(n):
-        f[r] = (zoh_integral(Q, i, base, cap, n, head, count, hi, r)
-                - zoh_integral(Q, i, base, cap, n, head, count, lo, r)) / (hi - lo)
+        out = replaced(out, r, (zoh_integral(Q, i, base, cap, n, head, count, hi, r)
+                                - zoh_integral(Q, i, base, cap, n, head, count, lo, r))
+                       / (hi - lo))
+    return out
 
 
 @jit(inline="always")
 def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
     """The chain's entry: parameters delay, knots kept (cap); memory: lost, dropped, head,
     count, then the knots (times; integrals; values)."""
-    _delay(P, Q, i, a, m, f, t, dt)
+    return _delay(P, Q, i, a, m, f, t, dt)
 
 
 def delay_capacity(delay: float, dt: float) -> int:

@@ -11,6 +11,7 @@ import numpy as np
 
 from quadfault.effects.base import Compiled, Identifiability, number, param
 from quadfault.effects.candidate import Candidate
+from quadfault.effects.kernels import scaled
 from quadfault.effects.physics import rows_of, shaped
 from quadfault.jit import jit
 
@@ -28,8 +29,7 @@ def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
     """The chain's entry: parameters rotor radius, ground_z; the height at the step's
     start."""
     k = ground_effect_factor1(P[i, a + 1] - p[2], P[i, a])
-    for r in range(f.shape[0]):
-        f[r] = f[r] * k
+    return scaled(f, k)
 
 
 @jit

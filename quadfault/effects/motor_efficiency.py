@@ -9,6 +9,7 @@ import numpy as np
 
 from quadfault.effects.base import Compiled, Identifiability, vector
 from quadfault.effects.candidate import Candidate
+from quadfault.effects.kernels import replaced
 from quadfault.effects.thrust_scale import ThrustScale
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
@@ -17,8 +18,10 @@ from quadfault.jit import jit
 @jit(inline="always")
 def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
     """The chain's entry: parameters eta_1 .. eta_n."""
-    for r in range(f.shape[0]):
-        f[r] = f[r] * P[i, a + r]
+    out = f
+    for r in range(len(f)):
+        out = replaced(out, r, f[r] * P[i, a + r])
+    return out
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,7 @@ import numpy as np
 
 from quadfault.effects.base import Compiled, Identifiability, number
 from quadfault.effects.candidate import Candidate
+from quadfault.effects.kernels import replaced
 from quadfault.effects.physics import rows_of, shaped
 from quadfault.jit import jit
 
@@ -37,11 +38,13 @@ def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
         Q[i, m + 1], Q[i, m + 2] = dt, lag_gain1(dt, P[i, a])
     g = Q[i, m + 2]
     started = Q[i, m] != 0.0
-    for r in range(f.shape[0]):
+    out = f
+    for r in range(len(f)):
         y = lag_step1(Q[i, m + 3 + r] if started else f[r], f[r], g)
         Q[i, m + 3 + r] = y
-        f[r] = y
+        out = replaced(out, r, y)
     Q[i, m] = 1.0
+    return out
 
 
 # over arrays -----------------------------------------------------------------------------

@@ -36,6 +36,7 @@ def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
     """Marks the step (memory: fresh, seen, dt, rate (n), previous thrust (n)): the next
     wrench call opens it."""
     Q[i, m], Q[i, m + 2] = 1.0, dt
+    return f
 
 
 @jit

@@ -97,12 +97,13 @@ def _columns(layout) -> list:
     return columns(width for _, width in layout)
 
 
-def empty(n_rows: int, n_entries: int, n_memory: int, layout=()) -> C.EffectRows:
+def empty(n_rows: int, n_entries: int, n_memory: int, layout=(), *,
+          n_rotors: int) -> C.EffectRows:
     """Rows without effects, room for ``n_entries`` entries and ``n_memory`` memory slots
     per vehicle, of ``layout`` (``(effect name, parameter width)`` per slot: the loop
-    compiles the chain of this layout)."""
+    compiles the chain of this layout) on vehicles of ``n_rotors`` rotors."""
     N, P = int(n_rows), sum(1 + width for _, width in layout)
-    return C.rows_class(layout)(
+    return C.rows_class(layout, n_rotors)(
         np.full((N, n_entries), -1, dtype=np.int64), np.zeros((N, n_entries), dtype=np.int64),
         np.zeros((N, n_entries), dtype=np.int64), np.zeros((N, max(P, 1))),
         np.zeros((N, max(n_memory, 1))), typed_list([_NEVER] * N))
@@ -133,14 +134,16 @@ def write(fx: C.EffectRows, i: int, entries) -> None:
     reset(fx, [i])
 
 
-def build(entries_per_row) -> C.EffectRows:
-    """The rows of N vehicles, row ``i`` flying ``entries_per_row[i]``."""
+def build(entries_per_row, n_rotors: int) -> C.EffectRows:
+    """The rows of N vehicles of ``n_rotors`` rotors, row ``i`` flying
+    ``entries_per_row[i]`` (:func:`entry` results for that many rotors)."""
     layout = ()
     for entries in entries_per_row:
         if _place(layout, entries) is None:
             layout = _merged(layout, entries)
     fx = empty(len(entries_per_row), max((len(e) for e in entries_per_row), default=0),
-               max((sum(m for _, _, m in e) for e in entries_per_row), default=0), layout)
+               max((sum(m for _, _, m in e) for e in entries_per_row), default=0), layout,
+               n_rotors=n_rotors)
     for i, e in enumerate(entries_per_row):
         write(fx, i, e)
     return fx
@@ -154,7 +157,8 @@ def grown(fx: C.EffectRows, entries) -> C.EffectRows:
     old = type(fx).layout
     layout = old if _place(old, entries) is not None else _merged(old, entries)
     out = empty(len(fx.code), max(len(entries), fx.code.shape[1]),
-                max(sum(m for _, _, m in entries), fx.memory.shape[1]), layout)
+                max(sum(m for _, _, m in entries), fx.memory.shape[1]), layout,
+                n_rotors=type(fx).n_rotors)
     # the old slots keep their order in the merged layout: map their columns
     cols, k = np.zeros(fx.params.shape[1], dtype=np.int64), 0
     new_at = _columns(layout)
@@ -212,8 +216,8 @@ class Single:
     """One vehicle's chain run from Python (arrays in, arrays out), for the built-in effects
     outside a loop or in the interpreted loop (:class:`quadfault.plant.EffectsHook`)."""
 
-    def __init__(self, entries):
-        self.rows = build([list(entries)])
+    def __init__(self, entries, n_rotors: int):
+        self.rows = build([list(entries)], n_rotors)
 
     def rotor_thrust(self, f, t, dt, p, v, R, w, gen) -> None:
         """The thrust stage, ``f`` (n,) float array replaced in place."""
@@ -232,7 +236,7 @@ def _vec(x, n=3) -> tuple:
 
 def single(effect, n_rotors: int, dt: float, yaw_signs=None) -> Single:
     """One vehicle's chain of the one built-in ``effect`` (its protocol methods from Python)."""
-    return Single([entry(effect, n_rotors, dt, yaw_signs)])
+    return Single([entry(effect, n_rotors, dt, yaw_signs)], n_rotors)
 
 
 Compiled.one_vehicle = staticmethod(single)

@@ -16,6 +16,7 @@ import numpy as np
 
 from quadfault.effects.base import Compiled, Identifiability, param, vector
 from quadfault.effects.candidate import Candidate
+from quadfault.effects.kernels import replaced
 from quadfault.effects.physics import rows_of, shaped
 from quadfault.effects.thrust_scale import ThrustScale
 from quadfault.errors import ConfigError
@@ -55,8 +56,10 @@ def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
     """The chain's entry: parameters a, b, c of the curve, then a, b, c of the nominal one."""
     curve = (P[i, a], P[i, a + 1], P[i, a + 2])
     nominal = (P[i, a + 3], P[i, a + 4], P[i, a + 5])
-    for r in range(f.shape[0]):
-        f[r] = recurve1(f[r], nominal, curve)
+    out = f
+    for r in range(len(f)):
+        out = replaced(out, r, recurve1(f[r], nominal, curve))
+    return out
 
 
 # over arrays -----------------------------------------------------------------------------

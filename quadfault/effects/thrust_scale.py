@@ -9,14 +9,14 @@ from typing import ClassVar
 
 from quadfault.effects.base import Compiled, Identifiability, number
 from quadfault.effects.candidate import Candidate
+from quadfault.effects.kernels import scaled
 from quadfault.jit import jit
 
 
 @jit(inline="always")
 def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
     """The chain's entry: parameter s."""
-    for r in range(f.shape[0]):
-        f[r] = f[r] * P[i, a]
+    return scaled(f, P[i, a])
 
 
 @dataclass(frozen=True)

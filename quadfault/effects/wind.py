@@ -40,6 +40,7 @@ def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
         g = gust_step3((Q[i, m], Q[i, m + 1], Q[i, m + 2]), Q[i, m + 4], Q[i, m + 5],
                        streams[i] if P[i, a + 8] != 0.0 else gen)
         Q[i, m], Q[i, m + 1], Q[i, m + 2] = g[0], g[1], g[2]
+    return f
 
 
 @jit(inline="always")
