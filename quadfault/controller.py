@@ -127,7 +127,7 @@ def desired_attitude3(f_n, b1d, normalize_b2d):
     return (b1[0], b2d[0], b3d[0], b1[1], b2d[1], b3d[1], b1[2], b2d[2], b3d[2])
 
 
-@jit(inline="always")
+@jit(inner=True)
 def geometric_control(p, v, R, w, ref, gains, nominal):
     """Eqs. 9 and 10 for the measured state ``(p, v, R, w)``.
 

@@ -186,7 +186,7 @@ def _rk_sum(x0, c, k1, k2, k3, k4):
             x0[2] + c * (k1[2] + 2 * k2[2] + 2 * k3[2] + k4[2]))
 
 
-@jit(inline="always")
+@jit(inner=True)
 def rkmk4_step(p0, v0, R0, w0, thrust, moment, rigid, dt, fx=None, f=None, t=0.0):
     """One RKMK4 step of length ``dt`` [s] with thrust [N] and moment [N m] held constant:
     ``R(t) = R0 exp([theta(t)]x)``, ``theta' = dexp^-1_{-theta}(Omega)``; order 4 in ``dt``.

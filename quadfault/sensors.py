@@ -85,7 +85,7 @@ def _noisy3(x, std, gen):
     return (a, b, c)
 
 
-@jit(inline="always")
+@jit(inner=True)
 def measure3(p, v, R, w, noise, gen):
     """The measured state ``(p, v, R, w)`` (tuples; see the module docstring for the draws)
     with ``noise`` = :attr:`SensorNoise.constants`."""
@@ -100,7 +100,7 @@ def measure3(p, v, R, w, noise, gen):
     return pm, vm, Rm, wm
 
 
-@jit(inline="always")
+@jit(inner=True)
 def accelerometer3(sf, noise, gen):
     """The accelerometer reading of the specific force ``sf`` [m/s^2] (body FRD)."""
     if noise[4] == 0.0:
