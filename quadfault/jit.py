@@ -246,32 +246,6 @@ def _python(fn, replace: tuple, memo: dict):
     return out
 
 
-def typed_list(items):
-    """``items`` as a list a compiled kernel takes cheaply (numba's typed list, built by a
-    cached kernel; a Python list without numba), e.g. one ``numpy.random.Generator`` per
-    vehicle: passing a Generator itself to a kernel costs about 10 us per call."""
-    nb = _numba()
-    if nb is None:
-        return list(items)
-    global _make_list
-    if _make_list is None:
-        from numba.typed import List
-
-        @nb.njit(cache=True)
-        def _make_list(xs):
-            out = List()
-            for x in xs:
-                out.append(x)
-            return out
-
-    with warnings.catch_warnings():  # numba's reflected list of the argument (read once)
-        warnings.simplefilter("ignore", nb.NumbaPendingDeprecationWarning)
-        return _make_list(list(items))
-
-
-_make_list = None
-
-
 def set_threads(n: int | None) -> int:
     """Set numba's worker-thread count for the calling thread (``None``: leave it); return it.
 
@@ -382,5 +356,5 @@ def configure_cache() -> str | None:
     return str(target)
 
 
-__all__ = ["AVAILABLE", "COMPILE_NOTICE", "InnerKernel", "jit", "prange", "python", "typed_list",
+__all__ = ["AVAILABLE", "COMPILE_NOTICE", "InnerKernel", "jit", "prange", "python",
            "set_threads", "threads", "cache_candidates", "configure_cache", "sources_digest"]

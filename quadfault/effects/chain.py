@@ -32,7 +32,8 @@ Each slot runs the kernels of its effect's module (``thrust_step``, ``wrench_ter
 
 Random numbers: a wind's gusts draw three standard normals per step, after the motors'
 draws, from the vehicle's generator (the loop's), or from the wind's own seeded generator
-(``streams[i]``) when it has a seed.
+(row ``i`` of ``streams``, a :class:`~quadfault.generator_table.GeneratorTable` like the
+loop's own) when it has a seed.
 """
 
 from __future__ import annotations
@@ -65,7 +66,8 @@ class EffectRows(NamedTuple):
     mem: np.ndarray  # (N, E) int64: column of each entry's first memory slot
     params: np.ndarray  # (N, P) the layout's columns: per slot a marker, then parameters
     memory: np.ndarray  # (N, Q) memory (zeros: a flight's start)
-    streams: object  # typed list of N generators: a seeded wind's own (else never drawn)
+    streams: np.ndarray  # (N, 6) GeneratorTable: a seeded wind's own generator per vehicle
+    #                      (quadfault.generator_table; else one never drawn from)
 
     #: the layout: ``(effect name, parameter width)`` per slot, in chain order, and the
     #: vehicles' number of rotors (set on each :func:`rows_class`; class attributes, not

@@ -50,7 +50,8 @@ def thrust_effects(fx, i, f, t, dt, p, v, R, w, gen):
     """The chain's thrust stage for the step ``[t, t + dt)`` [s]: ``f`` (n,), the thrusts
     [N] the motors produced, replaced in place; ``(p, v, R, w)`` the state at the step's
     start; ``gen`` the vehicle's generator; ``fx`` the rows, ``i`` the vehicle."""
-    _thrust_stage(borrowed(fx.params), borrowed(fx.memory), fx.streams, i, f, t, dt, p, gen)
+    _thrust_stage(borrowed(fx.params), borrowed(fx.memory), borrowed(fx.streams), i, f, t,
+                  dt, p, gen)
 
 
 @jit(cache=CACHE)
@@ -69,7 +70,7 @@ def step_effects(fx, i, f, t, dt, p, v, R, w, gen):
     taken once and read through views without a reference count (``borrowed``: an array
     used in a branch takes and drops a reference at every step)."""
     P, Q = borrowed(fx.params), borrowed(fx.memory)
-    _thrust_stage(P, Q, fx.streams, i, f, t, dt, p, gen)
+    _thrust_stage(P, Q, borrowed(fx.streams), i, f, t, dt, p, gen)
     return _collect(P, Q, i, f)
 
 

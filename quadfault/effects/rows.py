@@ -21,7 +21,8 @@ from quadfault.effects.base import Compiled
 from quadfault.effects.dispatch import columns, has_term, has_thrust
 from quadfault.effects.delay import delay_capacity
 from quadfault.errors import ConfigError
-from quadfault.jit import jit, typed_list
+from quadfault.generator_table import generator_table
+from quadfault.jit import jit
 
 #: the generator a row's stream holds when it has no seeded wind (never drawn from)
 _NEVER = np.random.default_rng(0)
@@ -106,7 +107,7 @@ def empty(n_rows: int, n_entries: int, n_memory: int, layout=(), *,
     return C.rows_class(layout, n_rotors)(
         np.full((N, n_entries), -1, dtype=np.int64), np.zeros((N, n_entries), dtype=np.int64),
         np.zeros((N, n_entries), dtype=np.int64), np.zeros((N, max(P, 1))),
-        np.zeros((N, max(n_memory, 1))), typed_list([_NEVER] * N))
+        np.zeros((N, max(n_memory, 1))), generator_table([_NEVER] * N))
 
 
 def fits(fx: C.EffectRows, entries) -> bool:
@@ -173,8 +174,7 @@ def grown(fx: C.EffectRows, entries) -> C.EffectRows:
     out.code[:, :E], out.mem[:, :E] = fx.code, fx.mem
     out.param[:, :E] = np.where(fx.code >= 0, cols[np.minimum(fx.param, len(cols) - 1)], 0)
     out.memory[:, :fx.memory.shape[1]] = fx.memory
-    for i in range(len(fx.code)):
-        out.streams[i] = fx.streams[i]
+    out.streams.put(np.arange(len(fx.code)), fx.streams.generators)
     return out
 
 
@@ -183,13 +183,14 @@ def reset(fx: C.EffectRows, rows) -> None:
     gusts at 0, a seeded wind's generator restarts from its seed."""
     for i in np.atleast_1d(np.asarray(rows, dtype=np.int64)):
         fx.memory[i] = 0.0
-        fx.streams[i] = _NEVER
+        stream = _NEVER
         for e in range(fx.code.shape[1]):
             if fx.code[i, e] < 0:
                 break
             seed = registry.TABLE[fx.code[i, e]].stream_seed(fx.params[i, fx.param[i, e]:])
             if seed is not None:
-                fx.streams[i] = np.random.default_rng(seed)
+                stream = np.random.default_rng(seed)
+        fx.streams.put([i], [stream])
 
 
 def lost(fx: C.EffectRows) -> np.ndarray:

@@ -14,6 +14,7 @@ from quadfault.effects.base import Compiled, Identifiability, param, vector
 from quadfault.effects.candidate import Candidate
 from quadfault.effects.drag import Drag, drag_force3
 from quadfault.errors import ConfigError
+from quadfault.generator_table import generator_at
 from quadfault.jit import jit
 
 
@@ -31,14 +32,15 @@ def gust_step3(g, a, c, gen):
 def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
     """The gusts advance once per step (parameters: velocity (3), gust, gust_tau, k (3), own
     stream (0/1), seed; memory: gust (3), dt, a, c), drawing from the wind's own seeded
-    stream when it has one, else from the vehicle's generator ``gen``."""
+    stream (row ``i`` of the generator table ``streams``) when it has one, else from the
+    vehicle's generator ``gen``."""
     sigma = P[i, a + 3]
     if sigma > 0.0:
         if Q[i, m + 3] != dt:
             decay = math.exp(-dt / P[i, a + 4])
             Q[i, m + 3], Q[i, m + 4], Q[i, m + 5] = dt, decay, sigma * math.sqrt(1 - decay * decay)
         g = gust_step3((Q[i, m], Q[i, m + 1], Q[i, m + 2]), Q[i, m + 4], Q[i, m + 5],
-                       streams[i] if P[i, a + 8] != 0.0 else gen)
+                       generator_at(streams, i) if P[i, a + 8] != 0.0 else gen)
         Q[i, m], Q[i, m + 1], Q[i, m + 2] = g[0], g[1], g[2]
     return f
 
