@@ -42,6 +42,7 @@ from estimators.ekf import (
     ekf_update_row,
 )
 from estimators.ekf_filter import X
+from estimators.ipm import any_size
 from estimators.irls import (
     COUNTERS,
     VN_ROWS,
@@ -64,7 +65,7 @@ CODE = {name: k for k, name in enumerate(STATUSES)}  # status name -> integer co
 
 
 @jit(parallel=True)
-def irls_update_rows(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, beyond, code):
+def irls_update_rows(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, beyond, any_n, code):
     """:func:`estimators.irls.irls_step` of every row, in parallel; status codes into
     ``code``."""
     N = ks.shape[0]
@@ -72,7 +73,7 @@ def irls_update_rows(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, beyond, code
     arrays = irls_constant_arrays(const, ip)
     for i in prange(N):
         code[i] = irls_step(t[i], p[i], v[i], R[i], w[i], f[i], const, arrays, fp, ip,
-                            named_pieces(views), ks, np.int64(i), hist, beyond)[0]
+                            named_pieces(views), ks, np.int64(i), hist, beyond, any_n)[0]
 
 
 @jit(parallel=True)
@@ -111,7 +112,7 @@ class BatchedIRLS:
         self._state = IRLSState(cfg.window - 1, n, cfg.output_median, cfg.max_irls, self.num)
         self._const, self._fp, self._ip = irls_parameters(vehicle, cfg, self._state.offsets)
         self._hist = no_history(n)
-        self._beyond = beyond_paper(cfg)
+        self._beyond, self._any_n = beyond_paper(cfg), any_size(n)
         self._code = np.zeros(self.num, dtype=np.int64)
         self.reset()
 
@@ -138,7 +139,7 @@ class BatchedIRLS:
         t, p, v, R, w, f = batch_arrays(self.num, self.vehicle.n_rotors, t, p, v, R, w, f)
         st = self._state
         irls_update_rows(t, p, v, R, w, f, self._const, self._fp, self._ip, st.floats, st.ints,
-                         self._hist, self._beyond, self._code)
+                         self._hist, self._beyond, self._any_n, self._code)
         VN = st.views.vn
         sd = np.where(st.ints[:, COUNTERS.has_sd, None] == 1, VN[:, VN_ROWS.sd], np.nan)
         return BatchedEstimate(t.copy(), VN[:, VN_ROWS.out].copy(), sd, self._code.copy())

@@ -145,12 +145,20 @@ def ipm_into(H, q, lo, hi, x, settings, max_iter, W, L, hist):
     """
     n = q.shape[0]
     if n == 4:  # a quadrotor: the same steps compiled for a size known in advance
-        return _ipm_steps(H, q, lo, hi, x, settings, max_iter, W, L, hist, 4)
-    return _ipm_steps(H, q, lo, hi, x, settings, max_iter, W, L, hist, n)
+        return ipm_steps(H, q, lo, hi, x, settings, max_iter, W, L, hist, 4)
+    return ipm_steps(H, q, lo, hi, x, settings, max_iter, W, L, hist, n)
+
+
+def any_size(n: int):
+    """The ``any_n`` argument of the kernels that run :func:`ipm_steps` (the IRLS window):
+    None for 4 unknowns (a quadrotor), else True. numba drops the branches of a None argument
+    before compiling (and only of a None one), so a quadrotor's kernels compile the steps for
+    the literal 4 alone (loops of known length); any other size compiles both."""
+    return None if n == 4 else True
 
 
 @jit
-def _ipm_steps(H, q, lo, hi, x, settings, max_iter, W, L, hist, n):
+def ipm_steps(H, q, lo, hi, x, settings, max_iter, W, L, hist, n):
     """:func:`ipm_into` for ``n`` unknowns (its loops' length; a constant lets the compiler
     unroll them). A call, not inlined: numba compiles it once per type of ``n`` (the literal
     4 and int64); inlined twice into :func:`ipm_into`, the copies of its IR cost about a

@@ -43,6 +43,7 @@ from estimators.base import (
 )
 from estimators.change_completion import COUNTERS as COMPLETION_COUNTERS
 from estimators.change_completion import N_COUNTERS, complete_into, observe_into
+from estimators.ipm import any_size
 from estimators.irls_config import (  # noqa: F401  (re-exported)
     SCALINGS,
     IRLSConfig,
@@ -246,7 +247,7 @@ def constant_arrays(const, ip):
 
 
 @jit(inline="always")
-def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond):
+def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond, any_n):
     """One online update of the sliding-window IRLS (module docstring) of row ``i`` of the
     state ``(S, ks)`` (:func:`state_pieces`, int state (N, K)), in place (``arrays``:
     :func:`constant_arrays` of ``const``). Returns ``(status
@@ -257,7 +258,9 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond):
     ``beyond`` (:func:`beyond_paper`): None for the paper's estimator, whose kernels then hold
     neither the change completion nor the output median (numba drops the branches of a None
     argument before compiling them: a first run compiles about 2 CPU-s less); True when
-    ``ip`` turns either on."""
+    ``ip`` turns either on. ``any_n`` (:func:`estimators.ipm.any_size`): None for a
+    quadrotor's four rotors (the window's interior point is then compiled for that size
+    only), else True."""
     m, n, L = ip[INT_SETTINGS.m], ip[INT_SETTINGS.n], ip[INT_SETTINGS.L]
     last_t, sample, VN, VM, BH = S.t[i], S.sample[i], S.vn[i], S.vm[i], S.bh[i]
     last_p, last_v, last_w = sample[SAMPLE_ROWS.p], sample[SAMPLE_ROWS.v], sample[SAMPLE_ROWS.w]
@@ -304,7 +307,7 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond):
                 code, rounds, cond = solve_window_into(
                     c, b, H, k_row[COUNTERS.head], eta, fp, ip, VN[VN_ROWS.window:], M,
                     VM[VM_ROWS.window:], VM[VM_ROWS.weights], k_row[COUNTERS.iters:], hist, x,
-                    sd_x)
+                    sd_x, any_n)
             if code == OK or code == MAX_ITER:
                 if beyond is not None and ip[INT_SETTINGS.completion] == 1:
                     complete_into(x, M[MATRICES.JGJ], history_, VN[VN_ROWS.anchor],
@@ -332,15 +335,16 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond):
 
 
 @jit
-def irls_update(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, beyond):
+def irls_update(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, beyond, any_n):
     """:func:`irls_step` of a single estimator (state of one row): the online update."""
     S = state_pieces(fs, ip, ks.shape[0])
-    return irls_step(t, p, v, R, w, f, const, constant_arrays(const, ip), fp, ip, S, ks,
-                     ks.shape[0] - 1, hist, beyond)  # row 0, a run-time value like the batch's
+    row = ks.shape[0] - 1  # 0, a run-time value like the batch's rows
+    return irls_step(t, p, v, R, w, f, const, constant_arrays(const, ip), fp, ip, S, ks, row,
+                     hist, beyond, any_n)
 
 
 @jit
-def irls_run(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, beyond, eta, sd, code):
+def irls_run(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, beyond, any_n, eta, sd, code):
     """:func:`irls_step` over the rows of a recording (a single estimator's state): the
     reported estimate, its sd (NaN until a window is solved) and the status code of every
     row."""
@@ -351,7 +355,8 @@ def irls_run(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, beyond, eta, sd, cod
     arrays = constant_arrays(const, ip)
     for k in range(t.shape[0]):
         code[k], _why, _rounds, _cond = irls_step(t[k], p[k], v[k], R[k], w[k], f[k], const,
-                                                  arrays, fp, ip, S, ks, row, hist, beyond)
+                                                  arrays, fp, ip, S, ks, row, hist, beyond,
+                                                  any_n)
         for j in range(n):
             eta[k, j] = out[j]
             sd[k, j] = sd_now[j] if ks[0, COUNTERS.has_sd] == 1 else np.nan
@@ -378,7 +383,7 @@ class SlidingWindowIRLS:
         self._state = IRLSState(cfg.window - 1, n, cfg.output_median, cfg.max_irls)
         self._const, self._fp, self._ip = irls_parameters(vehicle, cfg, self._state.offsets)
         self._hist = history(cfg, n) if cfg.record_history else no_history(n)
-        self._beyond = beyond_paper(cfg)
+        self._beyond, self._any_n = beyond_paper(cfg), any_size(n)
         self._nan_sample = (np.full(3, np.nan), np.full(3, np.nan), np.full((3, 3), np.nan),
                             np.full(3, np.nan), np.full(n, np.nan))
         self._shape_f = (n,)
@@ -421,7 +426,7 @@ class SlidingWindowIRLS:
         st = self._state
         code, why, rounds, cond = irls_update(math.nan if malformed else t, p, v, R, w, f,
                                               self._const, self._fp, self._ip, st.floats,
-                                              st.ints, self._hist, self._beyond)
+                                              st.ints, self._hist, self._beyond, self._any_n)
         row, ints = self._row, st.ints[0]
         sd = row[VN_ROWS.sd].copy() if ints[COUNTERS.has_sd] == 1 else None
         if code in _HELD:
@@ -454,7 +459,8 @@ class SlidingWindowIRLS:
         for k0 in range(0, N, chunk):
             k = slice(k0, min(k0 + chunk, N))
             irls_run(t[k], p[k], v[k], R[k], w[k], f[k], const, self._fp, self._ip,
-                     st.floats, st.ints, self._hist, self._beyond, eta[k], sd[k], code[k])
+                     st.floats, st.ints, self._hist, self._beyond, self._any_n, eta[k], sd[k],
+                     code[k])
             bar.update(k.stop - k0)
         bar.close()
         self.reset()

@@ -41,7 +41,7 @@ from estimators.base import (
     STATUSES,
 )
 from estimators.ipm import N_SETTINGS as N_IPM_SETTINGS
-from estimators.ipm import N_WORK_ROWS, ipm_into, ipm_parameters
+from estimators.ipm import N_WORK_ROWS, any_size, ipm_parameters, ipm_steps
 from estimators.irls_config import IRLSConfig, window_diagnostics
 from estimators.linalg import cholesky_into, cholesky_solve_into, cond1_into
 from estimators.robust import mad_weights_into
@@ -118,7 +118,8 @@ def energies_into(c, b, H, start, x, scale, e, n) -> None:
 
 
 @jit
-def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x_out, sd_out):
+def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x_out, sd_out,
+                      any_n):
     """Algorithm 2 on the ring window ``(c, b, H)`` (segment s at ``(start + s) % m``) from
     the previous estimate ``x_prev``.
 
@@ -184,8 +185,12 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
         for j in range(n):
             x_out[j] = x_cur[j]
         h = hist[rounds] if record else hist[0]
-        it, flag = ipm_into(Hq, q, lo, hi, x_out, fp[SETTINGS.ipm:SETTINGS.size],
-                            ip[INT_SETTINGS.ipm_max_iter], V[VECTORS.ipm:], L, h)
+        if any_n is None or n == 4:  # the interior point (Algorithm 1) for 4 unknowns
+            it, flag = ipm_steps(Hq, q, lo, hi, x_out, fp[SETTINGS.ipm:SETTINGS.size],
+                                 ip[INT_SETTINGS.ipm_max_iter], V[VECTORS.ipm:], L, h, 4)
+        else:
+            it, flag = ipm_steps(Hq, q, lo, hi, x_out, fp[SETTINGS.ipm:SETTINGS.size],
+                                 ip[INT_SETTINGS.ipm_max_iter], V[VECTORS.ipm:], L, h, n)
         converged = flag == 1
         iters[rounds] = it
         if record:
@@ -245,7 +250,7 @@ def solve_window(c, b, H, x_prev, config: IRLSConfig, record_history: bool = Fal
     hist = history(config, n) if record_history else no_history(n)
     x, sd = np.empty(n), np.empty(n)
     code, rounds, cond = solve_window_into(c, b, H, 0, x_prev, fp, ip, *workspace(m, n), w,
-                                           iters, hist, x, sd)
+                                           iters, hist, x, sd, any_size(n))
     diag = window_diagnostics(code, rounds, cond, iters, w, config,
                               hist if record_history else None)
     if code in (OK, MAX_ITER):
