@@ -103,10 +103,12 @@ def gauss_jordan_into(A, X) -> bool:
     return True
 
 
-@jit
+@jit(inline="always")
 def cond1_into(A, M, inv) -> float:
     """``||A||_1 ||A^-1||_1`` (inf when ``A`` is singular); ``M`` and ``inv`` are n x n
-    scratch (``inv`` holds ``A^-1`` afterwards)."""
+    scratch (``inv`` holds ``A^-1`` afterwards). Inlined into its caller (the IRLS window,
+    once): as a kernel of its own, numba would optimise and generate its code again in
+    every kernel above it on a first run."""
     n = A.shape[0]
     for r in range(n):
         for c in range(n):

@@ -101,10 +101,11 @@ def history(cfg: IRLSConfig, n: int) -> np.ndarray:
     return np.zeros((cfg.max_irls, cfg.ipm.max_iter, 4 + n))
 
 
-@jit(inline="always")
+@jit
 def energies_into(c, b, H, start, x, scale, e, n) -> None:
     """Segment energies ``e_s = (c + 2 b . x + x^T H x) * scale`` of the ring window (eq. 26),
-    oldest segment first (``n``: the unknowns, ``b.shape[1]``)."""
+    oldest segment first (``n``: the unknowns, ``b.shape[1]``). A call, not inlined: its three
+    calls in :func:`solve_window_into` share one compiled copy (a first run compiles less)."""
     m = b.shape[0]
     for s in range(m):
         i = (start + s) % m
