@@ -157,7 +157,7 @@ def any_size(n: int):
     return None if n == 4 else True
 
 
-@jit
+@jit(inner=True)
 def ipm_steps(H, q, lo, hi, x, settings, max_iter, W, L, hist, n):
     """:func:`ipm_into` for ``n`` unknowns (its loops' length; a constant lets the compiler
     unroll them). A call, not inlined: numba compiles it once per type of ``n`` (the literal

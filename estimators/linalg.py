@@ -72,7 +72,7 @@ def _backward_into(L, y, n) -> None:
         y[i] = s / L[i, i]
 
 
-@jit
+@jit(inner=True)
 def gauss_jordan_into(A, X) -> bool:
     """Solve ``A Y = X`` in place: ``X`` (n, k) becomes ``Y``, ``A`` (n, n) is destroyed.
     Gauss-Jordan elimination with partial pivoting; False when ``A`` is singular."""

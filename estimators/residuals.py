@@ -86,7 +86,7 @@ class SegmentOut(NamedTuple):
     H: np.ndarray
 
 
-@jit
+@jit(inner=True)
 def segment_terms_into(dt, s0, s1, f, model, out):
     """The segment from sample ``s0`` to sample ``s1`` (:class:`Kinematics`, ``dt`` [s]
     apart, command ``f`` [N] held) under ``model`` (:class:`SegmentModel`): its affine

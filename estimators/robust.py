@@ -28,7 +28,7 @@ from quadfault.jit import jit
 MAD_SCALE = 1.4826  # MAD -> standard deviation for Gaussian data
 
 
-@jit
+@jit(inner=True)
 def median_into(a, tmp) -> float:
     """Median of ``a`` (the middle value, or the mean of the middle two, as ``np.median``),
     by insertion sort into the scratch ``tmp`` (at least as long as ``a``)."""
@@ -46,7 +46,7 @@ def median_into(a, tmp) -> float:
     return 0.5 * (tmp[k - 1] + tmp[k])
 
 
-@jit
+@jit(inner=True)
 def mad_weights_into(e, z_soft, power, z_hard, w_min, mad_eps, hard_drop, median_normalize,
                      floor, w, z, tmp) -> None:
     """Robust weights of the energies ``e`` (m,) into ``w`` and their z-scores into ``z``

@@ -122,7 +122,7 @@ def piece(fs, offsets, k, shape):
     return fs[offsets[k]:offsets[k + 1]].reshape(shape)
 
 
-@jit
+@jit(inner=True)
 def all_finite(a) -> bool:
     """True when every entry of ``a`` is finite."""
     for x in a.flat:

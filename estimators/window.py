@@ -101,7 +101,7 @@ def history(cfg: IRLSConfig, n: int) -> np.ndarray:
     return np.zeros((cfg.max_irls, cfg.ipm.max_iter, 4 + n))
 
 
-@jit
+@jit(inner=True)
 def energies_into(c, b, H, start, x, scale, e, n) -> None:
     """Segment energies ``e_s = (c + 2 b . x + x^T H x) * scale`` of the ring window (eq. 26),
     oldest segment first (``n``: the unknowns, ``b.shape[1]``). A call, not inlined: its three
@@ -118,7 +118,7 @@ def energies_into(c, b, H, start, x, scale, e, n) -> None:
         e[s] = (c[i] + acc) * scale
 
 
-@jit
+@jit(inner=True)
 def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x_out, sd_out,
                       any_n):
     """Algorithm 2 on the ring window ``(c, b, H)`` (segment s at ``(start + s) % m``) from
