@@ -174,7 +174,7 @@ class ObservationLayout:
         return "\n".join(rows)
 
 
-@jit
+@jit(inner=True)
 def _bound(v, low, high, fill):
     """One element: NaN -> ``fill``, clipped into ``[low, high]``, as float32 (the
     observation's one rule for every slot; scalars only: arrays passed per element would
