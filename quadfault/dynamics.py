@@ -164,12 +164,14 @@ def dexpinv3(theta, w):
             w[2] + 0.5 * tw[2] + ttw[2] / 12.0)
 
 
-@jit(inner=True)
+@jit(inline="always")
 def _accelerations(p, v, R, w, thrust, moment, rigid, fx, f, t):
     """(v', Omega') of eqs. 2 and 4 at one stage's state; the effects ``fx`` (None: none)
-    add their external wrench at that state. A call, not inlined into the four stages of
-    :func:`rkmk4_step`: numba would type the effect chain four times (about 16 CPU-s of a
-    first compile); LLVM still inlines the compiled call."""
+    add their external wrench at that state. Inlined into the four stages of
+    :func:`rkmk4_step` by numba: as a compiled call LLVM inlines it without effects but not
+    with a wrench, and the four calls (some 50 arguments each) cost a vehicle-step more than
+    a drag's physics; typing the effect chain four times costs a flight with effects about
+    1 CPU-s of its first compile."""
     if fx is None:
         return (translational_acceleration3(R, thrust, rigid),
                 angular_acceleration3(w, moment, rigid))

@@ -20,7 +20,10 @@ from quadfault.rotation import mat3, store3, vec3
 @jit
 def drag_force3(R, v_air, k):
     """``-R diag(k) R^T v_air`` [N] for air-relative velocity ``v_air`` (world) [m/s] and
-    drag ``k`` [N s/m] per body axis."""
+    drag ``k`` [N s/m] per body axis; ``-k v_air`` when the three are equal (``R R^T = I``:
+    the same force without the two rotations, which the RK stages would wait for)."""
+    if k[0] == k[1] and k[1] == k[2]:
+        return (-(k[0] * v_air[0]), -(k[0] * v_air[1]), -(k[0] * v_air[2]))
     vb = body_velocity3(R, v_air)
     F = world_vector3(R, (vb[0] * k[0], vb[1] * k[1], vb[2] * k[2]))
     return (-F[0], -F[1], -F[2])
