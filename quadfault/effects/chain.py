@@ -39,6 +39,7 @@ loop's own) when it has a seed.
 from __future__ import annotations
 
 import re
+import warnings
 from typing import NamedTuple
 
 import numpy as np
@@ -203,7 +204,15 @@ def _register() -> None:
     """Compile each of the functions above as the chain of its rows' (or terms') type."""
     from numba import types
     from numba.core import ir_utils
+    from numba.core.errors import NumbaIRAssumptionWarning
     from numba.extending import overload
+
+    # numba inlines the chain's stage sum into each of the four RK stages; its SSA pass then
+    # finds a name of a branch of the inlined copies missing from the caller's scope table
+    # and says so ("an internal pedantic check"): the compiled code is right (goldens), the
+    # warning is noise for a user
+    warnings.filterwarnings("ignore", message=r"variable '.*' is not in scope",
+                            category=NumbaIRAssumptionWarning)
 
     def pick(name):
         return lambda typ: getattr(_chain_of(typ), name).py_func
