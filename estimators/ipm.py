@@ -30,8 +30,9 @@ Per iteration:
   the reference mixes the gap's ``phi`` from before the step with ``lambda`` from after).
 
 :func:`ipm_into` is the algorithm, plain Python compiled by :func:`quadfault.jit.jit` and
-allocation-free (the IRLS window runs it in place on its workspace); :func:`solve_box_qp` calls
-it on one problem and returns an :class:`IPMResult`.
+allocation-free; the IRLS window runs its steps (:func:`ipm_steps`) in place on its workspace,
+compiled for the vehicle's size only (:func:`any_size`); :func:`solve_box_qp` calls it on one
+problem and returns an :class:`IPMResult`.
 """
 
 from __future__ import annotations
@@ -162,7 +163,8 @@ def ipm_steps(H, q, lo, hi, x, settings, max_iter, W, L, hist, n):
     """:func:`ipm_into` for ``n`` unknowns (its loops' length; a constant lets the compiler
     unroll them). A call, not inlined: numba compiles it once per type of ``n`` (the literal
     4 and int64); inlined twice into :func:`ipm_into`, the copies of its IR cost about a
-    CPU-second more to compile, with the same machine code."""
+    CPU-second more to compile, with the same machine code. The IRLS window calls it
+    directly, for one size (:func:`any_size`)."""
     mu, alpha = settings[SETTINGS.mu], settings[SETTINGS.alpha]
     beta, step_fraction = settings[SETTINGS.beta], settings[SETTINGS.step_fraction]
     bt_eps, min_step = settings[SETTINGS.backtrack_eps], settings[SETTINGS.min_step]

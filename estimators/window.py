@@ -128,8 +128,10 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
     weights ``w`` (m,), the interior-point iterations of each round ``iters`` and, when
     ``hist`` is (rounds, ipm iterations, 4 + n), per round and iteration ``||r_dual||,
     ||r_cent||, gap, x, sqrt(sum w e(x))`` (a (1, 0, 4 + n) ``hist`` records nothing).
-    ``M[MATRICES.JGJ]`` keeps ``J^T W G J`` of the last round. Returns ``(status code, rounds,
-    cond)``.
+    ``M[MATRICES.JGJ]`` keeps ``J^T W G J`` of the last round. ``any_n``
+    (:func:`estimators.ipm.any_size` of ``n``): None runs the interior point compiled for
+    four unknowns only (a quadrotor), True the one for any ``n``. Returns ``(status code,
+    rounds, cond)``.
     """
     m, n = b.shape[0], b.shape[1]
     lo, hi, gamma, scale = fp[SETTINGS.lo], fp[SETTINGS.hi], fp[SETTINGS.gamma], \
@@ -186,7 +188,7 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
         for j in range(n):
             x_out[j] = x_cur[j]
         h = hist[rounds] if record else hist[0]
-        if any_n is None or n == 4:  # the interior point (Algorithm 1) for 4 unknowns
+        if any_n is None:  # the interior point (Algorithm 1) for 4 unknowns (a quadrotor)
             it, flag = ipm_steps(Hq, q, lo, hi, x_out, fp[SETTINGS.ipm:SETTINGS.size],
                                  ip[INT_SETTINGS.ipm_max_iter], V[VECTORS.ipm:], L, h, 4)
         else:

@@ -89,3 +89,29 @@ def test_malformed_window_terms_are_a_clear_error():
     with pytest.raises(ConfigError, match="window terms"):
         solve_window(np.zeros(9), np.zeros((9, 4)), np.zeros((9, 4, 3)), np.ones(4),
                      IRLSConfig())
+
+
+def test_the_quadrotor_and_the_any_size_interior_point_give_the_same_window(fault_flight):
+    """The window solve compiled for the literal four rotors (``any_n`` None, what a
+    quadrotor's estimators run) and for any size (``any_n`` True) are the same algorithm:
+    identical estimates, sd, weights and iteration counts on real windows."""
+    from estimators.window import solve_window_into, window_settings, workspace
+
+    cfg = IRLSConfig()
+    m, n = cfg.window - 1, 4
+    fp, ip = window_settings(cfg, m)
+    hist = np.zeros((1, 0, 4 + n))
+    x_prev = np.full(n, 0.9)
+    for c, b, H in _windows(fault_flight, cfg, range(150, 400, 31)):
+        out = []
+        for any_n in (None, True):
+            w, iters, x, sd = np.zeros(m), np.zeros(cfg.max_irls, np.int64), np.empty(n), \
+                np.empty(n)
+            code, rounds, cond = solve_window_into(c, b, H, 0, x_prev, fp, ip, *workspace(m, n),
+                                                   w, iters, hist, x, sd, any_n)
+            out.append((code, rounds, cond, x, sd, w, iters))
+        (code4, rounds4, cond4, *arrays4), (code_n, rounds_n, cond_n, *arrays_n) = out
+        assert (code4, rounds4, cond4) == (code_n, rounds_n, cond_n)
+        assert rounds4 >= 1
+        for a4, an in zip(arrays4, arrays_n):
+            np.testing.assert_array_equal(a4, an)
