@@ -39,7 +39,6 @@ loop's own) when it has a seed.
 from __future__ import annotations
 
 import re
-import warnings
 from typing import NamedTuple
 
 import numpy as np
@@ -141,6 +140,18 @@ def _chain_of(typ):
     return chain_for(cls.layout, cls.n_rotors)
 
 
+@jit.jit(inner=True)
+def plus_if(on, FM, dFM):
+    """``(F + dF, M + dM)`` when ``on``, else ``(F, M)`` (3-tuples): a flown slot's stage
+    added to the sum, as a call (LLVM inlines it as a select; numba does not type the branch
+    again in each of the four RK stages)."""
+    (F, M), (dF, dM) = FM, dFM
+    if on:
+        return ((F[0] + dF[0], F[1] + dF[1], F[2] + dF[2]),
+                (M[0] + dM[0], M[1] + dM[1], M[2] + dM[2]))
+    return FM
+
+
 def borrowed(a):
     """``a`` itself (compiled: the same array without its reference count, see
     :func:`_compiled_borrowed`)."""
@@ -204,15 +215,7 @@ def _register() -> None:
     """Compile each of the functions above as the chain of its rows' (or terms') type."""
     from numba import types
     from numba.core import ir_utils
-    from numba.core.errors import NumbaIRAssumptionWarning
     from numba.extending import overload
-
-    # numba inlines the chain's stage sum into each of the four RK stages; its SSA pass then
-    # finds a name of a branch of the inlined copies missing from the caller's scope table
-    # and says so ("an internal pedantic check"): the compiled code is right (goldens), the
-    # warning is noise for a user
-    warnings.filterwarnings("ignore", message=r"variable '.*' is not in scope",
-                            category=NumbaIRAssumptionWarning)
 
     def pick(name):
         return lambda typ: getattr(_chain_of(typ), name).py_func
