@@ -2,7 +2,8 @@
 
 Times :func:`quadfault.simulator.simulate` (the paper's 80 s ``combined`` flight by default,
 the geometric controller in the loop; best of ``--repeat``), a flight with effects (drag and
-motor lag: the loop interpreted by Python with the effects hook) and the cold start: the
+motor lag, compiled into the loop's effect chain; after a warm-up flight with the same
+effects, best of ``--repeat``) and the cold start: the
 first 10 ms flight in a fresh process with an empty numba cache (CPU seconds: the compile,
 which a busy machine does not inflate as much as the wall time).
 
@@ -25,7 +26,8 @@ import time
 
 def flights(duration: float = 80.0, effects_duration: float = 4.0, repeat: int = 3,
             scenario: str = "combined") -> dict:
-    """Wall seconds of the timed flights (after one warm-up flight)."""
+    """Wall seconds of the timed flights (each after a warm-up flight that compiles or loads
+    its kernels)."""
     from quadfault.effects import parse_effect
     from quadfault.scenarios import named_scenario
     from quadfault.simulator import simulate
@@ -39,10 +41,14 @@ def flights(duration: float = 80.0, effects_duration: float = 4.0, repeat: int =
         best = min(best, time.perf_counter() - t0)
     fx = (parse_effect("drag=0.3"), parse_effect("motor_lag=0.04"))
     sc_fx = named_scenario("lissajous", effects_duration)
-    t0 = time.perf_counter()
-    simulate(sc_fx, seed=4, effects=fx)
+    simulate(named_scenario("lissajous", 0.01), seed=4, effects=fx)  # its chain compiled
+    best_fx = float("inf")
+    for _ in range(max(1, repeat)):
+        t0 = time.perf_counter()
+        simulate(sc_fx, seed=4, effects=fx)
+        best_fx = min(best_fx, time.perf_counter() - t0)
     return {"flight_s": best, "steps": round(duration / 1e-3),
-            "effects_flight_s": time.perf_counter() - t0,
+            "effects_flight_s": best_fx,
             "effects_steps": round(effects_duration / 1e-3)}
 
 
