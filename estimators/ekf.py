@@ -64,7 +64,8 @@ from estimators.ekf_filter import (
     Workspace,
     predict_update_into,
 )
-from estimators.state import FlatState, Layout, all_finite, fields, pack, piece, piece_rows
+from estimators.state import (FlatState, Layout, all_finite, fields, pack, piece, piece_rows,
+                              reset_rows)
 from quadfault.rotation import mat3
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
@@ -290,16 +291,7 @@ def ekf_step(t, p, v, R, w, f, const, model, S, ks, i) -> int:
 def ekf_reset(ip_offsets, n, fs, ks, rows, eta0) -> None:
     """Forget the filters ``rows``; the next good sample initialises them, with the
     efficiencies ``eta0`` (N, n)."""
-    N = ks.shape[0]
-    for i in rows:
-        ks[i, COUNTERS.initialised] = 0
-        for k in range(ip_offsets.shape[0] - 1):  # every piece
-            row = piece_rows(fs, ip_offsets[k], ip_offsets[k + 1], N)[i]
-            for a in range(row.shape[0]):
-                row[a] = 0.0
-        e0 = piece_rows(fs, ip_offsets[F.eta0], ip_offsets[F.eta0 + 1], N)[i]
-        for j in range(n):
-            e0[j] = eta0[i, j]
+    reset_rows(ip_offsets, F.eta0, COUNTERS.initialised, n, fs, ks, rows, eta0)
 
 
 @jit

@@ -122,6 +122,24 @@ def piece(fs, offsets, k, shape):
     return fs[offsets[k]:offsets[k + 1]].reshape(shape)
 
 
+@jit(inline="always")
+def reset_rows(offsets, eta0_piece, initialised, n, fs, ks, rows, eta0) -> None:
+    """Forget the filters ``rows`` of the state ``(fs, ks)`` (``offsets``: its pieces' start
+    offsets): every piece of theirs zeroed, their int counter ``initialised`` 0, so that the
+    next good sample initialises them, with the efficiencies ``eta0`` (N, n) written to piece
+    ``eta0_piece``. (The Kalman filters' reset.)"""
+    N = ks.shape[0]
+    for i in rows:
+        ks[i, initialised] = 0
+        for k in range(offsets.shape[0] - 1):  # every piece
+            row = piece_rows(fs, offsets[k], offsets[k + 1], N)[i]
+            for a in range(row.shape[0]):
+                row[a] = 0.0
+        e0 = piece_rows(fs, offsets[eta0_piece], offsets[eta0_piece + 1], N)[i]
+        for j in range(n):
+            e0[j] = eta0[i, j]
+
+
 @jit(inner=True)
 def all_finite(a) -> bool:
     """True when every entry of ``a`` is finite."""
@@ -132,4 +150,4 @@ def all_finite(a) -> bool:
 
 
 __all__ = ["FlatState", "Layout", "all_finite", "counts", "fields", "pack", "piece",
-           "piece_rows"]
+           "piece_rows", "reset_rows"]

@@ -54,7 +54,7 @@ from estimators.ekf import IDLE_THRUST, NOISE_REFERENCE_DT
 from estimators.linalg import cholesky_into
 from estimators.recursive import BatchedRecursive, RecursiveEstimator
 from estimators.rls import check_bounds
-from estimators.state import Layout, all_finite, fields, pack, piece, piece_rows
+from estimators.state import Layout, all_finite, fields, pack, piece, piece_rows, reset_rows
 from quadfault.dynamics import angular_acceleration3, rotor_wrench, translational_acceleration3
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange
@@ -403,16 +403,7 @@ def ukf_estimate(offsets, n, fs, ks, eta, sd) -> None:
 def ukf_reset(const, offsets, n, fs, ks, rows, eta0) -> None:
     """Forget the filters ``rows``; the next good sample initialises them, with the
     efficiencies ``eta0`` (N, n)."""
-    N = ks.shape[0]
-    for i in rows:
-        ks[i, COUNTERS.initialised] = 0
-        for k in range(offsets.shape[0] - 1):  # every piece
-            row = piece_rows(fs, offsets[k], offsets[k + 1], N)[i]
-            for a in range(row.shape[0]):
-                row[a] = 0.0
-        e0 = piece_rows(fs, offsets[F.eta0], offsets[F.eta0 + 1], N)[i]
-        for j in range(n):
-            e0[j] = eta0[i, j]
+    reset_rows(offsets, F.eta0, COUNTERS.initialised, n, fs, ks, rows, eta0)
 
 
 @jit
