@@ -3,7 +3,7 @@ and estimator-in-the-loop evaluation (see ``docs/agents.md``).
 
 Modules:
 
-* :mod:`quadfault.allocation` -- estimate-aware, saturation-aware thrust allocation;
+* :mod:`quadfault.model.allocation` -- estimate-aware, saturation-aware thrust allocation;
 * :mod:`agents.fault_tolerant` -- :class:`GeometricBaseline`, :class:`EstimateAwareController`;
 * :mod:`agents.rollout` -- :func:`fly`, a closed-loop flight with an estimator in the loop;
 * :mod:`agents.metrics` -- tracking RMSE, crash, peak attitude error, energy, time to recover;
@@ -13,12 +13,19 @@ Modules:
 * :mod:`agents.train` -- ``quadfault train`` (PPO / SAC, needs the ``rl`` extra).
 """
 
-from quadfault.allocation import AllocationConfig, EstimateAwareAllocator
-from agents.fault_tolerant import (EstimateAwareController, FaultTolerantConfig,
-                                   GeometricBaseline)
+from agents.fault_tolerant import EstimateAwareController, FaultTolerantConfig, GeometricBaseline
 from agents.metrics import FlightMetrics
 from agents.rollout import Flight, FlightConfig, fly
+from quadfault.model.allocation import AllocationConfig, EstimateAwareAllocator
 
-__all__ = ["AllocationConfig", "EstimateAwareAllocator", "EstimateAwareController",
-           "FaultTolerantConfig", "GeometricBaseline", "Flight", "FlightConfig",
-           "FlightMetrics", "fly"]
+__all__ = [
+    "AllocationConfig",
+    "EstimateAwareAllocator",
+    "EstimateAwareController",
+    "FaultTolerantConfig",
+    "GeometricBaseline",
+    "Flight",
+    "FlightConfig",
+    "FlightMetrics",
+    "fly",
+]

@@ -16,8 +16,8 @@ import quad_fault_env  # noqa: F401  (registers the ids)
 from agents.metrics import flight_metrics, tilt_angle
 from agents.rollout import Flight, FlightConfig
 from quad_fault_env.envs.config import require_full_info
-from quadfault.controller import ControllerConfig, GeometricController
-from quadfault.scenarios import Scenario
+from quadfault.model.controller import ControllerConfig, GeometricController
+from quadfault.model.scenarios import Scenario
 
 
 def make_scenario_env(env_id: str, env_kwargs: dict, scenario: Scenario):
@@ -29,8 +29,17 @@ def make_scenario_env(env_id: str, env_kwargs: dict, scenario: Scenario):
     return gym.make(env_id, max_episode_steps=int(round(scenario.duration * rate)), **kwargs)
 
 
-def fly_env(policy, env, scenario: Scenario, seed: int, *, label: str, estimator: str,
-            normalizer=None, config: FlightConfig | None = None) -> Flight:
+def fly_env(
+    policy,
+    env,
+    scenario: Scenario,
+    seed: int,
+    *,
+    label: str,
+    estimator: str,
+    normalizer=None,
+    config: FlightConfig | None = None,
+) -> Flight:
     """One episode of ``policy`` (anything with SB3's ``predict``) in ``env``.
 
     ``normalizer``: a ``VecNormalize`` whose frozen statistics normalise the observations.
@@ -39,8 +48,9 @@ def fly_env(policy, env, scenario: Scenario, seed: int, *, label: str, estimator
     cfg = config or FlightConfig()
     inner = env.unwrapped
     obs, info = env.reset(seed=int(seed))
-    ctrl = GeometricController(inner.vehicle, scenario.trajectory,
-                               getattr(inner, "controller_config", ControllerConfig()))
+    ctrl = GeometricController(
+        inner.vehicle, scenario.trajectory, getattr(inner, "controller_config", ControllerConfig())
+    )
     dt = inner.control_period
     ts, err, tilt, fcmd, pos, eta_hat, eta_true, wz = [], [], [], [], [], [], [], []
     crash_time = None
@@ -68,8 +78,23 @@ def fly_env(policy, env, scenario: Scenario, seed: int, *, label: str, estimator
     t = np.asarray(ts)
     f = np.asarray(fcmd)
     onsets = [a for _, a, _ in scenario.fault_windows()]
-    metrics = flight_metrics(t, err, tilt, f, inner.vehicle.rotor_max_thrust, dt, crash_time,
-                             onsets, cfg.recovery)
-    return Flight(label, estimator, scenario.name, int(seed), metrics, t, np.asarray(pos),
-                  scenario.trajectory(t).position, np.asarray(err), np.asarray(tilt),
-                  np.asarray(wz), f, np.asarray(eta_hat), np.asarray(eta_true), {})
+    metrics = flight_metrics(
+        t, err, tilt, f, inner.vehicle.rotor_max_thrust, dt, crash_time, onsets, cfg.recovery
+    )
+    return Flight(
+        label,
+        estimator,
+        scenario.name,
+        int(seed),
+        metrics,
+        t,
+        np.asarray(pos),
+        scenario.trajectory(t).position,
+        np.asarray(err),
+        np.asarray(tilt),
+        np.asarray(wz),
+        f,
+        np.asarray(eta_hat),
+        np.asarray(eta_true),
+        {},
+    )

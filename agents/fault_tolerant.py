@@ -1,12 +1,12 @@
 """Controllers for the closed loop: the plain geometric baseline and the estimate-aware one.
 
-Both wrap :class:`quadfault.controller.GeometricController` (paper eqs. 9-10) on the
+Both wrap :class:`quadfault.model.controller.GeometricController` (paper eqs. 9-10) on the
 *nominal* vehicle and differ only in how the desired wrench becomes rotor commands:
 
 * :class:`GeometricBaseline` -- the nominal allocation inverse (eq. 12), ``f = A^-1 w``,
   clipped to the rotor limits ``[0, f_max]``; it ignores ``eta_hat``.
 * :class:`EstimateAwareController` -- the estimate-aware allocation of
-  :mod:`quadfault.allocation`: ``A diag(eta_hat) f = w`` within ``[0, f_max]``, yaw given up
+  :mod:`quadfault.model.allocation`: ``A diag(eta_hat) f = w`` within ``[0, f_max]``, yaw given up
   first. Optionally (``max_heading_error``, off by default) the controller bounds the
   heading error it asks for: the desired heading ``b1d`` becomes the current heading turned
   toward the reference one by at most that angle. The motivation: when a weak motor forces
@@ -29,17 +29,17 @@ from typing import NamedTuple
 
 import numpy as np
 
-from quadfault.allocation import EXACT, AllocationConfig, EstimateAwareAllocator
-from quadfault.controller import ControllerConfig, ControlOutput, GeometricController
 from quadfault.errors import ConfigError
-from quadfault.trajectory import FlatOutput, Trajectory
-from quadfault.vehicle import Vehicle
+from quadfault.model.allocation import EXACT, AllocationConfig, EstimateAwareAllocator
+from quadfault.model.controller import ControllerConfig, ControlOutput, GeometricController
+from quadfault.model.trajectory import FlatOutput, Trajectory
+from quadfault.model.vehicle import Vehicle
 
 
 class ControlStep(NamedTuple):
     f: np.ndarray  # rotor thrust commands [N], within [0, f_max]
     out: ControlOutput  # the geometric controller's details (errors, R_d)
-    mode: str  # allocation mode (quadfault.allocation.MODES)
+    mode: str  # allocation mode (quadfault.model.allocation.MODES)
     heading_clamped: bool  # True when the desired heading was bounded
 
 
@@ -94,8 +94,9 @@ class GeometricWrenchController:
 
     name = "geometric-wrench"
 
-    def __init__(self, vehicle: Vehicle, trajectory: Trajectory,
-                 config: ControllerConfig | None = None):
+    def __init__(
+        self, vehicle: Vehicle, trajectory: Trajectory, config: ControllerConfig | None = None
+    ):
         self.vehicle = vehicle
         self.geometric = GeometricController(vehicle, trajectory, config)
 
@@ -115,8 +116,9 @@ class GeometricWrenchController:
         """Rotor commands [N] within ``[0, f_max]`` for ``wrench`` and the allocation mode."""
         raise NotImplementedError
 
-    def command(self, t, p, v, R, w, eta_hat=None, reference: FlatOutput | None = None,
-                feedforward=None) -> ControlStep:
+    def command(
+        self, t, p, v, R, w, eta_hat=None, reference: FlatOutput | None = None, feedforward=None
+    ) -> ControlStep:
         """Rotor commands [N] for the measured state and the efficiency estimate ``eta_hat``
         (``None`` = nominal)."""
         reference, clamped = self._reference(t, R, reference)
@@ -147,9 +149,13 @@ class EstimateAwareController(GeometricWrenchController):
 
     name = "estimate-aware"
 
-    def __init__(self, vehicle: Vehicle, trajectory: Trajectory,
-                 config: ControllerConfig | None = None,
-                 fault_tolerant: FaultTolerantConfig | None = None):
+    def __init__(
+        self,
+        vehicle: Vehicle,
+        trajectory: Trajectory,
+        config: ControllerConfig | None = None,
+        fault_tolerant: FaultTolerantConfig | None = None,
+    ):
         super().__init__(vehicle, trajectory, config)
         self.ft = fault_tolerant or FaultTolerantConfig()
         self.allocator = EstimateAwareAllocator(vehicle, self.ft.allocation)
@@ -169,9 +175,13 @@ class EstimateAwareController(GeometricWrenchController):
 CONTROLLERS = {"geometric": GeometricBaseline, "estimate-aware": EstimateAwareController}
 
 
-def make_controller(kind: str, vehicle: Vehicle, trajectory: Trajectory,
-                    config: ControllerConfig | None = None,
-                    fault_tolerant: FaultTolerantConfig | None = None):
+def make_controller(
+    kind: str,
+    vehicle: Vehicle,
+    trajectory: Trajectory,
+    config: ControllerConfig | None = None,
+    fault_tolerant: FaultTolerantConfig | None = None,
+):
     """``"geometric"`` or ``"estimate-aware"`` for ``trajectory``."""
     if kind == "geometric":
         return GeometricBaseline(vehicle, trajectory, config)

@@ -61,8 +61,13 @@ def curve_data(runs) -> dict:
             continue
         rows.append(data["results"].mean(axis=1))
         used.append(Path(run))
-    return {"timesteps": ts, "returns": np.asarray(rows), "runs": used, "baseline": baseline,
-            "episode_seeds": seeds}
+    return {
+        "timesteps": ts,
+        "returns": np.asarray(rows),
+        "runs": used,
+        "baseline": baseline,
+        "episode_seeds": seeds,
+    }
 
 
 def write_learning_curve(runs, path, *, label: str = "policy", title: str | None = None):
@@ -72,8 +77,19 @@ def write_learning_curve(runs, path, *, label: str = "policy", title: str | None
         return data
     if title is None:
         seeds = data["episode_seeds"]
-        title = (f"mean return on {len(seeds)} fixed evaluation episodes (reset seeds "
-                 f"{seeds[0]}-{seeds[-1]})" if len(seeds) else "mean evaluation return")
-    plot_learning_curve(data["timesteps"], data["returns"], path, baseline=data["baseline"],
-                        label=label, title=title, force=True)
+        title = (
+            f"mean return on {len(seeds)} fixed evaluation episodes (reset seeds "
+            f"{seeds[0]}-{seeds[-1]})"
+            if len(seeds)
+            else "mean evaluation return"
+        )
+    plot_learning_curve(
+        data["timesteps"],
+        data["returns"],
+        path,
+        baseline=data["baseline"],
+        label=label,
+        title=title,
+        force=True,
+    )
     return data

@@ -82,11 +82,15 @@ class FlightMetrics:
         def num(x):
             return None if x is None or not math.isfinite(x) else float(x)
 
-        return {"rmse": num(self.rmse), "crashed": self.crashed, "crash_time": num(self.crash_time),
-                "peak_attitude_error_deg": num(self.peak_attitude_error),
-                "energy": num(self.energy),
-                "recovery_times": [num(x) for x in self.recovery_times],
-                "duration": self.duration}
+        return {
+            "rmse": num(self.rmse),
+            "crashed": self.crashed,
+            "crash_time": num(self.crash_time),
+            "peak_attitude_error_deg": num(self.peak_attitude_error),
+            "energy": num(self.energy),
+            "recovery_times": [num(x) for x in self.recovery_times],
+            "duration": self.duration,
+        }
 
 
 def tilt_angle(b3, b3d) -> np.ndarray:
@@ -123,12 +127,21 @@ def recovery_times(t, pos_error, onsets, config: RecoveryConfig | None = None) -
     return tuple(out)
 
 
-def flight_metrics(t, pos_error, tilt_error, f_cmd, f_max, dt, crash_time, onsets,
-                   recovery: RecoveryConfig | None = None) -> FlightMetrics:
+def flight_metrics(
+    t,
+    pos_error,
+    tilt_error,
+    f_cmd,
+    f_max,
+    dt,
+    crash_time,
+    onsets,
+    recovery: RecoveryConfig | None = None,
+) -> FlightMetrics:
     """Scores from the per-step traces (``pos_error`` = |p - p_ref| [m], ``tilt_error`` [deg],
     ``f_cmd`` ``(n, 4)`` [N])."""
     e = np.asarray(pos_error, float)
-    rmse = float(np.sqrt(np.mean(e ** 2))) if e.size else math.nan
+    rmse = float(np.sqrt(np.mean(e**2))) if e.size else math.nan
     energy = float(np.sum(np.clip(f_cmd, 0.0, f_max)) * dt)
     peak = float(np.max(tilt_error)) if len(tilt_error) else math.nan
     rec = recovery_times(t, e, onsets, recovery) if len(t) > 1 else ()

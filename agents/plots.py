@@ -19,8 +19,9 @@ def _figure(nrows: int, row_height: float = 2.6):
     return plt, fig, np.atleast_1d(axes)
 
 
-def plot_through_fault(flights, path, *, force: bool = False, before: float = 1.0,
-                       after: float = 5.0):
+def plot_through_fault(
+    flights, path, *, force: bool = False, before: float = 1.0, after: float = 5.0
+):
     """Position error, tilt error and eta_hat of the faulted motor for each flight around
     the first fault onset of their (common) scenario; the whole flight without a fault."""
     if not flights:
@@ -70,9 +71,16 @@ def _onsets(flights):
     return [(float(f.t[k + 1]), int(motor))]
 
 
-def plot_learning_curve(timesteps, returns, path, *, baseline: float | None = None,
-                        label: str = "policy", title: str = "learning curve",
-                        force: bool = False):
+def plot_learning_curve(
+    timesteps,
+    returns,
+    path,
+    *,
+    baseline: float | None = None,
+    label: str = "policy",
+    title: str = "learning curve",
+    force: bool = False,
+):
     """Evaluation return against environment steps.
 
     ``returns``: ``(n_seeds, n_evaluations)`` mean evaluation returns, one row per training
@@ -84,13 +92,15 @@ def plot_learning_curve(timesteps, returns, path, *, baseline: float | None = No
     plt, fig, (ax,) = _figure(1, 4.0)
     n = returns.shape[0]
     line_label = label if n == 1 else f"{label}: mean of {n} seeds (band: lowest to highest)"
-    line, = ax.plot(ts, returns.mean(axis=0), marker="o", label=line_label)
+    (line,) = ax.plot(ts, returns.mean(axis=0), marker="o", label=line_label)
     if n > 1:
-        ax.fill_between(ts, returns.min(axis=0), returns.max(axis=0), color=line.get_color(),
-                        alpha=0.25, lw=0)
+        ax.fill_between(
+            ts, returns.min(axis=0), returns.max(axis=0), color=line.get_color(), alpha=0.25, lw=0
+        )
     if baseline is not None:
-        ax.axhline(baseline, color="k", ls="--", lw=1.2,
-                   label="geometric controller (same episodes)")
+        ax.axhline(
+            baseline, color="k", ls="--", lw=1.2, label="geometric controller (same episodes)"
+        )
     ax.ticklabel_format(axis="y", useOffset=False)
     ax.set_xlabel("environment steps")
     ax.set_ylabel("mean evaluation return")

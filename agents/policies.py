@@ -13,7 +13,7 @@ acceleration but not the reference heading, so the policy holds the *current* he
 
 * ``"residual"``: the environment adds the action to its own geometric controller, so the
   plain policy returns zeros (exactly the baseline). With ``estimate_aware=True`` it returns
-  the difference between the estimate-aware allocation (:mod:`quadfault.allocation`, using the
+  the difference between the estimate-aware allocation (:mod:`quadfault.model.allocation`, using the
   observation's ``eta_hat``) and the nominal one, divided by ``residual_scale`` and clipped
   to [-1, 1] (so its authority is bounded by ``residual_scale`` [N] per rotor).
 * ``"motor"``: ``a_i = 2 f_i / f_max - 1`` for the (estimate-aware or nominal) commands.
@@ -25,11 +25,11 @@ from __future__ import annotations
 import numpy as np
 
 from quad_fault_env.observation import ObservationLayout
-from quadfault.allocation import AllocationConfig, EstimateAwareAllocator
-from quadfault.controller import ControllerConfig, GeometricController
 from quadfault.errors import ConfigError
-from quadfault.trajectory import FlatOutput, Hover
-from quadfault.vehicle import Vehicle
+from quadfault.model.allocation import AllocationConfig, EstimateAwareAllocator
+from quadfault.model.controller import ControllerConfig, GeometricController
+from quadfault.model.trajectory import FlatOutput, Hover
+from quadfault.model.vehicle import Vehicle
 
 ACTION_MODES = ("motor", "residual", "wrench")
 
@@ -49,16 +49,25 @@ class GeometricPolicy:
         allocation: allocation options (eta floor, priorities).
     """
 
-    def __init__(self, vehicle: Vehicle | None = None, action_mode: str = "residual", *,
-                 estimate_aware: bool = False, layout=None, residual_scale: float = 1.0,
-                 moment_scale: tuple = (1.0, 1.0, 0.05),
-                 controller: ControllerConfig | None = None,
-                 allocation: AllocationConfig | None = None):
+    def __init__(
+        self,
+        vehicle: Vehicle | None = None,
+        action_mode: str = "residual",
+        *,
+        estimate_aware: bool = False,
+        layout=None,
+        residual_scale: float = 1.0,
+        moment_scale: tuple = (1.0, 1.0, 0.05),
+        controller: ControllerConfig | None = None,
+        allocation: AllocationConfig | None = None,
+    ):
         if action_mode not in ACTION_MODES:
             raise ConfigError(f"action_mode must be one of {ACTION_MODES}, got {action_mode!r}")
         if estimate_aware and action_mode == "wrench":
-            raise ConfigError("an estimate-aware policy cannot act in 'wrench' mode (the "
-                              "environment allocates wrenches with the nominal inverse)")
+            raise ConfigError(
+                "an estimate-aware policy cannot act in 'wrench' mode (the "
+                "environment allocates wrenches with the nominal inverse)"
+            )
         if layout is None:
             layout = ObservationLayout(True)
         self.vehicle = vehicle or Vehicle()
@@ -68,23 +77,34 @@ class GeometricPolicy:
         self.residual_scale = float(residual_scale)
         self.moment_scale = np.asarray(moment_scale, dtype=float)
         base = controller or ControllerConfig()
-        cfg = ControllerConfig(gains=base.gains, acceleration_feedforward=True,
-                               angular_feedforward=False, normalize_b2d=True)
+        cfg = ControllerConfig(
+            gains=base.gains,
+            acceleration_feedforward=True,
+            angular_feedforward=False,
+            normalize_b2d=True,
+        )
         self.controller = GeometricController(self.vehicle, Hover(), cfg)
         self.allocator = EstimateAwareAllocator(self.vehicle, allocation)
         self._has_ref_acc = any(s.name == "ref_acc" for s in layout.slots)
         self._zero = np.zeros(3)
 
     @classmethod
-    def from_env(cls, env, estimate_aware: bool = False, **kwargs) -> "GeometricPolicy":
+    def from_env(cls, env, estimate_aware: bool = False, **kwargs) -> GeometricPolicy:
         """A policy matching ``env`` (a QuadFault env, possibly wrapped) or a VecEnv of it."""
         if hasattr(env, "get_attr"):  # a VecEnv
             inner = env.get_attr("unwrapped", [0])[0]
         else:
             inner = env.unwrapped
         ac = inner.action_config
-        return cls(inner.vehicle, ac.mode, estimate_aware=estimate_aware, layout=inner.layout,
-                   residual_scale=ac.residual_scale, moment_scale=ac.moment_scale, **kwargs)
+        return cls(
+            inner.vehicle,
+            ac.mode,
+            estimate_aware=estimate_aware,
+            layout=inner.layout,
+            residual_scale=ac.residual_scale,
+            moment_scale=ac.moment_scale,
+            **kwargs,
+        )
 
     @property
     def name(self) -> str:
@@ -107,8 +127,9 @@ class GeometricPolicy:
         wrench = np.concatenate(([float(out.thrust)], out.moment))
         veh, f_max = self.vehicle, self.vehicle.rotor_max_thrust
         if self.action_mode == "wrench":
-            a = np.concatenate(([2.0 * wrench[0] / (veh.n_rotors * f_max) - 1.0],
-                                wrench[1:] / self.moment_scale))
+            a = np.concatenate(
+                ([2.0 * wrench[0] / (veh.n_rotors * f_max) - 1.0], wrench[1:] / self.moment_scale)
+            )
             return np.clip(a, -1.0, 1.0)
         if self.action_mode == "residual" and not self.estimate_aware:
             return np.zeros(veh.n_rotors)
@@ -132,6 +153,8 @@ class GeometricPolicy:
         if obs.ndim == 2:
             return np.stack([self._action(o) for o in obs]).astype(np.float32), state
         if obs.ndim != 1 or obs.shape[0] != self.layout.size:
-            raise ConfigError(f"observation must have {self.layout.size} elements (the "
-                              f"environment's layout), got shape {obs.shape}")
+            raise ConfigError(
+                f"observation must have {self.layout.size} elements (the "
+                f"environment's layout), got shape {obs.shape}"
+            )
         return self._action(obs).astype(np.float32), state

@@ -1,7 +1,7 @@
 """Closed-loop flights with an estimator in the loop, without the Gymnasium environment.
 
-:func:`fly` flies the model's one closed loop (:class:`quadfault.flight.Flight`, the loop of
-:func:`quadfault.simulator.simulate`) with Python acting between its steps: per physics
+:func:`fly` flies the model's one closed loop (:class:`quadfault.model.flight.Flight`, the loop of
+:func:`quadfault.sim.simulator.simulate`) with Python acting between its steps: per physics
 step, the sensors measure (``Flight.sense``), the controller computes the commands from
 the measurement and the current ``eta_hat``, the loop steps the motors and the plant, then
 the estimator gets the sample just sent (state at ``t_k``, command held from ``t_k``). The
@@ -29,15 +29,15 @@ import numpy as np
 from agents.fault_tolerant import FaultTolerantConfig, make_controller
 from agents.metrics import CrashLimits, FlightMetrics, RecoveryConfig, flight_metrics, tilt_angle
 from estimators.registry import ESTIMATORS, make_estimator
-from quadfault.sample import Sample
-from quadfault import flight as loop
-from quadfault.controller import ControllerConfig
 from quadfault.errors import ConfigError
-from quadfault.motors import MotorModel
-from quadfault.plant import Plant
-from quadfault.scenarios import Scenario
-from quadfault.simulator import SensorNoise, initial_state
-from quadfault.vehicle import Vehicle
+from quadfault.io.sample import Sample
+from quadfault.model import flight as loop
+from quadfault.model.controller import ControllerConfig
+from quadfault.model.motors import MotorModel
+from quadfault.model.plant import Plant
+from quadfault.model.scenarios import Scenario
+from quadfault.model.vehicle import Vehicle
+from quadfault.sim.simulator import SensorNoise, initial_state
 
 #: the estimator names a flight takes (the registry's)
 ESTIMATOR_SOURCES = tuple(ESTIMATORS)
@@ -122,9 +122,16 @@ class _Tabulated:
         return self.table[k]
 
 
-def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any = "irls",
-        seed: int = 0, *, vehicle: Vehicle | None = None, config: FlightConfig | None = None,
-        progress_bar=None) -> Flight:
+def fly(
+    scenario: Scenario,
+    controller: str = "estimate-aware",
+    estimator: Any = "irls",
+    seed: int = 0,
+    *,
+    vehicle: Vehicle | None = None,
+    config: FlightConfig | None = None,
+    progress_bar=None,
+) -> Flight:
     """Fly ``scenario`` with ``controller`` (``"geometric"`` | ``"estimate-aware"``) fed by
     ``estimator`` (a name of :data:`ESTIMATOR_SOURCES` or an ``OnlineEstimator``).
 
@@ -148,21 +155,23 @@ def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any =
     flight.reset(rng)
     eta_table = flight.plan(n, scenario.efficiency)
     efficiency = _Tabulated(cfg.dt, eta_table)
-    ctrl = make_controller(controller, veh, scenario.trajectory, cfg.controller,
-                           cfg.fault_tolerant)
+    ctrl = make_controller(controller, veh, scenario.trajectory, cfg.controller, cfg.fault_tolerant)
     est = make_estimator(estimator, veh, schedule=efficiency)  # the schedule: the oracle's
     source = estimator if isinstance(estimator, str) else getattr(est, "name", type(est).__name__)
     est.reset()
     refs = scenario.trajectory(times)
-    ffs = (ctrl.geometric.feedforward_rates(times) if cfg.controller.angular_feedforward
-           else None)
+    ffs = ctrl.geometric.feedforward_rates(times) if cfg.controller.angular_feedforward else None
     flight.set_state(initial_state(scenario, 0.0, ctrl.geometric))
     ctrl.reset()
     decim = cfg.control_decimation
     pos_err, tilt, f_hist = np.empty(n), np.empty(n), np.empty((n, 4))
     keep = np.arange(0, n, cfg.trace_every)
-    tr_p, tr_eta_hat, tr_eta, tr_wz = (np.empty((keep.size, 3)), np.empty((keep.size, 4)),
-                                       np.empty((keep.size, 4)), np.empty(keep.size))
+    tr_p, tr_eta_hat, tr_eta, tr_wz = (
+        np.empty((keep.size, 3)),
+        np.empty((keep.size, 4)),
+        np.empty((keep.size, 4)),
+        np.empty(keep.size),
+    )
     eta_hat = np.ones(4)
     f_cmd = np.zeros(4)
     modes: dict = {}
@@ -176,8 +185,12 @@ def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any =
         state = flight.state()
         p_ref = refs.position[k]
         e = float(np.linalg.norm(state.p - p_ref)) if state.is_finite() else math.inf
-        if (not math.isfinite(e) or e > lim.max_position_error or state.R[2, 2] < cos_tilt
-                or state.p[2] > lim.ground_z):
+        if (
+            not math.isfinite(e)
+            or e > lim.max_position_error
+            or state.R[2, 2] < cos_tilt
+            or state.p[2] > lim.ground_z
+        ):
             crash_time, k_end = float(t), k
             break
         flight.sense()
@@ -204,9 +217,32 @@ def fly(scenario: Scenario, controller: str = "estimate-aware", estimator: Any =
         if progress_bar is not None and k % 1000 == 999:
             progress_bar.update(1000)
     onsets = [a for _, a, _ in scenario.fault_windows()]
-    metrics = flight_metrics(times[:k_end], pos_err[:k_end], tilt[:k_end], f_hist[:k_end],
-                             veh.rotor_max_thrust, cfg.dt, crash_time, onsets, cfg.recovery)
+    metrics = flight_metrics(
+        times[:k_end],
+        pos_err[:k_end],
+        tilt[:k_end],
+        f_hist[:k_end],
+        veh.rotor_max_thrust,
+        cfg.dt,
+        crash_time,
+        onsets,
+        cfg.recovery,
+    )
     m = int(np.searchsorted(keep, k_end))
-    return Flight(controller, source, scenario.name, int(seed), metrics, times[keep[:m]],
-                  tr_p[:m], refs.position[keep[:m]], pos_err[keep[:m]], tilt[keep[:m]],
-                  tr_wz[:m], f_hist[keep[:m]], tr_eta_hat[:m], tr_eta[:m], modes)
+    return Flight(
+        controller,
+        source,
+        scenario.name,
+        int(seed),
+        metrics,
+        times[keep[:m]],
+        tr_p[:m],
+        refs.position[keep[:m]],
+        pos_err[keep[:m]],
+        tilt[keep[:m]],
+        tr_wz[:m],
+        f_hist[keep[:m]],
+        tr_eta_hat[:m],
+        tr_eta[:m],
+        modes,
+    )

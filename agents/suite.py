@@ -19,15 +19,21 @@ suite          scenarios
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
 from quadfault.errors import ConfigError
-from quadfault.scenarios import (AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario,
-                                 named_scenario, random_scenario)
-from quadfault.trajectory import Circle, Hover
+from quadfault.model.scenarios import (
+    AbruptFault,
+    ConstantEfficiency,
+    EfficiencySchedule,
+    Scenario,
+    named_scenario,
+    random_scenario,
+)
+from quadfault.model.trajectory import Circle, Hover
 
 #: Severity of the single-motor survival scenario (eta of the failed motor).
 SEVERE_LEVEL = 0.3
@@ -45,9 +51,14 @@ class SuiteEntry:
         return self.build(seed).replace(name=self.name)
 
 
-def single_motor_failure(level: float = SEVERE_LEVEL, duration: float = 10.0, motor: int = 1,
-                         onset: float = SEVERE_ONSET, hover: bool = False,
-                         thrust_noise: float = 0.07) -> Scenario:
+def single_motor_failure(
+    level: float = SEVERE_LEVEL,
+    duration: float = 10.0,
+    motor: int = 1,
+    onset: float = SEVERE_ONSET,
+    hover: bool = False,
+    thrust_noise: float = 0.07,
+) -> Scenario:
     """One motor drops to ``level`` at ``onset`` [s] and stays there (circle or hover)."""
     traj = Hover() if hover else Circle()
     sched = EfficiencySchedule(ConstantEfficiency(), (AbruptFault(motor, onset, level=level),))
@@ -68,11 +79,15 @@ def _random(index: int, duration: float = 10.0):
 
 SUITES: dict[str, tuple[SuiteEntry, ...]] = {
     "paper": (SuiteEntry("abrupt", _named("abrupt")), SuiteEntry("combined", _named("combined"))),
-    "quick": (SuiteEntry("abrupt_20s", _named("abrupt", 20.0)),
-              SuiteEntry("combined_20s", _named("combined", 20.0)),
-              SuiteEntry("single_0.3", lambda seed: single_motor_failure())),
-    "severe": (SuiteEntry("single_0.3", lambda seed: single_motor_failure()),
-               SuiteEntry("hover_0.3", lambda seed: single_motor_failure(hover=True))),
+    "quick": (
+        SuiteEntry("abrupt_20s", _named("abrupt", 20.0)),
+        SuiteEntry("combined_20s", _named("combined", 20.0)),
+        SuiteEntry("single_0.3", lambda seed: single_motor_failure()),
+    ),
+    "severe": (
+        SuiteEntry("single_0.3", lambda seed: single_motor_failure()),
+        SuiteEntry("hover_0.3", lambda seed: single_motor_failure(hover=True)),
+    ),
     "random": tuple(SuiteEntry(f"random_{i}", _random(i)) for i in range(3)),
     "smoke": (SuiteEntry("abrupt_4s", _named("abrupt", 4.0)),),
 }
@@ -87,7 +102,9 @@ def get_suite(name: str, scenarios: list[str] | None = None) -> tuple[SuiteEntry
         known = {e.name for e in suite}
         missing = [s for s in scenarios if s not in known]
         if missing:
-            raise ConfigError(f"suite {name!r} has no scenario {', '.join(missing)}; it has "
-                              f"{', '.join(sorted(known))}")
+            raise ConfigError(
+                f"suite {name!r} has no scenario {', '.join(missing)}; it has "
+                f"{', '.join(sorted(known))}"
+            )
         suite = tuple(e for e in suite if e.name in scenarios)
     return suite

@@ -44,8 +44,16 @@ def _ray():
     return ray
 
 
-def run_sweep(fn, tasks, *, backend: str = "local", workers: int | None = None,
-              progress: bool = False, desc: str = "sweep", address: str | None = None) -> list:
+def run_sweep(
+    fn,
+    tasks,
+    *,
+    backend: str = "local",
+    workers: int | None = None,
+    progress: bool = False,
+    desc: str = "sweep",
+    address: str | None = None,
+) -> list:
     """``[fn(t) for t in tasks]`` in task order on ``backend`` (see the module docstring)."""
     if backend not in BACKENDS:
         raise ConfigError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")

@@ -30,8 +30,16 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 from agents.learning_curve import CONFIG_FILE, CURVE_FILE, matching_runs, write_learning_curve
-from agents.train_eval import (POLICIES, VECNORM_FILE, budget_line, callbacks, choose_policy,
-                               model_files, planned_timesteps, steps_per_rollout)
+from agents.train_eval import (
+    POLICIES,
+    VECNORM_FILE,
+    budget_line,
+    callbacks,
+    choose_policy,
+    model_files,
+    planned_timesteps,
+    steps_per_rollout,
+)
 from quadfault.errors import ConfigError, QuadfaultError
 from quadfault.fileio import atomic_write_files, atomic_write_text
 
@@ -47,7 +55,8 @@ def require_sb3():
     except ImportError as exc:
         raise QuadfaultError(
             f"training needs stable-baselines3 and torch ({exc.name or exc} is missing): install "
-            "a CPU torch, then pip install 'quadfault[rl]' (see the README)") from None
+            "a CPU torch, then pip install 'quadfault[rl]' (see the README)"
+        ) from None
     import stable_baselines3
 
     return stable_baselines3
@@ -128,24 +137,37 @@ class TrainConfig:
             raise ConfigError(f"algo must be one of {ALGORITHMS}, got {self.algo!r}")
         if not isinstance(self.env_kwargs, dict) or not isinstance(self.algo_kwargs, dict):
             raise ConfigError("env_kwargs and algo_kwargs must be JSON objects")
-        for key in ("timesteps", "n_envs", "eval_freq", "eval_episodes", "torch_threads",
-                    "frame_stack"):
+        for key in (
+            "timesteps",
+            "n_envs",
+            "eval_freq",
+            "eval_episodes",
+            "torch_threads",
+            "frame_stack",
+        ):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ConfigError(f"{key} must be a positive integer, got {value!r}")
         if self.policy is not None and self.policy not in POLICIES:
             raise ConfigError(f"policy must be one of {POLICIES} or null, got {self.policy!r}")
-        if isinstance(self.eval_seed, bool) or not isinstance(self.eval_seed, int) \
-                or self.eval_seed < 0:
+        if (
+            isinstance(self.eval_seed, bool)
+            or not isinstance(self.eval_seed, int)
+            or self.eval_seed < 0
+        ):
             raise ConfigError(f"eval_seed must be an integer >= 0, got {self.eval_seed!r}")
         if not isinstance(self.checkpoint_freq, int) or self.checkpoint_freq < 0:
-            raise ConfigError(f"checkpoint_freq must be an integer >= 0, got "
-                              f"{self.checkpoint_freq!r}")
+            raise ConfigError(
+                f"checkpoint_freq must be an integer >= 0, got {self.checkpoint_freq!r}"
+            )
         if self.numba_threads is not None and (
-                isinstance(self.numba_threads, bool) or not isinstance(self.numba_threads, int)
-                or self.numba_threads < 1):
-            raise ConfigError(f"numba_threads must be a positive integer or null, got "
-                              f"{self.numba_threads!r}")
+            isinstance(self.numba_threads, bool)
+            or not isinstance(self.numba_threads, int)
+            or self.numba_threads < 1
+        ):
+            raise ConfigError(
+                f"numba_threads must be a positive integer or null, got {self.numba_threads!r}"
+            )
         seeds = tuple(self.seeds) if isinstance(self.seeds, (list, tuple)) else (self.seeds,)
         if not seeds or any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in seeds):
             raise ConfigError(f"seeds must be a list of integers >= 0, got {self.seeds!r}")
@@ -162,8 +184,9 @@ class TrainConfig:
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(data) - known)
         if unknown:
-            raise ConfigError(f"{path}: unknown key(s) {', '.join(unknown)}; known: "
-                              f"{', '.join(sorted(known))}")
+            raise ConfigError(
+                f"{path}: unknown key(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}"
+            )
         return cls(**data)
 
     def to_dict(self) -> dict:
@@ -210,8 +233,13 @@ def make_vec_env(config: TrainConfig, seed: int, n_envs: int, monitor_dir=None):
         env = _array_vec_env(config, seed, n_envs, monitor_dir)
     else:
         vec_cls = SubprocVecEnv if n_envs > 1 else DummyVecEnv
-        env = sb3_make_vec_env(make, n_envs=n_envs, seed=seed, vec_env_cls=vec_cls,
-                               monitor_dir=None if monitor_dir is None else str(monitor_dir))
+        env = sb3_make_vec_env(
+            make,
+            n_envs=n_envs,
+            seed=seed,
+            vec_env_cls=vec_cls,
+            monitor_dir=None if monitor_dir is None else str(monitor_dir),
+        )
     return VecFrameStack(env, config.frame_stack) if config.frame_stack > 1 else env
 
 
@@ -222,8 +250,9 @@ def make_eval_env(config: TrainConfig):
     if config.frame_stack > 1:
         from gymnasium.wrappers import FlattenObservation, FrameStackObservation
 
-        env = FlattenObservation(FrameStackObservation(env, config.frame_stack,
-                                                       padding_type="zero"))
+        env = FlattenObservation(
+            FrameStackObservation(env, config.frame_stack, padding_type="zero")
+        )
     return env
 
 
@@ -236,11 +265,13 @@ def _array_vec_env(config: TrainConfig, seed: int, n_envs: int, monitor_dir=None
 
     threads = "auto" if config.numba_threads is None else config.numba_threads
     try:
-        venv = make_sb3_vec_env(n_envs, seed=seed, env_id=config.env_id,
-                                numba_threads=threads, **config.env_kwargs)
+        venv = make_sb3_vec_env(
+            n_envs, seed=seed, env_id=config.env_id, numba_threads=threads, **config.env_kwargs
+        )
     except TypeError as exc:
-        raise ConfigError(f"environment {config.env_id!r} (vector) rejected env_kwargs: "
-                          f"{exc}") from None
+        raise ConfigError(
+            f"environment {config.env_id!r} (vector) rejected env_kwargs: {exc}"
+        ) from None
     if monitor_dir is not None:
         Path(monitor_dir).mkdir(parents=True, exist_ok=True)
         return VecMonitor(venv, str(Path(monitor_dir) / "monitor.csv"))
@@ -284,8 +315,9 @@ def set_threads(config: TrainConfig) -> None:
     torch.set_num_threads(config.torch_threads)
 
 
-def train_one(config: TrainConfig, seed: int, run_dir: Path, *, force: bool = False,
-              quiet: bool = False):
+def train_one(
+    config: TrainConfig, seed: int, run_dir: Path, *, force: bool = False, quiet: bool = False
+):
     """Train one seed into ``run_dir``; returns the trained model.
 
     Runs ``config.timesteps`` rounded to the nearest whole rollout (one line says so when
@@ -295,8 +327,9 @@ def train_one(config: TrainConfig, seed: int, run_dir: Path, *, force: bool = Fa
 
     set_threads(config)
     if config.tensorboard and not _installed("tensorboard"):
-        raise QuadfaultError("--tensorboard needs the tensorboard package (pip install "
-                             "tensorboard)")
+        raise QuadfaultError(
+            "--tensorboard needs the tensorboard package (pip install tensorboard)"
+        )
     # SB3's own bar needs rich; otherwise (or by default) quadfault's tqdm bar is used
     sb3_bar = config.progress_bar and not quiet and _installed("rich") and _installed("tqdm")
     for name in (MODEL_FILE, VECNORM_FILE, CONFIG_FILE):
@@ -314,21 +347,37 @@ def train_one(config: TrainConfig, seed: int, run_dir: Path, *, force: bool = Fa
         if isinstance(kwargs.get("train_freq"), list):  # JSON has no tuples: [1, "episode"]
             kwargs["train_freq"] = tuple(kwargs["train_freq"])
         try:
-            model = algo_cls(policy, env, seed=seed, device=config.device, verbose=0,
-                             tensorboard_log=config.tensorboard, **kwargs)
+            model = algo_cls(
+                policy,
+                env,
+                seed=seed,
+                device=config.device,
+                verbose=0,
+                tensorboard_log=config.tensorboard,
+                **kwargs,
+            )
         except (TypeError, ValueError) as exc:
-            raise ConfigError(f"algo_kwargs rejected by {config.algo.upper()}: "
-                              f"{' '.join(str(exc).split())}") from None
+            raise ConfigError(
+                f"algo_kwargs rejected by {config.algo.upper()}: {' '.join(str(exc).split())}"
+            ) from None
         rollout = steps_per_rollout(model)
         total = planned_timesteps(config.timesteps, rollout)
         if total != config.timesteps and not quiet:
             print(budget_line(config.algo, seed, config.timesteps, total, model), flush=True)
-        model.learn(total_timesteps=total,
-                    callback=callbacks(config, run_dir, eval_env, total, not quiet and not sb3_bar),
-                    progress_bar=sb3_bar, tb_log_name=f"{config.algo}_seed{seed}")
+        model.learn(
+            total_timesteps=total,
+            callback=callbacks(config, run_dir, eval_env, total, not quiet and not sb3_bar),
+            progress_bar=sb3_bar,
+            tb_log_name=f"{config.algo}_seed{seed}",
+        )
         save_agent(model, run_dir, force=force)
-        saved = dict(config.to_dict(), seed=seed, policy=policy, timesteps_run=total,
-                     steps_per_rollout=rollout)
+        saved = dict(
+            config.to_dict(),
+            seed=seed,
+            policy=policy,
+            timesteps_run=total,
+            steps_per_rollout=rollout,
+        )
         atomic_write_text(run_dir / CONFIG_FILE, json.dumps(saved, indent=2), force=True)
     finally:
         env.close()
@@ -359,13 +408,16 @@ def load_agent(path, env=None, device: str = "cpu"):
     path = Path(path)
     zip_path = path
     if path.is_dir():  # a run folder, or its best/ folder
-        zip_path = next((path / n for n in (MODEL_FILE, "best_model.zip")
-                         if (path / n).exists()), path / MODEL_FILE)
+        zip_path = next(
+            (path / n for n in (MODEL_FILE, "best_model.zip") if (path / n).exists()),
+            path / MODEL_FILE,
+        )
     if not zip_path.exists():
         raise QuadfaultError(f"{zip_path}: no saved model there")
     folder = zip_path.parent
-    cfg_path = folder / CONFIG_FILE if (folder / CONFIG_FILE).exists() else \
-        folder.parent / CONFIG_FILE
+    cfg_path = (
+        folder / CONFIG_FILE if (folder / CONFIG_FILE).exists() else folder.parent / CONFIG_FILE
+    )
     if env is None:
         if not cfg_path.exists():
             raise QuadfaultError(f"{folder}: no {CONFIG_FILE}; pass the environment explicitly")
@@ -395,40 +447,76 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", help="JSON file with TrainConfig keys (flags override it)")
     parser.add_argument("--algo", choices=ALGORITHMS, help=f"algorithm (default {d.algo})")
     parser.add_argument("--env", dest="env_id", help=f"Gymnasium id (default {d.env_id})")
-    parser.add_argument("--env-kwargs", help="JSON object of environment keywords, e.g. "
-                        "'{\"estimator\": \"irls\", \"action_mode\": \"residual\"}'")
-    parser.add_argument("--estimator", choices=("irls", "ekf", "truth", "none"),
-                        help="shortcut for env_kwargs.estimator")
-    parser.add_argument("--action-mode", choices=("motor", "residual", "wrench"),
-                        help="shortcut for env_kwargs.action_mode")
+    parser.add_argument(
+        "--env-kwargs",
+        help="JSON object of environment keywords, e.g. "
+        '\'{"estimator": "irls", "action_mode": "residual"}\'',
+    )
+    parser.add_argument(
+        "--estimator",
+        choices=("irls", "ekf", "truth", "none"),
+        help="shortcut for env_kwargs.estimator",
+    )
+    parser.add_argument(
+        "--action-mode",
+        choices=("motor", "residual", "wrench"),
+        help="shortcut for env_kwargs.action_mode",
+    )
     parser.add_argument("--timesteps", type=int, help=f"steps per seed (default {d.timesteps})")
     parser.add_argument("--seeds", type=int, nargs="+", help="one run per seed (default 0)")
     parser.add_argument("--n-envs", type=int, help=f"parallel environments (default {d.n_envs})")
-    parser.add_argument("--vector-env", action="store_true",
-                        help="step the n-envs quadrotors as arrays in one process "
-                        "(QuadFaultVectorEnv; much faster than subprocesses)")
-    parser.add_argument("--no-vec-normalize", action="store_true",
-                        help="do not normalise observations and rewards")
-    parser.add_argument("--eval-freq", type=int, help=f"steps between evaluations "
-                        f"(default {d.eval_freq})")
-    parser.add_argument("--eval-episodes", type=int, help=f"fixed seeded episodes per "
-                        f"evaluation (default {d.eval_episodes})")
-    parser.add_argument("--eval-seed", type=int, help=f"reset seed of the first evaluation "
-                        f"episode (default {d.eval_seed})")
-    parser.add_argument("--policy", choices=POLICIES, help="SB3 policy (default: "
-                        "MultiInputPolicy for Dict observations, MlpPolicy otherwise)")
+    parser.add_argument(
+        "--vector-env",
+        action="store_true",
+        help="step the n-envs quadrotors as arrays in one process "
+        "(QuadFaultVectorEnv; much faster than subprocesses)",
+    )
+    parser.add_argument(
+        "--no-vec-normalize", action="store_true", help="do not normalise observations and rewards"
+    )
+    parser.add_argument(
+        "--eval-freq", type=int, help=f"steps between evaluations (default {d.eval_freq})"
+    )
+    parser.add_argument(
+        "--eval-episodes",
+        type=int,
+        help=f"fixed seeded episodes per evaluation (default {d.eval_episodes})",
+    )
+    parser.add_argument(
+        "--eval-seed",
+        type=int,
+        help=f"reset seed of the first evaluation episode (default {d.eval_seed})",
+    )
+    parser.add_argument(
+        "--policy",
+        choices=POLICIES,
+        help="SB3 policy (default: MultiInputPolicy for Dict observations, MlpPolicy otherwise)",
+    )
     parser.add_argument("--checkpoint-freq", type=int, help="steps between checkpoints (0: none)")
     parser.add_argument("--algo-kwargs", help="JSON object of algorithm keywords")
     parser.add_argument("--tensorboard", help="TensorBoard log folder")
-    parser.add_argument("--numba-threads", type=int,
-                        help="threads of numba's parallel kernels in the vector env's steps "
-                        "(default: the vector env's rule by batch size, docs/throughput.md)")
-    parser.add_argument("--frame-stack", type=int, help="stack the observations of the last "
-                        "this many steps (a policy with a short memory; default 1)")
-    parser.add_argument("--torch-threads", type=int, help="CPU threads of torch (default 1: "
-                        "fastest for these small networks, see TrainConfig)")
-    parser.add_argument("--progress", action="store_true",
-                        help="SB3's progress bar (needs rich; quadfault's bar otherwise)")
+    parser.add_argument(
+        "--numba-threads",
+        type=int,
+        help="threads of numba's parallel kernels in the vector env's steps "
+        "(default: the vector env's rule by batch size, docs/throughput.md)",
+    )
+    parser.add_argument(
+        "--frame-stack",
+        type=int,
+        help="stack the observations of the last "
+        "this many steps (a policy with a short memory; default 1)",
+    )
+    parser.add_argument(
+        "--torch-threads",
+        type=int,
+        help="CPU threads of torch (default 1: fastest for these small networks, see TrainConfig)",
+    )
+    parser.add_argument(
+        "--progress",
+        action="store_true",
+        help="SB3's progress bar (needs rich; quadfault's bar otherwise)",
+    )
     parser.add_argument("--out", required=True, help="output folder (one seed_<k>/ per seed)")
     parser.add_argument("--force", action="store_true", help="overwrite an existing run")
 
@@ -445,11 +533,25 @@ def _json_arg(text: str, flag: str) -> dict:
 
 def config_from_args(args) -> TrainConfig:
     cfg = TrainConfig.from_file(args.config) if args.config else TrainConfig()
-    changes = {k: getattr(args, k) for k in ("algo", "env_id", "timesteps", "n_envs", "eval_freq",
-                                             "eval_episodes", "eval_seed", "checkpoint_freq",
-                                             "tensorboard", "numba_threads", "policy",
-                                             "frame_stack", "torch_threads")
-               if getattr(args, k, None) is not None}
+    changes = {
+        k: getattr(args, k)
+        for k in (
+            "algo",
+            "env_id",
+            "timesteps",
+            "n_envs",
+            "eval_freq",
+            "eval_episodes",
+            "eval_seed",
+            "checkpoint_freq",
+            "tensorboard",
+            "numba_threads",
+            "policy",
+            "frame_stack",
+            "torch_threads",
+        )
+        if getattr(args, k, None) is not None
+    }
     if args.seeds is not None:
         changes["seeds"] = tuple(args.seeds)
     env_kwargs = dict(cfg.env_kwargs)
@@ -484,12 +586,15 @@ def run(args) -> int:
         best = _best_mean_reward(run_dir)
         if not quiet:
             best_text = "n/a" if math.isnan(best) else f"{best:.3f}"
-            print(f"{config.algo} seed {seed}: {model.num_timesteps} steps, best evaluation "
-                  f"return {best_text} ({config.eval_episodes} fixed episodes) -> {run_dir}")
+            print(
+                f"{config.algo} seed {seed}: {model.num_timesteps} steps, best evaluation "
+                f"return {best_text} ({config.eval_episodes} fixed episodes) -> {run_dir}"
+            )
     saved = json.loads((out / f"seed_{config.seeds[-1]}" / CONFIG_FILE).read_text())
     runs, other = matching_runs(out, saved)
-    data = write_learning_curve(runs, out / CURVE_FILE,
-                                label=f"{config.algo.upper()} on {config.env_id}")
+    data = write_learning_curve(
+        runs, out / CURVE_FILE, label=f"{config.algo.upper()} on {config.env_id}"
+    )
     if not quiet and data["runs"]:
         note = f"; left out {len(other)} run(s) with other settings" if other else ""
         print(f"learning curve over {len(data['runs'])} seed(s) -> {out / CURVE_FILE}{note}")

@@ -55,15 +55,21 @@ def choose_policy(requested: str | None, observation_space, env_id: str) -> str:
     if requested is None:
         return "MultiInputPolicy" if is_dict else "MlpPolicy"
     if is_dict and requested != "MultiInputPolicy":
-        raise ConfigError(f"policy {requested} cannot read the Dict observation of {env_id}; "
-                          "use MultiInputPolicy (the default for Dict observations)")
+        raise ConfigError(
+            f"policy {requested} cannot read the Dict observation of {env_id}; "
+            "use MultiInputPolicy (the default for Dict observations)"
+        )
     if not is_dict and requested == "MultiInputPolicy":
-        raise ConfigError(f"policy MultiInputPolicy needs a Dict observation, {env_id} has "
-                          f"{type(observation_space).__name__}; use MlpPolicy (the default)")
+        raise ConfigError(
+            f"policy MultiInputPolicy needs a Dict observation, {env_id} has "
+            f"{type(observation_space).__name__}; use MlpPolicy (the default)"
+        )
     if requested == "CnnPolicy" and not is_image_space(observation_space):
-        raise ConfigError(f"policy CnnPolicy needs image observations, {env_id} has a "
-                          f"{type(observation_space).__name__} of shape "
-                          f"{observation_space.shape}; use MlpPolicy (the default)")
+        raise ConfigError(
+            f"policy CnnPolicy needs image observations, {env_id} has a "
+            f"{type(observation_space).__name__} of shape "
+            f"{observation_space.shape}; use MlpPolicy (the default)"
+        )
     return requested
 
 
@@ -76,8 +82,10 @@ def steps_per_rollout(model) -> int:
         return int(model.n_steps * model.n_envs)
     freq = model.train_freq
     if freq.unit != TrainFrequencyUnit.STEP:
-        raise ConfigError("train_freq counted in episodes cannot honour a step budget; give "
-                          "train_freq in steps (an integer)")
+        raise ConfigError(
+            "train_freq counted in episodes cannot honour a step budget; give "
+            "train_freq in steps (an integer)"
+        )
     return int(freq.frequency * model.n_envs)
 
 
@@ -92,9 +100,11 @@ def budget_line(algo: str, seed: int, requested: int, planned: int, model) -> st
     rollout = steps_per_rollout(model)
     per_env = rollout // model.n_envs
     what = "n_steps" if hasattr(model, "n_steps") else "train_freq"
-    return (f"{algo} seed {seed}: training {planned:,} steps = {planned // rollout} rollouts of "
-            f"{model.n_envs} envs x {per_env:,} steps ({what}), the nearest whole rollout to "
-            f"the {requested:,} asked")
+    return (
+        f"{algo} seed {seed}: training {planned:,} steps = {planned // rollout} rollouts of "
+        f"{model.n_envs} envs x {per_env:,} steps ({what}), the nearest whole rollout to "
+        f"the {requested:,} asked"
+    )
 
 
 def evaluation_seeds(config) -> list[int]:
@@ -179,8 +189,7 @@ def callbacks(config, run_dir: Path, eval_env, total: int, progress: bool):
             self.best = -math.inf
             self.next_at = config.eval_freq
             policy = geometric_baseline(eval_env)
-            self.baseline = (None if policy is None
-                             else evaluate_episodes(policy, eval_env, seeds))
+            self.baseline = None if policy is None else evaluate_episodes(policy, eval_env, seeds)
 
         def _on_rollout_start(self) -> None:
             if self.num_timesteps >= self.next_at:
@@ -196,8 +205,9 @@ def callbacks(config, run_dir: Path, eval_env, total: int, progress: bool):
                 self._evaluate()
 
         def _evaluate(self) -> None:
-            returns, lengths = evaluate_episodes(self.model, eval_env, seeds,
-                                                 self.model.get_vec_normalize_env())
+            returns, lengths = evaluate_episodes(
+                self.model, eval_env, seeds, self.model.get_vec_normalize_env()
+            )
             self.timesteps.append(self.num_timesteps)
             self.results.append(returns)
             self.lengths.append(lengths)
@@ -205,10 +215,16 @@ def callbacks(config, run_dir: Path, eval_env, total: int, progress: bool):
                 self.best = float(returns.mean())
                 best = run_dir / "best"
                 best.mkdir(parents=True, exist_ok=True)
-                atomic_write_files(model_files(self.model, best / "best_model.zip",
-                                               best / VECNORM_FILE), force=True)
-            data = {"timesteps": np.asarray(self.timesteps), "results": np.asarray(self.results),
-                    "ep_lengths": np.asarray(self.lengths), "episode_seeds": np.asarray(seeds)}
+                atomic_write_files(
+                    model_files(self.model, best / "best_model.zip", best / VECNORM_FILE),
+                    force=True,
+                )
+            data = {
+                "timesteps": np.asarray(self.timesteps),
+                "results": np.asarray(self.results),
+                "ep_lengths": np.asarray(self.lengths),
+                "episode_seeds": np.asarray(seeds),
+            }
             if self.baseline is not None:
                 data["baseline_results"], data["baseline_ep_lengths"] = self.baseline
             buf = io.BytesIO()
@@ -228,10 +244,10 @@ def callbacks(config, run_dir: Path, eval_env, total: int, progress: bool):
                 folder = run_dir / "checkpoints"
                 folder.mkdir(parents=True, exist_ok=True)
                 k = self.num_timesteps
-                vn = folder / f"model_vecnormalize_{k}_steps.pkl" if config.vec_normalize \
-                    else None
-                atomic_write_files(model_files(self.model, folder / f"model_{k}_steps.zip", vn),
-                                   force=True)
+                vn = folder / f"model_vecnormalize_{k}_steps.pkl" if config.vec_normalize else None
+                atomic_write_files(
+                    model_files(self.model, folder / f"model_{k}_steps.zip", vn), force=True
+                )
             return True
 
     class Progress(BaseCallback):

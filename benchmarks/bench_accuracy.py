@@ -36,22 +36,23 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from estimators.median import median_series
-from estimators.paper.calibration import calibrate_q_eta
 from estimators.ekf import EKFConfig, MotorEfficiencyEKF
 from estimators.fdi import detect, evaluate
 from estimators.irls import IRLSConfig, SlidingWindowIRLS
+from estimators.median import median_series
 from estimators.metrics import fault_windows, mean_or_none, score
+from estimators.paper.calibration import calibrate_q_eta
 from estimators.paper.reproduce import flight_check, sim_config
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import simulate
+from quadfault.model.scenarios import named_scenario
+from quadfault.sim.simulator import simulate
 
 SCENARIOS = ("abrupt", "combined", "nominal", "degradation")
 
 
 def speed(duration: float) -> None:
-    rec = simulate(named_scenario("combined", duration), config=sim_config("rk4", "combined"),
-                   seed=0).without_truth()
+    rec = simulate(
+        named_scenario("combined", duration), config=sim_config("rk4", "combined"), seed=0
+    ).without_truth()
     rows = {}
     veh = rec.vehicle
     for label, est in (("EKF", MotorEfficiencyEKF(veh)), ("IRLS", SlidingWindowIRLS(veh))):
@@ -65,16 +66,26 @@ def speed(duration: float) -> None:
     print(f"  ratio EKF/IRLS {rows['EKF'] / rows['IRLS']:.2f}")
 
 
-def flight(name: str, seed: int, duration: float, q_eta: float,
-           q_improved: float | None = None, q_median: float | None = None) -> dict:
+def flight(
+    name: str,
+    seed: int,
+    duration: float,
+    q_eta: float,
+    q_improved: float | None = None,
+    q_median: float | None = None,
+) -> dict:
     rec = simulate(named_scenario(name, duration), config=sim_config("rk4", name), seed=seed)
     blind = rec.without_truth()
     out = {"diverged": flight_check(rec)["diverged"]}
-    runs = [("irls", SlidingWindowIRLS(rec.vehicle)),
-            ("ekf", MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_eta)))]
+    runs = [
+        ("irls", SlidingWindowIRLS(rec.vehicle)),
+        ("ekf", MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_eta))),
+    ]
     if q_improved is not None:
-        runs += [("irls+", SlidingWindowIRLS(rec.vehicle, IRLSConfig.improved())),
-                 ("ekf+", MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_improved)))]
+        runs += [
+            ("irls+", SlidingWindowIRLS(rec.vehicle, IRLSConfig.improved())),
+            ("ekf+", MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_improved))),
+        ]
     if q_median is not None:
         runs += [("ekf+m", MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_median)))]
     for key, est in runs:
@@ -82,21 +93,34 @@ def flight(name: str, seed: int, duration: float, q_eta: float,
         if key == "ekf+m":
             s = median_series(s, IRLSConfig.improved().output_median)
         sc = score(rec, s)
-        out[key] = {"rmse": float(np.mean(sc.rmse)), "spike": mean_or_none(sc.spike),
-                    "excess": mean_or_none(sc.excess_spike),
-                    "fdi": evaluate(detect(s), fault_windows(rec))}
+        out[key] = {
+            "rmse": float(np.mean(sc.rmse)),
+            "spike": mean_or_none(sc.spike),
+            "excess": mean_or_none(sc.excess_spike),
+            "fdi": evaluate(detect(s), fault_windows(rec)),
+        }
     return out
 
 
 def calibrate(duration: float, irls_config: IRLSConfig, post_median: int = 1):
     """The EKF's Q_eta matching ``irls_config``'s RMSE on the combined flight of seed 1000
     (the EKF's output median-filtered over ``post_median`` rows when > 1)."""
-    cal_rec = simulate(named_scenario("combined", min(duration, 40.0)),
-                       config=sim_config("rk4", "combined"), seed=1000)
-    target = float(np.mean(score(cal_rec, SlidingWindowIRLS(cal_rec.vehicle, irls_config).run(
-        cal_rec.without_truth())).rmse))
-    return calibrate_q_eta(cal_rec, target, q_range=(1e-4, 10.0), bisection_steps=6,
-                           post_median=post_median)
+    cal_rec = simulate(
+        named_scenario("combined", min(duration, 40.0)),
+        config=sim_config("rk4", "combined"),
+        seed=1000,
+    )
+    target = float(
+        np.mean(
+            score(
+                cal_rec,
+                SlidingWindowIRLS(cal_rec.vehicle, irls_config).run(cal_rec.without_truth()),
+            ).rmse
+        )
+    )
+    return calibrate_q_eta(
+        cal_rec, target, q_range=(1e-4, 10.0), bisection_steps=6, post_median=post_median
+    )
 
 
 def main() -> None:
@@ -105,14 +129,23 @@ def main() -> None:
     p.add_argument("--seeds", type=int, default=5)
     p.add_argument("--q-eta", type=float, default=None)
     p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--improved", action="store_true",
-                   help="also IRLSConfig.improved() and an EKF calibrated to it")
+    p.add_argument(
+        "--improved",
+        action="store_true",
+        help="also IRLSConfig.improved() and an EKF calibrated to it",
+    )
     p.add_argument("--no-speed", action="store_true", help="skip the speed section")
-    p.add_argument("--ekf-median", action="store_true",
-                   help="with --improved: also the improved IRLS's EKF with the same output "
-                        "median (fairness check)")
-    p.add_argument("--scenarios", default=",".join(SCENARIOS),
-                   help="comma-separated subset of " + ", ".join(SCENARIOS))
+    p.add_argument(
+        "--ekf-median",
+        action="store_true",
+        help="with --improved: also the improved IRLS's EKF with the same output "
+        "median (fairness check)",
+    )
+    p.add_argument(
+        "--scenarios",
+        default=",".join(SCENARIOS),
+        help="comma-separated subset of " + ", ".join(SCENARIOS),
+    )
     args = p.parse_args()
     if not args.no_speed:
         speed(min(args.duration, 20.0))
@@ -131,16 +164,28 @@ def main() -> None:
     scenarios = [n for n in SCENARIOS if n in args.scenarios.split(",")]
     jobs = [(n, s) for n in scenarios for s in range(args.seeds)]
     with ProcessPoolExecutor(args.workers) as pool:
-        res = list(pool.map(flight, [j[0] for j in jobs], [j[1] for j in jobs],
-                            [args.duration] * len(jobs), [q] * len(jobs),
-                            [q_plus] * len(jobs), [q_med] * len(jobs)))
+        res = list(
+            pool.map(
+                flight,
+                [j[0] for j in jobs],
+                [j[1] for j in jobs],
+                [args.duration] * len(jobs),
+                [q] * len(jobs),
+                [q_plus] * len(jobs),
+                [q_med] * len(jobs),
+            )
+        )
     lost = [j for j, r in zip(jobs, res) if r["diverged"]]
     if lost:
         print(f"WARNING: flights that lost control: {lost}")
-    print(f"\nFDI and accuracy over {args.seeds} seeds, {args.duration:g} s flights, "
-          f"EKF Q_eta = {q:.4g}")
-    print(f"{'scenario':<12} {'est':<5} {'detected':>9} {'worst lat [s]':>14} {'false':>6} "
-          f"{'RMSE':>7} {'spike':>7} {'excess':>7}")
+    print(
+        f"\nFDI and accuracy over {args.seeds} seeds, {args.duration:g} s flights, "
+        f"EKF Q_eta = {q:.4g}"
+    )
+    print(
+        f"{'scenario':<12} {'est':<5} {'detected':>9} {'worst lat [s]':>14} {'false':>6} "
+        f"{'RMSE':>7} {'spike':>7} {'excess':>7}"
+    )
     keys = ("irls", "ekf", "irls+", "ekf+") if args.improved else ("irls", "ekf")
     keys += ("ekf+m",) if q_med is not None else ()
     for name in scenarios:
@@ -153,20 +198,26 @@ def main() -> None:
             spikes = [r["spike"] for r in rs if r["spike"] is not None]
             excess = [r["excess"] for r in rs if r["excess"] is not None]
             worst = max(lat) if lat else float("nan")
-            print(f"{name:<12} {est:<5} {det:>4}/{tot:<4} {worst:>14.3f} {false:>6}"
-                  f" {np.mean([r['rmse'] for r in rs]):>7.4f} "
-                  f"{(np.mean(spikes) if spikes else float('nan')):>7.4f} "
-                  f"{(np.mean(excess) if excess else float('nan')):>7.4f}")
-    pairs = [("paper", "irls", "ekf")] + ([("improved", "irls+", "ekf+")] if args.improved
-                                          else [])
+            print(
+                f"{name:<12} {est:<5} {det:>4}/{tot:<4} {worst:>14.3f} {false:>6}"
+                f" {np.mean([r['rmse'] for r in rs]):>7.4f} "
+                f"{(np.mean(spikes) if spikes else float('nan')):>7.4f} "
+                f"{(np.mean(excess) if excess else float('nan')):>7.4f}"
+            )
+    pairs = [("paper", "irls", "ekf")] + ([("improved", "irls+", "ekf+")] if args.improved else [])
     pairs += [("vs ekf+m", "irls+", "ekf+m")] if q_med is not None else []
-    print("\nper seed: IRLS spike / EKF spike = ratio (motor averages; target <= 0.5), "
-          "IRLS RMSE (target <= 0.025)")
+    print(
+        "\nper seed: IRLS spike / EKF spike = ratio (motor averages; target <= 0.5), "
+        "IRLS RMSE (target <= 0.025)"
+    )
     for name in [n for n in ("abrupt", "combined") if n in scenarios]:
         for label, a, b in pairs:
-            cells = [f"{r[a]['spike']:.3f}/{r[b]['spike']:.3f}={r[a]['spike'] / r[b]['spike']:.2f}"
-                     f" ({r[a]['rmse']:.4f})"
-                     for (n, _), r in zip(jobs, res) if n == name]
+            cells = [
+                f"{r[a]['spike']:.3f}/{r[b]['spike']:.3f}={r[a]['spike'] / r[b]['spike']:.2f}"
+                f" ({r[a]['rmse']:.4f})"
+                for (n, _), r in zip(jobs, res)
+                if n == name
+            ]
             print(f"  {name:<9} {label:<9} " + "  ".join(cells))
 
 

@@ -12,8 +12,8 @@ import time
 
 import numpy as np
 
-from quadfault.allocation import EstimateAwareAllocator
-from quadfault.vehicle import Vehicle
+from quadfault.model.allocation import EstimateAwareAllocator
+from quadfault.model.vehicle import Vehicle
 
 
 def per_call(fn, n=2000) -> float:
@@ -31,8 +31,10 @@ def main() -> int:
     cases = {
         "exact (eta = 0.7 on motor 1)": (hover, np.array([0.7, 1, 1, 1.0])),
         "yaw released (eta = 0.3)": (hover, np.array([0.3, 1, 1, 1.0])),
-        "weighted lsq (two motors at 0.2, 18 N)": (np.array([18.0, 0, 0, 0]),
-                                                   np.array([0.2, 0.2, 1, 1.0])),
+        "weighted lsq (two motors at 0.2, 18 N)": (
+            np.array([18.0, 0, 0, 0]),
+            np.array([0.2, 0.2, 1, 1.0]),
+        ),
     }
     base = per_call(lambda: veh.rotor_thrust(hover))
     print(f"{'nominal inverse A^-1 w':42s} {base:8.1f} us   1.0x")

@@ -26,14 +26,18 @@ from pathlib import Path
 
 import numpy as np
 
-from quadfault import effects as fx
-from quadfault.recording import read_recording, write_recording
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import SensorNoise, SimConfig, simulate
-from quadfault.trajectory import Lissajous
+from quadfault.io.recording import read_recording, write_recording
+from quadfault.model import effects as fx
+from quadfault.model.scenarios import named_scenario
+from quadfault.model.trajectory import Lissajous
+from quadfault.sim.simulator import SensorNoise, SimConfig, simulate
 
-CASES = {"none": (), "drag": (fx.Drag(0.3),), "motor_lag": (fx.MotorLag(0.04),),
-         "drag+motor_lag": (fx.Drag(0.3), fx.MotorLag(0.04))}
+CASES = {
+    "none": (),
+    "drag": (fx.Drag(0.3),),
+    "motor_lag": (fx.MotorLag(0.04),),
+    "drag+motor_lag": (fx.Drag(0.3), fx.MotorLag(0.04)),
+}
 REPO = Path(__file__).resolve().parent.parent
 
 
@@ -43,7 +47,8 @@ def recording(case, duration, rate, cache):
         return read_recording(path)
     dt = 1.0 / rate
     sc = named_scenario("nominal", duration, dt).replace(
-        trajectory=Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.15))
+        trajectory=Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.15)
+    )
     cfg = SimConfig(dt=dt, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001))
     rec = simulate(sc, config=cfg, seed=1, effects=CASES[case], thrust_noise=0.02).without_truth()
     if path is not None:
@@ -55,29 +60,43 @@ def recording(case, duration, rate, cache):
 
 def reference_package(rev: str):
     """``quadfault.diagnosis`` as of git revision ``rev``, imported as ``_diagnosis_ref``,
-    with the effects module of the same revision (``quadfault/effects.py`` or the package
-    ``quadfault/effects/``) inside it as ``_diagnosis_ref._effects``."""
+    with the effects module of the same revision (``quadfault/model/effects.py`` or the package
+    ``quadfault/model/effects/``) inside it as ``_diagnosis_ref._effects``."""
     tmp = Path(tempfile.mkdtemp(prefix="diag_ref_")) / "_diagnosis_ref"
     tmp.mkdir()
 
     def files(path):
-        return subprocess.run(["git", "-C", str(REPO), "ls-tree", "-r", "--name-only", rev,
-                               path], check=True, capture_output=True, text=True).stdout.split()
+        return subprocess.run(
+            ["git", "-C", str(REPO), "ls-tree", "-r", "--name-only", rev, path],
+            check=True,
+            capture_output=True,
+            text=True,
+        ).stdout.split()
 
     def rewrite(text):
-        return (text.replace("from quadfault import effects as", "from _diagnosis_ref import "
-                             "_effects as").replace("quadfault.effects", "_diagnosis_ref._effects")
-                .replace("quadfault.diagnosis", "_diagnosis_ref"))
+        return (
+            text.replace(
+                "from quadfault.model import effects as", "from _diagnosis_ref import _effects as"
+            )
+            .replace("quadfault.model.effects", "_diagnosis_ref._effects")
+            .replace("quadfault.diagnosis", "_diagnosis_ref")
+        )
 
     copies = [(name, tmp / Path(name).name) for name in files("quadfault/diagnosis/")]
-    copies += [(name, tmp / "_effects" / Path(name).relative_to("quadfault/effects"))
-               for name in files("quadfault/effects/")]
-    copies += [(name, tmp / "_effects.py") for name in files("quadfault/effects.py")]
+    copies += [
+        (name, tmp / "_effects" / Path(name).relative_to("quadfault/model/effects"))
+        for name in files("quadfault/model/effects/")
+    ]
+    copies += [(name, tmp / "_effects.py") for name in files("quadfault/model/effects.py")]
     for name, dest in copies:
         if not name.endswith(".py"):
             continue
-        text = subprocess.run(["git", "-C", str(REPO), "show", f"{rev}:{name}"], check=True,
-                              capture_output=True, text=True).stdout
+        text = subprocess.run(
+            ["git", "-C", str(REPO), "show", f"{rev}:{name}"],
+            check=True,
+            capture_output=True,
+            text=True,
+        ).stdout
         dest.parent.mkdir(parents=True, exist_ok=True)
         dest.write_text(rewrite(text))
     sys.path.insert(0, str(tmp.parent))
@@ -96,21 +115,32 @@ def timed(pkg, rec):
 def describe(res):
     out = []
     for e in res.effects:
-        p = {k: (np.round(v, 4).tolist() if isinstance(v, (list, tuple, np.ndarray))
-                 else round(float(v), 4)) for k, v in e.params.items()
-             if k in ("tau_s", "k_N_s_per_m", "delay_s", "eta", "scale", "force_N")}
+        p = {
+            k: (
+                np.round(v, 4).tolist()
+                if isinstance(v, (list, tuple, np.ndarray))
+                else round(float(v), 4)
+            )
+            for k, v in e.params.items()
+            if k in ("tau_s", "k_N_s_per_m", "delay_s", "eta", "scale", "force_N")
+        }
         out.append(f"{e.name} {p}")
     return "; ".join(out) or "none"
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--cases", default=",".join(CASES), help="comma-separated subset of "
-                    + ", ".join(CASES))
+    ap.add_argument(
+        "--cases", default=",".join(CASES), help="comma-separated subset of " + ", ".join(CASES)
+    )
     ap.add_argument("--duration", type=float, default=60.0, help="[s] (default 60)")
     ap.add_argument("--rate", type=float, default=1000.0, help="[Hz] (default 1000)")
-    ap.add_argument("--reference", default=None, metavar="REV",
-                    help="also time the diagnosis package of this git revision")
+    ap.add_argument(
+        "--reference",
+        default=None,
+        metavar="REV",
+        help="also time the diagnosis package of this git revision",
+    )
     ap.add_argument("--cache", default=None, metavar="DIR", help="keep/reuse recordings here")
     args = ap.parse_args(argv)
     cases = [c.strip() for c in args.cases.split(",") if c.strip()]
@@ -127,18 +157,27 @@ def main(argv=None):
     for case in cases:
         t0 = time.perf_counter()
         rec = recording(case, args.duration, args.rate, args.cache)
-        print(f"{case}: {len(rec)} rows ({time.perf_counter() - t0:.0f} s to simulate/load)",
-              flush=True)
+        print(
+            f"{case}: {len(rec)} rows ({time.perf_counter() - t0:.0f} s to simulate/load)",
+            flush=True,
+        )
         cpu, wall, res = timed(new, rec)
-        line = (f"  new: {cpu:6.1f} s CPU {wall:6.1f} s wall  improvement "
-                f"{res.model_improvement:.3f}  {describe(res)}")
+        line = (
+            f"  new: {cpu:6.1f} s CPU {wall:6.1f} s wall  improvement "
+            f"{res.model_improvement:.3f}  {describe(res)}"
+        )
         print(line, flush=True)
         if ref is not None:
             cpu0, wall0, res0 = timed(ref, rec)
-            print(f"  ref: {cpu0:6.1f} s CPU {wall0:6.1f} s wall  improvement "
-                  f"{res0.model_improvement:.3f}  {describe(res0)}")
-            print(f"  speed-up (CPU) x{cpu0 / max(cpu, 1e-9):.1f}, (wall) "
-                  f"x{wall0 / max(wall, 1e-9):.1f}; load {os.getloadavg()[0]:.1f}", flush=True)
+            print(
+                f"  ref: {cpu0:6.1f} s CPU {wall0:6.1f} s wall  improvement "
+                f"{res0.model_improvement:.3f}  {describe(res0)}"
+            )
+            print(
+                f"  speed-up (CPU) x{cpu0 / max(cpu, 1e-9):.1f}, (wall) "
+                f"x{wall0 / max(wall, 1e-9):.1f}; load {os.getloadavg()[0]:.1f}",
+                flush=True,
+            )
     return 0
 
 

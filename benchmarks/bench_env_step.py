@@ -96,8 +96,7 @@ def resets(sizes=(1024, 4096)) -> dict:
     for n in sizes:
         rand = QuadFaultVectorEnv(n, "none", scenario="random")
         rand.reset(seed=1)
-        out[f"reset_{n}_wall"], out[f"reset_{n}_cpu"] = _clock(lambda r=rand: r.reset(seed=0),
-                                                               2)
+        out[f"reset_{n}_wall"], out[f"reset_{n}_cpu"] = _clock(lambda r=rand: r.reset(seed=0), 2)
     return out
 
 
@@ -123,8 +122,13 @@ def cold_start() -> dict:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--sizes", type=int, nargs="+", default=[1024, 4096],
-                   help="vector env sizes N (default 1024 4096)")
+    p.add_argument(
+        "--sizes",
+        type=int,
+        nargs="+",
+        default=[1024, 4096],
+        help="vector env sizes N (default 1024 4096)",
+    )
     p.add_argument("--steps", type=int, default=400, help="single-env steps per timing (400)")
     p.add_argument("--baseline", default=None, help="another checkout, measured side by side")
     p.add_argument("--rounds", type=int, default=3, help="alternated rounds (3)")
@@ -132,13 +136,17 @@ def main(argv=None) -> int:
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import side_by_side as sbs
 
-    jobs = (("single", max, {"steps": args.steps}), ("vector", max, {"sizes": list(args.sizes)}),
-            ("resets", min, {"sizes": list(args.sizes)}))
+    jobs = (
+        ("single", max, {"steps": args.steps}),
+        ("vector", max, {"sizes": list(args.sizes)}),
+        ("resets", min, {"sizes": list(args.sizes)}),
+    )
     now, base = {}, {}
     for fn, better, kw in jobs:
         if args.baseline:
-            a, b = sbs.compare(args.baseline, "bench_env_step", fn, args.rounds, better=better,
-                               **kw)
+            a, b = sbs.compare(
+                args.baseline, "bench_env_step", fn, args.rounds, better=better, **kw
+            )
             now.update(a)
             base.update(b)
         else:
@@ -160,8 +168,7 @@ def main(argv=None) -> int:
         rows.append((f"vector N = {n}: vehicle-steps / wall s", f"vector_{n}_wall", "rate"))
         rows.append((f"vector N = {n}: reset (random) [CPU s]", f"reset_{n}_cpu", "time"))
     rows.append(("first env step, empty cache [CPU s]", "cold_env_cpu_s", "time"))
-    rows.append(("first vector step (N = 128), empty cache [CPU s]", "cold_vector_cpu_s",
-                 "time"))
+    rows.append(("first vector step (N = 128), empty cache [CPU s]", "cold_vector_cpu_s", "time"))
     print(f"# environments; {sbs.load()} on {os.cpu_count()} cpus")
     if args.baseline:
         print("| measure | baseline | this checkout | speed-up |\n|---|---|---|---|")

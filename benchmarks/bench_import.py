@@ -40,8 +40,7 @@ def write(fmt: str, path: Path, minutes: float, rate: float) -> Path:
         px4_flight(path, duration=seconds, imu_rate=rate, invalid_vxy=None)
     elif fmt == "ardupilot":
         path = path.with_suffix(".bin")
-        dataflash_flight(path, duration=seconds, imu_rate=rate, rcou_rate=rate,
-                         invalid_vxy=None)
+        dataflash_flight(path, duration=seconds, imu_rate=rate, rcou_rate=rate, invalid_vxy=None)
     else:
         path = path.with_suffix(".bbl")
         atomic_write_bytes(path, blackbox_log(seconds, rate), force=True)
@@ -86,19 +85,24 @@ def main() -> int:
             t_imp = timed(["import", log, "--out", tmp / f"{fmt}.csv"])
             t_diag = None
             if not args.no_diagnose:
-                t_diag = timed(["diagnose", tmp / f"{fmt}.csv", "--json",
-                                tmp / f"{fmt}.diagnosis.json"])
+                t_diag = timed(
+                    ["diagnose", tmp / f"{fmt}.csv", "--json", tmp / f"{fmt}.diagnosis.json"]
+                )
             rows.append((fmt, log.stat().st_size / 1e6, t_imp, t_diag))
-    print(f"\n{args.minutes:g}-minute logs at {args.rate:g} Hz (budget {BUDGET_S:g} s for import "
-          f"+ diagnose; load average {load0} before, {load()} after)")
+    print(
+        f"\n{args.minutes:g}-minute logs at {args.rate:g} Hz (budget {BUDGET_S:g} s for import "
+        f"+ diagnose; load average {load0} before, {load()} after)"
+    )
     print("seconds as wall (CPU); share: import + diagnose over the budget, wall (CPU)")
     print(f"{'format':<10} {'MB':>7} {'import s':>14} {'diagnose s':>14} {'share':>13}")
     for fmt, mb, t_imp, t_diag in rows:
         wall = t_imp[0] + (t_diag[0] if t_diag else 0.0)
         cpu = t_imp[1] + (t_diag[1] if t_diag else 0.0)
         diag = f"{t_diag[0]:6.1f} ({t_diag[1]:5.1f})" if t_diag else f"{'-':>14}"
-        print(f"{fmt:<10} {mb:7.1f} {t_imp[0]:6.1f} ({t_imp[1]:5.1f}) {diag} "
-              f"{wall / BUDGET_S:5.2f} ({cpu / BUDGET_S:4.2f})")
+        print(
+            f"{fmt:<10} {mb:7.1f} {t_imp[0]:6.1f} ({t_imp[1]:5.1f}) {diag} "
+            f"{wall / BUDGET_S:5.2f} ({cpu / BUDGET_S:4.2f})"
+        )
     return 0
 
 

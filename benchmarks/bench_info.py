@@ -46,6 +46,7 @@ class _Clock:
                 self._depth -= 1
                 if self._depth == 0:
                     self.cpu += time.process_time() - c
+
         return timed
 
 
@@ -82,10 +83,22 @@ def ppo_rollouts(estimator: str, level: str, args) -> dict:
 
     from quad_fault_env.envs.quad_fault import QuadFaultEnv
 
-    venv = make_vec_env(lambda: gym.make(ENV_ID, estimator=estimator, info=level),
-                        n_envs=args.n_envs, seed=0, vec_env_cls=DummyVecEnv)
-    model = PPO("MlpPolicy", venv, n_steps=args.n_steps, batch_size=args.n_steps,
-                n_epochs=1, seed=0, device="cpu", verbose=0)
+    venv = make_vec_env(
+        lambda: gym.make(ENV_ID, estimator=estimator, info=level),
+        n_envs=args.n_envs,
+        seed=0,
+        vec_env_cls=DummyVecEnv,
+    )
+    model = PPO(
+        "MlpPolicy",
+        venv,
+        n_steps=args.n_steps,
+        batch_size=args.n_steps,
+        n_epochs=1,
+        seed=0,
+        device="cpu",
+        verbose=0,
+    )
     model.learn(args.n_steps * args.n_envs)  # warm-up: compile, first allocations
     clocks = {k: _Clock() for k in ("update", "copy", "build")}
     info_of = QuadFaultEnv._info
@@ -100,8 +113,11 @@ def ppo_rollouts(estimator: str, level: str, args) -> dict:
     finally:
         dummy.deepcopy, QuadFaultEnv._info = copy.deepcopy, info_of
         venv.close()
-    return {"rate": steps / rollout, "copy": clocks["copy"].cpu / rollout,
-            "build": clocks["build"].cpu / rollout}
+    return {
+        "rate": steps / rollout,
+        "copy": clocks["copy"].cpu / rollout,
+        "build": clocks["build"].cpu / rollout,
+    }
 
 
 def main(argv=None) -> int:
@@ -139,20 +155,25 @@ def main(argv=None) -> int:
         lo, hi = alone[(est, "light")], alone[(est, "full")]
         print(f"{est:<10} {lo:>8,.0f} {hi:>8,.0f} {lo / hi:>10.2f}x")
     if ppo:
-        print(f"\nPPO on a DummyVecEnv of {args.n_envs} single envs, {args.rollouts} rollouts "
-              f"of {args.n_steps} steps per env (torch 1 thread): rollout env steps per CPU "
-              f"second, and the rollout's CPU share in copying / building the infos")
-        print(f"{'estimator':<10} {'info':<6} {'steps/CPU-s':>12} {'info copy':>10} "
-              f"{'info build':>11}")
+        print(
+            f"\nPPO on a DummyVecEnv of {args.n_envs} single envs, {args.rollouts} rollouts "
+            f"of {args.n_steps} steps per env (torch 1 thread): rollout env steps per CPU "
+            f"second, and the rollout's CPU share in copying / building the infos"
+        )
+        print(
+            f"{'estimator':<10} {'info':<6} {'steps/CPU-s':>12} {'info copy':>10} "
+            f"{'info build':>11}"
+        )
         for est in args.estimators:
             for level in LEVELS:
                 r = ppo[(est, level)]
-                print(f"{est:<10} {level:<6} {r['rate']:>12,.0f} {r['copy']:>10.1%} "
-                      f"{r['build']:>11.1%}")
+                print(
+                    f"{est:<10} {level:<6} {r['rate']:>12,.0f} {r['copy']:>10.1%} "
+                    f"{r['build']:>11.1%}"
+                )
             ratio = ppo[(est, "light")]["rate"] / ppo[(est, "full")]["rate"]
             print(f"{est:<10} light/full rollout speed: {ratio:.2f}x")
-    print(f"\nload average {load0:.1f} before, {load1:.1f} after "
-          f"({os.cpu_count()} cores)")
+    print(f"\nload average {load0:.1f} before, {load1:.1f} after ({os.cpu_count()} cores)")
     return 0
 
 

@@ -39,17 +39,17 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-WORKLOADS = ("run", "online", "online_improved", "ekf", "rls", "ukf", "batched",
-             "batched_improved")
+WORKLOADS = ("run", "online", "online_improved", "ekf", "rls", "ukf", "batched", "batched_improved")
 
 
-def cached_flight(scenario: str, duration: float, integrator: str, cache: Path,
-                  seed: int = 0, paper: bool = False) -> Path:
+def cached_flight(
+    scenario: str, duration: float, integrator: str, cache: Path, seed: int = 0, paper: bool = False
+) -> Path:
     """The recording's path, simulated on first use (``paper``: ``quadfault reproduce``'s
     settings, sigma_f = 0.07 and no upper thrust limit except in ``clipping``)."""
-    from quadfault.recording import write_recording
-    from quadfault.scenarios import named_scenario
-    from quadfault.simulator import SimConfig, simulate
+    from quadfault.io.recording import write_recording
+    from quadfault.model.scenarios import named_scenario
+    from quadfault.sim.simulator import SimConfig, simulate
 
     cache.mkdir(parents=True, exist_ok=True)
     tag = "_paper" if paper else ""
@@ -62,8 +62,9 @@ def cached_flight(scenario: str, duration: float, integrator: str, cache: Path,
             cfg, kw = sim_config(integrator, scenario), {"thrust_noise": 0.07}
         else:
             cfg = SimConfig.reference() if integrator == "reference" else SimConfig()
-        write_recording(simulate(named_scenario(scenario, duration), config=cfg, seed=seed,
-                                 **kw), path)
+        write_recording(
+            simulate(named_scenario(scenario, duration), config=cfg, seed=seed, **kw), path
+        )
     return path
 
 
@@ -104,6 +105,7 @@ def _workload(name: str, rec, args):
             est.reset()
             for s in rows:
                 est.update(s)
+
         return len(rows), online
     if name.startswith("batched"):
         from estimators.batched import BatchedIRLS
@@ -115,20 +117,30 @@ def _workload(name: str, rec, args):
         def tile(x):
             return np.broadcast_to(np.asarray(x, float), (N,) + np.shape(x))
 
-        batches = [(np.full(N, s.t), tile(s.p) + 1e-4 * rng.standard_normal((N, 3)),
-                    tile(s.v), tile(s.R), tile(s.w), tile(s.f)) for s in rows]
+        batches = [
+            (
+                np.full(N, s.t),
+                tile(s.p) + 1e-4 * rng.standard_normal((N, 3)),
+                tile(s.v),
+                tile(s.R),
+                tile(s.w),
+                tile(s.f),
+            )
+            for s in rows
+        ]
         est = BatchedIRLS(veh, N, cfg)
 
         def batched():
             est.reset()
             for b in batches:
                 est.update(*b)
+
         return N * len(batches), batched
     raise SystemExit(f"unknown workload {name!r}")
 
 
 def child(args) -> None:
-    from quadfault.recording import read_recording
+    from quadfault.io.recording import read_recording
 
     rec = read_recording(args.recording).without_truth()
     out = {}
@@ -150,18 +162,28 @@ def child(args) -> None:
 # the parent: alternate checkouts, print medians and ratios
 def _run_child(checkout: Path, args, cold: bool) -> dict:
     env = dict(os.environ, PYTHONPATH=str(checkout))
-    cmd = [sys.executable, str(Path(__file__).resolve()), "--child", "--recording",
-           str(args.recording), "--batch", str(args.batch), "--batch-updates",
-           str(args.batch_updates), "--online-updates", str(args.online_updates), "--inner",
-           str(args.inner)]
+    cmd = [
+        sys.executable,
+        str(Path(__file__).resolve()),
+        "--child",
+        "--recording",
+        str(args.recording),
+        "--batch",
+        str(args.batch),
+        "--batch-updates",
+        str(args.batch_updates),
+        "--online-updates",
+        str(args.online_updates),
+        "--inner",
+        str(args.inner),
+    ]
     for name in args.only:
         cmd += ["--only", name]
     with tempfile.TemporaryDirectory() as cache:
         if cold:
             cmd.append("--cold")
             env["NUMBA_CACHE_DIR"] = cache
-        r = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=checkout,
-                           check=False)
+        r = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=checkout, check=False)
     if r.returncode != 0:
         raise SystemExit(f"{checkout}: benchmark child failed:\n{r.stderr[-2000:]}")
     return json.loads(r.stdout.strip().splitlines()[-1])
@@ -183,36 +205,48 @@ def side_by_side(args) -> None:
         for _ in range(args.cold_repeat):
             for k, path in checkouts.items():
                 cold[k].append(_run_child(path, args, cold=True))
-        print(f"\ncold compile: first call on an empty numba cache [s], median of "
-              f"{args.cold_repeat} ({_load()})")
+        print(
+            f"\ncold compile: first call on an empty numba cache [s], median of "
+            f"{args.cold_repeat} ({_load()})"
+        )
         _table(cold, lambda v: v, "{:8.1f}", lower_is_better=True)
     res = {k: [] for k in checkouts}
     for _ in range(args.repeat):
         for k, path in checkouts.items():
             res[k].append(_run_child(path, args, cold=False))
-    print(f"\nupdates per second (wall clock), median of {args.repeat} alternating runs "
-          f"({_load()})")
+    print(
+        f"\nupdates per second (wall clock), median of {args.repeat} alternating runs ({_load()})"
+    )
     _table(res, lambda v: v["wall"], "{:10.0f}")
     print(f"\nupdates per CPU-second, median of {args.repeat}")
     _table(res, lambda v: v["cpu"], "{:10.0f}")
     if "ekf" in args.only:
         for k, runs in res.items():
-            ratios = [f"{w} {np.median([r['ekf']['cpu'] / r[w]['cpu'] for r in runs]):.2f}x"
-                      for w in ("rls", "ukf") if w in args.only]
+            ratios = [
+                f"{w} {np.median([r['ekf']['cpu'] / r[w]['cpu'] for r in runs]):.2f}x"
+                for w in ("rls", "ukf")
+                if w in args.only
+            ]
             if ratios:
-                print(f"\nCPU time per update relative to the EKF ({k}), median of "
-                      f"{args.repeat}: " + ", ".join(ratios))
+                print(
+                    f"\nCPU time per update relative to the EKF ({k}), median of "
+                    f"{args.repeat}: " + ", ".join(ratios)
+                )
     if "run" in args.only:
         secs = {k: np.median([r["run"]["seconds"] for r in v]) for k, v in res.items()}
-        print("\nrun() of the whole flight: " + ", ".join(f"{k} {s:.2f} s"
-                                                         for k, s in secs.items()))
+        print(
+            "\nrun() of the whole flight: " + ", ".join(f"{k} {s:.2f} s" for k, s in secs.items())
+        )
 
 
 def _table(res: dict, value, fmt: str, lower_is_better: bool = False) -> None:
     names = list(res)
     better = "< 1: this is faster" if lower_is_better else "> 1: this is faster"
-    print(f"{'workload':18s}" + "".join(f"{n:>12s}" for n in names)
-          + (f"   this/reference ({better})" if len(names) > 1 else ""))
+    print(
+        f"{'workload':18s}"
+        + "".join(f"{n:>12s}" for n in names)
+        + (f"   this/reference ({better})" if len(names) > 1 else "")
+    )
     total = {n: 0.0 for n in names}
     for w in res[names[0]][0]:
         med = {n: float(np.median([value(r[w]) for r in res[n]])) for n in names}
@@ -232,21 +266,26 @@ def _table(res: dict, value, fmt: str, lower_is_better: bool = False) -> None:
 def accuracy(args) -> None:
     from estimators.irls import SlidingWindowIRLS
     from estimators.metrics import score
-    from quadfault.recording import read_recording
+    from quadfault.io.recording import read_recording
 
-    print(f"\naccuracy (80 s, quadfault reproduce's flights: sigma_f = 0.07, integrator "
-          f"{args.integrator}, seed {args.seed}, align=end; mean over motors)")
+    print(
+        f"\naccuracy (80 s, quadfault reproduce's flights: sigma_f = 0.07, integrator "
+        f"{args.integrator}, seed {args.seed}, align=end; mean over motors)"
+    )
     print(f"{'scenario':12s} {'rmse':>7s} {'std':>7s} {'spike':>7s} {'ok %':>6s} {'s':>6s}")
     for name in ("degradation", "abrupt", "combined"):
-        rec = read_recording(cached_flight(name, 80.0, args.integrator, args.cache, args.seed,
-                                           paper=True))
+        rec = read_recording(
+            cached_flight(name, 80.0, args.integrator, args.cache, args.seed, paper=True)
+        )
         series = SlidingWindowIRLS(rec.vehicle).run(rec.without_truth())
         sc = score(rec, series)
         spikes = [s for s in (sc.spike or ()) if s is not None]
         spike = f"{np.mean(spikes):.4f}" if spikes else "-"
         ok = 100 * np.mean(series.status == "ok")
-        print(f"{name:12s} {np.mean(sc.rmse):7.4f} {np.mean(sc.std):7.4f} {spike:>7s} "
-              f"{ok:6.1f} {series.seconds:6.2f}")
+        print(
+            f"{name:12s} {np.mean(sc.rmse):7.4f} {np.mean(sc.std):7.4f} {spike:>7s} "
+            f"{ok:6.1f} {series.seconds:6.2f}"
+        )
 
 
 def main() -> None:
@@ -261,13 +300,21 @@ def main() -> None:
     p.add_argument("--batch-updates", type=int, default=30)
     p.add_argument("--online-updates", type=int, default=5000)
     p.add_argument("--repeat", type=int, default=3, help="alternating processes per checkout")
-    p.add_argument("--inner", type=int, default=3, help="timed passes per process (the "
-                   "fastest counts)")
-    p.add_argument("--cold", action="store_true", help="also time the first calls on an "
-                   "empty numba cache (compile time)")
+    p.add_argument(
+        "--inner", type=int, default=3, help="timed passes per process (the fastest counts)"
+    )
+    p.add_argument(
+        "--cold",
+        action="store_true",
+        help="also time the first calls on an empty numba cache (compile time)",
+    )
     p.add_argument("--cold-repeat", type=int, default=1)
-    p.add_argument("--only", choices=WORKLOADS, action="append",
-                   help="these workloads only (repeatable; default all)")
+    p.add_argument(
+        "--only",
+        choices=WORKLOADS,
+        action="append",
+        help="these workloads only (repeatable; default all)",
+    )
     p.add_argument("--accuracy", action="store_true", help="also print the accuracy table")
     p.add_argument("--no-speed", action="store_true", help="skip the speed measurements")
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
@@ -277,8 +324,9 @@ def main() -> None:
     if args.child:
         child(args)
         return
-    args.recording = cached_flight(args.scenario, args.duration, args.integrator, args.cache,
-                                   args.seed)
+    args.recording = cached_flight(
+        args.scenario, args.duration, args.integrator, args.cache, args.seed
+    )
     if not args.no_speed:
         side_by_side(args)
     if args.accuracy:

@@ -61,10 +61,12 @@ def user_path(steps: int) -> list:
             break
     env.close()
     med, p90 = np.median(wall) * 1e3, np.percentile(wall, 90) * 1e3
-    print(f"env.render(), {len(wall)} frames of {frame.shape[1]}x{frame.shape[0]} px: "
-          f"median {med:.1f} ms, 90th percentile {p90:.1f} ms wall, "
-          f"{np.median(cpu) * 1e3:.1f} ms CPU per frame; first frame {first * 1e3:.0f} ms "
-          f"({_load()})")
+    print(
+        f"env.render(), {len(wall)} frames of {frame.shape[1]}x{frame.shape[0]} px: "
+        f"median {med:.1f} ms, 90th percentile {p90:.1f} ms wall, "
+        f"{np.median(cpu) * 1e3:.1f} ms CPU per frame; first frame {first * 1e3:.0f} ms "
+        f"({_load()})"
+    )
     print(f"target <= {TARGET_MS:.0f} ms per frame: {'met' if med <= TARGET_MS else 'NOT met'}")
     return states
 
@@ -94,7 +96,7 @@ def _full_redraw(renderer, states) -> float:
 
 def side_by_side(states, rounds: int) -> None:
     from quad_fault_env.rendering import FlightRenderer
-    from quadfault.vehicle import Vehicle
+    from quadfault.model.vehicle import Vehicle
 
     renderer = FlightRenderer(Vehicle())
     renderer.draw_state(states[-1])  # limits of the whole flight: no redraw while timing
@@ -105,9 +107,11 @@ def side_by_side(states, rounds: int) -> None:
         full.append(_full_redraw(renderer, states))
         renderer.draw_state(states[-1])
     b, f = min(blit) * 1e3, min(full) * 1e3
-    print(f"same {len(states)} frames, best of {rounds} interleaved rounds: blitted "
-          f"{b:.1f} ms, full redraw {f:.1f} ms per frame; full / blitted = {f / b:.1f}x "
-          f"({_load()})")
+    print(
+        f"same {len(states)} frames, best of {rounds} interleaved rounds: blitted "
+        f"{b:.1f} ms, full redraw {f:.1f} ms per frame; full / blitted = {f / b:.1f}x "
+        f"({_load()})"
+    )
 
 
 def against_revision(rev: str, rounds: int, frames: int = 40) -> None:
@@ -120,8 +124,13 @@ def against_revision(rev: str, rounds: int, frames: int = 40) -> None:
     from quad_fault_env.rendering import FlightRenderer
 
     repo = Path(__file__).resolve().parents[1]
-    source = subprocess.run(["git", "show", f"{rev}:quad_fault_env/rendering.py"], cwd=repo,
-                            capture_output=True, text=True, check=True).stdout
+    source = subprocess.run(
+        ["git", "show", f"{rev}:quad_fault_env/rendering.py"],
+        cwd=repo,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
     module = types.ModuleType("reference_rendering")
     sys.modules[module.__name__] = module
     exec(compile(source, f"{rev}:quad_fault_env/rendering.py", "exec"), module.__dict__)
@@ -139,16 +148,21 @@ def against_revision(rev: str, rounds: int, frames: int = 40) -> None:
             for _ in range(frames):
                 r.draw(env)
             best[name] = min(best[name], (time.process_time() - c) / frames)
-    print(f"renderer of {rev} {best[rev] * 1e3:.1f} ms, current {best['current'] * 1e3:.1f} ms "
-          f"CPU per frame: {best[rev] / best['current']:.1f}x ({_load()})")
+    print(
+        f"renderer of {rev} {best[rev] * 1e3:.1f} ms, current {best['current'] * 1e3:.1f} ms "
+        f"CPU per frame: {best[rev] / best['current']:.1f}x ({_load()})"
+    )
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--steps", type=int, default=300, help="frames (control steps, default 300)")
     p.add_argument("--rounds", type=int, default=3, help="interleaved rounds of parts 2 and 3")
-    p.add_argument("--reference", metavar="REV", help="also time the renderer of git revision "
-                   "REV against the current one")
+    p.add_argument(
+        "--reference",
+        metavar="REV",
+        help="also time the renderer of git revision REV against the current one",
+    )
     args = p.parse_args(argv)
     import matplotlib
 

@@ -1,6 +1,6 @@
 """Single-vehicle closed-loop simulation speed at 1 kHz, and the compile time of its kernels.
 
-Times :func:`quadfault.simulator.simulate` (the paper's 80 s ``combined`` flight by default,
+Times :func:`quadfault.sim.simulator.simulate` (the paper's 80 s ``combined`` flight by default,
 the geometric controller in the loop; best of ``--repeat``), a flight with effects (drag and
 motor lag, compiled into the loop's effect chain; after a warm-up flight with the same
 effects, best of ``--repeat``) and the cold start: the
@@ -24,13 +24,17 @@ import tempfile
 import time
 
 
-def flights(duration: float = 80.0, effects_duration: float = 4.0, repeat: int = 3,
-            scenario: str = "combined") -> dict:
+def flights(
+    duration: float = 80.0,
+    effects_duration: float = 4.0,
+    repeat: int = 3,
+    scenario: str = "combined",
+) -> dict:
     """Wall seconds of the timed flights (each after a warm-up flight that compiles or loads
     its kernels)."""
-    from quadfault.effects import parse_effect
-    from quadfault.scenarios import named_scenario
-    from quadfault.simulator import simulate
+    from quadfault.model.effects import parse_effect
+    from quadfault.model.scenarios import named_scenario
+    from quadfault.sim.simulator import simulate
 
     simulate(named_scenario(scenario, 0.01))  # compile or load the cache
     sc = named_scenario(scenario, duration)
@@ -47,16 +51,19 @@ def flights(duration: float = 80.0, effects_duration: float = 4.0, repeat: int =
         t0 = time.perf_counter()
         simulate(sc_fx, seed=4, effects=fx)
         best_fx = min(best_fx, time.perf_counter() - t0)
-    return {"flight_s": best, "steps": round(duration / 1e-3),
-            "effects_flight_s": best_fx,
-            "effects_steps": round(effects_duration / 1e-3)}
+    return {
+        "flight_s": best,
+        "steps": round(duration / 1e-3),
+        "effects_flight_s": best_fx,
+        "effects_steps": round(effects_duration / 1e-3),
+    }
 
 
 def cold_start(scenario: str = "combined") -> dict:
     """CPU seconds of the first 10 ms flight with an empty numba cache (set by the caller's
     environment: ``NUMBA_CACHE_DIR``)."""
-    from quadfault.scenarios import named_scenario
-    from quadfault.simulator import simulate
+    from quadfault.model.scenarios import named_scenario
+    from quadfault.sim.simulator import simulate
 
     c0, w0 = time.process_time(), time.perf_counter()
     simulate(named_scenario(scenario, 0.01))
@@ -77,26 +84,54 @@ def main(argv=None) -> int:
     kw = dict(duration=args.duration, repeat=args.repeat, scenario=args.scenario)
     if args.baseline:
         now, base = sbs.compare(args.baseline, "bench_simulator", "flights", args.rounds, **kw)
-        cold = [sbs.compare(args.baseline, "bench_simulator", "cold_start", 1,
-                            env={"NUMBA_CACHE_DIR": tempfile.mkdtemp(prefix="qf-cold-")},
-                            scenario=args.scenario) for _ in range(args.rounds)]
+        cold = [
+            sbs.compare(
+                args.baseline,
+                "bench_simulator",
+                "cold_start",
+                1,
+                env={"NUMBA_CACHE_DIR": tempfile.mkdtemp(prefix="qf-cold-")},
+                scenario=args.scenario,
+            )
+            for _ in range(args.rounds)
+        ]
         now.update({k: min(c[0][k] for c in cold) for k in cold[0][0]})
         base.update({k: min(c[1][k] for c in cold) for k in cold[0][1]})
     else:
         now, base = sbs.measure(sbs.ROOT, "bench_simulator", "flights", **kw), None
-        now.update(sbs.measure(sbs.ROOT, "bench_simulator", "cold_start",
-                               env={"NUMBA_CACHE_DIR": tempfile.mkdtemp(prefix="qf-cold-")},
-                               scenario=args.scenario))
-    print(f"# simulate(), scenario {args.scenario}, dt = 1 ms; {sbs.load()} on "
-          f"{os.cpu_count()} cpus")
-    rows = [("flight", f"{args.duration:g} s flight [s]", now["flight_s"],
-             base and base["flight_s"]),
-            ("us/step", "microseconds per step", 1e6 * now["flight_s"] / now["steps"],
-             base and 1e6 * base["flight_s"] / base["steps"]),
-            ("effects", f"lissajous {now['effects_steps'] / 1e3:g} s with drag + motor lag [s]",
-             now["effects_flight_s"], base and base["effects_flight_s"]),
-            ("cold", "first flight, empty numba cache [CPU s]", now["cold_cpu_s"],
-             base and base["cold_cpu_s"])]
+        now.update(
+            sbs.measure(
+                sbs.ROOT,
+                "bench_simulator",
+                "cold_start",
+                env={"NUMBA_CACHE_DIR": tempfile.mkdtemp(prefix="qf-cold-")},
+                scenario=args.scenario,
+            )
+        )
+    print(
+        f"# simulate(), scenario {args.scenario}, dt = 1 ms; {sbs.load()} on {os.cpu_count()} cpus"
+    )
+    rows = [
+        ("flight", f"{args.duration:g} s flight [s]", now["flight_s"], base and base["flight_s"]),
+        (
+            "us/step",
+            "microseconds per step",
+            1e6 * now["flight_s"] / now["steps"],
+            base and 1e6 * base["flight_s"] / base["steps"],
+        ),
+        (
+            "effects",
+            f"lissajous {now['effects_steps'] / 1e3:g} s with drag + motor lag [s]",
+            now["effects_flight_s"],
+            base and base["effects_flight_s"],
+        ),
+        (
+            "cold",
+            "first flight, empty numba cache [CPU s]",
+            now["cold_cpu_s"],
+            base and base["cold_cpu_s"],
+        ),
+    ]
     if base:
         print("| measure | baseline | this checkout | baseline / this |\n|---|---|---|---|")
         for _, label, x, y in rows:

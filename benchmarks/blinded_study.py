@@ -1,7 +1,7 @@
 """Blinded study of the model-mismatch diagnosis.
 
 Each recording hides an effect drawn at random -- none, one of the effects of
-``quadfault.effects.EFFECT_NAMES``, or a pair of effects from different classes -- on a
+``quadfault.model.effects.EFFECT_NAMES``, or a pair of effects from different classes -- on a
 randomised vehicle (mass 0.03-3 kg with inertia, arm and yaw coefficient scaled consistently),
 a randomised trajectory (circle or Lissajous; low altitude for ground effect), random sensor
 and thrust noise, written in NED or ENU with ``f`` or ``u`` commands and read back. The
@@ -20,6 +20,7 @@ reported). Classes (``quadfault.diagnosis.library.EQUIVALENT``): ``thrust_scale`
 Flights use 250 Hz physics and recording rate and 15 s by default (``--rate``,
 ``--duration``), in parallel over ``--workers`` processes.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -37,24 +38,38 @@ import numpy as np
 
 import quadfault.diagnosis.locate  # imported before forking the workers (and not timed)
 import quadfault.diagnosis.prediction  # noqa: F401
-from quadfault import effects as fx
 from quadfault.diagnosis import Diagnosis
 from quadfault.diagnosis.identifiability import TIMING_SAMPLES
 from quadfault.diagnosis.library import EQUIVALENT, build_library, predict
 from quadfault.diagnosis.residuals import noise_scale, prepare
-from quadfault.effects.model import frame_vectors
-from quadfault.effects.registry import identifiability
 from quadfault.fileio import atomic_write_text
-from quadfault.recording import read_recording, write_recording
-from quadfault.scenarios import LinearVoltage, named_scenario
-from quadfault.simulator import SensorNoise, SimConfig, simulate
-from quadfault.trajectory import Circle, Lissajous
-from quadfault.vehicle import PAPER_YAW_SIGNS, Vehicle
+from quadfault.io.recording import read_recording, write_recording
+from quadfault.model import effects as fx
+from quadfault.model.effects.model import frame_vectors
+from quadfault.model.effects.registry import identifiability
+from quadfault.model.scenarios import LinearVoltage, named_scenario
+from quadfault.model.trajectory import Circle, Lissajous
+from quadfault.model.vehicle import PAPER_YAW_SIGNS, Vehicle
+from quadfault.sim.simulator import SensorNoise, SimConfig, simulate
 
 #: the effects hidden, in the order the study's seeds draw them from (every registered effect)
-NAMES = ("motor_efficiency", "thrust_scale", "drag", "motor_lag", "delay", "wind", "ground_effect",
-         "com_offset", "inertia", "blade_flapping", "rotor_inertia", "battery_thrust",
-         "thrust_curve", "mass", "rate_damping")
+NAMES = (
+    "motor_efficiency",
+    "thrust_scale",
+    "drag",
+    "motor_lag",
+    "delay",
+    "wind",
+    "ground_effect",
+    "com_offset",
+    "inertia",
+    "blade_flapping",
+    "rotor_inertia",
+    "battery_thrust",
+    "thrust_curve",
+    "mass",
+    "rate_damping",
+)
 assert sorted(NAMES) == sorted(fx.EFFECT_NAMES), "a new effect: add it to the study's NAMES"
 
 
@@ -70,27 +85,49 @@ def random_vehicle(rng):
     jyy = m * dy * dy * rng.uniform(0.25, 0.4)
     jzz = (jxx + jyy) * rng.uniform(0.8, 1.0)
     pos = [(d, dy), (d, -dy), (-d, -dy), (-d, dy)]
-    return Vehicle.from_rotors(pos, PAPER_YAW_SIGNS, d * rng.uniform(0.03, 0.06), mass=m,
-                               inertia=(jxx, jyy, jzz), gravity=9.81,
-                               thrust_to_weight=float(rng.uniform(2.0, 2.6)),
-                               name=f"random {m:.3f} kg")
+    return Vehicle.from_rotors(
+        pos,
+        PAPER_YAW_SIGNS,
+        d * rng.uniform(0.03, 0.06),
+        mass=m,
+        inertia=(jxx, jyy, jzz),
+        gravity=9.81,
+        thrust_to_weight=float(rng.uniform(2.0, 2.6)),
+        name=f"random {m:.3f} kg",
+    )
 
 
 def random_trajectory(rng, scale, low=None):
     alt = float(rng.uniform(1.0, 2.0)) if low is None else low
     if low is not None:  # ground effect needs the height to vary (else it is a thrust scale)
-        return Lissajous(amplitude=(float(rng.uniform(0.5, 1.5) * scale),
-                                    float(rng.uniform(0.5, 1.5) * scale),
-                                    float(rng.uniform(0.3, 0.5) * low)),
-                         frequency=float(rng.uniform(0.12, 0.22)), altitude=alt,
-                         yaw_rate=float(rng.uniform(-0.2, 0.2)))
+        return Lissajous(
+            amplitude=(
+                float(rng.uniform(0.5, 1.5) * scale),
+                float(rng.uniform(0.5, 1.5) * scale),
+                float(rng.uniform(0.3, 0.5) * low),
+            ),
+            frequency=float(rng.uniform(0.12, 0.22)),
+            altitude=alt,
+            yaw_rate=float(rng.uniform(-0.2, 0.2)),
+        )
     if rng.random() < 0.5:
-        return Circle(radius=float(rng.uniform(0.8, 2.0) * scale), frequency=float(rng.uniform(0.12, 0.25)),
-                      altitude=alt, yaw_frequency=float(rng.uniform(0.0, 0.05)))
-    amp = (float(rng.uniform(0.8, 2.0) * scale), float(rng.uniform(0.5, 1.5) * scale),
-           float(rng.uniform(0.05, 0.3) * (scale if low is None else 0.3 * low)))
-    return Lissajous(amplitude=amp, frequency=float(rng.uniform(0.12, 0.22)), altitude=alt,
-                     yaw_rate=float(rng.uniform(-0.2, 0.2)))
+        return Circle(
+            radius=float(rng.uniform(0.8, 2.0) * scale),
+            frequency=float(rng.uniform(0.12, 0.25)),
+            altitude=alt,
+            yaw_frequency=float(rng.uniform(0.0, 0.05)),
+        )
+    amp = (
+        float(rng.uniform(0.8, 2.0) * scale),
+        float(rng.uniform(0.5, 1.5) * scale),
+        float(rng.uniform(0.05, 0.3) * (scale if low is None else 0.3 * low)),
+    )
+    return Lissajous(
+        amplitude=amp,
+        frequency=float(rng.uniform(0.12, 0.22)),
+        altitude=alt,
+        yaw_rate=float(rng.uniform(-0.2, 0.2)),
+    )
 
 
 def make_effect(name, delta, veh, rng_params, nominal_curve=None, duration=15.0):
@@ -118,8 +155,13 @@ def make_effect(name, delta, veh, rng_params, nominal_curve=None, duration=15.0)
         return fx.Delay(float(np.clip(0.015 * delta, 0.002, 0.15)))
     if name == "wind":
         v = min(2.0 * delta, 12.0)
-        return fx.Wind((v * math.cos(p["dir"]), v * math.sin(p["dir"]), 0.0), gust=0.1 * v,
-                       gust_tau=3.0, k=(0.3 * m,) * 3, seed=p["seed"])
+        return fx.Wind(
+            (v * math.cos(p["dir"]), v * math.sin(p["dir"]), 0.0),
+            gust=0.1 * v,
+            gust_tau=3.0,
+            k=(0.3 * m,) * 3,
+            seed=p["seed"],
+        )
     if name == "ground_effect":
         return fx.GroundEffect(float(np.clip(0.6 * d * math.sqrt(delta), 0.05 * d, 1.2 * d)))
     if name == "com_offset":
@@ -136,14 +178,15 @@ def make_effect(name, delta, veh, rng_params, nominal_curve=None, duration=15.0)
     if name == "battery_thrust":
         cells = 1 if m < 0.1 else (3 if m < 1.5 else 4)
         v0 = 4.2 * cells
-        return fx.BatteryThrust(float(np.clip(0.4 * delta, 0.2, 3.5)), v0, v0 * p["drop"],
-                                duration)
+        return fx.BatteryThrust(float(np.clip(0.4 * delta, 0.2, 3.5)), v0, v0 * p["drop"], duration)
     if name == "thrust_curve":
         nominal = nominal_curve or fx.thrust_curve.IDENTITY_CURVE
-        changes = np.clip(np.array([p["s0"] * 0.02, p["sign"] * 0.05, p["s2"] * 0.05]) * delta,
-                          -0.45, 0.45)  # inside the plausible bounds (+-0.5)
-        return fx.ThrustCurve(tuple(fx.curve_from_changes(nominal, veh.hover_thrust, changes)),
-                              nominal)
+        changes = np.clip(
+            np.array([p["s0"] * 0.02, p["sign"] * 0.05, p["s2"] * 0.05]) * delta, -0.45, 0.45
+        )  # inside the plausible bounds (+-0.5)
+        return fx.ThrustCurve(
+            tuple(fx.curve_from_changes(nominal, veh.hover_thrust, changes)), nominal
+        )
     if name == "mass":
         return fx.Mass(float(np.clip(1.0 + p["sign"] * 0.04 * delta, 0.7, 1.5)))
     if name == "rate_damping":
@@ -168,8 +211,10 @@ def snr(rec, effects, veh):
     out = []
     for t in terms:
         sig = (predict(rp, [t]) - base) / scale
-        out.append(float(np.sqrt(np.mean(np.sum(sig ** 2, axis=1)) / 1.0)))
-    noise = float(np.sqrt(np.mean(np.sum(((rp.measured - predict(rp, terms)) / scale) ** 2, axis=1))))
+        out.append(float(np.sqrt(np.mean(np.sum(sig**2, axis=1)) / 1.0)))
+    noise = float(
+        np.sqrt(np.mean(np.sum(((rp.measured - predict(rp, terms)) / scale) ** 2, axis=1)))
+    )
     return [s / max(noise, 1e-12) for s in out]
 
 
@@ -185,8 +230,9 @@ def fly(veh, traj, effects, noise, thrust_noise, rate, duration, seed, vbat=None
         voltage = LinearVoltage(vbat[0], vbat[1], duration)
     sc = named_scenario("nominal", duration, dt).replace(trajectory=traj, voltage=voltage)
     cfg = SimConfig(dt=dt, sensor_noise=noise)
-    return simulate(sc, vehicle=veh, config=cfg, seed=seed, effects=tuple(effects),
-                    thrust_noise=thrust_noise)
+    return simulate(
+        sc, vehicle=veh, config=cfg, seed=seed, effects=tuple(effects), thrust_noise=thrust_noise
+    )
 
 
 def draw_case(seed, i):
@@ -207,21 +253,44 @@ def draw_case(seed, i):
     scale = float(np.clip(veh.mass ** (1 / 3), 0.4, 1.4))
     low = float(rng.uniform(1.2, 2.5) * d) + 0.05 if "ground_effect" in names else None
     traj = random_trajectory(rng, scale, low)
-    noise = SensorNoise(float(rng.uniform(0.001, 0.005)), float(rng.uniform(0.002, 0.008)),
-                        float(rng.uniform(0.0005, 0.002)), float(rng.uniform(0.0005, 0.003)))
-    params = {n: {"motor": int(rng.integers(4)), "sign": float(rng.choice([-1.0, 1.0])),
-                  "ky": float(rng.uniform(0.8, 1.2)), "kz": float(rng.uniform(0.3, 1.0)),
-                  "dir": float(rng.uniform(0, 2 * math.pi)), "seed": int(rng.integers(1 << 30))}
-              for n in names}
+    noise = SensorNoise(
+        float(rng.uniform(0.001, 0.005)),
+        float(rng.uniform(0.002, 0.008)),
+        float(rng.uniform(0.0005, 0.002)),
+        float(rng.uniform(0.0005, 0.003)),
+    )
+    params = {
+        n: {
+            "motor": int(rng.integers(4)),
+            "sign": float(rng.choice([-1.0, 1.0])),
+            "ky": float(rng.uniform(0.8, 1.2)),
+            "kz": float(rng.uniform(0.3, 1.0)),
+            "dir": float(rng.uniform(0, 2 * math.pi)),
+            "seed": int(rng.integers(1 << 30)),
+        }
+        for n in names
+    }
     target = [float(rng.uniform(3.0, 10.0)) for _ in names]
-    case = dict(names=names, veh=veh, traj=traj, noise=noise,
-                thrust_noise=float(rng.uniform(0.0, 0.05)), params=params, target=target,
-                frame=str(rng.choice(["NED", "ENU"])), commands=str(rng.choice(["f", "u"])),
-                sim_seed=int(rng.integers(1 << 30)))
+    case = dict(
+        names=names,
+        veh=veh,
+        traj=traj,
+        noise=noise,
+        thrust_noise=float(rng.uniform(0.0, 0.05)),
+        params=params,
+        target=target,
+        frame=str(rng.choice(["NED", "ENU"])),
+        commands=str(rng.choice(["f", "u"])),
+        sim_seed=int(rng.integers(1 << 30)),
+    )
     for n in names:
-        params[n].update(ratio=float(rng.uniform(0.2, 0.6)), drop=float(rng.uniform(0.85, 0.92)),
-                         s0=float(rng.choice([-1.0, 1.0])), s2=float(rng.choice([-1.0, 1.0])),
-                         quad=float(rng.uniform(0.0, 0.5)))
+        params[n].update(
+            ratio=float(rng.uniform(0.2, 0.6)),
+            drop=float(rng.uniform(0.85, 0.92)),
+            s0=float(rng.choice([-1.0, 1.0])),
+            s2=float(rng.choice([-1.0, 1.0])),
+            quad=float(rng.uniform(0.0, 0.5)),
+        )
     case["vbat"] = (12.6, 12.6 * float(rng.uniform(0.85, 0.92))) if rng.random() < 0.5 else None
     return case
 
@@ -255,8 +324,10 @@ def param_error(true, found, veh):
         s = np.array(true.scale[:2])
         return float(np.linalg.norm(np.array(p["scale"][:2]) - s) / np.linalg.norm(s - 1))
     if n == "blade_flapping":
-        return 0.5 * (abs(p["k_force_s_per_m"] - true.k_force) / true.k_force
-                      + abs(p["k_moment_s"] - true.k_moment) / abs(true.k_moment))
+        return 0.5 * (
+            abs(p["k_force_s_per_m"] - true.k_force) / true.k_force
+            + abs(p["k_moment_s"] - true.k_moment) / abs(true.k_moment)
+        )
     if n == "rotor_inertia":
         return abs(p["kappa_m_s"] - true.kappa) / true.kappa
     if n == "battery_thrust":
@@ -265,13 +336,14 @@ def param_error(true, found, veh):
         return abs(p["scale"] - true.scale) / abs(true.scale - 1)
     if n == "rate_damping":
         d = np.array(true.linear[:2])
-        return float(np.linalg.norm(np.array(p["linear_N_m_s_per_rad"][:2]) - d)
-                     / np.linalg.norm(d))
+        return float(
+            np.linalg.norm(np.array(p["linear_N_m_s_per_rad"][:2]) - d) / np.linalg.norm(d)
+        )
     if n == "thrust_curve":  # the thrust change over commands of 0.6-1.4 times hover thrust
         f = np.linspace(0.6, 1.4, 41) * veh.hover_thrust
         dtrue = fx.recurve(f, true.nominal, true.curve) - f
         dfound = fx.recurve(f, p["nominal_curve"], p["curve"]) - f
-        return float(np.sqrt(np.mean((dfound - dtrue) ** 2) / np.mean(dtrue ** 2)))
+        return float(np.sqrt(np.mean((dfound - dtrue) ** 2) / np.mean(dtrue**2)))
     return float("nan")
 
 
@@ -285,8 +357,9 @@ def as_commands(rec, curve):
     if curve is None:
         return rec
     u = fx.curve_command(curve, rec.thrust_cmd)
-    return dataclasses.replace(rec, commands_u=u, thrust_curve=curve,
-                               thrust_cmd=fx.curve_thrust(curve, u))
+    return dataclasses.replace(
+        rec, commands_u=u, thrust_curve=curve, thrust_cmd=fx.curve_thrust(curve, u)
+    )
 
 
 def run_one(job):
@@ -310,29 +383,53 @@ def run_one(job):
     else:
         if c["names"]:
             unit = [make(n, 1.0, 5.0) for n in c["names"]]
-            pilot = fly(veh, c["traj"], unit, c["noise"], c["thrust_noise"], rate, 5.0,
-                        c["sim_seed"], c["vbat"])
+            pilot = fly(
+                veh,
+                c["traj"],
+                unit,
+                c["noise"],
+                c["thrust_noise"],
+                rate,
+                5.0,
+                c["sim_seed"],
+                c["vbat"],
+            )
             s0 = snr(as_commands(pilot, curve), unit, veh)
             for n, s, k in zip(c["names"], s0, c["target"]):
                 ratio = k / max(s, 1e-6)
-                delta = ratio ** 0.5 if n == "ground_effect" else ratio  # signal ~ r^2 there
+                delta = ratio**0.5 if n == "ground_effect" else ratio  # signal ~ r^2 there
                 deltas.append(float(delta))
                 effects.append(make(n, delta, duration))
-        rec = fly(veh, c["traj"], effects, c["noise"], c["thrust_noise"], rate, duration,
-                  c["sim_seed"], c["vbat"])
+        rec = fly(
+            veh,
+            c["traj"],
+            effects,
+            c["noise"],
+            c["thrust_noise"],
+            rate,
+            duration,
+            c["sim_seed"],
+            c["vbat"],
+        )
         rec = as_commands(rec, curve)
         if effects:
             achieved = snr(rec, effects, veh)
         t_sim = time.perf_counter() - t0
         with tempfile.TemporaryDirectory() as tmp:
-            path = os.path.join(tmp if stem is None else store, "flight.csv" if stem is None
-                                else os.path.basename(stem) + ".csv")
+            path = os.path.join(
+                tmp if stem is None else store,
+                "flight.csv" if stem is None else os.path.basename(stem) + ".csv",
+            )
             write_recording(rec.without_truth(), path, frame=c["frame"], force=True)
             blind = read_recording(path)
         if stem is not None:
-            atomic_write_text(stem + ".truth.json",
-                              json.dumps({"names": c["names"], "deltas": deltas, "snr": achieved,
-                                          "t_sim": t_sim}), force=True)
+            atomic_write_text(
+                stem + ".truth.json",
+                json.dumps(
+                    {"names": c["names"], "deltas": deltas, "snr": achieved, "t_sim": t_sim}
+                ),
+                force=True,
+            )
     t1, c1 = time.perf_counter(), time.process_time()
     res = Diagnosis().fit(blind)
     t_diag, cpu_diag = time.perf_counter() - t1, time.process_time() - c1
@@ -344,16 +441,27 @@ def run_one(job):
         if match:
             f = dataclasses.replace(match[0], params=frame_vectors(match[0].params, frame))
             errs[e.name] = param_error(e, f, veh)
-    return dict(i=i, truth=c["names"], found=found, snr=achieved, target=c["target"],
-                indistinguishable=[n["names"] for n in res.indistinguishable],
-                verdict=res.verdict,
-                below_resolution=[n["held_out"] for n in res.indistinguishable
-                                  if "held_out" in n],
-                mass=veh.mass, frame=c["frame"], commands=c["commands"],
-                improvement=res.model_improvement, param_errors=errs,
-                t_diag=t_diag, cpu_diag=cpu_diag, t_sim=t_sim, samples=len(blind),
-                params={f.name: f.params for f in res.effects},
-                truth_params=[e.describe() for e in effects])
+    return dict(
+        i=i,
+        truth=c["names"],
+        found=found,
+        snr=achieved,
+        target=c["target"],
+        indistinguishable=[n["names"] for n in res.indistinguishable],
+        verdict=res.verdict,
+        below_resolution=[n["held_out"] for n in res.indistinguishable if "held_out" in n],
+        mass=veh.mass,
+        frame=c["frame"],
+        commands=c["commands"],
+        improvement=res.model_improvement,
+        param_errors=errs,
+        t_diag=t_diag,
+        cpu_diag=cpu_diag,
+        t_sim=t_sim,
+        samples=len(blind),
+        params={f.name: f.params for f in res.effects},
+        truth_params=[e.describe() for e in effects],
+    )
 
 
 def resolvable(row, rate) -> list:
@@ -374,13 +482,21 @@ def resolvable(row, rate) -> list:
 def summarise(rows, rate, duration) -> dict:
     rows_all = rows
     below = [r for r in rows if r["truth"] and not resolvable(r, rate)]
-    top_all = [bool(r["found"]) and cls(r["found"][0]) in {cls(n) for n in r["truth"]}
-               for r in rows if r["truth"]]
-    rows = [dict(r, truth=resolvable(r, rate)) for r in rows if not (r["truth"] and
-                                                                    not resolvable(r, rate))]
+    top_all = [
+        bool(r["found"]) and cls(r["found"][0]) in {cls(n) for n in r["truth"]}
+        for r in rows
+        if r["truth"]
+    ]
+    rows = [
+        dict(r, truth=resolvable(r, rate))
+        for r in rows
+        if not (r["truth"] and not resolvable(r, rate))
+    ]
     with_eff = [r for r in rows if r["truth"]]
     none = [r for r in rows if not r["truth"]]
-    top_ok = [bool(r["found"]) and cls(r["found"][0]) in {cls(n) for n in r["truth"]} for r in with_eff]
+    top_ok = [
+        bool(r["found"]) and cls(r["found"][0]) in {cls(n) for n in r["truth"]} for r in with_eff
+    ]
     all_ok = [{cls(n) for n in r["found"]} == {cls(n) for n in r["truth"]} for r in with_eff]
     exact_top = [bool(r["found"]) and r["found"][0] in r["truth"] for r in with_eff]
     fa = [bool(r["found"]) for r in none]
@@ -398,23 +514,31 @@ def summarise(rows, rate, duration) -> dict:
     tdiag = np.array([r["t_diag"] for r in rows])
     per60k = tdiag * (60.0 * 1000.0) / np.array([r["samples"] for r in rows])
     return {
-        "n": len(rows_all), "n_with_effect": len(with_eff), "n_effect_free": len(none),
+        "n": len(rows_all),
+        "n_with_effect": len(with_eff),
+        "n_effect_free": len(none),
         "n_below_resolution": len(below),
         "below_resolution_found_nothing": sum(not r["found"] for r in below),
-        "below_resolution_found": {n: sum(bool(r["found"]) and r["found"][0] == n
-                                          for r in below)
-                                   for n in sorted({r["found"][0] for r in below
-                                                    if r["found"]})},
+        "below_resolution_found": {
+            n: sum(bool(r["found"]) and r["found"][0] == n for r in below)
+            for n in sorted({r["found"][0] for r in below if r["found"]})
+        },
         # an effect named indistinguishable from the time constant (the entries of the time
         # constant itself, with their figures, are counted apart)
         "below_resolution_indistinguishable": sum(
-            len(r.get("indistinguishable", [])) > len(r.get("below_resolution", []))
-            for r in below),
+            len(r.get("indistinguishable", [])) > len(r.get("below_resolution", [])) for r in below
+        ),
         "below_resolution_mismatch": sum(r.get("verdict") == "mismatch" for r in below),
-        "below_resolution_gain": [min((b["improvement"] for r in below
-                                       for b in r.get("below_resolution", [])), default=None),
-                                  max((b["improvement"] for r in below
-                                       for b in r.get("below_resolution", [])), default=None)],
+        "below_resolution_gain": [
+            min(
+                (b["improvement"] for r in below for b in r.get("below_resolution", [])),
+                default=None,
+            ),
+            max(
+                (b["improvement"] for r in below for b in r.get("below_resolution", [])),
+                default=None,
+            ),
+        ],
         "top_effect_correct": float(np.mean(top_ok)) if top_ok else None,
         "top_effect_correct_every_concealed": float(np.mean(top_all)) if top_all else None,
         "top_effect_exact_name": float(np.mean(exact_top)) if exact_top else None,
@@ -425,23 +549,32 @@ def summarise(rows, rate, duration) -> dict:
         "held_out_improvement_median": float(np.median(imp)) if imp else None,
         "held_out_improvement_ge_50pct": float(np.mean(np.array(imp) >= 0.5)) if imp else None,
         "seconds_per_recording_median": float(np.median(tdiag)),
-        "cpu_seconds_per_recording_median": float(np.median([r.get("cpu_diag", np.nan)
-                                                             for r in rows])),
+        "cpu_seconds_per_recording_median": float(
+            np.median([r.get("cpu_diag", np.nan) for r in rows])
+        ),
         "seconds_per_60s_at_1kHz_extrapolated_median": float(np.median(per60k)),
-        "snr_achieved_median": float(np.median([s for r in rows for s in r["snr"]])) if with_eff else None,
+        "snr_achieved_median": float(np.median([s for r in rows for s in r["snr"]]))
+        if with_eff
+        else None,
         "confusion": {f"{a} -> {b}": v for (a, b), v in sorted(conf.items())},
-        "rate_hz": rate, "duration_s": duration,
+        "rate_hz": rate,
+        "duration_s": duration,
     }
 
 
 def print_summary(s, rows):
-    print(f"\nBlinded study: {s['n']} recordings ({s['n_with_effect']} with effects, "
-          f"{s['n_effect_free']} effect-free), {s['rate_hz']:.0f} Hz, {s['duration_s']:.0f} s")
+    print(
+        f"\nBlinded study: {s['n']} recordings ({s['n_with_effect']} with effects, "
+        f"{s['n_effect_free']} effect-free), {s['rate_hz']:.0f} Hz, {s['duration_s']:.0f} s"
+    )
     classes = {}
     for name, c in EQUIVALENT.items():
         classes.setdefault(c, []).append(name)
-    print("classes: " + ", ".join(f"{c} = {{{', '.join(v)}}}" for c, v in classes.items())
-          + " (not separable in general; each counted as one class)")
+    print(
+        "classes: "
+        + ", ".join(f"{c} = {{{', '.join(v)}}}" for c, v in classes.items())
+        + " (not separable in general; each counted as one class)"
+    )
     truths = sorted({k.split(" -> ")[0] for k in s["confusion"]})
     founds = sorted({k.split(" -> ")[1] for k in s["confusion"]})
     w = max(len(t) for t in truths) + 2
@@ -450,54 +583,94 @@ def print_summary(s, rows):
     for t in truths:
         print(f"{t:<{w}}" + "".join(f"{s['confusion'].get(f'{t} -> {f}', 0):>10}" for f in founds))
     print()
-    for key in ("top_effect_correct", "top_effect_exact_name", "all_effects_correct",
-                "false_alarm_rate", "median_param_error", "held_out_improvement_median",
-                "held_out_improvement_ge_50pct", "seconds_per_recording_median",
-                "cpu_seconds_per_recording_median",
-                "seconds_per_60s_at_1kHz_extrapolated_median", "snr_achieved_median"):
+    for key in (
+        "top_effect_correct",
+        "top_effect_exact_name",
+        "all_effects_correct",
+        "false_alarm_rate",
+        "median_param_error",
+        "held_out_improvement_median",
+        "held_out_improvement_ge_50pct",
+        "seconds_per_recording_median",
+        "cpu_seconds_per_recording_median",
+        "seconds_per_60s_at_1kHz_extrapolated_median",
+        "snr_achieved_median",
+    ):
         v = s[key]
         print(f"{key:<46} {'n/a' if v is None else f'{v:.3f}'}")
     if s["n_below_resolution"]:
-        print(f"{s['n_below_resolution']} concealed time constants shorter than "
-              f"{TIMING_SAMPLES:g} sample periods (below what the recording resolves; left out "
-              f"of the scores above): nothing accepted on {s['below_resolution_found_nothing']}"
-              + "".join(f", {k} on {v}" for k, v in s["below_resolution_found"].items())
-              + (f" (on {s['below_resolution_indistinguishable']} of them an effect named "
-                 "indistinguishable from the time constant, and not accepted)"
-                 if s["below_resolution_indistinguishable"] else "")
-              + f"; verdict mismatch on {s['below_resolution_mismatch']}"
-              + ("" if s["below_resolution_gain"][0] is None else
-                 " (a time constant below the resolution explains "
-                 f"{100 * s['below_resolution_gain'][0]:.0f}-"
-                 f"{100 * s['below_resolution_gain'][1]:.0f} % held out)")
-              + f"; top effect correct counting them: "
-              f"{s['top_effect_correct_every_concealed']:.3f}")
-    print("median parameter error by effect:",
-          ", ".join(f"{k} {v:.3f}" for k, v in sorted(s["median_param_error_by_effect"].items())))
+        print(
+            f"{s['n_below_resolution']} concealed time constants shorter than "
+            f"{TIMING_SAMPLES:g} sample periods (below what the recording resolves; left out "
+            f"of the scores above): nothing accepted on {s['below_resolution_found_nothing']}"
+            + "".join(f", {k} on {v}" for k, v in s["below_resolution_found"].items())
+            + (
+                f" (on {s['below_resolution_indistinguishable']} of them an effect named "
+                "indistinguishable from the time constant, and not accepted)"
+                if s["below_resolution_indistinguishable"]
+                else ""
+            )
+            + f"; verdict mismatch on {s['below_resolution_mismatch']}"
+            + (
+                ""
+                if s["below_resolution_gain"][0] is None
+                else " (a time constant below the resolution explains "
+                f"{100 * s['below_resolution_gain'][0]:.0f}-"
+                f"{100 * s['below_resolution_gain'][1]:.0f} % held out)"
+            )
+            + f"; top effect correct counting them: "
+            f"{s['top_effect_correct_every_concealed']:.3f}"
+        )
+    print(
+        "median parameter error by effect:",
+        ", ".join(f"{k} {v:.3f}" for k, v in sorted(s["median_param_error_by_effect"].items())),
+    )
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--n", type=int, default=200, help="number of recordings (default 200)")
-    ap.add_argument("--seed", type=int, default=2026,
-                    help="study seed (default 2026, the held-out seed never used for tuning)")
+    ap.add_argument(
+        "--seed",
+        type=int,
+        default=2026,
+        help="study seed (default 2026, the held-out seed never used for tuning)",
+    )
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
-    ap.add_argument("--backend", choices=("pool", "ray"), default="pool",
-                    help="local process pool (default) or Ray (agents.sweep.run_sweep)")
+    ap.add_argument(
+        "--backend",
+        choices=("pool", "ray"),
+        default="pool",
+        help="local process pool (default) or Ray (agents.sweep.run_sweep)",
+    )
     ap.add_argument("--rate", type=float, default=250.0, help="physics and recording rate [Hz]")
     ap.add_argument("--duration", type=float, default=15.0, help="flight duration [s]")
     ap.add_argument("--out", default=None, help="write rows and summary to this JSON file")
-    ap.add_argument("--only", default=None, metavar="NAME,...",
-                    help="development: keep only cases concealing one of these effects "
-                         "('none' = effect-free); the draws of the others are skipped")
-    ap.add_argument("--store", default=None, metavar="DIR",
-                    help="keep the blinded recordings (and their concealed truth) in DIR")
-    ap.add_argument("--reuse", action="store_true",
-                    help="diagnose the recordings an earlier run kept in --store DIR instead "
-                         "of simulating them again (same seed, rate, duration); cases not "
-                         "kept there are simulated")
-    ap.add_argument("--kept-only", action="store_true",
-                    help="with --reuse: skip the cases not kept in --store DIR")
+    ap.add_argument(
+        "--only",
+        default=None,
+        metavar="NAME,...",
+        help="development: keep only cases concealing one of these effects "
+        "('none' = effect-free); the draws of the others are skipped",
+    )
+    ap.add_argument(
+        "--store",
+        default=None,
+        metavar="DIR",
+        help="keep the blinded recordings (and their concealed truth) in DIR",
+    )
+    ap.add_argument(
+        "--reuse",
+        action="store_true",
+        help="diagnose the recordings an earlier run kept in --store DIR instead "
+        "of simulating them again (same seed, rate, duration); cases not "
+        "kept there are simulated",
+    )
+    ap.add_argument(
+        "--kept-only",
+        action="store_true",
+        help="with --reuse: skip the cases not kept in --store DIR",
+    )
     args = ap.parse_args(argv)
     if args.n < 1 or args.workers < 1 or args.rate <= 0 or args.duration <= 5:
         print("blinded_study: --n, --workers >= 1, --rate > 0, --duration > 5 s", file=sys.stderr)
@@ -513,8 +686,11 @@ def main(argv=None):
     if args.store:
         os.makedirs(args.store, exist_ok=True)
     if args.reuse and args.kept_only:
-        keep = [i for i in keep if os.path.exists(
-            os.path.join(args.store, f"case_{args.seed}_{i:04d}.truth.json"))]
+        keep = [
+            i
+            for i in keep
+            if os.path.exists(os.path.join(args.store, f"case_{args.seed}_{i:04d}.truth.json"))
+        ]
     jobs = [(args.seed, i, args.rate, args.duration, args.store, args.reuse) for i in keep]
     args.n = len(jobs)
     rows = []
@@ -528,12 +704,14 @@ def main(argv=None):
         done = pool.imap_unordered(run_one, jobs)
     for k, row in enumerate(done, 1):
         rows.append(row)
-        print(f"[{k}/{args.n}] #{row['i']} {row['verdict']} "
-              f"truth={'+'.join(row['truth']) or 'none'} found={'+'.join(row['found']) or 'none'}"
-              + "".join(f" (indistinguishable: {' or '.join(n)})"
-                        for n in row["indistinguishable"])
-              + f" snr={[round(x, 1) for x in row['snr']]} "
-              f"imp={row['improvement']:.2f} diag={row['t_diag']:.1f}s", flush=True)
+        print(
+            f"[{k}/{args.n}] #{row['i']} {row['verdict']} "
+            f"truth={'+'.join(row['truth']) or 'none'} found={'+'.join(row['found']) or 'none'}"
+            + "".join(f" (indistinguishable: {' or '.join(n)})" for n in row["indistinguishable"])
+            + f" snr={[round(x, 1) for x in row['snr']]} "
+            f"imp={row['improvement']:.2f} diag={row['t_diag']:.1f}s",
+            flush=True,
+        )
     if args.backend == "pool":
         pool.close()
     rows.sort(key=lambda r: r["i"])
@@ -541,8 +719,11 @@ def main(argv=None):
     s["wall_seconds"] = time.perf_counter() - t0
     print_summary(s, rows)
     if args.out:
-        atomic_write_text(args.out, json.dumps({"summary": s, "rows": rows}, indent=1,
-                                               default=float) + "\n", force=True)
+        atomic_write_text(
+            args.out,
+            json.dumps({"summary": s, "rows": rows}, indent=1, default=float) + "\n",
+            force=True,
+        )
     return 0
 
 

@@ -2,7 +2,7 @@
 
 For each recording (pose logs, e.g. written by ``quadfault import``): the first ``--split``
 of it (by time) is written to a file and diagnosed with ``quadfault diagnose`` (defaults, or
-``--effects``); the diagnosis JSON is loaded with ``quadfault.effects.from_diagnosis`` (the
+``--effects``); the diagnosis JSON is loaded with ``quadfault.model.effects.from_diagnosis`` (the
 loader of ``quadfault simulate --model``); then the held-out rest of the flight is replayed
 open loop through the simulator's plant (``quadfault.diagnosis.replay.replay_errors``: from
 ``--starts`` recorded states, the recorded commands over 0.05-0.5 s), once with the nominal
@@ -28,10 +28,10 @@ from pathlib import Path
 import numpy as np
 
 from quadfault.cli import main as cli
-from quadfault.effects import from_diagnosis
 from quadfault.diagnosis.replay import replay_errors
 from quadfault.fileio import atomic_write_text
-from quadfault.recording import read_recording, sidecar_path, write_recording
+from quadfault.io.recording import read_recording, sidecar_path, write_recording
+from quadfault.model.effects import from_diagnosis
 
 HORIZONS = (0.05, 0.1, 0.2, 0.5)
 
@@ -64,11 +64,17 @@ def run(paths, split: float, effects, starts: int) -> list[dict]:
             rec, model, _, t_split = calibrate(Path(path), split, effects, Path(tmp))
             span = (t_split, float(rec.t[-1]))
             nominal = replay_errors(rec, model.vehicle, (), HORIZONS, starts=starts, span=span)
-            calibrated = replay_errors(rec, model.vehicle, model.effects, HORIZONS,
-                                       starts=starts, span=span)
-            rows.append({"flight": Path(path).stem, "effects": [e.describe() for e in
-                                                                model.effects],
-                         "nominal": nominal, "calibrated": calibrated})
+            calibrated = replay_errors(
+                rec, model.vehicle, model.effects, HORIZONS, starts=starts, span=span
+            )
+            rows.append(
+                {
+                    "flight": Path(path).stem,
+                    "effects": [e.describe() for e in model.effects],
+                    "nominal": nominal,
+                    "calibrated": calibrated,
+                }
+            )
             report(rows[-1])
     return rows
 
@@ -77,29 +83,39 @@ def report(row: dict) -> None:
     names = ", ".join(e["name"] for e in row["effects"]) or "none"
     print(f"\n{row['flight']}: calibrated with {names}; {row['nominal']['starts']} held-out starts")
     print(f"{'horizon [s]':<24}" + "".join(f"{h:>16.2f}" for h in row["nominal"]["horizons_s"]))
-    for key, unit in (("position_rmse_m", "m"), ("velocity_rmse_m_per_s", "m/s"),
-                      ("attitude_rmse_deg", "deg")):
-        cells = "".join(f"{a:>8.3f} ->{b:>6.3f}" for a, b in
-                        zip(row["nominal"][key], row["calibrated"][key]))
+    for key, unit in (
+        ("position_rmse_m", "m"),
+        ("velocity_rmse_m_per_s", "m/s"),
+        ("attitude_rmse_deg", "deg"),
+    ):
+        cells = "".join(
+            f"{a:>8.3f} ->{b:>6.3f}" for a, b in zip(row["nominal"][key], row["calibrated"][key])
+        )
         print(f"{key.split('_')[0] + ' [' + unit + ']':<24}{cells}")
 
 
 def summary(rows) -> None:
-    print("\ncalibrated / nominal RMS error (median over flights; < 1: the calibrated simulator "
-          "predicts better)")
+    print(
+        "\ncalibrated / nominal RMS error (median over flights; < 1: the calibrated simulator "
+        "predicts better)"
+    )
     print(f"{'horizon [s]':<24}" + "".join(f"{h:>8.2f}" for h in HORIZONS))
     for key in ("position_rmse_m", "velocity_rmse_m_per_s", "attitude_rmse_deg"):
-        ratio = np.array([np.array(r["calibrated"][key]) / np.array(r["nominal"][key])
-                          for r in rows])
+        ratio = np.array(
+            [np.array(r["calibrated"][key]) / np.array(r["nominal"][key]) for r in rows]
+        )
         better = np.sum(ratio < 1, axis=0)
-        print(f"{key.split('_')[0]:<24}" + "".join(f"{x:>8.2f}" for x in np.median(ratio, 0))
-              + f"   better on {', '.join(map(str, better))} of {len(rows)} flights")
+        print(
+            f"{key.split('_')[0]:<24}"
+            + "".join(f"{x:>8.2f}" for x in np.median(ratio, 0))
+            + f"   better on {', '.join(map(str, better))} of {len(rows)} flights"
+        )
 
 
 def import_nanodrone(directory: Path, work: Path) -> list[Path]:
     out = []
     for raw in sorted(directory.glob("*.csv.gz")):
-        csv = work / (raw.name[:-len(".csv.gz")] + ".csv")
+        csv = work / (raw.name[: -len(".csv.gz")] + ".csv")
         if cli(["import", "nanodrone", str(raw), "--out", str(csv), "--force", "--quiet"]) != 0:
             raise SystemExit(f"calibrated_sim: quadfault import failed on {raw}")
         out.append(csv)
@@ -109,10 +125,18 @@ def import_nanodrone(directory: Path, work: Path) -> list[Path]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("recordings", nargs="*", help="pose recordings (quadfault-recording/1)")
-    ap.add_argument("--nanodrone", default=None, metavar="DIR",
-                    help="import and use every flight of the nano-drone data set in DIR")
-    ap.add_argument("--split", type=float, default=0.6,
-                    help="fraction of each flight (by time) used to calibrate (default 0.6)")
+    ap.add_argument(
+        "--nanodrone",
+        default=None,
+        metavar="DIR",
+        help="import and use every flight of the nano-drone data set in DIR",
+    )
+    ap.add_argument(
+        "--split",
+        type=float,
+        default=0.6,
+        help="fraction of each flight (by time) used to calibrate (default 0.6)",
+    )
     ap.add_argument("--effects", default=None, help="restrict the diagnosis' library")
     ap.add_argument("--starts", type=int, default=40, help="held-out starts per flight")
     ap.add_argument("--out", default=None, help="also write the rows to this JSON file")

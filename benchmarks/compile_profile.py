@@ -38,8 +38,14 @@ def profile(case: str) -> tuple[float, list]:
         def on_end(self, ev):
             dispatcher, t0 = stack.pop()
             fn = dispatcher.py_func
-            rows.append((len(stack), f"{fn.__module__}.{fn.__name__}",
-                         time.process_time() - t0, str(ev.data.get("args"))))
+            rows.append(
+                (
+                    len(stack),
+                    f"{fn.__module__}.{fn.__name__}",
+                    time.process_time() - t0,
+                    str(ev.data.get("args")),
+                )
+            )
 
     listener = Compiles()
     event.register("numba:compile", listener)
@@ -49,8 +55,20 @@ def profile(case: str) -> tuple[float, list]:
             from quadfault.cli import main
 
             out = os.path.join(tempfile.mkdtemp(prefix="qf-compile-profile-"), "flight.csv")
-            main(["simulate", "--scenario", "combined", "--duration", "10", "--seed", "0",
-                  "--out", out, "--quiet"])
+            main(
+                [
+                    "simulate",
+                    "--scenario",
+                    "combined",
+                    "--duration",
+                    "10",
+                    "--seed",
+                    "0",
+                    "--out",
+                    out,
+                    "--quiet",
+                ]
+            )
         else:
             import gymnasium as gym
             import numpy as np
@@ -76,8 +94,10 @@ def main(argv=None) -> int:
     for depth, name, seconds, _ in rows:
         if depth == 0:
             outer[name] += seconds
-    print(f"# {case}: {total:.1f} CPU-s in all, {sum(outer.values()):.1f} compiling "
-          f"(cache {os.environ['NUMBA_CACHE_DIR']})")
+    print(
+        f"# {case}: {total:.1f} CPU-s in all, {sum(outer.values()):.1f} compiling "
+        f"(cache {os.environ['NUMBA_CACHE_DIR']})"
+    )
     for name, seconds in sorted(outer.items(), key=lambda x: -x[1]):
         if seconds >= 0.05:
             print(f"{seconds:8.2f}  {name}")

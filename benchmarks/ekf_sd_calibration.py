@@ -11,11 +11,11 @@ import argparse
 
 import numpy as np
 
-from estimators.paper.calibration import calibrate_sd_scale
 from estimators.ekf import EKFConfig, MotorEfficiencyEKF
 from estimators.metrics import score
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import simulate
+from estimators.paper.calibration import calibrate_sd_scale
+from quadfault.model.scenarios import named_scenario
+from quadfault.sim.simulator import simulate
 
 
 def main() -> None:
@@ -30,9 +30,11 @@ def main() -> None:
     cfg = EKFConfig(q_eta=args.q_eta)
     cal_rec = simulate(named_scenario(args.calibration, args.duration), seed=args.calibration_seed)
     cal = calibrate_sd_scale(cal_rec, cfg)
-    print(f"Q_eta {args.q_eta:g}: scale {cal.scale:.5f} fitted on {args.calibration} seed "
-          f"{args.calibration_seed} ({args.duration:g} s, {cal.samples} samples; raw coverage "
-          f"{cal.raw_coverage:.3f})")
+    print(
+        f"Q_eta {args.q_eta:g}: scale {cal.scale:.5f} fitted on {args.calibration} seed "
+        f"{args.calibration_seed} ({args.duration:g} s, {cal.samples} samples; raw coverage "
+        f"{cal.raw_coverage:.3f})"
+    )
     print(f"{'scenario':12s} {'seed':>5s} {'raw cov':>8s} {'scaled cov':>10s} {'median sd':>10s}")
     covs = []
     for name in args.scenarios.split(","):
@@ -42,10 +44,13 @@ def main() -> None:
             scaled = cal.apply(raw)
             c_raw, c_scaled = (float(np.mean(score(rec, s).coverage)) for s in (raw, scaled))
             covs.append(c_scaled)
-            print(f"{name:12s} {seed:5d} {c_raw:8.3f} {c_scaled:10.3f} "
-                  f"{np.median(scaled.sd[1:]):10.4f}")
-    print(f"held-out scaled coverage: {min(covs):.3f} - {max(covs):.3f} (target "
-          f"{cal.coverage:.4f})")
+            print(
+                f"{name:12s} {seed:5d} {c_raw:8.3f} {c_scaled:10.3f} "
+                f"{np.median(scaled.sd[1:]):10.4f}"
+            )
+    print(
+        f"held-out scaled coverage: {min(covs):.3f} - {max(covs):.3f} (target {cal.coverage:.4f})"
+    )
 
 
 if __name__ == "__main__":

@@ -61,31 +61,55 @@ import numpy as np
 
 #: the tasks: registered id, environment keywords, training seeds of the full study
 TASKS = {
-    "rotor_loss": {"env_id": "QuadFaultRotorLoss-v0", "seeds": 5,
-                   "env_kwargs": {"scenario_options": {"level": [0.1, 0.5]}}},
-    "tracking": {"env_id": "QuadFaultTrack-v0", "seeds": 3,
-                 "env_kwargs": {"scenario_options": {"degradation": [0.8, 0.95],
-                                                     "level": [0.3, 0.6],
-                                                     "onset": [0.3, 0.6]}}},
+    "rotor_loss": {
+        "env_id": "QuadFaultRotorLoss-v0",
+        "seeds": 5,
+        "env_kwargs": {"scenario_options": {"level": [0.1, 0.5]}},
+    },
+    "tracking": {
+        "env_id": "QuadFaultTrack-v0",
+        "seeds": 3,
+        "env_kwargs": {
+            "scenario_options": {
+                "degradation": [0.8, 0.95],
+                "level": [0.3, 0.6],
+                "onset": [0.3, 0.6],
+            }
+        },
+    },
 }
 FRAME_STACK = 8
 #: the arms: the estimator in the observation (and the base) and the memory
-ARMS = {"mlp_none": ("none", 1), "mlp_irls": ("irls", 1), "mlp_ekf": ("ekf", 1),
-        "mlp_truth": ("truth", 1), "memory_none": ("none", FRAME_STACK)}
+ARMS = {
+    "mlp_none": ("none", 1),
+    "mlp_irls": ("irls", 1),
+    "mlp_ekf": ("ekf", 1),
+    "mlp_truth": ("truth", 1),
+    "memory_none": ("none", FRAME_STACK),
+}
 REFERENCE_ARM = "mlp_none"
 #: every arm: residual authority of one rotor's hover thrust (m g / 4 for the F450)
 BASE_KWARGS = {"action_mode": "residual", "residual_scale": 2.45}
 #: PPO settings of every arm (chosen on the tuning episodes, never on the test episodes)
-PPO_KWARGS = {"n_steps": 256, "batch_size": 1024, "learning_rate": 3e-4, "n_epochs": 10,
-              "policy_kwargs": {"net_arch": [64, 64], "log_std_init": -2.3}}
+PPO_KWARGS = {
+    "n_steps": 256,
+    "batch_size": 1024,
+    "learning_rate": 3e-4,
+    "n_epochs": 10,
+    "policy_kwargs": {"net_arch": [64, 64], "log_std_init": -2.3},
+}
 TUNING_SEED, TEST_SEED = 10_000, 20_000
 FULL = {"timesteps": 300_000, "episodes": 50}
 QUICK = {"tasks": ["rotor_loss"], "seeds": [0, 1, 2], "timesteps": 200_000, "episodes": 20}
 
 
 def env_kwargs(task: str, arm: str, args) -> dict:
-    kw = dict(BASE_KWARGS, **TASKS[task]["env_kwargs"], estimator=ARMS[arm][0],
-              estimator_rate=args.estimator_rate)
+    kw = dict(
+        BASE_KWARGS,
+        **TASKS[task]["env_kwargs"],
+        estimator=ARMS[arm][0],
+        estimator_rate=args.estimator_rate,
+    )
     if args.duration is not None:
         kw["duration"] = args.duration
     if args.allocation != "nominal":
@@ -96,14 +120,24 @@ def env_kwargs(task: str, arm: str, args) -> dict:
 def train_config(task: str, arm: str, args):
     from agents.train import TrainConfig
 
-    ppo = dict(PPO_KWARGS, n_steps=args.n_steps, batch_size=min(PPO_KWARGS["batch_size"],
-                                                                args.n_steps * args.n_envs))
-    return TrainConfig(algo="ppo", env_id=TASKS[task]["env_id"],
-                       env_kwargs=env_kwargs(task, arm, args), timesteps=args.timesteps,
-                       n_envs=args.n_envs, vector_env=True, frame_stack=ARMS[arm][1],
-                       eval_freq=max(args.timesteps // args.curve_points, 1),
-                       eval_episodes=args.tuning_episodes, eval_seed=TUNING_SEED,
-                       algo_kwargs=ppo)
+    ppo = dict(
+        PPO_KWARGS,
+        n_steps=args.n_steps,
+        batch_size=min(PPO_KWARGS["batch_size"], args.n_steps * args.n_envs),
+    )
+    return TrainConfig(
+        algo="ppo",
+        env_id=TASKS[task]["env_id"],
+        env_kwargs=env_kwargs(task, arm, args),
+        timesteps=args.timesteps,
+        n_envs=args.n_envs,
+        vector_env=True,
+        frame_stack=ARMS[arm][1],
+        eval_freq=max(args.timesteps // args.curve_points, 1),
+        eval_episodes=args.tuning_episodes,
+        eval_seed=TUNING_SEED,
+        algo_kwargs=ppo,
+    )
 
 
 def t_interval(x) -> list[float]:
@@ -131,18 +165,23 @@ def fly(policy, env, seeds, normalizer=None) -> dict:
     from agents.train_eval import fly_episodes
 
     flown = fly_episodes(policy, env, seeds, normalizer)
-    return {"crashed": flown["crashed"].astype(float).tolist(), "rmse": flown["rmse"].tolist(),
-            "return": flown["returns"].tolist()}
+    return {
+        "crashed": flown["crashed"].astype(float).tolist(),
+        "rmse": flown["rmse"].tolist(),
+        "return": flown["returns"].tolist(),
+    }
 
 
 def curve(run_dir: Path, full_length: int) -> dict:
     """The tuning-episode learning curve: steps, mean return, crash rate (an episode shorter
     than the task's steps was terminated)."""
     with np.load(run_dir / "evaluations.npz") as data:
-        return {"timesteps": data["timesteps"].tolist(),
-                "return": data["results"].mean(axis=1).tolist(),
-                "crash_rate": (data["ep_lengths"] < full_length).mean(axis=1).tolist(),
-                "base_return": base_return(data)}
+        return {
+            "timesteps": data["timesteps"].tolist(),
+            "return": data["results"].mean(axis=1).tolist(),
+            "crash_rate": (data["ep_lengths"] < full_length).mean(axis=1).tolist(),
+            "base_return": base_return(data),
+        }
 
 
 def base_return(data) -> float | None:
@@ -197,8 +236,7 @@ def train_run(config, seed: int, run_dir: Path, retrain: bool) -> None:
         c0 = time.process_time()
         train_one(config, seed, run_dir, force=True, quiet=True)
         cpu = time.process_time() - c0
-        atomic_write_text(run_dir / "train_cpu.json", json.dumps({"train_cpu_s": cpu}),
-                          force=True)
+        atomic_write_text(run_dir / "train_cpu.json", json.dumps({"train_cpu_s": cpu}), force=True)
     finally:
         lock.unlink(missing_ok=True)
 
@@ -233,9 +271,12 @@ def run_arm(task: str, arm: str, args, test_seeds) -> dict:
         r = fly(model, env, test_seeds, venv if hasattr(venv, "normalize_obs") else None)
         r["curve"] = curve(run_dir, full_length)
         r["steps_to_crash_target"] = steps_to(r["curve"], args.crash_target)
-        r.update(timesteps_run=saved["timesteps_run"], train_cpu_s=cpu,
-                 episode_seeds=list(test_seeds),
-                 episode_scenarios=episode_faults(env, test_seeds))
+        r.update(
+            timesteps_run=saved["timesteps_run"],
+            train_cpu_s=cpu,
+            episode_seeds=list(test_seeds),
+            episode_scenarios=episode_faults(env, test_seeds),
+        )
         runs[str(seed)] = r
     env.close()
     return runs
@@ -251,8 +292,10 @@ def summarise(arms: dict, references: dict) -> tuple[dict, dict, dict]:
     for arm, runs in arms.items():
         summary[arm] = {k: t_interval([np.nanmean(r[k]) for r in runs.values()]) for k in keys}
         steps = [r["steps_to_crash_target"] for r in runs.values()]
-        summary[arm]["steps_to_crash_target"] = {"per_seed": steps,
-                                                 "reached": sum(s is not None for s in steps)}
+        summary[arm]["steps_to_crash_target"] = {
+            "per_seed": steps,
+            "reached": sum(s is not None for s in steps),
+        }
         base = references.get(f"base_{ARMS[arm][0]}")
         if base is not None:
             vs_base[arm] = paired_interval([(r, base) for r in runs.values()], keys)
@@ -267,8 +310,7 @@ def summarise(arms: dict, references: dict) -> tuple[dict, dict, dict]:
 def paired_interval(pairs, keys) -> dict:
     """Per key: mean and 95 % interval over the pairs of each pair's mean episode-by-episode
     difference (first minus second)."""
-    return {k: t_interval([np.nanmean(np.subtract(a[k], b[k])) for a, b in pairs])
-            for k in keys}
+    return {k: t_interval([np.nanmean(np.subtract(a[k], b[k])) for a, b in pairs]) for k in keys}
 
 
 def plot(results: dict, path: Path) -> None:
@@ -289,24 +331,37 @@ def plot(results: dict, path: Path) -> None:
             n = min(len(c["timesteps"]) for c in curves)
             ts = curves[0]["timesteps"][:n]
             colour = f"C{j}"
-            a1.plot(ts, np.mean([c["return"][:n] for c in curves], axis=0), marker=".",
-                    color=colour, label=arm)
+            a1.plot(
+                ts,
+                np.mean([c["return"][:n] for c in curves], axis=0),
+                marker=".",
+                color=colour,
+                label=arm,
+            )
             base = [c.get("base_return") for c in curves]
             if all(b is not None for b in base):
                 a1.axhline(float(np.mean(base)), color=colour, ls="--", lw=0.8)
         a1.set_xlabel("environment steps")
         a1.set_ylabel("mean return, tuning episodes")
-        a1.set_title(f"{task}: learning curves (mean of {len(args_seeds(res))} seeds; "
-                     "dashed: the arm's zero-residual base)", fontsize=9)
+        a1.set_title(
+            f"{task}: learning curves (mean of {len(args_seeds(res))} seeds; "
+            "dashed: the arm's zero-residual base)",
+            fontsize=9,
+        )
         a1.grid(alpha=0.3)
         a1.legend(fontsize=7)
         names = list(res["summary"])
         for j, key in enumerate(("crashed", "rmse")):
             m = [res["summary"][a][key][0] for a in names]
             h = [res["summary"][a][key][1] for a in names]
-            a2.errorbar(np.arange(len(names)) + 0.15 * j, m,
-                        yerr=np.nan_to_num(np.asarray(h, float)), fmt="o",
-                        capsize=3, label={"crashed": "crash rate", "rmse": "RMSE [m]"}[key])
+            a2.errorbar(
+                np.arange(len(names)) + 0.15 * j,
+                m,
+                yerr=np.nan_to_num(np.asarray(h, float)),
+                fmt="o",
+                capsize=3,
+                label={"crashed": "crash rate", "rmse": "RMSE [m]"}[key],
+            )
         a2.set_xticks(np.arange(len(names)), names, rotation=20, fontsize=7)
         a2.set_title(f"{task}: test episodes, mean and 95 % interval over seeds")
         a2.grid(alpha=0.3)
@@ -333,33 +388,50 @@ def args_seeds(res: dict) -> list:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true",
-                    help="one task (rotor_loss), 3 seeds, 2x10^5 steps, 20 test episodes")
+    ap.add_argument(
+        "--quick",
+        action="store_true",
+        help="one task (rotor_loss), 3 seeds, 2x10^5 steps, 20 test episodes",
+    )
     ap.add_argument("--tasks", nargs="+", choices=list(TASKS))
     ap.add_argument("--arms", nargs="+", choices=list(ARMS), default=list(ARMS))
-    ap.add_argument("--seeds", type=int, nargs="+", help="training seeds (default: the "
-                    "task's count in the full study, from 0)")
+    ap.add_argument(
+        "--seeds",
+        type=int,
+        nargs="+",
+        help="training seeds (default: the task's count in the full study, from 0)",
+    )
     ap.add_argument("--timesteps", type=int, help="env steps per run (full study 3x10^5)")
     ap.add_argument("--episodes", type=int, help="paired test episodes (full study 50)")
     ap.add_argument("--tuning-episodes", type=int, default=10)
-    ap.add_argument("--curve-points", type=int, default=20,
-                    help="evaluations on the tuning episodes per run")
+    ap.add_argument(
+        "--curve-points", type=int, default=20, help="evaluations on the tuning episodes per run"
+    )
     ap.add_argument("--crash-target", type=float, default=0.2)
     ap.add_argument("--n-envs", type=int, default=64)
     ap.add_argument("--n-steps", type=int, default=PPO_KWARGS["n_steps"])
-    ap.add_argument("--allocation", default="estimate-aware",
-                    choices=("nominal", "estimate-aware"))
+    ap.add_argument("--allocation", default="estimate-aware", choices=("nominal", "estimate-aware"))
     ap.add_argument("--estimator-rate", default="physics", choices=("physics", "control"))
-    ap.add_argument("--duration", type=float,
-                    help="episode length [s] (default: the task's; shorter only for tests)")
+    ap.add_argument(
+        "--duration",
+        type=float,
+        help="episode length [s] (default: the task's; shorter only for tests)",
+    )
     ap.add_argument("--out", default="runs/estimate_study")
     ap.add_argument("--retrain", action="store_true")
-    ap.add_argument("--train-only", action="store_true",
-                    help="train the missing runs and stop (for training in parallel)")
-    ap.add_argument("--markdown", action="store_true",
-                    help="print the summaries as markdown tables")
-    ap.add_argument("--replot", action="store_true",
-                    help="only recompute the summaries and the plot of OUT/study.json")
+    ap.add_argument(
+        "--train-only",
+        action="store_true",
+        help="train the missing runs and stop (for training in parallel)",
+    )
+    ap.add_argument(
+        "--markdown", action="store_true", help="print the summaries as markdown tables"
+    )
+    ap.add_argument(
+        "--replot",
+        action="store_true",
+        help="only recompute the summaries and the plot of OUT/study.json",
+    )
     args = ap.parse_args(argv)
     if args.replot:
         return replot(Path(args.out), args.markdown)
@@ -373,25 +445,37 @@ def main(argv=None) -> int:
     import gymnasium as gym
 
     import quad_fault_env  # noqa: F401  (registers the ids)
+
     out = Path(args.out)
     seed_arg = args.seeds
-    results = {"design": {"arms": {a: {"estimator": e, "frame_stack": k}
-                                   for a, (e, k) in ARMS.items() if a in args.arms},
-                          "reference_arm": REFERENCE_ARM, "ppo": PPO_KWARGS,
-                          "n_envs": args.n_envs, "n_steps": args.n_steps,
-                          "timesteps": args.timesteps, "allocation": args.allocation,
-                          "duration": args.duration,
-                          "estimator_rate": args.estimator_rate,
-                          "tuning_seeds": [TUNING_SEED, TUNING_SEED + args.tuning_episodes - 1],
-                          "test_seeds": test_seeds, "crash_target": args.crash_target},
-               "tasks": {}}
+    results = {
+        "design": {
+            "arms": {
+                a: {"estimator": e, "frame_stack": k}
+                for a, (e, k) in ARMS.items()
+                if a in args.arms
+            },
+            "reference_arm": REFERENCE_ARM,
+            "ppo": PPO_KWARGS,
+            "n_envs": args.n_envs,
+            "n_steps": args.n_steps,
+            "timesteps": args.timesteps,
+            "allocation": args.allocation,
+            "duration": args.duration,
+            "estimator_rate": args.estimator_rate,
+            "tuning_seeds": [TUNING_SEED, TUNING_SEED + args.tuning_episodes - 1],
+            "test_seeds": test_seeds,
+            "crash_target": args.crash_target,
+        },
+        "tasks": {},
+    }
     for task in tasks:
-        args.seeds = seed_arg or list(range(TASKS[task]["seeds"] if not args.quick
-                                            else len(QUICK["seeds"])))
+        args.seeds = seed_arg or list(
+            range(TASKS[task]["seeds"] if not args.quick else len(QUICK["seeds"]))
+        )
         arms = {}
         for arm in args.arms:
-            print(f"{task} / {arm}: seeds {args.seeds}, {args.timesteps:,} steps each",
-                  flush=True)
+            print(f"{task} / {arm}: seeds {args.seeds}, {args.timesteps:,} steps each", flush=True)
             arms[arm] = run_arm(task, arm, args, test_seeds)
         if args.train_only:
             continue
@@ -400,14 +484,19 @@ def main(argv=None) -> int:
             arm = next((a for a in args.arms if ARMS[a][0] == est and ARMS[a][1] == 1), None)
             if arm is None:
                 continue
-            env = gym.make(TASKS[task]["env_id"], **env_kwargs(task, arm, args),
-                           info="full")  # fly() scores info["tracking_error"]
+            env = gym.make(
+                TASKS[task]["env_id"], **env_kwargs(task, arm, args), info="full"
+            )  # fly() scores info["tracking_error"]
             references[f"base_{est}"] = fly(None, env, test_seeds)
             env.close()
-        results["tasks"][task] = {"env_id": TASKS[task]["env_id"],
-                                  "env_kwargs": TASKS[task]["env_kwargs"],
-                                  "seeds": args.seeds, "episode_seeds": test_seeds,
-                                  "arms": arms, "references": references}
+        results["tasks"][task] = {
+            "env_id": TASKS[task]["env_id"],
+            "env_kwargs": TASKS[task]["env_kwargs"],
+            "seeds": args.seeds,
+            "episode_seeds": test_seeds,
+            "arms": arms,
+            "references": references,
+        }
     if args.train_only:
         print(f"trained; CPU of this process {(time.process_time() - cpu0) / 60:.1f} min")
         return 0
@@ -423,52 +512,81 @@ def finish(results: dict, out: Path, crash_target: float, markdown: bool = False
 
     for task, res in results["tasks"].items():
         summary, paired, vs_base = summarise(res["arms"], res["references"])
-        res.update({"summary": summary, f"paired_vs_{REFERENCE_ARM}": paired,
-                    "paired_vs_base": vs_base})
-        print(f"{task} (mean and 95 % interval over seeds; 'vs base': the arm minus its "
-              "zero-residual base, paired by episode)")
+        res.update(
+            {"summary": summary, f"paired_vs_{REFERENCE_ARM}": paired, "paired_vs_base": vs_base}
+        )
+        print(
+            f"{task} (mean and 95 % interval over seeds; 'vs base': the arm minus its "
+            "zero-residual base, paired by episode)"
+        )
         for arm, s in summary.items():
-            line = ", ".join(f"{k} {m:.3f} +/- {h:.3f}" for k, (m, h) in
-                             ((k, s[k]) for k in ("crashed", "rmse", "return")))
+            line = ", ".join(
+                f"{k} {m:.3f} +/- {h:.3f}"
+                for k, (m, h) in ((k, s[k]) for k in ("crashed", "rmse", "return"))
+            )
             b = vs_base.get(arm)
-            extra = (f"; vs base: rmse {b['rmse'][0]:+.4f} +/- {b['rmse'][1]:.4f}, return "
-                     f"{b['return'][0]:+.1f} +/- {b['return'][1]:.1f}" if b else "")
-            print(f"  {arm}: {line}{extra}; steps to crash rate <= {crash_target}: "
-                  f"{s['steps_to_crash_target']['per_seed']}")
+            extra = (
+                f"; vs base: rmse {b['rmse'][0]:+.4f} +/- {b['rmse'][1]:.4f}, return "
+                f"{b['return'][0]:+.1f} +/- {b['return'][1]:.1f}"
+                if b
+                else ""
+            )
+            print(
+                f"  {arm}: {line}{extra}; steps to crash rate <= {crash_target}: "
+                f"{s['steps_to_crash_target']['per_seed']}"
+            )
         if markdown:
             print(markdown_table(res))
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "study.json", json.dumps(_json(results), indent=1,
-                                                          allow_nan=False), force=True)
+    atomic_write_text(
+        out / "study.json", json.dumps(_json(results), indent=1, allow_nan=False), force=True
+    )
     plot(results, out / "study.png")
-    train = [r.get("train_cpu_s") for res in results["tasks"].values()
-             for runs in res["arms"].values() for r in runs.values()]
+    train = [
+        r.get("train_cpu_s")
+        for res in results["tasks"].values()
+        for runs in res["arms"].values()
+        for r in runs.values()
+    ]
     known = [c for c in train if c is not None]
     if known:
-        print(f"training CPU, sum over the {len(known)} of {len(train)} runs that recorded it: "
-              f"{sum(known) / 60:.1f} min")
+        print(
+            f"training CPU, sum over the {len(known)} of {len(train)} runs that recorded it: "
+            f"{sum(known) / 60:.1f} min"
+        )
     if results.get("cpu_s") is not None:
-        print(f"CPU time of this process (evaluations, and the training it did): "
-              f"{results['cpu_s'] / 60:.1f} min")
+        print(
+            f"CPU time of this process (evaluations, and the training it did): "
+            f"{results['cpu_s'] / 60:.1f} min"
+        )
     print(f"-> {out / 'study.json'}, {out / 'study.png'}")
 
 
 def markdown_table(res: dict) -> str:
     """One task's summary as a markdown table: mean +/- 95 % interval over seeds."""
+
     def pm(v, digits):
         m, h = v
-        return f"{m:.{digits}f} ± {h:.{digits}f}" if h is not None and math.isfinite(h) \
+        return (
+            f"{m:.{digits}f} ± {h:.{digits}f}"
+            if h is not None and math.isfinite(h)
             else f"{m:.{digits}f}"
-    rows = ["| arm | crash rate | tracking RMSE [m] | return | RMSE vs `mlp_none` [m] "
-            "| return vs `mlp_none` | RMSE vs base [m] | return vs base |",
-            "|---|---|---|---|---|---|---|---|"]
+        )
+
+    rows = [
+        "| arm | crash rate | tracking RMSE [m] | return | RMSE vs `mlp_none` [m] "
+        "| return vs `mlp_none` | RMSE vs base [m] | return vs base |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for arm, s in res["summary"].items():
         p = res.get(f"paired_vs_{REFERENCE_ARM}", {}).get(arm)
         b = res.get("paired_vs_base", {}).get(arm)
-        rows.append(f"| `{arm}` | {pm(s['crashed'], 2)} | {pm(s['rmse'], 3)} | "
-                    f"{pm(s['return'], 0)} | {pm(p['rmse'], 4) if p else '-'} | "
-                    f"{pm(p['return'], 1) if p else '-'} | {pm(b['rmse'], 4) if b else '-'} | "
-                    f"{pm(b['return'], 1) if b else '-'} |")
+        rows.append(
+            f"| `{arm}` | {pm(s['crashed'], 2)} | {pm(s['rmse'], 3)} | "
+            f"{pm(s['return'], 0)} | {pm(p['rmse'], 4) if p else '-'} | "
+            f"{pm(p['return'], 1) if p else '-'} | {pm(b['rmse'], 4) if b else '-'} | "
+            f"{pm(b['return'], 1) if b else '-'} |"
+        )
     return "\n".join(rows)
 
 
@@ -494,6 +612,7 @@ def replot(out: Path, markdown: bool = False) -> int:
                         r["curve"]["base_return"] = base
     finish(results, out, results["design"]["crash_target"], markdown)
     return 0
+
 
 if __name__ == "__main__":
     sys.exit(main())

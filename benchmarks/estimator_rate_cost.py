@@ -59,19 +59,27 @@ def fly(estimator: str, rate: str, seed: int) -> dict:
         after = (t >= f.onset) & (hat[:, f.motor - 1] < threshold)
         if after.any():
             detect = 1e3 * (t[np.argmax(after)] - f.onset)
-    return {"sq": np.square(hat - true).ravel(), "detect": detect,
-            "err": np.asarray(err), "crashed": bool(terminated), "cpu_step": cpu / len(t)}
+    return {
+        "sq": np.square(hat - true).ravel(),
+        "detect": detect,
+        "err": np.asarray(err),
+        "crashed": bool(terminated),
+        "cpu_step": cpu / len(t),
+    }
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
-    ap.add_argument("--estimators", nargs="+", default=["irls", "ekf"],
-                    choices=("irls", "ekf", "rls", "ukf"))
+    ap.add_argument(
+        "--estimators", nargs="+", default=["irls", "ekf"], choices=("irls", "ekf", "rls", "ukf")
+    )
     args = ap.parse_args(argv)
     print(f"{ENV_ID}, {ENV_KWARGS}, zero residual, seeds {args.seeds}")
-    print(f"{'estimator':9} {'rate':8} {'eta RMSE':>9} {'detect [ms]':>12} "
-          f"{'track RMSE [m]':>15} {'crashes':>8} {'CPU/step [ms]':>14}")
+    print(
+        f"{'estimator':9} {'rate':8} {'eta RMSE':>9} {'detect [ms]':>12} "
+        f"{'track RMSE [m]':>15} {'crashes':>8} {'CPU/step [ms]':>14}"
+    )
     for est in args.estimators:
         rows = {}
         for rate in ("physics", "control"):
@@ -79,16 +87,23 @@ def main(argv=None) -> int:
             rows[rate] = r = {
                 "eta": float(np.sqrt(np.mean(np.concatenate([x["sq"] for x in runs])))),
                 "detect": float(np.nanmedian([x["detect"] for x in runs]))
-                if any(np.isfinite(x["detect"]) for x in runs) else float("nan"),
+                if any(np.isfinite(x["detect"]) for x in runs)
+                else float("nan"),
                 "track": float(np.sqrt(np.mean(np.concatenate([x["err"] for x in runs]) ** 2))),
                 "crashes": sum(x["crashed"] for x in runs),
-                "cpu": 1e3 * float(np.mean([x["cpu_step"] for x in runs]))}
-            print(f"{est:9} {rate:8} {r['eta']:9.4f} {r['detect']:12.0f} {r['track']:15.4f} "
-                  f"{r['crashes']:>5}/{len(runs)} {r['cpu']:14.3f}", flush=True)
+                "cpu": 1e3 * float(np.mean([x["cpu_step"] for x in runs])),
+            }
+            print(
+                f"{est:9} {rate:8} {r['eta']:9.4f} {r['detect']:12.0f} {r['track']:15.4f} "
+                f"{r['crashes']:>5}/{len(runs)} {r['cpu']:14.3f}",
+                flush=True,
+            )
         p, c = rows["physics"], rows["control"]
-        print(f"{est:9} {'ratio':8} {c['eta'] / p['eta']:9.2f} "
-              f"{c['detect'] / p['detect']:12.2f} {c['track'] / p['track']:15.2f} "
-              f"{'':>8} {c['cpu'] / p['cpu']:14.2f}   (control / physics)")
+        print(
+            f"{est:9} {'ratio':8} {c['eta'] / p['eta']:9.2f} "
+            f"{c['detect'] / p['detect']:12.2f} {c['track'] / p['track']:15.2f} "
+            f"{'':>8} {c['cpu'] / p['cpu']:14.2f}   (control / physics)"
+        )
     return 0
 
 

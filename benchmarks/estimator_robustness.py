@@ -40,9 +40,9 @@ from estimators.base import Sample, samples
 from estimators.ekf import MotorEfficiencyEKF
 from estimators.irls import SlidingWindowIRLS
 from quadfault.errors import QuadfaultError
-from quadfault.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario
-from quadfault.simulator import simulate
-from quadfault.trajectory import Circle
+from quadfault.model.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario
+from quadfault.model.trajectory import Circle
+from quadfault.sim.simulator import simulate
 
 ESTIMATORS = {"irls": SlidingWindowIRLS, "ekf": MotorEfficiencyEKF}
 ETA_TRUE = (1.0, 0.7, 1.0, 1.0)
@@ -51,8 +51,13 @@ BURSTS = ("spikes", "nan", "frozen", "gap")
 
 def flight(duration: float = 3.0, seed: int = 0):
     """``(measurement samples, vehicle)`` of a circle flight with motor 2 at 70 %, 1 kHz."""
-    sc = Scenario("robustness", duration, EfficiencySchedule(ConstantEfficiency(ETA_TRUE)),
-                  Circle(), thrust_noise=0.02)
+    sc = Scenario(
+        "robustness",
+        duration,
+        EfficiencySchedule(ConstantEfficiency(ETA_TRUE)),
+        Circle(),
+        thrust_noise=0.02,
+    )
     rec = simulate(sc, seed=seed).without_truth()
     return list(samples(rec)), rec.vehicle
 
@@ -62,10 +67,15 @@ def saturated_flight(duration: float = 3.0, seed: int = 0, max_thrust: float = 3
     motor cannot deliver what the controller asks (its recorded command goes far above the
     limit). Returns ``(samples, vehicle, fraction of rows with a command at or above the
     limit)``."""
-    from quadfault.vehicle import Vehicle
+    from quadfault.model.vehicle import Vehicle
 
-    sc = Scenario("saturated", duration, EfficiencySchedule(ConstantEfficiency(ETA_TRUE)),
-                  Circle(), thrust_noise=0.02)
+    sc = Scenario(
+        "saturated",
+        duration,
+        EfficiencySchedule(ConstantEfficiency(ETA_TRUE)),
+        Circle(),
+        thrust_noise=0.02,
+    )
     rec = simulate(sc, vehicle=Vehicle(max_thrust=max_thrust), seed=seed).without_truth()
     at_limit = np.any(rec.thrust_cmd >= rec.vehicle.rotor_max_thrust, axis=1)
     return list(samples(rec)), rec.vehicle, float(np.mean(at_limit))
@@ -74,9 +84,12 @@ def saturated_flight(duration: float = 3.0, seed: int = 0, max_thrust: float = 3
 def check_saturated(name, vehicle, stream):
     """Statuses, NaN anywhere, and the final error against the truth."""
     t, eta, status, err = run_stream(name, vehicle, stream)
-    return {"statuses": sorted(set(status)), "finite": bool(np.all(np.isfinite(eta))),
-            "error_at_end": float(np.max(np.abs(eta[-1] - ETA_TRUE))),
-            "raised": None if err is None else str(err)}
+    return {
+        "statuses": sorted(set(status)),
+        "finite": bool(np.all(np.isfinite(eta))),
+        "error_at_end": float(np.max(np.abs(eta[-1] - ETA_TRUE))),
+        "raised": None if err is None else str(err),
+    }
 
 
 def run_stream(name, vehicle, stream, eta0=None):
@@ -108,8 +121,17 @@ def hover_commands(vehicle, eta) -> np.ndarray:
 
 
 def _still(n, t0, f, dt=1e-3):
-    return [Sample(t0 + k * dt, np.array([0.0, 0.0, -1.0]), np.zeros(3), np.eye(3), np.zeros(3),
-                   np.asarray(f, dtype=float)) for k in range(n)]
+    return [
+        Sample(
+            t0 + k * dt,
+            np.array([0.0, 0.0, -1.0]),
+            np.zeros(3),
+            np.eye(3),
+            np.zeros(3),
+            np.asarray(f, dtype=float),
+        )
+        for k in range(n)
+    ]
 
 
 def degenerate_streams(base, vehicle, at: int = 1500, n: int = 200) -> dict:
@@ -118,10 +140,10 @@ def degenerate_streams(base, vehicle, at: int = 1500, n: int = 200) -> dict:
     hover = _still(at, 0.0, hover_commands(vehicle, ETA_TRUE))
     out["hover"] = (hover + _still(n, at * 1e-3, hover_commands(vehicle, ETA_TRUE)), (at, at + n))
     out["idle"] = (hover + _still(n, at * 1e-3, np.zeros(vehicle.n_rotors)), (at, at + n))
-    off = [s._replace(f=np.where(np.arange(len(s.f)) == 0, 0.0, s.f)) for s in base[at:at + n]]
+    off = [s._replace(f=np.where(np.arange(len(s.f)) == 0, 0.0, s.f)) for s in base[at : at + n]]
     out["rotor_off"] = (base[:at] + off, (at, at + n))
-    nan = [s._replace(p=np.full(3, np.nan), v=np.full(3, np.nan)) for s in base[at:at + n]]
-    out["nan_rows"] = (base[:at] + nan + base[at + n:], (at, at + n))
+    nan = [s._replace(p=np.full(3, np.nan), v=np.full(3, np.nan)) for s in base[at : at + n]]
+    out["nan_rows"] = (base[:at] + nan + base[at + n :], (at, at + n))
     out["repeated_time"] = (base[:at] + [base[at - 1]] + base[at:], (at, at + 1))
     return out
 
@@ -135,21 +157,29 @@ def check_degenerate(name, vehicle, stream, span):
     if err is not None and len(eta) <= lo:
         return {"raised": str(err)}
     a = min(lo + SETTLE, hi - 1)
-    return {"statuses": sorted(set(status[a:hi])),
-            "kept": bool(np.all(eta[a:hi] == eta[a - 1])),
-            "finite": bool(np.all(np.isfinite(eta))),
-            "error_before": float(np.max(np.abs(eta[lo - 1] - ETA_TRUE))),
-            "error_at_end": float(np.max(np.abs(eta[hi - 1] - ETA_TRUE))),
-            "raised": None if err is None else str(err)}
+    return {
+        "statuses": sorted(set(status[a:hi])),
+        "kept": bool(np.all(eta[a:hi] == eta[a - 1])),
+        "finite": bool(np.all(np.isfinite(eta))),
+        "error_before": float(np.max(np.abs(eta[lo - 1] - ETA_TRUE))),
+        "error_at_end": float(np.max(np.abs(eta[hi - 1] - ETA_TRUE))),
+        "raised": None if err is None else str(err),
+    }
 
 
 # -- recovery ---------------------------------------------------------------------------------------
 def corrupt(base, kind: str, start: int, n: int, rng: np.random.Generator) -> list:
     """``base`` with samples ``start:start+n`` corrupted by ``kind``."""
-    burst = base[start:start + n]
+    burst = base[start : start + n]
     if kind == "spikes":
-        burst = [s._replace(p=s.p + rng.uniform(-0.5, 0.5, 3), v=s.v + rng.normal(0, 2.0, 3),
-                            w=s.w + rng.normal(0, 5.0, 3)) for s in burst]
+        burst = [
+            s._replace(
+                p=s.p + rng.uniform(-0.5, 0.5, 3),
+                v=s.v + rng.normal(0, 2.0, 3),
+                w=s.w + rng.normal(0, 5.0, 3),
+            )
+            for s in burst
+        ]
     elif kind == "nan":
         burst = [s._replace(p=np.full(3, np.nan), w=np.full(3, np.nan)) for s in burst]
     elif kind == "frozen":
@@ -159,7 +189,7 @@ def corrupt(base, kind: str, start: int, n: int, rng: np.random.Generator) -> li
         burst = []
     else:
         raise ValueError(kind)
-    return base[:start] + burst + base[start + n:]
+    return base[:start] + burst + base[start + n :]
 
 
 def recovery_time(name, vehicle, base, kind, start, n, tol, seed=0, clean=None):
@@ -177,25 +207,40 @@ def recovery_time(name, vehicle, base, kind, start, n, tol, seed=0, clean=None):
     dev = np.array([np.max(np.abs(e - ref[float(tk)])) for tk, e in zip(t, eta)])
     after = t > t_end
     bad = np.flatnonzero(after & (dev > tol))
-    rec = 0.0 if bad.size == 0 else float(t[bad[-1] + 1] - t_end) if bad[-1] + 1 < len(t) \
+    rec = (
+        0.0
+        if bad.size == 0
+        else float(t[bad[-1] + 1] - t_end)
+        if bad[-1] + 1 < len(t)
         else math.inf
-    return {"recovery_s": rec, "max_deviation": float(dev.max()),
-            "finite": bool(np.all(np.isfinite(eta))), "raised": None}
+    )
+    return {
+        "recovery_s": rec,
+        "max_deviation": float(dev.max()),
+        "finite": bool(np.all(np.isfinite(eta))),
+        "raised": None,
+    }
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--duration", type=float, default=3.0, help="flight [s] (default 3)")
     p.add_argument("--burst", type=float, default=0.05, help="corrupted span [s] (default 0.05)")
-    p.add_argument("--tol", type=float, default=0.02,
-                   help="recovered when within this of the clean estimate (default 0.02)")
+    p.add_argument(
+        "--tol",
+        type=float,
+        default=0.02,
+        help="recovered when within this of the clean estimate (default 0.02)",
+    )
     p.add_argument("--seed", type=int, default=0)
     args = p.parse_args(argv)
     t0 = time.perf_counter()
     base, vehicle = flight(args.duration, args.seed)
     at = len(base) // 2
-    print(f"flight: {len(base)} samples at 1 kHz, eta = {ETA_TRUE}, seed {args.seed} "
-          f"({time.perf_counter() - t0:.1f} s)")
+    print(
+        f"flight: {len(base)} samples at 1 kHz, eta = {ETA_TRUE}, seed {args.seed} "
+        f"({time.perf_counter() - t0:.1f} s)"
+    )
     ok = True
     print(f"degenerate windows (200 samples at mid-flight; statuses after {SETTLE} samples):")
     for case, (stream, span) in degenerate_streams(base, vehicle, at).items():
@@ -204,22 +249,27 @@ def main(argv=None) -> int:
             ok &= r.get("finite", True)
             print(f"  {case:14s} {name:4s} " + ", ".join(f"{k} {v}" for k, v in r.items()))
     sat, sat_vehicle, frac = saturated_flight(args.duration, args.seed)
-    print(f"saturated rotors (limit {sat_vehicle.rotor_max_thrust} N; {100 * frac:.1f} % of the "
-          "rows command a rotor at or above it):")
+    print(
+        f"saturated rotors (limit {sat_vehicle.rotor_max_thrust} N; {100 * frac:.1f} % of the "
+        "rows command a rotor at or above it):"
+    )
     for name in ESTIMATORS:
         r = check_saturated(name, sat_vehicle, sat)
         ok &= r["finite"]
         print(f"  {name:4s} " + ", ".join(f"{k} {v}" for k, v in r.items()))
     n = int(round(args.burst / 1e-3))
-    print(f"recovery after a {args.burst * 1e3:.0f} ms burst at t = {base[at].t:.2f} s "
-          f"(tolerance {args.tol} of the clean estimate):")
+    print(
+        f"recovery after a {args.burst * 1e3:.0f} ms burst at t = {base[at].t:.2f} s "
+        f"(tolerance {args.tol} of the clean estimate):"
+    )
     for name in ESTIMATORS:
         clean = run_stream(name, vehicle, base)
         for kind in BURSTS:
             r = recovery_time(name, vehicle, base, kind, at, n, args.tol, args.seed, clean)
             ok &= r.get("finite", False) and math.isfinite(r["recovery_s"])
-            text = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
-                             for k, v in r.items())
+            text = ", ".join(
+                f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in r.items()
+            )
             print(f"  {name:4s} {kind:7s} {text}")
     print(f"({time.perf_counter() - t0:.0f} s) " + ("PASS" if ok else "FAIL"))
     return 0 if ok else 1

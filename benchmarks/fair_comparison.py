@@ -39,9 +39,21 @@ def seeds_of(text: str) -> list[int]:
 def run_seed(out: Path, seed: int, quick: bool, workers: int) -> dict:
     path = out / f"seed-{seed}"
     if not (path / "metrics.json").exists():
-        cmd = [sys.executable, "-m", "quadfault.cli", "reproduce", "--seed", str(seed),
-               "--no-reference-mode", "--out", str(path), "--workers", str(workers),
-               "--quiet", "--force"] + (["--quick"] if quick else [])
+        cmd = [
+            sys.executable,
+            "-m",
+            "quadfault.cli",
+            "reproduce",
+            "--seed",
+            str(seed),
+            "--no-reference-mode",
+            "--out",
+            str(path),
+            "--workers",
+            str(workers),
+            "--quiet",
+            "--force",
+        ] + (["--quick"] if quick else [])
         print("$ quadfault " + " ".join(cmd[3:]), flush=True)
         subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
     return json.loads((path / "metrics.json").read_text())
@@ -63,7 +75,8 @@ def _mean(values):
 
 def _ratios(doc: dict, baseline: str) -> dict:
     return doc.get("baseline_ratios", {}).get(baseline) or (
-        doc["ratios"] if baseline == "ekf" else {})
+        doc["ratios"] if baseline == "ekf" else {}
+    )
 
 
 def summarise(docs: dict, baseline: str = "ekf") -> dict:
@@ -84,9 +97,11 @@ def summarise(docs: dict, baseline: str = "ekf") -> dict:
             ratios = [_ratios(d, baseline)[name][v.name] for d in docs.values()]
             for metric in METRICS + ("excess_spike_difference",):
                 vals = [r.get(metric) for r in ratios]
-                if metric == "excess_spike" and all(
-                        r.get("excess_spike_difference") is not None for r in ratios) \
-                        and any(x is None for x in vals):
+                if (
+                    metric == "excess_spike"
+                    and all(r.get("excess_spike_difference") is not None for r in ratios)
+                    and any(x is None for x in vals)
+                ):
                     # the partner's excess is within its noise on some seed (pairing.MIN_EXCESS)
                     block[metric] = {"per_seed": vals, "mean": None, "ci95": [None, None]}
                     continue
@@ -100,9 +115,9 @@ def summarise(docs: dict, baseline: str = "ekf") -> dict:
                     "rmse": _mean([float(np.mean(p["rmse"])) for p in per]),
                     "spike": _mean([mean_or_none(p["spike"]) for p in per]),
                     "excess_spike": _mean([mean_or_none(p["excess_spike"]) for p in per]),
-                    "cli": per[0]["cli"]}
-            block["tuning"] = [d["scenarios"][name][v.key(baseline)][option]
-                               for d in docs.values()]
+                    "cli": per[0]["cli"],
+                }
+            block["tuning"] = [d["scenarios"][name][v.key(baseline)][option] for d in docs.values()]
             if baseline == "ekf":
                 block["q_eta"] = block["tuning"]
             out.setdefault(name, {})[v.name] = block
@@ -119,10 +134,15 @@ def _cell(b, d=2) -> str:
 
 def print_summary(summary: dict, seeds: list[int], baseline: str = "ekf") -> None:
     B = baseline.upper()
-    print(f"\nIRLS / {B} partner (identical post-processing), seeds {seeds[0]}-{seeds[-1]}: "
-          "mean [95 % interval] of the per-seed ratio")
-    print(f"{'scenario':<10} {'variant':<9} " + " ".join(f"{m + ' ratio':>26}" for m in METRICS)
-          + f" {'excess IRLS - ' + B:>26}")
+    print(
+        f"\nIRLS / {B} partner (identical post-processing), seeds {seeds[0]}-{seeds[-1]}: "
+        "mean [95 % interval] of the per-seed ratio"
+    )
+    print(
+        f"{'scenario':<10} {'variant':<9} "
+        + " ".join(f"{m + ' ratio':>26}" for m in METRICS)
+        + f" {'excess IRLS - ' + B:>26}"
+    )
     for name, per in summary.items():
         for v, b in per.items():
             cells = [_cell(b.get(m)) for m in METRICS]
@@ -138,10 +158,14 @@ def print_summary(summary: dict, seeds: list[int], baseline: str = "ekf") -> Non
             if i["spike"] is None:
                 spikes = f"{'-':>15} {'-':>17}"
             else:
-                spikes = (f"{i['spike']:.4f}/{e['spike']:.4f} {i['excess_spike']:+.4f}/"
-                          f"{e['excess_spike']:+.4f}")
-            print(f"{name:<10} {v:<9} {i['rmse']:.4f}/{e['rmse']:.4f} {spikes}  "
-                  + ", ".join(f"{q:.4g}" for q in b["tuning"]))
+                spikes = (
+                    f"{i['spike']:.4f}/{e['spike']:.4f} {i['excess_spike']:+.4f}/"
+                    f"{e['excess_spike']:+.4f}"
+                )
+            print(
+                f"{name:<10} {v:<9} {i['rmse']:.4f}/{e['rmse']:.4f} {spikes}  "
+                + ", ".join(f"{q:.4g}" for q in b["tuning"])
+            )
 
 
 def main(argv=None) -> int:
@@ -161,9 +185,20 @@ def main(argv=None) -> int:
     baselines = [b for b in BASELINES if b == "ekf" or first.get("baseline_ratios", {}).get(b)]
     summaries = {b: summarise(docs, b) for b in baselines}
     # summary.json is derived from the per-seed runs: rewritten on every call
-    atomic_write_text(out / "summary.json", json.dumps(
-        {"seeds": seeds, "quick": args.quick, "ratios": summaries["ekf"],
-         "baselines": summaries}, indent=2) + "\n", force=True)
+    atomic_write_text(
+        out / "summary.json",
+        json.dumps(
+            {
+                "seeds": seeds,
+                "quick": args.quick,
+                "ratios": summaries["ekf"],
+                "baselines": summaries,
+            },
+            indent=2,
+        )
+        + "\n",
+        force=True,
+    )
     for b, summary in summaries.items():
         print_summary(summary, seeds, b)
     return 0

@@ -26,26 +26,50 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-ENV_CODE = ("import gymnasium as gym, numpy as np, quad_fault_env; env = gym.make('QuadFault-v1'); "
-            "env.reset(seed=0); env.step(np.zeros(4, dtype=np.float32))")
+ENV_CODE = (
+    "import gymnasium as gym, numpy as np, quad_fault_env; env = gym.make('QuadFault-v1'); "
+    "env.reset(seed=0); env.step(np.zeros(4, dtype=np.float32))"
+)
 CASES = ("simulate", "env", "estimate")
 
 
 def command(case: str, work: Path) -> list[str]:
     cli = [sys.executable, "-m", "quadfault.cli"]
     if case == "simulate":
-        return cli + ["simulate", "--scenario", "combined", "--duration", "10", "--seed", "0",
-                      "--out", str(work / "flight.csv"), "--force", "--quiet"]
+        return cli + [
+            "simulate",
+            "--scenario",
+            "combined",
+            "--duration",
+            "10",
+            "--seed",
+            "0",
+            "--out",
+            str(work / "flight.csv"),
+            "--force",
+            "--quiet",
+        ]
     if case == "env":
         return [sys.executable, "-c", ENV_CODE]
-    return cli + ["estimate", str(work / "input.csv"), "--estimator", "irls",
-                  "--out", str(work / "est.csv"), "--force", "--quiet"]
+    return cli + [
+        "estimate",
+        str(work / "input.csv"),
+        "--estimator",
+        "irls",
+        "--out",
+        str(work / "est.csv"),
+        "--force",
+        "--quiet",
+    ]
 
 
 def run(cmd: list[str], checkout: Path, cache: str) -> tuple[float, float]:
     """CPU seconds (user + system) and wall seconds of ``cmd`` run with ``checkout``'s code."""
-    env = {k: v for k, v in os.environ.items()
-           if k not in ("NUMBA_CACHE_DIR", "QUADFAULT_NUMBA_CACHE", "QUADFAULT_NUMBA_CACHE_USER")}
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("NUMBA_CACHE_DIR", "QUADFAULT_NUMBA_CACHE", "QUADFAULT_NUMBA_CACHE_USER")
+    }
     env.update(NUMBA_CACHE_DIR=cache, PYTHONPATH=str(checkout))
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
@@ -79,12 +103,30 @@ def main(argv=None) -> int:
     checkouts = {"this": ROOT} | ({"baseline": args.baseline.resolve()} if args.baseline else {})
     work = Path(tempfile.mkdtemp(prefix="qf-first-run-work-"))
     if "estimate" in cases:
-        subprocess.run([sys.executable, "-m", "quadfault.cli", "simulate", "--scenario",
-                        "combined", "--duration", "10", "--seed", "0", "--out",
-                        str(work / "input.csv"), "--quiet"], cwd=ROOT, check=True,
-                       env=dict(os.environ, PYTHONPATH=str(ROOT)))
-    print(f"# first run on an empty numba cache, then cached; CPU s (wall s); {load()} on "
-          f"{os.cpu_count()} cpus")
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "quadfault.cli",
+                "simulate",
+                "--scenario",
+                "combined",
+                "--duration",
+                "10",
+                "--seed",
+                "0",
+                "--out",
+                str(work / "input.csv"),
+                "--quiet",
+            ],
+            cwd=ROOT,
+            check=True,
+            env=dict(os.environ, PYTHONPATH=str(ROOT)),
+        )
+    print(
+        f"# first run on an empty numba cache, then cached; CPU s (wall s); {load()} on "
+        f"{os.cpu_count()} cpus"
+    )
     best: dict = {}
     for _ in range(args.rounds):
         for case in cases:
@@ -97,8 +139,10 @@ def main(argv=None) -> int:
     for case in cases:
         for name in checkouts:
             b = best[(case, name)]
-            line = (f"{case:<9} {name:<9} {b['cold_cpu']:>8.1f} ({b['cold_wall']:>6.1f}) "
-                    f"{b['warm_cpu']:>7.1f} ({b['warm_wall']:>5.1f})")
+            line = (
+                f"{case:<9} {name:<9} {b['cold_cpu']:>8.1f} ({b['cold_wall']:>6.1f}) "
+                f"{b['warm_cpu']:>7.1f} ({b['warm_wall']:>5.1f})"
+            )
             if name == "this" and args.baseline:
                 ratio = best[(case, "baseline")]["cold_cpu"] / b["cold_cpu"]
                 line += f"   {ratio:.2f}x"

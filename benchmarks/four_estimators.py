@@ -43,39 +43,63 @@ def main(argv=None) -> int:
     from estimators.base import EstimateSeries
     from estimators.metrics import fault_windows, score
     from estimators.series_io import read_estimate_csv
-    from quadfault.recording import read_recording
+    from quadfault.io.recording import read_recording
 
     with tempfile.TemporaryDirectory() as tmp:
         out = args.out or Path(tmp)
         out.mkdir(parents=True, exist_ok=True)
         flight = out / "flight.csv"
-        quadfault(["simulate", "--scenario", args.scenario, "--duration", args.duration,
-                   "--seed", args.seed, "--no-saturation", "--out", flight, "--force"])
+        quadfault(
+            [
+                "simulate",
+                "--scenario",
+                args.scenario,
+                "--duration",
+                args.duration,
+                "--seed",
+                args.seed,
+                "--no-saturation",
+                "--out",
+                flight,
+                "--force",
+            ]
+        )
         rec = read_recording(flight)
         rows = {}
         for est in ESTIMATORS:
             path = out / f"{est}.csv"
             quadfault(["estimate", flight, "--estimator", est, "--out", path, "--force"])
             d = read_estimate_csv(path)
-            series = EstimateSeries(t=d["t"], eta=d["eta"], sd=d["sd"], status=d["status"],
-                                    estimator=est)
+            series = EstimateSeries(
+                t=d["t"], eta=d["eta"], sd=d["sd"], status=d["status"], estimator=est
+            )
             rows[est] = (series, score(rec, series))
     windows = fault_windows(rec)
-    print(f"\n{args.scenario}, {args.duration:g} s, seed {args.seed}, no saturation: per motor "
-          "RMSE | spike | detection delay [s] (estimate < 0.75 after the onset)")
-    print(f"{'est':5s} " + " ".join(f"{'M' + str(m + 1) + ' rmse':>8s}" for m in range(4))
-          + f" {'mean':>7s}   " + " ".join(f"{'M' + str(m + 1) + ' spike':>9s}" for m in range(4))
-          + "   delays")
+    print(
+        f"\n{args.scenario}, {args.duration:g} s, seed {args.seed}, no saturation: per motor "
+        "RMSE | spike | detection delay [s] (estimate < 0.75 after the onset)"
+    )
+    print(
+        f"{'est':5s} "
+        + " ".join(f"{'M' + str(m + 1) + ' rmse':>8s}" for m in range(4))
+        + f" {'mean':>7s}   "
+        + " ".join(f"{'M' + str(m + 1) + ' spike':>9s}" for m in range(4))
+        + "   delays"
+    )
     for est, (s, sc) in rows.items():
         delays = []
         for motor, t0, t1 in windows:
             k = np.flatnonzero((s.t >= t0) & (s.t <= t1) & (s.eta[:, motor - 1] < THRESHOLD))
             delays.append(f"M{motor} {s.t[k[0]] - t0:.3f}" if k.size else f"M{motor} -")
         spikes = sc.spike or [None] * 4
-        print(f"{est:5s} " + " ".join(f"{x:8.4f}" for x in sc.rmse)
-              + f" {np.mean(sc.rmse):7.4f}   "
-              + " ".join(f"{x:9.4f}" if x is not None else f"{'-':>9s}" for x in spikes)
-              + "   " + ", ".join(delays))
+        print(
+            f"{est:5s} "
+            + " ".join(f"{x:8.4f}" for x in sc.rmse)
+            + f" {np.mean(sc.rmse):7.4f}   "
+            + " ".join(f"{x:9.4f}" if x is not None else f"{'-':>9s}" for x in spikes)
+            + "   "
+            + ", ".join(delays)
+        )
     return 0
 
 

@@ -33,8 +33,8 @@ import numpy as np
 
 from quadfault.cli import main as cli_main
 from quadfault.errors import QuadfaultError
+from quadfault.io.recording import read_recording
 from quadfault.progress import progress_bar
-from quadfault.recording import read_recording
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from support.fuzzing import (  # noqa: E402  (the tests' case generators)
@@ -80,7 +80,7 @@ def check_cli(argv, case, csv_path, side_path, outputs, timeout) -> tuple[str, s
     prefix = f"quadfault {argv[0]}: error: "
     if not text.startswith(prefix):
         return "unclean", text
-    why = error_is_clean(text[len(prefix):], case, csv_path, side_path)
+    why = error_is_clean(text[len(prefix) :], case, csv_path, side_path)
     return ("clean", "") if why is None and code == 2 else ("unclean", f"{why}: {text}")
 
 
@@ -96,8 +96,9 @@ def main(argv=None) -> int:
     per_mutation = collections.defaultdict(collections.Counter)
     examples = {}
     start = time.perf_counter()
-    bar = progress_bar(total=args.cases, desc="fuzz", unit="file",
-                       disable=True if args.quiet else None)
+    bar = progress_bar(
+        total=args.cases, desc="fuzz", unit="file", disable=True if args.quiet else None
+    )
     for k in range(args.cases):
         case = bad_case(rng, k % len(MUTATION_NAMES))
         with tempfile.TemporaryDirectory() as folder:
@@ -106,12 +107,22 @@ def main(argv=None) -> int:
             diag = Path(folder) / "diag.json"
             runs = {
                 "read_recording": check_reader(case, csv_path, side_path, args.timeout),
-                "estimate": check_cli(["estimate", str(csv_path), "--out", str(est), "--quiet"],
-                                      case, csv_path, side_path, [est, est.with_suffix(".json")],
-                                      args.timeout),
-                "diagnose": check_cli(["diagnose", str(csv_path), "--json", str(diag),
-                                       "--quiet"], case, csv_path, side_path, [diag],
-                                      args.timeout),
+                "estimate": check_cli(
+                    ["estimate", str(csv_path), "--out", str(est), "--quiet"],
+                    case,
+                    csv_path,
+                    side_path,
+                    [est, est.with_suffix(".json")],
+                    args.timeout,
+                ),
+                "diagnose": check_cli(
+                    ["diagnose", str(csv_path), "--json", str(diag), "--quiet"],
+                    case,
+                    csv_path,
+                    side_path,
+                    [diag],
+                    args.timeout,
+                ),
             }
         for entry, (verdict, detail) in runs.items():
             tally[(entry, verdict)] += 1
@@ -123,14 +134,20 @@ def main(argv=None) -> int:
     seconds = time.perf_counter() - start
     runs_total = sum(tally.values())
     clean = sum(v for (e, verdict), v in tally.items() if verdict == "clean")
-    print(f"fuzz_recordings: {args.cases} broken recordings x 3 entry points = {runs_total} runs "
-          f"in {seconds:.1f} s (seed {args.seed})")
+    print(
+        f"fuzz_recordings: {args.cases} broken recordings x 3 entry points = {runs_total} runs "
+        f"in {seconds:.1f} s (seed {args.seed})"
+    )
     for entry in ("read_recording", "estimate", "diagnose"):
-        counts = {v: tally[(entry, v)] for v in ("clean", "unclean", "traceback", "hang",
-                                                 "accepted", "output")}
+        counts = {
+            v: tally[(entry, v)]
+            for v in ("clean", "unclean", "traceback", "hang", "accepted", "output")
+        }
         print(f"  {entry:15s} " + "  ".join(f"{v} {n}" for v, n in counts.items()))
-    print(f"  mutations: {len(per_mutation)} kinds, "
-          + ", ".join(f"{m} {sum(c.values())}" for m, c in sorted(per_mutation.items())))
+    print(
+        f"  mutations: {len(per_mutation)} kinds, "
+        + ", ".join(f"{m} {sum(c.values())}" for m, c in sorted(per_mutation.items()))
+    )
     print(f"clean: {clean}/{runs_total}")
     for (entry, name, verdict), detail in sorted(examples.items())[:20]:
         print(f"  NOT CLEAN {entry} {name} {verdict}: {detail[:200]}")

@@ -63,9 +63,11 @@ def trajectory(kind: str, vehicle: str):
     if kind == "circle":
         from rotorpy.trajectories.circular_traj import ThreeDCircularTraj
 
-        return ThreeDCircularTraj(center=np.array([0.0, 0.0, 1.0]),
-                                  radius=scale * np.array([1.0, 1.0, 0.3]),
-                                  freq=np.array([0.3, 0.3, 0.15]))
+        return ThreeDCircularTraj(
+            center=np.array([0.0, 0.0, 1.0]),
+            radius=scale * np.array([1.0, 1.0, 0.3]),
+            freq=np.array([0.3, 0.3, 0.15]),
+        )
     from rotorpy.trajectories.lissajous_traj import TwoDLissajous
 
     return TwoDLissajous(A=scale, B=scale, a=1.6, b=2.4, delta=0.5, height=1.0)
@@ -91,23 +93,51 @@ def fly(case: str, duration: float, rate: float, settle: float = 0.0) -> dict:
     traj = trajectory(tkind, vname)
     flat0 = traj.update(0.0)
     hover = np.sqrt(params["mass"] * 9.81 / (4 * params["k_eta"]))
-    x0 = {"x": np.asarray(flat0["x"], float), "v": np.asarray(flat0["x_dot"], float),
-          "q": np.array([0.0, 0.0, 0.0, 1.0]), "w": np.zeros(3), "wind": np.zeros(3),
-          "rotor_speeds": np.full(4, hover)}
+    x0 = {
+        "x": np.asarray(flat0["x"], float),
+        "v": np.asarray(flat0["x_dot"], float),
+        "q": np.array([0.0, 0.0, 0.0, 1.0]),
+        "w": np.zeros(3),
+        "wind": np.zeros(3),
+        "rotor_speeds": np.full(4, hover),
+    }
     veh = Multirotor(params, initial_state=x0, aero=aero)
-    out = simulate(World.empty((-50, 50, -50, 50, -50, 50)), x0, veh, SE3Control(params), traj,
-                   NoWind(), Imu(sampling_rate=rate),
-                   MotionCapture(sampling_rate=rate, with_artifacts=False), NullEstimator(),
-                   settle + duration, 1.0 / rate, 0.0, False, terminate=False)
+    out = simulate(
+        World.empty((-50, 50, -50, 50, -50, 50)),
+        x0,
+        veh,
+        SE3Control(params),
+        traj,
+        NoWind(),
+        Imu(sampling_rate=rate),
+        MotionCapture(sampling_rate=rate, with_artifacts=False),
+        NullEstimator(),
+        settle + duration,
+        1.0 / rate,
+        0.0,
+        False,
+        terminate=False,
+    )
     t, state, control = out[0], out[1], out[2]
     keep = t >= settle - 1e-9
     state = {k: np.asarray(v)[keep] for k, v in state.items()}
     # RotorPy clips the commanded speed to its rotor limits (and f = k u^2 needs u >= 0)
-    u = np.clip(np.asarray(control["cmd_motor_speeds"])[keep], params["rotor_speed_min"],
-                params["rotor_speed_max"])
-    return {"t": t[keep] - t[keep][0], "state": state, "u": u, "params": params,
-            "vehicle": vname, "trajectory": tkind, "aero": aero, "f_to_TM": veh.f_to_TM,
-            "settle": settle}
+    u = np.clip(
+        np.asarray(control["cmd_motor_speeds"])[keep],
+        params["rotor_speed_min"],
+        params["rotor_speed_max"],
+    )
+    return {
+        "t": t[keep] - t[keep][0],
+        "state": state,
+        "u": u,
+        "params": params,
+        "vehicle": vname,
+        "trajectory": tkind,
+        "aero": aero,
+        "f_to_TM": veh.f_to_TM,
+        "settle": settle,
+    }
 
 
 def expected(run: dict) -> dict:
@@ -126,8 +156,9 @@ def expected(run: dict) -> dict:
     speed = np.linalg.norm(vb, axis=1)
     cd = np.array([p.get("c_Dx", 0.0), p.get("c_Dy", 0.0), p.get("c_Dz", 0.0)])
     # best linear k for the quadratic -|v| C_D v in the least-squares sense, per body axis
-    parasitic = (cd * np.sum(speed[:, None] * vb * vb, axis=0)
-                 / np.maximum(np.sum(vb * vb, axis=0), 1e-12))
+    parasitic = (
+        cd * np.sum(speed[:, None] * vb * vb, axis=0) / np.maximum(np.sum(vb * vb, axis=0), 1e-12)
+    )
     out["drag_k_N_s_per_m"] = (rotor + parasitic).tolist()
     out["drag_rotor_part"] = rotor.tolist()
     # the same rotor drag in blade_flapping's terms (force proportional to thrust; RotorPy's
@@ -138,15 +169,27 @@ def expected(run: dict) -> dict:
 
 
 def write_recording(run: dict, csv_path: Path, force: bool) -> None:
-    """Our recording format, written independently of quadfault.recording (ENU / FLU)."""
+    """Our recording format, written independently of quadfault.io.recording (ENU / FLU)."""
     from quadfault.fileio import atomic_write_files
 
     st, p = run["state"], run["params"]
     q = st["q"]  # RotorPy: [x, y, z, w], body -> world
-    cols = {"t": run["t"], "px": st["x"][:, 0], "py": st["x"][:, 1], "pz": st["x"][:, 2],
-            "vx": st["v"][:, 0], "vy": st["v"][:, 1], "vz": st["v"][:, 2],
-            "qw": q[:, 3], "qx": q[:, 0], "qy": q[:, 1], "qz": q[:, 2],
-            "wx": st["w"][:, 0], "wy": st["w"][:, 1], "wz": st["w"][:, 2]}
+    cols = {
+        "t": run["t"],
+        "px": st["x"][:, 0],
+        "py": st["x"][:, 1],
+        "pz": st["x"][:, 2],
+        "vx": st["v"][:, 0],
+        "vy": st["v"][:, 1],
+        "vz": st["v"][:, 2],
+        "qw": q[:, 3],
+        "qx": q[:, 0],
+        "qy": q[:, 1],
+        "qz": q[:, 2],
+        "wx": st["w"][:, 0],
+        "wy": st["w"][:, 1],
+        "wz": st["w"][:, 2],
+    }
     for i in range(4):
         cols[f"u{i + 1}"] = run["u"][:, i]
     for i in range(4):
@@ -154,23 +197,39 @@ def write_recording(run: dict, csv_path: Path, force: bool) -> None:
     data = np.column_stack(list(cols.values()))
     lines = [",".join(cols)] + [",".join(f"{x:.9g}" for x in row) for row in data]
     sidecar = {
-        "format": "quadfault-recording/1", "frame": "ENU", "gravity": 9.81,
-        "vehicle": {"mass": p["mass"],
-                    "inertia": [[p["Ixx"], p["Ixy"], p["Ixz"]], [p["Ixy"], p["Iyy"], p["Iyz"]],
-                                [p["Ixz"], p["Iyz"], p["Izz"]]],
-                    "allocation": np.asarray(run["f_to_TM"]).tolist(),
-                    "thrust_coefficient": p["k_eta"],
-                    "max_thrust": p["k_eta"] * p["rotor_speed_max"] ** 2},
+        "format": "quadfault-recording/1",
+        "frame": "ENU",
+        "gravity": 9.81,
+        "vehicle": {
+            "mass": p["mass"],
+            "inertia": [
+                [p["Ixx"], p["Ixy"], p["Ixz"]],
+                [p["Ixy"], p["Iyy"], p["Iyz"]],
+                [p["Ixz"], p["Iyz"], p["Izz"]],
+            ],
+            "allocation": np.asarray(run["f_to_TM"]).tolist(),
+            "thrust_coefficient": p["k_eta"],
+            "max_thrust": p["k_eta"] * p["rotor_speed_max"] ** 2,
+        },
         "source": f"RotorPy {run['vehicle']} ({run['trajectory']}, aero={run['aero']}, "
-                  f"tau_m={p['tau_m']} s, first {run['settle']} s dropped), exported by "
-                  "benchmarks/independent_sim.py",
-        "truth": {"rotorpy_params": {k: (v.tolist() if isinstance(v, np.ndarray) else v)
-                                     for k, v in p.items() if k != "rotor_pos"},
-                  "expected": expected(run)},
+        f"tau_m={p['tau_m']} s, first {run['settle']} s dropped), exported by "
+        "benchmarks/independent_sim.py",
+        "truth": {
+            "rotorpy_params": {
+                k: (v.tolist() if isinstance(v, np.ndarray) else v)
+                for k, v in p.items()
+                if k != "rotor_pos"
+            },
+            "expected": expected(run),
+        },
     }
-    atomic_write_files({csv_path: "\n".join(lines) + "\n",
-                        csv_path.with_suffix(".json"): json.dumps(sidecar, indent=1)},
-                       force=force)
+    atomic_write_files(
+        {
+            csv_path: "\n".join(lines) + "\n",
+            csv_path.with_suffix(".json"): json.dumps(sidecar, indent=1),
+        },
+        force=force,
+    )
 
 
 def reused(csv_path: Path) -> tuple:
@@ -185,8 +244,9 @@ def diagnose(csv_path: Path, force: bool) -> dict:
     from quadfault import cli
 
     out = csv_path.with_name(csv_path.stem + "_diag.json")
-    code = cli.main(["diagnose", str(csv_path), "--json", str(out), "--quiet"]
-                    + (["--force"] if force else []))
+    code = cli.main(
+        ["diagnose", str(csv_path), "--json", str(out), "--quiet"] + (["--force"] if force else [])
+    )
     if code != 0:
         raise SystemExit(f"quadfault diagnose failed on {csv_path} (exit {code})")
     return json.loads(out.read_text())
@@ -204,19 +264,28 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=Path("independent_sim_out"))
     ap.add_argument("--duration", type=float, default=15.0, help="flight length [s]")
     ap.add_argument("--rate", type=float, default=200.0, help="simulation/recording rate [Hz]")
-    ap.add_argument("--settle", type=float, default=0.0,
-                    help="simulate this long first and drop it (start-up transient) [s]")
+    ap.add_argument(
+        "--settle",
+        type=float,
+        default=0.0,
+        help="simulate this long first and drop it (start-up transient) [s]",
+    )
     ap.add_argument("--cases", default=",".join(CASES), help="comma-separated case names")
     ap.add_argument("--force", action="store_true", help="overwrite existing outputs")
-    ap.add_argument("--reuse", action="store_true",
-                    help="diagnose the recordings already in --out instead of flying again")
+    ap.add_argument(
+        "--reuse",
+        action="store_true",
+        help="diagnose the recordings already in --out instead of flying again",
+    )
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     args = ap.parse_args(argv)
     try:
         import rotorpy  # noqa: F401
     except ImportError:
-        print("skipped: RotorPy is not importable (pip install rotorpy, or run with the "
-              "interpreter that has it)")
+        print(
+            "skipped: RotorPy is not importable (pip install rotorpy, or run with the "
+            "interpreter that has it)"
+        )
         return 0
     from quadfault.progress import progress_bar
 
@@ -227,8 +296,12 @@ def main(argv=None) -> int:
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []
-    with progress_bar(total=len(cases), desc="independent sim", unit="flight",
-                      disable=True if args.quiet else None) as bar:
+    with progress_bar(
+        total=len(cases),
+        desc="independent sim",
+        unit="flight",
+        disable=True if args.quiet else None,
+    ) as bar:
         for case in cases:
             t0 = time.perf_counter()
             csv_path = args.out / f"{case}.csv"
@@ -243,22 +316,36 @@ def main(argv=None) -> int:
             diag = diagnose(csv_path, args.force or args.reuse)
             rows.append((case, exp, diag, t1 - t0, time.perf_counter() - t1, v95))
             bar.update(1)
-    print("| case | RotorPy: drag k (x,y,z) [N s/m], tau_m [s] (as blade_flapping k_force "
-          "[s/m]) | speed p95 [m/s] | verdict | "
-          "diagnosis: effects (params +- sd; held-out improvement) | model improvement |")
+    print(
+        "| case | RotorPy: drag k (x,y,z) [N s/m], tau_m [s] (as blade_flapping k_force "
+        "[s/m]) | speed p95 [m/s] | verdict | "
+        "diagnosis: effects (params +- sd; held-out improvement) | model improvement |"
+    )
     print("|---|---|---|---|---|---|")
-    for case, exp, diag, t_sim, t_diag, v95 in rows:
-        eff = "; ".join(
-            f"{e['name']}(" + ", ".join(f"{k}={_fmt(v)} +- {_fmt(e['uncertainty'].get(k))}"
-                                        for k, v in e["params"].items())
-            + f"; {100 * e['improvement']:.0f}%)" for e in diag["effects"]) or "none"
+    for case, exp, diag, _t_sim, _t_diag, v95 in rows:
+        eff = (
+            "; ".join(
+                f"{e['name']}("
+                + ", ".join(
+                    f"{k}={_fmt(v)} +- {_fmt(e['uncertainty'].get(k))}"
+                    for k, v in e["params"].items()
+                )
+                + f"; {100 * e['improvement']:.0f}%)"
+                for e in diag["effects"]
+            )
+            or "none"
+        )
         flap = exp.get("blade_flapping_k_force_s_per_m")
         flap = "" if flap is None else f" ({flap:.3g})"
-        print(f"| {case} | {_fmt(exp['drag_k_N_s_per_m'])}, {exp['motor_lag_tau_s']:g}{flap} | "
-              f"{v95:.2f} | {diag['verdict']} | {eff} | "
-              f"{100 * diag['model']['improvement']:.1f}% |")
-    print(f"\n(simulation + export {sum(r[3] for r in rows):.0f} s, diagnosis "
-          f"{sum(r[4] for r in rows):.0f} s; files in {args.out})")
+        print(
+            f"| {case} | {_fmt(exp['drag_k_N_s_per_m'])}, {exp['motor_lag_tau_s']:g}{flap} | "
+            f"{v95:.2f} | {diag['verdict']} | {eff} | "
+            f"{100 * diag['model']['improvement']:.1f}% |"
+        )
+    print(
+        f"\n(simulation + export {sum(r[3] for r in rows):.0f} s, diagnosis "
+        f"{sum(r[4] for r in rows):.0f} s; files in {args.out})"
+    )
     return 0
 
 

@@ -55,8 +55,11 @@ YAW = (-0.01, 0.01, 0.01, -0.01)
 def vehicle() -> dict:
     """The sidecar ``vehicle`` object: wrench = allocation @ f with rows [T; Mx; My; Mz] (FRD:
     thrust along -z, so Mx = -y f, My = x f)."""
-    return {"mass": MASS, "inertia": list(INERTIA),
-            "allocation": [[1.0] * 4, [-y for y in ROTOR_Y], list(ROTOR_X), list(YAW)]}
+    return {
+        "mass": MASS,
+        "inertia": list(INERTIA),
+        "allocation": [[1.0] * 4, [-y for y in ROTOR_Y], list(ROTOR_X), list(YAW)],
+    }
 
 
 def quadfault(args: list, quiet: bool) -> None:
@@ -72,7 +75,7 @@ def quadfault(args: list, quiet: bool) -> None:
 def onboard(log: Path) -> dict:
     """The onboard thrust-row estimates of the longest log in the file: their final values
     and the times their learning started and ended [s]."""
-    from quadfault.importers.blackbox_format import decode_log, split_logs
+    from quadfault.io.importers.blackbox_format import decode_log, split_logs
 
     data = log.read_bytes()
     lg = max((decode_log(data, a, b) for a, b in split_logs(data)), key=lambda g: len(g.main))
@@ -111,45 +114,53 @@ def run(data: Path, out: Path, quiet: bool) -> list:
             ok = (s["status"] == "ok") & (np.mean(s["eta"], axis=1) > 0.3)
             rel = relative(s["eta"][ok])
             med = np.median(rel, axis=0)
-            entry = {"t": s["t"][ok].tolist(), "relative": rel.tolist(),
-                     "median": med.tolist()}
+            entry = {"t": s["t"][ok].tolist(), "relative": rel.tolist(), "median": med.tolist()}
             if e_ob is not None:
                 d = med - e_ob
-                entry.update(rms=float(np.sqrt(np.mean(d ** 2))), worst=float(np.max(np.abs(d))),
-                             corr=float(np.corrcoef(med, e_ob)[0, 1]))
+                entry.update(
+                    rms=float(np.sqrt(np.mean(d**2))),
+                    worst=float(np.max(np.abs(d))),
+                    corr=float(np.corrcoef(med, e_ob)[0, 1]),
+                )
             row["estimators"][est] = entry
         rows.append(row)
     return rows
 
 
 def print_table(rows: list) -> None:
-    print("\nper motor, normalised by the four motors' mean: onboard (end of its learning) and "
-          "the median of ours over the ok rows; agreement RMS / worst / correlation")
-    print(f"{'flight':9s} {'source':8s} {'m1':>6s} {'m2':>6s} {'m3':>6s} {'m4':>6s} "
-          f"{'RMS':>6s} {'worst':>6s} {'corr':>6s}")
+    print(
+        "\nper motor, normalised by the four motors' mean: onboard (end of its learning) and "
+        "the median of ours over the ok rows; agreement RMS / worst / correlation"
+    )
+    print(
+        f"{'flight':9s} {'source':8s} {'m1':>6s} {'m2':>6s} {'m3':>6s} {'m4':>6s} "
+        f"{'RMS':>6s} {'worst':>6s} {'corr':>6s}"
+    )
     for r in rows:
         ob = r["onboard"]
         if ob["x"] is not None:
-            print(f"{r['flight']:9s} {'onboard':8s} "
-                  + " ".join(f"{v:6.3f}" for v in relative(ob["x"]))
-                  + f"   (learned {ob['learning'][0]:.2f}-{ob['learning'][1]:.2f} s)")
+            print(
+                f"{r['flight']:9s} {'onboard':8s} "
+                + " ".join(f"{v:6.3f}" for v in relative(ob["x"]))
+                + f"   (learned {ob['learning'][0]:.2f}-{ob['learning'][1]:.2f} s)"
+            )
         for est, e in r["estimators"].items():
-            tail = (f" {e['rms']:6.3f} {e['worst']:6.3f} {e['corr']:+6.2f}" if "rms" in e
-                    else "")
-            print(f"{r['flight']:9s} {est:8s} " + " ".join(f"{v:6.3f}" for v in e["median"])
-                  + tail)
+            tail = f" {e['rms']:6.3f} {e['worst']:6.3f} {e['corr']:+6.2f}" if "rms" in e else ""
+            print(f"{r['flight']:9s} {est:8s} " + " ".join(f"{v:6.3f}" for v in e["median"]) + tail)
 
 
 def plot(rows: list, path: Path) -> None:
+    import matplotlib
+
     from quadfault.fileio import atomic_savefig
 
-    import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     colors = {"irls": "tab:blue", "ekf": "tab:orange", "rls": "tab:green", "ukf": "tab:purple"}
-    fig, axes = plt.subplots(len(rows), 4, figsize=(14, 2.6 * len(rows)), squeeze=False,
-                             sharey=True)
+    fig, axes = plt.subplots(
+        len(rows), 4, figsize=(14, 2.6 * len(rows)), squeeze=False, sharey=True
+    )
     for i, r in enumerate(rows):
         e_ob = None if r["onboard"]["x"] is None else relative(r["onboard"]["x"])
         for j in range(4):
@@ -175,8 +186,12 @@ def plot(rows: list, path: Path) -> None:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--data", type=Path, default=DEFAULT_DATA)
-    p.add_argument("--out", type=Path, default=None,
-                   help="folder for the recordings and estimates (default: a temporary one)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="folder for the recordings and estimates (default: a temporary one)",
+    )
     p.add_argument("--plot", type=Path, default=None, help="write the figure (PNG)")
     p.add_argument("--json", type=Path, default=None, help="also write the summary as JSON")
     p.add_argument("--quiet", action="store_true", help="do not print the commands")
@@ -195,9 +210,16 @@ def main(argv=None) -> int:
     if args.json:
         from quadfault.fileio import atomic_write_text
 
-        slim = [{**r, "estimators": {k: {m: v for m, v in e.items()
-                                         if m not in ("t", "relative")}
-                                     for k, e in r["estimators"].items()}} for r in rows]
+        slim = [
+            {
+                **r,
+                "estimators": {
+                    k: {m: v for m, v in e.items() if m not in ("t", "relative")}
+                    for k, e in r["estimators"].items()
+                },
+            }
+            for r in rows
+        ]
         atomic_write_text(args.json, json.dumps(slim, indent=2) + "\n", force=True)
     return 0
 

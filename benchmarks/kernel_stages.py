@@ -1,6 +1,6 @@
 """Where the closed loop's time goes: each kernel timed alone, on one core.
 
-Each stage of one closed-loop vehicle-step (``quadfault.closed_loop``) runs in its own
+Each stage of one closed-loop vehicle-step (``quadfault.model.closed_loop``) runs in its own
 compiled loop over N vehicles x ``horizon`` steps (hover-like states, angular rates of a few
 rad/s), on the calling thread; the result is CPU nanoseconds per vehicle-step (best of
 ``repeats`` timings). The last two rows are the loop itself (``fly_batch`` with the
@@ -34,17 +34,17 @@ def _loops():
     """The stage loops (compiled here, not cached: they time the kernels as they are)."""
     from numba import njit
 
-    from quadfault.closed_loop import _allocate, _tuples
-    from quadfault.controller import (
+    from quadfault.model.closed_loop import _allocate, _tuples
+    from quadfault.model.controller import (
         controller_tuples,
         geometric_control,
         reference_row,
         rotor_commands,
     )
-    from quadfault.dynamics import rkmk4_step
-    from quadfault.motors import motor_thrust
-    from quadfault.rotation import expm3, mat3, vec3
-    from quadfault.sensors import measure3
+    from quadfault.model.dynamics import rkmk4_step
+    from quadfault.model.motors import motor_thrust
+    from quadfault.model.rotation import expm3, mat3, vec3
+    from quadfault.model.sensors import measure3
 
     jit = njit(cache=False, error_model="numpy")
 
@@ -124,13 +124,13 @@ def stage_ns(N: int = 4096, horizon: int = 50, repeats: int = 5) -> dict[str, fl
     """CPU ns per vehicle-step of each stage of :data:`STAGES` at N vehicles."""
     import numba
 
-    from quadfault import closed_loop, jit
-    from quadfault.controller import GeometricController
-    from quadfault.motors import MotorModel
-    from quadfault.plant import Plant
-    from quadfault.sensors import SensorNoise
-    from quadfault.trajectory import Hover
-    from quadfault.vehicle import Vehicle
+    from quadfault.model import closed_loop
+    from quadfault.model.controller import GeometricController
+    from quadfault.model.motors import MotorModel
+    from quadfault.model.plant import Plant
+    from quadfault.model.sensors import SensorNoise
+    from quadfault.model.trajectory import Hover
+    from quadfault.model.vehicle import Vehicle
 
     rng = np.random.default_rng(0)
     veh = Vehicle()
@@ -173,6 +173,7 @@ def stage_ns(N: int = 4096, horizon: int = 50, repeats: int = 5) -> dict[str, fl
                 closed_loop.fly_batch(gens, active, k0, horizon, True, C, V, tables, none, K)
             finally:
                 numba.set_num_threads(before)
+
         return fn
 
     calls["serial"] = batch(1)
@@ -196,9 +197,11 @@ def main(argv=None) -> int:
     os.environ.setdefault("OMP_WAIT_POLICY", "passive")
     ns = stage_ns(args.n, args.horizon, args.repeats)
     load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
-    print(f"# CPU ns per vehicle-step at N = {args.n}, horizon {args.horizon} (best of "
-          f"{args.repeats}); {ns['threads']} numba threads; load average {load} on "
-          f"{os.cpu_count()} cpus")
+    print(
+        f"# CPU ns per vehicle-step at N = {args.n}, horizon {args.horizon} (best of "
+        f"{args.repeats}); {ns['threads']} numba threads; load average {load} on "
+        f"{os.cpu_count()} cpus"
+    )
     print("| stage | CPU ns per vehicle-step |\n|---|---|")
     for key, label in STAGES:
         print(f"| {label} | {ns[key]:.0f} |")

@@ -29,7 +29,7 @@ import numpy as np
 
 from quadfault.cli import main as cli
 from quadfault.fileio import atomic_write_text
-from quadfault.recording import read_recording, write_recording
+from quadfault.io.recording import read_recording, write_recording
 
 LIBRARIES = ("motor_lag", "thrust_curve,motor_lag", "thrust_curve,motor_lag,inertia")
 
@@ -42,8 +42,10 @@ def segments(rec, segment, author: bool) -> list[tuple[str, float, float]]:
     out = []
     for name, seg in (rec.meta.get("author_segments") or {}).items():
         spans = seg if isinstance(seg[0], list) else [seg]
-        out += [(name if len(spans) == 1 else f"{name}{k + 1}", float(a), float(b))
-                for k, (a, b) in enumerate(spans)]
+        out += [
+            (name if len(spans) == 1 else f"{name}{k + 1}", float(a), float(b))
+            for k, (a, b) in enumerate(spans)
+        ]
     return out
 
 
@@ -53,8 +55,10 @@ def diagnose(rec, t0, t1, effects, work: Path) -> dict:
     csv = work / "part.csv"
     write_recording(part, csv, frame=rec.frame, force=True)
     out = work / "part.diag.json"
-    if cli(["diagnose", str(csv), "--json", str(out), "--force", "--quiet",
-            "--effects", effects]) != 0:
+    if (
+        cli(["diagnose", str(csv), "--json", str(out), "--force", "--quiet", "--effects", effects])
+        != 0
+    ):
         raise SystemExit(f"lag_curve: quadfault diagnose failed on {t0}-{t1} s")
     return json.loads(out.read_text())
 
@@ -67,8 +71,10 @@ def describe(doc) -> str:
     text = f"tau {lag['params']['tau_s']:.3f} +- {lag['uncertainty']['tau_s']:.3f} s"
     if "thrust_curve" in found:
         p = found["thrust_curve"]["params"]
-        text += (f"; curve: hover {p['hover_thrust_change']:+.3f}, slope "
-                 f"{p['slope_change']:+.3f}, curvature {p['curvature_change']:+.3f}")
+        text += (
+            f"; curve: hover {p['hover_thrust_change']:+.3f}, slope "
+            f"{p['slope_change']:+.3f}, curvature {p['curvature_change']:+.3f}"
+        )
     if "inertia" in found:
         text += "; inertia x" + ", ".join(f"{s:.2f}" for s in found["inertia"]["params"]["scale"])
     return text + f"; model improvement {doc['model']['improvement']:.2f}"
@@ -116,8 +122,19 @@ def main(argv=None) -> int:
                 return 0
             for log in ("log10", "log15", "log16"):
                 csv = Path(tmp) / f"{log}.csv"
-                if cli(["import", "eschmann", str(directory / f"{log}.csv.gz"), "--out",
-                        str(csv), "--quiet"]) != 0:
+                if (
+                    cli(
+                        [
+                            "import",
+                            "eschmann",
+                            str(directory / f"{log}.csv.gz"),
+                            "--out",
+                            str(csv),
+                            "--quiet",
+                        ]
+                    )
+                    != 0
+                ):
                     raise SystemExit(f"lag_curve: quadfault import failed on {log}")
                 paths.append(csv)
             author = True

@@ -31,10 +31,15 @@ def _env(n: int, estimator: str):
     import quad_fault_env  # noqa: F401
     from quad_fault_env.vector import QuadFaultVectorEnv
 
-    kwargs = dict(gym.spec("QuadFaultHover-v1").kwargs, action_mode="residual",
-                  residual_scale=2.45, estimator_rate="control", duration=10.0,
-                  estimator=estimator, random_faults={"n_faults": [1, 1],
-                                                      "severity": [0.5, 0.85]})
+    kwargs = dict(
+        gym.spec("QuadFaultHover-v1").kwargs,
+        action_mode="residual",
+        residual_scale=2.45,
+        estimator_rate="control",
+        duration=10.0,
+        estimator=estimator,
+        random_faults={"n_faults": [1, 1], "severity": [0.5, 0.85]},
+    )
     venv = QuadFaultVectorEnv(n, **kwargs)
     venv.reset(seed=0)
     return venv
@@ -55,8 +60,9 @@ def _time(venv, steps: int, threads: int) -> tuple[float, float]:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--sizes", type=int, nargs="+", default=[8, 32, 128, 512, 4096])
-    p.add_argument("--estimators", nargs="+", default=["irls", "none"],
-                   choices=("irls", "ekf", "none"))
+    p.add_argument(
+        "--estimators", nargs="+", default=["irls", "none"], choices=("irls", "ekf", "none")
+    )
     p.add_argument("--steps", type=int, default=100, help="vector steps per round")
     p.add_argument("--rounds", type=int, default=3, help="interleaved rounds (best kept)")
     args = p.parse_args(argv)
@@ -67,10 +73,14 @@ def main(argv=None) -> int:
     if default == 1:
         print("numba has one thread on this machine: nothing to compare")
         return 0
-    print(f"numba threads: 1 vs {default} (default); us per vehicle-step, best of "
-          f"{args.rounds} rounds")
-    print(f"{'estimator':>9} {'N':>5} {'wall 1':>8} {'wall d':>8} {'cpu 1':>8} {'cpu d':>8} "
-          f"{'wall d/1':>8} {'cpu d/1':>8}  load")
+    print(
+        f"numba threads: 1 vs {default} (default); us per vehicle-step, best of "
+        f"{args.rounds} rounds"
+    )
+    print(
+        f"{'estimator':>9} {'N':>5} {'wall 1':>8} {'wall d':>8} {'cpu 1':>8} {'cpu d':>8} "
+        f"{'wall d/1':>8} {'cpu d/1':>8}  load"
+    )
     for est in args.estimators:
         for n in args.sizes:
             venv = _env(n, est)
@@ -86,8 +96,11 @@ def main(argv=None) -> int:
             per = 1e6 / (steps * n)
             w1, c1 = (x * per for x in best[1])
             wd, cd = (x * per for x in best[default])
-            print(f"{est:>9} {n:>5} {w1:8.2f} {wd:8.2f} {c1:8.2f} {cd:8.2f} {wd / w1:8.2f} "
-                  f"{cd / c1:8.2f}  {os.getloadavg()[0]:.1f}", flush=True)
+            print(
+                f"{est:>9} {n:>5} {w1:8.2f} {wd:8.2f} {c1:8.2f} {cd:8.2f} {wd / w1:8.2f} "
+                f"{cd / c1:8.2f}  {os.getloadavg()[0]:.1f}",
+                flush=True,
+            )
     return 0
 
 

@@ -73,9 +73,16 @@ RANDOM_FAULTS = {"n_faults": [1, 1], "severity": [0.5, 0.85]}
 #: PPO settings of both arms. The residual starts at zero (SB3 initialises the action head
 #: with gain 0.01) with exploration noise exp(-2.3) ~ 0.1 per unit action (0.25 N); rollouts
 #: of n_envs x n_steps = 32 x 256 steps (2.56 s of flight per quadrotor).
-PPO_KWARGS = {"n_steps": 256, "batch_size": 1024, "n_epochs": 10, "learning_rate": 3e-4,
-              "gamma": 0.99, "gae_lambda": 0.95, "clip_range": 0.2,
-              "policy_kwargs": {"log_std_init": -2.3, "net_arch": [128, 128]}}
+PPO_KWARGS = {
+    "n_steps": 256,
+    "batch_size": 1024,
+    "n_epochs": 10,
+    "learning_rate": 3e-4,
+    "gamma": 0.99,
+    "gae_lambda": 0.95,
+    "clip_range": 0.2,
+    "policy_kwargs": {"log_std_init": -2.3, "net_arch": [128, 128]},
+}
 
 
 def ppo_kwargs(args) -> dict:
@@ -83,8 +90,7 @@ def ppo_kwargs(args) -> dict:
     extra = dict(getattr(args, "ppo_kwargs", None) or {})
     policy_extra = extra.pop("policy_kwargs", {})
     if not isinstance(policy_extra, dict):
-        raise SystemExit(f"--ppo-kwargs: policy_kwargs must be a JSON object, got "
-                         f"{policy_extra!r}")
+        raise SystemExit(f"--ppo-kwargs: policy_kwargs must be a JSON object, got {policy_extra!r}")
     policy = dict(PPO_KWARGS["policy_kwargs"], **policy_extra)
     return dict(PPO_KWARGS, **extra, policy_kwargs=policy)
 
@@ -103,9 +109,14 @@ def t_interval(x, confidence: float = 0.95):
 
 def env_kwargs(args, estimator: str) -> dict:
     """Keywords of the study's environment (on top of the registration's) for ``estimator``."""
-    kwargs = {"action_mode": "residual", "residual_scale": args.residual_scale,
-              "estimator_rate": "control", "duration": args.duration, "estimator": estimator,
-              "random_trajectory": getattr(args, "trajectory", "hover")}
+    kwargs = {
+        "action_mode": "residual",
+        "residual_scale": args.residual_scale,
+        "estimator_rate": "control",
+        "duration": args.duration,
+        "estimator": estimator,
+        "random_trajectory": getattr(args, "trajectory", "hover"),
+    }
     if getattr(args, "compensate", False):
         kwargs["compensate"] = True
     if args.random_faults is not None:
@@ -162,8 +173,9 @@ def paired_scores(policies, kwargs: dict, seeds: list[int]):
             done = np.zeros(n, dtype=bool)
             sq, steps = np.zeros(n), np.zeros(n)
             while not done.all():
-                act = np.asarray(policy.predict(obs, deterministic=True)[0],
-                                 dtype=float).reshape(n, -1)
+                act = np.asarray(policy.predict(obs, deterministic=True)[0], dtype=float).reshape(
+                    n, -1
+                )
                 obs, _, term, trunc, info = venv.step(np.clip(act, -1.0, 1.0))
                 live = ~done
                 sq[live] += info["tracking_error"][live] ** 2
@@ -200,18 +212,32 @@ def train_arm(args, arm: str, out: Path) -> None:
         run_dir = out / arm / f"seed_{seed}"
         if not args.retrain and (run_dir / "model.zip").exists():
             continue
-        cfg = TrainConfig(algo="ppo", env_id=ENV_ID, env_kwargs=env_kwargs(args, estimator),
-                          timesteps=steps, seeds=(seed,), n_envs=args.n_envs,
-                          vector_env=True, eval_freq=max(args.timesteps // 2, 1000),
-                          eval_episodes=4, algo_kwargs=ppo_kwargs(args),
-                          numba_threads=args.numba_threads)
+        cfg = TrainConfig(
+            algo="ppo",
+            env_id=ENV_ID,
+            env_kwargs=env_kwargs(args, estimator),
+            timesteps=steps,
+            seeds=(seed,),
+            n_envs=args.n_envs,
+            vector_env=True,
+            eval_freq=max(args.timesteps // 2, 1000),
+            eval_episodes=4,
+            algo_kwargs=ppo_kwargs(args),
+            numba_threads=args.numba_threads,
+        )
         wall, cpu = time.time(), time.process_time()
         train_one(cfg, seed, run_dir, force=True, quiet=True)
-        times = {"wall_seconds": time.time() - wall, "cpu_seconds": time.process_time() - cpu,
-                 "timesteps": steps}
+        times = {
+            "wall_seconds": time.time() - wall,
+            "cpu_seconds": time.process_time() - cpu,
+            "timesteps": steps,
+        }
         atomic_write_text(run_dir / "train_time.json", json.dumps(times, indent=2), force=True)
-        print(f"{arm} seed {seed}: trained {steps} steps in {times['wall_seconds']:.0f} s"
-              f" wall, {times['cpu_seconds']:.0f} s CPU", flush=True)
+        print(
+            f"{arm} seed {seed}: trained {steps} steps in {times['wall_seconds']:.0f} s"
+            f" wall, {times['cpu_seconds']:.0f} s CPU",
+            flush=True,
+        )
 
 
 def model_path(out: Path, arm: str, seed: int, snapshot: str) -> Path:
@@ -235,7 +261,7 @@ def evaluate(args, out: Path, seeds_by_arm: dict) -> dict:
     from agents.policies import GeometricPolicy
     from agents.train import load_agent
     from quadfault.fileio import atomic_write_text
-    from quadfault.vehicle import Vehicle
+    from quadfault.model.vehicle import Vehicle
 
     seeds = episode_seeds(args.episodes, env_kwargs(args, "none"))
     results = {"episode_seeds": seeds}
@@ -251,16 +277,37 @@ def evaluate(args, out: Path, seeds_by_arm: dict) -> dict:
             if "compensate" in kwargs:
                 rows.append(("compensated_zero_residual", False, kwargs))
             for name, aware, kw in rows:
-                agents.append((name, None, lambda aware=aware: GeometricPolicy(
-                    Vehicle(), "residual", estimate_aware=aware,
-                    residual_scale=args.residual_scale), kw))
+                agents.append(
+                    (
+                        name,
+                        None,
+                        lambda aware=aware: GeometricPolicy(
+                            Vehicle(),
+                            "residual",
+                            estimate_aware=aware,
+                            residual_scale=args.residual_scale,
+                        ),
+                        kw,
+                    )
+                )
         for seed in seeds_by_arm.get(arm, ()):
             path = model_path(out, arm, seed, args.snapshot)
-            agents.append((f"{arm}/{seed}", path, lambda path=path, kw=kwargs: _Normalised(
-                *load_agent(path, gym.make(ENV_ID, **kw))), kwargs))
+            agents.append(
+                (
+                    f"{arm}/{seed}",
+                    path,
+                    lambda path=path, kw=kwargs: _Normalised(
+                        *load_agent(path, gym.make(ENV_ID, **kw))
+                    ),
+                    kwargs,
+                )
+            )
         for name, path, make, kw in agents:
-            key = {"episode_seeds": seeds, "env_kwargs": kw,
-                   "model": None if path is None else [str(path), path.stat().st_mtime]}
+            key = {
+                "episode_seeds": seeds,
+                "env_kwargs": kw,
+                "model": None if path is None else [str(path), path.stat().st_mtime],
+            }
             cache = out / "eval" / f"{name.replace('/', '_seed_')}.json"
             if cache.exists() and json.loads(cache.read_text())["key"] == key:
                 results[name] = json.loads(cache.read_text())["episodes"]
@@ -268,8 +315,9 @@ def evaluate(args, out: Path, seeds_by_arm: dict) -> dict:
             rmse, crashed = paired_scores([make()], kw, seeds)
             results[name] = {"rmse": rmse[0].tolist(), "crashed": crashed[0].tolist()}
             cache.parent.mkdir(parents=True, exist_ok=True)
-            atomic_write_text(cache, json.dumps({"key": key, "episodes": results[name]}),
-                              force=True)
+            atomic_write_text(
+                cache, json.dumps({"key": key, "episodes": results[name]}), force=True
+            )
             print(f"evaluated {name}: {len(seeds)} episodes", flush=True)
     return results
 
@@ -304,40 +352,77 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--episodes", type=int, default=40, help="paired evaluation episodes")
     p.add_argument("--duration", type=float, default=10.0, help="episode length [s]")
-    p.add_argument("--trajectory", default="hover",
-                   choices=("hover", "circle", "lissajous", "random"),
-                   help="reference of the random scenarios (both arms; default hover)")
-    p.add_argument("--compensate", action="store_true",
-                   help="both arms: the residual is added to the geometric commands divided by "
-                   "eta_hat (the environment's compensate=True; a no-op without the estimate)")
+    p.add_argument(
+        "--trajectory",
+        default="hover",
+        choices=("hover", "circle", "lissajous", "random"),
+        help="reference of the random scenarios (both arms; default hover)",
+    )
+    p.add_argument(
+        "--compensate",
+        action="store_true",
+        help="both arms: the residual is added to the geometric commands divided by "
+        "eta_hat (the environment's compensate=True; a no-op without the estimate)",
+    )
     p.add_argument("--estimator", default="irls", choices=("irls", "ekf", "truth"))
-    p.add_argument("--residual-scale", type=float, default=RESIDUAL_SCALE,
-                   help="thrust per unit residual action [N] (both arms; default m g / 4)")
+    p.add_argument(
+        "--residual-scale",
+        type=float,
+        default=RESIDUAL_SCALE,
+        help="thrust per unit residual action [N] (both arms; default m g / 4)",
+    )
     p.add_argument("--n-envs", type=int, default=32, help="quadrotors per training env")
-    p.add_argument("--random-faults", type=_random_faults, default=RANDOM_FAULTS,
-                   help="fault distribution: JSON random_faults keywords of the environment, "
-                   "or 'default' for the environment's own (0-2 faults, severity 0.3-0.9); "
-                   f"default {json.dumps(RANDOM_FAULTS)}")
-    p.add_argument("--ppo-kwargs", type=_json_object, default=None,
-                   help="JSON overriding PPO_KWARGS in both arms (policy_kwargs merged), "
-                   'e.g. \'{"use_sde": true}\'')
-    p.add_argument("--numba-threads", type=_positive_int, default=1,
-                   help="threads of numba's parallel kernels per training run (default 1: "
-                   "see agents.train.TrainConfig.numba_threads)")
-    p.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS),
-                   help="arms to train (evaluation always needs both)")
+    p.add_argument(
+        "--random-faults",
+        type=_random_faults,
+        default=RANDOM_FAULTS,
+        help="fault distribution: JSON random_faults keywords of the environment, "
+        "or 'default' for the environment's own (0-2 faults, severity 0.3-0.9); "
+        f"default {json.dumps(RANDOM_FAULTS)}",
+    )
+    p.add_argument(
+        "--ppo-kwargs",
+        type=_json_object,
+        default=None,
+        help="JSON overriding PPO_KWARGS in both arms (policy_kwargs merged), "
+        "e.g. '{\"use_sde\": true}'",
+    )
+    p.add_argument(
+        "--numba-threads",
+        type=_positive_int,
+        default=1,
+        help="threads of numba's parallel kernels per training run (default 1: "
+        "see agents.train.TrainConfig.numba_threads)",
+    )
+    p.add_argument(
+        "--arms",
+        nargs="+",
+        choices=ARMS,
+        default=list(ARMS),
+        help="arms to train (evaluation always needs both)",
+    )
     p.add_argument("--train-only", action="store_true", help="train, do not evaluate")
     p.add_argument("--out", default="runs/ppo_study")
     p.add_argument("--retrain", action="store_true")
-    p.add_argument("--available", action="store_true",
-                   help="train nothing; evaluate the runs that exist (at least one per arm) "
-                   "and list the missing ones")
-    p.add_argument("--snapshot", choices=("final", "mid"), default="final",
-                   help="evaluate each run's final model or its mid-training snapshot "
-                   "(best/best_model.zip: for runs stopped after their first evaluation)")
-    p.add_argument("--check-distribution", action="store_true",
-                   help="train nothing; fly only the baseline and the estimate-aware reference "
-                   "(does the fault distribution leave headroom without crashing the baseline?)")
+    p.add_argument(
+        "--available",
+        action="store_true",
+        help="train nothing; evaluate the runs that exist (at least one per arm) "
+        "and list the missing ones",
+    )
+    p.add_argument(
+        "--snapshot",
+        choices=("final", "mid"),
+        default="final",
+        help="evaluate each run's final model or its mid-training snapshot "
+        "(best/best_model.zip: for runs stopped after their first evaluation)",
+    )
+    p.add_argument(
+        "--check-distribution",
+        action="store_true",
+        help="train nothing; fly only the baseline and the estimate-aware reference "
+        "(does the fault distribution leave headroom without crashing the baseline?)",
+    )
     args = p.parse_args(argv)
 
     from agents.train import set_numba_threads
@@ -353,12 +438,16 @@ def main(argv=None) -> int:
             train_arm(args, arm, out)
         if args.train_only:
             return 0
-        done = {a: [s for s in args.seeds if model_path(out, a, s, args.snapshot).exists()]
-                for a in ARMS}
+        done = {
+            a: [s for s in args.seeds if model_path(out, a, s, args.snapshot).exists()]
+            for a in ARMS
+        }
         missing = [f"{a}/seed_{s}" for a in ARMS for s in args.seeds if s not in done[a]]
         if missing and not (args.available and all(done.values())):
-            raise SystemExit(f"{out}: runs missing for the evaluation: {', '.join(missing)} "
-                             "(train them with --arms, or evaluate what exists with --available)")
+            raise SystemExit(
+                f"{out}: runs missing for the evaluation: {', '.join(missing)} "
+                "(train them with --arms, or evaluate what exists with --available)"
+            )
     results = evaluate(args, out, done)
     summary = _summary(results, done)
     train_times = {}
@@ -366,26 +455,43 @@ def main(argv=None) -> int:
         for s in done[a]:
             # a run stopped at its snapshot has snapshot_time.json (CPU and wall seconds
             # of the process when it was stopped) instead of train_time.json
-            names = ("snapshot_time.json", "train_time.json") if args.snapshot == "mid" \
+            names = (
+                ("snapshot_time.json", "train_time.json")
+                if args.snapshot == "mid"
                 else ("train_time.json",)
+            )
             for path in (out / a / f"seed_{s}" / n for n in names):
                 if path.exists():
-                    train_times[f"{a}/seed_{s}"] = dict(json.loads(path.read_text()),
-                                                        file=path.name)
+                    train_times[f"{a}/seed_{s}"] = dict(
+                        json.loads(path.read_text()), file=path.name
+                    )
                     break
-    meta = {"timesteps": args.timesteps, "seeds": args.seeds, "episodes": args.episodes,
-            "duration": args.duration, "estimator": args.estimator, "env_id": ENV_ID,
-            "residual_scale": args.residual_scale, "random_faults": args.random_faults,
-            "trajectory": args.trajectory, "compensate": args.compensate, "n_envs": args.n_envs, "ppo_kwargs": ppo_kwargs(args),
-            "train_times": train_times,
-            "snapshot": args.snapshot,
-            "evaluated_seeds": done, "missing_runs": missing,
-            "evaluation_seconds": time.time() - t0}
+    meta = {
+        "timesteps": args.timesteps,
+        "seeds": args.seeds,
+        "episodes": args.episodes,
+        "duration": args.duration,
+        "estimator": args.estimator,
+        "env_id": ENV_ID,
+        "residual_scale": args.residual_scale,
+        "random_faults": args.random_faults,
+        "trajectory": args.trajectory,
+        "compensate": args.compensate,
+        "n_envs": args.n_envs,
+        "ppo_kwargs": ppo_kwargs(args),
+        "train_times": train_times,
+        "snapshot": args.snapshot,
+        "evaluated_seeds": done,
+        "missing_runs": missing,
+        "evaluation_seconds": time.time() - t0,
+    }
     name = "distribution" if args.check_distribution else "study"
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / f"{name}.json", json.dumps({"meta": meta, "summary": summary,
-                                                        "episodes": results}, indent=2),
-                      force=True)
+    atomic_write_text(
+        out / f"{name}.json",
+        json.dumps({"meta": meta, "summary": summary, "episodes": results}, indent=2),
+        force=True,
+    )
     md = _markdown(summary, meta)
     atomic_write_text(out / f"{name}.md", md, force=True)
     print(md)
@@ -425,21 +531,31 @@ def _summary(results, seeds_by_arm: dict) -> dict:
         runs = [_scores(results[f"{arm}/{s}"]) for s in seeds_by_arm[arm]]
         if not runs:
             continue
-        out[arm] = {"crash_rate": float(np.mean([results[f"{arm}/{s}"]["crashed"]
-                                                 for s in seeds_by_arm[arm]]))}
+        out[arm] = {
+            "crash_rate": float(
+                np.mean([results[f"{arm}/{s}"]["crashed"] for s in seeds_by_arm[arm]])
+            )
+        }
         for k in SCORES:
             mean, half, over = _paired([base[k] - r[k] for r in runs])
-            out[arm][k] = {"mean": float(np.mean([r[k].mean() for r in runs])), "gain": mean,
-                           "ci95": half, "per_seed_gain": [float((base[k] - r[k]).mean())
-                                                           for r in runs]}
+            out[arm][k] = {
+                "mean": float(np.mean([r[k].mean() for r in runs])),
+                "gain": mean,
+                "ci95": half,
+                "per_seed_gain": [float((base[k] - r[k]).mean()) for r in runs],
+            }
             out[arm]["ci_over"] = over
     common = [s for s in seeds_by_arm["with_estimate"] if s in seeds_by_arm["without_estimate"]]
     if common:
         out["with_minus_without"] = {"seeds": common}
         for k in SCORES:
-            mean, half, over = _paired([
-                _scores(results[f"without_estimate/{s}"])[k]
-                - _scores(results[f"with_estimate/{s}"])[k] for s in common])
+            mean, half, over = _paired(
+                [
+                    _scores(results[f"without_estimate/{s}"])[k]
+                    - _scores(results[f"with_estimate/{s}"])[k]
+                    for s in common
+                ]
+            )
             out["with_minus_without"][k] = {"gain": mean, "ci95": half, "ci_over": over}
     return out
 
@@ -450,45 +566,84 @@ def _markdown(s, meta) -> str:
         return f"{m:+.4f} ± {h:.4f}" if math.isfinite(h) else f"{m:+.4f} (no CI)"
 
     def row(label, a):
-        gains = ("-", "-") if label.startswith("geometric") else (
-            f"{ci(a['rmse'])} (over {a['ci_over']})", ci(a["rmse_crash5"]))
-        return (f"| {label} | {a['rmse']['mean']:.4f} | {a['crash_rate']:.3f} | {gains[0]} | "
-                f"{a['rmse_crash5']['mean']:.4f} | {gains[1]} |")
+        gains = (
+            ("-", "-")
+            if label.startswith("geometric")
+            else (f"{ci(a['rmse'])} (over {a['ci_over']})", ci(a["rmse_crash5"]))
+        )
+        return (
+            f"| {label} | {a['rmse']['mean']:.4f} | {a['crash_rate']:.3f} | {gains[0]} | "
+            f"{a['rmse_crash5']['mean']:.4f} | {gains[1]} |"
+        )
 
-    lines = [(f"# PPO residual study ({meta['env_id']}, random_faults "
-             f"{json.dumps(meta['random_faults'])}, {meta['timesteps']}-step runs"
-             f"{' (their mid-training snapshots)' if meta.get('snapshot') == 'mid' else ''}, seeds "
-             f"{meta['evaluated_seeds']}, {meta['episodes']} paired episodes of "
-             f"{meta['duration']} s, residual scale {meta['residual_scale']} N)"), "",
-             *([f"Missing runs (not trained yet): {', '.join(meta['missing_runs'])}", ""]
-               if meta["missing_runs"] else []),
-             ("| agent | mean RMSE [m] | crash rate | RMSE gain vs baseline [m], 95% CI | "
-             "mean RMSE, crash = 5 m [m] | its gain, 95% CI |"), "|---|---|---|---|---|---|",
-             row("geometric (zero residual)", s["baseline"])]
+    lines = [
+        (
+            f"# PPO residual study ({meta['env_id']}, random_faults "
+            f"{json.dumps(meta['random_faults'])}, {meta['timesteps']}-step runs"
+            f"{' (their mid-training snapshots)' if meta.get('snapshot') == 'mid' else ''}, seeds "
+            f"{meta['evaluated_seeds']}, {meta['episodes']} paired episodes of "
+            f"{meta['duration']} s, residual scale {meta['residual_scale']} N)"
+        ),
+        "",
+        *(
+            [f"Missing runs (not trained yet): {', '.join(meta['missing_runs'])}", ""]
+            if meta["missing_runs"]
+            else []
+        ),
+        (
+            "| agent | mean RMSE [m] | crash rate | RMSE gain vs baseline [m], 95% CI | "
+            "mean RMSE, crash = 5 m [m] | its gain, 95% CI |"
+        ),
+        "|---|---|---|---|---|---|",
+        row("geometric (zero residual)", s["baseline"]),
+    ]
     for arm in ARMS:
         if arm in s:
             lines.append(row(f"PPO {arm.replace('_', ' ')}", s[arm]))
-    lines.append(row("(reference) estimate-aware allocation, same residual bound",
-                     s["estimate_aware_reference"]))
+    lines.append(
+        row(
+            "(reference) estimate-aware allocation, same residual bound",
+            s["estimate_aware_reference"],
+        )
+    )
     if "compensated_zero_residual" in s:
-        lines.append(row("(--compensate) zero residual on geometric / eta_hat",
-                         s["compensated_zero_residual"]))
+        lines.append(
+            row(
+                "(--compensate) zero residual on geometric / eta_hat",
+                s["compensated_zero_residual"],
+            )
+        )
     if "with_minus_without" in s:
         w = s["with_minus_without"]
-        lines += ["", (f"With vs without the estimate (RMSE_without - RMSE_with, paired, seeds "
-                  f"{w['seeds']}): {ci(w['rmse'])} m (over {w['rmse']['ci_over']}); crash = "
-                  f"5 m score: {ci(w['rmse_crash5'])} m.")]
+        lines += [
+            "",
+            (
+                f"With vs without the estimate (RMSE_without - RMSE_with, paired, seeds "
+                f"{w['seeds']}): {ci(w['rmse'])} m (over {w['rmse']['ci_over']}); crash = "
+                f"5 m score: {ci(w['rmse_crash5'])} m."
+            ),
+        ]
     arms = [a for a in ARMS if a in s]
     if arms:
-        lines += ["", "Per-seed RMSE gains vs baseline [m]: " + "; ".join(
-            f"{a}: " + ", ".join(f"{g:+.4f}" for g in s[a]["rmse"]["per_seed_gain"])
-            for a in arms)]
+        lines += [
+            "",
+            "Per-seed RMSE gains vs baseline [m]: "
+            + "; ".join(
+                f"{a}: " + ", ".join(f"{g:+.4f}" for g in s[a]["rmse"]["per_seed_gain"])
+                for a in arms
+            ),
+        ]
     if meta["train_times"]:
-        lines += ["", "Training per run (steps, wall / CPU s): " + ", ".join(
-            f"{k} {v.get('timesteps', meta['timesteps'])}"
-            f"{' (stopped at the snapshot)' if v.get('file') == 'snapshot_time.json' else ''}, "
-            f"{v['wall_seconds']:.0f}/{v['cpu_seconds']:.0f}"
-            for k, v in meta["train_times"].items())]
+        lines += [
+            "",
+            "Training per run (steps, wall / CPU s): "
+            + ", ".join(
+                f"{k} {v.get('timesteps', meta['timesteps'])}"
+                f"{' (stopped at the snapshot)' if v.get('file') == 'snapshot_time.json' else ''}, "
+                f"{v['wall_seconds']:.0f}/{v['cpu_seconds']:.0f}"
+                for k, v in meta["train_times"].items()
+            ),
+        ]
     return "\n".join(lines) + "\n"
 
 

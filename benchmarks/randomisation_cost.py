@@ -3,7 +3,7 @@
 Measured in one run, rounds interleaved (the ratios are what to compare; the machine may be
 shared), at N vehicles (default 1024), with numba's default thread count (what a user gets):
 
-1. ``quadfault.closed_loop.fly_batch`` with the geometric controller at every step, hovering
+1. ``quadfault.model.closed_loop.fly_batch`` with the geometric controller at every step, hovering
    vehicles with thrust noise: the nominal plant (no effects: the chain is compiled out)
    against every vehicle flying its own draw of mass, inertia, drag, motor lag and wind with
    gusts (``Plant.assign``: one row of the compiled effect chain per vehicle);
@@ -41,8 +41,13 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 #: the randomised physics: ``quadfault simulate --effect`` specs with ``a:b`` ranges
-RANGES = ("mass=0.8:1.2", "inertia=0.8:1.2,0.8:1.2,0.8:1.2", "drag=0.1:0.5",
-          "motor_lag=0.01:0.05", "wind=-2:2,-2:2,0,gust=0.5")
+RANGES = (
+    "mass=0.8:1.2",
+    "inertia=0.8:1.2,0.8:1.2,0.8:1.2",
+    "drag=0.1:0.5",
+    "motor_lag=0.01:0.05",
+    "wind=-2:2,-2:2,0,gust=0.5",
+)
 RATE = 1000.0  # physics rate [Hz]
 _RANGE = re.compile(r"(-?[0-9.]+(?:[eE][-+]?[0-9]+)?):(-?[0-9.]+(?:[eE][-+]?[0-9]+)?)")
 
@@ -68,14 +73,14 @@ def loop_batch(N: int, horizon: int, randomise: bool, ranges=RANGES):
     """``fn`` advancing N hovering vehicles by ``horizon`` physics steps with the controller in
     the loop (one ``fly_batch`` call); with ``randomise`` each vehicle flies its own draw of
     ``ranges`` (default :data:`RANGES`; a spec without ranges: every vehicle the same)."""
-    from quadfault import closed_loop
-    from quadfault.controller import GeometricController
-    from quadfault.effects import parse_effect
-    from quadfault.motors import MotorModel
-    from quadfault.plant import Plant
-    from quadfault.sensors import SensorNoise
-    from quadfault.trajectory import Hover
-    from quadfault.vehicle import Vehicle
+    from quadfault.model import closed_loop
+    from quadfault.model.controller import GeometricController
+    from quadfault.model.effects import parse_effect
+    from quadfault.model.motors import MotorModel
+    from quadfault.model.plant import Plant
+    from quadfault.model.sensors import SensorNoise
+    from quadfault.model.trajectory import Hover
+    from quadfault.model.vehicle import Vehicle
 
     veh = Vehicle()
     plant = Plant(veh, MotorModel(0.07), dt=1.0 / RATE, n_vehicles=N)
@@ -97,8 +102,9 @@ def loop_batch(N: int, horizon: int, randomise: bool, ranges=RANGES):
     def fn():
         for x, x0 in zip(V, start):  # every call flies the same `horizon` steps from hover
             x[...] = x0
-        closed_loop.fly_batch(gens, active, k0, horizon, True, consts, V, tables, none,
-                              ctrl.constants, plant.hook)
+        closed_loop.fly_batch(
+            gens, active, k0, horizon, True, consts, V, tables, none, ctrl.constants, plant.hook
+        )
 
     fn()  # compile (or load numba's cache)
     return fn
@@ -146,8 +152,10 @@ def _report(name: str, best: dict, specs) -> None:
     print(f"  cost of randomisation: {_cost(w1, w0)} (wall)  {_cost(c1, c0)} (CPU)")
     if not specs:
         return
-    print("  per effect, vehicle-steps per CPU-s (cost against nominal, CPU ns added per "
-          "vehicle-step; randomising: randomised against the same)")
+    print(
+        "  per effect, vehicle-steps per CPU-s (cost against nominal, CPU ns added per "
+        "vehicle-step; randomising: randomised against the same)"
+    )
     print(f"    {'effect':34s} {'same for all':>28s} {'randomised':>28s} {'randomising':>11s}")
     for spec in (*specs, "all"):
         (_, a) = best[("same", spec)]
@@ -164,10 +172,18 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds (best kept)")
     ap.add_argument("--min-time", type=float, default=0.5, help="seconds per timing")
     ap.add_argument("--skip-env", action="store_true", help="only the closed loop")
-    ap.add_argument("--total-only", action="store_true",
-                    help="only the randomised set against nominal (no per-effect breakdown)")
-    ap.add_argument("--ranges", nargs="+", default=list(RANGES), metavar="SPEC",
-                    help="the randomised effects (--effect syntax with a:b ranges)")
+    ap.add_argument(
+        "--total-only",
+        action="store_true",
+        help="only the randomised set against nominal (no per-effect breakdown)",
+    )
+    ap.add_argument(
+        "--ranges",
+        nargs="+",
+        default=list(RANGES),
+        metavar="SPEC",
+        help="the randomised effects (--effect syntax with a:b ranges)",
+    )
     args = ap.parse_args(argv)
 
     import numba
@@ -186,22 +202,28 @@ def main(argv=None) -> int:
         return out
 
     loops = variants(lambda r, x: loop_batch(N, args.horizon, r, x))
-    print(f"N = {N}, physics {RATE:g} Hz, numba {numba.__version__}, "
-          f"{numba.get_num_threads()} threads ({numba.threading_layer()}), "
-          f"OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY')}, {os.cpu_count()} cpus")
+    print(
+        f"N = {N}, physics {RATE:g} Hz, numba {numba.__version__}, "
+        f"{numba.get_num_threads()} threads ({numba.threading_layer()}), "
+        f"OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY')}, {os.cpu_count()} cpus"
+    )
     print(f"randomised: {', '.join(ranges)}")
     if specs:
         print(f"the same for all: {', '.join(fixed(s) for s in ranges)}")
     print(f"load average before: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
-    _report("closed loop + controller (fly_batch)",
-            _best(loops, dict.fromkeys(loops, N * args.horizon), args.rounds, args.min_time),
-            specs)
+    _report(
+        "closed loop + controller (fly_batch)",
+        _best(loops, dict.fromkeys(loops, N * args.horizon), args.rounds, args.min_time),
+        specs,
+    )
     if not args.skip_env:
         envs = variants(lambda r, x: env_batch(N, args.steps, r, x))
         work = {key: N * args.steps * S for key, (_, S) in envs.items()}
-        _report("QuadFaultVectorEnv step (no estimator), effects= vs none",
-                _best({key: fn for key, (fn, _) in envs.items()}, work, args.rounds,
-                      args.min_time), specs)
+        _report(
+            "QuadFaultVectorEnv step (no estimator), effects= vs none",
+            _best({key: fn for key, (fn, _) in envs.items()}, work, args.rounds, args.min_time),
+            specs,
+        )
     print(f"load average after: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
     return 0
 

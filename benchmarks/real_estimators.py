@@ -37,8 +37,12 @@ import numpy as np
 
 DEFAULT_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
 ESTIMATORS = ("irls", "ekf", "rls", "ukf")
-CONDITIONS = ("normal_flight", "cut_propeller_M3_1mm", "cut_propeller_M3_2mm",
-              "cut_propeller_M3_3mm")
+CONDITIONS = (
+    "normal_flight",
+    "cut_propeller_M3_1mm",
+    "cut_propeller_M3_2mm",
+    "cut_propeller_M3_3mm",
+)
 
 
 def quadfault(args: list, quiet: bool) -> None:
@@ -90,57 +94,84 @@ def m3_gap(median) -> float | None:
 
 def print_tables(rows: list) -> None:
     print("\nper flight: median eta1..eta4 over the ok rows, and eta3 - mean(others)")
-    print(f"{'flight':34s} {'est':5s} {'eta1':>6s} {'eta2':>6s} {'eta3':>6s} {'eta4':>6s} "
-          f"{'m3 gap':>7s} {'IQR (mean)':>10s}")
+    print(
+        f"{'flight':34s} {'est':5s} {'eta1':>6s} {'eta2':>6s} {'eta3':>6s} {'eta4':>6s} "
+        f"{'m3 gap':>7s} {'IQR (mean)':>10s}"
+    )
     for r in rows:
         for est, s in r["estimators"].items():
             if s["median"] is None:
                 print(f"{r['flight']:34s} {est:5s} (no ok rows)")
                 continue
             m = s["median"]
-            print(f"{r['flight']:34s} {est:5s} " + " ".join(f"{x:6.3f}" for x in m)
-                  + f" {m3_gap(m):+7.3f} {np.mean(s['iqr']):10.3f}")
-    print("\nper airframe, condition and estimator: mean [min, max] of the m3 gap over the "
-          "flights, its shift from the same airframe's normal flights, flights with motor 3 "
-          "the lowest")
-    print(f"{'airframe':8s} {'condition':22s} {'est':5s} {'m3 gap':>26s} {'vs normal':>10s} "
-          f"{'M3 lowest':>10s}")
+            print(
+                f"{r['flight']:34s} {est:5s} "
+                + " ".join(f"{x:6.3f}" for x in m)
+                + f" {m3_gap(m):+7.3f} {np.mean(s['iqr']):10.3f}"
+            )
+    print(
+        "\nper airframe, condition and estimator: mean [min, max] of the m3 gap over the "
+        "flights, its shift from the same airframe's normal flights, flights with motor 3 "
+        "the lowest"
+    )
+    print(
+        f"{'airframe':8s} {'condition':22s} {'est':5s} {'m3 gap':>26s} {'vs normal':>10s} "
+        f"{'M3 lowest':>10s}"
+    )
     groups = dict.fromkeys((airframe(r), r["condition"]) for r in rows)
-    for frame, cond in sorted(groups, key=lambda g: (g[0], CONDITIONS.index(g[1])
-                                                      if g[1] in CONDITIONS else 99)):
+    for frame, cond in sorted(
+        groups, key=lambda g: (g[0], CONDITIONS.index(g[1]) if g[1] in CONDITIONS else 99)
+    ):
         for est in ESTIMATORS:
             gaps, lowest = _gaps(rows, frame, cond, est)
             if not gaps:
                 continue
             normal, _ = _gaps(rows, frame, "normal_flight", est)
             shift = f"{np.mean(gaps) - np.mean(normal):+10.3f}" if normal else f"{'-':>10s}"
-            print(f"{frame:8s} {cond:22s} {est:5s} {np.mean(gaps):+8.3f} [{min(gaps):+.3f}, "
-                  f"{max(gaps):+.3f}] {shift} {lowest:>6d}/{len(gaps)}")
+            print(
+                f"{frame:8s} {cond:22s} {est:5s} {np.mean(gaps):+8.3f} [{min(gaps):+.3f}, "
+                f"{max(gaps):+.3f}] {shift} {lowest:>6d}/{len(gaps)}"
+            )
 
 
 def airframe(row: dict) -> str:
     """The CrazyPAD airframe of a flight (``E8`` or ``E9``, the log's name prefix)."""
-    return row["flight"][len(row["condition"]) + 1:].split("_")[0]
+    return row["flight"][len(row["condition"]) + 1 :].split("_")[0]
 
 
 def _gaps(rows, frame, cond, est):
-    meds = [r["estimators"][est]["median"] for r in rows
-            if airframe(r) == frame and r["condition"] == cond
-            and r["estimators"][est]["median"] is not None]
+    meds = [
+        r["estimators"][est]["median"]
+        for r in rows
+        if airframe(r) == frame
+        and r["condition"] == cond
+        and r["estimators"][est]["median"] is not None
+    ]
     return [m3_gap(m) for m in meds], sum(int(np.argmin(m)) == 2 for m in meds)
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--data", type=Path, default=DEFAULT_DATA)
-    p.add_argument("--out", type=Path, default=None,
-                   help="folder for the recordings and estimates (default: a temporary one)")
-    p.add_argument("--conditions", default=",".join(CONDITIONS),
-                   help=f"CrazyPAD motor_data conditions (default {','.join(CONDITIONS)})")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="folder for the recordings and estimates (default: a temporary one)",
+    )
+    p.add_argument(
+        "--conditions",
+        default=",".join(CONDITIONS),
+        help=f"CrazyPAD motor_data conditions (default {','.join(CONDITIONS)})",
+    )
     p.add_argument("--json", type=Path, default=None, help="also write the rows as JSON")
     p.add_argument("--quiet", action="store_true", help="do not print the commands")
-    p.add_argument("--from-json", type=Path, default=None,
-                   help="re-print the tables of a --json file (runs nothing)")
+    p.add_argument(
+        "--from-json",
+        type=Path,
+        default=None,
+        help="re-print the tables of a --json file (runs nothing)",
+    )
     args = p.parse_args(argv)
     if args.from_json:
         print_tables(json.loads(args.from_json.read_text()))

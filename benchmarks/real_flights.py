@@ -50,15 +50,27 @@ import numpy as np
 
 DEFAULT_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
 #: Crazyflie research data sets: folder -> ``quadfault import DATASET`` name, and the files
-DATASETS = {"eschmann-cf21-sysid": ("eschmann", "*.csv.gz"),
-            "nanodrone-cf21bl": ("nanodrone", "*.csv.gz"),
-            "crazypad-cf21-faults": ("crazypad", "motor_data/*/*.csv.gz")}
+DATASETS = {
+    "eschmann-cf21-sysid": ("eschmann", "*.csv.gz"),
+    "nanodrone-cf21bl": ("nanodrone", "*.csv.gz"),
+    "crazypad-cf21-faults": ("crazypad", "motor_data/*/*.csv.gz"),
+}
 #: CrazyPAD conditions of the default run (healthy, and graded propeller damage)
-TARGET_CONDITIONS = ("normal_flight", "cut_propeller_M3_1mm", "cut_propeller_M3_2mm",
-                     "cut_propeller_M3_3mm")
+TARGET_CONDITIONS = (
+    "normal_flight",
+    "cut_propeller_M3_1mm",
+    "cut_propeller_M3_2mm",
+    "cut_propeller_M3_3mm",
+)
 LOG_SUFFIXES = (".ulg", ".bin", ".log", ".bbl", ".bfl", ".bfl.csv", ".bbl.csv")
-MAX_INERTIA, MIN_INERTIA, MIN_ETA, HEALTHY_ETA, MAX_FORCE, TIMING_SAMPLES = \
-    2.0, 0.5, 0.5, 0.85, 0.2, 2.0
+MAX_INERTIA, MIN_INERTIA, MIN_ETA, HEALTHY_ETA, MAX_FORCE, TIMING_SAMPLES = (
+    2.0,
+    0.5,
+    0.5,
+    0.85,
+    0.2,
+    2.0,
+)
 
 
 def jobs(data: Path, only, crazypad_all: bool) -> list:
@@ -97,7 +109,7 @@ def quadfault(args: list, quiet: bool) -> tuple[int, str]:
 
 def drag_reference(csv: Path, doc: dict) -> list:
     """k [N s/m] per horizontal body axis from ``m sf_b = -k v_b`` on the scored span."""
-    from quadfault.recording import read_recording
+    from quadfault.io.recording import read_recording
 
     rec = read_recording(csv)
     keep = _scored_rows(rec.t, doc)
@@ -121,8 +133,8 @@ def rotor_lag_reference(csv: Path, doc: dict) -> float | None:
     squares on the rows the diagnosis scored."""
     from scipy.optimize import minimize_scalar
 
-    from quadfault.effects import lag_series
-    from quadfault.recording import read_recording
+    from quadfault.io.recording import read_recording
+    from quadfault.model.effects import lag_series
 
     rec = read_recording(csv)
     if rec.rotor_speed is None:
@@ -168,8 +180,9 @@ def run_one(folder, kind, path, name, cond, out: Path, quiet: bool) -> dict:
     row["diagnosis"] = json.loads(js.read_text())
     if kind == "crazypad":
         js2 = out / f"{stem}.efficiency.json"
-        code, err = quadfault(["diagnose", csv, "--json", js2, "--force", "--effects",
-                               "motor_efficiency"], quiet)
+        code, err = quadfault(
+            ["diagnose", csv, "--json", js2, "--force", "--effects", "motor_efficiency"], quiet
+        )
         row["efficiency"] = json.loads(js2.read_text()) if code == 0 else None
         row["files"] = {"csv": str(csv), "efficiency": str(js2)}
     if kind == "nanodrone":
@@ -188,14 +201,28 @@ def against_baseline(rows, quiet: bool) -> None:
     against every other healthy flight of the same airframe."""
     pad = [r for r in rows if r["kind"] == "crazypad" and r.get("efficiency") is not None]
     for r in pad:
-        healthy = [h for h in pad if h["condition"] == "normal_flight"
-                   and vehicle_of(h) == vehicle_of(r) and h is not r]
+        healthy = [
+            h
+            for h in pad
+            if h["condition"] == "normal_flight" and vehicle_of(h) == vehicle_of(r) and h is not r
+        ]
         if not healthy:
             continue
         js = Path(r["files"]["efficiency"]).with_suffix(".baseline.json")
-        code, err = quadfault(["diagnose", r["files"]["csv"], "--json", js, "--force",
-                               "--effects", "motor_efficiency", "--baseline",
-                               *[h["files"]["efficiency"] for h in healthy]], quiet)
+        code, err = quadfault(
+            [
+                "diagnose",
+                r["files"]["csv"],
+                "--json",
+                js,
+                "--force",
+                "--effects",
+                "motor_efficiency",
+                "--baseline",
+                *[h["files"]["efficiency"] for h in healthy],
+            ],
+            quiet,
+        )
         r["baseline_flight"] = f"{len(healthy)} healthy flights"
         r["vs_baseline"] = json.loads(js.read_text()) if code == 0 else None
 
@@ -207,8 +234,15 @@ def _short(v) -> str:
     return f"{v:.3g}" if isinstance(v, (int, float)) else str(v)
 
 
-SKIP_KEYS = ("inertia_diag_kg_m2", "ground_z_m", "nominal_curve", "v_ref_V", "v_start_V",
-             "v_end_V", "duration_s")
+SKIP_KEYS = (
+    "inertia_diag_kg_m2",
+    "ground_z_m",
+    "nominal_curve",
+    "v_ref_V",
+    "v_start_V",
+    "v_end_V",
+    "duration_s",
+)
 
 
 def _effects(entries) -> str:
@@ -236,15 +270,21 @@ def absurd(doc: dict) -> list:
                 if eta and min(eta) < MIN_ETA:
                     out.append(f"motor_efficiency {key} {_short(eta)}: a rotor below {MIN_ETA}")
                 if eta and max(eta) < HEALTHY_ETA:
-                    out.append(f"motor_efficiency {key} {_short(eta)}: all four below "
-                               f"{HEALTHY_ETA} (a common factor)")
+                    out.append(
+                        f"motor_efficiency {key} {_short(eta)}: all four below "
+                        f"{HEALTHY_ETA} (a common factor)"
+                    )
         if n == "wind" and np.linalg.norm(p["force_N"]) > MAX_FORCE * weight:
-            out.append(f"wind {_short(p['force_N'])} N: "
-                       f"{100 * np.linalg.norm(p['force_N']) / weight:.0f}% of the weight")
+            out.append(
+                f"wind {_short(p['force_N'])} N: "
+                f"{100 * np.linalg.norm(p['force_N']) / weight:.0f}% of the weight"
+            )
         for key in ("tau_s", "delay_s"):
             if key in p and rate and p[key] * rate < TIMING_SAMPLES:
-                out.append(f"{n} {p[key]:.3g} s from commands at {rate:.3g} Hz: "
-                           f"{p[key] * rate:.2g} samples per time constant")
+                out.append(
+                    f"{n} {p[key]:.3g} s from commands at {rate:.3g} Hz: "
+                    f"{p[key] * rate:.2g} samples per time constant"
+                )
     return out
 
 
@@ -258,11 +298,16 @@ def print_log(r) -> None:
         return
     d = r["diagnosis"]
     ev = d.get("evidence") or {}
-    rates = ", ".join(f"{k.replace('_rate_hz', '')} {v:.3g} Hz" for k, v in ev.items()
-                      if k.endswith("_rate_hz") and v)
+    rates = ", ".join(
+        f"{k.replace('_rate_hz', '')} {v:.3g} Hz"
+        for k, v in ev.items()
+        if k.endswith("_rate_hz") and v
+    )
     print(f"{head} ({rates}; {100 * d['scoring']['masked_fraction']:.0f}% not free flight)")
-    print(f"{d['verdict']}: {_effects(d['effects'])}; held-out improvement "
-          f"{100 * d['model']['improvement']:.1f}%")
+    print(
+        f"{d['verdict']}: {_effects(d['effects'])}; held-out improvement "
+        f"{100 * d['model']['improvement']:.1f}%"
+    )
     if d["suspect"]:
         print("suspect (at a bound): " + ", ".join(e["name"] for e in d["suspect"]))
     for n in d.get("indistinguishable", []):
@@ -273,8 +318,10 @@ def print_log(r) -> None:
         print(f"assumed: {', '.join(d['assumptions']['assumed'])}")
     if r.get("efficiency") is not None:
         imb = _eta(r["efficiency"], imbalance=True)
-        print(f"--effects motor_efficiency: {_effects(r['efficiency']['effects'])}"
-              + (f"; vehicle imbalance, eta {_short(imb)}" if np.all(np.isfinite(imb)) else ""))
+        print(
+            f"--effects motor_efficiency: {_effects(r['efficiency']['effects'])}"
+            + (f"; vehicle imbalance, eta {_short(imb)}" if np.all(np.isfinite(imb)) else "")
+        )
     if r.get("vs_baseline") is not None:
         print(f"--baseline {r['baseline_flight']}: {_effects(r['vs_baseline']['effects'])}")
     if r.get("rotor_lag_reference") is not None:
@@ -286,9 +333,11 @@ def print_log(r) -> None:
 # ----------------------------------------------------------------------------- tables
 def print_flights(rows) -> None:
     print("\n## Every log (quadfault import, quadfault diagnose with defaults)\n")
-    print("| log | verdict | accepted effects (params; held-out improvement alone) | "
-          "not identifiable | model improvement [95% CI] | excluded (not free flight) | "
-          "absurd |")
+    print(
+        "| log | verdict | accepted effects (params; held-out improvement alone) | "
+        "not identifiable | model improvement [95% CI] | excluded (not free flight) | "
+        "absurd |"
+    )
     print("|---|---|---|---|---|---|---|")
     for r in rows:
         if "diagnosis" not in r:
@@ -298,10 +347,12 @@ def print_flights(rows) -> None:
         d = r["diagnosis"]
         ci = d["model"]["ci95"]
         skipped = ", ".join(n["name"] for n in d.get("not_identifiable", [])) or "-"
-        print(f"| {r['folder']} {r['name']} | {d['verdict']} | {_effects(d['effects'])} | "
-              f"{skipped} | {100 * d['model']['improvement']:.1f}% [{100 * ci[0]:.0f}, "
-              f"{100 * ci[1]:.0f}] | {100 * d['scoring']['masked_fraction']:.1f}% | "
-              f"{len(absurd(d)) or '-'} |")
+        print(
+            f"| {r['folder']} {r['name']} | {d['verdict']} | {_effects(d['effects'])} | "
+            f"{skipped} | {100 * d['model']['improvement']:.1f}% [{100 * ci[0]:.0f}, "
+            f"{100 * ci[1]:.0f}] | {100 * d['scoring']['masked_fraction']:.1f}% | "
+            f"{len(absurd(d)) or '-'} |"
+        )
 
 
 def _eta(doc, imbalance: bool = False):
@@ -309,19 +360,33 @@ def _eta(doc, imbalance: bool = False):
     as the vehicle's own imbalance), or NaN x 4."""
     doc = doc or {}
     if imbalance:
-        eff = [e for e in doc.get("rejected", []) if e["name"] == "motor_efficiency"
-               and e.get("reason", "").startswith("vehicle imbalance")]
+        eff = [
+            e
+            for e in doc.get("rejected", [])
+            if e["name"] == "motor_efficiency"
+            and e.get("reason", "").startswith("vehicle imbalance")
+        ]
     else:
         eff = [e for e in doc.get("effects", []) if e["name"] == "motor_efficiency"]
     return eff[0]["params"]["eta"] if eff else [np.nan] * 4
 
 
 #: the CrazyPAD tables: (result key, reported as imbalance, what)
-PAD_TABLES = (("efficiency", False, "one flight, accepted: eta relative to the median rotor"),
-              ("efficiency", True, "one flight, reported as the vehicle's own imbalance (not "
-                                   "accepted): eta relative to the median rotor"),
-              ("vs_baseline", False, "`--baseline` the other healthy flights of the same "
-                                     "airframe, accepted: eta relative to them"))
+PAD_TABLES = (
+    ("efficiency", False, "one flight, accepted: eta relative to the median rotor"),
+    (
+        "efficiency",
+        True,
+        "one flight, reported as the vehicle's own imbalance (not "
+        "accepted): eta relative to the median rotor",
+    ),
+    (
+        "vs_baseline",
+        False,
+        "`--baseline` the other healthy flights of the same "
+        "airframe, accepted: eta relative to them",
+    ),
+)
 
 
 def print_crazypad(rows) -> None:
@@ -332,10 +397,13 @@ def print_crazypad(rows) -> None:
 
 
 def _crazypad_table(sub, key, imbalance, what) -> None:
-    print(f"\n## CrazyPAD, `--effects motor_efficiency`, {what} (mean +- sd over the flights "
-          "where it is so)\n")
-    print(f"| condition | {'as imbalance' if imbalance else 'accepted'} | eta1 | eta2 | eta3 | "
-          "eta4 |")
+    print(
+        f"\n## CrazyPAD, `--effects motor_efficiency`, {what} (mean +- sd over the flights "
+        "where it is so)\n"
+    )
+    print(
+        f"| condition | {'as imbalance' if imbalance else 'accepted'} | eta1 | eta2 | eta3 | eta4 |"
+    )
     print("|---|---|---|---|---|---|")
     for cond in sorted({r["condition"] for r in sub}, key=lambda c: (c != "normal_flight", c)):
         e = np.array([_eta(r[key], imbalance) for r in sub if r["condition"] == cond])
@@ -369,13 +437,14 @@ def print_lags(rows) -> None:
     if not lags:
         return
     print("\n## Motor lag on logs with measured rotor speeds\n")
-    print("| log | motor_lag accepted (tau_s) | from command to rotor speed (tau_s) | "
-          "within 20% |")
+    print("| log | motor_lag accepted (tau_s) | from command to rotor speed (tau_s) | within 20% |")
     print("|---|---|---|---|")
     for r, tau, ref in lags:
         ok = tau is not None and abs(tau - ref) <= 0.2 * ref
-        print(f"| {r['folder']} {r['name']} | {'-' if tau is None else f'{tau:.3f}'} | "
-              f"{ref:.3f} | {'yes' if ok else 'no'} |")
+        print(
+            f"| {r['folder']} {r['name']} | {'-' if tau is None else f'{tau:.3f}'} | "
+            f"{ref:.3f} | {'yes' if ok else 'no'} |"
+        )
 
 
 def horizontal_drag(effects):
@@ -393,20 +462,31 @@ def targets(rows) -> list:
     """``(target, measured, met)`` of the real-flight targets present in ``rows``."""
     out = []
     done = [r for r in rows if "diagnosis" in r]
-    failed = [f"{r['folder']} {r['name']}: {r.get('import_error') or r.get('diagnose_error')}"
-              for r in rows if "diagnosis" not in r]
-    out.append(("every log imports and diagnoses, or fails with a one-line error",
-                f"{len(done)} of {len(rows)} diagnosed; failed: " + ("; ".join(failed) or
-                                                                     "none"), True))
+    failed = [
+        f"{r['folder']} {r['name']}: {r.get('import_error') or r.get('diagnose_error')}"
+        for r in rows
+        if "diagnosis" not in r
+    ]
+    out.append(
+        (
+            "every log imports and diagnoses, or fails with a one-line error",
+            f"{len(done)} of {len(rows)} diagnosed; failed: " + ("; ".join(failed) or "none"),
+            True,
+        )
+    )
     bad = [f"{r['name']}: {line}" for r in done for line in absurd(r["diagnosis"])]
     out.append(("no absurd accepted answer", "; ".join(bad) or "none", not bad))
     lags = lag_rows(rows)
     if lags:
         n_ok = sum(tau is not None and abs(tau - ref) <= 0.2 * ref for _, tau, ref in lags)
-        out.append(("logs with rotor speeds and outputs fast enough for a lag: motor_lag "
-                    "accepted within 20% of the lag from command to rotor speed on >= 90%",
-                    f"{n_ok} of {len(lags)}",
-                    n_ok >= 0.9 * len(lags)))
+        out.append(
+            (
+                "logs with rotor speeds and outputs fast enough for a lag: motor_lag "
+                "accepted within 20% of the lag from command to rotor speed on >= 90%",
+                f"{n_ok} of {len(lags)}",
+                n_ok >= 0.9 * len(lags),
+            )
+        )
     esch = [r for r in done if r["kind"] == "eschmann"]
     if esch:
         cells, ok = [], True
@@ -416,14 +496,25 @@ def targets(rows) -> list:
             ch = d["model"]["channels"]
             v = ch.get("sf_z") or ch.get("acc_z")
             tau = lag[0]["params"]["tau_s"] if lag else None
-            good = (tau is not None and 0.05 <= tau <= 0.11 and v["improvement"] >= 0.3
-                    and v["ci95"][0] > 0)
+            good = (
+                tau is not None
+                and 0.05 <= tau <= 0.11
+                and v["improvement"] >= 0.3
+                and v["ci95"][0] > 0
+            )
             ok &= good
-            cells.append(f"{r['name']}: tau {'-' if tau is None else f'{tau:.3f} s'}, vertical "
-                         f"{100 * v['improvement']:.0f}% [{100 * v['ci95'][0]:.0f}, "
-                         f"{100 * v['ci95'][1]:.0f}]")
-        out.append(("Eschmann: motor_lag tau 0.05-0.11 s, vertical >= 30% with CI above 0",
-                    "; ".join(cells), ok))
+            cells.append(
+                f"{r['name']}: tau {'-' if tau is None else f'{tau:.3f} s'}, vertical "
+                f"{100 * v['improvement']:.0f}% [{100 * v['ci95'][0]:.0f}, "
+                f"{100 * v['ci95'][1]:.0f}]"
+            )
+        out.append(
+            (
+                "Eschmann: motor_lag tau 0.05-0.11 s, vertical >= 30% with CI above 0",
+                "; ".join(cells),
+                ok,
+            )
+        )
     nano = [r for r in done if r["kind"] == "nanodrone"]
     if nano:
         n_ok, cells = 0, []
@@ -432,15 +523,23 @@ def targets(rows) -> list:
             ref = np.mean(r["drag_reference"])
             if k is not None:
                 n_ok += abs(k[1] - ref) <= 0.3 * ref
-            cells.append(f"{r['name']} {'-' if k is None else f'{k[0]} {k[1]:.4f}'} "
-                         f"(ref {ref:.4f})")
-        out.append(("nano-drone: horizontal drag within 30% of the accelerometer fit on >= 7 "
-                    "of 9", f"{n_ok} of {len(nano)}: " + "; ".join(cells), n_ok >= 7))
-    for key, what in (("efficiency", "one flight"), ("vs_baseline", "against the other "
-                                                                    "healthy flights "
-                                                                    "(--baseline)")):
-        out += _crazypad_targets([r for r in done if r["kind"] == "crazypad"
-                                  and r.get(key) is not None], key, what)
+            cells.append(
+                f"{r['name']} {'-' if k is None else f'{k[0]} {k[1]:.4f}'} (ref {ref:.4f})"
+            )
+        out.append(
+            (
+                "nano-drone: horizontal drag within 30% of the accelerometer fit on >= 7 of 9",
+                f"{n_ok} of {len(nano)}: " + "; ".join(cells),
+                n_ok >= 7,
+            )
+        )
+    for key, what in (
+        ("efficiency", "one flight"),
+        ("vs_baseline", "against the other healthy flights (--baseline)"),
+    ):
+        out += _crazypad_targets(
+            [r for r in done if r["kind"] == "crazypad" and r.get(key) is not None], key, what
+        )
     return out
 
 
@@ -454,17 +553,25 @@ def _crazypad_targets(pad, key, what) -> list:
     out = []
     healthy = [(r, _eta(r[key])) for r in pad if r["condition"] == "normal_flight"]
     if healthy:
-        low = [f"{r['name']} {_short(e)}" for r, e in healthy
-               if np.any(np.asarray(e, dtype=float) < HEALTHY_ETA)]
-        out.append((f"CrazyPAD healthy, {what}: no accepted rotor below {HEALTHY_ETA} "
-                    "relative", f"{len(low)} of {len(healthy)}: " + ("; ".join(low) or "none"),
-                    not low))
+        low = [
+            f"{r['name']} {_short(e)}"
+            for r, e in healthy
+            if np.any(np.asarray(e, dtype=float) < HEALTHY_ETA)
+        ]
+        out.append(
+            (
+                f"CrazyPAD healthy, {what}: no accepted rotor below {HEALTHY_ETA} relative",
+                f"{len(low)} of {len(healthy)}: " + ("; ".join(low) or "none"),
+                not low,
+            )
+        )
     graded = {}
     for r in pad:
         c = r["condition"]
         if c.startswith("cut_propeller_M3_"):
-            graded.setdefault(c, []).append(_reported(r[key]) if key == "efficiency"
-                                            else _eta(r[key]))
+            graded.setdefault(c, []).append(
+                _reported(r[key]) if key == "efficiency" else _eta(r[key])
+            )
     if graded:
         cells, ok, last = [], True, 1.0
         for c in sorted(graded, key=lambda c: float(c.rsplit("_", 1)[1].rstrip("m"))):
@@ -475,8 +582,14 @@ def _crazypad_targets(pad, key, what) -> list:
             last = m3
             cells.append(f"{c}: rotor 3 lowest on {lowest} of {len(e)}, mean eta3 {m3:.3f}")
         how = " (accepted or reported as imbalance)" if key == "efficiency" else " (accepted)"
-        out.append((f"CrazyPAD cut propeller M3 (1/2/3 mm), {what}{how}: rotor 3 lowest, "
-                    "falling as the damage grows", "; ".join(cells), ok))
+        out.append(
+            (
+                f"CrazyPAD cut propeller M3 (1/2/3 mm), {what}{how}: rotor 3 lowest, "
+                "falling as the damage grows",
+                "; ".join(cells),
+                ok,
+            )
+        )
     return out
 
 
@@ -491,18 +604,29 @@ def print_targets(rows) -> None:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="the real data folder")
-    ap.add_argument("--out", type=Path, default=None,
-                    help="keep the imported recordings and diagnosis JSON here (default: a "
-                         "temporary folder)")
-    ap.add_argument("--only", default="", help="comma-separated words: folders whose name "
-                                               "contains one of them")
-    ap.add_argument("--crazypad-all", action="store_true",
-                    help="every CrazyPAD motor_data condition, not only healthy and cut")
+    ap.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="keep the imported recordings and diagnosis JSON here (default: a temporary folder)",
+    )
+    ap.add_argument(
+        "--only", default="", help="comma-separated words: folders whose name contains one of them"
+    )
+    ap.add_argument(
+        "--crazypad-all",
+        action="store_true",
+        help="every CrazyPAD motor_data condition, not only healthy and cut",
+    )
     ap.add_argument("--json", type=Path, default=None, help="also write all results here")
     ap.add_argument("--force", action="store_true", help="overwrite --json")
     ap.add_argument("--quiet", action="store_true", help="do not print the commands")
-    ap.add_argument("--from-json", type=Path, default=None,
-                    help="print the tables of an earlier run's --json instead of computing")
+    ap.add_argument(
+        "--from-json",
+        type=Path,
+        default=None,
+        help="print the tables of an earlier run's --json instead of computing",
+    )
     args = ap.parse_args(argv)
     only = tuple(s.strip() for s in args.only.split(",") if s.strip())
     if args.from_json is None and not args.data.is_dir():
@@ -512,8 +636,11 @@ def main(argv=None) -> int:
 
     t0 = time.perf_counter()
     if args.from_json is not None:
-        rows = [r for r in json.loads(args.from_json.read_text())
-                if not only or any(w in r["folder"] for w in only)]
+        rows = [
+            r
+            for r in json.loads(args.from_json.read_text())
+            if not only or any(w in r["folder"] for w in only)
+        ]
     else:
         if args.json is not None:
             check_writable([args.json], force=args.force)

@@ -31,15 +31,28 @@ from pathlib import Path
 import numpy as np
 
 #: the task of both parts: the PPO study's residual hover task (one fault, 2.45 N per unit)
-ENV_KWARGS = {"action_mode": "residual", "residual_scale": 2.45, "estimator": "irls",
-              "estimator_rate": "control",
-              "random_faults": {"n_faults": [1, 1], "severity": [0.5, 0.85]}}
+ENV_KWARGS = {
+    "action_mode": "residual",
+    "residual_scale": 2.45,
+    "estimator": "irls",
+    "estimator_rate": "control",
+    "random_faults": {"n_faults": [1, 1], "severity": [0.5, 0.85]},
+}
 #: PPO settings (the study's, with 8 sub-envs: rollouts of 8 x 256 steps)
-PPO_KWARGS = {"n_steps": 256, "batch_size": 512, "n_epochs": 10, "learning_rate": 3e-4,
-              "gamma": 0.99, "gae_lambda": 0.95, "clip_range": 0.2,
-              "policy_kwargs": {"log_std_init": -1.0, "net_arch": [64, 64]}}
+PPO_KWARGS = {
+    "n_steps": 256,
+    "batch_size": 512,
+    "n_epochs": 10,
+    "learning_rate": 3e-4,
+    "gamma": 0.99,
+    "gae_lambda": 0.95,
+    "clip_range": 0.2,
+    "policy_kwargs": {"log_std_init": -1.0, "net_arch": [64, 64]},
+}
 EVAL_SEED = 20_000
-ROLL = np.array([-1.0, 1.0, 1.0, -1.0])  # residual: right rotors down, left rotors up  # the evaluation episodes' reset seeds: EVAL_SEED, EVAL_SEED + 1, ...
+ROLL = np.array(
+    [-1.0, 1.0, 1.0, -1.0]
+)  # residual: right rotors down, left rotors up  # the evaluation episodes' reset seeds: EVAL_SEED, EVAL_SEED + 1, ...
 
 
 class RandomPolicy:
@@ -77,8 +90,10 @@ def crash_part(seeds) -> None:
 
     from agents.policies import GeometricPolicy
 
-    print("Part 1: the geometric controller's flight (motor mode) vs the same flight with the "
-          "rotors off from 0.6 s before its end")
+    print(
+        "Part 1: the geometric controller's flight (motor mode) vs the same flight with the "
+        "rotors off from 0.6 s before its end"
+    )
     print(f"{'reward':>7} {'seed':>6} {'survived':>9} {'late crash':>11} {'crash step':>10}")
     for env_id in ("QuadFaultHover-v1", "QuadFaultHover-v0"):
         env = gym.make(env_id, **dict(ENV_KWARGS, action_mode="motor"))
@@ -87,8 +102,10 @@ def crash_part(seeds) -> None:
             survived, n_s, reason_s = _episode(env, seed, policy)
             crashed, n_c, reason_c = _episode(env, seed, policy, cut=n_s - 60)
             note = "" if reason_s is None else f" (the controller alone: {reason_s})"
-            print(f"{env_id[-2:]:>7} {seed:>6} {survived:9.1f} {crashed:11.1f} "
-                  f"{f'{n_c}/{n_s}' if reason_c else '-':>10}{note}")
+            print(
+                f"{env_id[-2:]:>7} {seed:>6} {survived:9.1f} {crashed:11.1f} "
+                f"{f'{n_c}/{n_s}' if reason_c else '-':>10}{note}"
+            )
         env.close()
 
 
@@ -108,16 +125,41 @@ def evaluate(env_id: str, policy, seeds) -> tuple[np.ndarray, int]:
 
 
 def learning_part(args) -> None:
-    from agents.train import load_agent, main as train_main
     from ppo_residual_study import t_interval  # benchmarks/ (this script's folder)
+
+    from agents.train import load_agent
+    from agents.train import main as train_main
 
     out = Path(args.out or tempfile.mkdtemp(prefix="reward_learnability_"))
     t0 = time.perf_counter()
-    code = 0 if args.trained else train_main(["--env", "QuadFaultHover-v1", "--env-kwargs", json.dumps(ENV_KWARGS),
-                       "--vector-env", "--n-envs", "8", "--timesteps", str(args.timesteps),
-                       "--eval-freq", str(args.timesteps), "--eval-episodes", "3",
-                       "--algo-kwargs", json.dumps(PPO_KWARGS), "--seeds", str(args.seed),
-                       "--out", str(out), "--force"])
+    code = (
+        0
+        if args.trained
+        else train_main(
+            [
+                "--env",
+                "QuadFaultHover-v1",
+                "--env-kwargs",
+                json.dumps(ENV_KWARGS),
+                "--vector-env",
+                "--n-envs",
+                "8",
+                "--timesteps",
+                str(args.timesteps),
+                "--eval-freq",
+                str(args.timesteps),
+                "--eval-episodes",
+                "3",
+                "--algo-kwargs",
+                json.dumps(PPO_KWARGS),
+                "--seeds",
+                str(args.seed),
+                "--out",
+                str(out),
+                "--force",
+            ]
+        )
+    )
     if code != 0:
         raise SystemExit(code)
     train_s = time.perf_counter() - t0
@@ -129,28 +171,39 @@ def learning_part(args) -> None:
             return model.predict(o, deterministic=True)
 
     seeds = [EVAL_SEED + i for i in range(args.episodes)]
-    print(f"\nPart 2: PPO {args.timesteps} steps (seed {args.seed}, {train_s:.0f} s of training, "
-          f"load {os.getloadavg()[0]:.1f}) vs random and zero actions, {args.episodes} "
-          f"evaluation episodes (seeds {seeds[0]}..{seeds[-1]})")
+    print(
+        f"\nPart 2: PPO {args.timesteps} steps (seed {args.seed}, {train_s:.0f} s of training, "
+        f"load {os.getloadavg()[0]:.1f}) vs random and zero actions, {args.episodes} "
+        f"evaluation episodes (seeds {seeds[0]}..{seeds[-1]})"
+    )
     print(f"{'reward':>7} {'policy':>8} {'mean':>9} {'sd':>8} {'crashes':>8}")
     rows = {}
-    for env_id, arms in (("QuadFaultHover-v1", ("ppo", "random", "zero")),
-                         ("QuadFaultHover-v0", ("random", "zero"))):
+    for env_id, arms in (
+        ("QuadFaultHover-v1", ("ppo", "random", "zero")),
+        ("QuadFaultHover-v0", ("random", "zero")),
+    ):
         for arm in arms:
-            policy = {"ppo": Trained(), "random": RandomPolicy(args.seed),
-                      "zero": ZeroPolicy()}[arm]
+            policy = {"ppo": Trained(), "random": RandomPolicy(args.seed), "zero": ZeroPolicy()}[
+                arm
+            ]
             ret, crashes = evaluate(env_id, policy, seeds)
             rows[env_id[-2:], arm] = ret
-            print(f"{env_id[-2:]:>7} {arm:>8} {ret.mean():9.1f} {ret.std(ddof=1):8.1f} "
-                  f"{crashes:>4}/{len(seeds)}")
+            print(
+                f"{env_id[-2:]:>7} {arm:>8} {ret.mean():9.1f} {ret.std(ddof=1):8.1f} "
+                f"{crashes:>4}/{len(seeds)}"
+            )
     for v in ("v1", "v0"):
         zero, rand = rows[v, "zero"].mean(), rows[v, "random"].mean()
-        print(f"{v}: random actions score {100 * (zero - rand) / abs(zero):.1f} % below the "
-              f"zero action")
+        print(
+            f"{v}: random actions score {100 * (zero - rand) / abs(zero):.1f} % below the "
+            f"zero action"
+        )
     for other in ("random", "zero"):  # paired over the same episodes
         mean, half = t_interval(rows["v1", "ppo"] - rows["v1", other])
-        print(f"v1: PPO - {other} = {mean:.1f} +- {half:.1f} (95 % CI, paired), PPO ahead in "
-              f"{int(np.sum(rows['v1', 'ppo'] > rows['v1', other]))}/{len(seeds)} episodes")
+        print(
+            f"v1: PPO - {other} = {mean:.1f} +- {half:.1f} (95 % CI, paired), PPO ahead in "
+            f"{int(np.sum(rows['v1', 'ppo'] > rows['v1', other]))}/{len(seeds)} episodes"
+        )
 
 
 def main(argv=None) -> int:
@@ -161,8 +214,9 @@ def main(argv=None) -> int:
     p.add_argument("--crash-seeds", type=int, nargs="+", default=[1, 2, 3])
     p.add_argument("--out", help="training folder (default: a temporary one)")
     p.add_argument("--skip-training", action="store_true", help="part 1 only")
-    p.add_argument("--trained", action="store_true",
-                   help="evaluate the run already in --out (no training)")
+    p.add_argument(
+        "--trained", action="store_true", help="evaluate the run already in --out (no training)"
+    )
     args = p.parse_args(argv)
     import quad_fault_env  # noqa: F401
 

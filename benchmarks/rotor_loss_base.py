@@ -21,18 +21,25 @@ import time
 
 import numpy as np
 
-ARMS = ("nominal:irls", "estimate-aware:irls", "estimate-aware:ekf", "estimate-aware:none",
-        "estimate-aware:truth")
+ARMS = (
+    "nominal:irls",
+    "estimate-aware:irls",
+    "estimate-aware:ekf",
+    "estimate-aware:none",
+    "estimate-aware:truth",
+)
 
 
-def survival(allocation: str, estimator: str, episodes: int = 10, seed: int = 0,
-             level=(0.1, 0.5)) -> dict:
+def survival(
+    allocation: str, estimator: str, episodes: int = 10, seed: int = 0, level=(0.1, 0.5)
+) -> dict:
     """Survivors of ``episodes`` seeded RotorLoss episodes with the zero residual action."""
     from quad_fault_env.tasks import registered_kwargs
     from quad_fault_env.vector import QuadFaultVectorEnv
 
-    kw = registered_kwargs("QuadFaultRotorLoss-v0", allocation=allocation,
-                           scenario_options={"level": tuple(level)})
+    kw = registered_kwargs(
+        "QuadFaultRotorLoss-v0", allocation=allocation, scenario_options={"level": tuple(level)}
+    )
     kw.pop("estimator", None)
     vec = QuadFaultVectorEnv(episodes, estimator, **kw)
     vec.reset(seed=seed)
@@ -47,8 +54,12 @@ def survival(allocation: str, estimator: str, episodes: int = 10, seed: int = 0,
         if (term | trunc | (end >= 0)).all():
             break
     vec.close()
-    return {"survived": int((end < 0).sum()), "levels": levels, "end": end.tolist(),
-            "reason": reason.tolist()}
+    return {
+        "survived": int((end < 0).sum()),
+        "levels": levels,
+        "end": end.tolist(),
+        "reason": reason.tolist(),
+    }
 
 
 def main(argv=None) -> int:
@@ -56,21 +67,32 @@ def main(argv=None) -> int:
     ap.add_argument("--episodes", type=int, default=10)
     ap.add_argument("--seed", type=int, default=0, help="episode i is seeded seed + i (0)")
     ap.add_argument("--level", type=float, nargs=2, default=[0.1, 0.5])
-    ap.add_argument("--arms", nargs="+", default=list(ARMS),
-                    help="allocation:estimator pairs (default: %(default)s)")
+    ap.add_argument(
+        "--arms",
+        nargs="+",
+        default=list(ARMS),
+        help="allocation:estimator pairs (default: %(default)s)",
+    )
     args = ap.parse_args(argv)
-    print(f"QuadFaultRotorLoss-v0, level {args.level[0]:g}-{args.level[1]:g}, zero residual, "
-          f"seeds {args.seed}..{args.seed + args.episodes - 1}\n")
+    print(
+        f"QuadFaultRotorLoss-v0, level {args.level[0]:g}-{args.level[1]:g}, zero residual, "
+        f"seeds {args.seed}..{args.seed + args.episodes - 1}\n"
+    )
     print("| allocation | estimator | survived | crashed: level (end step, reason) | CPU s |")
     print("|---|---|---|---|---|")
     for arm in args.arms:
         allocation, estimator = arm.split(":")
         c0 = time.process_time()
         r = survival(allocation, estimator, args.episodes, args.seed, args.level)
-        crashed = [f"{lv:.2f} ({e}, {why})" for lv, e, why in zip(r["levels"], r["end"],
-                                                                   r["reason"]) if e >= 0]
-        print(f"| {allocation} | {estimator} | {r['survived']}/{args.episodes} | "
-              f"{', '.join(crashed) or '-'} | {time.process_time() - c0:.0f} |")
+        crashed = [
+            f"{lv:.2f} ({e}, {why})"
+            for lv, e, why in zip(r["levels"], r["end"], r["reason"])
+            if e >= 0
+        ]
+        print(
+            f"| {allocation} | {estimator} | {r['survived']}/{args.episodes} | "
+            f"{', '.join(crashed) or '-'} | {time.process_time() - c0:.0f} |"
+        )
     return 0
 
 

@@ -1,6 +1,6 @@
 """Which rotor losses can be survived at all: hover, one rotor drops abruptly to ``eta``.
 
-Flies :func:`quadfault.task_scenarios.rotor_loss_scenario`'s situation with fixed draws (rotor
+Flies :func:`quadfault.model.task_scenarios.rotor_loss_scenario`'s situation with fixed draws (rotor
 1, onset 3 s, 10 s flight, hover at 1 m) through the public API (:func:`agents.rollout.fly`)
 for each level, with the plain geometric controller, the estimate-aware controller fed by
 the online IRLS estimate, and the estimate-aware controller fed by the true efficiency (the
@@ -19,16 +19,20 @@ import time
 import numpy as np
 
 from agents.rollout import fly
-from quadfault.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
-from quadfault.trajectory import Hover
+from quadfault.model.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
+from quadfault.model.trajectory import Hover
 
 ARMS = (("geometric", "none"), ("estimate-aware", "irls"), ("estimate-aware", "truth"))
 
 
 def scenario(level: float, onset: float, duration: float, motor: int = 1) -> Scenario:
     fault = AbruptFault(motor=motor, onset=onset, level=level)
-    return Scenario(f"rotor_loss_{level:g}", duration,
-                    EfficiencySchedule(ConstantEfficiency(), (fault,)), Hover())
+    return Scenario(
+        f"rotor_loss_{level:g}",
+        duration,
+        EfficiencySchedule(ConstantEfficiency(), (fault,)),
+        Hover(),
+    )
 
 
 def main(argv=None) -> int:
@@ -39,8 +43,10 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=10.0)
     args = ap.parse_args(argv)
     start = time.process_time()
-    print("| eta after loss | controller (estimate) | survived | crash time [s] | "
-          "max error after loss [m] | final error [m] | RMSE [m] |")
+    print(
+        "| eta after loss | controller (estimate) | survived | crash time [s] | "
+        "max error after loss [m] | final error [m] | RMSE [m] |"
+    )
     print("|---|---|---|---|---|---|---|")
     for level in args.levels:
         sc = scenario(level, args.onset, args.duration)
@@ -53,8 +59,10 @@ def main(argv=None) -> int:
             final = max(float(f.pos_error[-1]) for f in fl)
             rmse = float(np.mean([f.metrics.rmse for f in fl]))
             crash_s = "-" if not crash else f"{min(crash):.2f}-{max(crash):.2f}"
-            print(f"| {level:g} | {ctrl} ({est}) | {ok}/{len(fl)} | {crash_s} | {peak:.3f} | "
-                  f"{final:.3f} | {rmse:.3f} |")
+            print(
+                f"| {level:g} | {ctrl} ({est}) | {ok}/{len(fl)} | {crash_s} | {peak:.3f} | "
+                f"{final:.3f} | {rmse:.3f} |"
+            )
     print(f"\n{time.process_time() - start:.0f} CPU-s")
     return 0
 

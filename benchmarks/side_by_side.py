@@ -24,21 +24,31 @@ HERE = Path(__file__).resolve().parent
 
 def measure(checkout, script: str, function: str, env: dict | None = None, **kwargs) -> dict:
     """``function(**kwargs)`` of ``benchmarks/<script>.py`` run against ``checkout``."""
-    code = ("import json, sys\n"
-            f"sys.path.insert(1, {str(HERE)!r})\n"
-            f"import {script}\n"
-            f"print('@@' + json.dumps({script}.{function}(**{kwargs!r})))\n")
+    code = (
+        "import json, sys\n"
+        f"sys.path.insert(1, {str(HERE)!r})\n"
+        f"import {script}\n"
+        f"print('@@' + json.dumps({script}.{function}(**{kwargs!r})))\n"
+    )
     environ = dict(os.environ, PYTHONPATH=str(Path(checkout).resolve()), **(env or {}))
-    out = subprocess.run([sys.executable, "-c", code], env=environ, capture_output=True,
-                         text=True, cwd=str(checkout))
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=environ, capture_output=True, text=True, cwd=str(checkout)
+    )
     if out.returncode != 0:
         raise RuntimeError(f"{script}.{function} failed in {checkout}:\n{out.stderr[-3000:]}")
     line = [x for x in out.stdout.splitlines() if x.startswith("@@")][-1]
     return json.loads(line[2:])
 
 
-def compare(baseline, script: str, function: str, rounds: int = 3, better=min,
-            env: dict | None = None, **kwargs) -> tuple[dict, dict]:
+def compare(
+    baseline,
+    script: str,
+    function: str,
+    rounds: int = 3,
+    better=min,
+    env: dict | None = None,
+    **kwargs,
+) -> tuple[dict, dict]:
     """Best of ``rounds`` alternated runs of the measurement in this checkout and in
     ``baseline``: ``(this, baseline)``, each a dict of numbers (``better`` picks the best)."""
     best: list[dict] = [{}, {}]

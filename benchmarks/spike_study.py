@@ -22,8 +22,8 @@ import numpy as np
 from estimators.irls import IRLSConfig, SlidingWindowIRLS
 from estimators.metrics import fault_windows, score, window_masks
 from estimators.paper.reproduce import sim_config
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import simulate
+from quadfault.model.scenarios import named_scenario
+from quadfault.sim.simulator import simulate
 
 VARIANTS = {
     "reference": IRLSConfig(),
@@ -36,8 +36,9 @@ EDGE = 0.06  # [s] a spike this close to a fault edge counts as a transient
 
 
 def study(name: str, seed: int, duration: float) -> dict:
-    rec = simulate(named_scenario(name, duration), config=sim_config("rk4", name), seed=seed,
-                   thrust_noise=0.07)
+    rec = simulate(
+        named_scenario(name, duration), config=sim_config("rk4", name), seed=seed, thrust_noise=0.07
+    )
     blind = rec.without_truth()
     edges = np.array([x for _, t0, t1 in fault_windows(rec) for x in (t0, t1)])
     own = window_masks(rec.t, rec.eta_true, fault_windows(rec))
@@ -51,8 +52,12 @@ def study(name: str, seed: int, duration: float) -> dict:
             others = np.delete(own, m, axis=0).any(axis=0)
             k = np.flatnonzero(others)[np.argmax(e[others, m])]
             near += bool(np.min(np.abs(rec.t[k] - edges)) < EDGE)
-        out[label] = (float(np.mean(sc.rmse)), float(np.mean(sc.spike)),
-                      float(np.mean(sc.excess_spike)), near / 4)
+        out[label] = (
+            float(np.mean(sc.rmse)),
+            float(np.mean(sc.spike)),
+            float(np.mean(sc.excess_spike)),
+            near / 4,
+        )
     return out
 
 
@@ -65,17 +70,16 @@ def main() -> None:
     seeds = [int(s) for s in args.seeds.split(",")]
     jobs = [(n, s) for n in ("abrupt", "combined") for s in seeds]
     with ProcessPoolExecutor(args.workers) as pool:
-        res = list(pool.map(study, [j[0] for j in jobs], [j[1] for j in jobs],
-                            [args.duration] * len(jobs)))
+        res = list(
+            pool.map(study, [j[0] for j in jobs], [j[1] for j in jobs], [args.duration] * len(jobs))
+        )
     print(f"seeds {seeds}, {args.duration:g} s flights; means over seeds")
-    print(f"{'scenario':<9} {'variant':<16} {'RMSE':>7} {'spike':>7} {'excess':>7} "
-          f"{'at edge':>8}")
+    print(f"{'scenario':<9} {'variant':<16} {'RMSE':>7} {'spike':>7} {'excess':>7} {'at edge':>8}")
     for name in ("abrupt", "combined"):
         for label in VARIANTS:
             rows = np.array([r[label] for (n, _), r in zip(jobs, res) if n == name])
             rmse, spike, excess, near = rows.mean(axis=0)
-            print(f"{name:<9} {label:<16} {rmse:>7.4f} {spike:>7.4f} {excess:>7.4f} "
-                  f"{near:>8.2f}")
+            print(f"{name:<9} {label:<16} {rmse:>7.4f} {spike:>7.4f} {excess:>7.4f} {near:>8.2f}")
 
 
 if __name__ == "__main__":

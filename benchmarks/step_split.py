@@ -4,7 +4,7 @@ against the Python (and numpy) around it.
 ``QuadFaultVectorEnv(N, "none", "combined", control_rate=1000, action_mode="motor",
 duration=600)`` (one physics substep per env step, as in the env-against-env comparison of
 ``throughput.py``; the env's default numba threads) is stepped with the zero action; the calls
-of the compiled loop (``quadfault.closed_loop.fly_batch``, and ``fly`` for one vehicle) are
+of the compiled loop (``quadfault.model.closed_loop.fly_batch``, and ``fly`` for one vehicle) are
 timed apart. Printed per N: nanoseconds per vehicle-step of the whole step and of the kernel,
 per wall second and per CPU second of the process (all its threads), and the kernel's share.
 
@@ -35,7 +35,7 @@ def split(N: int, seconds: float = 1.0, repeat: int = 3) -> dict:
     import numpy as np
 
     from quad_fault_env.vector import QuadFaultVectorEnv
-    from quadfault import closed_loop
+    from quadfault.model import closed_loop
 
     spent = {"wall": 0.0, "cpu": 0.0}
 
@@ -46,12 +46,14 @@ def split(N: int, seconds: float = 1.0, repeat: int = 3) -> dict:
             spent["wall"] += time.perf_counter() - w
             spent["cpu"] += time.process_time() - c
             return out
+
         return call
 
     closed_loop.fly_batch = timed(closed_loop.fly_batch)
     closed_loop.fly = timed(closed_loop.fly)
-    env = QuadFaultVectorEnv(N, "none", scenario="combined", duration=600.0,
-                             control_rate=1000.0, action_mode="motor")
+    env = QuadFaultVectorEnv(
+        N, "none", scenario="combined", duration=600.0, control_rate=1000.0, action_mode="motor"
+    )
     env.reset(seed=0)
     a = np.zeros((N, 4), dtype=np.float32)
     for _ in range(3):  # compile / load the cache, first-step allocations
@@ -64,19 +66,24 @@ def split(N: int, seconds: float = 1.0, repeat: int = 3) -> dict:
             env.step(a)
             steps += 1
         per = 1e9 / (steps * N)
-        got = {"step_wall": (time.perf_counter() - w) * per,
-               "step_cpu": (time.process_time() - c) * per,
-               "kernel_wall": spent["wall"] * per, "kernel_cpu": spent["cpu"] * per}
+        got = {
+            "step_wall": (time.perf_counter() - w) * per,
+            "step_cpu": (time.process_time() - c) * per,
+            "kernel_wall": spent["wall"] * per,
+            "kernel_cpu": spent["cpu"] * per,
+        }
         if best is None or got["step_cpu"] < best["step_cpu"]:
             best = got
     return best
 
 
 def _row(N: int, r: dict) -> str:
-    return (f"| {N} | {r['step_wall']:,.0f} / {r['step_cpu']:,.0f} | "
-            f"{r['kernel_wall']:,.0f} / {r['kernel_cpu']:,.0f} | "
-            f"{r['step_wall'] - r['kernel_wall']:,.0f} / {r['step_cpu'] - r['kernel_cpu']:,.0f} | "
-            f"{r['kernel_cpu'] / r['step_cpu']:.0%} |")
+    return (
+        f"| {N} | {r['step_wall']:,.0f} / {r['step_cpu']:,.0f} | "
+        f"{r['kernel_wall']:,.0f} / {r['kernel_cpu']:,.0f} | "
+        f"{r['step_wall'] - r['kernel_wall']:,.0f} / {r['step_cpu'] - r['kernel_cpu']:,.0f} | "
+        f"{r['kernel_cpu'] / r['step_cpu']:.0%} |"
+    )
 
 
 def main(argv=None) -> int:
@@ -85,8 +92,11 @@ def main(argv=None) -> int:
     p.add_argument("--seconds", type=float, default=1.0, help="length of each timing")
     p.add_argument("--baseline", default=None, help="another checkout, measured side by side")
     p.add_argument("--rounds", type=int, default=2)
-    p.add_argument("--omp-spin", action="store_true",
-                   help="keep OpenMP's spin-waiting (default: OMP_WAIT_POLICY=passive)")
+    p.add_argument(
+        "--omp-spin",
+        action="store_true",
+        help="keep OpenMP's spin-waiting (default: OMP_WAIT_POLICY=passive)",
+    )
     args = p.parse_args(argv)
     if min(args.sizes) < 1 or args.seconds <= 0 or args.rounds < 1:
         print("step_split: --sizes >= 1, --seconds > 0, --rounds >= 1", file=sys.stderr)
@@ -94,18 +104,20 @@ def main(argv=None) -> int:
     sys.path.insert(1, os.path.dirname(os.path.abspath(__file__)))
     import side_by_side as sbs
 
-    print(f"# ns per vehicle-step, wall / CPU (all threads); {sbs.load()} on "
-          f"{os.cpu_count()} cpus")
+    print(f"# ns per vehicle-step, wall / CPU (all threads); {sbs.load()} on {os.cpu_count()} cpus")
     head = "| N | step | loop kernel | Python around it | kernel share (CPU) |"
     rule = "|---|---|---|---|---|"
     rows = {}
     for N in args.sizes:
         if args.baseline:
-            rows[N] = sbs.compare(args.baseline, "step_split", "split", args.rounds,
-                                  N=N, seconds=args.seconds)
+            rows[N] = sbs.compare(
+                args.baseline, "step_split", "split", args.rounds, N=N, seconds=args.seconds
+            )
         else:
-            rows[N] = (sbs.measure(sbs.ROOT, "step_split", "split", N=N,
-                                   seconds=args.seconds), None)
+            rows[N] = (
+                sbs.measure(sbs.ROOT, "step_split", "split", N=N, seconds=args.seconds),
+                None,
+            )
     for k, label in enumerate(("this checkout", "baseline") if args.baseline else ("",)):
         if label:
             print(f"\n{label}:")

@@ -52,7 +52,7 @@ if "--omp-spin" not in sys.argv:
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from quadfault.vehicle import Vehicle  # noqa: E402
+from quadfault.model.vehicle import Vehicle  # noqa: E402
 
 RATE = 1000.0  # physics rate of every measurement [Hz]
 MIN_TIME = 0.3  # each timing repeats its call for at least this long [s]
@@ -81,12 +81,12 @@ def compiled_batch(N: int, horizon: int, rng, control_every: int = 0, thrust_noi
     """``fn`` advancing N hovering vehicles by ``horizon`` steps with one call of the loop
     (``closed_loop.fly_batch``: motors with thrust noise + RKMK4; the geometric controller
     every ``control_every`` steps when > 0), compiled before it is returned."""
-    from quadfault import closed_loop
-    from quadfault.controller import GeometricController
-    from quadfault.motors import MotorModel
-    from quadfault.plant import Plant
-    from quadfault.sensors import SensorNoise
-    from quadfault.trajectory import Hover
+    from quadfault.model import closed_loop
+    from quadfault.model.controller import GeometricController
+    from quadfault.model.motors import MotorModel
+    from quadfault.model.plant import Plant
+    from quadfault.model.sensors import SensorNoise
+    from quadfault.model.trajectory import Hover
 
     veh = Vehicle()
     plant = Plant(veh, MotorModel(thrust_noise), dt=1.0 / RATE, n_vehicles=N)
@@ -130,8 +130,9 @@ def make_env(N: int, estimator: str = "none", **kw):
     return env, time.perf_counter() - t0
 
 
-def env_rate(N: int, control_steps: int, estimator: str = "none", env=None, cpu: bool = False,
-             **kw):
+def env_rate(
+    N: int, control_steps: int, estimator: str = "none", env=None, cpu: bool = False, **kw
+):
     """Physics vehicle-steps/s of QuadFaultVectorEnv (after one warm-up step); with ``cpu``
     the pair (per wall second, per CPU second)."""
     env = env if env is not None else make_env(N, estimator, **kw)[0]
@@ -164,8 +165,8 @@ def irls_window_rate(N: int, updates: int) -> tuple[float, str]:
     """Solved IRLS windows/s of BatchedIRLS on N copies of a simulated flight's samples."""
     from estimators.base import samples
     from estimators.batched import BatchedIRLS
-    from quadfault.scenarios import named_scenario
-    from quadfault.simulator import simulate
+    from quadfault.model.scenarios import named_scenario
+    from quadfault.sim.simulator import simulate
 
     rec = simulate(named_scenario("combined", 0.2, 1e-3), seed=0).without_truth()
     rows = list(samples(rec))
@@ -173,9 +174,17 @@ def irls_window_rate(N: int, updates: int) -> tuple[float, str]:
     rng = np.random.default_rng(0)
     tile = lambda x: np.broadcast_to(np.asarray(x, float), (N,) + np.shape(x))  # noqa: E731
     batches = []
-    for s in rows[:updates + 12]:
-        batches.append((np.full(N, s.t), tile(s.p) + 1e-4 * rng.standard_normal((N, 3)),
-                        tile(s.v), tile(s.R), tile(s.w), tile(s.f)))
+    for s in rows[: updates + 12]:
+        batches.append(
+            (
+                np.full(N, s.t),
+                tile(s.p) + 1e-4 * rng.standard_normal((N, 3)),
+                tile(s.v),
+                tile(s.R),
+                tile(s.w),
+                tile(s.f),
+            )
+        )
     for b in batches[:12]:  # fill the windows (and compile on a first run)
         est.update(*b)
     solved = 0
@@ -183,8 +192,9 @@ def irls_window_rate(N: int, updates: int) -> tuple[float, str]:
     for b in batches[12:]:
         out = est.update(*b)
         solved += int(np.sum(out.status_names == "ok") + np.sum(out.status_names == "max_iter"))
-    return N * len(batches[12:]) / (time.perf_counter() - t0), \
-        f"{solved / (N * len(batches[12:])):.0%} ok"
+    return N * len(batches[12:]) / (
+        time.perf_counter() - t0
+    ), f"{solved / (N * len(batches[12:])):.0%} ok"
 
 
 _CRAZYFLOW_SIM = textwrap.dedent("""
@@ -243,21 +253,26 @@ _CRAZYFLOW_ENV = textwrap.dedent("""
 #: what one step of each peer (and of the quadfault row it is compared with) includes
 PEER_STEPS = {
     "rotorpy": "RotorPy BatchedMultirotor (torch CPU): rk4, aero, motor-speed commands, no "
-               "controller",
+    "controller",
     "crazyflow": "crazyflow Sim defaults (JAX CPU): Euler, first-principles model, attitude "
-                 "controller (computed every step, applied at 500 Hz), motor mixing",
+    "controller (computed every step, applied at 500 Hz), motor mixing",
     "crazyflow-rk4": "crazyflow Sim like-for-like: rk4, first-principles model, Mellinger "
-                     "position + attitude controller at 1 kHz, motor mixing",
+    "position + attitude controller at 1 kHz, motor mixing",
     "crazyflow-env": "crazyflow DroneReachPos-v0 (gymnasium VectorEnv, JAX CPU) defaults: "
-                     "fitted so_rpy model, Euler, attitude commands, 1 physics step at 500 Hz "
-                     "per env step",
+    "fitted so_rpy model, Euler, attitude commands, 1 physics step at 500 Hz "
+    "per env step",
     "crazyflow-env-fp": "crazyflow DroneReachPos-v0 with dynamics='first_principles': rotor "
-                        "model, Euler, attitude controller + mixing, 1 physics step per env "
-                        "step",
+    "model, Euler, attitude controller + mixing, 1 physics step per env "
+    "step",
 }
 #: the quadfault row each peer is compared with: the compiled closed loop or the env
-PEER_VERSUS = {"rotorpy": "compiled", "crazyflow": "compiled", "crazyflow-rk4": "compiled",
-               "crazyflow-env": "env1", "crazyflow-env-fp": "env1"}
+PEER_VERSUS = {
+    "rotorpy": "compiled",
+    "crazyflow": "compiled",
+    "crazyflow-rk4": "compiled",
+    "crazyflow-env": "env1",
+    "crazyflow-env-fp": "env1",
+}
 
 
 PEERS = {
@@ -289,7 +304,8 @@ PEERS = {
     """),
     "crazyflow": _CRAZYFLOW_SIM.replace("KW", "{}"),
     "crazyflow-rk4": _CRAZYFLOW_SIM.replace(
-        "KW", "dict(control='state', integrator='rk4', state_freq=rate, attitude_freq=rate)"),
+        "KW", "dict(control='state', integrator='rk4', state_freq=rate, attitude_freq=rate)"
+    ),
     "crazyflow-env": _CRAZYFLOW_ENV.replace("KW", "{}"),
     "crazyflow-env-fp": _CRAZYFLOW_ENV.replace("KW", "dict(dynamics='first_principles')"),
 }
@@ -299,8 +315,12 @@ def peer_rate(python: str, name: str, N: int, horizon: int, timeout: float):
     """((vehicle-steps per wall s, per CPU s), None) of a peer, or (None, why it could not
     run)."""
     try:
-        out = subprocess.run([python, "-c", PEERS[name], str(N), str(horizon), str(RATE)],
-                             capture_output=True, text=True, timeout=timeout)
+        out = subprocess.run(
+            [python, "-c", PEERS[name], str(N), str(horizon), str(RATE)],
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+        )
     except subprocess.TimeoutExpired:
         return None, f"timed out after {timeout:.0f} s"
     except OSError as exc:
@@ -334,10 +354,13 @@ def ppo_rates(n_envs: int, total: int):
         if name == "native":
             env = make_sb3_vec_env(n_envs, seed=0, **kw)
         else:
-            env = make_vec_env(lambda: gym.make("quad_fault_env:QuadFault-v1", **kw),
-                               n_envs=n_envs, seed=0, vec_env_cls=SubprocVecEnv)
-        model = PPO("MlpPolicy", env, n_steps=128, batch_size=256, n_epochs=1, device="cpu",
-                    seed=0)
+            env = make_vec_env(
+                lambda: gym.make("quad_fault_env:QuadFault-v1", **kw),
+                n_envs=n_envs,
+                seed=0,
+                vec_env_cls=SubprocVecEnv,
+            )
+        model = PPO("MlpPolicy", env, n_steps=128, batch_size=256, n_epochs=1, device="cpu", seed=0)
         t0 = time.perf_counter()
         model.learn(total)
         out[name] = model.num_timesteps / (time.perf_counter() - t0)
@@ -364,12 +387,14 @@ def profile_env(N: int, steps: int = 5) -> list[tuple[str, float]]:
     prof.disable()
     stats = pstats.Stats(prof).stats
     total = sum(v[2] for v in stats.values())  # own time of every function
-    parts = {"the closed loop (fly_batch: sensors, motors, RKMK4)": ("fly_batch",),
-             "end-of-step measurement (sense_rows)": ("sense_rows",),
-             "controller + action mapping (_motor_commands)": ("_motor_commands",),
-             "reference / efficiency tables": ("_ensure_tables", "references"),
-             "observation + info": ("_observations", "_infos"),
-             "termination + reward": ("reasons", "__call__")}
+    parts = {
+        "the closed loop (fly_batch: sensors, motors, RKMK4)": ("fly_batch",),
+        "end-of-step measurement (sense_rows)": ("sense_rows",),
+        "controller + action mapping (_motor_commands)": ("_motor_commands",),
+        "reference / efficiency tables": ("_ensure_tables", "references"),
+        "observation + info": ("_observations", "_infos"),
+        "termination + reward": ("reasons", "__call__"),
+    }
     out = []
     for label, names in parts.items():
         cum = sum(v[3] for (_, _, fn), v in stats.items() if fn in names)
@@ -383,48 +408,73 @@ def main(argv=None) -> int:
     ap.add_argument("--full", action="store_true", help="N up to 16384 (default up to 4096)")
     ap.add_argument("--max-n", type=int, default=None, help="largest N")
     ap.add_argument("--horizon", type=int, default=50, help="physics steps per timing (50)")
-    ap.add_argument("--peer-python", default=sys.executable,
-                    help="python that has the peers installed (default: this one)")
+    ap.add_argument(
+        "--peer-python",
+        default=sys.executable,
+        help="python that has the peers installed (default: this one)",
+    )
     ap.add_argument("--peer-timeout", type=float, default=600.0)
     ap.add_argument("--skip-peers", action="store_true")
-    ap.add_argument("--peers", nargs="+", choices=sorted(PEERS), default=None,
-                    help="the peers to run (default all)")
-    ap.add_argument("--peer-sizes", type=int, nargs="+", default=None,
-                    help="N of the peer table (default 1 256 4096 16384 up to --max-n)")
+    ap.add_argument(
+        "--peers",
+        nargs="+",
+        choices=sorted(PEERS),
+        default=None,
+        help="the peers to run (default all)",
+    )
+    ap.add_argument(
+        "--peer-sizes",
+        type=int,
+        nargs="+",
+        default=None,
+        help="N of the peer table (default 1 256 4096 16384 up to --max-n)",
+    )
     ap.add_argument("--skip-ppo", action="store_true")
     ap.add_argument("--skip-profile", action="store_true")
-    ap.add_argument("--skip-table", action="store_true",
-                    help="skip the N table and the batched IRLS (peers / profile / PPO only)")
-    ap.add_argument("--omp-spin", action="store_true",
-                    help="keep OpenMP's default spin-waiting (default here: OMP_WAIT_POLICY="
-                         "passive, better on a shared machine)")
+    ap.add_argument(
+        "--skip-table",
+        action="store_true",
+        help="skip the N table and the batched IRLS (peers / profile / PPO only)",
+    )
+    ap.add_argument(
+        "--omp-spin",
+        action="store_true",
+        help="keep OpenMP's default spin-waiting (default here: OMP_WAIT_POLICY="
+        "passive, better on a shared machine)",
+    )
     ap.add_argument("--ppo-envs", type=int, default=8)
     ap.add_argument("--ppo-steps", type=int, default=4096)
     args = ap.parse_args(argv)
     max_n = (16384 if args.full else 4096) if args.max_n is None else args.max_n
     if max_n < 1 or args.horizon < 10 or min(args.peer_sizes or [1]) < 1:
-        print("throughput: --max-n >= 1, --peer-sizes >= 1 and --horizon >= 10 required",
-              file=sys.stderr)
+        print(
+            "throughput: --max-n >= 1, --peer-sizes >= 1 and --horizon >= 10 required",
+            file=sys.stderr,
+        )
         return 2
     import numba
 
-    from quadfault import closed_loop
+    from quadfault.model import closed_loop
 
     Ns = [n for n in (1, 16, 256, 1024, 4096, 16384) if n <= max_n]
     rng = np.random.default_rng(0)
     compiled_batch(closed_loop.PARALLEL_MIN_VEHICLES, 10, rng)  # compile; start the threads
     steps = max(1, args.horizon // 10)
-    print(f"# physics vehicle-steps/s at {RATE:.0f} Hz, horizon {args.horizon} steps; numba "
-          f"{numba.__version__}, {numba.get_num_threads()} threads "
-          f"({numba.threading_layer() if _threading_started() else 'layer not started'}, "
-          f"OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY', 'unset')}); load average "
-          f"{', '.join(f'{x:.1f}' for x in os.getloadavg())} on {os.cpu_count()} cpus")
+    print(
+        f"# physics vehicle-steps/s at {RATE:.0f} Hz, horizon {args.horizon} steps; numba "
+        f"{numba.__version__}, {numba.get_num_threads()} threads "
+        f"({numba.threading_layer() if _threading_started() else 'layer not started'}, "
+        f"OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY', 'unset')}); load average "
+        f"{', '.join(f'{x:.1f}' for x in os.getloadavg())} on {os.cpu_count()} cpus"
+    )
     if not args.skip_table:
-        print("| N | loop (motors + RKMK4) | loop + controller | env | env + IRLS | "
-              "memory/vehicle (env + IRLS) | build + reset [s] |")
+        print(
+            "| N | loop (motors + RKMK4) | loop + controller | env | env + IRLS | "
+            "memory/vehicle (env + IRLS) | build + reset [s] |"
+        )
         print("|---|---|---|---|---|---|---|")
     results = {}
-    for N in ([] if args.skip_table else Ns):
+    for N in [] if args.skip_table else Ns:
         comp = core_compiled(N, args.horizon, rng)
         closed = core_compiled(N, args.horizon, rng, control_every=1)
         env, setup = make_env(N)
@@ -433,23 +483,32 @@ def main(argv=None) -> int:
         irls = env_rate(N, max(1, steps // 2), "irls") if N <= 1024 else None
         mem = env_memory_per_vehicle(N) if N <= 4096 else None
         results[N] = (comp, closed, nb, irls)
-        print(f"| {N} | {_fmt(comp)} | {_fmt(closed)} | {_fmt(nb)} | {_fmt(irls)} | "
-              f"{'n/a' if mem is None else f'{mem / 1024:.1f} KiB'} | {setup:.1f} |", flush=True)
+        print(
+            f"| {N} | {_fmt(comp)} | {_fmt(closed)} | {_fmt(nb)} | {_fmt(irls)} | "
+            f"{'n/a' if mem is None else f'{mem / 1024:.1f} KiB'} | {setup:.1f} |",
+            flush=True,
+        )
     n_ref = 4096 if 4096 in results else max(results, default=0)
     r = results.get(n_ref)
     if r is not None:
-        print(f"\nat N = {n_ref}: loop {r[0] / 1e6:.2f}, loop + controller {r[1] / 1e6:.2f}, "
-              f"env {r[2] / 1e6:.2f} of the 1,000,000 vehicle-steps/s target")
+        print(
+            f"\nat N = {n_ref}: loop {r[0] / 1e6:.2f}, loop + controller {r[1] / 1e6:.2f}, "
+            f"env {r[2] / 1e6:.2f} of the 1,000,000 vehicle-steps/s target"
+        )
     if not args.skip_table:
         n_irls = min(4096, max_n)
         rate, note = irls_window_rate(n_irls, 20)
-        print(f"\nbatched IRLS at N = {n_irls}: {rate:,.0f} window updates/s ({note}; target "
-              f"100,000: ratio {rate / 1e5:.2f})")
+        print(
+            f"\nbatched IRLS at N = {n_irls}: {rate:,.0f} window updates/s ({note}; target "
+            f"100,000: ratio {rate / 1e5:.2f})"
+        )
     if not args.skip_profile:
         n_prof = min(4096, max_n)
         print(f"\n# where the time goes at N = {n_prof}")
-        print("kernels, CPU ns per vehicle-step, each stage alone on one core "
-              "(benchmarks/kernel_stages.py):")
+        print(
+            "kernels, CPU ns per vehicle-step, each stage alone on one core "
+            "(benchmarks/kernel_stages.py):"
+        )
         from benchmarks.kernel_stages import STAGES, stage_ns
 
         ns = stage_ns(n_prof, args.horizon, repeats=3)
@@ -460,30 +519,49 @@ def main(argv=None) -> int:
             print(f"  {label:<56} {share:6.1%}")
     if not args.skip_peers:
         peers = list(PEERS) if args.peers is None else args.peers
-        print(f"\n# peers at {RATE:.0f} Hz, horizon {args.horizon} (python {args.peer_python}); "
-              f"vehicle-steps per wall second / per CPU second of each process (all threads); "
-              f"load average {', '.join(f'{x:.1f}' for x in os.getloadavg())}")
+        print(
+            f"\n# peers at {RATE:.0f} Hz, horizon {args.horizon} (python {args.peer_python}); "
+            f"vehicle-steps per wall second / per CPU second of each process (all threads); "
+            f"load average {', '.join(f'{x:.1f}' for x in os.getloadavg())}"
+        )
         for name in peers:
             print(f"  {name}: {PEER_STEPS[name]}")
         wanted = {PEER_VERSUS[name] for name in peers}
         if "compiled" in wanted:
-            print("  quadfault compiled + controller: closed_loop.fly_batch, geometric "
-                  "controller every step, motor model with thrust noise, RKMK4 (4 derivatives, "
-                  "5 SO(3) exponentials)")
+            print(
+                "  quadfault compiled + controller: closed_loop.fly_batch, geometric "
+                "controller every step, motor model with thrust noise, RKMK4 (4 derivatives, "
+                "5 SO(3) exponentials)"
+            )
         if "env1" in wanted:
-            print("  quadfault env1: QuadFaultVectorEnv.step at control = physics = 1 kHz (1 "
-                  "substep per env step), motor commands, no estimator, combined scenario "
-                  "(thrust noise, degradation), the env's default numba threads; RKMK4")
+            print(
+                "  quadfault env1: QuadFaultVectorEnv.step at control = physics = 1 kHz (1 "
+                "substep per env step), motor commands, no estimator, combined scenario "
+                "(thrust noise, degradation), the env's default numba threads; RKMK4"
+            )
         print("| N | system | vehicle-steps/s wall / CPU | quadfault / system, wall / CPU |")
         print("|---|---|---|---|")
         pair = lambda r: "n/a" if r is None else f"{r[0]:,.0f} / {r[1]:,.0f}"  # noqa: E731
-        ratio = lambda a, b: ("n/a" if b is None  # noqa: E731
-                              else f"**{a[0] / b[0]:.2f}x / {a[1] / b[1]:.2f}x**")
+
+        def ratio(a, b):
+            return (
+                "n/a"
+                if b is None  # noqa: E731
+                else f"**{a[0] / b[0]:.2f}x / {a[1] / b[1]:.2f}x**"
+            )
+
         best = lambda a, b: (max(a[0], b[0]), max(a[1], b[1]))  # noqa: E731
         measures = {
             "compiled": lambda N: core_compiled(N, args.horizon, rng, control_every=1, cpu=True),
-            "env1": lambda N: env_rate(N, args.horizon, cpu=True, control_rate=RATE,
-                                       action_mode="motor", numba_threads="auto")}
+            "env1": lambda N: env_rate(
+                N,
+                args.horizon,
+                cpu=True,
+                control_rate=RATE,
+                action_mode="motor",
+                numba_threads="auto",
+            ),
+        }
         labels = {"compiled": "quadfault compiled + controller", "env1": "quadfault env1"}
         sizes = args.peer_sizes or [n for n in Ns if n in (1, 256, 4096, 16384)]
         for N in sizes:
@@ -503,17 +581,22 @@ def main(argv=None) -> int:
                 if rate is None:
                     print(f"| {N} | {name} | did not run: {why} | |", flush=True)
                     continue
-                print(f"| {N} | {name} | {pair(rate)} | {PEER_VERSUS[name]}: "
-                      f"{ratio(ours[PEER_VERSUS[name]], rate)} |", flush=True)
+                print(
+                    f"| {N} | {name} | {pair(rate)} | {PEER_VERSUS[name]}: "
+                    f"{ratio(ours[PEER_VERSUS[name]], rate)} |",
+                    flush=True,
+                )
     if not args.skip_ppo:
         rates, why = ppo_rates(args.ppo_envs, args.ppo_steps)
         if rates is None:
             print(f"\nPPO: skipped ({why})")
         else:
-            print(f"\nPPO training with {args.ppo_envs} envs, {args.ppo_steps} steps: native "
-                  f"vector env {rates['native']:,.0f} steps/s, SubprocVecEnv "
-                  f"{rates['subproc']:,.0f} steps/s, "
-                  f"ratio {rates['native'] / rates['subproc']:.2f}")
+            print(
+                f"\nPPO training with {args.ppo_envs} envs, {args.ppo_steps} steps: native "
+                f"vector env {rates['native']:,.0f} steps/s, SubprocVecEnv "
+                f"{rates['subproc']:,.0f} steps/s, "
+                f"ratio {rates['native'] / rates['subproc']:.2f}"
+            )
     return 0
 
 

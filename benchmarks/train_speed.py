@@ -46,6 +46,7 @@ class _Clock:
                 return fn(*args, **kwargs)
             finally:
                 self.cpu += time.process_time() - c
+
         return timed
 
 
@@ -57,10 +58,19 @@ def build(args):
 
     from agents.train import TrainConfig, make_vec_env, set_threads
 
-    env_kwargs = {"estimator": args.estimator, "estimator_rate": args.estimator_rate,
-                  "action_mode": "residual", "residual_scale": 2.45}
-    config = TrainConfig(env_id=args.env, env_kwargs=env_kwargs, n_envs=args.n_envs,
-                         vector_env=True, torch_threads=args.torch_threads)
+    env_kwargs = {
+        "estimator": args.estimator,
+        "estimator_rate": args.estimator_rate,
+        "action_mode": "residual",
+        "residual_scale": 2.45,
+    }
+    config = TrainConfig(
+        env_id=args.env,
+        env_kwargs=env_kwargs,
+        n_envs=args.n_envs,
+        vector_env=True,
+        torch_threads=args.torch_threads,
+    )
     if args.keep_threads:  # torch as set, the env's numba switch left to reset it
         import torch
 
@@ -73,8 +83,16 @@ def build(args):
     clocks = {"env": _Clock(), "wrapped": _Clock(), "update": _Clock()}
     sb3.step_wait = clocks["env"].wrap(sb3.step_wait)
     env.step_wait = clocks["wrapped"].wrap(env.step_wait)
-    model = PPO("MlpPolicy", env, seed=0, device="cpu", verbose=0, n_steps=args.n_steps,
-                batch_size=args.batch_size, policy_kwargs={"net_arch": [64, 64]})
+    model = PPO(
+        "MlpPolicy",
+        env,
+        seed=0,
+        device="cpu",
+        verbose=0,
+        n_steps=args.n_steps,
+        batch_size=args.batch_size,
+        policy_kwargs={"net_arch": [64, 64]},
+    )
     model.train = clocks["update"].wrap(model.train)
     return model, clocks
 
@@ -97,29 +115,45 @@ def measure(args) -> dict:
     wall, cpu = time.perf_counter() - w, time.process_time() - c
     steps = model.num_timesteps - steps0
     env, wrapped, update = (clocks[k].cpu for k in ("env", "wrapped", "update"))
-    parts = {"env": env, "wrappers": wrapped - env, "policy": cpu - wrapped - update,
-             "update": update}
-    return {"env_id": args.env, "estimator": args.estimator,
-            "estimator_rate": args.estimator_rate, "n_envs": args.n_envs,
-            "n_steps": args.n_steps, "torch_threads": args.torch_threads, "steps": steps,
-            "cpu_s": cpu, "wall_s": wall, "steps_per_cpu_s": steps / cpu,
-            "steps_per_wall_s": steps / wall, "cpu_s": cpu,
-            "cpu_s_by_stage": parts,
-            "steps_per_cpu_s_by_stage": {k: steps / v for k, v in parts.items() if v > 0},
-            "cpu_min_per_1e6_steps": 1e6 / (steps / cpu) / 60,
-            "torch_threads_after": _torch_threads(), "load_average": [load0, os.getloadavg()[0]], "cpus": os.cpu_count()}
+    parts = {
+        "env": env,
+        "wrappers": wrapped - env,
+        "policy": cpu - wrapped - update,
+        "update": update,
+    }
+    return {
+        "env_id": args.env,
+        "estimator": args.estimator,
+        "estimator_rate": args.estimator_rate,
+        "n_envs": args.n_envs,
+        "n_steps": args.n_steps,
+        "torch_threads": args.torch_threads,
+        "steps": steps,
+        "cpu_s": cpu,
+        "wall_s": wall,
+        "steps_per_cpu_s": steps / cpu,
+        "steps_per_wall_s": steps / wall,
+        "cpu_s_by_stage": parts,
+        "steps_per_cpu_s_by_stage": {k: steps / v for k, v in parts.items() if v > 0},
+        "cpu_min_per_1e6_steps": 1e6 / (steps / cpu) / 60,
+        "torch_threads_after": _torch_threads(),
+        "load_average": [load0, os.getloadavg()[0]],
+        "cpus": os.cpu_count(),
+    }
 
 
 def report(r: dict) -> str:
-    lines = [f"{r['env_id']}, estimator {r['estimator']} ({r['estimator_rate']} rate), "
-             f"{r['n_envs']} envs x {r['n_steps']} steps per rollout, torch threads "
-             f"{r['torch_threads']} asked, {r['torch_threads_after']} in use; load average {r['load_average'][0]:.1f} -> "
-             f"{r['load_average'][1]:.1f} on {r['cpus']} CPUs",
-             f"{r['steps']:,} env steps in {r['cpu_s']:.1f} CPU-s ({r['wall_s']:.1f} s wall): "
-             f"{r['steps_per_cpu_s']:,.0f} steps per CPU-s, "
-             f"{r['cpu_min_per_1e6_steps']:.1f} CPU-min per 10^6 steps",
-             "| stage | CPU-s | share | env steps per CPU-s of the stage |",
-             "|---|---|---|---|"]
+    lines = [
+        f"{r['env_id']}, estimator {r['estimator']} ({r['estimator_rate']} rate), "
+        f"{r['n_envs']} envs x {r['n_steps']} steps per rollout, torch threads "
+        f"{r['torch_threads']} asked, {r['torch_threads_after']} in use; load average {r['load_average'][0]:.1f} -> "
+        f"{r['load_average'][1]:.1f} on {r['cpus']} CPUs",
+        f"{r['steps']:,} env steps in {r['cpu_s']:.1f} CPU-s ({r['wall_s']:.1f} s wall): "
+        f"{r['steps_per_cpu_s']:,.0f} steps per CPU-s, "
+        f"{r['cpu_min_per_1e6_steps']:.1f} CPU-min per 10^6 steps",
+        "| stage | CPU-s | share | env steps per CPU-s of the stage |",
+        "|---|---|---|---|",
+    ]
     for k, v in r["cpu_s_by_stage"].items():
         rate = r["steps_per_cpu_s_by_stage"].get(k, float("nan"))
         lines.append(f"| {k} | {v:.1f} | {v / r['cpu_s']:.0%} | {rate:,.0f} |")
@@ -137,11 +171,19 @@ def main(argv=None) -> int:
     ap.add_argument("--timesteps", type=int, default=131_072)
     ap.add_argument("--warmup", type=int, default=64)
     ap.add_argument("--torch-threads", type=int, default=1)
-    ap.add_argument("--keep-threads", action="store_true",
-                    help="set torch's threads only, not numba's first (shows what the "
-                    "shared OpenMP runtime costs when the env's step resets torch's count)")
-    ap.add_argument("--profile", type=int, default=0, metavar="K",
-                    help="also print the K functions of most own time (cProfile)")
+    ap.add_argument(
+        "--keep-threads",
+        action="store_true",
+        help="set torch's threads only, not numba's first (shows what the "
+        "shared OpenMP runtime costs when the env's step resets torch's count)",
+    )
+    ap.add_argument(
+        "--profile",
+        type=int,
+        default=0,
+        metavar="K",
+        help="also print the K functions of most own time (cProfile)",
+    )
     ap.add_argument("--json", help="write the result as JSON here")
     args = ap.parse_args(argv)
     if args.profile:

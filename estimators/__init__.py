@@ -7,5 +7,13 @@ from estimators.base import Estimate, EstimateSeries, OnlineEstimator, Sample
 from estimators.ipm import IPMSettings
 from estimators.irls import IRLSConfig, IRLSDiagnostics, SlidingWindowIRLS
 
-__all__ = ["Estimate", "EstimateSeries", "IPMSettings", "IRLSConfig", "IRLSDiagnostics",
-           "OnlineEstimator", "Sample", "SlidingWindowIRLS"]
+__all__ = [
+    "Estimate",
+    "EstimateSeries",
+    "IPMSettings",
+    "IRLSConfig",
+    "IRLSDiagnostics",
+    "OnlineEstimator",
+    "Sample",
+    "SlidingWindowIRLS",
+]

@@ -5,8 +5,8 @@ calls this); a batch of N estimators (the vector environment's) takes one sample
 gives a :class:`BatchedEstimate`. Offline: ``est.run(recording) -> EstimateSeries`` over a
 whole recording.
 Estimators receive the *nominal* vehicle and measurements only; they never read the
-recording's true efficiency columns. The measurement record :class:`~quadfault.sample.Sample`
-and :func:`~quadfault.sample.samples` live in the core and are re-exported here.
+recording's true efficiency columns. The measurement record :class:`~quadfault.io.sample.Sample`
+and :func:`~quadfault.io.sample.samples` live in the core and are re-exported here.
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from quadfault.errors import ConfigError
-from quadfault.recording import Recording
-from quadfault.sample import Sample, samples  # the measurement record lives in the core
+from quadfault.io.recording import Recording
+from quadfault.io.sample import Sample, samples  # the measurement record lives in the core
 
 #: Status values an estimate may carry.
 STATUS_OK = "ok"
@@ -28,8 +28,15 @@ STATUS_NO_EXCITATION = "no_excitation"  # data carries no information on eta (e.
 STATUS_REJECTED = "rejected"  # every segment rejected as an outlier; previous estimate kept
 STATUS_MAX_ITER = "max_iter"  # solver stopped at its iteration limit (estimate still usable)
 STATUS_BAD_SAMPLE = "bad_sample"  # non-finite measurement skipped; previous estimate kept
-STATUSES = (STATUS_OK, STATUS_WARMUP, STATUS_ILL_CONDITIONED, STATUS_NO_EXCITATION,
-            STATUS_REJECTED, STATUS_MAX_ITER, STATUS_BAD_SAMPLE)
+STATUSES = (
+    STATUS_OK,
+    STATUS_WARMUP,
+    STATUS_ILL_CONDITIONED,
+    STATUS_NO_EXCITATION,
+    STATUS_REJECTED,
+    STATUS_MAX_ITER,
+    STATUS_BAD_SAMPLE,
+)
 
 
 @dataclass(frozen=True)
@@ -82,8 +89,10 @@ def command_limit(recording: Recording, vehicle) -> float:
         return float(vehicle.rotor_max_thrust)
     if flag is False:
         return float("inf")
-    raise ConfigError(f"{recording.path or 'recording'}: sidecar key {SATURATED_KEY!r} must be "
-                      f"true or false, got {flag!r}")
+    raise ConfigError(
+        f"{recording.path or 'recording'}: sidecar key {SATURATED_KEY!r} must be "
+        f"true or false, got {flag!r}"
+    )
 
 
 def sample_arrays(sample: Sample, n_rotors: int, who: str) -> tuple:
@@ -94,12 +103,15 @@ def sample_arrays(sample: Sample, n_rotors: int, who: str) -> tuple:
         t = float(sample.t)
         arrays = [np.asarray(a, dtype=np.float64) for a in sample[1:]]
     except (AttributeError, TypeError, ValueError, IndexError):
-        raise ConfigError(f"{who}: {sample!r} is not a sample (t, p, v, R, w, f of numbers)") \
-            from None
+        raise ConfigError(
+            f"{who}: {sample!r} is not a sample (t, p, v, R, w, f of numbers)"
+        ) from None
     shapes = [a.shape for a in arrays]
     if shapes != [(3,), (3,), (3, 3), (3,), (n_rotors,)]:
-        raise ConfigError(f"{who}: sample at t = {sample.t} has shapes {shapes}; expected "
-                          f"p, v, w (3,), R (3, 3), f ({n_rotors},)")
+        raise ConfigError(
+            f"{who}: sample at t = {sample.t} has shapes {shapes}; expected "
+            f"p, v, w (3,), R (3, 3), f ({n_rotors},)"
+        )
     return (t, *(np.ascontiguousarray(a) for a in arrays))
 
 
@@ -131,9 +143,11 @@ def batch_arrays(num: int, n: int, t, p, v, R, w, f):
     arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (p, v, R, w, f)]
     shapes = [(num, 3), (num, 3), (num, 3, 3), (num, 3), (num, n)]
     if t.shape != (num,) or [a.shape for a in arrays] != shapes:
-        raise ConfigError(f"batched sample must have t {(num,)}, p, v {(num, 3)}, R "
-                          f"{(num, 3, 3)}, w {(num, 3)}, f {(num, n)}; got "
-                          f"{[t.shape] + [a.shape for a in arrays]}")
+        raise ConfigError(
+            f"batched sample must have t {(num,)}, p, v {(num, 3)}, R "
+            f"{(num, 3, 3)}, w {(num, 3)}, f {(num, n)}; got "
+            f"{[t.shape] + [a.shape for a in arrays]}"
+        )
     return (t, *arrays)
 
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from estimators.base import Estimate, EstimateSeries, Sample, samples
 from quadfault.errors import ConfigError
-from quadfault.vehicle import Vehicle
+from quadfault.model.vehicle import Vehicle
 
 #: the uncertainty the "none" belief reports for every motor [-]
 NOMINAL_PRIOR_SD = 0.25
@@ -25,9 +25,13 @@ NOMINAL_PRIOR_SD = 0.25
 def _series(est, recording) -> EstimateSeries:
     est.reset()
     rows = [est.update(s) for s in samples(recording)]
-    return EstimateSeries(t=np.array([r.t for r in rows]), eta=np.array([r.eta for r in rows]),
-                          sd=np.array([r.sd for r in rows]),
-                          status=np.array([r.status for r in rows]), estimator=est.name)
+    return EstimateSeries(
+        t=np.array([r.t for r in rows]),
+        eta=np.array([r.eta for r in rows]),
+        sd=np.array([r.sd for r in rows]),
+        status=np.array([r.status for r in rows]),
+        estimator=est.name,
+    )
 
 
 class NominalBelief:

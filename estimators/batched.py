@@ -19,7 +19,6 @@ Inputs of :meth:`update` are the N samples of one instant: ``t`` (N,) [s], ``p``
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -59,7 +58,7 @@ from estimators.registry import make_estimator
 from estimators.window import no_history
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange
-from quadfault.vehicle import Vehicle
+from quadfault.model.vehicle import Vehicle
 
 CODE = {name: k for k, name in enumerate(STATUSES)}  # status name -> integer code
 
@@ -72,8 +71,24 @@ def irls_update_rows(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, beyond, any_
     views = state_views(fs, ip, N)  # formed once; a prange captures plain tuples only
     arrays = irls_constant_arrays(const, ip)
     for i in prange(N):
-        code[i] = irls_step(t[i], p[i], v[i], R[i], w[i], f[i], const, arrays, fp, ip,
-                            named_pieces(views), ks, np.int64(i), hist, beyond, any_n)[0]
+        code[i] = irls_step(
+            t[i],
+            p[i],
+            v[i],
+            R[i],
+            w[i],
+            f[i],
+            const,
+            arrays,
+            fp,
+            ip,
+            named_pieces(views),
+            ks,
+            np.int64(i),
+            hist,
+            beyond,
+            any_n,
+        )[0]
 
 
 @jit(parallel=True)
@@ -81,8 +96,9 @@ def ekf_update_rows(t, p, v, R, w, f, const, offsets, fs, ks, code):
     """:func:`estimators.ekf.ekf_step` of every row, in parallel; status codes into
     ``code``."""
     for i in prange(ks.shape[0]):
-        code[i] = ekf_update_row(t[i], p[i], v[i], R[i], w[i], f[i], const, offsets, fs, ks,
-                                 np.int64(i))
+        code[i] = ekf_update_row(
+            t[i], p[i], v[i], R[i], w[i], f[i], const, offsets, fs, ks, np.int64(i)
+        )
 
 
 class BatchedIRLS:
@@ -138,8 +154,23 @@ class BatchedIRLS:
         """Add one sample per vehicle; returns the estimates of the windows ending at them."""
         t, p, v, R, w, f = batch_arrays(self.num, self.vehicle.n_rotors, t, p, v, R, w, f)
         st = self._state
-        irls_update_rows(t, p, v, R, w, f, self._const, self._fp, self._ip, st.floats, st.ints,
-                         self._hist, self._beyond, self._any_n, self._code)
+        irls_update_rows(
+            t,
+            p,
+            v,
+            R,
+            w,
+            f,
+            self._const,
+            self._fp,
+            self._ip,
+            st.floats,
+            st.ints,
+            self._hist,
+            self._beyond,
+            self._any_n,
+            self._code,
+        )
         VN = st.views.vn
         sd = np.where(st.ints[:, COUNTERS.has_sd, None] == 1, VN[:, VN_ROWS.sd], np.nan)
         return BatchedEstimate(t.copy(), VN[:, VN_ROWS.out].copy(), sd, self._code.copy())
@@ -191,20 +222,22 @@ class BatchedEKF:
         """One predict (previous sample's command held) and one update per vehicle."""
         t, p, v, R, w, f = batch_arrays(self.num, self.vehicle.n_rotors, t, p, v, R, w, f)
         st = self._state
-        ekf_update_rows(t, p, v, R, w, f, self._const, st.offsets, st.floats, st.ints,
-                        self._code)
+        ekf_update_rows(t, p, v, R, w, f, self._const, st.offsets, st.floats, st.ints, self._code)
         init = st.ints[:, EKF_COUNTERS.initialised, None] == 1
-        eta = np.where(init, st.views.x[:, X.eta:], st.views.eta0)
-        diag = np.diagonal(st.views.P, axis1=1, axis2=2)[:, X.eta:]
+        eta = np.where(init, st.views.x[:, X.eta :], st.views.eta0)
+        diag = np.diagonal(st.views.P, axis1=1, axis2=2)[:, X.eta :]
         sd = np.where(init, np.sqrt(np.where(init, diag, 0.0)), np.nan)
         return BatchedEstimate(t.copy(), eta, sd, self._code.copy())
 
 
 def make_batched_estimator(name: str, vehicle: Vehicle, num: int, **kwargs):
     """Deprecated: ``estimators.registry.make_estimator(name, vehicle, num=num, ...)``."""
-    warnings.warn("make_batched_estimator is deprecated; use "
-                  "estimators.registry.make_estimator(name, vehicle, num=N)", DeprecationWarning,
-                  stacklevel=2)
+    warnings.warn(
+        "make_batched_estimator is deprecated; use "
+        "estimators.registry.make_estimator(name, vehicle, num=N)",
+        DeprecationWarning,
+        stacklevel=2,
+    )
     return make_estimator(name, vehicle, num=num, **kwargs)
 
 

@@ -125,8 +125,9 @@ def observe_into(x, history, counters) -> None:
 
 
 @jit
-def complete_into(x, info, history, anchor, v, counters, threshold, hold, gamma, lower, upper,
-                  D, E, scratch) -> None:
+def complete_into(
+    x, info, history, anchor, v, counters, threshold, hold, gamma, lower, upper, D, E, scratch
+) -> None:
     """The change completion of one window, in place: ``x`` is the solver's estimate on entry
     and the estimate to use (and feed back) on return; ``info`` (n, n) is the window's
     information ``J^T W G J``; ``D``, ``E`` (n, n) and ``scratch`` (3, n) are scratch.

@@ -32,39 +32,66 @@ def check_options(name: str, improved: bool, median, q_eta, forgetting=None) -> 
     for key, given in (("improved", improved), ("q_eta", q_eta), ("forgetting", forgetting)):
         if given is not None and given is not False and key not in options:
             takers = [s.name for s in ESTIMATORS.values() if key in s.options]
-            raise ConfigError(f"--{key.replace('_', '-')} applies to the "
-                              f"{', '.join(takers)} estimator, not {name!r}")
-    if q_eta is not None and (isinstance(q_eta, bool) or not isinstance(q_eta, (int, float))
-                              or not (math.isfinite(q_eta) and q_eta > 0)):
+            raise ConfigError(
+                f"--{key.replace('_', '-')} applies to the "
+                f"{', '.join(takers)} estimator, not {name!r}"
+            )
+    if q_eta is not None and (
+        isinstance(q_eta, bool)
+        or not isinstance(q_eta, (int, float))
+        or not (math.isfinite(q_eta) and q_eta > 0)
+    ):
         raise ConfigError(f"--q-eta must be a positive number, got {q_eta!r}")
-    if forgetting is not None and (isinstance(forgetting, bool)
-                                   or not isinstance(forgetting, (int, float))
-                                   or not 0 < forgetting <= 1):
+    if forgetting is not None and (
+        isinstance(forgetting, bool)
+        or not isinstance(forgetting, (int, float))
+        or not 0 < forgetting <= 1
+    ):
         raise ConfigError(f"--forgetting must be in (0, 1], got {forgetting!r}")
-    if median is not None and (isinstance(median, bool) or not isinstance(median, int)
-                               or median < 1):
+    if median is not None and (
+        isinstance(median, bool) or not isinstance(median, int) or median < 1
+    ):
         raise ConfigError(f"--median must be an integer >= 1 samples, got {median!r}")
 
 
-def estimate_series(recording, name: str, *, improved: bool = False, median: int | None = None,
-                    q_eta: float | None = None, forgetting: float | None = None,
-                    progress: bool = False):
+def estimate_series(
+    recording,
+    name: str,
+    *,
+    improved: bool = False,
+    median: int | None = None,
+    q_eta: float | None = None,
+    forgetting: float | None = None,
+    progress: bool = False,
+):
     """Run estimator ``name`` over ``recording`` (never its truth) with the options of
     ``quadfault estimate``; the series' ``postprocess`` says which median it got."""
     from estimators.median import median_series
 
     check_options(name, improved, median, q_eta, forgetting)
     online_median = "median" in estimator_spec(name).options
-    est = make_estimator(name, recording.vehicle, improved=improved, q_eta=q_eta,
-                         forgetting=forgetting, median=median if online_median else None)
+    est = make_estimator(
+        name,
+        recording.vehicle,
+        improved=improved,
+        q_eta=q_eta,
+        forgetting=forgetting,
+        median=median if online_median else None,
+    )
     series = est.run(recording.without_truth(), progress=progress)
     if median is not None and not online_median:
         series = median_series(series, median)
     return series
 
 
-def cli_args(name: str, *, improved: bool = False, median: int | None = None,
-             q_eta: float | None = None, forgetting: float | None = None) -> list[str]:
+def cli_args(
+    name: str,
+    *,
+    improved: bool = False,
+    median: int | None = None,
+    q_eta: float | None = None,
+    forgetting: float | None = None,
+) -> list[str]:
     """The ``quadfault estimate`` arguments of :func:`estimate_series`'s options (``q_eta``
     written with ``repr``, so the arguments reproduce the series exactly)."""
     args = ["--estimator", name]
@@ -81,43 +108,76 @@ def cli_args(name: str, *, improved: bool = False, median: int | None = None,
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", metavar="FILE.csv", help="input recording (+ FILE.json)")
-    p.add_argument("--estimator", choices=_choices(), default="irls",
-                   help="; ".join(f"{s.name}: {s.summary}" for s in ESTIMATORS.values()
-                                  if s.name in _choices()))
+    p.add_argument(
+        "--estimator",
+        choices=_choices(),
+        default="irls",
+        help="; ".join(
+            f"{s.name}: {s.summary}" for s in ESTIMATORS.values() if s.name in _choices()
+        ),
+    )
     p.add_argument("--out", required=True, help="output EST.csv (+ EST.json)")
     p.add_argument("--force", action="store_true", help="overwrite existing files")
-    p.add_argument("--improved", action="store_true",
-                   help="IRLS with the options beyond the paper: change completion and a "
-                        "21-sample causal output median (docs/irls.md)")
-    p.add_argument("--median", type=int, default=None, metavar="N",
-                   help="post-processing of any estimator: causal running median of the last N "
-                        "estimates (the IRLS's output_median; 1 = none; overrides --improved's "
-                        "21)")
-    p.add_argument("--q-eta", type=float, default=None, metavar="Q",
-                   help="EKF, UKF: random-walk variance of each efficiency per 1 ms step "
-                        "(default 0.5, the reference code's)")
-    p.add_argument("--forgetting", type=float, default=None, metavar="L",
-                   help="RLS: forgetting factor per 1 ms step, in (0, 1] (default 0.99)")
+    p.add_argument(
+        "--improved",
+        action="store_true",
+        help="IRLS with the options beyond the paper: change completion and a "
+        "21-sample causal output median (docs/irls.md)",
+    )
+    p.add_argument(
+        "--median",
+        type=int,
+        default=None,
+        metavar="N",
+        help="post-processing of any estimator: causal running median of the last N "
+        "estimates (the IRLS's output_median; 1 = none; overrides --improved's "
+        "21)",
+    )
+    p.add_argument(
+        "--q-eta",
+        type=float,
+        default=None,
+        metavar="Q",
+        help="EKF, UKF: random-walk variance of each efficiency per 1 ms step "
+        "(default 0.5, the reference code's)",
+    )
+    p.add_argument(
+        "--forgetting",
+        type=float,
+        default=None,
+        metavar="L",
+        help="RLS: forgetting factor per 1 ms step, in (0, 1] (default 0.99)",
+    )
 
 
 def run(args) -> int:
     from estimators.series_io import estimate_paths, write_estimate_series
     from quadfault.fileio import check_writable
+    from quadfault.io.recording import read_recording
     from quadfault.progress import enabled
-    from quadfault.recording import read_recording
 
     check_options(args.estimator, args.improved, args.median, args.q_eta, args.forgetting)
     out, side = estimate_paths(args.out)
     check_writable([out, side], force=args.force)
     rec = read_recording(args.recording)
     if "pose" in estimator_spec(args.estimator).needs and not rec.has_pose:
-        raise ConfigError(f"{args.recording}: 'estimate' needs position, velocity and attitude "
-                          "columns (px..pz, vx..vz, qw..qz); this recording is IMU-only")
-    series = estimate_series(rec, args.estimator, improved=args.improved, median=args.median,
-                             q_eta=args.q_eta, forgetting=args.forgetting,
-                             progress=enabled())
+        raise ConfigError(
+            f"{args.recording}: 'estimate' needs position, velocity and attitude "
+            "columns (px..pz, vx..vz, qw..qz); this recording is IMU-only"
+        )
+    series = estimate_series(
+        rec,
+        args.estimator,
+        improved=args.improved,
+        median=args.median,
+        q_eta=args.q_eta,
+        forgetting=args.forgetting,
+        progress=enabled(),
+    )
     write_estimate_series(series, out, input_path=args.recording, force=args.force)
     if not args.quiet:
-        print(f"{series.estimator}: {len(series.t)} estimates in {series.seconds:.2f} s -> {out}",
-              file=sys.stdout)
+        print(
+            f"{series.estimator}: {len(series.t)} estimates in {series.seconds:.2f} s -> {out}",
+            file=sys.stdout,
+        )
     return 0

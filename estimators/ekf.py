@@ -57,21 +57,29 @@ from estimators.ekf_filter import (
     N_VEC_R,
     VECS,
     WORKSPACE,
-    X,
-    Y,
     Measurement,
     Model,
     Workspace,
+    X,
+    Y,
     predict_update_into,
 )
-from estimators.state import (FlatState, Layout, all_finite, fields, pack, piece, piece_rows,
-                              reset_rows)
-from quadfault.rotation import mat3
+from estimators.state import (
+    FlatState,
+    Layout,
+    all_finite,
+    fields,
+    pack,
+    piece,
+    piece_rows,
+    reset_rows,
+)
 from quadfault.errors import ConfigError
+from quadfault.io.recording import Recording
 from quadfault.jit import jit
+from quadfault.model.rotation import mat3
+from quadfault.model.vehicle import Vehicle
 from quadfault.progress import progress_bar
-from quadfault.recording import Recording
-from quadfault.vehicle import Vehicle
 
 #: Sample period the per-step noise values refer to [s] (the reference's 1 kHz).
 NOISE_REFERENCE_DT = 1e-3
@@ -124,17 +132,32 @@ class EKFConfig:
     clip_commands: bool = True
 
     def __post_init__(self):
-        for key in ("q_eta", "q_position", "q_velocity", "q_rate", "q_rotation", "r_position",
-                    "r_velocity", "r_rate", "r_attitude", "p0"):
+        for key in (
+            "q_eta",
+            "q_position",
+            "q_velocity",
+            "q_rate",
+            "q_rotation",
+            "r_position",
+            "r_velocity",
+            "r_rate",
+            "r_attitude",
+            "p0",
+        ):
             value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                    or not (math.isfinite(value) and value > 0):
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or not (math.isfinite(value) and value > 0)
+            ):
                 raise ConfigError(f"EKFConfig.{key} must be a positive number, got {value!r}")
         if self.eta_bounds is not None:
             lo, hi = self.eta_bounds
             if not (lo < hi):
-                raise ConfigError(f"EKFConfig.eta_bounds must be (low, high) with low < high, "
-                                  f"got {self.eta_bounds!r}")
+                raise ConfigError(
+                    f"EKFConfig.eta_bounds must be (low, high) with low < high, "
+                    f"got {self.eta_bounds!r}"
+                )
 
     @classmethod
     def from_options(cls, q_eta: float | None = None) -> EKFConfig:
@@ -155,8 +178,17 @@ class EKFConfig:
 #: covariance ``P``, the previous sample's time and (clipped) command, the initial
 #: efficiency, the efficiencies kept across an idle step, then the workspace of
 #: :func:`predict_update_into` (dimensions: rotors ``n``, states ``ns = X.size + n``)
-FLOATS = Layout("EKFPieces", x=("ns",), P=("ns", "ns"), last_t=(1,), last_f=("n",),
-                eta0=("n",), eta_keep=("n",), P_keep=("n", "n"), **WORKSPACE.declared)
+FLOATS = Layout(
+    "EKFPieces",
+    x=("ns",),
+    P=("ns", "ns"),
+    last_t=(1,),
+    last_f=("n",),
+    eta0=("n",),
+    eta_keep=("n",),
+    P_keep=("n", "n"),
+    **WORKSPACE.declared,
+)
 F = FLOATS.index
 EKFPieces = FLOATS.pieces
 #: the int state: 1 once the first good sample set the kinematic states
@@ -164,8 +196,20 @@ COUNTERS = fields("EKFCounters", "initialised")
 #: the constants: scalars, the inertia and its inverse, the measurement-noise variances
 #: ``r``; last the arrays sized by the rotors: the allocation ``A`` (4, n), then the
 #: process-noise variance rates ``qc`` (ns,) [1/s] (:func:`constant_arrays`)
-CONSTANTS = fields("EKFConstants", "mass", "gravity", "f_max", "clip", "lo", "hi", "p0",
-                   ("J", 9), ("Jinv", 9), ("r", Y.size), ("per_rotor", 0))
+CONSTANTS = fields(
+    "EKFConstants",
+    "mass",
+    "gravity",
+    "f_max",
+    "clip",
+    "lo",
+    "hi",
+    "p0",
+    ("J", 9),
+    ("Jinv", 9),
+    ("r", Y.size),
+    ("per_rotor", 0),
+)
 
 
 class EKFState(FlatState):
@@ -176,8 +220,7 @@ class EKFState(FlatState):
     workspace of :func:`predict_update_into`."""
 
     def __init__(self, n: int, num: int = 1):
-        super().__init__(FLOATS.shapes(n=n, ns=X.size + n), num, COUNTERS.size,
-                         FLOATS.pieces)
+        super().__init__(FLOATS.shapes(n=n, ns=X.size + n), num, COUNTERS.size, FLOATS.pieces)
 
 
 @jit
@@ -185,33 +228,46 @@ def state_pieces(fs, offsets, n, N):
     """The pieces of the float state of ``N`` filters (:data:`FLOATS`) by name, each
     ``(N, *shape)``."""
     ns, o, nm = X.size + n, offsets, Y.size
-    return EKFPieces(x=piece_rows(fs, o[F.x], o[F.x + 1], N),
-                     P=piece(fs, o, F.P, (N, ns, ns)),
-                     last_t=piece_rows(fs, o[F.last_t], o[F.last_t + 1], N),
-                     last_f=piece_rows(fs, o[F.last_f], o[F.last_f + 1], N),
-                     eta0=piece_rows(fs, o[F.eta0], o[F.eta0 + 1], N),
-                     eta_keep=piece_rows(fs, o[F.eta_keep], o[F.eta_keep + 1], N),
-                     P_keep=piece(fs, o, F.P_keep, (N, n, n)),
-                     mats=piece(fs, o, F.mats, (N, MATS.size, ns, ns)),
-                     WT=piece(fs, o, F.WT, (N, ns, nm)),
-                     s12=piece(fs, o, F.s12, (N, 2, nm, nm)),
-                     HP=piece(fs, o, F.HP, (N, nm, ns)),
-                     M3=piece(fs, o, F.M3, (N, M3.size, 3, 3)),
-                     dR=piece(fs, o, F.dR, (N, N_VEC_R, 3)),
-                     Bs=piece(fs, o, F.Bs, (N, 2, n, 3)),
-                     HR=piece(fs, o, F.HR, (N, nm - Y.R, N_VEC_R)),
-                     vecs=piece(fs, o, F.vecs, (N, VECS.size, ns)),
-                     Z=piece(fs, o, F.Z, (N, 3, ns)),
-                     y=piece_rows(fs, o[F.y], o[F.y + 1], N),
-                     dT=piece_rows(fs, o[F.dT], o[F.dT + 1], N))
+    return EKFPieces(
+        x=piece_rows(fs, o[F.x], o[F.x + 1], N),
+        P=piece(fs, o, F.P, (N, ns, ns)),
+        last_t=piece_rows(fs, o[F.last_t], o[F.last_t + 1], N),
+        last_f=piece_rows(fs, o[F.last_f], o[F.last_f + 1], N),
+        eta0=piece_rows(fs, o[F.eta0], o[F.eta0 + 1], N),
+        eta_keep=piece_rows(fs, o[F.eta_keep], o[F.eta_keep + 1], N),
+        P_keep=piece(fs, o, F.P_keep, (N, n, n)),
+        mats=piece(fs, o, F.mats, (N, MATS.size, ns, ns)),
+        WT=piece(fs, o, F.WT, (N, ns, nm)),
+        s12=piece(fs, o, F.s12, (N, 2, nm, nm)),
+        HP=piece(fs, o, F.HP, (N, nm, ns)),
+        M3=piece(fs, o, F.M3, (N, M3.size, 3, 3)),
+        dR=piece(fs, o, F.dR, (N, N_VEC_R, 3)),
+        Bs=piece(fs, o, F.Bs, (N, 2, n, 3)),
+        HR=piece(fs, o, F.HR, (N, nm - Y.R, N_VEC_R)),
+        vecs=piece(fs, o, F.vecs, (N, VECS.size, ns)),
+        Z=piece(fs, o, F.Z, (N, 3, ns)),
+        y=piece_rows(fs, o[F.y], o[F.y + 1], N),
+        dT=piece_rows(fs, o[F.dT], o[F.dT + 1], N),
+    )
 
 
 @jit(inline="always")
 def workspace_row(S, i):
     """The workspace of filter ``i`` (:class:`estimators.ekf_filter.Workspace`)."""
-    return Workspace(mats=S.mats[i], WT=S.WT[i], s12=S.s12[i], HP=S.HP[i], M3=S.M3[i],
-                     dR=S.dR[i], Bs=S.Bs[i], HR=S.HR[i], vecs=S.vecs[i], Z=S.Z[i], y=S.y[i],
-                     dT=S.dT[i])
+    return Workspace(
+        mats=S.mats[i],
+        WT=S.WT[i],
+        s12=S.s12[i],
+        HP=S.HP[i],
+        M3=S.M3[i],
+        dR=S.dR[i],
+        Bs=S.Bs[i],
+        HR=S.HR[i],
+        vecs=S.vecs[i],
+        Z=S.Z[i],
+        y=S.y[i],
+        dT=S.dT[i],
+    )
 
 
 @jit
@@ -219,11 +275,18 @@ def constant_arrays(const, n):
     """The filter's :class:`~estimators.ekf_filter.Model` from the constants (views of
     ``const``, :func:`ekf_constants`)."""
     C, ns = CONSTANTS, X.size + n
-    J, Jinv = const[C.J:C.Jinv].reshape((3, 3)), const[C.Jinv:C.r].reshape((3, 3))
+    J, Jinv = const[C.J : C.Jinv].reshape((3, 3)), const[C.Jinv : C.r].reshape((3, 3))
     a = C.per_rotor  # A (4, n), then qc (ns,)
-    return Model((const[C.mass], const[C.gravity], mat3(J), mat3(Jinv)), J, Jinv,
-                 const[a:a + 4 * n].reshape((4, n)), const[a + 4 * n:a + 4 * n + ns],
-                 const[C.r:C.per_rotor], const[C.lo], const[C.hi])
+    return Model(
+        (const[C.mass], const[C.gravity], mat3(J), mat3(Jinv)),
+        J,
+        Jinv,
+        const[a : a + 4 * n].reshape((4, n)),
+        const[a + 4 * n : a + 4 * n + ns],
+        const[C.r : C.per_rotor],
+        const[C.lo],
+        const[C.hi],
+    )
 
 
 @jit
@@ -239,8 +302,14 @@ def ekf_step(t, p, v, R, w, f, const, model, S, ks, i) -> int:
     ns = X.size + n
     x, P, last_t, last_f = S.x[i], S.P[i], S.last_t[i], S.last_f[i]
     clip, f_max = const[CONSTANTS.clip] != 0.0, const[CONSTANTS.f_max]
-    if not (math.isfinite(t) and all_finite(p) and all_finite(v) and all_finite(R)
-            and all_finite(w) and all_finite(f)):
+    if not (
+        math.isfinite(t)
+        and all_finite(p)
+        and all_finite(v)
+        and all_finite(R)
+        and all_finite(w)
+        and all_finite(f)
+    ):
         return BAD_SAMPLE
     if ks[i, COUNTERS.initialised] == 0:  # the first sample sets the kinematic states
         eta0 = S.eta0[i]
@@ -268,8 +337,7 @@ def ekf_step(t, p, v, R, w, f, const, model, S, ks, i) -> int:
                 keep[j] = x[e + j]
                 for k in range(n):
                     P_keep[j, k] = P[e + j, e + k]
-        predict_update_into(x, P, last_f, dt, Measurement(p, v, w, R), model,
-                            workspace_row(S, i))
+        predict_update_into(x, P, last_f, dt, Measurement(p, v, w, R), model, workspace_row(S, i))
         code = OK
         if idle:  # the efficiencies stay, decorrelated; their variance grows by Q_eta dt
             for j in range(n):
@@ -305,8 +373,9 @@ def ekf_update_row(t, p, v, R, w, f, const, offsets, fs, ks, i) -> int:
 @jit
 def ekf_update(t, p, v, R, w, f, const, offsets, fs, ks) -> int:
     """:func:`ekf_step` of a single filter (the online update)."""
-    return ekf_update_row(t, p, v, R, w, f, const, offsets, fs, ks,
-                          ks.shape[0] - 1)  # row 0, a run-time value like the batch's rows
+    return ekf_update_row(
+        t, p, v, R, w, f, const, offsets, fs, ks, ks.shape[0] - 1
+    )  # row 0, a run-time value like the batch's rows
 
 
 @jit
@@ -352,12 +421,24 @@ class MotorEfficiencyEKF:
         self._const = ekf_constants(vehicle, self.config)
         cfg, n = self.config, self.n_rotors
         #: process-noise variances per 1 ms step (diagonal of Q at dt = 1 ms)
-        self.q_diag = np.concatenate((np.full(3, cfg.q_position), np.full(3, cfg.q_velocity),
-                                      np.full(3, cfg.q_rate), np.full(9, cfg.q_rotation),
-                                      np.full(n, cfg.q_eta)))
+        self.q_diag = np.concatenate(
+            (
+                np.full(3, cfg.q_position),
+                np.full(3, cfg.q_velocity),
+                np.full(3, cfg.q_rate),
+                np.full(9, cfg.q_rotation),
+                np.full(n, cfg.q_eta),
+            )
+        )
         #: measurement-noise variances (p, v, Omega, attitude rows)
-        self.r_diag = np.concatenate((np.full(3, cfg.r_position), np.full(3, cfg.r_velocity),
-                                      np.full(3, cfg.r_rate), np.full(3, cfg.r_attitude)))
+        self.r_diag = np.concatenate(
+            (
+                np.full(3, cfg.r_position),
+                np.full(3, cfg.r_velocity),
+                np.full(3, cfg.r_rate),
+                np.full(3, cfg.r_attitude),
+            )
+        )
         self._state = EKFState(self.n_rotors)
         self.reset()
 
@@ -386,8 +467,8 @@ class MotorEfficiencyEKF:
     def _estimate(self, t, code) -> Estimate:
         views = self._state.views
         if self._state.ints[0, COUNTERS.initialised]:
-            eta = views.x[0, X.eta:].copy()
-            sd = np.sqrt(np.diagonal(views.P[0])[X.eta:])
+            eta = views.x[0, X.eta :].copy()
+            sd = np.sqrt(np.diagonal(views.P[0])[X.eta :])
         else:
             eta, sd = views.eta0[0].copy(), None
         return Estimate(t=float(t), eta=eta, sd=sd, status=STATUSES[code])
@@ -406,32 +487,63 @@ class MotorEfficiencyEKF:
         if not isinstance(recording, Recording):
             raise ConfigError(f"run() needs a Recording, got {type(recording).__name__}")
         if not recording.has_pose:
-            raise ConfigError(f"{recording.path or 'recording'}: the estimators need position, "
-                              "velocity and attitude columns (px..pz, vx..vz, qw..qz); this "
-                              "recording is IMU-only")
+            raise ConfigError(
+                f"{recording.path or 'recording'}: the estimators need position, "
+                "velocity and attitude columns (px..pz, vx..vz, qw..qz); this "
+                "recording is IMU-only"
+            )
         if recording.thrust_cmd.shape[1] != self.n_rotors:
-            raise ConfigError(f"{recording.path or 'recording'}: "
-                              f"{recording.thrust_cmd.shape[1]} rotor commands, the vehicle has "
-                              f"{self.n_rotors} rotors")
+            raise ConfigError(
+                f"{recording.path or 'recording'}: "
+                f"{recording.thrust_cmd.shape[1]} rotor commands, the vehicle has "
+                f"{self.n_rotors} rotors"
+            )
         const = self._const.copy()
         const[CONSTANTS.f_max] = command_limit(recording, self.vehicle)  # its saturation
         self.reset(self._state.views.eta0[0].copy())
-        t, p, v, R, w, f = (np.ascontiguousarray(a, dtype=np.float64) for a in (
-            recording.t, recording.position, recording.velocity, recording.rotation,
-            recording.omega, recording.thrust_cmd))
+        t, p, v, R, w, f = (
+            np.ascontiguousarray(a, dtype=np.float64)
+            for a in (
+                recording.t,
+                recording.position,
+                recording.velocity,
+                recording.rotation,
+                recording.omega,
+                recording.thrust_cmd,
+            )
+        )
         N, n, st = len(t), self.n_rotors, self._state
         eta, sd, code = np.empty((N, n)), np.empty((N, n)), np.empty(N, dtype=np.int64)
         chunk = 50000
         bar = progress_bar(total=N, desc="ekf", unit="sample", disable=None if progress else True)
         for k0 in range(0, N, chunk):
             k = slice(k0, min(k0 + chunk, N))
-            ekf_run(t[k], p[k], v[k], R[k], w[k], f[k], const, st.offsets, st.floats,
-                    st.ints, eta[k], sd[k], code[k])
+            ekf_run(
+                t[k],
+                p[k],
+                v[k],
+                R[k],
+                w[k],
+                f[k],
+                const,
+                st.offsets,
+                st.floats,
+                st.ints,
+                eta[k],
+                sd[k],
+                code[k],
+            )
             bar.update(k.stop - k0)
         bar.close()
-        return EstimateSeries(t=t.copy(), eta=eta, sd=sd, status=np.asarray(STATUSES)[code],
-                              estimator=self.name, config=self.describe(),
-                              seconds=time.perf_counter() - start)
+        return EstimateSeries(
+            t=t.copy(),
+            eta=eta,
+            sd=sd,
+            status=np.asarray(STATUSES)[code],
+            estimator=self.name,
+            config=self.describe(),
+            seconds=time.perf_counter() - start,
+        )
 
     def describe(self) -> dict:
         """JSON-ready description (for sidecars and reports)."""
@@ -456,16 +568,40 @@ def ekf_constants(vehicle: Vehicle, cfg: EKFConfig) -> np.ndarray:
     n = vehicle.n_rotors
     b = cfg.eta_bounds
     lo, hi = (-np.inf, np.inf) if b is None else (float(b[0]), float(b[1]))
-    q = np.concatenate((np.full(3, cfg.q_position), np.full(3, cfg.q_velocity),
-                        np.full(3, cfg.q_rate), np.full(9, cfg.q_rotation), np.full(n, cfg.q_eta)))
-    r = np.concatenate((np.full(3, cfg.r_position), np.full(3, cfg.r_velocity),
-                        np.full(3, cfg.r_rate), np.full(3, cfg.r_attitude)))
-    per_rotor = np.concatenate((np.asarray(vehicle.allocation, dtype=float).ravel(),
-                                q / NOISE_REFERENCE_DT))  # A, then qc (constant_arrays)
-    return pack(CONSTANTS, mass=vehicle.mass, gravity=vehicle.gravity,
-                f_max=vehicle.rotor_max_thrust, clip=float(cfg.clip_commands), lo=lo, hi=hi,
-                p0=cfg.p0, J=vehicle.inertia, Jinv=vehicle.inertia_inverse, r=r,
-                per_rotor=per_rotor)
+    q = np.concatenate(
+        (
+            np.full(3, cfg.q_position),
+            np.full(3, cfg.q_velocity),
+            np.full(3, cfg.q_rate),
+            np.full(9, cfg.q_rotation),
+            np.full(n, cfg.q_eta),
+        )
+    )
+    r = np.concatenate(
+        (
+            np.full(3, cfg.r_position),
+            np.full(3, cfg.r_velocity),
+            np.full(3, cfg.r_rate),
+            np.full(3, cfg.r_attitude),
+        )
+    )
+    per_rotor = np.concatenate(
+        (np.asarray(vehicle.allocation, dtype=float).ravel(), q / NOISE_REFERENCE_DT)
+    )  # A, then qc (constant_arrays)
+    return pack(
+        CONSTANTS,
+        mass=vehicle.mass,
+        gravity=vehicle.gravity,
+        f_max=vehicle.rotor_max_thrust,
+        clip=float(cfg.clip_commands),
+        lo=lo,
+        hi=hi,
+        p0=cfg.p0,
+        J=vehicle.inertia,
+        Jinv=vehicle.inertia_inverse,
+        r=r,
+        per_rotor=per_rotor,
+    )
 
 
 _ROW0 = np.zeros(1, dtype=np.int64)

@@ -24,21 +24,25 @@ The online rules around it (first sample, bad samples, idle rotors, command clip
 from __future__ import annotations
 
 import math
-
 from typing import NamedTuple
 
 import numpy as np
 
 from estimators.linalg import cholesky_into, gauss_jordan_into, symmetric_eigen_into
 from estimators.state import Layout, fields
-from quadfault.dynamics import angular_acceleration3, rotor_wrench, translational_acceleration3
 from quadfault.jit import jit
-from quadfault.rotation import expm3, mat3, matvec3  # the core's kernels
+from quadfault.model.dynamics import (
+    angular_acceleration3,
+    rotor_wrench,
+    translational_acceleration3,
+)
+from quadfault.model.rotation import expm3, mat3, matvec3  # the core's kernels
 
 #: the filter's state vector: position, velocity, rate, vec(R) column by column (R e1, R e2,
 #: R e3), then the n efficiencies
-X = fields("EKFStates", ("p", 3), ("v", 3), ("w", 3), ("Re1", 3), ("Re2", 3), ("Re3", 3),
-           ("eta", 0))
+X = fields(
+    "EKFStates", ("p", 3), ("v", 3), ("w", 3), ("Re1", 3), ("Re2", 3), ("Re3", 3), ("eta", 0)
+)
 #: rows of the measurement: position, velocity, rate (each reads its state: ``H = I`` there),
 #: then the attitude's rotation error
 Y = fields("EKFMeasurementRows", ("p", 3), ("v", 3), ("w", 3), ("R", 3))
@@ -49,10 +53,21 @@ MATS = fields("EKFMatrices", "FP", "FPT", "Pp")
 M3 = fields("EKFBlocks", "R", "Rn", "Jr", "G", "Mr", "C", "Fw", "Mw")
 VECS = fields("EKFVectors", "xp", "ze", "phi")
 #: the workspace of one filter (dimensions: rotors ``n``, states ``ns = X.size + n``)
-WORKSPACE = Layout("EKFWorkspace", mats=(MATS.size, "ns", "ns"), WT=("ns", Y.size),
-                   s12=(2, Y.size, Y.size), HP=(Y.size, "ns"), M3=(M3.size, 3, 3),
-                   dR=(N_VEC_R, 3), Bs=(2, "n", 3), HR=(Y.size - Y.R, N_VEC_R),
-                   vecs=(VECS.size, "ns"), Z=(3, "ns"), y=(Y.size,), dT=("n",))
+WORKSPACE = Layout(
+    "EKFWorkspace",
+    mats=(MATS.size, "ns", "ns"),
+    WT=("ns", Y.size),
+    s12=(2, Y.size, Y.size),
+    HP=(Y.size, "ns"),
+    M3=(M3.size, 3, 3),
+    dR=(N_VEC_R, 3),
+    Bs=(2, "n", 3),
+    HR=(Y.size - Y.R, N_VEC_R),
+    vecs=(VECS.size, "ns"),
+    Z=(3, "ns"),
+    y=(Y.size,),
+    dT=("n",),
+)
 Workspace = WORKSPACE.pieces
 
 
@@ -68,7 +83,7 @@ class Measurement(NamedTuple):
 
 class Model(NamedTuple):
     """The filter's model: the nominal rigid body ``rigid`` (the tuple of
-    :func:`quadfault.dynamics.rigid_body`: mass, gravity, J, J^-1), the inertia ``J`` and its
+    :func:`quadfault.model.dynamics.rigid_body`: mass, gravity, J, J^-1), the inertia ``J`` and its
     inverse ``Jinv`` as (3, 3) arrays (the Jacobian's blocks), the allocation ``A`` (4, n),
     the process-noise variance rates ``qc`` (ns,) [1/s], the measurement-noise variances
     ``r`` (:data:`Y`), and the efficiency clamp ``[lo, hi]``."""
@@ -111,15 +126,17 @@ def _right_jacobian_into(phi0, phi1, phi2, Jr):
 
 @jit
 def _det3(M):
-    return (M[0, 0] * (M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1])
-            - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
-            + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]))
+    return (
+        M[0, 0] * (M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1])
+        - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
+        + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0])
+    )
 
 
 @jit
 def _project_so3_into(M, A, D, V):
     """Closest rotation (polar factor) of ``M`` in place, as
-    ``quadfault.rotation.orthonormalize``: Newton iterations ``M <- (M + M^-T) / 2`` when ``M``
+    ``quadfault.model.rotation.orthonormalize``: Newton iterations ``M <- (M + M^-T) / 2`` when ``M``
     is near SO(3) (the EKF's case), else from the eigen-decomposition of ``M^T M`` (the SVD
     of ``M``). ``A``, ``D``, ``V`` are 3 x 3 scratch."""
     err = 0.0
@@ -207,16 +224,18 @@ def _jacobian_times(Pin, out, lower, F, ze, Z):
     for i in range(3):  # p and v rows (R e3: the thrust direction)
         lp = X.p + i + 1 if lower else ns
         for k in range(lp):
-            out[X.p + i, k] = (Pin[X.p + i, k] + dt * Pin[X.v + i, k] + cp * Pin[X.Re3 + i, k]
-                               + up[i] * ze[k])
+            out[X.p + i, k] = (
+                Pin[X.p + i, k] + dt * Pin[X.v + i, k] + cp * Pin[X.Re3 + i, k] + up[i] * ze[k]
+            )
         lv = X.v + i + 1 if lower else ns
         for k in range(lv):
             out[X.v + i, k] = Pin[X.v + i, k] + cv * Pin[X.Re3 + i, k] + uv[i] * ze[k]
     for i in range(3):  # Omega rows
         lw = w + i + 1 if lower else ns
         for k in range(lw):
-            out[w + i, k] = (Fw[i, 0] * Pin[w, k] + Fw[i, 1] * Pin[w + 1, k]
-                             + Fw[i, 2] * Pin[w + 2, k])
+            out[w + i, k] = (
+                Fw[i, 0] * Pin[w, k] + Fw[i, 1] * Pin[w + 1, k] + Fw[i, 2] * Pin[w + 2, k]
+            )
         for j in range(nr):
             b = BwT[j, i]
             for k in range(lw):
@@ -235,9 +254,14 @@ def _jacobian_times(Pin, out, lower, F, ze, Z):
             d0, d1, d2 = dR[row, 0], dR[row, 1], dR[row, 2]
             lr = X.Re1 + row + 1 if lower else ns
             for k in range(lr):
-                out[X.Re1 + row, k] = (e0 * Pin[X.Re1 + kk, k] + e1 * Pin[X.Re2 + kk, k]
-                                       + e2 * Pin[X.Re3 + kk, k]
-                                       + d0 * Z[0, k] + d1 * Z[1, k] + d2 * Z[2, k])
+                out[X.Re1 + row, k] = (
+                    e0 * Pin[X.Re1 + kk, k]
+                    + e1 * Pin[X.Re2 + kk, k]
+                    + e2 * Pin[X.Re3 + kk, k]
+                    + d0 * Z[0, k]
+                    + d1 * Z[1, k]
+                    + d2 * Z[2, k]
+                )
     for i in range(e, ns):  # eta rows: random walk
         le = i + 1 if lower else ns
         for k in range(le):
@@ -249,13 +273,12 @@ def predict_update_into(x, P, f, dt, z, model, work):
     """One predict over ``dt`` [s] with the rotor commands ``f`` [N] held (eqs. 1-4, 12) and one
     update with the measurement ``z`` (:class:`Measurement`); ``x`` and ``P`` are overwritten.
     ``model``: :class:`Model` (the nominal rigid body, allocation, noise, clamp); ``work``:
-    :class:`Workspace`. The rigid body is the model's (:mod:`quadfault.dynamics`: the thrust
+    :class:`Workspace`. The rigid body is the model's (:mod:`quadfault.model.dynamics`: the thrust
     allocation, eqs. 2 and 4); the step discretises it as the paper's EKF does."""
     FP, FPT, Pp = work.mats[MATS.FP], work.mats[MATS.FPT], work.mats[MATS.Pp]
     S, L = work.s12[0], work.s12[1]
     M3_ = work.M3
-    R, Rn, Jr, G, Mr, C = (M3_[M3.R], M3_[M3.Rn], M3_[M3.Jr], M3_[M3.G], M3_[M3.Mr],
-                           M3_[M3.C])
+    R, Rn, Jr, G, Mr, C = (M3_[M3.R], M3_[M3.Rn], M3_[M3.Jr], M3_[M3.G], M3_[M3.Mr], M3_[M3.C])
     Fw, Mw = M3_[M3.Fw], M3_[M3.Mw]
     BwT, BrT = work.Bs[0], work.Bs[1]
     xp, ze, phi = work.vecs[VECS.xp], work.vecs[VECS.ze], work.vecs[VECS.phi, 0:3]
@@ -268,7 +291,7 @@ def predict_update_into(x, P, f, dt, z, model, work):
         for i in range(3):
             R[i, j] = x[X.Re1 + 3 * j + i]
     # ---- predict (eqs. 1-4, 12)
-    T, mo = rotor_wrench(A, f, x[X.eta:])  # [T; M] = A diag(eta) f
+    T, mo = rotor_wrench(A, f, x[X.eta :])  # [T; M] = A diag(eta) f
     w = (x[X.w], x[X.w + 1], x[X.w + 2])
     w0, w1, w2 = w
     jw = matvec3(rigid[2], w)
@@ -295,8 +318,11 @@ def predict_update_into(x, P, f, dt, z, model, work):
     for j in range(nr):  # B = J^-1 A_M diag(f) = d Omega' / d eta, dT = d T / d eta
         dT[j] = A[0, j] * f[j]
         for i in range(3):
-            b = (Jinv[i, 0] * (A[1, j] * f[j]) + Jinv[i, 1] * (A[2, j] * f[j])
-                 + Jinv[i, 2] * (A[3, j] * f[j]))
+            b = (
+                Jinv[i, 0] * (A[1, j] * f[j])
+                + Jinv[i, 1] * (A[2, j] * f[j])
+                + Jinv[i, 2] * (A[3, j] * f[j])
+            )
             BwT[j, i] = dt * b
             BrT[j, i] = 0.5 * dt * dt * b
     hjw = ((0.0, -jw[2], jw[1]), (jw[2], 0.0, -jw[0]), (-jw[1], jw[0], 0.0))
@@ -314,11 +340,15 @@ def predict_update_into(x, P, f, dt, z, model, work):
         h = ((0.0, -Jr[2, i], Jr[1, i]), (Jr[2, i], 0.0, -Jr[0, i]), (-Jr[1, i], Jr[0, i], 0.0))
         for cc in range(3):
             for rr in range(3):
-                dR[3 * cc + rr, i] = Rn[rr, 0] * h[0][cc] + Rn[rr, 1] * h[1][cc] \
-                    + Rn[rr, 2] * h[2][cc]
+                dR[3 * cc + rr, i] = (
+                    Rn[rr, 0] * h[0][cc] + Rn[rr, 1] * h[1][cc] + Rn[rr, 2] * h[2][cc]
+                )
     cp, cv = -(T / m) * 0.5 * dt * dt, -(T / m) * dt  # d (p, v) / d (R e3)
-    up = (-R[0, 2] * (0.5 * dt * dt / m), -R[1, 2] * (0.5 * dt * dt / m),
-          -R[2, 2] * (0.5 * dt * dt / m))  # d (p, v) / d eta = up / uv (x) dT
+    up = (
+        -R[0, 2] * (0.5 * dt * dt / m),
+        -R[1, 2] * (0.5 * dt * dt / m),
+        -R[2, 2] * (0.5 * dt * dt / m),
+    )  # d (p, v) / d eta = up / uv (x) dT
     uv = (-R[0, 2] * (dt / m), -R[1, 2] * (dt / m), -R[2, 2] * (dt / m))
     # P_pred = F P F^T + Q: F P, then F (F P)^T on the lower triangle, mirrored
     F = Transition(dt, cp, cv, up, uv, dT, Fw, BwT, E, dR, Mw, BrT)
@@ -350,7 +380,7 @@ def predict_update_into(x, P, f, dt, z, model, work):
     for k in range(3):
         for i in range(N_VEC_R):
             HR[k, i] = 0.0
-    for (k, ia, ib) in ((0, 2, 1), (1, 0, 2), (2, 1, 0)):
+    for k, ia, ib in ((0, 2, 1), (1, 0, 2), (2, 1, 0)):
         for i in range(3):
             HR[k, 3 * ia + i] -= 0.5 * zR[i, ib]
             HR[k, 3 * ib + i] += 0.5 * zR[i, ia]

@@ -201,8 +201,12 @@ class FDIScore:
     false_alarms: int
 
     def to_dict(self) -> dict:
-        return {"latencies": list(self.latencies), "detected": self.detected,
-                "missed": self.missed, "false_alarms": self.false_alarms}
+        return {
+            "latencies": list(self.latencies),
+            "detected": self.detected,
+            "missed": self.missed,
+            "false_alarms": self.false_alarms,
+        }
 
 
 def evaluate(result: FDIResult, windows, grace: float = 0.2) -> FDIScore:
@@ -212,7 +216,10 @@ def evaluate(result: FDIResult, windows, grace: float = 0.2) -> FDIScore:
     for motor, t0, t1 in windows:
         hits = [a.t - t0 for a in raised if a.motor == motor and t0 <= a.t <= t1 + grace]
         latencies.append(min(hits) if hits else None)
-    false = sum(1 for a in raised if not any(
-        a.motor == m and t0 <= a.t <= t1 + grace for m, t0, t1 in windows))
+    false = sum(
+        1
+        for a in raised
+        if not any(a.motor == m and t0 <= a.t <= t1 + grace for m, t0, t1 in windows)
+    )
     detected = sum(x is not None for x in latencies)
     return FDIScore(tuple(latencies), detected, len(latencies) - detected, false)

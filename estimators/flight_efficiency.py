@@ -2,9 +2,9 @@
 
 :func:`irls_efficiency` runs :class:`~estimators.irls.SlidingWindowIRLS` offline over a
 flight and takes the median of its ``ok`` estimates while airborne
-(:func:`quadfault.importers.flight_analysis.airborne`): the estimator's cross-check of the
+(:func:`quadfault.diagnosis.flight_analysis.airborne`): the estimator's cross-check of the
 diagnosis' ``motor_efficiency`` effect
-(:func:`quadfault.importers.flight_analysis.efficiency_fit`).
+(:func:`quadfault.diagnosis.flight_analysis.efficiency_fit`).
 """
 
 from __future__ import annotations
@@ -13,12 +13,13 @@ import numpy as np
 
 from estimators.base import STATUS_OK
 from estimators.irls import IRLSConfig, SlidingWindowIRLS
-from quadfault.importers.flight_analysis import MIN_HEIGHT, airborne
-from quadfault.recording import Recording
+from quadfault.diagnosis.flight_analysis import MIN_HEIGHT, airborne
+from quadfault.io.recording import Recording
 
 
-def irls_efficiency(rec: Recording, min_height: float | None = MIN_HEIGHT,
-                    eta_max: float = 1.6) -> tuple:
+def irls_efficiency(
+    rec: Recording, min_height: float | None = MIN_HEIGHT, eta_max: float = 1.6
+) -> tuple:
     """Median IRLS efficiency per rotor over the airborne ``ok`` estimates of ``rec``.
 
     The upper bound is raised from the paper's 1 to ``eta_max``: on a real flight the

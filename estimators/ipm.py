@@ -75,19 +75,29 @@ class IPMSettings:
     max_iter: int = 80
 
     def __post_init__(self):
-        for key in ("mu", "alpha", "beta", "step_fraction", "backtrack_eps", "min_step",
-                    "tol_feas", "tol_gap"):
+        for key in (
+            "mu",
+            "alpha",
+            "beta",
+            "step_fraction",
+            "backtrack_eps",
+            "min_step",
+            "tol_feas",
+            "tol_gap",
+        ):
             value = getattr(self, key)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ConfigError(f"IPM setting {key} must be a finite number >= 0, got {value!r}")
         if not self.mu > 1:
             raise ConfigError(f"IPM setting mu must be > 1, got {self.mu!r}")
         if not (0 < self.beta < 1 and 0 < self.step_fraction < 1 and 0 <= self.alpha < 1):
-            raise ConfigError("IPM settings need 0 < beta < 1, 0 < step_fraction < 1, "
-                              "0 <= alpha < 1")
+            raise ConfigError(
+                "IPM settings need 0 < beta < 1, 0 < step_fraction < 1, 0 <= alpha < 1"
+            )
         if not (isinstance(self.max_iter, int) and self.max_iter >= 1):
-            raise ConfigError(f"IPM setting max_iter must be an integer >= 1, "
-                              f"got {self.max_iter!r}")
+            raise ConfigError(
+                f"IPM setting max_iter must be an integer >= 1, got {self.max_iter!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -113,11 +123,21 @@ class IPMResult:
 
 
 #: the float settings of :func:`ipm_into`, by name (:func:`ipm_parameters` packs them)
-SETTINGS = fields("IPMSettingRows", "mu", "alpha", "beta", "step_fraction", "backtrack_eps",
-                  "min_step", "tol_feas", "tol_gap")
+SETTINGS = fields(
+    "IPMSettingRows",
+    "mu",
+    "alpha",
+    "beta",
+    "step_fraction",
+    "backtrack_eps",
+    "min_step",
+    "tol_feas",
+    "tol_gap",
+)
 #: rows of the interior point's workspace ``W`` (:func:`ipm_into`)
-WORK = fields("IPMWorkRows", "lam_hi", "lam_lo", "d", "rhs", "dx", "dlam_hi", "dlam_lo", "hx",
-              "hdx")
+WORK = fields(
+    "IPMWorkRows", "lam_hi", "lam_lo", "d", "rhs", "dx", "dlam_hi", "dlam_lo", "hx", "hdx"
+)
 N_SETTINGS, N_WORK_ROWS = SETTINGS.size, WORK.size
 
 
@@ -170,8 +190,13 @@ def ipm_steps(H, q, lo, hi, x, settings, max_iter, W, L, hist, n):
     bt_eps, min_step = settings[SETTINGS.backtrack_eps], settings[SETTINGS.min_step]
     tol_feas, tol_gap = settings[SETTINGS.tol_feas], settings[SETTINGS.tol_gap]
     # the workspace rows as views made once (no reference counting in the loop)
-    lam_hi, lam_lo, d, rhs, dx_ = (W[WORK.lam_hi], W[WORK.lam_lo], W[WORK.d], W[WORK.rhs],
-                                   W[WORK.dx])
+    lam_hi, lam_lo, d, rhs, dx_ = (
+        W[WORK.lam_hi],
+        W[WORK.lam_lo],
+        W[WORK.d],
+        W[WORK.rhs],
+        W[WORK.dx],
+    )
     dlam_hi, dlam_lo, hx_, hdx_ = W[WORK.dlam_hi], W[WORK.dlam_lo], W[WORK.hx], W[WORK.hdx]
     gap = 0.0  # surrogate gap -phi^T lambda, eq. (45); phi = [x - hi; lo - x]
     for i in range(n):
@@ -257,8 +282,15 @@ def ipm_steps(H, q, lo, hi, x, settings, max_iter, W, L, hist, n):
     return max_iter, 0
 
 
-def solve_box_qp(H, q, lo: float, hi: float, x0, settings: IPMSettings | None = None,
-                 record_history: bool = False) -> IPMResult:
+def solve_box_qp(
+    H,
+    q,
+    lo: float,
+    hi: float,
+    x0,
+    settings: IPMSettings | None = None,
+    record_history: bool = False,
+) -> IPMResult:
     """Minimise ``1/2 x^T H x + q^T x`` over ``lo <= x <= hi`` (Algorithm 1, :func:`ipm_into`).
 
     Args:
@@ -282,13 +314,15 @@ def solve_box_qp(H, q, lo: float, hi: float, x0, settings: IPMSettings | None = 
     q = np.ascontiguousarray(q, dtype=float)
     W = np.zeros((N_WORK_ROWS, n))
     hist = np.zeros((cfg.max_iter if record_history else 0, 3 + n))
-    it, flag = ipm_into(H, q, lo, hi, x, ipm_parameters(cfg), cfg.max_iter, W,
-                        np.empty((n, n)), hist)
+    it, flag = ipm_into(
+        H, q, lo, hi, x, ipm_parameters(cfg), cfg.max_iter, W, np.empty((n, n)), hist
+    )
     if flag < 0:
         raise np.linalg.LinAlgError("Newton matrix is not positive definite")
     lam = np.concatenate((W[WORK.lam_hi], W[WORK.lam_lo]))
     if not record_history:
         return IPMResult(x, lam, it, flag == 1)
     h = hist[:it]
-    return IPMResult(x, lam, it, flag == 1, h[:, 0].copy(), h[:, 1].copy(), h[:, 2].copy(),
-                     h[:, 3:].copy())
+    return IPMResult(
+        x, lam, it, flag == 1, h[:, 0].copy(), h[:, 1].copy(), h[:, 2].copy(), h[:, 3:].copy()
+    )

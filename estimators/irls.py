@@ -77,10 +77,10 @@ from estimators.window import (
     window_settings,
 )
 from quadfault.errors import ConfigError
+from quadfault.io.recording import Recording
 from quadfault.jit import jit
+from quadfault.model.vehicle import Vehicle
 from quadfault.progress import progress_bar
-from quadfault.recording import Recording
-from quadfault.vehicle import Vehicle
 
 __all__ = [
     "IRLSConfig",
@@ -99,27 +99,57 @@ WHY_NONFINITE, WHY_TIME = 1, 2
 _ROW0 = np.zeros(1, dtype=np.int64)
 _WHY = {WHY_NONFINITE: "non-finite or malformed sample", WHY_TIME: "time not increasing"}
 #: the diagnostics of the statuses that solve nothing (frozen, so one instance serves all)
-_HELD = {WARMUP: IRLSDiagnostics(STATUS_WARMUP),
-         NO_EXCITATION: IRLSDiagnostics(STATUS_NO_EXCITATION,
-                                        "commanded thrust ~ 0 in the window")}
+_HELD = {
+    WARMUP: IRLSDiagnostics(STATUS_WARMUP),
+    NO_EXCITATION: IRLSDiagnostics(STATUS_NO_EXCITATION, "commanded thrust ~ 0 in the window"),
+}
 
 #: the float settings (``fp``): the window solve's (:data:`estimators.window.SETTINGS`), then
 #: the change completion's threshold
 FLOAT_SETTINGS = fields("IRLSFloatSettings", ("window", N_FLOAT_SETTINGS), "change_threshold")
 #: the int settings (``ip``): the window solve's, the sizes (segments ``m``, rotors ``n``, the
 #: output median's ``L``), the completion's, then the offsets of the float state's pieces
-INT_SETTINGS = fields("IRLSIntSettings", ("window", N_INT_SETTINGS), "m", "n", "L",
-                      "completion", "hold", ("offsets", 0))
+INT_SETTINGS = fields(
+    "IRLSIntSettings",
+    ("window", N_INT_SETTINGS),
+    "m",
+    "n",
+    "L",
+    "completion",
+    "hold",
+    ("offsets", 0),
+)
 #: the vehicle constants (``const``); ``A`` (4 n) the allocation, last
-CONSTANTS = fields("IRLSConstants", "mass", "gravity", "f_max", "clip", "min_thrust", ("J", 9),
-                   ("Jinv", 9), ("G", RESIDUAL_ROWS), ("A", 0))
+CONSTANTS = fields(
+    "IRLSConstants",
+    "mass",
+    "gravity",
+    "f_max",
+    "clip",
+    "min_thrust",
+    ("J", 9),
+    ("Jinv", 9),
+    ("G", RESIDUAL_ROWS),
+    ("A", 0),
+)
 #: rows of the piece ``sample``: the previous sample's p, v, w and R
 SAMPLE_ROWS = fields("IRLSSampleRows", "p", "v", "w", ("R", 3))
 #: rows of the piece ``vn`` (n each): the previous command, the estimate, its sd, the
 #: reported estimate, the window's solution and sd, the completion's anchor, direction and
 #: scratch, then the window solver's vectors (:data:`estimators.window.VECTORS`)
-VN_ROWS = fields("IRLSVectorRows", "last_f", "eta", "sd", "out", "x", "sd_x", "anchor",
-                 "direction", ("scratch", 3), ("window", N_VECTORS))
+VN_ROWS = fields(
+    "IRLSVectorRows",
+    "last_f",
+    "eta",
+    "sd",
+    "out",
+    "x",
+    "sd_x",
+    "anchor",
+    "direction",
+    ("scratch", 3),
+    ("window", N_VECTORS),
+)
 #: rows of the piece ``vm`` (m each): the ring's energy constants and thrusts, the final
 #: weights, then the window solver's segment rows
 VM_ROWS = fields("IRLSSegmentRows", "c", "thrust", "weights", ("window", N_SEGMENT_ROWS))
@@ -127,22 +157,32 @@ VM_ROWS = fields("IRLSSegmentRows", "c", "thrust", "weights", ("window", N_SEGME
 BH_ROWS = fields("IRLSRingRows", "b", "history")
 #: the int state: counters, the completion's (:mod:`estimators.change_completion`), then the
 #: interior-point iterations of each IRLS round
-COUNTERS = fields("IRLSCounters", "head", "count", "has_last", "has_sd", "median_k",
-                  "median_fresh", ("completion", N_COUNTERS), ("iters", 0))
+COUNTERS = fields(
+    "IRLSCounters",
+    "head",
+    "count",
+    "has_last",
+    "has_sd",
+    "median_k",
+    "median_fresh",
+    ("completion", N_COUNTERS),
+    ("iters", 0),
+)
 #: the float state of one estimator: its pieces and their shapes in the window's segments
 #: ``m``, the rotors ``n`` and the output median's length ``L`` (offsets derived)
 FLOATS = Layout(
     "IRLSPieces",
-    t=(1,),                                    # the previous sample's time [s]
-    sample=(SAMPLE_ROWS.size, 3),              # its p, v, w, R (SAMPLE_ROWS)
-    vn=(VN_ROWS.size, "n"),                    # n-vectors (VN_ROWS)
-    vm=(VM_ROWS.size, "m"),                    # m-vectors (VM_ROWS)
-    bh=(BH_ROWS.size, "m", "n"),               # (BH_ROWS)
-    H=("m", "n", "n"),                         # the ring's H
-    M=(N_MATRICES, "n", "n"),                  # the window solver's matrices
-    r0=(RESIDUAL_ROWS,),                       # a segment's residual at eta = 0 (scratch)
-    J=(RESIDUAL_ROWS, "n"),                    # its Jacobian (scratch)
-    median=(2, "L", "n"))                      # the output median's ring and sorted copy
+    t=(1,),  # the previous sample's time [s]
+    sample=(SAMPLE_ROWS.size, 3),  # its p, v, w, R (SAMPLE_ROWS)
+    vn=(VN_ROWS.size, "n"),  # n-vectors (VN_ROWS)
+    vm=(VM_ROWS.size, "m"),  # m-vectors (VM_ROWS)
+    bh=(BH_ROWS.size, "m", "n"),  # (BH_ROWS)
+    H=("m", "n", "n"),  # the ring's H
+    M=(N_MATRICES, "n", "n"),  # the window solver's matrices
+    r0=(RESIDUAL_ROWS,),  # a segment's residual at eta = 0 (scratch)
+    J=(RESIDUAL_ROWS, "n"),  # its Jacobian (scratch)
+    median=(2, "L", "n"),
+)  # the output median's ring and sorted copy
 F = FLOATS.index
 IRLSPieces = FLOATS.pieces
 
@@ -164,8 +204,7 @@ class IRLSState(FlatState):
     """
 
     def __init__(self, m: int, n: int, L: int, rounds: int, num: int = 1):
-        super().__init__(FLOATS.shapes(m=m, n=n, L=L), num, COUNTERS.size + rounds,
-                         FLOATS.pieces)
+        super().__init__(FLOATS.shapes(m=m, n=n, L=L), num, COUNTERS.size + rounds, FLOATS.pieces)
 
     def reset(self, rows: np.ndarray, eta0: np.ndarray) -> None:
         """Forget everything of the estimators ``rows`` (int64); start them from ``eta0``
@@ -192,15 +231,30 @@ def irls_parameters(vehicle: Vehicle, cfg: IRLSConfig, offsets: np.ndarray):
     """``(const, fp, ip)`` of :func:`irls_update`: the vehicle constants, the float and the
     int settings (with the state's piece offsets)."""
     m, n = cfg.window - 1, vehicle.n_rotors
-    const = pack(CONSTANTS, mass=vehicle.mass, gravity=vehicle.gravity,
-                 f_max=vehicle.rotor_max_thrust, clip=float(cfg.clip_commands),
-                 min_thrust=cfg.min_thrust, J=vehicle.inertia, Jinv=vehicle.inertia_inverse,
-                 G=cfg.segment_weights, A=vehicle.allocation)
+    const = pack(
+        CONSTANTS,
+        mass=vehicle.mass,
+        gravity=vehicle.gravity,
+        f_max=vehicle.rotor_max_thrust,
+        clip=float(cfg.clip_commands),
+        min_thrust=cfg.min_thrust,
+        J=vehicle.inertia,
+        Jinv=vehicle.inertia_inverse,
+        G=cfg.segment_weights,
+        A=vehicle.allocation,
+    )
     fp, ip = window_settings(cfg, m)
     fp = pack(FLOAT_SETTINGS, window=fp, change_threshold=cfg.change_threshold)
-    ip = pack(INT_SETTINGS, window=ip, m=m, n=n, L=cfg.output_median,
-              completion=int(cfg.change_completion), hold=cfg.change_hold,
-              offsets=offsets).astype(np.int64)
+    ip = pack(
+        INT_SETTINGS,
+        window=ip,
+        m=m,
+        n=n,
+        L=cfg.output_median,
+        completion=int(cfg.change_completion),
+        hold=cfg.change_hold,
+        offsets=offsets,
+    ).astype(np.int64)
     return const, fp, ip
 
 
@@ -210,17 +264,19 @@ def state_views(fs, ip, N):
     tuple in the order of :data:`FLOATS` (what a ``prange`` loop can capture;
     :func:`named_pieces` names them)."""
     m, n, L = ip[INT_SETTINGS.m], ip[INT_SETTINGS.n], ip[INT_SETTINGS.L]
-    o = ip[INT_SETTINGS.offsets:]
-    return (piece_rows(fs, o[F.t], o[F.t + 1], N),
-            piece(fs, o, F.sample, (N, SAMPLE_ROWS.size, 3)),
-            piece(fs, o, F.vn, (N, VN_ROWS.size, n)),
-            piece(fs, o, F.vm, (N, VM_ROWS.size, m)),
-            piece(fs, o, F.bh, (N, BH_ROWS.size, m, n)),
-            piece(fs, o, F.H, (N, m, n, n)),
-            piece(fs, o, F.M, (N, N_MATRICES, n, n)),
-            piece_rows(fs, o[F.r0], o[F.r0 + 1], N),
-            piece(fs, o, F.J, (N, RESIDUAL_ROWS, n)),
-            piece(fs, o, F.median, (N, 2, L, n)))
+    o = ip[INT_SETTINGS.offsets :]
+    return (
+        piece_rows(fs, o[F.t], o[F.t + 1], N),
+        piece(fs, o, F.sample, (N, SAMPLE_ROWS.size, 3)),
+        piece(fs, o, F.vn, (N, VN_ROWS.size, n)),
+        piece(fs, o, F.vm, (N, VM_ROWS.size, m)),
+        piece(fs, o, F.bh, (N, BH_ROWS.size, m, n)),
+        piece(fs, o, F.H, (N, m, n, n)),
+        piece(fs, o, F.M, (N, N_MATRICES, n, n)),
+        piece_rows(fs, o[F.r0], o[F.r0 + 1], N),
+        piece(fs, o, F.J, (N, RESIDUAL_ROWS, n)),
+        piece(fs, o, F.median, (N, 2, L, n)),
+    )
 
 
 @jit(inline="always")
@@ -242,8 +298,12 @@ def constant_arrays(const, ip):
     :func:`irls_step`, as views of ``const`` (:data:`CONSTANTS`)."""
     n = ip[INT_SETTINGS.n]
     C = CONSTANTS
-    return (const[C.J:C.Jinv].reshape((3, 3)), const[C.Jinv:C.G].reshape((3, 3)),
-            const[C.A:C.A + 4 * n].reshape((4, n)), const[C.G:C.A])
+    return (
+        const[C.J : C.Jinv].reshape((3, 3)),
+        const[C.Jinv : C.G].reshape((3, 3)),
+        const[C.A : C.A + 4 * n].reshape((4, n)),
+        const[C.G : C.A],
+    )
 
 
 @jit(inline="always")
@@ -264,28 +324,44 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond, a
     m, n, L = ip[INT_SETTINGS.m], ip[INT_SETTINGS.n], ip[INT_SETTINGS.L]
     last_t, sample, VN, VM, BH = S.t[i], S.sample[i], S.vn[i], S.vm[i], S.bh[i]
     last_p, last_v, last_w = sample[SAMPLE_ROWS.p], sample[SAMPLE_ROWS.v], sample[SAMPLE_ROWS.w]
-    last_R = sample[SAMPLE_ROWS.R:]
-    last_f, eta, sd, out, x, sd_x = (VN[VN_ROWS.last_f], VN[VN_ROWS.eta], VN[VN_ROWS.sd],
-                                     VN[VN_ROWS.out], VN[VN_ROWS.x], VN[VN_ROWS.sd_x])
+    last_R = sample[SAMPLE_ROWS.R :]
+    last_f, eta, sd, out, x, sd_x = (
+        VN[VN_ROWS.last_f],
+        VN[VN_ROWS.eta],
+        VN[VN_ROWS.sd],
+        VN[VN_ROWS.out],
+        VN[VN_ROWS.x],
+        VN[VN_ROWS.sd_x],
+    )
     c, thrust, b, history_ = VM[VM_ROWS.c], VM[VM_ROWS.thrust], BH[BH_ROWS.b], BH[BH_ROWS.history]
     H, M = S.H[i], S.M[i]
     k_row = ks[i]
-    completion = k_row[COUNTERS.completion:COUNTERS.iters]
+    completion = k_row[COUNTERS.completion : COUNTERS.iters]
     code, why, rounds, cond = WARMUP, 0, 0, np.nan
-    finite = (math.isfinite(t) and all_finite(p) and all_finite(v) and all_finite(R)
-              and all_finite(w) and all_finite(f))
+    finite = (
+        math.isfinite(t)
+        and all_finite(p)
+        and all_finite(v)
+        and all_finite(R)
+        and all_finite(w)
+        and all_finite(f)
+    )
     if not finite or (k_row[COUNTERS.has_last] == 1 and not t > last_t[0]):
         k_row[COUNTERS.count] = 0
         k_row[COUNTERS.has_last] = 0
         code, why = BAD_SAMPLE, (WHY_TIME if finite else WHY_NONFINITE)
     else:
         if k_row[COUNTERS.has_last] == 1:  # the segment last -> this sample into the ring
-            slot = k_row[COUNTERS.head]          # (eqs. 13-26)
+            slot = k_row[COUNTERS.head]  # (eqs. 13-26)
             Jmat, Jinv, A, G = arrays
             c[slot], thrust[slot] = segment_terms_into(
-                t - last_t[0], Kinematics(last_p, last_v, last_R, last_w), Kinematics(p, v, R, w),
-                last_f, SegmentModel(const[CONSTANTS.mass], const[CONSTANTS.gravity], Jmat, Jinv,
-                                     A, G), SegmentOut(S.r0[i], S.J[i], b[slot], H[slot]))
+                t - last_t[0],
+                Kinematics(last_p, last_v, last_R, last_w),
+                Kinematics(p, v, R, w),
+                last_f,
+                SegmentModel(const[CONSTANTS.mass], const[CONSTANTS.gravity], Jmat, Jinv, A, G),
+                SegmentOut(S.r0[i], S.J[i], b[slot], H[slot]),
+            )
             k_row[COUNTERS.head] = (slot + 1) % m
             k_row[COUNTERS.count] = min(k_row[COUNTERS.count] + 1, m)
         last_t[0] = t
@@ -294,8 +370,11 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond, a
             for k in range(3):
                 last_R[a, k] = R[a, k]
         for j in range(n):
-            last_f[j] = (min(max(f[j], 0.0), const[CONSTANTS.f_max])
-                         if const[CONSTANTS.clip] != 0.0 else f[j])
+            last_f[j] = (
+                min(max(f[j], 0.0), const[CONSTANTS.f_max])
+                if const[CONSTANTS.clip] != 0.0
+                else f[j]
+            )
         k_row[COUNTERS.has_last] = 1
         if k_row[COUNTERS.count] == m:
             mean = 0.0
@@ -305,17 +384,41 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond, a
                 code = NO_EXCITATION
             else:
                 code, rounds, cond = solve_window_into(
-                    c, b, H, k_row[COUNTERS.head], eta, fp, ip, VN[VN_ROWS.window:], M,
-                    VM[VM_ROWS.window:], VM[VM_ROWS.weights], k_row[COUNTERS.iters:], hist, x,
-                    sd_x, any_n)
+                    c,
+                    b,
+                    H,
+                    k_row[COUNTERS.head],
+                    eta,
+                    fp,
+                    ip,
+                    VN[VN_ROWS.window :],
+                    M,
+                    VM[VM_ROWS.window :],
+                    VM[VM_ROWS.weights],
+                    k_row[COUNTERS.iters :],
+                    hist,
+                    x,
+                    sd_x,
+                    any_n,
+                )
             if code == OK or code == MAX_ITER:
                 if beyond is not None and ip[INT_SETTINGS.completion] == 1:
-                    complete_into(x, M[MATRICES.JGJ], history_, VN[VN_ROWS.anchor],
-                                  VN[VN_ROWS.direction], completion,
-                                  fp[FLOAT_SETTINGS.change_threshold], ip[INT_SETTINGS.hold],
-                                  fp[SETTINGS.gamma], fp[SETTINGS.lo], fp[SETTINGS.hi],
-                                  M[MATRICES.A], M[MATRICES.B],
-                                  VN[VN_ROWS.scratch:VN_ROWS.window])
+                    complete_into(
+                        x,
+                        M[MATRICES.JGJ],
+                        history_,
+                        VN[VN_ROWS.anchor],
+                        VN[VN_ROWS.direction],
+                        completion,
+                        fp[FLOAT_SETTINGS.change_threshold],
+                        ip[INT_SETTINGS.hold],
+                        fp[SETTINGS.gamma],
+                        fp[SETTINGS.lo],
+                        fp[SETTINGS.hi],
+                        M[MATRICES.A],
+                        M[MATRICES.B],
+                        VN[VN_ROWS.scratch : VN_ROWS.window],
+                    )
                 for j in range(n):
                     eta[j] = x[j]
                     sd[j] = sd_x[j]
@@ -324,8 +427,14 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond, a
                 observe_into(eta, history_, completion)  # the completion sees the kept estimate
     if beyond is not None and L > 1:
         median = S.median[i]
-        median_push_into(median[0], median[1], k_row[COUNTERS.median_k], eta,
-                         k_row[COUNTERS.median_fresh] == 1, out)
+        median_push_into(
+            median[0],
+            median[1],
+            k_row[COUNTERS.median_k],
+            eta,
+            k_row[COUNTERS.median_fresh] == 1,
+            out,
+        )
         k_row[COUNTERS.median_k] = (k_row[COUNTERS.median_k] + 1) % L
         k_row[COUNTERS.median_fresh] = 0
     else:
@@ -339,8 +448,9 @@ def irls_update(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, beyond, any_n):
     """:func:`irls_step` of a single estimator (state of one row): the online update."""
     S = state_pieces(fs, ip, ks.shape[0])
     row = ks.shape[0] - 1  # 0, a run-time value like the batch's rows
-    return irls_step(t, p, v, R, w, f, const, constant_arrays(const, ip), fp, ip, S, ks, row,
-                     hist, beyond, any_n)
+    return irls_step(
+        t, p, v, R, w, f, const, constant_arrays(const, ip), fp, ip, S, ks, row, hist, beyond, any_n
+    )
 
 
 @jit
@@ -354,9 +464,24 @@ def irls_run(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, beyond, any_n, eta, 
     out, sd_now = S.vn[row, VN_ROWS.out], S.vn[row, VN_ROWS.sd]
     arrays = constant_arrays(const, ip)
     for k in range(t.shape[0]):
-        code[k], _why, _rounds, _cond = irls_step(t[k], p[k], v[k], R[k], w[k], f[k], const,
-                                                  arrays, fp, ip, S, ks, row, hist, beyond,
-                                                  any_n)
+        code[k], _why, _rounds, _cond = irls_step(
+            t[k],
+            p[k],
+            v[k],
+            R[k],
+            w[k],
+            f[k],
+            const,
+            arrays,
+            fp,
+            ip,
+            S,
+            ks,
+            row,
+            hist,
+            beyond,
+            any_n,
+        )
         for j in range(n):
             eta[k, j] = out[j]
             sd[k, j] = sd_now[j] if ks[0, COUNTERS.has_sd] == 1 else np.nan
@@ -384,8 +509,13 @@ class SlidingWindowIRLS:
         self._const, self._fp, self._ip = irls_parameters(vehicle, cfg, self._state.offsets)
         self._hist = history(cfg, n) if cfg.record_history else no_history(n)
         self._beyond, self._any_n = beyond_paper(cfg), any_size(n)
-        self._nan_sample = (np.full(3, np.nan), np.full(3, np.nan), np.full((3, 3), np.nan),
-                            np.full(3, np.nan), np.full(n, np.nan))
+        self._nan_sample = (
+            np.full(3, np.nan),
+            np.full(3, np.nan),
+            np.full((3, 3), np.nan),
+            np.full(3, np.nan),
+            np.full(n, np.nan),
+        )
         self._shape_f = (n,)
         self._row = self._state.views.vn[0]  # the n-vectors of the state (estimate, sd, ...)
         self._weights = self._state.views.vm[0, VM_ROWS.weights]
@@ -417,16 +547,34 @@ class SlidingWindowIRLS:
         try:
             t = float(sample.t)
             p, v, R, w, f = [np.ascontiguousarray(a, dtype=float) for a in sample[1:]]
-            malformed = (p.shape != (3,) or v.shape != (3,) or R.shape != (3, 3)
-                         or w.shape != (3,) or f.shape != self._shape_f)
+            malformed = (
+                p.shape != (3,)
+                or v.shape != (3,)
+                or R.shape != (3, 3)
+                or w.shape != (3,)
+                or f.shape != self._shape_f
+            )
         except (AttributeError, TypeError, ValueError, IndexError):
             t, malformed = math.nan, True
         if malformed:
             p, v, R, w, f = self._nan_sample
         st = self._state
-        code, why, rounds, cond = irls_update(math.nan if malformed else t, p, v, R, w, f,
-                                              self._const, self._fp, self._ip, st.floats,
-                                              st.ints, self._hist, self._beyond, self._any_n)
+        code, why, rounds, cond = irls_update(
+            math.nan if malformed else t,
+            p,
+            v,
+            R,
+            w,
+            f,
+            self._const,
+            self._fp,
+            self._ip,
+            st.floats,
+            st.ints,
+            self._hist,
+            self._beyond,
+            self._any_n,
+        )
         row, ints = self._row, st.ints[0]
         sd = row[VN_ROWS.sd].copy() if ints[COUNTERS.has_sd] == 1 else None
         if code in _HELD:
@@ -436,11 +584,13 @@ class SlidingWindowIRLS:
         else:  # a window was solved (or held by a guard)
             cfg = self.config
             if cfg.record_history:
-                diag = window_diagnostics(code, rounds, cond, ints[COUNTERS.iters:],
-                                          self._weights, cfg, self._hist)
+                diag = window_diagnostics(
+                    code, rounds, cond, ints[COUNTERS.iters :], self._weights, cfg, self._hist
+                )
             else:
-                diag = LazyWindowDiagnostics(code, rounds, cond, ints[COUNTERS.iters:].copy(),
-                                             self._weights.copy(), cfg)
+                diag = LazyWindowDiagnostics(
+                    code, rounds, cond, ints[COUNTERS.iters :].copy(), self._weights.copy(), cfg
+                )
         return Estimate(t, row[VN_ROWS.out].copy(), sd, STATUSES[code], diag)
 
     def run(self, recording: Recording, progress: bool = False) -> EstimateSeries:
@@ -454,21 +604,41 @@ class SlidingWindowIRLS:
         st, N, n = self._state, len(t), self.vehicle.n_rotors
         eta, sd, code = np.empty((N, n)), np.empty((N, n)), np.empty(N, dtype=np.int64)
         chunk = 20000
-        bar = progress_bar(total=N, desc="irls", unit="sample",
-                           disable=None if progress else True)
+        bar = progress_bar(total=N, desc="irls", unit="sample", disable=None if progress else True)
         for k0 in range(0, N, chunk):
             k = slice(k0, min(k0 + chunk, N))
-            irls_run(t[k], p[k], v[k], R[k], w[k], f[k], const, self._fp, self._ip,
-                     st.floats, st.ints, self._hist, self._beyond, self._any_n, eta[k], sd[k],
-                     code[k])
+            irls_run(
+                t[k],
+                p[k],
+                v[k],
+                R[k],
+                w[k],
+                f[k],
+                const,
+                self._fp,
+                self._ip,
+                st.floats,
+                st.ints,
+                self._hist,
+                self._beyond,
+                self._any_n,
+                eta[k],
+                sd[k],
+                code[k],
+            )
             bar.update(k.stop - k0)
         bar.close()
         self.reset()
-        return EstimateSeries(t=t.copy(), eta=eta, sd=sd,
-                              status=np.asarray(STATUSES)[code],
-                              estimator=self.name, config=asdict(self.config),
-                              seconds=time.perf_counter() - start,
-                              postprocess=postprocess_label(self.config.output_median))
+        return EstimateSeries(
+            t=t.copy(),
+            eta=eta,
+            sd=sd,
+            status=np.asarray(STATUSES)[code],
+            estimator=self.name,
+            config=asdict(self.config),
+            seconds=time.perf_counter() - start,
+            postprocess=postprocess_label(self.config.output_median),
+        )
 
 
 def _recording_arrays(recording: Recording, vehicle: Vehicle, window: int):
@@ -477,21 +647,32 @@ def _recording_arrays(recording: Recording, vehicle: Vehicle, window: int):
         raise ConfigError(f"run() needs a Recording, got {type(recording).__name__}")
     where = recording.path or "recording"
     if not recording.has_pose:
-        raise ConfigError(f"{where}: the IRLS estimator needs position, velocity and attitude "
-                          "columns (px..pz, vx..vz, qw..qz); this recording is IMU-only")
+        raise ConfigError(
+            f"{where}: the IRLS estimator needs position, velocity and attitude "
+            "columns (px..pz, vx..vz, qw..qz); this recording is IMU-only"
+        )
     N = len(recording)
     if N == 0:
         raise ConfigError(f"{where}: the recording is empty")
     if N < window:
-        raise ConfigError(f"{where}: the IRLS window of {window} samples is longer than the "
-                          f"recording ({N} samples)")
+        raise ConfigError(
+            f"{where}: the IRLS window of {window} samples is longer than the "
+            f"recording ({N} samples)"
+        )
     if recording.thrust_cmd.shape[1] != vehicle.n_rotors:
-        raise ConfigError(f"{where}: {recording.thrust_cmd.shape[1]} rotor commands, the "
-                          f"vehicle has {vehicle.n_rotors} rotors")
+        raise ConfigError(
+            f"{where}: {recording.thrust_cmd.shape[1]} rotor commands, the "
+            f"vehicle has {vehicle.n_rotors} rotors"
+        )
     t = np.asarray(recording.t, dtype=float)
-    cols = (("t", t[:, None]), ("px..pz", recording.position), ("vx..vz", recording.velocity),
-            ("qw..qz", recording.quaternion), ("wx..wz", recording.omega),
-            ("f1..f4", recording.thrust_cmd))
+    cols = (
+        ("t", t[:, None]),
+        ("px..pz", recording.position),
+        ("vx..vz", recording.velocity),
+        ("qw..qz", recording.quaternion),
+        ("wx..wz", recording.omega),
+        ("f1..f4", recording.thrust_cmd),
+    )
     for name, arr in cols:
         bad = np.flatnonzero(~np.all(np.isfinite(arr), axis=1))
         if bad.size:
@@ -499,6 +680,14 @@ def _recording_arrays(recording: Recording, vehicle: Vehicle, window: int):
     if np.any(np.diff(t) <= 0):
         k = int(np.flatnonzero(np.diff(t) <= 0)[0])
         raise ConfigError(f"{where}: time must be strictly increasing (row {k + 2})")
-    return tuple(np.ascontiguousarray(a, dtype=np.float64) for a in (
-        t, recording.position, recording.velocity, recording.rotation, recording.omega,
-        recording.thrust_cmd))
+    return tuple(
+        np.ascontiguousarray(a, dtype=np.float64)
+        for a in (
+            t,
+            recording.position,
+            recording.velocity,
+            recording.rotation,
+            recording.omega,
+            recording.thrust_cmd,
+        )
+    )

@@ -21,6 +21,8 @@ from estimators.residuals import residual_weights
 from quadfault.errors import ConfigError
 
 SCALINGS = ("reference", "paper")
+
+
 @dataclass(frozen=True)
 class IRLSConfig:
     """Settings of :class:`SlidingWindowIRLS` (defaults: the authors' reference code).
@@ -105,18 +107,39 @@ class IRLSConfig:
     def __post_init__(self):
         if not (isinstance(self.window, int) and self.window >= 3):
             raise ConfigError(f"IRLS window must be an integer >= 3 samples, got {self.window!r}")
-        for key in ("g_v", "g_x", "g_omega", "g_R", "gamma", "bound_eps", "z_soft", "soft_power",
-                    "z_hard", "w_min", "mad_eps", "irls_tol", "cond_max", "min_thrust",
-                    "change_threshold"):
+        for key in (
+            "g_v",
+            "g_x",
+            "g_omega",
+            "g_R",
+            "gamma",
+            "bound_eps",
+            "z_soft",
+            "soft_power",
+            "z_hard",
+            "w_min",
+            "mad_eps",
+            "irls_tol",
+            "cond_max",
+            "min_thrust",
+            "change_threshold",
+        ):
             value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                    or not math.isfinite(value) or value < 0:
-                raise ConfigError(f"IRLS setting {key} must be a finite number >= 0, "
-                                  f"got {value!r}")
-        if not (math.isfinite(self.eta_min) and math.isfinite(self.eta_max)
-                and self.eta_min < self.eta_max):
-            raise ConfigError(f"IRLS bounds need eta_min < eta_max, got {self.eta_min!r}, "
-                              f"{self.eta_max!r}")
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or not math.isfinite(value)
+                or value < 0
+            ):
+                raise ConfigError(f"IRLS setting {key} must be a finite number >= 0, got {value!r}")
+        if not (
+            math.isfinite(self.eta_min)
+            and math.isfinite(self.eta_max)
+            and self.eta_min < self.eta_max
+        ):
+            raise ConfigError(
+                f"IRLS bounds need eta_min < eta_max, got {self.eta_min!r}, {self.eta_max!r}"
+            )
         if self.scaling not in SCALINGS:
             raise ConfigError(f"IRLS scaling must be one of {SCALINGS}, got {self.scaling!r}")
         if not (isinstance(self.max_irls, int) and self.max_irls >= 1):
@@ -128,8 +151,9 @@ class IRLSConfig:
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ConfigError(f"IRLS setting {key} must be an integer >= 1, got {value!r}")
         if not isinstance(self.change_completion, bool):
-            raise ConfigError(f"IRLS change_completion must be True or False, got "
-                              f"{self.change_completion!r}")
+            raise ConfigError(
+                f"IRLS change_completion must be True or False, got {self.change_completion!r}"
+            )
 
     @property
     def lower(self) -> float:
@@ -175,8 +199,9 @@ class IRLSDiagnostics:
     residual_history: tuple | None = None
 
 
-def window_diagnostics(code: int, rounds: int, cond: float, iters, weights, cfg: IRLSConfig,
-                       hist=None) -> IRLSDiagnostics:
+def window_diagnostics(
+    code: int, rounds: int, cond: float, iters, weights, cfg: IRLSConfig, hist=None
+) -> IRLSDiagnostics:
     """The :class:`IRLSDiagnostics` of a window solve (:func:`estimators.window.solve_window_into`:
     status ``code``, ``rounds`` IRLS rounds with ``iters`` interior-point iterations each,
     final weights, condition number, and the per-round histories ``hist`` when recorded)."""
@@ -193,11 +218,18 @@ def window_diagnostics(code: int, rounds: int, cond: float, iters, weights, cfg:
     kw = {}
     if hist is not None:
         n = hist.shape[2] - 4
-        kw = {name: tuple(hist[r, :k, col].copy() for r, k in enumerate(its))
-              for name, col in (("dual_history", 0), ("cent_history", 1), ("gap_history", 2),
-                                ("residual_history", 3 + n))}
-    return IRLSDiagnostics(status, message, its, w, tuple(int(i) for i in np.flatnonzero(w == 0)),
-                           float(cond), **kw)
+        kw = {
+            name: tuple(hist[r, :k, col].copy() for r, k in enumerate(its))
+            for name, col in (
+                ("dual_history", 0),
+                ("cent_history", 1),
+                ("gap_history", 2),
+                ("residual_history", 3 + n),
+            )
+        }
+    return IRLSDiagnostics(
+        status, message, its, w, tuple(int(i) for i in np.flatnonzero(w == 0)), float(cond), **kw
+    )
 
 
 class LazyWindowDiagnostics(IRLSDiagnostics):
@@ -232,6 +264,5 @@ class LazyWindowDiagnostics(IRLSDiagnostics):
 
 for _name in IRLSDiagnostics.__dataclass_fields__:
     if _name not in ("status", "weights"):
-        setattr(LazyWindowDiagnostics, _name,
-                property(lambda self, _n=_name: self._get(_n)))
+        setattr(LazyWindowDiagnostics, _name, property(lambda self, _n=_name: self._get(_n)))
 del _name

@@ -89,10 +89,12 @@ def median_series(series, length: int):
     if length <= 1:
         return series
     if series.postprocess != "none":
-        raise ConfigError(f"the {series.estimator} series is already post-processed "
-                          f"({series.postprocess})")
-    return replace(series, eta=causal_median(series.eta, int(length)),
-                   postprocess=postprocess_label(length))
+        raise ConfigError(
+            f"the {series.estimator} series is already post-processed ({series.postprocess})"
+        )
+    return replace(
+        series, eta=causal_median(series.eta, int(length)), postprocess=postprocess_label(length)
+    )
 
 
 __all__ = ["causal_median", "median_push_into", "median_series", "postprocess_label"]

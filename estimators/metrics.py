@@ -33,7 +33,7 @@ import numpy as np
 
 from estimators.base import STATUS_WARMUP, EstimateSeries
 from quadfault.errors import ConfigError
-from quadfault.recording import Recording
+from quadfault.io.recording import Recording
 
 BAND = 0.03  # relative band around the pre-/post-fault level
 PAD = 0.03  # [s] dilation of each fault window
@@ -67,12 +67,15 @@ class Score:
 
     def to_contract(self) -> dict:
         """The ``metrics.json`` entry (docs/reproduce.md) plus ``excess_spike`` and ``n``."""
-        return {"rmse": list(self.rmse), "std": list(self.std),
-                "spike": None if self.spike is None else list(self.spike),
-                "seconds": float(self.seconds),
-                "excess_spike": None if self.excess_spike is None else list(self.excess_spike),
-                "n": self.n,
-                "coverage": None if self.coverage is None else list(self.coverage)}
+        return {
+            "rmse": list(self.rmse),
+            "std": list(self.std),
+            "spike": None if self.spike is None else list(self.spike),
+            "seconds": float(self.seconds),
+            "excess_spike": None if self.excess_spike is None else list(self.excess_spike),
+            "n": self.n,
+            "coverage": None if self.coverage is None else list(self.coverage),
+        }
 
 
 def fault_windows(recording: Recording) -> list[tuple[int, float, float]]:
@@ -85,17 +88,22 @@ def fault_windows(recording: Recording) -> list[tuple[int, float, float]]:
             motor, t0 = int(motor), float(t0)
             t1 = math.inf if t1 is None else float(t1)
         except (TypeError, ValueError):
-            raise ConfigError(f"{recording.path or 'recording'}: meta fault_windows[{i}] must be "
-                              f"[motor, t0, t1], got {item!r}") from None
+            raise ConfigError(
+                f"{recording.path or 'recording'}: meta fault_windows[{i}] must be "
+                f"[motor, t0, t1], got {item!r}"
+            ) from None
         if not 1 <= motor <= recording.thrust_cmd.shape[1] or not t1 >= t0:
-            raise ConfigError(f"{recording.path or 'recording'}: meta fault_windows[{i}] = "
-                              f"{item!r} is not a valid [motor, t0, t1]")
+            raise ConfigError(
+                f"{recording.path or 'recording'}: meta fault_windows[{i}] = "
+                f"{item!r} is not a valid [motor, t0, t1]"
+            )
         out.append((motor, t0, t1))
     return out
 
 
-def window_masks(t: np.ndarray, eta_true: np.ndarray, windows, *, band: float = BAND,
-                 pad: float = PAD) -> np.ndarray:
+def window_masks(
+    t: np.ndarray, eta_true: np.ndarray, windows, *, band: float = BAND, pad: float = PAD
+) -> np.ndarray:
     """``(n_motors, N)`` masks of each motor's own fault windows on the time base ``t``.
 
     Each window ``[t0, t1]`` is extended backwards to the last sample whose true efficiency is
@@ -113,7 +121,7 @@ def window_masks(t: np.ndarray, eta_true: np.ndarray, windows, *, band: float = 
         s, e = int(inside[0]), int(inside[-1])
         before, after = eta_true[max(s - 1, 0), m], eta_true[min(e + 1, N - 1), m]
 
-        def in_band(k, level):
+        def in_band(k, level, m=m):
             v = abs(eta_true[k, m])
             return (1 - band) * abs(level) <= v <= (1 + band) * abs(level)
 
@@ -125,14 +133,16 @@ def window_masks(t: np.ndarray, eta_true: np.ndarray, windows, *, band: float = 
     return masks
 
 
-def aligned_truth(recording: Recording, est: EstimateSeries, align: str = "end",
-                  window: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+def aligned_truth(
+    recording: Recording, est: EstimateSeries, align: str = "end", window: int | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """``(t_truth, eta_truth)`` for each estimate row, per the alignment rule."""
     if align not in ALIGNMENTS:
         raise ConfigError(f"align must be one of {ALIGNMENTS}, got {align!r}")
     if recording.eta_true is None:
-        raise ConfigError(f"{recording.path or 'recording'}: no true efficiency (eta1..eta4) "
-                          "to score against")
+        raise ConfigError(
+            f"{recording.path or 'recording'}: no true efficiency (eta1..eta4) to score against"
+        )
     idx = np.searchsorted(recording.t, est.t)
     idx = np.clip(idx, 0, len(recording) - 1)
     if not np.allclose(recording.t[idx], est.t, rtol=0, atol=1e-9):
@@ -144,8 +154,15 @@ def aligned_truth(recording: Recording, est: EstimateSeries, align: str = "end",
     return recording.t[idx], recording.eta_true[idx]
 
 
-def score(recording: Recording, est: EstimateSeries, *, align: str = "end",
-          window: int | None = None, band: float = BAND, pad: float = PAD) -> Score:
+def score(
+    recording: Recording,
+    est: EstimateSeries,
+    *,
+    align: str = "end",
+    window: int | None = None,
+    band: float = BAND,
+    pad: float = PAD,
+) -> Score:
     """Score ``est`` against the truth of ``recording`` (see the module docstring)."""
     t_true, eta_true = aligned_truth(recording, est, align, window)
     keep = np.asarray(est.status) != STATUS_WARMUP
@@ -173,8 +190,15 @@ def score(recording: Recording, est: EstimateSeries, *, align: str = "end",
             spike.append(peak)
             excess.append(peak - base)
         spike, excess = tuple(spike), tuple(excess)
-    return Score(tuple(map(float, rmse)), tuple(map(float, std)), spike, excess,
-                 float(est.seconds), int(keep.sum()), _coverage(est, e, keep))
+    return Score(
+        tuple(map(float, rmse)),
+        tuple(map(float, std)),
+        spike,
+        excess,
+        float(est.seconds),
+        int(keep.sum()),
+        _coverage(est, e, keep),
+    )
 
 
 def _coverage(est: EstimateSeries, e: np.ndarray, keep: np.ndarray) -> tuple | None:

@@ -40,9 +40,9 @@ from estimators.base import (
 )
 from estimators.state import FlatState, Layout
 from quadfault.errors import ConfigError
+from quadfault.io.recording import Recording
+from quadfault.model.vehicle import Vehicle
 from quadfault.progress import progress_bar
-from quadfault.recording import Recording
-from quadfault.vehicle import Vehicle
 
 _ROW0 = np.zeros(1, dtype=np.int64)
 
@@ -66,17 +66,28 @@ def recording_arrays(recording: Recording, n: int, name: str):
         raise ConfigError(f"run() needs a Recording, got {type(recording).__name__}")
     where = recording.path or "recording"
     if not recording.has_pose:
-        raise ConfigError(f"{where}: the {name} estimator needs position, velocity and "
-                          "attitude columns (px..pz, vx..vz, qw..qz); this recording is "
-                          "IMU-only")
+        raise ConfigError(
+            f"{where}: the {name} estimator needs position, velocity and "
+            "attitude columns (px..pz, vx..vz, qw..qz); this recording is "
+            "IMU-only"
+        )
     if len(recording) == 0:
         raise ConfigError(f"{where}: the recording is empty")
     if recording.thrust_cmd.shape[1] != n:
-        raise ConfigError(f"{where}: {recording.thrust_cmd.shape[1]} rotor commands, the "
-                          f"vehicle has {n} rotors")
-    return tuple(np.ascontiguousarray(a, dtype=np.float64) for a in (
-        recording.t, recording.position, recording.velocity, recording.rotation,
-        recording.omega, recording.thrust_cmd))
+        raise ConfigError(
+            f"{where}: {recording.thrust_cmd.shape[1]} rotor commands, the vehicle has {n} rotors"
+        )
+    return tuple(
+        np.ascontiguousarray(a, dtype=np.float64)
+        for a in (
+            recording.t,
+            recording.position,
+            recording.velocity,
+            recording.rotation,
+            recording.omega,
+            recording.thrust_cmd,
+        )
+    )
 
 
 class _Kernels:
@@ -113,16 +124,23 @@ class _Kernels:
         self.vehicle = vehicle
         self.config = self.config_class() if config is None else config
         if not isinstance(self.config, self.config_class):
-            raise ConfigError(f"config must be a {self.config_class.__name__}, got "
-                              f"{type(self.config).__name__}")
+            raise ConfigError(
+                f"config must be a {self.config_class.__name__}, got {type(self.config).__name__}"
+            )
         self.n_rotors = vehicle.n_rotors
-        self._eta0_default = per_rotor(self.config.eta0, self.n_rotors,
-                                       f"{self.config_class.__name__}.eta0")
+        self._eta0_default = per_rotor(
+            self.config.eta0, self.n_rotors, f"{self.config_class.__name__}.eta0"
+        )
         self._const = self.constants(vehicle, self.config)
-        self._state = FlatState(self.floats.shapes(**self.dims(self.n_rotors)), num,
-                                self.counters.size, self.floats.pieces)
-        (self._k_reset, self._k_update, self._k_run, self._k_rows,
-         self._k_estimate) = self.kernels()
+        self._state = FlatState(
+            self.floats.shapes(**self.dims(self.n_rotors)),
+            num,
+            self.counters.size,
+            self.floats.pieces,
+        )
+        (self._k_reset, self._k_update, self._k_run, self._k_rows, self._k_estimate) = (
+            self.kernels()
+        )
 
     def describe(self) -> dict:
         """JSON-ready description of the configuration (for sidecars and reports)."""
@@ -149,8 +167,7 @@ class RecursiveEstimator(_Kernels):
         if eta.shape != (self.n_rotors,) or not np.all(np.isfinite(eta)):
             raise ConfigError(f"eta0 must be {self.n_rotors} finite values, got {eta0!r}")
         st = self._state
-        self._k_reset(self._const, st.offsets, self.n_rotors, st.floats, st.ints, _ROW0,
-                      eta[None])
+        self._k_reset(self._const, st.offsets, self.n_rotors, st.floats, st.ints, _ROW0, eta[None])
 
     def update(self, sample: Sample) -> Estimate:
         """One sample in (the command it carries is held until the next one); the estimate."""
@@ -172,17 +189,37 @@ class RecursiveEstimator(_Kernels):
         N, n, st = len(t), self.n_rotors, self._state
         eta, sd, code = np.empty((N, n)), np.empty((N, n)), np.empty(N, dtype=np.int64)
         chunk = 50000
-        bar = progress_bar(total=N, desc=self.name, unit="sample",
-                           disable=None if progress else True)
+        bar = progress_bar(
+            total=N, desc=self.name, unit="sample", disable=None if progress else True
+        )
         for k0 in range(0, N, chunk):
             k = slice(k0, min(k0 + chunk, N))
-            self._k_run(t[k], p[k], v[k], R[k], w[k], f[k], const, st.offsets, st.floats,
-                        st.ints, eta[k], sd[k], code[k])
+            self._k_run(
+                t[k],
+                p[k],
+                v[k],
+                R[k],
+                w[k],
+                f[k],
+                const,
+                st.offsets,
+                st.floats,
+                st.ints,
+                eta[k],
+                sd[k],
+                code[k],
+            )
             bar.update(k.stop - k0)
         bar.close()
-        return EstimateSeries(t=t.copy(), eta=eta, sd=sd, status=np.asarray(STATUSES)[code],
-                              estimator=self.name, config=self.describe(),
-                              seconds=time.perf_counter() - start)
+        return EstimateSeries(
+            t=t.copy(),
+            eta=eta,
+            sd=sd,
+            status=np.asarray(STATUSES)[code],
+            estimator=self.name,
+            config=self.describe(),
+            seconds=time.perf_counter() - start,
+        )
 
 
 class BatchedRecursive(_Kernels):

@@ -64,29 +64,53 @@ class EstimatorSpec:
 
 #: every estimator, in the order the command line and the docs list them
 TABLE: tuple[EstimatorSpec, ...] = (
-    EstimatorSpec("irls", "estimators.irls:SlidingWindowIRLS",
-                  "the paper's sliding-window IRLS (default)",
-                  config="estimators.irls_config:IRLSConfig",
-                  batched="estimators.batched:BatchedIRLS", options=("improved", "median")),
-    EstimatorSpec("ekf", "estimators.ekf:MotorEfficiencyEKF",
-                  "extended Kalman filter over the rigid body and the efficiencies (baseline)",
-                  config="estimators.ekf:EKFConfig",
-                  batched="estimators.batched:BatchedEKF", options=("q_eta",)),
-    EstimatorSpec("rls", "estimators.rls:RecursiveLeastSquares",
-                  "recursive least squares with a forgetting factor on the IRLS's regression "
-                  "(what INDI controllers fly; baseline)",
-                  config="estimators.rls:RLSConfig",
-                  batched="estimators.rls:BatchedRLS", options=("forgetting",)),
-    EstimatorSpec("ukf", "estimators.ukf:UnscentedKalmanFilter",
-                  "unscented Kalman filter over velocity, rate and the efficiencies (baseline)",
-                  config="estimators.ukf:UKFConfig",
-                  batched="estimators.ukf:BatchedUKF", options=("q_eta",)),
-    EstimatorSpec("none", "estimators.baselines:NominalBelief",
-                  "no estimator: eta = 1 with a fixed prior uncertainty",
-                  role="nominal", needs=()),
-    EstimatorSpec("truth", "estimators.baselines:TruthOracle",
-                  "the labelled oracle: the true efficiency schedule (environments, rollouts)",
-                  role="oracle", needs=("truth",)),
+    EstimatorSpec(
+        "irls",
+        "estimators.irls:SlidingWindowIRLS",
+        "the paper's sliding-window IRLS (default)",
+        config="estimators.irls_config:IRLSConfig",
+        batched="estimators.batched:BatchedIRLS",
+        options=("improved", "median"),
+    ),
+    EstimatorSpec(
+        "ekf",
+        "estimators.ekf:MotorEfficiencyEKF",
+        "extended Kalman filter over the rigid body and the efficiencies (baseline)",
+        config="estimators.ekf:EKFConfig",
+        batched="estimators.batched:BatchedEKF",
+        options=("q_eta",),
+    ),
+    EstimatorSpec(
+        "rls",
+        "estimators.rls:RecursiveLeastSquares",
+        "recursive least squares with a forgetting factor on the IRLS's regression "
+        "(what INDI controllers fly; baseline)",
+        config="estimators.rls:RLSConfig",
+        batched="estimators.rls:BatchedRLS",
+        options=("forgetting",),
+    ),
+    EstimatorSpec(
+        "ukf",
+        "estimators.ukf:UnscentedKalmanFilter",
+        "unscented Kalman filter over velocity, rate and the efficiencies (baseline)",
+        config="estimators.ukf:UKFConfig",
+        batched="estimators.ukf:BatchedUKF",
+        options=("q_eta",),
+    ),
+    EstimatorSpec(
+        "none",
+        "estimators.baselines:NominalBelief",
+        "no estimator: eta = 1 with a fixed prior uncertainty",
+        role="nominal",
+        needs=(),
+    ),
+    EstimatorSpec(
+        "truth",
+        "estimators.baselines:TruthOracle",
+        "the labelled oracle: the true efficiency schedule (environments, rollouts)",
+        role="oracle",
+        needs=("truth",),
+    ),
 )
 
 #: name -> row of :data:`TABLE`
@@ -96,9 +120,12 @@ ESTIMATORS: dict[str, EstimatorSpec] = {spec.name: spec for spec in TABLE}
 def estimator_names(role: str | None = None, batched: bool | None = None) -> tuple[str, ...]:
     """The registered names, optionally only those of ``role`` and / or those with
     (``batched=True``) or without a batched form."""
-    return tuple(s.name for s in ESTIMATORS.values()
-                 if (role is None or s.role == role)
-                 and (batched is None or (s.batched is not None) == batched))
+    return tuple(
+        s.name
+        for s in ESTIMATORS.values()
+        if (role is None or s.role == role)
+        and (batched is None or (s.batched is not None) == batched)
+    )
 
 
 def estimator_spec(name) -> EstimatorSpec:
@@ -120,8 +147,9 @@ def _load(name: str, entry: str):
     try:
         return getattr(module, class_name)
     except AttributeError:
-        raise ConfigError(f"estimator {name!r} is not available ({module_name} has no "
-                          f"{class_name})") from None
+        raise ConfigError(
+            f"estimator {name!r} is not available ({module_name} has no {class_name})"
+        ) from None
 
 
 def estimator_class(name: str, batched: bool = False):
@@ -129,8 +157,10 @@ def estimator_class(name: str, batched: bool = False):
     spec = estimator_spec(name)
     if batched:
         if spec.batched is None:
-            raise ConfigError(f"estimator {name!r} has no batched form; batched estimators: "
-                              f"{', '.join(estimator_names(batched=True))}")
+            raise ConfigError(
+                f"estimator {name!r} has no batched form; batched estimators: "
+                f"{', '.join(estimator_names(batched=True))}"
+            )
         return _load(name, spec.batched)
     return _load(name, spec.online)
 
@@ -151,13 +181,13 @@ def config_from_options(name: str, **options):
     for key in given:
         if key not in spec.options:
             takers = [s.name for s in TABLE if key in s.options]
-            raise ConfigError(f"option {key!r} applies to the {', '.join(takers) or 'no'} "
-                              f"estimator, not {name!r}")
+            raise ConfigError(
+                f"option {key!r} applies to the {', '.join(takers) or 'no'} estimator, not {name!r}"
+            )
     return config_class(name).from_options(**given)
 
 
-def make_estimator(name, vehicle, config=None, *, num: int | None = None, schedule=None,
-                   **options):
+def make_estimator(name, vehicle, config=None, *, num: int | None = None, schedule=None, **options):
     """Build the estimator registered under ``name`` for the *nominal* ``vehicle``.
 
     Args:
@@ -171,11 +201,16 @@ def make_estimator(name, vehicle, config=None, *, num: int | None = None, schedu
             (:func:`config_from_options`).
     """
     if not isinstance(name, str):
-        if num is None and callable(getattr(name, "update", None)) \
-                and callable(getattr(name, "reset", None)):
+        if (
+            num is None
+            and callable(getattr(name, "update", None))
+            and callable(getattr(name, "reset", None))
+        ):
             return name
-        raise ConfigError(f"estimator must be one of {', '.join(ESTIMATORS)} or an object with "
-                          f"reset() and update(sample), got {name!r}")
+        raise ConfigError(
+            f"estimator must be one of {', '.join(ESTIMATORS)} or an object with "
+            f"reset() and update(sample), got {name!r}"
+        )
     spec = estimator_spec(name)
     if options:
         from_options = config_from_options(name, **options)
@@ -193,6 +228,16 @@ def make_estimator(name, vehicle, config=None, *, num: int | None = None, schedu
     return estimator_class(name)(vehicle, **kwargs)
 
 
-__all__ = ["ESTIMATORS", "OPTIONS", "ROLES", "TABLE", "EstimatorSpec", "config_class",
-           "config_from_options", "estimator_class", "estimator_names", "estimator_spec",
-           "make_estimator"]
+__all__ = [
+    "ESTIMATORS",
+    "OPTIONS",
+    "ROLES",
+    "TABLE",
+    "EstimatorSpec",
+    "config_class",
+    "config_from_options",
+    "estimator_class",
+    "estimator_names",
+    "estimator_spec",
+    "make_estimator",
+]

@@ -39,9 +39,9 @@ from typing import NamedTuple
 import numpy as np
 
 from estimators.state import fields, pack
-from quadfault.dynamics import rotor_wrench
 from quadfault.jit import jit
-from quadfault.vehicle import Vehicle
+from quadfault.model.dynamics import rotor_wrench
+from quadfault.model.vehicle import Vehicle
 
 #: the rows of a segment's residual: velocity, position, rate, rotation
 RESIDUAL = fields("ResidualRows", ("v", 3), ("x", 3), ("w", 3), "R")
@@ -196,13 +196,21 @@ def segment_terms(vehicle: Vehicle, t, p, v, R, w, f, G) -> SegmentTerms:
     S, n = len(t) - 1, f.shape[1]
     r0, J = np.empty((S, RESIDUAL_ROWS)), np.empty((S, RESIDUAL_ROWS, n))
     c, b, H, thrust = np.empty(S), np.empty((S, n)), np.empty((S, n, n)), np.empty(S)
-    model = SegmentModel(float(vehicle.mass), float(vehicle.gravity),
-                         np.ascontiguousarray(vehicle.inertia, dtype=float),
-                         np.ascontiguousarray(vehicle.inertia_inverse, dtype=float),
-                         np.ascontiguousarray(vehicle.allocation, dtype=float), G)
+    model = SegmentModel(
+        float(vehicle.mass),
+        float(vehicle.gravity),
+        np.ascontiguousarray(vehicle.inertia, dtype=float),
+        np.ascontiguousarray(vehicle.inertia_inverse, dtype=float),
+        np.ascontiguousarray(vehicle.allocation, dtype=float),
+        G,
+    )
     for k in range(S):
         c[k], thrust[k] = segment_terms_into(
-            t[k + 1] - t[k], Kinematics(p[k], v[k], R[k], w[k]),
-            Kinematics(p[k + 1], v[k + 1], R[k + 1], w[k + 1]), f[k], model,
-            SegmentOut(r0[k], J[k], b[k], H[k]))
+            t[k + 1] - t[k],
+            Kinematics(p[k], v[k], R[k], w[k]),
+            Kinematics(p[k + 1], v[k + 1], R[k + 1], w[k + 1]),
+            f[k],
+            model,
+            SegmentOut(r0[k], J[k], b[k], H[k]),
+        )
     return SegmentTerms(r0, J, c, b, H, np.diff(t), thrust)

@@ -53,8 +53,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from estimators.base import STATUS_BAD_SAMPLE, STATUS_NO_EXCITATION, STATUS_OK, STATUS_WARMUP
-from estimators.base import STATUSES
+from estimators.base import (
+    STATUS_BAD_SAMPLE,
+    STATUS_NO_EXCITATION,
+    STATUS_OK,
+    STATUS_WARMUP,
+    STATUSES,
+)
 from estimators.ekf import IDLE_THRUST
 from estimators.recursive import BatchedRecursive, RecursiveEstimator
 from estimators.residuals import (
@@ -68,7 +73,7 @@ from estimators.residuals import (
 from estimators.state import Layout, all_finite, fields, pack, piece, piece_rows
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange
-from quadfault.vehicle import Vehicle
+from quadfault.model.vehicle import Vehicle
 
 #: the sample period the forgetting factor refers to [s]
 FORGETTING_REFERENCE_DT = 1e-3
@@ -100,11 +105,13 @@ class RLSConfig:
 
     def __post_init__(self):
         lam = self.forgetting
-        if isinstance(lam, bool) or not isinstance(lam, (int, float)) \
-                or not (0.0 < lam <= 1.0):
+        if isinstance(lam, bool) or not isinstance(lam, (int, float)) or not (0.0 < lam <= 1.0):
             raise ConfigError(f"RLSConfig.forgetting must be in (0, 1], got {lam!r}")
-        if isinstance(self.p0, bool) or not isinstance(self.p0, (int, float)) \
-                or not (math.isfinite(self.p0) and self.p0 > 0):
+        if (
+            isinstance(self.p0, bool)
+            or not isinstance(self.p0, (int, float))
+            or not (math.isfinite(self.p0) and self.p0 > 0)
+        ):
             raise ConfigError(f"RLSConfig.p0 must be a positive number, got {self.p0!r}")
         check_bounds("RLSConfig", self.eta_bounds)
 
@@ -126,8 +133,7 @@ def check_bounds(owner: str, bounds) -> None:
     except (TypeError, ValueError):
         lo = hi = math.nan
     if not lo < hi:
-        raise ConfigError(f"{owner}.eta_bounds must be (low, high) with low < high, got "
-                          f"{bounds!r}")
+        raise ConfigError(f"{owner}.eta_bounds must be (low, high) with low < high, got {bounds!r}")
 
 
 #: the residual rows RLS fits (:data:`estimators.residuals.RESIDUAL`): velocity, then rate
@@ -144,10 +150,22 @@ NOISE = fields("RLSNoise", "mean", "count")
 #: the initial efficiency, the noise scale, then scratch of one update (the segment's
 #: residual model ``r0``, ``J``, ``b``, ``H`` of :func:`segment_terms_into`, ``P phi`` and
 #: the rows' weights ``g``)
-FLOATS = Layout("RLSPieces", theta=("n",), P=("n", "n"), last_t=(1,),
-                sample=(SAMPLE_ROWS.size, 3), last_f=("n",), eta0=("n",), noise=(NOISE.size,),
-                r0=(RESIDUAL_ROWS,), J=(RESIDUAL_ROWS, "n"), b=("n",), H=("n", "n"),
-                Pphi=("n",), g=(N_ROWS,))
+FLOATS = Layout(
+    "RLSPieces",
+    theta=("n",),
+    P=("n", "n"),
+    last_t=(1,),
+    sample=(SAMPLE_ROWS.size, 3),
+    last_f=("n",),
+    eta0=("n",),
+    noise=(NOISE.size,),
+    r0=(RESIDUAL_ROWS,),
+    J=(RESIDUAL_ROWS, "n"),
+    b=("n",),
+    H=("n", "n"),
+    Pphi=("n",),
+    g=(N_ROWS,),
+)
 F = FLOATS.index
 RLSPieces = FLOATS.pieces
 #: the int state: 1 once a previous sample is held; 1 once the first update was made
@@ -155,8 +173,21 @@ COUNTERS = fields("RLSCounters", "has_last", "updated")
 #: the constants: scalars (the box ``lo``, ``hi``; ``log_lambda``: ln(lambda) per second),
 #: the inertia and its inverse, the residual weights ``G`` (ones: :func:`segment_terms_into`'s
 #: energy is unused), last the allocation ``A`` (4, n) (:func:`rls_constants`)
-CONSTANTS = fields("RLSConstants", "mass", "gravity", "f_max", "clip", "lo", "hi", "p0",
-                   "log_lambda", ("J", 9), ("Jinv", 9), ("G", RESIDUAL_ROWS), ("A", 0))
+CONSTANTS = fields(
+    "RLSConstants",
+    "mass",
+    "gravity",
+    "f_max",
+    "clip",
+    "lo",
+    "hi",
+    "p0",
+    "log_lambda",
+    ("J", 9),
+    ("Jinv", 9),
+    ("G", RESIDUAL_ROWS),
+    ("A", 0),
+)
 
 
 def _dims(n: int) -> dict:
@@ -167,11 +198,21 @@ def rls_constants(vehicle: Vehicle, cfg: RLSConfig) -> np.ndarray:
     """The constants of :func:`rls_step` (:data:`CONSTANTS`)."""
     b = cfg.eta_bounds
     lo, hi = (-np.inf, np.inf) if b is None else (float(b[0]), float(b[1]))
-    return pack(CONSTANTS, mass=vehicle.mass, gravity=vehicle.gravity,
-                f_max=vehicle.rotor_max_thrust, clip=float(cfg.clip_commands), lo=lo, hi=hi,
-                p0=cfg.p0, log_lambda=math.log(cfg.forgetting) / FORGETTING_REFERENCE_DT,
-                J=vehicle.inertia, Jinv=vehicle.inertia_inverse, G=np.ones(RESIDUAL_ROWS),
-                A=vehicle.allocation)
+    return pack(
+        CONSTANTS,
+        mass=vehicle.mass,
+        gravity=vehicle.gravity,
+        f_max=vehicle.rotor_max_thrust,
+        clip=float(cfg.clip_commands),
+        lo=lo,
+        hi=hi,
+        p0=cfg.p0,
+        log_lambda=math.log(cfg.forgetting) / FORGETTING_REFERENCE_DT,
+        J=vehicle.inertia,
+        Jinv=vehicle.inertia_inverse,
+        G=np.ones(RESIDUAL_ROWS),
+        A=vehicle.allocation,
+    )
 
 
 @jit
@@ -180,19 +221,21 @@ def state_views(fs, offsets, n, N):
     in the order of :data:`FLOATS` (what a ``prange`` loop can capture; :func:`named_pieces`
     names them)."""
     o = offsets
-    return (piece_rows(fs, o[F.theta], o[F.theta + 1], N),
-            piece(fs, o, F.P, (N, n, n)),
-            piece_rows(fs, o[F.last_t], o[F.last_t + 1], N),
-            piece(fs, o, F.sample, (N, SAMPLE_ROWS.size, 3)),
-            piece_rows(fs, o[F.last_f], o[F.last_f + 1], N),
-            piece_rows(fs, o[F.eta0], o[F.eta0 + 1], N),
-            piece_rows(fs, o[F.noise], o[F.noise + 1], N),
-            piece_rows(fs, o[F.r0], o[F.r0 + 1], N),
-            piece(fs, o, F.J, (N, RESIDUAL_ROWS, n)),
-            piece_rows(fs, o[F.b], o[F.b + 1], N),
-            piece(fs, o, F.H, (N, n, n)),
-            piece_rows(fs, o[F.Pphi], o[F.Pphi + 1], N),
-            piece_rows(fs, o[F.g], o[F.g + 1], N))
+    return (
+        piece_rows(fs, o[F.theta], o[F.theta + 1], N),
+        piece(fs, o, F.P, (N, n, n)),
+        piece_rows(fs, o[F.last_t], o[F.last_t + 1], N),
+        piece(fs, o, F.sample, (N, SAMPLE_ROWS.size, 3)),
+        piece_rows(fs, o[F.last_f], o[F.last_f + 1], N),
+        piece_rows(fs, o[F.eta0], o[F.eta0 + 1], N),
+        piece_rows(fs, o[F.noise], o[F.noise + 1], N),
+        piece_rows(fs, o[F.r0], o[F.r0 + 1], N),
+        piece(fs, o, F.J, (N, RESIDUAL_ROWS, n)),
+        piece_rows(fs, o[F.b], o[F.b + 1], N),
+        piece(fs, o, F.H, (N, n, n)),
+        piece_rows(fs, o[F.Pphi], o[F.Pphi + 1], N),
+        piece_rows(fs, o[F.g], o[F.g + 1], N),
+    )
 
 
 @jit(inline="always")
@@ -217,10 +260,15 @@ def rls_step(t, p, v, R, w, f, const, S, ks, i) -> int:
     theta, P, last_t, sample = S.theta[i], S.P[i], S.last_t[i], S.sample[i]
     last_f, s2 = S.last_f[i], S.noise[i]
     last_p, last_v, last_w = sample[SAMPLE_ROWS.p], sample[SAMPLE_ROWS.v], sample[SAMPLE_ROWS.w]
-    last_R = sample[SAMPLE_ROWS.R:]
-    if not (math.isfinite(t) and all_finite(p) and all_finite(v) and all_finite(R)
-            and all_finite(w) and all_finite(f)) \
-            or (ks[i, COUNTERS.has_last] == 1 and not t > last_t[0]):
+    last_R = sample[SAMPLE_ROWS.R :]
+    if not (
+        math.isfinite(t)
+        and all_finite(p)
+        and all_finite(v)
+        and all_finite(R)
+        and all_finite(w)
+        and all_finite(f)
+    ) or (ks[i, COUNTERS.has_last] == 1 and not t > last_t[0]):
         ks[i, COUNTERS.has_last] = 0  # the next good sample starts afresh
         return BAD_SAMPLE
     code = WARMUP
@@ -233,13 +281,22 @@ def rls_step(t, p, v, R, w, f, const, S, ks, i) -> int:
             code = NO_EXCITATION
         else:
             r0, Jr = S.r0[i], S.J[i]
-            model = SegmentModel(const[C.mass], const[C.gravity],
-                                 const[C.J:C.Jinv].reshape((3, 3)),
-                                 const[C.Jinv:C.G].reshape((3, 3)),
-                                 const[C.A:C.A + 4 * n].reshape((4, n)), const[C.G:C.A])
-            segment_terms_into(dt, Kinematics(last_p, last_v, last_R, last_w),
-                               Kinematics(p, v, R, w), last_f, model,
-                               SegmentOut(r0, Jr, S.b[i], S.H[i]))
+            model = SegmentModel(
+                const[C.mass],
+                const[C.gravity],
+                const[C.J : C.Jinv].reshape((3, 3)),
+                const[C.Jinv : C.G].reshape((3, 3)),
+                const[C.A : C.A + 4 * n].reshape((4, n)),
+                const[C.G : C.A],
+            )
+            segment_terms_into(
+                dt,
+                Kinematics(last_p, last_v, last_R, last_w),
+                Kinematics(p, v, R, w),
+                last_f,
+                model,
+                SegmentOut(r0, Jr, S.b[i], S.H[i]),
+            )
             lam = math.exp(const[C.log_lambda] * dt)
             g = S.g[i]  # the rows' weights
             energy = 0.0  # the weighted a-priori residual energy, per row
@@ -296,8 +353,11 @@ def _estimate_row(S, ks, i, n, eta, sd) -> None:
     theta, P, s2 = S.theta[i], S.P[i], S.noise[i]
     for j in range(n):
         eta[j] = theta[j]
-        sd[j] = (math.sqrt(max(P[j, j] * s2[NOISE.mean], 0.0))
-                 if ks[i, COUNTERS.updated] == 1 else np.nan)
+        sd[j] = (
+            math.sqrt(max(P[j, j] * s2[NOISE.mean], 0.0))
+            if ks[i, COUNTERS.updated] == 1
+            else np.nan
+        )
 
 
 @jit
@@ -364,8 +424,9 @@ def rls_update_rows(t, p, v, R, w, f, const, offsets, fs, ks, code) -> None:
     N = ks.shape[0]
     views = state_views(fs, offsets, f.shape[1], N)  # formed once; named inside the loop
     for i in prange(N):
-        code[i] = _one(t[i], p[i], v[i], R[i], w[i], f[i], const, named_pieces(views), ks,
-                       np.int64(i))
+        code[i] = _one(
+            t[i], p[i], v[i], R[i], w[i], f[i], const, named_pieces(views), ks, np.int64(i)
+        )
 
 
 def _kernels():

@@ -47,8 +47,9 @@ def median_into(a, tmp) -> float:
 
 
 @jit(inner=True)
-def mad_weights_into(e, z_soft, power, z_hard, w_min, mad_eps, hard_drop, median_normalize,
-                     floor, w, z, tmp) -> None:
+def mad_weights_into(
+    e, z_soft, power, z_hard, w_min, mad_eps, hard_drop, median_normalize, floor, w, z, tmp
+) -> None:
     """Robust weights of the energies ``e`` (m,) into ``w`` and their z-scores into ``z``
     (eqs. 27-30); ``tmp`` (m,) is scratch. ``floor``: apply ``w_min`` even when ``hard_drop``
     is on (the paper's eq. 29); ``median_normalize``: divide by the median weight (the
@@ -78,9 +79,18 @@ def mad_weights_into(e, z_soft, power, z_hard, w_min, mad_eps, hard_drop, median
                 w[i] = w[i] / medw
 
 
-def mad_weights(e, *, z_soft: float = 2.5, power: float = 7.0, z_hard: float = 2.5,
-                hard_drop: bool = True, w_min: float = 0.03, mad_eps: float = 1e-9,
-                median_normalize: bool = True, floor: bool = False):
+def mad_weights(
+    e,
+    *,
+    z_soft: float = 2.5,
+    power: float = 7.0,
+    z_hard: float = 2.5,
+    hard_drop: bool = True,
+    w_min: float = 0.03,
+    mad_eps: float = 1e-9,
+    median_normalize: bool = True,
+    floor: bool = False,
+):
     """Robust weights of segment energies ``e`` (m,) (:func:`mad_weights_into`).
 
     Returns:
@@ -88,7 +98,18 @@ def mad_weights(e, *, z_soft: float = 2.5, power: float = 7.0, z_hard: float = 2
     """
     e = np.ascontiguousarray(e, dtype=float)
     w, z, tmp = np.empty_like(e), np.empty_like(e), np.empty_like(e)
-    mad_weights_into(e, float(z_soft), float(power), float(z_hard), float(w_min),
-                     float(mad_eps), bool(hard_drop), bool(median_normalize), bool(floor), w, z,
-                     tmp)
+    mad_weights_into(
+        e,
+        float(z_soft),
+        float(power),
+        float(z_hard),
+        float(w_min),
+        float(mad_eps),
+        bool(hard_drop),
+        bool(median_normalize),
+        bool(floor),
+        w,
+        z,
+        tmp,
+    )
     return w, z

@@ -31,8 +31,12 @@ def estimate_paths(csv_path) -> tuple[Path, Path]:
 
 
 def estimate_columns(n_rotors: int) -> list[str]:
-    return (["t"] + [f"eta{i + 1}" for i in range(n_rotors)]
-            + [f"sd{i + 1}" for i in range(n_rotors)] + ["status"])
+    return (
+        ["t"]
+        + [f"eta{i + 1}" for i in range(n_rotors)]
+        + [f"sd{i + 1}" for i in range(n_rotors)]
+        + ["status"]
+    )
 
 
 def _json_default(value):
@@ -69,8 +73,14 @@ def format_series(series: EstimateSeries) -> str:
     return buf.getvalue()
 
 
-def write_estimate_series(series: EstimateSeries, csv_path, *, input_path=None,
-                          force: bool = False, extra: dict | None = None) -> Path:
+def write_estimate_series(
+    series: EstimateSeries,
+    csv_path,
+    *,
+    input_path=None,
+    force: bool = False,
+    extra: dict | None = None,
+) -> Path:
     """Write ``EST.csv`` and ``EST.json`` atomically; refuse to overwrite unless ``force``."""
     path, side = estimate_paths(csv_path)
     check_writable([path, side], force=force)
@@ -101,5 +111,9 @@ def read_estimate_csv(csv_path) -> dict:
         rows = [line.rstrip("\n").split(",") for line in fh if line.strip()]
     n = sum(1 for h in header if h.startswith("eta"))
     data = np.array([[float(x) for x in r[:-1]] for r in rows]).reshape(-1, 1 + 2 * n)
-    return {"t": data[:, 0], "eta": data[:, 1:1 + n], "sd": data[:, 1 + n:],
-            "status": np.array([r[-1] for r in rows])}
+    return {
+        "t": data[:, 0],
+        "eta": data[:, 1 : 1 + n],
+        "sd": data[:, 1 + n :],
+        "status": np.array([r[-1] for r in rows]),
+    }

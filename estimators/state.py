@@ -43,8 +43,10 @@ def fields(name: str, *entries):
 def counts(rows) -> dict:
     """Entry -> its row count in a :func:`fields` layout (0 for an open last entry)."""
     values = list(rows)
-    return {key: (values[i + 1] - values[i] if i + 1 < len(values) - 1 else
-                  rows.size - values[i]) for i, key in enumerate(rows._fields[:-1])}
+    return {
+        key: (values[i + 1] - values[i] if i + 1 < len(values) - 1 else rows.size - values[i])
+        for i, key in enumerate(rows._fields[:-1])
+    }
 
 
 def pack(rows, **values) -> np.ndarray:
@@ -52,14 +54,14 @@ def pack(rows, **values) -> np.ndarray:
     (scalars or arrays, raveled row-major); the open last entry takes any length."""
     sizes = counts(rows)
     if set(values) != set(sizes):
-        raise ConfigError(f"{type(rows).__name__}: entries {sorted(sizes)} expected, got "
-                          f"{sorted(values)}")
+        raise ConfigError(
+            f"{type(rows).__name__}: entries {sorted(sizes)} expected, got {sorted(values)}"
+        )
     out = []
     for key, count in sizes.items():
         a = np.asarray(values[key], dtype=np.float64).ravel()
         if count and a.size != count:
-            raise ConfigError(f"{type(rows).__name__}.{key}: {count} values expected, got "
-                              f"{a.size}")
+            raise ConfigError(f"{type(rows).__name__}.{key}: {count} values expected, got {a.size}")
         out.append(a)
     return np.concatenate(out)
 
@@ -81,8 +83,10 @@ class Layout:
 
     def shapes(self, **dims) -> tuple:
         """The pieces' shapes with the dimensions bound (``dims``: name -> int)."""
-        return tuple(tuple(d if isinstance(d, int) else int(dims[d]) for d in shape)
-                     for shape in self.declared.values())
+        return tuple(
+            tuple(d if isinstance(d, int) else int(dims[d]) for d in shape)
+            for shape in self.declared.values()
+        )
 
 
 class FlatState:
@@ -102,8 +106,10 @@ class FlatState:
         self.offsets = np.concatenate(([0], np.cumsum(sizes))).astype(np.int64)
         self.floats = np.zeros(int(self.offsets[-1]))
         self.ints = np.zeros((num, n_ints), dtype=np.int64)
-        views = (self.floats[a:b].reshape((num,) + tuple(s)) for a, b, s in
-                 zip(self.offsets[:-1], self.offsets[1:], shapes))
+        views = (
+            self.floats[a:b].reshape((num,) + tuple(s))
+            for a, b, s in zip(self.offsets[:-1], self.offsets[1:], shapes)
+        )
         self.views = pieces(views) if pieces is tuple else pieces(*views)
 
 
@@ -119,7 +125,7 @@ def piece(fs, offsets, k, shape):
     (leading axis: the estimators), in one reshape. (Inlined, as :func:`piece_rows`: each
     caller's shapes -- tuples of different lengths and constants -- would otherwise compile a
     specialisation of their own.)"""
-    return fs[offsets[k]:offsets[k + 1]].reshape(shape)
+    return fs[offsets[k] : offsets[k + 1]].reshape(shape)
 
 
 @jit(inline="always")
@@ -149,5 +155,14 @@ def all_finite(a) -> bool:
     return True
 
 
-__all__ = ["FlatState", "Layout", "all_finite", "counts", "fields", "pack", "piece",
-           "piece_rows", "reset_rows"]
+__all__ = [
+    "FlatState",
+    "Layout",
+    "all_finite",
+    "counts",
+    "fields",
+    "pack",
+    "piece",
+    "piece_rows",
+    "reset_rows",
+]

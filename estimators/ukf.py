@@ -48,17 +48,27 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from estimators.base import STATUS_BAD_SAMPLE, STATUS_NO_EXCITATION, STATUS_OK, STATUS_WARMUP
-from estimators.base import STATUS_ILL_CONDITIONED, STATUSES
+from estimators.base import (
+    STATUS_BAD_SAMPLE,
+    STATUS_ILL_CONDITIONED,
+    STATUS_NO_EXCITATION,
+    STATUS_OK,
+    STATUS_WARMUP,
+    STATUSES,
+)
 from estimators.ekf import IDLE_THRUST, NOISE_REFERENCE_DT
 from estimators.linalg import cholesky_into
 from estimators.recursive import BatchedRecursive, RecursiveEstimator
 from estimators.rls import check_bounds
 from estimators.state import Layout, all_finite, fields, pack, piece, piece_rows, reset_rows
-from quadfault.dynamics import angular_acceleration3, rotor_wrench, translational_acceleration3
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange
-from quadfault.vehicle import Vehicle
+from quadfault.model.dynamics import (
+    angular_acceleration3,
+    rotor_wrench,
+    translational_acceleration3,
+)
+from quadfault.model.vehicle import Vehicle
 
 OK = STATUSES.index(STATUS_OK)
 WARMUP = STATUSES.index(STATUS_WARMUP)
@@ -102,13 +112,19 @@ class UKFConfig:
     def __post_init__(self):
         for key in ("q_eta", "q_velocity", "q_rate", "r_velocity", "r_rate", "p0", "alpha"):
             value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                    or not (math.isfinite(value) and value > 0):
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or not (math.isfinite(value) and value > 0)
+            ):
                 raise ConfigError(f"UKFConfig.{key} must be a positive number, got {value!r}")
         for key in ("beta", "kappa"):
             value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                    or not math.isfinite(value):
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or not math.isfinite(value)
+            ):
                 raise ConfigError(f"UKFConfig.{key} must be a finite number, got {value!r}")
         check_bounds("UKFConfig", self.eta_bounds)
 
@@ -116,13 +132,14 @@ class UKFConfig:
         """``(scale, W_m0, W_c0, W_i)`` of ``L = 6 + n`` states: the sigma points are
         ``x +- scale * columns of chol(P)``."""
         L = X.eta + n
-        lam = self.alpha ** 2 * (L + self.kappa) - L
+        lam = self.alpha**2 * (L + self.kappa) - L
         if not L + lam > 0:
-            raise ConfigError(f"UKFConfig: alpha^2 (L + kappa) must be positive for L = {L} "
-                              f"states, got alpha = {self.alpha}, kappa = {self.kappa}")
+            raise ConfigError(
+                f"UKFConfig: alpha^2 (L + kappa) must be positive for L = {L} "
+                f"states, got alpha = {self.alpha}, kappa = {self.kappa}"
+            )
         wm0 = lam / (L + lam)
-        return (math.sqrt(L + lam), wm0, wm0 + 1.0 - self.alpha ** 2 + self.beta,
-                0.5 / (L + lam))
+        return (math.sqrt(L + lam), wm0, wm0 + 1.0 - self.alpha**2 + self.beta, 0.5 / (L + lam))
 
     @classmethod
     def from_options(cls, q_eta: float | None = None) -> UKFConfig:
@@ -143,11 +160,26 @@ assert (X.v, X.w) == (Y.v, Y.w) and X.eta == Y.size  # the rows read the first s
 #: command and attitude, the initial efficiency, the efficiencies kept across an idle step,
 #: then the workspace of one update (the sigma points, chol(P), the predicted moments, the
 #: innovation's covariance and its factor, ``W``, the innovation, the factorisation's shift)
-FLOATS = Layout("UKFPieces", x=("L",), P=("L", "L"), last_t=(1,), last_f=("n",),
-                last_R=(3, 3), eta0=("n",), keep=("n",), P_keep=("n", "n"),
-                sigma=("sigma", "L"), chol=("L", "L"), xp=("L",), Pp=("L", "L"),
-                S=(Y.size, Y.size), SL=(Y.size, Y.size), W=(Y.size, "L"), y=(Y.size,),
-                shift=("L",))
+FLOATS = Layout(
+    "UKFPieces",
+    x=("L",),
+    P=("L", "L"),
+    last_t=(1,),
+    last_f=("n",),
+    last_R=(3, 3),
+    eta0=("n",),
+    keep=("n",),
+    P_keep=("n", "n"),
+    sigma=("sigma", "L"),
+    chol=("L", "L"),
+    xp=("L",),
+    Pp=("L", "L"),
+    S=(Y.size, Y.size),
+    SL=(Y.size, Y.size),
+    W=(Y.size, "L"),
+    y=(Y.size,),
+    shift=("L",),
+)
 F = FLOATS.index
 UKFPieces = FLOATS.pieces
 #: the int state: 1 once the first good sample set the kinematic states
@@ -156,9 +188,24 @@ COUNTERS = fields("UKFCounters", "initialised")
 #: weights, :meth:`UKFConfig.weights`), the inertia and its inverse, the measurement-noise
 #: variances ``r``; last the arrays sized by the rotors: the allocation ``A`` (4, n), then
 #: the process-noise variance rates ``qc`` (L,) [1/s] (:func:`ukf_constants`)
-CONSTANTS = fields("UKFConstants", "mass", "gravity", "f_max", "clip", "lo", "hi", "p0",
-                   "scale", "wm0", "wc0", "wi", ("J", 9), ("Jinv", 9), ("r", Y.size),
-                   ("per_rotor", 0))
+CONSTANTS = fields(
+    "UKFConstants",
+    "mass",
+    "gravity",
+    "f_max",
+    "clip",
+    "lo",
+    "hi",
+    "p0",
+    "scale",
+    "wm0",
+    "wc0",
+    "wi",
+    ("J", 9),
+    ("Jinv", 9),
+    ("r", Y.size),
+    ("per_rotor", 0),
+)
 
 
 def _dims(n: int) -> dict:
@@ -171,16 +218,30 @@ def ukf_constants(vehicle: Vehicle, cfg: UKFConfig) -> np.ndarray:
     n = vehicle.n_rotors
     b = cfg.eta_bounds
     lo, hi = (-np.inf, np.inf) if b is None else (float(b[0]), float(b[1]))
-    q = pack(X, v=np.full(3, cfg.q_velocity), w=np.full(3, cfg.q_rate),
-             eta=np.full(n, cfg.q_eta))
+    q = pack(X, v=np.full(3, cfg.q_velocity), w=np.full(3, cfg.q_rate), eta=np.full(n, cfg.q_eta))
     r = pack(Y, v=np.full(3, cfg.r_velocity), w=np.full(3, cfg.r_rate))
     scale, wm0, wc0, wi = cfg.weights(n)
-    per_rotor = np.concatenate((np.asarray(vehicle.allocation, dtype=float).ravel(),
-                                q / NOISE_REFERENCE_DT))  # A, then qc (_model)
-    return pack(CONSTANTS, mass=vehicle.mass, gravity=vehicle.gravity,
-                f_max=vehicle.rotor_max_thrust, clip=float(cfg.clip_commands), lo=lo, hi=hi,
-                p0=cfg.p0, scale=scale, wm0=wm0, wc0=wc0, wi=wi, J=vehicle.inertia,
-                Jinv=vehicle.inertia_inverse, r=r, per_rotor=per_rotor)
+    per_rotor = np.concatenate(
+        (np.asarray(vehicle.allocation, dtype=float).ravel(), q / NOISE_REFERENCE_DT)
+    )  # A, then qc (_model)
+    return pack(
+        CONSTANTS,
+        mass=vehicle.mass,
+        gravity=vehicle.gravity,
+        f_max=vehicle.rotor_max_thrust,
+        clip=float(cfg.clip_commands),
+        lo=lo,
+        hi=hi,
+        p0=cfg.p0,
+        scale=scale,
+        wm0=wm0,
+        wc0=wc0,
+        wi=wi,
+        J=vehicle.inertia,
+        Jinv=vehicle.inertia_inverse,
+        r=r,
+        per_rotor=per_rotor,
+    )
 
 
 @jit(inline="always")
@@ -188,8 +249,11 @@ def _model(const, n):
     """``(A, qc, r)``: the allocation (4, n), the process-noise variance rates (L,) and the
     measurement-noise variances (:data:`Y`), views of ``const``."""
     a, L = CONSTANTS.per_rotor, X.eta + n
-    return (const[a:a + 4 * n].reshape((4, n)), const[a + 4 * n:a + 4 * n + L],
-            const[CONSTANTS.r:CONSTANTS.per_rotor])
+    return (
+        const[a : a + 4 * n].reshape((4, n)),
+        const[a + 4 * n : a + 4 * n + L],
+        const[CONSTANTS.r : CONSTANTS.per_rotor],
+    )
 
 
 @jit
@@ -198,23 +262,25 @@ def state_views(fs, offsets, n, N):
     in the order of :data:`FLOATS` (what a ``prange`` loop can capture; :func:`named_pieces`
     names them)."""
     L, o, m = X.eta + n, offsets, Y.size
-    return (piece_rows(fs, o[F.x], o[F.x + 1], N),
-            piece(fs, o, F.P, (N, L, L)),
-            piece_rows(fs, o[F.last_t], o[F.last_t + 1], N),
-            piece_rows(fs, o[F.last_f], o[F.last_f + 1], N),
-            piece(fs, o, F.last_R, (N, 3, 3)),
-            piece_rows(fs, o[F.eta0], o[F.eta0 + 1], N),
-            piece_rows(fs, o[F.keep], o[F.keep + 1], N),
-            piece(fs, o, F.P_keep, (N, n, n)),
-            piece(fs, o, F.sigma, (N, 2 * L + 1, L)),
-            piece(fs, o, F.chol, (N, L, L)),
-            piece_rows(fs, o[F.xp], o[F.xp + 1], N),
-            piece(fs, o, F.Pp, (N, L, L)),
-            piece(fs, o, F.S, (N, m, m)),
-            piece(fs, o, F.SL, (N, m, m)),
-            piece(fs, o, F.W, (N, m, L)),
-            piece_rows(fs, o[F.y], o[F.y + 1], N),
-            piece_rows(fs, o[F.shift], o[F.shift + 1], N))
+    return (
+        piece_rows(fs, o[F.x], o[F.x + 1], N),
+        piece(fs, o, F.P, (N, L, L)),
+        piece_rows(fs, o[F.last_t], o[F.last_t + 1], N),
+        piece_rows(fs, o[F.last_f], o[F.last_f + 1], N),
+        piece(fs, o, F.last_R, (N, 3, 3)),
+        piece_rows(fs, o[F.eta0], o[F.eta0 + 1], N),
+        piece_rows(fs, o[F.keep], o[F.keep + 1], N),
+        piece(fs, o, F.P_keep, (N, n, n)),
+        piece(fs, o, F.sigma, (N, 2 * L + 1, L)),
+        piece(fs, o, F.chol, (N, L, L)),
+        piece_rows(fs, o[F.xp], o[F.xp + 1], N),
+        piece(fs, o, F.Pp, (N, L, L)),
+        piece(fs, o, F.S, (N, m, m)),
+        piece(fs, o, F.SL, (N, m, m)),
+        piece(fs, o, F.W, (N, m, L)),
+        piece_rows(fs, o[F.y], o[F.y + 1], N),
+        piece_rows(fs, o[F.shift], o[F.shift + 1], N),
+    )
 
 
 @jit(inline="always")
@@ -234,10 +300,10 @@ def state_pieces(fs, offsets, n, N):
 def _propagate(chi, f, R9, dt, rigid, A) -> None:
     """One sigma point ``chi = [v, Omega, eta]`` (:data:`X`) over ``dt`` with the command
     ``f`` held and the attitude ``R9`` (row-major 9-tuple), in place: the model's allocation
-    and rigid body (:mod:`quadfault.dynamics`, eqs. 2, 4 and 12; the efficiencies a random
+    and rigid body (:mod:`quadfault.model.dynamics`, eqs. 2, 4 and 12; the efficiencies a random
     walk)."""
     n = f.shape[0]
-    T, M = rotor_wrench(A, f, chi[X.eta:X.eta + n])
+    T, M = rotor_wrench(A, f, chi[X.eta : X.eta + n])
     acc = translational_acceleration3(R9, T, rigid)
     wdot = angular_acceleration3((chi[X.w], chi[X.w + 1], chi[X.w + 2]), M, rigid)
     for a in range(3):
@@ -252,8 +318,14 @@ def ukf_step(t, p, v, R, w, f, const, S, ks, i) -> int:
     n = f.shape[0]
     L = X.eta + n
     x, P, last_t, last_f, last_R = S.x[i], S.P[i], S.last_t[i], S.last_f[i], S.last_R[i]
-    if not (math.isfinite(t) and all_finite(p) and all_finite(v) and all_finite(R)
-            and all_finite(w) and all_finite(f)):
+    if not (
+        math.isfinite(t)
+        and all_finite(p)
+        and all_finite(v)
+        and all_finite(R)
+        and all_finite(w)
+        and all_finite(f)
+    ):
         return BAD_SAMPLE
     if ks[i, COUNTERS.initialised] == 0:  # the first sample sets the kinematic states
         eta0 = S.eta0[i]
@@ -292,8 +364,9 @@ def ukf_step(t, p, v, R, w, f, const, S, ks, i) -> int:
         for b in range(3):
             last_R[a, b] = R[a, b]
     for j in range(n):
-        last_f[j] = (min(max(f[j], 0.0), const[CONSTANTS.f_max]) if const[CONSTANTS.clip] != 0.0
-                     else f[j])
+        last_f[j] = (
+            min(max(f[j], 0.0), const[CONSTANTS.f_max]) if const[CONSTANTS.clip] != 0.0 else f[j]
+        )
     return code
 
 
@@ -321,7 +394,7 @@ def _predict_update(x, P, zv, zw, f, R, dt, const, S, i, n) -> int:
             d = scale * C[a, c] if a >= c else 0.0
             sig[1 + c, a] = x[a] + d
             sig[1 + L + c, a] = x[a] - d
-    rigid = (const[C_.mass], const[C_.gravity], const[C_.J:C_.Jinv], const[C_.Jinv:C_.r])
+    rigid = (const[C_.mass], const[C_.gravity], const[C_.J : C_.Jinv], const[C_.Jinv : C_.r])
     R9 = (R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2], R[2, 0], R[2, 1], R[2, 2])
     for s in range(2 * L + 1):
         _propagate(sig[s], f, R9, dt, rigid, A)
@@ -430,8 +503,9 @@ def ukf_update_rows(t, p, v, R, w, f, const, offsets, fs, ks, code) -> None:
     N = ks.shape[0]
     views = state_views(fs, offsets, f.shape[1], N)  # formed once; named inside the loop
     for i in prange(N):
-        code[i] = ukf_step(t[i], p[i], v[i], R[i], w[i], f[i], const, named_pieces(views), ks,
-                           np.int64(i))
+        code[i] = ukf_step(
+            t[i], p[i], v[i], R[i], w[i], f[i], const, named_pieces(views), ks, np.int64(i)
+        )
 
 
 def _kernels():

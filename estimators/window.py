@@ -58,11 +58,25 @@ MAX_ITER = STATUSES.index(STATUS_MAX_ITER)
 
 #: the float settings of a window solve (``fp``), by name; ``ipm``: the interior point's
 #: (:data:`estimators.ipm.SETTINGS`)
-SETTINGS = fields("WindowSettings", "lo", "hi", "gamma", "scale", "z_soft", "power", "z_hard",
-                  "w_min", "mad_eps", "irls_tol", "cond_max", ("ipm", N_IPM_SETTINGS))
+SETTINGS = fields(
+    "WindowSettings",
+    "lo",
+    "hi",
+    "gamma",
+    "scale",
+    "z_soft",
+    "power",
+    "z_hard",
+    "w_min",
+    "mad_eps",
+    "irls_tol",
+    "cond_max",
+    ("ipm", N_IPM_SETTINGS),
+)
 #: the integer settings of a window solve (``ip``), by name
-INT_SETTINGS = fields("WindowIntSettings", "max_irls", "ipm_max_iter", "hard_drop",
-                      "median_normalize", "floor")
+INT_SETTINGS = fields(
+    "WindowIntSettings", "max_irls", "ipm_max_iter", "hard_drop", "median_normalize", "floor"
+)
 #: rows of the workspace's vectors ``V`` (n each; ``ipm``: the interior point's rows),
 #: matrices ``M`` (n x n each) and segment rows ``S`` (m each)
 VECTORS = fields("WindowVectors", "xcur", "q", "zero", "unit", "col", ("ipm", N_WORK_ROWS))
@@ -76,13 +90,29 @@ def window_settings(cfg: IRLSConfig, m: int) -> tuple[np.ndarray, np.ndarray]:
     """``(fp, ip)``: the settings of :func:`solve_window_into` for windows of ``m`` segments."""
     scale = 1.0 / m if cfg.scaling == "paper" else 1.0
     paper = cfg.scaling == "paper"
-    fp = pack(SETTINGS, lo=cfg.lower, hi=cfg.upper, gamma=cfg.gamma, scale=scale,
-              z_soft=cfg.z_soft, power=cfg.soft_power, z_hard=cfg.z_hard, w_min=cfg.w_min,
-              mad_eps=cfg.mad_eps, irls_tol=cfg.irls_tol, cond_max=cfg.cond_max,
-              ipm=ipm_parameters(cfg.ipm))
-    ip = pack(INT_SETTINGS, max_irls=cfg.max_irls, ipm_max_iter=cfg.ipm.max_iter,
-              hard_drop=int(cfg.hard_drop), median_normalize=int(not paper),
-              floor=int(paper)).astype(np.int64)
+    fp = pack(
+        SETTINGS,
+        lo=cfg.lower,
+        hi=cfg.upper,
+        gamma=cfg.gamma,
+        scale=scale,
+        z_soft=cfg.z_soft,
+        power=cfg.soft_power,
+        z_hard=cfg.z_hard,
+        w_min=cfg.w_min,
+        mad_eps=cfg.mad_eps,
+        irls_tol=cfg.irls_tol,
+        cond_max=cfg.cond_max,
+        ipm=ipm_parameters(cfg.ipm),
+    )
+    ip = pack(
+        INT_SETTINGS,
+        max_irls=cfg.max_irls,
+        ipm_max_iter=cfg.ipm.max_iter,
+        hard_drop=int(cfg.hard_drop),
+        median_normalize=int(not paper),
+        floor=int(paper),
+    ).astype(np.int64)
     return fp, ip
 
 
@@ -119,8 +149,9 @@ def energies_into(c, b, H, start, x, scale, e, n) -> None:
 
 
 @jit(inner=True)
-def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x_out, sd_out,
-                      any_n):
+def solve_window_into(
+    c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x_out, sd_out, any_n
+):
     """Algorithm 2 on the ring window ``(c, b, H)`` (segment s at ``(start + s) % m``) from
     the previous estimate ``x_prev``.
 
@@ -134,8 +165,7 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
     rounds, cond)``.
     """
     m, n = b.shape[0], b.shape[1]
-    lo, hi, gamma, scale = fp[SETTINGS.lo], fp[SETTINGS.hi], fp[SETTINGS.gamma], \
-        fp[SETTINGS.scale]
+    lo, hi, gamma, scale = fp[SETTINGS.lo], fp[SETTINGS.hi], fp[SETTINGS.gamma], fp[SETTINGS.scale]
     x_cur, q, zero = V[VECTORS.xcur], V[VECTORS.q], V[VECTORS.zero]
     JGJ, Hq, L = M[MATRICES.JGJ], M[MATRICES.Hq], M[MATRICES.L]
     e, z, tmp = S[SEGMENT_ROWS.e], S[SEGMENT_ROWS.z], S[SEGMENT_ROWS.tmp]
@@ -151,10 +181,20 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
     rounds = 0
     for _round in range(ip[INT_SETTINGS.max_irls]):
         energies_into(c, b, H, start, x_cur, scale, e, n)  # eq. 26
-        mad_weights_into(e, fp[SETTINGS.z_soft], fp[SETTINGS.power], fp[SETTINGS.z_hard],
-                         fp[SETTINGS.w_min], fp[SETTINGS.mad_eps],
-                         ip[INT_SETTINGS.hard_drop] == 1, ip[INT_SETTINGS.median_normalize] == 1,
-                         ip[INT_SETTINGS.floor] == 1, w, z, tmp)
+        mad_weights_into(
+            e,
+            fp[SETTINGS.z_soft],
+            fp[SETTINGS.power],
+            fp[SETTINGS.z_hard],
+            fp[SETTINGS.w_min],
+            fp[SETTINGS.mad_eps],
+            ip[INT_SETTINGS.hard_drop] == 1,
+            ip[INT_SETTINGS.median_normalize] == 1,
+            ip[INT_SETTINGS.floor] == 1,
+            w,
+            z,
+            tmp,
+        )
         any_kept = False
         for s in range(m):
             any_kept = any_kept or w[s] > 0
@@ -189,16 +229,38 @@ def solve_window_into(c, b, H, start, x_prev, fp, ip, V, M, S, w, iters, hist, x
             x_out[j] = x_cur[j]
         h = hist[rounds] if record else hist[0]
         if any_n is None:  # the interior point (Algorithm 1) for 4 unknowns (a quadrotor)
-            it, flag = ipm_steps(Hq, q, lo, hi, x_out, fp[SETTINGS.ipm:SETTINGS.size],
-                                 ip[INT_SETTINGS.ipm_max_iter], V[VECTORS.ipm:], L, h, 4)
+            it, flag = ipm_steps(
+                Hq,
+                q,
+                lo,
+                hi,
+                x_out,
+                fp[SETTINGS.ipm : SETTINGS.size],
+                ip[INT_SETTINGS.ipm_max_iter],
+                V[VECTORS.ipm :],
+                L,
+                h,
+                4,
+            )
         else:
-            it, flag = ipm_steps(Hq, q, lo, hi, x_out, fp[SETTINGS.ipm:SETTINGS.size],
-                                 ip[INT_SETTINGS.ipm_max_iter], V[VECTORS.ipm:], L, h, n)
+            it, flag = ipm_steps(
+                Hq,
+                q,
+                lo,
+                hi,
+                x_out,
+                fp[SETTINGS.ipm : SETTINGS.size],
+                ip[INT_SETTINGS.ipm_max_iter],
+                V[VECTORS.ipm :],
+                L,
+                h,
+                n,
+            )
         converged = flag == 1
         iters[rounds] = it
         if record:
             for k in range(it):  # the weighted residual norm of each iterate
-                energies_into(c, b, H, start, hist[rounds, k, 3:3 + n], scale, e, n)
+                energies_into(c, b, H, start, hist[rounds, k, 3 : 3 + n], scale, e, n)
                 acc = 0.0
                 for s in range(m):
                     acc += w[s] * e[s]
@@ -243,19 +305,27 @@ def solve_window(c, b, H, x_prev, config: IRLSConfig, record_history: bool = Fal
     """
     c, b, H = (np.ascontiguousarray(a, dtype=float) for a in (c, b, H))
     x_prev = np.ascontiguousarray(x_prev, dtype=float)
-    if b.ndim != 2 or c.shape != b.shape[:1] or H.shape != b.shape + b.shape[1:] \
-            or x_prev.shape != b.shape[1:]:
-        raise ConfigError(f"window terms must be c (m,), b (m, n), H (m, n, n), x_prev (n,); "
-                          f"got {c.shape}, {b.shape}, {H.shape}, {x_prev.shape}")
+    if (
+        b.ndim != 2
+        or c.shape != b.shape[:1]
+        or H.shape != b.shape + b.shape[1:]
+        or x_prev.shape != b.shape[1:]
+    ):
+        raise ConfigError(
+            f"window terms must be c (m,), b (m, n), H (m, n, n), x_prev (n,); "
+            f"got {c.shape}, {b.shape}, {H.shape}, {x_prev.shape}"
+        )
     m, n = b.shape
     fp, ip = window_settings(config, m)
     w, iters = np.zeros(m), np.zeros(config.max_irls, dtype=np.int64)
     hist = history(config, n) if record_history else no_history(n)
     x, sd = np.empty(n), np.empty(n)
-    code, rounds, cond = solve_window_into(c, b, H, 0, x_prev, fp, ip, *workspace(m, n), w,
-                                           iters, hist, x, sd, any_size(n))
-    diag = window_diagnostics(code, rounds, cond, iters, w, config,
-                              hist if record_history else None)
+    code, rounds, cond = solve_window_into(
+        c, b, H, 0, x_prev, fp, ip, *workspace(m, n), w, iters, hist, x, sd, any_size(n)
+    )
+    diag = window_diagnostics(
+        code, rounds, cond, iters, w, config, hist if record_history else None
+    )
     if code in (OK, MAX_ITER):
         return x, sd, diag
     return x_prev.copy(), None, diag

@@ -13,8 +13,13 @@ from __future__ import annotations
 import argparse
 import sys
 
-AGENTS = ["geometric", "estimate-aware:irls", "estimate-aware:ekf", "estimate-aware:truth",
-          "estimate-aware:none"]
+AGENTS = [
+    "geometric",
+    "estimate-aware:irls",
+    "estimate-aware:ekf",
+    "estimate-aware:truth",
+    "estimate-aware:none",
+]
 
 
 def main(argv=None) -> int:
@@ -29,8 +34,17 @@ def main(argv=None) -> int:
 
     from quadfault.cli import main as cli_main
 
-    cli = ["evaluate", "--agents", *args.agents, "--suite", args.suite, "--seeds",
-           *map(str, args.seeds), "--out", args.out]
+    cli = [
+        "evaluate",
+        "--agents",
+        *args.agents,
+        "--suite",
+        args.suite,
+        "--seeds",
+        *map(str, args.seeds),
+        "--out",
+        args.out,
+    ]
     if args.duration is not None:
         cli += ["--duration", str(args.duration)]
     if args.force:

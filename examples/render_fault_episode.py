@@ -32,9 +32,8 @@ import numpy as np  # noqa: E402
 import quad_fault_env  # noqa: E402,F401  (registers the ids)
 from quadfault.errors import QuadfaultError  # noqa: E402
 from quadfault.fileio import atomic_write_bytes, check_writable  # noqa: E402
-from quadfault.scenarios import (AbruptFault, ConstantEfficiency,  # noqa: E402
-                                 EfficiencySchedule, Scenario)
-from quadfault.trajectory import Circle  # noqa: E402
+from quadfault.model.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario  # noqa: E402
+from quadfault.model.trajectory import Circle  # noqa: E402
 
 
 def fault_scenario(seconds: float) -> Scenario:
@@ -50,18 +49,26 @@ def frame_stride(fps: float, control_period: float) -> int:
     return max(2, round(1.0 / (fps * control_period)))
 
 
-def collect_frames(seconds: float, fps: float, estimator: str, seed: int,
-                   compensate: bool = True) -> tuple[list[np.ndarray], int]:
+def collect_frames(
+    seconds: float, fps: float, estimator: str, seed: int, compensate: bool = True
+) -> tuple[list[np.ndarray], int]:
     """``(frames, frame_ms)``: frames at reset and after every k-th control step (and the
     last step), k from :func:`frame_stride`; each covers ``frame_ms`` of flight."""
-    env = gym.make("QuadFault-v1", estimator=estimator, scenario=fault_scenario(seconds),
-                   compensate=compensate, render_mode="rgb_array")
+    env = gym.make(
+        "QuadFault-v1",
+        estimator=estimator,
+        scenario=fault_scenario(seconds),
+        compensate=compensate,
+        render_mode="rgb_array",
+    )
     period = env.unwrapped.control_period
     every = frame_stride(fps, period)
     frame_ms = round(every * period * 1000)
     if abs(1000 / frame_ms - fps) > 1e-9:
-        print(f"--fps {fps:g}: using {1000 / frame_ms:g} fps (every {every} control steps of "
-              f"{period * 1000:g} ms), so the GIF plays in real time")
+        print(
+            f"--fps {fps:g}: using {1000 / frame_ms:g} fps (every {every} control steps of "
+            f"{period * 1000:g} ms), so the GIF plays in real time"
+        )
     env.reset(seed=seed)
     frames = [env.render()]
     k, done = 0, False
@@ -73,8 +80,9 @@ def collect_frames(seconds: float, fps: float, estimator: str, seed: int,
             frames.append(env.render())
     env.close()
     if info["termination_reason"]:
-        print(f"episode ended early: {info['termination_reason']} at t = "
-              f"{env.unwrapped.time:.2f} s")
+        print(
+            f"episode ended early: {info['termination_reason']} at t = {env.unwrapped.time:.2f} s"
+        )
     return frames, frame_ms
 
 
@@ -86,8 +94,9 @@ def gif_bytes(frames: list[np.ndarray], frame_ms: int, hold_ms: int = 1000) -> b
     images = [Image.fromarray(f) for f in frames]
     durations = [frame_ms] * (len(images) - 1) + [frame_ms + hold_ms]
     buf = io.BytesIO()
-    images[0].save(buf, format="GIF", save_all=True, append_images=images[1:],
-                   duration=durations, loop=0)
+    images[0].save(
+        buf, format="GIF", save_all=True, append_images=images[1:], duration=durations, loop=0
+    )
     return buf.getvalue()
 
 
@@ -95,10 +104,17 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", default="fault_episode.gif", help="GIF to write")
     p.add_argument("--seconds", type=float, default=3.0, help="episode length [s]")
-    p.add_argument("--fps", type=float, default=20.0,
-                   help="frames per second of the GIF, 2-50 (default 20); plays in real time")
-    p.add_argument("--no-compensate", action="store_true",
-                   help="fly the nominal allocation (the estimate is only observed)")
+    p.add_argument(
+        "--fps",
+        type=float,
+        default=20.0,
+        help="frames per second of the GIF, 2-50 (default 20); plays in real time",
+    )
+    p.add_argument(
+        "--no-compensate",
+        action="store_true",
+        help="fly the nominal allocation (the estimate is only observed)",
+    )
     p.add_argument("--estimator", default="irls", choices=["irls", "ekf", "truth", "none"])
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--force", action="store_true", help="overwrite --out")
@@ -109,8 +125,9 @@ def main(argv=None) -> int:
         if not 2 <= args.fps <= 50:
             raise QuadfaultError(f"--fps must be between 2 and 50, got {args.fps}")
         check_writable([args.out], force=args.force)
-        frames, frame_ms = collect_frames(args.seconds, args.fps, args.estimator, args.seed,
-                                          not args.no_compensate)
+        frames, frame_ms = collect_frames(
+            args.seconds, args.fps, args.estimator, args.seed, not args.no_compensate
+        )
         atomic_write_bytes(args.out, gif_bytes(frames, frame_ms), force=args.force)
     except QuadfaultError as exc:
         print(f"render_fault_episode: error: {exc}", file=sys.stderr)

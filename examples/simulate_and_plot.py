@@ -1,6 +1,6 @@
 """Fly the paper's combined scenario and plot the true motor efficiencies and the tracking error.
 
-    python examples/simulate_and_plot.py --duration 20 --out flight.png
+python examples/simulate_and_plot.py --duration 20 --out flight.png
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from quadfault.fileio import atomic_savefig  # noqa: E402
-from quadfault.scenarios import named_scenario  # noqa: E402
-from quadfault.simulator import simulate  # noqa: E402
+from quadfault.model.scenarios import named_scenario  # noqa: E402
+from quadfault.sim.simulator import simulate  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -43,8 +43,10 @@ def main(argv=None) -> int:
     fig.tight_layout()
     atomic_savefig(fig, args.out, force=args.force, dpi=120)
     mask = rec.t > 2.0
-    print(f"position error RMS after 2 s: {np.sqrt(np.mean(err[mask] ** 2)) * 100:.2f} cm; "
-          f"wrote {args.out}")
+    print(
+        f"position error RMS after 2 s: {np.sqrt(np.mean(err[mask] ** 2)) * 100:.2f} cm; "
+        f"wrote {args.out}"
+    )
     return 0
 
 

@@ -40,8 +40,9 @@ def fly(env, policy, seeds, normalizer=None) -> tuple[float, float]:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--log", required=True, help="a real flight log")
-    parser.add_argument("--dataset", default="nanodrone",
-                        help="its importer (quadfault import DATASET)")
+    parser.add_argument(
+        "--dataset", default="nanodrone", help="its importer (quadfault import DATASET)"
+    )
     parser.add_argument("--out", default="runs/calibrated", help="output folder")
     parser.add_argument("--timesteps", type=int, default=16_384)
     parser.add_argument("--episodes", type=int, default=5, help="evaluation episodes")
@@ -54,8 +55,8 @@ def main(argv=None) -> int:
     import quad_fault_env  # noqa: F401  (registers the ids)
     from agents.train import TrainConfig, load_agent, train_one
     from quadfault.cli import main as cli
-    from quadfault.effects import from_diagnosis
     from quadfault.errors import QuadfaultError
+    from quadfault.model.effects import from_diagnosis
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -67,14 +68,27 @@ def main(argv=None) -> int:
         return 2
     model = from_diagnosis(diag)
     print("calibrated model: " + (", ".join(e.name for e in model.effects) or "no effects"))
-    common = {"estimator": "none", "action_mode": "residual", "duration": args.duration,
-              "residual_scale": 0.25 * model.vehicle.mass * model.vehicle.gravity}
-    config = TrainConfig(algo="ppo", env_id=ENV_ID, env_kwargs=dict(common, model=str(diag)),
-                         timesteps=args.timesteps, seeds=(0,), n_envs=4,
-                         eval_freq=max(args.timesteps // 4, 1000), eval_episodes=3,
-                         algo_kwargs={"n_steps": 512, "batch_size": 256,
-                                      "policy_kwargs": {"net_arch": [64, 64],
-                                                        "log_std_init": -2.3}})
+    common = {
+        "estimator": "none",
+        "action_mode": "residual",
+        "duration": args.duration,
+        "residual_scale": 0.25 * model.vehicle.mass * model.vehicle.gravity,
+    }
+    config = TrainConfig(
+        algo="ppo",
+        env_id=ENV_ID,
+        env_kwargs=dict(common, model=str(diag)),
+        timesteps=args.timesteps,
+        seeds=(0,),
+        n_envs=4,
+        eval_freq=max(args.timesteps // 4, 1000),
+        eval_episodes=3,
+        algo_kwargs={
+            "n_steps": 512,
+            "batch_size": 256,
+            "policy_kwargs": {"net_arch": [64, 64], "log_std_init": -2.3},
+        },
+    )
     try:
         train_one(config, 0, out / "seed_0", force=args.force)
     except QuadfaultError as exc:
@@ -82,14 +96,18 @@ def main(argv=None) -> int:
         return 2
     seeds = [30_000 + i for i in range(args.episodes)]
     scored = dict(common, info="full")  # fly() scores info["tracking_error"]
-    envs = {"nominal": gym.make(ENV_ID, vehicle=model.vehicle, **scored),
-            "calibrated": gym.make(ENV_ID, model=str(diag), **scored)}
+    envs = {
+        "nominal": gym.make(ENV_ID, vehicle=model.vehicle, **scored),
+        "calibrated": gym.make(ENV_ID, model=str(diag), **scored),
+    }
     print(f"{'env':<11} {'agent':<22} {'mean return':>12} {'RMSE [m]':>9}")
     for name, env in envs.items():
         policy, venv = load_agent(out / "seed_0", env=env)
         norm = venv if hasattr(venv, "normalize_obs") else None
-        for label, (ret, rmse) in (("geometric (zero)", fly(env, None, seeds)),
-                                   ("PPO residual", fly(env, policy, seeds, norm))):
+        for label, (ret, rmse) in (
+            ("geometric (zero)", fly(env, None, seeds)),
+            ("PPO residual", fly(env, policy, seeds, norm)),
+        ):
             print(f"{name:<11} {label:<22} {ret:>12.1f} {rmse:>9.4f}")
     return 0
 

@@ -28,8 +28,9 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default="runs/ppo_residual", help="output folder")
     parser.add_argument("--timesteps", type=int, default=20_000)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--n-envs", type=int, default=8,
-                        help="quadrotors stepped as arrays in one vector env")
+    parser.add_argument(
+        "--n-envs", type=int, default=8, help="quadrotors stepped as arrays in one vector env"
+    )
     parser.add_argument("--estimator", default="irls", choices=("irls", "ekf", "truth", "none"))
     parser.add_argument("--duration", type=float, default=5.0, help="episode length [s]")
     parser.add_argument("--force", action="store_true")
@@ -40,32 +41,48 @@ def main(argv=None) -> int:
     from quadfault.errors import QuadfaultError
 
     config = TrainConfig(
-        algo="ppo", env_id="QuadFaultHover-v1",
-        env_kwargs={"estimator": args.estimator, "estimator_rate": "control",
-                    "action_mode": "residual", "residual_scale": 2.45,
-                    "random_faults": {"n_faults": [1, 1], "severity": [0.5, 0.85]},
-                    "duration": args.duration},
-        timesteps=args.timesteps, seeds=(args.seed,), n_envs=args.n_envs, vector_env=True,
+        algo="ppo",
+        env_id="QuadFaultHover-v1",
+        env_kwargs={
+            "estimator": args.estimator,
+            "estimator_rate": "control",
+            "action_mode": "residual",
+            "residual_scale": 2.45,
+            "random_faults": {"n_faults": [1, 1], "severity": [0.5, 0.85]},
+            "duration": args.duration,
+        },
+        timesteps=args.timesteps,
+        seeds=(args.seed,),
+        n_envs=args.n_envs,
+        vector_env=True,
         eval_freq=max(args.timesteps // 8, 500),
         # small initial exploration noise (exp(-2.3) x 2.45 N ~ 0.25 N per rotor, as in the
         # study): the residual starts from a controller that already flies, and large noise
         # early only costs return
-        algo_kwargs={"n_steps": 256, "batch_size": 256, "learning_rate": 1e-4,
-                     "policy_kwargs": {"net_arch": [64, 64], "log_std_init": -2.3}})
+        algo_kwargs={
+            "n_steps": 256,
+            "batch_size": 256,
+            "learning_rate": 1e-4,
+            "policy_kwargs": {"net_arch": [64, 64], "log_std_init": -2.3},
+        },
+    )
     out = Path(args.out)
     run_dir = out / f"seed_{args.seed}"
     try:
         train_one(config, args.seed, run_dir, force=args.force)
-        data = write_learning_curve([run_dir], out / CURVE_FILE,
-                                    label=f"PPO residual, eta_hat from {args.estimator}")
+        data = write_learning_curve(
+            [run_dir], out / CURVE_FILE, label=f"PPO residual, eta_hat from {args.estimator}"
+        )
     except QuadfaultError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     curve = data["returns"][0]
-    print(f"evaluation return ({len(data['episode_seeds'])} fixed episodes, max possible "
-          f"{args.duration * 100:.0f}): geometric controller {data['baseline']:.1f}; PPO first "
-          f"{curve[0]:.1f}, last {curve[-1]:.1f}, best {curve.max():.1f}; curve -> "
-          f"{out / CURVE_FILE}")
+    print(
+        f"evaluation return ({len(data['episode_seeds'])} fixed episodes, max possible "
+        f"{args.duration * 100:.0f}): geometric controller {data['baseline']:.1f}; PPO first "
+        f"{curve[0]:.1f}, last {curve[-1]:.1f}, best {curve.max():.1f}; curve -> "
+        f"{out / CURVE_FILE}"
+    )
     return 0
 
 

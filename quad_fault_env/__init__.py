@@ -36,12 +36,16 @@ from gymnasium.envs.registration import register
 from quad_fault_env.estimation import make_estimator
 from quad_fault_env.tasks import ENTRY_POINT, TASKS, VECTOR_ENTRY_POINT
 
-
 #: id -> (max_episode_steps, kwargs): the registration table (from the tasks)
 ENVIRONMENTS = {t.id: (t.max_episode_steps, t.kwargs()) for t in TASKS}
 
 for _id, (_steps, _kwargs) in ENVIRONMENTS.items():
-    register(id=_id, entry_point=ENTRY_POINT, max_episode_steps=_steps, kwargs=_kwargs,
-             vector_entry_point=VECTOR_ENTRY_POINT)
+    register(
+        id=_id,
+        entry_point=ENTRY_POINT,
+        max_episode_steps=_steps,
+        kwargs=_kwargs,
+        vector_entry_point=VECTOR_ENTRY_POINT,
+    )
 
 __all__ = ["ENVIRONMENTS", "TASKS", "make_estimator"]

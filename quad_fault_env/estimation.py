@@ -47,8 +47,9 @@ def diagnostics_template(estimator) -> dict:
     with ``weights`` NaN over the window's segments; estimators without diagnostics: ``{}``."""
     config = getattr(estimator, "config", None)
     if getattr(estimator, "name", None) == "irls" and hasattr(config, "window"):
-        return diagnostics_dict(IRLSDiagnostics("warmup",
-                                                weights=np.full(config.window - 1, np.nan)))
+        return diagnostics_dict(
+            IRLSDiagnostics("warmup", weights=np.full(config.window - 1, np.nan))
+        )
     return {}
 
 
@@ -62,8 +63,7 @@ def _fixed_diagnostics(diagnostics, template: dict) -> dict:
     out = {}
     for key, default in template.items():
         value = d.get(key)
-        if value is None or (isinstance(default, np.ndarray)
-                             and np.shape(value) != default.shape):
+        if value is None or (isinstance(default, np.ndarray) and np.shape(value) != default.shape):
             value = default.copy() if isinstance(default, np.ndarray) else default
         out[key] = value
     return out
@@ -86,6 +86,16 @@ def estimate_info(estimate: Estimate, estimator, n: int, template: dict) -> dict
     }
 
 
-__all__ = ["make_estimator", "estimator_class", "NominalBelief", "TruthOracle", "ESTIMATOR_NAMES",
-           "NOMINAL_PRIOR_SD", "STATUS_OK", "estimate_sd", "diagnostics_dict",
-           "diagnostics_template", "estimate_info"]
+__all__ = [
+    "make_estimator",
+    "estimator_class",
+    "NominalBelief",
+    "TruthOracle",
+    "ESTIMATOR_NAMES",
+    "NOMINAL_PRIOR_SD",
+    "STATUS_OK",
+    "estimate_sd",
+    "diagnostics_dict",
+    "diagnostics_template",
+    "estimate_info",
+]

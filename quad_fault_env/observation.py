@@ -59,8 +59,13 @@ _MOTORS = ("1", "2", "3", "4")
 SLOTS = (
     Slot("pos_err", _XYZ, -POS_MAX, POS_MAX, "p - p_ref, world NED [m]"),
     Slot("vel_err", _XYZ, -VEL_MAX, VEL_MAX, "v - v_ref, world NED [m/s]"),
-    Slot("rot6", ("r11", "r21", "r31", "r12", "r22", "r32"), -1.0, 1.0,
-         "first two columns of R (body FRD -> world NED)"),
+    Slot(
+        "rot6",
+        ("r11", "r21", "r31", "r12", "r22", "r32"),
+        -1.0,
+        1.0,
+        "first two columns of R (body FRD -> world NED)",
+    ),
     Slot("omega", _XYZ, -RATE_MAX, RATE_MAX, "body rate, FRD [rad/s]"),
     Slot("eta_hat", _MOTORS, 0.0, ETA_MAX, "estimated motor efficiency (1 = nominal)"),
     Slot("eta_sd", _MOTORS, 0.0, SD_MAX, "one-sigma uncertainty of eta_hat"),
@@ -79,12 +84,17 @@ class ObservationLayout:
             self._slices[s.name] = slice(start, start + s.size)
             start += s.size
         self.size = start
-        per = (lambda f: np.concatenate([np.full(s.size, f(s), dtype=float) for s in self.slots]))
+
+        def per(f):
+            return np.concatenate([np.full(s.size, f(s), dtype=float) for s in self.slots])
+
         self._low, self._high = per(lambda s: s.low), per(lambda s: s.high)
         self._fill = per(lambda s: SD_MAX if s.name == "eta_sd" else 0.0)
         # where each of _ARGS starts in the flat vector (-1: not in this layout)
-        self._at = np.array([self._slices[name].start if name in self._slices else -1
-                             for name in _ARGS], dtype=np.int64)
+        self._at = np.array(
+            [self._slices[name].start if name in self._slices else -1 for name in _ARGS],
+            dtype=np.int64,
+        )
 
     @property
     def names(self) -> list[str]:
@@ -100,12 +110,16 @@ class ObservationLayout:
         return spaces.Box(low, high, dtype=np.float32)
 
     def dict_space(self) -> spaces.Dict:
-        return spaces.Dict({s.name: spaces.Box(np.float32(s.low), np.float32(s.high),
-                                               shape=(s.size,), dtype=np.float32)
-                            for s in self.slots})
+        return spaces.Dict(
+            {
+                s.name: spaces.Box(
+                    np.float32(s.low), np.float32(s.high), shape=(s.size,), dtype=np.float32
+                )
+                for s in self.slots
+            }
+        )
 
-    def flat(self, *, pos_err, vel_err, R, omega, eta_hat, eta_sd=None,
-             ref_acc=None) -> np.ndarray:
+    def flat(self, *, pos_err, vel_err, R, omega, eta_hat, eta_sd=None, ref_acc=None) -> np.ndarray:
         """The flat observation, float32 ``(..., size)`` for a leading batch shape: the slots'
         values concatenated, NaN replaced by the slot's fill (``SD_MAX`` for ``eta_sd``, else
         0), everything (infinities included) clipped into the slot's bounds. ``eta_sd`` None
@@ -113,12 +127,24 @@ class ObservationLayout:
         R = np.asarray(R, dtype=float)
         batch = R.shape[:-2]
         shape = (-1, 3, 3)
-        values = (pos_err, vel_err, omega, eta_hat, SD_MAX if eta_sd is None else eta_sd,
-                  0.0 if ref_acc is None else ref_acc)
+        values = (
+            pos_err,
+            vel_err,
+            omega,
+            eta_hat,
+            SD_MAX if eta_sd is None else eta_sd,
+            0.0 if ref_acc is None else ref_acc,
+        )
         out = np.empty(batch + (self.size,), dtype=np.float32)
-        _observation_rows(tuple(_rows(x, batch, size) for x, size in zip(values, _SIZES)),
-                          np.ascontiguousarray(R.reshape(shape)), self._at, self._low,
-                          self._high, self._fill, out.reshape(-1, self.size))
+        _observation_rows(
+            tuple(_rows(x, batch, size) for x, size in zip(values, _SIZES)),
+            np.ascontiguousarray(R.reshape(shape)),
+            self._at,
+            self._low,
+            self._high,
+            self._fill,
+            out.reshape(-1, self.size),
+        )
         return out
 
     def _bounded(self, x: np.ndarray, where=None) -> np.ndarray:
@@ -130,8 +156,7 @@ class ObservationLayout:
         x = np.asarray(x, dtype=float)
         x = np.broadcast_to(x, x.shape[:-1] + low.shape) if x.shape[-1:] != low.shape else x
         out = np.empty(x.shape, dtype=np.float32)
-        _bound_rows(x.reshape(-1, low.shape[0]), low, high, fill,
-                    out.reshape(-1, low.shape[0]))
+        _bound_rows(x.reshape(-1, low.shape[0]), low, high, fill, out.reshape(-1, low.shape[0]))
         return out
 
     def values(self, **slots) -> dict:
@@ -169,8 +194,9 @@ class ObservationLayout:
         rows = ["| slot | elements | bounds | meaning |", "|---|---|---|---|"]
         for s in self.slots:
             sl = self._slices[s.name]
-            rows.append(f"| `{s.name}` | {sl.start}..{sl.stop - 1} | [{s.low}, {s.high}] | "
-                        f"{s.meaning} |")
+            rows.append(
+                f"| `{s.name}` | {sl.start}..{sl.stop - 1} | [{s.low}, {s.high}] | {s.meaning} |"
+            )
         return "\n".join(rows)
 
 
@@ -195,8 +221,9 @@ def _bound_rows(x, low, high, fill, out):
 #: the values :meth:`ObservationLayout.flat` takes, in the order :func:`_observation_rows` does
 _ARGS = ("pos_err", "vel_err", "rot6", "omega", "eta_hat", "eta_sd", "ref_acc")
 #: the sizes of the ``values`` of :func:`_observation_rows` (``_ARGS`` but rot6)
-_SIZES = tuple({s.name: s.size for s in SLOTS + (REF_ACC_SLOT,)}[name]
-               for name in _ARGS if name != "rot6")
+_SIZES = tuple(
+    {s.name: s.size for s in SLOTS + (REF_ACC_SLOT,)}[name] for name in _ARGS if name != "rot6"
+)
 
 
 def _rows(x, batch: tuple, size: int) -> np.ndarray:

@@ -39,8 +39,12 @@ from quad_fault_env.observation import SD_MAX
 FIGSIZE = (10.0, 4.0)  # [in]
 DPI = 80
 MARGIN = 0.5  # [m] around the reference in the top view
-REASONS = {"crash": "CRASH: below the ground", "out_of_bounds": "out of bounds",
-           "excessive_tilt": "excessive tilt", "non_finite": "non-finite state"}
+REASONS = {
+    "crash": "CRASH: below the ground",
+    "out_of_bounds": "out of bounds",
+    "excessive_tilt": "excessive tilt",
+    "non_finite": "non-finite state",
+}
 ARM_SCALE = 2.0  # the arms are drawn this many times longer, so the attitude is visible [-]
 
 
@@ -83,11 +87,20 @@ def frame_state(env) -> FrameState:
     est = env._estimate
     sd = None if est.sd is None else np.asarray(est.sd, dtype=float)
     reason = env.limits.reason(state.p, state.R, sc.trajectory(t).position)
-    return FrameState(t, path, np.arange(len(path)) * env.control_period, np.asarray(state.R),
-                      np.asarray(est.eta, dtype=float), sd,
-                      np.asarray(sc.efficiency(t), dtype=float), str(est.status),
-                      getattr(env.estimator, "name", "custom"), reason, sc,
-                      float(env.limits.ground_altitude))
+    return FrameState(
+        t,
+        path,
+        np.arange(len(path)) * env.control_period,
+        np.asarray(state.R),
+        np.asarray(est.eta, dtype=float),
+        sd,
+        np.asarray(sc.efficiency(t), dtype=float),
+        str(est.status),
+        getattr(env.estimator, "name", "custom"),
+        reason,
+        sc,
+        float(env.limits.ground_altitude),
+    )
 
 
 def _rotor_positions(vehicle) -> np.ndarray:
@@ -111,8 +124,14 @@ class FlightRenderer:
         if human:
             import matplotlib.pyplot as plt
 
-            if matplotlib.get_backend().lower() not in ("agg", "pdf", "svg", "ps", "cairo",
-                                                        "template"):
+            if matplotlib.get_backend().lower() not in (
+                "agg",
+                "pdf",
+                "svg",
+                "ps",
+                "cairo",
+                "template",
+            ):
                 try:
                     plt.ion()
                     self.fig = plt.figure(figsize=FIGSIZE, dpi=DPI)
@@ -146,27 +165,31 @@ class FlightRenderer:
         for ax in (top, alt, eta):
             ax.tick_params(labelsize=7)
             ax.grid(alpha=0.3)
-        self.ref_top, = top.plot([], [], color="0.5", lw=1, ls="--", label="reference")
-        self.ref_alt, = alt.plot([], [], color="0.5", lw=1, ls="--", label="reference")
+        (self.ref_top,) = top.plot([], [], color="0.5", lw=1, ls="--", label="reference")
+        (self.ref_alt,) = alt.plot([], [], color="0.5", lw=1, ls="--", label="reference")
         a = dict(animated=True)
-        self.path_top, = top.plot([], [], color="tab:blue", lw=1.3, label="flown", **a)
-        self.path_alt, = alt.plot([], [], color="tab:blue", lw=1.3, label="flown", **a)
-        self.arms = [top.plot([], [], color="k", lw=2, solid_capstyle="round", **a)[0]
-                     for _ in self.rotors]
+        (self.path_top,) = top.plot([], [], color="tab:blue", lw=1.3, label="flown", **a)
+        (self.path_alt,) = alt.plot([], [], color="tab:blue", lw=1.3, label="flown", **a)
+        self.arms = [
+            top.plot([], [], color="k", lw=2, solid_capstyle="round", **a)[0] for _ in self.rotors
+        ]
         # rotor numbers as marker glyphs (paths: far cheaper to draw than text)
-        self.labels = [top.plot([], [], marker=f"${i + 1}$", ms=7, color="k", ls="none", **a)[0]
-                       for i in range(len(self.rotors))]
+        self.labels = [
+            top.plot([], [], marker=f"${i + 1}$", ms=7, color="k", ls="none", **a)[0]
+            for i in range(len(self.rotors))
+        ]
         self.cursor = alt.axvline(0.0, color="tab:blue", lw=0.8, alpha=0.6, **a)
-        self.end_top, = top.plot([], [], "x", color="red", ms=12, mew=3, **a)
-        self.end_alt, = alt.plot([], [], "x", color="red", ms=12, mew=3, **a)
+        (self.end_top,) = top.plot([], [], "x", color="red", ms=12, mew=3, **a)
+        (self.end_alt,) = alt.plot([], [], "x", color="red", ms=12, mew=3, **a)
         self.ground = None
         top.legend(fontsize=6, loc="upper right")
         # efficiency bars (moving heights) and one-sigma error bars
         n = len(self.rotors)
         idx = np.arange(n)
         self.bars_true = eta.bar(idx - 0.2, np.ones(n), width=0.4, color="0.6", label="true")
-        self.bars_est = eta.bar(idx + 0.2, np.ones(n), width=0.4, color="tab:orange",
-                                label="estimate")
+        self.bars_est = eta.bar(
+            idx + 0.2, np.ones(n), width=0.4, color="tab:orange", label="estimate"
+        )
         from matplotlib.collections import LineCollection
 
         self.err = LineCollection([], colors="k", linewidths=1, **a)
@@ -182,12 +205,32 @@ class FlightRenderer:
         self.eta_title = eta.set_title("", fontsize=9)
         self.name = self.fig.text(0.01, 0.955, "", fontsize=10, va="center", weight="bold")
         self.title = self.fig.text(0.2, 0.955, "", fontsize=10, va="center", **a)
-        self.banner = self.fig.text(0.99, 0.955, "", fontsize=10, va="center", ha="right",
-                                    color="white", weight="bold", animated=True,
-                                    bbox=dict(facecolor="red", edgecolor="none", pad=2))
-        self._animated = [self.path_top, self.path_alt, *self.arms, *self.labels, self.cursor,
-                          *self.bars_true, *self.bars_est, self.err, self.end_top,
-                          self.end_alt, self.title, self.banner]
+        self.banner = self.fig.text(
+            0.99,
+            0.955,
+            "",
+            fontsize=10,
+            va="center",
+            ha="right",
+            color="white",
+            weight="bold",
+            animated=True,
+            bbox=dict(facecolor="red", edgecolor="none", pad=2),
+        )
+        self._animated = [
+            self.path_top,
+            self.path_alt,
+            *self.arms,
+            *self.labels,
+            self.cursor,
+            *self.bars_true,
+            *self.bars_est,
+            self.err,
+            self.end_top,
+            self.end_alt,
+            self.title,
+            self.banner,
+        ]
 
     def _new_episode(self, s: FrameState) -> None:
         """Static content of an episode: reference, time axis, limits."""
@@ -200,8 +243,14 @@ class FlightRenderer:
         self._ref = ref
         if self.ground is not None:
             self.ground.remove()
-        self.ground = self.ax_alt.axhspan(s.ground_altitude - 1e3, s.ground_altitude,
-                                          color="saddlebrown", alpha=0.25, lw=0, label="ground")
+        self.ground = self.ax_alt.axhspan(
+            s.ground_altitude - 1e3,
+            s.ground_altitude,
+            color="saddlebrown",
+            alpha=0.25,
+            lw=0,
+            label="ground",
+        )
         self.ax_alt.legend(fontsize=6, loc="upper right")
         self._limits = None
         self._duration = duration
@@ -218,14 +267,23 @@ class FlightRenderer:
         up = np.concatenate((-ref[:, 2], -path[:, 2], [s.ground_altitude]))
         if self._limits is not None:
             (e0, e1), (n0, n1), (u0, u1) = self._limits
-            inside = (e0 <= east.min() and east.max() <= e1 and n0 <= north.min()
-                      and north.max() <= n1 and u0 <= up.min() and up.max() <= u1)
+            inside = (
+                e0 <= east.min()
+                and east.max() <= e1
+                and n0 <= north.min()
+                and north.max() <= n1
+                and u0 <= up.min()
+                and up.max() <= u1
+            )
             if inside:
                 return False
         half = 0.5 * max(np.ptp(east), np.ptp(north), 1.0) * 1.1 + MARGIN  # square view
         ce, cn = 0.5 * (east.min() + east.max()), 0.5 * (north.min() + north.max())
-        limits = ((ce - half, ce + half), (cn - half, cn + half),
-                  _padded(up.min(), up.max(), max(0.3, 0.15 * np.ptp(up))))
+        limits = (
+            (ce - half, ce + half),
+            (cn - half, cn + half),
+            _padded(up.min(), up.max(), max(0.3, 0.15 * np.ptp(up))),
+        )
         self._limits = limits
         self.ax_top.set_xlim(*limits[0])
         self.ax_top.set_ylim(*limits[1])
@@ -275,8 +333,9 @@ class FlightRenderer:
         else:
             sd = np.minimum(s.eta_sd, SD_MAX)
             x = np.arange(len(s.eta_hat)) + 0.2
-            self.err.set_segments([((xi, v - e), (xi, v + e))
-                                   for xi, v, e in zip(x, s.eta_hat, sd)])
+            self.err.set_segments(
+                [((xi, v - e), (xi, v + e)) for xi, v, e in zip(x, s.eta_hat, sd)]
+            )
         self.title.set_text(f"t = {s.t:6.2f} s   estimator status: {s.status}")
         if s.reason is None:
             self.end_top.set_data([], [])

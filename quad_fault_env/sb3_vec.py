@@ -28,8 +28,16 @@ try:
 except ImportError:  # pragma: no cover - the rl extra is optional
     VecEnv = None
 
-_INFO_KEYS = ("t", "eta_true", "eta_hat", "eta_sd", "estimator_status", "tracking_error",
-              "termination_reason", "scenario")
+_INFO_KEYS = (
+    "t",
+    "eta_true",
+    "eta_hat",
+    "eta_sd",
+    "estimator_status",
+    "tracking_error",
+    "termination_reason",
+    "scenario",
+)
 
 
 def _base():
@@ -44,8 +52,9 @@ class QuadFaultSB3VecEnv(VecEnv if VecEnv is not None else object):
     def __init__(self, venv: QuadFaultVectorEnv):
         _base()
         if not isinstance(venv, QuadFaultVectorEnv):
-            raise ConfigError(f"QuadFaultSB3VecEnv wraps a QuadFaultVectorEnv, got "
-                              f"{type(venv).__name__}")
+            raise ConfigError(
+                f"QuadFaultSB3VecEnv wraps a QuadFaultVectorEnv, got {type(venv).__name__}"
+            )
         if venv.metadata["autoreset_mode"] != AutoresetMode.SAME_STEP:
             raise ConfigError("QuadFaultSB3VecEnv needs autoreset_mode='same_step'")
         self.venv = venv
@@ -58,8 +67,9 @@ class QuadFaultSB3VecEnv(VecEnv if VecEnv is not None else object):
         if all(s is None for s in seeds):
             obs, info = self.venv.reset()
         else:
-            base = [s if s is not None else int(np.random.SeedSequence().entropy % 2**31)
-                    for s in seeds]
+            base = [
+                s if s is not None else int(np.random.SeedSequence().entropy % 2**31) for s in seeds
+            ]
             obs, info = self.venv.reset(seed=base)
         self.reset_infos = self._split(info)
         self._reset_seeds()
@@ -67,8 +77,9 @@ class QuadFaultSB3VecEnv(VecEnv if VecEnv is not None else object):
         return obs
 
     def step_async(self, actions: np.ndarray) -> None:
-        self._actions = np.clip(np.asarray(actions, dtype=float).reshape(self.num_envs, -1),
-                                -1.0, 1.0)
+        self._actions = np.clip(
+            np.asarray(actions, dtype=float).reshape(self.num_envs, -1), -1.0, 1.0
+        )
 
     def step_wait(self):
         obs, rew, term, trunc, info = self.venv.step(self._actions)
@@ -95,12 +106,16 @@ class QuadFaultSB3VecEnv(VecEnv if VecEnv is not None else object):
         return [getattr(self.venv.single_env, attr_name)] * len(self._indices(indices))
 
     def set_attr(self, attr_name, value, indices=None) -> None:
-        raise ConfigError("the sub-envs share one configuration, fixed when the vector env "
-                          "is made: pass keywords to make_sb3_vec_env instead of set_attr")
+        raise ConfigError(
+            "the sub-envs share one configuration, fixed when the vector env "
+            "is made: pass keywords to make_sb3_vec_env instead of set_attr"
+        )
 
     def env_method(self, method_name, *method_args, indices=None, **method_kwargs):
-        raise ConfigError("the sub-envs are rows of one vector env, not env objects: call "
-                          "the vector env (QuadFaultSB3VecEnv.venv) instead of env_method")
+        raise ConfigError(
+            "the sub-envs are rows of one vector env, not env objects: call "
+            "the vector env (QuadFaultSB3VecEnv.venv) instead of env_method"
+        )
 
     def env_is_wrapped(self, wrapper_class, indices=None):
         return [False] * len(self._indices(indices))
@@ -119,8 +134,9 @@ def _row(obs, i):
     return obs[i]
 
 
-def make_sb3_vec_env(num_envs: int, seed: int | None = None, env_id: str | None = None,
-                     **kwargs) -> QuadFaultSB3VecEnv:
+def make_sb3_vec_env(
+    num_envs: int, seed: int | None = None, env_id: str | None = None, **kwargs
+) -> QuadFaultSB3VecEnv:
     """A :class:`QuadFaultSB3VecEnv` of ``num_envs`` sub-envs, seeded with ``seed .. seed +
     num_envs - 1``.
 

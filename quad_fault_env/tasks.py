@@ -32,8 +32,14 @@ VECTOR_ENTRY_POINT = "quad_fault_env.vector:QuadFaultVectorEnv"
 
 #: the reward of the -v0 ids: tracking and thrust effort only (no action effort, no survival
 #: bonus, no termination penalty)
-REWARD_V0 = RewardConfig(position_scale=1.0, velocity_weight=0.1, effort_weight=0.01,
-                         action_weight=0.0, survival_bonus=0.0, termination_penalty=0.0)
+REWARD_V0 = RewardConfig(
+    position_scale=1.0,
+    velocity_weight=0.1,
+    effort_weight=0.01,
+    action_weight=0.0,
+    survival_bonus=0.0,
+    termination_penalty=0.0,
+)
 #: the reward of the -v1 ids (the defaults of :class:`RewardConfig`)
 REWARD_V1 = RewardConfig()
 #: the initial-state spread of the hover tasks
@@ -47,7 +53,7 @@ class Task:
     Attributes:
         id: the Gymnasium id (``Name-vN``).
         summary: one line for the docs and ``repr``.
-        scenario: a name of :data:`quadfault.scenarios.SCENARIO_NAMES` or a generator
+        scenario: a name of :data:`quadfault.model.scenarios.SCENARIO_NAMES` or a generator
             (``"random"``, ``"track"``, ``"rotor_loss"``).
         duration: episode length [s].
         random_trajectory: trajectory of random scenarios.
@@ -81,8 +87,12 @@ class Task:
 
     def kwargs(self) -> dict:
         """The environment keywords of the task (what the registration passes)."""
-        out = {"estimator": self.estimator, "scenario": self.scenario,
-               "duration": float(self.duration), "reward": self.reward}
+        out = {
+            "estimator": self.estimator,
+            "scenario": self.scenario,
+            "duration": float(self.duration),
+            "reward": self.reward,
+        }
         if self.scenario == "random":
             out["random_trajectory"] = self.random_trajectory
         if self.scenario_options is not None:
@@ -94,31 +104,60 @@ class Task:
         return out
 
 
-_CIRCLE = ("the paper's circle (radius 3 m, 0.1 Hz) for 20 s with battery degradation and the "
-           "four scheduled 50 % motor faults; IRLS estimate in the observation")
-_HOVER = ("hover at a set-point for 10 s with randomised faults, degradation, thrust noise and "
-          "initial state; IRLS estimate in the observation")
+_CIRCLE = (
+    "the paper's circle (radius 3 m, 0.1 Hz) for 20 s with battery degradation and the "
+    "four scheduled 50 % motor faults; IRLS estimate in the observation"
+)
+_HOVER = (
+    "hover at a set-point for 10 s with randomised faults, degradation, thrust noise and "
+    "initial state; IRLS estimate in the observation"
+)
 
-_TRACK = ("follow a random smooth trajectory for 20 s (each horizontal axis 0.5-2 m/s peak "
-          "speed, curvature 0.3-1 /m; heading rate within 0.3 rad/s; scaled to the vehicle's "
-          "size), healthy motors; IRLS estimate in the observation")
-_ROTOR_LOSS = ("hover for 10 s; between 3 and 6 s one rotor drops abruptly to an efficiency of "
-               "0-0.5 and stays there; survive and hold the set-point; IRLS estimate in the "
-               "observation")
+_TRACK = (
+    "follow a random smooth trajectory for 20 s (each horizontal axis 0.5-2 m/s peak "
+    "speed, curvature 0.3-1 /m; heading rate within 0.3 rad/s; scaled to the vehicle's "
+    "size), healthy motors; IRLS estimate in the observation"
+)
+_ROTOR_LOSS = (
+    "hover for 10 s; between 3 and 6 s one rotor drops abruptly to an efficiency of "
+    "0-0.5 and stays there; survive and hold the set-point; IRLS estimate in the "
+    "observation"
+)
 #: small initial-state spread of the new tasks
 TASK_SPREAD = InitialStateSpread(position=0.1, velocity=0.1, attitude=0.05, rate=0.1)
 
 TASKS = (
     Task("QuadFault-v1", _CIRCLE, "combined", 20.0),
-    Task("QuadFaultHover-v1", _HOVER, "random", 10.0, random_trajectory="hover",
-         initial_spread=HOVER_SPREAD),
+    Task(
+        "QuadFaultHover-v1",
+        _HOVER,
+        "random",
+        10.0,
+        random_trajectory="hover",
+        initial_spread=HOVER_SPREAD,
+    ),
     Task("QuadFaultTrack-v0", _TRACK, "track", 20.0, initial_spread=TASK_SPREAD),
     Task("QuadFaultRotorLoss-v0", _ROTOR_LOSS, "rotor_loss", 10.0, initial_spread=TASK_SPREAD),
-    Task("QuadFault-v0", _CIRCLE, "combined", 20.0, reward=REWARD_V0, max_episode_steps=2000,
-         deprecated_by="QuadFault-v1"),
-    Task("QuadFaultHover-v0", _HOVER, "random", 10.0, random_trajectory="hover",
-         initial_spread=HOVER_SPREAD, reward=REWARD_V0, max_episode_steps=1000,
-         deprecated_by="QuadFaultHover-v1"),
+    Task(
+        "QuadFault-v0",
+        _CIRCLE,
+        "combined",
+        20.0,
+        reward=REWARD_V0,
+        max_episode_steps=2000,
+        deprecated_by="QuadFault-v1",
+    ),
+    Task(
+        "QuadFaultHover-v0",
+        _HOVER,
+        "random",
+        10.0,
+        random_trajectory="hover",
+        initial_spread=HOVER_SPREAD,
+        reward=REWARD_V0,
+        max_episode_steps=1000,
+        deprecated_by="QuadFaultHover-v1",
+    ),
 )
 
 
@@ -131,8 +170,10 @@ def registered_kwargs(env_id: str, **overrides) -> dict:
     except gym.error.Error as exc:
         raise ConfigError(f"environment {env_id!r}: {exc}") from None
     if spec.vector_entry_point != VECTOR_ENTRY_POINT:
-        raise ConfigError(f"{env_id!r} is not a QuadFault environment id (its vector entry "
-                          f"point is {spec.vector_entry_point!r})")
+        raise ConfigError(
+            f"{env_id!r} is not a QuadFault environment id (its vector entry "
+            f"point is {spec.vector_entry_point!r})"
+        )
     kwargs = dict(spec.kwargs, **overrides)
     if spec.max_episode_steps is not None:
         kwargs.setdefault("max_episode_steps", spec.max_episode_steps)
@@ -147,4 +188,13 @@ def task(env_id: str) -> Task:
     raise KeyError(f"unknown task {env_id!r}; known: {', '.join(t.id for t in TASKS)}")
 
 
-__all__ = ["HOVER_SPREAD", "TASK_SPREAD", "registered_kwargs", "REWARD_V0", "REWARD_V1", "TASKS", "Task", "task"]
+__all__ = [
+    "HOVER_SPREAD",
+    "TASK_SPREAD",
+    "registered_kwargs",
+    "REWARD_V0",
+    "REWARD_V1",
+    "TASKS",
+    "Task",
+    "task",
+]

@@ -7,7 +7,7 @@ trajectory / schedule -- with random scenarios, one per sub-env. Instead each ro
 of :data:`WINDOW` control steps: the reference and feed-forward at the step boundaries
 ``t = (k S) dt`` and the efficiency at the substeps ``t = (k S + j) dt``, evaluated with one
 vectorised call per distinct trajectory (per distinct schedule) and window start, and the
-feed-forward arithmetic of :meth:`~quadfault.controller.GeometricController.feedforward_rates`
+feed-forward arithmetic of :meth:`~quadfault.model.controller.GeometricController.feedforward_rates`
 over all refilled rows at once (its times hold the boundaries, so each trajectory is called
 once). A row whose step leaves its window, or that was reset, is refilled.
 """
@@ -17,9 +17,9 @@ from __future__ import annotations
 import numpy as np
 
 from quad_fault_env.envs.episode_start import RowTrajectories
-from quadfault.controller import ControllerConfig, GeometricController
-from quadfault.scenarios import at_times
-from quadfault.vehicle import Vehicle
+from quadfault.model.controller import ControllerConfig, GeometricController
+from quadfault.model.scenarios import at_times
+from quadfault.model.vehicle import Vehicle
 
 #: control steps per window
 WINDOW = 16
@@ -51,8 +51,16 @@ class RowTimeTables:
             longer windows: fewer refills).
     """
 
-    def __init__(self, n_rows: int, substeps: int, dt: float, vehicle: Vehicle,
-                 controller: ControllerConfig, window: int = WINDOW, feedforward: bool = True):
+    def __init__(
+        self,
+        n_rows: int,
+        substeps: int,
+        dt: float,
+        vehicle: Vehicle,
+        controller: ControllerConfig,
+        window: int = WINDOW,
+        feedforward: bool = True,
+    ):
         self.S, self.dt, self.window = int(substeps), float(dt), int(window)
         self.vehicle, self.config = vehicle, controller
         #: tabulate b1d and the feed-forward rates (rows 3-5: only a controller reads them)
@@ -75,8 +83,9 @@ class RowTimeTables:
         self.k0[rows] = _STALE
         self.first[rows] = _STALE
 
-    def ensure(self, k: np.ndarray, traj_key, sched_key, trajectories, schedules,
-               last: int) -> None:
+    def ensure(
+        self, k: np.ndarray, traj_key, sched_key, trajectories, schedules, last: int
+    ) -> None:
         """Make ``k - k0`` lie in ``[0, last]`` for every row (refilling from ``k``).
 
         ``trajectories[key]`` / ``schedules[key]`` are the callables of ``traj_key`` /
@@ -91,8 +100,9 @@ class RowTimeTables:
         for _, k0, idx in _combo_groups(np.zeros(len(rows), dtype=np.int64), kr):
             r = rows[idx]
             keys, inv = np.unique(traj_key[r], return_inverse=True)
-            block = self._reference_block([trajectories[key] for key in keys.tolist()],
-                                          (np.arange(k0, k0 + W + 1) * S) * dt)  # t = (k S) dt
+            block = self._reference_block(
+                [trajectories[key] for key in keys.tolist()], (np.arange(k0, k0 + W + 1) * S) * dt
+            )  # t = (k S) dt
             c = block.shape[2]
             if len(r) == len(self.k0) and len(keys) == 1:
                 self.refs[:, :, :c] = block[0]

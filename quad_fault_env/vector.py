@@ -1,7 +1,7 @@
 """QuadFaultVectorEnv: N quadrotors stepped in one call (a gymnasium VectorEnv).
 
 The physics is the core model's one closed loop over the sub-envs: one
-:class:`quadfault.flight.Flight` of N vehicles runs the same per-vehicle kernel the single
+:class:`quadfault.model.flight.Flight` of N vehicles runs the same per-vehicle kernel the single
 :class:`~quad_fault_env.envs.quad_fault.QuadFaultEnv` runs, in parallel over the vehicles
 (``prange``), one call per control step. The configuration is one: the keywords are those of
 the single env, validated once (:attr:`QuadFaultVectorEnv.single_env`, never stepped); the
@@ -30,27 +30,34 @@ import os
 
 import gymnasium as gym
 import numpy as np
-from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from quad_fault_env.envs.config import (INFO_LEVELS, REASONS, check_choice, check_keywords,
-                                        keywords_of, light_info, validate_action)
-from quad_fault_env.envs.scenario_source import GENERATORS
-from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
 from estimators.registry import estimator_names, estimator_spec, make_estimator
+from quad_fault_env.envs.config import (
+    INFO_LEVELS,
+    REASONS,
+    check_choice,
+    check_keywords,
+    keywords_of,
+    light_info,
+    validate_action,
+)
+from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
+from quad_fault_env.envs.scenario_source import GENERATORS
 from quad_fault_env.estimation import NOMINAL_PRIOR_SD
 from quad_fault_env.observation import SD_MAX
 from quad_fault_env.time_tables import WINDOW, InternTable, RowTimeTables
 from quadfault import jit
-from quadfault.controller import GeometricController
-from quadfault.dynamics import RigidBodyState
-from quadfault.effects.sampling import describe
 from quadfault.errors import ConfigError
-from quadfault.flight import Flight
-from quadfault.motors import MotorModel
-from quadfault.plant import Plant
+from quadfault.model.controller import GeometricController
+from quadfault.model.dynamics import RigidBodyState
+from quadfault.model.effects.sampling import describe
+from quadfault.model.flight import Flight
+from quadfault.model.motors import MotorModel
+from quadfault.model.plant import Plant
 
 #: batch size from which the vector env runs numba's parallel kernels on numba's threads by
 #: default; below it, on the calling thread alone (measured: ``benchmarks/numba_threads.py``,
@@ -58,8 +65,9 @@ from quadfault.plant import Plant
 THREADS_MIN_BATCH = 16384
 #: the estimators the vector env takes: those with a batched form, the nominal belief and the
 #: oracle (both computed here)
-VECTOR_ESTIMATORS = (estimator_names(batched=True) + estimator_names(role="nominal")
-                     + estimator_names(role="oracle"))
+VECTOR_ESTIMATORS = (
+    estimator_names(batched=True) + estimator_names(role="nominal") + estimator_names(role="oracle")
+)
 AUTORESET_MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
 
 
@@ -113,35 +121,59 @@ class QuadFaultVectorEnv(VectorEnv):
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
-    def __init__(self, num_envs: int = 1, estimator: str = "irls", scenario="combined", *,
-                 estimator_kwargs=None, max_episode_steps: int | None = None,
-                 autoreset_mode: str = "next_step", numba_threads="auto", info: str = "light",
-                 **kwargs):
-        check_keywords(kwargs, keywords_of(QuadFaultVectorEnv.__init__)
-                       + keywords_of(QuadFaultEnv.__init__), type(self).__name__)
-        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
-                or num_envs < 1:
+    def __init__(
+        self,
+        num_envs: int = 1,
+        estimator: str = "irls",
+        scenario="combined",
+        *,
+        estimator_kwargs=None,
+        max_episode_steps: int | None = None,
+        autoreset_mode: str = "next_step",
+        numba_threads="auto",
+        info: str = "light",
+        **kwargs,
+    ):
+        check_keywords(
+            kwargs,
+            keywords_of(QuadFaultVectorEnv.__init__) + keywords_of(QuadFaultEnv.__init__),
+            type(self).__name__,
+        )
+        if (
+            isinstance(num_envs, bool)
+            or not isinstance(num_envs, (int, np.integer))
+            or num_envs < 1
+        ):
             raise ConfigError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         if kwargs.get("render_mode") is not None:
             raise ConfigError("QuadFaultVectorEnv does not render; use QuadFaultEnv")
         if not isinstance(estimator, str) or estimator not in VECTOR_ESTIMATORS:
-            raise ConfigError(f"estimator must be one of {', '.join(VECTOR_ESTIMATORS)} in the "
-                              f"vector env, got {estimator!r}")
+            raise ConfigError(
+                f"estimator must be one of {', '.join(VECTOR_ESTIMATORS)} in the "
+                f"vector env, got {estimator!r}"
+            )
         if autoreset_mode not in AUTORESET_MODES:
-            raise ConfigError(f"autoreset_mode must be one of {sorted(AUTORESET_MODES)}, "
-                              f"got {autoreset_mode!r}")
+            raise ConfigError(
+                f"autoreset_mode must be one of {sorted(AUTORESET_MODES)}, got {autoreset_mode!r}"
+            )
         #: what ``info`` holds: ``"light"`` (the termination reasons) or ``"full"``
         self.info_level = check_choice("info", info, INFO_LEVELS)
-        if max_episode_steps is not None and not (isinstance(max_episode_steps, int)
-                                                  and max_episode_steps >= 1):
-            raise ConfigError(f"max_episode_steps must be an integer >= 1, "
-                              f"got {max_episode_steps!r}")
+        if max_episode_steps is not None and not (
+            isinstance(max_episode_steps, int) and max_episode_steps >= 1
+        ):
+            raise ConfigError(
+                f"max_episode_steps must be an integer >= 1, got {max_episode_steps!r}"
+            )
         if numba_threads == "auto":
             numba_threads = default_threads(int(num_envs))
-        elif numba_threads is not None and (isinstance(numba_threads, bool) or not isinstance(
-                numba_threads, (int, np.integer)) or numba_threads < 1):
-            raise ConfigError(f"numba_threads must be 'auto', None or an integer >= 1, "
-                              f"got {numba_threads!r}")
+        elif numba_threads is not None and (
+            isinstance(numba_threads, bool)
+            or not isinstance(numba_threads, (int, np.integer))
+            or numba_threads < 1
+        ):
+            raise ConfigError(
+                f"numba_threads must be 'auto', None or an integer >= 1, got {numba_threads!r}"
+            )
         #: numba threads of this env's steps and resets (None: the caller's count)
         self.numba_threads = None if numba_threads is None else int(numba_threads)
         self.num_envs = N = int(num_envs)
@@ -160,8 +192,9 @@ class QuadFaultVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, N)
         self.estimator = None
         if estimator_spec(estimator).batched is not None:
-            self.estimator = make_estimator(estimator, self.vehicle, num=N,
-                                            **(estimator_kwargs or {}))
+            self.estimator = make_estimator(
+                estimator, self.vehicle, num=N, **(estimator_kwargs or {})
+            )
         # the single env's plant (MotorModel(thrust_noise): its default saturation), N of it
         self.plant = Plant(self.vehicle, MotorModel(), dt=self.dt, n_vehicles=N)
         self.flight = Flight(self.plant, e0.sensor_noise)
@@ -170,8 +203,14 @@ class QuadFaultVectorEnv(VectorEnv):
         self._controller = GeometricController(self.vehicle, None, e0.controller_config)
         #: the geometric controller runs in the step (residual actions)
         self._uses_controller = e0.action_config.mode == "residual"
-        self._tables = RowTimeTables(N, self.substeps, self.dt, self.vehicle,
-                                     e0.controller_config, feedforward=self._uses_controller)
+        self._tables = RowTimeTables(
+            N,
+            self.substeps,
+            self.dt,
+            self.vehicle,
+            e0.controller_config,
+            feedforward=self._uses_controller,
+        )
         self.flight.use_efficiency(self._tables.eta, self._tables.first)
         n = self.vehicle.n_rotors
         self.eta_hat, self.eta_sd = np.ones((N, n)), np.full((N, n), np.nan)
@@ -260,13 +299,18 @@ class QuadFaultVectorEnv(VectorEnv):
         self.flight.set_thrust_noise(rows, sigma)
         keys, inv = np.unique(self._traj_key[rows], return_inverse=True)
         items = [self._trajectories.items[int(key)] for key in keys]
-        start, ref0 = start_states(items, inv.ravel(), self.vehicle, e0.controller_config,
-                                   e0.initial_spread, u)
+        start, ref0 = start_states(
+            items, inv.ravel(), self.vehicle, e0.controller_config, e0.initial_spread, u
+        )
         # the rows' flights: their generators, initial states, measurements, zero commands
         self.flight.reset([self._rngs[i] for i in rows.tolist()], rows=rows, state=start)
         keys, inv = np.unique(self._sched_key[rows], return_inverse=True)
-        eta0 = np.array([np.broadcast_to(np.asarray(self._schedules.items[key](0.0), float), (n,))
-                         for key in keys.tolist()])
+        eta0 = np.array(
+            [
+                np.broadcast_to(np.asarray(self._schedules.items[key](0.0), float), (n,))
+                for key in keys.tolist()
+            ]
+        )
         self.steps[rows] = 0
         self._tables.invalidate(rows)
         self._ensure_tables(self.steps, WINDOW - 1)  # the rows' windows from t = 0
@@ -312,8 +356,14 @@ class QuadFaultVectorEnv(VectorEnv):
 
     # -- functions of time: per-row windows (quad_fault_env.time_tables) ---------------------
     def _ensure_tables(self, k: np.ndarray, last: int) -> None:
-        self._tables.ensure(k, self._traj_key, self._sched_key, self._trajectories.items,
-                            self._schedules.items, last)
+        self._tables.ensure(
+            k,
+            self._traj_key,
+            self._sched_key,
+            self._trajectories.items,
+            self._schedules.items,
+            last,
+        )
 
     def _references_now(self):
         """Reference position, velocity, acceleration (N, 3) at each row's current time."""
@@ -332,13 +382,14 @@ class QuadFaultVectorEnv(VectorEnv):
         f_ctrl = None
         if self._uses_controller:
             m = self.meas
-            f_ctrl = self._controller.commands(m.p, m.v, m.R, m.w,
-                                               self._tables.references(self.steps))
+            f_ctrl = self._controller.commands(
+                m.p, m.v, m.R, m.w, self._tables.references(self.steps)
+            )
         return cfg.commands(a, self.vehicle, f_ctrl, self.eta_hat, e0.compensate, e0.allocator)
 
     def _substeps(self, commands: np.ndarray, ts: np.ndarray, active: np.ndarray) -> None:
         """The control step's physics substeps of the ``active`` rows with ``commands`` held,
-        in one call of the loop (:meth:`quadfault.flight.Flight.step`); then the batched
+        in one call of the loop (:meth:`quadfault.model.flight.Flight.step`); then the batched
         estimator's updates on the measurements it recorded every ``estimator_stride``
         substeps (the estimate does not act on the physics within a step)."""
         N, S, n = self.num_envs, self.substeps, self.vehicle.n_rotors
@@ -350,8 +401,9 @@ class QuadFaultVectorEnv(VectorEnv):
         self.flight.step(commands, S, record=out, active=active)
         if self.estimator is not None:
             for r, j in enumerate(range(0, S, stride)):
-                res = self.estimator.update(ts[:, j], out.p[:, r], out.v[:, r], out.R[:, r],
-                                            out.w[:, r], self.f_cmd)
+                res = self.estimator.update(
+                    ts[:, j], out.p[:, r], out.v[:, r], out.R[:, r], out.w[:, r], self.f_cmd
+                )
                 self.eta_hat, self.eta_sd = res.eta, res.sd
                 self.status = res.status_names
         if self.estimator_name == "truth":
@@ -364,8 +416,10 @@ class QuadFaultVectorEnv(VectorEnv):
         if not self._started:
             raise gym.error.ResetNeeded("call reset() before step()")
         a = self._check_actions(actions)
-        with np.errstate(invalid="ignore", over="ignore", divide="ignore"), \
-                jit.threads(self.numba_threads):
+        with (
+            np.errstate(invalid="ignore", over="ignore", divide="ignore"),
+            jit.threads(self.numba_threads),
+        ):
             return self._step(a)
 
     def _step(self, a: np.ndarray):
@@ -402,8 +456,14 @@ class QuadFaultVectorEnv(VectorEnv):
                 self.flight.sense(on)
             if terminated.any():
                 self.flight.sense(terminated, noise=False)
-        reward = self.single_env.reward_config(state.p - refs[0], state.v - refs[1], self.f_cmd,
-                                            self.vehicle.rotor_max_thrust, terminated, a)
+        reward = self.single_env.reward_config(
+            state.p - refs[0],
+            state.v - refs[1],
+            self.f_cmd,
+            self.vehicle.rotor_max_thrust,
+            terminated,
+            a,
+        )
         done = terminated | truncated
         mode = self.metadata["autoreset_mode"]
         if any_resetting:
@@ -430,8 +490,15 @@ class QuadFaultVectorEnv(VectorEnv):
     def _observations(self, refs):
         """The sub-envs' observations (``ObservationLayout.flat`` over the batch)."""
         m, (pos, vel, acc) = self.meas, refs
-        flat = self.layout.flat(pos_err=m.p - pos, vel_err=m.v - vel, R=m.R, omega=m.w,
-                                eta_hat=self.eta_hat, eta_sd=self.eta_sd, ref_acc=acc)
+        flat = self.layout.flat(
+            pos_err=m.p - pos,
+            vel_err=m.v - vel,
+            R=m.R,
+            omega=m.w,
+            eta_hat=self.eta_hat,
+            eta_sd=self.eta_sd,
+            ref_acc=acc,
+        )
         return self.layout.split(flat) if self.single_env.observation_kind == "dict" else flat
 
     def _infos(self, refs, code) -> dict:
@@ -462,4 +529,10 @@ class QuadFaultVectorEnv(VectorEnv):
         self.single_env.close()
 
 
-__all__ = ["AUTORESET_MODES", "INFO_LEVELS", "THREADS_MIN_BATCH", "QuadFaultVectorEnv", "default_threads"]
+__all__ = [
+    "AUTORESET_MODES",
+    "INFO_LEVELS",
+    "THREADS_MIN_BATCH",
+    "QuadFaultVectorEnv",
+    "default_threads",
+]

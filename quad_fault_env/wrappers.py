@@ -26,12 +26,17 @@ import numpy as np
 
 from estimators.base import Estimate
 from quad_fault_env.envs.config import require_full_info
-from quad_fault_env.estimation import (TruthOracle, diagnostics_template, estimate_info,
-                                       estimate_sd, make_estimator)
+from quad_fault_env.estimation import (
+    TruthOracle,
+    diagnostics_template,
+    estimate_info,
+    estimate_sd,
+    make_estimator,
+)
 from quad_fault_env.observation import SD_MAX
 from quadfault.errors import ConfigError
-from quadfault.recording import Recording, write_recording
-from quadfault.rotation import rot_to_quat
+from quadfault.io.recording import Recording, write_recording
+from quadfault.model.rotation import rot_to_quat
 
 
 def _stream(info: dict, stride: int):
@@ -40,7 +45,7 @@ def _stream(info: dict, stride: int):
 
 def _flown(info: dict, key: str) -> np.ndarray:
     """The rows of a per-substep ``info`` array that belong to ``info["samples"]``."""
-    return np.asarray(info[key])[:len(info.get("samples", []))]
+    return np.asarray(info[key])[: len(info.get("samples", []))]
 
 
 def _prepare(estimator, env):
@@ -169,8 +174,14 @@ class EstimatorComparison(gym.Wrapper):
         stride: substep stride of the stream (default: the env's).
     """
 
-    def __init__(self, env, estimators: dict | None = None, stride: int | None = None,
-                 detection_fraction: float = 0.5, spike_pad: float = 0.03):
+    def __init__(
+        self,
+        env,
+        estimators: dict | None = None,
+        stride: int | None = None,
+        detection_fraction: float = 0.5,
+        spike_pad: float = 0.03,
+    ):
         require_full_info(env, type(self).__name__)
         super().__init__(env)
         base = env.unwrapped
@@ -200,7 +211,7 @@ class EstimatorComparison(gym.Wrapper):
     def step(self, action):
         obs, reward, terminated, truncated, info = self.env.step(action)
         stream = _stream(info, self.stride)
-        truth = _flown(info, "eta_true_samples")[::self.stride]
+        truth = _flown(info, "eta_true_samples")[:: self.stride]
         report = {}
         for name, est in self.estimators.items():
             estimate = None
@@ -209,9 +220,12 @@ class EstimatorComparison(gym.Wrapper):
                 self._scores[name].add(s.t, estimate.eta, eta_true)
                 self._sq[name] += (np.asarray(estimate.eta, dtype=float) - eta_true) ** 2
             if estimate is not None:
-                report[name] = {"eta": np.asarray(estimate.eta, dtype=float),
-                                "sd": estimate.sd, "status": estimate.status,
-                                "rmse": self._scores[name].running_rmse(self._sq[name])}
+                report[name] = {
+                    "eta": np.asarray(estimate.eta, dtype=float),
+                    "sd": estimate.sd,
+                    "status": estimate.status,
+                    "rmse": self._scores[name].running_rmse(self._sq[name]),
+                }
         info = dict(info, comparison=report)
         return obs, reward, terminated, truncated, info
 
@@ -222,13 +236,17 @@ class EstimatorComparison(gym.Wrapper):
         n = self.env.unwrapped.vehicle.n_rotors
         for name, sc in self._scores.items():
             if not sc.t:
-                out[name] = {"rmse": [math.nan] * n, "spike": None, "latency": [None] * n,
-                             "n_updates": 0}
+                out[name] = {
+                    "rmse": [math.nan] * n,
+                    "spike": None,
+                    "latency": [None] * n,
+                    "n_updates": 0,
+                }
                 continue
             t, eta, truth = np.array(sc.t), np.array(sc.eta), np.array(sc.truth)
             err = eta - truth
             out[name] = {
-                "rmse": np.sqrt(np.mean(err ** 2, axis=0)).tolist(),
+                "rmse": np.sqrt(np.mean(err**2, axis=0)).tolist(),
                 "spike": _spike(t, err, self._faults, self.spike_pad),
                 "latency": _latency(t, eta, truth, self._faults, self.detection_fraction, n),
                 "n_updates": len(t),
@@ -244,8 +262,11 @@ class EstimatorComparison(gym.Wrapper):
     def summary(self) -> dict:
         """``{"estimators": [names], "episodes": [score, ...], "current": score or None}``
         where a score is ``{name: {"rmse", "spike", "latency", "n_updates"}}``."""
-        return {"estimators": list(self.estimators), "episodes": list(self.episodes),
-                "current": self._score()}
+        return {
+            "estimators": list(self.estimators),
+            "episodes": list(self.episodes),
+            "current": self._score(),
+        }
 
 
 class RecordFlight(gym.Wrapper):
@@ -268,8 +289,9 @@ class RecordFlight(gym.Wrapper):
             raise ConfigError(f"{self.stem.parent}: folder does not exist")
         taken = sorted(self.stem.parent.glob(f"{self.stem.name}_[0-9][0-9][0-9].*"))
         if taken:
-            raise ConfigError(f"{taken[0]}: already exists; RecordFlight never overwrites, "
-                              "choose another path")
+            raise ConfigError(
+                f"{taken[0]}: already exists; RecordFlight never overwrites, choose another path"
+            )
         if frame not in ("NED", "ENU"):
             raise ConfigError(f"frame must be 'NED' or 'ENU', got {frame!r}")
         self.frame = frame
@@ -305,18 +327,31 @@ class RecordFlight(gym.Wrapper):
         t = np.array([x.t for x in s])
         R = np.array([x.R for x in s])
         sc = base.scenario
-        meta = {"scenario": sc.name, "seed": getattr(base, "np_random_seed", None),
-                "dt": base.dt, "control_period": base.control_period,
-                "thrust_noise": sc.thrust_noise,
-                "fault_windows": [[m, a, b if math.isfinite(b) else None]
-                                  for m, a, b in sc.fault_windows()]}
-        rec = Recording(t=t, omega=np.array([x.w for x in s]),
-                        thrust_cmd=np.array([x.f for x in s]), vehicle=base.vehicle,
-                        position=np.array([x.p for x in s]), velocity=np.array([x.v for x in s]),
-                        quaternion=rot_to_quat(R), accel=np.concatenate(rows["acc"]),
-                        vbat=None if sc.voltage is None else sc.voltage(t),
-                        eta_true=np.concatenate(rows["eta"]), frame="NED",
-                        source="quad_fault_env RecordFlight", meta=meta)
+        meta = {
+            "scenario": sc.name,
+            "seed": getattr(base, "np_random_seed", None),
+            "dt": base.dt,
+            "control_period": base.control_period,
+            "thrust_noise": sc.thrust_noise,
+            "fault_windows": [
+                [m, a, b if math.isfinite(b) else None] for m, a, b in sc.fault_windows()
+            ],
+        }
+        rec = Recording(
+            t=t,
+            omega=np.array([x.w for x in s]),
+            thrust_cmd=np.array([x.f for x in s]),
+            vehicle=base.vehicle,
+            position=np.array([x.p for x in s]),
+            velocity=np.array([x.v for x in s]),
+            quaternion=rot_to_quat(R),
+            accel=np.concatenate(rows["acc"]),
+            vbat=None if sc.voltage is None else sc.voltage(t),
+            eta_true=np.concatenate(rows["eta"]),
+            frame="NED",
+            source="quad_fault_env RecordFlight",
+            meta=meta,
+        )
         path = Path(f"{self.stem}_{len(self.paths):03d}.csv")
         write_recording(rec, path, frame=self.frame)
         self.paths.append(path)

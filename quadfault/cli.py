@@ -14,13 +14,15 @@ import sys
 
 #: name -> (module, one-line help)
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
-    "reproduce": ("estimators.paper.reproduce", "the paper's evaluation: IRLS vs EKF on the paper's "
-                  "scenarios; writes metrics.json, report.md and figures"),
-    "simulate": ("quadfault.cli_simulate", "fly the quadrotor through a scenario and write a "
-                 "recording"),
+    "reproduce": (
+        "estimators.paper.reproduce",
+        "the paper's evaluation: IRLS vs EKF on the paper's "
+        "scenarios; writes metrics.json, report.md and figures",
+    ),
+    "simulate": ("quadfault.sim.cli", "fly the quadrotor through a scenario and write a recording"),
     "estimate": ("estimators.cli", "run a motor-efficiency estimator over a recording"),
     "diagnose": ("quadfault.diagnosis.cli", "model-mismatch diagnosis of a recording"),
-    "import": ("quadfault.importers.cli", "convert a real flight log into a recording"),
+    "import": ("quadfault.io.importers.cli", "convert a real flight log into a recording"),
     "train": ("agents.train", "train a stable-baselines3 agent (needs the rl extra)"),
     "evaluate": ("agents.evaluate", "evaluate agents over a scenario suite"),
 }
@@ -74,8 +76,11 @@ def main(argv: list[str] | None = None) -> int:
         module = importlib.import_module(module_name)
     except ImportError as exc:
         missing = getattr(exc, "name", None) or str(exc)
-        return _error(prog, f"this command needs a package that is not installed ({missing}); "
-                            "see the README's install extras")
+        return _error(
+            prog,
+            f"this command needs a package that is not installed ({missing}); "
+            "see the README's install extras",
+        )
     parser = OneLineErrorParser(prog=prog, description=help_text)
     module.add_arguments(parser)
     add_common_arguments(parser)

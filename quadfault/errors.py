@@ -16,8 +16,15 @@ class RecordingError(QuadfaultError):
     The message names the file and, where relevant, the column or key and the row.
     """
 
-    def __init__(self, path, message: str, *, column: str | None = None,
-                 key: str | None = None, row: int | None = None):
+    def __init__(
+        self,
+        path,
+        message: str,
+        *,
+        column: str | None = None,
+        key: str | None = None,
+        row: int | None = None,
+    ):
         where = [str(path)]
         if column is not None:
             where.append(f"column '{column}'")

@@ -30,8 +30,9 @@ def _write_temp(path: Path, data: bytes) -> str:
     while True:
         tmp = str(path.parent / f".{path.name}.{secrets.token_hex(4)}.tmp")
         try:
-            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0),
-                         0o666)
+            fd = os.open(
+                tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666
+            )
             break
         except FileExistsError:  # pragma: no cover - a 32-bit name collision
             continue
@@ -90,8 +91,7 @@ def atomic_write_files(contents: dict, *, force: bool = False) -> list[Path]:
     temps = []
     try:
         for path, data in zip(paths, contents.values()):
-            temps.append(_write_temp(path, data.encode("utf-8") if isinstance(data, str)
-                                     else data))
+            temps.append(_write_temp(path, data.encode("utf-8") if isinstance(data, str) else data))
         with _sigint_deferred():
             for tmp, path in zip(temps, paths):
                 os.replace(tmp, path)

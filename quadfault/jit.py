@@ -14,8 +14,8 @@ first such call (:class:`InnerKernel`). Without numba the decorator leaves the f
 Python -- slow but correct -- and warns once. Batched paths run the same kernel under
 :data:`prange`. :func:`python` gives a kernel's interpreted form (the same code, with every
 kernel it calls interpreted too): the closed loop runs that way when it must call Python
-objects (the effects of ``quadfault.effects``), and a kernel written with plain arithmetic
-runs over whole arrays that way (``quadfault.dynamics.step_rk4`` with a Python wrench).
+objects (the effects of ``quadfault.model.effects``), and a kernel written with plain arithmetic
+runs over whole arrays that way (``quadfault.model.dynamics.step_rk4`` with a Python wrench).
 
 Cache: numba's on-disk cache checks only the source file of the function it compiled. Our
 kernels call compiled functions of other modules, so after an update that changes only a
@@ -57,8 +57,10 @@ _MARKERS = (b"quadfault.jit", b"numba")
 #: the one for the other
 _CONFIGURED, _USERS = "QUADFAULT_NUMBA_CACHE", "QUADFAULT_NUMBA_CACHE_USER"
 #: the one-line notice of a first compile (:func:`_compile_notice`)
-COMPILE_NOTICE = ("quadfault: compiling kernels, once per install (a minute or two; later "
-                  "runs load them from the cache{where})")
+COMPILE_NOTICE = (
+    "quadfault: compiling kernels, once per install (a minute or two; later "
+    "runs load them from the cache{where})"
+)
 
 _warned = False
 _noticed = False
@@ -94,8 +96,7 @@ def _compile_notice(stream=None) -> bool:
         return False
     _noticed = True
     cache = os.environ.get("NUMBA_CACHE_DIR")
-    print(COMPILE_NOTICE.format(where=f" in {cache}" if cache else ""), file=stream,
-          flush=True)
+    print(COMPILE_NOTICE.format(where=f" in {cache}" if cache else ""), file=stream, flush=True)
     return True
 
 
@@ -133,8 +134,12 @@ def _warn_once() -> None:
     global _warned
     if not _warned:
         _warned = True
-        warnings.warn("numba is not importable: quadfault's kernels run as plain Python "
-                      "(correct but slow); pip install numba", RuntimeWarning, stacklevel=3)
+        warnings.warn(
+            "numba is not importable: quadfault's kernels run as plain Python "
+            "(correct but slow); pip install numba",
+            RuntimeWarning,
+            stacklevel=3,
+        )
 
 
 def jit(*args, **kwargs):
@@ -168,8 +173,9 @@ def _inner(fn, options: dict):
     """``fn`` compiled as an :class:`InnerKernel` with numba options ``options``."""
     options = dict(options, nopython=True, no_cpython_wrapper=True)
     cache = options.pop("cache")
-    kernel = _inner_kernel_class()(py_func=fn, locals=options.pop("locals", None) or {},
-                                   targetoptions=options)
+    kernel = _inner_kernel_class()(
+        py_func=fn, locals=options.pop("locals", None) or {}, targetoptions=options
+    )
     if cache:
         kernel.enable_caching()
     return kernel
@@ -204,15 +210,17 @@ def _inner_kernel_class():
 
             def _with_wrapper(self):
                 f = self.py_func
-                copy = types.FunctionType(f.__code__, f.__globals__, f.__name__,
-                                          f.__defaults__, f.__closure__)
+                copy = types.FunctionType(
+                    f.__code__, f.__globals__, f.__name__, f.__defaults__, f.__closure__
+                )
                 copy.__qualname__ = f.__qualname__ + ".python"  # its own cache entry
                 copy.__doc__, copy.__kwdefaults__ = f.__doc__, f.__kwdefaults__
                 options = dict(self.targetoptions)
                 for name in ("no_cpython_wrapper", "nopython"):
                     options.pop(name, None)
-                return _numba().njit(cache=not isinstance(self._cache, _null_cache()),
-                                     locals=self.locals, **options)(copy)
+                return _numba().njit(
+                    cache=not isinstance(self._cache, _null_cache()), locals=self.locals, **options
+                )(copy)
 
         InnerKernel.__module__, InnerKernel.__qualname__ = __name__, "InnerKernel"
         _InnerKernel = InnerKernel
@@ -322,7 +330,9 @@ def cache_candidates(digest: str) -> list[Path]:
     user = _users_cache_dir()
     uid = os.getuid() if hasattr(os, "getuid") else "user"
     return ([Path(user) / f"quadfault-{digest}"] if user else []) + [
-        _user_cache() / digest, Path(tempfile.gettempdir()) / f"quadfault-numba-{uid}" / digest]
+        _user_cache() / digest,
+        Path(tempfile.gettempdir()) / f"quadfault-numba-{uid}" / digest,
+    ]
 
 
 def _users_cache_dir() -> str:
@@ -356,5 +366,13 @@ def configure_cache() -> str | None:
     return str(target)
 
 
-__all__ = ["AVAILABLE", "COMPILE_NOTICE", "InnerKernel", "jit", "prange", "python",
-           "set_threads", "threads", "cache_candidates", "configure_cache", "sources_digest"]
+__all__ = [
+    "COMPILE_NOTICE",
+    "jit",
+    "python",
+    "set_threads",
+    "threads",
+    "cache_candidates",
+    "configure_cache",
+    "sources_digest",
+]

@@ -21,5 +21,11 @@ def progress_bar(total=None, desc: str = "", unit: str = "it", disable: bool | N
     """A tqdm bar (or a no-op stand-in when disabled)."""
     from tqdm.auto import tqdm
 
-    return tqdm(total=total, desc=desc, unit=unit, disable=(not enabled()) if disable is None else disable,
-                dynamic_ncols=True, leave=False)
+    return tqdm(
+        total=total,
+        desc=desc,
+        unit=unit,
+        disable=(not enabled()) if disable is None else disable,
+        dynamic_ncols=True,
+        leave=False,
+    )

@@ -22,7 +22,7 @@ def test_agent_specs():
 
 
 def test_suites_build_and_restrict():
-    for name, entries in SUITES.items():
+    for _name, entries in SUITES.items():
         for e in entries:
             sc = e.scenario(0)
             assert sc.name == e.name and sc.duration > 0
@@ -48,8 +48,21 @@ def test_evaluation_deterministic_under_seed():
 
 def test_cli_writes_tables_and_plots_and_refuses_overwrite(tmp_path, capsys):
     out = tmp_path / "eval"
-    args = ["evaluate", "--agents", "geometric", "estimate-aware:none", "--suite", "smoke",
-            "--seeds", "0", "--duration", "0.3", "--out", str(out), "--quiet"]
+    args = [
+        "evaluate",
+        "--agents",
+        "geometric",
+        "estimate-aware:none",
+        "--suite",
+        "smoke",
+        "--seeds",
+        "0",
+        "--duration",
+        "0.3",
+        "--out",
+        str(out),
+        "--quiet",
+    ]
     assert main(args) == 0
     data = json.loads((out / "results.json").read_text())
     assert {r["agent"] for r in data["summary"]} == {"geometric", "estimate-aware:none"}
@@ -64,8 +77,7 @@ def test_cli_writes_tables_and_plots_and_refuses_overwrite(tmp_path, capsys):
 
 
 def test_cli_duplicate_agent_is_an_error(tmp_path, capsys):
-    assert main(["evaluate", "--agents", "geometric", "geometric", "--out",
-                 str(tmp_path)]) == 2
+    assert main(["evaluate", "--agents", "geometric", "geometric", "--out", str(tmp_path)]) == 2
     assert "twice" in capsys.readouterr().err
 
 
@@ -78,5 +90,6 @@ def test_evaluate_flies_env_policies_on_current_ids():
         warnings.simplefilter("always")
         flights = evaluate([AgentSpec.parse("policy:geometric")], "smoke", [0], duration=0.3)
     assert len(flights) == 1 and flights[0].metrics
-    assert not [w for w in caught if "out of date" in str(w.message)
-                or "-v0" in str(w.message)], [str(w.message) for w in caught]
+    assert not [w for w in caught if "out of date" in str(w.message) or "-v0" in str(w.message)], [
+        str(w.message) for w in caught
+    ]

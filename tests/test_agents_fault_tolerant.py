@@ -9,10 +9,10 @@ from agents.fault_tolerant import EstimateAwareController, FaultTolerantConfig, 
 from agents.rollout import FlightConfig, fly
 from agents.suite import single_motor_failure
 from quadfault.errors import ConfigError
-from quadfault.rotation import expm_so3
-from quadfault.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
-from quadfault.trajectory import Circle, Hover
-from quadfault.vehicle import Vehicle
+from quadfault.model.rotation import expm_so3
+from quadfault.model.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
+from quadfault.model.trajectory import Circle, Hover
+from quadfault.model.vehicle import Vehicle
 
 
 def _abrupt(duration=2.0, onset=0.5, level=0.5):

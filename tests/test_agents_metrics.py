@@ -33,7 +33,7 @@ def test_never_recovers_is_inf():
     assert recovery_times(t, e, [4.0]) == (math.inf,)
     # back below the threshold too late to hold for 0.5 s before the next onset
     t, e = _trace()
-    assert recovery_times(t, e, [4.0, 5.8]) [0] == math.inf
+    assert recovery_times(t, e, [4.0, 5.8])[0] == math.inf
 
 
 def test_threshold_floor():

@@ -5,8 +5,8 @@ import pytest
 
 from agents.policies import GeometricPolicy
 from quadfault.errors import ConfigError
-from quadfault.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
-from quadfault.trajectory import Hover
+from quadfault.model.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
+from quadfault.model.trajectory import Hover
 
 gym = pytest.importorskip("gymnasium")
 
@@ -16,8 +16,15 @@ def _env(action_mode, estimator="truth", duration=1.0):
 
     sched = EfficiencySchedule(ConstantEfficiency(), (AbruptFault(1, 0.2, level=0.5),))
     sc = Scenario("hover_fault", duration, sched, Hover(), thrust_noise=0.0)
-    return gym.make("QuadFault-v0", estimator=estimator, scenario=sc, duration=duration,
-                    action_mode=action_mode, max_episode_steps=int(duration * 100), info="full")
+    return gym.make(
+        "QuadFault-v0",
+        estimator=estimator,
+        scenario=sc,
+        duration=duration,
+        action_mode=action_mode,
+        max_episode_steps=int(duration * 100),
+        info="full",
+    )
 
 
 def _episode(env, policy, seed=0):
@@ -49,7 +56,7 @@ def test_estimate_aware_motor_policy_beats_nominal_motor_policy():
     nominal, _ = _episode(env, GeometricPolicy.from_env(env))
     aware, crashed = _episode(env, GeometricPolicy.from_env(env, estimate_aware=True))
     assert not crashed
-    assert np.sqrt(np.mean(aware ** 2)) < 0.8 * np.sqrt(np.mean(nominal ** 2))
+    assert np.sqrt(np.mean(aware**2)) < 0.8 * np.sqrt(np.mean(nominal**2))
 
 
 def test_motor_policy_hovers_at_nominal():

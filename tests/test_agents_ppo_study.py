@@ -13,14 +13,18 @@ from scipy import stats
 
 _SPEC = importlib.util.spec_from_file_location(
     "ppo_residual_study",
-    Path(__file__).resolve().parents[1] / "benchmarks" / "ppo_residual_study.py")
+    Path(__file__).resolve().parents[1] / "benchmarks" / "ppo_residual_study.py",
+)
 study = importlib.util.module_from_spec(_SPEC)
 _SPEC.loader.exec_module(study)
 
 
 def _args(**changes):
-    base = {"residual_scale": study.RESIDUAL_SCALE, "duration": 2.0,
-            "random_faults": study.RANDOM_FAULTS}
+    base = {
+        "residual_scale": study.RESIDUAL_SCALE,
+        "duration": 2.0,
+        "random_faults": study.RANDOM_FAULTS,
+    }
     return types.SimpleNamespace(**dict(base, **changes))
 
 
@@ -50,8 +54,9 @@ def test_episodes_draw_one_fault_of_the_study_severity():
 
     args = _args()
     with_kw, without_kw = study.env_kwargs(args, "irls"), study.env_kwargs(args, "none")
-    assert {k: v for k, v in with_kw.items() if k != "estimator"} == \
-        {k: v for k, v in without_kw.items() if k != "estimator"}
+    assert {k: v for k, v in with_kw.items() if k != "estimator"} == {
+        k: v for k, v in without_kw.items() if k != "estimator"
+    }
     seeds = study.episode_seeds(5, without_kw)
     assert seeds == sorted(set(seeds)) and seeds[0] >= 10_000
     env = gym.make(study.ENV_ID, **without_kw)
@@ -78,10 +83,12 @@ def _entry(rmse, crashed=None):
 
 def test_summary_pairs_by_seed_and_scores_crashes_separately():
     base = _entry([0.10, 0.20, 0.30], [False, False, True])
-    runs = {"with_estimate/0": _entry([0.05, 0.10, 0.10], [False, False, True]),
-            "with_estimate/1": _entry([0.07, 0.12, 0.10], [False, False, False]),
-            "without_estimate/0": _entry([0.09, 0.19, 0.30], [False, False, True]),
-            "without_estimate/1": _entry([0.08, 0.20, 0.28], [False, False, True])}
+    runs = {
+        "with_estimate/0": _entry([0.05, 0.10, 0.10], [False, False, True]),
+        "with_estimate/1": _entry([0.07, 0.12, 0.10], [False, False, False]),
+        "without_estimate/0": _entry([0.09, 0.19, 0.30], [False, False, True]),
+        "without_estimate/1": _entry([0.08, 0.20, 0.28], [False, False, True]),
+    }
     seeds = {"with_estimate": [0, 1], "without_estimate": [0, 1]}
     s = study._summary(_results(base, _entry([0.05, 0.05, 0.05]), runs), seeds)
     # primary score: flown RMSE; per-seed mean paired gains, CI over the two seeds
@@ -102,29 +109,45 @@ def test_summary_pairs_by_seed_and_scores_crashes_separately():
     assert w["rmse"]["gain"] == pytest.approx((d0 + d1) / 2) and w["seeds"] == [0, 1]
     assert s["baseline"]["rmse"]["gain"] == 0.0
     assert s["estimate_aware_reference"]["crash_rate"] == 0.0
-    md = study._markdown(s, {"env_id": study.ENV_ID, "random_faults": study.RANDOM_FAULTS,
-                             "timesteps": 10, "evaluated_seeds": seeds, "episodes": 3,
-                             "duration": 10.0, "residual_scale": 2.45, "missing_runs": [],
-                             "train_times": {}})
+    md = study._markdown(
+        s,
+        {
+            "env_id": study.ENV_ID,
+            "random_faults": study.RANDOM_FAULTS,
+            "timesteps": 10,
+            "evaluated_seeds": seeds,
+            "episodes": 3,
+            "duration": 10.0,
+            "residual_scale": 2.45,
+            "missing_runs": [],
+            "train_times": {},
+        },
+    )
     assert "| PPO with estimate |" in md and "With vs without the estimate" in md
 
 
 def test_summary_with_one_seed_gives_episode_intervals():
     base = _entry([0.1, 0.2, 0.3, 0.4])
-    runs = {"with_estimate/0": _entry([0.1, 0.1, 0.2, 0.3]),
-            "without_estimate/0": _entry([0.1, 0.2, 0.3, 0.3])}
-    s = study._summary(_results(base, base, runs), {"with_estimate": [0],
-                                                    "without_estimate": [0]})
+    runs = {
+        "with_estimate/0": _entry([0.1, 0.1, 0.2, 0.3]),
+        "without_estimate/0": _entry([0.1, 0.2, 0.3, 0.3]),
+    }
+    s = study._summary(_results(base, base, runs), {"with_estimate": [0], "without_estimate": [0]})
     assert s["with_estimate"]["ci_over"] == "episodes"
     assert s["with_estimate"]["rmse"]["ci95"] == pytest.approx(
-        study.t_interval([0.0, 0.1, 0.1, 0.1])[1])
+        study.t_interval([0.0, 0.1, 0.1, 0.1])[1]
+    )
 
 
 def test_check_distribution_flies_baseline_and_reference(tmp_path):
     """``--check-distribution`` trains nothing and writes the headroom table."""
     out = tmp_path / "dist"
-    assert study.main(["--check-distribution", "--episodes", "2", "--duration", "0.5",
-                       "--out", str(out)]) == 0
+    assert (
+        study.main(
+            ["--check-distribution", "--episodes", "2", "--duration", "0.5", "--out", str(out)]
+        )
+        == 0
+    )
     md = (out / "distribution.md").read_text()
     assert "| geometric (zero residual) |" in md and "estimate-aware allocation" in md
     assert not (out / "with_estimate").exists()
@@ -136,14 +159,15 @@ def test_check_distribution_flies_baseline_and_reference(tmp_path):
     argv = ["--check-distribution", "--episodes", "2", "--duration", "0.5", "--out", str(out)]
     assert study.main(argv) == 0
     assert "| geometric (zero residual) | 9.0000 |" in (out / "distribution.md").read_text()
-    assert study.main(argv[:4] + ["0.4"] + argv[5:]) == 0   # other duration: flown again
+    assert study.main(argv[:4] + ["0.4"] + argv[5:]) == 0  # other duration: flown again
     assert "| geometric (zero residual) | 9.0000 |" not in (out / "distribution.md").read_text()
 
 
 def test_ppo_kwargs_override_merges_policy_kwargs():
     assert study.ppo_kwargs(_args()) == study.PPO_KWARGS
-    merged = study.ppo_kwargs(_args(ppo_kwargs={"n_epochs": 5,
-                                                "policy_kwargs": {"log_std_init": -1.0}}))
+    merged = study.ppo_kwargs(
+        _args(ppo_kwargs={"n_epochs": 5, "policy_kwargs": {"log_std_init": -1.0}})
+    )
     assert merged["n_epochs"] == 5 and merged["learning_rate"] == study.PPO_KWARGS["learning_rate"]
     assert merged["policy_kwargs"] == {"log_std_init": -1.0, "net_arch": [128, 128]}
     assert study.PPO_KWARGS["policy_kwargs"]["log_std_init"] == -2.3  # not mutated

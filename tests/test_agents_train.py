@@ -33,10 +33,20 @@ def test_config_validation_and_file(tmp_path):
 
 
 def _tiny(algo):
-    kwargs = ({"n_steps": 32, "batch_size": 32, "n_epochs": 1} if algo == "ppo"
-              else {"learning_starts": 16, "batch_size": 16, "buffer_size": 1000})
-    return TrainConfig(algo=algo, env_kwargs=TINY_ENV, timesteps=64, eval_freq=32,
-                       eval_episodes=1, checkpoint_freq=32, algo_kwargs=kwargs)
+    kwargs = (
+        {"n_steps": 32, "batch_size": 32, "n_epochs": 1}
+        if algo == "ppo"
+        else {"learning_starts": 16, "batch_size": 16, "buffer_size": 1000}
+    )
+    return TrainConfig(
+        algo=algo,
+        env_kwargs=TINY_ENV,
+        timesteps=64,
+        eval_freq=32,
+        eval_episodes=1,
+        checkpoint_freq=32,
+        algo_kwargs=kwargs,
+    )
 
 
 @pytest.mark.rl
@@ -50,8 +60,14 @@ def test_smoke_training_and_round_trip(algo, tmp_path):
 
     model = train_one(_tiny(algo), 0, tmp_path / "run", quiet=True)
     assert model.num_timesteps == 64  # whole rollouts: exactly the budget
-    for name in ("model.zip", "vecnormalize.pkl", "train_config.json", "evaluations.npz",
-                 "best/best_model.zip", "best/vecnormalize.pkl"):
+    for name in (
+        "model.zip",
+        "vecnormalize.pkl",
+        "train_config.json",
+        "evaluations.npz",
+        "best/best_model.zip",
+        "best/vecnormalize.pkl",
+    ):
         assert (tmp_path / "run" / name).exists(), name
     assert list((tmp_path / "run" / "checkpoints").glob("*vecnormalize*"))
     loaded, venv = load_agent(tmp_path / "run")
@@ -59,8 +75,9 @@ def test_smoke_training_and_round_trip(algo, tmp_path):
     trained_vn = model.get_vec_normalize_env()
     np.testing.assert_allclose(venv.obs_rms.mean, trained_vn.obs_rms.mean)
     np.testing.assert_allclose(venv.obs_rms.var, trained_vn.obs_rms.var)
-    obs = trained_vn.normalize_obs(np.linspace(-1, 1, venv.observation_space.shape[0],
-                                               dtype=np.float32))
+    obs = trained_vn.normalize_obs(
+        np.linspace(-1, 1, venv.observation_space.shape[0], dtype=np.float32)
+    )
     a1, _ = model.predict(obs, deterministic=True)
     a2, _ = loaded.predict(obs, deterministic=True)
     np.testing.assert_allclose(a1, a2, atol=1e-6)
@@ -95,8 +112,9 @@ def test_missing_sb3_is_one_clean_error(monkeypatch, tmp_path, capsys):
     monkeypatch.setitem(sys.modules, "stable_baselines3", None)  # import now fails
     from quadfault.cli import main
 
-    assert main(["train", "--env-kwargs", '{"estimator": "none"}', "--out",
-                 str(tmp_path / "x")]) == 2
+    assert (
+        main(["train", "--env-kwargs", '{"estimator": "none"}', "--out", str(tmp_path / "x")]) == 2
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "rl" in err[0] and "stable-baselines3" in err[0]
 
@@ -110,8 +128,11 @@ def test_tensorboard_missing_is_clean(tmp_path, monkeypatch):
     from quadfault.errors import QuadfaultError
 
     find_spec = importlib.util.find_spec
-    monkeypatch.setattr(importlib.util, "find_spec",  # as without the tensorboard package
-                        lambda name, *a: None if name == "tensorboard" else find_spec(name, *a))
+    monkeypatch.setattr(
+        importlib.util,
+        "find_spec",  # as without the tensorboard package
+        lambda name, *a: None if name == "tensorboard" else find_spec(name, *a),
+    )
     cfg = replace(_tiny("ppo"), tensorboard=str(tmp_path / "tb"))
     with pytest.raises(QuadfaultError, match="tensorboard"):
         train_one(cfg, 0, tmp_path / "run", quiet=True)
@@ -135,8 +156,11 @@ def test_vector_env_training_writes_complete_files(tmp_path):
     assert type(model.get_env().venv).__name__ == "VecMonitor"
     checkpoints = sorted(p.name for p in (run / "checkpoints").iterdir())
     assert "model_64_steps.zip" in checkpoints and "model_vecnormalize_64_steps.pkl" in checkpoints
-    for path in [run / "best" / "best_model.zip", run / "model.zip",
-                 *(run / "checkpoints").glob("*.zip")]:
+    for path in [
+        run / "best" / "best_model.zip",
+        run / "model.zip",
+        *(run / "checkpoints").glob("*.zip"),
+    ]:
         assert zipfile.is_zipfile(path), path
     assert np.load(run / "evaluations.npz")["results"].shape[0] >= 2
     leftovers = [p for p in run.rglob("*") if p.name.startswith(".")]
@@ -163,12 +187,23 @@ def test_flags_override_the_config_file(tmp_path):
     from agents.train import add_arguments, config_from_args
 
     path = tmp_path / "cfg.json"
-    path.write_text(json.dumps({"algo": "sac", "timesteps": 500, "numba_threads": 2,
-                                "env_kwargs": {"estimator": "ekf", "duration": 2}}))
+    path.write_text(
+        json.dumps(
+            {
+                "algo": "sac",
+                "timesteps": 500,
+                "numba_threads": 2,
+                "env_kwargs": {"estimator": "ekf", "duration": 2},
+            }
+        )
+    )
     parser = argparse.ArgumentParser()
     add_arguments(parser)
-    cfg = config_from_args(parser.parse_args(
-        ["--config", str(path), "--timesteps", "700", "--estimator", "irls", "--out", "x"]))
+    cfg = config_from_args(
+        parser.parse_args(
+            ["--config", str(path), "--timesteps", "700", "--estimator", "irls", "--out", "x"]
+        )
+    )
     assert (cfg.algo, cfg.timesteps, cfg.numba_threads) == ("sac", 700, 2)
     assert cfg.env_kwargs == {"estimator": "irls", "duration": 2}
     cfg = config_from_args(parser.parse_args(["--numba-threads", "1", "--out", "x"]))
@@ -183,8 +218,13 @@ def test_torch_keeps_its_thread_count_through_vector_env_steps():
     torch = pytest.importorskip("torch")
     from agents.train import TrainConfig, make_vec_env, set_threads
 
-    config = TrainConfig(env_id="QuadFaultRotorLoss-v0", env_kwargs=dict(TINY_ENV), n_envs=2,
-                         vector_env=True, torch_threads=1)
+    config = TrainConfig(
+        env_id="QuadFaultRotorLoss-v0",
+        env_kwargs=dict(TINY_ENV),
+        n_envs=2,
+        vector_env=True,
+        torch_threads=1,
+    )
     before = torch.get_num_threads()
     try:
         env = make_vec_env(config, 0, 2)

@@ -25,8 +25,21 @@ def test_budget_rounds_to_the_nearest_whole_rollout():
 def _train(tmp_path, capsys, *extra, env=None, out="run"):
     from quadfault.cli import main
 
-    code = main(["train", "--env-kwargs", json.dumps(env or TINY_ENV), "--algo-kwargs", TINY_PPO,
-                 "--vector-env", "--n-envs", "2", "--out", str(tmp_path / out), *extra])
+    code = main(
+        [
+            "train",
+            "--env-kwargs",
+            json.dumps(env or TINY_ENV),
+            "--algo-kwargs",
+            TINY_PPO,
+            "--vector-env",
+            "--n-envs",
+            "2",
+            "--out",
+            str(tmp_path / out),
+            *extra,
+        ]
+    )
     captured = capsys.readouterr()
     return code, captured.out, captured.err
 
@@ -34,22 +47,37 @@ def _train(tmp_path, capsys, *extra, env=None, out="run"):
 @pytest.mark.rl
 def test_cli_runs_whole_rollouts_and_says_so(tmp_path, capsys):
     pytest.importorskip("stable_baselines3")
-    code, out, err = _train(tmp_path, capsys, "--timesteps", "200", "--eval-freq", "64",
-                            "--eval-episodes", "2")
+    code, out, err = _train(
+        tmp_path, capsys, "--timesteps", "200", "--eval-freq", "64", "--eval-episodes", "2"
+    )
     assert code == 0, err
     lines = out.splitlines()
-    assert lines[0] == ("ppo seed 0: training 192 steps = 3 rollouts of 2 envs x 32 steps "
-                        "(n_steps), the nearest whole rollout to the 200 asked")
+    assert lines[0] == (
+        "ppo seed 0: training 192 steps = 3 rollouts of 2 envs x 32 steps "
+        "(n_steps), the nearest whole rollout to the 200 asked"
+    )
     assert "ppo seed 0: 192 steps" in lines[1]
     saved = json.loads((tmp_path / "run" / "seed_0" / "train_config.json").read_text())
-    assert (saved["timesteps"], saved["timesteps_run"], saved["steps_per_rollout"]) == \
-        (200, 192, 64)
+    assert (saved["timesteps"], saved["timesteps_run"], saved["steps_per_rollout"]) == (
+        200,
+        192,
+        64,
+    )
     # evaluations after each rollout at or past a multiple of eval_freq, and at the end
     data = np.load(tmp_path / "run" / "seed_0" / "evaluations.npz")
     assert data["timesteps"].tolist() == [64, 128, 192]
     # a request that is a whole number of rollouts runs as asked, without the line
-    code, out, err = _train(tmp_path, capsys, "--timesteps", "128", "--eval-freq", "64",
-                            "--eval-episodes", "2", out="exact")
+    code, out, err = _train(
+        tmp_path,
+        capsys,
+        "--timesteps",
+        "128",
+        "--eval-freq",
+        "64",
+        "--eval-episodes",
+        "2",
+        out="exact",
+    )
     assert code == 0, err
     assert "rollouts of" not in out and "ppo seed 0: 128 steps" in out
 
@@ -59,19 +87,47 @@ def test_sac_budget_in_steps_and_episode_train_freq_refused(tmp_path, capsys):
     pytest.importorskip("stable_baselines3")
     from quadfault.cli import main
 
-    sac = ["train", "--algo", "sac", "--env-kwargs", json.dumps(TINY_ENV), "--eval-freq", "64",
-           "--eval-episodes", "1"]
-    code = main([*sac, "--timesteps", "50", "--out", str(tmp_path / "sac"), "--algo-kwargs",
-                 '{"learning_starts": 16, "batch_size": 16, "buffer_size": 500}'])
+    sac = [
+        "train",
+        "--algo",
+        "sac",
+        "--env-kwargs",
+        json.dumps(TINY_ENV),
+        "--eval-freq",
+        "64",
+        "--eval-episodes",
+        "1",
+    ]
+    code = main(
+        [
+            *sac,
+            "--timesteps",
+            "50",
+            "--out",
+            str(tmp_path / "sac"),
+            "--algo-kwargs",
+            '{"learning_starts": 16, "batch_size": 16, "buffer_size": 500}',
+        ]
+    )
     out, err = capsys.readouterr()
     assert code == 0 and "sac seed 0: 50 steps" in out and "rollouts of" not in out, err
-    code = main([*sac, "--timesteps", "50", "--out", str(tmp_path / "episodes"),
-                 "--algo-kwargs", '{"train_freq": [1, "episode"]}'])
+    code = main(
+        [
+            *sac,
+            "--timesteps",
+            "50",
+            "--out",
+            str(tmp_path / "episodes"),
+            "--algo-kwargs",
+            '{"train_freq": [1, "episode"]}',
+        ]
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "train_freq" in err[0]
     # a value SB3 itself rejects is one line too, not its traceback
-    code = main([*sac, "--out", str(tmp_path / "bad"), "--algo-kwargs",
-                 '{"train_freq": ["many", "step"]}'])
+    code = main(
+        [*sac, "--out", str(tmp_path / "bad"), "--algo-kwargs", '{"train_freq": ["many", "step"]}']
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "algo_kwargs rejected by SAC" in err[0]
 
@@ -82,8 +138,9 @@ def test_dict_observation_picks_multi_input_policy(tmp_path, capsys):
     from agents.train import load_agent
 
     env = dict(TINY_ENV, observation="dict")
-    code, out, err = _train(tmp_path, capsys, "--timesteps", "64", "--eval-freq", "64",
-                            "--eval-episodes", "2", env=env)
+    code, out, err = _train(
+        tmp_path, capsys, "--timesteps", "64", "--eval-freq", "64", "--eval-episodes", "2", env=env
+    )
     assert code == 0, err
     model, venv = load_agent(tmp_path / "run" / "seed_0")
     assert type(model.policy).__name__ == "MultiInputActorCriticPolicy"
@@ -94,10 +151,21 @@ def test_dict_observation_picks_multi_input_policy(tmp_path, capsys):
     saved = json.loads((tmp_path / "run" / "seed_0" / "train_config.json").read_text())
     assert saved["policy"] == "MultiInputPolicy"
     # an explicit policy that cannot read the observation: one line, exit 2, nothing trained
-    for policy, observation in (("MlpPolicy", "dict"), ("MultiInputPolicy", "flat"),
-                                ("CnnPolicy", "flat")):
-        code, _, err = _train(tmp_path, capsys, "--timesteps", "64", "--policy", policy,
-                              env=dict(TINY_ENV, observation=observation), out=policy)
+    for policy, observation in (
+        ("MlpPolicy", "dict"),
+        ("MultiInputPolicy", "flat"),
+        ("CnnPolicy", "flat"),
+    ):
+        code, _, err = _train(
+            tmp_path,
+            capsys,
+            "--timesteps",
+            "64",
+            "--policy",
+            policy,
+            env=dict(TINY_ENV, observation=observation),
+            out=policy,
+        )
         lines = err.strip().splitlines()
         assert code == 2 and len(lines) == 1 and policy in lines[0], err
         assert not (tmp_path / policy / "seed_0" / "model.zip").exists()
@@ -148,18 +216,49 @@ def test_learning_curve_over_seeds_with_the_baseline(tmp_path, capsys):
     pytest.importorskip("stable_baselines3")
     from agents.learning_curve import curve_data, matching_runs
 
-    code, out, err = _train(tmp_path, capsys, "--timesteps", "128", "--eval-freq", "64",
-                            "--eval-episodes", "2", "--seeds", "0", "1")
+    code, out, err = _train(
+        tmp_path,
+        capsys,
+        "--timesteps",
+        "128",
+        "--eval-freq",
+        "64",
+        "--eval-episodes",
+        "2",
+        "--seeds",
+        "0",
+        "1",
+    )
     assert code == 0, err
     png = tmp_path / "run" / "learning_curve.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert f"learning curve over 2 seed(s) -> {png}" in out
     # a seed trained later into the same folder joins; other settings are left out and named
-    code, out, err = _train(tmp_path, capsys, "--timesteps", "128", "--eval-freq", "64",
-                            "--eval-episodes", "2", "--seeds", "2")
+    code, out, err = _train(
+        tmp_path,
+        capsys,
+        "--timesteps",
+        "128",
+        "--eval-freq",
+        "64",
+        "--eval-episodes",
+        "2",
+        "--seeds",
+        "2",
+    )
     assert code == 0 and "learning curve over 3 seed(s)" in out, err
-    code, out, err = _train(tmp_path, capsys, "--timesteps", "64", "--eval-freq", "64",
-                            "--eval-episodes", "2", "--seeds", "3")
+    code, out, err = _train(
+        tmp_path,
+        capsys,
+        "--timesteps",
+        "64",
+        "--eval-freq",
+        "64",
+        "--eval-episodes",
+        "2",
+        "--seeds",
+        "3",
+    )
     assert code == 0 and "over 1 seed(s)" in out and "left out 3 run(s)" in out, err
     saved = json.loads((tmp_path / "run" / "seed_0" / "train_config.json").read_text())
     runs, other = matching_runs(tmp_path / "run", saved)

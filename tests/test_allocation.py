@@ -4,10 +4,16 @@ import numpy as np
 import pytest
 from scipy.optimize import lsq_linear
 
-from quadfault.allocation import (EXACT, WEIGHTED, YAW_RELEASED, AllocationConfig,
-                               EstimateAwareAllocator, guard_eta)
 from quadfault.errors import ConfigError
-from quadfault.vehicle import Vehicle
+from quadfault.model.allocation import (
+    EXACT,
+    WEIGHTED,
+    YAW_RELEASED,
+    AllocationConfig,
+    EstimateAwareAllocator,
+    guard_eta,
+)
+from quadfault.model.vehicle import Vehicle
 
 VEH = Vehicle()
 FMAX = VEH.rotor_max_thrust

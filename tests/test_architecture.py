@@ -15,12 +15,15 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
+
 def test_cli_help_does_not_import_numpy():
-    code = ("import sys, contextlib, io\n"
-            "from quadfault import cli\n"
-            "with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):\n"
-            "    cli.main(['--help'])\n"
-            "print('numpy' in sys.modules)")
+    code = (
+        "import sys, contextlib, io\n"
+        "from quadfault import cli\n"
+        "with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):\n"
+        "    cli.main(['--help'])\n"
+        "print('numpy' in sys.modules)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
     assert out.stdout.strip() == "False", out.stderr
 
@@ -98,53 +101,104 @@ def test_the_packages_are_layered():
     point names the upper packages' subcommand modules as strings, not imports)."""
     graph = _import_graph()
     rank = {pkg: k for k, pkg in enumerate(PACKAGES)}
-    bad = sorted(f"{name} imports {dep}" for name, deps in graph.items() for dep in deps
-                 if rank[dep.split(".")[0]] > rank[name.split(".")[0]])
+    bad = sorted(
+        f"{name} imports {dep}"
+        for name, deps in graph.items()
+        for dep in deps
+        if rank[dep.split(".")[0]] > rank[name.split(".")[0]]
+    )
     assert "quad_fault_env" in graph["agents.env_rollout"]  # the check sees a package's edges
     assert not bad, "\n".join(bad)
 
 
 def test_the_import_graph_has_no_cycles():
     graph = _import_graph()
-    assert "estimators.irls" in graph and "quadfault.sample" in graph
+    assert "estimators.irls" in graph and "quadfault.io.sample" in graph
     assert _cycles({"a": {"b"}, "b": {"a"}, "c": set()}) == [["a", "b"]]  # the check works
     assert _cycles(graph) == []
 
 
-@pytest.mark.parametrize("module", ["quadfault.sample", "estimators.base", "estimators.irls",
-                                    "estimators.ekf", "estimators.batched",
-                                    "estimators.paper.reproduce"])
+@pytest.mark.parametrize(
+    "module",
+    [
+        "quadfault.io.sample",
+        "estimators.base",
+        "estimators.irls",
+        "estimators.ekf",
+        "estimators.batched",
+        "estimators.paper.reproduce",
+    ],
+)
 def test_modules_import_on_their_own(module):
     """Each entry point imports in a fresh interpreter (no order-dependent import)."""
-    out = subprocess.run([sys.executable, "-c", f"import {module}"], capture_output=True,
-                         text=True, cwd=ROOT, check=False)
+    out = subprocess.run(
+        [sys.executable, "-c", f"import {module}"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        check=False,
+    )
     assert out.returncode == 0, out.stderr
 
 
 def test_the_core_does_not_load_the_estimators():
-    code = ("import sys, quadfault.sample, quadfault.recording\n"
-            "import quadfault.importers.flight_analysis\n"
-            "print(sorted(m for m in sys.modules if m.split('.')[0] in "
-            "('estimators', 'quad_fault_env', 'agents')))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
-                         check=False)
+    code = (
+        "import sys, quadfault.io.sample, quadfault.io.recording\n"
+        "import quadfault.io.importers.px4_ulog\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in "
+        "('estimators', 'quad_fault_env', 'agents')))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=False
+    )
     assert out.stdout.strip() == "[]", out.stderr
 
 
 # the layers of the quadfault package ---------------------------------------------------
 #: lowest first: a module imports (lazy imports included) only its own layer and those below
 LAYERS = (
-    ("foundation", ("quadfault", "quadfault.errors", "quadfault.jit", "quadfault.progress",
-                    "quadfault.fileio", "quadfault.rotation", "quadfault.vehicle",
-                    "quadfault.frames", "quadfault.sidecar", "quadfault.sample",
-                    "quadfault.trajectory")),
-    ("effects", ("quadfault.effects",)),
-    ("model", ("quadfault.dynamics", "quadfault.motors", "quadfault.sensors",
-               "quadfault.controller", "quadfault.closed_loop", "quadfault.plant",
-               "quadfault.flight", "quadfault.allocation", "quadfault.scenarios",
-               "quadfault.task_scenarios", "quadfault.recording")),
-    ("applications", ("quadfault.simulator", "quadfault.diagnosis", "quadfault.importers",
-                      "quadfault.cli", "quadfault.cli_simulate")),
+    (
+        "foundation",
+        (
+            "quadfault",
+            "quadfault._moved",
+            "quadfault.errors",
+            "quadfault.jit",
+            "quadfault.progress",
+            "quadfault.fileio",
+        ),
+    ),
+    (
+        "model basics",
+        (
+            "quadfault.model",
+            "quadfault.model.rotation",
+            "quadfault.model.vehicle",
+            "quadfault.model.frames",
+            "quadfault.model.sidecar",
+            "quadfault.model.trajectory",
+            "quadfault.model.generator_table",
+        ),
+    ),
+    ("effects", ("quadfault.model.effects",)),
+    (
+        "model",
+        (
+            "quadfault.model.dynamics",
+            "quadfault.model.motors",
+            "quadfault.model.sensors",
+            "quadfault.model.controller",
+            "quadfault.model.closed_loop",
+            "quadfault.model.plant",
+            "quadfault.model.flight",
+            "quadfault.model.allocation",
+            "quadfault.model.scenarios",
+            "quadfault.model.task_scenarios",
+        ),
+    ),
+    ("io", ("quadfault.io",)),
+    ("diagnosis", ("quadfault.diagnosis",)),
+    ("applications", ("quadfault.sim", "quadfault.cli")),
 )
 
 
@@ -153,8 +207,9 @@ def _layer(module: str) -> int:
     best = None
     for k, (_, members) in enumerate(LAYERS):
         for m in members:
-            if (module == m or module.startswith(m + ".")) and (best is None
-                                                                 or len(m) > len(best[1])):
+            if (module == m or module.startswith(m + ".")) and (
+                best is None or len(m) > len(best[1])
+            ):
                 best = (k, m)
     assert best is not None, f"{module} is in no layer of LAYERS"
     return best[0]
@@ -171,17 +226,30 @@ def test_the_model_sits_below_the_applications():
             continue
         for dep in deps:
             if dep.split(".")[0] == "quadfault" and _layer(dep) > _layer(name):
-                bad.append(f"{name} ({LAYERS[_layer(name)][0]}) imports {dep} "
-                           f"({LAYERS[_layer(dep)][0]})")
-    assert _layer("quadfault.effects.motor_lag") < _layer("quadfault.dynamics")  # the check
+                bad.append(
+                    f"{name} ({LAYERS[_layer(name)][0]}) imports {dep} ({LAYERS[_layer(dep)][0]})"
+                )
+    assert _layer("quadfault.model.effects.motor_lag") < _layer(
+        "quadfault.model.dynamics"
+    )  # the check
     assert not bad, "\n".join(sorted(bad))
 
 
 #: third-party modules a product module may import inside a function: optional extras and
 #: heavy ones only some commands need (plots, progress bars, the compiler's own loader, the RL
 #: stack, video)
-OPTIONAL = {"matplotlib", "pyulog", "pymavlink", "numba", "tqdm", "torch", "stable_baselines3",
-            "sb3_contrib", "ray", "imageio"}
+OPTIONAL = {
+    "matplotlib",
+    "pyulog",
+    "pymavlink",
+    "numba",
+    "tqdm",
+    "torch",
+    "stable_baselines3",
+    "sb3_contrib",
+    "ray",
+    "imageio",
+}
 
 
 def _function_imports(path: Path):
@@ -226,8 +294,8 @@ def test_each_effect_is_named_in_its_own_module():
     a ``mass`` or an ``inertia`` may be the vehicle's)."""
     import dataclasses
 
-    from quadfault.effects import registry
-    from quadfault.vehicle import Vehicle
+    from quadfault.model.effects import registry
+    from quadfault.model.vehicle import Vehicle
 
     def quoted(tree):
         keys = set()
@@ -236,18 +304,29 @@ def test_each_effect_is_named_in_its_own_module():
                 keys.update(id(k) for k in n.keys if k is not None)
             elif isinstance(n, ast.Subscript):
                 keys.add(id(n.slice))
-            elif isinstance(n, ast.Compare) and any(isinstance(o, (ast.In, ast.NotIn))
-                                                    for o in n.ops):
+            elif isinstance(n, ast.Compare) and any(
+                isinstance(o, (ast.In, ast.NotIn)) for o in n.ops
+            ):
                 keys.add(id(n.left))
-            elif (isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute)
-                  and n.func.attr in ("get", "pop", "setdefault") and n.args):
+            elif (
+                isinstance(n, ast.Call)
+                and isinstance(n.func, ast.Attribute)
+                and n.func.attr in ("get", "pop", "setdefault")
+                and n.args
+            ):
                 keys.add(id(n.args[0]))
-        return {n.value for n in ast.walk(tree)
-                if isinstance(n, ast.Constant) and isinstance(n.value, str) and id(n) not in keys}
+        return {
+            n.value
+            for n in ast.walk(tree)
+            if isinstance(n, ast.Constant) and isinstance(n.value, str) and id(n) not in keys
+        }
 
-    names = {p: quoted(ast.parse(p.read_text(encoding="utf-8")))
-             for pkg in ACYCLIC for p in sorted((ROOT / pkg).rglob("*.py"))}
-    effects = ROOT / "quadfault" / "effects"
+    names = {
+        p: quoted(ast.parse(p.read_text(encoding="utf-8")))
+        for pkg in ACYCLIC
+        for p in sorted((ROOT / pkg).rglob("*.py"))
+    }
+    effects = ROOT / "quadfault" / "model" / "effects"
     bad = {}
     quantities = {f.name for f in dataclasses.fields(Vehicle)}
     for name in set(registry.names()) - quantities:
@@ -258,3 +337,28 @@ def test_each_effect_is_named_in_its_own_module():
     lag = effects / "motor_lag.py"
     assert lag in names and '"motor_lag"' in lag.read_text(encoding="utf-8")  # the check works
     assert not bad, bad
+
+
+def test_old_import_paths_resolve_to_the_moved_modules():
+    """A module that moved into a layer package keeps its old path, as the same module
+    object, with a DeprecationWarning naming the new one."""
+    code = (
+        "import warnings, quadfault\n"
+        "warnings.simplefilter('error')\n"
+        "import quadfault.model.effects.wind as new\n"
+        "try:\n"
+        "    import quadfault.effects.wind\n"
+        "except DeprecationWarning as e:\n"
+        "    print(e)\n"
+        "warnings.simplefilter('ignore')\n"
+        "import quadfault.effects.wind as old, quadfault.importers.px4_ulog as px4\n"
+        "import quadfault.io.importers.px4_ulog as px4_new\n"
+        "print(old is new, px4 is px4_new)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=False
+    )
+    assert out.stdout.splitlines() == [
+        "quadfault.effects moved to quadfault.model.effects; import it from there",
+        "True True",
+    ], out.stderr

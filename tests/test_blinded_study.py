@@ -10,17 +10,28 @@ import blinded_study  # noqa: E402
 
 
 def _row(truth, params, found, indistinguishable=()):
-    return {"truth": truth, "found": found, "indistinguishable": list(indistinguishable), "snr": [5.0] * len(truth), "improvement": 0.5,
-            "param_errors": {}, "t_diag": 0.1, "cpu_diag": 0.1, "samples": 3000,
-            "truth_params": [{"name": n, "params": p} for n, p in zip(truth, params)]}
+    return {
+        "truth": truth,
+        "found": found,
+        "indistinguishable": list(indistinguishable),
+        "snr": [5.0] * len(truth),
+        "improvement": 0.5,
+        "param_errors": {},
+        "t_diag": 0.1,
+        "cpu_diag": 0.1,
+        "samples": 3000,
+        "truth_params": [{"name": n, "params": p} for n, p in zip(truth, params)],
+    }
 
 
 def test_time_constants_below_two_samples_are_not_scored():
     rate = 250.0  # two samples: 8 ms
-    short_lag = _row(["motor_lag"], [{"tau_s": 0.005}], [],
-                     indistinguishable=[["inertia", "motor_lag"]])
-    short_delay_pair = _row(["delay", "drag"], [{"delay_s": 0.002}, {"k_N_s_per_m": [0.3] * 3}],
-                            ["drag"])
+    short_lag = _row(
+        ["motor_lag"], [{"tau_s": 0.005}], [], indistinguishable=[["inertia", "motor_lag"]]
+    )
+    short_delay_pair = _row(
+        ["delay", "drag"], [{"delay_s": 0.002}, {"k_N_s_per_m": [0.3] * 3}], ["drag"]
+    )
     long_lag = _row(["motor_lag"], [{"tau_s": 0.03}], ["inertia"])
     free = _row([], [], [])
     assert blinded_study.resolvable(short_lag, rate) == []

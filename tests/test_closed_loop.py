@@ -1,4 +1,4 @@
-"""The one closed loop (quadfault.closed_loop): the readable loop's results and random
+"""The one closed loop (quadfault.model.closed_loop): the readable loop's results and random
 numbers, one vehicle or N in parallel, the effects hook, and bad input."""
 
 from dataclasses import replace
@@ -7,21 +7,26 @@ import numpy as np
 import pytest
 from support import oracles
 
-from quadfault import closed_loop, jit
-from quadfault.controller import ControllerConfig, GeometricController
-from quadfault.dynamics import RigidBodyState
 from quadfault.errors import ConfigError
-from quadfault.motors import MotorModel
-from quadfault.plant import Plant
-from quadfault.rotation import rot_to_quat
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import SensorNoise, SimConfig, initial_state, simulate
-from quadfault.trajectory import Hover
-from quadfault.vehicle import Vehicle
+from quadfault.model import closed_loop, jit
+from quadfault.model.controller import ControllerConfig, GeometricController
+from quadfault.model.dynamics import RigidBodyState
+from quadfault.model.motors import MotorModel
+from quadfault.model.plant import Plant
+from quadfault.model.rotation import rot_to_quat
+from quadfault.model.scenarios import named_scenario
+from quadfault.model.trajectory import Hover
+from quadfault.model.vehicle import Vehicle
+from quadfault.sim.simulator import SensorNoise, SimConfig, initial_state, simulate
 
 NOISY = SensorNoise(position=0.01, velocity=0.02, attitude=0.003, gyro=0.01, accel=0.05)
-FIELDS = (("position", "p"), ("velocity", "v"), ("quaternion", "q"), ("omega", "w"),
-          ("thrust_cmd", "f"))
+FIELDS = (
+    ("position", "p"),
+    ("velocity", "v"),
+    ("quaternion", "q"),
+    ("omega", "w"),
+    ("thrust_cmd", "f"),
+)
 
 
 def _readable(sc, cfg, seed, vehicle=None, nominal=None, thrust_noise=None):
@@ -33,13 +38,23 @@ def _readable(sc, cfg, seed, vehicle=None, nominal=None, thrust_noise=None):
     reference = cfg.integrator == "reference"
     t0 = cfg.dt if reference else 0.0
     ctrl = None if reference else GeometricController(nominal, sc.trajectory, cfg.controller)
-    return oracles.closed_loop_flight(sc, cfg, seed, vehicle, nominal, sigma,
-                                      initial_state(sc, t0, ctrl))
+    return oracles.closed_loop_flight(
+        sc, cfg, seed, vehicle, nominal, sigma, initial_state(sc, t0, ctrl)
+    )
 
 
-@pytest.mark.parametrize("case", ["sensor-noise", "decimation", "no-saturation",
-                                  "nominal-mismatch", "no-accel-record", "reference",
-                                  "no-thrust-noise"])
+@pytest.mark.parametrize(
+    "case",
+    [
+        "sensor-noise",
+        "decimation",
+        "no-saturation",
+        "nominal-mismatch",
+        "no-accel-record",
+        "reference",
+        "no-thrust-noise",
+    ],
+)
 def test_simulate_is_the_readable_loop_with_the_same_draws(case):
     """simulate() equals the loop written out with numpy (tests/support/oracles.py) drawing
     from the same generator in the documented order: sensors, motors, accelerometer."""
@@ -51,8 +66,10 @@ def test_simulate_is_the_readable_loop_with_the_same_draws(case):
         cfg = replace(cfg, saturate=False, controller=ControllerConfig(normalize_b2d=False))
     elif case == "nominal-mismatch":
         sc = named_scenario("clipping", duration=8.0).replace(duration=0.6)
-        kw.update(vehicle=Vehicle(mass=1.1, inertia=(0.016, 0.014, 0.03), max_thrust=3.2),
-                  nominal=Vehicle())
+        kw.update(
+            vehicle=Vehicle(mass=1.1, inertia=(0.016, 0.014, 0.03), max_thrust=3.2),
+            nominal=Vehicle(),
+        )
     elif case == "no-accel-record":
         cfg = replace(cfg, record_accel=False)
     elif case == "reference":
@@ -63,8 +80,7 @@ def test_simulate_is_the_readable_loop_with_the_same_draws(case):
     want = _readable(sc, cfg, **kw)
     want["q"] = rot_to_quat(want["R"])
     for name, key in FIELDS:
-        np.testing.assert_allclose(getattr(rec, name), want[key], rtol=0, atol=1e-9,
-                                   err_msg=name)
+        np.testing.assert_allclose(getattr(rec, name), want[key], rtol=0, atol=1e-9, err_msg=name)
     if cfg.record_accel:
         np.testing.assert_allclose(rec.accel, want["acc"], rtol=0, atol=1e-9)
     else:
@@ -77,12 +93,20 @@ def test_kernel_draws_are_the_generators_own_stream():
     """numba's Generator.standard_normal continues the numpy generator's stream, so draws
     inside a kernel are the numbers (and leave the generator where) numpy would."""
     gen, twin = np.random.default_rng(11), np.random.default_rng(11)
-    sc = named_scenario("hover", duration=0.01).replace(thrust_noise=0.1)
+    named_scenario("hover", duration=0.01).replace(thrust_noise=0.1)
     plant = Plant(Vehicle(), MotorModel(0.1), dt=1e-3)
     consts = closed_loop.constants(plant, SensorNoise(gyro=0.1))
     tables = closed_loop.Tables(np.zeros(1, np.int64), np.ones((1, 5, 4)), np.zeros((1, 0, 6, 3)))
-    closed_loop.fly(closed_loop.generators([gen]), 0, 5, True, consts, plant.vehicles, tables,
-                    closed_loop.Records.none(1, 4))
+    closed_loop.fly(
+        closed_loop.generators([gen]),
+        0,
+        5,
+        True,
+        consts,
+        plant.vehicles,
+        tables,
+        closed_loop.Records.none(1, 4),
+    )
     twin.standard_normal(5 * (9 + 4))  # per step: p, v, w (sensors), 4 motors (no accel)
     assert gen.standard_normal() == twin.standard_normal()
 
@@ -105,10 +129,12 @@ def _fleet(N, seed=0, sigma=0.07):
     V.f_cmd[:] = veh.hover_thrust + 0.1 * rng.normal(size=(N, 4))
     V.sigma[:] = sigma * rng.random(N)
     consts = closed_loop.constants(plant, NOISY)
-    closed_loop.sense_rows(closed_loop.generators([np.random.default_rng(1)] * N),
-                           np.arange(0), consts, V)
-    tables = closed_loop.Tables(np.zeros(N, np.int64), 0.5 + 0.5 * rng.random((N, 40, 4)),
-                                np.zeros((N, 0, 6, 3)))
+    closed_loop.sense_rows(
+        closed_loop.generators([np.random.default_rng(1)] * N), np.arange(0), consts, V
+    )
+    tables = closed_loop.Tables(
+        np.zeros(N, np.int64), 0.5 + 0.5 * rng.random((N, 40, 4)), np.zeros((N, 0, 6, 3))
+    )
     return plant, consts, tables
 
 
@@ -125,8 +151,16 @@ def test_the_batch_is_the_single_vehicle_loop_in_any_thread_count():
         active[5] = False
         out = closed_loop.Records.empty(N, 5, 4, stride=2)
         done = closed_loop.fly_batch(
-            closed_loop.generators([np.random.default_rng(s) for s in range(N)]), active,
-            np.arange(N) % 3, 10, True, consts, plant.vehicles, tables, out)
+            closed_loop.generators([np.random.default_rng(s) for s in range(N)]),
+            active,
+            np.arange(N) % 3,
+            10,
+            True,
+            consts,
+            plant.vehicles,
+            tables,
+            out,
+        )
         runs.append((plant.vehicles, out, done))
     jit.set_threads(threads)
     for a, b in zip(runs[0][0] + runs[0][1][1:], runs[-1][0] + runs[-1][1][1:]):
@@ -137,8 +171,7 @@ def test_the_batch_is_the_single_vehicle_loop_in_any_thread_count():
         one = _fleet(N)
         out = closed_loop.Records.empty(N, 5, 4, stride=2)
         gens = closed_loop.generators([np.random.default_rng(i)] * N)
-        closed_loop.fly(gens, i % 3, i % 3 + 10, True, one[1],
-                        one[0].vehicles, one[2], out, i=i)
+        closed_loop.fly(gens, i % 3, i % 3 + 10, True, one[1], one[0].vehicles, one[2], out, i=i)
         np.testing.assert_array_equal(one[0].vehicles.p[i], runs[0][0].p[i])
         np.testing.assert_array_equal(one[0].vehicles.R[i], runs[0][0].R[i])
         np.testing.assert_array_equal(out.p[i], runs[0][1].p[i])
@@ -151,11 +184,19 @@ def test_a_diverging_vehicle_stops_alone_without_raising():
     with np.errstate(over="ignore", invalid="ignore"):
         done = closed_loop.fly_batch(
             closed_loop.generators([np.random.default_rng(s) for s in range(N)]),
-            np.ones(N, bool), np.zeros(N, np.int64), 10, True, consts, plant.vehicles, tables,
-            closed_loop.Records.none(N, 4))
+            np.ones(N, bool),
+            np.zeros(N, np.int64),
+            10,
+            True,
+            consts,
+            plant.vehicles,
+            tables,
+            closed_loop.Records.none(N, 4),
+        )
     assert done[7] == 1 and np.all(np.delete(done, 7) == 10)
-    finite = RigidBodyState(*(x for x in (plant.vehicles.p, plant.vehicles.v, plant.vehicles.R,
-                                          plant.vehicles.w))).is_finite()
+    finite = RigidBodyState(
+        *(x for x in (plant.vehicles.p, plant.vehicles.v, plant.vehicles.R, plant.vehicles.w))
+    ).is_finite()
     assert not finite[7] and finite.sum() == N - 1
 
 
@@ -216,16 +257,18 @@ def test_true_vehicle_and_wrench_act_on_the_plant_only():
     for name in ("position", "quaternion", "thrust_cmd"):
         np.testing.assert_allclose(getattr(got, name), getattr(want, name), atol=1e-12)
     push = simulate(sc, vehicle=light, effects=(Heavier(force=(0.0, 0.0, 0.5)),), seed=3)
-    sink = simulate(sc, vehicle=light.replace(gravity=light.gravity + 0.5), nominal=light,
-                    seed=3)
+    sink = simulate(sc, vehicle=light.replace(gravity=light.gravity + 0.5), nominal=light, seed=3)
     np.testing.assert_allclose(push.position, sink.position, atol=1e-12)
     assert push.position[-1, 2] > simulate(sc, vehicle=light, seed=3).position[-1, 2]  # sags
 
 
 def test_effects_with_the_reference_integrator_are_refused():
     with pytest.raises(ConfigError, match="reference integrator does not support"):
-        simulate(named_scenario("hover", duration=0.1), config=SimConfig.reference(),
-                 effects=(Heavier(),))
+        simulate(
+            named_scenario("hover", duration=0.1),
+            config=SimConfig.reference(),
+            effects=(Heavier(),),
+        )
 
 
 def test_true_vehicle_must_keep_the_rotors():

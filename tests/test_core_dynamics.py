@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
-
 from support import oracles
-from quadfault.dynamics import (
+
+from quadfault.model.dynamics import (
     RigidBodyState,
     angular_acceleration,
     reference_euler_step,
@@ -15,8 +15,8 @@ from quadfault.dynamics import (
     step_rk4,
     translational_acceleration,
 )
-from quadfault.rotation import expm_so3, hat
-from quadfault.vehicle import Vehicle
+from quadfault.model.rotation import expm_so3, hat
+from quadfault.model.vehicle import Vehicle
 
 
 class ReferenceEuler:
@@ -30,8 +30,9 @@ class ReferenceEuler:
         return self.memory[0]
 
     def step(self, s):
-        p, v, R, w = reference_euler_step(tuple(s.p), tuple(s.v), tuple(s.R.ravel()),
-                                          tuple(s.w), self.memory, self.rigid, self.dt)
+        p, v, R, w = reference_euler_step(
+            tuple(s.p), tuple(s.v), tuple(s.R.ravel()), tuple(s.w), self.memory, self.rigid, self.dt
+        )
         return RigidBodyState(np.array(p), np.array(v), np.array(R).reshape(3, 3), np.array(w))
 
     def apply(self, thrust, moment, R):
@@ -52,7 +53,9 @@ def test_hover_equilibrium_has_zero_acceleration(vehicle):
     np.testing.assert_allclose(acc, 0.0, atol=1e-12)
     np.testing.assert_allclose(alpha, 0.0, atol=1e-12)
     # the accelerometer at hover reads the specific force (0, 0, -g) in FRD
-    np.testing.assert_allclose(specific_force_body(R, acc, vehicle.gravity), [0, 0, -vehicle.gravity])
+    np.testing.assert_allclose(
+        specific_force_body(R, acc, vehicle.gravity), [0, 0, -vehicle.gravity]
+    )
 
 
 def test_free_fall_matches_g_t2_over_2(vehicle):
@@ -67,7 +70,7 @@ def test_free_fall_matches_g_t2_over_2(vehicle):
 
 def _full_ode(vehicle, thrust, moment):
     def f(_, y):
-        p, v, R, w = y[:3], y[3:6], y[6:15].reshape(3, 3), y[15:]
+        _p, v, R, w = y[:3], y[3:6], y[6:15].reshape(3, 3), y[15:]
         acc = translational_acceleration(R, thrust, vehicle)
         Rdot = R @ hat(w)
         wdot = angular_acceleration(w, moment, vehicle)
@@ -83,8 +86,9 @@ def test_rk4_matches_scipy_on_a_tumbling_thrusting_body(vehicle):
     thrust, moment = 12.0, np.array([0.01, -0.02, 0.005])
     dt, n = 1e-3, 500
     y0 = np.concatenate((s.p, s.v, s.R.ravel(), s.w))
-    sol = solve_ivp(_full_ode(vehicle, thrust, moment), (0, n * dt), y0, rtol=1e-12, atol=1e-12,
-                    method="DOP853")
+    sol = solve_ivp(
+        _full_ode(vehicle, thrust, moment), (0, n * dt), y0, rtol=1e-12, atol=1e-12, method="DOP853"
+    )
     for _ in range(n):
         s = step_rk4(s, thrust, moment, vehicle, dt)
     yT = sol.y[:, -1]
@@ -151,7 +155,9 @@ def test_reference_euler_reproduces_hand_computed_steps(vehicle):
     """The authors' step order: W, v, R, x, then a and W' from the stored command."""
     dt = 1e-3
     ref = ReferenceEuler(vehicle, dt)
-    s = RigidBodyState(np.array([3.0, 0.0, -1.0]), np.array([0.0, 1.0, 0.0]), np.eye(3), np.zeros(3))
+    s = RigidBodyState(
+        np.array([3.0, 0.0, -1.0]), np.array([0.0, 1.0, 0.0]), np.eye(3), np.zeros(3)
+    )
     # step 1: a = 0 and W' = 0 initially, so only x moves; then a = g e3 (no force stored yet)
     s1 = ref.step(s)
     np.testing.assert_allclose(s1.p, s.p + s.v * dt)
@@ -178,8 +184,9 @@ def test_reference_euler_kernels_equal_the_readable_form(vehicle):
     rng = np.random.default_rng(4)
     dt = 1e-3
     kernel, oracle = ReferenceEuler(vehicle, dt), oracles.ReferenceEuler(vehicle, dt)
-    s = RigidBodyState(rng.normal(size=3), rng.normal(size=3), expm_so3(rng.normal(size=3)),
-                       rng.normal(size=3))
+    s = RigidBodyState(
+        rng.normal(size=3), rng.normal(size=3), expm_so3(rng.normal(size=3)), rng.normal(size=3)
+    )
     x = (s.p, s.v, s.R, s.w)
     for _ in range(50):
         s = kernel.step(s)
@@ -194,8 +201,12 @@ def test_reference_euler_kernels_equal_the_readable_form(vehicle):
 def test_rk4_kernel_equals_the_readable_form_with_and_without_a_wrench(vehicle):
     rng = np.random.default_rng(5)
     for _ in range(5):
-        s = RigidBodyState(rng.normal(size=3), rng.normal(size=3), expm_so3(rng.normal(size=3)),
-                           rng.normal(scale=3.0, size=3))
+        s = RigidBodyState(
+            rng.normal(size=3),
+            rng.normal(size=3),
+            expm_so3(rng.normal(size=3)),
+            rng.normal(scale=3.0, size=3),
+        )
         T, M, dt = 5 + 5 * rng.random(), 0.05 * rng.normal(size=3), 10 ** rng.uniform(-4, -2)
         want = oracles.step_rk4(*s, T, M, vehicle, dt)
         for got, ref in zip(step_rk4(s, T, M, vehicle, dt), want):
@@ -213,8 +224,12 @@ def test_rk4_kernel_equals_the_readable_form_with_and_without_a_wrench(vehicle):
 def test_rk4_with_a_python_wrench_batches_and_calls_it_once_per_stage(vehicle):
     rng = np.random.default_rng(6)
     B = 7
-    s = RigidBodyState(rng.normal(size=(B, 3)), rng.normal(size=(B, 3)),
-                       expm_so3(rng.normal(size=(B, 3))), rng.normal(size=(B, 3)))
+    s = RigidBodyState(
+        rng.normal(size=(B, 3)),
+        rng.normal(size=(B, 3)),
+        expm_so3(rng.normal(size=(B, 3))),
+        rng.normal(size=(B, 3)),
+    )
     T, M = 9 + rng.random(B), 0.01 * rng.normal(size=(B, 3))
     dt = np.full((B, 1), 2e-3)  # one step per row, as a column
     calls = []
@@ -226,8 +241,14 @@ def test_rk4_with_a_python_wrench_batches_and_calls_it_once_per_stage(vehicle):
     out = step_rk4(s, T, M, vehicle, dt, wind)
     assert calls == [(B, 3)] * 4
     for i in range(B):
-        one = step_rk4(RigidBodyState(*(x[i] for x in s)), T[i], M[i], vehicle, 2e-3,
-                       lambda st: (np.array([0.2, -0.1, 0.0]), 0.001 * st.w))
+        one = step_rk4(
+            RigidBodyState(*(x[i] for x in s)),
+            T[i],
+            M[i],
+            vehicle,
+            2e-3,
+            lambda st: (np.array([0.2, -0.1, 0.0]), 0.001 * st.w),
+        )
         for a, b in zip(out, one):
             np.testing.assert_allclose(a[i], b, rtol=0, atol=1e-15)
 
@@ -235,9 +256,19 @@ def test_rk4_with_a_python_wrench_batches_and_calls_it_once_per_stage(vehicle):
 def test_accelerations_equal_the_readable_forms(vehicle):
     rng = np.random.default_rng(7)
     R, w = expm_so3(rng.normal(size=(6, 3))), rng.normal(size=(6, 3))
-    T, M, F, Mx = rng.random(6) * 10, rng.normal(size=(6, 3)), rng.normal(size=(6, 3)), \
-        rng.normal(size=(6, 3))
-    np.testing.assert_allclose(translational_acceleration(R, T, vehicle, F),
-                               oracles.translational_acceleration(R, T, vehicle, F), atol=1e-13)
-    np.testing.assert_allclose(angular_acceleration(w, M, vehicle, Mx),
-                               oracles.angular_acceleration(w, M, vehicle, Mx), atol=1e-10)
+    T, M, F, Mx = (
+        rng.random(6) * 10,
+        rng.normal(size=(6, 3)),
+        rng.normal(size=(6, 3)),
+        rng.normal(size=(6, 3)),
+    )
+    np.testing.assert_allclose(
+        translational_acceleration(R, T, vehicle, F),
+        oracles.translational_acceleration(R, T, vehicle, F),
+        atol=1e-13,
+    )
+    np.testing.assert_allclose(
+        angular_acceleration(w, M, vehicle, Mx),
+        oracles.angular_acceleration(w, M, vehicle, Mx),
+        atol=1e-10,
+    )

@@ -6,12 +6,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 from support import oracles
 
-from quadfault import closed_loop, controller, dynamics, jit, motors, rotation, sensors
-from quadfault.controller import ControllerConfig, GeometricController
-from quadfault.motors import MotorModel
-from quadfault.scenarios import named_scenario
-from quadfault.sensors import SensorNoise
-from quadfault.vehicle import Vehicle
+from quadfault.model import closed_loop, controller, dynamics, jit, motors, rotation, sensors
+from quadfault.model.controller import ControllerConfig, GeometricController
+from quadfault.model.motors import MotorModel
+from quadfault.model.scenarios import named_scenario
+from quadfault.model.sensors import SensorNoise
+from quadfault.model.vehicle import Vehicle
 
 
 def test_rotation_kernels_equal_the_readable_forms_and_scipy():
@@ -26,8 +26,12 @@ def test_rotation_kernels_equal_the_readable_forms_and_scipy():
     np.testing.assert_allclose(rotation.cross(a, b), np.cross(a, b), rtol=0, atol=1e-15)
     assert rotation.cross(a[0], b).shape == (3,)
     M = rng.normal(size=(3, 3))
-    np.testing.assert_allclose(np.array(rotation.dcm_renormalize3(tuple(M.ravel()))),
-                               oracles.dcm_renormalize(M).ravel(), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(
+        np.array(rotation.dcm_renormalize3(tuple(M.ravel()))),
+        oracles.dcm_renormalize(M).ravel(),
+        rtol=0,
+        atol=1e-15,
+    )
 
 
 def test_expm_series_equals_rodrigues_on_both_sides_of_its_bound():
@@ -44,8 +48,7 @@ def test_expm_series_equals_rodrigues_on_both_sides_of_its_bound():
             a = np.sin(th) / th
             b = 2 * np.sin(th / 2) ** 2 / th**2  # (1 - cos th)/th^2 without cancellation
             hat = np.array([[0, -z, y], [z, 0, -x], [-y, x, 0]])
-            np.testing.assert_allclose(got, np.eye(3) + a * hat + b * hat @ hat, rtol=0,
-                                       atol=2e-16)
+            np.testing.assert_allclose(got, np.eye(3) + a * hat + b * hat @ hat, rtol=0, atol=2e-16)
 
 
 @pytest.mark.parametrize("saturate", [True, False])
@@ -57,12 +60,13 @@ def test_motor_kernel_draws_in_rotor_order(saturate):
     z = np.random.default_rng(9).standard_normal((20, 4))  # row by row, rotor by rotor
     want = oracles.motor_thrust(f, eta, 4.9, saturate, 0.07, z)
     np.testing.assert_allclose(got, want, rtol=1e-15, atol=0)
-    np.testing.assert_array_equal(MotorModel(0.0).apply(f, 1.0, 4.9, None),
-                                  np.clip(f, 0.0, 4.9))
+    np.testing.assert_array_equal(MotorModel(0.0).apply(f, 1.0, 4.9, None), np.clip(f, 0.0, 4.9))
 
 
-@pytest.mark.parametrize("config", [ControllerConfig(), ControllerConfig.reference(),
-                                    ControllerConfig(angular_feedforward=False)])
+@pytest.mark.parametrize(
+    "config",
+    [ControllerConfig(), ControllerConfig.reference(), ControllerConfig(angular_feedforward=False)],
+)
 def test_controller_kernel_equals_the_readable_form(config):
     rng = np.random.default_rng(3)
     veh = Vehicle()
@@ -81,8 +85,11 @@ def test_controller_kernel_equals_the_readable_form(config):
         np.testing.assert_allclose(out.moment, M, rtol=0, atol=1e-12)
         np.testing.assert_allclose(out.Rd, Rd, rtol=0, atol=1e-14)
         np.testing.assert_allclose(f, veh.allocation_inverse @ np.r_[T, M], atol=1e-12)
-        np.testing.assert_allclose(ctrl.feedforward_rates(t)[0], oracles.feedforward_rates(
-            traj, t, veh, config)[0], atol=1e-11)
+        np.testing.assert_allclose(
+            ctrl.feedforward_rates(t)[0],
+            oracles.feedforward_rates(traj, t, veh, config)[0],
+            atol=1e-11,
+        )
     # a batch of states is the same kernel per row
     P = rng.normal(size=(5, 3))
     batch = ctrl.compute(1.0, P, np.zeros(3), np.eye(3), np.zeros(3))
@@ -91,15 +98,20 @@ def test_controller_kernel_equals_the_readable_form(config):
         np.testing.assert_array_equal(batch.moment[i], one.moment)
 
 
-@pytest.mark.parametrize("config", [ControllerConfig(), ControllerConfig.reference(),
-                                    ControllerConfig(acceleration_feedforward=False,
-                                                     normalize_b2d=False)])
+@pytest.mark.parametrize(
+    "config",
+    [
+        ControllerConfig(),
+        ControllerConfig.reference(),
+        ControllerConfig(acceleration_feedforward=False, normalize_b2d=False),
+    ],
+)
 def test_feedforward_over_arrays_equals_the_compiled_kernel(config):
     ctrl = GeometricController(Vehicle(), named_scenario("lissajous").trajectory, config)
     for t in (0.3, np.linspace(0.0, 20.0, 7), np.linspace(0.0, 20.0, 200).reshape(4, 50)):
         compiled, arrays = ctrl.feedforward(t, compiled=True), ctrl.feedforward(t, compiled=False)
         for a, b in zip(compiled, arrays):
-            assert a.shape == b.shape == np.shape(t) + a.shape[np.ndim(t):]
+            assert a.shape == b.shape == np.shape(t) + a.shape[np.ndim(t) :]
             np.testing.assert_array_equal(a, b)
     # a flight's table (many times) takes the numpy form by default
     t = np.linspace(0.0, 20.0, 500)
@@ -110,8 +122,12 @@ def test_feedforward_over_arrays_equals_the_compiled_kernel(config):
 def test_sensor_kernel_draws_p_v_attitude_w_then_the_accelerometer():
     rng = np.random.default_rng(4)
     noise = SensorNoise(0.1, 0.2, 0.03, 0.4, 0.5)
-    state = dynamics.RigidBodyState(rng.normal(size=3), rng.normal(size=3),
-                                    rotation.expm_so3(rng.normal(size=3)), rng.normal(size=3))
+    state = dynamics.RigidBodyState(
+        rng.normal(size=3),
+        rng.normal(size=3),
+        rotation.expm_so3(rng.normal(size=3)),
+        rng.normal(size=3),
+    )
     sf = rng.normal(size=3)
     got, got_sf = noise.measure(state, sf, np.random.default_rng(5))
     twin = np.random.default_rng(5)
@@ -124,9 +140,16 @@ def test_sensor_kernel_draws_p_v_attitude_w_then_the_accelerometer():
         np.testing.assert_array_equal(a, b)
 
 
-KERNELS = (rotation.expm3, dynamics.rkmk4_step, controller.geometric_control,
-           closed_loop.fly_vehicle, closed_loop._fly_parallel, closed_loop.sense_vehicle,
-           sensors.measure3, motors._motor_rows)
+KERNELS = (
+    rotation.expm3,
+    dynamics.rkmk4_step,
+    controller.geometric_control,
+    closed_loop.fly_vehicle,
+    closed_loop._fly_parallel,
+    closed_loop.sense_vehicle,
+    sensors.measure3,
+    motors._motor_rows,
+)
 
 
 def test_compile_options_float64_nopython_cache_no_fastmath():
@@ -148,7 +171,7 @@ def test_per_step_cores_take_no_arrays():
         pytest.skip("numba is not importable")
     import numba
 
-    from quadfault.plant import Plant
+    from quadfault.model.plant import Plant
 
     plant = Plant(Vehicle(), MotorModel(0.07))
     C = closed_loop.constants(plant, SensorNoise(0.1, 0.1, 0.1, 0.1, 0.1))
@@ -171,16 +194,27 @@ def test_per_step_cores_take_no_arrays():
     ta = one_step.overloads[one_step.signatures[0]].type_annotation
     calls = {}
     for expr, sig in ta.calltypes.items():
-        disp = getattr(ta.typemap.get(getattr(getattr(expr, "func", None), "name", "")),
-                       "dispatcher", None) if getattr(expr, "op", None) == "call" else None
+        disp = (
+            getattr(
+                ta.typemap.get(getattr(getattr(expr, "func", None), "name", "")), "dispatcher", None
+            )
+            if getattr(expr, "op", None) == "call"
+            else None
+        )
         if disp is not None:
             calls[disp.py_func.__name__] = sig
-    cores = {"rkmk4_step": dynamics.rkmk4_step, "geometric_control": controller.geometric_control,
-             "measure3": sensors.measure3}
+    cores = {
+        "rkmk4_step": dynamics.rkmk4_step,
+        "geometric_control": controller.geometric_control,
+        "measure3": sensors.measure3,
+    }
     for name, core in cores.items():
         if core.targetoptions.get("inline") == "always":  # no call: its body is the caller's
             assert name not in calls, (name, calls)
             continue
-        flat = [t for a in calls[name].args
-                for t in (a.types if isinstance(a, numba.types.BaseTuple) else (a,))]
+        flat = [
+            t
+            for a in calls[name].args
+            for t in (a.types if isinstance(a, numba.types.BaseTuple) else (a,))
+        ]
         assert not any(isinstance(t, numba.types.Array) for t in flat), (name, calls[name])

@@ -7,8 +7,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from quadfault.errors import ConfigError
-from quadfault.motors import MotorModel
-from quadfault.rotation import (
+from quadfault.model.motors import MotorModel
+from quadfault.model.rotation import (
     ENU_TO_NED,
     FLU_TO_FRD,
     expm_so3,
@@ -20,14 +20,14 @@ from quadfault.rotation import (
     rot_to_quat,
     vee,
 )
-from quadfault.scenarios import (
+from quadfault.model.scenarios import (
     AbruptFault,
     ConstantEfficiency,
     EfficiencySchedule,
     named_scenario,
     random_scenario,
 )
-from quadfault.vehicle import Vehicle, allocation_from_rotors, paper_allocation
+from quadfault.model.vehicle import Vehicle, allocation_from_rotors, paper_allocation
 
 
 def test_paper_vehicle_defaults():
@@ -44,22 +44,29 @@ def test_paper_vehicle_defaults():
 def test_allocation_from_rotor_positions_matches_paper_layout():
     d, c = 0.1, 0.02
     pos = [(d, d), (d, -d), (-d, -d), (-d, d)]
-    np.testing.assert_allclose(allocation_from_rotors(pos, [-1, 1, -1, 1], c), paper_allocation(d, c))
+    np.testing.assert_allclose(
+        allocation_from_rotors(pos, [-1, 1, -1, 1], c), paper_allocation(d, c)
+    )
     # a rotor on the right (+y in FRD) pushing up (-z) rolls the vehicle left: Mx < 0
-    A = allocation_from_rotors([(0.0, 0.2), (0.0, -0.2), (0.2, 0.0), (-0.2, 0.0)], [1, 1, -1, -1], c)
+    A = allocation_from_rotors(
+        [(0.0, 0.2), (0.0, -0.2), (0.2, 0.0), (-0.2, 0.0)], [1, 1, -1, -1], c
+    )
     assert A[1, 0] < 0 and A[1, 1] > 0 and A[2, 2] > 0 and A[2, 3] < 0
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"mass": 0.0}, "mass"),
-    ({"mass": -1.0}, "mass"),
-    ({"mass": float("nan")}, "mass"),
-    ({"inertia": [1.0, -1.0, 1.0]}, "positive definite"),
-    ({"inertia": [[1, 0.5, 0], [0, 1, 0], [0, 0, 1]]}, "symmetric"),
-    ({"allocation": np.ones((4, 4))}, "singular"),
-    ({"allocation": np.ones((3, 4))}, "shape"),
-    ({"max_thrust": -1.0}, "max_thrust"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"mass": 0.0}, "mass"),
+        ({"mass": -1.0}, "mass"),
+        ({"mass": float("nan")}, "mass"),
+        ({"inertia": [1.0, -1.0, 1.0]}, "positive definite"),
+        ({"inertia": [[1, 0.5, 0], [0, 1, 0], [0, 0, 1]]}, "symmetric"),
+        ({"allocation": np.ones((4, 4))}, "singular"),
+        ({"allocation": np.ones((3, 4))}, "shape"),
+        ({"max_thrust": -1.0}, "max_thrust"),
+    ],
+)
 def test_vehicle_rejects_bad_parameters(kwargs, match):
     with pytest.raises(ConfigError, match=match):
         Vehicle(**kwargs)
@@ -99,7 +106,9 @@ def test_motor_model_saturation_efficiency_and_noise():
     f = m.apply(np.array([-1.0, 2.0, 6.0, 4.9]), np.array([1.0, 0.5, 0.5, 1.0]), 4.9, rng)
     np.testing.assert_allclose(f, [0.0, 1.0, 2.45, 4.9])
     ref = MotorModel(thrust_noise=0.0, saturate=False)
-    np.testing.assert_allclose(ref.apply(np.array([-1.0, 6.0, 1, 1]), np.ones(4), 4.9, rng), [0, 6, 1, 1])
+    np.testing.assert_allclose(
+        ref.apply(np.array([-1.0, 6.0, 1, 1]), np.ones(4), 4.9, rng), [0, 6, 1, 1]
+    )
     noisy = MotorModel(thrust_noise=0.07)
     samples = np.array([noisy.apply(np.full(4, 2.0), np.ones(4), 4.9, rng) for _ in range(4000)])
     logs = np.log(samples / 2.0)
@@ -130,8 +139,9 @@ def test_combined_scenario_follows_reference_schedule():
 def test_abrupt_scenario_is_one_outside_faults_and_fault_modes():
     sc = named_scenario("abrupt")
     np.testing.assert_allclose(sc.efficiency(np.array([0.0, 20.0, 79.9])), 1.0)
-    sched = EfficiencySchedule(ConstantEfficiency((0.8, 1, 1, 1)),
-                               (AbruptFault(1, 1.0, 1.0, 0.5, mode="multiply"),))
+    sched = EfficiencySchedule(
+        ConstantEfficiency((0.8, 1, 1, 1)), (AbruptFault(1, 1.0, 1.0, 0.5, mode="multiply"),)
+    )
     assert sched(1.5)[0] == pytest.approx(0.4)
     ramp = EfficiencySchedule(faults=(AbruptFault(2, 1.0, level=0.5, ramp=1.0),))
     assert ramp(1.5)[1] == pytest.approx(0.75)

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from quadfault.errors import QuadfaultError, RecordingError
-from quadfault.recording import read_recording, sidecar_path, write_recording
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import SensorNoise, SimConfig, simulate
+from quadfault.io.recording import read_recording, sidecar_path, write_recording
+from quadfault.model.scenarios import named_scenario
+from quadfault.sim.simulator import SensorNoise, SimConfig, simulate
 
 
 @pytest.fixture(scope="module")
@@ -27,8 +27,20 @@ def written(rec, tmp_path):
 
 
 def _fields(r):
-    return {k: getattr(r, k) for k in ("t", "position", "velocity", "quaternion", "omega", "accel",
-                                        "thrust_cmd", "vbat", "eta_true")}
+    return {
+        k: getattr(r, k)
+        for k in (
+            "t",
+            "position",
+            "velocity",
+            "quaternion",
+            "omega",
+            "accel",
+            "thrust_cmd",
+            "vbat",
+            "eta_true",
+        )
+    }
 
 
 def test_round_trip_is_exact(rec, written):
@@ -67,7 +79,9 @@ def test_u_commands_with_thrust_coefficient(rec, tmp_path):
     header = path.read_text().splitlines()[0].split(",")
     assert "u1" in header and "f1" not in header
     back = read_recording(path)
-    np.testing.assert_allclose(back.thrust_cmd, np.maximum(rec.thrust_cmd, 0), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(
+        back.thrust_cmd, np.maximum(rec.thrust_cmd, 0), rtol=1e-12, atol=1e-12
+    )
 
 
 def test_arm_and_torque_coefficient_sidecar(written):
@@ -99,25 +113,30 @@ def _set(col, row, value):
     def fn(header, rows):
         rows[row - 1][header.index(col)] = value
         return header, rows
+
     return fn
 
 
 def _drop(col):
     def fn(header, rows):
         j = header.index(col)
-        return header[:j] + header[j + 1:], [r[:j] + r[j + 1:] for r in rows]
+        return header[:j] + header[j + 1 :], [r[:j] + r[j + 1 :] for r in rows]
+
     return fn
 
 
-@pytest.mark.parametrize("edit, pattern", [
-    (_drop("wy"), r"column 'wy'.*missing"),
-    (_drop("f3"), r"column 'f3'.*missing"),
-    (_set("px", 5, "nan"), r"column 'px', row 5: NaN or inf"),
-    (_set("f2", 7, "inf"), r"column 'f2', row 7: NaN or inf"),
-    (_set("vx", 3, "abc"), r"column 'vx', row 3: not a number"),
-    (_set("t", 4, "0.0"), r"column 't', row 4: time must be strictly increasing"),
-    (_set("qw", 6, "0.9"), r"column 'qw', row 6: quaternion norm"),
-])
+@pytest.mark.parametrize(
+    "edit, pattern",
+    [
+        (_drop("wy"), r"column 'wy'.*missing"),
+        (_drop("f3"), r"column 'f3'.*missing"),
+        (_set("px", 5, "nan"), r"column 'px', row 5: NaN or inf"),
+        (_set("f2", 7, "inf"), r"column 'f2', row 7: NaN or inf"),
+        (_set("vx", 3, "abc"), r"column 'vx', row 3: not a number"),
+        (_set("t", 4, "0.0"), r"column 't', row 4: time must be strictly increasing"),
+        (_set("qw", 6, "0.9"), r"column 'qw', row 6: quaternion norm"),
+    ],
+)
 def test_csv_validation_errors_name_file_column_and_row(written, edit, pattern):
     _edit_csv(written, edit)
     with pytest.raises(RecordingError, match=pattern) as info:
@@ -131,6 +150,7 @@ def _scale_quaternion(row, factor):
             j = header.index(c)
             rows[row - 1][j] = repr(float(rows[row - 1][j]) * factor)
         return header, rows
+
     return fn
 
 
@@ -140,17 +160,20 @@ def test_quaternion_close_to_unit_is_renormalised(written):
     np.testing.assert_allclose(np.linalg.norm(back.quaternion, axis=1), 1.0, atol=1e-15)
 
 
-@pytest.mark.parametrize("mutate, pattern", [
-    (lambda s: s.update(format="quadfault-recording/2"), r"key 'format'"),
-    (lambda s: s.update(frame="XYZ"), r"key 'frame'"),
-    (lambda s: s.pop("vehicle"), r"key 'vehicle'"),
-    (lambda s: s["vehicle"].update(mass=-1), r"key 'vehicle.mass'"),
-    (lambda s: s["vehicle"].update(mass="heavy"), r"key 'vehicle.mass'"),
-    (lambda s: s["vehicle"].pop("inertia"), r"key 'vehicle.inertia'"),
-    (lambda s: s["vehicle"].update(allocation=[[1, 1, 1, 1]] * 4), r"singular"),
-    (lambda s: s["vehicle"].update(allocation=[[1, 2], [3, 4]]), r"key 'vehicle.allocation'"),
-    (lambda s: s["vehicle"].pop("allocation"), r"needs 'allocation'"),
-])
+@pytest.mark.parametrize(
+    "mutate, pattern",
+    [
+        (lambda s: s.update(format="quadfault-recording/2"), r"key 'format'"),
+        (lambda s: s.update(frame="XYZ"), r"key 'frame'"),
+        (lambda s: s.pop("vehicle"), r"key 'vehicle'"),
+        (lambda s: s["vehicle"].update(mass=-1), r"key 'vehicle.mass'"),
+        (lambda s: s["vehicle"].update(mass="heavy"), r"key 'vehicle.mass'"),
+        (lambda s: s["vehicle"].pop("inertia"), r"key 'vehicle.inertia'"),
+        (lambda s: s["vehicle"].update(allocation=[[1, 1, 1, 1]] * 4), r"singular"),
+        (lambda s: s["vehicle"].update(allocation=[[1, 2], [3, 4]]), r"key 'vehicle.allocation'"),
+        (lambda s: s["vehicle"].pop("allocation"), r"needs 'allocation'"),
+    ],
+)
 def test_sidecar_validation_errors(written, mutate, pattern):
     side = json.loads(sidecar_path(written).read_text())
     mutate(side)
@@ -169,8 +192,15 @@ def test_missing_sidecar_empty_file_and_bad_json(written, tmp_path):
         read_recording(written)
     empty = tmp_path / "empty.csv"
     empty.write_text("")
-    sidecar_path(empty).write_text(json.dumps({"format": "quadfault-recording/1", "frame": "NED",
-                                               "vehicle": {"mass": 1, "inertia": [1, 1, 1]}}))
+    sidecar_path(empty).write_text(
+        json.dumps(
+            {
+                "format": "quadfault-recording/1",
+                "frame": "NED",
+                "vehicle": {"mass": 1, "inertia": [1, 1, 1]},
+            }
+        )
+    )
     with pytest.raises(RecordingError, match="empty"):
         read_recording(empty)
     with pytest.raises(RecordingError, match="file not found"):

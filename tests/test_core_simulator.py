@@ -6,12 +6,12 @@ import sys
 import numpy as np
 import pytest
 
-from quadfault.controller import ControllerConfig, GeometricController
 from quadfault.errors import ConfigError
-from quadfault.recording import read_recording
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import SimConfig, simulate
-from quadfault.vehicle import Vehicle
+from quadfault.io.recording import read_recording
+from quadfault.model.controller import ControllerConfig, GeometricController
+from quadfault.model.scenarios import named_scenario
+from quadfault.model.vehicle import Vehicle
+from quadfault.sim.simulator import SimConfig, simulate
 
 
 def test_tracks_the_circle_with_feedforward():
@@ -21,7 +21,9 @@ def test_tracks_the_circle_with_feedforward():
     rms = np.sqrt(np.mean(err[rec.t >= 2.0] ** 2))
     assert rms <= 0.05
     R = rec.rotation
-    np.testing.assert_allclose(R @ np.swapaxes(R, 1, 2), np.broadcast_to(np.eye(3), R.shape), atol=1e-12)
+    np.testing.assert_allclose(
+        R @ np.swapaxes(R, 1, 2), np.broadcast_to(np.eye(3), R.shape), atol=1e-12
+    )
 
 
 def test_acceleration_feedforward_matters():
@@ -48,7 +50,9 @@ def test_recording_holds_commands_before_efficiency_and_noise():
     rec = simulate(sc, seed=0, vehicle=veh)
     ctrl = GeometricController(veh, sc.trajectory)
     k = 50
-    f, _ = ctrl.motor_commands(rec.t[k], rec.position[k], rec.velocity[k], rec.rotation[k], rec.omega[k])
+    f, _ = ctrl.motor_commands(
+        rec.t[k], rec.position[k], rec.velocity[k], rec.rotation[k], rec.omega[k]
+    )
     np.testing.assert_allclose(rec.thrust_cmd[k], f, rtol=1e-9, atol=1e-9)
 
 
@@ -89,14 +93,33 @@ def test_bad_configuration_is_rejected():
 
 
 def _quadfault(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "quadfault.cli", *args], cwd=cwd,
-                          capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "quadfault.cli", *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
 
 
 def test_cli_simulate_writes_a_valid_recording(tmp_path):
     out = tmp_path / "flight.csv"
-    r = _quadfault("simulate", "--scenario", "combined", "--duration", "1", "--seed", "0",
-                   "--out", str(out), "--frame", "ENU", "--commands", "u", cwd=tmp_path)
+    r = _quadfault(
+        "simulate",
+        "--scenario",
+        "combined",
+        "--duration",
+        "1",
+        "--seed",
+        "0",
+        "--out",
+        str(out),
+        "--frame",
+        "ENU",
+        "--commands",
+        "u",
+        cwd=tmp_path,
+    )
     assert r.returncode == 0, r.stderr
     rec = read_recording(out)
     assert rec.frame == "ENU" and rec.commands_u is not None and len(rec) == 1000
@@ -106,12 +129,15 @@ def test_cli_simulate_writes_a_valid_recording(tmp_path):
     assert len(again.stderr.strip().splitlines()) == 1 and "Traceback" not in again.stderr
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--duration", "-1"], "--duration"),
-    (["--thrust-noise", "5"], "--thrust-noise"),
-    (["--sensor-noise", "1,2"], "--sensor-noise"),
-    (["--out", "x.txt"], ".csv"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--duration", "-1"], "--duration"),
+        (["--thrust-noise", "5"], "--thrust-noise"),
+        (["--sensor-noise", "1,2"], "--sensor-noise"),
+        (["--out", "x.txt"], ".csv"),
+    ],
+)
 def test_cli_simulate_bad_flags(tmp_path, args, message):
     base = ["simulate", "--out", str(tmp_path / "f.csv")]
     r = _quadfault(*base, *args, cwd=tmp_path)
@@ -133,23 +159,29 @@ def test_gains_scaled_to_a_small_vehicle_fly_it_where_the_f450_gains_saturate():
     Crazyflie with 30 ms motor lag and sensor noise they hover it within centimetres with no
     rotor at a limit, while the F450's own gains (about 10^3 x too stiff in attitude for its
     inertia) drive the rotors bang-bang between their limits."""
-    from quadfault.controller import GeometricGains
-    from quadfault.effects import parse_effect
-    from quadfault.sensors import SensorNoise
-    from quadfault.trajectory import Hover
+    from quadfault.model.controller import GeometricGains
+    from quadfault.model.effects import parse_effect
+    from quadfault.model.sensors import SensorNoise
+    from quadfault.model.trajectory import Hover
 
     assert GeometricGains().scaled(Vehicle()) == GeometricGains()
     cf = Vehicle.from_arm(0.046, 0.006, mass=0.03, inertia=np.diag([1.4e-5, 1.4e-5, 2.2e-5]))
     g = GeometricGains().scaled(cf)
     assert np.allclose(np.array(g.kx) / GeometricGains().kx, 0.03 / Vehicle().mass)
-    assert np.allclose(np.array(g.kW) / GeometricGains().kW, np.diag(cf.inertia)
-                       / np.diag(Vehicle().inertia))
+    assert np.allclose(
+        np.array(g.kW) / GeometricGains().kW, np.diag(cf.inertia) / np.diag(Vehicle().inertia)
+    )
     sc = named_scenario("nominal", 4.0).replace(trajectory=Hover())
     lag, noise = (parse_effect("motor_lag=0.03"),), SensorNoise(0.002, 0.005, 0.002, 0.005)
 
     def fly(gains):
-        rec = simulate(sc, vehicle=cf, seed=0, effects=lag, config=SimConfig(
-            sensor_noise=noise, controller=ControllerConfig(gains=gains)))
+        rec = simulate(
+            sc,
+            vehicle=cf,
+            seed=0,
+            effects=lag,
+            config=SimConfig(sensor_noise=noise, controller=ControllerConfig(gains=gains)),
+        )
         err = np.linalg.norm(rec.position - (0.0, 0.0, -1.0), axis=1)
         f = rec.thrust_cmd
         at_limit = np.mean((f >= cf.rotor_max_thrust - 1e-9) | (f <= 1e-9))

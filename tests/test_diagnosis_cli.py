@@ -6,14 +6,14 @@ import json
 import numpy as np
 import pytest
 
-from quadfault import effects as fx
 from quadfault.cli import main
 from quadfault.diagnosis import Diagnosis, DiagnosisConfig
 from quadfault.errors import ConfigError, QuadfaultError, RecordingError
-from quadfault.recording import write_recording
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import SensorNoise, SimConfig, simulate
-from quadfault.trajectory import Lissajous
+from quadfault.io.recording import write_recording
+from quadfault.model import effects as fx
+from quadfault.model.scenarios import named_scenario
+from quadfault.model.trajectory import Lissajous
+from quadfault.sim.simulator import SensorNoise, SimConfig, simulate
 
 CHANNELS = {"acc_x", "acc_y", "acc_z", "sf_x", "sf_y", "sf_z", "alpha_x", "alpha_y", "alpha_z"}
 
@@ -21,10 +21,12 @@ CHANNELS = {"acc_x", "acc_y", "acc_z", "sf_x", "sf_y", "sf_z", "alpha_x", "alpha
 @pytest.fixture(scope="module")
 def com_recording():
     sc = named_scenario("nominal", 5.0, 4e-3).replace(
-        trajectory=Lissajous(amplitude=(1.5, 1.0, 0.2), frequency=0.2))
+        trajectory=Lissajous(amplitude=(1.5, 1.0, 0.2), frequency=0.2)
+    )
     cfg = SimConfig(dt=4e-3, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001))
-    return simulate(sc, config=cfg, seed=3, effects=(fx.ComOffset((0.015, 0.0)),),
-                    thrust_noise=0.02)
+    return simulate(
+        sc, config=cfg, seed=3, effects=(fx.ComOffset((0.015, 0.0)),), thrust_noise=0.02
+    )
 
 
 def _number(x):
@@ -37,15 +39,24 @@ def validate_contract(doc: dict) -> None:
     assert doc["verdict"] in ("mismatch", "consistent")
     rm = doc["baseline"]["rmse"]
     assert isinstance(rm, dict) and rm and all(_number(v) and v >= 0 for v in rm.values())
-    assert isinstance(doc["untestable"], list) and all(isinstance(s, str) for s in doc["untestable"])
+    assert isinstance(doc["untestable"], list) and all(
+        isinstance(s, str) for s in doc["untestable"]
+    )
     for w in doc["where"]:
         assert set(w) == {"channel", "t0", "t1", "note"}
         assert isinstance(w["channel"], str) and isinstance(w["note"], str)
         assert _number(w["t0"]) and _number(w["t1"]) and w["t0"] <= w["t1"]
     imps = []
     for e in doc["effects"]:
-        assert set(e) >= {"name", "params", "uncertainty", "improvement", "explanation",
-                          "bounds", "folds"}
+        assert set(e) >= {
+            "name",
+            "params",
+            "uncertainty",
+            "improvement",
+            "explanation",
+            "bounds",
+            "folds",
+        }
         assert isinstance(e["name"], str) and e["name"] == e["name"].lower()
         assert isinstance(e["params"], dict) and isinstance(e["uncertainty"], dict)
         assert _number(e["improvement"]) and e["improvement"] <= 1.0
@@ -75,8 +86,21 @@ def test_json_validates_and_cli_writes_report(com_recording, tmp_path):
     assert "com_offset" in (rep / "report.md").read_text()
     # no silent overwrite; --force allows it
     assert main(["diagnose", str(csv), "--json", str(out), "--quiet"]) == 2
-    assert main(["diagnose", str(csv), "--json", str(out), "--quiet", "--force",
-                 "--effects", "drag,wind"]) == 0
+    assert (
+        main(
+            [
+                "diagnose",
+                str(csv),
+                "--json",
+                str(out),
+                "--quiet",
+                "--force",
+                "--effects",
+                "drag,wind",
+            ]
+        )
+        == 0
+    )
     validate_contract(json.loads(out.read_text()))
 
 
@@ -96,8 +120,9 @@ def test_cli_errors_are_one_line(tmp_path, capsys, com_recording):
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "sidecar" in err
     assert (tmp_path / "flight.json").read_text() == side
-    assert main(["diagnose", str(csv), "--json", str(tmp_path / "o.json"), "--effects",
-                 "vortex"]) == 2
+    assert (
+        main(["diagnose", str(csv), "--json", str(tmp_path / "o.json"), "--effects", "vortex"]) == 2
+    )
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "vortex" in err
 
@@ -126,10 +151,13 @@ def test_malformed_recordings_give_clear_errors(com_recording):
     omega[40, 1] = np.nan
     with pytest.raises(RecordingError, match="row 41"):
         Diagnosis().fit(dataclasses.replace(com_recording, omega=omega))
-    from quadfault.vehicle import Vehicle
+    from quadfault.model.vehicle import Vehicle
 
-    six = Vehicle.from_rotors([(1, 0), (0.5, 0.8), (-0.5, 0.8), (-1, 0), (-0.5, -0.8), (0.5, -0.8)],
-                              [1, -1, 1, -1, 1, -1], 0.01)
+    six = Vehicle.from_rotors(
+        [(1, 0), (0.5, 0.8), (-0.5, 0.8), (-1, 0), (-0.5, -0.8), (0.5, -0.8)],
+        [1, -1, 1, -1, 1, -1],
+        0.01,
+    )
     with pytest.raises(RecordingError, match="rotor"):
         Diagnosis().fit(com_recording, vehicle=six)
     with pytest.raises(ConfigError, match="folds"):
@@ -143,14 +171,23 @@ def test_malformed_recordings_give_clear_errors(com_recording):
 def test_imu_only_log_lists_untestable_effects(com_recording):
     imu = dataclasses.replace(com_recording, position=None, velocity=None, quaternion=None)
     res = Diagnosis().fit(imu)
-    assert set(res.untestable) == {"drag", "wind", "ground_effect", "blade_flapping",
-                                   "battery_thrust"}
+    assert set(res.untestable) == {
+        "drag",
+        "wind",
+        "ground_effect",
+        "blade_flapping",
+        "battery_thrust",
+    }
     assert set(res.baseline_rmse) == {"sf_x", "sf_y", "sf_z", "alpha_x", "alpha_y", "alpha_z"}
     assert res.effect_names[0] == "com_offset"
     # no pose to start from: the prediction is of the body rate and the attitude change
     p = res.prediction
     assert "position_rmse_m" not in p and set(p["rate_rmse_rad_per_s"]) == {
-        "nominal", "model", "constant_velocity", "constant_acceleration"}
+        "nominal",
+        "model",
+        "constant_velocity",
+        "constant_acceleration",
+    }
 
 
 def test_gaps_and_jitter_are_handled(com_recording):
@@ -160,9 +197,16 @@ def test_gaps_and_jitter_are_handled(com_recording):
     keep[::7] = False  # irregular sampling
     idx = np.flatnonzero(keep)
     cut = dataclasses.replace(
-        rec, t=rec.t[idx], omega=rec.omega[idx], thrust_cmd=rec.thrust_cmd[idx],
-        position=rec.position[idx], velocity=rec.velocity[idx], quaternion=rec.quaternion[idx],
-        accel=rec.accel[idx], eta_true=None)
+        rec,
+        t=rec.t[idx],
+        omega=rec.omega[idx],
+        thrust_cmd=rec.thrust_cmd[idx],
+        position=rec.position[idx],
+        velocity=rec.velocity[idx],
+        quaternion=rec.quaternion[idx],
+        accel=rec.accel[idx],
+        eta_true=None,
+    )
     res = Diagnosis().fit(cut)
     assert res.effect_names[0] == "com_offset"
     assert res.effects[0].params["offset_m"][0] == pytest.approx(0.015, abs=0.003)

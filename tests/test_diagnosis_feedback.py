@@ -5,23 +5,24 @@ reactions, and timing effects on merged 1 kHz logs are unbiased."""
 import numpy as np
 import pytest
 
-from quadfault import effects as fx
 from quadfault.diagnosis import Diagnosis
 from quadfault.diagnosis.fit import fit
 from quadfault.diagnosis.library import build_library, predict
 from quadfault.diagnosis.residuals import noise_scale, prepare
 from quadfault.diagnosis.select import frozen_replay, iv_slope
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import SimConfig, simulate
-from quadfault.trajectory import Lissajous
+from quadfault.model import effects as fx
+from quadfault.model.scenarios import named_scenario
+from quadfault.model.trajectory import Lissajous
+from quadfault.sim.simulator import SimConfig, simulate
 
 
 def _fly(duration, effects=(), thrust_noise=0.07, trajectory=None, seed=0):
     sc = named_scenario("nominal", duration, 1e-3)
     if trajectory is not None:
         sc = sc.replace(trajectory=trajectory)
-    return simulate(sc, config=SimConfig(dt=1e-3), seed=seed, effects=tuple(effects),
-                    thrust_noise=thrust_noise).without_truth()
+    return simulate(
+        sc, config=SimConfig(dt=1e-3), seed=seed, effects=tuple(effects), thrust_noise=thrust_noise
+    ).without_truth()
 
 
 @pytest.fixture(scope="module")
@@ -43,8 +44,9 @@ def test_frozen_replay_knows_only_what_was_known_at_each_block_start(noisy_effec
         rows = np.flatnonzero(rp.block == b)
         k0 = rp.knots[rows[0]]
         # states: those of the block's first row, held
-        np.testing.assert_array_equal(fr.w[rows], np.broadcast_to(noisy_effect_free.omega[k0],
-                                                                  (len(rows), 3)))
+        np.testing.assert_array_equal(
+            fr.w[rows], np.broadcast_to(noisy_effect_free.omega[k0], (len(rows), 3))
+        )
         # commands: the first row's, extrapolated with the slope over the row before it
         raw_rows = np.flatnonzero(np.isin(rp.raw["seg"], rows))
         slope = (f[k0] - f[k0 - 1]) / (t[k0] - t[k0 - 1]) if b > 0 else 0.0 * f[k0]
@@ -60,8 +62,9 @@ def test_least_squares_fits_a_lag_to_noise_and_the_iv_check_sees_through_it(nois
     scale = noise_scale(rp, rp.measured - base)
     f = fit(rp, [_lag(rp)], scale)
     assert f.x[0][0] > 0.01  # least squares "finds" a lag that is not there
-    slope, se = iv_slope(rp, [], f.terms, scale, (rp.measured - base) / scale,
-                         np.arange(len(rp.channels)))
+    slope, se = iv_slope(
+        rp, [], f.terms, scale, (rp.measured - base) / scale, np.arange(len(rp.channels))
+    )
     assert slope + 2 * se < 0.5
 
 
@@ -73,22 +76,32 @@ def test_effect_free_noisy_1khz_flight_is_consistent(noisy_effect_free):
 
 @pytest.mark.parametrize("tau", [0.02, 0.05])
 def test_motor_lag_on_a_merged_1khz_log_is_unbiased(tau):
-    rec = _fly(4.0, [fx.MotorLag(tau)], thrust_noise=0.0,
-               trajectory=Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.3))
+    rec = _fly(
+        4.0,
+        [fx.MotorLag(tau)],
+        thrust_noise=0.0,
+        trajectory=Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.3),
+    )
     rp = prepare(rec)
     base = predict(rp, [])
     scale = noise_scale(rp, rp.measured - base)
     f = fit(rp, [_lag(rp)], scale)
     assert f.x[0][0] == pytest.approx(tau, rel=0.01)
-    slope, se = iv_slope(rp, [], f.terms, scale, (rp.measured - base) / scale,
-                         np.arange(len(rp.channels)))
+    slope, se = iv_slope(
+        rp, [], f.terms, scale, (rp.measured - base) / scale, np.arange(len(rp.channels))
+    )
     assert slope == pytest.approx(1.0, abs=0.1)
 
 
 @pytest.mark.slow
 def test_real_lag_with_thrust_noise_is_found():
-    rec = _fly(8.0, [fx.MotorLag(0.04)], thrust_noise=0.05,
-               trajectory=Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.3), seed=3)
+    rec = _fly(
+        8.0,
+        [fx.MotorLag(0.04)],
+        thrust_noise=0.05,
+        trajectory=Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.3),
+        seed=3,
+    )
     res = Diagnosis().fit(rec)
     assert res.effect_names[:1] == ["motor_lag"]
     tau = res.to_dict()["effects"][0]["params"]["tau_s"]

@@ -7,17 +7,17 @@ import dataclasses
 import numpy as np
 import pytest
 
-from quadfault import effects as fx
 from quadfault.diagnosis import Diagnosis, DiagnosisConfig
 from quadfault.diagnosis.crossval import at_bound, fold_agreement
 from quadfault.diagnosis.library import build_library, predict
 from quadfault.diagnosis.residuals import prepare
 from quadfault.diagnosis.scores import fixed_scoring
 from quadfault.diagnosis.select import select
-from quadfault.recording import read_recording, write_recording
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import SensorNoise, SimConfig, simulate
-from quadfault.trajectory import Lissajous
+from quadfault.io.recording import read_recording, write_recording
+from quadfault.model import effects as fx
+from quadfault.model.scenarios import named_scenario
+from quadfault.model.trajectory import Lissajous
+from quadfault.sim.simulator import SensorNoise, SimConfig, simulate
 
 DT = 4e-3
 TRAJ = Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.15)
@@ -26,8 +26,9 @@ TRAJ = Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.15)
 def fly(effects=(), seed=1, duration=8.0, **kw):
     sc = named_scenario("nominal", duration, DT).replace(trajectory=TRAJ)
     cfg = SimConfig(dt=DT, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001))
-    return simulate(sc, config=cfg, seed=seed, effects=tuple(effects), thrust_noise=0.02,
-                    **kw).without_truth()
+    return simulate(
+        sc, config=cfg, seed=seed, effects=tuple(effects), thrust_noise=0.02, **kw
+    ).without_truth()
 
 
 @pytest.fixture(scope="module")
@@ -183,8 +184,7 @@ def test_measured_rotor_speeds_identify_the_motor_lag():
     lagged = np.vstack((rec.thrust_cmd[:1], lagged[:-1]))  # value at the end of interval k-1
     omega = np.sqrt(np.maximum(lagged, 0.0) / k)
     omega[100:103, 2] = np.nan  # a few telemetry dropouts
-    with_rotor = dataclasses.replace(rec, rotor_speed=omega,
-                                     meta={"rotor_thrust_coefficient": k})
+    with_rotor = dataclasses.replace(rec, rotor_speed=omega, meta={"rotor_thrust_coefficient": k})
     res = Diagnosis().fit(with_rotor)
     assert {f"rotor_{i}" for i in range(1, 5)} <= set(res.channels)
     lag = next(e for e in res.effects if e.name == "motor_lag")

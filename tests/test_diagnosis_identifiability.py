@@ -10,15 +10,15 @@ import dataclasses
 import numpy as np
 import pytest
 
-from quadfault import effects as fx
 from quadfault.diagnosis import Diagnosis, DiagnosisConfig
 from quadfault.diagnosis.identifiability import change_period, evidence, gate, invalid_spans
 from quadfault.diagnosis.library import build_library
 from quadfault.diagnosis.residuals import prepare
 from quadfault.errors import RecordingError
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import SensorNoise, SimConfig, simulate
-from quadfault.trajectory import Lissajous
+from quadfault.model import effects as fx
+from quadfault.model.scenarios import named_scenario
+from quadfault.model.trajectory import Lissajous
+from quadfault.sim.simulator import SensorNoise, SimConfig, simulate
 
 DT = 4e-3
 TRAJ = Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.15)
@@ -27,8 +27,9 @@ TRAJ = Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.15)
 def fly(effects=(), seed=1, duration=8.0):
     sc = named_scenario("nominal", duration, DT).replace(trajectory=TRAJ)
     cfg = SimConfig(dt=DT, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001))
-    return simulate(sc, config=cfg, seed=seed, effects=tuple(effects),
-                    thrust_noise=0.02).without_truth()
+    return simulate(
+        sc, config=cfg, seed=seed, effects=tuple(effects), thrust_noise=0.02
+    ).without_truth()
 
 
 def held(rec, rate_hz):
@@ -95,8 +96,9 @@ def drag_flight():
 
 def test_an_invalid_velocity_gives_no_drag_or_wind(drag_flight):
     t0, t1 = float(drag_flight.t[0]), float(drag_flight.t[-1])
-    rec = dataclasses.replace(drag_flight, meta={**drag_flight.meta,
-                                                "invalid": {"velocity": [[t0, t1]]}})
+    rec = dataclasses.replace(
+        drag_flight, meta={**drag_flight.meta, "invalid": {"velocity": [[t0, t1]]}}
+    )
     res = Diagnosis().fit(rec)
     skipped = {n["name"]: n["reason"] for n in res.not_identifiable}
     assert {"drag", "wind"} <= set(skipped) and "invalid" in skipped["drag"]
@@ -106,8 +108,9 @@ def test_an_invalid_velocity_gives_no_drag_or_wind(drag_flight):
 
 
 def test_a_short_invalid_span_is_left_out_and_named(drag_flight):
-    rec = dataclasses.replace(drag_flight, meta={**drag_flight.meta,
-                                                "invalid": {"velocity": [[2.0, 3.0]]}})
+    rec = dataclasses.replace(
+        drag_flight, meta={**drag_flight.meta, "invalid": {"velocity": [[2.0, 3.0]]}}
+    )
     spans = invalid_spans(rec)
     assert spans == {"velocity": ((2.0, 3.0),)}
     rp = prepare(rec, exclude=[(2.0, 3.0, "x")])
@@ -121,7 +124,7 @@ def test_a_short_invalid_span_is_left_out_and_named(drag_flight):
 def test_a_0_1_validity_column_flags_spans_and_a_bad_sidecar_entry_is_one_line(drag_flight):
     flag = ((drag_flight.t < 1.0) | (drag_flight.t > 1.5)).astype(float)
     rec = dataclasses.replace(drag_flight, extra={"velocity_valid": flag})
-    (a, b), = invalid_spans(rec)["velocity"]
+    ((a, b),) = invalid_spans(rec)["velocity"]
     assert a == pytest.approx(1.0, abs=DT) and b == pytest.approx(1.5, abs=2 * DT)
     bad = dataclasses.replace(drag_flight, meta={"invalid": {"velocity": [["x"]]}})
     with pytest.raises(RecordingError, match="invalid.velocity"):
@@ -139,7 +142,8 @@ def test_a_common_thrust_factor_is_not_four_weak_motors(common_factor):
     why = next(e.reason for e in res.rejected + res.suspect if e.name == "motor_efficiency")
     assert "do not differ" in why and "thrust_scale" in why
     res = Diagnosis(DiagnosisConfig(effects=("motor_efficiency", "thrust_scale"))).fit(
-        common_factor)
+        common_factor
+    )
     assert res.effect_names == ["thrust_scale"]
     assert res.effects[0].params["scale"] == pytest.approx(0.85, abs=0.02)
 
@@ -180,8 +184,11 @@ def test_a_centre_of_mass_offset_is_not_a_weak_rotor(com_offset_flight):
     assert "--baseline" in eff.reason
     res = Diagnosis().fit(com_offset_flight)  # ... and the default library names the cause
     assert "com_offset" in res.effect_names and "motor_efficiency" not in res.effect_names
-    np.testing.assert_allclose(res.effects[res.effect_names.index("com_offset")].params[
-        "offset_m"], [0.005, -0.003], atol=0.001)
+    np.testing.assert_allclose(
+        res.effects[res.effect_names.index("com_offset")].params["offset_m"],
+        [0.005, -0.003],
+        atol=0.001,
+    )
 
 
 def test_a_weak_rotor_in_maneuvers_is_told_from_the_vehicles_imbalance():
@@ -189,7 +196,8 @@ def test_a_weak_rotor_in_maneuvers_is_told_from_the_vehicles_imbalance():
     other, and the per-rotor pattern explains the held-out data better than a CoM offset
     with a yaw trim."""
     res = Diagnosis(DiagnosisConfig(effects=("motor_efficiency",))).fit(
-        fly((fx.MotorEfficiency((1.0, 1.0, 0.7, 1.0)),), seed=6))
+        fly((fx.MotorEfficiency((1.0, 1.0, 0.7, 1.0)),), seed=6)
+    )
     assert res.effect_names == ["motor_efficiency"]
     eta = res.effects[0].params["eta"]
     assert int(np.argmin(eta)) == 2
@@ -197,7 +205,7 @@ def test_a_weak_rotor_in_maneuvers_is_told_from_the_vehicles_imbalance():
 
 
 def test_the_healthy_pattern_of_several_flights_and_its_spread():
-    from quadfault.effects.motor_efficiency import EfficiencyCandidate, healthy_pattern
+    from quadfault.model.effects.motor_efficiency import EfficiencyCandidate, healthy_pattern
 
     eta, spread = healthy_pattern([(1.0, 1.1, 0.8, 1.0)])
     np.testing.assert_allclose(eta, [1.0, 1.1, 0.8, 1.0])
@@ -207,14 +215,23 @@ def test_the_healthy_pattern_of_several_flights_and_its_spread():
     np.testing.assert_allclose(eta, [1.0, 1.1, 0.8 * (1.1 * 1.05) ** (1 / 3), 1.0], rtol=1e-12)
     sd3 = np.std(np.log([0.8, 0.88, 0.84]), ddof=1)
     np.testing.assert_allclose(spread, [0.0, 0.0, sd3, 0.0], atol=1e-12)
-    cand = EfficiencyCandidate("motor_efficiency", ("a",) * 4, (0.2,) * 4, (1.5,) * 4,
-                               (1.0,) * 4, ((1.0,) * 4,), "thrust", spread=spread)
+    cand = EfficiencyCandidate(
+        "motor_efficiency",
+        ("a",) * 4,
+        (0.2,) * 4,
+        (1.5,) * 4,
+        (1.0,) * 4,
+        ((1.0,) * 4,),
+        "thrust",
+        spread=spread,
+    )
     np.testing.assert_allclose(cand.tolerance(), [0.05, 0.05, 3 * sd3, 0.05])
 
 
 def test_assumed_mass_and_inertia_say_what_depends_on_them(drag_flight):
-    rec = dataclasses.replace(drag_flight, meta={**drag_flight.meta,
-                                                "assumed": ["mass", "inertia"]})
+    rec = dataclasses.replace(
+        drag_flight, meta={**drag_flight.meta, "assumed": ["mass", "inertia"]}
+    )
     res = Diagnosis(DiagnosisConfig(effects=("drag", "motor_lag"))).fit(rec)
     a = res.to_dict()["assumptions"]
     assert a["assumed"] == ["mass", "inertia"]
@@ -224,7 +241,8 @@ def test_assumed_mass_and_inertia_say_what_depends_on_them(drag_flight):
 
 
 def test_a_healthy_baseline_flight_separates_damage_from_the_vehicles_own_imbalance(
-        weak_rotor, tmp_path):
+    weak_rotor, tmp_path
+):
     """Rotor 3 is 25 % weaker than the others. Against a baseline in which it was already
     that weak (the vehicle's own imbalance) nothing is accepted; against a baseline of equal
     rotors it is, relative to the baseline."""
@@ -232,19 +250,24 @@ def test_a_healthy_baseline_flight_separates_damage_from_the_vehicles_own_imbala
 
     from quadfault.diagnosis.cli import baseline_eta
 
-    same = Diagnosis(DiagnosisConfig(effects=("motor_efficiency",),
-                                     baseline_eta=(1.0, 1.0, 0.75, 1.0))).fit(weak_rotor)
+    same = Diagnosis(
+        DiagnosisConfig(effects=("motor_efficiency",), baseline_eta=(1.0, 1.0, 0.75, 1.0))
+    ).fit(weak_rotor)
     assert "motor_efficiency" not in same.effect_names
     why = next(e.reason for e in same.rejected if e.name == "motor_efficiency")
     assert "match the healthy vehicle" in why
-    spread = Diagnosis(DiagnosisConfig(  # healthy flights whose rotor 3 varies by 10 %
-        effects=("motor_efficiency",), baseline_eta=[(1.0, 1.0, 0.85, 1.0),
-                                                     (1.0, 1.0, 1.0, 1.0)])).fit(weak_rotor)
+    spread = Diagnosis(
+        DiagnosisConfig(  # healthy flights whose rotor 3 varies by 10 %
+            effects=("motor_efficiency",),
+            baseline_eta=[(1.0, 1.0, 0.85, 1.0), (1.0, 1.0, 1.0, 1.0)],
+        )
+    ).fit(weak_rotor)
     assert "motor_efficiency" not in spread.effect_names
     why = next(e.reason for e in spread.rejected if e.name == "motor_efficiency")
     assert "match the healthy vehicle (2 flights)" in why
-    other = Diagnosis(DiagnosisConfig(effects=("motor_efficiency",),
-                                      baseline_eta=(1.0, 1.05, 1.0, 0.95))).fit(weak_rotor)
+    other = Diagnosis(
+        DiagnosisConfig(effects=("motor_efficiency",), baseline_eta=(1.0, 1.05, 1.0, 0.95))
+    ).fit(weak_rotor)
     p = other.effects[0].params
     assert p["baseline_flights"] == 1 and "baseline_spread" not in p
     np.testing.assert_allclose(p["eta"][2] / p["eta"][0], 0.75, atol=0.03)
@@ -264,13 +287,25 @@ def test_the_report_lists_what_was_not_identifiable_and_the_assumed_constants():
     from quadfault.diagnosis.result import DiagnosisResult
 
     res = DiagnosisResult(
-        verdict="consistent", baseline_rmse={}, model_rmse={}, model_improvement=0.0,
+        verdict="consistent",
+        baseline_rmse={},
+        model_rmse={},
+        model_improvement=0.0,
         not_identifiable=({"name": "motor_lag", "reason": "rotor commands logged at 10 Hz"},),
-        assumptions={"assumed": ["mass"], "depends": {"drag": ["mass"]},
-                     "independent": ["motor_lag"], "note": "the vehicle's mass is assumed"})
+        assumptions={
+            "assumed": ["mass"],
+            "depends": {"drag": ["mass"]},
+            "independent": ["motor_lag"],
+            "note": "the vehicle's mass is assumed",
+        },
+    )
     text = markdown(res, "flight.csv")
     assert "## Not identifiable from this log" in text
     assert "- **motor_lag**: rotor commands logged at 10 Hz" in text
     assert "- drag depends on the assumed mass" in text
-    assert "## Not identifiable" not in markdown(DiagnosisResult(
-        verdict="consistent", baseline_rmse={}, model_rmse={}, model_improvement=0.0), "f.csv")
+    assert "## Not identifiable" not in markdown(
+        DiagnosisResult(
+            verdict="consistent", baseline_rmse={}, model_rmse={}, model_improvement=0.0
+        ),
+        "f.csv",
+    )

@@ -14,10 +14,10 @@ import pytest
 from quadfault.diagnosis import Diagnosis, DiagnosisConfig
 from quadfault.diagnosis.phases import flight_phases
 from quadfault.diagnosis.residuals import prepare
-from quadfault.recording import Recording
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import SensorNoise, SimConfig, simulate
-from quadfault.trajectory import Lissajous
+from quadfault.io.recording import Recording
+from quadfault.model.scenarios import named_scenario
+from quadfault.model.trajectory import Lissajous
+from quadfault.sim.simulator import SensorNoise, SimConfig, simulate
 
 DT = 4e-3
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real"
@@ -25,7 +25,8 @@ DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real"
 
 def _flight(seed, duration=4.0):
     sc = named_scenario("nominal", duration, DT).replace(
-        trajectory=Lissajous(amplitude=(1.5, 1.0, 0.2), frequency=0.2))
+        trajectory=Lissajous(amplitude=(1.5, 1.0, 0.2), frequency=0.2)
+    )
     cfg = SimConfig(dt=DT, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001, 0.02))
     return simulate(sc, config=cfg, seed=seed, thrust_noise=0.02).without_truth()
 
@@ -38,10 +39,14 @@ def _still(rec, seconds, f, sf_z, rng, w=0.0, sf_norm=None):
     if sf_norm is not None:
         d = rng.standard_normal((n, 3))
         sf = sf_norm * d / np.linalg.norm(d, axis=1, keepdims=True)
-    return {"position": np.tile([rec.position[-1, 0], rec.position[-1, 1], 0.0], (n, 1)),
-            "velocity": np.zeros((n, 3)), "quaternion": np.tile([1.0, 0, 0, 0], (n, 1)),
-            "omega": w * rng.standard_normal((n, 3)) + 1e-4 * rng.standard_normal((n, 3)),
-            "thrust_cmd": np.full((n, 4), f), "accel": sf}
+    return {
+        "position": np.tile([rec.position[-1, 0], rec.position[-1, 1], 0.0], (n, 1)),
+        "velocity": np.zeros((n, 3)),
+        "quaternion": np.tile([1.0, 0, 0, 0], (n, 1)),
+        "omega": w * rng.standard_normal((n, 3)) + 1e-4 * rng.standard_normal((n, 3)),
+        "thrust_cmd": np.full((n, 4), f),
+        "accel": sf,
+    }
 
 
 def _stitch(parts, vehicle):
@@ -52,8 +57,10 @@ def _stitch(parts, vehicle):
 
 
 def _as_parts(rec):
-    return {c: getattr(rec, c) for c in ("position", "velocity", "quaternion", "omega",
-                                         "thrust_cmd", "accel")}
+    return {
+        c: getattr(rec, c)
+        for c in ("position", "velocity", "quaternion", "omega", "thrust_cmd", "accel")
+    }
 
 
 @pytest.fixture(scope="module")
@@ -62,13 +69,15 @@ def stitched():
     g = a.vehicle.gravity
     idle = 0.3 * a.vehicle.weight / 4
     rng = np.random.default_rng(0)
-    parts = [_as_parts(a),
-             _still(a, 1.0, idle, -g, rng),         # landed, rotors idle
-             _still(a, 1.5, 0.0, -g, rng),          # motors off on the ground
-             _still(a, 0.5, idle, -g, rng),         # idle again before take-off
-             _as_parts(b),
-             _still(b, 0.2, idle, 0.0, rng, w=15.0, sf_norm=8 * g),  # impact, tumbling
-             _still(b, 0.8, 0.0, g, rng)]           # lying upside down, motors off
+    parts = [
+        _as_parts(a),
+        _still(a, 1.0, idle, -g, rng),  # landed, rotors idle
+        _still(a, 1.5, 0.0, -g, rng),  # motors off on the ground
+        _still(a, 0.5, idle, -g, rng),  # idle again before take-off
+        _as_parts(b),
+        _still(b, 0.2, idle, 0.0, rng, w=15.0, sf_norm=8 * g),  # impact, tumbling
+        _still(b, 0.8, 0.0, g, rng),
+    ]  # lying upside down, motors off
     n = [len(p["omega"]) for p in parts]
     edges = DT * np.cumsum([0] + n)
     return _stitch(parts, a.vehicle), edges
@@ -116,7 +125,7 @@ def test_a_deliberate_short_motor_cut_in_flight_is_data():
     rec = _flight(4, duration=6.0)
     f = rec.thrust_cmd.copy()
     k0 = int(3.0 / DT)
-    f[k0:k0 + int(0.25 / DT)] = 0.0
+    f[k0 : k0 + int(0.25 / DT)] = 0.0
     cut = dataclasses.replace(rec, thrust_cmd=f)
     assert flight_phases(prepare(cut)) == ()
 
@@ -125,14 +134,15 @@ def _import(kind, rel, tmp_path):
     path = DATA / rel
     if not path.exists():
         pytest.skip("../shared/data/real is not available")
-    from quadfault.importers import get_importer
+    from quadfault.io.importers import get_importer
 
     return get_importer(kind)(path)
 
 
 def test_real_pad_landing_and_crash_are_masked(tmp_path):
-    pad = _import("crazypad", "crazypad-cf21-faults/motor_data/normal_flight/E8_log00.csv.gz",
-                  tmp_path)
+    pad = _import(
+        "crazypad", "crazypad-cf21-faults/motor_data/normal_flight/E8_log00.csv.gz", tmp_path
+    )
     spans = flight_phases(prepare(pad))
     assert len(spans) == 1 and "motors off" in spans[0].reason
     assert 5.0 < spans[0].t1 - spans[0].t0 < 7.5  # ~5 s on the pad plus take-off and landing

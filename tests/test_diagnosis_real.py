@@ -41,8 +41,13 @@ def test_eschmann_motor_lag_and_its_vertical_gain(log, tmp_path):
     whose 95 % interval is above 0; log10's crash and log16's stay on the ground are
     excluded, not scored."""
     doc = diagnose("eschmann", f"eschmann-cf21-sysid/{log}.csv.gz", tmp_path)
-    assert set(doc["untestable"]) == {"drag", "wind", "ground_effect", "blade_flapping",
-                                      "battery_thrust"}
+    assert set(doc["untestable"]) == {
+        "drag",
+        "wind",
+        "ground_effect",
+        "blade_flapping",
+        "battery_thrust",
+    }
     lag = [e for e in doc["effects"] if e["name"] == "motor_lag"]
     assert lag and 0.05 <= lag[0]["params"]["tau_s"] <= 0.11
     sf_z = doc["model"]["channels"]["sf_z"]
@@ -59,9 +64,13 @@ def test_nanodrone_drag_from_the_accelerometer_and_rotor_speeds(tmp_path):
     doc = diagnose("nanodrone", "nanodrone-cf21bl/random1_20251017_run4.csv.gz", tmp_path)
     assert {"sf_x", "rotor_1"} <= set(doc["model"]["channels"])
     # the horizontal drag, as drag or as rotor drag proportional to thrust (at hover thrust)
-    k = [np.mean(e["params"]["k_N_s_per_m"][:2]) if e["name"] == "drag"
-         else e["params"]["drag_at_hover_N_s_per_m"] for e in doc["effects"]
-         if e["name"] in ("drag", "blade_flapping")]
+    k = [
+        np.mean(e["params"]["k_N_s_per_m"][:2])
+        if e["name"] == "drag"
+        else e["params"]["drag_at_hover_N_s_per_m"]
+        for e in doc["effects"]
+        if e["name"] in ("drag", "blade_flapping")
+    ]
     assert len(k) == 1 and 0.014 <= k[0] <= 0.026
     lag = next(e for e in doc["effects"] if e["name"] == "motor_lag")
     assert 0.02 <= lag["params"]["tau_s"] <= 0.06
@@ -72,14 +81,20 @@ def test_nanodrone_drag_from_the_accelerometer_and_rotor_speeds(tmp_path):
 
 @pytest.mark.slow
 def test_crazypad_pad_is_excluded_and_inertia_at_its_bound_is_suspect(tmp_path):
-    doc = diagnose("crazypad", "crazypad-cf21-faults/motor_data/normal_flight/E8_log05.csv.gz",
-                   tmp_path)
+    doc = diagnose(
+        "crazypad", "crazypad-cf21-faults/motor_data/normal_flight/E8_log05.csv.gz", tmp_path
+    )
     assert any("motors off" in e["reason"] for e in doc["scoring"]["excluded"])
     assert all(not e["at_bound"] for e in doc["effects"])
     inertia = next(e for e in doc["suspect"] if e["name"] == "inertia")
     assert inertia["at_bound"] and "bound" in inertia["explanation"]
-    eff = diagnose("crazypad", "crazypad-cf21-faults/motor_data/normal_flight/E8_log05.csv.gz",
-                   tmp_path / "eff", "--effects", "motor_efficiency")
+    eff = diagnose(
+        "crazypad",
+        "crazypad-cf21-faults/motor_data/normal_flight/E8_log05.csv.gz",
+        tmp_path / "eff",
+        "--effects",
+        "motor_efficiency",
+    )
     fitted = eff["effects"] + eff["suspect"] + eff["rejected"]
     assert [e["name"] for e in fitted] == ["motor_efficiency"]
 
@@ -92,19 +107,38 @@ def test_crazypad_cut_propeller_against_healthy_flights(tmp_path):
     folder = "crazypad-cf21-faults/motor_data"
     bases = []
     for name in ("E8_log00", "E8_log03"):
-        healthy = diagnose("crazypad", f"{folder}/normal_flight/{name}.csv.gz",
-                           tmp_path / name, "--effects", "motor_efficiency")
+        healthy = diagnose(
+            "crazypad",
+            f"{folder}/normal_flight/{name}.csv.gz",
+            tmp_path / name,
+            "--effects",
+            "motor_efficiency",
+        )
         assert not healthy["effects"]
         imb = next(e for e in healthy["rejected"] if e["name"] == "motor_efficiency")
         assert imb["reason"].startswith("vehicle imbalance: rotor ")
         assert "one flight cannot tell a weak rotor" in imb["reason"]
         bases.append(str(tmp_path / name / "diag.json"))
-    other = diagnose("crazypad", f"{folder}/normal_flight/E8_log01.csv.gz", tmp_path / "o",
-                     "--effects", "motor_efficiency", "--baseline", *bases)
+    other = diagnose(
+        "crazypad",
+        f"{folder}/normal_flight/E8_log01.csv.gz",
+        tmp_path / "o",
+        "--effects",
+        "motor_efficiency",
+        "--baseline",
+        *bases,
+    )
     for e in other["effects"]:
         assert min(e["params"]["eta"]) >= 0.85
-    cut = diagnose("crazypad", f"{folder}/cut_propeller_M3_3mm/E8_log01.csv.gz",
-                   tmp_path / "c", "--effects", "motor_efficiency", "--baseline", *bases)
+    cut = diagnose(
+        "crazypad",
+        f"{folder}/cut_propeller_M3_3mm/E8_log01.csv.gz",
+        tmp_path / "c",
+        "--effects",
+        "motor_efficiency",
+        "--baseline",
+        *bases,
+    )
     eta = cut["effects"][0]["params"]["eta"]
     assert int(np.argmin(eta)) == 2 and eta[2] < 0.9
     assert cut["effects"][0]["params"]["baseline_flights"] == 2

@@ -7,12 +7,12 @@ slower cases carry the ``slow`` marker.
 import numpy as np
 import pytest
 
-from quadfault import effects as fx
 from quadfault.diagnosis import Diagnosis
 from quadfault.diagnosis.library import EQUIVALENT
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import SensorNoise, SimConfig, simulate
-from quadfault.trajectory import Lissajous
+from quadfault.model import effects as fx
+from quadfault.model.scenarios import named_scenario
+from quadfault.model.trajectory import Lissajous
+from quadfault.sim.simulator import SensorNoise, SimConfig, simulate
 
 DT = 4e-3
 FAST_TRAJ = Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.15)
@@ -40,8 +40,17 @@ def test_effect_free_flight_is_consistent():
     assert res.verdict == "consistent"
     assert res.effects == ()
     assert res.model_improvement == 0.0
-    assert set(res.baseline_rmse) == {"acc_x", "acc_y", "acc_z", "sf_x", "sf_y", "sf_z",
-                                      "alpha_x", "alpha_y", "alpha_z"}
+    assert set(res.baseline_rmse) == {
+        "acc_x",
+        "acc_y",
+        "acc_z",
+        "sf_x",
+        "sf_y",
+        "sf_z",
+        "alpha_x",
+        "alpha_y",
+        "alpha_z",
+    }
 
 
 def test_drag_recovered():
@@ -70,17 +79,32 @@ def test_two_effects_recovered():
 CASES = {
     "motor_lag": ((fx.MotorLag(0.05),), {}, lambda p: abs(p["tau_s"] - 0.05) < 0.0075),
     "delay": ((fx.Delay(0.03),), {}, lambda p: abs(p["delay_s"] - 0.03) < 0.004),
-    "motor_efficiency": ((fx.MotorEfficiency((1.0, 1.0, 0.8, 1.0)),), {},
-                         lambda p: np.allclose(p["eta"], [1, 1, 0.8, 1], atol=0.03)),
+    "motor_efficiency": (
+        (fx.MotorEfficiency((1.0, 1.0, 0.8, 1.0)),),
+        {},
+        lambda p: np.allclose(p["eta"], [1, 1, 0.8, 1], atol=0.03),
+    ),
     "thrust_scale": ((fx.ThrustScale(0.9),), {}, lambda p: abs(p["scale"] - 0.9) < 0.02),
-    "wind": ((fx.Wind((2.0, -1.0, 0.0), k=0.3),), {},
-             lambda p: np.allclose(p["force_N"][:2], [0.6, -0.3], atol=0.08)),
-    "ground_effect": ((fx.GroundEffect(0.3),), {"traj": LOW_TRAJ},
-                      lambda p: abs(p["rotor_radius_m"] - 0.3) < 0.045),
-    "com_offset": ((fx.ComOffset((0.01, -0.02)),), {},
-                   lambda p: np.allclose(p["offset_m"], [0.01, -0.02], atol=0.002)),
-    "inertia": ((fx.Inertia((1.6, 1.6, 1.0)),), {},
-                lambda p: np.allclose(p["scale"][:2], 1.6, rtol=0.25)),
+    "wind": (
+        (fx.Wind((2.0, -1.0, 0.0), k=0.3),),
+        {},
+        lambda p: np.allclose(p["force_N"][:2], [0.6, -0.3], atol=0.08),
+    ),
+    "ground_effect": (
+        (fx.GroundEffect(0.3),),
+        {"traj": LOW_TRAJ},
+        lambda p: abs(p["rotor_radius_m"] - 0.3) < 0.045,
+    ),
+    "com_offset": (
+        (fx.ComOffset((0.01, -0.02)),),
+        {},
+        lambda p: np.allclose(p["offset_m"], [0.01, -0.02], atol=0.002),
+    ),
+    "inertia": (
+        (fx.Inertia((1.6, 1.6, 1.0)),),
+        {},
+        lambda p: np.allclose(p["scale"][:2], 1.6, rtol=0.25),
+    ),
 }
 
 

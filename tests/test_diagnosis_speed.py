@@ -10,25 +10,28 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from quadfault import effects as fx
 from quadfault.diagnosis import Diagnosis
 from quadfault.diagnosis.fit import Linearisation, fit, linearisation, solve_linear
 from quadfault.diagnosis.library import build_library, predict
 from quadfault.diagnosis.residuals import noise_scale, prepare
 from quadfault.diagnosis.select import iv_slope
 from quadfault.errors import RecordingError
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import SensorNoise, SimConfig, simulate
-from quadfault.trajectory import Lissajous
-from quadfault.vehicle import PAPER_YAW_SIGNS, Vehicle
+from quadfault.model import effects as fx
+from quadfault.model.scenarios import named_scenario
+from quadfault.model.trajectory import Lissajous
+from quadfault.model.vehicle import PAPER_YAW_SIGNS, Vehicle
+from quadfault.sim.simulator import SensorNoise, SimConfig, simulate
 
 
 @pytest.fixture(scope="module")
 def drag_recording():
     sc = named_scenario("nominal", 6.0, 4e-3).replace(
-        trajectory=Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.2))
+        trajectory=Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.2)
+    )
     cfg = SimConfig(dt=4e-3, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001))
-    return simulate(sc, config=cfg, seed=4, effects=(fx.Drag(0.3),), thrust_noise=0.02).without_truth()
+    return simulate(
+        sc, config=cfg, seed=4, effects=(fx.Drag(0.3),), thrust_noise=0.02
+    ).without_truth()
 
 
 @pytest.mark.parametrize("kind", ["uniform", "short_last", "jitter"])
@@ -36,8 +39,11 @@ def drag_recording():
 def test_lag_scan_matches_the_plant_recursion(kind, tau):
     rng = np.random.default_rng(3)
     n = 3001
-    dt = {"uniform": np.full(n, 0.004), "short_last": np.r_[np.full(n - 1, 0.004), 0.003],
-          "jitter": 0.004 + 1e-4 * rng.random(n)}[kind]
+    dt = {
+        "uniform": np.full(n, 0.004),
+        "short_last": np.r_[np.full(n - 1, 0.004), 0.003],
+        "jitter": 0.004 + 1e-4 * rng.random(n),
+    }[kind]
     f = rng.random((n, 4))
     y, oracle = f[0].copy(), np.empty_like(f)  # the plant's recursion, one step at a time
     for k in range(n):
@@ -62,8 +68,16 @@ def test_irls_solution_equals_scipy_least_squares():
     def fun(x):
         return ((meas - base - phi @ x)[mask] / scale).ravel()
 
-    ref = least_squares(fun, np.zeros(p), bounds=(lo, hi), loss="soft_l1", f_scale=2.0,
-                        xtol=1e-14, ftol=1e-14, gtol=1e-14)
+    ref = least_squares(
+        fun,
+        np.zeros(p),
+        bounds=(lo, hi),
+        loss="soft_l1",
+        f_scale=2.0,
+        xtol=1e-14,
+        ftol=1e-14,
+        gtol=1e-14,
+    )
     np.testing.assert_allclose(sol.x, ref.x, atol=2e-6)
     assert sol.x[2] == pytest.approx(1.5)
     np.testing.assert_allclose(sol.fun, fun(sol.x), atol=1e-12)
@@ -79,8 +93,12 @@ def test_affine_effects_use_a_verified_linear_model(drag_recording):
     exact = predict(rp, [(lib["drag"], x[:3]), (lib["wind"], x[3:])])
     np.testing.assert_allclose(lin.at(x), exact, atol=1e-9 * np.max(np.abs(exact)))
     # not affine: thrust gain times CoM offset, or a lag
-    assert linearisation(rp, [lib["motor_efficiency"], lib["com_offset"]], [],
-                         np.r_[np.ones(4), 0.0, 0.0], scale) is None
+    assert (
+        linearisation(
+            rp, [lib["motor_efficiency"], lib["com_offset"]], [], np.r_[np.ones(4), 0.0, 0.0], scale
+        )
+        is None
+    )
     assert linearisation(rp, [lib["motor_lag"]], [], [0.05], scale) is None
     # a non-affine model fails the verification even if declared affine
     probe = Linearisation(rp, [lib["motor_lag"]], [], np.array([0.05]), exact=True, scale=scale)
@@ -100,7 +118,8 @@ def test_calibration_segment_is_fitted_on_but_not_scored(drag_recording):
     assert sc["excluded_fraction"] == pytest.approx(2.0 / drag_recording.duration, rel=1e-6)
     assert sc["blocks"] == plain.scoring["blocks"]
     assert sc["scored_blocks"] < sc["blocks"] and sc["scored_blocks"] == pytest.approx(
-        sc["blocks"] * 4 / 6, abs=3)
+        sc["blocks"] * 4 / 6, abs=3
+    )
     assert res.effect_names[:1] == ["drag"]
     assert res.baseline_rmse != plain.baseline_rmse  # scored on other blocks
     doc = json.loads(res.to_json())
@@ -120,11 +139,18 @@ def test_heavy_vehicle_thrust_noise_inertia_bias_is_caught_by_the_iv_check():
     at ~1.4 (feedback bias); the IV slope of that fit is ~0 and the diagnosis stays
     consistent."""
     m, d = 1.222, 0.2 * 1.222 ** (1 / 3)
-    veh = Vehicle.from_rotors([(d, d), (d, -d), (-d, -d), (-d, d)], PAPER_YAW_SIGNS, 0.045 * d,
-                              mass=m, inertia=(0.32 * m * d * d, 0.32 * m * d * d, 0.58 * m * d * d),
-                              gravity=9.81, thrust_to_weight=2.3)
+    veh = Vehicle.from_rotors(
+        [(d, d), (d, -d), (-d, -d), (-d, d)],
+        PAPER_YAW_SIGNS,
+        0.045 * d,
+        mass=m,
+        inertia=(0.32 * m * d * d, 0.32 * m * d * d, 0.58 * m * d * d),
+        gravity=9.81,
+        thrust_to_weight=2.3,
+    )
     sc = named_scenario("nominal", 12.0, 4e-3).replace(
-        trajectory=Lissajous(amplitude=(1.6, 1.1, 0.2), frequency=0.18))
+        trajectory=Lissajous(amplitude=(1.6, 1.1, 0.2), frequency=0.18)
+    )
     cfg = SimConfig(dt=4e-3, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001))
     rec = simulate(sc, vehicle=veh, config=cfg, seed=0, thrust_noise=0.045).without_truth()
     rp = prepare(rec)
@@ -135,8 +161,9 @@ def test_heavy_vehicle_thrust_noise_inertia_bias_is_caught_by_the_iv_check():
     assert np.all(f.x[0][:2] > 1.2)  # the bias is real and large
     sig = (predict(rp, f.terms) - base) / scale
     assert sig.any()
-    slope, se = iv_slope(rp, [], f.terms, scale, (rp.measured - base) / scale,
-                         rp.channel_index("alpha"))
+    slope, se = iv_slope(
+        rp, [], f.terms, scale, (rp.measured - base) / scale, rp.channel_index("alpha")
+    )
     assert slope + 2 * se < 0.5
     res = Diagnosis().fit(rec)
     assert "inertia" not in res.effect_names
@@ -151,6 +178,7 @@ def test_numpy_savgol_matches_scipy(n, window):
     from quadfault.diagnosis.locate import savgol_coeffs, savgol_filter
 
     z = np.random.default_rng(n).normal(size=(n, 6)).cumsum(axis=0)
-    np.testing.assert_allclose(savgol_filter(z, window), ref_filter(z, window, 2, axis=0, mode="interp"),
-                               atol=1e-10)
+    np.testing.assert_allclose(
+        savgol_filter(z, window), ref_filter(z, window, 2, axis=0, mode="interp"), atol=1e-10
+    )
     np.testing.assert_allclose(savgol_coeffs(window), ref_coeffs(window, 2), atol=1e-14)

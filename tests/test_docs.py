@@ -6,10 +6,10 @@ from __future__ import annotations
 import re
 import subprocess
 import sys
-import tomllib
 from pathlib import Path
 
 import pytest
+import tomllib
 
 from quadfault.cli import SUBCOMMANDS
 
@@ -26,12 +26,17 @@ def _code_spans(text: str) -> list[str]:
 
 
 def test_ci_runs_the_readme_test_command_and_it_installs_existing_extras():
-    out = subprocess.run(["bash", "-c", "source <(sed -n '/^cmd=/p' .ci/run); echo \"$cmd\""],
-                         cwd=ROOT, capture_output=True, text=True)
+    out = subprocess.run(
+        ["bash", "-c", "source <(sed -n '/^cmd=/p' .ci/run); echo \"$cmd\""],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+    )
     command = out.stdout.strip()
     assert command.startswith("python3 -m venv") and command.endswith("python -m pytest -n 2")
-    extras = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
-                 ["optional-dependencies"])
+    extras = set(
+        tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    )
     (asked,) = re.findall(r'pip install -e "\.\[([a-z0-9_,-]+)\]"', command)
     assert set(asked.split(",")) <= extras
     # command 1 installs the core alone (its job needs no extra)
@@ -39,8 +44,9 @@ def test_ci_runs_the_readme_test_command_and_it_installs_existing_extras():
     assert "pip install -e . &&" in first and "quadfault reproduce" in first
 
 
-@pytest.mark.parametrize("doc", [ROOT / "README.md", ROOT / "docs" / "results.md"],
-                         ids=lambda p: p.name)
+@pytest.mark.parametrize(
+    "doc", [ROOT / "README.md", ROOT / "docs" / "results.md"], ids=lambda p: p.name
+)
 def test_every_command_named_exists(doc):
     text = doc.read_text(encoding="utf-8")
     for span in _code_spans(text):
@@ -55,20 +61,31 @@ def test_user_docs_cite_no_internal_files(doc):
     assert "CONTRACT" not in doc.read_text(encoding="utf-8")
 
 
-@pytest.mark.parametrize("doc", [ROOT / "README.md", ROOT / "docs" / "results.md",
-                                 ROOT / "docs" / "formats.md"], ids=lambda p: p.name)
+@pytest.mark.parametrize(
+    "doc",
+    [ROOT / "README.md", ROOT / "docs" / "results.md", ROOT / "docs" / "formats.md"],
+    ids=lambda p: p.name,
+)
 def test_front_docs_name_no_machine_paths_or_commits(doc):
     text = doc.read_text(encoding="utf-8")
     assert not re.search(r"\.\./shared|/work/|/tmp/", text), "a path of one machine"
-    assert not re.search(r"\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}\b", text), \
+    assert not re.search(r"\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}\b", text), (
         "a commit hash"
+    )
 
 
 def test_product_code_cites_the_user_docs():
-    offenders = [str(p.relative_to(ROOT)) for pkg in ("quadfault", "estimators", "quad_fault_env",
-                                                     "agents")
-                 for p in (ROOT / pkg).rglob("*.py") if "CONTRACT" in p.read_text()]
+    offenders = [
+        str(p.relative_to(ROOT))
+        for pkg in ("quadfault", "estimators", "quad_fault_env", "agents")
+        for p in (ROOT / pkg).rglob("*.py")
+        if "CONTRACT" in p.read_text()
+    ]
     assert offenders == []
-    help_text = subprocess.run([sys.executable, "-m", "quadfault.cli", "diagnose", "--help"],
-                               cwd=ROOT, capture_output=True, text=True).stdout
+    help_text = subprocess.run(
+        [sys.executable, "-m", "quadfault.cli", "diagnose", "--help"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+    ).stdout
     assert "docs/formats.md" in help_text

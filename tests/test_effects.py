@@ -1,42 +1,46 @@
-"""Effect models (quadfault.effects): physics invariants, one model for plant and diagnosis."""
+"""Effect models (quadfault.model.effects): physics invariants, one model for plant and diagnosis."""
 
 import numpy as np
 import pytest
 
-from quadfault import effects as fx
-from quadfault.dynamics import RigidBodyState
 from quadfault.errors import ConfigError
-from quadfault.rotation import cross, euler_zyx_to_rot
-from quadfault.vehicle import Vehicle
+from quadfault.model import effects as fx
+from quadfault.model.dynamics import RigidBodyState
+from quadfault.model.rotation import cross, euler_zyx_to_rot
+from quadfault.model.vehicle import Vehicle
 
 
 def _state(rng, n=()):
     R = euler_zyx_to_rot(*(rng.uniform(-0.5, 0.5, size=n) for _ in range(3)))
-    return RigidBodyState(rng.normal(size=n + (3,)), rng.normal(size=n + (3,)), R,
-                          rng.normal(size=n + (3,)))
+    return RigidBodyState(
+        rng.normal(size=n + (3,)), rng.normal(size=n + (3,)), R, rng.normal(size=n + (3,))
+    )
 
 
-@pytest.mark.parametrize("spec, cls, attr, value", [
-    ("drag=0.3", fx.Drag, "k", (0.3, 0.3, 0.3)),
-    ("drag=0.1,0.2,0.3", fx.Drag, "k", (0.1, 0.2, 0.3)),
-    ("wind=2,0,0,gust=0.5", fx.Wind, "velocity", (2.0, 0.0, 0.0)),
-    ("motor_lag=0.05", fx.MotorLag, "tau", 0.05),
-    ("delay=0.02", fx.Delay, "delay", 0.02),
-    ("motor_efficiency=1,1,0.7,1", fx.MotorEfficiency, "eta", (1.0, 1.0, 0.7, 1.0)),
-    ("thrust_scale=0.9", fx.ThrustScale, "scale", 0.9),
-    ("ground_effect=0.12", fx.GroundEffect, "rotor_radius", 0.12),
-    ("com_offset=0.01,-0.02", fx.ComOffset, "offset", (0.01, -0.02)),
-    ("inertia=1.2", fx.Inertia, "scale", (1.2, 1.2, 1.2)),
-    ("blade_flapping=0.05,0.002", fx.BladeFlapping, "k_moment", 0.002),
-    ("blade_flapping=0.05", fx.BladeFlapping, "k_moment", 0.0),
-    ("rotor_inertia=0.004", fx.RotorInertia, "kappa", 0.004),
-    ("battery_thrust=2,v_start=4.2,v_end=3.6", fx.BatteryThrust, "v_ref", 3.9),
-    ("thrust_curve=0.1,0.9,0.02", fx.ThrustCurve, "curve", (0.1, 0.9, 0.02)),
-    ("mass=1.15", fx.Mass, "scale", 1.15),
-    ("rate_damping=0.01", fx.RateDamping, "linear", (0.01, 0.01, 0.01)),
-    ("rate_damping=0.01,0.002", fx.RateDamping, "quadratic", (0.002, 0.002, 0.002)),
-    ("rate_damping=1,2,3,4,5,6", fx.RateDamping, "quadratic", (4.0, 5.0, 6.0)),
-])
+@pytest.mark.parametrize(
+    "spec, cls, attr, value",
+    [
+        ("drag=0.3", fx.Drag, "k", (0.3, 0.3, 0.3)),
+        ("drag=0.1,0.2,0.3", fx.Drag, "k", (0.1, 0.2, 0.3)),
+        ("wind=2,0,0,gust=0.5", fx.Wind, "velocity", (2.0, 0.0, 0.0)),
+        ("motor_lag=0.05", fx.MotorLag, "tau", 0.05),
+        ("delay=0.02", fx.Delay, "delay", 0.02),
+        ("motor_efficiency=1,1,0.7,1", fx.MotorEfficiency, "eta", (1.0, 1.0, 0.7, 1.0)),
+        ("thrust_scale=0.9", fx.ThrustScale, "scale", 0.9),
+        ("ground_effect=0.12", fx.GroundEffect, "rotor_radius", 0.12),
+        ("com_offset=0.01,-0.02", fx.ComOffset, "offset", (0.01, -0.02)),
+        ("inertia=1.2", fx.Inertia, "scale", (1.2, 1.2, 1.2)),
+        ("blade_flapping=0.05,0.002", fx.BladeFlapping, "k_moment", 0.002),
+        ("blade_flapping=0.05", fx.BladeFlapping, "k_moment", 0.0),
+        ("rotor_inertia=0.004", fx.RotorInertia, "kappa", 0.004),
+        ("battery_thrust=2,v_start=4.2,v_end=3.6", fx.BatteryThrust, "v_ref", 3.9),
+        ("thrust_curve=0.1,0.9,0.02", fx.ThrustCurve, "curve", (0.1, 0.9, 0.02)),
+        ("mass=1.15", fx.Mass, "scale", 1.15),
+        ("rate_damping=0.01", fx.RateDamping, "linear", (0.01, 0.01, 0.01)),
+        ("rate_damping=0.01,0.002", fx.RateDamping, "quadratic", (0.002, 0.002, 0.002)),
+        ("rate_damping=1,2,3,4,5,6", fx.RateDamping, "quadratic", (4.0, 5.0, 6.0)),
+    ],
+)
 def test_parse_effect(spec, cls, attr, value):
     e = fx.parse_effect(spec)
     assert isinstance(e, cls)
@@ -45,15 +49,26 @@ def test_parse_effect(spec, cls, attr, value):
     assert d["name"] == spec.split("=")[0] and isinstance(d["params"], dict)
 
 
-@pytest.mark.parametrize("spec, words", [
-    ("nothing=1", "unknown effect"), ("drag", "NAME=VALUES"), ("drag=1,2", "expects 1 or 3"),
-    ("wind=1,0,0,color=3", "unknown option"), ("delay=-1", "delay"), ("drag=x", "not a number"),
-    ("motor_lag=0", "tau"), ("drag=nan", "finite"),
-    ("rate_damping=1,2,3,4", "expects 1 or 2 or 3 or 6"), ("mass=0", "mass scale"),
-    ("thrust_curve=0,0,0", "b > 0 or c > 0"), ("rate_damping=-1", ">= 0"),
-    ("battery_thrust=2,v_start=-1", "v_start"), ("drag=0.1:0.3", "random generator"),
-    ("blade_flapping=x", "not a number"),
-])
+@pytest.mark.parametrize(
+    "spec, words",
+    [
+        ("nothing=1", "unknown effect"),
+        ("drag", "NAME=VALUES"),
+        ("drag=1,2", "expects 1 or 3"),
+        ("wind=1,0,0,color=3", "unknown option"),
+        ("delay=-1", "delay"),
+        ("drag=x", "not a number"),
+        ("motor_lag=0", "tau"),
+        ("drag=nan", "finite"),
+        ("rate_damping=1,2,3,4", "expects 1 or 2 or 3 or 6"),
+        ("mass=0", "mass scale"),
+        ("thrust_curve=0,0,0", "b > 0 or c > 0"),
+        ("rate_damping=-1", ">= 0"),
+        ("battery_thrust=2,v_start=-1", "v_start"),
+        ("drag=0.1:0.3", "random generator"),
+        ("blade_flapping=x", "not a number"),
+    ],
+)
 def test_parse_effect_errors(spec, words):
     with pytest.raises(ConfigError, match=words):
         fx.parse_effect(spec)
@@ -70,9 +85,12 @@ def test_parse_effect_ranges_are_drawn_from_the_generator():
 def test_every_effect_round_trips_through_its_params():
     rng = np.random.default_rng(6)
     for name in fx.EFFECT_NAMES:
-        spec = {"wind": "wind=1,2,0", "com_offset": "com_offset=0.01,0.02",
-                "thrust_curve": "thrust_curve=0.1,0.9,0.02",
-                "blade_flapping": "blade_flapping=0.05,0.002"}.get(name, f"{name}=0.5:0.9")
+        spec = {
+            "wind": "wind=1,2,0",
+            "com_offset": "com_offset=0.01,0.02",
+            "thrust_curve": "thrust_curve=0.1,0.9,0.02",
+            "blade_flapping": "blade_flapping=0.05,0.002",
+        }.get(name, f"{name}=0.5:0.9")
         e = fx.parse_effect(spec, rng=rng)
         again = fx.EFFECTS[name].from_params(e.params())
         if name == "wind":  # the diagnosis' model: the steady force
@@ -110,7 +128,9 @@ def test_zoh_mean_matches_numerical_integration():
     fine = np.linspace(a, b, 20001)
     j = np.searchsorted(t, fine, side="right") - 1
     num = f[j].mean(axis=0)
-    np.testing.assert_allclose(fx.zoh_mean(t, f, c, np.array([a]), np.array([b]))[0], num, atol=2e-3)
+    np.testing.assert_allclose(
+        fx.zoh_mean(t, f, c, np.array([a]), np.array([b]))[0], num, atol=2e-3
+    )
 
 
 def test_lag_series_steps_equal_one_series_and_reach_a_held_command():
@@ -149,12 +169,14 @@ def test_plant_step_equals_series_model(effect):
 
 
 def test_body_effects_change_the_flown_vehicle_only():
-    from quadfault.plant import Plant
+    from quadfault.model.plant import Plant
 
     veh = Vehicle()
     plant = Plant(veh, effects=(fx.Inertia((1.3, 0.8, 1.1)), fx.Mass(1.2)))
     plant.reset(RigidBodyState.at_rest())
-    np.testing.assert_allclose(np.diag(plant.vehicle.inertia), np.diag(veh.inertia) * (1.3, 0.8, 1.1))
+    np.testing.assert_allclose(
+        np.diag(plant.vehicle.inertia), np.diag(veh.inertia) * (1.3, 0.8, 1.1)
+    )
     assert plant.vehicle.mass == pytest.approx(1.2 * veh.mass)
     assert plant.vehicle.rotor_max_thrust == veh.rotor_max_thrust  # the rotors are unchanged
     assert plant.nominal_vehicle is veh and veh.mass == 1.0
@@ -169,6 +191,7 @@ def test_com_offset_moment_is_r_cross_thrust():
 def test_wind_gusts_are_seeded_and_steady_mean():
     w = fx.Wind((2.0, 0.0, 0.0), gust=0.5, gust_tau=0.5, seed=3)
     s = RigidBodyState.at_rest()
+
     def run():
         w.reset(4)
         out = []
@@ -176,6 +199,7 @@ def test_wind_gusts_are_seeded_and_steady_mean():
             w.rotor_thrust(np.ones(4), k * 1e-2, 1e-2, s)
             out.append(w.air_velocity().copy())
         return np.array(out)
+
     a, b = run(), run()
     np.testing.assert_array_equal(a, b)
     assert abs(a[:, 0].mean() - 2.0) < 0.15 and 0.3 < a[:, 0].std() < 0.7
@@ -184,8 +208,8 @@ def test_wind_gusts_are_seeded_and_steady_mean():
 
 
 def test_simulated_effects_are_truth_and_stripped():
-    from quadfault.scenarios import named_scenario
-    from quadfault.simulator import SimConfig, simulate
+    from quadfault.model.scenarios import named_scenario
+    from quadfault.sim.simulator import SimConfig, simulate
 
     sc = named_scenario("hover", 0.2, 4e-3)
     rec = simulate(sc, config=SimConfig(dt=4e-3), effects=(fx.parse_effect("drag=0.2"),))

@@ -5,38 +5,59 @@ import json
 import numpy as np
 import pytest
 
-from quadfault import effects as fx
 from quadfault.cli import main
 from quadfault.errors import ConfigError
-from quadfault.recording import Recording, read_recording, recording_sidecar, write_recording
-from quadfault.vehicle import Vehicle
+from quadfault.io.recording import Recording, read_recording, recording_sidecar, write_recording
+from quadfault.model import effects as fx
+from quadfault.model.vehicle import Vehicle
 
-VEHICLE = Vehicle.from_arm(0.1, 0.01, mass=0.5, inertia=(0.003, 0.004, 0.006), gravity=9.81,
-                           max_thrust=3.0)
+VEHICLE = Vehicle.from_arm(
+    0.1, 0.01, mass=0.5, inertia=(0.003, 0.004, 0.006), gravity=9.81, max_thrust=3.0
+)
 
 
 def _sidecar(vehicle=VEHICLE, frame="NED", curve=None):
-    rec = Recording(t=np.arange(3.0), omega=np.zeros((3, 3)), thrust_cmd=np.ones((3, 4)),
-                    vehicle=vehicle, position=np.zeros((3, 3)), velocity=np.zeros((3, 3)),
-                    quaternion=np.tile([1.0, 0, 0, 0], (3, 1)),
-                    commands_u=None if curve is None else np.ones((3, 4)), thrust_curve=curve)
+    rec = Recording(
+        t=np.arange(3.0),
+        omega=np.zeros((3, 3)),
+        thrust_cmd=np.ones((3, 4)),
+        vehicle=vehicle,
+        position=np.zeros((3, 3)),
+        velocity=np.zeros((3, 3)),
+        quaternion=np.tile([1.0, 0, 0, 0], (3, 1)),
+        commands_u=None if curve is None else np.ones((3, 4)),
+        thrust_curve=curve,
+    )
     return recording_sidecar(rec, frame)
 
 
 def _doc(effects, frame="NED", curve=None, **extra):
     side = _sidecar(frame=frame, curve=curve)
-    doc = {"format": "quadfault-diagnosis/2", "verdict": "mismatch", "frame": frame,
-           "gravity": side["gravity"], "vehicle": side["vehicle"], "effects": effects}
+    doc = {
+        "format": "quadfault-diagnosis/2",
+        "verdict": "mismatch",
+        "frame": frame,
+        "gravity": side["gravity"],
+        "vehicle": side["vehicle"],
+        "effects": effects,
+    }
     doc.update(extra)
     return doc
 
 
 EFFECTS = [
-    {"name": "drag", "params": {"k_N_s_per_m": [0.2, 0.25, 0.1]},
-     "uncertainty": {"k_N_s_per_m": [0.01, 0.01, 0.02]},
-     "bounds": {"k_N_s_per_m": [[0, 0, 0], [1.5, 1.5, 2.5]]}},
-    {"name": "motor_lag", "params": {"tau_s": 0.04}, "uncertainty": {"tau_s": 0.002},
-     "bounds": {"tau_s": [1e-4, 0.3]}},
+    {
+        "name": "drag",
+        "params": {"k_N_s_per_m": [0.2, 0.25, 0.1]},
+        "uncertainty": {"k_N_s_per_m": [0.01, 0.01, 0.02]},
+        "bounds": {"k_N_s_per_m": [[0, 0, 0], [1.5, 1.5, 2.5]]},
+    },
+    {
+        "name": "motor_lag",
+        "params": {"tau_s": 0.04},
+        "uncertainty": {"tau_s": 0.002},
+        "bounds": {"tau_s": [1e-4, 0.3]},
+    },
     {"name": "mass", "params": {"scale": 1.1, "mass_kg": 0.55}, "uncertainty": {"scale": 0.01}},
 ]
 
@@ -54,9 +75,14 @@ def test_from_diagnosis_gives_the_nominal_vehicle_and_the_effects_in_canonical_o
 
 
 def test_enu_diagnosis_converts_directions_and_the_vehicle():
-    effects = [{"name": "wind", "params": {"force_N": [1.0, 2.0, 0.5]}},
-               {"name": "com_offset", "params": {"offset_m": [0.01, 0.02]},
-                "uncertainty": {"offset_m": [0.001, 0.002]}}]
+    effects = [
+        {"name": "wind", "params": {"force_N": [1.0, 2.0, 0.5]}},
+        {
+            "name": "com_offset",
+            "params": {"offset_m": [0.01, 0.02]},
+            "uncertainty": {"offset_m": [0.001, 0.002]},
+        },
+    ]
     model = fx.from_diagnosis(_doc(effects, frame="ENU"))
     assert model.vehicle == VEHICLE  # the sidecar's FLU vehicle back in FRD
     np.testing.assert_allclose(model.effects[0].steady_force(), [2.0, 1.0, -0.5])
@@ -73,8 +99,12 @@ def test_u_command_model_keeps_its_curve_and_a_refit_curve_is_relative_to_it():
 
 
 def test_wind_with_drag_keeps_the_air_velocity():
-    effects = [{"name": "wind", "params": {"force_N": [0.6, -0.3, 0.0],
-                                           "air_velocity_m_per_s": [2.0, -1.0, 0.0]}}]
+    effects = [
+        {
+            "name": "wind",
+            "params": {"force_N": [0.6, -0.3, 0.0], "air_velocity_m_per_s": [2.0, -1.0, 0.0]},
+        }
+    ]
     wind = fx.from_diagnosis(_doc(effects)).effects[0]
     assert wind.k == pytest.approx((0.3,) * 3)
     np.testing.assert_allclose(wind.steady_force(), [0.6, -0.3, 0.0])
@@ -92,21 +122,24 @@ def test_sample_draws_within_bounds_and_is_seeded():
     assert min(taus) >= 1e-4 and max(taus) <= 0.3  # clipped to the reported bounds
 
 
-@pytest.mark.parametrize("change, words", [
-    ({"format": None}, "older quadfault diagnose"),
-    ({"format": "quadfault-diagnosis/1"}, "expected 'quadfault-diagnosis/2'"),
-    ({"vehicle": None}, "key 'vehicle'"),
-    ({"vehicle": {"mass": -1}}, "vehicle.mass"),
-    ({"frame": "XYZ"}, "key 'frame'"),
-    ({"effects": {"drag": 1}}, "key 'effects'"),
-    ({"effects": [{"name": "vortex", "params": {}}]}, "unknown effect 'vortex'"),
-    ({"effects": [{"name": "drag"}]}, "effects[0].params"),
-    ({"effects": [{"name": "motor_lag", "params": {"tau": 0.1}}]}, "params need 'tau_s'"),
-    ({"effects": [{"name": "motor_lag", "params": {"tau_s": "fast"}}]}, "tau"),
-    ({"effects": [{"name": "motor_lag", "params": {"tau_s": -1}}]}, "tau"),
-    ({"effects": [{"name": "drag", "params": {"k_N_s_per_m": [1, [2]]}}]}, "drag"),
-    ({"effects": [EFFECTS[1], EFFECTS[1]]}, "appears twice"),
-])
+@pytest.mark.parametrize(
+    "change, words",
+    [
+        ({"format": None}, "older quadfault diagnose"),
+        ({"format": "quadfault-diagnosis/1"}, "expected 'quadfault-diagnosis/2'"),
+        ({"vehicle": None}, "key 'vehicle'"),
+        ({"vehicle": {"mass": -1}}, "vehicle.mass"),
+        ({"frame": "XYZ"}, "key 'frame'"),
+        ({"effects": {"drag": 1}}, "key 'effects'"),
+        ({"effects": [{"name": "vortex", "params": {}}]}, "unknown effect 'vortex'"),
+        ({"effects": [{"name": "drag"}]}, "effects[0].params"),
+        ({"effects": [{"name": "motor_lag", "params": {"tau": 0.1}}]}, "params need 'tau_s'"),
+        ({"effects": [{"name": "motor_lag", "params": {"tau_s": "fast"}}]}, "tau"),
+        ({"effects": [{"name": "motor_lag", "params": {"tau_s": -1}}]}, "tau"),
+        ({"effects": [{"name": "drag", "params": {"k_N_s_per_m": [1, [2]]}}]}, "drag"),
+        ({"effects": [EFFECTS[1], EFFECTS[1]]}, "appears twice"),
+    ],
+)
 def test_malformed_diagnosis_is_a_one_line_error(change, words):
     doc = _doc(EFFECTS)
     for key, value in change.items():
@@ -123,7 +156,7 @@ def test_unreadable_files(tmp_path):
     with pytest.raises(ConfigError, match="not found"):
         fx.from_diagnosis(tmp_path / "none.json")
     bad = tmp_path / "bad.json"
-    bad.write_text("{\"format\": ")
+    bad.write_text('{"format": ')
     with pytest.raises(ConfigError, match="invalid JSON at line 1"):
         fx.from_diagnosis(bad)
     bad.write_text("[1, 2]")
@@ -135,9 +168,29 @@ def test_simulate_model_flies_the_effects_and_keeps_the_nominal_vehicle(tmp_path
     path = tmp_path / "d.json"
     path.write_text(json.dumps(_doc(EFFECTS)))
     out = tmp_path / "r.csv"
-    assert main(["simulate", "--model", str(path), "--scenario", "nominal", "--trajectory",
-                 "lissajous", "--duration", "1", "--dt", "0.004", "--out", str(out), "--quiet",
-                 "--commands", "u"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--model",
+                str(path),
+                "--scenario",
+                "nominal",
+                "--trajectory",
+                "lissajous",
+                "--duration",
+                "1",
+                "--dt",
+                "0.004",
+                "--out",
+                str(out),
+                "--quiet",
+                "--commands",
+                "u",
+            ]
+        )
+        == 0
+    )
     rec = read_recording(out)
     assert rec.vehicle == VEHICLE  # nominal, not the heavier flown one
     side = json.loads(out.with_suffix(".json").read_text())
@@ -146,44 +199,134 @@ def test_simulate_model_flies_the_effects_and_keeps_the_nominal_vehicle(tmp_path
     stripped = rec.without_truth().meta
     assert "effects" not in stripped and "truth" not in stripped
     # --effect adds to the model; naming an effect twice is an error
-    assert main(["simulate", "--model", str(path), "--duration", "1", "--dt", "0.004",
-                 "--out", str(tmp_path / "r2.csv"), "--quiet", "--effect", "motor_lag=0.1"]) == 2
+    assert (
+        main(
+            [
+                "simulate",
+                "--model",
+                str(path),
+                "--duration",
+                "1",
+                "--dt",
+                "0.004",
+                "--out",
+                str(tmp_path / "r2.csv"),
+                "--quiet",
+                "--effect",
+                "motor_lag=0.1",
+            ]
+        )
+        == 2
+    )
     assert "given twice" in capsys.readouterr().err
     path.write_text("{}")
-    assert main(["simulate", "--model", str(path), "--duration", "1", "--out",
-                 str(tmp_path / "r3.csv"), "--quiet"]) == 2
+    assert (
+        main(
+            [
+                "simulate",
+                "--model",
+                str(path),
+                "--duration",
+                "1",
+                "--out",
+                str(tmp_path / "r3.csv"),
+                "--quiet",
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "format" in err
 
 
 def test_simulate_battery_thrust_records_its_voltage(tmp_path, capsys):
     out = tmp_path / "b.csv"
-    assert main(["simulate", "--scenario", "nominal", "--duration", "2", "--dt", "0.004",
-                 "--out", str(out), "--quiet", "--effect",
-                 "battery_thrust=2,v_start=4.2,v_end=3.7"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--scenario",
+                "nominal",
+                "--duration",
+                "2",
+                "--dt",
+                "0.004",
+                "--out",
+                str(out),
+                "--quiet",
+                "--effect",
+                "battery_thrust=2,v_start=4.2,v_end=3.7",
+            ]
+        )
+        == 0
+    )
     rec = read_recording(out)
     assert rec.vbat[0] == pytest.approx(4.2) and rec.vbat[-1] == pytest.approx(3.7, abs=1e-3)
-    assert main(["simulate", "--scenario", "combined", "--duration", "2", "--out",
-                 str(tmp_path / "c.csv"), "--quiet", "--effect", "battery_thrust=2"]) == 2
+    assert (
+        main(
+            [
+                "simulate",
+                "--scenario",
+                "combined",
+                "--duration",
+                "2",
+                "--out",
+                str(tmp_path / "c.csv"),
+                "--quiet",
+                "--effect",
+                "battery_thrust=2",
+            ]
+        )
+        == 2
+    )
     assert "own battery voltage" in capsys.readouterr().err
 
 
 def test_written_recording_sidecar_is_a_valid_diagnosis_vehicle(tmp_path):
     """The diagnosis copies the sidecar's vehicle: what write_recording writes loads back."""
-    rec = Recording(t=np.arange(3.0), omega=np.zeros((3, 3)), thrust_cmd=np.ones((3, 4)),
-                    vehicle=VEHICLE, position=np.zeros((3, 3)), velocity=np.zeros((3, 3)),
-                    quaternion=np.tile([1.0, 0, 0, 0], (3, 1)))
+    rec = Recording(
+        t=np.arange(3.0),
+        omega=np.zeros((3, 3)),
+        thrust_cmd=np.ones((3, 4)),
+        vehicle=VEHICLE,
+        position=np.zeros((3, 3)),
+        velocity=np.zeros((3, 3)),
+        quaternion=np.tile([1.0, 0, 0, 0], (3, 1)),
+    )
     write_recording(rec, tmp_path / "x.csv", frame="ENU")
     side = json.loads((tmp_path / "x.json").read_text())
-    doc = {"format": "quadfault-diagnosis/2", "frame": side["frame"], "gravity": side["gravity"],
-           "vehicle": side["vehicle"], "effects": []}
+    doc = {
+        "format": "quadfault-diagnosis/2",
+        "frame": side["frame"],
+        "gravity": side["gravity"],
+        "vehicle": side["vehicle"],
+        "effects": [],
+    }
     assert fx.from_diagnosis(doc).vehicle == VEHICLE
 
 
 def test_rotor_inertia_without_lag_losing_the_vehicle_says_why(tmp_path, capsys):
     out = tmp_path / "ri.csv"
-    assert main(["simulate", "--scenario", "nominal", "--trajectory", "lissajous", "--duration",
-                 "5", "--dt", "0.004", "--out", str(out), "--quiet", "--effect",
-                 "rotor_inertia=0.001"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--scenario",
+                "nominal",
+                "--trajectory",
+                "lissajous",
+                "--duration",
+                "5",
+                "--dt",
+                "0.004",
+                "--out",
+                str(out),
+                "--quiet",
+                "--effect",
+                "rotor_inertia=0.001",
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     assert "lost the vehicle" in err and "add --effect motor_lag" in err

@@ -4,20 +4,21 @@ the diagnosis (the library with the true parameters reproduces a simulated fligh
 import numpy as np
 import pytest
 
-from quadfault import effects as fx
-from quadfault.effects.candidate import PublicContext
 from quadfault.diagnosis.library import build_library, predict
 from quadfault.diagnosis.residuals import prepare
-from quadfault.dynamics import RigidBodyState
-from quadfault.rotation import euler_zyx_to_rot
-from quadfault.scenarios import LinearVoltage, named_scenario
-from quadfault.simulator import SimConfig, simulate
-from quadfault.trajectory import Lissajous
-from quadfault.vehicle import Vehicle
+from quadfault.model import effects as fx
+from quadfault.model.dynamics import RigidBodyState
+from quadfault.model.effects.candidate import PublicContext
+from quadfault.model.rotation import euler_zyx_to_rot
+from quadfault.model.scenarios import LinearVoltage, named_scenario
+from quadfault.model.trajectory import Lissajous
+from quadfault.model.vehicle import Vehicle
+from quadfault.sim.simulator import SimConfig, simulate
 
 
-@pytest.mark.parametrize("curve", [(0.01, 0.5, 0.3), (0.0, 0.0, 2e-5), (0.2, 1.5, 0.0),
-                                   (0.0, 1.2, -0.05)])
+@pytest.mark.parametrize(
+    "curve", [(0.01, 0.5, 0.3), (0.0, 0.0, 2e-5), (0.2, 1.5, 0.0), (0.0, 1.2, -0.05)]
+)
 def test_curve_command_inverts_the_curve(curve):
     u = np.linspace(0.05, 3.0, 50)
     f = fx.curve_thrust(curve, u)
@@ -61,8 +62,9 @@ def test_rate_damping_removes_rotational_energy():
     w = rng.normal(scale=3, size=(100, 3))
     M = fx.rate_damping_moment(w, (0.01, 0.02, 0.03), (0.001, 0.002, 0.0))
     assert np.all(np.einsum("ij,ij->i", M, w) <= 0)
-    np.testing.assert_allclose(fx.rate_damping_moment(-w, (0.01, 0.02, 0.03), (0.001, 0.002, 0.0)),
-                               -M)
+    np.testing.assert_allclose(
+        fx.rate_damping_moment(-w, (0.01, 0.02, 0.03), (0.001, 0.002, 0.0)), -M
+    )
 
 
 def test_battery_factor_is_one_at_the_reference_and_a_power_law():
@@ -105,12 +107,23 @@ def test_thrust_rate_telescopes_over_blocks():
 
 TRAJ = Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.2, yaw_rate=0.3)
 LOW = Lissajous(amplitude=(1.0, 1.0, 0.15), frequency=0.15, altitude=0.35)
-ONE_MODEL = [fx.MotorEfficiency((1, 0.8, 1, 1)), fx.ThrustScale(0.9), fx.Drag((0.3, 0.2, 0.4)),
-             fx.MotorLag(0.05), fx.Delay(0.013), fx.Wind((2.0, -1.0, 0.0), k=(0.3,) * 3),
-             fx.GroundEffect(0.3), fx.ComOffset((0.01, -0.02)), fx.Inertia((1.3, 0.8, 1.2)),
-             fx.BladeFlapping(0.05, 0.005), fx.RotorInertia(0.005),
-             fx.BatteryThrust(2.0, 12.0, 11.0, 3.0), fx.ThrustCurve((0.3, 0.8, 0.03)),
-             fx.Mass(1.15), fx.RateDamping((0.07, 0.05, 0.1), (0.01, 0.01, 0.02))]
+ONE_MODEL = [
+    fx.MotorEfficiency((1, 0.8, 1, 1)),
+    fx.ThrustScale(0.9),
+    fx.Drag((0.3, 0.2, 0.4)),
+    fx.MotorLag(0.05),
+    fx.Delay(0.013),
+    fx.Wind((2.0, -1.0, 0.0), k=(0.3,) * 3),
+    fx.GroundEffect(0.3),
+    fx.ComOffset((0.01, -0.02)),
+    fx.Inertia((1.3, 0.8, 1.2)),
+    fx.BladeFlapping(0.05, 0.005),
+    fx.RotorInertia(0.005),
+    fx.BatteryThrust(2.0, 12.0, 11.0, 3.0),
+    fx.ThrustCurve((0.3, 0.8, 0.03)),
+    fx.Mass(1.15),
+    fx.RateDamping((0.07, 0.05, 0.1), (0.01, 0.01, 0.02)),
+]
 
 
 @pytest.mark.parametrize("effect", ONE_MODEL, ids=[e.name for e in ONE_MODEL])
@@ -121,8 +134,9 @@ def test_library_with_the_true_parameters_reproduces_the_plant(effect):
     traj = LOW if effect.name == "ground_effect" else TRAJ
     volt = LinearVoltage(12.0, 11.0, 3.0) if effect.name == "battery_thrust" else None
     sc = named_scenario("nominal", 3.0, 4e-3).replace(trajectory=traj, voltage=volt)
-    rec = simulate(sc, config=SimConfig(dt=4e-3), seed=0, effects=(effect,),
-                   thrust_noise=0.0).without_truth()
+    rec = simulate(
+        sc, config=SimConfig(dt=4e-3), seed=0, effects=(effect,), thrust_noise=0.0
+    ).without_truth()
     rp = prepare(rec)
     cand = next(c for c in build_library(rp, fx.EFFECT_NAMES) if c.name == effect.name)
     x = cand.x_from_params(effect.params())
@@ -133,12 +147,13 @@ def test_library_with_the_true_parameters_reproduces_the_plant(effect):
     # the accelerometer samples the state at a step's start, the model the interval's
     # midpoint: state-dependent forces differ by O(dt / 2) there
     tol = np.array([0.02 if c.startswith("sf") else 0.01 for c in rp.channels])
-    assert np.all(after[acting] < tol[acting] * before[acting]), (after / before)
+    assert np.all(after[acting] < tol[acting] * before[acting]), after / before
 
 
 def test_every_candidate_reports_bounds_in_its_public_keys():
-    sc = named_scenario("nominal", 1.0, 4e-3).replace(trajectory=TRAJ,
-                                                      voltage=LinearVoltage(12.0, 11.0, 1.0))
+    sc = named_scenario("nominal", 1.0, 4e-3).replace(
+        trajectory=TRAJ, voltage=LinearVoltage(12.0, 11.0, 1.0)
+    )
     rec = simulate(sc, config=SimConfig(dt=4e-3), seed=0, thrust_noise=0.0).without_truth()
     rp = prepare(rec)
     lib = build_library(rp, fx.EFFECT_NAMES)

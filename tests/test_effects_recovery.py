@@ -12,14 +12,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from quadfault import effects as fx
 from quadfault.cli import main
 from quadfault.diagnosis.replay import replay_errors
-from quadfault.recording import read_recording, write_recording
-from quadfault.scenarios import LinearVoltage, named_scenario
-from quadfault.simulator import SensorNoise, SimConfig, simulate
-from quadfault.trajectory import Lissajous
-from quadfault.vehicle import Vehicle
+from quadfault.io.recording import read_recording, write_recording
+from quadfault.model import effects as fx
+from quadfault.model.scenarios import LinearVoltage, named_scenario
+from quadfault.model.trajectory import Lissajous
+from quadfault.model.vehicle import Vehicle
+from quadfault.sim.simulator import SensorNoise, SimConfig, simulate
 
 DT = 4e-3
 TRAJ = Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.15)
@@ -30,12 +30,14 @@ REAL = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real"
 def fly(effects, seed=1, duration=8.0, voltage=None, u_curve=None, vehicle=None):
     sc = named_scenario("nominal", duration, DT).replace(trajectory=TRAJ, voltage=voltage)
     cfg = SimConfig(dt=DT, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001))
-    rec = simulate(sc, vehicle=vehicle, config=cfg, seed=seed, effects=tuple(effects),
-                   thrust_noise=0.02)
+    rec = simulate(
+        sc, vehicle=vehicle, config=cfg, seed=seed, effects=tuple(effects), thrust_noise=0.02
+    )
     if u_curve is not None:
         u = fx.curve_command(u_curve, rec.thrust_cmd)
-        rec = dataclasses.replace(rec, commands_u=u, thrust_curve=u_curve,
-                                  thrust_cmd=fx.curve_thrust(u_curve, u))
+        rec = dataclasses.replace(
+            rec, commands_u=u, thrust_curve=u_curve, thrust_cmd=fx.curve_thrust(u_curve, u)
+        )
     return rec
 
 
@@ -65,7 +67,7 @@ def curve_error(params, truth: fx.ThrustCurve, hover: float) -> float:
     f = np.linspace(0.6, 1.4, 41) * hover
     want = fx.recurve(f, truth.nominal, truth.curve) - f
     got = fx.recurve(f, params["nominal_curve"], params["curve"]) - f
-    return float(np.sqrt(np.mean((got - want) ** 2) / np.mean(want ** 2)))
+    return float(np.sqrt(np.mean((got - want) ** 2) / np.mean(want**2)))
 
 
 HOVER = Vehicle().hover_thrust
@@ -73,30 +75,66 @@ U_TRUTH = fx.ThrustCurve(tuple(fx.curve_from_changes(U_CURVE, HOVER, (0.05, -0.2
 F_TRUTH = fx.ThrustCurve(tuple(fx.curve_from_changes((0, 1, 0), HOVER, (0.05, -0.25, 0.2))))
 
 CASES = {  # name: (effects, fly keywords, diagnose flags, check of the found params)
-    "blade_flapping": ([fx.BladeFlapping(0.05, 0.005)], {}, (),
-                       lambda d: abs(found(d, "blade_flapping")["k_force_s_per_m"] - 0.05) < 0.0025
-                       and abs(found(d, "blade_flapping")["k_moment_s"] - 0.005) < 0.0005),
-    "rotor_inertia": ([fx.RotorInertia(0.005)], {}, (),
-                      lambda d: abs(found(d, "rotor_inertia")["kappa_m_s"] - 0.005) < 0.00025),
-    "battery_thrust": ([fx.BatteryThrust(2.0, 12.0, 11.0, 8.0)],
-                       {"voltage": LinearVoltage(12.0, 11.0, 8.0)}, (),
-                       lambda d: abs(found(d, "battery_thrust")["exponent"] - 2.0) < 0.2),
-    "rate_damping": ([fx.RateDamping((0.07, 0.07, 0.14))], {}, (),
-                     lambda d: np.allclose(found(d, "rate_damping")["linear_N_m_s_per_rad"],
-                                           [0.07, 0.07, 0.14], rtol=0.15)),
+    "blade_flapping": (
+        [fx.BladeFlapping(0.05, 0.005)],
+        {},
+        (),
+        lambda d: (
+            abs(found(d, "blade_flapping")["k_force_s_per_m"] - 0.05) < 0.0025
+            and abs(found(d, "blade_flapping")["k_moment_s"] - 0.005) < 0.0005
+        ),
+    ),
+    "rotor_inertia": (
+        [fx.RotorInertia(0.005)],
+        {},
+        (),
+        lambda d: abs(found(d, "rotor_inertia")["kappa_m_s"] - 0.005) < 0.00025,
+    ),
+    "battery_thrust": (
+        [fx.BatteryThrust(2.0, 12.0, 11.0, 8.0)],
+        {"voltage": LinearVoltage(12.0, 11.0, 8.0)},
+        (),
+        lambda d: abs(found(d, "battery_thrust")["exponent"] - 2.0) < 0.2,
+    ),
+    "rate_damping": (
+        [fx.RateDamping((0.07, 0.07, 0.14))],
+        {},
+        (),
+        lambda d: np.allclose(
+            found(d, "rate_damping")["linear_N_m_s_per_rad"], [0.07, 0.07, 0.14], rtol=0.15
+        ),
+    ),
     # u commands: the curve is in the default library
-    "thrust_curve": ([U_TRUTH], {"u_curve": U_CURVE}, (),
-                     lambda d: curve_error(found(d, "thrust_curve"), U_TRUTH, HOVER) < 0.2),
+    "thrust_curve": (
+        [U_TRUTH],
+        {"u_curve": U_CURVE},
+        (),
+        lambda d: curve_error(found(d, "thrust_curve"), U_TRUTH, HOVER) < 0.2,
+    ),
     # a lag fitted jointly with the curve
-    "thrust_curve+motor_lag": ([U_TRUTH, fx.MotorLag(0.05)], {"u_curve": U_CURVE}, (),
-                               lambda d: abs(found(d, "motor_lag")["tau_s"] - 0.05) < 0.005
-                               and curve_error(found(d, "thrust_curve"), U_TRUTH, HOVER) < 0.3),
+    "thrust_curve+motor_lag": (
+        [U_TRUTH, fx.MotorLag(0.05)],
+        {"u_curve": U_CURVE},
+        (),
+        lambda d: (
+            abs(found(d, "motor_lag")["tau_s"] - 0.05) < 0.005
+            and curve_error(found(d, "thrust_curve"), U_TRUTH, HOVER) < 0.3
+        ),
+    ),
     # thrust commands: in closed loop a curve's slope is what an inertia does, so it is asked for
-    "thrust_curve_f": ([F_TRUTH], {}, ("--effects", "thrust_curve"),
-                       lambda d: curve_error(found(d, "thrust_curve"), F_TRUTH, HOVER) < 0.2),
+    "thrust_curve_f": (
+        [F_TRUTH],
+        {},
+        ("--effects", "thrust_curve"),
+        lambda d: curve_error(found(d, "thrust_curve"), F_TRUTH, HOVER) < 0.2,
+    ),
     # a payload: the default library reports the same translation as a thrust scale (one class)
-    "mass": ([fx.Mass(1.15)], {}, ("--effects", "mass"),
-             lambda d: abs(found(d, "mass")["scale"] - 1.15) < 0.01),
+    "mass": (
+        [fx.Mass(1.15)],
+        {},
+        ("--effects", "mass"),
+        lambda d: abs(found(d, "mass")["scale"] - 1.15) < 0.01,
+    ),
 }
 
 
@@ -132,21 +170,54 @@ def _within(a: dict, b: dict, z: float = 3.0) -> list:
 def test_simulate_model_round_trip_finds_the_same_parameters(tmp_path):
     """simulate (known effects) -> diagnose -> simulate --model (another seed) -> diagnose:
     the same effects, every parameter within 3 combined one-sigma uncertainties."""
-    common = ["--scenario", "nominal", "--trajectory", "lissajous", "--duration", "12", "--dt",
-              "0.004", "--sensor-noise", "0.002,0.005,0.001,0.001", "--thrust-noise", "0.02",
-              "--quiet"]
+    common = [
+        "--scenario",
+        "nominal",
+        "--trajectory",
+        "lissajous",
+        "--duration",
+        "12",
+        "--dt",
+        "0.004",
+        "--sensor-noise",
+        "0.002,0.005,0.001,0.001",
+        "--thrust-noise",
+        "0.02",
+        "--quiet",
+    ]
     first = tmp_path / "first.csv"
-    assert main(["simulate", *common, "--seed", "1", "--out", str(first), "--effect",
-                 "motor_efficiency=1,0.75,1,1", "--effect", "blade_flapping=0.04,0.006",
-                 "--effect", "rate_damping=0.1"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                *common,
+                "--seed",
+                "1",
+                "--out",
+                str(first),
+                "--effect",
+                "motor_efficiency=1,0.75,1,1",
+                "--effect",
+                "blade_flapping=0.04,0.006",
+                "--effect",
+                "rate_damping=0.1",
+            ]
+        )
+        == 0
+    )
     d1 = diagnose(read_recording(first), tmp_path, name="d1")
-    assert {e["name"] for e in d1["effects"]} == {"motor_efficiency", "blade_flapping",
-                                                  "rate_damping"}
+    assert {e["name"] for e in d1["effects"]} == {
+        "motor_efficiency",
+        "blade_flapping",
+        "rate_damping",
+    }
     model_json = tmp_path / "model.json"
     model_json.write_text(json.dumps(d1))
     second = tmp_path / "second.csv"
-    assert main(["simulate", *common, "--seed", "2", "--out", str(second), "--model",
-                 str(model_json)]) == 0
+    assert (
+        main(["simulate", *common, "--seed", "2", "--out", str(second), "--model", str(model_json)])
+        == 0
+    )
     d2 = diagnose(read_recording(second), tmp_path, name="d2")
     again = {e["name"]: e for e in d2["effects"]}
     assert set(again) == {e["name"] for e in d1["effects"]}

@@ -6,13 +6,13 @@ import pytest
 from quadfault.diagnosis import Diagnosis, DiagnosisConfig
 from quadfault.diagnosis.library import build_library, predict_intervals
 from quadfault.diagnosis.residuals import prepare
-from quadfault.effects import chain, parse_effect, registry, rows
-from quadfault.effects.base import CHANNELS, Compiled, Identifiability
 from quadfault.errors import ConfigError
-from quadfault.scenarios import LinearVoltage, named_scenario
-from quadfault.simulator import SensorNoise, SimConfig, simulate
-from quadfault.trajectory import Lissajous
-from quadfault.vehicle import Vehicle
+from quadfault.model.effects import chain, parse_effect, registry, rows
+from quadfault.model.effects.base import CHANNELS, Compiled, Identifiability
+from quadfault.model.scenarios import LinearVoltage, named_scenario
+from quadfault.model.trajectory import Lissajous
+from quadfault.model.vehicle import Vehicle
+from quadfault.sim.simulator import SensorNoise, SimConfig, simulate
 
 
 def test_every_effect_is_registered_once_with_a_unique_name():
@@ -54,8 +54,7 @@ def test_unknown_names_are_one_line_errors():
 DT = 4e-3
 TRAJ = Lissajous(amplitude=(2.0, 1.5, 0.3), frequency=0.15)
 #: flights an effect needs beyond the default (the height varying near the ground)
-FLIGHTS = {"ground_effect": Lissajous(amplitude=(1.0, 1.0, 0.15), frequency=0.15,
-                                      altitude=0.35)}
+FLIGHTS = {"ground_effect": Lissajous(amplitude=(1.0, 1.0, 0.15), frequency=0.15, altitude=0.35)}
 
 
 def _fly(effect, seed=1, duration=8.0):
@@ -80,7 +79,7 @@ def test_every_effect_parses_packs_and_simulates(name):
         assert code == registry.code(name) and len(params) > 0 and memory >= 0
         built = rows.build([[entry]], 4)
         a = built.param[0, 0]
-        assert built.code[0, 0] == code and np.all(built.params[0, a:a + len(params)] == params)
+        assert built.code[0, 0] == code and np.all(built.params[0, a : a + len(params)] == params)
     nominal = _fly(parse_effect("thrust_scale=1"), duration=1.0)
     rec = _fly(effect, duration=1.0)
     assert np.all(np.isfinite(rec.position)) and len(rec) == len(nominal)
@@ -90,15 +89,19 @@ def test_every_effect_parses_packs_and_simulates(name):
 def test_vehicles_flying_some_of_a_layouts_slots_fly_as_in_their_own_layout():
     """A vehicle's numbers do not depend on the other slots of its rows' layout (slots it
     does not fly are skipped), nor on a thrust-only and a wrench-only entry trading places."""
-    lag, drag = rows.entry(parse_effect("motor_lag=0.05"), 4, 1e-3), \
-        rows.entry(parse_effect("drag=0.3"), 4, 1e-3)
+    lag, drag = (
+        rows.entry(parse_effect("motor_lag=0.05"), 4, 1e-3),
+        rows.entry(parse_effect("drag=0.3"), 4, 1e-3),
+    )
     wind = rows.entry(parse_effect("wind=1,2,0,gust=0.5,seed=3"), 4, 1e-3)
     delay = rows.entry(parse_effect("delay=0.01"), 4, 1e-3)
     state = ((0.0, 0.0, -1.0), (1.0, -0.5, 0.2), tuple(np.eye(3).ravel()), (0.1, 0.2, -0.3))
     out = []
-    for fx, i in ((rows.build([[lag, drag]], 4), 0),
-                  (rows.build([[delay, wind], [drag, lag]], 4), 1),
-                  (rows.build([[lag, wind, drag]] * 2 + [[lag, drag]], 4), 2)):
+    for fx, i in (
+        (rows.build([[lag, drag]], 4), 0),
+        (rows.build([[delay, wind], [drag, lag]], 4), 1),
+        (rows.build([[lag, wind, drag]] * 2 + [[lag, drag]], 4), 2),
+    ):
         c = chain.chain_for(type(fx).layout, type(fx).n_rotors)
         f = np.array([2.0, 2.1, 2.2, 2.3])
         for k in range(3):
@@ -115,14 +118,15 @@ def test_vehicles_flying_some_of_a_layouts_slots_fly_as_in_their_own_layout():
 def test_the_chain_carries_as_many_thrusts_as_the_rows_rotors():
     """Rows are built for a rotor count: a hexacopter's chain scales its six thrusts, and a
     loop whose vehicles have another count refuses the rows with a one-line error."""
-    from quadfault import closed_loop
+    from quadfault.model import closed_loop
 
     scale = rows.entry(parse_effect("thrust_scale=0.5"), 6, 1e-3)
     fx = rows.build([[scale]], 6)
     state = ((0.0, 0.0, -1.0), (0.0, 0.0, 0.0), tuple(np.eye(3).ravel()), (0.0, 0.0, 0.0))
     f = np.arange(1.0, 7.0)
-    chain.chain_for(type(fx).layout, 6).thrust_effects(fx, 0, f, 0.0, 1e-3, *state,
-                                                       np.random.default_rng(0))
+    chain.chain_for(type(fx).layout, 6).thrust_effects(
+        fx, 0, f, 0.0, 1e-3, *state, np.random.default_rng(0)
+    )
     np.testing.assert_array_equal(f, 0.5 * np.arange(1.0, 7.0))
     V = closed_loop.Vehicles.empty(1, 4)
     with pytest.raises(ConfigError, match="built for 6 rotors, the vehicles have 4"):
@@ -133,8 +137,10 @@ def test_rows_are_typed_by_their_layout_and_grow_to_new_effects():
     """Rows carry their layout (slots of effect and parameter width) in their class: the
     loop compiles that chain alone. A vehicle given an effect the rows lack grows them,
     keeping the other rows' parameters and memory; a vehicle's own order is kept."""
-    lag, drag = rows.entry(parse_effect("motor_lag=0.05"), 4, 1e-3), \
-        rows.entry(parse_effect("drag=0.3"), 4, 1e-3)
+    lag, drag = (
+        rows.entry(parse_effect("motor_lag=0.05"), 4, 1e-3),
+        rows.entry(parse_effect("drag=0.3"), 4, 1e-3),
+    )
     wind = rows.entry(parse_effect("wind=1,2,0"), 4, 1e-3)
     fx = rows.build([[lag], []], 4)
     assert type(fx).layout == (("motor_lag", 1),)
@@ -143,7 +149,7 @@ def test_rows_are_typed_by_their_layout_and_grow_to_new_effects():
     assert not rows.fits(fx, [lag, drag])
     grown = rows.grown(fx, [wind, lag, drag])
     assert type(grown).layout == (("wind", 10), ("motor_lag", 1), ("drag", 6))
-    assert np.all(grown.memory[0, :fx.memory.shape[1]] == 7.0)
+    assert np.all(grown.memory[0, : fx.memory.shape[1]] == 7.0)
     assert grown.code[0, 0] == fx.code[0, 0] and grown.params[0, grown.param[0, 0]] == 0.05
     rows.write(grown, 1, [drag, lag])  # a wrench-only and a thrust-only entry: any order
     assert type(grown).layout == (("wind", 10), ("motor_lag", 1), ("drag", 6))
@@ -151,7 +157,11 @@ def test_rows_are_typed_by_their_layout_and_grow_to_new_effects():
     assert grown.params[1, grown.param[1, 0]] == 0.3 and grown.params[0, grown.param[0, 0]] == 0.05
     assert not rows.fits(grown, [lag, wind])  # two thrust-stage entries in another order
     assert type(rows.grown(grown, [lag, wind])).layout == (
-        ("wind", 10), ("motor_lag", 1), ("drag", 6), ("wind", 10))
+        ("wind", 10),
+        ("motor_lag", 1),
+        ("drag", 6),
+        ("wind", 10),
+    )
     with pytest.raises(ConfigError, match="more room"):
         rows.write(fx, 1, [drag])
 
@@ -172,8 +182,11 @@ def test_every_effect_is_recovered_by_the_diagnosis(name):
     want, got = c.x_from_params(effect.params()), c.x_from_params(res.effects[0].params)
     span = np.asarray(c.upper) - np.asarray(c.lower)
     set_ = want != 0.0
-    assert np.all(np.abs(got - want)[set_] <= (0.25 * np.abs(want) + 0.02 * span)[set_]), \
-        (got, want)
-    nominal, truth, fitted = (predict_intervals(rp, terms)
-                              for terms in ([], [(c, want)], [(c, got)]))
+    assert np.all(np.abs(got - want)[set_] <= (0.25 * np.abs(want) + 0.02 * span)[set_]), (
+        got,
+        want,
+    )
+    nominal, truth, fitted = (
+        predict_intervals(rp, terms) for terms in ([], [(c, want)], [(c, got)])
+    )
     assert np.linalg.norm(fitted - truth) <= 0.25 * np.linalg.norm(truth - nominal)

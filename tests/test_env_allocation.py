@@ -11,12 +11,15 @@ import quad_fault_env  # noqa: F401  (registers the ids)
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.tasks import registered_kwargs
 from quad_fault_env.vector import QuadFaultVectorEnv
-from quadfault.allocation import EXACT
 from quadfault.errors import ConfigError
+from quadfault.model.allocation import EXACT
 
 #: a rotor loss early in a short flight: the allocation saturates within a few steps
-EARLY_LOSS = dict(scenario="rotor_loss", duration=1.0,
-                  scenario_options={"level": (0.1, 0.2), "onset": (0.05, 0.05)})
+EARLY_LOSS = dict(
+    scenario="rotor_loss",
+    duration=1.0,
+    scenario_options={"level": (0.1, 0.2), "onset": (0.05, 0.05)},
+)
 
 
 def _rollout(env, seed, steps, action=None):
@@ -67,8 +70,9 @@ def test_estimate_aware_base_allocates_with_the_estimate_after_the_loss():
 def test_allocate_rows_equals_allocate_row_by_row():
     env = QuadFaultEnv("none", allocation="estimate-aware")
     rng = np.random.default_rng(0)
-    W = np.column_stack((rng.uniform(2, 25, 64), rng.normal(0, 0.5, (64, 2)),
-                         rng.normal(0, 0.05, 64)))
+    W = np.column_stack(
+        (rng.uniform(2, 25, 64), rng.normal(0, 0.5, (64, 2)), rng.normal(0, 0.05, 64))
+    )
     eta = rng.uniform(0.05, 1.2, (64, 4))
     eta[3, 2] = np.nan
     rows = env.allocator.allocate_rows(W, eta)
@@ -95,15 +99,19 @@ def test_vector_env_equals_single_envs(estimator):
         np.testing.assert_allclose(rows[0][i], o, rtol=0, atol=1e-9)
         for k in range(steps):
             o, *_ = env.step(np.zeros(4, dtype=np.float32))
-            np.testing.assert_allclose(rows[k + 1][i], o, rtol=0, atol=1e-9,
-                                       err_msg=f"row {i} step {k}")
+            np.testing.assert_allclose(
+                rows[k + 1][i], o, rtol=0, atol=1e-9, err_msg=f"row {i} step {k}"
+            )
 
 
-@pytest.mark.parametrize("kw, word", [
-    (dict(allocation="fancy"), "allocation must be one of"),
-    (dict(allocation="estimate-aware", action_mode="motor"), "motor mode"),
-    (dict(allocation="estimate-aware", compensate=True), "not both"),
-])
+@pytest.mark.parametrize(
+    "kw, word",
+    [
+        (dict(allocation="fancy"), "allocation must be one of"),
+        (dict(allocation="estimate-aware", action_mode="motor"), "motor mode"),
+        (dict(allocation="estimate-aware", compensate=True), "not both"),
+    ],
+)
 def test_bad_allocation_keywords_raise_one_line_errors(kw, word):
     with pytest.raises(ConfigError, match=word):
         QuadFaultEnv("none", **kw)
@@ -117,9 +125,11 @@ def test_the_estimate_aware_base_survives_partial_rotor_losses():
     QuadFaultRotorLoss-v0 episodes with the rotor dropping to 0.1-0.5 end without a
     termination (the vector env's rows equal single envs seeded 0..9); the nominal base
     crashes in most of them."""
+
     def survivors(allocation):
-        kw = registered_kwargs("QuadFaultRotorLoss-v0", allocation=allocation,
-                               scenario_options={"level": (0.1, 0.5)})
+        kw = registered_kwargs(
+            "QuadFaultRotorLoss-v0", allocation=allocation, scenario_options={"level": (0.1, 0.5)}
+        )
         kw.pop("estimator", None)
         vec = QuadFaultVectorEnv(10, "irls", **kw)
         vec.reset(seed=0)

@@ -7,11 +7,14 @@ import pytest
 from estimators.base import Estimate
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quadfault.errors import ConfigError
-from quadfault.simulator import SensorNoise
+from quadfault.sim.simulator import SensorNoise
 
-FAULT_NOISE = dict(scenario="combined", duration=1.2, thrust_noise=0.07,
-                   sensor_noise=SensorNoise(position=0.01, velocity=0.02, attitude=0.002,
-                                            gyro=0.01, accel=0.1))
+FAULT_NOISE = dict(
+    scenario="combined",
+    duration=1.2,
+    thrust_noise=0.07,
+    sensor_noise=SensorNoise(position=0.01, velocity=0.02, attitude=0.002, gyro=0.01, accel=0.1),
+)
 
 
 def test_a_diverging_state_stops_the_substeps_and_terminates_non_finite():
@@ -42,9 +45,15 @@ def test_observation_is_the_layouts_values_even_for_nan_and_inf():
         ref = env.scenario.trajectory(0.0)
         got = env._observation(ref)
         m = env._meas
-        want = env.layout.values(pos_err=m.p - ref.position, vel_err=m.v - ref.velocity, R=m.R,
-                                 omega=m.w, eta_hat=env._estimate.eta, eta_sd=None,
-                                 ref_acc=ref.acceleration)
+        want = env.layout.values(
+            pos_err=m.p - ref.position,
+            vel_err=m.v - ref.velocity,
+            R=m.R,
+            omega=m.w,
+            eta_hat=env._estimate.eta,
+            eta_sd=None,
+            ref_acc=ref.acceleration,
+        )
         if kind == "flat":
             np.testing.assert_array_equal(got, env.layout.flatten(want))
             assert got.dtype == np.float32
@@ -59,8 +68,11 @@ def test_unknown_keyword_is_a_one_line_error_naming_the_closest():
 
     import quad_fault_env  # noqa: F401  (registers the ids)
 
-    with pytest.raises(ConfigError, match=r"unknown keyword 'estimater'; did you mean "
-                                          r"'estimator'\?") as err:
+    with pytest.raises(
+        ConfigError,
+        match=r"unknown keyword 'estimater'; did you mean "
+        r"'estimator'\?",
+    ) as err:
         gym.make("QuadFault-v1", estimater="ekf")
     assert "\n" not in str(err.value)
     with pytest.raises(ConfigError, match="'sensor_nois'; did you mean 'sensor_noise'"):

@@ -71,8 +71,7 @@ def test_full_info_of_the_single_env_equals_the_vector_env_where_both_have_a_key
     for _ in range(40):
         *_, iv = vec.step(a[None])
         *_, info = env.step(a)
-    for key in ("t", "eta_true", "eta_hat", "position_error", "tracking_error",
-                "motor_command"):
+    for key in ("t", "eta_true", "eta_hat", "position_error", "tracking_error", "motor_command"):
         np.testing.assert_allclose(iv[key][0], info[key], rtol=0, atol=1e-9, err_msg=key)
     for key in ("termination_reason", "scenario"):
         assert iv[key][0] == info[key], key
@@ -80,8 +79,10 @@ def test_full_info_of_the_single_env_equals_the_vector_env_where_both_have_a_key
 
 @pytest.mark.parametrize("level", ["light", "full"])
 def test_check_env_with_either_info(level):
-    check_env(gym.make("QuadFaultRotorLoss-v0", duration=0.3, info=level).unwrapped,
-              skip_render_check=True)
+    check_env(
+        gym.make("QuadFaultRotorLoss-v0", duration=0.3, info=level).unwrapped,
+        skip_render_check=True,
+    )
 
 
 def test_seeded_determinism_with_the_light_info():
@@ -93,12 +94,18 @@ def test_seeded_determinism_with_the_light_info():
         assert x[1:] == y[1:]
 
 
-@pytest.mark.parametrize("make", [lambda v: QuadFaultEnv("none", info=v),
-                                  lambda v: gym.make("QuadFault-v1", info=v),
-                                  lambda v: QuadFaultVectorEnv(2, "none", info=v)])
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda v: QuadFaultEnv("none", info=v),
+        lambda v: gym.make("QuadFault-v1", info=v),
+        lambda v: QuadFaultVectorEnv(2, "none", info=v),
+    ],
+)
 def test_an_unknown_info_level_names_the_closest(make):
-    with pytest.raises(ConfigError, match="info must be one of 'light', 'full', got 'ful'; "
-                                          "did you mean 'full'"):
+    with pytest.raises(
+        ConfigError, match="info must be one of 'light', 'full', got 'ful'; did you mean 'full'"
+    ):
         make("ful")
     with pytest.raises(ConfigError, match="got None$"):
         make(None)
@@ -114,8 +121,24 @@ def test_the_info_benchmark_runs():
 
     pytest.importorskip("stable_baselines3")
     script = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_info.py"
-    res = subprocess.run([sys.executable, str(script), "--estimators", "none", "--rounds", "1",
-                          "--steps", "20", "--n-steps", "16", "--rollouts", "1"],
-                         capture_output=True, text=True, timeout=600)
+    res = subprocess.run(
+        [
+            sys.executable,
+            str(script),
+            "--estimators",
+            "none",
+            "--rounds",
+            "1",
+            "--steps",
+            "20",
+            "--n-steps",
+            "16",
+            "--rollouts",
+            "1",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert res.returncode == 0, res.stderr
     assert "light/full" in res.stdout and "info copy" in res.stdout

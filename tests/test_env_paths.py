@@ -36,8 +36,9 @@ def _structure(info: dict) -> dict:
 @pytest.mark.parametrize("info", ["light", "full"])
 @pytest.mark.parametrize("estimator", ESTIMATORS)
 def test_single_env_info_keeps_one_structure_across_reset_step_and_termination(estimator, info):
-    env = gym.make("QuadFaultHover-v1", estimator=estimator, action_mode="motor", duration=1.0,
-                   info=info)
+    env = gym.make(
+        "QuadFaultHover-v1", estimator=estimator, action_mode="motor", duration=1.0, info=info
+    )
     _, info = env.reset(seed=0)
     first = _structure(info)
     for _ in range(100):  # zero thrust: free fall, crash after ~0.45 s
@@ -54,8 +55,15 @@ def test_make_vec_with_staggered_episode_ends(mode):
     gymnasium's vector envs batch every info value through the episodes, for every
     estimator."""
     for estimator in ESTIMATORS:
-        env = gym.make_vec("QuadFaultHover-v1", num_envs=2, vectorization_mode=mode,
-                           estimator=estimator, duration=1.0, action_mode="motor", info="full")
+        env = gym.make_vec(
+            "QuadFaultHover-v1",
+            num_envs=2,
+            vectorization_mode=mode,
+            estimator=estimator,
+            duration=1.0,
+            action_mode="motor",
+            info="full",
+        )
         try:
             env.reset(seed=0)
             ends = []
@@ -94,8 +102,14 @@ def _episode_steps_vector(env, reset=True) -> int:
     raise AssertionError("no episode end")
 
 
-@pytest.mark.parametrize("kw, steps", [({"duration": 0.6}, 60), ({"duration": 30.0}, 3000),
-                                       ({"duration": 0.6, "control_rate": 50.0}, 30)])
+@pytest.mark.parametrize(
+    "kw, steps",
+    [
+        ({"duration": 0.6}, 60),
+        ({"duration": 30.0}, 3000),
+        ({"duration": 0.6, "control_rate": 50.0}, 30),
+    ],
+)
 def test_duration_and_control_rate_set_the_episode_length_on_every_path(kw, steps):
     pytest.importorskip("stable_baselines3")
     from agents.train import TrainConfig, make_vec_env
@@ -104,14 +118,17 @@ def test_duration_and_control_rate_set_the_episode_length_on_every_path(kw, step
     kw = dict(kw, estimator="none")
     assert _episode_steps_single(gym.make("QuadFault-v1", **kw)) == steps
     for mode in ("sync", "vector_entry_point"):
-        assert _episode_steps_vector(gym.make_vec("QuadFault-v1", 2, vectorization_mode=mode,
-                                                  **kw)) == steps, mode
+        assert (
+            _episode_steps_vector(gym.make_vec("QuadFault-v1", 2, vectorization_mode=mode, **kw))
+            == steps
+        ), mode
     sb3 = make_sb3_vec_env(2, seed=0, env_id="QuadFault-v1", **kw)
     sb3.reset()
     assert _episode_steps_vector(sb3, reset=False) == steps
     for vector_env in (True, False):  # quadfault train's two kinds of training env
-        venv = make_vec_env(TrainConfig(env_id="QuadFault-v1", env_kwargs=kw,
-                                        vector_env=vector_env), 0, 2)
+        venv = make_vec_env(
+            TrainConfig(env_id="QuadFault-v1", env_kwargs=kw, vector_env=vector_env), 0, 2
+        )
         venv.reset()
         assert _episode_steps_vector(venv, reset=False) == steps, vector_env
         venv.close()
@@ -122,12 +139,22 @@ def test_v0_ids_keep_their_step_limit_and_reward():
         spec = gym.spec(env_id)
         assert spec.max_episode_steps == limit and spec.kwargs["reward"] == REWARD_V0
         assert gym.spec(env_id.replace("-v0", "-v1")).max_episode_steps is None
-    assert REWARD_V0 == RewardConfig(position_scale=1.0, velocity_weight=0.1, effort_weight=0.01,
-                                     action_weight=0.0, survival_bonus=0.0,
-                                     termination_penalty=0.0)
-    assert {t.id for t in TASKS} == {"QuadFault-v0", "QuadFaultHover-v0", "QuadFault-v1",
-                                     "QuadFaultHover-v1", "QuadFaultTrack-v0",
-                                     "QuadFaultRotorLoss-v0"}
+    assert REWARD_V0 == RewardConfig(
+        position_scale=1.0,
+        velocity_weight=0.1,
+        effort_weight=0.01,
+        action_weight=0.0,
+        survival_bonus=0.0,
+        termination_penalty=0.0,
+    )
+    assert {t.id for t in TASKS} == {
+        "QuadFault-v0",
+        "QuadFaultHover-v0",
+        "QuadFault-v1",
+        "QuadFaultHover-v1",
+        "QuadFaultTrack-v0",
+        "QuadFaultRotorLoss-v0",
+    }
 
 
 def _returns(reward: RewardConfig, rng, steps=500, crash_at=None):
@@ -159,10 +186,17 @@ def test_a_late_crash_scores_below_a_survived_episode_of_the_same_tracking():
 def test_v1_reward_terms_in_the_env():
     """Tracking, thrust and action effort, the survival bonus on every flown step and the
     penalty on the crash step, the same in the single and the vector env."""
-    env = gym.make("QuadFaultHover-v1", estimator="none", action_mode="motor", duration=1.0,
-                   info="full")
-    vec = gym.make_vec("QuadFaultHover-v1", 1, vectorization_mode="vector_entry_point",
-                       estimator="none", action_mode="motor", duration=1.0)
+    env = gym.make(
+        "QuadFaultHover-v1", estimator="none", action_mode="motor", duration=1.0, info="full"
+    )
+    vec = gym.make_vec(
+        "QuadFaultHover-v1",
+        1,
+        vectorization_mode="vector_entry_point",
+        estimator="none",
+        action_mode="motor",
+        duration=1.0,
+    )
     env.reset(seed=3)
     vec.reset(seed=3)
     rewards = []
@@ -187,11 +221,14 @@ def test_v1_reward_terms_in_the_env():
     vec.close()
 
 
-@pytest.mark.parametrize("kwargs, word", [
-    ({"reward": {"survival_bonus": -1}}, "survival_bonus"),
-    ({"reward": {"bonus": 1}}, "unknown keys"),
-    ({"reward": 3}, "reward must be"),
-])
+@pytest.mark.parametrize(
+    "kwargs, word",
+    [
+        ({"reward": {"survival_bonus": -1}}, "survival_bonus"),
+        ({"reward": {"bonus": 1}}, "unknown keys"),
+        ({"reward": 3}, "reward must be"),
+    ],
+)
 def test_bad_reward_keywords_raise_one_clear_error(kwargs, word):
     with pytest.raises(ConfigError, match=word):
         gym.make("QuadFault-v1", **kwargs)

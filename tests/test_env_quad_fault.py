@@ -23,9 +23,9 @@ from quad_fault_env.envs.config import InitialStateSpread, TerminationLimits
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.estimation import NOMINAL_PRIOR_SD, make_estimator
 from quadfault.errors import ConfigError
-from quadfault.scenarios import Scenario, named_scenario
-from quadfault.simulator import SensorNoise
-from quadfault.trajectory import Hover
+from quadfault.model.scenarios import Scenario, named_scenario
+from quadfault.model.trajectory import Hover
+from quadfault.sim.simulator import SensorNoise
 
 IDS = list(quad_fault_env.ENVIRONMENTS)
 
@@ -85,10 +85,12 @@ def test_check_env_every_registered_id(env_id, estimator):
 
 
 def test_check_env_dict_and_other_action_modes():
-    check_env(QuadFaultEnv("none", "hover", observation="dict", duration=0.5),
-              skip_render_check=True)
-    check_env(QuadFaultEnv("none", "hover", action_mode="wrench", duration=0.5),
-              skip_render_check=True)
+    check_env(
+        QuadFaultEnv("none", "hover", observation="dict", duration=0.5), skip_render_check=True
+    )
+    check_env(
+        QuadFaultEnv("none", "hover", action_mode="wrench", duration=0.5), skip_render_check=True
+    )
 
 
 @pytest.mark.parametrize("env_id", IDS)
@@ -97,8 +99,9 @@ def test_make_with_namespace_prefix_and_default_estimator(env_id):
         pytest.skip("estimators.irls not available yet")
     from estimators.irls import IRLSConfig
 
-    env = gym.make(f"quad_fault_env:{env_id}", duration=0.2,
-                   estimator_kwargs={"config": IRLSConfig()})
+    env = gym.make(
+        f"quad_fault_env:{env_id}", duration=0.2, estimator_kwargs={"config": IRLSConfig()}
+    )
     obs, info = env.reset(seed=0)
     assert env.unwrapped.estimator.name == "irls"
     assert env.spec.max_episode_steps == quad_fault_env.ENVIRONMENTS[env_id][0]
@@ -111,16 +114,24 @@ def test_observation_names_match_layout():
     names = env.observation_names
     assert len(names) == env.observation_space.shape[0] == 26
     assert names[:3] == ["pos_err_x", "pos_err_y", "pos_err_z"]
-    assert names[env.layout.slice("eta_hat")] == ["eta_hat_1", "eta_hat_2", "eta_hat_3",
-                                                   "eta_hat_4"]
+    assert names[env.layout.slice("eta_hat")] == [
+        "eta_hat_1",
+        "eta_hat_2",
+        "eta_hat_3",
+        "eta_hat_4",
+    ]
     env2 = QuadFaultEnv("none", "hover", reference_acceleration=False)
     assert len(env2.observation_names) == 23
 
 
 def test_seeded_determinism_and_obs_in_box():
-    kw = dict(estimator="none", scenario="random", duration=0.3,
-              sensor_noise=SensorNoise(position=0.01, velocity=0.02, attitude=0.01, gyro=0.02),
-              initial_spread=InitialStateSpread(0.2, 0.1, 0.05, 0.1))
+    kw = dict(
+        estimator="none",
+        scenario="random",
+        duration=0.3,
+        sensor_noise=SensorNoise(position=0.01, velocity=0.02, attitude=0.01, gyro=0.02),
+        initial_spread=InitialStateSpread(0.2, 0.1, 0.05, 0.1),
+    )
     actions = np.random.default_rng(5).uniform(-0.3, 0.3, (30, 4)).astype(np.float32)
     a = run(QuadFaultEnv(**kw), actions, seed=123)
     b = run(QuadFaultEnv(**kw), actions, seed=123)
@@ -140,8 +151,9 @@ def test_reset_options_fix_the_scenario_and_random_scenarios_vary():
     assert len(seen) > 1
     _, info = env.reset(seed=0, options={"scenario": "hover_fault"})
     assert info["scenario"] == "hover_fault"
-    assert info["faults"] == [{"motor": 1, "onset": 0.3, "end": math.inf, "level": 0.5,
-                               "ramp": 0.0}]
+    assert info["faults"] == [
+        {"motor": 1, "onset": 0.3, "end": math.inf, "level": 0.5, "ramp": 0.0}
+    ]
     custom = named_scenario("abrupt", 2.0).replace(name="mine", thrust_noise=0.0)
     _, info = env.reset(seed=0, options={"scenario": custom})
     assert info["scenario"] == "mine" and info["thrust_noise"] == 0.0
@@ -153,12 +165,18 @@ def test_reset_options_fix_the_scenario_and_random_scenarios_vary():
 
 def test_hover_residual_zero_action_stays_up_for_5_s_through_a_fault():
     # motor 1 drops to 50 % at 1.5 s; the nominal geometric controller must hold the hover
-    env = gym.make("QuadFaultHover-v0", estimator="none", scenario="hover_fault",
-                   duration=5.0, thrust_noise=0.07, info="full")
+    env = gym.make(
+        "QuadFaultHover-v0",
+        estimator="none",
+        scenario="hover_fault",
+        duration=5.0,
+        thrust_noise=0.07,
+        info="full",
+    )
     obs, info = env.reset(seed=3)
     z_ref = -1.0
     worst = 0.0
-    for k in range(500):
+    for k in range(500):  # noqa: B007  (k is read after the loop)
         obs, r, terminated, truncated, info = env.step(np.zeros(4, dtype=np.float32))
         assert not terminated, info["termination_reason"]
         worst = max(worst, info["tracking_error"])
@@ -174,8 +192,9 @@ def test_hover_residual_zero_action_stays_up_for_5_s_through_a_fault():
 
 def test_fault_compensated_through_the_estimate_removes_the_sag():
     # same fault; the controller divides its commands by eta_hat (here the oracle's)
-    env = QuadFaultEnv("truth", "hover_fault", duration=3.0, thrust_noise=0.07, compensate=True,
-                       info="full")
+    env = QuadFaultEnv(
+        "truth", "hover_fault", duration=3.0, thrust_noise=0.07, compensate=True, info="full"
+    )
     out = run(env, [np.zeros(4)] * 300, seed=3)
     assert len(out) == 301 and out[-1][3]
     assert out[-1][4]["eta_true"][0] == 0.5
@@ -192,8 +211,9 @@ def test_physics_substeps_per_control_step_and_estimator_rates():
     f = np.array([s.f for s in info["samples"]])
     np.testing.assert_array_equal(f, np.broadcast_to(info["motor_command"], f.shape))
     est2 = CountingEstimator()
-    env2 = QuadFaultEnv(est2, "hover", estimator_rate="control", control_rate=50, duration=1.0,
-                        info="full")
+    env2 = QuadFaultEnv(
+        est2, "hover", estimator_rate="control", control_rate=50, duration=1.0, info="full"
+    )
     _, _, _, _, info = run(env2, [np.zeros(4)] * 3)[-1]
     assert len(info["samples"]) == 20 and est2.n_updates == 3
     assert est2.times == pytest.approx([0.0, 0.02, 0.04])
@@ -208,18 +228,28 @@ def _terminate(env, action, n=300):
 
 
 def test_termination_reasons():
-    free_fall = _terminate(QuadFaultEnv("none", "hover", action_mode="motor", duration=3.0,
-                                        info="full"),
-                           [-1, -1, -1, -1])
+    free_fall = _terminate(
+        QuadFaultEnv("none", "hover", action_mode="motor", duration=3.0, info="full"),
+        [-1, -1, -1, -1],
+    )
     assert free_fall[4]["termination_reason"] == "crash"
     # 1 m of free fall takes ~0.45 s
     assert 0.4 <= free_fall[4]["t"] <= 0.55
-    roll = _terminate(QuadFaultEnv("none", "hover", action_mode="motor", duration=3.0),
-                      [1, -1, -1, 1])
+    roll = _terminate(
+        QuadFaultEnv("none", "hover", action_mode="motor", duration=3.0), [1, -1, -1, 1]
+    )
     assert roll[4]["termination_reason"] == "excessive_tilt"
-    up = _terminate(QuadFaultEnv("none", "hover", action_mode="motor", duration=3.0,
-                                 limits=TerminationLimits(max_position_error=0.2), info="full"),
-                    [1, 1, 1, 1])
+    up = _terminate(
+        QuadFaultEnv(
+            "none",
+            "hover",
+            action_mode="motor",
+            duration=3.0,
+            limits=TerminationLimits(max_position_error=0.2),
+            info="full",
+        ),
+        [1, 1, 1, 1],
+    )
     assert up[4]["termination_reason"] == "out_of_bounds"
     assert up[4]["tracking_error"] > 0.2
 
@@ -285,8 +315,7 @@ def test_action_modes_map_to_commands_within_limits(mode):
         f = env.motor_commands(np.asarray(a, float), 0.0, env.plant.state)
         assert f.shape == (4,) and np.all(f >= 0) and np.all(f <= f_max)
     if mode == "motor":
-        np.testing.assert_allclose(env.motor_commands(np.zeros(4), 0.0, env.plant.state),
-                                   f_max / 2)
+        np.testing.assert_allclose(env.motor_commands(np.zeros(4), 0.0, env.plant.state), f_max / 2)
     if mode == "wrench":
         f = env.motor_commands(np.array([0.0, 0.0, 0.0, 0.0]), 0.0, env.plant.state)
         np.testing.assert_allclose(env.vehicle.wrench(f), [2 * f_max, 0, 0, 0], atol=1e-12)
@@ -297,12 +326,15 @@ def test_action_modes_map_to_commands_within_limits(mode):
         assert f1[0] - f0[0] == pytest.approx(0.5 * env.action_config.residual_scale)
 
 
-@pytest.mark.parametrize("action, message", [
-    (np.zeros(3), "shape"),
-    (np.array([0.0, np.nan, 0.0, 0.0]), "NaN"),
-    (np.array([0.0, 1.5, 0.0, 0.0]), r"outside \[-1, 1\]"),
-    ("fly", "numeric"),
-])
+@pytest.mark.parametrize(
+    "action, message",
+    [
+        (np.zeros(3), "shape"),
+        (np.array([0.0, np.nan, 0.0, 0.0]), "NaN"),
+        (np.array([0.0, 1.5, 0.0, 0.0]), r"outside \[-1, 1\]"),
+        ("fly", "numeric"),
+    ],
+)
 def test_bad_actions_raise(action, message):
     env = QuadFaultEnv("none", "hover", duration=1.0)
     env.reset(seed=0)
@@ -310,24 +342,27 @@ def test_bad_actions_raise(action, message):
         env.step(action)
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"estimator": "kalman"}, "unknown estimator"),
-    ({"scenario": "loop"}, "unknown scenario"),
-    ({"action_mode": "thrust"}, "action_mode"),
-    ({"physics_rate": 1000, "control_rate": 300}, "whole multiple"),
-    ({"estimator_rate": "fast"}, "estimator_rate"),
-    ({"observation": "image"}, "observation"),
-    ({"thrust_noise": -0.1}, "thrust_noise"),
-    ({"thrust_noise": "high"}, "thrust_noise"),
-    ({"duration": 0.0}, "duration"),
-    ({"duration": "long"}, "duration"),
-    ({"control_rate": None}, "control_rate"),
-    ({"random_trajectory": "spiral"}, "random_trajectory"),
-    ({"sensor_noise": 0.1}, "sensor_noise"),
-    ({"render_mode": "ascii"}, "render_mode"),
-    ({"residual_scale": -1.0}, "residual_scale"),
-    ({"moment_scale": (1.0, 0.0, 1.0)}, "moment_scale"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"estimator": "kalman"}, "unknown estimator"),
+        ({"scenario": "loop"}, "unknown scenario"),
+        ({"action_mode": "thrust"}, "action_mode"),
+        ({"physics_rate": 1000, "control_rate": 300}, "whole multiple"),
+        ({"estimator_rate": "fast"}, "estimator_rate"),
+        ({"observation": "image"}, "observation"),
+        ({"thrust_noise": -0.1}, "thrust_noise"),
+        ({"thrust_noise": "high"}, "thrust_noise"),
+        ({"duration": 0.0}, "duration"),
+        ({"duration": "long"}, "duration"),
+        ({"control_rate": None}, "control_rate"),
+        ({"random_trajectory": "spiral"}, "random_trajectory"),
+        ({"sensor_noise": 0.1}, "sensor_noise"),
+        ({"render_mode": "ascii"}, "render_mode"),
+        ({"residual_scale": -1.0}, "residual_scale"),
+        ({"moment_scale": (1.0, 0.0, 1.0)}, "moment_scale"),
+    ],
+)
 def test_bad_configuration_raises_config_error(kwargs, message):
     kw = {"estimator": "none", "scenario": "hover"}
     kw.update(kwargs)
@@ -336,7 +371,7 @@ def test_bad_configuration_raises_config_error(kwargs, message):
 
 
 def test_make_estimator_factory():
-    from quadfault.vehicle import Vehicle
+    from quadfault.model.vehicle import Vehicle
 
     v = Vehicle()
     est = CountingEstimator()
@@ -361,15 +396,23 @@ _PROPERTY_ENVS = {}
 def _property_env(mode="motor"):
     """One env per action mode, reused across hypothesis examples (reset each time)."""
     if mode not in _PROPERTY_ENVS:
-        _PROPERTY_ENVS[mode] = QuadFaultEnv("none", "hover_fault", action_mode=mode,
-                                            duration=100.0, sensor_noise=SensorNoise(gyro=0.01),
-                                            info="full")
+        _PROPERTY_ENVS[mode] = QuadFaultEnv(
+            "none",
+            "hover_fault",
+            action_mode=mode,
+            duration=100.0,
+            sensor_noise=SensorNoise(gyro=0.01),
+            info="full",
+        )
     return _PROPERTY_ENVS[mode]
 
 
 @settings(max_examples=25, deadline=None)
-@given(action=hnp.arrays(np.float64, 4, elements=st.floats(-1.0, 1.0)),
-       seed=st.integers(0, 2**16), mode=st.sampled_from(["motor", "residual", "wrench"]))
+@given(
+    action=hnp.arrays(np.float64, 4, elements=st.floats(-1.0, 1.0)),
+    seed=st.integers(0, 2**16),
+    mode=st.sampled_from(["motor", "residual", "wrench"]),
+)
 def test_any_valid_action_gives_an_observation_in_the_box(action, seed, mode):
     env = _property_env(mode)
     obs, _ = env.reset(seed=seed)
@@ -378,16 +421,22 @@ def test_any_valid_action_gives_an_observation_in_the_box(action, seed, mode):
         assert env.observation_space.contains(obs)
         w = env.reward_config
         low = -(w.effort_weight + w.action_weight) + w.survival_bonus
-        assert (low - 1e-12 <= r <= 1.0 + w.survival_bonus if not terminated
-                else r <= 1.0 - w.termination_penalty)
+        assert (
+            low - 1e-12 <= r <= 1.0 + w.survival_bonus
+            if not terminated
+            else r <= 1.0 - w.termination_penalty
+        )
         assert np.all((info["motor_command"] >= 0) & (info["motor_command"] <= env.f_max))
         if terminated:
             break
 
 
 @settings(max_examples=25, deadline=None)
-@given(action=hnp.arrays(np.float64, 4, elements=st.floats(allow_nan=True,
-                                                           allow_infinity=True, width=32)))
+@given(
+    action=hnp.arrays(
+        np.float64, 4, elements=st.floats(allow_nan=True, allow_infinity=True, width=32)
+    )
+)
 def test_out_of_range_actions_always_raise(action):
     assume(not np.all(np.abs(action) <= 1.0 + 1e-6))
     env = _property_env()
@@ -417,8 +466,11 @@ def test_estimator_rate_physics_by_default_control_on_request():
 
 
 def test_random_faults_bounds_the_random_scenarios_faults():
-    env = QuadFaultEnv("none", "random", random_faults={"n_faults": (1, 1), "severity": (0.6, 0.7),
-                                                         "degradation_prob": 0.0})
+    env = QuadFaultEnv(
+        "none",
+        "random",
+        random_faults={"n_faults": (1, 1), "severity": (0.6, 0.7), "degradation_prob": 0.0},
+    )
     for seed in range(8):
         env.reset(seed=seed)
         faults = env.scenario.efficiency.faults
@@ -426,24 +478,44 @@ def test_random_faults_bounds_the_random_scenarios_faults():
         assert 0.6 <= faults[0].level <= 0.7
 
 
-@pytest.mark.parametrize("spec, word", [
-    ({"n_faults": (0, 1.5)}, "whole numbers"), ({"severity": (0.5, 1.2)}, "[0, 1]"),
-    ({"severity": (0.8, 0.5)}, "low <= high"), ({"ramp_prob": 2}, "probability"),
-    ({"bogus": 1}, "unknown key"), ({"severity": 0.5}, "pair"), ([1, 2], "dict")])
+@pytest.mark.parametrize(
+    "spec, word",
+    [
+        ({"n_faults": (0, 1.5)}, "whole numbers"),
+        ({"severity": (0.5, 1.2)}, "[0, 1]"),
+        ({"severity": (0.8, 0.5)}, "low <= high"),
+        ({"ramp_prob": 2}, "probability"),
+        ({"bogus": 1}, "unknown key"),
+        ({"severity": 0.5}, "pair"),
+        ([1, 2], "dict"),
+    ],
+)
 def test_random_faults_rejects_bad_specs(spec, word):
     with pytest.raises(ConfigError, match=re.escape(word)):
         QuadFaultEnv("none", "random", random_faults=spec)
 
 
 # -- the physics: the model's closed loop, one call per control step --------------------------
-FAULT_NOISE = dict(scenario="combined", duration=1.2, thrust_noise=0.07,
-                   sensor_noise=SensorNoise(position=0.01, velocity=0.02, attitude=0.002,
-                                            gyro=0.01, accel=0.1))
+FAULT_NOISE = dict(
+    scenario="combined",
+    duration=1.2,
+    thrust_noise=0.07,
+    sensor_noise=SensorNoise(position=0.01, velocity=0.02, attitude=0.002, gyro=0.01, accel=0.1),
+)
 
 
-@pytest.mark.parametrize("kw", [FAULT_NOISE, dict(scenario="lissajous", duration=0.4,
-                                                   thrust_noise=0.0,
-                                                   sensor_noise=SensorNoise(accel=0.1))])
+@pytest.mark.parametrize(
+    "kw",
+    [
+        FAULT_NOISE,
+        dict(
+            scenario="lissajous",
+            duration=0.4,
+            thrust_noise=0.0,
+            sensor_noise=SensorNoise(accel=0.1),
+        ),
+    ],
+)
 def test_substeps_are_the_readable_loop_with_the_env_generator(kw):
     """Every substep sample and accelerometer reading equals the loop written out with numpy
     (tests/support/oracles.py: sensors, motors with the step's held command, RKMK4,

@@ -13,9 +13,9 @@ import quad_fault_env  # noqa: F401  (registers the ids)
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.vector import QuadFaultVectorEnv
 from quadfault.errors import ConfigError
-from quadfault.recording import Recording, recording_sidecar
-from quadfault.simulator import SensorNoise
-from quadfault.vehicle import Vehicle
+from quadfault.io.recording import Recording, recording_sidecar
+from quadfault.model.vehicle import Vehicle
+from quadfault.sim.simulator import SensorNoise
 
 RANGES = ["mass=0.8:1.2", "drag=0.1:0.5", "motor_lag=0.01:0.05", "wind=-2:2,-2:2,0,gust=0.3"]
 NOISE = SensorNoise(position=0.01, velocity=0.02, attitude=0.002, gyro=0.01, accel=0.1)
@@ -69,8 +69,13 @@ def test_no_effects_keeps_the_info_and_the_physics():
 
 def test_vector_env_equals_single_envs_with_the_same_draws():
     N, seed = 3, 11
-    kw = dict(scenario="random", random_trajectory="hover", duration=0.3, sensor_noise=NOISE,
-              effects=RANGES + ["inertia=0.8:1.2,0.9:1.1,0.8:1.2", "delay=0:0.01"])
+    kw = dict(
+        scenario="random",
+        random_trajectory="hover",
+        duration=0.3,
+        sensor_noise=NOISE,
+        effects=RANGES + ["inertia=0.8:1.2,0.9:1.1,0.8:1.2", "delay=0:0.01"],
+    )
     vec = QuadFaultVectorEnv(N, "none", info="full", **kw)
     singles = [QuadFaultEnv("none", **kw, info="full") for _ in range(N)]
     obs, info = vec.reset(seed=seed)
@@ -95,17 +100,20 @@ def test_vector_env_equals_single_envs_with_the_same_draws():
     assert resets >= N
 
 
-@pytest.mark.parametrize("kw, words", [
-    ({"effects": ["drag=0.5:0.1"]}, "low <= high"),
-    ({"effects": ["vortex=1"]}, "unknown effect 'vortex'"),
-    ({"effects": ["motor_lag=-0.1:0.05"]}, "motor_lag"),
-    ({"effects": ["drag"]}, "NAME=VALUES"),
-    ({"effects": ["drag=a:b"]}, "not a number"),
-    ({"effects": 5}, "effects must be a list"),
-    ({"effects": ["drag=0.1", "drag=0.1:0.2"]}, "given twice"),
-    ({"model_uncertainty": True}, "needs a model"),
-    ({"model": {"format": "nope"}}, "format"),
-])
+@pytest.mark.parametrize(
+    "kw, words",
+    [
+        ({"effects": ["drag=0.5:0.1"]}, "low <= high"),
+        ({"effects": ["vortex=1"]}, "unknown effect 'vortex'"),
+        ({"effects": ["motor_lag=-0.1:0.05"]}, "motor_lag"),
+        ({"effects": ["drag"]}, "NAME=VALUES"),
+        ({"effects": ["drag=a:b"]}, "not a number"),
+        ({"effects": 5}, "effects must be a list"),
+        ({"effects": ["drag=0.1", "drag=0.1:0.2"]}, "given twice"),
+        ({"model_uncertainty": True}, "needs a model"),
+        ({"model": {"format": "nope"}}, "format"),
+    ],
+)
 def test_bad_randomisation_is_a_one_line_error(kw, words):
     with pytest.raises(ConfigError) as err:
         QuadFaultEnv("none", "hover", **kw)
@@ -114,22 +122,43 @@ def test_bad_randomisation_is_a_one_line_error(kw, words):
         QuadFaultVectorEnv(2, "none", scenario="hover", **kw)
 
 
-VEHICLE = Vehicle.from_arm(0.2, 0.01, mass=1.2, inertia=(0.012, 0.012, 0.022), gravity=9.81,
-                           max_thrust=8.0)
+VEHICLE = Vehicle.from_arm(
+    0.2, 0.01, mass=1.2, inertia=(0.012, 0.012, 0.022), gravity=9.81, max_thrust=8.0
+)
 
 
 def _diagnosis(tmp_path):
-    rec = Recording(t=np.arange(3.0), omega=np.zeros((3, 3)), thrust_cmd=np.ones((3, 4)),
-                    vehicle=VEHICLE, position=np.zeros((3, 3)), velocity=np.zeros((3, 3)),
-                    quaternion=np.tile([1.0, 0, 0, 0], (3, 1)))
+    rec = Recording(
+        t=np.arange(3.0),
+        omega=np.zeros((3, 3)),
+        thrust_cmd=np.ones((3, 4)),
+        vehicle=VEHICLE,
+        position=np.zeros((3, 3)),
+        velocity=np.zeros((3, 3)),
+        quaternion=np.tile([1.0, 0, 0, 0], (3, 1)),
+    )
     side = recording_sidecar(rec, "NED")
-    doc = {"format": "quadfault-diagnosis/2", "verdict": "mismatch", "frame": "NED",
-           "gravity": side["gravity"], "vehicle": side["vehicle"], "effects": [
-               {"name": "drag", "params": {"k_N_s_per_m": [0.2, 0.25, 0.1]},
+    doc = {
+        "format": "quadfault-diagnosis/2",
+        "verdict": "mismatch",
+        "frame": "NED",
+        "gravity": side["gravity"],
+        "vehicle": side["vehicle"],
+        "effects": [
+            {
+                "name": "drag",
+                "params": {"k_N_s_per_m": [0.2, 0.25, 0.1]},
                 "uncertainty": {"k_N_s_per_m": [0.02, 0.02, 0.02]},
-                "bounds": {"k_N_s_per_m": [[0, 0, 0], [1.5, 1.5, 2.5]]}},
-               {"name": "motor_lag", "params": {"tau_s": 0.03}, "uncertainty": {"tau_s": 0.003},
-                "bounds": {"tau_s": [1e-4, 0.3]}}]}
+                "bounds": {"k_N_s_per_m": [[0, 0, 0], [1.5, 1.5, 2.5]]},
+            },
+            {
+                "name": "motor_lag",
+                "params": {"tau_s": 0.03},
+                "uncertainty": {"tau_s": 0.003},
+                "bounds": {"tau_s": [1e-4, 0.3]},
+            },
+        ],
+    }
     path = tmp_path / "d.json"
     path.write_text(json.dumps(doc))
     return path
@@ -152,8 +181,9 @@ def test_make_with_a_model_flies_its_vehicle_and_fitted_effects(tmp_path):
 
 def test_model_uncertainty_draws_the_fitted_parameters_per_reset(tmp_path):
     path = _diagnosis(tmp_path)
-    env = QuadFaultEnv("none", "hover", model=path, model_uncertainty=True,
-                       effects=["wind=-1:1,0,0"], info="full")
+    env = QuadFaultEnv(
+        "none", "hover", model=path, model_uncertainty=True, effects=["wind=-1:1,0,0"], info="full"
+    )
     draws = [_drawn(env.reset(seed=s)[1]) for s in range(40)]
     taus = np.array([d["motor_lag"]["tau_s"] for d in draws])
     k = np.array([d["drag"]["k_N_s_per_m"] for d in draws])
@@ -166,7 +196,7 @@ def test_model_uncertainty_draws_the_fitted_parameters_per_reset(tmp_path):
 
 def test_a_vehicle_flies_any_number_of_wrench_effects():
     """Seven drags of 0.1 N s/m push as one of 0.7 (every slot of the layout is summed)."""
-    from quadfault.effects import chain, parse_effect, rows
+    from quadfault.model.effects import chain, parse_effect, rows
 
     state = ((0.0, 0.0, -1.0), (1.0, -0.5, 0.2), tuple(np.eye(3).ravel()), (0.1, 0.2, -0.3))
     f = np.full(4, 2.0)

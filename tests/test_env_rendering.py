@@ -53,20 +53,40 @@ def _gif_durations(path) -> list[int]:
 def test_example_writes_a_gif(tmp_path):
     out = tmp_path / "episode.gif"
     script = str(REPO / "examples" / "render_fault_episode.py")
-    cmd = [sys.executable, script, "--out", str(out), "--seconds", "0.3", "--fps", "20",
-           "--estimator", "truth"]
+    cmd = [
+        sys.executable,
+        script,
+        "--out",
+        str(out),
+        "--seconds",
+        "0.3",
+        "--fps",
+        "20",
+        "--estimator",
+        "truth",
+    ]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert res.returncode == 0, res.stderr
     assert out.read_bytes()[:6] in (b"GIF89a", b"GIF87a")
     # real time: 0.3 s at 20 fps is 6 frames of 50 ms after the first; the last is held 1 s
     assert _gif_durations(out) == [50] * 6 + [1050]
     # an fps that is not a whole number of 10 ms control steps is rounded, and said
-    res = subprocess.run([*cmd[:-4], "--fps", "30", "--estimator", "truth", "--force"],
-                         capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    res = subprocess.run(
+        [*cmd[:-4], "--fps", "30", "--estimator", "truth", "--force"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=tmp_path,
+    )
     assert res.returncode == 0 and "using 33.3333 fps" in res.stdout, res.stderr
     assert _gif_durations(out)[:-1] == [30] * 10
-    bad = subprocess.run([*cmd[:-4], "--fps", "100", "--force"], capture_output=True,
-                         text=True, timeout=300, cwd=tmp_path)
+    bad = subprocess.run(
+        [*cmd[:-4], "--fps", "100", "--force"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=tmp_path,
+    )
     assert bad.returncode == 2 and "--fps" in bad.stderr and "Traceback" not in bad.stderr
     # never overwrites without --force: one-line error, exit 2
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=300, cwd=tmp_path)
@@ -81,8 +101,13 @@ def _red_pixels(frame) -> int:
 
 
 def _crash_scenario():
-    from quadfault.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
-    from quadfault.trajectory import Circle
+    from quadfault.model.scenarios import (
+        AbruptFault,
+        ConstantEfficiency,
+        EfficiencySchedule,
+        Scenario,
+    )
+    from quadfault.model.trajectory import Circle
 
     faults = (AbruptFault(1, 0.3, level=0.2),)  # motor 1 at 20 %: the vehicle falls
     return Scenario("crash", 4.0, EfficiencySchedule(ConstantEfficiency(), faults), Circle())
@@ -134,9 +159,11 @@ def test_record_video_plays_in_real_time(tmp_path):
 
     import quad_fault_env  # noqa: F401
 
-    env = RecordVideo(gym.make("QuadFaultHover-v0", estimator="none", duration=0.5,
-                               render_mode="rgb_array"), str(tmp_path / "videos"),
-                      name_prefix="hover")
+    env = RecordVideo(
+        gym.make("QuadFaultHover-v0", estimator="none", duration=0.5, render_mode="rgb_array"),
+        str(tmp_path / "videos"),
+        name_prefix="hover",
+    )
     env.reset(seed=0)
     steps, done = 0, False
     while not done:
@@ -155,9 +182,19 @@ def test_record_video_plays_in_real_time(tmp_path):
 @pytest.mark.slow
 def test_render_benchmark_runs():
     """``benchmarks/bench_render.py`` prints the frame time (no timing assertion here)."""
-    res = subprocess.run([sys.executable, str(REPO / "benchmarks" / "bench_render.py"),
-                          "--steps", "5", "--rounds", "1"], capture_output=True, text=True,
-                         timeout=300)
+    res = subprocess.run(
+        [
+            sys.executable,
+            str(REPO / "benchmarks" / "bench_render.py"),
+            "--steps",
+            "5",
+            "--rounds",
+            "1",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert res.returncode == 0, res.stderr
     assert "env.render(), 5 frames of 800x320 px: median" in res.stdout
     assert "full / blitted" in res.stdout

@@ -9,9 +9,9 @@ import quad_fault_env  # noqa: F401  (registers the ids)
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.vector import QuadFaultVectorEnv
 from quadfault.errors import ConfigError
-from quadfault.sensors import SensorNoise
-from quadfault.task_scenarios import SmoothTrack, size_scale
-from quadfault.vehicle import Vehicle
+from quadfault.model.sensors import SensorNoise
+from quadfault.model.task_scenarios import SmoothTrack, size_scale
+from quadfault.model.vehicle import Vehicle
 
 TASK_IDS = ("QuadFaultTrack-v0", "QuadFaultRotorLoss-v0")
 
@@ -47,8 +47,16 @@ def test_same_seed_same_episode_other_seed_other_scenario(env_id):
 
 @pytest.mark.parametrize("scenario", ["track", "rotor_loss"])
 def test_vector_env_matches_single_envs(scenario):
-    n, seed, kw = 3, 11, dict(scenario=scenario, duration=0.25, estimator_rate="control",
-                              sensor_noise=SensorNoise(0.01, 0.02, 0.005, 0.01))
+    n, seed, kw = (
+        3,
+        11,
+        dict(
+            scenario=scenario,
+            duration=0.25,
+            estimator_rate="control",
+            sensor_noise=SensorNoise(0.01, 0.02, 0.005, 0.01),
+        ),
+    )
     vec = QuadFaultVectorEnv(n, "irls", **kw)
     singles = [QuadFaultEnv("irls", **kw) for _ in range(n)]
     obs, _ = vec.reset(seed=seed)
@@ -60,8 +68,7 @@ def test_vector_env_matches_single_envs(scenario):
         a = rng.uniform(-1, 1, (n, 4)).astype(np.float32)
         obs, rew, term, trunc, _ = vec.step(a)
         for i, env in enumerate(singles):
-            o, r, te, tr = ((env.reset()[0], 0.0, False, False) if done[i]
-                            else env.step(a[i])[:4])
+            o, r, te, tr = (env.reset()[0], 0.0, False, False) if done[i] else env.step(a[i])[:4]
             np.testing.assert_allclose(obs[i], o, rtol=0, atol=1e-9, err_msg=f"{k} {i}")
             assert abs(rew[i] - r) <= 1e-9 and (term[i], trunc[i]) == (te, tr)
         done = term | trunc
@@ -70,8 +77,12 @@ def test_vector_env_matches_single_envs(scenario):
 
 
 def test_rotor_loss_draws_from_its_options_and_bad_options_are_refused():
-    env = QuadFaultEnv("none", "rotor_loss", duration=2.0,
-                       scenario_options={"level": (0.2, 0.3), "onset": (0.5, 0.5)})
+    env = QuadFaultEnv(
+        "none",
+        "rotor_loss",
+        duration=2.0,
+        scenario_options={"level": (0.2, 0.3), "onset": (0.5, 0.5)},
+    )
     for seed in range(5):
         env.reset(seed=seed)
         (fault,) = env.scenario.efficiency.faults
@@ -105,10 +116,12 @@ def test_a_crazyflie_flies_the_track_task_scaled_to_its_size():
 
 def test_sensor_noise_as_a_dict_equals_the_dataclass_and_bad_keys_are_named():
     """JSON keywords (``quadfault train --env-kwargs``) can switch the sensor noise on."""
-    a = QuadFaultEnv("none", "rotor_loss", duration=0.2, sensor_noise={"position": 0.01,
-                                                                       "gyro": 0.02})
-    b = QuadFaultEnv("none", "rotor_loss", duration=0.2,
-                     sensor_noise=SensorNoise(position=0.01, gyro=0.02))
+    a = QuadFaultEnv(
+        "none", "rotor_loss", duration=0.2, sensor_noise={"position": 0.01, "gyro": 0.02}
+    )
+    b = QuadFaultEnv(
+        "none", "rotor_loss", duration=0.2, sensor_noise=SensorNoise(position=0.01, gyro=0.02)
+    )
     assert a.sensor_noise == b.sensor_noise
     oa, ob = a.reset(seed=5)[0], b.reset(seed=5)[0]
     for _ in range(5):
@@ -128,18 +141,37 @@ def test_drag_learnt_by_the_diagnosis_flies_in_the_env_and_is_found_again(tmp_pa
 
     from quad_fault_env.wrappers import RecordFlight
     from quadfault.cli import main
-    from quadfault.scenarios import named_scenario
-    from quadfault.trajectory import Lissajous
+    from quadfault.model.scenarios import named_scenario
+    from quadfault.model.trajectory import Lissajous
 
     first, diag1, diag2 = tmp_path / "drag.csv", tmp_path / "d1.json", tmp_path / "d2.json"
-    assert main(["simulate", "--scenario", "nominal", "--trajectory", "lissajous", "--effect",
-                 "drag=0.3", "--duration", "20", "--seed", "0", "--out", str(first),
-                 "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--scenario",
+                "nominal",
+                "--trajectory",
+                "lissajous",
+                "--effect",
+                "drag=0.3",
+                "--duration",
+                "20",
+                "--seed",
+                "0",
+                "--out",
+                str(first),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert main(["diagnose", str(first), "--json", str(diag1), "--quiet"]) == 0
     sc = named_scenario("nominal", 20.0).replace(trajectory=Lissajous())
-    env = RecordFlight(gym.make("QuadFault-v1", model=str(diag1), estimator="none", scenario=sc,
-                                info="full"),
-                       tmp_path / "calibrated")
+    env = RecordFlight(
+        gym.make("QuadFault-v1", model=str(diag1), estimator="none", scenario=sc, info="full"),
+        tmp_path / "calibrated",
+    )
     env.reset(seed=1)
     while True:
         *_, term, trunc, info = env.step(np.zeros(4))

@@ -11,12 +11,11 @@ import pytest
 
 from estimators.base import Estimate
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
-from quad_fault_env.wrappers import (EfficiencyEstimateObservation, EstimatorComparison,
-                                     RecordFlight)
+from quad_fault_env.wrappers import EfficiencyEstimateObservation, EstimatorComparison, RecordFlight
 from quadfault.errors import ConfigError
-from quadfault.recording import read_recording
-from quadfault.rotation import quat_to_rot
-from quadfault.scenarios import named_scenario
+from quadfault.io.recording import read_recording
+from quadfault.model.rotation import quat_to_rot
+from quadfault.model.scenarios import named_scenario
 
 
 class FrozenEstimator:
@@ -83,8 +82,9 @@ def test_estimate_observation_with_the_oracle_and_dict_observations():
 
 def test_estimator_comparison_summary_keys_and_scores():
     truth_like = FrozenEstimator(name="ones")  # eta = 1: wrong during the fault windows
-    env = EstimatorComparison(QuadFaultEnv("none", _abrupt(), info="full"),
-                              {"oracle": "truth", "ones": truth_like})
+    env = EstimatorComparison(
+        QuadFaultEnv("none", _abrupt(), info="full"), {"oracle": "truth", "ones": truth_like}
+    )
     steps = _episode(env, 200)
     last = steps[-1][1]["comparison"]
     assert set(last) == {"oracle", "ones"}
@@ -111,29 +111,32 @@ def test_estimator_comparison_summary_keys_and_scores():
 
 
 def test_estimator_comparison_no_faults_gives_null_spike_and_latency():
-    env = EstimatorComparison(QuadFaultEnv("none", "hover", duration=0.1, info="full"),
-                              {"a": FrozenEstimator()})
+    env = EstimatorComparison(
+        QuadFaultEnv("none", "hover", duration=0.1, info="full"), {"a": FrozenEstimator()}
+    )
     _episode(env, 20)
     cur = env.summary()["current"]["a"]
     assert cur["spike"] is None and cur["latency"] == [None] * 4
 
 
-@pytest.mark.skipif(importlib.util.find_spec("estimators.ekf") is None
-                    or importlib.util.find_spec("estimators.irls") is None,
-                    reason="IRLS / EKF not available")
+@pytest.mark.skipif(
+    importlib.util.find_spec("estimators.ekf") is None
+    or importlib.util.find_spec("estimators.irls") is None,
+    reason="IRLS / EKF not available",
+)
 def test_estimator_comparison_runs_irls_and_ekf():
     from estimators.ekf import EKFConfig, MotorEfficiencyEKF
     from estimators.irls import IRLSConfig, SlidingWindowIRLS
 
-    base = QuadFaultEnv("none", "hover_fault", duration=0.6, estimator_rate="control",
-                        info="full")
+    base = QuadFaultEnv("none", "hover_fault", duration=0.6, estimator_rate="control", info="full")
     default = EstimatorComparison(base)
     assert {n: e.name for n, e in default.estimators.items()} == {"irls": "irls", "ekf": "ekf"}
     # the numpy backends: same results, and no numba compilation inside this test
     v = base.vehicle
-    env = EstimatorComparison(base, {
-        "irls": SlidingWindowIRLS(v, IRLSConfig()),
-        "ekf": MotorEfficiencyEKF(v, EKFConfig())})
+    env = EstimatorComparison(
+        base,
+        {"irls": SlidingWindowIRLS(v, IRLSConfig()), "ekf": MotorEfficiencyEKF(v, EKFConfig())},
+    )
     steps = _episode(env, 60)
     assert set(steps[-1][1]["comparison"]) == {"irls", "ekf"}
     cur = env.summary()["current"]
@@ -146,8 +149,7 @@ def test_estimator_comparison_runs_irls_and_ekf():
 
 def test_estimator_comparison_runs_any_set_of_registered_estimators():
     """IRLS, the EKF, RLS and the UKF side by side on one measurement stream, by name."""
-    base = QuadFaultEnv("none", "hover_fault", duration=0.6, estimator_rate="control",
-                        info="full")
+    base = QuadFaultEnv("none", "hover_fault", duration=0.6, estimator_rate="control", info="full")
     names = ("irls", "ekf", "rls", "ukf")
     env = EstimatorComparison(base, {n: n for n in names})
     steps = _episode(env, 60)
@@ -188,17 +190,23 @@ def test_record_flight_writes_loadable_recordings(tmp_path):
 
 
 def test_record_flight_enu_round_trip(tmp_path):
-    env = RecordFlight(QuadFaultEnv("none", "hover", duration=0.05, info="full"), tmp_path / "f",
-                       frame="ENU")
+    env = RecordFlight(
+        QuadFaultEnv("none", "hover", duration=0.05, info="full"), tmp_path / "f", frame="ENU"
+    )
     steps = _episode(env, 10)
     rec = read_recording(env.paths[0])
     assert rec.frame == "ENU"
     np.testing.assert_allclose(rec.position[-1], steps[-1][1]["samples"][-1].p, atol=1e-9)
 
 
-@pytest.mark.parametrize("wrap", [lambda env: EfficiencyEstimateObservation(env, "irls"),
-                                  EstimatorComparison,
-                                  lambda env: RecordFlight(env, "flight")])
+@pytest.mark.parametrize(
+    "wrap",
+    [
+        lambda env: EfficiencyEstimateObservation(env, "irls"),
+        EstimatorComparison,
+        lambda env: RecordFlight(env, "flight"),
+    ],
+)
 def test_wrappers_of_the_measurement_stream_refuse_a_light_info(wrap):
     """The stream lives in the full info: a light env is a one-line error naming the fix."""
     with pytest.raises(ConfigError, match="info='full'"):

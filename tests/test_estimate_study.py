@@ -14,11 +14,35 @@ import estimate_study  # noqa: E402
 
 def test_every_arm_trains_and_flies_the_same_episodes(tmp_path):
     out = tmp_path / "study"
-    assert estimate_study.main(["--tasks", "rotor_loss", "--seeds", "0", "--timesteps", "128",
-                                "--n-envs", "4", "--n-steps", "32", "--episodes", "2",
-                                "--tuning-episodes", "1", "--curve-points", "2",
-                                "--allocation", "nominal", "--duration", "0.5",
-                                "--out", str(out)]) == 0
+    assert (
+        estimate_study.main(
+            [
+                "--tasks",
+                "rotor_loss",
+                "--seeds",
+                "0",
+                "--timesteps",
+                "128",
+                "--n-envs",
+                "4",
+                "--n-steps",
+                "32",
+                "--episodes",
+                "2",
+                "--tuning-episodes",
+                "1",
+                "--curve-points",
+                "2",
+                "--allocation",
+                "nominal",
+                "--duration",
+                "0.5",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     result = json.loads((out / "study.json").read_text())
     assert (out / "study.png").stat().st_size > 0
     assert set(result["design"]["arms"]) == set(estimate_study.ARMS)
@@ -32,7 +56,7 @@ def test_every_arm_trains_and_flies_the_same_episodes(tmp_path):
         assert len(r["crashed"]) == len(r["rmse"]) == len(r["return"]) == 2
         assert r["timesteps_run"] == 128 and r["curve"]["timesteps"][-1] == 128
         assert all(0 <= c <= 1 for c in r["curve"]["crash_rate"])
-    for arm, s in task["summary"].items():
+    for _arm, s in task["summary"].items():
         assert 0 <= s["crashed"][0] <= 1 and s["rmse"][0] > 0
     assert set(task["paired_vs_mlp_none"]) == set(estimate_study.ARMS) - {"mlp_none"}
     # every arm is also paired with its own zero-residual base on the same episodes
@@ -40,7 +64,8 @@ def test_every_arm_trains_and_flies_the_same_episodes(tmp_path):
     base = task["references"]["base_irls"]
     irls = next(iter(task["arms"]["mlp_irls"].values()))
     assert task["paired_vs_base"]["mlp_irls"]["return"][0] == pytest.approx(
-        sum(a - b for a, b in zip(irls["return"], base["return"])) / len(base["return"]))
+        sum(a - b for a, b in zip(irls["return"], base["return"])) / len(base["return"])
+    )
     assert result["cpu_s"] > 0
     # --replot redraws from study.json alone, with the bases' returns on the learning curves
     (out / "study.png").unlink()
@@ -49,8 +74,9 @@ def test_every_arm_trains_and_flies_the_same_episodes(tmp_path):
     replotted = json.loads((out / "study.json").read_text())["tasks"]["rotor_loss"]
     assert replotted["paired_vs_base"] == task["paired_vs_base"]
     # the memory arm saw stacked observations; the oracle arm the true efficiency
-    cfg = json.loads((out / "rotor_loss" / "memory_none" / "seed_0" / "train_config.json")
-                     .read_text())
+    cfg = json.loads(
+        (out / "rotor_loss" / "memory_none" / "seed_0" / "train_config.json").read_text()
+    )
     assert cfg["frame_stack"] == estimate_study.FRAME_STACK
     assert cfg["env_kwargs"]["estimator"] == "none"
 
@@ -61,10 +87,33 @@ def test_train_only_then_evaluate_reuses_the_runs_and_their_cpu(tmp_path, capsys
     import subprocess
 
     out = tmp_path / "study"
-    tiny = ["--tasks", "rotor_loss", "--arms", "mlp_none", "mlp_truth", "--seeds", "0",
-            "--timesteps", "64", "--n-envs", "2", "--n-steps", "32", "--episodes", "1",
-            "--tuning-episodes", "1", "--curve-points", "1", "--allocation", "nominal",
-            "--duration", "0.3", "--out", str(out)]
+    tiny = [
+        "--tasks",
+        "rotor_loss",
+        "--arms",
+        "mlp_none",
+        "mlp_truth",
+        "--seeds",
+        "0",
+        "--timesteps",
+        "64",
+        "--n-envs",
+        "2",
+        "--n-steps",
+        "32",
+        "--episodes",
+        "1",
+        "--tuning-episodes",
+        "1",
+        "--curve-points",
+        "1",
+        "--allocation",
+        "nominal",
+        "--duration",
+        "0.3",
+        "--out",
+        str(out),
+    ]
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
     (out / "rotor_loss" / "mlp_none").mkdir(parents=True)

@@ -20,8 +20,8 @@ from estimators.median import causal_median
 from estimators.metrics import mean_or_none, score
 from estimators.paper.reproduce import sim_config
 from quadfault.errors import ConfigError
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import simulate
+from quadfault.model.scenarios import named_scenario
+from quadfault.sim.simulator import simulate
 
 YAW = np.array([-1.0, 1.0, -1.0, 1.0]) / 2.0
 
@@ -39,8 +39,16 @@ class Completion:
 
     def step(self, x_raw, info):
         x = np.array(x_raw, dtype=float)
-        complete_into(x, np.asarray(info, float), self.history, self.anchor, self.v,
-                      self.counters, *self.args, *self.scratch)
+        complete_into(
+            x,
+            np.asarray(info, float),
+            self.history,
+            self.anchor,
+            self.v,
+            self.counters,
+            *self.args,
+            *self.scratch,
+        )
         return x
 
     @property
@@ -55,8 +63,12 @@ class Completion:
 @pytest.fixture(scope="module")
 def combined():
     """8 s of the combined scenario (four 0.33 s faults on a degraded level)."""
-    return simulate(named_scenario("combined", 8.0), config=sim_config("rk4", "combined"),
-                    seed=11, thrust_noise=0.07)
+    return simulate(
+        named_scenario("combined", 8.0),
+        config=sim_config("rk4", "combined"),
+        seed=11,
+        thrust_noise=0.07,
+    )
 
 
 def test_l1_completion_recovers_a_single_motor_step_from_its_observable_part():
@@ -89,8 +101,9 @@ def test_l1_completion_equals_the_numpy_oracle():
     v[3] = [0.0, 0.0, 0.6, 0.8]  # entries the completion must skip
     delta = rng.standard_normal((50, 4))
     for d, vi in zip(delta, v):
-        np.testing.assert_allclose(l1_completion(d, vi), oracle.l1_completion(d, vi),
-                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            l1_completion(d, vi), oracle.l1_completion(d, vi), rtol=0, atol=1e-12
+        )
 
 
 def test_weak_direction_is_the_smallest_eigenvector():
@@ -144,8 +157,15 @@ def test_causal_median_matches_numpy_medians_through_ties(L):
     np.testing.assert_array_equal(causal_median(x, 1), x)
 
 
-@pytest.mark.parametrize("bad", [{"output_median": 0}, {"change_hold": True},
-                                 {"change_threshold": -0.1}, {"change_completion": 1}])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"output_median": 0},
+        {"change_hold": True},
+        {"change_threshold": -0.1},
+        {"change_completion": 1},
+    ],
+)
 def test_bad_settings_are_config_errors(bad):
     with pytest.raises(ConfigError):
         IRLSConfig(**bad)
@@ -232,20 +252,21 @@ def test_completion_stands_down_on_a_collective_change():
 
 @pytest.mark.parametrize("seed", [0, 1])
 def test_simultaneous_four_motor_step_is_not_worse_with_completion(seed):
-    from quadfault.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule
+    from quadfault.model.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule
 
-    faults = tuple(AbruptFault(motor=m, onset=3.0, duration=3.0, level=0.75)
-                   for m in (1, 2, 3, 4))
+    faults = tuple(AbruptFault(motor=m, onset=3.0, duration=3.0, level=0.75) for m in (1, 2, 3, 4))
     sc = named_scenario("abrupt", 8.0).replace(
-        name="collective", efficiency=EfficiencySchedule(ConstantEfficiency(), faults))
+        name="collective", efficiency=EfficiencySchedule(ConstantEfficiency(), faults)
+    )
     rec = simulate(sc, config=sim_config("rk4", "abrupt"), seed=seed, thrust_noise=0.07)
     inside = (rec.t >= 3.0) & (rec.t <= 6.0)
     errs = {}
     for on in (False, True):
         s = SlidingWindowIRLS(rec.vehicle, IRLSConfig.improved(change_completion=on)).run(
-            rec.without_truth())
+            rec.without_truth()
+        )
         errs[on] = s.eta[inside] - rec.eta_true[inside]
-    rmse = {k: float(np.sqrt(np.mean(e ** 2))) for k, e in errs.items()}
+    rmse = {k: float(np.sqrt(np.mean(e**2))) for k, e in errs.items()}
     worst = {k: float(np.abs(e).max()) for k, e in errs.items()}
     assert rmse[True] <= rmse[False] + 1e-9 and worst[True] <= worst[False] + 1e-9
     assert rmse[False] < 0.03  # the raw estimate follows the collective step

@@ -8,13 +8,13 @@ import pytest
 
 from estimators.base import STATUSES, Sample, samples
 from estimators.batched import BatchedEKF, BatchedIRLS
-from estimators.registry import make_estimator
 from estimators.ekf import MotorEfficiencyEKF
 from estimators.irls import IRLSConfig, SlidingWindowIRLS
+from estimators.registry import make_estimator
 from quadfault.errors import ConfigError
-from quadfault.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
-from quadfault.simulator import simulate
-from quadfault.trajectory import Circle, Hover
+from quadfault.model.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
+from quadfault.model.trajectory import Circle, Hover
+from quadfault.sim.simulator import simulate
 
 N_VEHICLES = 3
 
@@ -24,8 +24,10 @@ def flights():
     """Three flights of equal length: different faults, noise and trajectories."""
     out = []
     for k in range(N_VEHICLES):
-        sched = EfficiencySchedule(ConstantEfficiency((1.0, 0.9 - 0.1 * k, 0.8, 0.95)),
-                                   (AbruptFault(motor=k + 1, onset=0.1, level=0.5),))
+        sched = EfficiencySchedule(
+            ConstantEfficiency((1.0, 0.9 - 0.1 * k, 0.8, 0.95)),
+            (AbruptFault(motor=k + 1, onset=0.1, level=0.5),),
+        )
         traj = Circle() if k != 1 else Hover()
         sc = Scenario(f"v{k}", 0.2, sched, traj, thrust_noise=0.03 * k)
         out.append(simulate(sc, seed=20 + k).without_truth())
@@ -37,8 +39,9 @@ def _stack(flights):
     T = min(len(r) for r in rows)
     for k in range(T):
         batch = [r[k] for r in rows]
-        yield tuple(np.array([getattr(s, name) for s in batch])
-                    for name in ("t", "p", "v", "R", "w", "f"))
+        yield tuple(
+            np.array([getattr(s, name) for s in batch]) for name in ("t", "p", "v", "R", "w", "f")
+        )
 
 
 def _compare(flights, single_factory, batched, corrupt=None, reset_at=None):
@@ -82,8 +85,9 @@ def test_batched_improved_irls_matches_single(flights):
     veh = flights[0].vehicle
     cfg = IRLSConfig.improved()
     batched = BatchedIRLS(veh, N_VEHICLES, cfg)
-    n_ok, singles = _compare(flights, lambda: SlidingWindowIRLS(veh, cfg), batched,
-                             corrupt=40, reset_at=(70, 2))
+    n_ok, singles = _compare(
+        flights, lambda: SlidingWindowIRLS(veh, cfg), batched, corrupt=40, reset_at=(70, 2)
+    )
     assert n_ok > 100
     events = [s.change_events for s in singles]
     assert sum(events) >= 2  # the faults triggered the completion
@@ -93,8 +97,9 @@ def test_batched_improved_irls_matches_single(flights):
 def test_batched_ekf_matches_single(flights):
     veh = flights[0].vehicle
     batched = BatchedEKF(veh, N_VEHICLES)
-    n_ok, _ = _compare(flights, lambda: MotorEfficiencyEKF(veh), batched, corrupt=40,
-                       reset_at=(70, 1))
+    n_ok, _ = _compare(
+        flights, lambda: MotorEfficiencyEKF(veh), batched, corrupt=40, reset_at=(70, 1)
+    )
     assert n_ok > 100
 
 
@@ -111,8 +116,9 @@ def test_batched_ekf_follows_the_single_rules_for_idle_rotors_and_repeated_times
     seen = set()
     for k in range(30):
         batch = [r[k] for r in rows]
-        out = batched.update(*(np.array([getattr(s, f) for s in batch])
-                               for f in ("t", "p", "v", "R", "w", "f")))
+        out = batched.update(
+            *(np.array([getattr(s, f) for s in batch]) for f in ("t", "p", "v", "R", "w", "f"))
+        )
         for i, est in enumerate(singles):
             e = est.update(batch[i])
             assert STATUSES[out.status[i]] == e.status
@@ -139,8 +145,14 @@ def test_bad_shapes_and_names_raise_config_errors(flights):
     veh = flights[0].vehicle
     est = BatchedIRLS(veh, 2)
     with pytest.raises(ConfigError, match="batched sample"):
-        est.update(np.zeros(3), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3, 3)),
-                   np.zeros((3, 3)), np.zeros((3, 4)))
+        est.update(
+            np.zeros(3),
+            np.zeros((3, 3)),
+            np.zeros((3, 3)),
+            np.zeros((3, 3, 3)),
+            np.zeros((3, 3)),
+            np.zeros((3, 4)),
+        )
     with pytest.raises(ConfigError, match="reset mask"):
         est.reset(np.ones(5, dtype=bool))
     with pytest.raises(ConfigError, match="integer >= 1"):

@@ -6,17 +6,22 @@ import dataclasses
 
 import numpy as np
 import pytest
-from oracles.ekf_numpy import (NOISE_REFERENCE_DT, attitude_jacobian, kalman_update,
-                               measurement_update, predict)
+from oracles.ekf_numpy import (
+    NOISE_REFERENCE_DT,
+    attitude_jacobian,
+    kalman_update,
+    measurement_update,
+    predict,
+)
 
 from estimators.base import Sample, samples
 from estimators.ekf import EKFConfig, MotorEfficiencyEKF
 from quadfault.errors import ConfigError
-from quadfault.rotation import expm_so3, hat, logm_so3, vee
-from quadfault.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario
-from quadfault.simulator import simulate
-from quadfault.trajectory import Circle
-from quadfault.vehicle import Vehicle
+from quadfault.model.rotation import expm_so3, hat, logm_so3, vee
+from quadfault.model.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario
+from quadfault.model.trajectory import Circle
+from quadfault.model.vehicle import Vehicle
+from quadfault.sim.simulator import simulate
 
 TRUE_ETA = (0.9, 0.75, 1.0, 0.6)
 
@@ -29,15 +34,23 @@ def vehicle():
 @pytest.fixture(scope="module")
 def recording():
     """2 s of a circle with fixed, unequal efficiencies and sigma_f = 0.07 (seeded)."""
-    sc = Scenario("const", 2.0, EfficiencySchedule(ConstantEfficiency(TRUE_ETA)), Circle(),
-                  thrust_noise=0.07)
+    sc = Scenario(
+        "const", 2.0, EfficiencySchedule(ConstantEfficiency(TRUE_ETA)), Circle(), thrust_noise=0.07
+    )
     return simulate(sc, seed=3)
 
 
 def _random_state(rng, n=4):
     R = expm_so3(rng.normal(size=3))
-    return np.concatenate((rng.normal(size=3), rng.normal(size=3), rng.normal(size=3) * 2,
-                           R.reshape(9, order="F"), rng.uniform(0.5, 1.0, n)))
+    return np.concatenate(
+        (
+            rng.normal(size=3),
+            rng.normal(size=3),
+            rng.normal(size=3) * 2,
+            R.reshape(9, order="F"),
+            rng.uniform(0.5, 1.0, n),
+        )
+    )
 
 
 def test_predict_jacobian_matches_central_differences(vehicle):
@@ -52,8 +65,10 @@ def test_predict_jacobian_matches_central_differences(vehicle):
     for i in range(22):
         d = np.zeros(22)
         d[i] = h
-        F_num[:, i] = (predict(x + d, np.eye(22), f, dt, vehicle, Q)[0]
-                       - predict(x - d, np.eye(22), f, dt, vehicle, Q)[0]) / (2 * h)
+        F_num[:, i] = (
+            predict(x + d, np.eye(22), f, dt, vehicle, Q)[0]
+            - predict(x - d, np.eye(22), f, dt, vehicle, Q)[0]
+        ) / (2 * h)
     np.testing.assert_allclose(F, F_num, atol=1e-8)
     # the gyroscopic block is not the identity the reference used
     assert np.max(np.abs(F[6:9, 6:9] - np.eye(3))) > 1e-4
@@ -108,11 +123,23 @@ def test_ekf_step_equals_linear_kalman_filter_at_level_attitude(vehicle):
     dt, m, f0 = 1e-3, vehicle.mass, 2.0
     cfg = EKFConfig(q_eta=1e-3)
     ekf = MotorEfficiencyEKF(vehicle, cfg)
-    z0 = Sample(0.0, np.array([1.0, 2.0, -1.0]), np.array([0.5, -0.2, 0.1]), np.eye(3),
-                np.zeros(3), np.full(4, f0))
+    z0 = Sample(
+        0.0,
+        np.array([1.0, 2.0, -1.0]),
+        np.array([0.5, -0.2, 0.1]),
+        np.eye(3),
+        np.zeros(3),
+        np.full(4, f0),
+    )
     ekf.update(z0)
-    z1 = Sample(dt, np.array([1.0006, 1.9998, -0.9999]), np.array([0.49, -0.21, 0.12]),
-                np.eye(3), np.array([0.01, -0.02, 0.003]), np.full(4, f0))
+    z1 = Sample(
+        dt,
+        np.array([1.0006, 1.9998, -0.9999]),
+        np.array([0.49, -0.21, 0.12]),
+        np.eye(3),
+        np.array([0.01, -0.02, 0.003]),
+        np.full(4, f0),
+    )
     ekf.update(z1)
     # --- plain KF by hand
     x = np.concatenate((z0.p, z0.v, z0.w, np.eye(3).reshape(9, order="F"), np.ones(4)))
@@ -157,8 +184,9 @@ def test_compiled_filter_equals_the_numpy_oracle_over_a_flight(recording):
     ekf = MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=1e-4))
     offline = ekf.run(rec)
     rows = list(samples(rec))
-    x = np.concatenate((rows[0].p, rows[0].v, rows[0].w, rows[0].R.reshape(9, order="F"),
-                        np.ones(4)))
+    x = np.concatenate(
+        (rows[0].p, rows[0].v, rows[0].w, rows[0].R.reshape(9, order="F"), np.ones(4))
+    )
     P = ekf.config.p0 * np.eye(22)
     for k in range(1, len(rows)):
         dt = rows[k].t - rows[k - 1].t
@@ -176,7 +204,8 @@ def test_compiled_filter_equals_the_numpy_oracle_over_a_flight(recording):
 
 def test_seeded_accuracy_on_constant_efficiencies(recording):
     est = MotorEfficiencyEKF(recording.vehicle, EKFConfig(q_eta=1e-5)).run(
-        recording.without_truth())
+        recording.without_truth()
+    )
     assert est.estimator == "ekf" and est.eta.shape == (len(recording), 4)
     assert est.status[0] == "warmup" and set(est.status[1:]) == {"ok"}
     final = est.eta[-200:].mean(axis=0)
@@ -197,8 +226,10 @@ def test_reference_clamp_and_default_bounds(recording):
     assert ours.eta.min() >= -0.001 and ours.eta.max() <= 1.001
 
 
-@pytest.mark.parametrize("changes", [{"q_eta": 0.0}, {"r_attitude": -1.0}, {"p0": float("nan")},
-                                     {"eta_bounds": (1.0, 0.0)}])
+@pytest.mark.parametrize(
+    "changes",
+    [{"q_eta": 0.0}, {"r_attitude": -1.0}, {"p0": float("nan")}, {"eta_bounds": (1.0, 0.0)}],
+)
 def test_bad_config_is_a_clear_error(changes):
     with pytest.raises(ConfigError, match="EKFConfig"):
         EKFConfig(**changes)
@@ -227,4 +258,3 @@ def test_imu_only_recording_is_refused(recording):
     imu = dataclasses.replace(recording, position=None, velocity=None, quaternion=None)
     with pytest.raises(ConfigError, match="IMU-only"):
         MotorEfficiencyEKF(recording.vehicle, EKFConfig()).run(imu)
-

@@ -8,9 +8,9 @@ from estimators.ekf import EKFConfig, MotorEfficiencyEKF
 from estimators.metrics import score
 from estimators.paper.calibration import ONE_SIGMA, SdCalibration, calibrate_sd_scale
 from quadfault.errors import ConfigError
-from quadfault.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario
-from quadfault.simulator import simulate
-from quadfault.trajectory import Circle
+from quadfault.model.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario
+from quadfault.model.trajectory import Circle
+from quadfault.sim.simulator import simulate
 
 _FLIGHTS = {}
 
@@ -23,8 +23,13 @@ def _flight(seed, duration=2.0):
 
 
 def _simulate(seed, duration):
-    sc = Scenario("const", duration, EfficiencySchedule(ConstantEfficiency((0.9, 0.75, 1.0, 0.6))),
-                  Circle(), thrust_noise=0.07)
+    sc = Scenario(
+        "const",
+        duration,
+        EfficiencySchedule(ConstantEfficiency((0.9, 0.75, 1.0, 0.6))),
+        Circle(),
+        thrust_noise=0.07,
+    )
     return simulate(sc, seed=seed)
 
 

@@ -10,26 +10,39 @@ from oracles.ekf_numpy import NOISE_REFERENCE_DT, measurement_update, predict
 from estimators.base import Sample
 from estimators.ekf import EKFConfig, MotorEfficiencyEKF, constant_arrays
 from estimators.ekf_filter import Measurement, _project_so3_into, predict_update_into, workspace
-from quadfault.rotation import expm_so3, orthonormalize
-from quadfault.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario
-from quadfault.simulator import simulate
-from quadfault.trajectory import Circle
-from quadfault.vehicle import Vehicle
+from quadfault.model.rotation import expm_so3, orthonormalize
+from quadfault.model.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario
+from quadfault.model.trajectory import Circle
+from quadfault.model.vehicle import Vehicle
+from quadfault.sim.simulator import simulate
 
 
 def _random_case(rng, n_rotors=4):
     """A state far from hover (fast rates, tilted attitude), a dense SPD covariance of very
     unequal scales, commands, dt and a measurement near the prediction."""
     R = expm_so3(rng.normal(size=3))
-    x = np.concatenate((rng.normal(size=3), rng.normal(size=3), 3.0 * rng.normal(size=3),
-                        R.reshape(9, order="F"), rng.uniform(0.5, 1.0, n_rotors)))
+    x = np.concatenate(
+        (
+            rng.normal(size=3),
+            rng.normal(size=3),
+            3.0 * rng.normal(size=3),
+            R.reshape(9, order="F"),
+            rng.uniform(0.5, 1.0, n_rotors),
+        )
+    )
     n = x.size
     L = rng.normal(size=(n, n)) * np.geomspace(1e-3, 1.0, n)
     P = L @ L.T + 1e-4 * np.eye(n)
     f = rng.uniform(0.5, 4.0, n_rotors)
     dt = float(rng.uniform(5e-4, 5e-3))
-    z = Sample(dt, x[:3] + 0.01 * rng.normal(size=3), x[3:6] + 0.01 * rng.normal(size=3),
-               R @ expm_so3(0.02 * rng.normal(size=3)), x[6:9] + 0.01 * rng.normal(size=3), f)
+    z = Sample(
+        dt,
+        x[:3] + 0.01 * rng.normal(size=3),
+        x[3:6] + 0.01 * rng.normal(size=3),
+        R @ expm_so3(0.02 * rng.normal(size=3)),
+        x[6:9] + 0.01 * rng.normal(size=3),
+        f,
+    )
     return x, P, f, dt, z
 
 
@@ -44,8 +57,15 @@ def _compiled_step(ekf, x, P, f, dt, z):
     model = constant_arrays(ekf._const, ekf.n_rotors)  # the filter's model of the vehicle
     np.testing.assert_array_equal(model.qc, ekf.q_diag / NOISE_REFERENCE_DT)
     np.testing.assert_array_equal(model.r, ekf.r_diag)
-    predict_update_into(x, P, f, dt, Measurement(z.p, z.v, z.w, np.ascontiguousarray(z.R)),
-                        model, workspace(ekf.n_rotors))
+    predict_update_into(
+        x,
+        P,
+        f,
+        dt,
+        Measurement(z.p, z.v, z.w, np.ascontiguousarray(z.R)),
+        model,
+        workspace(ekf.n_rotors),
+    )
     return x, P
 
 
@@ -60,8 +80,9 @@ def test_compiled_step_equals_numpy_step_from_random_states(seed):
     """Seeds 0-4: the quadrotor (22 states); seed 5: a hexarotor (24 states)."""
     rng = np.random.default_rng(seed)
     vehicle = Vehicle() if seed < 5 else _hexarotor()
-    ekf = MotorEfficiencyEKF(vehicle, EKFConfig(q_eta=float(rng.uniform(1e-4, 1.0)),
-                                                eta_bounds=None))
+    ekf = MotorEfficiencyEKF(
+        vehicle, EKFConfig(q_eta=float(rng.uniform(1e-4, 1.0)), eta_bounds=None)
+    )
     x, P, f, dt, z = _random_case(rng, vehicle.n_rotors)
     x_np, P_np = _numpy_step(ekf, x, P, f, dt, z)
     x_nb, P_nb = _compiled_step(ekf, x, P, f, dt, z)
@@ -86,8 +107,13 @@ def test_indefinite_covariance_takes_the_general_solver_and_still_matches_numpy(
 
 
 def test_covariance_stays_symmetric_and_positive_definite_over_a_flight():
-    sc = Scenario("const", 1.5, EfficiencySchedule(ConstantEfficiency((0.9, 0.75, 1.0, 0.6))),
-                  Circle(), thrust_noise=0.07)
+    sc = Scenario(
+        "const",
+        1.5,
+        EfficiencySchedule(ConstantEfficiency((0.9, 0.75, 1.0, 0.6))),
+        Circle(),
+        thrust_noise=0.07,
+    )
     rec = simulate(sc, seed=5).without_truth()
     for q_eta in (1e-6, 0.5, 10.0):  # slow, default and very fast random walk
         ekf = MotorEfficiencyEKF(rec.vehicle, EKFConfig(q_eta=q_eta))
@@ -100,11 +126,14 @@ def test_covariance_stays_symmetric_and_positive_definite_over_a_flight():
 @pytest.mark.parametrize("seed", range(8))
 def test_attitude_projection_is_the_closest_rotation(seed):
     """Near SO(3) (Newton iterations) and far from it (the SVD through M^T M), as
-    quadfault.rotation.orthonormalize."""
+    quadfault.model.rotation.orthonormalize."""
     rng = np.random.default_rng(seed)
     R = expm_so3(rng.normal(size=3))
-    for M in (R + 1e-5 * rng.normal(size=(3, 3)), R + 0.3 * rng.normal(size=(3, 3)),
-              R @ np.diag([1.0, 1.0, -1.0]) + 0.1 * rng.normal(size=(3, 3))):
+    for M in (
+        R + 1e-5 * rng.normal(size=(3, 3)),
+        R + 0.3 * rng.normal(size=(3, 3)),
+        R @ np.diag([1.0, 1.0, -1.0]) + 0.1 * rng.normal(size=(3, 3)),
+    ):
         out = M.copy()
         _project_so3_into(out, np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)))
         np.testing.assert_allclose(out, orthonormalize(M), rtol=0, atol=1e-9)

@@ -12,8 +12,13 @@ DT = 1e-3
 
 def _series(eta, status=None):
     n = len(eta)
-    return EstimateSeries(t=DT * np.arange(n), eta=np.asarray(eta, float), sd=None,
-                          status=np.array(status or ["ok"] * n), estimator="test")
+    return EstimateSeries(
+        t=DT * np.arange(n),
+        eta=np.asarray(eta, float),
+        sd=None,
+        status=np.array(status or ["ok"] * n),
+        estimator="test",
+    )
 
 
 def _abrupt(seed=0, n=6000, motor=3, onset=2.0, end=4.0, noise=0.02, leak=0.12):
@@ -86,8 +91,9 @@ def test_no_alarm_while_settling():
     assert len(detect(_series(eta), FDIConfig(settle=0.1)).events) == 2
 
 
-@pytest.mark.parametrize("changes", [{"threshold": 0}, {"clear": 1.5}, {"confirm": -1.0},
-                                     {"tau_baseline": float("inf")}])
+@pytest.mark.parametrize(
+    "changes", [{"threshold": 0}, {"clear": 1.5}, {"confirm": -1.0}, {"tau_baseline": float("inf")}]
+)
 def test_bad_config_is_a_clear_error(changes):
     with pytest.raises(ConfigError, match="FDIConfig"):
         FDIConfig(**changes)
@@ -103,8 +109,8 @@ def test_irls_stream_of_a_seeded_abrupt_flight():
     from estimators.irls import SlidingWindowIRLS
     from estimators.metrics import fault_windows
     from estimators.paper.reproduce import flight_check, sim_config
-    from quadfault.scenarios import named_scenario
-    from quadfault.simulator import simulate
+    from quadfault.model.scenarios import named_scenario
+    from quadfault.sim.simulator import simulate
 
     rec = simulate(named_scenario("abrupt", 12.0), config=sim_config("rk4", "abrupt"), seed=5)
     assert not flight_check(rec)["diverged"]

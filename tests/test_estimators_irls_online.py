@@ -12,17 +12,22 @@ from oracles import irls_numpy as oracle
 
 from estimators.base import Sample, samples
 from estimators.irls import IRLSConfig, IRLSDiagnostics, SlidingWindowIRLS
-from quadfault.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
-from quadfault.simulator import simulate
-from quadfault.trajectory import Circle
+from quadfault.model.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
+from quadfault.model.trajectory import Circle
+from quadfault.sim.simulator import simulate
 
 
 @pytest.fixture(scope="module")
 def fault_flight():
     """A motor fault at 0.2 s (the change completion triggers on it)."""
-    sc = Scenario("fault", 0.4, EfficiencySchedule(
-        ConstantEfficiency((1.0, 0.9, 0.8, 0.95)), (AbruptFault(motor=3, onset=0.2, level=0.4),)),
-        Circle())
+    sc = Scenario(
+        "fault",
+        0.4,
+        EfficiencySchedule(
+            ConstantEfficiency((1.0, 0.9, 0.8, 0.95)), (AbruptFault(motor=3, onset=0.2, level=0.4),)
+        ),
+        Circle(),
+    )
     return simulate(sc, seed=5).without_truth()
 
 
@@ -63,8 +68,7 @@ def test_compiled_online_update_equals_run(fault_flight, improved):
     est = SlidingWindowIRLS(fault_flight.vehicle, cfg)
     online = [est.update(s) for s in samples(fault_flight)]
     offline = SlidingWindowIRLS(fault_flight.vehicle, cfg).run(fault_flight)
-    np.testing.assert_allclose(np.array([e.eta for e in online]), offline.eta, rtol=0,
-                               atol=1e-12)
+    np.testing.assert_allclose(np.array([e.eta for e in online]), offline.eta, rtol=0, atol=1e-12)
     assert [e.status for e in online] == list(offline.status)
     sd = np.array([np.full(4, np.nan) if e.sd is None else e.sd for e in online])
     np.testing.assert_allclose(sd, offline.sd, rtol=0, atol=1e-12)
@@ -100,9 +104,11 @@ def test_lazy_diagnostics_are_irls_diagnostics(fault_flight):
 def test_malformed_samples_restart_the_window(fault_flight):
     est = SlidingWindowIRLS(fault_flight.vehicle, IRLSConfig())
     rows = list(samples(fault_flight.slice(0, 30)))
-    for bad, why in ((rows[12]._replace(R=np.eye(4)), "non-finite or malformed sample"),
-                     (("not", "a", "sample"), "non-finite or malformed sample"),
-                     (rows[11], "time not increasing")):
+    for bad, why in (
+        (rows[12]._replace(R=np.eye(4)), "non-finite or malformed sample"),
+        (("not", "a", "sample"), "non-finite or malformed sample"),
+        (rows[11], "time not increasing"),
+    ):
         est.reset()
         assert [est.update(s).status for s in rows[:13]][-1] == "ok"
         out = est.update(bad)

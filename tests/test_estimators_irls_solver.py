@@ -31,10 +31,15 @@ def _problem(seed, x_true):
     return H, q, A, b
 
 
-@pytest.mark.parametrize("seed,x_true", [(0, (0.9, 0.5, 0.7, 0.3)),   # interior
-                                          (1, (1.3, 0.5, -0.4, 0.8)),  # two active bounds
-                                          (2, (1.001, 1.2, 1.0, 0.0)),  # at / beyond the bounds
-                                          (3, (-1.0, -1.0, 2.0, 0.5))])
+@pytest.mark.parametrize(
+    "seed,x_true",
+    [
+        (0, (0.9, 0.5, 0.7, 0.3)),  # interior
+        (1, (1.3, 0.5, -0.4, 0.8)),  # two active bounds
+        (2, (1.001, 1.2, 1.0, 0.0)),  # at / beyond the bounds
+        (3, (-1.0, -1.0, 2.0, 0.5)),
+    ],
+)
 def test_ipm_equals_scipy_lsq_linear(seed, x_true):
     H, q, A, b = _problem(seed, x_true)
     ref = lsq_linear(A, b, bounds=(LO, HI), method="bvls", tol=1e-14)
@@ -71,8 +76,9 @@ def test_reduced_newton_steps_follow_the_full_kkt_system(seed):
     x0 = np.random.default_rng(seed).uniform(0.05, 0.95, 4)
     for cfg in (IPMSettings(), TIGHT, IPMSettings(max_iter=3)):
         res = solve_box_qp(H, q, LO, HI, x0, cfg, record_history=True)
-        _x, it, converged, iterates = oracle.ipm(H, q, LO, HI, x0, ipm_parameters(cfg),
-                                                 cfg.max_iter)
+        _x, it, converged, iterates = oracle.ipm(
+            H, q, LO, HI, x0, ipm_parameters(cfg), cfg.max_iter
+        )
         assert (res.iterations, res.converged) == (it, converged)
         np.testing.assert_allclose(res.x_history, iterates, rtol=0, atol=1e-10)
 

@@ -9,27 +9,39 @@ import pytest
 from oracles import irls_numpy as oracle
 
 from estimators.irls import IRLSConfig, solve_window
-from quadfault.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
-from quadfault.simulator import simulate
-from quadfault.trajectory import Circle
+from quadfault.model.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
+from quadfault.model.trajectory import Circle
+from quadfault.sim.simulator import simulate
 
 
 @pytest.fixture(scope="module")
 def fault_flight():
     """A motor fault in the middle, so the windows see outliers and a step."""
-    sc = Scenario("fault", 0.5, EfficiencySchedule(
-        ConstantEfficiency((1.0, 0.9, 0.8, 0.95)), (AbruptFault(motor=2, onset=0.25, level=0.5),)),
-        Circle())
+    sc = Scenario(
+        "fault",
+        0.5,
+        EfficiencySchedule(
+            ConstantEfficiency((1.0, 0.9, 0.8, 0.95)),
+            (AbruptFault(motor=2, onset=0.25, level=0.5),),
+        ),
+        Circle(),
+    )
     return simulate(sc, seed=11).without_truth()
 
 
 def _windows(rec, cfg, starts):
-    models = oracle.segment_models(rec.vehicle, rec.t, rec.position, rec.velocity,
-                                   rec.rotation, rec.omega,
-                                   np.clip(rec.thrust_cmd, 0.0, rec.vehicle.rotor_max_thrust))
+    models = oracle.segment_models(
+        rec.vehicle,
+        rec.t,
+        rec.position,
+        rec.velocity,
+        rec.rotation,
+        rec.omega,
+        np.clip(rec.thrust_cmd, 0.0, rec.vehicle.rotor_max_thrust),
+    )
     c, b, H = oracle.quadratic_terms(models, cfg.segment_weights)
     m = cfg.window - 1
-    return [(c[k:k + m], b[k:k + m], H[k:k + m]) for k in starts]
+    return [(c[k : k + m], b[k : k + m], H[k : k + m]) for k in starts]
 
 
 @pytest.mark.parametrize("scaling", ["reference", "paper"])
@@ -43,10 +55,15 @@ def test_window_solver_equals_the_numpy_oracle(fault_flight, scaling):
         assert diag.status == "ok"
         np.testing.assert_allclose(x, x_ref, rtol=0, atol=1e-9)
         np.testing.assert_allclose(diag.weights, w_ref, rtol=0, atol=1e-9)
-        np.testing.assert_allclose(sd, oracle.window_uncertainty(c, b, H, w_ref, x_ref, cfg),
-                                   rtol=1e-7)
-        assert diag.cond == pytest.approx(oracle.condition_number_1(
-            np.tensordot(w_ref, H, 1) * (1 / 9 if scaling == "paper" else 1)), rel=1e-9)
+        np.testing.assert_allclose(
+            sd, oracle.window_uncertainty(c, b, H, w_ref, x_ref, cfg), rtol=1e-7
+        )
+        assert diag.cond == pytest.approx(
+            oracle.condition_number_1(
+                np.tensordot(w_ref, H, 1) * (1 / 9 if scaling == "paper" else 1)
+            ),
+            rel=1e-9,
+        )
 
 
 def test_window_solver_agrees_with_an_exact_scipy_solve(fault_flight):
@@ -54,8 +71,9 @@ def test_window_solver_agrees_with_an_exact_scipy_solve(fault_flight):
     finds, so the window's estimate and weights are scipy's."""
     from estimators.ipm import IPMSettings
 
-    cfg = IRLSConfig(ipm=IPMSettings(tol_feas=1e-11, tol_gap=1e-11, backtrack_eps=0.0,
-                                     max_iter=200))
+    cfg = IRLSConfig(
+        ipm=IPMSettings(tol_feas=1e-11, tol_gap=1e-11, backtrack_eps=0.0, max_iter=200)
+    )
     for c, b, H in _windows(fault_flight, cfg, range(100, 400, 25)):
         x, _sd, diag = solve_window(c, b, H, np.full(4, 0.9), cfg)
         x_ref, w_ref = oracle.solve_window_scipy(c, b, H, np.full(4, 0.9), cfg)
@@ -72,9 +90,9 @@ def test_window_with_six_rotors_equals_the_oracle(scaling):
     r0 = -(J @ rng.uniform(0.5, 1.0, n)) + 1e-4 * rng.standard_normal((m, 10))
     r0[4] += 0.05  # one corrupted segment: rejected by the robust weights
     cfg = IRLSConfig(scaling=scaling)
-    c, b, H = oracle.quadratic_terms(oracle.SegmentModels(r0, J, np.full(m, 1e-3),
-                                                          np.full(m, 5.0)),
-                                     cfg.segment_weights)
+    c, b, H = oracle.quadratic_terms(
+        oracle.SegmentModels(r0, J, np.full(m, 1e-3), np.full(m, 5.0)), cfg.segment_weights
+    )
     x, sd, diag = solve_window(c, b, H, np.full(n, 0.9), cfg)
     x_ref, w_ref = oracle.solve_window(c, b, H, np.full(n, 0.9), cfg)
     assert diag.status == "ok" and 4 in diag.rejected
@@ -87,8 +105,7 @@ def test_malformed_window_terms_are_a_clear_error():
     from quadfault.errors import ConfigError
 
     with pytest.raises(ConfigError, match="window terms"):
-        solve_window(np.zeros(9), np.zeros((9, 4)), np.zeros((9, 4, 3)), np.ones(4),
-                     IRLSConfig())
+        solve_window(np.zeros(9), np.zeros((9, 4)), np.zeros((9, 4, 3)), np.ones(4), IRLSConfig())
 
 
 def test_the_quadrotor_and_the_any_size_interior_point_give_the_same_window(fault_flight):
@@ -105,10 +122,15 @@ def test_the_quadrotor_and_the_any_size_interior_point_give_the_same_window(faul
     for c, b, H in _windows(fault_flight, cfg, range(150, 400, 31)):
         out = []
         for any_n in (None, True):
-            w, iters, x, sd = np.zeros(m), np.zeros(cfg.max_irls, np.int64), np.empty(n), \
-                np.empty(n)
-            code, rounds, cond = solve_window_into(c, b, H, 0, x_prev, fp, ip, *workspace(m, n),
-                                                   w, iters, hist, x, sd, any_n)
+            w, iters, x, sd = (
+                np.zeros(m),
+                np.zeros(cfg.max_irls, np.int64),
+                np.empty(n),
+                np.empty(n),
+            )
+            code, rounds, cond = solve_window_into(
+                c, b, H, 0, x_prev, fp, ip, *workspace(m, n), w, iters, hist, x, sd, any_n
+            )
             out.append((code, rounds, cond, x, sd, w, iters))
         (code4, rounds4, cond4, *arrays4), (code_n, rounds_n, cond_n, *arrays_n) = out
         assert (code4, rounds4, cond4) == (code_n, rounds_n, cond_n)

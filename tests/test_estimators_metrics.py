@@ -6,8 +6,8 @@ import pytest
 from estimators.base import EstimateSeries
 from estimators.metrics import fault_windows, mean_or_none, score, window_masks
 from quadfault.errors import ConfigError
-from quadfault.recording import Recording
-from quadfault.vehicle import Vehicle
+from quadfault.io.recording import Recording
+from quadfault.model.vehicle import Vehicle
 
 DT = 1e-3
 
@@ -17,15 +17,30 @@ def _recording(eta_true, windows=None):
     t = DT * np.arange(n)
     quat = np.tile([1.0, 0, 0, 0], (n, 1))
     meta = {} if windows is None else {"fault_windows": windows}
-    return Recording(t=t, omega=np.zeros((n, 3)), thrust_cmd=np.full((n, 4), 2.45),
-                     vehicle=Vehicle(), position=np.zeros((n, 3)), velocity=np.zeros((n, 3)),
-                     quaternion=quat, eta_true=np.asarray(eta_true, float), meta=meta)
+    return Recording(
+        t=t,
+        omega=np.zeros((n, 3)),
+        thrust_cmd=np.full((n, 4), 2.45),
+        vehicle=Vehicle(),
+        position=np.zeros((n, 3)),
+        velocity=np.zeros((n, 3)),
+        quaternion=quat,
+        eta_true=np.asarray(eta_true, float),
+        meta=meta,
+    )
 
 
 def _series(rec, eta_hat, name="test", config=None, warmup=0):
     status = np.array(["warmup"] * warmup + ["ok"] * (len(rec) - warmup))
-    return EstimateSeries(t=rec.t.copy(), eta=np.asarray(eta_hat, float), sd=None, status=status,
-                          estimator=name, config=config or {}, seconds=1.5)
+    return EstimateSeries(
+        t=rec.t.copy(),
+        eta=np.asarray(eta_hat, float),
+        sd=None,
+        status=status,
+        estimator=name,
+        config=config or {},
+        seconds=1.5,
+    )
 
 
 def test_rmse_and_std_on_known_errors():
@@ -129,8 +144,11 @@ def test_bad_input_is_a_clear_error():
     with pytest.raises(ConfigError, match="fault_windows"):
         fault_windows(rec)
     with pytest.raises(ConfigError, match="align"):
-        score(_recording(np.ones((100, 4))), _series(_recording(np.ones((100, 4))),
-                                                     np.ones((100, 4))), align="start")
+        score(
+            _recording(np.ones((100, 4))),
+            _series(_recording(np.ones((100, 4))), np.ones((100, 4))),
+            align="start",
+        )
 
 
 def test_coverage_counts_errors_within_one_sigma():
@@ -143,8 +161,15 @@ def test_coverage_counts_errors_within_one_sigma():
     assert score(rec, s).coverage is None  # no sd
     sd = np.full((n, 4), 0.1)
     sd[:10, 2] = np.nan  # rows without sd are not counted
-    s = EstimateSeries(t=rec.t.copy(), eta=truth - err, sd=sd, status=np.array(["ok"] * n),
-                       estimator="test", config={}, seconds=0.0)
+    s = EstimateSeries(
+        t=rec.t.copy(),
+        eta=truth - err,
+        sd=sd,
+        status=np.array(["ok"] * n),
+        estimator="test",
+        config={},
+        seconds=0.0,
+    )
     cov = score(rec, s).coverage
     assert cov[0] == pytest.approx(0.75) and cov[3] == pytest.approx(0.75)
     assert cov[2] == pytest.approx(np.mean(np.arange(10, n) % 4 != 0))

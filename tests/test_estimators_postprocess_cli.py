@@ -13,12 +13,17 @@ import pytest
 from estimators.median import causal_median
 from estimators.metrics import score
 from estimators.series_io import read_estimate_csv
-from quadfault.recording import read_recording
+from quadfault.io.recording import read_recording
 
 
 def _quadfault(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "quadfault.cli", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "quadfault.cli", *map(str, args)],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
 
 
 def _estimate(flight, out, *args):
@@ -33,8 +38,22 @@ def abrupt(tmp_path_factory):
     commanded beyond the sidecar's max_thrust (3.5 N) in its fault windows."""
     d = tmp_path_factory.mktemp("post")
     out = d / "abrupt.csv"
-    r = _quadfault("simulate", "--scenario", "abrupt", "--duration", "12", "--seed", "1",
-                   "--no-saturation", "--max-thrust", "3.5", "--out", out, "--quiet", cwd=d)
+    r = _quadfault(
+        "simulate",
+        "--scenario",
+        "abrupt",
+        "--duration",
+        "12",
+        "--seed",
+        "1",
+        "--no-saturation",
+        "--max-thrust",
+        "3.5",
+        "--out",
+        out,
+        "--quiet",
+        cwd=d,
+    )
     assert r.returncode == 0, r.stderr
     return out
 
@@ -42,8 +61,9 @@ def abrupt(tmp_path_factory):
 def test_median_is_the_same_post_processing_for_irls_and_ekf(abrupt, tmp_path):
     for name, extra in (("irls", []), ("ekf", ["--q-eta", "1.778"])):
         plain, side0 = _estimate(abrupt, tmp_path / f"{name}.csv", "--estimator", name, *extra)
-        med, side = _estimate(abrupt, tmp_path / f"{name}_m.csv", "--estimator", name, *extra,
-                              "--median", "21")
+        med, side = _estimate(
+            abrupt, tmp_path / f"{name}_m.csv", "--estimator", name, *extra, "--median", "21"
+        )
         np.testing.assert_array_equal(med["eta"], causal_median(plain["eta"], 21))
         np.testing.assert_array_equal(med["sd"], plain["sd"])
         assert side0["postprocess"] == "none" and side["postprocess"] == "median:21"
@@ -55,18 +75,22 @@ def test_q_eta_changes_the_ekf_and_median_overrides_improved(abrupt, tmp_path):
     a, _ = _estimate(abrupt, tmp_path / "a.csv", "--estimator", "ekf")
     b, side = _estimate(abrupt, tmp_path / "b.csv", "--estimator", "ekf", "--q-eta", "0.01")
     assert side["config"]["q_eta"] == 0.01 and not np.allclose(a["eta"], b["eta"])
-    _, side = _estimate(abrupt, tmp_path / "i.csv", "--estimator", "irls", "--improved",
-                          "--median", "5")
+    _, side = _estimate(
+        abrupt, tmp_path / "i.csv", "--estimator", "irls", "--improved", "--median", "5"
+    )
     assert side["config"]["output_median"] == 5 and side["config"]["change_completion"]
     assert side["postprocess"] == "median:5"
 
 
-@pytest.mark.parametrize("args, words", [
-    (["--median", "0"], "--median must be an integer >= 1"),
-    (["--estimator", "ekf", "--q-eta", "-1"], "--q-eta must be a positive number"),
-    (["--estimator", "irls", "--q-eta", "0.3"], "--q-eta applies to the ekf"),
-    (["--estimator", "ekf", "--improved"], "--improved applies to the irls"),
-])
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["--median", "0"], "--median must be an integer >= 1"),
+        (["--estimator", "ekf", "--q-eta", "-1"], "--q-eta must be a positive number"),
+        (["--estimator", "irls", "--q-eta", "0.3"], "--q-eta applies to the ekf"),
+        (["--estimator", "ekf", "--improved"], "--improved applies to the irls"),
+    ],
+)
 def test_bad_post_processing_options_are_one_line_errors(abrupt, tmp_path, args, words):
     r = _quadfault("estimate", abrupt, "--out", tmp_path / "x.csv", *args, cwd=tmp_path)
     assert r.returncode == 2 and words in r.stderr
@@ -108,8 +132,19 @@ def _rmse(rec, d, name):
 
 def test_simulate_records_saturation_and_bad_flags_are_errors(abrupt, tmp_path):
     d = tmp_path
-    r = _quadfault("simulate", "--scenario", "hover", "--duration", "0.3", "--seed", "0",
-                   "--out", d / "h.csv", "--quiet", cwd=d)
+    r = _quadfault(
+        "simulate",
+        "--scenario",
+        "hover",
+        "--duration",
+        "0.3",
+        "--seed",
+        "0",
+        "--out",
+        d / "h.csv",
+        "--quiet",
+        cwd=d,
+    )
     assert r.returncode == 0, r.stderr
     assert json.loads((d / "h.json").read_text())["saturated"] is True
     bad = _with_sidecar(abrupt, d / "bad.csv", lambda s: s.update(saturated="yes"))

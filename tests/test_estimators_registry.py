@@ -21,9 +21,9 @@ from estimators.registry import (
     make_estimator,
 )
 from quadfault.errors import ConfigError
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import simulate
-from quadfault.vehicle import Vehicle
+from quadfault.model.scenarios import named_scenario
+from quadfault.model.vehicle import Vehicle
+from quadfault.sim.simulator import simulate
 
 
 @pytest.fixture(scope="module")
@@ -72,8 +72,9 @@ def test_options_build_the_configuration(name):
     for key in spec.options:
         cfg = config_from_options(name, **{key: values[key]})
         assert isinstance(cfg, config_class(name)) and cfg != config_class(name)()
-        assert isinstance(make_estimator(name, Vehicle(), **{key: values[key]}).config,
-                          config_class(name))
+        assert isinstance(
+            make_estimator(name, Vehicle(), **{key: values[key]}).config, config_class(name)
+        )
     for key in set(OPTIONS) - set(spec.options):
         with pytest.raises(ConfigError, match=f"{key!r} applies to"):
             make_estimator(name, Vehicle(), **{key: values[key]})

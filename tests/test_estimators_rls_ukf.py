@@ -17,10 +17,10 @@ from estimators.rls import BatchedRLS, RecursiveLeastSquares, RLSConfig
 from estimators.ukf import BatchedUKF, UKFConfig, UnscentedKalmanFilter
 from quadfault.cli import main
 from quadfault.errors import ConfigError
-from quadfault.recording import read_recording
-from quadfault.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
-from quadfault.simulator import simulate
-from quadfault.trajectory import Circle
+from quadfault.io.recording import read_recording
+from quadfault.model.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
+from quadfault.model.trajectory import Circle
+from quadfault.sim.simulator import simulate
 
 NEW = {"rls": RecursiveLeastSquares, "ukf": UnscentedKalmanFilter}
 
@@ -29,22 +29,40 @@ NEW = {"rls": RecursiveLeastSquares, "ukf": UnscentedKalmanFilter}
 def abrupt(tmp_path_factory):
     """``quadfault simulate --scenario abrupt --duration 40 --seed 11 --no-saturation``."""
     out = tmp_path_factory.mktemp("abrupt") / "abrupt.csv"
-    assert main(["simulate", "--scenario", "abrupt", "--duration", "40", "--seed", "11",
-                 "--no-saturation", "--out", str(out), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--scenario",
+                "abrupt",
+                "--duration",
+                "40",
+                "--seed",
+                "11",
+                "--no-saturation",
+                "--out",
+                str(out),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     return read_recording(out)
 
 
 @pytest.fixture(scope="module")
 def ekf_rmse(abrupt):
-    return float(np.mean(score(abrupt, MotorEfficiencyEKF(abrupt.vehicle).run(
-        abrupt.without_truth())).rmse))
+    return float(
+        np.mean(score(abrupt, MotorEfficiencyEKF(abrupt.vehicle).run(abrupt.without_truth())).rmse)
+    )
 
 
 @pytest.fixture(scope="module")
 def short():
     """1 s of a circle with unequal efficiencies, a fault at 0.5 s and sigma_f = 0.07."""
-    sched = EfficiencySchedule(ConstantEfficiency((0.9, 0.8, 1.0, 0.95)),
-                               (AbruptFault(motor=2, onset=0.5, level=0.5),))
+    sched = EfficiencySchedule(
+        ConstantEfficiency((0.9, 0.8, 1.0, 0.95)), (AbruptFault(motor=2, onset=0.5, level=0.5),)
+    )
     return simulate(Scenario("short", 1.0, sched, Circle(), thrust_noise=0.07), seed=4)
 
 
@@ -94,8 +112,9 @@ def test_rls_equals_a_numpy_rls_over_the_segments(short):
     rec = short.without_truth().slice(0, 300)
     lam = 0.98
     f = np.clip(rec.thrust_cmd, 0.0, rec.vehicle.rotor_max_thrust)
-    seg = segment_terms(rec.vehicle, rec.t, rec.position, rec.velocity, rec.rotation,
-                        rec.omega, f, np.ones(10))
+    seg = segment_terms(
+        rec.vehicle, rec.t, rec.position, rec.velocity, rec.rotation, rec.omega, f, np.ones(10)
+    )
     theta, P = np.ones(4), np.eye(4)
     expected = [theta.copy()]
     for k in range(len(seg.dt)):
@@ -119,7 +138,7 @@ def test_rls_equals_a_numpy_rls_over_the_segments(short):
 def test_ukf_equals_a_linear_kalman_filter_at_rest():
     """Hovering level with no rate, the UKF's model is linear (v' = v + (g e3 - T e3 / m) dt,
     Omega' = Omega + J^-1 M dt): its sigma-point moments equal the Kalman filter's."""
-    from quadfault.vehicle import Vehicle
+    from quadfault.model.vehicle import Vehicle
 
     veh = Vehicle()
     cfg = UKFConfig(eta_bounds=None)
@@ -134,8 +153,9 @@ def test_ukf_equals_a_linear_kalman_filter_at_rest():
     F[3:6, 6:] = Jinv @ (A[1:] * f) * dt
     u = np.zeros(6 + n)
     u[2] = g * dt
-    Q = np.diag(np.r_[np.full(3, cfg.q_velocity), np.full(3, cfg.q_rate),
-                      np.full(n, cfg.q_eta)]) * (dt / 1e-3)
+    Q = np.diag(
+        np.r_[np.full(3, cfg.q_velocity), np.full(3, cfg.q_rate), np.full(n, cfg.q_eta)]
+    ) * (dt / 1e-3)
     Rn = np.diag(np.r_[np.full(3, cfg.r_velocity), np.full(3, cfg.r_rate)])
     H = np.hstack((np.eye(6), np.zeros((6, n))))
     x, P = np.r_[np.zeros(6), np.ones(n)], cfg.p0 * np.eye(6 + n)
@@ -153,20 +173,24 @@ def test_ukf_equals_a_linear_kalman_filter_at_rest():
 
 @pytest.mark.parametrize("name,batched", [("rls", BatchedRLS), ("ukf", BatchedUKF)])
 def test_batch_rows_equal_single_filters(short, name, batched):
-    recs = [short.without_truth().slice(0, 200),
-            short.without_truth().slice(300, 500)]
+    recs = [short.without_truth().slice(0, 200), short.without_truth().slice(300, 500)]
     singles = [NEW[name](r.vehicle).run(r) for r in recs]
     batch = batched(recs[0].vehicle, 2)
     rows = [list(samples(r)) for r in recs]
     for k in range(200):
         s = [rows[0][k], rows[1][k]]
-        out = batch.update(*(np.array([getattr(x, a) for x in s])
-                             for a in ("t", "p", "v", "R", "w", "f")))
+        out = batch.update(
+            *(np.array([getattr(x, a) for x in s]) for a in ("t", "p", "v", "R", "w", "f"))
+        )
         for i in range(2):
             np.testing.assert_array_equal(out.eta[i], singles[i].eta[k])
     batch.reset(mask=[True, False])
-    out = batch.update(*(np.array([getattr(x, a) for x in (rows[0][0], rows[1][0])])
-                         for a in ("t", "p", "v", "R", "w", "f")))
+    out = batch.update(
+        *(
+            np.array([getattr(x, a) for x in (rows[0][0], rows[1][0])])
+            for a in ("t", "p", "v", "R", "w", "f")
+        )
+    )
     assert out.status_names[0] == "warmup"
 
 
@@ -208,18 +232,34 @@ def test_malformed_input_is_a_clear_error(short, name):
         NEW[name](short.vehicle, config=UKFConfig() if name == "rls" else RLSConfig())
 
 
-@pytest.mark.parametrize("changes", [{"forgetting": 0.0}, {"forgetting": 1.5},
-                                     {"forgetting": True}, {"p0": -1.0},
-                                     {"eta_bounds": (1.0, 0.0)}, {"eta0": (1.0, 1.0)}])
+@pytest.mark.parametrize(
+    "changes",
+    [
+        {"forgetting": 0.0},
+        {"forgetting": 1.5},
+        {"forgetting": True},
+        {"p0": -1.0},
+        {"eta_bounds": (1.0, 0.0)},
+        {"eta0": (1.0, 1.0)},
+    ],
+)
 def test_bad_rls_config_is_a_clear_error(short, changes):
     with pytest.raises(ConfigError, match="RLSConfig"):
         RecursiveLeastSquares(short.vehicle, RLSConfig(**changes))
 
 
-@pytest.mark.parametrize("changes", [{"q_eta": 0.0}, {"r_rate": float("nan")},
-                                     {"alpha": -1.0}, {"kappa": "x"},
-                                     {"kappa": -11.0},
-                                     {"eta_bounds": (0.5, 0.5)}, {"eta0": "one"}])
+@pytest.mark.parametrize(
+    "changes",
+    [
+        {"q_eta": 0.0},
+        {"r_rate": float("nan")},
+        {"alpha": -1.0},
+        {"kappa": "x"},
+        {"kappa": -11.0},
+        {"eta_bounds": (0.5, 0.5)},
+        {"eta0": "one"},
+    ],
+)
 def test_bad_ukf_config_is_a_clear_error(short, changes):
     with pytest.raises(ConfigError, match="UKFConfig"):
         UnscentedKalmanFilter(short.vehicle, UKFConfig(**changes))

@@ -11,7 +11,7 @@ import pytest
 from estimators import ekf, irls, rls, ukf
 from estimators.state import counts, fields, pack
 from quadfault.errors import ConfigError
-from quadfault.vehicle import Vehicle
+from quadfault.model.vehicle import Vehicle
 
 
 def test_fields_derive_the_start_rows_from_the_counts():
@@ -45,8 +45,11 @@ def test_compiled_pieces_are_the_declared_pieces(num, n_rotors):
     cfg = irls.IRLSConfig.improved()
     st = irls.IRLSState(cfg.window - 1, n_rotors, cfg.output_median, cfg.max_irls, num)
     ang = np.arange(n_rotors) * 2 * np.pi / n_rotors
-    veh = Vehicle.from_rotors(0.1 * np.stack((np.cos(ang), np.sin(ang), 0 * ang), axis=1),
-                              [(-1) ** k for k in range(n_rotors)], 0.006)
+    veh = Vehicle.from_rotors(
+        0.1 * np.stack((np.cos(ang), np.sin(ang), 0 * ang), axis=1),
+        [(-1) ** k for k in range(n_rotors)],
+        0.006,
+    )
     _const, _fp, ip = irls.irls_parameters(veh, cfg, st.offsets)
     _same_views(irls.state_pieces(st.floats, ip, num), st.views)
     est = ekf.EKFState(n_rotors, num)
@@ -78,9 +81,9 @@ def test_constants_are_read_by_name():
         const = getattr(module, f"{module.__name__.split('.')[-1]}_constants")(veh, config)
         C = module.CONSTANTS
         assert const[C.mass] == veh.mass and const[C.lo] == config.eta_bounds[0]
-        np.testing.assert_array_equal(const[C.Jinv:C.Jinv + 9], veh.inertia_inverse.ravel())
+        np.testing.assert_array_equal(const[C.Jinv : C.Jinv + 9], veh.inertia_inverse.ravel())
     const = rls.rls_constants(veh, rls.RLSConfig())
-    np.testing.assert_array_equal(const[rls.CONSTANTS.A:], veh.allocation.ravel())
+    np.testing.assert_array_equal(const[rls.CONSTANTS.A :], veh.allocation.ravel())
     A, qc, r = ukf._model(ukf.ukf_constants(veh, ukf.UKFConfig(q_eta=0.3)), veh.n_rotors)
     np.testing.assert_array_equal(A, veh.allocation)
     assert qc[ukf.X.eta] == pytest.approx(0.3 / ekf.NOISE_REFERENCE_DT)

@@ -1,16 +1,16 @@
-"""The flight interface over the closed loop (quadfault.flight): seeding, the one way the
+"""The flight interface over the closed loop (quadfault.model.flight): seeding, the one way the
 efficiency reaches the motors, batches against single flights, records."""
 
 import numpy as np
 import pytest
 
-from quadfault.dynamics import RigidBodyState
 from quadfault.errors import ConfigError
-from quadfault.flight import Flight
-from quadfault.motors import MotorModel
-from quadfault.plant import Plant
-from quadfault.sensors import SensorNoise
-from quadfault.vehicle import Vehicle
+from quadfault.model.dynamics import RigidBodyState
+from quadfault.model.flight import Flight
+from quadfault.model.motors import MotorModel
+from quadfault.model.plant import Plant
+from quadfault.model.sensors import SensorNoise
+from quadfault.model.vehicle import Vehicle
 
 NOISY = SensorNoise(0.01, 0.02, 0.003, 0.01)
 
@@ -22,8 +22,9 @@ def _hover_commands(veh: Vehicle) -> np.ndarray:
 def _start(N=1):
     p = np.zeros((N, 3))
     p[:, 2] = -1.0
-    return RigidBodyState(p, np.zeros((N, 3)), np.broadcast_to(np.eye(3), (N, 3, 3)).copy(),
-                          np.zeros((N, 3)))
+    return RigidBodyState(
+        p, np.zeros((N, 3)), np.broadcast_to(np.eye(3), (N, 3, 3)).copy(), np.zeros((N, 3))
+    )
 
 
 def _flight(N=1, sigma=0.07, sensors=NOISY):
@@ -78,8 +79,9 @@ def test_a_batch_equals_single_flights_and_idle_rows_keep_still():
     batch.reset(list(range(10, 10 + N)), state=_start(N))
     active = np.array([True, False, True, True, False])
     before = batch.state(1)
-    out = batch.step(np.tile(_hover_commands(veh), (N, 1)), n, record=batch.records(n),
-                     active=active)
+    out = batch.step(
+        np.tile(_hover_commands(veh), (N, 1)), n, record=batch.records(n), active=active
+    )
     np.testing.assert_array_equal(batch.state(1).p, before.p)
     np.testing.assert_array_equal(out.p[1], np.broadcast_to(batch.measured(1).p, (n, 3)))
     assert batch.k.tolist() == [n, 0, n, n, 0]

@@ -6,8 +6,8 @@ import pickle
 import numpy as np
 import pytest
 
-from quadfault.generator_table import generator_at, generator_at_python, generator_table
 from quadfault.jit import jit
+from quadfault.model.generator_table import generator_at, generator_at_python, generator_table
 
 
 @jit
@@ -20,8 +20,12 @@ def _draws(table, rows, out):
 
 
 def _expected(gens, rows):
-    return np.array([[gens[i].standard_normal(), gens[i].normal(0.0, 2.0),
-                      gens[i].uniform(-1.0, 1.0)] for i in rows])
+    return np.array(
+        [
+            [gens[i].standard_normal(), gens[i].normal(0.0, 2.0), gens[i].uniform(-1.0, 1.0)]
+            for i in rows
+        ]
+    )
 
 
 def test_kernel_draws_equal_the_generators_and_advance_their_state():
@@ -32,8 +36,7 @@ def test_kernel_draws_equal_the_generators_and_advance_their_state():
     twins = [np.random.default_rng(s) for s in range(4)]
     np.testing.assert_array_equal(out, _expected(twins, rows))
     # the table's generators moved on: their next numbers follow the kernel's
-    assert [g.standard_normal() for g in table.generators] == \
-        [g.standard_normal() for g in twins]
+    assert [g.standard_normal() for g in table.generators] == [g.standard_normal() for g in twins]
 
 
 def test_put_swaps_a_vehicles_generator():
@@ -58,8 +61,10 @@ def test_a_copy_draws_from_the_copied_generators(clone):
     assert twin.generators is not table.generators
     out = np.empty((2, 3))
     _draws(twin, np.arange(2), out)
-    np.testing.assert_array_equal(out, _expected([np.random.default_rng(s) for s in range(2)],
-                                                 range(2)))
+    np.testing.assert_array_equal(
+        out, _expected([np.random.default_rng(s) for s in range(2)], range(2))
+    )
     # the original's generators did not move
-    assert [g.standard_normal() for g in table.generators] == \
-        [np.random.default_rng(s).standard_normal() for s in range(2)]
+    assert [g.standard_normal() for g in table.generators] == [
+        np.random.default_rng(s).standard_normal() for s in range(2)
+    ]

@@ -12,14 +12,13 @@ import numpy as np
 import pytest
 
 from quadfault.errors import QuadfaultError
-from tests.support.field_logs import (G, HOVER, OMEGA_PER_U, T_LAND, T_TAKEOFF,
-                                      dataflash_flight)
+from tests.support.field_logs import HOVER, OMEGA_PER_U, T_LAND, T_TAKEOFF, G, dataflash_flight
 
 pytest.importorskip("pymavlink")
 
 
 def _import(path, **kw):
-    from quadfault.importers.ardupilot import import_ardupilot
+    from quadfault.io.importers.ardupilot import import_ardupilot
 
     return import_ardupilot(path, **kw)
 
@@ -28,7 +27,7 @@ def _import(path, **kw):
 def test_dataflash_flight(tmp_path, text):
     path = tmp_path / ("flight.log" if text else "flight.bin")
     dataflash_flight(path, text=text)
-    from quadfault.importers import detect_format
+    from quadfault.io.importers import detect_format
 
     assert detect_format(path) == "ardupilot"
     rec = _import(path, mass=1.5)
@@ -44,7 +43,7 @@ def test_dataflash_flight(tmp_path, text):
     assert not np.any((rec.t > 8.0) & (rec.t < 9.0))
     assert np.all(np.abs(rec.velocity) < 0.1)
     # ATT yaw 30 deg
-    from quadfault.rotation import quat_to_rot
+    from quadfault.model.rotation import quat_to_rot
 
     R = quat_to_rot(rec.quaternion)
     np.testing.assert_allclose(np.degrees(np.arctan2(R[:, 1, 0], R[:, 0, 0])), 30.0, atol=1e-3)
@@ -54,9 +53,9 @@ def test_dataflash_flight(tmp_path, text):
     a, b, c = rec.thrust_curve
     s0, s1 = 0.1, 0.95
     x = (0.6 - s0) / (s1 - s0)
-    ref = (a + b * 0.6 + c * 0.36) / (a + b * s1 + c * s1 ** 2)
+    ref = (a + b * 0.6 + c * 0.36) / (a + b * s1 + c * s1**2)
     assert ref == pytest.approx(0.5 * x + 0.5 * x * x, rel=1e-4)
-    assert a + b * s0 + c * s0 ** 2 == pytest.approx(0.0, abs=1e-5)
+    assert a + b * s0 + c * s0**2 == pytest.approx(0.0, abs=1e-5)
     sel = (rec.t >= cal["segment"][0]) & (rec.t <= cal["segment"][1])
     assert rec.thrust_cmd[sel].sum(1).mean() == pytest.approx(1.5 * G, rel=1e-6)
     assert rec.meta["log_parameters"]["MOT_SPIN_MIN"] == pytest.approx(0.1)
@@ -75,8 +74,8 @@ def test_low_rate_outputs_and_no_land_events(tmp_path):
 
 
 def test_a_land_detector_that_never_reports_flight_falls_back_to_the_threshold(tmp_path):
-    from quadfault.importers.ardupilot import read_ardupilot
-    from quadfault.importers.field_log import build_recording
+    from quadfault.io.importers.ardupilot import read_ardupilot
+    from quadfault.io.importers.field_log import build_recording
 
     path = tmp_path / "flight.bin"
     dataflash_flight(path)
@@ -89,8 +88,8 @@ def test_a_land_detector_that_never_reports_flight_falls_back_to_the_threshold(t
 
 
 def test_threshold_span_without_land_events(tmp_path):
-    from quadfault.importers.ardupilot import read_ardupilot
-    from quadfault.importers.field_log import build_recording
+    from quadfault.io.importers.ardupilot import read_ardupilot
+    from quadfault.io.importers.field_log import build_recording
 
     path = tmp_path / "flight.bin"
     dataflash_flight(path)
@@ -103,12 +102,14 @@ def test_threshold_span_without_land_events(tmp_path):
 
 
 def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "quadfault.cli", "import", *map(str, args)],
-                          capture_output=True, text=True)
+    return subprocess.run(
+        [sys.executable, "-m", "quadfault.cli", "import", *map(str, args)],
+        capture_output=True,
+        text=True,
+    )
 
 
-@pytest.mark.parametrize("case", ["truncated", "wrong_format", "no_motors", "no_imu",
-                                  "not_a_quad"])
+@pytest.mark.parametrize("case", ["truncated", "wrong_format", "no_motors", "no_imu", "not_a_quad"])
 def test_bad_input_gives_one_line(tmp_path, case):
     path = tmp_path / "flight.bin"
     dataflash_flight(path)
@@ -132,8 +133,8 @@ def test_bad_input_gives_one_line(tmp_path, case):
 
 
 def test_motors_never_running_is_an_error(tmp_path):
-    from quadfault.importers.ardupilot import read_ardupilot
-    from quadfault.importers.field_log import build_recording
+    from quadfault.io.importers.ardupilot import read_ardupilot
+    from quadfault.io.importers.field_log import build_recording
 
     path = tmp_path / "flight.bin"
     dataflash_flight(path)
@@ -186,8 +187,9 @@ def test_old_text_log_says_what_is_missing(tmp_path, case):
     from tests.support.field_logs import old_text_log
 
     path = tmp_path / "old.log"
-    old_text_log(path, imu=None if case == "no_gyro" else "IMU",
-                 gps="board" if case == "no_gyro" else None)
+    old_text_log(
+        path, imu=None if case == "no_gyro" else "IMU", gps="board" if case == "no_gyro" else None
+    )
     res = _cli(path, "--out", tmp_path / "o.csv")
     assert res.returncode != 0
     assert res.stderr.count("\n") == 1 and "Traceback" not in res.stderr, res.stderr

@@ -12,9 +12,17 @@ import numpy as np
 import pytest
 
 from quadfault.errors import QuadfaultError
-from quadfault.importers.blackbox_format import decode_log, split_logs
-from tests.support.field_logs import (BB_FIELDS, G, HOVER, IDLE, OMEGA_PER_U, _bb_rows,
-                                      blackbox_csv, blackbox_log, encode_fields)
+from quadfault.io.importers.blackbox_format import decode_log, split_logs
+from tests.support.field_logs import (
+    HOVER,
+    IDLE,
+    OMEGA_PER_U,
+    G,
+    _bb_rows,
+    blackbox_csv,
+    blackbox_log,
+    encode_fields,
+)
 
 
 def test_every_encoding_round_trips():
@@ -27,10 +35,12 @@ def test_every_encoding_round_trips():
         vals[9:13] = [max(-32768, min(32767, v)) for v in vals[9:13]]
         vals[13] = 0
         names = ",".join(f"f{i}" for i in range(len(encodings)))
-        head = (f"H Product:Blackbox flight data recorder by Nicholas Sherlock\n"
-                f"H Data version:2\nH Field I name:{names}\n"
-                f"H Field I predictor:{','.join('0' * len(encodings))}\n"
-                f"H Field I encoding:{','.join(map(str, encodings))}\n").encode()
+        head = (
+            f"H Product:Blackbox flight data recorder by Nicholas Sherlock\n"
+            f"H Data version:2\nH Field I name:{names}\n"
+            f"H Field I predictor:{','.join('0' * len(encodings))}\n"
+            f"H Field I encoding:{','.join(map(str, encodings))}\n"
+        ).encode()
         data = head + b"I" + encode_fields(vals, encodings)
         log = decode_log(data, 0, len(data))
         assert log.corrupt == 0 and log.main.shape == (1, len(encodings))
@@ -53,7 +63,7 @@ def test_frames_decode_exactly_and_corrupt_frames_are_dropped():
 
 
 def _import(path, **kw):
-    from quadfault.importers.blackbox import import_blackbox
+    from quadfault.io.importers.blackbox import import_blackbox
 
     return import_blackbox(path, **kw)
 
@@ -61,7 +71,7 @@ def _import(path, **kw):
 def test_several_logs_default_the_longest(tmp_path):
     path = tmp_path / "LOG001.BBL"
     path.write_bytes(blackbox_log(8.0) + blackbox_log(19.0) + blackbox_log(6.0))
-    from quadfault.importers import detect_format
+    from quadfault.io.importers import detect_format
 
     assert detect_format(path) == "blackbox"
     rec = _import(path, mass=0.5)
@@ -101,7 +111,7 @@ def test_decoded_csv_imports_like_the_log(tmp_path):
     log_path, csv_path = tmp_path / "f.bbl", tmp_path / "f.csv"
     log_path.write_bytes(blackbox_log(19.0))
     csv_path.write_text(blackbox_csv(19.0))
-    from quadfault.importers import detect_format
+    from quadfault.io.importers import detect_format
 
     assert detect_format(csv_path) == "blackbox"
     a = _import(log_path, mass=0.5, arm=0.1)
@@ -115,12 +125,16 @@ def test_decoded_csv_imports_like_the_log(tmp_path):
 
 
 def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "quadfault.cli", "import", *map(str, args)],
-                          capture_output=True, text=True)
+    return subprocess.run(
+        [sys.executable, "-m", "quadfault.cli", "import", *map(str, args)],
+        capture_output=True,
+        text=True,
+    )
 
 
-@pytest.mark.parametrize("case", ["truncated", "wrong_format", "no_motors", "empty_log",
-                                  "bad_log_number"])
+@pytest.mark.parametrize(
+    "case", ["truncated", "wrong_format", "no_motors", "empty_log", "bad_log_number"]
+)
 def test_bad_input_gives_one_line(tmp_path, case):
     path = tmp_path / "flight.bbl"
     data = blackbox_log(19.0)
@@ -133,7 +147,7 @@ def test_bad_input_gives_one_line(tmp_path, case):
     elif case == "no_motors":
         data = data.replace(b"motor[", b"motxr[")
     elif case == "empty_log":
-        data = data[:data.index(b"\nH Field I name") + 1]
+        data = data[: data.index(b"\nH Field I name") + 1]
     else:
         args = ["--log", "2"]
     path.write_bytes(data)

@@ -11,16 +11,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from quadfault.effects import curve_thrust
 from quadfault.errors import ConfigError, RecordingError
-from quadfault.importers.crazyflie import (CF21_BRUSHED, CRAZYFLIE_ROTOR_XY_FLU,
-                                           CRAZYFLIE_YAW_SIGNS_FLU, FOERSTER_THRUST_CURVE,
-                                           crazyflie_allocation)
-from quadfault.importers.crazypad import import_crazypad, power_distribution_legacy
-from quadfault.importers.eschmann import import_eschmann
-from quadfault.importers.nanodrone import import_nanodrone
-from quadfault.recording import read_recording, vehicle_flu_to_frd, write_recording
-from quadfault.rotation import quat_to_rot, rot_to_euler_zyx
+from quadfault.io.importers.crazyflie import (
+    CF21_BRUSHED,
+    CRAZYFLIE_ROTOR_XY_FLU,
+    CRAZYFLIE_YAW_SIGNS_FLU,
+    FOERSTER_THRUST_CURVE,
+    crazyflie_allocation,
+)
+from quadfault.io.importers.crazypad import import_crazypad, power_distribution_legacy
+from quadfault.io.importers.eschmann import import_eschmann
+from quadfault.io.importers.nanodrone import import_nanodrone
+from quadfault.io.recording import read_recording, vehicle_flu_to_frd, write_recording
+from quadfault.model.effects import curve_thrust
+from quadfault.model.rotation import quat_to_rot, rot_to_euler_zyx
 
 FIX = Path(__file__).parent / "fixtures"
 G = 9.81
@@ -69,8 +73,9 @@ def test_eschmann_fixture_units_frames_trim_and_duplicates():
     cal = rec.meta["calibration"]
     sel = (rec.t >= cal["segment"][0]) & (rec.t <= cal["segment"][1])
     assert sel.sum() >= 5
-    np.testing.assert_allclose(rec.thrust_cmd[sel].sum(1).mean(),
-                               -CF21_BRUSHED.mass * rec.accel[sel, 2].mean(), rtol=1e-9)
+    np.testing.assert_allclose(
+        rec.thrust_cmd[sel].sum(1).mean(), -CF21_BRUSHED.mass * rec.accel[sel, 2].mean(), rtol=1e-9
+    )
     scale = cal["fitted"]["thrust_scale"]
     np.testing.assert_allclose(rec.thrust_curve, np.array(FOERSTER_THRUST_CURVE) * scale)
     np.testing.assert_allclose(rec.thrust_cmd, curve_thrust(rec.thrust_curve, rec.commands_u))
@@ -85,9 +90,11 @@ def test_eschmann_keep_all_and_explicit_calibration():
 
 @pytest.mark.parametrize("frame", ["NED", "ENU"])
 def test_round_trip_through_the_recording_format(tmp_path, frame):
-    for rec in (import_eschmann(FIX / "eschmann_log.csv"),
-                import_nanodrone(FIX / "nanodrone_flight.csv"),
-                import_crazypad(FIX / "crazypad_motor_log.csv")):
+    for rec in (
+        import_eschmann(FIX / "eschmann_log.csv"),
+        import_nanodrone(FIX / "nanodrone_flight.csv"),
+        import_crazypad(FIX / "crazypad_motor_log.csv"),
+    ):
         out = write_recording(rec, tmp_path / f"{rec.meta['dataset']}_{frame}.csv", frame=frame)
         back = read_recording(out)
         np.testing.assert_allclose(back.t, rec.t)
@@ -98,8 +105,9 @@ def test_round_trip_through_the_recording_format(tmp_path, frame):
             np.testing.assert_allclose(back.accel, rec.accel, atol=1e-12)
         if rec.has_pose:
             np.testing.assert_allclose(back.position, rec.position, atol=1e-12)
-            np.testing.assert_allclose(quat_to_rot(back.quaternion), quat_to_rot(rec.quaternion),
-                                       atol=1e-12)
+            np.testing.assert_allclose(
+                quat_to_rot(back.quaternion), quat_to_rot(rec.quaternion), atol=1e-12
+            )
         assert back.meta["dataset"] == rec.meta["dataset"]
         assert "calibration" in back.meta and "licence" in back.meta
 
@@ -148,8 +156,17 @@ def test_crazypad_controller_log_mixer_and_gyro_sign():
     rec = import_crazypad(FIX / "crazypad_controller_log.csv")
     assert rec.meta["log_kind"] == "controller_data"
     # legacy mixer: m1 = T - r/2 + p/2 + y with (T, r, p, y) = (40000, 2000, 400, 5000)
-    expected = np.array([40000 - 1000 + 200 + 5000, 40000 - 1000 - 200 - 5000,
-                         40000 + 1000 - 200 + 5000, 40000 + 1000 + 200 - 5000]) / 65536
+    expected = (
+        np.array(
+            [
+                40000 - 1000 + 200 + 5000,
+                40000 - 1000 - 200 - 5000,
+                40000 + 1000 - 200 + 5000,
+                40000 + 1000 + 200 - 5000,
+            ]
+        )
+        / 65536
+    )
     np.testing.assert_allclose(rec.commands_u[5], expected)
     # gyro bias removed from the rest before take-off: mean rate ~ 0
     assert np.abs(rec.omega.mean(0)).max() < 2e-3
@@ -197,8 +214,11 @@ def test_motors_never_running_and_empty_files(tmp_path):
 # ----------------------------------------------------------------------------------------
 # CLI
 def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "quadfault.cli", "import", *map(str, args)],
-                          capture_output=True, text=True)
+    return subprocess.run(
+        [sys.executable, "-m", "quadfault.cli", "import", *map(str, args)],
+        capture_output=True,
+        text=True,
+    )
 
 
 def test_cli_writes_and_refuses_to_overwrite(tmp_path):
@@ -221,10 +241,28 @@ def test_cli_errors_are_one_line(tmp_path):
         (("eschmann", bad, "--out", tmp_path / "o.csv"), "column 'motor.m3'"),
         (("eschmann", tmp_path / "none.csv", "--out", tmp_path / "o.csv"), "not found"),
         (("eschmann", FIX / "eschmann_log.csv", "--out", tmp_path / "o.txt"), ".csv"),
-        (("eschmann", FIX / "eschmann_log.csv", "--out", tmp_path / "o.csv",
-          "--calibration", "5"), "--calibration"),
-        (("crazypad", FIX / "crazypad_motor_log.csv", "--out", tmp_path / "o.csv",
-          "--vehicle", tmp_path / "none.json"), "not found"),
+        (
+            (
+                "eschmann",
+                FIX / "eschmann_log.csv",
+                "--out",
+                tmp_path / "o.csv",
+                "--calibration",
+                "5",
+            ),
+            "--calibration",
+        ),
+        (
+            (
+                "crazypad",
+                FIX / "crazypad_motor_log.csv",
+                "--out",
+                tmp_path / "o.csv",
+                "--vehicle",
+                tmp_path / "none.json",
+            ),
+            "not found",
+        ),
     ]
     for args, needle in cases:
         res = _cli(*args)
@@ -236,13 +274,22 @@ def test_cli_errors_are_one_line(tmp_path):
 def test_cli_vehicle_file_overrides_constants(tmp_path):
     import json
 
-    veh = {"mass": 0.05, "inertia": [2e-5, 2e-5, 4e-5],
-           "allocation": crazyflie_allocation(0.03, 0.006).tolist(),
-           "thrust_curve": [0.0, 0.0, 0.2]}
+    veh = {
+        "mass": 0.05,
+        "inertia": [2e-5, 2e-5, 4e-5],
+        "allocation": crazyflie_allocation(0.03, 0.006).tolist(),
+        "thrust_curve": [0.0, 0.0, 0.2],
+    }
     (tmp_path / "veh.json").write_text(json.dumps(veh))
-    res = _cli("crazypad", FIX / "crazypad_motor_log.csv", "--out", tmp_path / "o.csv",
-               "--vehicle", tmp_path / "veh.json")
+    res = _cli(
+        "crazypad",
+        FIX / "crazypad_motor_log.csv",
+        "--out",
+        tmp_path / "o.csv",
+        "--vehicle",
+        tmp_path / "veh.json",
+    )
     assert res.returncode == 0, res.stderr
     back = read_recording(tmp_path / "o.csv")
     assert back.vehicle.mass == 0.05 and back.thrust_curve == (0.0, 0.0, 0.2)
-    np.testing.assert_allclose(back.thrust_cmd, 0.2 * back.commands_u ** 2)
+    np.testing.assert_allclose(back.thrust_cmd, 0.2 * back.commands_u**2)

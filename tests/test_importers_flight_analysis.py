@@ -1,4 +1,4 @@
-"""Per-flight analyses of imported logs (quadfault.importers.flight_analysis).
+"""Per-flight analyses of imported logs (quadfault.diagnosis.flight_analysis).
 
 Simulated cross-checks (a known motor efficiency is recovered by the diagnosis' effect and by
 the IRLS estimator; a known rotor-drag moment folded into the commands is recovered with its
@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 
 from estimators.flight_efficiency import irls_efficiency
-from quadfault import effects as fx
-from quadfault.importers.flight_analysis import efficiency_fit, rotational_check
-from quadfault.rotation import quat_to_rot
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import SensorNoise, SimConfig, simulate
-from quadfault.trajectory import Lissajous
+from quadfault.diagnosis.flight_analysis import efficiency_fit, rotational_check
+from quadfault.model import effects as fx
+from quadfault.model.rotation import quat_to_rot
+from quadfault.model.scenarios import named_scenario
+from quadfault.model.trajectory import Lissajous
+from quadfault.sim.simulator import SensorNoise, SimConfig, simulate
 
 REAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
 DT = 4e-3
@@ -28,10 +28,16 @@ DT = 4e-3
 @pytest.fixture(scope="module")
 def weak_m3():
     sc = named_scenario("nominal", 8.0, DT).replace(
-        trajectory=Lissajous(amplitude=(1.5, 1.0, 0.2), frequency=0.15))
+        trajectory=Lissajous(amplitude=(1.5, 1.0, 0.2), frequency=0.15)
+    )
     cfg = SimConfig(dt=DT, sensor_noise=SensorNoise(0.002, 0.005, 0.001, 0.001))
-    rec = simulate(sc, config=cfg, seed=3, effects=(fx.MotorEfficiency((1.0, 1.0, 0.8, 1.0)),),
-                   thrust_noise=0.01)
+    rec = simulate(
+        sc,
+        config=cfg,
+        seed=3,
+        effects=(fx.MotorEfficiency((1.0, 1.0, 0.8, 1.0)),),
+        thrust_noise=0.01,
+    )
     return rec.without_truth()
 
 
@@ -58,7 +64,8 @@ def test_efficiency_fit_needs_airborne_blocks(weak_m3):
 
 def _fly_noise(thrust_noise):
     sc = named_scenario("nominal", 10.0, DT).replace(
-        trajectory=Lissajous(amplitude=(2.0, 1.5, 0.2), frequency=0.12))
+        trajectory=Lissajous(amplitude=(2.0, 1.5, 0.2), frequency=0.12)
+    )
     return simulate(sc, config=SimConfig(dt=DT), seed=1, thrust_noise=thrust_noise).without_truth()
 
 
@@ -77,8 +84,9 @@ def test_rotational_check_finds_a_drag_moment_folded_into_the_commands():
     chk = rotational_check(replace(rec, thrust_cmd=f))
     # the plant's own slow moment residual (integration, sampling) is small next to c
     assert max(abs(x) for x in base.drag_moment_c) < 0.25 * c
-    np.testing.assert_allclose(np.subtract(chk.drag_moment_c, base.drag_moment_c), [c, c],
-                               rtol=0.05)
+    np.testing.assert_allclose(
+        np.subtract(chk.drag_moment_c, base.drag_moment_c), [c, c], rtol=0.05
+    )
     assert min(chk.drag_moment_fraction) > 0.9
     np.testing.assert_allclose(base.gain_cmd[:2], 1.0, atol=0.15)  # the model is the plant
     assert max(abs(p) for p in base.phase_cmd_deg) < 10.0
@@ -103,8 +111,8 @@ def _need(folder: Path):
 def test_nanodrone_slow_moment_is_a_rotor_drag_moment():
     folder = REAL / "nanodrone-cf21bl"
     _need(folder)
-    from quadfault.importers.crazyflie import BRUSHLESS_KF
-    from quadfault.importers.nanodrone import import_nanodrone
+    from quadfault.io.importers.crazyflie import BRUSHLESS_KF
+    from quadfault.io.importers.nanodrone import import_nanodrone
 
     chk = rotational_check(import_nanodrone(folder / "square_20251017_run3.csv.gz"), BRUSHLESS_KF)
     assert min(chk.drag_moment_fraction) > 0.6  # most of the slow unexplained moment
@@ -117,11 +125,15 @@ def test_nanodrone_slow_moment_is_a_rotor_drag_moment():
 def test_crazypad_cut_m3_is_weaker_than_nominal_by_more_than_twice_the_spread():
     folder = REAL / "crazypad-cf21-faults" / "motor_data"
     _need(folder)
-    from quadfault.importers.crazypad import import_crazypad
+    from quadfault.io.importers.crazypad import import_crazypad
 
     def eta3(cond):
-        return np.array([efficiency_fit(import_crazypad(p)).eta[2]
-                         for p in sorted((folder / cond).glob("*.csv.gz"))])
+        return np.array(
+            [
+                efficiency_fit(import_crazypad(p)).eta[2]
+                for p in sorted((folder / cond).glob("*.csv.gz"))
+            ]
+        )
 
     nominal, cut = eta3("normal_flight"), eta3("cut_propeller_M3_3mm")
     assert len(nominal) == 12 and len(cut) == 6
@@ -134,17 +146,24 @@ def _script(name, *args, tmp_path):
     import sys
 
     root = Path(__file__).resolve().parents[1]
-    return subprocess.run([sys.executable, str(root / "benchmarks" / name), *args],
-                          capture_output=True, text=True, cwd=tmp_path, timeout=120,
-                          check=False)
+    return subprocess.run(
+        [sys.executable, str(root / "benchmarks" / name), *args],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=120,
+        check=False,
+    )
 
 
 def test_real_flights_script_skips_without_data(tmp_path):
-    out = _script("real_flights.py", "--data", str(tmp_path / "absent"), "--quiet",
-                  tmp_path=tmp_path)
+    out = _script(
+        "real_flights.py", "--data", str(tmp_path / "absent"), "--quiet", tmp_path=tmp_path
+    )
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().splitlines() == [
-        f"skipped: real data not available ({tmp_path / 'absent'} is absent)"]
+        f"skipped: real data not available ({tmp_path / 'absent'} is absent)"
+    ]
 
 
 def test_independent_sim_script_skips_without_rotorpy(tmp_path):

@@ -11,10 +11,14 @@ import numpy as np
 import pytest
 
 from quadfault.errors import QuadfaultError
-from quadfault.importers.resample import (interp_linear, interp_quaternion, merge_topics,
-                                          zero_order_hold)
-from quadfault.rotation import quat_to_rot
-from tests.support.field_logs import (HOVER, OMEGA_PER_U, T_LAND, T_TAKEOFF, px4_flight)
+from quadfault.io.importers.resample import (
+    interp_linear,
+    interp_quaternion,
+    merge_topics,
+    zero_order_hold,
+)
+from quadfault.model.rotation import quat_to_rot
+from tests.support.field_logs import HOVER, OMEGA_PER_U, T_LAND, T_TAKEOFF, px4_flight
 
 pyulog = pytest.importorskip("pyulog")
 
@@ -49,9 +53,13 @@ def test_interp_quaternion_handles_sign_flips():
 
 def test_merge_topics_sorts_and_drops_duplicate_source_stamps():
     t = np.array([0.5, 1.5])
-    res = merge_topics(t, {"a": (np.array([1.0, 0.0, 1.0, 2.0]),
-                                 np.array([[1.0], [0.0], [9.0], [2.0]]), "linear"),
-                           "u": (np.array([0.0, 1.0]), np.array([[3.0], [4.0]]), "hold")})
+    res = merge_topics(
+        t,
+        {
+            "a": (np.array([1.0, 0.0, 1.0, 2.0]), np.array([[1.0], [0.0], [9.0], [2.0]]), "linear"),
+            "u": (np.array([0.0, 1.0]), np.array([[3.0], [4.0]]), "hold"),
+        },
+    )
     np.testing.assert_allclose(res["a"][:, 0], [0.5, 1.5])
     np.testing.assert_allclose(res["u"][:, 0], [3.0, 4.0])
     with pytest.raises(ValueError):
@@ -60,7 +68,7 @@ def test_merge_topics_sorts_and_drops_duplicate_source_stamps():
 
 # ----------------------------------------------------------------------------------------
 def _import(path, **kw):
-    from quadfault.importers.px4_ulog import import_px4_ulog
+    from quadfault.io.importers.px4_ulog import import_px4_ulog
 
     return import_px4_ulog(path, **kw)
 
@@ -142,8 +150,11 @@ def test_placeholder_geometry_is_flagged(tmp_path):
 
 
 def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "quadfault.cli", "import", *map(str, args)],
-                          capture_output=True, text=True)
+    return subprocess.run(
+        [sys.executable, "-m", "quadfault.cli", "import", *map(str, args)],
+        capture_output=True,
+        text=True,
+    )
 
 
 def test_cli_detects_the_format_and_warns_on_one_line(tmp_path):
@@ -153,10 +164,11 @@ def test_cli_detects_the_format_and_warns_on_one_line(tmp_path):
     assert res.returncode == 0, res.stderr
     assert res.stderr.count("\n") == 1 and res.stderr.startswith("warning:")
     assert "assumed mass, inertia" in res.stderr
-    res = _cli("px4", path, "--out", tmp_path / "o2.csv", "--mass", "1.5", "--inertia",
-               "0.01,0.01,0.02")
+    res = _cli(
+        "px4", path, "--out", tmp_path / "o2.csv", "--mass", "1.5", "--inertia", "0.01,0.01,0.02"
+    )
     assert res.returncode == 0, res.stderr
-    from quadfault.recording import read_recording
+    from quadfault.io.recording import read_recording
 
     rec = read_recording(tmp_path / "o2.csv")
     assert rec.vehicle.mass == 1.5 and rec.rotor_speed is not None
@@ -183,8 +195,8 @@ def test_bad_input_gives_one_line(tmp_path, case):
 
 
 def test_commands_of_7e_10_never_run(tmp_path):
-    from quadfault.importers.field_log import build_recording
-    from quadfault.importers.px4_ulog import read_px4
+    from quadfault.io.importers.field_log import build_recording
+    from quadfault.io.importers.px4_ulog import read_px4
 
     path = tmp_path / "flight.ulg"
     px4_flight(path, outputs="motors")

@@ -49,14 +49,14 @@ def _held_out_thrust_ratio(rec, measured_thrust):
 @pytest.fixture(scope="module")
 def eschmann():
     _need(ESCHMANN)
-    from quadfault.importers.eschmann import import_eschmann
+    from quadfault.io.importers.eschmann import import_eschmann
 
     return {n: import_eschmann(ESCHMANN / f"{n}.csv.gz") for n in ("log10", "log15", "log16")}
 
 
 def test_eschmann_at_rest_reads_minus_g_in_frd():
     _need(ESCHMANN)
-    from quadfault.importers.eschmann import import_eschmann
+    from quadfault.io.importers.eschmann import import_eschmann
 
     rec = import_eschmann(ESCHMANN / "log10.csv.gz", keep_all=True)
     rest = rec.t < rec.meta["import"]["motors_running"][0] - 1.0
@@ -74,8 +74,10 @@ def test_eschmann_thrust_curve_and_rates(eschmann):
         assert rec.t[0] == pytest.approx(t0) and rec.t[-1] == pytest.approx(t1)
         assert np.abs(rec.omega).max() < 35.0  # within the 2000 deg/s gyro range
         flying = rec.commands_u.max(1) > 0.3
-        ratio = float(np.mean(-rec.vehicle.mass * rec.accel[flying, 2])
-                      / np.mean(rec.thrust_cmd[flying].sum(1)))
+        ratio = float(
+            np.mean(-rec.vehicle.mass * rec.accel[flying, 2])
+            / np.mean(rec.thrust_cmd[flying].sum(1))
+        )
         assert ratio == pytest.approx(1.0, abs=0.1), name
         scales.append(rec.meta["calibration"]["fitted"]["thrust_scale"])
     # one airframe: the fitted scale of Foerster's curve agrees between flights
@@ -104,7 +106,7 @@ def _first_order(t, u, tau):
 def test_eschmann_log10_shows_the_readme_motor_lag(eschmann):
     # README: on the thrust segment (35-65 s) the fit of m a_z to the summed thrust improves
     # by ~63 % when the commands pass through a ~0.08 s first-order lag
-    from quadfault.effects import curve_thrust
+    from quadfault.model.effects import curve_thrust
 
     rec = eschmann["log10"]
     seg = (rec.t >= 35.0) & (rec.t <= 65.0)
@@ -112,8 +114,7 @@ def test_eschmann_log10_shows_the_readme_motor_lag(eschmann):
 
     def rmse(tau):
         u = rec.commands_u if tau == 0 else _first_order(rec.t, rec.commands_u, tau)
-        return np.sqrt(np.mean((measured - curve_thrust(rec.thrust_curve, u[seg]).sum(1))
-                               ** 2))
+        return np.sqrt(np.mean((measured - curve_thrust(rec.thrust_curve, u[seg]).sum(1)) ** 2))
 
     taus = [0.03, 0.05, 0.08, 0.11, 0.15]
     errors = [rmse(tau) for tau in taus]
@@ -125,7 +126,7 @@ def test_eschmann_log10_shows_the_readme_motor_lag(eschmann):
 @pytest.fixture(scope="module")
 def nanodrone():
     _need(NANODRONE)
-    from quadfault.importers.nanodrone import import_nanodrone
+    from quadfault.io.importers.nanodrone import import_nanodrone
 
     return {p.name.split(".")[0]: import_nanodrone(p) for p in sorted(NANODRONE.glob("*.csv.gz"))}
 
@@ -156,12 +157,15 @@ def test_nanodrone_allocation_signs_agree_with_the_gyro(nanodrone):
 @pytest.fixture(scope="module")
 def crazypad():
     _need(CRAZYPAD)
-    from quadfault.importers.crazypad import import_crazypad
+    from quadfault.io.importers.crazypad import import_crazypad
 
     folders = ("normal_flight", "cut_propeller_M3_3mm")
-    return {f"{kind}/{p.parent.name}/{p.name}": import_crazypad(p)
-            for kind in ("motor_data", "controller_data") for c in folders
-            for p in sorted((CRAZYPAD / kind / c).glob("*.csv.gz"))}
+    return {
+        f"{kind}/{p.parent.name}/{p.name}": import_crazypad(p)
+        for kind in ("motor_data", "controller_data")
+        for c in folders
+        for p in sorted((CRAZYPAD / kind / c).glob("*.csv.gz"))
+    }
 
 
 def _m3_share(rec):
@@ -178,11 +182,13 @@ def test_crazypad_motor_logs(crazypad):
         assert 3.0 < rec.vbat.min() and rec.vbat.max() < 4.3, name
         # reconstructed attitude predicts the logged roll
         assert rec.meta["import"]["roll_check_rms_deg"] < 3.0, name
-        f_world = np.linalg.norm(np.gradient(rec.velocity, rec.t, axis=0)
-                                 - np.array([0, 0, G]), axis=1)
+        f_world = np.linalg.norm(
+            np.gradient(rec.velocity, rec.t, axis=0) - np.array([0, 0, G]), axis=1
+        )
         air = -rec.position[:, 2] > 0.3
         assert np.mean(rec.thrust_cmd[air].sum(1)) == pytest.approx(
-            rec.vehicle.mass * np.mean(f_world[air]), rel=0.1), name
+            rec.vehicle.mass * np.mean(f_world[air]), rel=0.1
+        ), name
     # README: the M3 command share is already > 1 in nominal flights (1.128) and grows with
     # a cut M3 propeller (1.218 at 3 mm)
     normal = [_m3_share(r) for k, r in motor.items() if "normal_flight" in k]
@@ -192,11 +198,10 @@ def test_crazypad_motor_logs(crazypad):
 
 
 def test_crazypad_controller_logs(crazypad):
-    from quadfault.rotation import quat_to_rot
+    from quadfault.model.rotation import quat_to_rot
 
     ctrl = {k: r for k, r in crazypad.items() if k.startswith("controller_data")}
-    motor_normal = [_m3_share(r) for k, r in crazypad.items()
-                    if k.startswith("motor_data/normal")]
+    motor_normal = [_m3_share(r) for k, r in crazypad.items() if k.startswith("motor_data/normal")]
     ctrl_normal = [_m3_share(r) for k, r in ctrl.items() if "normal_flight" in k]
     # the reconstructed mixer gives the same command split as the logged motor commands
     assert abs(np.mean(ctrl_normal) - np.mean(motor_normal)) < 0.1
@@ -223,7 +228,7 @@ def _autopilot_logs(patterns):
 @pytest.mark.parametrize("path", _autopilot_logs(["*/*.ulg"]), ids=lambda p: p.name)
 def test_px4_logs_import_with_physical_sense(path):
     pytest.importorskip("pyulog")
-    from quadfault.importers import detect_format, get_importer
+    from quadfault.io.importers import detect_format, get_importer
 
     assert detect_format(path) == "px4"
     rec = get_importer("px4")(path)
@@ -238,12 +243,13 @@ def test_px4_logs_import_with_physical_sense(path):
     assert set(rec.meta["assumed"]) >= {"mass", "inertia"}  # ULogs carry neither
 
 
-@pytest.mark.parametrize("path", _autopilot_logs(["*/*.bin", "*/*.BIN", "ardupilot*/*.log"]),
-                         ids=lambda p: p.name)
+@pytest.mark.parametrize(
+    "path", _autopilot_logs(["*/*.bin", "*/*.BIN", "ardupilot*/*.log"]), ids=lambda p: p.name
+)
 def test_ardupilot_logs_import_or_say_what_is_missing(path):
     pytest.importorskip("pymavlink")
     from quadfault.errors import QuadfaultError
-    from quadfault.importers import detect_format, get_importer
+    from quadfault.io.importers import detect_format, get_importer
 
     assert detect_format(path) == "ardupilot"
     try:
@@ -255,11 +261,12 @@ def test_ardupilot_logs_import_or_say_what_is_missing(path):
     assert -1.3 * G < np.median(rec.accel[:, 2]) < -0.7 * G
 
 
-@pytest.mark.parametrize("path", _autopilot_logs(["*/*.bbl", "*/*.BBL", "*/*.bfl", "*/*.BFL"]),
-                         ids=lambda p: p.name)
+@pytest.mark.parametrize(
+    "path", _autopilot_logs(["*/*.bbl", "*/*.BBL", "*/*.bfl", "*/*.BFL"]), ids=lambda p: p.name
+)
 def test_blackbox_logs_decode_cleanly_and_import(path):
-    from quadfault.importers import detect_format, get_importer
-    from quadfault.importers.blackbox_format import decode_log, split_logs
+    from quadfault.io.importers import detect_format, get_importer
+    from quadfault.io.importers.blackbox_format import decode_log, split_logs
 
     assert detect_format(path) == "blackbox"
     data = path.read_bytes()
@@ -276,7 +283,7 @@ def test_blackbox_logs_decode_cleanly_and_import(path):
         high = level > np.median(level)
         assert np.nanmean(w[high]) > np.nanmean(w[~high])
     if rec.has_pose:  # the attitude agrees with the gyro (body rates from dq/dt, FRD)
-        from quadfault.rotation import quat_multiply
+        from quadfault.model.rotation import quat_multiply
 
         q = rec.quaternion
         dq = np.gradient(q, rec.t, axis=0)

@@ -13,8 +13,12 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def test_every_module_with_a_cached_kernel_is_in_the_digest():
-    cached = {p for d in jit.PACKAGES for p in (ROOT / d).rglob("*.py")
-              if "cache=True" in p.read_text() or "@jit" in p.read_text()}
+    cached = {
+        p
+        for d in jit.PACKAGES
+        for p in (ROOT / d).rglob("*.py")
+        if "cache=True" in p.read_text() or "@jit" in p.read_text()
+    }
     assert cached <= set(jit.compiled_sources(ROOT)), cached - set(jit.compiled_sources(ROOT))
 
 
@@ -81,8 +85,9 @@ def _run_on_a_terminal(code: str, env: dict) -> tuple[int, str]:
 
     master, slave = pty.openpty()
     try:
-        proc = subprocess.run([sys.executable, "-c", code], env=env, stdout=subprocess.PIPE,
-                              stderr=slave, timeout=300)
+        proc = subprocess.run(
+            [sys.executable, "-c", code], env=env, stdout=subprocess.PIPE, stderr=slave, timeout=300
+        )
     finally:
         os.close(slave)
     out = b""
@@ -104,15 +109,21 @@ def test_read_only_install_caches_in_the_user_folder_and_notices_the_first_compi
     user's cache folder, never beside the sources; the first run, which compiles, says so in
     one line on the terminal, the second, which loads them, says nothing."""
     install = tmp_path / "site"
-    shutil.copytree(ROOT / "quadfault", install / "quadfault",
-                    ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(
+        ROOT / "quadfault", install / "quadfault", ignore=shutil.ignore_patterns("__pycache__")
+    )
     for path in sorted(install.rglob("*"), reverse=True) + [install]:
         path.chmod(0o555 if path.is_dir() else 0o444)
-    env = {k: v for k, v in os.environ.items()
-           if k not in ("NUMBA_CACHE_DIR", jit._CONFIGURED, jit._USERS)}
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("NUMBA_CACHE_DIR", jit._CONFIGURED, jit._USERS)
+    }
     env.update(PYTHONPATH=str(install), XDG_CACHE_HOME=str(tmp_path / "cache"))
-    code = ("import numpy as np; from quadfault.rotation import dot3; "
-            "assert dot3(np.ones(3), np.ones(3)) == 3.0")
+    code = (
+        "import numpy as np; from quadfault.model.rotation import dot3; "
+        "assert dot3(np.ones(3), np.ones(3)) == 3.0"
+    )
     try:
         first, second = _run_on_a_terminal(code, env), _run_on_a_terminal(code, env)
     finally:
@@ -151,15 +162,23 @@ def test_an_inner_kernel_runs_from_kernels_and_from_python_and_is_cached(tmp_pat
 
     (tmp_path / "inner_mod.py").write_text(_INNER)
     env = {k: v for k, v in os.environ.items() if k not in (jit._CONFIGURED, jit._USERS)}
-    env.update(PYTHONPATH=os.pathsep.join([str(ROOT), str(tmp_path)]),
-               NUMBA_CACHE_DIR=str(tmp_path / "cache"))
-    code = ("import inner_mod as m\n"
-            "assert m.scaled.targetoptions['no_cpython_wrapper']\n"
-            "assert m.outer((1.0, 2.0)) == 6.0 and m.scaled((1.0, 2.0), 3.0) == (3.0, 6.0)\n"
-            "print(sum(m.outer.stats.cache_misses.values()),"
-            " sum(m.scaled._python_form.stats.cache_misses.values()))\n")
-    runs = [subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
-                           text=True, timeout=300) for _ in range(2)]
+    env.update(
+        PYTHONPATH=os.pathsep.join([str(ROOT), str(tmp_path)]),
+        NUMBA_CACHE_DIR=str(tmp_path / "cache"),
+    )
+    code = (
+        "import inner_mod as m\n"
+        "assert m.scaled.targetoptions['no_cpython_wrapper']\n"
+        "assert m.outer((1.0, 2.0)) == 6.0 and m.scaled((1.0, 2.0), 3.0) == (3.0, 6.0)\n"
+        "print(sum(m.outer.stats.cache_misses.values()),"
+        " sum(m.scaled._python_form.stats.cache_misses.values()))\n"
+    )
+    runs = [
+        subprocess.run(
+            [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300
+        )
+        for _ in range(2)
+    ]
     assert [r.returncode for r in runs] == [0, 0], runs[0].stderr[-2000:]
     assert runs[0].stdout.split() == ["1", "1"] and runs[1].stdout.split() == ["0", "0"]
 
@@ -189,6 +208,10 @@ def test_jit_compiles_and_falls_back_to_python(monkeypatch):
 def test_import_quadfault_does_not_import_numba():
     import subprocess
 
-    out = subprocess.run([sys.executable, "-c", "import sys, quadfault; print('numba' in sys.modules)"],
-                         capture_output=True, text=True, cwd=ROOT)
+    out = subprocess.run(
+        [sys.executable, "-c", "import sys, quadfault; print('numba' in sys.modules)"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     assert out.stdout.strip() == "False", out.stderr

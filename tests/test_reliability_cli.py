@@ -18,14 +18,26 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from support.fuzzing import (
+    MUTATIONS,
+    bad_case,
+    csv_bytes,
+    error_is_clean,
+    json_bytes,
+    time_limit,
+    valid_recording,
+    write_case,
+)
 
 from quadfault.cli import SUBCOMMANDS, main
-from support.fuzzing import (MUTATIONS, bad_case, csv_bytes, error_is_clean, json_bytes,
-                               time_limit, valid_recording, write_case)
 
 FIXTURES = Path(__file__).parent / "fixtures"
-FUZZ = settings(max_examples=25, deadline=None, derandomize=True,
-                suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+FUZZ = settings(
+    max_examples=25,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
 
 
 def run_cli(argv, timeout: float = 600.0):
@@ -66,8 +78,11 @@ def _files(folder) -> set:
 
 # -- fuzzed recordings through estimate and diagnose --------------------------------------------
 @FUZZ
-@given(index=st.integers(0, len(MUTATIONS) - 1), seed=st.integers(0, 2**32 - 1),
-       command=st.sampled_from(["estimate", "diagnose"]))
+@given(
+    index=st.integers(0, len(MUTATIONS) - 1),
+    seed=st.integers(0, 2**32 - 1),
+    command=st.sampled_from(["estimate", "diagnose"]),
+)
 def test_fuzzed_recordings_through_the_cli(index, seed, command):
     case = bad_case(np.random.default_rng(seed), index)
     with tempfile.TemporaryDirectory() as folder:
@@ -89,10 +104,10 @@ def _strict_json(path):
     return json.loads(path.read_text(), parse_constant=no_constant)
 
 
-@settings(max_examples=3, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.too_slow])
-@given(seed=st.integers(0, 2**32 - 1), rows=st.integers(20, 80),
-       log_scale=st.floats(-3, 3))
+@settings(
+    max_examples=3, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+)
+@given(seed=st.integers(0, 2**32 - 1), rows=st.integers(20, 80), log_scale=st.floats(-3, 3))
 def test_random_valid_recordings_give_finite_results(seed, rows, log_scale):
     """Valid but meaningless data (random states, unit quaternions, irregular time steps,
     magnitudes 1e-3..1e3): estimates are finite numbers, the diagnosis is strict JSON."""
@@ -100,13 +115,18 @@ def test_random_valid_recordings_give_finite_results(seed, rows, log_scale):
 
     rng = np.random.default_rng(seed)
     header, _, side = valid_recording(rows)
-    scale = 10.0 ** log_scale
+    scale = 10.0**log_scale
     q = rng.standard_normal((rows, 4))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
-    data = np.column_stack([np.cumsum(rng.uniform(1e-4, 0.05, rows)),
-                            scale * rng.standard_normal((rows, 6)), q,
-                            scale * rng.standard_normal((rows, 3)),
-                            np.abs(scale * rng.standard_normal((rows, 4)))])
+    data = np.column_stack(
+        [
+            np.cumsum(rng.uniform(1e-4, 0.05, rows)),
+            scale * rng.standard_normal((rows, 6)),
+            q,
+            scale * rng.standard_normal((rows, 3)),
+            np.abs(scale * rng.standard_normal((rows, 4))),
+        ]
+    )
     with tempfile.TemporaryDirectory() as folder:
         src = Path(folder) / "r.csv"
         src.write_bytes(csv_bytes(header, [[repr(float(x)) for x in r] for r in data]))
@@ -136,12 +156,14 @@ BAD_ARGUMENTS = [
     ("simulate", ["--scenario", "nope", "--out", "a.csv"], "--scenario"),
     ("simulate", ["--seed", "x", "--out", "a.csv"], "--seed"),
     ("simulate", ["--out", "nodir/a.csv", "--duration", "0.05"], "nodir"),
-    ("simulate", ["--control-rate", "0", "--out", "a.csv", "--duration", "0.05"],
-     "--control-rate"),
+    ("simulate", ["--control-rate", "0", "--out", "a.csv", "--duration", "0.05"], "--control-rate"),
     ("simulate", ["--seed", "-1", "--out", "a.csv", "--duration", "0.05"], "--seed"),
     ("simulate", ["--dt", "1e-12", "--duration", "1", "--out", "a.csv"], "memory"),
-    ("simulate", ["--effect", "wind=1e308,0,0", "--duration", "0.05", "--out", "a.csv"],
-     "diverged"),
+    (
+        "simulate",
+        ["--effect", "wind=1e308,0,0", "--duration", "0.05", "--out", "a.csv"],
+        "diverged",
+    ),
     ("estimate", ["missing.csv", "--out", "e.csv"], "missing.csv"),
     ("estimate", [".", "--out", "e.csv"], "directory"),
     ("estimate", ["{hover}", "--out", "e.txt"], ".csv"),
@@ -183,9 +205,11 @@ def test_every_subcommand_has_bad_argument_cases():
     assert {_values(c)[0] for c in BAD_ARGUMENTS} == set(SUBCOMMANDS)
 
 
-@pytest.mark.parametrize("command,args,mentions", BAD_ARGUMENTS,
-                         ids=[f"{_values(c)[0]}-{'_'.join(_values(c)[1])[:40]}"
-                              for c in BAD_ARGUMENTS])
+@pytest.mark.parametrize(
+    "command,args,mentions",
+    BAD_ARGUMENTS,
+    ids=[f"{_values(c)[0]}-{'_'.join(_values(c)[1])[:40]}" for c in BAD_ARGUMENTS],
+)
 def test_bad_arguments_give_one_line_error(command, args, mentions, hover, monkeypatch):
     if command == "train":
         pytest.importorskip("stable_baselines3")
@@ -201,8 +225,18 @@ def test_bad_arguments_give_one_line_error(command, args, mentions, hover, monke
 def test_deeply_nested_vehicle_file_is_one_line(tmp_path):
     deep = tmp_path / "vehicle.json"
     deep.write_text("[" * 100_000)
-    code, _, err = run_cli(["import", "eschmann", FIXTURES / "eschmann_log.csv", "--vehicle",
-                            deep, "--out", tmp_path / "o.csv", "--quiet"])
+    code, _, err = run_cli(
+        [
+            "import",
+            "eschmann",
+            FIXTURES / "eschmann_log.csv",
+            "--vehicle",
+            deep,
+            "--out",
+            tmp_path / "o.csv",
+            "--quiet",
+        ]
+    )
     assert "vehicle.json" in assert_one_line_error(code, err, "import")
 
 
@@ -212,18 +246,24 @@ def test_unknown_subcommand_is_one_line():
 
 
 # -- fuzzed raw logs through quadfault import -----------------------------------------------------
-IMPORT_FIXTURES = {"eschmann": "eschmann_log.csv", "nanodrone": "nanodrone_flight.csv",
-                   "crazypad": "crazypad_motor_log.csv"}
+IMPORT_FIXTURES = {
+    "eschmann": "eschmann_log.csv",
+    "nanodrone": "nanodrone_flight.csv",
+    "crazypad": "crazypad_motor_log.csv",
+}
 JUNK = ("abc", "", "nan", "inf", "-inf", "1e999", "-1", "0", "1e300")
 
 
 @FUZZ
-@given(kind=st.sampled_from(sorted(IMPORT_FIXTURES)), how=st.integers(0, 3),
-       seed=st.integers(0, 2**32 - 1))
+@given(
+    kind=st.sampled_from(sorted(IMPORT_FIXTURES)),
+    how=st.integers(0, 3),
+    seed=st.integers(0, 2**32 - 1),
+)
 def test_fuzzed_raw_logs_through_import(kind, how, seed):
     """A raw log with a junk cell, cut anywhere, missing a column or with time going back:
     a valid recording comes out, or one line and exit 2."""
-    from quadfault.recording import read_recording
+    from quadfault.io.recording import read_recording
 
     rng = np.random.default_rng(seed)
     lines = (FIXTURES / IMPORT_FIXTURES[kind]).read_text().splitlines()
@@ -234,7 +274,7 @@ def test_fuzzed_raw_logs_through_import(kind, how, seed):
         lines[k] = ",".join(cells)
     elif how == 1:
         text = "\n".join(lines)
-        lines = text[:int(rng.integers(len(text)))].split("\n")
+        lines = text[: int(rng.integers(len(text)))].split("\n")
     elif how == 2:
         j = int(rng.integers(len(lines[0].split(","))))
         lines = [",".join(c for i, c in enumerate(ln.split(",")) if i != j) for ln in lines]
@@ -309,12 +349,14 @@ def test_diagnose_refuses_to_overwrite_json_and_report(hover):
     assert _untouched([out])
     report = folder / "report"
     _plant([report / "report.md"])
-    code, _, err = run_cli(["diagnose", hover, "--json", folder / "d2.json", "--report", report,
-                            "--quiet"])
+    code, _, err = run_cli(
+        ["diagnose", hover, "--json", folder / "d2.json", "--report", report, "--quiet"]
+    )
     assert "--force" in assert_one_line_error(code, err, "diagnose")
     assert _untouched([report / "report.md"]) and not (folder / "d2.json").exists()
-    code, _, err = run_cli(["diagnose", hover, "--json", out, "--report", report, "--quiet",
-                            "--force"])
+    code, _, err = run_cli(
+        ["diagnose", hover, "--json", out, "--report", report, "--quiet", "--force"]
+    )
     assert code == 0, err
     assert json.loads(out.read_text())["verdict"] in ("consistent", "mismatch")
     assert (report / "report.md").read_text() != SENTINEL
@@ -323,8 +365,9 @@ def test_diagnose_refuses_to_overwrite_json_and_report(hover):
 def test_import_refuses_to_overwrite(tmp_path):
     out = tmp_path / "imp.csv"
     _plant([tmp_path / "imp.json"])
-    code, _, err = run_cli(["import", "eschmann", FIXTURES / "eschmann_log.csv", "--out", out,
-                            "--quiet"])
+    code, _, err = run_cli(
+        ["import", "eschmann", FIXTURES / "eschmann_log.csv", "--out", out, "--quiet"]
+    )
     assert "--force" in assert_one_line_error(code, err, "import")
     assert _untouched([tmp_path / "imp.json"]) and not out.exists()
 
@@ -334,8 +377,7 @@ def test_reproduce_refuses_to_overwrite_before_running(tmp_path):
 
     for victim in planned_files(tmp_path)[:2]:
         _plant([victim])
-        code, _, err = run_cli(["reproduce", "--quick", "--out", tmp_path, "--quiet"],
-                               timeout=30)
+        code, _, err = run_cli(["reproduce", "--quick", "--out", tmp_path, "--quiet"], timeout=30)
         assert "--force" in assert_one_line_error(code, err, "reproduce")
         assert _untouched([victim])
         victim.unlink()
@@ -352,8 +394,7 @@ def test_train_refuses_to_overwrite_before_running(tmp_path):
     pytest.importorskip("stable_baselines3")
     model = tmp_path / "seed_0" / "model.zip"
     _plant([model])
-    code, _, err = run_cli(["train", "--timesteps", "64", "--out", tmp_path, "--quiet"],
-                           timeout=60)
+    code, _, err = run_cli(["train", "--timesteps", "64", "--out", tmp_path, "--quiet"], timeout=60)
     assert "--force" in assert_one_line_error(code, err, "train")
     assert _untouched([model])
 
@@ -362,7 +403,7 @@ def test_train_refuses_to_overwrite_before_running(tmp_path):
 def _recording(tmp_path, shift=0.0, source="first"):
     import dataclasses
 
-    from quadfault.recording import read_recording
+    from quadfault.io.recording import read_recording
 
     header, rows, side = valid_recording(20)
     src = tmp_path / "src.csv"
@@ -373,11 +414,12 @@ def _recording(tmp_path, shift=0.0, source="first"):
 
 
 @pytest.mark.parametrize("n_before", [0, 1, 2, 3])
-def test_keyboard_interrupt_inside_the_writer_leaves_no_partial_file(tmp_path, monkeypatch,
-                                                                      n_before):
+def test_keyboard_interrupt_inside_the_writer_leaves_no_partial_file(
+    tmp_path, monkeypatch, n_before
+):
     """Ctrl-C during the n-th fsync (while a temporary file is being written): no new file,
     no temporary file, the old pair intact."""
-    from quadfault.recording import read_recording, write_recording
+    from quadfault.io.recording import read_recording, write_recording
 
     old = _recording(tmp_path)
     path = tmp_path / "f.csv"
@@ -415,7 +457,7 @@ def test_keyboard_interrupt_inside_the_writer_leaves_no_partial_file(tmp_path, m
 def test_sigint_between_the_renames_keeps_the_pair_consistent(tmp_path, monkeypatch, at_rename):
     """A real SIGINT arriving while the CSV and its sidecar are renamed into place: the pair is
     either all old or all new (never a new sidecar beside the old CSV)."""
-    from quadfault.recording import read_recording, write_recording
+    from quadfault.io.recording import read_recording, write_recording
 
     path = tmp_path / "f.csv"
     write_recording(_recording(tmp_path), path)
@@ -444,7 +486,7 @@ def test_sigint_between_the_renames_keeps_the_pair_consistent(tmp_path, monkeypa
 
 
 def test_keyboard_interrupt_in_a_subcommand_exits_130_without_files(tmp_path, monkeypatch):
-    import quadfault.simulator as simulator
+    import quadfault.sim.simulator as simulator
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
@@ -464,9 +506,12 @@ def _quadfault():
 def test_subprocess_bad_recording_exits_2_with_one_line(tmp_path):
     case = bad_case(np.random.default_rng(3), 6)  # NaN / inf in a required column
     csv_path, side_path = write_case(case, tmp_path)
-    proc = subprocess.run(_quadfault() + ["estimate", str(csv_path), "--out",
-                                          str(tmp_path / "e.csv")],
-                          capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        _quadfault() + ["estimate", str(csv_path), "--out", str(tmp_path / "e.csv")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
     assert error_is_clean(proc.stderr.strip(), case, csv_path, side_path) is None, proc.stderr
@@ -474,8 +519,9 @@ def test_subprocess_bad_recording_exits_2_with_one_line(tmp_path):
 
 
 def test_subprocess_usage_error_exits_2_with_one_line(tmp_path):
-    proc = subprocess.run(_quadfault() + ["diagnose", "--json"], capture_output=True, text=True,
-                          timeout=120)
+    proc = subprocess.run(
+        _quadfault() + ["diagnose", "--json"], capture_output=True, text=True, timeout=120
+    )
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
 
@@ -487,18 +533,33 @@ def test_sigint_to_a_long_simulation_leaves_no_file(tmp_path):
     # in one of llvmlite's finalizers during compilation is swallowed by Python, and the
     # flight then runs to its end): the signal is meant for the flight itself
     # the child takes Ctrl-C as at a terminal, whatever this process inherited
-    code = ("import signal\nsignal.signal(signal.SIGINT, signal.default_int_handler)\n"
-            "import sys, tempfile, quadfault.cli, quadfault.simulator, quadfault.cli_simulate, "
-            "quadfault.controller, quadfault.recording\n"
-            "with tempfile.TemporaryDirectory() as warm:\n"
-            "    quadfault.cli.main(['simulate', '--duration', '0.05', '--quiet', '--out', "
-            "warm + '/warm.csv'])\n"
-            "print('ready', flush=True)\n"
-            "sys.exit(quadfault.cli.main(sys.argv[1:]))\n")
+    code = (
+        "import signal\nsignal.signal(signal.SIGINT, signal.default_int_handler)\n"
+        "import sys, tempfile, quadfault.cli, quadfault.sim.simulator, quadfault.sim.cli, "
+        "quadfault.model.controller, quadfault.io.recording\n"
+        "with tempfile.TemporaryDirectory() as warm:\n"
+        "    quadfault.cli.main(['simulate', '--duration', '0.05', '--quiet', '--out', "
+        "warm + '/warm.csv'])\n"
+        "print('ready', flush=True)\n"
+        "sys.exit(quadfault.cli.main(sys.argv[1:]))\n"
+    )
     out = tmp_path / "long.csv"
-    proc = subprocess.Popen([sys.executable, "-c", code, "simulate", "--duration", "1200",
-                             "--out", str(out), "--quiet"], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            code,
+            "simulate",
+            "--duration",
+            "1200",
+            "--out",
+            str(out),
+            "--quiet",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert proc.stdout.readline().strip() == "ready"
         import time

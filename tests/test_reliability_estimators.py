@@ -14,7 +14,8 @@ import pytest
 
 _spec = importlib.util.spec_from_file_location(
     "estimator_robustness",
-    Path(__file__).resolve().parents[1] / "benchmarks" / "estimator_robustness.py")
+    Path(__file__).resolve().parents[1] / "benchmarks" / "estimator_robustness.py",
+)
 er = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(er)
 
@@ -113,8 +114,9 @@ def test_saturated_rotor_is_estimated_from_its_limit(name, saturated):
 @pytest.mark.parametrize("kind", er.BURSTS)
 def test_recovery_after_a_burst_of_corrupted_samples(name, kind, flight, clean_runs):
     base, vehicle = flight
-    r = er.recovery_time(name, vehicle, base, kind, AT, 50, tol=0.02, seed=1,
-                         clean=clean_runs[name])
+    r = er.recovery_time(
+        name, vehicle, base, kind, AT, 50, tol=0.02, seed=1, clean=clean_runs[name]
+    )
     assert r["raised"] is None and r["finite"]
     assert math.isfinite(r["recovery_s"]) and r["recovery_s"] <= RECOVERY_BOUND[name], r
     if kind == "spikes":
@@ -124,7 +126,6 @@ def test_recovery_after_a_burst_of_corrupted_samples(name, kind, flight, clean_r
 def test_recovery_time_is_measured_against_the_clean_run(flight, clean_runs):
     """No burst at all (a zero-length burst) recovers in zero time with zero deviation."""
     base, vehicle = flight
-    r = er.recovery_time("ekf", vehicle, base, "spikes", AT, 0, tol=1e-12,
-                         clean=clean_runs["ekf"])
+    r = er.recovery_time("ekf", vehicle, base, "spikes", AT, 0, tol=1e-12, clean=clean_runs["ekf"])
     assert r["recovery_s"] == 0.0 and r["max_deviation"] == 0.0
     assert np.isfinite(r["max_deviation"])

@@ -27,12 +27,12 @@ WRITE_PATTERNS = {
 WRITE_ALLOWED = {
     ("quadfault/fileio.py", "savefig"): "atomic_savefig renders into a buffer",
     ("agents/train_eval.py", "numpy save"): "np.savez into an in-memory buffer that "
-                                            "atomic_write_bytes then writes",
+    "atomic_write_bytes then writes",
     ("benchmarks/bench_diagnosis.py", "write_text/write_bytes"): "the reference revision's "
-                                                                 "modules, into its own "
-                                                                 "temporary folder",
+    "modules, into its own "
+    "temporary folder",
     ("agents/train_eval.py", "SB3 save"): "model.save into an in-memory buffer that "
-                                          "atomic_write_files then writes",
+    "atomic_write_files then writes",
 }
 
 #: loaders that can execute code from a file
@@ -56,8 +56,11 @@ def _hits(patterns):
     found = {}
     for rel, text in _sources():
         for name, rx in patterns.items():
-            lines = [i + 1 for i, line in enumerate(text.splitlines())
-                     if rx.search(line) and not line.lstrip().startswith("#")]
+            lines = [
+                i + 1
+                for i, line in enumerate(text.splitlines())
+                if rx.search(line) and not line.lstrip().startswith("#")
+            ]
             if lines:
                 found[(rel, name)] = lines
     return found
@@ -86,8 +89,9 @@ def test_docs_warn_about_pickled_agent_files():
     assert "pickle" in text and "vecnormalize" in text and "trust" in text
 
 
-@pytest.mark.parametrize("name", ["atomic_write_bytes", "atomic_write_text", "atomic_savefig",
-                                  "atomic_write_files"])
+@pytest.mark.parametrize(
+    "name", ["atomic_write_bytes", "atomic_write_text", "atomic_savefig", "atomic_write_files"]
+)
 def test_fileio_writers_refuse_to_overwrite(tmp_path, name):
     import matplotlib
 
@@ -100,10 +104,12 @@ def test_fileio_writers_refuse_to_overwrite(tmp_path, name):
     target = tmp_path / "out.png"
     target.write_text("keep")
     fig = plt.figure()
-    calls = {"atomic_write_bytes": lambda f: fileio.atomic_write_bytes(target, b"x", force=f),
-             "atomic_write_text": lambda f: fileio.atomic_write_text(target, "x", force=f),
-             "atomic_savefig": lambda f: fileio.atomic_savefig(fig, target, force=f),
-             "atomic_write_files": lambda f: fileio.atomic_write_files({target: "x"}, force=f)}
+    calls = {
+        "atomic_write_bytes": lambda f: fileio.atomic_write_bytes(target, b"x", force=f),
+        "atomic_write_text": lambda f: fileio.atomic_write_text(target, "x", force=f),
+        "atomic_savefig": lambda f: fileio.atomic_savefig(fig, target, force=f),
+        "atomic_write_files": lambda f: fileio.atomic_write_files({target: "x"}, force=f),
+    }
     with pytest.raises(QuadfaultError, match="--force"):
         calls[name](False)
     assert target.read_text() == "keep"
@@ -111,7 +117,6 @@ def test_fileio_writers_refuse_to_overwrite(tmp_path, name):
     assert target.read_bytes() != b"keep"
     plt.close(fig)
     assert [p.name for p in tmp_path.iterdir()] == ["out.png"]
-
 
 
 @pytest.mark.parametrize("umask", [0o022, 0o002, 0o077])
@@ -132,6 +137,7 @@ def test_written_files_respect_the_umask(tmp_path, umask):
         os.umask(before)
     modes = {p.name: stat.S_IMODE(p.stat().st_mode) for p in tmp_path.iterdir()}
     assert modes == dict.fromkeys(["a.csv", "a.json", "b.md"], 0o666 & ~umask)
+
 
 class _FakeModel:
     """Stands in for an SB3 model: ``save`` writes into the file object it is given."""

@@ -12,14 +12,24 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from support.fuzzing import (
+    BASE_COLUMNS,
+    MUTATIONS,
+    bad_case,
+    csv_bytes,
+    error_is_clean,
+    json_bytes,
+    time_limit,
+    valid_recording,
+    write_case,
+)
 
 from quadfault.errors import QuadfaultError, RecordingError
-from support.fuzzing import (BASE_COLUMNS, MUTATIONS, bad_case, csv_bytes, error_is_clean,
-                               json_bytes, time_limit, valid_recording, write_case)
-from quadfault.recording import read_recording
+from quadfault.io.recording import read_recording
 
-FAST = settings(max_examples=60, deadline=None, derandomize=True,
-                suppress_health_check=[HealthCheck.too_slow])
+FAST = settings(
+    max_examples=60, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+)
 
 
 def _write(folder, header, rows, side, stem="flight"):
@@ -106,8 +116,11 @@ def test_any_cell_text_is_a_correct_value_or_an_error_naming_it(cell, column, ro
 
 
 @FAST
-@given(scale=st.one_of(st.floats(0.0, 3.0), st.floats(0.998, 1.002)),
-       direction=st.lists(st.floats(-1, 1), min_size=4, max_size=4), row=st.integers(0, 39))
+@given(
+    scale=st.one_of(st.floats(0.0, 3.0), st.floats(0.998, 1.002)),
+    direction=st.lists(st.floats(-1, 1), min_size=4, max_size=4),
+    row=st.integers(0, 39),
+)
 def test_quaternion_norm_is_renormalised_within_tolerance_else_rejected(scale, direction, row):
     q = np.asarray(direction)
     if np.linalg.norm(q) < 1e-3:
@@ -128,15 +141,26 @@ def test_quaternion_norm_is_renormalised_within_tolerance_else_rejected(scale, d
 
 
 @FAST
-@given(mass=st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=5),
-                      st.booleans(), st.none(), st.integers(-5, 5)))
+@given(
+    mass=st.one_of(
+        st.floats(allow_nan=True, allow_infinity=True),
+        st.text(max_size=5),
+        st.booleans(),
+        st.none(),
+        st.integers(-5, 5),
+    )
+)
 def test_vehicle_mass_accepted_iff_positive_finite_number(mass):
     header, rows, side = valid_recording()
     side["vehicle"]["mass"] = mass
     with tempfile.TemporaryDirectory() as folder:
         rec, err = _read_or_error(_write(folder, header, rows, side))
-    good = isinstance(mass, (int, float)) and not isinstance(mass, bool) \
-        and np.isfinite(mass) and mass > 0
+    good = (
+        isinstance(mass, (int, float))
+        and not isinstance(mass, bool)
+        and np.isfinite(mass)
+        and mass > 0
+    )
     if good:
         assert rec is not None and rec.vehicle.mass == float(mass)
     else:
@@ -230,7 +254,7 @@ def test_sidecar_nan_in_vehicle_is_rejected(tmp_path):
 
 @pytest.mark.parametrize("bad_row", [1, 7, 8, 9, 23])
 def test_streaming_reader_names_the_row_across_chunks(tmp_path, monkeypatch, bad_row):
-    import quadfault.recording as recording
+    import quadfault.io.recording as recording
 
     monkeypatch.setattr(recording, "_CHUNK_ROWS", 8)
     header, rows, side = valid_recording(30)

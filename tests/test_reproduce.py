@@ -44,8 +44,12 @@ def test_calibration_rejects_a_bad_grid():
 
 
 def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "quadfault.cli", "reproduce", *args],
-                          capture_output=True, text=True, timeout=900)
+    return subprocess.run(
+        [sys.executable, "-m", "quadfault.cli", "reproduce", *args],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
 
 
 def _check_contract(doc):
@@ -98,9 +102,15 @@ def test_quick_reproduce_writes_the_contract_outputs(tmp_path):
     assert doc["config"]["calibration"]["rk4"]["curve_q"]
     report = (out / "report.md").read_text()
     assert "paper" in report and "![estimates_combined.png](estimates_combined.png)" in report
-    for name in ("estimates_abrupt.png", "errors_combined.png", "rmse_std_bars.png",
-                 "spikes_per_motor.png", "calibration_curve.png", "irls_convergence.png",
-                 "kkt_convergence.png"):
+    for name in (
+        "estimates_abrupt.png",
+        "errors_combined.png",
+        "rmse_std_bars.png",
+        "spikes_per_motor.png",
+        "calibration_curve.png",
+        "irls_convergence.png",
+        "kkt_convergence.png",
+    ):
         data = (out / name).read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
     # the IRLS detector finds every abrupt fault on the right motor
@@ -108,8 +118,9 @@ def test_quick_reproduce_writes_the_contract_outputs(tmp_path):
     assert doc["fdi"]["abrupt"]["irls"]["false_alarms"] == 0
     # every IRLS variant beside its partners (EKF, RLS, UKF), with the identical post-processing
     per = doc["scenarios"]["combined"]
-    assert set(per) == {f"{e}{v}" for e in ("irls", "ekf", "rls", "ukf")
-                        for v in ("", "_median", "_improved")}
+    assert set(per) == {
+        f"{e}{v}" for e in ("irls", "ekf", "rls", "ukf") for v in ("", "_median", "_improved")
+    }
     for key, entry in per.items():
         partner = per[entry["partner"]]
         assert partner["postprocess"] == entry["postprocess"]
@@ -123,17 +134,23 @@ def test_quick_reproduce_writes_the_contract_outputs(tmp_path):
     assert set(doc["baseline_ratios"]) == {"ekf", "rls", "ukf"}
     assert doc["baseline_ratios"]["ekf"] == doc["ratios"]
     assert 0 < per["rls"]["forgetting"] < 1
-    assert per["ekf"]["postprocess"] == "none" and per["ekf_improved"]["postprocess"] == \
-        "median:21"
+    assert per["ekf"]["postprocess"] == "none" and per["ekf_improved"]["postprocess"] == "median:21"
     assert per["ekf_improved"]["cli"][-2:] == ["--median", "21"]
     assert doc["config"]["ekf_q_eta_improved"] > 0
     assert set(doc["spike_ratio"]["abrupt"]) == {"paper", "median", "improved"}
-    assert set(doc["ratios"]["abrupt"]["paper"]) == {"spike", "excess_spike", "rmse",
-                                                     "excess_spike_difference"}
+    assert set(doc["ratios"]["abrupt"]["paper"]) == {
+        "spike",
+        "excess_spike",
+        "rmse",
+        "excess_spike_difference",
+    }
     cal = doc["config"]["calibration"]["rk4_improved"]
     q_min = cal["curve_q"][int(np.argmin(cal["curve_rmse"]))]
-    feasible = [e for q, r, e in zip(cal["curve_q"], cal["curve_rmse"], cal["curve_excess"])
-                if r <= cal["target_rmse"] and q >= q_min]
+    feasible = [
+        e
+        for q, r, e in zip(cal["curve_q"], cal["curve_rmse"], cal["curve_excess"])
+        if r <= cal["target_rmse"] and q >= q_min
+    ]
     assert cal["matched"] and cal["excess_spike"] == min(feasible)
     assert doc["fdi"]["abrupt"]["irls_improved"]["detected"] == 4
     assert "| combined | irls_improved |" in r.stdout and "excess" in r.stdout

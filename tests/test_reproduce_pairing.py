@@ -16,16 +16,16 @@ from estimators.paper.pairing import VARIANTS, Variant, choose_partner, pair_rat
 from estimators.paper.reproduce import sim_config
 from estimators.series_io import read_estimate_csv
 from quadfault.errors import ConfigError
-from quadfault.recording import write_recording
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import simulate
+from quadfault.io.recording import write_recording
+from quadfault.model.scenarios import named_scenario
+from quadfault.sim.simulator import simulate
 
 
 def _curve(q):
     """U-shaped RMSE (minimum 0.02 at q = 1e-2) and an excess spike with its minimum at
     q = 1 (a hump elsewhere)."""
     x = math.log10(q)
-    return 0.02 + 0.01 * (x + 2.0) ** 2, 0.05 + 0.02 * x ** 2
+    return 0.02 + 0.01 * (x + 2.0) ** 2, 0.05 + 0.02 * x**2
 
 
 def test_partner_is_the_least_excess_spike_within_the_rmse_target():
@@ -35,15 +35,18 @@ def test_partner_is_the_least_excess_spike_within_the_rmse_target():
     res = choose_partner(None, 0.035, evaluate=_curve, q_range=(1e-5, 1e2), refine=6)
     edge = 10 ** (-2 + math.sqrt(1.5))
     assert res.matched and res.rmse <= 0.035 and res.q_eta == pytest.approx(edge, rel=0.1)
-    assert all(r > 0.035 or e >= res.excess_spike - 1e-12
-               for r, e in zip(res.curve_rmse, res.curve_excess))
+    assert all(
+        r > 0.035 or e >= res.excess_spike - 1e-12 for r, e in zip(res.curve_rmse, res.curve_excess)
+    )
 
 
 def test_partner_keeps_to_the_fast_branch():
     """A slow filter (left of the RMSE minimum) with a lower excess spike is not chosen."""
+
     def curve(q):
         r, e = _curve(q)
         return r, (0.0 if q < 1e-2 else e)
+
     res = choose_partner(None, 0.065, evaluate=curve, q_range=(1e-5, 1e2), refine=4)
     assert res.matched and res.q_eta == pytest.approx(1.0, rel=0.05)
     assert min(res.curve_excess) == 0.0 and res.excess_spike > 0.0
@@ -68,8 +71,9 @@ def test_variants_share_post_processing_and_keys():
 
 @pytest.fixture(scope="module")
 def flight(tmp_path_factory):
-    rec = simulate(named_scenario("abrupt", 3.0), config=sim_config("rk4", "abrupt"), seed=5,
-                   thrust_noise=0.07)
+    rec = simulate(
+        named_scenario("abrupt", 3.0), config=sim_config("rk4", "abrupt"), seed=5, thrust_noise=0.07
+    )
     path = tmp_path_factory.mktemp("pair") / "abrupt.csv"
     write_recording(rec, path)
     return rec, path
@@ -84,25 +88,50 @@ def test_each_entry_cli_reproduces_its_series(flight, tmp_path):
         assert extra["postprocess"] == "median:21" and extra["partner"] in pair
         assert extra["partner"] != key
         out = tmp_path / f"{key}.csv"
-        r = subprocess.run([sys.executable, "-m", "quadfault.cli", "estimate", str(path),
-                            *extra["cli"], "--out", str(out), "--quiet"],
-                           capture_output=True, text=True, timeout=600)
+        r = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "quadfault.cli",
+                "estimate",
+                str(path),
+                *extra["cli"],
+                "--out",
+                str(out),
+                "--quiet",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
         assert r.returncode == 0, r.stderr
         np.testing.assert_array_equal(read_estimate_csv(out)["eta"], series.eta)
         assert json.loads(out.with_suffix(".json").read_text())["postprocess"] == "median:21"
     assert pair["ekf_improved"][1]["q_eta"] == 0.3
-    assert pair["ekf_improved"][1]["cli"] == ["--estimator", "ekf", "--q-eta", "0.3",
-                                              "--median", "21"]
+    assert pair["ekf_improved"][1]["cli"] == [
+        "--estimator",
+        "ekf",
+        "--q-eta",
+        "0.3",
+        "--median",
+        "21",
+    ]
 
 
 def test_pair_ratios():
-    per = {"irls": {"rmse": [0.02] * 4, "spike": [0.1] * 4, "excess_spike": [0.02] * 4},
-           "ekf": {"rmse": [0.025] * 4, "spike": [0.2] * 4, "excess_spike": [0.08] * 4}}
-    r = pair_ratios({"abrupt": per, "degradation": {
-        k: {**v, "spike": None, "excess_spike": None} for k, v in per.items()}})
-    assert r["abrupt"]["paper"] == pytest.approx({"spike": 0.5, "excess_spike": 0.25,
-                                                  "excess_spike_difference": -0.06,
-                                                  "rmse": 0.8})
+    per = {
+        "irls": {"rmse": [0.02] * 4, "spike": [0.1] * 4, "excess_spike": [0.02] * 4},
+        "ekf": {"rmse": [0.025] * 4, "spike": [0.2] * 4, "excess_spike": [0.08] * 4},
+    }
+    r = pair_ratios(
+        {
+            "abrupt": per,
+            "degradation": {k: {**v, "spike": None, "excess_spike": None} for k, v in per.items()},
+        }
+    )
+    assert r["abrupt"]["paper"] == pytest.approx(
+        {"spike": 0.5, "excess_spike": 0.25, "excess_spike_difference": -0.06, "rmse": 0.8}
+    )
     assert r["degradation"]["paper"]["spike"] is None
     assert r["degradation"]["paper"]["excess_spike_difference"] is None
 
@@ -113,18 +142,23 @@ def test_excess_ratio_over_an_ekf_excess_within_noise_is_not_a_number(tmp_path):
     from estimators.paper.pairing import MIN_EXCESS
     from estimators.paper.report import _ratio_lines, excess_ratio_text
 
-    per = {"irls": {"rmse": [0.02] * 4, "spike": [0.1] * 4, "excess_spike": [0.02] * 4},
-           "ekf": {"rmse": [0.025] * 4, "spike": [0.2] * 4,
-                   "excess_spike": [MIN_EXCESS / 25] * 4}}
+    per = {
+        "irls": {"rmse": [0.02] * 4, "spike": [0.1] * 4, "excess_spike": [0.02] * 4},
+        "ekf": {"rmse": [0.025] * 4, "spike": [0.2] * 4, "excess_spike": [MIN_EXCESS / 25] * 4},
+    }
     r = pair_ratios({"combined": per})["combined"]["paper"]
     assert r["excess_spike"] is None
     assert r["excess_spike_difference"] == pytest.approx(0.02 - MIN_EXCESS / 25)
     assert excess_ratio_text(r, "x") == "n/a"
     assert excess_ratio_text({"excess_spike": None, "excess_spike_difference": None}) == "-"
-    assert excess_ratio_text({"excess_spike": 0.25, "excess_spike_difference": -0.06},
-                             "x") == "0.25x"
-    row = [line for line in _ratio_lines({"combined": {"paper": r}})
-           if line.startswith("| combined | paper |")]
+    assert (
+        excess_ratio_text({"excess_spike": 0.25, "excess_spike_difference": -0.06}, "x") == "0.25x"
+    )
+    row = [
+        line
+        for line in _ratio_lines({"combined": {"paper": r}})
+        if line.startswith("| combined | paper |")
+    ]
     assert row == ["| combined | paper | 0.50 | n/a | 0.020 | 0.80 |"]
 
 
@@ -184,9 +218,16 @@ def test_partners_are_tuned_on_the_calibration_flight_never_on_the_scored_ones(m
 
     monkeypatch.setattr(pairing, "choose_partner", spy_choose)
     monkeypatch.setattr(pairing, "estimate_series", spy_estimate)
-    cfg = ReproduceConfig.quick(duration=1.0, calibration_duration=1.5, workers=1,
-                                reference_mode=False, improved=False, seed=3,
-                                partner_points_per_decade=1.0, partner_refine=1)
+    cfg = ReproduceConfig.quick(
+        duration=1.0,
+        calibration_duration=1.5,
+        workers=1,
+        reference_mode=False,
+        improved=False,
+        seed=3,
+        partner_points_per_decade=1.0,
+        partner_refine=1,
+    )
     run = reproduce(cfg)
     assert sorted(searched) == sorted((cfg.calibration_seed, b) for b in ("ekf", "rls", "ukf"))
     tuning_runs = {(s, n) for s, n, _ in runs if n != "irls"}

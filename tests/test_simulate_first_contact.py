@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from quadfault.cli import main
-from quadfault.recording import read_recording
-from quadfault.scenarios import named_scenario
-from quadfault.simulator import LOST_CONTROL_ERROR, flight_end, simulate
-from quadfault.vehicle import Vehicle
+from quadfault.io.recording import read_recording
+from quadfault.model.scenarios import named_scenario
+from quadfault.model.vehicle import Vehicle
+from quadfault.sim.simulator import LOST_CONTROL_ERROR, flight_end, simulate
 
 
 def _cli(argv):
@@ -37,8 +37,20 @@ def test_the_readme_example_stays_physical_for_80_s(tmp_path):
     """The README's example flies the paper's combined scenario unsaturated: the rotor at
     eta = 0.5 gets more than thrust-to-weight 2 and the vehicle stays on the circle."""
     out = tmp_path / "flight.csv"
-    code, err = _cli(["simulate", "--scenario", "combined", "--duration", "80", "--seed", "0",
-                      "--out", out, "--quiet"])
+    code, err = _cli(
+        [
+            "simulate",
+            "--scenario",
+            "combined",
+            "--duration",
+            "80",
+            "--seed",
+            "0",
+            "--out",
+            out,
+            "--quiet",
+        ]
+    )
     assert code == 0 and "warning" not in err
     rec = read_recording(out)
     assert len(rec) == 80_000 and "end" not in rec.meta
@@ -48,8 +60,22 @@ def test_the_readme_example_stays_physical_for_80_s(tmp_path):
     assert rec.thrust_cmd.min() >= 0 and rec.thrust_cmd.max() > Vehicle().rotor_max_thrust
     # with the limit asked for, the same flight loses the vehicle and ends at the ground
     limited = tmp_path / "limited.csv"
-    code, err = _cli(["simulate", "--scenario", "combined", "--duration", "80", "--seed", "0",
-                      "--max-thrust", Vehicle().rotor_max_thrust, "--out", limited, "--quiet"])
+    code, err = _cli(
+        [
+            "simulate",
+            "--scenario",
+            "combined",
+            "--duration",
+            "80",
+            "--seed",
+            "0",
+            "--max-thrust",
+            Vehicle().rotor_max_thrust,
+            "--out",
+            limited,
+            "--quiet",
+        ]
+    )
     assert code == 0 and err.startswith("warning: the controller lost the vehicle below the ground")
     cut = read_recording(limited)
     end = json.loads(limited.with_suffix(".json").read_text())["end"]
@@ -65,17 +91,52 @@ def test_the_readme_example_stays_physical_for_80_s(tmp_path):
 
 def test_a_falling_flight_ends_at_the_ground_and_no_saturation_still_works(tmp_path):
     out = tmp_path / "fall.csv"
-    code, err = _cli(["simulate", "--scenario", "hover", "--duration", "3", "--max-thrust",
-                      "2.0", "--out", out, "--quiet"])  # below hover thrust: it falls
+    code, err = _cli(
+        [
+            "simulate",
+            "--scenario",
+            "hover",
+            "--duration",
+            "3",
+            "--max-thrust",
+            "2.0",
+            "--out",
+            out,
+            "--quiet",
+        ]
+    )  # below hover thrust: it falls
     assert code == 0 and "below the ground" in err and len(err.strip().splitlines()) == 1
     rec = read_recording(out)
     assert rec.meta["end"]["reason"] == "below_ground" and 0.3 < rec.t[-1] < 2.0
     free = tmp_path / "free.csv"
-    code, err = _cli(["simulate", "--scenario", "clipping", "--duration", "2", "--no-saturation",
-                      "--out", free, "--quiet"])
+    code, err = _cli(
+        [
+            "simulate",
+            "--scenario",
+            "clipping",
+            "--duration",
+            "2",
+            "--no-saturation",
+            "--out",
+            free,
+            "--quiet",
+        ]
+    )
     assert code == 0 and err == "" and len(read_recording(free)) == 2000
-    code, err = _cli(["simulate", "--scenario", "hover", "--duration", "1", "--max-thrust",
-                      "-1", "--out", tmp_path / "bad.csv", "--quiet"])
+    code, err = _cli(
+        [
+            "simulate",
+            "--scenario",
+            "hover",
+            "--duration",
+            "1",
+            "--max-thrust",
+            "-1",
+            "--out",
+            tmp_path / "bad.csv",
+            "--quiet",
+        ]
+    )
     assert code == 2 and "max_thrust must be positive" in err and "Traceback" not in err
 
 
@@ -101,7 +162,10 @@ def test_stop_at_loss_is_the_same_flight_cut_at_the_event():
     cut = simulate(scenario, vehicle=weak, seed=4, stop_at_loss=True)
     row, reason = flight_end(full, scenario)
     assert len(cut) == row + 1 and cut.meta["end"] == {
-        "reason": reason, "t": full.t[row], "planned_duration": 3.0}
+        "reason": reason,
+        "t": full.t[row],
+        "planned_duration": 3.0,
+    }
     for name in ("t", "position", "velocity", "quaternion", "omega", "thrust_cmd", "eta_true"):
-        np.testing.assert_array_equal(getattr(cut, name), getattr(full, name)[:row + 1])
+        np.testing.assert_array_equal(getattr(cut, name), getattr(full, name)[: row + 1])
     assert "end" not in simulate(scenario, seed=4, stop_at_loss=True).meta

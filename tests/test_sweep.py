@@ -17,8 +17,15 @@ def _square(x):
 
 
 def _table(backend, workers=2):
-    flights = evaluate(AGENTS, "quick", [0, 1], scenarios=["abrupt_20s"], duration=0.3,
-                       backend=backend, workers=workers)
+    flights = evaluate(
+        AGENTS,
+        "quick",
+        [0, 1],
+        scenarios=["abrupt_20s"],
+        duration=0.3,
+        backend=backend,
+        workers=workers,
+    )
     return markdown_table(aggregate(flights)), [f.metrics.rmse for f in flights]
 
 
@@ -76,10 +83,35 @@ def test_evaluate_cli_hands_backend_and_workers_to_evaluate(tmp_path, monkeypatc
         return original(*args, **kwargs)
 
     monkeypatch.setattr(ev, "evaluate", spy)
-    common = ["--agents", "geometric", "--suite", "quick", "--scenarios", "abrupt_20s",
-              "--seeds", "0", "--duration", "0.3", "--no-plots", "--quiet"]
-    assert main(["evaluate", *common, "--out", str(tmp_path / "a"), "--backend", "local",
-                 "--workers", "1"]) == 0
+    common = [
+        "--agents",
+        "geometric",
+        "--suite",
+        "quick",
+        "--scenarios",
+        "abrupt_20s",
+        "--seeds",
+        "0",
+        "--duration",
+        "0.3",
+        "--no-plots",
+        "--quiet",
+    ]
+    assert (
+        main(
+            [
+                "evaluate",
+                *common,
+                "--out",
+                str(tmp_path / "a"),
+                "--backend",
+                "local",
+                "--workers",
+                "1",
+            ]
+        )
+        == 0
+    )
     assert main(["evaluate", *common, "--out", str(tmp_path / "b")]) == 0
     assert seen == [("local", 1), ("serial", None)]
     runs = [json.loads((tmp_path / d / "results.json").read_text())["runs"] for d in "ab"]

@@ -6,9 +6,15 @@ import numpy as np
 import pytest
 
 from quadfault.errors import ConfigError
-from quadfault.task_scenarios import (REFERENCE_ARM, SmoothTrack, arm_length,
-                                      rotor_loss_scenario, size_scale, track_scenario)
-from quadfault.vehicle import Vehicle
+from quadfault.model.task_scenarios import (
+    REFERENCE_ARM,
+    SmoothTrack,
+    arm_length,
+    rotor_loss_scenario,
+    size_scale,
+    track_scenario,
+)
+from quadfault.model.vehicle import Vehicle
 
 
 def crazyflie() -> Vehicle:
@@ -34,8 +40,13 @@ def test_smooth_track_derivatives_are_exact_and_it_starts_at_rest():
 
 def test_track_scenario_draws_speed_and_curvature_in_their_ranges():
     for seed in range(20):
-        sc = track_scenario(np.random.default_rng(seed), 30.0, speed=(0.5, 1.5),
-                            curvature=(0.4, 0.8), yaw_rate=(-0.2, 0.1))
+        sc = track_scenario(
+            np.random.default_rng(seed),
+            30.0,
+            speed=(0.5, 1.5),
+            curvature=(0.4, 0.8),
+            yaw_rate=(-0.2, 0.1),
+        )
         tr = sc.trajectory
         t = np.linspace(0.0, 200.0, 20001)
         v = tr(t).velocity
@@ -67,8 +78,9 @@ def test_track_scenario_is_deterministic_per_generator_and_froude_scaled():
 def test_rotor_loss_draws_one_rotor_level_and_onset_in_range():
     motors = set()
     for seed in range(40):
-        sc = rotor_loss_scenario(np.random.default_rng(seed), 10.0, level=(0.0, 0.4),
-                                 onset=(0.2, 0.5))
+        sc = rotor_loss_scenario(
+            np.random.default_rng(seed), 10.0, level=(0.0, 0.4), onset=(0.2, 0.5)
+        )
         (fault,) = sc.efficiency.faults
         motors.add(fault.motor)
         assert 2.0 <= fault.onset <= 5.0 and 0.0 <= fault.level <= 0.4
@@ -80,15 +92,18 @@ def test_rotor_loss_draws_one_rotor_level_and_onset_in_range():
     assert motors == {1, 2, 3, 4}
 
 
-@pytest.mark.parametrize("call, match", [
-    (lambda g: track_scenario(g, speed=(2.0, 1.0)), "speed"),
-    (lambda g: track_scenario(g, curvature=(0.0, 1.0)), "curvature must be > 0"),
-    (lambda g: track_scenario(g, yaw_rate="fast"), "yaw_rate"),
-    (lambda g: track_scenario(g, duration=-1.0), "duration"),
-    (lambda g: rotor_loss_scenario(g, level=(0.2, 1.5)), "level"),
-    (lambda g: rotor_loss_scenario(g, onset=(0.5, 0.2)), "onset"),
-    (lambda g: SmoothTrack(omega=(-1.0, 0.0, 0.0)), "omega"),
-])
+@pytest.mark.parametrize(
+    "call, match",
+    [
+        (lambda g: track_scenario(g, speed=(2.0, 1.0)), "speed"),
+        (lambda g: track_scenario(g, curvature=(0.0, 1.0)), "curvature must be > 0"),
+        (lambda g: track_scenario(g, yaw_rate="fast"), "yaw_rate"),
+        (lambda g: track_scenario(g, duration=-1.0), "duration"),
+        (lambda g: rotor_loss_scenario(g, level=(0.2, 1.5)), "level"),
+        (lambda g: rotor_loss_scenario(g, onset=(0.5, 0.2)), "onset"),
+        (lambda g: SmoothTrack(omega=(-1.0, 0.0, 0.0)), "omega"),
+    ],
+)
 def test_bad_ranges_are_refused_with_a_clear_error(call, match):
     with pytest.raises(ConfigError, match=match):
         call(np.random.default_rng(0))
@@ -96,8 +111,9 @@ def test_bad_ranges_are_refused_with_a_clear_error(call, match):
 
 def test_track_with_degradation_and_a_fault_keeps_the_healthy_tracks_trajectory():
     healthy = track_scenario(np.random.default_rng(5))
-    faulty = track_scenario(np.random.default_rng(5), degradation=(0.8, 0.9), level=(0.3, 0.4),
-                            onset=(0.4, 0.5))
+    faulty = track_scenario(
+        np.random.default_rng(5), degradation=(0.8, 0.9), level=(0.3, 0.4), onset=(0.4, 0.5)
+    )
     assert faulty.trajectory == healthy.trajectory
     np.testing.assert_array_equal(healthy.efficiency(np.array([0.0, 19.9])), 1.0)
     (fault,) = faulty.efficiency.faults

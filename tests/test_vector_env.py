@@ -13,9 +13,9 @@ from estimators.irls import IRLSConfig
 from quad_fault_env.envs.config import InitialStateSpread
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.vector import QuadFaultVectorEnv
-from quadfault.controller import ControllerConfig
 from quadfault.errors import ConfigError
-from quadfault.simulator import SensorNoise
+from quadfault.model.controller import ControllerConfig
+from quadfault.sim.simulator import SensorNoise
 
 NOISE = SensorNoise(position=0.01, velocity=0.02, attitude=0.002, gyro=0.01, accel=0.1)
 
@@ -32,8 +32,9 @@ def _run_side_by_side(n_envs, steps, seed, estimator, action_scale=1.0, **kw):
     """Step a vector env and ``n_envs`` single envs with the same actions; compare all."""
     ekw = _estimator_kwargs(estimator)
     vec = QuadFaultVectorEnv(n_envs, estimator, estimator_kwargs=ekw, info="full", **kw)
-    singles = [QuadFaultEnv(estimator, estimator_kwargs=ekw, info="full", **kw)
-               for _ in range(n_envs)]
+    singles = [
+        QuadFaultEnv(estimator, estimator_kwargs=ekw, info="full", **kw) for _ in range(n_envs)
+    ]
     obs, info = vec.reset(seed=seed)
     single_obs = [e.reset(seed=seed + i)[0] for i, e in enumerate(singles)]
     np.testing.assert_allclose(obs, np.array(single_obs), rtol=0, atol=1e-9)
@@ -63,16 +64,23 @@ def _run_side_by_side(n_envs, steps, seed, estimator, action_scale=1.0, **kw):
 def test_matches_single_envs_with_noise_random_scenarios_and_autoreset():
     """Random scenarios (per-env trajectories, schedules, thrust noise), every sensor noise,
     the IRLS estimate in the loop, truncation after 0.3 s and the autoreset after it."""
-    n_done = _run_side_by_side(3, 70, seed=7, estimator="irls", scenario="random",
-                               duration=0.3, sensor_noise=NOISE, estimator_rate="control")
+    n_done = _run_side_by_side(
+        3,
+        70,
+        seed=7,
+        estimator="irls",
+        scenario="random",
+        duration=0.3,
+        sensor_noise=NOISE,
+        estimator_rate="control",
+    )
     assert n_done >= 6  # every sub-env went through at least two episodes
 
 
 def test_rows_sharing_a_scenario_do_not_leak_it_to_other_rows():
     """Rows that repeat a reset seed share one interned schedule; the other rows must keep
     their own (a grouping bug once gave row 1 the schedule of rows 0 and 2)."""
-    kw = dict(scenario="random", random_trajectory="hover", duration=0.2,
-              estimator_rate="control")
+    kw = dict(scenario="random", random_trajectory="hover", duration=0.2, estimator_rate="control")
     seeds = [10001, 10002, 10001]
     vec = QuadFaultVectorEnv(len(seeds), "truth", info="full", **kw)
     singles = [QuadFaultEnv("truth", **kw, info="full") for _ in seeds]
@@ -90,17 +98,41 @@ def test_rows_sharing_a_scenario_do_not_leak_it_to_other_rows():
 def test_matches_single_envs_in_motor_mode_until_crashes(estimator):
     """Full-range random motor commands crash or tilt the vehicles: termination reasons,
     penalties and resets must agree too (the estimator at every substep or none)."""
-    n_done = _run_side_by_side(2, 60, seed=3, estimator=estimator, scenario="abrupt",
-                               duration=2.0, action_mode="motor", estimator_rate="physics",
-                               reward=gym.make("QuadFault-v0").unwrapped.reward_config)
+    n_done = _run_side_by_side(
+        2,
+        60,
+        seed=3,
+        estimator=estimator,
+        scenario="abrupt",
+        duration=2.0,
+        action_mode="motor",
+        estimator_rate="physics",
+        reward=gym.make("QuadFault-v0").unwrapped.reward_config,
+    )
     assert n_done >= 1
 
 
 def test_wrench_mode_and_compensation_match():
-    _run_side_by_side(2, 15, seed=11, estimator="truth", scenario="combined", duration=1.0,
-                      action_mode="wrench", action_scale=0.3)
-    _run_side_by_side(2, 15, seed=12, estimator="truth", scenario="combined", duration=1.0,
-                      compensate=True, action_scale=0.3)
+    _run_side_by_side(
+        2,
+        15,
+        seed=11,
+        estimator="truth",
+        scenario="combined",
+        duration=1.0,
+        action_mode="wrench",
+        action_scale=0.3,
+    )
+    _run_side_by_side(
+        2,
+        15,
+        seed=12,
+        estimator="truth",
+        scenario="combined",
+        duration=1.0,
+        compensate=True,
+        action_scale=0.3,
+    )
 
 
 def test_same_step_autoreset_reports_the_final_observation():
@@ -123,8 +155,14 @@ def test_same_step_autoreset_reports_the_final_observation():
 
 
 def test_make_vec_vector_entry_point_and_dict_observations():
-    env = gym.make_vec("QuadFault-v0", num_envs=3, vectorization_mode="vector_entry_point",
-                       estimator="none", observation="dict", info="full")
+    env = gym.make_vec(
+        "QuadFault-v0",
+        num_envs=3,
+        vectorization_mode="vector_entry_point",
+        estimator="none",
+        observation="dict",
+        info="full",
+    )
     assert isinstance(env.unwrapped, QuadFaultVectorEnv)
     assert env.unwrapped.max_episode_steps == 2000  # the registration's limit
     obs, info = env.reset(seed=0)
@@ -188,15 +226,19 @@ def test_bad_input_raises_clear_errors():
 def test_unknown_keywords_name_the_closest_of_either_env():
     import gymnasium as gym
 
-    import quad_fault_env  # noqa: F401  (registers the ids)
-
     kw = dict(scenario="combined", duration=1.0)
-    with pytest.raises(ConfigError, match="QuadFaultVectorEnv: unknown keyword "
-                                          "'autoreset_mod'; did you mean 'autoreset_mode'"):
+    with pytest.raises(
+        ConfigError,
+        match="QuadFaultVectorEnv: unknown keyword 'autoreset_mod'; did you mean 'autoreset_mode'",
+    ):
         QuadFaultVectorEnv(2, "none", autoreset_mod="same_step", **kw)
     with pytest.raises(ConfigError, match="'estimator_rat'; did you mean 'estimator_rate'"):
-        gym.make_vec("QuadFault-v1", num_envs=2, vectorization_mode="vector_entry_point",
-                     estimator_rat="control")
+        gym.make_vec(
+            "QuadFault-v1",
+            num_envs=2,
+            vectorization_mode="vector_entry_point",
+            estimator_rat="control",
+        )
     for removed in ("physics", "noise_streams"):  # no-op keywords, removed
         with pytest.raises(ConfigError, match=f"unknown keyword '{removed}'"):
             QuadFaultVectorEnv(2, "none", **{removed: "numpy"}, **kw)
@@ -236,12 +278,22 @@ def test_sub_envs_of_one_configuration_share_no_episode_state():
     assert a != b
 
 
-@pytest.mark.parametrize("kw", [
-    dict(scenario="random", initial_spread=InitialStateSpread(0.3, 0.2, 0.1, 0.2),
-         sensor_noise=NOISE),
-    dict(scenario="combined", thrust_noise=0.05, initial_spread=InitialStateSpread(0.3, 0.2, 0.1, 0.2)),
-    dict(scenario="random", random_trajectory="hover", controller=ControllerConfig.reference()),
-])
+@pytest.mark.parametrize(
+    "kw",
+    [
+        dict(
+            scenario="random",
+            initial_spread=InitialStateSpread(0.3, 0.2, 0.1, 0.2),
+            sensor_noise=NOISE,
+        ),
+        dict(
+            scenario="combined",
+            thrust_noise=0.05,
+            initial_spread=InitialStateSpread(0.3, 0.2, 0.1, 0.2),
+        ),
+        dict(scenario="random", random_trajectory="hover", controller=ControllerConfig.reference()),
+    ],
+)
 def test_batched_reset_equals_single_env_resets(kw):
     """The batched reset gives every row the single env's episode start for seed s + i:
     scenario, true and measured initial state, the generator's position after the draws."""
@@ -283,9 +335,9 @@ def test_time_tables_equal_the_functions_of_time(feedforward):
     and different window starts; refilled when a row leaves its window or is invalidated.
     Without ``feedforward`` (no controller in the step) only p, v, a are tabulated."""
     from quad_fault_env.time_tables import WINDOW, RowTimeTables
-    from quadfault.controller import GeometricController
-    from quadfault.scenarios import random_scenario
-    from quadfault.vehicle import Vehicle
+    from quadfault.model.controller import GeometricController
+    from quadfault.model.scenarios import random_scenario
+    from quadfault.model.vehicle import Vehicle
 
     rng = np.random.default_rng(3)
     scs = [random_scenario(rng, 5.0, trajectory=t) for t in ("circle", "lissajous", "hover")]
@@ -326,9 +378,14 @@ def test_numba_thread_count_does_not_change_the_flight(estimator):
     try:
         for threads in (1, numba.config.NUMBA_NUM_THREADS):
             numba.set_num_threads(threads)
-            venv = QuadFaultVectorEnv(6, scenario="random", random_trajectory="random",
-                                      estimator=estimator, estimator_rate="physics",
-                                      duration=1.0)
+            venv = QuadFaultVectorEnv(
+                6,
+                scenario="random",
+                random_trajectory="random",
+                estimator=estimator,
+                estimator_rate="physics",
+                duration=1.0,
+            )
             obs, _ = venv.reset(seed=11)
             trace = [obs]
             for k in range(40):

@@ -33,8 +33,8 @@ from estimators.ekf import EKFConfig, MotorEfficiencyEKF
 from estimators.median import median_series
 from estimators.metrics import aligned_truth, score
 from quadfault.errors import ConfigError
+from quadfault.io.recording import Recording
 from quadfault.progress import progress_bar
-from quadfault.recording import Recording
 
 
 @dataclass(frozen=True)
@@ -59,13 +59,24 @@ class CalibrationResult:
     message: str
 
     def to_dict(self) -> dict:
-        return {"q_eta": self.q_eta, "target_rmse": self.target_rmse, "rmse": self.rmse,
-                "matched": self.matched, "curve_q": list(self.curve_q),
-                "curve_rmse": list(self.curve_rmse), "message": self.message}
+        return {
+            "q_eta": self.q_eta,
+            "target_rmse": self.target_rmse,
+            "rmse": self.rmse,
+            "matched": self.matched,
+            "curve_q": list(self.curve_q),
+            "curve_rmse": list(self.curve_rmse),
+            "message": self.message,
+        }
 
 
-def match_larger_root(rmse_of: Callable[[float], float], target: float, grid,
-                      bisection_steps: int = 8, rtol: float = 0.005) -> CalibrationResult:
+def match_larger_root(
+    rmse_of: Callable[[float], float],
+    target: float,
+    grid,
+    bisection_steps: int = 8,
+    rtol: float = 0.005,
+) -> CalibrationResult:
     """Find the largest ``q`` in ``grid``'s span with ``rmse_of(q) == target`` (see module).
 
     Args:
@@ -90,13 +101,18 @@ def match_larger_root(rmse_of: Callable[[float], float], target: float, grid,
     vals = np.array([f(q) for q in qs])
     above = vals - target
     finite = np.isfinite(above)
-    brackets = [i for i in range(len(qs) - 1)
-                if finite[i] and finite[i + 1] and above[i] * above[i + 1] <= 0]
+    brackets = [
+        i
+        for i in range(len(qs) - 1)
+        if finite[i] and finite[i + 1] and above[i] * above[i + 1] <= 0
+    ]
     if not brackets:
         k = int(np.nanargmin(vals))
         q_best, matched = float(qs[k]), False
-        msg = (f"no Q_eta in [{qs[0]:.3g}, {qs[-1]:.3g}] reaches RMSE {target:.4g}; "
-               f"using the minimum {vals[k]:.4g} at Q_eta = {q_best:.3g}")
+        msg = (
+            f"no Q_eta in [{qs[0]:.3g}, {qs[-1]:.3g}] reaches RMSE {target:.4g}; "
+            f"using the minimum {vals[k]:.4g} at Q_eta = {q_best:.3g}"
+        )
     else:
         i = brackets[-1]  # the larger root of the U
         lo, hi = math.log(qs[i]), math.log(qs[i + 1])
@@ -113,15 +129,23 @@ def match_larger_root(rmse_of: Callable[[float], float], target: float, grid,
                 lo, f_lo = mid, g
             q_best = min((math.exp(lo), math.exp(hi)), key=lambda q: abs(f(q) - target))
         matched = True
-        msg = (f"Q_eta = {q_best:.4g} gives RMSE {f(q_best):.4g} (target {target:.4g}, larger "
-               f"root, {len(seen)} evaluations)")
+        msg = (
+            f"Q_eta = {q_best:.4g} gives RMSE {f(q_best):.4g} (target {target:.4g}, larger "
+            f"root, {len(seen)} evaluations)"
+        )
     order = sorted(seen)
-    return CalibrationResult(q_best, float(target), f(q_best), matched, tuple(order),
-                             tuple(seen[q] for q in order), msg)
+    return CalibrationResult(
+        q_best, float(target), f(q_best), matched, tuple(order), tuple(seen[q] for q in order), msg
+    )
 
 
-def ekf_rmse(recording: Recording, q_eta: float, base: EKFConfig | None = None,
-             align: str = "end", post_median: int = 1) -> float:
+def ekf_rmse(
+    recording: Recording,
+    q_eta: float,
+    base: EKFConfig | None = None,
+    align: str = "end",
+    post_median: int = 1,
+) -> float:
     """Motor-averaged RMSE of the EKF with ``q_eta`` on ``recording`` (which holds truth);
     ``post_median > 1`` scores the causal running median of its output (a fairness check of
     ``IRLSConfig.output_median``, docs/ekf.md)."""
@@ -132,10 +156,18 @@ def ekf_rmse(recording: Recording, q_eta: float, base: EKFConfig | None = None,
     return float(np.mean(score(recording, est, align=align).rmse))
 
 
-def calibrate_q_eta(recording: Recording, target_rmse: float, *, base: EKFConfig | None = None,
-                    q_range: tuple = (1e-6, 10.0), points_per_decade: float = 1.0,
-                    bisection_steps: int = 8, align: str = "end",
-                    progress: bool = False, post_median: int = 1) -> CalibrationResult:
+def calibrate_q_eta(
+    recording: Recording,
+    target_rmse: float,
+    *,
+    base: EKFConfig | None = None,
+    q_range: tuple = (1e-6, 10.0),
+    points_per_decade: float = 1.0,
+    bisection_steps: int = 8,
+    align: str = "end",
+    progress: bool = False,
+    post_median: int = 1,
+) -> CalibrationResult:
     """Choose ``Q_eta`` so the EKF's RMSE on ``recording`` (of its output's causal running
     median over ``post_median`` rows when > 1) equals ``target_rmse``."""
     lo, hi = q_range
@@ -189,13 +221,18 @@ class SdCalibration:
         return replace(series, sd=sd)
 
     def to_dict(self) -> dict:
-        return {"scale": self.scale, "coverage": self.coverage,
-                "raw_coverage": self.raw_coverage, "samples": self.samples,
-                "q_eta": self.config.q_eta}
+        return {
+            "scale": self.scale,
+            "coverage": self.coverage,
+            "raw_coverage": self.raw_coverage,
+            "samples": self.samples,
+            "q_eta": self.config.q_eta,
+        }
 
 
-def calibrate_sd_scale(recording: Recording, config: EKFConfig | None = None, *,
-                       coverage: float = ONE_SIGMA) -> SdCalibration:
+def calibrate_sd_scale(
+    recording: Recording, config: EKFConfig | None = None, *, coverage: float = ONE_SIGMA
+) -> SdCalibration:
     """Fit ``scale`` so that ``|eta_true - eta| <= scale * sd`` on a ``coverage`` fraction of
     the scored samples (status other than ``warmup``, finite positive ``sd``, all motors
     pooled) of the EKF with ``config`` on ``recording``, which must hold the truth. Fit it on
@@ -204,16 +241,25 @@ def calibrate_sd_scale(recording: Recording, config: EKFConfig | None = None, *,
         raise ConfigError(f"coverage must be a fraction in (0, 1), got {coverage!r}")
     cfg = config or EKFConfig()
     if recording.eta_true is None:
-        raise ConfigError(f"{recording.path or 'recording'}: no true efficiency (eta1..eta4) "
-                          "to calibrate the EKF's sd against")
+        raise ConfigError(
+            f"{recording.path or 'recording'}: no true efficiency (eta1..eta4) "
+            "to calibrate the EKF's sd against"
+        )
     est = MotorEfficiencyEKF(recording.vehicle, cfg).run(recording.without_truth())
     _, eta_true = aligned_truth(recording, est)
     sd = np.asarray(est.sd, dtype=float)
     keep = (np.asarray(est.status) != "warmup")[:, None] & np.isfinite(sd) & (sd > 0)
     if keep.sum() < 2:
-        raise ConfigError("fewer than two scored estimates with an sd; the recording is too "
-                          "short to calibrate the EKF's sd")
+        raise ConfigError(
+            "fewer than two scored estimates with an sd; the recording is too "
+            "short to calibrate the EKF's sd"
+        )
     err = np.abs(eta_true - est.eta)[keep]
     ratio = err / sd[keep]
-    return SdCalibration(float(np.quantile(ratio, coverage)), float(coverage),
-                         float(np.mean(ratio <= 1.0)), int(keep.sum()), cfg)
+    return SdCalibration(
+        float(np.quantile(ratio, coverage)),
+        float(coverage),
+        float(np.mean(ratio <= 1.0)),
+        int(keep.sum()),
+        cfg,
+    )

@@ -31,7 +31,7 @@ from estimators.cli import cli_args, estimate_series
 from estimators.median import median_series, postprocess_label
 from estimators.metrics import mean_or_none, score
 from quadfault.errors import ConfigError
-from quadfault.recording import Recording
+from quadfault.io.recording import Recording
 
 #: an excess-spike ratio IRLS / EKF is defined only when the EKF's motor-averaged excess spike
 #: exceeds this [1]: below it the EKF's transient is within its own noise and a ratio over it
@@ -61,11 +61,14 @@ class Baseline:
 
 
 #: the baselines ``reproduce`` pairs with every IRLS variant, the EKF first (the paper's)
-BASELINES = {b.name: b for b in (
-    Baseline("ekf", "q_eta", "Q_eta", (1e-4, 1e3)),
-    Baseline("rls", "forgetting", "1 - lambda", (1e-4, 0.5)),
-    Baseline("ukf", "q_eta", "Q_eta", (1e-4, 1e3)),
-)}
+BASELINES = {
+    b.name: b
+    for b in (
+        Baseline("ekf", "q_eta", "Q_eta", (1e-4, 1e3)),
+        Baseline("rls", "forgetting", "1 - lambda", (1e-4, 0.5)),
+        Baseline("ukf", "q_eta", "Q_eta", (1e-4, 1e3)),
+    )
+}
 
 
 def baseline(name: str) -> Baseline:
@@ -124,8 +127,11 @@ class Variant:
 
 #: The variants ``reproduce`` runs: the paper's estimator, the output median alone, and the
 #: improved IRLS (median plus change completion).
-VARIANTS = (Variant("paper"), Variant("median", median=21),
-            Variant("improved", improved=True, median=21))
+VARIANTS = (
+    Variant("paper"),
+    Variant("median", median=21),
+    Variant("improved", improved=True, median=21),
+)
 
 
 @dataclass(frozen=True)
@@ -161,13 +167,21 @@ class PartnerResult:
         return {b.option: b.value(self.q_eta)}
 
     def to_dict(self) -> dict:
-        return {"baseline": self.baseline, **self.option,
-                "q_eta": self.q_eta, "target_rmse": self.target_rmse, "rmse": self.rmse,
-                "excess_spike": self.excess_spike, "matched": self.matched,
-                "curve_q": list(self.curve_q), "curve_rmse": list(self.curve_rmse),
-                "curve_excess": list(self.curve_excess), "message": self.message,
-                "rule": "smallest excess spike with RMSE <= target, q >= the most "
-                        "accurate one, on the calibration flight"}
+        return {
+            "baseline": self.baseline,
+            **self.option,
+            "q_eta": self.q_eta,
+            "target_rmse": self.target_rmse,
+            "rmse": self.rmse,
+            "excess_spike": self.excess_spike,
+            "matched": self.matched,
+            "curve_q": list(self.curve_q),
+            "curve_rmse": list(self.curve_rmse),
+            "curve_excess": list(self.curve_excess),
+            "message": self.message,
+            "rule": "smallest excess spike with RMSE <= target, q >= the most "
+            "accurate one, on the calibration flight",
+        }
 
 
 def _best(points: dict, target: float):
@@ -181,9 +195,17 @@ def _best(points: dict, target: float):
     return min(points, key=lambda q: points[q][0]), False
 
 
-def choose_partner(recording: Recording, target_rmse: float, median: int = 1, *,
-                   q_range: tuple | None = None, points_per_decade: float = 3.0,
-                   refine: int = 3, evaluate=None, baseline_name: str = "ekf") -> PartnerResult:
+def choose_partner(
+    recording: Recording,
+    target_rmse: float,
+    median: int = 1,
+    *,
+    q_range: tuple | None = None,
+    points_per_decade: float = 3.0,
+    refine: int = 3,
+    evaluate=None,
+    baseline_name: str = "ekf",
+) -> PartnerResult:
     """The speed ``q`` of baseline ``baseline_name`` (the EKF's ``Q_eta`` by default) on the
     calibration ``recording`` (which holds the truth) with the smallest motor-averaged excess
     spike among those on the fast branch whose RMSE (of the output after a ``median``-row
@@ -199,16 +221,17 @@ def choose_partner(recording: Recording, target_rmse: float, median: int = 1, *,
     if not (math.isfinite(target_rmse) and target_rmse > 0):
         raise ConfigError(f"target RMSE must be positive, got {target_rmse!r}")
     if evaluate is None:
+
         def evaluate(q):
             return partner_point(recording, b.name, q, median)
+
     n = max(2, round(math.log10(hi / lo) * points_per_decade) + 1)
-    points = {float(q): evaluate(float(q)) for q in np.logspace(math.log10(lo),
-                                                                  math.log10(hi), n)}
+    points = {float(q): evaluate(float(q)) for q in np.logspace(math.log10(lo), math.log10(hi), n)}
     step = math.log10(hi / lo) / (n - 1)
     for _ in range(refine):
         step /= 2.0
         q0, _ = _best(points, target_rmse)
-        for q in (q0 * 10 ** -step, q0 * 10 ** step):
+        for q in (q0 * 10**-step, q0 * 10**step):
             if lo <= q <= hi and q not in points:
                 points[q] = evaluate(q)
     q, matched = _best(points, target_rmse)
@@ -216,14 +239,27 @@ def choose_partner(recording: Recording, target_rmse: float, median: int = 1, *,
     order = sorted(points)
     lab = f"{b.name} {b.label}"
     if matched:
-        msg = (f"{lab} = {q:.4g}: least excess spike {excess:.4f} with RMSE {rmse:.4f} <= "
-               f"{target_rmse:.4f} on the fast branch ({len(points)} evaluations)")
+        msg = (
+            f"{lab} = {q:.4g}: least excess spike {excess:.4f} with RMSE {rmse:.4f} <= "
+            f"{target_rmse:.4f} on the fast branch ({len(points)} evaluations)"
+        )
     else:
-        msg = (f"no {lab} in [{lo:.3g}, {hi:.3g}] reaches RMSE {target_rmse:.4f}; using the "
-               f"most accurate, {b.label} = {q:.4g} (RMSE {rmse:.4f})")
-    return PartnerResult(float(q), float(target_rmse), float(rmse), float(excess), matched,
-                         tuple(order), tuple(points[k][0] for k in order),
-                         tuple(points[k][1] for k in order), msg, b.name)
+        msg = (
+            f"no {lab} in [{lo:.3g}, {hi:.3g}] reaches RMSE {target_rmse:.4f}; using the "
+            f"most accurate, {b.label} = {q:.4g} (RMSE {rmse:.4f})"
+        )
+    return PartnerResult(
+        float(q),
+        float(target_rmse),
+        float(rmse),
+        float(excess),
+        matched,
+        tuple(order),
+        tuple(points[k][0] for k in order),
+        tuple(points[k][1] for k in order),
+        msg,
+        b.name,
+    )
 
 
 def ekf_point(recording: Recording, q_eta: float, median: int = 1) -> tuple[float, float]:
@@ -232,8 +268,9 @@ def ekf_point(recording: Recording, q_eta: float, median: int = 1) -> tuple[floa
     return partner_point(recording, "ekf", q_eta, median)
 
 
-def partner_point(recording: Recording, baseline_name: str, q: float,
-                  median: int = 1) -> tuple[float, float]:
+def partner_point(
+    recording: Recording, baseline_name: str, q: float, median: int = 1
+) -> tuple[float, float]:
     """``(rmse, excess_spike)``, motor averages, of the baseline at speed ``q`` with the
     output median ``median`` on ``recording``."""
     b = baseline(baseline_name)
@@ -266,8 +303,9 @@ def shared_scan(recording: Recording, baseline_name: str = "ekf"):
 
 def irls_target(recording: Recording, variant: Variant) -> float:
     """The IRLS variant's motor-averaged RMSE on ``recording``."""
-    return float(np.mean(score(recording, estimate_series(recording, "irls",
-                                                          **variant.irls_args())).rmse))
+    return float(
+        np.mean(score(recording, estimate_series(recording, "irls", **variant.irls_args())).rmse)
+    )
 
 
 def run_pair(recording: Recording, variant: Variant, q_eta: float) -> dict:
@@ -284,13 +322,14 @@ def run_pairs(recording: Recording, variant: Variant, tunings: dict) -> dict:
     names = list(tunings)
     first = variant.key("ekf" if "ekf" in tunings else names[0])
     jobs = [(variant.irls_key, "irls", variant.irls_args(), first)]
-    jobs += [(variant.key(b), b, variant.partner_args(b, q), variant.irls_key)
-             for b, q in tunings.items()]
+    jobs += [
+        (variant.key(b), b, variant.partner_args(b, q), variant.irls_key)
+        for b, q in tunings.items()
+    ]
     out = {}
     for key, name, kw, partner in jobs:
         series = estimate_series(recording, name, **kw)
-        extra = {"postprocess": series.postprocess, "partner": partner,
-                 "cli": cli_args(name, **kw)}
+        extra = {"postprocess": series.postprocess, "partner": partner, "cli": cli_args(name, **kw)}
         if name != "irls":
             option = baseline(name).option
             extra[option] = kw[option]
@@ -326,6 +365,20 @@ def pair_ratios(scenarios: dict, variants=VARIANTS, baseline_name: str = "ekf") 
     return out
 
 
-__all__ = ["BASELINES", "MIN_EXCESS", "VARIANTS", "Baseline", "PartnerResult", "Variant",
-           "baseline", "choose_partner", "ekf_point", "irls_target", "pair_ratios",
-           "partner_point", "run_pair", "run_pairs", "shared_scan"]
+__all__ = [
+    "BASELINES",
+    "MIN_EXCESS",
+    "VARIANTS",
+    "Baseline",
+    "PartnerResult",
+    "Variant",
+    "baseline",
+    "choose_partner",
+    "ekf_point",
+    "irls_target",
+    "pair_ratios",
+    "partner_point",
+    "run_pair",
+    "run_pairs",
+    "shared_scan",
+]

@@ -14,23 +14,33 @@ from quadfault.fileio import atomic_write_text
 #: Estimator keys of a scenario block: the paper pair (the contract's ``irls``/``ekf``) and the
 #: beyond-the-paper IRLS variants, each with its partners (same post-processing): the EKF, RLS
 #: and the UKF (the figures show the IRLS and EKF keys, :data:`figures.ORDER`).
-ESTIMATOR_KEYS = tuple(f"{e}{v}" for v in ("", "_median", "_improved")
-                       for e in ("irls", "ekf", "rls", "ukf"))
-STATIC_FIGURES = ("rmse_std_bars.png", "spikes_per_motor.png", "calibration_curve.png",
-                  "irls_convergence.png", "kkt_convergence.png")
+ESTIMATOR_KEYS = tuple(
+    f"{e}{v}" for v in ("", "_median", "_improved") for e in ("irls", "ekf", "rls", "ukf")
+)
+STATIC_FIGURES = (
+    "rmse_std_bars.png",
+    "spikes_per_motor.png",
+    "calibration_curve.png",
+    "irls_convergence.png",
+    "kkt_convergence.png",
+)
 
 
 def table(scenarios: dict) -> str:
     """Markdown table: motor-averaged RMSE, std, spike (and excess spike), wall time."""
-    lines = ["| scenario | estimator | RMSE | std | spike | excess spike | 1-sigma coverage "
-             "| seconds |", "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| scenario | estimator | RMSE | std | spike | excess spike | 1-sigma coverage | seconds |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for name, per in scenarios.items():
         for est in (k for k in ESTIMATOR_KEYS if k in per):
             s = per[est]
-            lines.append(f"| {name} | {est} | {_f(np.mean(s['rmse']))} | "
-                         f"{_f(np.mean(s['std']))} | {_f(mean_or_none(s['spike']))} | "
-                         f"{_f(mean_or_none(s['excess_spike']))} | "
-                         f"{_f(mean_or_none(s.get('coverage')), 2)} | {s['seconds']:.2f} |")
+            lines.append(
+                f"| {name} | {est} | {_f(np.mean(s['rmse']))} | "
+                f"{_f(np.mean(s['std']))} | {_f(mean_or_none(s['spike']))} | "
+                f"{_f(mean_or_none(s['excess_spike']))} | "
+                f"{_f(mean_or_none(s.get('coverage')), 2)} | {s['seconds']:.2f} |"
+            )
     return "\n".join(lines)
 
 
@@ -54,27 +64,37 @@ def _spike_rows(scenarios: dict) -> list[str]:
             sp = per[est]["spike"]
             if sp is None:
                 continue
-            rows.append(f"| {name} | {est} | " + " | ".join(_f(v) for v in sp)
-                        + f" | {_f(mean_or_none(sp))} |")
+            rows.append(
+                f"| {name} | {est} | "
+                + " | ".join(_f(v) for v in sp)
+                + f" | {_f(mean_or_none(sp))} |"
+            )
     return rows
 
 
 def _fdi_rows(fdi: dict) -> list[str]:
-    rows = ["| scenario | estimator | faults detected | missed | false alarms "
-            "| worst latency [s] |", "|---|---|---|---|---|---|"]
+    rows = [
+        "| scenario | estimator | faults detected | missed | false alarms | worst latency [s] |",
+        "|---|---|---|---|---|---|",
+    ]
     for name, per in fdi.items():
         for est in (k for k in ESTIMATOR_KEYS if k in per):
             s = per[est]
             lat = [x for x in s["latencies"] if x is not None]
             worst = _f(max(lat) if lat else None, 3)
-            rows.append(f"| {name} | {est} | {s['detected']}/{len(s['latencies'])} | "
-                        f"{s['missed']} | {s['false_alarms']} | {worst} |")
+            rows.append(
+                f"| {name} | {est} | {s['detected']}/{len(s['latencies'])} | "
+                f"{s['missed']} | {s['false_alarms']} | {worst} |"
+            )
     return rows
 
 
 def _paper_rows(scenarios: dict, paper: dict) -> list[str]:
-    rows = ["| scenario | IRLS RMSE (ours / paper) | EKF RMSE (ours / paper) | "
-            "IRLS spike (ours / paper) | EKF spike (ours / paper) |", "|---|---|---|---|---|"]
+    rows = [
+        "| scenario | IRLS RMSE (ours / paper) | EKF RMSE (ours / paper) | "
+        "IRLS spike (ours / paper) | EKF spike (ours / paper) |",
+        "|---|---|---|---|---|",
+    ]
     for name, per in scenarios.items():
         cells = []
         for key in ("rmse", "spike"):
@@ -90,8 +110,10 @@ def _paper_rows(scenarios: dict, paper: dict) -> list[str]:
 
 def _curve_note(cal: dict) -> str:
     k = int(np.argmin(cal["curve_rmse"]))
-    return (f"The EKF's best RMSE on the calibration flight is {cal['curve_rmse'][k]:.4f} at "
-            f"Q_eta = {cal['curve_q'][k]:.3g} (calibration_curve.png).")
+    return (
+        f"The EKF's best RMSE on the calibration flight is {cal['curve_rmse'][k]:.4f} at "
+        f"Q_eta = {cal['curve_q'][k]:.3g} (calibration_curve.png)."
+    )
 
 
 def _pair_lines(doc: dict) -> list[str]:
@@ -105,12 +127,16 @@ def _pair_lines(doc: dict) -> list[str]:
         "curve. "
         "*irls* is the paper's estimator (reference settings); *irls_median* adds a 21-sample "
         "causal output median; *irls_improved* adds the median and the change completion "
-        "(`IRLSConfig.improved()`, docs/irls.md).", ""]
+        "(`IRLSConfig.improved()`, docs/irls.md).",
+        "",
+    ]
     for key in ("rk4", "rk4_median", "rk4_improved"):
         for suffix in ("", "/rls", "/ukf"):
             if key + suffix in cal:
-                lines += [f"* {suffix[1:] or 'ekf'} partner of {key.replace('rk4', 'irls')}: "
-                          f"{cal[key + suffix]['message']}."]
+                lines += [
+                    f"* {suffix[1:] or 'ekf'} partner of {key.replace('rk4', 'irls')}: "
+                    f"{cal[key + suffix]['message']}."
+                ]
     lines.append("")
     ratios = doc.get("baseline_ratios") or {"ekf": doc.get("ratios", {})}
     for b, per_b in ratios.items():
@@ -124,29 +150,45 @@ def _ratio_lines(ratios: dict, baseline_name: str = "ekf") -> list[str]:
     if not ratios:
         return []
     B = baseline_name.upper()
-    lines = [f"IRLS / its {B} partner:", "",
-             "| scenario | variant | spike ratio | excess-spike ratio | excess spike "
-             f"IRLS - {B} | RMSE ratio |", "|---|---|---|---|---|---|"]
+    lines = [
+        f"IRLS / its {B} partner:",
+        "",
+        "| scenario | variant | spike ratio | excess-spike ratio | excess spike "
+        f"IRLS - {B} | RMSE ratio |",
+        "|---|---|---|---|---|---|",
+    ]
     for name, per in ratios.items():
         for v, r in per.items():
-            lines.append(f"| {name} | {v} | {_f(r['spike'], 2)} | {excess_ratio_text(r)} | "
-                         f"{_f(r.get('excess_spike_difference'), 3)} | {_f(r['rmse'], 2)} |")
-    lines += ["", f"Ratios are IRLS / its {B} partner, motor averages (the paper's claim "
-              "against the EKF: spike ratio <= 0.5 at equal accuracy; above 1 the IRLS "
-              f"loses). n/a: the {B}'s excess spike is at most {MIN_EXCESS:g}, within its "
-              f"noise, so a ratio over it says nothing; the difference IRLS - {B} is given "
-              "instead.", ""]
+            lines.append(
+                f"| {name} | {v} | {_f(r['spike'], 2)} | {excess_ratio_text(r)} | "
+                f"{_f(r.get('excess_spike_difference'), 3)} | {_f(r['rmse'], 2)} |"
+            )
+    lines += [
+        "",
+        f"Ratios are IRLS / its {B} partner, motor averages (the paper's claim "
+        "against the EKF: spike ratio <= 0.5 at equal accuracy; above 1 the IRLS "
+        f"loses). n/a: the {B}'s excess spike is at most {MIN_EXCESS:g}, within its "
+        f"noise, so a ratio over it says nothing; the difference IRLS - {B} is given "
+        "instead.",
+        "",
+    ]
     return lines
 
 
 def _diverged_lines(doc: dict) -> list[str]:
-    bad = [f"{n} ({key.split('_')[0] if key != 'flights' else 'rk4'})"
-           for key in ("flights", "reference_mode_flights")
-           for n, fl in doc.get(key, {}).items() if fl["diverged"]]
+    bad = [
+        f"{n} ({key.split('_')[0] if key != 'flights' else 'rk4'})"
+        for key in ("flights", "reference_mode_flights")
+        for n, fl in doc.get(key, {}).items()
+        if fl["diverged"]
+    ]
     if not bad:
         return ["Every flight stayed under control (`flights` in metrics.json).", ""]
-    return [f"**Warning: these flights lost control; their numbers are meaningless: "
-            f"{', '.join(bad)}.**", ""]
+    return [
+        f"**Warning: these flights lost control; their numbers are meaningless: "
+        f"{', '.join(bad)}.**",
+        "",
+    ]
 
 
 def write_figures(out: Path, doc: dict, run: dict, force: bool) -> list[str]:
@@ -161,9 +203,11 @@ def write_figures(out: Path, doc: dict, run: dict, force: bool) -> list[str]:
             written.append(path.name)
     figures.plot_rmse_std(out / "rmse_std_bars.png", doc["scenarios"], force=force)
     figures.plot_spikes(out / "spikes_per_motor.png", doc["scenarios"], force=force)
-    figures.plot_calibration(out / "calibration_curve.png",
-                             {k: c for k, c in doc["config"]["calibration"].items()
-                              if "/" not in k}, force=force)
+    figures.plot_calibration(
+        out / "calibration_curve.png",
+        {k: c for k, c in doc["config"]["calibration"].items() if "/" not in k},
+        force=force,
+    )
     figures.plot_convergence(out / "irls_convergence.png", run["history"], force=force)
     figures.plot_kkt(out / "kkt_convergence.png", run["history"], force=force)
     written += list(STATIC_FIGURES)

@@ -46,14 +46,24 @@ FIGURES = ("estimates_{s}.png", "errors_{s}.png")
 #: The reference code's hard-coded results (facts sec. 6): motor-averaged RMSE / std per case
 #: and the per-motor max spikes.
 PAPER = {
-    "rmse": {"irls": {"degradation": 0.023358, "abrupt": 0.0237185, "combined": 0.02357875},
-             "ekf": {"degradation": 0.02247225, "abrupt": 0.027893, "combined": 0.02250075}},
-    "std": {"irls": {"degradation": 0.0233525, "abrupt": 0.02008725, "combined": 0.0235735},
-            "ekf": {"degradation": 0.02246, "abrupt": 0.02005375, "combined": 0.022483}},
-    "spike": {"irls": {"abrupt": [0.139575, 0.123851, 0.142402, 0.130006],
-                       "combined": [0.120609, 0.102525, 0.129096, 0.150433]},
-              "ekf": {"abrupt": [0.286273, 0.263499, 0.292192, 0.274747],
-                      "combined": [0.176225, 0.155338, 0.259303, 0.220348]}},
+    "rmse": {
+        "irls": {"degradation": 0.023358, "abrupt": 0.0237185, "combined": 0.02357875},
+        "ekf": {"degradation": 0.02247225, "abrupt": 0.027893, "combined": 0.02250075},
+    },
+    "std": {
+        "irls": {"degradation": 0.0233525, "abrupt": 0.02008725, "combined": 0.0235735},
+        "ekf": {"degradation": 0.02246, "abrupt": 0.02005375, "combined": 0.022483},
+    },
+    "spike": {
+        "irls": {
+            "abrupt": [0.139575, 0.123851, 0.142402, 0.130006],
+            "combined": [0.120609, 0.102525, 0.129096, 0.150433],
+        },
+        "ekf": {
+            "abrupt": [0.286273, 0.263499, 0.292192, 0.274747],
+            "combined": [0.176225, 0.155338, 0.259303, 0.220348],
+        },
+    },
 }
 
 
@@ -101,10 +111,18 @@ class ReproduceConfig:
     @classmethod
     def quick(cls, **changes) -> ReproduceConfig:
         """~1 minute: 12 s flights (schedule scaled) and a coarser calibration."""
-        return replace(cls(duration=12.0, calibration_duration=12.0, q_range=(1e-3, 10.0),
-                           bisection_steps=4, partner_q_range=(1e-3, 1e3),
-                           partner_points_per_decade=2.0, partner_refine=2),
-                       **changes)
+        return replace(
+            cls(
+                duration=12.0,
+                calibration_duration=12.0,
+                q_range=(1e-3, 10.0),
+                bisection_steps=4,
+                partner_q_range=(1e-3, 1e3),
+                partner_points_per_decade=2.0,
+                partner_refine=2,
+            ),
+            **changes,
+        )
 
     @property
     def variants(self) -> tuple:
@@ -127,7 +145,7 @@ def sim_config(mode: str, name: str):
     2), a motor at eta = 0.5 cannot hold hover plus the circle, and the abrupt and combined
     flights lose control during the first fault.
     """
-    from quadfault.simulator import SimConfig
+    from quadfault.sim.simulator import SimConfig
 
     if mode == "reference":
         return SimConfig.reference()
@@ -135,11 +153,12 @@ def sim_config(mode: str, name: str):
 
 
 def _fly(name: str, duration: float, seed: int, mode: str, sigma: float):
-    from quadfault.scenarios import named_scenario
-    from quadfault.simulator import simulate
+    from quadfault.model.scenarios import named_scenario
+    from quadfault.sim.simulator import simulate
 
-    return simulate(named_scenario(name, duration), config=sim_config(mode, name), seed=seed,
-                    thrust_noise=sigma)
+    return simulate(
+        named_scenario(name, duration), config=sim_config(mode, name), seed=seed, thrust_noise=sigma
+    )
 
 
 def flight_check(rec) -> dict:
@@ -148,8 +167,11 @@ def flight_check(rec) -> dict:
     f = np.abs(rec.thrust_cmd).max(axis=1)
     wild = float(np.mean(f > 5.0 * rec.vehicle.hover_thrust))
     drift = float(np.max(np.linalg.norm(rec.position - rec.position[0], axis=1)))
-    return {"max_command": float(f.max()), "max_distance": drift,
-            "diverged": bool(wild > 0.01 or drift > 10.0)}
+    return {
+        "max_command": float(f.max()),
+        "max_distance": drift,
+        "diverged": bool(wild > 0.01 or drift > 10.0),
+    }
 
 
 def _calibration_job(mode: str, cfg: ReproduceConfig) -> dict:
@@ -158,15 +180,29 @@ def _calibration_job(mode: str, cfg: ReproduceConfig) -> dict:
     ``reference``: the paper pair's EKF matched to the IRLS's RMSE, as in the paper
     (:func:`estimators.paper.calibration.calibrate_q_eta`)."""
     from estimators.paper.calibration import calibrate_q_eta
-    from estimators.paper.pairing import (BASELINES, VARIANTS, choose_partner, irls_target,
-                                          shared_scan)
+    from estimators.paper.pairing import (
+        BASELINES,
+        VARIANTS,
+        choose_partner,
+        irls_target,
+        shared_scan,
+    )
 
-    rec = _fly(cfg.calibration_scenario, cfg.calibration_duration, cfg.calibration_seed, mode,
-               cfg.thrust_noise)
+    rec = _fly(
+        cfg.calibration_scenario,
+        cfg.calibration_duration,
+        cfg.calibration_seed,
+        mode,
+        cfg.thrust_noise,
+    )
     if mode == "reference":
-        cal = calibrate_q_eta(rec, irls_target(rec, VARIANTS[0]), q_range=cfg.q_range,
-                              points_per_decade=cfg.points_per_decade,
-                              bisection_steps=cfg.bisection_steps)
+        cal = calibrate_q_eta(
+            rec,
+            irls_target(rec, VARIANTS[0]),
+            q_range=cfg.q_range,
+            points_per_decade=cfg.points_per_decade,
+            bisection_steps=cfg.bisection_steps,
+        )
         return {"reference": cal}
     targets = {v.name: irls_target(rec, v) for v in cfg.variants}
     out = {}
@@ -175,9 +211,15 @@ def _calibration_job(mode: str, cfg: ReproduceConfig) -> dict:
         q_range = cfg.partner_q_range if BASELINES[b].option == "q_eta" else None
         for v in cfg.variants:
             out[calibration_key(v.name, b)] = choose_partner(
-                rec, targets[v.name], v.median, q_range=q_range,
-                points_per_decade=cfg.partner_points_per_decade, refine=cfg.partner_refine,
-                evaluate=scan(v.median), baseline_name=b)
+                rec,
+                targets[v.name],
+                v.median,
+                q_range=q_range,
+                points_per_decade=cfg.partner_points_per_decade,
+                refine=cfg.partner_refine,
+                evaluate=scan(v.median),
+                baseline_name=b,
+            )
     return out
 
 
@@ -188,8 +230,9 @@ def calibration_key(variant: str, baseline_name: str) -> str:
     return key if baseline_name == "ekf" else f"{key}/{baseline_name}"
 
 
-def _scenario_job(mode: str, name: str, cfg: ReproduceConfig, tunings: dict,
-                  keep_series: bool) -> dict:
+def _scenario_job(
+    mode: str, name: str, cfg: ReproduceConfig, tunings: dict, keep_series: bool
+) -> dict:
     """Fly one scenario; run and score every variant's pairs (``tunings``: variant name ->
     {baseline: its partner's speed q}; the reference mode runs the paper's EKF pair only)."""
     from estimators.fdi import detect, evaluate
@@ -197,8 +240,14 @@ def _scenario_job(mode: str, name: str, cfg: ReproduceConfig, tunings: dict,
     from estimators.paper.pairing import VARIANTS, run_pairs
 
     rec = _fly(name, cfg.duration, cfg.seed, mode, cfg.thrust_noise)
-    out = {"mode": mode, "name": name, "scores": {}, "extra": {}, "fdi": {},
-           "flight": flight_check(rec)}
+    out = {
+        "mode": mode,
+        "name": name,
+        "scores": {},
+        "extra": {},
+        "fdi": {},
+        "flight": flight_check(rec),
+    }
     series = {}
     for v in (x for x in VARIANTS if x.name in tunings):
         for key, (s, extra) in run_pairs(rec, v, tunings[v.name]).items():
@@ -250,26 +299,40 @@ def reproduce(cfg: ReproduceConfig, progress: bool = False) -> dict:
     start = time.perf_counter()
     _warm_up()
     cal_jobs = [(m, cfg) for m in modes]
-    n_jobs = len(cal_jobs) + len(SCENARIOS) + (len(REFERENCE_SCENARIOS) if cfg.reference_mode
-                                               else 0)
-    bar = progress_bar(total=n_jobs + 1, desc="reproduce", unit="job",
-                       disable=None if progress else True)
+    n_jobs = (
+        len(cal_jobs) + len(SCENARIOS) + (len(REFERENCE_SCENARIOS) if cfg.reference_mode else 0)
+    )
+    bar = progress_bar(
+        total=n_jobs + 1, desc="reproduce", unit="job", disable=None if progress else True
+    )
     try:
-        cals = {k: c for block in _map(_calibration_job, cal_jobs, cfg.workers, bar)
-                for k, c in block.items()}
-        q = {v.name: {b: cals[calibration_key(v.name, b)].q_eta for b in cfg.baselines}
-             for v in cfg.variants}
+        cals = {
+            k: c
+            for block in _map(_calibration_job, cal_jobs, cfg.workers, bar)
+            for k, c in block.items()
+        }
+        q = {
+            v.name: {b: cals[calibration_key(v.name, b)].q_eta for b in cfg.baselines}
+            for v in cfg.variants
+        }
         jobs = [("rk4", s, cfg, q, True) for s in SCENARIOS]
         if cfg.reference_mode:
-            jobs += [("reference", s, cfg, {"paper": {"ekf": cals["reference"].q_eta}}, False)
-                     for s in REFERENCE_SCENARIOS]
+            jobs += [
+                ("reference", s, cfg, {"paper": {"ekf": cals["reference"].q_eta}}, False)
+                for s in REFERENCE_SCENARIOS
+            ]
         results = _map(_scenario_job, jobs, cfg.workers, bar)
         history = irls_history(cfg)
         bar.update(1)
     finally:
         bar.close()
-    return {"config": cfg, "calibration": cals,
-            "results": results, "history": history, "seconds": time.perf_counter() - start}
+    return {
+        "config": cfg,
+        "calibration": cals,
+        "results": results,
+        "history": history,
+        "seconds": time.perf_counter() - start,
+    }
 
 
 def irls_history(cfg: ReproduceConfig) -> dict:
@@ -297,19 +360,48 @@ def irls_history(cfg: ReproduceConfig) -> dict:
     # first round of the same window, from x0 = 0.5, keeping the iterates (x_history)
     sl = slice(k0, k_end + 1)
     f = np.clip(rec.thrust_cmd[sl], 0.0, rec.vehicle.rotor_max_thrust)
-    seg = segment_terms(rec.vehicle, rec.t[sl], rec.position[sl], rec.velocity[sl],
-                        rec.rotation[sl], rec.omega[sl], f, icfg.segment_weights)
+    seg = segment_terms(
+        rec.vehicle,
+        rec.t[sl],
+        rec.position[sl],
+        rec.velocity[sl],
+        rec.rotation[sl],
+        rec.omega[sl],
+        f,
+        icfg.segment_weights,
+    )
     e = seg.c + 2.0 * (seg.b @ x_prev) + np.einsum("snm,n,m->s", seg.H, x_prev, x_prev)  # eq. 26
-    w, _ = mad_weights(e, z_soft=icfg.z_soft, power=icfg.soft_power, z_hard=icfg.z_hard,
-                       hard_drop=icfg.hard_drop, w_min=icfg.w_min, mad_eps=icfg.mad_eps)
+    w, _ = mad_weights(
+        e,
+        z_soft=icfg.z_soft,
+        power=icfg.soft_power,
+        z_hard=icfg.z_hard,
+        hard_drop=icfg.hard_drop,
+        w_min=icfg.w_min,
+        mad_eps=icfg.mad_eps,
+    )
     JGJ = np.einsum("s,snm->nm", w, seg.H) + icfg.gamma * np.eye(4)
     x0 = np.full(4, 0.5)
-    ipm = solve_box_qp(JGJ, w @ seg.b - icfg.gamma * x_prev, icfg.lower, icfg.upper, x0,
-                       icfg.ipm, record_history=True)
-    return {"t": float(rec.t[k_end]), "truth": rec.eta_true[k_end].tolist(),
-            "x_history": np.vstack((x0, ipm.x_history)), "x_prev": x_prev.tolist(),
-            "dual": d.dual_history, "cent": d.cent_history, "gap": d.gap_history,
-            "residual": d.residual_history, "eta": last.eta.tolist()}
+    ipm = solve_box_qp(
+        JGJ,
+        w @ seg.b - icfg.gamma * x_prev,
+        icfg.lower,
+        icfg.upper,
+        x0,
+        icfg.ipm,
+        record_history=True,
+    )
+    return {
+        "t": float(rec.t[k_end]),
+        "truth": rec.eta_true[k_end].tolist(),
+        "x_history": np.vstack((x0, ipm.x_history)),
+        "x_prev": x_prev.tolist(),
+        "dual": d.dual_history,
+        "cent": d.cent_history,
+        "gap": d.gap_history,
+        "residual": d.residual_history,
+        "eta": last.eta.tolist(),
+    }
 
 
 # ---------------------------------------------------------------------------------------
@@ -317,34 +409,51 @@ def irls_history(cfg: ReproduceConfig) -> dict:
 def metrics_document(run: dict) -> dict:
     """``metrics.json``: the contract's ``scenarios`` block plus config, reference mode, FDI."""
     cfg: ReproduceConfig = run["config"]
-    doc = {"scenarios": {}, "reference_mode": {"scenarios": {}}, "fdi": {},
-           "reference_mode_fdi": {}, "flights": {}, "reference_mode_flights": {}}
+    doc = {
+        "scenarios": {},
+        "reference_mode": {"scenarios": {}},
+        "fdi": {},
+        "reference_mode_fdi": {},
+        "flights": {},
+        "reference_mode_flights": {},
+    }
     for r in run["results"]:
         ref = r["mode"] == "reference"
         scen = doc["reference_mode"]["scenarios"] if ref else doc["scenarios"]
         fdi = doc["reference_mode_fdi"] if ref else doc["fdi"]
-        scen[r["name"]] = {k: {**v.to_contract(), **r["extra"][k]}
-                           for k, v in r["scores"].items()}
+        scen[r["name"]] = {k: {**v.to_contract(), **r["extra"][k]} for k, v in r["scores"].items()}
         fdi[r["name"]] = r["fdi"]
         doc["reference_mode_flights" if ref else "flights"][r["name"]] = r["flight"]
     if not cfg.reference_mode:
         del doc["reference_mode"], doc["reference_mode_fdi"], doc["reference_mode_flights"]
     doc["ratios"] = pair_ratios(doc["scenarios"])
-    doc["baseline_ratios"] = {b: pair_ratios(doc["scenarios"], baseline_name=b)
-                              for b in cfg.baselines}
-    doc["spike_ratio"] = {n: {v: r["spike"] for v, r in per.items() if r["spike"] is not None}
-                          for n, per in doc["ratios"].items()}
-    doc["config"] = {**asdict(cfg), "q_range": list(cfg.q_range),
-                     "partner_q_range": list(cfg.partner_q_range), "integrator": "rk4",
-                     "baselines": list(cfg.baselines),
-                     "upper_thrust_limit": "only in clipping (the paper has none)",
-                     "align": "end", "ekf_q_eta": run["calibration"]["rk4"].q_eta,
-                     "ekf_q_eta_improved": (run["calibration"]["rk4_improved"].q_eta
-                                            if "rk4_improved" in run["calibration"] else None),
-                     "ekf_q_eta_median": (run["calibration"]["rk4_median"].q_eta
-                                          if "rk4_median" in run["calibration"] else None),
-                     "calibration": {m: c.to_dict() for m, c in run["calibration"].items()},
-                     "seconds_total": run["seconds"]}
+    doc["baseline_ratios"] = {
+        b: pair_ratios(doc["scenarios"], baseline_name=b) for b in cfg.baselines
+    }
+    doc["spike_ratio"] = {
+        n: {v: r["spike"] for v, r in per.items() if r["spike"] is not None}
+        for n, per in doc["ratios"].items()
+    }
+    doc["config"] = {
+        **asdict(cfg),
+        "q_range": list(cfg.q_range),
+        "partner_q_range": list(cfg.partner_q_range),
+        "integrator": "rk4",
+        "baselines": list(cfg.baselines),
+        "upper_thrust_limit": "only in clipping (the paper has none)",
+        "align": "end",
+        "ekf_q_eta": run["calibration"]["rk4"].q_eta,
+        "ekf_q_eta_improved": (
+            run["calibration"]["rk4_improved"].q_eta
+            if "rk4_improved" in run["calibration"]
+            else None
+        ),
+        "ekf_q_eta_median": (
+            run["calibration"]["rk4_median"].q_eta if "rk4_median" in run["calibration"] else None
+        ),
+        "calibration": {m: c.to_dict() for m, c in run["calibration"].items()},
+        "seconds_total": run["seconds"],
+    }
     doc["paper"] = PAPER
     return doc
 
@@ -356,22 +465,42 @@ def planned_files(out: Path) -> list[Path]:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--out", default="quadfault-reproduce",
-                   help="output folder (default ./quadfault-reproduce; created if missing)")
-    p.add_argument("--quick", action="store_true",
-                   help="12 s flights and a coarser calibration (about a minute)")
+    p.add_argument(
+        "--out",
+        default="quadfault-reproduce",
+        help="output folder (default ./quadfault-reproduce; created if missing)",
+    )
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="12 s flights and a coarser calibration (about a minute)",
+    )
     p.add_argument("--force", action="store_true", help="overwrite existing output files")
-    p.add_argument("--seed", type=int, default=0,
-                   help="seed of the scored flights (calibration flight: seed + 1000)")
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="seed of the scored flights (calibration flight: seed + 1000)",
+    )
     p.add_argument("--workers", type=int, default=2, help="parallel processes (default 2)")
-    p.add_argument("--no-reference-mode", action="store_true",
-                   help="skip the flights of the reference integration mode")
-    p.add_argument("--baselines", default="ekf,rls,ukf", metavar="NAMES",
-                   help="comma-separated estimators each IRLS variant is paired with, each "
-                        "tuned on the calibration flight (default ekf,rls,ukf; ekf always)")
-    p.add_argument("--no-improved", action="store_true",
-                   help="skip the IRLS variants beyond the paper (output median, "
-                        "IRLSConfig.improved()) and their EKF partners")
+    p.add_argument(
+        "--no-reference-mode",
+        action="store_true",
+        help="skip the flights of the reference integration mode",
+    )
+    p.add_argument(
+        "--baselines",
+        default="ekf,rls,ukf",
+        metavar="NAMES",
+        help="comma-separated estimators each IRLS variant is paired with, each "
+        "tuned on the calibration flight (default ekf,rls,ukf; ekf always)",
+    )
+    p.add_argument(
+        "--no-improved",
+        action="store_true",
+        help="skip the IRLS variants beyond the paper (output median, "
+        "IRLSConfig.improved()) and their EKF partners",
+    )
 
 
 def run(args) -> int:
@@ -386,35 +515,53 @@ def run(args) -> int:
     if out.exists():
         check_writable(planned_files(out), force=args.force)
     base = ReproduceConfig.quick() if args.quick else ReproduceConfig()
-    cfg = replace(base, seed=args.seed, workers=args.workers,
-                  baselines=baselines_of(getattr(args, "baselines", "ekf,rls,ukf")),
-                  reference_mode=not args.no_reference_mode,
-                  improved=not getattr(args, "no_improved", False))
+    cfg = replace(
+        base,
+        seed=args.seed,
+        workers=args.workers,
+        baselines=baselines_of(getattr(args, "baselines", "ekf,rls,ukf")),
+        reference_mode=not args.no_reference_mode,
+        improved=not getattr(args, "no_improved", False),
+    )
     result = reproduce(cfg, progress=not args.quiet and enabled())
     out.mkdir(parents=True, exist_ok=True)
     doc = metrics_document(result)
-    atomic_write_text(out / "metrics.json", json.dumps(doc, indent=2, default=_json) + "\n",
-                      force=args.force)
+    atomic_write_text(
+        out / "metrics.json", json.dumps(doc, indent=2, default=_json) + "\n", force=args.force
+    )
     write_report(out, doc, result, force=args.force)
-    print(f"quadfault reproduce ({'quick' if args.quick else 'full'}, seed {cfg.seed}, "
-          f"integrator rk4, EKF Q_eta = {doc['config']['ekf_q_eta']:.4g})")
+    print(
+        f"quadfault reproduce ({'quick' if args.quick else 'full'}, seed {cfg.seed}, "
+        f"integrator rk4, EKF Q_eta = {doc['config']['ekf_q_eta']:.4g})"
+    )
     print(table(doc["scenarios"]))
     for b, ratios in doc["baseline_ratios"].items():
         for name, per in ratios.items():
-            pairs = [f"{v} spike {r['spike']:.2f}x, excess {excess_ratio_text(r, 'x')}, "
-                     f"RMSE {r['rmse']:.2f}x" for v, r in per.items() if r["spike"] is not None]
+            pairs = [
+                f"{v} spike {r['spike']:.2f}x, excess {excess_ratio_text(r, 'x')}, "
+                f"RMSE {r['rmse']:.2f}x"
+                for v, r in per.items()
+                if r["spike"] is not None
+            ]
             if pairs:
                 print(f"IRLS/{b.upper()} {name}: " + "; ".join(pairs))
-    bad = [f"{n} ({m})" for m, key in (("rk4", "flights"), ("reference", "reference_mode_flights"))
-           for n, fl in doc.get(key, {}).items() if fl["diverged"]]
+    bad = [
+        f"{n} ({m})"
+        for m, key in (("rk4", "flights"), ("reference", "reference_mode_flights"))
+        for n, fl in doc.get(key, {}).items()
+        if fl["diverged"]
+    ]
     if bad:
-        print(f"WARNING: flights that lost control (their numbers are meaningless): "
-              f"{', '.join(bad)}")
+        print(
+            f"WARNING: flights that lost control (their numbers are meaningless): {', '.join(bad)}"
+        )
     if cfg.reference_mode:
         print("\nreference integration mode (the authors' Euler step):")
         print(table(doc["reference_mode"]["scenarios"]))
-    print(f"\nwrote {out / 'metrics.json'}, {out / 'report.md'} and figures "
-          f"({result['seconds']:.0f} s)")
+    print(
+        f"\nwrote {out / 'metrics.json'}, {out / 'report.md'} and figures "
+        f"({result['seconds']:.0f} s)"
+    )
     return 0
 
 
@@ -425,8 +572,9 @@ def baselines_of(text: str) -> tuple:
     names = [x.strip() for x in str(text).split(",") if x.strip()]
     bad = [x for x in names if x not in BASELINES]
     if bad:
-        raise ConfigError(f"--baselines: unknown {', '.join(map(repr, bad))}; choose from "
-                          f"{', '.join(BASELINES)}")
+        raise ConfigError(
+            f"--baselines: unknown {', '.join(map(repr, bad))}; choose from {', '.join(BASELINES)}"
+        )
     return ("ekf",) + tuple(dict.fromkeys(x for x in names if x != "ekf"))
 
 

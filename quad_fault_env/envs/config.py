@@ -1,8 +1,8 @@
 """Parameters of the environment that are not physics: actions, reward, termination, resets.
 
-The physics parameters live in the core package (:class:`quadfault.vehicle.Vehicle`,
-:class:`quadfault.motors.MotorModel`, :class:`quadfault.simulator.SensorNoise`,
-:class:`quadfault.scenarios.Scenario`); these dataclasses say how the agent sees and drives it.
+The physics parameters live in the core package (:class:`quadfault.model.vehicle.Vehicle`,
+:class:`quadfault.model.motors.MotorModel`, :class:`quadfault.sim.simulator.SensorNoise`,
+:class:`quadfault.model.scenarios.Scenario`); these dataclasses say how the agent sees and drives it.
 """
 
 from __future__ import annotations
@@ -20,12 +20,12 @@ from quadfault.jit import jit
 
 ACTION_MODES = ("motor", "residual", "wrench")
 #: how a wrench becomes rotor commands: the nominal allocation inverse, or the estimate-aware
-#: allocation (quadfault.allocation) with the observation's estimate
+#: allocation (quadfault.model.allocation) with the observation's estimate
 ALLOCATIONS = ("nominal", "estimate-aware")
 ESTIMATOR_RATES = ("physics", "control")
 OBSERVATION_KINDS = ("flat", "dict")
 TERMINATION_REASONS = ("crash", "out_of_bounds", "excessive_tilt", "non_finite")
-#: trajectories of random scenarios (``quadfault.scenarios.random_scenario``)
+#: trajectories of random scenarios (``quadfault.model.scenarios.random_scenario``)
 RANDOM_TRAJECTORIES = ("random", "circle", "hover", "lissajous")
 #: what ``info`` holds (the single and the vector env): ``"light"`` the keys of
 #: :func:`light_info` alone, ``"full"`` every diagnostic as well
@@ -48,15 +48,20 @@ def require_full_info(env, reader: str) -> None:
     """A one-line :class:`ConfigError` when ``env`` (a QuadFault environment, possibly
     wrapped) gives the light ``info`` and ``reader`` reads the full one."""
     if getattr(getattr(env, "unwrapped", env), "info_level", "full") != "full":
-        raise ConfigError(f"{reader} reads the full info (the measurement stream and the "
-                          f"truth); make the environment with info='full'")
+        raise ConfigError(
+            f"{reader} reads the full info (the measurement stream and the "
+            f"truth); make the environment with info='full'"
+        )
 
 
 def keywords_of(init) -> tuple:
     """The keyword names a constructor takes (``self`` and ``*args`` / ``**kwargs`` left out)."""
     kinds = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
-    return tuple(name for name, p in inspect.signature(init).parameters.items()
-                 if p.kind in kinds and name != "self")
+    return tuple(
+        name
+        for name, p in inspect.signature(init).parameters.items()
+        if p.kind in kinds and name != "self"
+    )
 
 
 def _closest(word, valid) -> str | None:
@@ -71,8 +76,11 @@ def check_keywords(kwargs, valid, owner: str) -> None:
     for key in kwargs:
         if key not in valid:
             close = _closest(key, valid)
-            hint = (f"did you mean {close!r}?" if close
-                    else f"valid keywords: {', '.join(sorted(valid))}")
+            hint = (
+                f"did you mean {close!r}?"
+                if close
+                else f"valid keywords: {', '.join(sorted(valid))}"
+            )
             raise ConfigError(f"{owner}: unknown keyword {key!r}; {hint}")
 
 
@@ -83,8 +91,7 @@ def check_choice(name: str, value, valid: tuple):
         return value
     close = _closest(value, valid) if isinstance(value, str) else None
     hint = f"; did you mean {close!r}?" if close else ""
-    raise ConfigError(f"{name} must be one of {', '.join(map(repr, valid))}, "
-                      f"got {value!r}{hint}")
+    raise ConfigError(f"{name} must be one of {', '.join(map(repr, valid))}, got {value!r}{hint}")
 
 
 def checked_keywords(init):
@@ -104,8 +111,9 @@ def _check_nonnegative(obj, names):
     for name in names:
         value = getattr(obj, name)
         if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-            raise ConfigError(f"{type(obj).__name__}.{name} must be a finite number >= 0, "
-                              f"got {value!r}")
+            raise ConfigError(
+                f"{type(obj).__name__}.{name} must be a finite number >= 0, got {value!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -136,26 +144,42 @@ class ActionConfig:
         _check_nonnegative(self, ("residual_scale",))
         ms = tuple(float(x) for x in self.moment_scale)
         if len(ms) != 3 or any(not (math.isfinite(x) and x > 0) for x in ms):
-            raise ConfigError(f"moment_scale must be three positive numbers [N m], "
-                              f"got {self.moment_scale!r}")
+            raise ConfigError(
+                f"moment_scale must be three positive numbers [N m], got {self.moment_scale!r}"
+            )
         object.__setattr__(self, "moment_scale", ms)
 
-    def commands(self, action: np.ndarray, vehicle, f_ctrl=None, eta_hat=None,
-                 compensate: bool = False, allocator=None) -> np.ndarray:
+    def commands(
+        self,
+        action: np.ndarray,
+        vehicle,
+        f_ctrl=None,
+        eta_hat=None,
+        compensate: bool = False,
+        allocator=None,
+    ) -> np.ndarray:
         """Rotor thrust commands [N] for checked actions ``(..., 4)`` (one vehicle or a
         batch); ``f_ctrl`` the geometric controller's commands [N] (residual mode), divided by
         ``eta_hat`` (floored at 0.1) with ``compensate``. With ``allocator`` (a
-        :class:`~quadfault.allocation.EstimateAwareAllocator`) the controller's wrench
+        :class:`~quadfault.model.allocation.EstimateAwareAllocator`) the controller's wrench
         (residual mode) or the agent's (wrench mode) is allocated with ``eta_hat`` instead,
         giving up yaw first when the rotors cannot realise it."""
         f_max = vehicle.rotor_max_thrust
         if self.mode == "motor":
             f = 0.5 * (action + 1.0) * f_max
         elif self.mode == "wrench":
-            wrench = np.concatenate((0.5 * (action[..., :1] + 1.0) * vehicle.n_rotors * f_max,
-                                     action[..., 1:] * np.asarray(self.moment_scale)), axis=-1)
-            f = (vehicle.rotor_thrust(wrench) if allocator is None
-                 else _allocated(allocator, wrench, eta_hat))
+            wrench = np.concatenate(
+                (
+                    0.5 * (action[..., :1] + 1.0) * vehicle.n_rotors * f_max,
+                    action[..., 1:] * np.asarray(self.moment_scale),
+                ),
+                axis=-1,
+            )
+            f = (
+                vehicle.rotor_thrust(wrench)
+                if allocator is None
+                else _allocated(allocator, wrench, eta_hat)
+            )
         else:
             if allocator is not None:  # the controller's wrench (eq. 12: w = A f_ctrl)
                 f_ctrl = _allocated(allocator, f_ctrl @ vehicle.allocation.T, eta_hat)
@@ -212,8 +236,16 @@ class RewardConfig:
     termination_penalty: float = 100.0
 
     def __post_init__(self):
-        _check_nonnegative(self, ("velocity_weight", "effort_weight", "action_weight",
-                                  "survival_bonus", "termination_penalty"))
+        _check_nonnegative(
+            self,
+            (
+                "velocity_weight",
+                "effort_weight",
+                "action_weight",
+                "survival_bonus",
+                "termination_penalty",
+            ),
+        )
         if not (math.isfinite(self.position_scale) and self.position_scale > 0):
             raise ConfigError(f"position_scale must be positive [m], got {self.position_scale!r}")
 
@@ -225,24 +257,46 @@ class RewardConfig:
         f = np.ascontiguousarray(f_cmd, dtype=float)
         a = np.zeros_like(f) if action is None else np.ascontiguousarray(action, dtype=float)
         out = np.empty(pe.shape[:-1])
-        _rewards(pe.reshape(-1, 3), np.ascontiguousarray(vel_err, dtype=float).reshape(-1, 3),
-                 f.reshape(-1, f.shape[-1]), float(f_max),
-                 np.ascontiguousarray(terminated, dtype=np.bool_).reshape(-1),
-                 a.reshape(-1, a.shape[-1]), float(self.position_scale),
-                 float(self.velocity_weight), float(self.effort_weight),
-                 float(self.action_weight), float(self.survival_bonus),
-                 float(self.termination_penalty), out.reshape(-1))
+        _rewards(
+            pe.reshape(-1, 3),
+            np.ascontiguousarray(vel_err, dtype=float).reshape(-1, 3),
+            f.reshape(-1, f.shape[-1]),
+            float(f_max),
+            np.ascontiguousarray(terminated, dtype=np.bool_).reshape(-1),
+            a.reshape(-1, a.shape[-1]),
+            float(self.position_scale),
+            float(self.velocity_weight),
+            float(self.effort_weight),
+            float(self.action_weight),
+            float(self.survival_bonus),
+            float(self.termination_penalty),
+            out.reshape(-1),
+        )
         return float(out) if out.ndim == 0 else out
 
 
 @jit
-def _rewards(pos_err, vel_err, f_cmd, f_max, terminated, action, scale, w_vel, w_effort,
-             w_action, bonus, penalty, out):
+def _rewards(
+    pos_err,
+    vel_err,
+    f_cmd,
+    f_max,
+    terminated,
+    action,
+    scale,
+    w_vel,
+    w_effort,
+    w_action,
+    bonus,
+    penalty,
+    out,
+):
     """:class:`RewardConfig` per row."""
     for i in range(out.shape[0]):
         pe, ve = pos_err[i], vel_err[i]
-        track = (math.sqrt(pe[0] * pe[0] + pe[1] * pe[1] + pe[2] * pe[2])
-                 + w_vel * math.sqrt(ve[0] * ve[0] + ve[1] * ve[1] + ve[2] * ve[2]))
+        track = math.sqrt(pe[0] * pe[0] + pe[1] * pe[1] + pe[2] * pe[2]) + w_vel * math.sqrt(
+            ve[0] * ve[0] + ve[1] * ve[1] + ve[2] * ve[2]
+        )
         effort = 0.0
         for j in range(f_cmd.shape[1]):
             u = f_cmd[i, j] / f_max
@@ -278,8 +332,9 @@ class TerminationLimits:
         if not math.isfinite(self.ground_altitude):
             raise ConfigError("ground_altitude must be finite [m]")
         if not (self.max_position_error > 0):
-            raise ConfigError(f"max_position_error must be positive [m], "
-                              f"got {self.max_position_error!r}")
+            raise ConfigError(
+                f"max_position_error must be positive [m], got {self.max_position_error!r}"
+            )
         if not (0 < self.max_tilt <= math.pi):
             raise ConfigError(f"max_tilt must be in (0, pi] [rad], got {self.max_tilt!r}")
 
@@ -292,10 +347,15 @@ class TerminationLimits:
         """:meth:`reasons` as integer codes (N,): the index of each reason in
         :data:`REASONS` (0: none)."""
         codes = np.empty(len(p), dtype=np.int64)
-        _termination_codes(np.ascontiguousarray(p, dtype=float),
-                           np.ascontiguousarray(R, dtype=float),
-                           np.ascontiguousarray(p_ref, dtype=float), float(self.ground_altitude),
-                           float(self.max_position_error), float(self.max_tilt), codes)
+        _termination_codes(
+            np.ascontiguousarray(p, dtype=float),
+            np.ascontiguousarray(R, dtype=float),
+            np.ascontiguousarray(p_ref, dtype=float),
+            float(self.ground_altitude),
+            float(self.max_position_error),
+            float(self.max_tilt),
+            codes,
+        )
         return codes
 
     def reason(self, p, R, p_ref) -> str | None:
@@ -304,8 +364,7 @@ class TerminationLimits:
 
 
 #: termination codes of :func:`_termination_codes` -> reasons
-REASONS = np.array([None, "excessive_tilt", "out_of_bounds", "crash", "non_finite"],
-                    dtype=object)
+REASONS = np.array([None, "excessive_tilt", "out_of_bounds", "crash", "non_finite"], dtype=object)
 
 
 @jit
@@ -365,8 +424,9 @@ def config_of(value, cls, name: str):
             return cls(**value)
         except TypeError:
             known = ", ".join(cls.__dataclass_fields__)
-            raise ConfigError(f"{name} has unknown keys {sorted(value)}; choose from "
-                              f"{known}") from None
+            raise ConfigError(
+                f"{name} has unknown keys {sorted(value)}; choose from {known}"
+            ) from None
     raise ConfigError(f"{name} must be a {cls.__name__} or a dict of its fields, got {value!r}")
 
 
@@ -391,8 +451,12 @@ def validate_action(action, shape: tuple, name: str = "action") -> np.ndarray:
 
 def number_at_least(value, low: float) -> bool:
     """Whether ``value`` is a finite real number >= ``low``."""
-    return (isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
-            and math.isfinite(value) and value >= low)
+    return (
+        isinstance(value, (int, float, np.integer, np.floating))
+        and not isinstance(value, bool)
+        and math.isfinite(value)
+        and value >= low
+    )
 
 
 #: keywords of ``random_faults``: (low, high) ranges and probabilities of ``random_scenario``
@@ -410,30 +474,36 @@ def check_random_faults(spec) -> dict:
     for key, value in spec.items():
         if key in _PROB_KEYS:
             if not (number_at_least(value, 0.0) and value <= 1.0):
-                raise ConfigError(f"random_faults[{key!r}] must be a probability in [0, 1], "
-                                  f"got {value!r}")
+                raise ConfigError(
+                    f"random_faults[{key!r}] must be a probability in [0, 1], got {value!r}"
+                )
             out[key] = float(value)
         elif key in _RANGE_KEYS:
             try:
                 low, high = (float(v) for v in value)
             except (TypeError, ValueError):
-                raise ConfigError(f"random_faults[{key!r}] must be a (low, high) pair, "
-                                  f"got {value!r}") from None
+                raise ConfigError(
+                    f"random_faults[{key!r}] must be a (low, high) pair, got {value!r}"
+                ) from None
             if not (math.isfinite(low) and math.isfinite(high) and 0.0 <= low <= high):
-                raise ConfigError(f"random_faults[{key!r}] must satisfy 0 <= low <= high, "
-                                  f"got {value!r}")
+                raise ConfigError(
+                    f"random_faults[{key!r}] must satisfy 0 <= low <= high, got {value!r}"
+                )
             if key == "n_faults":
                 if low != int(low) or high != int(high):
-                    raise ConfigError(f"random_faults['n_faults'] must be whole numbers, "
-                                      f"got {value!r}")
+                    raise ConfigError(
+                        f"random_faults['n_faults'] must be whole numbers, got {value!r}"
+                    )
                 out[key] = (int(low), int(high))
             elif key == "severity" and high > 1.0:
-                raise ConfigError(f"random_faults['severity'] levels are efficiencies in "
-                                  f"[0, 1], got {value!r}")
+                raise ConfigError(
+                    f"random_faults['severity'] levels are efficiencies in [0, 1], got {value!r}"
+                )
             else:
                 out[key] = (low, high)
         else:
-            raise ConfigError(f"random_faults has unknown key {key!r}; choose from "
-                              f"{', '.join(_RANGE_KEYS + _PROB_KEYS)}")
+            raise ConfigError(
+                f"random_faults has unknown key {key!r}; choose from "
+                f"{', '.join(_RANGE_KEYS + _PROB_KEYS)}"
+            )
     return out
-

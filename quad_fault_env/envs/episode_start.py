@@ -1,7 +1,7 @@
 """The start of an episode over a batch axis: one definition for the single and the vector env.
 
 An episode of :class:`~quad_fault_env.envs.quad_fault.QuadFaultEnv` starts from the core's
-:func:`quadfault.simulator.initial_state` (the geometric controller's feed-forward attitude
+:func:`quadfault.sim.simulator.initial_state` (the geometric controller's feed-forward attitude
 ``R_d`` and rate ``Omega_d`` at t = 0 on the reference's position and velocity), perturbed by
 :class:`~quad_fault_env.envs.config.InitialStateSpread` with 12 uniform draws of the episode's
 generator (position, velocity, attitude, rate; 3 each). :func:`start_states` computes that for
@@ -16,13 +16,13 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from quadfault.controller import ControllerConfig, GeometricController
-from quadfault.dynamics import RigidBodyState
-from quadfault.rotation import expm_so3
-from quadfault.scenarios import at_times
-from quadfault.simulator import initial_state
-from quadfault.trajectory import FlatOutput
-from quadfault.vehicle import Vehicle
+from quadfault.model.controller import ControllerConfig, GeometricController
+from quadfault.model.dynamics import RigidBodyState
+from quadfault.model.rotation import expm_so3
+from quadfault.model.scenarios import at_times
+from quadfault.model.trajectory import FlatOutput
+from quadfault.model.vehicle import Vehicle
+from quadfault.sim.simulator import initial_state
 
 #: uniform draws in [-1, 1] per episode start: position, velocity, attitude, rate (3 each)
 SPREAD_DRAWS = 12
@@ -36,9 +36,9 @@ def _as_shape(x, shape: tuple) -> np.ndarray:
 class RowTrajectories:
     """N reference trajectories as one callable: row i follows ``items[keys[i]]``.
 
-    ``self(t)`` returns a :class:`~quadfault.trajectory.FlatOutput` of arrays
+    ``self(t)`` returns a :class:`~quadfault.model.trajectory.FlatOutput` of arrays
     ``(N,) + shape(t) + (3,)``; each distinct trajectory is evaluated once on the times
-    (:func:`quadfault.scenarios.at_times`: one call when it takes arrays).
+    (:func:`quadfault.model.scenarios.at_times`: one call when it takes arrays).
     """
 
     def __init__(self, items, keys: np.ndarray):
@@ -54,9 +54,12 @@ class RowTrajectories:
             shape = np.shape(t) + (3,)
             flat = np.asarray(t, dtype=float).reshape(-1)
             outs = [at_times(traj, flat) for traj in self.items]
-            self._memo[t_key] = FlatOutput(*(
-                np.stack([_as_shape(np.reshape(o[f], shape), shape) for o in outs])[self.keys]
-                for f in range(4)))
+            self._memo[t_key] = FlatOutput(
+                *(
+                    np.stack([_as_shape(np.reshape(o[f], shape), shape) for o in outs])[self.keys]
+                    for f in range(4)
+                )
+            )
         return FlatOutput(*(x.copy() for x in self._memo[t_key]))
 
     def _scalar_from_memo(self, t):
@@ -71,8 +74,9 @@ class RowTrajectories:
         return None
 
 
-def start_states(items, keys, vehicle: Vehicle, controller: ControllerConfig, spread,
-                 u: np.ndarray) -> tuple[RigidBodyState, FlatOutput]:
+def start_states(
+    items, keys, vehicle: Vehicle, controller: ControllerConfig, spread, u: np.ndarray
+) -> tuple[RigidBodyState, FlatOutput]:
     """Initial true states (N,) of N episodes.
 
     Args:
@@ -86,14 +90,16 @@ def start_states(items, keys, vehicle: Vehicle, controller: ControllerConfig, sp
     """
     traj = RowTrajectories(items, keys)
     if controller.angular_feedforward:  # one evaluation per trajectory: the feed-forward's
-        h = controller.ff_step          # times (as feedforward_rates forms them) hold t = 0
+        h = controller.ff_step  # times (as feedforward_rates forms them) hold t = 0
         traj(np.stack((0.0 - h, 0.0, 0.0 + h), axis=-1))
-    s = initial_state(SimpleNamespace(trajectory=traj), 0.0,
-                      GeometricController(vehicle, traj, controller))
-    pos, vel, att, rate = (u[:, 3 * k:3 * k + 3] for k in range(4))
+    s = initial_state(
+        SimpleNamespace(trajectory=traj), 0.0, GeometricController(vehicle, traj, controller)
+    )
+    pos, vel, att, rate = (u[:, 3 * k : 3 * k + 3] for k in range(4))
     R = s.R if spread.attitude == 0 else s.R @ expm_so3(spread.attitude * att)  # R I == R
-    state = RigidBodyState(s.p + spread.position * pos, s.v + spread.velocity * vel, R,
-                           s.w + spread.rate * rate)
+    state = RigidBodyState(
+        s.p + spread.position * pos, s.v + spread.velocity * vel, R, s.w + spread.rate * rate
+    )
     return state, traj(0.0)
 
 

@@ -6,10 +6,10 @@ Data flow per control step (100 Hz by default)::
     action -> rotor commands (held) -> the closed loop over the physics substeps (1 kHz)
            -> samples -> estimator.update(samples) -> observation (+ truth only in info)
 
-The physics is the core model's one closed loop (:class:`quadfault.flight.Flight`: motor
+The physics is the core model's one closed loop (:class:`quadfault.model.flight.Flight`: motor
 saturation, efficiency and thrust noise, RKMK4, the sensors and the accelerometer, the random
 numbers drawn from ``self.np_random`` in loop order), one call per control step, and the
-baseline controller is the core :class:`quadfault.controller.GeometricController` on the
+baseline controller is the core :class:`quadfault.model.controller.GeometricController` on the
 *nominal* vehicle: a fault reaches the controller only through the estimator
 (``compensate=True``, ``allocation="estimate-aware"``) or through the agent.
 """
@@ -38,9 +38,13 @@ from quad_fault_env.envs.config import (
     number_at_least,
     validate_action,
 )
-from quad_fault_env.envs.scenario_source import (GENERATORS, check_scenario_options, fault_dict,
-                                                  make_scenario)
 from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
+from quad_fault_env.envs.scenario_source import (
+    GENERATORS,
+    check_scenario_options,
+    fault_dict,
+    make_scenario,
+)
 from quad_fault_env.estimation import (
     NOMINAL_PRIOR_SD,
     NominalBelief,
@@ -53,22 +57,22 @@ from quad_fault_env.estimation import (
 from quad_fault_env.observation import ObservationLayout
 from quad_fault_env.rendering import FlightRenderer
 from quad_fault_env.time_tables import RowTimeTables
-from quadfault.allocation import EstimateAwareAllocator
-from quadfault.controller import ControllerConfig, GeometricController, GeometricGains
-from quadfault.dynamics import RigidBodyState
-from quadfault.effects.sampling import PhysicsDraws, describe
 from quadfault.errors import ConfigError
-from quadfault.flight import Flight
-from quadfault.motors import MotorModel
-from quadfault.plant import Plant
-from quadfault.scenarios import SCENARIO_NAMES, Scenario
-from quadfault.sensors import SensorNoise
-from quadfault.trajectory import FlatOutput
-from quadfault.vehicle import Vehicle
+from quadfault.model.allocation import EstimateAwareAllocator
+from quadfault.model.controller import ControllerConfig, GeometricController, GeometricGains
+from quadfault.model.dynamics import RigidBodyState
+from quadfault.model.effects.sampling import PhysicsDraws, describe
+from quadfault.model.flight import Flight
+from quadfault.model.motors import MotorModel
+from quadfault.model.plant import Plant
+from quadfault.model.scenarios import SCENARIO_NAMES, Scenario
+from quadfault.model.sensors import SensorNoise
+from quadfault.model.trajectory import FlatOutput
+from quadfault.model.vehicle import Vehicle
 
 DEFAULT_DURATION = 20.0  # [s] episode length for named and random scenarios
 #: a fault event at time t_k belongs to the step whose interval [t0, t1) holds it (same
-#: tolerance as the fault windows of quadfault.scenarios) [s]
+#: tolerance as the fault windows of quadfault.model.scenarios) [s]
 EVENT_TOL = 1e-9
 _KEY0 = np.zeros(1, dtype=np.int64)  # the single env's row of the time tables
 TABLE_WINDOW = 64  # control steps per refill of the time tables (one row: cheap to hold)
@@ -119,25 +123,25 @@ class QuadFaultEnv(gym.Env):
     Keyword arguments:
         estimator: ``"irls" | "ekf" | "truth" | "none"`` or an estimator object.
         estimator_kwargs: passed to the estimator's constructor.
-        scenario: a name of :data:`quadfault.scenarios.SCENARIO_NAMES`, a
-            :class:`~quadfault.scenarios.Scenario`, or a generator drawn from at every reset
+        scenario: a name of :data:`quadfault.model.scenarios.SCENARIO_NAMES`, a
+            :class:`~quadfault.model.scenarios.Scenario`, or a generator drawn from at every reset
             with ``self.np_random``: ``"random"``
-            (:func:`~quadfault.scenarios.random_scenario`), ``"track"``
-            (:func:`~quadfault.task_scenarios.track_scenario`: a random smooth trajectory) or
-            ``"rotor_loss"`` (:func:`~quadfault.task_scenarios.rotor_loss_scenario`: hover,
+            (:func:`~quadfault.model.scenarios.random_scenario`), ``"track"``
+            (:func:`~quadfault.model.task_scenarios.track_scenario`: a random smooth trajectory) or
+            ``"rotor_loss"`` (:func:`~quadfault.model.task_scenarios.rotor_loss_scenario`: hover,
             one rotor drops abruptly); the last two scale with the vehicle's size.
         scenario_options: keyword arguments of the ``"track"`` or ``"rotor_loss"`` generator
             (e.g. ``{"speed": (0.5, 1.0), "curvature": (0.5, 1.0), "yaw_rate": (0, 0)}`` or
             ``{"level": (0.1, 0.3)}``); None keeps its defaults.
         random_trajectory: trajectory of random scenarios (``"random"``, ``"hover"``, ...).
-        random_faults: keyword arguments of :func:`~quadfault.scenarios.random_scenario` for
+        random_faults: keyword arguments of :func:`~quadfault.model.scenarios.random_scenario` for
             random scenarios (``n_faults``, ``severity``, ``degradation_prob``, ``xi_range``,
             ``thrust_noise``, ``ramp_prob``), e.g. ``{"n_faults": (1, 1), "severity": (0.5,
             0.8)}`` for one fault a controller can counter; None keeps its defaults.
         duration: episode length [s] of named and random scenarios (default 20 s); a
             Scenario object brings its own ``duration``.
         thrust_noise: sigma_f overriding the scenario's (None keeps it).
-        sensor_noise: a :class:`~quadfault.simulator.SensorNoise` or a dict of its fields
+        sensor_noise: a :class:`~quadfault.sim.simulator.SensorNoise` or a dict of its fields
             (``{"position": 0.01, "gyro": 0.005}``; default noise-free).
         action_mode, residual_scale, moment_scale: see ``ActionConfig``.
         control_rate: agent / controller rate [Hz] (100). physics_rate: plant rate [Hz] (1000).
@@ -147,7 +151,7 @@ class QuadFaultEnv(gym.Env):
             allocation through the estimate).
         allocation: how the base controller's wrench (residual mode) or the agent's (wrench
             mode) becomes rotor commands: ``"nominal"`` (the allocation inverse, eq. 12) or
-            ``"estimate-aware"`` (:mod:`quadfault.allocation`: ``A diag(eta_hat) f = w``
+            ``"estimate-aware"`` (:mod:`quadfault.model.allocation`: ``A diag(eta_hat) f = w``
             within the rotor limits, giving up yaw first to keep thrust, roll and pitch; fed
             by the observation's estimate, never the truth unless ``estimator="truth"``).
         observation: ``"flat"`` or ``"dict"``. reference_acceleration: add the ``ref_acc`` slot.
@@ -160,8 +164,8 @@ class QuadFaultEnv(gym.Env):
         effects: domain randomisation: ``quadfault simulate --effect`` specs, values or
             ranges ``a:b`` drawn from ``self.np_random`` at each reset (e.g.
             ``["mass=0.8:1.2", "drag=0.1:0.5", "wind=-2:2,-2:2,0"]``); ``info["effects"]``
-            says what was drawn (:mod:`quadfault.effects.sampling`).
-        model: a diagnosis JSON (path or parsed object; ``quadfault.effects.from_diagnosis``):
+            says what was drawn (:mod:`quadfault.model.effects.sampling`).
+        model: a diagnosis JSON (path or parsed object; ``quadfault.model.effects.from_diagnosis``):
             fly its nominal vehicle (instead of ``vehicle``) and its accepted effects.
         model_uncertainty: draw the model's fitted parameters from their reported
             uncertainty at each reset.
@@ -177,22 +181,39 @@ class QuadFaultEnv(gym.Env):
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
 
     @checked_keywords
-    def __init__(self, estimator="irls", scenario="combined", *, estimator_kwargs=None,
-                 random_trajectory: str = "random", random_faults: dict | None = None,
-                 scenario_options: dict | None = None,
-                 duration: float | None = None,
-                 thrust_noise: float | None = None, sensor_noise: SensorNoise | None = None,
-                 action_mode: str = "residual", residual_scale: float = 1.0,
-                 moment_scale: tuple = (1.0, 1.0, 0.05), control_rate: float = 100.0,
-                 physics_rate: float = 1000.0, estimator_rate: str = "physics",
-                 compensate: bool = False, allocation: str = "nominal",
-                 observation: str = "flat",
-                 reference_acceleration: bool = True, reward: RewardConfig | None = None,
-                 limits: TerminationLimits | None = None,
-                 initial_spread: InitialStateSpread | None = None,
-                 vehicle: Vehicle | None = None, controller: ControllerConfig | None = None,
-                 render_mode: str | None = None, effects=None, model=None,
-                 model_uncertainty: bool = False, info: str = "light"):
+    def __init__(
+        self,
+        estimator="irls",
+        scenario="combined",
+        *,
+        estimator_kwargs=None,
+        random_trajectory: str = "random",
+        random_faults: dict | None = None,
+        scenario_options: dict | None = None,
+        duration: float | None = None,
+        thrust_noise: float | None = None,
+        sensor_noise: SensorNoise | None = None,
+        action_mode: str = "residual",
+        residual_scale: float = 1.0,
+        moment_scale: tuple = (1.0, 1.0, 0.05),
+        control_rate: float = 100.0,
+        physics_rate: float = 1000.0,
+        estimator_rate: str = "physics",
+        compensate: bool = False,
+        allocation: str = "nominal",
+        observation: str = "flat",
+        reference_acceleration: bool = True,
+        reward: RewardConfig | None = None,
+        limits: TerminationLimits | None = None,
+        initial_spread: InitialStateSpread | None = None,
+        vehicle: Vehicle | None = None,
+        controller: ControllerConfig | None = None,
+        render_mode: str | None = None,
+        effects=None,
+        model=None,
+        model_uncertainty: bool = False,
+        info: str = "light",
+    ):
         #: what ``info`` holds: ``"light"`` (the termination reason) or ``"full"``
         self.info_level = check_choice("info", info, INFO_LEVELS)
         self.physics_draws = PhysicsDraws.of(effects, model, model_uncertainty)
@@ -202,8 +223,10 @@ class QuadFaultEnv(gym.Env):
             vehicle = self.physics_draws.vehicle
         self.vehicle = vehicle or Vehicle()
         if not isinstance(self.vehicle, Vehicle) or self.vehicle.n_rotors != 4:
-            raise ConfigError("vehicle must be a quadfault Vehicle with 4 rotors (the scenarios "
-                              "and the observation have four motors)")
+            raise ConfigError(
+                "vehicle must be a quadfault Vehicle with 4 rotors (the scenarios "
+                "and the observation have four motors)"
+            )
         self.action_config = ActionConfig(action_mode, residual_scale, moment_scale)
         self.reward_config = config_of(reward, RewardConfig, "reward")
         self.limits = config_of(limits, TerminationLimits, "limits")
@@ -212,33 +235,45 @@ class QuadFaultEnv(gym.Env):
         if thrust_noise is not None and not number_at_least(thrust_noise, 0.0):
             raise ConfigError(f"thrust_noise must be a number >= 0, got {thrust_noise!r}")
         self.thrust_noise = thrust_noise
-        if not (number_at_least(control_rate, 0.0) and number_at_least(physics_rate, 0.0)
-                and control_rate > 0 and physics_rate > 0):
-            raise ConfigError(f"control_rate and physics_rate must be positive [Hz], got "
-                              f"{control_rate!r} and {physics_rate!r}")
+        if not (
+            number_at_least(control_rate, 0.0)
+            and number_at_least(physics_rate, 0.0)
+            and control_rate > 0
+            and physics_rate > 0
+        ):
+            raise ConfigError(
+                f"control_rate and physics_rate must be positive [Hz], got "
+                f"{control_rate!r} and {physics_rate!r}"
+            )
         ratio = physics_rate / control_rate
         if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
-            raise ConfigError(f"physics_rate ({physics_rate} Hz) must be a whole multiple of "
-                              f"control_rate ({control_rate} Hz)")
+            raise ConfigError(
+                f"physics_rate ({physics_rate} Hz) must be a whole multiple of "
+                f"control_rate ({control_rate} Hz)"
+            )
         self.substeps = int(round(ratio))
         self.dt = 1.0 / physics_rate
         self.control_period = 1.0 / control_rate
         self.metadata = {**self.metadata, "render_fps": control_rate}  # a frame per step
         if estimator_rate not in ESTIMATOR_RATES:
-            raise ConfigError(f"estimator_rate must be one of {ESTIMATOR_RATES}, "
-                              f"got {estimator_rate!r}")
+            raise ConfigError(
+                f"estimator_rate must be one of {ESTIMATOR_RATES}, got {estimator_rate!r}"
+            )
         self.estimator_rate = estimator_rate
         #: take every ``estimator_stride``-th substep sample of ``info["samples"]``
         self.estimator_stride = 1 if estimator_rate == "physics" else self.substeps
         if not (isinstance(scenario, (str, Scenario))):
             raise ConfigError(f"scenario must be a name, 'random' or a Scenario, got {scenario!r}")
         if isinstance(scenario, str) and scenario not in SCENARIO_NAMES + GENERATORS:
-            raise ConfigError(f"unknown scenario {scenario!r}; choose from "
-                              f"{', '.join(SCENARIO_NAMES + GENERATORS)}")
+            raise ConfigError(
+                f"unknown scenario {scenario!r}; choose from "
+                f"{', '.join(SCENARIO_NAMES + GENERATORS)}"
+            )
         self.scenario_spec = scenario
         if random_trajectory not in RANDOM_TRAJECTORIES:
-            raise ConfigError(f"random_trajectory must be one of {RANDOM_TRAJECTORIES}, "
-                              f"got {random_trajectory!r}")
+            raise ConfigError(
+                f"random_trajectory must be one of {RANDOM_TRAJECTORIES}, got {random_trajectory!r}"
+            )
         self.random_trajectory = random_trajectory
         self.random_faults = check_random_faults(random_faults)
         self.scenario_options = check_scenario_options(scenario_options, scenario)
@@ -251,31 +286,41 @@ class QuadFaultEnv(gym.Env):
         if allocation not in ALLOCATIONS:
             raise ConfigError(f"allocation must be one of {ALLOCATIONS}, got {allocation!r}")
         if allocation == "estimate-aware" and self.action_config.mode == "motor":
-            raise ConfigError("allocation='estimate-aware' allocates a wrench (the controller's "
-                              "in residual mode, the agent's in wrench mode); motor mode has "
-                              "none")
+            raise ConfigError(
+                "allocation='estimate-aware' allocates a wrench (the controller's "
+                "in residual mode, the agent's in wrench mode); motor mode has "
+                "none"
+            )
         if allocation == "estimate-aware" and self.compensate:
-            raise ConfigError("choose compensate=True (the nominal split divided by eta_hat) or "
-                              "allocation='estimate-aware' (which already uses eta_hat), not both")
+            raise ConfigError(
+                "choose compensate=True (the nominal split divided by eta_hat) or "
+                "allocation='estimate-aware' (which already uses eta_hat), not both"
+            )
         self.allocation = allocation
         #: the estimate-aware allocation (None: the nominal allocation inverse)
-        self.allocator = (EstimateAwareAllocator(self.vehicle) if allocation == "estimate-aware"
-                          else None)
+        self.allocator = (
+            EstimateAwareAllocator(self.vehicle) if allocation == "estimate-aware" else None
+        )
         # the paper's gains carried over to the vehicle's mass and inertia (any vehicle flies)
         self.controller_config = controller or ControllerConfig(
-            gains=GeometricGains().scaled(self.vehicle))
+            gains=GeometricGains().scaled(self.vehicle)
+        )
         if observation not in OBSERVATION_KINDS:
-            raise ConfigError(f"observation must be one of {OBSERVATION_KINDS}, "
-                              f"got {observation!r}")
+            raise ConfigError(
+                f"observation must be one of {OBSERVATION_KINDS}, got {observation!r}"
+            )
         self.observation_kind = observation
         self.layout = ObservationLayout(reference_acceleration)
-        self.observation_space = (self.layout.flat_space() if observation == "flat"
-                                  else self.layout.dict_space())
-        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(self.vehicle.n_rotors,),
-                                           dtype=np.float32)
+        self.observation_space = (
+            self.layout.flat_space() if observation == "flat" else self.layout.dict_space()
+        )
+        self.action_space = gym.spaces.Box(
+            -1.0, 1.0, shape=(self.vehicle.n_rotors,), dtype=np.float32
+        )
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ConfigError(f"render_mode must be one of {self.metadata['render_modes']}, "
-                              f"got {render_mode!r}")
+            raise ConfigError(
+                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
+            )
         self.render_mode = render_mode
         self._renderer = None
         self.scenario: Scenario | None = None
@@ -301,12 +346,17 @@ class QuadFaultEnv(gym.Env):
     # -- scenario and reset ------------------------------------------------------------------
     def _make_scenario(self, spec, rng: np.random.Generator | None = None) -> Scenario:
         """The scenario of ``spec`` (drawn from ``rng``, default ``self.np_random``)."""
-        return make_scenario(spec, rng or self.np_random, duration=self.duration or DEFAULT_DURATION,
-                             dt=self.dt, vehicle=self.vehicle,
-                             random_trajectory=self.random_trajectory,
-                             random_faults=self.random_faults,
-                             scenario_options=self.scenario_options,
-                             thrust_noise=self.thrust_noise)
+        return make_scenario(
+            spec,
+            rng or self.np_random,
+            duration=self.duration or DEFAULT_DURATION,
+            dt=self.dt,
+            vehicle=self.vehicle,
+            random_trajectory=self.random_trajectory,
+            random_faults=self.random_faults,
+            scenario_options=self.scenario_options,
+            thrust_noise=self.thrust_noise,
+        )
 
     def _scenario_option(self, options):
         """The scenario spec of a reset (``options["scenario"]`` or the env's)."""
@@ -319,24 +369,33 @@ class QuadFaultEnv(gym.Env):
     def _initial_state(self) -> RigidBodyState:
         """The episode's true initial state (``episode_start.start_states`` with N = 1)."""
         u = self.np_random.uniform(-1.0, 1.0, SPREAD_DRAWS)[None]
-        s, _ = start_states([self.scenario.trajectory], np.zeros(1, dtype=np.int64),
-                            self.vehicle, self.controller_config, self.initial_spread, u)
+        s, _ = start_states(
+            [self.scenario.trajectory],
+            np.zeros(1, dtype=np.int64),
+            self.vehicle,
+            self.controller_config,
+            self.initial_spread,
+            u,
+        )
         return RigidBodyState(*(x[0].copy() for x in s))
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
         self.scenario = self._make_scenario(self._scenario_option(options))
-        self.controller = GeometricController(self.vehicle, self.scenario.trajectory,
-                                              self.controller_config)
+        self.controller = GeometricController(
+            self.vehicle, self.scenario.trajectory, self.controller_config
+        )
         self.effects = self.physics_draws.draw(self.np_random) if self.physics_draws else ()
-        self.plant = Plant(self.vehicle, MotorModel(self.scenario.thrust_noise),
-                           effects=self.effects, dt=self.dt)
+        self.plant = Plant(
+            self.vehicle, MotorModel(self.scenario.thrust_noise), effects=self.effects, dt=self.dt
+        )
         self.plant.reset(self._initial_state())
         self.flight = Flight(self.plant, self.sensor_noise)
         self.flight.reset(self.np_random)  # the loop draws from the env's generator
         self._views = self.flight.views(0)
-        self._tables = RowTimeTables(1, self.substeps, self.dt, self.vehicle,
-                                     self.controller_config, TABLE_WINDOW)
+        self._tables = RowTimeTables(
+            1, self.substeps, self.dt, self.vehicle, self.controller_config, TABLE_WINDOW
+        )
         self.flight.use_efficiency(self._tables.eta, self._tables.first)
         self.max_steps = int(round(self.scenario.duration / self.control_period))
         self._step_count = 0
@@ -357,8 +416,9 @@ class QuadFaultEnv(gym.Env):
         self.flight.sense()
         self.history = [self.plant.state.p.copy()]
         ref = self.scenario.trajectory(0.0)
-        events = (self._fault_events(-np.inf, 0.0, ("onset",)) if self.info_level == "full"
-                  else None)  # the faults under way from the start
+        events = (
+            self._fault_events(-np.inf, 0.0, ("onset",)) if self.info_level == "full" else None
+        )  # the faults under way from the start
         info = self._info([], [], [], events, None, ref)
         if self.render_mode == "human":
             self.render()
@@ -391,8 +451,9 @@ class QuadFaultEnv(gym.Env):
         return validate_action(action, self.action_space.shape)
 
     def _sample(self, t: float, meas: RigidBodyState) -> Sample:
-        return Sample(t, meas.p.copy(), meas.v.copy(), meas.R.copy(), meas.w.copy(),
-                      self._f_cmd.copy())
+        return Sample(
+            t, meas.p.copy(), meas.v.copy(), meas.R.copy(), meas.w.copy(), self._f_cmd.copy()
+        )
 
     def _table_row(self, k: int) -> int:
         """Control step ``k``'s row in the time tables (filled so that it and its end are
@@ -400,8 +461,14 @@ class QuadFaultEnv(gym.Env):
         i = k - int(self._tables.k0[0])
         if not 0 <= i < TABLE_WINDOW:
             sc = self.scenario
-            self._tables.ensure(np.array([k], dtype=np.int64), _KEY0, _KEY0, [sc.trajectory],
-                                [sc.efficiency], TABLE_WINDOW - 1)
+            self._tables.ensure(
+                np.array([k], dtype=np.int64),
+                _KEY0,
+                _KEY0,
+                [sc.trajectory],
+                [sc.efficiency],
+                TABLE_WINDOW - 1,
+            )
             i = k - int(self._tables.k0[0])
         return i
 
@@ -409,8 +476,9 @@ class QuadFaultEnv(gym.Env):
         """Rotor thrust commands [N] for a checked ``action`` (see ``ActionConfig``)."""
         cfg = self.action_config
         f_ctrl = self._controller_commands(t, meas) if cfg.mode == "residual" else None
-        return cfg.commands(action, self.vehicle, f_ctrl, self._estimate.eta, self.compensate,
-                            self.allocator)
+        return cfg.commands(
+            action, self.vehicle, f_ctrl, self._estimate.eta, self.compensate, self.allocator
+        )
 
     def _controller_commands(self, t: float, meas: RigidBodyState) -> np.ndarray:
         """The geometric controller's rotor commands [N] (eqs. 5-10, nominal allocation); at
@@ -434,8 +502,9 @@ class QuadFaultEnv(gym.Env):
         t = ((k * S + np.arange(done)) * self.dt).tolist()
 
         def sample(j: int) -> Sample:
-            return Sample(t[j], out.p[0, j], out.v[0, j], out.R[0, j], out.w[0, j],
-                          self._f_cmd.copy())
+            return Sample(
+                t[j], out.p[0, j], out.v[0, j], out.R[0, j], out.w[0, j], self._f_cmd.copy()
+            )
 
         fed = range(0, done, self.estimator_stride)
         if self._stateless_estimator:  # a pure function of the sample: the last one decides
@@ -445,7 +514,7 @@ class QuadFaultEnv(gym.Env):
             fed = [samples[j] for j in fed]
         else:
             samples, fed = [], [sample(j) for j in fed]
-        eta = self._tables.eta[0, row * S:row * S + S + 1]
+        eta = self._tables.eta[0, row * S : row * S + S + 1]
         return samples, fed, eta[:done].copy(), out.accel[0, :done], eta[S].copy()
 
     def step(self, action):
@@ -470,8 +539,9 @@ class QuadFaultEnv(gym.Env):
         # the agent sees the true state of a terminated episode: no measurement is drawn
         self.flight.sense(noise=not terminated)
         self.history.append(np.array(state.p, dtype=float))
-        reward = self.reward_config(state.p - ref.position, state.v - ref.velocity,
-                                    self._f_cmd, self.f_max, terminated, a)
+        reward = self.reward_config(
+            state.p - ref.position, state.v - ref.velocity, self._f_cmd, self.f_max, terminated, a
+        )
         full = self.info_level == "full"
         events = self._fault_events(t0, t1, ("onset", "end")) if full else None
         info = self._info(samples, eta_true, sf, events, reason, ref, eta_t1)
@@ -484,17 +554,26 @@ class QuadFaultEnv(gym.Env):
         """The observation at the end of the step (``ObservationLayout.flat``); ``ref`` is
         the reference at that time."""
         m, n = self._meas, self.vehicle.n_rotors
-        flat = self.layout.flat(pos_err=m.p - ref.position, vel_err=m.v - ref.velocity, R=m.R,
-                                omega=m.w, eta_hat=self._estimate.eta,
-                                eta_sd=estimate_sd(self._estimate, n), ref_acc=ref.acceleration)
+        flat = self.layout.flat(
+            pos_err=m.p - ref.position,
+            vel_err=m.v - ref.velocity,
+            R=m.R,
+            omega=m.w,
+            eta_hat=self._estimate.eta,
+            eta_sd=estimate_sd(self._estimate, n),
+            ref_acc=ref.acceleration,
+        )
         return flat if self.observation_kind == "flat" else self.layout.split(flat)
 
     def _fault_events(self, t0: float, t1: float, kinds: tuple) -> list[dict]:
         """The ``info["fault_events"]`` of the interval [t0, t1): the faults' events of
         ``kinds`` (``"onset"``, ``"end"``) at a time within it."""
-        return [dict(fault_dict(f), kind=kind, t=tk) for f in self.scenario.efficiency.faults
-                for kind, tk in (("onset", f.onset), ("end", f.end))
-                if kind in kinds and t0 - EVENT_TOL <= tk < t1 - EVENT_TOL]
+        return [
+            dict(fault_dict(f), kind=kind, t=tk)
+            for f in self.scenario.efficiency.faults
+            for kind, tk in (("onset", f.onset), ("end", f.end))
+            if kind in kinds and t0 - EVENT_TOL <= tk < t1 - EVENT_TOL
+        ]
 
     def _info(self, samples, eta_true, sf, events, reason, ref, eta_t=None) -> dict:
         """The step's (or the reset's) ``info``: light
@@ -507,24 +586,29 @@ class QuadFaultEnv(gym.Env):
         state = self._state
         S, n = self.substeps, self.vehicle.n_rotors
         eta_rows, sf_rows = np.full((S, n), np.nan), np.full((S, 3), np.nan)
-        eta_rows[:len(samples)] = np.reshape(eta_true, (-1, n))
-        sf_rows[:len(samples)] = np.reshape(sf, (-1, 3))
-        return light_info(reason) | {
-            "t": float(t),
-            "eta_true": (np.asarray(self.scenario.efficiency(t), dtype=float) if eta_t is None
-                         else eta_t),
-            **estimate_info(self._estimate, self.estimator, n, self._diagnostics_template),
-            "position_error": state.p - ref.position,
-            "tracking_error": float(np.linalg.norm(state.p - ref.position)),
-            "motor_command": self._f_cmd.copy(),
-            "fault_events": events,
-            "faults": [fault_dict(f) for f in self.scenario.efficiency.faults],
-            "scenario": self.scenario.name,
-            "thrust_noise": float(self.scenario.thrust_noise),
-            "samples": samples,
-            "eta_true_samples": eta_rows,
-            "specific_force_samples": sf_rows,
-        } | ({"effects": describe(self.effects)} if self.physics_draws else {})
+        eta_rows[: len(samples)] = np.reshape(eta_true, (-1, n))
+        sf_rows[: len(samples)] = np.reshape(sf, (-1, 3))
+        return (
+            light_info(reason)
+            | {
+                "t": float(t),
+                "eta_true": (
+                    np.asarray(self.scenario.efficiency(t), dtype=float) if eta_t is None else eta_t
+                ),
+                **estimate_info(self._estimate, self.estimator, n, self._diagnostics_template),
+                "position_error": state.p - ref.position,
+                "tracking_error": float(np.linalg.norm(state.p - ref.position)),
+                "motor_command": self._f_cmd.copy(),
+                "fault_events": events,
+                "faults": [fault_dict(f) for f in self.scenario.efficiency.faults],
+                "scenario": self.scenario.name,
+                "thrust_noise": float(self.scenario.thrust_noise),
+                "samples": samples,
+                "eta_true_samples": eta_rows,
+                "specific_force_samples": sf_rows,
+            }
+            | ({"effects": describe(self.effects)} if self.physics_draws else {})
+        )
 
     # -- rendering ---------------------------------------------------------------------------
     def render(self):

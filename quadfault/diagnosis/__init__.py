@@ -2,7 +2,7 @@
 
 ``Diagnosis(DiagnosisConfig()).fit(recording, vehicle=None) -> DiagnosisResult``: replay the
 recording through the nominal model, locate where and in which regime it disagrees, fit a
-library of physically named effects (:mod:`quadfault.effects`) by bounded robust least
+library of physically named effects (:mod:`quadfault.model.effects`) by bounded robust least
 squares, and keep those that improve held-out residuals (time-blocked cross-validation + BIC).
 
 Modules: ``residuals`` (replay and block-mean channels), ``library`` (candidate effects),

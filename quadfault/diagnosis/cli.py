@@ -10,24 +10,42 @@ from quadfault.errors import ConfigError
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", metavar="FILE.csv", help="recording (quadfault-recording/1)")
-    p.add_argument("--json", required=True, metavar="OUT.json",
-                   help="diagnosis result (format: docs/formats.md)")
-    p.add_argument("--report", metavar="DIR", default=None,
-                   help="also write DIR/report.md and PNG plots")
+    p.add_argument(
+        "--json",
+        required=True,
+        metavar="OUT.json",
+        help="diagnosis result (format: docs/formats.md)",
+    )
+    p.add_argument(
+        "--report", metavar="DIR", default=None, help="also write DIR/report.md and PNG plots"
+    )
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
-    p.add_argument("--effects", default=None, metavar="NAME,...",
-                   help="restrict the candidate library (default: all effects)")
-    p.add_argument("--block", type=float, default=0.02,
-                   help="smoothing block length [s] (default 0.02)")
+    p.add_argument(
+        "--effects",
+        default=None,
+        metavar="NAME,...",
+        help="restrict the candidate library (default: all effects)",
+    )
+    p.add_argument(
+        "--block", type=float, default=0.02, help="smoothing block length [s] (default 0.02)"
+    )
     p.add_argument("--max-effects", type=int, default=3, help="most effects accepted (default 3)")
-    p.add_argument("--baseline", metavar="HEALTHY.json", nargs="+", default=None,
-                   help="the diagnosis JSON of one or more flights of the healthy vehicle, "
-                        "each with a motor_efficiency fit: eta is then relative to them (one "
-                        "flight alone cannot tell a weak rotor from the vehicle's own "
-                        "imbalance; several also give the flight-to-flight spread)")
-    p.add_argument("--no-mask", action="store_true",
-                   help="fit and score every block: do not exclude what is not free flight "
-                        "(motors off, ground or pad contact, impacts; see docs/diagnosis.md)")
+    p.add_argument(
+        "--baseline",
+        metavar="HEALTHY.json",
+        nargs="+",
+        default=None,
+        help="the diagnosis JSON of one or more flights of the healthy vehicle, "
+        "each with a motor_efficiency fit: eta is then relative to them (one "
+        "flight alone cannot tell a weak rotor from the vehicle's own "
+        "imbalance; several also give the flight-to-flight spread)",
+    )
+    p.add_argument(
+        "--no-mask",
+        action="store_true",
+        help="fit and score every block: do not exclude what is not free flight "
+        "(motors off, ground or pad contact, impacts; see docs/diagnosis.md)",
+    )
 
 
 def baseline_eta(path) -> tuple:
@@ -36,8 +54,8 @@ def baseline_eta(path) -> tuple:
     had a baseline itself)."""
     import json
 
-    from quadfault.effects.motor_efficiency import MotorEfficiency
     from quadfault.errors import RecordingError
+    from quadfault.model.effects.motor_efficiency import MotorEfficiency
 
     path = Path(path)
     try:
@@ -46,13 +64,23 @@ def baseline_eta(path) -> tuple:
         raise RecordingError(path, f"cannot read: {exc.strerror or exc}") from None
     except ValueError as exc:
         raise RecordingError(path, f"not valid JSON: {exc}") from None
-    fits = [e for key in ("effects", "suspect", "rejected") for e in (doc.get(key) or [])
-            if isinstance(e, dict) and e.get("name") == MotorEfficiency.name] \
-        if isinstance(doc, dict) else []
+    fits = (
+        [
+            e
+            for key in ("effects", "suspect", "rejected")
+            for e in (doc.get(key) or [])
+            if isinstance(e, dict) and e.get("name") == MotorEfficiency.name
+        ]
+        if isinstance(doc, dict)
+        else []
+    )
     if not fits:
-        raise RecordingError(path, "no motor_efficiency fit in this diagnosis (run quadfault "
-                                   "diagnose --effects motor_efficiency on the healthy flight)",
-                             key="effects")
+        raise RecordingError(
+            path,
+            "no motor_efficiency fit in this diagnosis (run quadfault "
+            "diagnose --effects motor_efficiency on the healthy flight)",
+            key="effects",
+        )
     params = fits[0].get("params") or {}
     eta = params.get("eta_flight", params.get("eta"))
     try:
@@ -60,25 +88,28 @@ def baseline_eta(path) -> tuple:
     except (TypeError, ValueError):
         eta = ()
     if len(eta) != 4 or not all(v > 0 for v in eta):
-        raise RecordingError(path, f"motor_efficiency eta must be 4 positive numbers, got "
-                                   f"{params.get('eta')!r}", key="effects")
+        raise RecordingError(
+            path,
+            f"motor_efficiency eta must be 4 positive numbers, got {params.get('eta')!r}",
+            key="effects",
+        )
     return eta
 
 
 def run(args) -> int:
     from quadfault.diagnosis import Diagnosis, DiagnosisConfig
     from quadfault.fileio import atomic_write_text, check_writable
+    from quadfault.io.recording import read_recording, sidecar_path
     from quadfault.progress import progress_bar
-    from quadfault.recording import read_recording
-
-    from quadfault.recording import sidecar_path
 
     out = Path(args.json)
     if out.suffix != ".json":
         raise ConfigError(f"--json must end in .json, got {args.json!r}")
     if out.resolve() == sidecar_path(Path(args.recording)).resolve():
-        raise ConfigError(f"--json {args.json} is the recording's own sidecar; choose another "
-                          "name (it would be overwritten)")
+        raise ConfigError(
+            f"--json {args.json} is the recording's own sidecar; choose another "
+            "name (it would be overwritten)"
+        )
     check_writable([out], force=args.force)
     if args.report is not None:
         from quadfault.diagnosis.report import FILES
@@ -89,12 +120,19 @@ def run(args) -> int:
     effects = None
     if args.effects:
         effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
-    cfg = DiagnosisConfig(block_seconds=args.block, max_effects=args.max_effects, effects=effects,
-                          mask=not args.no_mask,
-                          baseline_eta=None if args.baseline is None else tuple(
-                              baseline_eta(b) for b in args.baseline))
+    cfg = DiagnosisConfig(
+        block_seconds=args.block,
+        max_effects=args.max_effects,
+        effects=effects,
+        mask=not args.no_mask,
+        baseline_eta=None
+        if args.baseline is None
+        else tuple(baseline_eta(b) for b in args.baseline),
+    )
     rec = read_recording(args.recording).without_truth()
-    bar = progress_bar(total=None, desc="diagnose", unit="fit", disable=None if not args.quiet else True)
+    bar = progress_bar(
+        total=None, desc="diagnose", unit="fit", disable=None if not args.quiet else True
+    )
     try:
         res = Diagnosis(cfg).fit(rec, progress=lambda: bar.update(1))
     finally:
@@ -111,13 +149,17 @@ def run(args) -> int:
             extra += "; suspect (at a bound): " + ", ".join(e.name for e in res.suspect)
         if res.indistinguishable:
             extra += "; indistinguishable in this log: " + ", ".join(
-                " or ".join(n["names"]) for n in res.indistinguishable)
+                " or ".join(n["names"]) for n in res.indistinguishable
+            )
         if res.not_identifiable:
             extra += "; not identifiable from this log: " + ", ".join(
-                n["name"] for n in res.not_identifiable)
+                n["name"] for n in res.not_identifiable
+            )
         frac = res.scoring.get("masked_fraction", 0.0)
         if frac:
             extra += f"; {100 * frac:.0f}% not free flight (excluded)"
-        print(f"{res.verdict}: effects {names}{extra}; held-out improvement "
-              f"{100 * res.model_improvement:.1f}%; wrote {out}")
+        print(
+            f"{res.verdict}: effects {names}{extra}; held-out improvement "
+            f"{100 * res.model_improvement:.1f}%; wrote {out}"
+        )
     return 0

@@ -64,8 +64,9 @@ def folds_of(n_blocks: int, k: int) -> list[np.ndarray]:
     return np.array_split(np.arange(n_blocks), k)
 
 
-def cross_validate(rp: Replay, cands, sc, x_init, folds, *, full: Fit | None = None,
-                   fixed=(), **kw) -> CrossValidation:
+def cross_validate(
+    rp: Replay, cands, sc, x_init, folds, *, full: Fit | None = None, fixed=(), **kw
+) -> CrossValidation:
     """Time-blocked cross-validation of ``cands`` (on top of ``fixed``) with the scoring
     ``sc``.
 
@@ -126,8 +127,7 @@ class Gain(NamedTuple):
     passes: bool
 
 
-def gain_over(rp: Replay, sc, before: CrossValidation, after: CrossValidation,
-              m: float) -> Gain:
+def gain_over(rp: Replay, sc, before: CrossValidation, after: CrossValidation, m: float) -> Gain:
     """The held-out :class:`Gain` of ``after`` over ``before`` (same folds), against the
     bar ``m`` (``min_improvement``)."""
     table, (lo, _) = sc.channel_table(before.residual, after.residual, rp.block_dur[sc.rows])
@@ -164,7 +164,7 @@ def bound_mask(cand, x, rp: Replay | None = None, sc=None, others=()) -> np.ndar
         back = x.copy()
         back[idx] = np.asarray(cand.x0, dtype=float)[idx]
         change = (model - predict(rp, others + [(cand, back)])) / sc.noise
-        return bool(np.sqrt(np.sum(np.mean(change ** 2, axis=0))) >= 1.0)
+        return bool(np.sqrt(np.sum(np.mean(change**2, axis=0))) >= 1.0)
 
     idx = np.flatnonzero(near)
     if not matters(idx):  # all of them together below the noise
@@ -185,7 +185,7 @@ def fit_bound_mask(rp: Replay, sc, f: Fit, j: int, x=None) -> np.ndarray:
     value), the fit's other effects at their fitted values."""
     terms = list(f.terms)
     x = terms[j][1] if x is None else x
-    return bound_mask(f.candidates[j], x, rp, sc, terms[:j] + terms[j + 1:])
+    return bound_mask(f.candidates[j], x, rp, sc, terms[:j] + terms[j + 1 :])
 
 
 def fit_at_bound(rp: Replay, sc, f: Fit, j: int, x=None) -> bool:
@@ -218,7 +218,9 @@ def fold_agreement(cand, x, fold_x, mask=None) -> tuple[bool, str]:
     same_side = bool(np.all(np.sign(X[:, j] - x0[j]) == np.sign(x[j] - x0[j])))
     bound_folds = int(sum(bool(mask(xi)[j]) for xi in X))
     size = "every fold gives the same value" if z[j] > 1e6 else f"{z[j]:.1f} jackknife sd"
-    detail = (f"folds: {label} departs from nominal by {size} (needs {FOLD_Z:g})"
-              + ("" if same_side else ", folds on both sides of nominal")
-              + (f", {bound_folds} of {k} folds at a bound" if bound_folds else ""))
+    detail = (
+        f"folds: {label} departs from nominal by {size} (needs {FOLD_Z:g})"
+        + ("" if same_side else ", folds on both sides of nominal")
+        + (f", {bound_folds} of {k} folds at a bound" if bound_folds else "")
+    )
     return bool(z[j] >= FOLD_Z and same_side and bound_folds == 0), detail

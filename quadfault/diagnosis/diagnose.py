@@ -15,8 +15,13 @@ from threadpoolctl import threadpool_limits
 from quadfault.diagnosis.crossval import cross_validate, fit_at_bound, fit_bound_mask, folds_of
 from quadfault.diagnosis.feedback import IV_MIN, IV_UNVERIFIED_GAIN
 from quadfault.diagnosis.findings import base_explanation, finding
-from quadfault.diagnosis.identifiability import (assumptions, evidence, gate,
-                                                 pin_to_rotor_speeds, without_pose)
+from quadfault.diagnosis.identifiability import (
+    assumptions,
+    evidence,
+    gate,
+    pin_to_rotor_speeds,
+    without_pose,
+)
 from quadfault.diagnosis.library import EQUIVALENT, build_library, predict, public_params
 from quadfault.diagnosis.locate import locate
 from quadfault.diagnosis.phases import excluded_fraction, flight_phases
@@ -25,10 +30,10 @@ from quadfault.diagnosis.residuals import prepare
 from quadfault.diagnosis.result import DiagnosisResult
 from quadfault.diagnosis.scores import fixed_scoring
 from quadfault.diagnosis.select import select
-from quadfault.effects.motor_efficiency import MotorEfficiency, healthy_pattern
-from quadfault.effects.registry import EFFECT_NAMES, effect_class
 from quadfault.errors import ConfigError, RecordingError
-from quadfault.recording import Recording, recording_sidecar
+from quadfault.io.recording import Recording, recording_sidecar
+from quadfault.model.effects.motor_efficiency import MotorEfficiency, healthy_pattern
+from quadfault.model.effects.registry import EFFECT_NAMES, effect_class
 
 #: a located interval whose nominal residual RMS reaches this many noise scales for at least
 #: ``STRONG_SECONDS`` makes the verdict ``mismatch`` even when nothing in the library explains
@@ -85,12 +90,21 @@ class DiagnosisConfig:
                 b = np.asarray(self.baseline_eta, dtype=float)
             except (TypeError, ValueError):
                 b = np.zeros(0)
-            if b.ndim not in (1, 2) or b.shape[-1] != 4 or b.size == 0 \
-                    or not np.all(np.isfinite(b) & (b > 0)):
-                raise ConfigError(f"baseline_eta must be 4 positive numbers (or one row of 4 "
-                                  f"per healthy flight), got {self.baseline_eta!r}")
-            object.__setattr__(self, "baseline_eta",
-                               tuple(tuple(float(v) for v in row) for row in b.reshape(-1, 4)))
+            if (
+                b.ndim not in (1, 2)
+                or b.shape[-1] != 4
+                or b.size == 0
+                or not np.all(np.isfinite(b) & (b > 0))
+            ):
+                raise ConfigError(
+                    f"baseline_eta must be 4 positive numbers (or one row of 4 "
+                    f"per healthy flight), got {self.baseline_eta!r}"
+                )
+            object.__setattr__(
+                self,
+                "baseline_eta",
+                tuple(tuple(float(v) for v in row) for row in b.reshape(-1, 4)),
+            )
         if not (0 < self.block_seconds <= 1.0):
             raise ConfigError(f"block_seconds must be in (0, 1] s, got {self.block_seconds!r}")
         if not (self.gap_factor > 1):
@@ -104,37 +118,49 @@ class DiagnosisConfig:
         if self.effects is not None:
             bad = [e for e in self.effects if e not in EFFECT_NAMES]
             if bad:
-                raise ConfigError(f"unknown effect {bad[0]!r}; choose from {', '.join(EFFECT_NAMES)}")
+                raise ConfigError(
+                    f"unknown effect {bad[0]!r}; choose from {', '.join(EFFECT_NAMES)}"
+                )
         if not self.horizons or not all(h > 0 for h in self.horizons):
             raise ConfigError("horizons must be positive [s]")
 
 
 def _explain(step, selected_names, params) -> str:
     name = step.candidate.name
-    text = base_explanation(name) + f"; held-out residual RMS -{100 * step.improvement_step:.0f}% " \
-                                    "when added."
+    text = (
+        base_explanation(name) + f"; held-out residual RMS -{100 * step.improvement_step:.0f}% "
+        "when added."
+    )
     text += effect_class(name).fit_note(params, selected_names)
     kind = EQUIVALENT.get(name)
     mates = [n for n, k in EQUIVALENT.items() if k == kind and n != name]
     ratio = step.rivals.get(mates[0]) if len(mates) == 1 else None
     if ratio is not None and ratio < 1.1:  # a class of two (timing): the rival's fit
         a, b = sorted((name, mates[0]))
-        text += (f" {mates[0]} fits almost as well (in-sample SSE ratio {ratio:.2f}): the data "
-                 f"cannot separate {a} from {b} (one {kind} class).")
+        text += (
+            f" {mates[0]} fits almost as well (in-sample SSE ratio {ratio:.2f}): the data "
+            f"cannot separate {a} from {b} (one {kind} class)."
+        )
     if step.iv is not None and np.isfinite(step.iv):
-        text += (f" Instrumental-variable check (instrument: the fitted signal with each "
-                 f"block's inputs frozen at its start, blind to feedback on the block's own "
-                 f"noise): slope {step.iv:.2f} (1 = all real, 0 = feedback bias; accepted "
-                 f"when >= {IV_MIN} and significantly above 0).")
+        text += (
+            f" Instrumental-variable check (instrument: the fitted signal with each "
+            f"block's inputs frozen at its start, blind to feedback on the block's own "
+            f"noise): slope {step.iv:.2f} (1 = all real, 0 = feedback bias; accepted "
+            f"when >= {IV_MIN} and significantly above 0)."
+        )
     elif step.iv is not None:
-        text += (" The instrumental-variable check could not vouch for this signal (no "
-                 "predictable part), so it was accepted only on a held-out gain of at least "
-                 f"{IV_UNVERIFIED_GAIN:.0%}.")
+        text += (
+            " The instrumental-variable check could not vouch for this signal (no "
+            "predictable part), so it was accepted only on a held-out gain of at least "
+            f"{IV_UNVERIFIED_GAIN:.0%}."
+        )
     if step.agreement:
         text += f" Fold agreement: {step.agreement}."
     if step.candidate.pinned:
-        text += (" Its time constant comes from command to measured rotor speed directly (the "
-                 "rotor channels alone); the other channels only decided that it is there.")
+        text += (
+            " Its time constant comes from command to measured rotor speed directly (the "
+            "rotor channels alone); the other channels only decided that it is there."
+        )
     return text
 
 
@@ -160,13 +186,19 @@ def _indistinguishable(verdicts, order) -> tuple:
         v = verdicts.get(name)
         if v is None or v.status != "rejected" or v.like is None:
             continue
-        out.append({"names": [name, v.like.name],
-                    "reason": (f"this log cannot tell {name} from {v.like.describe()}: "
-                               f"on held-out data {name} adds too little to that time "
-                               "constant (its entry in rejected gives the figures), and the "
-                               "log is too slow to confirm the time constant itself; one of "
-                               "the two is likely there, and faster commands or measured "
-                               "rotor speeds would tell which")})
+        out.append(
+            {
+                "names": [name, v.like.name],
+                "reason": (
+                    f"this log cannot tell {name} from {v.like.describe()}: "
+                    f"on held-out data {name} adds too little to that time "
+                    "constant (its entry in rejected gives the figures), and the "
+                    "log is too slow to confirm the time constant itself; one of "
+                    "the two is likely there, and faster commands or measured "
+                    "rotor speeds would tell which"
+                ),
+            }
+        )
     return tuple(out)
 
 
@@ -178,9 +210,13 @@ def _valid_pose(rec, ev) -> tuple:
         return rec, []
     if not ev.pose_valid:
         if rec.accel is None:
-            raise RecordingError(rec.path or "recording", f"velocity flagged invalid over "
-                                 f"{100 * ev.invalid_fraction:.0f}% of the log and no "
-                                 "accelerometer to diagnose from instead", key="invalid")
+            raise RecordingError(
+                rec.path or "recording",
+                f"velocity flagged invalid over "
+                f"{100 * ev.invalid_fraction:.0f}% of the log and no "
+                "accelerometer to diagnose from instead",
+                key="invalid",
+            )
         return without_pose(rec), []
     why = "velocity or position flagged invalid by the log"
     return rec, [(a, b, why) for k in ("velocity", "position") for a, b in ev.invalid.get(k, ())]
@@ -195,24 +231,31 @@ def _calibration_note(rp) -> str:
     inside = excluded_fraction([s for s in rp.masked if s[1] > a and s[0] < b], a, b)
     if inside < 0.05:
         return ""
-    return (f"{100 * inside:.0f}% of the importer's calibration segment is not free flight: "
-            "its thrust constant is biased by it (a common factor that thrust_scale or "
-            "thrust_curve takes up)")
+    return (
+        f"{100 * inside:.0f}% of the importer's calibration segment is not free flight: "
+        "its thrust constant is biased by it (a common factor that thrust_scale or "
+        "thrust_curve takes up)"
+    )
 
 
 def _scoring_dict(rp, sc, recording, mask_note="") -> dict:
     t0, t1 = float(recording.t[0]), float(recording.t[-1])
     spans = [{"t0": a, "t1": b, "reason": why} for a, b, why in rp.masked]
-    spans += [{"t0": a, "t1": b, "reason": "calibration segment of the importer (fitted on, "
-               "not scored)"} for a, b in rp.excluded]
+    spans += [
+        {"t0": a, "t1": b, "reason": "calibration segment of the importer (fitted on, not scored)"}
+        for a, b in rp.excluded
+    ]
     spans.sort(key=lambda s: s["t0"])
-    out = {"excluded": spans,
-           "excluded_fraction": excluded_fraction([(s["t0"], s["t1"]) for s in spans], t0, t1),
-           "masked_fraction": excluded_fraction(rp.masked, t0, t1),
-           "scored_blocks": int(sc.rows.sum()), "blocks": int(rp.n_blocks),
-           "weights": "fixed before any fit: noise scale per channel from the measured channel "
-                      "and the nominal residual; each measured quantity weighs as 3 channels; "
-                      "residuals winsorised at 5 robust sd of the nominal residual"}
+    out = {
+        "excluded": spans,
+        "excluded_fraction": excluded_fraction([(s["t0"], s["t1"]) for s in spans], t0, t1),
+        "masked_fraction": excluded_fraction(rp.masked, t0, t1),
+        "scored_blocks": int(sc.rows.sum()),
+        "blocks": int(rp.n_blocks),
+        "weights": "fixed before any fit: noise scale per channel from the measured channel "
+        "and the nominal residual; each measured quantity weighs as 3 channels; "
+        "residuals winsorised at 5 robust sd of the nominal residual",
+    }
     if rp.has_rotor:
         out["rotor_thrust_coefficient"] = {"value": rp.rotor_k, "source": rp.rotor_k_source}
     notes = [n for n in (mask_note, rp.scoring_note, _calibration_note(rp)) if n]
@@ -240,8 +283,12 @@ class Diagnosis:
         t_start = time.perf_counter()
         cfg = self.config
         rec = recording.without_truth() if isinstance(recording, Recording) else recording
-        kw = dict(block_seconds=cfg.block_seconds, gap_factor=cfg.gap_factor,
-                  saturate=cfg.saturate, internal_step=cfg.internal_step)
+        kw = dict(
+            block_seconds=cfg.block_seconds,
+            gap_factor=cfg.gap_factor,
+            saturate=cfg.saturate,
+            internal_step=cfg.internal_step,
+        )
         ev = evidence(rec)
         rec, invalid = _valid_pose(rec, ev)
         rp = prepare(rec, vehicle, exclude=invalid, **kw)
@@ -250,39 +297,61 @@ class Diagnosis:
             spans = flight_phases(rp)
             if spans:
                 try:
-                    rp = prepare(rec, vehicle, exclude=invalid + [s.as_tuple() for s in spans],
-                                 **kw)
+                    rp = prepare(
+                        rec, vehicle, exclude=invalid + [s.as_tuple() for s in spans], **kw
+                    )
                 except RecordingError:  # too little would be left: keep everything, say so
-                    frac = excluded_fraction([s.as_tuple() for s in spans], float(rec.t[0]),
-                                             float(rec.t[-1]))
+                    frac = excluded_fraction(
+                        [s.as_tuple() for s in spans], float(rec.t[0]), float(rec.t[-1])
+                    )
                     why = "; ".join(sorted({s.reason for s in spans}))
-                    mask_note = (f"nothing excluded: what does not look like free flight "
-                                 f"({why}; {100 * frac:.0f}% of the recording) would leave "
-                                 "too few blocks")
+                    mask_note = (
+                        f"nothing excluded: what does not look like free flight "
+                        f"({why}; {100 * frac:.0f}% of the recording) would leave "
+                        "too few blocks"
+                    )
         library = build_library(rp, cfg.effects)
         if cfg.baseline_eta is not None:
             eta, spread = healthy_pattern(cfg.baseline_eta)
-            library = [dataclasses.replace(c, baseline=eta, spread=spread,
-                                           baseline_flights=len(cfg.baseline_eta))
-                       if c.name == MotorEfficiency.name else c for c in library]
+            library = [
+                dataclasses.replace(
+                    c, baseline=eta, spread=spread, baseline_flights=len(cfg.baseline_eta)
+                )
+                if c.name == MotorEfficiency.name
+                else c
+                for c in library
+            ]
         lacks = {c.name: c.untestable_reason(rp) for c in library}
         library, gated = gate(library, ev)
         # one list of what this recording cannot reveal, in the library's order, each with
         # its reason (the gate's, else what the effect itself lacks); untestable: the names
         gated = {n["name"]: n["reason"] for n in gated}
-        not_identifiable = [{"name": n, "reason": gated.get(n) or why}
-                            for n, why in lacks.items() if n in gated or why]
+        not_identifiable = [
+            {"name": n, "reason": gated.get(n) or why}
+            for n, why in lacks.items()
+            if n in gated or why
+        ]
         untestable = [n["name"] for n in not_identifiable]
         base_res = rp.measured - predict(rp, [])
         sc = fixed_scoring(rp, base_res, rp.scored)
         library = pin_to_rotor_speeds(rp, library, sc)
-        sel = select(rp, library, sc, folds=cfg.folds, max_effects=cfg.max_effects,
-                     min_improvement=cfg.min_improvement, bic_margin=cfg.bic_margin,
-                     screen_top=cfg.screen_top, pair_top=cfg.pair_top, progress=progress)
+        sel = select(
+            rp,
+            library,
+            sc,
+            folds=cfg.folds,
+            max_effects=cfg.max_effects,
+            min_improvement=cfg.min_improvement,
+            bic_margin=cfg.bic_margin,
+            screen_top=cfg.screen_top,
+            pair_top=cfg.pair_top,
+            progress=progress,
+        )
         fl = folds_of(rp.n_blocks, cfg.folds)
         frame = rec.frame if rec.frame in ("NED", "ENU") else "NED"
-        selected = ({s.candidate.name: x for s, x in zip(sel.steps, sel.final.x)}
-                    if sel.final else {})
+        selected = (
+            {s.candidate.name: x for s, x in zip(sel.steps, sel.final.x)} if sel.final else {}
+        )
 
         def alone_cv(c, x=None):
             """Held-out result of nominal + ``c`` alone: fitted alone, or from ``x`` (an
@@ -303,12 +372,20 @@ class Diagnosis:
             c = step.candidate
             x, sd = sel.final.x[k], sel.final.sd[k]
             params, _ = public_params(c, x, sd, rp.vehicle, selected)
-            effects.append(finding(
-                c, x, sd, improvement=improvement(alone_cv(c, x)),
-                explanation=_explain(step, selected, params),
-                fold_x=[fx[k] for fx in sel.final_cv.fold_x], gain=step.improvement_step,
-                at_bound=fit_at_bound(rp, sc, sel.final, k),
-                bound=lambda xf, k=k: fit_bound_mask(rp, sc, sel.final, k, xf), **common))
+            effects.append(
+                finding(
+                    c,
+                    x,
+                    sd,
+                    improvement=improvement(alone_cv(c, x)),
+                    explanation=_explain(step, selected, params),
+                    fold_x=[fx[k] for fx in sel.final_cv.fold_x],
+                    gain=step.improvement_step,
+                    at_bound=fit_at_bound(rp, sc, sel.final, k),
+                    bound=lambda xf, k=k: fit_bound_mask(rp, sc, sel.final, k, xf),
+                    **common,
+                )
+            )
         effects.sort(key=lambda e: -e.improvement)
         suspect, rejected = [], []
         for name, v in sel.verdicts.items():
@@ -317,57 +394,104 @@ class Diagnosis:
             if v.status == "suspect":
                 j = list(v.fit.candidates).index(c)
                 folds = [] if v.cv is None else [fx[j] for fx in v.cv.fold_x]
-                suspect.append(finding(
-                    c, v.x, v.sd, improvement=improvement(cv_alone),
-                    explanation=f"{base_explanation(c.name)}. {v.reason}.", fold_x=folds,
-                    status="suspect", reason=v.reason, at_bound=True, gain=v.gain,
-                    bound=lambda xf, f=v.fit, j=j: fit_bound_mask(rp, sc, f, j, xf), **common))
+                suspect.append(
+                    finding(
+                        c,
+                        v.x,
+                        v.sd,
+                        improvement=improvement(cv_alone),
+                        explanation=f"{base_explanation(c.name)}. {v.reason}.",
+                        fold_x=folds,
+                        status="suspect",
+                        reason=v.reason,
+                        at_bound=True,
+                        gain=v.gain,
+                        bound=lambda xf, f=v.fit, j=j: fit_bound_mask(rp, sc, f, j, xf),
+                        **common,
+                    )
+                )
             else:
                 f = sel.alone.get(name, v.fit)
                 j = list(f.candidates).index(c)
-                rejected.append(finding(
-                    c, f.x[j], f.sd[j], improvement=improvement(cv_alone),
-                    explanation=base_explanation(c.name), status="rejected", reason=v.reason,
-                    fold_x=[] if cv_alone is None else [fx[0] for fx in cv_alone.fold_x],
-                    at_bound=fit_at_bound(rp, sc, f, j), gain=v.gain,
-                    bound=lambda xf, f=f, j=j: fit_bound_mask(rp, sc, f, j, xf), **common))
+                rejected.append(
+                    finding(
+                        c,
+                        f.x[j],
+                        f.sd[j],
+                        improvement=improvement(cv_alone),
+                        explanation=base_explanation(c.name),
+                        status="rejected",
+                        reason=v.reason,
+                        fold_x=[] if cv_alone is None else [fx[0] for fx in cv_alone.fold_x],
+                        at_bound=fit_at_bound(rp, sc, f, j),
+                        gain=v.gain,
+                        bound=lambda xf, f=f, j=j: fit_bound_mask(rp, sc, f, j, xf),
+                        **common,
+                    )
+                )
         suspect.sort(key=lambda e: -e.improvement)
         rejected.sort(key=lambda e: -e.improvement)
         alike = _indistinguishable(sel.verdicts, [e.name for e in rejected])
         if sel.unattributed is not None:  # a time constant the log cannot resolve is missing
             alike += (sel.unattributed.entry(),)
-        table, model_ci = sc.channel_table(sel.baseline.residual, sel.final_cv.residual,
-                                           rp.block_dur[sc.rows])
+        table, model_ci = sc.channel_table(
+            sel.baseline.residual, sel.final_cv.residual, rp.block_dur[sc.rows]
+        )
         model_imp = sc.improvement(sel.baseline.residual, sel.final_cv.residual)
         where, regimes = locate(rp, base_res, sc.noise)
-        verdict = "mismatch" if effects or suspect or alike \
-            or _unexplained(rp, sc, base_res, where) else "consistent"
+        verdict = (
+            "mismatch"
+            if effects or suspect or alike or _unexplained(rp, sc, base_res, where)
+            else "consistent"
+        )
         fold_of_block = np.zeros(rp.n_blocks, dtype=int)
         for i, idx in enumerate(fl):
             fold_of_block[idx] = i
         cands = [s.candidate for s in sel.steps]
-        fold_terms = ([list(zip(cands, fx)) for fx in sel.final_cv.fold_x] if cands
-                      else [[] for _ in fl])
+        fold_terms = (
+            [list(zip(cands, fx)) for fx in sel.final_cv.fold_x] if cands else [[] for _ in fl]
+        )
         prediction = open_loop_errors(rec, rp, fold_terms, fold_of_block, cfg.horizons)
-        series = {"block_t": rp.block_t, "baseline": sel.baseline.residual,
-                  "model": sel.final_cv.residual, "channels": rp.channels, "regimes": regimes,
-                  "replay": rp, "prediction": prediction, "scored": sc.rows,
-                  "masked": rp.masked, "calibration": rp.excluded}
+        series = {
+            "block_t": rp.block_t,
+            "baseline": sel.baseline.residual,
+            "model": sel.final_cv.residual,
+            "channels": rp.channels,
+            "regimes": regimes,
+            "replay": rp,
+            "prediction": prediction,
+            "scored": sc.rows,
+            "masked": rp.masked,
+            "calibration": rp.excluded,
+        }
         side = recording_sidecar(rec, frame=frame)
         rmse_b = {ch: v["rmse_before"] for ch, v in table.items()}
         rmse_a = {ch: v["rmse_after"] for ch, v in table.items()}
         return DiagnosisResult(
-            verdict=verdict, baseline_rmse=rmse_b, model_rmse=rmse_a,
-            model_improvement=float(model_imp), effects=tuple(effects),
-            untestable=tuple(untestable), not_identifiable=tuple(not_identifiable),
-            assumptions=assumptions(ev, [e.name for e in effects]), evidence=ev.to_dict(),
-            where=tuple(where), regimes=tuple(regimes),
+            verdict=verdict,
+            baseline_rmse=rmse_b,
+            model_rmse=rmse_a,
+            model_improvement=float(model_imp),
+            effects=tuple(effects),
+            untestable=tuple(untestable),
+            not_identifiable=tuple(not_identifiable),
+            assumptions=assumptions(ev, [e.name for e in effects]),
+            evidence=ev.to_dict(),
+            where=tuple(where),
+            regimes=tuple(regimes),
             prediction={k: v for k, v in prediction.items() if not k.startswith("_")},
-            channels=rp.channels, scale=tuple(float(s) for s in sc.noise),
+            channels=rp.channels,
+            scale=tuple(float(s) for s in sc.noise),
             seconds=float(time.perf_counter() - t_start),
             scoring=_scoring_dict(rp, sc, rec, mask_note),
-            suspect=tuple(suspect), rejected=tuple(rejected), indistinguishable=alike,
+            suspect=tuple(suspect),
+            rejected=tuple(rejected),
+            indistinguishable=alike,
             channel_scores=table,
-            model_ci95=tuple(model_ci), weights=tuple(float(w) for w in sc.weight),
-            vehicle=side["vehicle"], frame=frame, gravity=float(side["gravity"]),
-            series=series)
+            model_ci95=tuple(model_ci),
+            weights=tuple(float(w) for w in sc.weight),
+            vehicle=side["vehicle"],
+            frame=frame,
+            gravity=float(side["gravity"]),
+            series=series,
+        )

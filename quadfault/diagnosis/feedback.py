@@ -54,8 +54,7 @@ def iv_slope(rp: Replay, before, after, scale, residual, channels) -> tuple[floa
     # relative to the least-squares slope of the same signal: 1 at an interior optimum, more
     # when the fit stopped at a bound (the residual still holds more of the signal, which
     # would inflate the instrumented slope too)
-    ols = float(np.sum(sig[:, ch] * residual[:, ch])) / max(float(np.sum(sig[:, ch] ** 2)),
-                                                            1e-300)
+    ols = float(np.sum(sig[:, ch] * residual[:, ch])) / max(float(np.sum(sig[:, ch] ** 2)), 1e-300)
     scale = max(ols, 1.0)
     return beta / scale, se / scale
 
@@ -108,10 +107,12 @@ def frozen_replay(rp: Replay) -> Replay:
         raw = dict(rp.raw, f=f_raw)
     else:
         f = commands(rp.t[:-1], rp.block, src["f"])
-    take = (lambda a: None if a is None else a[first])
-    fr = replace(rp, f=f, p=take(src["p"]), v=take(src["v"]), R=take(src["R"]),
-                 w=take(src["w"]), raw=raw)
+
+    def take(a):
+        return None if a is None else a[first]
+
+    fr = replace(
+        rp, f=f, p=take(src["p"]), v=take(src["v"]), R=take(src["R"]), w=take(src["w"]), raw=raw
+    )
     object.__setattr__(rp, "_frozen", fr)
     return fr
-
-

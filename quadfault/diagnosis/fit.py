@@ -63,7 +63,7 @@ class Fit:
 def _split(x, cands):
     out, i = [], 0
     for c in cands:
-        out.append(np.asarray(x[i:i + c.size], dtype=float))
+        out.append(np.asarray(x[i : i + c.size], dtype=float))
         i += c.size
     return out
 
@@ -90,8 +90,10 @@ def is_affine(cands) -> bool:
 
 
 def _key(cands, fixed):
-    return (tuple(c.name for c in cands),
-            tuple((c.name, np.asarray(x, dtype=float).tobytes()) for c, x in fixed))
+    return (
+        tuple(c.name for c in cands),
+        tuple((c.name, np.asarray(x, dtype=float).tobytes()) for c, x in fixed),
+    )
 
 
 class Linearisation:
@@ -164,8 +166,18 @@ class LinearSolution:
     message: str
 
 
-def solve_linear(lin: Linearisation, measured, scale, mask, x_start, lo, hi,
-                 loss="soft_l1", f_scale=2.0, iterations=200) -> LinearSolution:
+def solve_linear(
+    lin: Linearisation,
+    measured,
+    scale,
+    mask,
+    x_start,
+    lo,
+    hi,
+    loss="soft_l1",
+    f_scale=2.0,
+    iterations=200,
+) -> LinearSolution:
     """Bounded robust least squares of the surrogate ``lin`` on the blocks in ``mask``.
 
     The residual ``r = z - A x`` is affine, so the ``soft_l1`` problem is convex; it is solved
@@ -195,8 +207,7 @@ def solve_linear(lin: Linearisation, measured, scale, mask, x_start, lo, hi,
         if np.any(x_new < lo) or np.any(x_new > hi):
             try:
                 L = np.linalg.cholesky(H)
-                x_new = lsq_linear(L.T, np.linalg.solve(L, g), bounds=(lo, hi),
-                                   method="bvls").x
+                x_new = lsq_linear(L.T, np.linalg.solve(L, g), bounds=(lo, hi), method="bvls").x
             except np.linalg.LinAlgError:
                 x_new = np.clip(x_new, lo, hi)
         if np.array_equal(x_new, x):  # a fixed point: every further step repeats this one
@@ -217,9 +228,17 @@ def solve_linear(lin: Linearisation, measured, scale, mask, x_start, lo, hi,
     return LinearSolution(x, r, -A * jscale[:, None], status, message)
 
 
-def fit(rp: Replay, candidates: list[Candidate], scale: np.ndarray, mask=None, init=None,
-        loss: str = "soft_l1", f_scale: float = 2.0, max_nfev: int = 30,
-        fixed=()) -> Fit:
+def fit(
+    rp: Replay,
+    candidates: list[Candidate],
+    scale: np.ndarray,
+    mask=None,
+    init=None,
+    loss: str = "soft_l1",
+    f_scale: float = 2.0,
+    max_nfev: int = 30,
+    fixed=(),
+) -> Fit:
     """Fit ``candidates`` jointly on the blocks in ``mask`` (all by default).
 
     ``init`` gives start vectors (None entries: the candidate's own start guesses, the best
@@ -249,9 +268,9 @@ def fit(rp: Replay, candidates: list[Candidate], scale: np.ndarray, mask=None, i
             continue
         best, best_cost = x[j], np.inf
         for s in c.starts:
-            trial = x[:j] + [np.asarray(s, dtype=float)] + x[j + 1:]
+            trial = x[:j] + [np.asarray(s, dtype=float)] + x[j + 1 :]
             r = resid(np.concatenate(trial))
-            cost = float(np.sum(np.log1p(r * r / f_scale ** 2)))
+            cost = float(np.sum(np.log1p(r * r / f_scale**2)))
             if cost < best_cost:
                 best, best_cost = np.asarray(s, dtype=float), cost
         x[j] = best
@@ -259,8 +278,16 @@ def fit(rp: Replay, candidates: list[Candidate], scale: np.ndarray, mask=None, i
     if lin is not None:
         res = solve_linear(lin, rp.measured, scale, mask, x0, lo, hi, loss, f_scale)
     else:
-        res = least_squares(resid, x0, bounds=(lo, hi), loss=loss, f_scale=f_scale,
-                            max_nfev=max_nfev * len(x0), x_scale="jac", method="trf")
+        res = least_squares(
+            resid,
+            x0,
+            bounds=(lo, hi),
+            loss=loss,
+            f_scale=f_scale,
+            max_nfev=max_nfev * len(x0),
+            x_scale="jac",
+            method="trf",
+        )
     r = res.fun
     n, p = r.size, len(res.x)
     s2 = float(r @ r) / max(n - p, 1)
@@ -270,6 +297,14 @@ def fit(rp: Replay, candidates: list[Candidate], scale: np.ndarray, mask=None, i
         sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     except np.linalg.LinAlgError:
         sd = np.full(p, np.nan)
-    return Fit(tuple(cands), tuple(_split(res.x, cands)), tuple(_split(sd, cands)),
-               float(r @ r), n, int(res.status), str(res.message),
-               sum(c.size for c, _ in fixed), s2)
+    return Fit(
+        tuple(cands),
+        tuple(_split(res.x, cands)),
+        tuple(_split(sd, cands)),
+        float(r @ r),
+        n,
+        int(res.status),
+        str(res.message),
+        sum(c.size for c, _ in fixed),
+        s2,
+    )

@@ -3,8 +3,8 @@
 A candidate effect is fitted only when the recording carries the evidence it needs; the
 others are listed under ``not_identifiable`` with the reason, and no effect is ever accepted
 on evidence the log lacks. Each effect declares its needs in its own module
-(:class:`quadfault.effects.base.Identifiability`, read through
-:func:`quadfault.effects.registry.identifiability`); this module holds the one gate that reads
+(:class:`quadfault.model.effects.base.Identifiability`, read through
+:func:`quadfault.model.effects.registry.identifiability`); this module holds the one gate that reads
 them:
 
 ``channels`` / ``any_of``
@@ -47,11 +47,11 @@ from quadfault.diagnosis.fit import fit
 from quadfault.diagnosis.library import build_library
 from quadfault.diagnosis.phases import excluded_fraction
 from quadfault.diagnosis.residuals import rotor_speeds
-from quadfault.effects.base import ASSUMABLE
-from quadfault.effects.registry import identifiability
-from quadfault.effects.registry import names as effect_names
 from quadfault.errors import ConfigError, RecordingError
-from quadfault.recording import Recording
+from quadfault.io.recording import Recording
+from quadfault.model.effects.base import ASSUMABLE
+from quadfault.model.effects.registry import identifiability
+from quadfault.model.effects.registry import names as effect_names
 
 TIMING_SAMPLES = 2.0
 MAX_INVALID_FRACTION = 0.5
@@ -59,8 +59,9 @@ MAX_INVALID_FRACTION = 0.5
 #: assumed constants each effect's fitted value scales with (each effect's declaration,
 #: ``Identifiability.scales_with``; effects not listed: none -- time constants, and
 #: motor_efficiency's eta relative to the median rotor)
-DEPENDS_ON = {n: identifiability(n).scales_with for n in effect_names()
-              if identifiability(n).scales_with}
+DEPENDS_ON = {
+    n: identifiability(n).scales_with for n in effect_names() if identifiability(n).scales_with
+}
 
 
 @dataclass(frozen=True)
@@ -95,18 +96,24 @@ class Evidence:
 
     def to_dict(self) -> dict:
         """The rates and channels as reported in the diagnosis JSON (``evidence``)."""
+
         def hz(period):
             return None if period is None or not np.isfinite(period) else 1.0 / period
 
-        return {"command_rate_hz": hz(self.command_period),
-                "sample_rate_hz": hz(self.sample_period),
-                "rotor_speed_rate_hz": hz(self.rotor_speed_period),
-                "shortest_time_constant_s": (self.shortest_time_constant
-                                             if np.isfinite(self.command_period) else None),
-                "pose": self.pose, "pose_valid": self.pose_valid,
-                "velocity_invalid_fraction": self.invalid_fraction,
-                "accelerometer": self.accel, "battery": self.vbat,
-                "assumed": list(self.assumed)}
+        return {
+            "command_rate_hz": hz(self.command_period),
+            "sample_rate_hz": hz(self.sample_period),
+            "rotor_speed_rate_hz": hz(self.rotor_speed_period),
+            "shortest_time_constant_s": (
+                self.shortest_time_constant if np.isfinite(self.command_period) else None
+            ),
+            "pose": self.pose,
+            "pose_valid": self.pose_valid,
+            "velocity_invalid_fraction": self.invalid_fraction,
+            "accelerometer": self.accel,
+            "battery": self.vbat,
+            "assumed": list(self.assumed),
+        }
 
     @property
     def pose_valid(self) -> bool:
@@ -131,8 +138,9 @@ def _spans_from_column(t, flag) -> tuple:
     if not bad.any():
         return ()
     edges = np.flatnonzero(np.diff(np.r_[0, bad.astype(int), 0]))
-    return tuple((float(t[a]), float(t[min(b, len(t) - 1)])) for a, b in zip(edges[::2],
-                                                                               edges[1::2]))
+    return tuple(
+        (float(t[a]), float(t[min(b, len(t) - 1)])) for a, b in zip(edges[::2], edges[1::2])
+    )
 
 
 def invalid_spans(rec: Recording) -> dict:
@@ -141,17 +149,22 @@ def invalid_spans(rec: Recording) -> dict:
     out = {}
     declared = (rec.meta or {}).get("invalid") or {}
     if not isinstance(declared, dict):
-        raise RecordingError(rec.path or "recording", "must be an object {\"velocity\": "
-                             "[[t0, t1], ...]}", key="invalid")
+        raise RecordingError(
+            rec.path or "recording",
+            'must be an object {"velocity": [[t0, t1], ...]}',
+            key="invalid",
+        )
     for key in ("velocity", "position"):
         spans = []
         for s in declared.get(key) or ():
             try:
                 a, b = (float(v) for v in s)
             except (TypeError, ValueError):
-                raise RecordingError(rec.path or "recording", f"invalid.{key} must list "
-                                     f"[t0, t1] spans in seconds, got {s!r}",
-                                     key="invalid") from None
+                raise RecordingError(
+                    rec.path or "recording",
+                    f"invalid.{key} must list [t0, t1] spans in seconds, got {s!r}",
+                    key="invalid",
+                ) from None
             spans.append((a, b))
         col = rec.extra.get(f"{key}_valid")
         if col is not None:
@@ -181,12 +194,17 @@ def evidence(rec: Recording) -> Evidence:
         command_period = max(command_period, 1.0 / source["u"])
     if rotor_period is not None and "rotor" in source:
         rotor_period = max(rotor_period, 1.0 / source["rotor"])
-    return Evidence(command_period=command_period,
-                    sample_period=float(np.median(np.diff(t))),
-                    rotor_speed_period=rotor_period,
-                    pose=rec.has_pose, accel=rec.accel is not None,
-                    vbat=rec.vbat is not None, invalid=invalid, invalid_fraction=frac,
-                    assumed=tuple(str(a) for a in assumed if a in ASSUMABLE))
+    return Evidence(
+        command_period=command_period,
+        sample_period=float(np.median(np.diff(t))),
+        rotor_speed_period=rotor_period,
+        pose=rec.has_pose,
+        accel=rec.accel is not None,
+        vbat=rec.vbat is not None,
+        invalid=invalid,
+        invalid_fraction=frac,
+        assumed=tuple(str(a) for a in assumed if a in ASSUMABLE),
+    )
 
 
 def _source_rates(rec: Recording) -> dict:
@@ -215,13 +233,23 @@ def _present(group: str, ev: Evidence) -> str:
         if not ev.pose:
             return f"no {group} in the log"
         if not ev.pose_valid:
-            return (f"no valid {group}: the log flags the velocity or position invalid over "
-                    f"{100 * ev.invalid_fraction:.0f}% of the flight")
+            return (
+                f"no valid {group}: the log flags the velocity or position invalid over "
+                f"{100 * ev.invalid_fraction:.0f}% of the flight"
+            )
         return ""
-    have = {"accelerometer": ev.accel, "battery": ev.vbat, "body_rate": True,
-            "rotor_speed": ev.rotor_speed_period is not None}
-    names = {"accelerometer": "accelerometer", "battery": "battery voltage",
-             "rotor_speed": "measured rotor speed", "body_rate": "body rates"}
+    have = {
+        "accelerometer": ev.accel,
+        "battery": ev.vbat,
+        "body_rate": True,
+        "rotor_speed": ev.rotor_speed_period is not None,
+    }
+    names = {
+        "accelerometer": "accelerometer",
+        "battery": "battery voltage",
+        "rotor_speed": "measured rotor speed",
+        "body_rate": "body rates",
+    }
     return "" if have.get(group, False) else f"no {names.get(group, group)} in the log"
 
 
@@ -241,16 +269,20 @@ def _why_not(cand, ev: Evidence) -> str:
         if direct:  # rotor speeds show it directly: the faster of the two streams counts
             period = min(period, ev.rotor_speed_period)
         if 1.0 / period < need.min_command_rate:
-            return (f"rotor commands logged at {1.0 / ev.command_period:.3g} Hz (needs "
-                    f"{need.min_command_rate:g} Hz" + (")" if not direct else
-                                                      " from the commands or rotor speeds)"))
+            return (
+                f"rotor commands logged at {1.0 / ev.command_period:.3g} Hz (needs "
+                f"{need.min_command_rate:g} Hz"
+                + (")" if not direct else " from the commands or rotor speeds)")
+            )
     if need.timescale is not None:
         upper = float(cand.upper[0])
         if ev.shortest_time_constant > 0.5 * upper:
-            return (f"rotor commands logged at {1.0 / ev.command_period:.3g} Hz resolve no "
-                    f"time constant below {ev.shortest_time_constant:.3g} s ("
-                    f"{TIMING_SAMPLES:g} samples per time constant); the candidate's range "
-                    f"ends at {upper:g} s")
+            return (
+                f"rotor commands logged at {1.0 / ev.command_period:.3g} Hz resolve no "
+                f"time constant below {ev.shortest_time_constant:.3g} s ("
+                f"{TIMING_SAMPLES:g} samples per time constant); the candidate's range "
+                f"ends at {upper:g} s"
+            )
     return ""
 
 
@@ -274,8 +306,10 @@ def too_short(cand, x) -> str:
     ""."""
     floor = getattr(cand, "resolvable", 0.0)
     if floor > 0 and float(np.ravel(x)[0]) < floor:
-        return (f"{cand.name} {float(np.ravel(x)[0]):.3g} s is shorter than {TIMING_SAMPLES:g} "
-                f"command periods ({floor:.3g} s): the log cannot show it")
+        return (
+            f"{cand.name} {float(np.ravel(x)[0]):.3g} s is shorter than {TIMING_SAMPLES:g} "
+            f"command periods ({floor:.3g} s): the log cannot show it"
+        )
     return ""
 
 
@@ -288,12 +322,18 @@ def assumptions(ev: Evidence, names) -> dict:
     depends = {n: a for n, a in dep.items() if a}
     independent = [n for n, a in dep.items() if not a]
     many = len(ev.assumed) > 1
-    note = (f"the vehicle's {', '.join(ev.assumed).replace('_', ' ')} "
-            f"{'are' if many else 'is'} assumed: forces, thrust factors and inertia-scaled "
-            f"moments scale with {'them' if many else 'it'}; ratios between rotors "
-            "(motor_efficiency's relative eta) and time constants (motor_lag, delay) do not")
-    return {"assumed": list(ev.assumed), "depends": depends, "independent": independent,
-            "note": note}
+    note = (
+        f"the vehicle's {', '.join(ev.assumed).replace('_', ' ')} "
+        f"{'are' if many else 'is'} assumed: forces, thrust factors and inertia-scaled "
+        f"moments scale with {'them' if many else 'it'}; ratios between rotors "
+        "(motor_efficiency's relative eta) and time constants (motor_lag, delay) do not"
+    )
+    return {
+        "assumed": list(ev.assumed),
+        "depends": depends,
+        "independent": independent,
+        "note": note,
+    }
 
 
 #: a parameter pinned by direct evidence may move this fraction inside its bounds
@@ -324,6 +364,13 @@ def pin_to_rotor_speeds(rp, library, sc) -> list:
         x, sd = np.asarray(f.x[0], dtype=float), np.asarray(f.sd[0], dtype=float)
         lo = np.maximum(x * (1.0 - PIN_WIDTH), np.asarray(c.lower, dtype=float))
         hi = np.minimum(np.maximum(x * (1.0 + PIN_WIDTH), lo + 1e-9), np.asarray(c.upper, float))
-        out.append(dataclasses.replace(c, lower=tuple(lo), upper=tuple(hi), starts=(tuple(x),),
-                                       pinned=(tuple(x), tuple(sd))))
+        out.append(
+            dataclasses.replace(
+                c,
+                lower=tuple(lo),
+                upper=tuple(hi),
+                starts=(tuple(x),),
+                pinned=(tuple(x), tuple(sd)),
+            )
+        )
     return out

@@ -1,9 +1,9 @@
 """The candidate library: physically named effects with bounded parameter vectors.
 
 Every candidate (each effect's ``candidate``, built from the registry
-:mod:`quadfault.effects.registry`; the protocol in :mod:`quadfault.effects.candidate`)
+:mod:`quadfault.model.effects.registry`; the protocol in :mod:`quadfault.model.effects.candidate`)
 predicts through its effect's module (the same physics the simulator's plant runs) and
-:mod:`quadfault.dynamics` (the same rigid-body equations). The model of a set of terms
+:mod:`quadfault.model.dynamics` (the same rigid-body equations). The model of a set of terms
 ``[(candidate, x), ...]`` is the plant's chain:
 
 1. ``thrust`` stages in ``order``: command-to-thrust curve, battery voltage, efficiency or
@@ -22,12 +22,12 @@ from __future__ import annotations
 
 import numpy as np
 
-import quadfault.effects.registry as registry
-from quadfault.effects.candidate import Candidate, LibraryContext, PublicContext, WrenchInputs
-from quadfault.effects.model import frame_vectors
-from quadfault.effects.rotor_inertia import thrust_rate
-from quadfault.effects.thrust_curve import IDENTITY_CURVE, curve_command
+import quadfault.model.effects.registry as registry
 from quadfault.diagnosis.residuals import Replay, model_parts
+from quadfault.model.effects.candidate import Candidate, LibraryContext, PublicContext, WrenchInputs
+from quadfault.model.effects.model import frame_vectors
+from quadfault.model.effects.rotor_inertia import thrust_rate
+from quadfault.model.effects.thrust_curve import IDENTITY_CURVE, curve_command
 
 __all__ = [
     "EQUIVALENT",
@@ -52,11 +52,20 @@ def context(rp: Replay) -> LibraryContext:
     nominal = tuple(rp.thrust_curve) if rp.thrust_curve is not None else IDENTITY_CURVE
     f_h = m * g / n
     return LibraryContext(
-        rp=rp, mass=m, gravity=g, arm=rp.arm, n_rotors=n, inertia=np.diag(veh.inertia),
-        c_yaw=float(np.mean(np.abs(veh.allocation[3]))), dt=float(np.median(rp.dt)),
-        thrust_to_weight=n * veh.rotor_max_thrust / (m * g), nominal_curve=nominal,
-        f_hover=f_h, u_hover=float(curve_command(nominal, f_h)),
-        u_commands=rp.thrust_curve is not None)
+        rp=rp,
+        mass=m,
+        gravity=g,
+        arm=rp.arm,
+        n_rotors=n,
+        inertia=np.diag(veh.inertia),
+        c_yaw=float(np.mean(np.abs(veh.allocation[3]))),
+        dt=float(np.median(rp.dt)),
+        thrust_to_weight=n * veh.rotor_max_thrust / (m * g),
+        nominal_curve=nominal,
+        f_hover=f_h,
+        u_hover=float(curve_command(nominal, f_h)),
+        u_commands=rp.thrust_curve is not None,
+    )
 
 
 def build_library(rp: Replay, names=None) -> list[Candidate]:
@@ -82,8 +91,10 @@ def thrust_series(rp: Replay, terms, ends: bool = False):
     scale, ground effect) follow on the merged thrust -- exact for the constant factors, and
     for the others up to their variation within one internal step. With ``ends``, also the
     thrust held at the end of each interval (M, n) (its last raw row), for rates."""
-    stages = sorted(((c, np.asarray(x, dtype=float)) for c, x in terms if c.stage == "thrust"),
-                    key=lambda t: t[0].order)
+    stages = sorted(
+        ((c, np.asarray(x, dtype=float)) for c, x in terms if c.stage == "thrust"),
+        key=lambda t: t[0].order,
+    )
     f, f_end = rp.f, None
     raw = rp.raw
     if raw is not None and (ends or any(c.on_raw for c, _ in stages)):
@@ -164,13 +175,17 @@ def predict(rp: Replay, terms) -> np.ndarray:
     return np.hstack([rp.block_mean(p) for p in _interval_parts(rp, terms)])
 
 
-def public_params(cand: Candidate, x, sd, vehicle, selected: dict,
-                  frame: str = "NED") -> tuple[dict, dict]:
+def public_params(
+    cand: Candidate, x, sd, vehicle, selected: dict, frame: str = "NED"
+) -> tuple[dict, dict]:
     """``params`` and ``uncertainty`` (one sigma) as reported in the diagnosis JSON; direction
     parameters (world ``force_N``, ``air_velocity_m_per_s``; body ``offset_m``) in the
     recording's own frame (``"ENU"``: world ENU, body FLU)."""
-    params, unc = cand.public(np.asarray(x, dtype=float), np.asarray(sd, dtype=float),
-                              PublicContext(vehicle, selected, frame))
+    params, unc = cand.public(
+        np.asarray(x, dtype=float),
+        np.asarray(sd, dtype=float),
+        PublicContext(vehicle, selected, frame),
+    )
     return frame_vectors(params, frame), frame_vectors(unc, frame, magnitude=True)
 
 

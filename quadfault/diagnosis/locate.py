@@ -19,8 +19,14 @@ from numpy.lib.stride_tricks import sliding_window_view
 from quadfault.diagnosis.residuals import Replay, channel_unit
 from quadfault.diagnosis.result import Interval
 
-REGIME_UNITS = {"airspeed": "m/s", "height": "m", "thrust_level": "T/(m g)",
-                "command_rate": "1/s", "tilt": "deg", "body_rate": "rad/s"}
+REGIME_UNITS = {
+    "airspeed": "m/s",
+    "height": "m",
+    "thrust_level": "T/(m g)",
+    "command_rate": "1/s",
+    "tilt": "deg",
+    "body_rate": "rad/s",
+}
 
 
 def savgol_coeffs(window: int, order: int = 2) -> np.ndarray:
@@ -35,11 +41,11 @@ def savgol_filter(z: np.ndarray, window: int, order: int = 2) -> np.ndarray:
     z = np.asarray(z, dtype=float)
     n, h = len(z), window // 2
     out = np.empty_like(z)
-    out[h:n - h] = sliding_window_view(z, window, axis=0) @ savgol_coeffs(window, order)
+    out[h : n - h] = sliding_window_view(z, window, axis=0) @ savgol_coeffs(window, order)
     V = np.vander(np.arange(window, dtype=float), order + 1, increasing=True)
     P = V @ np.linalg.pinv(V)  # fitted values of a window at each of its positions
     out[:h] = P[:h] @ z[:window]
-    out[n - h:] = P[window - h:] @ z[n - window:]
+    out[n - h :] = P[window - h :] @ z[n - window :]
     return out
 
 
@@ -99,16 +105,22 @@ def locate(rp: Replay, residual: np.ndarray, scale: np.ndarray, per_channel: int
             else:
                 merged.append((a, b))
         merged = [(a, b) for a, b in merged if b - a >= max(3, win // 2)]
-        merged.sort(key=lambda ab: -np.max(np.abs(zs[ab[0]:ab[1], j])))
+        merged.sort(key=lambda ab: -np.max(np.abs(zs[ab[0] : ab[1], j])))
         unit = channel_unit(ch)
         for a, b in merged[:per_channel]:
             seg = residual[a:b, j]
-            excess = float(np.sqrt(np.mean(seg ** 2)) / scale[j])
-            where.append(Interval(ch, float(rp.block_t[a] - 0.5 * rp.block_dur[a]),
-                                  float(rp.block_t[b - 1] + 0.5 * rp.block_dur[b - 1]),
-                                  f"mean residual {np.mean(seg):+.3g} {unit}, "
-                                  f"peak {seg[np.argmax(np.abs(seg))]:+.3g} {unit}, "
-                                  f"{excess:.1f}x noise", excess))
+            excess = float(np.sqrt(np.mean(seg**2)) / scale[j])
+            where.append(
+                Interval(
+                    ch,
+                    float(rp.block_t[a] - 0.5 * rp.block_dur[a]),
+                    float(rp.block_t[b - 1] + 0.5 * rp.block_dur[b - 1]),
+                    f"mean residual {np.mean(seg):+.3g} {unit}, "
+                    f"peak {seg[np.argmax(np.abs(seg))]:+.3g} {unit}, "
+                    f"{excess:.1f}x noise",
+                    excess,
+                )
+            )
     where.sort(key=lambda w: (w.t0, w.channel))
     regimes = []
     variables = regime_variables(rp)
@@ -128,8 +140,17 @@ def locate(rp: Replay, residual: np.ndarray, scale: np.ndarray, per_channel: int
             sel = (var >= lo) & (var <= hi)
             if sel.any():
                 bins.append([float(lo), float(hi), float(np.sqrt(np.mean(residual[sel, j] ** 2)))])
-        regimes.append({"channel": ch, "variable": name, "unit": REGIME_UNITS[name],
-                        "correlation": c, "bins_lo_hi_rms": bins,
-                        "all": {k: max(abs(_corr(zs[:, j], v)), abs(_corr(np.abs(zs[:, j]), v)))
-                                for k, v in variables.items()}})
+        regimes.append(
+            {
+                "channel": ch,
+                "variable": name,
+                "unit": REGIME_UNITS[name],
+                "correlation": c,
+                "bins_lo_hi_rms": bins,
+                "all": {
+                    k: max(abs(_corr(zs[:, j], v)), abs(_corr(np.abs(zs[:, j]), v)))
+                    for k, v in variables.items()
+                },
+            }
+        )
     return where, regimes

@@ -155,15 +155,16 @@ def flight_phases(rp: Replay) -> tuple:
         found.append([a - MARGIN, b + MARGIN, "motors off"])
     # held: support while the body is (nearly) at rest, its specific force about 1 g
     rest = np.abs(np.linalg.norm(s["sf"], axis=1) / g - 1.0)
-    held = ((support > SUPPORT_FRACTION) | ((support > IDLE_FRACTION) & s["constant"])) \
-        & (rest < HELD_G)
+    held = ((support > SUPPORT_FRACTION) | ((support > IDLE_FRACTION) & s["constant"])) & (
+        rest < HELD_G
+    )
     partial = (support > TRANSITION_FRACTION) & (rest < REST_G)  # take-off, landing
     for span in _runs(held, t0, t1, SUPPORT_SECONDS):
         a, b = _extend(span, partial, t0, t1)
         found.append([a - MARGIN, b + MARGIN, "supported (ground, pad or hand)"])
     # impact: more specific force than the last IMPACT_MEMORY s of commands can give
     n_mem = max(1, int(round(IMPACT_MEMORY / float(np.median(rp.block_dur)))))
-    avail = np.array([s["thrust"][max(0, k - n_mem):k + 1].max() for k in range(len(t0))])
+    avail = np.array([s["thrust"][max(0, k - n_mem) : k + 1].max() for k in range(len(t0))])
     impact = np.linalg.norm(s["sf"], axis=1) / g - avail > IMPACT_G
     for a, b, *_ in _runs(impact, t0, t1, 0.0):
         found.append([a - MARGIN, b + AFTER_IMPACT, "impact (crash, hard landing)"])
@@ -175,13 +176,20 @@ def flight_phases(rp: Replay) -> tuple:
         edges = [start] + [x for a, b, _ in spans for x in (a, b)] + [end]
         for a, b in zip(edges[0::2], edges[1::2]):
             if 0 < b - a < MIN_FREE_SECONDS:
-                spans.append([a, b, f"ragged end (free flight shorter than {MIN_FREE_SECONDS:g} s)"])
+                spans.append(
+                    [a, b, f"ragged end (free flight shorter than {MIN_FREE_SECONDS:g} s)"]
+                )
         spans = _merge(spans)
     return tuple(Span(float(a), float(b), why) for a, b, why in spans if b > a)
 
 
 def excluded_fraction(spans, start: float, end: float) -> float:
     """Fraction of ``[start, end]`` covered by the union of ``(t0, t1, ...)`` spans."""
-    merged = _merge([[max(float(s[0]), start), min(float(s[1]), end), ""] for s in spans
-                     if s[1] > start and s[0] < end])
+    merged = _merge(
+        [
+            [max(float(s[0]), start), min(float(s[1]), end), ""]
+            for s in spans
+            if s[1] > start and s[0] < end
+        ]
+    )
     return float(sum(b - a for a, b, _ in merged) / max(end - start, 1e-12))

@@ -2,7 +2,7 @@
 
 From up to ``max_starts`` evenly spaced free-flight samples, the recorded state is
 integrated with the recorded commands by the simulator's own integrator
-(:func:`quadfault.dynamics.step_rk4`, all starts at once as a batch; at most 100 steps over
+(:func:`quadfault.model.dynamics.step_rk4`, all starts at once as a batch; at most 100 steps over
 the longest horizon, so consecutive held commands are merged into their duration-weighted
 mean) and compared with the recorded state after each horizon (default 0.05, 0.1, 0.2, 0.5
 s). Every start lies in one cross-validation fold and the diagnosed model is the fit that did
@@ -33,8 +33,8 @@ from quadfault.diagnosis.library import (
     thrust_series,
 )
 from quadfault.diagnosis.residuals import Replay
-from quadfault.dynamics import RigidBodyState, step_rk4
-from quadfault.rotation import expm_so3, rotation_angle
+from quadfault.model.dynamics import RigidBodyState, step_rk4
+from quadfault.model.rotation import expm_so3, rotation_angle
 
 HORIZONS = (0.05, 0.1, 0.2, 0.5)
 BASELINES = ("constant_velocity", "constant_acceleration")
@@ -62,11 +62,19 @@ def _rollout(rec, rp: Replay, terms, starts, steps, sub):
     kn = rp.knots
     S = len(starts)
     if rec.has_pose:
-        s = RigidBodyState(rec.position[kn][starts].copy(), rec.velocity[kn][starts].copy(),
-                           rec.rotation[kn][starts].copy(), rec.omega[kn][starts].copy())
+        s = RigidBodyState(
+            rec.position[kn][starts].copy(),
+            rec.velocity[kn][starts].copy(),
+            rec.rotation[kn][starts].copy(),
+            rec.omega[kn][starts].copy(),
+        )
     else:  # attitude relative to the start; the translational state is not predicted
-        s = RigidBodyState(np.zeros((S, 3)), np.zeros((S, 3)),
-                           np.broadcast_to(np.eye(3), (S, 3, 3)).copy(), rec.omega[kn][starts].copy())
+        s = RigidBodyState(
+            np.zeros((S, 3)),
+            np.zeros((S, 3)),
+            np.broadcast_to(np.eye(3), (S, 3, 3)).copy(),
+            rec.omega[kn][starts].copy(),
+        )
     wterms = [(c, np.asarray(x, float)) for c, x in terms if c.stage == "wrench"]
     out = []
     for j in range(steps):
@@ -83,8 +91,10 @@ def _rollout(rec, rp: Replay, terms, starts, steps, sub):
 
         def external(st, T=T, M=M, rate=rate):
             F, Mx = external_wrench(wterms, WrenchInputs(veh, st.R, st.v, st.w, T, M, rate))
-            return (np.zeros(st.p.shape) if F is None else F,
-                    np.zeros(st.w.shape) if Mx is None else Mx)
+            return (
+                np.zeros(st.p.shape) if F is None else F,
+                np.zeros(st.w.shape) if Mx is None else Mx,
+            )
 
         s = step_rk4(s, T, M, body, dt[:, None], external if wterms else None)
         out.append(s)
@@ -121,8 +131,9 @@ def _rms(x):
     return float(np.sqrt(np.mean(np.square(x)))) if np.size(x) else float("nan")
 
 
-def open_loop_errors(rec, rp: Replay, fold_terms, fold_of_block, horizons=HORIZONS,
-                     max_starts: int = 60) -> dict:
+def open_loop_errors(
+    rec, rp: Replay, fold_terms, fold_of_block, horizons=HORIZONS, max_starts: int = 60
+) -> dict:
     """Held-out prediction errors at ``horizons`` [s] (module docstring).
 
     ``fold_terms``: per fold, the accepted effects ``[(cand, x), ...]`` fitted without that
@@ -135,8 +146,9 @@ def open_loop_errors(rec, rp: Replay, fold_terms, fold_of_block, horizons=HORIZO
     while usable:
         nh = max(1, int(round(usable[-1] / med)))
         cand = np.arange(back, max(back, M - nh))
-        cand = cand[(gap[cand + nh] == gap[cand]) & (gap[cand] == gap[cand - back])
-                    & (rp.block[cand] >= 0)]
+        cand = cand[
+            (gap[cand + nh] == gap[cand]) & (gap[cand] == gap[cand - back]) & (rp.block[cand] >= 0)
+        ]
         if len(cand):
             break
         usable.pop()
@@ -148,8 +160,10 @@ def open_loop_errors(rec, rp: Replay, fold_terms, fold_of_block, horizons=HORIZO
     at = sorted({max(1, min(steps, int(round(h / med / sub)))) for h in usable})
     folds = fold_of_block[rp.block[starts]]
     pose = rec.has_pose
-    keys = (["position_rmse_m", "velocity_rmse_m_per_s"] if pose else []) + \
-        ["attitude_rmse_deg", "rate_rmse_rad_per_s"]
+    keys = (["position_rmse_m", "velocity_rmse_m_per_s"] if pose else []) + [
+        "attitude_rmse_deg",
+        "rate_rmse_rad_per_s",
+    ]
     errors = {k: {} for k in keys}
     per_start = {}
     kn = rp.knots
@@ -167,14 +181,17 @@ def open_loop_errors(rec, rp: Replay, fold_terms, fold_of_block, horizons=HORIZO
         for a in at:
             n = a * sub
             R_meas = _measured_rotation(rp, rec, starts, n)
-            R_pred = np.swapaxes(rec.rotation[kn][starts], -1, -2) @ Rr[a - 1] if pose else Rr[a - 1]
+            R_pred = (
+                np.swapaxes(rec.rotation[kn][starts], -1, -2) @ Rr[a - 1] if pose else Rr[a - 1]
+            )
             e_att = np.degrees(rotation_angle(np.swapaxes(R_pred, -1, -2) @ R_meas))
             e_w = np.linalg.norm(Wr[a - 1] - rec.omega[kn][starts + n], axis=1)
             if pose:
                 e_p = np.linalg.norm(P[a - 1] - rec.position[kn][starts + n], axis=1)
                 errors["position_rmse_m"][label].append(_rms(e_p))
                 errors["velocity_rmse_m_per_s"][label].append(
-                    _rms(np.linalg.norm(V[a - 1] - rec.velocity[kn][starts + n], axis=1)))
+                    _rms(np.linalg.norm(V[a - 1] - rec.velocity[kn][starts + n], axis=1))
+                )
                 per_start.setdefault(label, []).append(e_p)
             else:
                 per_start.setdefault(label, []).append(e_att)
@@ -188,19 +205,30 @@ def open_loop_errors(rec, rp: Replay, fold_terms, fold_of_block, horizons=HORIZO
             p, v, R_rel, w = _baseline(rec, rp, starts, n, kind)
             R_meas = _measured_rotation(rp, rec, starts, n)
             errors["attitude_rmse_deg"][kind].append(
-                _rms(np.degrees(rotation_angle(np.swapaxes(R_rel, -1, -2) @ R_meas))))
+                _rms(np.degrees(rotation_angle(np.swapaxes(R_rel, -1, -2) @ R_meas)))
+            )
             errors["rate_rmse_rad_per_s"][kind].append(
-                _rms(np.linalg.norm(w - rec.omega[kn][starts + n], axis=1)))
+                _rms(np.linalg.norm(w - rec.omega[kn][starts + n], axis=1))
+            )
             if pose:
                 errors["position_rmse_m"][kind].append(
-                    _rms(np.linalg.norm(p - rec.position[kn][starts + n], axis=1)))
+                    _rms(np.linalg.norm(p - rec.position[kn][starts + n], axis=1))
+                )
                 errors["velocity_rmse_m_per_s"][kind].append(
-                    _rms(np.linalg.norm(v - rec.velocity[kn][starts + n], axis=1)))
+                    _rms(np.linalg.norm(v - rec.velocity[kn][starts + n], axis=1))
+                )
     horizons_s = [float(rp.t[starts[0] + a * sub] - rp.t[starts[0]]) for a in at]
     mid = int(np.argmin(np.abs(np.array(horizons_s) - 0.2)))
-    return {"horizons_s": horizons_s, "n_starts": int(len(starts)),
-            "held_out": "each start is predicted by the fit that did not see its fold",
-            **errors,
-            "_over_time": {"t": rp.t[starts], "horizon_s": horizons_s[mid],
-                           "quantity": "position error [m]" if pose else "attitude error [deg]",
-                           "nominal": per_start["nominal"][mid], "model": per_start["model"][mid]}}
+    return {
+        "horizons_s": horizons_s,
+        "n_starts": int(len(starts)),
+        "held_out": "each start is predicted by the fit that did not see its fold",
+        **errors,
+        "_over_time": {
+            "t": rp.t[starts],
+            "horizon_s": horizons_s[mid],
+            "quantity": "position error [m]" if pose else "attitude error [deg]",
+            "nominal": per_start["nominal"][mid],
+            "model": per_start["model"][mid],
+        },
+    }

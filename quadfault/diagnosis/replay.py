@@ -10,18 +10,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from quadfault.dynamics import RigidBodyState
 from quadfault.errors import ConfigError
-from quadfault.flight import Flight
-from quadfault.motors import MotorModel
-from quadfault.plant import Plant
-from quadfault.rotation import rotation_angle
+from quadfault.model.dynamics import RigidBodyState
+from quadfault.model.flight import Flight
+from quadfault.model.motors import MotorModel
+from quadfault.model.plant import Plant
+from quadfault.model.rotation import rotation_angle
 
 
 # the simulator's plant, one step at a time: the only calls into it ----------------------
 class _OpenLoop:
     """The plant (nominal motors without noise, efficiency 1, the given effects) flown by the
-    one closed loop (:class:`quadfault.flight.Flight`) without a controller: the recorded
+    one closed loop (:class:`quadfault.model.flight.Flight`) without a controller: the recorded
     command of each row held over that row's interval."""
 
     def __init__(self, vehicle, effects, dt):
@@ -63,12 +63,21 @@ def _step(plant, f_cmd, t, dt):
 
 
 def _state(rec, k):
-    return RigidBodyState(rec.position[k].copy(), rec.velocity[k].copy(),
-                          rec.rotation[k].copy(), rec.omega[k].copy())
+    return RigidBodyState(
+        rec.position[k].copy(), rec.velocity[k].copy(), rec.rotation[k].copy(), rec.omega[k].copy()
+    )
 
 
-def replay_errors(recording, vehicle, effects=(), horizons=(0.05, 0.1, 0.2, 0.5), *,
-                  starts: int = 40, span=None, warmup: float = 0.3) -> dict:
+def replay_errors(
+    recording,
+    vehicle,
+    effects=(),
+    horizons=(0.05, 0.1, 0.2, 0.5),
+    *,
+    starts: int = 40,
+    span=None,
+    warmup: float = 0.3,
+) -> dict:
     """Open-loop prediction errors of the plant ``vehicle`` + ``effects`` on ``recording``.
 
     From ``starts`` evenly spaced rows inside ``span = (t0, t1)`` [s] (default: the whole
@@ -82,8 +91,9 @@ def replay_errors(recording, vehicle, effects=(), horizons=(0.05, 0.1, 0.2, 0.5)
     horizon).
     """
     if not recording.has_pose:
-        raise ConfigError("open-loop replay needs a recording with pose (position, velocity, "
-                          "attitude)")
+        raise ConfigError(
+            "open-loop replay needs a recording with pose (position, velocity, attitude)"
+        )
     t = recording.t
     dt = np.diff(t)
     med = float(np.median(dt))
@@ -114,8 +124,12 @@ def replay_errors(recording, vehicle, effects=(), horizons=(0.05, 0.1, 0.2, 0.5)
         plant.check()
 
     def rms(x):
-        return np.sqrt(np.mean(x ** 2, axis=0)).tolist()
+        return np.sqrt(np.mean(x**2, axis=0)).tolist()
 
-    return {"horizons_s": [n * med for n in steps], "starts": len(rows),
-            "position_rmse_m": rms(err["p"]), "velocity_rmse_m_per_s": rms(err["v"]),
-            "attitude_rmse_deg": rms(err["a"])}
+    return {
+        "horizons_s": [n * med for n in steps],
+        "starts": len(rows),
+        "position_rmse_m": rms(err["p"]),
+        "velocity_rmse_m_per_s": rms(err["v"]),
+        "attitude_rmse_deg": rms(err["a"]),
+    }

@@ -30,11 +30,18 @@ from quadfault.fileio import atomic_savefig, atomic_write_text, check_writable
 
 FILES = ("report.md", "residuals.png", "regimes.png", "prediction.png")
 REGIME_BINS = 10
-COLORS = {"nominal": "tab:red", "model": "tab:blue", "constant_velocity": "tab:gray",
-          "constant_acceleration": "tab:olive"}
-LABELS = {"nominal": "nominal model", "model": "with diagnosed effects",
-          "constant_velocity": "constant velocity", "constant_acceleration":
-          "constant acceleration"}
+COLORS = {
+    "nominal": "tab:red",
+    "model": "tab:blue",
+    "constant_velocity": "tab:gray",
+    "constant_acceleration": "tab:olive",
+}
+LABELS = {
+    "nominal": "nominal model",
+    "model": "with diagnosed effects",
+    "constant_velocity": "constant velocity",
+    "constant_acceleration": "constant acceleration",
+}
 
 
 def _plt():
@@ -81,9 +88,12 @@ def _residuals_png(res: DiagnosisResult, path, force):
         ax.set_ylabel(f"{ch}\n[{channel_unit(ch)}]", fontsize=8)
         ax.grid(alpha=0.3)
     axes[0, 0].legend(loc="upper right", fontsize=8)
-    axes[0, 0].set_title("held-out residuals (block means; 0.5-99.5 percentile range). Grey: "
-                         "not free flight (excluded); hatched: calibration segment; orange: "
-                         "located intervals", fontsize=8)
+    axes[0, 0].set_title(
+        "held-out residuals (block means; 0.5-99.5 percentile range). Grey: "
+        "not free flight (excluded); hatched: calibration segment; orange: "
+        "located intervals",
+        fontsize=8,
+    )
     axes[-1, 0].set_xlabel("t [s]")
     fig.tight_layout()
     atomic_savefig(fig, path, force=force, dpi=90)
@@ -126,8 +136,11 @@ def _regimes_png(res: DiagnosisResult, path, force):
         ax.axhline(0.0, color="k", lw=0.5)
         ax.set_xlabel(f"{name} [{unit}]")
         ax.set_ylabel(f"{ch} residual [{channel_unit(ch)}]")
-        ax.set_title(f"median and quartiles in {REGIME_BINS} bins"
-                     + ("" if corr is None else f"; |corr| = {corr:.2f}"), fontsize=8)
+        ax.set_title(
+            f"median and quartiles in {REGIME_BINS} bins"
+            + ("" if corr is None else f"; |corr| = {corr:.2f}"),
+            fontsize=8,
+        )
         ax.grid(alpha=0.3)
     axes[0, 0].legend(fontsize=7)
     fig.tight_layout()
@@ -141,8 +154,13 @@ def _prediction_png(res: DiagnosisResult, path, force):
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     if not pred:
         for ax in axes:
-            ax.text(0.5, 0.5, "no free-flight stretch long enough for a prediction",
-                    ha="center", va="center")
+            ax.text(
+                0.5,
+                0.5,
+                "no free-flight stretch long enough for a prediction",
+                ha="center",
+                va="center",
+            )
             ax.set_axis_off()
     else:
         key = "position_rmse_m" if "position_rmse_m" in pred else "attitude_rmse_deg"
@@ -155,12 +173,14 @@ def _prediction_png(res: DiagnosisResult, path, force):
         axes[0].set_yscale("log")
         axes[0].legend(fontsize=8)
         axes[0].grid(alpha=0.3, which="both")
-        axes[0].set_title(f"held-out open-loop prediction from {pred['n_starts']} recorded "
-                          "states", fontsize=9)
+        axes[0].set_title(
+            f"held-out open-loop prediction from {pred['n_starts']} recorded states", fontsize=9
+        )
         ot = pred["_over_time"]
         for label in ("nominal", "model"):
-            axes[1].plot(ot["t"], ot[label], ".-", ms=3, lw=0.7, color=COLORS[label],
-                         label=LABELS[label])
+            axes[1].plot(
+                ot["t"], ot[label], ".-", ms=3, lw=0.7, color=COLORS[label], label=LABELS[label]
+            )
         _shade(axes[1], res)
         axes[1].set_xlabel("start time t [s]")
         axes[1].set_ylabel(ot["quantity"])
@@ -172,8 +192,9 @@ def _prediction_png(res: DiagnosisResult, path, force):
     plt.close(fig)
 
 
-def write_report(res: DiagnosisResult, out_dir, *, source: str = "recording",
-                 force: bool = False) -> Path:
+def write_report(
+    res: DiagnosisResult, out_dir, *, source: str = "recording", force: bool = False
+) -> Path:
     """Write ``report.md`` and the PNG plots into ``out_dir`` (created if missing)."""
     out = Path(out_dir)
     if out.exists() and not out.is_dir():

@@ -42,11 +42,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.sparse import csr_matrix
 
-from quadfault.dynamics import E3, angular_acceleration, translational_acceleration
 from quadfault.errors import ConfigError, RecordingError
-from quadfault.motors import MotorModel
-from quadfault.recording import Recording
-from quadfault.vehicle import Vehicle
+from quadfault.io.recording import Recording
+from quadfault.model.dynamics import E3, angular_acceleration, translational_acceleration
+from quadfault.model.motors import MotorModel
+from quadfault.model.vehicle import Vehicle
 
 ACC_CHANNELS = ("acc_x", "acc_y", "acc_z")
 SF_CHANNELS = ("sf_x", "sf_y", "sf_z")
@@ -55,8 +55,12 @@ POSE_CHANNELS = ACC_CHANNELS + ALPHA_CHANNELS
 IMU_CHANNELS = SF_CHANNELS + ALPHA_CHANNELS
 CHANNEL_UNITS = {"acc": "m/s^2", "sf": "m/s^2", "alpha": "rad/s^2", "rotor": "N"}
 #: what each channel group measures (groups share one total weight, see ``scores``)
-CHANNEL_GROUPS = {"acc": "translation", "sf": "translation", "alpha": "rotation",
-                  "rotor": "rotor speed"}
+CHANNEL_GROUPS = {
+    "acc": "translation",
+    "sf": "translation",
+    "alpha": "rotation",
+    "rotor": "rotor speed",
+}
 
 
 def channel_unit(name: str) -> str:
@@ -159,8 +163,9 @@ class Replay:
 
     def channel_index(self, *groups: str) -> np.ndarray:
         """Indices of the channels whose name starts with one of ``groups`` (``"alpha"``)."""
-        return np.array([j for j, c in enumerate(self.channels) if c.split("_")[0] in groups],
-                        dtype=int)
+        return np.array(
+            [j for j, c in enumerate(self.channels) if c.split("_")[0] in groups], dtype=int
+        )
 
     def block_mean(self, x: np.ndarray) -> np.ndarray:
         """Duration-weighted block means of interval values ``x`` (M, k) -> (B, k)."""
@@ -168,8 +173,9 @@ class Replay:
         if S is None:
             ok = np.flatnonzero(self.block >= 0)
             blk = self.block[ok]
-            S = csr_matrix((self.dt[ok] / self.block_dur[blk], (blk, ok)),
-                           shape=(self.n_blocks, len(self.dt)))
+            S = csr_matrix(
+                (self.dt[ok] / self.block_dur[blk], (blk, ok)), shape=(self.n_blocks, len(self.dt))
+            )
             object.__setattr__(self, "_averager", S)
         return np.asarray(S @ x)
 
@@ -178,8 +184,12 @@ class Replay:
         1e-3 g (accelerations), 1e-3 g / arm (angular), 1e-3 of the hover thrust per rotor
         (rotor channels)."""
         g = self.vehicle.gravity
-        per = {"acc": 1e-3 * g, "sf": 1e-3 * g, "alpha": 1e-3 * g / max(self.arm, 1e-3),
-               "rotor": 1e-3 * self.vehicle.weight / self.vehicle.n_rotors}
+        per = {
+            "acc": 1e-3 * g,
+            "sf": 1e-3 * g,
+            "alpha": 1e-3 * g / max(self.arm, 1e-3),
+            "rotor": 1e-3 * self.vehicle.weight / self.vehicle.n_rotors,
+        }
         return np.array([per[c.split("_")[0]] for c in self.channels])
 
 
@@ -217,7 +227,7 @@ def _blocks(dt: np.ndarray, valid: np.ndarray, q: int):
             k += 1
         n_full = (k - start) // q
         if n_full:
-            block[start:start + n_full * q] = b + np.arange(n_full * q) // q
+            block[start : start + n_full * q] = b + np.arange(n_full * q) // q
             run_id += [len(runs)] * n_full
             runs.append((start, start + n_full * q))
             b += n_full
@@ -229,8 +239,12 @@ def _check(recording: Recording, veh: Vehicle, where: str) -> np.ndarray:
     if len(t) < 20:
         raise RecordingError(where, f"too short for a diagnosis ({len(t)} rows, need >= 20)")
     if recording.thrust_cmd.shape[1] != veh.n_rotors:
-        raise RecordingError(where, f"{recording.thrust_cmd.shape[1]} rotor commands but the "
-                                    f"vehicle has {veh.n_rotors} rotors", key="vehicle")
+        raise RecordingError(
+            where,
+            f"{recording.thrust_cmd.shape[1]} rotor commands but the "
+            f"vehicle has {veh.n_rotors} rotors",
+            key="vehicle",
+        )
     if not np.all(np.diff(t) > 0):
         raise RecordingError(where, "time must be strictly increasing", column="t")
     for name in ("omega", "thrust_cmd", "position", "velocity", "quaternion", "accel"):
@@ -257,9 +271,16 @@ def rotor_speeds(recording: Recording) -> np.ndarray | None:
     return W
 
 
-def prepare(recording: Recording, vehicle: Vehicle | None = None, *,
-            block_seconds: float = 0.02, gap_factor: float = 2.5,
-            saturate: bool = True, internal_step: float = 0.004, exclude=()) -> Replay:
+def prepare(
+    recording: Recording,
+    vehicle: Vehicle | None = None,
+    *,
+    block_seconds: float = 0.02,
+    gap_factor: float = 2.5,
+    saturate: bool = True,
+    internal_step: float = 0.004,
+    exclude=(),
+) -> Replay:
     """Replay ``recording`` (truth is never read) into block-mean measured channels.
 
     ``exclude``: spans ``(t0, t1[, reason])`` [s] treated like gaps (never in a block)."""
@@ -292,12 +313,16 @@ def prepare(recording: Recording, vehicle: Vehicle | None = None, *,
     block, n_blocks, run = _blocks(dtk, validk, q)
     if n_blocks < 10:
         hint = " after excluding what is not free flight (--no-mask keeps it)" if exclude else ""
-        raise RecordingError(where, f"only {n_blocks} usable blocks of {q * r} samples "
-                                    f"(too short or too many gaps{hint})")
+        raise RecordingError(
+            where,
+            f"only {n_blocks} usable blocks of {q * r} samples (too short or too many gaps{hint})",
+        )
     ok = block >= 0
     dur = np.bincount(block[ok], weights=dtk[ok], minlength=n_blocks)
-    tc = np.bincount(block[ok], weights=(tk[:-1] + 0.5 * dtk)[ok] * dtk[ok],
-                     minlength=n_blocks) / dur
+    tc = (
+        np.bincount(block[ok], weights=(tk[:-1] + 0.5 * dtk)[ok] * dtk[ok], minlength=n_blocks)
+        / dur
+    )
     ok_idx = np.flatnonzero(ok)
     first_k = ok_idx[np.unique(block[ok], return_index=True)[1]]
     first, last = knots[first_k], knots[first_k + q]  # sample indices at the block ends
@@ -340,9 +365,12 @@ def prepare(recording: Recording, vehicle: Vehicle | None = None, *,
             except (TypeError, ValueError):
                 rotor_k = float("nan")
             if not (math.isfinite(rotor_k) and rotor_k > 0):
-                raise RecordingError(where, f"must be a positive number, got "
-                                            f"{recording.meta['rotor_thrust_coefficient']!r}",
-                                     key="rotor_thrust_coefficient")
+                raise RecordingError(
+                    where,
+                    f"must be a positive number, got "
+                    f"{recording.meta['rotor_thrust_coefficient']!r}",
+                    key="rotor_thrust_coefficient",
+                )
         channels += tuple(f"rotor_{i + 1}" for i in range(W.shape[1]))
         parts.append(None)
     excluded = calibration_segments(recording, where)
@@ -351,19 +379,48 @@ def prepare(recording: Recording, vehicle: Vehicle | None = None, *,
         scored &= ~((tc + 0.5 * dur > a) & (tc - 0.5 * dur < b))
     note = ""
     if excluded and scored.sum() < max(10, n_blocks // 10):
-        note = (f"calibration segment {list(excluded[0])} s leaves only {int(scored.sum())} of "
-                f"{n_blocks} blocks: scored on all blocks (including calibration data)")
+        note = (
+            f"calibration segment {list(excluded[0])} s leaves only {int(scored.sum())} of "
+            f"{n_blocks} blocks: scored on all blocks (including calibration data)"
+        )
         scored[:] = True
         excluded = ()
-    masked = tuple((float(s[0]), float(s[1]), str(s[2]) if len(s) > 2 else "excluded")
-                   for s in exclude)
+    masked = tuple(
+        (float(s[0]), float(s[1]), str(s[2]) if len(s) > 2 else "excluded") for s in exclude
+    )
     curve = recording.thrust_curve if recording.commands_u is not None else None
     vbat = _interval_voltage(recording, mean)
-    rp = Replay(veh, tk, dtk, f, p_mid, v_mid, R_mid, w_mid, block, tc, dur, run,
-                np.zeros((n_blocks, len(channels))), channels, knots, scored, excluded, note,
-                starts, raw, masked, accel, rotor_k, k_source, curve, vbat)
-    later = iter([rp.block_mean(x) for x in (accel, None if W is None else rotor_k * f2)
-                  if x is not None])
+    rp = Replay(
+        veh,
+        tk,
+        dtk,
+        f,
+        p_mid,
+        v_mid,
+        R_mid,
+        w_mid,
+        block,
+        tc,
+        dur,
+        run,
+        np.zeros((n_blocks, len(channels))),
+        channels,
+        knots,
+        scored,
+        excluded,
+        note,
+        starts,
+        raw,
+        masked,
+        accel,
+        rotor_k,
+        k_source,
+        curve,
+        vbat,
+    )
+    later = iter(
+        [rp.block_mean(x) for x in (accel, None if W is None else rotor_k * f2) if x is not None]
+    )
     parts = [next(later) if x is None else x for x in parts]
     object.__setattr__(rp, "measured", np.hstack(parts))
     return rp
@@ -394,16 +451,27 @@ def calibration_segments(recording: Recording, where: str = "recording") -> tupl
     try:
         t0, t1 = (float(x) for x in seg)
     except (TypeError, ValueError):
-        raise RecordingError(where, f"meta calibration.segment must be [t0, t1] in seconds, "
-                                    f"got {seg!r}", key="calibration") from None
+        raise RecordingError(
+            where,
+            f"meta calibration.segment must be [t0, t1] in seconds, got {seg!r}",
+            key="calibration",
+        ) from None
     if not (np.isfinite(t0) and np.isfinite(t1) and t0 < t1):
-        raise RecordingError(where, f"meta calibration.segment needs finite t0 < t1, got {seg!r}",
-                             key="calibration")
+        raise RecordingError(
+            where, f"meta calibration.segment needs finite t0 < t1, got {seg!r}", key="calibration"
+        )
     return ((t0, t1),)
 
 
-def model_parts(rp: Replay, f: np.ndarray, force=None, moment_ext=None,
-                thrust=None, moment=None, vehicle: Vehicle | None = None) -> list:
+def model_parts(
+    rp: Replay,
+    f: np.ndarray,
+    force=None,
+    moment_ext=None,
+    thrust=None,
+    moment=None,
+    vehicle: Vehicle | None = None,
+) -> list:
     """Interval channels (M, C) the model predicts for produced rotor thrusts ``f`` [N] and
     external force (world; body for an IMU-only log) [N] / moment (body) [N m] (paper eqs. 2
     and 4), for the rigid body ``vehicle`` (default: the nominal one; another mass or inertia
@@ -426,8 +494,15 @@ def model_parts(rp: Replay, f: np.ndarray, force=None, moment_ext=None,
     return parts
 
 
-def model_channels(rp: Replay, f: np.ndarray, force=None, moment_ext=None,
-                   thrust=None, moment=None, vehicle: Vehicle | None = None) -> np.ndarray:
+def model_channels(
+    rp: Replay,
+    f: np.ndarray,
+    force=None,
+    moment_ext=None,
+    thrust=None,
+    moment=None,
+    vehicle: Vehicle | None = None,
+) -> np.ndarray:
     """Interval channels (M, C) of :func:`model_parts`, stacked."""
     return np.hstack(model_parts(rp, f, force, moment_ext, thrust, moment, vehicle))
 

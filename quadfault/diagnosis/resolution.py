@@ -40,7 +40,7 @@ import numpy as np
 
 from quadfault.diagnosis.crossval import Gain, gain_over, held_out
 from quadfault.diagnosis.identifiability import TIMING_SAMPLES, too_short
-from quadfault.effects.registry import EFFECT_NAMES, identifiability
+from quadfault.model.effects.registry import EFFECT_NAMES, identifiability
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,9 +63,11 @@ class Unresolved:
         return self.candidate.name
 
     def describe(self) -> str:
-        return (f"a {self.name} of {1000 * float(self.x[0]):.1f} ms, shorter than the "
-                f"{TIMING_SAMPLES:g} command periods ({1000 * self.floor:.1f} ms) the log "
-                "resolves")
+        return (
+            f"a {self.name} of {1000 * float(self.x[0]):.1f} ms, shorter than the "
+            f"{TIMING_SAMPLES:g} command periods ({1000 * self.floor:.1f} ms) the log "
+            "resolves"
+        )
 
 
 def is_timing(cand) -> bool:
@@ -92,21 +94,31 @@ class Unattributed:
         """The ``indistinguishable`` entry: every timing effect of the library, the best fit
         first, with the reason and the figures (``held_out``)."""
         un, g = self.unresolved, self.gain
-        names = [un.name] + [n for n in EFFECT_NAMES
-                             if n != un.name and identifiability(n).timescale is not None]
+        names = [un.name] + [
+            n for n in EFFECT_NAMES if n != un.name and identifiability(n).timescale is not None
+        ]
         rate = TIMING_SAMPLES / un.floor
         x = float(un.x[0])
-        return {"names": names,
-                "reason": (f"a time constant below the resolution ({1000 * x:.1f} ms as a "
-                           f"{un.name}; commands at {rate:.0f} Hz resolve "
-                           f"{1000 * un.floor:.1f} ms and up) explains {_pct(g.gain)} of the "
-                           f"held-out residual (best channel {_pct(g.best)}, 95% interval "
-                           f"from {_pct(g.lo)}): the model does not match the flight, but "
-                           f"this log cannot tell {' from '.join(names)} or measure it; "
-                           "faster commands or measured rotor speeds would tell which, and how long"),
-                "held_out": {"time_constant_s": x, "shortest_time_constant_s": un.floor,
-                             "command_rate_hz": rate, "improvement": g.gain,
-                             "best_channel": g.best, "ci95_low": g.lo}}
+        return {
+            "names": names,
+            "reason": (
+                f"a time constant below the resolution ({1000 * x:.1f} ms as a "
+                f"{un.name}; commands at {rate:.0f} Hz resolve "
+                f"{1000 * un.floor:.1f} ms and up) explains {_pct(g.gain)} of the "
+                f"held-out residual (best channel {_pct(g.best)}, 95% interval "
+                f"from {_pct(g.lo)}): the model does not match the flight, but "
+                f"this log cannot tell {' from '.join(names)} or measure it; "
+                "faster commands or measured rotor speeds would tell which, and how long"
+            ),
+            "held_out": {
+                "time_constant_s": x,
+                "shortest_time_constant_s": un.floor,
+                "command_rate_hz": rate,
+                "improvement": g.gain,
+                "best_channel": g.best,
+                "ci95_low": g.lo,
+            },
+        }
 
 
 def below_resolution(rp, sc, options, n_current: int, cur_cv, m: float) -> Unattributed | None:
@@ -141,10 +153,12 @@ def unresolved(singles, cur_bic: float, margin: float) -> Unresolved | None:
             upper = np.minimum(np.asarray(c.upper, dtype=float), floor)
             lower = np.minimum(np.asarray(c.lower, dtype=float), upper)
             starts = tuple(tuple(np.clip(s, lower, upper)) for s in c.starts)
-            bounded = dataclasses.replace(c, lower=tuple(lower), upper=tuple(upper),
-                                          starts=starts, resolvable=0.0)
-            return Unresolved(bounded, np.clip(np.asarray(f.x[0], dtype=float), lower, upper),
-                              floor)
+            bounded = dataclasses.replace(
+                c, lower=tuple(lower), upper=tuple(upper), starts=starts, resolvable=0.0
+            )
+            return Unresolved(
+                bounded, np.clip(np.asarray(f.x[0], dtype=float), lower, upper), floor
+            )
         return None
     return None
 
@@ -165,16 +179,18 @@ class TimingCheck:
         if un is None or not new or any(is_timing(c) for c in new):
             return ""
         if self._base is None:
-            self._base, _ = held_out(self.rp, self.sc, self.terms + [(un.candidate, un.x)],
-                                     self.folds)
-        cv, _ = held_out(self.rp, self.sc, list(opt.fit.terms) + [(un.candidate, un.x)],
-                         self.folds)
+            self._base, _ = held_out(
+                self.rp, self.sc, self.terms + [(un.candidate, un.x)], self.folds
+            )
+        cv, _ = held_out(self.rp, self.sc, list(opt.fit.terms) + [(un.candidate, un.x)], self.folds)
         g = gain_over(self.rp, self.sc, self._base, cv, self.m)
         if g.passes:
             return ""
         names = " + ".join(c.name for c in new)
         pct = _pct
-        return (f"indistinguishable in this log from {un.describe()}: with that time "
-                f"constant {names} improves the held-out fit by only {pct(g.gain)} (best "
-                f"channel {pct(g.best)}, 95% interval from {pct(g.lo)}); a log with faster "
-                "commands or measured rotor speeds could tell them apart")
+        return (
+            f"indistinguishable in this log from {un.describe()}: with that time "
+            f"constant {names} improves the held-out fit by only {pct(g.gain)} (best "
+            f"channel {pct(g.best)}, 95% interval from {pct(g.lo)}); a log with faster "
+            "commands or measured rotor speeds could tell them apart"
+        )

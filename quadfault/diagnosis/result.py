@@ -48,9 +48,16 @@ class EffectFinding:
     folds_agree: bool | None = None
 
     def to_dict(self) -> dict:
-        out = {"name": self.name, "params": self.params, "uncertainty": self.uncertainty,
-               "improvement": self.improvement, "explanation": self.explanation,
-               "bounds": self.bounds, "folds": self.folds, "at_bound": self.at_bound}
+        out = {
+            "name": self.name,
+            "params": self.params,
+            "uncertainty": self.uncertainty,
+            "improvement": self.improvement,
+            "explanation": self.explanation,
+            "bounds": self.bounds,
+            "folds": self.folds,
+            "at_bound": self.at_bound,
+        }
         if self.status != "accepted":
             out["reason"] = self.reason
         if self.improvement_when_added is not None:
@@ -137,32 +144,40 @@ class DiagnosisResult:
 
     def to_dict(self) -> dict:
         """The contract's JSON object (plus extra informative fields)."""
-        return _clean({
-            "format": FORMAT,
-            "verdict": self.verdict,
-            "baseline": {"rmse": dict(self.baseline_rmse)},
-            "untestable": list(self.untestable),
-            "not_identifiable": [dict(n) for n in self.not_identifiable],
-            "assumptions": dict(self.assumptions),
-            "evidence": dict(self.evidence),
-            "where": [{"channel": w.channel, "t0": w.t0, "t1": w.t1, "note": w.note}
-                      for w in self.where],
-            "effects": [e.to_dict() for e in self.effects],
-            "suspect": [e.to_dict() for e in self.suspect],
-            "rejected": [e.to_dict() for e in self.rejected],
-            "indistinguishable": [dict(n) for n in self.indistinguishable],
-            "model": {"rmse": dict(self.model_rmse), "improvement": self.model_improvement,
-                      "ci95": list(self.model_ci95), "channels": dict(self.channel_scores)},
-            "regimes": list(self.regimes),
-            "prediction": dict(self.prediction),
-            "normalisation": dict(zip(self.channels, self.scale)),
-            "weights": dict(zip(self.channels, self.weights)),
-            "seconds": self.seconds,
-            "scoring": dict(self.scoring),
-            "vehicle": dict(self.vehicle),
-            "frame": self.frame,
-            "gravity": self.gravity,
-        })
+        return _clean(
+            {
+                "format": FORMAT,
+                "verdict": self.verdict,
+                "baseline": {"rmse": dict(self.baseline_rmse)},
+                "untestable": list(self.untestable),
+                "not_identifiable": [dict(n) for n in self.not_identifiable],
+                "assumptions": dict(self.assumptions),
+                "evidence": dict(self.evidence),
+                "where": [
+                    {"channel": w.channel, "t0": w.t0, "t1": w.t1, "note": w.note}
+                    for w in self.where
+                ],
+                "effects": [e.to_dict() for e in self.effects],
+                "suspect": [e.to_dict() for e in self.suspect],
+                "rejected": [e.to_dict() for e in self.rejected],
+                "indistinguishable": [dict(n) for n in self.indistinguishable],
+                "model": {
+                    "rmse": dict(self.model_rmse),
+                    "improvement": self.model_improvement,
+                    "ci95": list(self.model_ci95),
+                    "channels": dict(self.channel_scores),
+                },
+                "regimes": list(self.regimes),
+                "prediction": dict(self.prediction),
+                "normalisation": dict(zip(self.channels, self.scale)),
+                "weights": dict(zip(self.channels, self.weights)),
+                "seconds": self.seconds,
+                "scoring": dict(self.scoring),
+                "vehicle": dict(self.vehicle),
+                "frame": self.frame,
+                "gravity": self.gravity,
+            }
+        )
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n"

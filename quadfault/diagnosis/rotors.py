@@ -25,7 +25,7 @@ With flights of the healthy vehicle (``EfficiencyCandidate.baseline``) the basel
 the vehicle's own imbalance, and the imbalance test is not needed: the efficiencies relative
 to it are accepted when a rotor departs from it by more than ``BASELINE_TOLERANCE`` (5 %) and
 by more than ``BASELINE_Z`` (3) times the healthy flights' flight-to-flight spread of that
-rotor (:func:`~quadfault.effects.motor_efficiency.healthy_pattern`; with one healthy flight
+rotor (:func:`~quadfault.model.effects.motor_efficiency.healthy_pattern`; with one healthy flight
 the spread is unknown and 5 % is the only test).
 """
 
@@ -35,24 +35,29 @@ import numpy as np
 
 from quadfault.diagnosis.crossval import gain_over, held_out
 from quadfault.diagnosis.library import EQUIVALENT, build_library
-from quadfault.effects.com_offset import ComOffset
-from quadfault.effects.motor_efficiency import MotorEfficiency
-from quadfault.effects.thrust_scale import ThrustScale
+from quadfault.model.effects.com_offset import ComOffset
+from quadfault.model.effects.motor_efficiency import MotorEfficiency
+from quadfault.model.effects.thrust_scale import ThrustScale
 
 #: effects that already carry a thrust factor common to every rotor (the thrust class of
 #: effects the data cannot tell apart, but the per-rotor one)
-COMMON_THRUST = tuple(n for n, k in EQUIVALENT.items()
-                      if k == EQUIVALENT[MotorEfficiency.name] and n != MotorEfficiency.name)
+COMMON_THRUST = tuple(
+    n
+    for n, k in EQUIVALENT.items()
+    if k == EQUIVALENT[MotorEfficiency.name] and n != MotorEfficiency.name
+)
 #: what one flight cannot tell (the report's sentence)
-ONE_FLIGHT = ("one flight cannot tell a weak rotor from the vehicle's own imbalance (a "
-              "centre-of-mass offset, a tilted motor); a flight of the healthy vehicle "
-              "(--baseline HEALTHY.json) can")
+ONE_FLIGHT = (
+    "one flight cannot tell a weak rotor from the vehicle's own imbalance (a "
+    "centre-of-mass offset, a tilted motor); a flight of the healthy vehicle "
+    "(--baseline HEALTHY.json) can"
+)
 
 
 def rotors_differ(rp, sc, opt, current, fl, m) -> str:
     """Why the option ``opt`` (its candidates, joint ``fit`` and held-out ``cv``) may not
     accept ``motor_efficiency`` (module docstring), or ""."""
-    new = [c for c in opt.cands[len(current):] if c.name == MotorEfficiency.name]
+    new = [c for c in opt.cands[len(current) :] if c.name == MotorEfficiency.name]
     if not new:
         return ""
     eff = new[0]
@@ -61,19 +66,26 @@ def rotors_differ(rp, sc, opt, current, fl, m) -> str:
         rel, tol = eff.relative(eta), eff.tolerance()
         if np.all(np.abs(rel - 1.0) <= tol):
             n = eff.baseline_flights
-            return (f"the rotors match the healthy vehicle ({n} flight{'s' * (n != 1)}) within "
-                    f"{_percent(tol)} (eta relative to it {np.round(rel, 3).tolist()})")
+            return (
+                f"the rotors match the healthy vehicle ({n} flight{'s' * (n != 1)}) within "
+                f"{_percent(tol)} (eta relative to it {np.round(rel, 3).tolist()})"
+            )
     others = [(c, x) for c, x in zip(opt.cands, opt.fit.x) if c.name != MotorEfficiency.name]
     has_common = any(c.name in COMMON_THRUST for c, _ in others)
-    common = [] if has_common else [(build_library(rp, (ThrustScale.name,))[0],
-                                     np.array([float(np.mean(eta))]))]
+    common = (
+        []
+        if has_common
+        else [(build_library(rp, (ThrustScale.name,))[0], np.array([float(np.mean(eta))]))]
+    )
     if common:
         cv, f = held_out(rp, sc, others + common, fl)
         if np.sqrt(opt.cv.sse / max(cv.sse, 1e-300)) > 1.0 - m:
-            return ("the rotors do not differ from each other: one thrust factor common to "
-                    f"every rotor (thrust_scale {float(f.x[-1][0]):.3g}) fits the held-out "
-                    f"data within {m:.0%}; that is a calibration or thrust-curve error, not "
-                    "per-rotor damage")
+            return (
+                "the rotors do not differ from each other: one thrust factor common to "
+                f"every rotor (thrust_scale {float(f.x[-1][0]):.3g}) fits the held-out "
+                f"data within {m:.0%}; that is a calibration or thrust-curve error, not "
+                "per-rotor damage"
+            )
     if eff.baseline:
         return ""
     if not any(c.name == ComOffset.name for c, _ in others):
@@ -99,7 +111,9 @@ def imbalance_reason(rel, gain, best, lo, x_imbalance) -> str:
     rel = np.asarray(rel, dtype=float)
     k = int(np.argmin(rel))
     offset = 1000 * float(np.hypot(x_imbalance[0], x_imbalance[1]))
-    return (f"vehicle imbalance: rotor {k + 1} looks weakest ({rel[k]:.2f} of the median "
-            f"rotor), but a centre-of-mass offset of {offset:.1f} mm with a yaw trim explains "
-            f"the data as well (held-out gain of the per-rotor pattern over it {gain:.1%}, "
-            f"95% interval from {lo:.1%}; best channel {best:.1%}): {ONE_FLIGHT}")
+    return (
+        f"vehicle imbalance: rotor {k + 1} looks weakest ({rel[k]:.2f} of the median "
+        f"rotor), but a centre-of-mass offset of {offset:.1f} mm with a yaw trim explains "
+        f"the data as well (held-out gain of the per-rotor pattern over it {gain:.1%}, "
+        f"95% interval from {lo:.1%}; best channel {best:.1%}): {ONE_FLIGHT}"
+    )

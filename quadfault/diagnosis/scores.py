@@ -45,7 +45,7 @@ def _second_difference_scale(rp: Replay, x: np.ndarray) -> np.ndarray:
     """Robust scale of white noise in ``x`` (B, C) from second differences at lag 2 within
     runs, ``x[k+2] - 2 x[k] + x[k-2]``: blind to linear trends and to the lag-1 correlation
     of block-mean accelerations that share their end samples."""
-    same = (rp.block_run[4:] == rp.block_run[:-4])
+    same = rp.block_run[4:] == rp.block_run[:-4]
     d = (x[4:] - 2.0 * x[2:-2] + x[:-4])[same]
     if len(d) < 5:
         d = x - np.median(x, axis=0)
@@ -116,9 +116,12 @@ class Scoring:
         for j, ch in enumerate(self.channels):
             ok = np.isfinite(imp[:, j])
             ci = np.percentile(imp[ok, j], [2.5, 97.5]) if ok.any() else [np.nan, np.nan]
-            out[ch] = {"rmse_before": float(rb[j]), "rmse_after": float(ra[j]),
-                       "improvement": float(1.0 - ra[j] / rb[j]) if rb[j] > 0 else 0.0,
-                       "ci95": [float(ci[0]), float(ci[1])]}
+            out[ch] = {
+                "rmse_before": float(rb[j]),
+                "rmse_after": float(ra[j]),
+                "improvement": float(1.0 - ra[j] / rb[j]) if rb[j] > 0 else 0.0,
+                "ci95": [float(ci[0]), float(ci[1])],
+            }
         ok = np.isfinite(pooled)
         ci = np.percentile(pooled[ok], [2.5, 97.5]) if ok.any() else [np.nan, np.nan]
         return out, [float(ci[0]), float(ci[1])]
@@ -133,8 +136,9 @@ def channel_weights(channels) -> np.ndarray:
 def fixed_scoring(rp: Replay, nominal_residual: np.ndarray, rows=None) -> Scoring:
     """The weights of ``rp`` from its measured channels and the nominal model's residual
     (never from a fitted model; module docstring)."""
-    noise = np.minimum(_second_difference_scale(rp, rp.measured),
-                       _second_difference_scale(rp, nominal_residual))
+    noise = np.minimum(
+        _second_difference_scale(rp, rp.measured), _second_difference_scale(rp, nominal_residual)
+    )
     noise = np.maximum(noise, rp.floors())
     weight = channel_weights(rp.channels)
     divisor = noise / np.sqrt(weight)

@@ -40,6 +40,10 @@ contains another (``Candidate.excludes``: ``motor_efficiency`` and ``thrust_curv
 fitted and not accepted keeps the reason it last failed.
 """
 
+# The selection loop's helpers close over the loop's state and are called only within the
+# iteration that defines them.
+# ruff: noqa: B023
+
 from __future__ import annotations
 
 import itertools
@@ -47,20 +51,39 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from quadfault.diagnosis.crossval import (CrossValidation, cross_validate, fit_at_bound,
-                                          fit_bound_mask, fold_agreement, folds_of)
-from quadfault.diagnosis.feedback import (IV_MIN, IV_UNVERIFIED_GAIN, IV_Z, frozen_replay,
-                                          iv_slope)
+from quadfault.diagnosis.crossval import (
+    CrossValidation,
+    cross_validate,
+    fit_at_bound,
+    fit_bound_mask,
+    fold_agreement,
+    folds_of,
+)
+from quadfault.diagnosis.feedback import IV_MIN, IV_UNVERIFIED_GAIN, IV_Z, frozen_replay, iv_slope
 from quadfault.diagnosis.fit import Fit, fit
 from quadfault.diagnosis.identifiability import too_short
 from quadfault.diagnosis.library import Candidate, predict
 from quadfault.diagnosis.residuals import Replay
-from quadfault.diagnosis.resolution import (TimingCheck, Unattributed, Unresolved,
-                                            below_resolution, unresolved)
+from quadfault.diagnosis.resolution import (
+    TimingCheck,
+    Unattributed,
+    Unresolved,
+    below_resolution,
+    unresolved,
+)
 from quadfault.diagnosis.rotors import rotors_differ
 
-__all__ = ["Selection", "Step", "Verdict", "select", "frozen_replay", "iv_slope", "folds_of",
-           "cross_validate", "CrossValidation"]
+__all__ = [
+    "Selection",
+    "Step",
+    "Verdict",
+    "select",
+    "frozen_replay",
+    "iv_slope",
+    "folds_of",
+    "cross_validate",
+    "CrossValidation",
+]
 
 PAIR_TOP = 3
 INFLATION = 3.0
@@ -143,13 +166,15 @@ class _Option:
 
 def _signal(rp, sc, current, x_cur, opt, cur_pred) -> np.ndarray:
     """RMS of the option's fitted signal per channel, in noise units."""
-    sig = (predict(rp, x_terms(current, x_cur) + list(opt.fit.terms)[len(current):])
-           - cur_pred) / sc.noise
-    return np.sqrt(np.mean(sig ** 2, axis=0))
+    sig = (
+        predict(rp, x_terms(current, x_cur) + list(opt.fit.terms)[len(current) :]) - cur_pred
+    ) / sc.noise
+    return np.sqrt(np.mean(sig**2, axis=0))
 
 
-def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, singles_cv,
-          cur_fit, timing):
+def _test(
+    rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, singles_cv, cur_fit, timing
+):
     """Run the acceptance tests of one option in order (module docstring); fills
     ``opt.cv``, ``gain``, ``iv``, ``agreement`` and, on the first failure, ``failed``
     (and ``like`` when it is the time constant the log cannot resolve)."""
@@ -159,20 +184,22 @@ def _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, single
     opt.cv = cross_validate(rp, opt.cands, sc, None, fl, full=opt.fit)
     opt.gain = 1.0 - np.sqrt(opt.cv.sse / cur_cv.sse)
     signal = _signal(rp, sc, current, x_cur, opt, cur_pred)
-    new = list(enumerate(opt.cands[len(current):], start=len(current)))
-    opt.failed = (_held_out(sc, opt, cur_cv, signal, kw["min_improvement"])
-                  or _pair(opt, new, singles_cv, kw["min_improvement"])
-                  or _feedback(rp, sc, opt, current, x_cur, cur_pred, signal)
-                  or _bounds_and_trade(rp, sc, opt, current, new, cur_fit)
-                  or _folds(rp, sc, opt, new)
-                  or rotors_differ(rp, sc, opt, current, fl, kw["min_improvement"]))
+    new = list(enumerate(opt.cands[len(current) :], start=len(current)))
+    opt.failed = (
+        _held_out(sc, opt, cur_cv, signal, kw["min_improvement"])
+        or _pair(opt, new, singles_cv, kw["min_improvement"])
+        or _feedback(rp, sc, opt, current, x_cur, cur_pred, signal)
+        or _bounds_and_trade(rp, sc, opt, current, new, cur_fit)
+        or _folds(rp, sc, opt, new)
+        or rotors_differ(rp, sc, opt, current, fl, kw["min_improvement"])
+    )
     if not opt.failed:
         opt.failed = timing.why_not(opt, [c for _, c in new])
         opt.like = timing.un if opt.failed else None
 
 
 def _held_out(sc, opt, cur_cv, signal, m) -> str:
-    if np.sqrt(np.sum(signal ** 2)) < 1.0:
+    if np.sqrt(np.sum(signal**2)) < 1.0:
         return "negligible: its fitted signal, over all channels, is below the noise"
     touched = signal >= 1.0  # the channels it acts on
     gain_touched = 0.0
@@ -181,8 +208,10 @@ def _held_out(sc, opt, cur_cv, signal, m) -> str:
         after = sc.channel_sse(opt.cv.residual)[touched]
         gain_touched = float(np.max(1.0 - np.sqrt(after / np.maximum(before, 1e-300))))
     if opt.gain < m and gain_touched < 3 * m:
-        return (f"held-out gain {opt.gain:.1%} (best channel {gain_touched:.1%}) below "
-                f"{m:.0%} ({3 * m:.0%} in a channel it acts on)")
+        return (
+            f"held-out gain {opt.gain:.1%} (best channel {gain_touched:.1%}) below "
+            f"{m:.0%} ({3 * m:.0%} in a channel it acts on)"
+        )
     return ""
 
 
@@ -204,15 +233,25 @@ def _feedback(rp, sc, opt, current, x_cur, cur_pred, signal) -> str:
     """The instrumental-variable check on the channels the option acts on."""
     touched = signal >= 1.0
     channels = np.flatnonzero(touched) if touched.any() else np.flatnonzero(signal > 0)
-    opt.iv, iv_se = iv_slope(rp, x_terms(current, x_cur), opt.fit.terms, sc.divisor,
-                             (rp.measured - cur_pred) / sc.divisor, channels)
+    opt.iv, iv_se = iv_slope(
+        rp,
+        x_terms(current, x_cur),
+        opt.fit.terms,
+        sc.divisor,
+        (rp.measured - cur_pred) / sc.divisor,
+        channels,
+    )
     if not np.isfinite(opt.iv):
         if opt.gain < IV_UNVERIFIED_GAIN:
-            return ("the instrumental-variable check cannot vouch for its signal and the "
-                    f"held-out gain is under {IV_UNVERIFIED_GAIN:.0%}")
+            return (
+                "the instrumental-variable check cannot vouch for its signal and the "
+                f"held-out gain is under {IV_UNVERIFIED_GAIN:.0%}"
+            )
     elif not (opt.iv >= IV_MIN and opt.iv - IV_Z * iv_se > 0.0):
-        return (f"instrumental-variable slope {opt.iv:.2f} +- {iv_se:.2f} (feedback bias; "
-                f"needs >= {IV_MIN} and > {IV_Z:g} se above 0)")
+        return (
+            f"instrumental-variable slope {opt.iv:.2f} +- {iv_se:.2f} (feedback bias; "
+            f"needs >= {IV_MIN} and > {IV_Z:g} se above 0)"
+        )
     return ""
 
 
@@ -230,8 +269,12 @@ def _bounds_and_trade(rp, sc, opt, current, new, cur_fit) -> str:
 
 def _folds(rp, sc, opt, new) -> str:
     for j, c in new:
-        ok, detail = fold_agreement(c, opt.fit.x[j], [fx[j] for fx in opt.cv.fold_x],
-                                    lambda xf, j=j: fit_bound_mask(rp, sc, opt.fit, j, xf))
+        ok, detail = fold_agreement(
+            c,
+            opt.fit.x[j],
+            [fx[j] for fx in opt.cv.fold_x],
+            lambda xf, j=j: fit_bound_mask(rp, sc, opt.fit, j, xf),
+        )
         opt.agreement[c.name] = detail
         if not ok:
             return f"{c.name}: the folds disagree ({detail})"
@@ -256,14 +299,26 @@ def trade_off(before: Fit, names, after: Fit) -> str:
         k = int(np.argmax(ratio))
         if ratio[k] > INFLATION:
             c = before.candidates[i]
-            return (f"{name} would become {ratio[k]:.0f}x less certain ({c.labels[k]}): the "
-                    "effects trade along a direction the data cannot resolve")
+            return (
+                f"{name} would become {ratio[k]:.0f}x less certain ({c.labels[k]}): the "
+                "effects trade along a direction the data cannot resolve"
+            )
     return ""
 
 
-def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
-           max_effects: int = 3, min_improvement: float = 0.05, bic_margin: float = 10.0,
-           screen_top: int = 3, pair_top: int = PAIR_TOP, progress=None) -> Selection:
+def select(
+    rp: Replay,
+    library: list[Candidate],
+    sc,
+    *,
+    folds: int = 5,
+    max_effects: int = 3,
+    min_improvement: float = 0.05,
+    bic_margin: float = 10.0,
+    screen_top: int = 3,
+    pair_top: int = PAIR_TOP,
+    progress=None,
+) -> Selection:
     """Forward selection (module docstring) with the fixed scoring ``sc``
     (:class:`~quadfault.diagnosis.scores.Scoring`)."""
     kw = {"bic_margin": bic_margin, "min_improvement": min_improvement}
@@ -282,8 +337,13 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
     testable = [c for c in library if c.testable(rp)]
     while len(current) < max_effects:
         chosen = {c.name for c in current}
-        pool = [c for c in testable if c.name not in chosen
-                and c.name not in verdicts_final(verdicts) and c.compatible(current)]
+        pool = [
+            c
+            for c in testable
+            if c.name not in chosen
+            and c.name not in verdicts_final(verdicts)
+            and c.compatible(current)
+        ]
         if not pool:
             break
         fixed = list(zip(current, x_cur))
@@ -300,11 +360,12 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
         singles.sort(key=lambda item: item[0])
         screening = tuple((c.name, b) for b, c, _ in singles)
         for b, c, f in singles:  # this round's reading, unless an option test says more
-            verdicts[c.name] = Verdict(c, "rejected", _screen_reason(b, cur_bic, kw), f,
-                                       f.x[0], f.sd[0])
+            verdicts[c.name] = Verdict(
+                c, "rejected", _screen_reason(b, cur_bic, kw), f, f.x[0], f.sd[0]
+            )
         cur_pred = predict(rp, x_terms(current, x_cur))
         options = []
-        for b, c, f in [s for s in singles if s[0] < cur_bic - bic_margin][:screen_top]:
+        for _b, c, f in [s for s in singles if s[0] < cur_bic - bic_margin][:screen_top]:
             if current:  # joint refit of the candidate with the accepted effects
                 f = fit(rp, current + [c], scale, init=x_cur + list(f.x))
             options.append(_Option(current + [c], f, f.bic()))
@@ -330,24 +391,49 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
                 single_cv[c.name] = (cross_validate(rp, current + [c], sc, None, fl, full=f), f)
             return single_cv[c.name]
 
-        timing = TimingCheck(rp, sc, fl, x_terms(current, x_cur),
-                             unresolved(singles, cur_bic, bic_margin), min_improvement)
+        timing = TimingCheck(
+            rp,
+            sc,
+            fl,
+            x_terms(current, x_cur),
+            unresolved(singles, cur_bic, bic_margin),
+            min_improvement,
+        )
         for opt in options:
-            _test(rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, singles_cv,
-                  final, timing)
+            _test(
+                rp,
+                sc,
+                opt,
+                current,
+                x_cur,
+                cur_cv,
+                cur_bic,
+                cur_pred,
+                fl,
+                kw,
+                singles_cv,
+                final,
+                timing,
+            )
         lacks = below_resolution(rp, sc, options, len(current), cur_cv, min_improvement)
         passed = []
         single_tested = set()
         for opt in sorted(options, key=lambda o: len(o.cands)):  # singles first
-            new = opt.cands[len(current):]
+            new = opt.cands[len(current) :]
             for j, c in enumerate(opt.cands):
                 if c not in new or c.name in verdicts_final(verdicts):
                     continue
                 if opt.failed == "at a bound" and fit_at_bound(rp, sc, opt.fit, j):
-                    verdicts[c.name] = _verdict(c, "suspect", (
-                        "improves the held-out fit only with a parameter at its bound: the data "
-                        "asks for more than this effect allows; a missing effect is likely"),
-                        opt, j)
+                    verdicts[c.name] = _verdict(
+                        c,
+                        "suspect",
+                        (
+                            "improves the held-out fit only with a parameter at its bound: the data "
+                            "asks for more than this effect allows; a missing effect is likely"
+                        ),
+                        opt,
+                        j,
+                    )
                 elif opt.failed and (len(new) == 1 or c.name not in single_tested):
                     why = opt.failed
                     if why == "at a bound":
@@ -371,30 +457,50 @@ def select(rp: Replay, library: list[Candidate], sc, *, folds: int = 5,
                 best = pair
         for o in passed:
             if o is not best:
-                for j, c in enumerate(o.cands[len(current):], start=len(current)):
+                for j, c in enumerate(o.cands[len(current) :], start=len(current)):
                     if c not in best.cands:
-                        verdicts[c.name] = _verdict(c, "rejected", (
-                            "passed the tests, but " + " + ".join(x.name for x in
-                                                                 best.cands[len(current):])
-                            + " fitted the held-out data better"), o, j)
-        for j, c in enumerate(best.cands[len(current):], start=len(current)):
-            rivals = {rc.name: rf.sse / max(best.fit.sse, 1e-300) for _, rc, rf in singles
-                      if rc is not c}
-            steps.append(Step(c, best.fit, best.cv, float(best.gain), rivals, best.iv,
-                              best.agreement.get(c.name, "")))
+                        verdicts[c.name] = _verdict(
+                            c,
+                            "rejected",
+                            (
+                                "passed the tests, but "
+                                + " + ".join(x.name for x in best.cands[len(current) :])
+                                + " fitted the held-out data better"
+                            ),
+                            o,
+                            j,
+                        )
+        for _j, c in enumerate(best.cands[len(current) :], start=len(current)):
+            rivals = {
+                rc.name: rf.sse / max(best.fit.sse, 1e-300) for _, rc, rf in singles if rc is not c
+            }
+            steps.append(
+                Step(
+                    c,
+                    best.fit,
+                    best.cv,
+                    float(best.gain),
+                    rivals,
+                    best.iv,
+                    best.agreement.get(c.name, ""),
+                )
+            )
             verdicts.pop(c.name, None)
         current = list(best.cands)
         x_cur = list(best.fit.x)
         cur_cv, cur_bic, final = best.cv, best.bic, best.fit
         lacks = None  # judged against the model before this round's acceptance
     for c in testable:  # never screened (the search stopped) or still pending
-        if c.name not in verdicts and c.name not in {s.candidate.name for s in steps} \
-                and c.name in alone:
+        if (
+            c.name not in verdicts
+            and c.name not in {s.candidate.name for s in steps}
+            and c.name in alone
+        ):
             f = alone[c.name]
-            verdicts[c.name] = Verdict(c, "rejected", "not reached: the search stopped", f,
-                                       f.x[0], f.sd[0])
-    return Selection(baseline, tuple(steps), final, cur_cv, screening, alone, verdicts,
-                     lacks)
+            verdicts[c.name] = Verdict(
+                c, "rejected", "not reached: the search stopped", f, f.x[0], f.sd[0]
+            )
+    return Selection(baseline, tuple(steps), final, cur_cv, screening, alone, verdicts, lacks)
 
 
 def verdicts_final(verdicts: dict) -> set:
@@ -403,9 +509,19 @@ def verdicts_final(verdicts: dict) -> set:
 
 
 def _verdict(c, status, reason, opt, j) -> Verdict:
-    return Verdict(c, status, reason, opt.fit, np.asarray(opt.fit.x[j]),
-                   np.asarray(opt.fit.sd[j]), opt.cv, opt.gain if opt.cv is not None else None,
-                   opt.iv, opt.agreement.get(c.name, ""), opt.like)
+    return Verdict(
+        c,
+        status,
+        reason,
+        opt.fit,
+        np.asarray(opt.fit.x[j]),
+        np.asarray(opt.fit.sd[j]),
+        opt.cv,
+        opt.gain if opt.cv is not None else None,
+        opt.iv,
+        opt.agreement.get(c.name, ""),
+        opt.like,
+    )
 
 
 def _screen_reason(b, cur_bic, kw) -> str:

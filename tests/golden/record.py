@@ -21,14 +21,48 @@ ROW_STRIDE = 7  # keep every 7th row of long series: small files, every code pat
 #: name -> ``quadfault simulate`` arguments
 FLIGHTS = {
     "combined_clean": ["--scenario", "combined", "--duration", "12", "--seed", "0"],
-    "combined_sensor_noise": ["--scenario", "combined", "--duration", "6", "--seed", "3",
-                              "--sensor-noise", "0.01,0.02,0.005,0.01,0.05"],
-    "hover_fault_100hz": ["--scenario", "hover_fault", "--duration", "5", "--seed", "1",
-                          "--control-rate", "100"],
-    "reference_mode": ["--scenario", "abrupt", "--duration", "5", "--seed", "2",
-                       "--integrator", "reference"],
-    "effects_drag_lag": ["--scenario", "lissajous", "--duration", "4", "--seed", "4",
-                         "--effect", "drag=0.3", "--effect", "motor_lag=0.04"],
+    "combined_sensor_noise": [
+        "--scenario",
+        "combined",
+        "--duration",
+        "6",
+        "--seed",
+        "3",
+        "--sensor-noise",
+        "0.01,0.02,0.005,0.01,0.05",
+    ],
+    "hover_fault_100hz": [
+        "--scenario",
+        "hover_fault",
+        "--duration",
+        "5",
+        "--seed",
+        "1",
+        "--control-rate",
+        "100",
+    ],
+    "reference_mode": [
+        "--scenario",
+        "abrupt",
+        "--duration",
+        "5",
+        "--seed",
+        "2",
+        "--integrator",
+        "reference",
+    ],
+    "effects_drag_lag": [
+        "--scenario",
+        "lissajous",
+        "--duration",
+        "4",
+        "--seed",
+        "4",
+        "--effect",
+        "drag=0.3",
+        "--effect",
+        "motor_lag=0.04",
+    ],
 }
 #: name -> (flight, ``quadfault estimate`` arguments)
 ESTIMATES = {
@@ -43,9 +77,11 @@ ROLLOUTS = {
     "QuadFault-v0_ekf": ("QuadFault-v0", {"estimator": "ekf"}, 300),
     "QuadFault-v0_none": ("QuadFault-v0", {"estimator": "none"}, 300),
     "QuadFaultHover-v0_irls": ("QuadFaultHover-v0", {"estimator": "irls"}, 300),
-    "QuadFaultHover-v0_noise": ("QuadFaultHover-v0", {
-        "estimator": "irls",
-        "sensor_noise": "0.01,0.02,0.005,0.01,0.05"}, 200),
+    "QuadFaultHover-v0_noise": (
+        "QuadFaultHover-v0",
+        {"estimator": "irls", "sensor_noise": "0.01,0.02,0.005,0.01,0.05"},
+        200,
+    ),
 }
 VECTOR = {"QuadFaultHover-v0_vec_irls": ("QuadFaultHover-v0", {"estimator": "irls"}, 4, 150)}
 #: name -> (scenario, controller, estimator, duration)
@@ -99,7 +135,7 @@ def rollouts() -> dict[str, np.ndarray]:
     import quad_fault_env  # noqa: F401  (registers the ids)
 
     out = {}
-    from quadfault.simulator import SensorNoise
+    from quadfault.sim.simulator import SensorNoise
 
     for name, (env_id, kwargs, steps) in ROLLOUTS.items():
         kwargs = dict(kwargs)
@@ -138,7 +174,7 @@ def rollouts() -> dict[str, np.ndarray]:
 
 def agent_flights() -> dict[str, np.ndarray]:
     from agents.rollout import fly
-    from quadfault.scenarios import named_scenario
+    from quadfault.model.scenarios import named_scenario
 
     out = {}
     for name, (scen, controller, estimator, duration) in AGENT_FLIGHTS.items():

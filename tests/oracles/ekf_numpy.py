@@ -8,9 +8,9 @@ import math
 
 import numpy as np
 
-from quadfault.dynamics import angular_acceleration, translational_acceleration
-from quadfault.rotation import expm_so3, hat, logm_so3, orthonormalize
-from quadfault.vehicle import Vehicle
+from quadfault.model.dynamics import angular_acceleration, translational_acceleration
+from quadfault.model.rotation import expm_so3, hat, logm_so3, orthonormalize
+from quadfault.model.vehicle import Vehicle
 
 #: Sample period the per-step noise values refer to [s] (the reference's 1 kHz).
 NOISE_REFERENCE_DT = 1e-3
@@ -40,13 +40,14 @@ def attitude_jacobian(R_meas: np.ndarray) -> np.ndarray:
     """
     H = np.zeros((3, 9))
     for k, a, b in ((0, 2, 1), (1, 0, 2), (2, 1, 0)):  # g_k = (A_ab - A_ba) / 2, A = R^T R_m
-        H[k, 3 * a:3 * a + 3] -= 0.5 * R_meas[:, b]
-        H[k, 3 * b:3 * b + 3] += 0.5 * R_meas[:, a]
+        H[k, 3 * a : 3 * a + 3] -= 0.5 * R_meas[:, b]
+        H[k, 3 * b : 3 * b + 3] += 0.5 * R_meas[:, a]
     return H
 
 
-def predict(x: np.ndarray, P: np.ndarray, f: np.ndarray, dt: float, vehicle: Vehicle,
-            Q: np.ndarray):
+def predict(
+    x: np.ndarray, P: np.ndarray, f: np.ndarray, dt: float, vehicle: Vehicle, Q: np.ndarray
+):
     """EKF time update over ``dt`` [s] with rotor commands ``f`` [N] held.
 
     Returns ``(x_pred, P_pred, F)``. Mean: eqs. (1)-(4) discretised as
@@ -65,8 +66,15 @@ def predict(x: np.ndarray, P: np.ndarray, f: np.ndarray, dt: float, vehicle: Veh
     phi = w * dt + 0.5 * wdot * dt * dt
     E = expm_so3(phi)
     R_new = R @ E  # eq. (3), exponential map
-    x_pred = np.concatenate((p + v * dt + 0.5 * a * dt * dt, v + a * dt, w + wdot * dt,
-                             R_new.reshape(9, order="F"), eta))
+    x_pred = np.concatenate(
+        (
+            p + v * dt + 0.5 * a * dt * dt,
+            v + a * dt,
+            w + wdot * dt,
+            R_new.reshape(9, order="F"),
+            eta,
+        )
+    )
     # Jacobian F = d x_pred / d x
     J = vehicle.inertia
     b3 = R[:, 2]
@@ -90,8 +98,7 @@ def predict(x: np.ndarray, P: np.ndarray, f: np.ndarray, dt: float, vehicle: Veh
     return x_pred, P_pred, F
 
 
-def kalman_update(x: np.ndarray, P: np.ndarray, y: np.ndarray, H: np.ndarray,
-                  R: np.ndarray):
+def kalman_update(x: np.ndarray, P: np.ndarray, y: np.ndarray, H: np.ndarray, R: np.ndarray):
     """Measurement update with innovation ``y``, Jacobian ``H`` and noise ``R``.
 
     ``S = H P H^T + R``, ``K = P H^T S^-1`` (by ``solve``), ``x+ = x + K y`` and the Joseph
@@ -105,13 +112,13 @@ def kalman_update(x: np.ndarray, P: np.ndarray, y: np.ndarray, H: np.ndarray,
     return x + K @ y, 0.5 * (P_new + P_new.T)
 
 
-def measurement_update(x: np.ndarray, P: np.ndarray, sample, r_diag: np.ndarray,
-                       bounds):
+def measurement_update(x: np.ndarray, P: np.ndarray, sample, r_diag: np.ndarray, bounds):
     """Update with the measured ``p, v, Omega`` and attitude; project R, clamp eta."""
     n = x.shape[0]
     R_est = x[R_].reshape(3, 3, order="F")
-    y = np.concatenate((sample.p - x[P_], sample.v - x[V_], sample.w - x[W_],
-                        logm_so3(R_est.T @ sample.R)))
+    y = np.concatenate(
+        (sample.p - x[P_], sample.v - x[V_], sample.w - x[W_], logm_so3(R_est.T @ sample.R))
+    )
     H = np.zeros((12, n))
     H[:9, :9] = np.eye(9)
     H[9:, R_] = attitude_jacobian(sample.R)

@@ -19,9 +19,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from quadfault.dynamics import E3
-from quadfault.rotation import cross, vee
-from quadfault.vehicle import Vehicle
+from quadfault.model.dynamics import E3
+from quadfault.model.rotation import cross, vee
+from quadfault.model.vehicle import Vehicle
 
 RESIDUAL_ROWS = 10
 
@@ -123,9 +123,18 @@ def _median(a: np.ndarray) -> float:
     return float(s[k // 2]) if k % 2 else 0.5 * float(s[k // 2 - 1] + s[k // 2])
 
 
-def mad_weights(e, *, z_soft: float = 2.5, power: float = 7.0, z_hard: float = 2.5,
-                hard_drop: bool = True, w_min: float = 0.03, mad_eps: float = 1e-9,
-                median_normalize: bool = True, floor: bool = False):
+def mad_weights(
+    e,
+    *,
+    z_soft: float = 2.5,
+    power: float = 7.0,
+    z_hard: float = 2.5,
+    hard_drop: bool = True,
+    w_min: float = 0.03,
+    mad_eps: float = 1e-9,
+    median_normalize: bool = True,
+    floor: bool = False,
+):
     """Robust weights of segment energies ``e`` (m,).
 
     Args:
@@ -212,9 +221,17 @@ def _rounds(c, b, H, x_prev, cfg, solve):
     w = np.ones(m)
     for _ in range(cfg.max_irls):
         e = (c + 2 * b @ x + np.einsum("snm,n,m->s", H, x, x)) * scale
-        w, _ = mad_weights(e, z_soft=cfg.z_soft, power=cfg.soft_power, z_hard=cfg.z_hard,
-                           hard_drop=cfg.hard_drop, w_min=cfg.w_min, mad_eps=cfg.mad_eps,
-                           median_normalize=not paper, floor=paper)
+        w, _ = mad_weights(
+            e,
+            z_soft=cfg.z_soft,
+            power=cfg.soft_power,
+            z_hard=cfg.z_hard,
+            hard_drop=cfg.hard_drop,
+            w_min=cfg.w_min,
+            mad_eps=cfg.mad_eps,
+            median_normalize=not paper,
+            floor=paper,
+        )
         JGJ = np.tensordot(w, H, 1) * scale
         if not condition_number_1(JGJ) <= cfg.cond_max:
             return None, w
@@ -230,10 +247,24 @@ def _rounds(c, b, H, x_prev, cfg, solve):
 
 def solve_window(c, b, H, x_prev, cfg):
     """Algorithm 2 from the numpy pieces (no guards): ``(x, weights)``."""
-    s = (cfg.ipm.mu, cfg.ipm.alpha, cfg.ipm.beta, cfg.ipm.step_fraction, cfg.ipm.backtrack_eps,
-         cfg.ipm.min_step, cfg.ipm.tol_feas, cfg.ipm.tol_gap)
-    return _rounds(c, b, H, x_prev, cfg,
-                   lambda Hq, q, x: ipm(Hq, q, cfg.lower, cfg.upper, x, s, cfg.ipm.max_iter)[0])
+    s = (
+        cfg.ipm.mu,
+        cfg.ipm.alpha,
+        cfg.ipm.beta,
+        cfg.ipm.step_fraction,
+        cfg.ipm.backtrack_eps,
+        cfg.ipm.min_step,
+        cfg.ipm.tol_feas,
+        cfg.ipm.tol_gap,
+    )
+    return _rounds(
+        c,
+        b,
+        H,
+        x_prev,
+        cfg,
+        lambda Hq, q, x: ipm(Hq, q, cfg.lower, cfg.upper, x, s, cfg.ipm.max_iter)[0],
+    )
 
 
 def solve_window_scipy(c, b, H, x_prev, cfg):
@@ -241,9 +272,14 @@ def solve_window_scipy(c, b, H, x_prev, cfg):
     from scipy.optimize import minimize
 
     def solve(Hq, q, x):
-        res = minimize(lambda y: 0.5 * y @ Hq @ y + q @ y, x, jac=lambda y: Hq @ y + q,
-                       method="L-BFGS-B", bounds=[(cfg.lower, cfg.upper)] * len(q),
-                       options={"ftol": 1e-15, "gtol": 1e-12, "maxiter": 10000})
+        res = minimize(
+            lambda y: 0.5 * y @ Hq @ y + q @ y,
+            x,
+            jac=lambda y: Hq @ y + q,
+            method="L-BFGS-B",
+            bounds=[(cfg.lower, cfg.upper)] * len(q),
+            options={"ftol": 1e-15, "gtol": 1e-12, "maxiter": 10000},
+        )
         return res.x
 
     return _rounds(c, b, H, x_prev, cfg, solve)
@@ -272,7 +308,7 @@ def causal_median(x, length):
     """Running median over the last ``length`` rows, the first row repeated before them."""
     x = np.asarray(x, float)
     pad = np.concatenate((np.repeat(x[:1], length - 1, axis=0), x))
-    return np.array([np.median(pad[k:k + length], axis=0) for k in range(len(x))])
+    return np.array([np.median(pad[k : k + length], axis=0) for k in range(len(x))])
 
 
 def weak_direction(info: np.ndarray) -> tuple[np.ndarray, float]:
@@ -311,8 +347,9 @@ class ChangeCompletion:
         span: windows over which a move is measured.
     """
 
-    def __init__(self, threshold: float, hold: int, gamma: float, lower: float, upper: float,
-                 span: int = 9):
+    def __init__(
+        self, threshold: float, hold: int, gamma: float, lower: float, upper: float, span: int = 9
+    ):
         self.threshold, self.hold, self.gamma = threshold, hold, gamma
         self.lower, self.upper, self.span = lower, upper, span
         self.reset(None)
@@ -323,8 +360,9 @@ class ChangeCompletion:
         self.anchor = None
         self.v = None
         self.events = 0
-        self.history = None if x0 is None else np.repeat(
-            np.asarray(x0, dtype=float)[None], self.span, axis=0)
+        self.history = (
+            None if x0 is None else np.repeat(np.asarray(x0, dtype=float)[None], self.span, axis=0)
+        )
         self._k = 0
 
     @property
@@ -351,8 +389,10 @@ class ChangeCompletion:
         # max_i |x_i - ref_i| on Python floats: the same numbers, without numpy's
         # per-call overhead on a 4-vector (the online update calls this every window)
         ref = self.history[self._k].tolist()
-        return max(abs(a - b) for a, b in zip(np.asarray(x_raw, dtype=float).tolist(),
-                                              ref)) > self.threshold
+        return (
+            max(abs(a - b) for a, b in zip(np.asarray(x_raw, dtype=float).tolist(), ref))
+            > self.threshold
+        )
 
     def step(self, x_raw: np.ndarray, info) -> np.ndarray:
         """The estimate to use (and feed back) for a window whose solver returned ``x_raw``;
@@ -384,31 +424,48 @@ class OnlineIRLS:
 
     def __init__(self, vehicle, cfg):
         self.vehicle, self.cfg, self.rows, self.eta = vehicle, cfg, [], np.ones(4)
-        self.completion = ChangeCompletion(cfg.change_threshold, cfg.change_hold, cfg.gamma,
-                                           cfg.lower, cfg.upper, span=cfg.window - 1)
+        self.completion = ChangeCompletion(
+            cfg.change_threshold,
+            cfg.change_hold,
+            cfg.gamma,
+            cfg.lower,
+            cfg.upper,
+            span=cfg.window - 1,
+        )
         self.completion.reset(self.eta)
         self.out = []
 
     def _report(self, status):
         self.out.append(self.eta.copy())
-        return status, causal_median(np.array(self.out), self.cfg.output_median)[-1] \
-            if self.cfg.output_median > 1 else self.eta.copy()
+        return status, causal_median(np.array(self.out), self.cfg.output_median)[
+            -1
+        ] if self.cfg.output_median > 1 else self.eta.copy()
 
     def update(self, s):
         cfg, veh = self.cfg, self.vehicle
         arrays = [np.asarray(a, float) for a in s[1:]]
-        ok = [a.shape for a in arrays] == [(3,), (3,), (3, 3), (3,), (4,)] and \
-            np.isfinite(s.t) and all(np.all(np.isfinite(a)) for a in arrays)
+        ok = (
+            [a.shape for a in arrays] == [(3,), (3,), (3, 3), (3,), (4,)]
+            and np.isfinite(s.t)
+            and all(np.all(np.isfinite(a)) for a in arrays)
+        )
         if not ok or (self.rows and not s.t > self.rows[-1].t):
             self.rows = []
             return self._report("bad_sample")
         self.rows = self.rows + [s._replace(f=np.clip(arrays[4], 0, veh.rotor_max_thrust))]
-        self.rows = self.rows[-cfg.window:]
+        self.rows = self.rows[-cfg.window :]
         if len(self.rows) < cfg.window:
             return self._report("warmup")
         r = self.rows
-        models = segment_models(veh, [x.t for x in r], [x.p for x in r], [x.v for x in r],
-                                [x.R for x in r], [x.w for x in r], [x.f for x in r])
+        models = segment_models(
+            veh,
+            [x.t for x in r],
+            [x.p for x in r],
+            [x.v for x in r],
+            [x.R for x in r],
+            [x.w for x in r],
+            [x.f for x in r],
+        )
         if models.thrust.mean() < cfg.min_thrust:
             self.completion.observe(self.eta)
             return self._report("no_excitation")

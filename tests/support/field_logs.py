@@ -13,8 +13,8 @@ import struct
 import numpy as np
 
 G = 9.81
-HOVER = 0.5          # normalised hover command
-IDLE = 0.08          # armed idle command
+HOVER = 0.5  # normalised hover command
+IDLE = 0.08  # armed idle command
 T_ARM, T_TAKEOFF, T_LAND, T_DISARM, T_END = 2.0, 4.0, 16.0, 18.0, 19.0
 OMEGA_PER_U = 2000.0  # measured rotor speed per unit command [rad/s]
 
@@ -76,12 +76,12 @@ def write_ulog(path, topics: list, params: dict | None = None, nested: dict | No
     for msg_id, (name, multi_id, _, _) in enumerate(topics):
         out += _msg("A", struct.pack("<BH", multi_id, msg_id) + name.encode())
     events = []
-    for msg_id, (name, _, fields, rows) in enumerate(topics):
+    for msg_id, (_name, _, fields, rows) in enumerate(topics):
         fmt = "<" + "".join(fmt_of(t) * (n or 1) for t, _, n in fields)
         for row in rows:
             flat = []
             for v in row:
-                for item in (v if isinstance(v, (list, tuple, np.ndarray)) else [v]):
+                for item in v if isinstance(v, (list, tuple, np.ndarray)) else [v]:
                     flat.extend(item if isinstance(item, tuple) else [item])
             events.append((row[0], _msg("D", struct.pack("<H", msg_id) + struct.pack(fmt, *flat))))
     for _, blob in sorted(events, key=lambda e: e[0]):
@@ -89,10 +89,18 @@ def write_ulog(path, topics: list, params: dict | None = None, nested: dict | No
     path.write_bytes(bytes(out))
 
 
-def px4_flight(path, *, outputs: str = "uavcan", invalid_vxy=(8.0, 9.0), motor_rate=100.0,
-               params: dict | None = None, disarmed_value: float = 0.0,
-               duration: float = T_END, imu_rate: float = 500.0,
-               esc_motors=None) -> dict:
+def px4_flight(
+    path,
+    *,
+    outputs: str = "uavcan",
+    invalid_vxy=(8.0, 9.0),
+    motor_rate=100.0,
+    params: dict | None = None,
+    disarmed_value: float = 0.0,
+    duration: float = T_END,
+    imu_rate: float = 500.0,
+    esc_motors=None,
+) -> dict:
     """Write the synthetic flight as a ULog. ``outputs``: "uavcan" (actuator_outputs
     instance 1, 0-8191, instance 0 all zeros, no actuator_motors), "motors"
     (actuator_motors, ``disarmed_value`` before arming) or "none". Velocity flagged invalid on
@@ -109,60 +117,110 @@ def px4_flight(path, *, outputs: str = "uavcan", invalid_vxy=(8.0, 9.0), motor_r
     prof = flight_profile(t_mot / stretch)
     q = [1.0, 0.0, 0.0, 0.0]
     topics = [
-        ("vehicle_attitude", 0, [("uint64_t", "timestamp", 0), ("float", "q", 4)],
-         [(int(t * us), q) for t in t_att]),
-        ("sensor_combined", 0, [("uint64_t", "timestamp", 0), ("float", "gyro_rad", 3),
-                                ("float", "accelerometer_m_s2", 3)],
-         [(int(t * us), [0.0, 0.0, 0.0], [0.0, 0.0, -G]) for t in t_imu])]
+        (
+            "vehicle_attitude",
+            0,
+            [("uint64_t", "timestamp", 0), ("float", "q", 4)],
+            [(int(t * us), q) for t in t_att],
+        ),
+        (
+            "sensor_combined",
+            0,
+            [
+                ("uint64_t", "timestamp", 0),
+                ("float", "gyro_rad", 3),
+                ("float", "accelerometer_m_s2", 3),
+            ],
+            [(int(t * us), [0.0, 0.0, 0.0], [0.0, 0.0, -G]) for t in t_imu],
+        ),
+    ]
     pp = flight_profile(t_pos / stretch)
     bad = np.zeros(len(t_pos), dtype=bool)
     if invalid_vxy is not None:
         bad = (t_pos / stretch >= invalid_vxy[0]) & (t_pos / stretch < invalid_vxy[1])
     vel = pp["vel"].copy()
     vel[bad, 0] = 5.0 + t_pos[bad]  # an invalid estimate drifts
-    topics.append(("vehicle_local_position", 0,
-                   [("uint64_t", "timestamp", 0)] + [("float", k, 0) for k in
-                                                     ("x", "y", "z", "vx", "vy", "vz")]
-                   + [("uint8_t", k, 0) for k in ("xy_valid", "z_valid", "v_xy_valid",
-                                                   "v_z_valid")],
-                   [(int(t * us), *pp["pos"][k], *vel[k], 1, 1, int(not bad[k]), 1)
-                    for k, t in enumerate(t_pos)]))
+    topics.append(
+        (
+            "vehicle_local_position",
+            0,
+            [("uint64_t", "timestamp", 0)]
+            + [("float", k, 0) for k in ("x", "y", "z", "vx", "vy", "vz")]
+            + [("uint8_t", k, 0) for k in ("xy_valid", "z_valid", "v_xy_valid", "v_z_valid")],
+            [
+                (int(t * us), *pp["pos"][k], *vel[k], 1, 1, int(not bad[k]), 1)
+                for k, t in enumerate(t_pos)
+            ],
+        )
+    )
     if outputs == "uavcan":
         fields = [("uint64_t", "timestamp", 0), ("float", "output", 8)]
         zero = [(int(t * us), [0.0] * 8) for t in t_mot]
-        raw = [(int(t * us), list(8191.0 * prof["u"][k]) + [4095.5] * 4)
-               for k, t in enumerate(t_mot)]
+        raw = [
+            (int(t * us), list(8191.0 * prof["u"][k]) + [4095.5] * 4) for k, t in enumerate(t_mot)
+        ]
         topics += [("actuator_outputs", 0, fields, zero), ("actuator_outputs", 1, fields, raw)]
     elif outputs == "motors":
         u = prof["u"].copy()
         u[t_mot / stretch < T_ARM] = disarmed_value
-        topics.append(("actuator_motors", 0,
-                       [("uint64_t", "timestamp", 0), ("float", "control", 4)],
-                       [(int(t * us), list(u[j])) for j, t in enumerate(t_mot)]))
+        topics.append(
+            (
+                "actuator_motors",
+                0,
+                [("uint64_t", "timestamp", 0), ("float", "control", 4)],
+                [(int(t * us), list(u[j])) for j, t in enumerate(t_mot)],
+            )
+        )
     rpm = prof["u"] * OMEGA_PER_U * 60.0 / (2 * np.pi)
     report = [("int32_t", "esc_rpm", 0), ("float", "esc_voltage", 0)]
     if esc_motors is None:
-        esc = [(int(t * us), 4, [(int(round(r)), 12.0) for r in rpm[k]])
-               for k, t in enumerate(t_mot)]
+        esc = [
+            (int(t * us), 4, [(int(round(r)), 12.0) for r in rpm[k]]) for k, t in enumerate(t_mot)
+        ]
     else:
         report.append(("uint8_t", "actuator_function", 0))
-        esc = [(int(t * us), 4, [(int(round(rpm[k, m])), 12.0, 101 + m) for m in esc_motors])
-               for k, t in enumerate(t_mot)]
-    topics.append(("esc_status", 0, [("uint64_t", "timestamp", 0), ("uint8_t", "esc_count", 0),
-                                     ("esc_report", "esc", 4)], esc))
+        esc = [
+            (int(t * us), 4, [(int(round(rpm[k, m])), 12.0, 101 + m) for m in esc_motors])
+            for k, t in enumerate(t_mot)
+        ]
+    topics.append(
+        (
+            "esc_status",
+            0,
+            [("uint64_t", "timestamp", 0), ("uint8_t", "esc_count", 0), ("esc_report", "esc", 4)],
+            esc,
+        )
+    )
     t_land = np.arange(0.0, duration, 0.1)
     pl = flight_profile(t_land / stretch)
-    topics.append(("vehicle_land_detected", 0,
-                   [("uint64_t", "timestamp", 0), ("uint8_t", "landed", 0),
-                    ("uint8_t", "maybe_landed", 0), ("uint8_t", "ground_contact", 0)],
-                   [(int(t * us), int(pl["landed"][k]), 0, 0) for k, t in enumerate(t_land)]))
+    topics.append(
+        (
+            "vehicle_land_detected",
+            0,
+            [
+                ("uint64_t", "timestamp", 0),
+                ("uint8_t", "landed", 0),
+                ("uint8_t", "maybe_landed", 0),
+                ("uint8_t", "ground_contact", 0),
+            ],
+            [(int(t * us), int(pl["landed"][k]), 0, 0) for k, t in enumerate(t_land)],
+        )
+    )
     t_bat = np.arange(0.0, duration, 0.1)
-    topics.append(("battery_status", 0, [("uint64_t", "timestamp", 0), ("float", "voltage_v", 0),
-                                         ("float", "current_a", 0)],
-                   [(int(t * us), 16.0 - 0.05 * t, 10.0) for t in t_bat]))
+    topics.append(
+        (
+            "battery_status",
+            0,
+            [("uint64_t", "timestamp", 0), ("float", "voltage_v", 0), ("float", "current_a", 0)],
+            [(int(t * us), 16.0 - 0.05 * t, 10.0) for t in t_bat],
+        )
+    )
     base = {"THR_MDL_FAC": 0.3, "CA_ROTOR_COUNT": 4}
-    for i, ((x, y), km) in enumerate(zip(((0.12, 0.12), (-0.12, -0.12), (0.12, -0.12),
-                                          (-0.12, 0.12)), (0.02, 0.02, -0.02, -0.02))):
+    for i, ((x, y), km) in enumerate(
+        zip(
+            ((0.12, 0.12), (-0.12, -0.12), (0.12, -0.12), (-0.12, 0.12)), (0.02, 0.02, -0.02, -0.02)
+        )
+    ):
         base.update({f"CA_ROTOR{i}_PX": x, f"CA_ROTOR{i}_PY": y, f"CA_ROTOR{i}_KM": km})
     base.update(params or {})
     write_ulog(path, topics, base, nested={"esc_report": report})
@@ -182,13 +240,21 @@ _DF = {  # name: (type id, format, columns)
     "BAT": (136, "QBff", "TimeUS,Instance,Volt,Curr"),
     "EV": (137, "QB", "TimeUS,Id"),
 }
-_STRUCT = {"Q": "Q", "B": "B", "f": "f", "I": "I", "H": "H", "i": "i", "N": "16s", "n": "4s",
-           "Z": "64s"}
+_STRUCT = {
+    "Q": "Q",
+    "B": "B",
+    "f": "f",
+    "I": "I",
+    "H": "H",
+    "i": "i",
+    "N": "16s",
+    "n": "4s",
+    "Z": "64s",
+}
 SS_OK = 0b111111  # attitude, velocities, positions valid
 
 
-def _df_messages(*, rcou_rate, invalid_vxy, params, motor_channels, imu_rate=400.0,
-                 duration=T_END):
+def _df_messages(*, rcou_rate, invalid_vxy, params, motor_channels, imu_rate=400.0, duration=T_END):
     """``[(t, name, values)]`` of the synthetic flight."""
     s = duration / T_END
     msgs = [(0.0, "PARM", (k.encode(), float(v))) for k, v in params.items()]
@@ -221,30 +287,51 @@ def _df_messages(*, rcou_rate, invalid_vxy, params, motor_channels, imu_rate=400
     return sorted(msgs, key=lambda m: m[0])
 
 
-def dataflash_flight(path, *, text: bool = False, rcou_rate: float = 100.0,
-                     invalid_vxy=(8.0, 9.0), params: dict | None = None,
-                     motor_channels=(5, 6, 7, 8), imu_rate: float = 400.0,
-                     duration: float = T_END) -> None:
+def dataflash_flight(
+    path,
+    *,
+    text: bool = False,
+    rcou_rate: float = 100.0,
+    invalid_vxy=(8.0, 9.0),
+    params: dict | None = None,
+    motor_channels=(5, 6, 7, 8),
+    imu_rate: float = 400.0,
+    duration: float = T_END,
+) -> None:
     """Write the synthetic flight as an ArduPilot DataFlash log: binary, or text with
     ``text=True``. Motors on ``motor_channels`` (``SERVOn_FUNCTION``), ESC telemetry on
     the same instances, a broken second IMU and EKF core, velocity flagged invalid on
     ``invalid_vxy`` [s], land events."""
-    base = {"FRAME_CLASS": 1, "FRAME_TYPE": 1, "MOT_PWM_MIN": 1000, "MOT_PWM_MAX": 2000,
-            "MOT_SPIN_MIN": 0.1, "MOT_SPIN_MAX": 0.95, "MOT_THST_EXPO": 0.5}
+    base = {
+        "FRAME_CLASS": 1,
+        "FRAME_TYPE": 1,
+        "MOT_PWM_MIN": 1000,
+        "MOT_PWM_MAX": 2000,
+        "MOT_SPIN_MIN": 0.1,
+        "MOT_SPIN_MAX": 0.95,
+        "MOT_THST_EXPO": 0.5,
+    }
     for i, ch in enumerate(motor_channels):
         base[f"SERVO{ch}_FUNCTION"] = 33 + i
     base.update(params or {})
-    msgs = _df_messages(rcou_rate=rcou_rate, invalid_vxy=invalid_vxy, params=base,
-                        motor_channels=motor_channels, imu_rate=imu_rate, duration=duration)
+    msgs = _df_messages(
+        rcou_rate=rcou_rate,
+        invalid_vxy=invalid_vxy,
+        params=base,
+        motor_channels=motor_channels,
+        imu_rate=imu_rate,
+        duration=duration,
+    )
     if text:
         lines = ["FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format,Columns"]
         for name, (tid, fmt, cols) in _DF.items():
             size = 3 + struct.calcsize("<" + "".join(_STRUCT[c] for c in fmt))
             lines.append(f"FMT, {tid}, {size}, {name}, {fmt}, {cols}")
         for t, name, vals in msgs:
-            cells = [str(int(round(t * 1e6)))] + [v.decode() if isinstance(v, bytes) else
-                                                   f"{v:g}" if isinstance(v, float) else str(v)
-                                                   for v in vals]
+            cells = [str(int(round(t * 1e6)))] + [
+                v.decode() if isinstance(v, bytes) else f"{v:g}" if isinstance(v, float) else str(v)
+                for v in vals
+            ]
             lines.append(f"{name}, " + ", ".join(cells))
         path.write_text("\n".join(lines) + "\n")
         return
@@ -252,8 +339,9 @@ def dataflash_flight(path, *, text: bool = False, rcou_rate: float = 100.0,
 
     def fmt_msg(tid, name, fmt, cols):
         size = 3 + struct.calcsize("<" + "".join(_STRUCT[c] for c in fmt))
-        return b"\xa3\x95\x80" + struct.pack("<BB4s16s64s", tid, size, name.encode(),
-                                             fmt.encode(), cols.encode())
+        return b"\xa3\x95\x80" + struct.pack(
+            "<BB4s16s64s", tid, size, name.encode(), fmt.encode(), cols.encode()
+        )
 
     out += fmt_msg(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns")
     for name, (tid, fmt, cols) in _DF.items():
@@ -278,8 +366,14 @@ LAT0, LNG0, ALT0 = -39.49503, 176.74835, 46.8  # [deg], [deg], [m]
 BOARD_T0 = 66.937  # board clock at the start of the old text log [s]
 
 
-def old_text_log(path, *, gps: str | None = "board", imu: str | None = "IMU",
-                 rate: float = 50.0, gps_every: int = 10) -> None:
+def old_text_log(
+    path,
+    *,
+    gps: str | None = "board",
+    imu: str | None = "IMU",
+    rate: float = 50.0,
+    gps_every: int = 10,
+) -> None:
     """An ArduCopter 3.x-style text log of the synthetic flight: IMU (named ``imu``; None
     leaves it out), ATT and MOT once per loop at ``rate`` without time stamps, CURR, and a GPS
     fix every ``gps_every`` loops: ``gps="board"`` with GPS week, time of week and the board
@@ -309,8 +403,10 @@ def old_text_log(path, *, gps: str | None = "board", imu: str | None = "IMU",
             tow = 109206800 + int(round(1000 * tk))
             fix = f"3, {tow}, 1774" if gps == "board" else f"3, {tow}"
             tail = f", {vd:.6f}, {int(round(1000 * (BOARD_T0 + tk)))}" if gps == "board" else ""
-            lines.append(f"GPS, {fix}, 9, 2.42, {lat:.7f}, {lng:.7f}, 0.00, {ALT0 - d:.2f}, "
-                         f"{spd:.3f}, {crs:.2f}" + tail)
+            lines.append(
+                f"GPS, {fix}, 9, 2.42, {lat:.7f}, {lng:.7f}, 0.00, {ALT0 - d:.2f}, "
+                f"{spd:.3f}, {crs:.2f}" + tail
+            )
         if imu:
             lines.append(f"{imu}, 0.0000, 0.0000, 0.0000, 0.0000, 0.0000, {-G:.4f}")
         lines.append("ATT, 0.00, 0.00, 0.00, 0.00, 0.00, 30.00, 30.00")
@@ -386,30 +482,41 @@ def encode_fields(values, encodings) -> bytes:
     while i < n:
         e = encodings[i]
         if e == 0:
-            out += _svb(values[i]); i += 1
+            out += _svb(values[i])
+            i += 1
         elif e == 1:
-            out += _uvb(values[i]); i += 1
+            out += _uvb(values[i])
+            i += 1
         elif e == 3:
-            out += _uvb((-values[i]) & 0x3FFF); i += 1
+            out += _uvb((-values[i]) & 0x3FFF)
+            i += 1
         elif e == 9:
             i += 1
         elif e == 6:
             c = 1
             while c < 8 and i + c < n and encodings[i + c] == 6:
                 c += 1
-            out += _tag8_8svb(values[i:i + c]); i += c
+            out += _tag8_8svb(values[i : i + c])
+            i += c
         elif e == 7:
-            out += _tag2_3s32(values[i:i + 3]); i += 3
+            out += _tag2_3s32(values[i : i + 3])
+            i += 3
         elif e == 8:
-            out += _tag8_4s16(values[i:i + 4]); i += 4
+            out += _tag8_4s16(values[i : i + 4])
+            i += 4
         else:
             raise ValueError(e)
     return bytes(out)
 
 
-BB_FIELDS = (["loopIteration", "time"] + [f"gyroADC[{i}]" for i in range(3)]
-             + [f"accSmooth[{i}]" for i in range(3)] + [f"motor[{i}]" for i in range(4)]
-             + [f"eRPM[{i}]" for i in range(4)] + ["vbatLatest"])
+BB_FIELDS = (
+    ["loopIteration", "time"]
+    + [f"gyroADC[{i}]" for i in range(3)]
+    + [f"accSmooth[{i}]" for i in range(3)]
+    + [f"motor[{i}]" for i in range(4)]
+    + [f"eRPM[{i}]" for i in range(4)]
+    + ["vbatLatest"]
+)
 #                    it  t  gyro     acc      motors       eRPM         vbat
 BB_I_PRED = [0, 0, 0, 0, 0, 0, 0, 0, 11, 5, 5, 5, 0, 0, 0, 0, 9]
 BB_I_ENC = [1, 1, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 1, 1, 1, 1, 3]
@@ -442,34 +549,51 @@ def _bb_rows(duration: float, rate: float) -> np.ndarray:
 def _predict(row, prev, prev2, preds, motor0):
     out = []
     for i, (v, p) in enumerate(zip(row, preds)):
-        base = {0: 0, 1: prev[i] if prev is not None else 0,
-                2: 2 * prev[i] - prev2[i] if prev is not None else 0,
-                3: int((prev[i] + prev2[i]) / 2) if prev is not None else 0,
-                5: row[motor0], 6: v, 9: BB_VBATREF, 11: BB_MOTOR_OUTPUT[0]}[p]
+        base = {
+            0: 0,
+            1: prev[i] if prev is not None else 0,
+            2: 2 * prev[i] - prev2[i] if prev is not None else 0,
+            3: int((prev[i] + prev2[i]) / 2) if prev is not None else 0,
+            5: row[motor0],
+            6: v,
+            9: BB_VBATREF,
+            11: BB_MOTOR_OUTPUT[0],
+        }[p]
         out.append(int(v - base))
     return out
 
 
-def blackbox_log(duration: float, rate: float = 500.0, *, i_interval: int = 32,
-                 corrupt_at: int | None = None) -> bytes:
+def blackbox_log(
+    duration: float, rate: float = 500.0, *, i_interval: int = 32, corrupt_at: int | None = None
+) -> bytes:
     """One log of the synthetic flight: header, I frames every ``i_interval`` frames, P
     frames between, slow frames, a sync-beep event and the log-end event. ``corrupt_at``:
     damage the frame with that index."""
     header = [
-        "Product:Blackbox flight data recorder by Nicholas Sherlock", "Data version:2",
-        "I interval:" + str(2 * i_interval), "P interval:2",
+        "Product:Blackbox flight data recorder by Nicholas Sherlock",
+        "Data version:2",
+        "I interval:" + str(2 * i_interval),
+        "P interval:2",
         "Field I name:" + ",".join(BB_FIELDS),
         "Field I signed:" + ",".join(["0", "0"] + ["1"] * 6 + ["0"] * 9),
         "Field I predictor:" + ",".join(map(str, BB_I_PRED)),
         "Field I encoding:" + ",".join(map(str, BB_I_ENC)),
         "Field P predictor:" + ",".join(map(str, BB_P_PRED)),
         "Field P encoding:" + ",".join(map(str, BB_P_ENC)),
-        "Field S name:flightModeFlags,stateFlags", "Field S signed:0,0",
-        "Field S predictor:0,0", "Field S encoding:1,1",
-        "Firmware type:Cleanflight", "Firmware revision:Betaflight 4.4.0 (test) STM32F7X2",
-        f"motorOutput:{BB_MOTOR_OUTPUT[0]},{BB_MOTOR_OUTPUT[1]}", f"acc_1G:{BB_ACC_1G}",
-        "gyro_scale:0x3f800000", f"vbatref:{BB_VBATREF}", f"motor_poles:{BB_POLES}",
-        "motor_pwm_protocol:7", "minthrottle:1070"]
+        "Field S name:flightModeFlags,stateFlags",
+        "Field S signed:0,0",
+        "Field S predictor:0,0",
+        "Field S encoding:1,1",
+        "Firmware type:Cleanflight",
+        "Firmware revision:Betaflight 4.4.0 (test) STM32F7X2",
+        f"motorOutput:{BB_MOTOR_OUTPUT[0]},{BB_MOTOR_OUTPUT[1]}",
+        f"acc_1G:{BB_ACC_1G}",
+        "gyro_scale:0x3f800000",
+        f"vbatref:{BB_VBATREF}",
+        f"motor_poles:{BB_POLES}",
+        "motor_pwm_protocol:7",
+        "minthrottle:1070",
+    ]
     out = bytearray("".join(f"H {h}\n" for h in header).encode())
     out += b"E" + bytes([0]) + _uvb(1234)  # sync beep
     rows = _bb_rows(duration, rate)
@@ -495,8 +619,10 @@ def blackbox_log(duration: float, rate: float = 500.0, *, i_interval: int = 32,
 def blackbox_csv(duration: float, rate: float = 500.0) -> str:
     """The same flight as ``blackbox_decode`` writes it (units in the column names)."""
     rows = _bb_rows(duration, rate)
-    names = [("time (us)" if n == "time" else "vbatLatest (V)" if n == "vbatLatest" else n)
-             for n in BB_FIELDS]
+    names = [
+        ("time (us)" if n == "time" else "vbatLatest (V)" if n == "vbatLatest" else n)
+        for n in BB_FIELDS
+    ]
     lines = [",".join(names)]
     for r in rows:
         cells = [str(v) for v in r[:-1]] + [f"{r[-1] / 100:.2f}"]
@@ -508,8 +634,8 @@ def blackbox_csv(duration: float, rate: float = 500.0) -> str:
 # a simulated flight written in each format (frames, units and motor order as each autopilot
 # logs them), for cross-checks of the importers against the simulator's truth
 SIM_CURVE = 9.8  # f = SIM_CURVE u^2 [N]: the commands written for thrusts f
-PX4_ORDER = (0, 2, 1, 3)        # PX4/ArduPilot quad X rotor i is the paper's rotor ORDER[i]
-BF_ORDER = (3, 0, 2, 1)         # Betaflight: rear-right, front-right, rear-left, front-left
+PX4_ORDER = (0, 2, 1, 3)  # PX4/ArduPilot quad X rotor i is the paper's rotor ORDER[i]
+BF_ORDER = (3, 0, 2, 1)  # Betaflight: rear-right, front-right, rear-left, front-left
 
 
 def _commands(rec, order):
@@ -525,25 +651,54 @@ def sim_to_px4(rec, path, every: int = 2) -> None:
     u = _commands(rec, PX4_ORDER)[sel]
     ts = [int(round(x * us)) + us for x in t]
     topics = [
-        ("vehicle_attitude", 0, [("uint64_t", "timestamp", 0), ("float", "q", 4)],
-         [(s, list(rec.quaternion[k])) for s, k in zip(ts, sel)]),
-        ("vehicle_angular_velocity", 0, [("uint64_t", "timestamp", 0), ("float", "xyz", 3)],
-         [(s, list(rec.omega[k])) for s, k in zip(ts, sel)]),
-        ("sensor_combined", 0, [("uint64_t", "timestamp", 0),
-                                ("float", "accelerometer_m_s2", 3)],
-         [(s, list(rec.accel[k])) for s, k in zip(ts, sel)]),
-        ("vehicle_local_position", 0, [("uint64_t", "timestamp", 0)]
-         + [("float", c, 0) for c in ("x", "y", "z", "vx", "vy", "vz")],
-         [(s, *rec.position[k], *rec.velocity[k]) for s, k in zip(ts, sel)]),
-        ("actuator_motors", 0, [("uint64_t", "timestamp", 0), ("float", "control", 4)],
-         [(s, list(u[j])) for j, s in enumerate(ts)]),
-        ("vehicle_land_detected", 0, [("uint64_t", "timestamp", 0), ("uint8_t", "landed", 0)],
-         [(ts[0], 0)])]
+        (
+            "vehicle_attitude",
+            0,
+            [("uint64_t", "timestamp", 0), ("float", "q", 4)],
+            [(s, list(rec.quaternion[k])) for s, k in zip(ts, sel)],
+        ),
+        (
+            "vehicle_angular_velocity",
+            0,
+            [("uint64_t", "timestamp", 0), ("float", "xyz", 3)],
+            [(s, list(rec.omega[k])) for s, k in zip(ts, sel)],
+        ),
+        (
+            "sensor_combined",
+            0,
+            [("uint64_t", "timestamp", 0), ("float", "accelerometer_m_s2", 3)],
+            [(s, list(rec.accel[k])) for s, k in zip(ts, sel)],
+        ),
+        (
+            "vehicle_local_position",
+            0,
+            [("uint64_t", "timestamp", 0)]
+            + [("float", c, 0) for c in ("x", "y", "z", "vx", "vy", "vz")],
+            [(s, *rec.position[k], *rec.velocity[k]) for s, k in zip(ts, sel)],
+        ),
+        (
+            "actuator_motors",
+            0,
+            [("uint64_t", "timestamp", 0), ("float", "control", 4)],
+            [(s, list(u[j])) for j, s in enumerate(ts)],
+        ),
+        (
+            "vehicle_land_detected",
+            0,
+            [("uint64_t", "timestamp", 0), ("uint8_t", "landed", 0)],
+            [(ts[0], 0)],
+        ),
+    ]
     A = rec.vehicle.allocation[:, list(PX4_ORDER)]
     params = {"THR_MDL_FAC": 1.0, "CA_ROTOR_COUNT": 4}
     for i in range(4):
-        params.update({f"CA_ROTOR{i}_PX": float(A[2, i]), f"CA_ROTOR{i}_PY": float(-A[1, i]),
-                       f"CA_ROTOR{i}_KM": float(A[3, i])})
+        params.update(
+            {
+                f"CA_ROTOR{i}_PX": float(A[2, i]),
+                f"CA_ROTOR{i}_PY": float(-A[1, i]),
+                f"CA_ROTOR{i}_KM": float(A[3, i]),
+            }
+        )
     write_ulog(path, topics, params)
 
 
@@ -551,14 +706,21 @@ def sim_to_dataflash(rec, path, every: int = 2) -> None:
     """DataFlash binary of a simulated recording (IMU, ATT, XKF1, RCOU PWM 1000-2000 with a
     pure square thrust model, a not-landed event); the frame type (X, or H when rotor 1 spins
     clockwise) from the vehicle's spin directions."""
-    from quadfault.rotation import quat_to_rot, rot_to_euler_zyx
+    from quadfault.model.rotation import quat_to_rot, rot_to_euler_zyx
 
     sel = np.arange(0, len(rec.t), every)
     u = _commands(rec, PX4_ORDER)[sel]
     eul = np.degrees(rot_to_euler_zyx(quat_to_rot(rec.quaternion[sel])))
     frame = 1 if rec.vehicle.allocation[3, PX4_ORDER[0]] > 0 else 3
-    params = {"FRAME_CLASS": 1, "FRAME_TYPE": frame, "MOT_PWM_MIN": 1000, "MOT_PWM_MAX": 2000,
-              "MOT_SPIN_MIN": 0.0, "MOT_SPIN_MAX": 1.0, "MOT_THST_EXPO": 1.0}
+    params = {
+        "FRAME_CLASS": 1,
+        "FRAME_TYPE": frame,
+        "MOT_PWM_MIN": 1000,
+        "MOT_PWM_MAX": 2000,
+        "MOT_SPIN_MIN": 0.0,
+        "MOT_SPIN_MAX": 1.0,
+        "MOT_THST_EXPO": 1.0,
+    }
     msgs = [(0.0, "PARM", (k.encode(), float(v))) for k, v in params.items()]
     msgs.append((rec.t[0] + 0.5, "EV", (28,)))
     for j, k in enumerate(sel):
@@ -570,11 +732,13 @@ def sim_to_dataflash(rec, path, every: int = 2) -> None:
         pwm = [int(round(1000 + 1000 * x)) for x in u[j]] + [1000] * 4
         msgs.append((t, "RCOU", tuple(pwm)))
     out = bytearray()
-    for name, (tid, fmt, cols) in [("FMT", (128, "BBnNZ", "Type,Length,Name,Format,Columns"))] \
-            + list(_DF.items()):
+    for name, (tid, fmt, cols) in [
+        ("FMT", (128, "BBnNZ", "Type,Length,Name,Format,Columns"))
+    ] + list(_DF.items()):
         size = 3 + struct.calcsize("<" + "".join(_STRUCT[c] for c in fmt))
-        out += b"\xa3\x95\x80" + struct.pack("<BB4s16s64s", tid, size, name.encode(),
-                                             fmt.encode(), cols.encode())
+        out += b"\xa3\x95\x80" + struct.pack(
+            "<BB4s16s64s", tid, size, name.encode(), fmt.encode(), cols.encode()
+        )
     for t, name, vals in sorted(msgs, key=lambda m: m[0]):
         tid, fmt, _ = _DF[name]
         pack = "<" + "".join(_STRUCT[c] for c in fmt)
@@ -590,17 +754,29 @@ def sim_to_blackbox(rec, path, every: int = 2) -> None:
     sel = np.arange(0, len(rec.t), every)
     u = _commands(rec, BF_ORDER)[sel]
     flu = np.array([1.0, -1.0, -1.0])
-    names = ["loopIteration", "time"] + [f"gyroADC[{i}]" for i in range(3)] \
-        + [f"accSmooth[{i}]" for i in range(3)] + [f"motor[{i}]" for i in range(4)]
+    names = (
+        ["loopIteration", "time"]
+        + [f"gyroADC[{i}]" for i in range(3)]
+        + [f"accSmooth[{i}]" for i in range(3)]
+        + [f"motor[{i}]" for i in range(4)]
+    )
     enc = [1, 1, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1]
-    head = ["Product:Blackbox flight data recorder by Nicholas Sherlock", "Data version:2",
-            "I interval:1", "P interval:1", "Field I name:" + ",".join(names),
-            "Field I signed:0,0,1,1,1,1,1,1,0,0,0,0",
-            "Field I predictor:" + ",".join("0" * len(names)),
-            "Field I encoding:" + ",".join(map(str, enc)),
-            "Firmware revision:Betaflight 4.4.0 (test)", "motorOutput:48,2047",
-            f"acc_1G:{BB_ACC_1G}", "gyro_scale:0x3f800000", "motor_pwm_protocol:7",
-            f"yaw_motors_reversed:{int(rec.vehicle.allocation[3, BF_ORDER[0]] > 0)}"]
+    head = [
+        "Product:Blackbox flight data recorder by Nicholas Sherlock",
+        "Data version:2",
+        "I interval:1",
+        "P interval:1",
+        "Field I name:" + ",".join(names),
+        "Field I signed:0,0,1,1,1,1,1,1,0,0,0,0",
+        "Field I predictor:" + ",".join("0" * len(names)),
+        "Field I encoding:" + ",".join(map(str, enc)),
+        "Firmware revision:Betaflight 4.4.0 (test)",
+        "motorOutput:48,2047",
+        f"acc_1G:{BB_ACC_1G}",
+        "gyro_scale:0x3f800000",
+        "motor_pwm_protocol:7",
+        f"yaw_motors_reversed:{int(rec.vehicle.allocation[3, BF_ORDER[0]] > 0)}",
+    ]
     out = bytearray("".join(f"H {h}\n" for h in head).encode())
     for j, k in enumerate(sel):
         gyro = np.round(np.degrees(rec.omega[k] * flu)).astype(int)  # deg/s, as Betaflight

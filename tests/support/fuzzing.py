@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from quadfault.recording import FORMAT, POSE_COLUMNS, RATE_COLUMNS
-from quadfault.vehicle import PAPER_GRAVITY, PAPER_INERTIA, PAPER_MASS, paper_allocation
+from quadfault.io.recording import FORMAT, POSE_COLUMNS, RATE_COLUMNS
+from quadfault.model.vehicle import PAPER_GRAVITY, PAPER_INERTIA, PAPER_MASS, paper_allocation
 
 
 class Hang(BaseException):
@@ -31,6 +31,7 @@ class Hang(BaseException):
 @contextlib.contextmanager
 def time_limit(seconds: float):
     """Raise :class:`Hang` when the block runs longer than ``seconds`` (main thread, POSIX)."""
+
     def _raise(signum, frame):
         raise Hang(f"took longer than {seconds} s")
 
@@ -41,6 +42,7 @@ def time_limit(seconds: float):
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, previous)
+
 
 #: Columns of the valid base recording (pose + rates + thrust commands).
 BASE_COLUMNS = ("t", *POSE_COLUMNS, *RATE_COLUMNS, "f1", "f2", "f3", "f4")
@@ -85,10 +87,17 @@ def valid_recording(rows: int = 40, rate: float = 100.0) -> tuple[list[str], lis
         t = k / rate
         values = [t, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, f, f, f, f]
         table.append([repr(float(v)) for v in values])
-    side = {"format": FORMAT, "frame": "NED", "gravity": PAPER_GRAVITY,
-            "vehicle": {"mass": PAPER_MASS, "inertia": list(PAPER_INERTIA),
-                        "allocation": paper_allocation().tolist()},
-            "source": "fuzzing hover"}
+    side = {
+        "format": FORMAT,
+        "frame": "NED",
+        "gravity": PAPER_GRAVITY,
+        "vehicle": {
+            "mass": PAPER_MASS,
+            "inertia": list(PAPER_INERTIA),
+            "allocation": paper_allocation().tolist(),
+        },
+        "source": "fuzzing hover",
+    }
     return list(BASE_COLUMNS), table, side
 
 
@@ -144,8 +153,12 @@ def _not_a_number(rng, header, rows, side):
     if "," in token:
         token = f'"{token}"'
     rows[k][j] = token
-    return BadCase("not_a_number", csv_bytes(header, rows), json_bytes(side),
-                   (f"column '{name}'", f"row {k + 1}"))
+    return BadCase(
+        "not_a_number",
+        csv_bytes(header, rows),
+        json_bytes(side),
+        (f"column '{name}'", f"row {k + 1}"),
+    )
 
 
 def _not_finite(rng, header, rows, side):
@@ -153,24 +166,30 @@ def _not_finite(rng, header, rows, side):
     j, name = _col(header, rng)
     k = int(rng.integers(0, len(rows)))
     rows[k][j] = str(rng.choice(NOT_FINITE))
-    return BadCase("not_finite", csv_bytes(header, rows), json_bytes(side),
-                   (f"column '{name}'", f"row {k + 1}"))
+    return BadCase(
+        "not_finite",
+        csv_bytes(header, rows),
+        json_bytes(side),
+        (f"column '{name}'", f"row {k + 1}"),
+    )
 
 
 def _time_repeat(rng, header, rows, side):
     rows = [list(r) for r in rows]
     k = int(rng.integers(1, len(rows)))
     rows[k][0] = rows[k - 1][0]
-    return BadCase("duplicated_time", csv_bytes(header, rows), json_bytes(side),
-                   ("column 't'", f"row {k + 1}"))
+    return BadCase(
+        "duplicated_time", csv_bytes(header, rows), json_bytes(side), ("column 't'", f"row {k + 1}")
+    )
 
 
 def _time_backwards(rng, header, rows, side):
     rows = [list(r) for r in rows]
     k = int(rng.integers(1, len(rows)))
     rows[k][0] = repr(float(rows[k - 1][0]) - float(rng.uniform(1e-6, 1.0)))
-    return BadCase("decreasing_time", csv_bytes(header, rows), json_bytes(side),
-                   ("column 't'", f"row {k + 1}"))
+    return BadCase(
+        "decreasing_time", csv_bytes(header, rows), json_bytes(side), ("column 't'", f"row {k + 1}")
+    )
 
 
 def _quaternion_scale(rng, header, rows, side):
@@ -181,8 +200,12 @@ def _quaternion_scale(rng, header, rows, side):
     q = scale * q / np.linalg.norm(q)
     for i, c in enumerate(("qw", "qx", "qy", "qz")):
         rows[k][header.index(c)] = repr(float(q[i]))
-    return BadCase("quaternion_norm", csv_bytes(header, rows), json_bytes(side),
-                   ("column 'qw'", f"row {k + 1}", "quaternion norm"))
+    return BadCase(
+        "quaternion_norm",
+        csv_bytes(header, rows),
+        json_bytes(side),
+        ("column 'qw'", f"row {k + 1}", "quaternion norm"),
+    )
 
 
 def _drop_column(rng, header, rows, side):
@@ -196,16 +219,21 @@ def _duplicate_column(rng, header, rows, side):
     j, name = _col(header, rng)
     header = list(header) + [name]
     rows = [list(r) + [r[j]] for r in rows]
-    return BadCase("duplicated_column", csv_bytes(header, rows), json_bytes(side),
-                   (f"column '{name}'", "duplicated"))
+    return BadCase(
+        "duplicated_column",
+        csv_bytes(header, rows),
+        json_bytes(side),
+        (f"column '{name}'", "duplicated"),
+    )
 
 
 def _extra_field(rng, header, rows, side):
     rows = [list(r) for r in rows]
     k = int(rng.integers(0, len(rows)))
     rows[k] = rows[k] + ["0.0"] * int(rng.integers(1, 4))
-    return BadCase("extra_field", csv_bytes(header, rows), json_bytes(side),
-                   (f"row {k + 1}", "fields"))
+    return BadCase(
+        "extra_field", csv_bytes(header, rows), json_bytes(side), (f"row {k + 1}", "fields")
+    )
 
 
 def _not_utf8(rng, header, rows, side):
@@ -217,8 +245,9 @@ def _not_utf8(rng, header, rows, side):
 
 def _binary_garbage(rng, header, rows, side):
     n = int(rng.integers(1, 4096))
-    return BadCase("binary_garbage", rng.integers(0, 256, n, dtype=np.uint8).tobytes(),
-                   json_bytes(side), ())
+    return BadCase(
+        "binary_garbage", rng.integers(0, 256, n, dtype=np.uint8).tobytes(), json_bytes(side), ()
+    )
 
 
 def _truncated_gzip(rng, header, rows, side):
@@ -229,13 +258,23 @@ def _truncated_gzip(rng, header, rows, side):
 
 # -- sidecar mutations -----------------------------------------------------------------------
 def _side(name, header, rows, side, expect):
-    return BadCase(name, csv_bytes(header, rows), json_bytes(side) if not isinstance(side, bytes)
-                   else side, expect, blame="sidecar")
+    return BadCase(
+        name,
+        csv_bytes(header, rows),
+        json_bytes(side) if not isinstance(side, bytes) else side,
+        expect,
+        blame="sidecar",
+    )
 
 
 def _missing_sidecar(rng, header, rows, side):
-    return BadCase("missing_sidecar", csv_bytes(header, rows), None, ("sidecar JSON not found",),
-                   blame="sidecar")
+    return BadCase(
+        "missing_sidecar",
+        csv_bytes(header, rows),
+        None,
+        ("sidecar JSON not found",),
+        blame="sidecar",
+    )
 
 
 def _truncated_sidecar(rng, header, rows, side):
@@ -260,12 +299,27 @@ def _bad_format_or_frame(rng, header, rows, side):
 
 #: vehicle keys -> generators of values that break them
 _ABSURD = {
-    "mass": lambda rng: [0, -1.0, -rng.uniform(0, 10), float("nan"), float("inf"), "1.0", None,
-                         True, [1.0]][int(rng.integers(0, 9))],
+    "mass": lambda rng: [
+        0,
+        -1.0,
+        -rng.uniform(0, 10),
+        float("nan"),
+        float("inf"),
+        "1.0",
+        None,
+        True,
+        [1.0],
+    ][int(rng.integers(0, 9))],
     "gravity": lambda rng: [0, -9.81, float("nan"), "g"][int(rng.integers(0, 4))],
-    "inertia": lambda rng: [[1.0, 2.0], [0.0, 0.0, 0.0], [-0.01, 0.01, 0.02],
-                            [[1, 2, 3], [4, 5, 6], [7, 8, 9]], "diag", [float("nan"), 1, 1],
-                            [[0.01, 0.5, 0], [0, 0.01, 0], [0, 0, 0.02]]][int(rng.integers(0, 7))],
+    "inertia": lambda rng: [
+        [1.0, 2.0],
+        [0.0, 0.0, 0.0],
+        [-0.01, 0.01, 0.02],
+        [[1, 2, 3], [4, 5, 6], [7, 8, 9]],
+        "diag",
+        [float("nan"), 1, 1],
+        [[0.01, 0.5, 0], [0, 0.01, 0], [0, 0, 0.02]],
+    ][int(rng.integers(0, 7))],
     "max_thrust": lambda rng: [0, -2.0, float("nan"), "max"][int(rng.integers(0, 4))],
 }
 
@@ -326,12 +380,34 @@ def _u_without_curve(rng, header, rows, side):
     return _side("u_without_thrust_curve", header, rows, side, ("key 'vehicle'", "thrust"))
 
 
-CSV_MUTATIONS = (_empty, _header_only, _one_row, _truncated, _truncated_header, _not_a_number,
-                 _not_finite, _time_repeat, _time_backwards, _quaternion_scale, _drop_column,
-                 _duplicate_column, _extra_field, _not_utf8, _binary_garbage, _truncated_gzip)
-SIDECAR_MUTATIONS = (_missing_sidecar, _truncated_sidecar, _sidecar_not_object,
-                     _bad_format_or_frame, _absurd_vehicle, _singular_allocation, _bad_arm_layout,
-                     _u_without_curve)
+CSV_MUTATIONS = (
+    _empty,
+    _header_only,
+    _one_row,
+    _truncated,
+    _truncated_header,
+    _not_a_number,
+    _not_finite,
+    _time_repeat,
+    _time_backwards,
+    _quaternion_scale,
+    _drop_column,
+    _duplicate_column,
+    _extra_field,
+    _not_utf8,
+    _binary_garbage,
+    _truncated_gzip,
+)
+SIDECAR_MUTATIONS = (
+    _missing_sidecar,
+    _truncated_sidecar,
+    _sidecar_not_object,
+    _bad_format_or_frame,
+    _absurd_vehicle,
+    _singular_allocation,
+    _bad_arm_layout,
+    _u_without_curve,
+)
 MUTATIONS = CSV_MUTATIONS + SIDECAR_MUTATIONS
 MUTATION_NAMES = tuple(m.__name__.lstrip("_") for m in MUTATIONS)
 

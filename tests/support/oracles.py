@@ -20,8 +20,10 @@ def hat(w):
 
 def vee(m):
     m = np.asarray(m, dtype=float)
-    return 0.5 * np.stack((m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0],
-                           m[..., 1, 0] - m[..., 0, 1]), axis=-1)
+    return 0.5 * np.stack(
+        (m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]),
+        axis=-1,
+    )
 
 
 def expm_so3(phi):
@@ -31,7 +33,7 @@ def expm_so3(phi):
     K = hat(phi)
     safe = np.where(th > 1e-12, th, 1.0)
     a = np.where(th > 1e-12, np.sin(safe) / safe, 1.0)
-    b = np.where(th > 1e-12, (1 - np.cos(safe)) / safe ** 2, 0.5)
+    b = np.where(th > 1e-12, (1 - np.cos(safe)) / safe**2, 0.5)
     return np.eye(3) + a * K + b * (K @ K)
 
 
@@ -56,8 +58,11 @@ def step_rk4(p, v, R, w, thrust, moment, vehicle, dt, external=None):
         F = M = None
         if external is not None:
             F, M = external(pp, vv, RR, ww)
-        return vv, translational_acceleration(RR, thrust, vehicle, F), \
-            angular_acceleration(ww, moment, vehicle, M)
+        return (
+            vv,
+            translational_acceleration(RR, thrust, vehicle, F),
+            angular_acceleration(ww, moment, vehicle, M),
+        )
 
     def dexpinv(th, ww):
         tw = np.cross(th, ww)
@@ -76,10 +81,12 @@ def step_rk4(p, v, R, w, thrust, moment, vehicle, dt, external=None):
     k4 = deriv(*s4)
     th4 = dexpinv(dt * th3, s4[3])
     c = dt / 6
-    return (p + c * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0]),
-            v + c * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1]),
-            R @ expm_so3(c * (th1 + 2 * th2 + 2 * th3 + th4)),
-            w + c * (k1[2] + 2 * k2[2] + 2 * k3[2] + k4[2]))
+    return (
+        p + c * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0]),
+        v + c * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1]),
+        R @ expm_so3(c * (th1 + 2 * th2 + 2 * th3 + th4)),
+        w + c * (k1[2] + 2 * k2[2] + 2 * k3[2] + k4[2]),
+    )
 
 
 def dcm_renormalize(R):
@@ -131,8 +138,11 @@ def geometric_control(p, v, R, w, ref, w_d, w_dot_d, vehicle, config):
     """Eqs. 9, 10 (Lee, Leok, McClamroch) in NED/FRD: thrust [N], moment [N m], R_d."""
     g = config.gains
     m, J = vehicle.mass, vehicle.inertia
-    f_n = (np.asarray(g.kx) * (p - ref.position) + np.asarray(g.kv) * (v - ref.velocity)
-           + m * vehicle.gravity * E3)
+    f_n = (
+        np.asarray(g.kx) * (p - ref.position)
+        + np.asarray(g.kv) * (v - ref.velocity)
+        + m * vehicle.gravity * E3
+    )
     if config.acceleration_feedforward:
         f_n = f_n - m * ref.acceleration
     Rd = desired_attitude(f_n, ref.b1d, config.normalize_b2d)

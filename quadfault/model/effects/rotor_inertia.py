@@ -1,0 +1,198 @@
+"""``rotor_inertia``: the rotors' reaction when they change speed, a yaw moment
+``M_z = kappa sum_i s_i df_i'/dt`` (``s_i`` the sign of rotor i's yaw torque)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from quadfault.errors import ConfigError
+from quadfault.jit import jit
+from quadfault.model.effects.base import Compiled, Identifiability, number, vector
+from quadfault.model.effects.candidate import Candidate
+from quadfault.model.effects.physics import batch_of, rows_of
+from quadfault.model.rotation import store3
+
+
+# kernels ---------------------------------------------------------------------------------
+@jit
+def thrust_rate1(f_end, f_prev, dt):
+    """Mean rate of change [N/s] of a thrust that went from ``f_prev`` to ``f_end`` over
+    ``dt`` [s]."""
+    return (f_end - f_prev) / dt
+
+
+@jit
+def rotor_inertia_moment1(yaw_rate_sum, kappa):
+    """Yaw moment [N m] ``kappa sum_i s_i df_i/dt`` from the signed sum of rotor thrust rates
+    ``sum_i s_i df_i/dt`` [N/s]."""
+    return kappa * yaw_rate_sum
+
+
+@jit(inline="always")
+def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
+    """Marks the step (memory: fresh, seen, dt, rate (n), previous thrust (n)): the next
+    wrench call opens it."""
+    Q[i, m], Q[i, m + 2] = 1.0, dt
+    return f
+
+
+@jit
+def _rotor_rate(P, Q, i, a, m, f):
+    """The yaw-signed sum of the rotors' thrust rates over the current step [N/s] (computed
+    at the step's first wrench call, from the thrusts the chain produced)."""
+    n = f.shape[0]
+    if Q[i, m] != 0.0:
+        for r in range(n):
+            rate = 0.0
+            if Q[i, m + 1] != 0.0:
+                rate = thrust_rate1(f[r], Q[i, m + 3 + n + r], Q[i, m + 2])
+            Q[i, m + 3 + r] = rate
+            Q[i, m + 3 + n + r] = f[r]
+        Q[i, m], Q[i, m + 1] = 0.0, 1.0
+    s = 0.0
+    for r in range(n):
+        s += Q[i, m + 3 + r] * P[i, a + 1 + r]
+    return s
+
+
+@jit(inline="always")
+def wrench_term(P, Q, i, a, m, f):
+    """The step's numbers: the body moment (3) of the step's thrust rates (parameters kappa,
+    yaw signs s_1 .. s_n)."""
+    Mz = rotor_inertia_moment1(_rotor_rate(P, Q, i, a, m, f), P[i, a])
+    return 0.0, 0.0, Mz, 0.0, 0.0, 0.0
+
+
+@jit(inline="always")
+def wrench_stage(s, v, R, w):
+    """The step's body moment, the same at every stage."""
+    return (0.0, 0.0, 0.0), (s[1], s[2], s[3])
+
+
+# over arrays -----------------------------------------------------------------------------
+@jit
+def _rate_rows(f_end, dt, out):
+    for k in range(1, f_end.shape[0]):
+        for m in range(f_end.shape[1]):
+            out[k, m] = thrust_rate1(f_end[k, m], f_end[k - 1, m], dt[k])
+
+
+def thrust_rate(f_end: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    """Mean rate of change [N/s] of a thrust held over each interval: the step from the
+    previous interval's final thrust to this one's, ``(f_end_k - f_end_{k-1}) / dt_k`` (0 for
+    the first), so block means of the rate telescope exactly."""
+    f = np.ascontiguousarray(f_end, dtype=float)
+    out = np.zeros_like(f)
+    if len(f) > 1:
+        d = np.ascontiguousarray(np.broadcast_to(np.asarray(dt, dtype=float), (len(f),)))
+        _rate_rows(f.reshape(len(f), -1), d, out.reshape(len(f), -1))
+    return out
+
+
+@jit
+def _moment_rows(rate, signs, kappa, out):
+    for i in range(rate.shape[0]):
+        s = 0.0
+        for m in range(rate.shape[1]):
+            s += rate[i, m] * signs[i, m]
+        store3(out[i], (0.0, 0.0, rotor_inertia_moment1(s, kappa)))
+
+
+def rotor_inertia_moment(rate: np.ndarray, yaw_signs: np.ndarray, kappa: float) -> np.ndarray:
+    """Body moment [N m] of the rotors' reaction when they spin up or down:
+    ``M_z = kappa sum_i s_i df_i/dt`` (``rate`` = df/dt [N/s], ``s_i`` = the sign of rotor
+    i's drag torque on the body, ``kappa`` [m s] = J_r omega / (2 f) at the operating point,
+    J_r the rotor inertia)."""
+    rate = np.asarray(rate, dtype=float)
+    n = (rate.shape[-1],)
+    batch = batch_of((rate, n), (yaw_signs, n))
+    rr, rs = rows_of(batch, (rate, n), (yaw_signs, n))
+    out = np.zeros((int(np.prod(batch)), 3))
+    _moment_rows(rr, rs, float(kappa), out)
+    return out.reshape(batch + (3,))
+
+
+# the effect ------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RotorInertia(Compiled):
+    """Yaw reaction of the rotors' inertia when their thrust changes:
+    ``M_z = kappa sum_i s_i df_i/dt`` (``kappa`` [m s]; ``s_i`` the sign of rotor i's yaw
+    torque: ``yaw_signs``, by default read from the flown vehicle's allocation at reset). The
+    rate over a step is the step from the previous step's produced thrust
+    (:func:`thrust_rate1`), so a jump in thrust gives the yaw-rate kick
+    ``kappa sum_i s_i df_i / J_z``."""
+
+    kappa: float = 0.001
+    yaw_signs: tuple | None = None
+    name: ClassVar[str] = "rotor_inertia"
+    order: ClassVar[int] = 10
+    identifiability: ClassVar[Identifiability] = Identifiability(
+        scales_with=("inertia", "torque_coefficient"),
+        excitation="thrust changes (the yaw kick of rotors speeding up or down)",
+        note="shows in the yaw rate when the rotors change speed",
+    )
+    explanation: ClassVar[str] = "the rotors' inertia: changing rotor speeds kick the body in yaw"
+    syntax: ClassVar[str] = "KAPPA [m s]"
+    example: ClassVar[str] = "rotor_inertia=0.005"
+    parameter: ClassVar[tuple] = ("kappa", "kappa_m_s")
+
+    def __post_init__(self):
+        number(self.kappa, "rotor_inertia kappa [m s]", 0.0, 10.0)
+        if self.yaw_signs is not None:
+            signs = np.sign(
+                vector(self.yaw_signs, len(np.ravel(self.yaw_signs)), "rotor_inertia yaw_signs")
+            )
+            object.__setattr__(self, "yaw_signs", tuple(float(s) for s in signs))
+
+    def true_vehicle(self, vehicle):
+        self.__dict__["_signs"] = np.sign(vehicle.allocation[3])  # the flown rotors' spins
+        self.__dict__.pop("_single", None)
+        return vehicle
+
+    def signs(self, n_rotors: int) -> np.ndarray:
+        """Yaw-torque sign of each rotor: ``yaw_signs``, else the flown vehicle's (seen by
+        ``true_vehicle``), else alternating -1, +1."""
+        if self.yaw_signs is not None:
+            return np.asarray(self.yaw_signs)
+        s = self.__dict__.get("_signs")
+        return s if s is not None and len(s) == n_rotors else np.resize([-1.0, 1.0], n_rotors)
+
+    def _yaw_signs(self, n_rotors):
+        return self.signs(n_rotors)
+
+    def pack(self, n_rotors, dt, yaw_signs=None):
+        signs = self.yaw_signs if self.yaw_signs is not None else yaw_signs
+        if signs is None:
+            signs = np.resize([-1.0, 1.0], n_rotors)
+        if len(signs) != n_rotors:
+            raise ConfigError(
+                f"rotor_inertia has {len(signs)} yaw signs, the vehicle {n_rotors} rotors"
+            )
+        return (self.kappa, *(float(s) for s in signs)), 3 + 2 * n_rotors
+
+    @classmethod
+    def candidate(cls, ctx):
+        return RotorInertiaCandidate(
+            cls.name,
+            ("kappa [m s]",),
+            (0.0,),
+            (1.5 * ctx.c_yaw,),
+            (0.0,),
+            ((0.0,),),
+            "wrench",
+            affine=True,
+        )
+
+
+@dataclass(frozen=True)
+class RotorInertiaCandidate(Candidate):
+    uses_thrust: ClassVar[bool] = True
+    needs_rate: ClassVar[bool] = True
+    keys: ClassVar[tuple] = (("kappa_m_s", 0, 1),)
+
+    def wrench(self, x, inp):
+        signs = np.sign(inp.vehicle.allocation[3])
+        return None, rotor_inertia_moment(inp.rate, signs, float(x[0]))
