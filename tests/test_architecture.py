@@ -166,6 +166,7 @@ LAYERS = (
             "quadfault.jit",
             "quadfault.progress",
             "quadfault.fileio",
+            "quadfault.layout",
         ),
     ),
     (
