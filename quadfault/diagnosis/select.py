@@ -40,10 +40,6 @@ contains another (``Candidate.excludes``: ``motor_efficiency`` and ``thrust_curv
 fitted and not accepted keeps the reason it last failed.
 """
 
-# The selection loop's helpers close over the loop's state and are called only within the
-# iteration that defines them.
-# ruff: noqa: B023
-
 from __future__ import annotations
 
 import itertools
@@ -74,7 +70,9 @@ from quadfault.diagnosis.resolution import (
 from quadfault.diagnosis.rotors import rotors_differ
 
 __all__ = [
+    "ForwardSelection",
     "Selection",
+    "SelectionSettings",
     "Step",
     "Verdict",
     "select",
@@ -151,8 +149,23 @@ def x_terms(cands, xs) -> list:
     return list(zip(cands, xs))
 
 
+@dataclass(frozen=True)
+class SelectionSettings:
+    """The selection's thresholds (:class:`~quadfault.diagnosis.diagnose.DiagnosisConfig`
+    documents each)."""
+
+    folds: int = 5
+    max_effects: int = 3
+    min_improvement: float = 0.05
+    bic_margin: float = 10.0
+    screen_top: int = 3
+    pair_top: int = PAIR_TOP
+
+
 @dataclass(eq=False)
 class _Option:
+    """One effect (or pair) tried on top of the current model, and how its tests went."""
+
     cands: list
     fit: Fit
     bic: float
@@ -164,121 +177,221 @@ class _Option:
     like: Unresolved | None = None
 
 
-def _signal(rp, sc, current, x_cur, opt, cur_pred) -> np.ndarray:
-    """RMS of the option's fitted signal per channel, in noise units."""
-    sig = (
-        predict(rp, x_terms(current, x_cur) + list(opt.fit.terms)[len(current) :]) - cur_pred
-    ) / sc.noise
-    return np.sqrt(np.mean(sig**2, axis=0))
+@dataclass(frozen=True, eq=False)
+class _Model:
+    """The model a round starts from: the accepted candidates, their values, the joint fit
+    (None before the first acceptance), its held-out result, in-sample BIC and prediction."""
+
+    cands: list
+    x: list
+    fit: Fit | None
+    cv: CrossValidation
+    bic: float
+    prediction: np.ndarray
+
+    @property
+    def terms(self) -> list:
+        return x_terms(self.cands, self.x)
 
 
-def _test(
-    rp, sc, opt, current, x_cur, cur_cv, cur_bic, cur_pred, fl, kw, singles_cv, cur_fit, timing
-):
-    """Run the acceptance tests of one option in order (module docstring); fills
-    ``opt.cv``, ``gain``, ``iv``, ``agreement`` and, on the first failure, ``failed``
-    (and ``like`` when it is the time constant the log cannot resolve)."""
-    if opt.bic > cur_bic - kw["bic_margin"]:
-        opt.failed = f"BIC not lower by more than {kw['bic_margin']:g}"
-        return
-    opt.cv = cross_validate(rp, opt.cands, sc, None, fl, full=opt.fit)
-    opt.gain = 1.0 - np.sqrt(opt.cv.sse / cur_cv.sse)
-    signal = _signal(rp, sc, current, x_cur, opt, cur_pred)
-    new = list(enumerate(opt.cands[len(current) :], start=len(current)))
-    opt.failed = (
-        _held_out(sc, opt, cur_cv, signal, kw["min_improvement"])
-        or _pair(opt, new, singles_cv, kw["min_improvement"])
-        or _feedback(rp, sc, opt, current, x_cur, cur_pred, signal)
-        or _bounds_and_trade(rp, sc, opt, current, new, cur_fit)
-        or _folds(rp, sc, opt, new)
-        or rotors_differ(rp, sc, opt, current, fl, kw["min_improvement"])
-    )
-    if not opt.failed:
-        opt.failed = timing.why_not(opt, [c for _, c in new])
-        opt.like = timing.un if opt.failed else None
+class _Round:
+    """One round of the search (module docstring, steps 1-4) on top of ``model``."""
 
+    def __init__(self, search: ForwardSelection, model: _Model, singles: list):
+        self.search, self.model, self.singles = search, model, singles
+        self.options: list[_Option] = []
+        self._single_cv: dict = {}
 
-def _held_out(sc, opt, cur_cv, signal, m) -> str:
-    if np.sqrt(np.sum(signal**2)) < 1.0:
-        return "negligible: its fitted signal, over all channels, is below the noise"
-    touched = signal >= 1.0  # the channels it acts on
-    gain_touched = 0.0
-    if touched.any():  # best held-out gain among the channels the option acts on
-        before = sc.channel_sse(cur_cv.residual)[touched]
-        after = sc.channel_sse(opt.cv.residual)[touched]
-        gain_touched = float(np.max(1.0 - np.sqrt(after / np.maximum(before, 1e-300))))
-    if opt.gain < m and gain_touched < 3 * m:
-        return (
-            f"held-out gain {opt.gain:.1%} (best channel {gain_touched:.1%}) below "
-            f"{m:.0%} ({3 * m:.0%} in a channel it acts on)"
+    # options --------------------------------------------------------------------------
+    def build_options(self) -> None:
+        """The best single candidates and the pairs among the best (module docstring)."""
+        s, m = self.search.settings, self.model
+        rp, scale = self.search.replay, self.search.scoring.divisor
+        good = [b for b in self.singles if b[0] < m.bic - s.bic_margin][: s.screen_top]
+        for _b, c, f in good:
+            if m.cands:  # joint refit of the candidate with the accepted effects
+                f = fit(rp, m.cands + [c], scale, init=m.x + list(f.x))
+            self.options.append(_Option(m.cands + [c], f, f.bic()))
+        if len(m.cands) + 2 <= s.max_effects:
+            for (ba, a, fa), (_, b, fb) in itertools.combinations(self.singles[: s.pair_top], 2):
+                if not a.compatible([b]) or ba >= m.bic - s.bic_margin:
+                    continue  # (singles are in BIC order: the better one must lower BIC)
+                f = fit(rp, m.cands + [a, b], scale, init=m.x + list(fa.x) + list(fb.x))
+                self.options.append(_Option(m.cands + [a, b], f, f.bic()))
+
+    def single_cv(self, c) -> tuple:
+        """Held-out result and fit of ``c`` alone on top of the accepted effects."""
+        m, sr = self.model, self.search
+        for o in self.options:
+            if len(o.cands) == len(m.cands) + 1 and o.cands[-1] is c:
+                if o.cv is None:
+                    o.cv = cross_validate(
+                        sr.replay, o.cands, sr.scoring, None, sr.folds, full=o.fit
+                    )
+                return o.cv, o.fit
+        if c.name not in self._single_cv:
+            f = next(s[2] for s in self.singles if s[1] is c)
+            if m.cands:
+                f = fit(sr.replay, m.cands + [c], sr.scoring.divisor, init=m.x + list(f.x))
+            cv = cross_validate(sr.replay, m.cands + [c], sr.scoring, None, sr.folds, full=f)
+            self._single_cv[c.name] = (cv, f)
+        return self._single_cv[c.name]
+
+    # tests ----------------------------------------------------------------------------
+    def test(self, opt: _Option, timing: TimingCheck) -> None:
+        """Run the acceptance tests of one option in order (module docstring); fills
+        ``opt.cv``, ``gain``, ``iv``, ``agreement`` and, on the first failure, ``failed``
+        (and ``like`` when it is the time constant the log cannot resolve)."""
+        sr, m, s = self.search, self.model, self.search.settings
+        if opt.bic > m.bic - s.bic_margin:
+            opt.failed = f"BIC not lower by more than {s.bic_margin:g}"
+            return
+        opt.cv = cross_validate(sr.replay, opt.cands, sr.scoring, None, sr.folds, full=opt.fit)
+        opt.gain = 1.0 - np.sqrt(opt.cv.sse / m.cv.sse)
+        signal = self.signal(opt)
+        new = list(enumerate(opt.cands[len(m.cands) :], start=len(m.cands)))
+        opt.failed = (
+            self.held_out(opt, signal)
+            or self.pair(opt, new)
+            or self.feedback(opt, signal)
+            or self.bounds_and_trade(opt, new)
+            or self.folds_agree(opt, new)
+            or rotors_differ(sr.replay, sr.scoring, opt, m.cands, sr.folds, s.min_improvement)
         )
-    return ""
+        if not opt.failed:
+            opt.failed = timing.why_not(opt, [c for _, c in new])
+            opt.like = timing.un if opt.failed else None
 
+    def signal(self, opt: _Option) -> np.ndarray:
+        """RMS of the option's fitted signal per channel, in noise units."""
+        m, sr = self.model, self.search
+        terms = m.terms + list(opt.fit.terms)[len(m.cands) :]
+        sig = (predict(sr.replay, terms) - m.prediction) / sr.scoring.noise
+        return np.sqrt(np.mean(sig**2, axis=0))
 
-def _pair(opt, new, singles_cv, m) -> str:
-    """A pair must beat each of its members alone, and add to their single fits."""
-    if len(new) != 2:
-        return ""
-    for _, c in new:
-        one, fit_one = singles_cv(c)
-        if np.sqrt(opt.cv.sse / one.sse) > 1.0 - m:
-            return f"the pair is not better than {c.name} alone by {m:.0%}"
-        moved = trade_off(fit_one, [c.name], opt.fit)
-        if moved:
-            return moved
-    return ""
-
-
-def _feedback(rp, sc, opt, current, x_cur, cur_pred, signal) -> str:
-    """The instrumental-variable check on the channels the option acts on."""
-    touched = signal >= 1.0
-    channels = np.flatnonzero(touched) if touched.any() else np.flatnonzero(signal > 0)
-    opt.iv, iv_se = iv_slope(
-        rp,
-        x_terms(current, x_cur),
-        opt.fit.terms,
-        sc.divisor,
-        (rp.measured - cur_pred) / sc.divisor,
-        channels,
-    )
-    if not np.isfinite(opt.iv):
-        if opt.gain < IV_UNVERIFIED_GAIN:
+    def held_out(self, opt: _Option, signal) -> str:
+        sc, cur_cv, bar = self.search.scoring, self.model.cv, self.search.settings.min_improvement
+        if np.sqrt(np.sum(signal**2)) < 1.0:
+            return "negligible: its fitted signal, over all channels, is below the noise"
+        touched = signal >= 1.0  # the channels it acts on
+        gain_touched = 0.0
+        if touched.any():  # best held-out gain among the channels the option acts on
+            before = sc.channel_sse(cur_cv.residual)[touched]
+            after = sc.channel_sse(opt.cv.residual)[touched]
+            gain_touched = float(np.max(1.0 - np.sqrt(after / np.maximum(before, 1e-300))))
+        if opt.gain < bar and gain_touched < 3 * bar:
             return (
-                "the instrumental-variable check cannot vouch for its signal and the "
-                f"held-out gain is under {IV_UNVERIFIED_GAIN:.0%}"
+                f"held-out gain {opt.gain:.1%} (best channel {gain_touched:.1%}) below "
+                f"{bar:.0%} ({3 * bar:.0%} in a channel it acts on)"
             )
-    elif not (opt.iv >= IV_MIN and opt.iv - IV_Z * iv_se > 0.0):
-        return (
-            f"instrumental-variable slope {opt.iv:.2f} +- {iv_se:.2f} (feedback bias; "
-            f"needs >= {IV_MIN} and > {IV_Z:g} se above 0)"
+        return ""
+
+    def pair(self, opt: _Option, new) -> str:
+        """A pair must beat each of its members alone, and add to their single fits."""
+        if len(new) != 2:
+            return ""
+        bar = self.search.settings.min_improvement
+        for _, c in new:
+            one, fit_one = self.single_cv(c)
+            if np.sqrt(opt.cv.sse / one.sse) > 1.0 - bar:
+                return f"the pair is not better than {c.name} alone by {bar:.0%}"
+            moved = trade_off(fit_one, [c.name], opt.fit)
+            if moved:
+                return moved
+        return ""
+
+    def feedback(self, opt: _Option, signal) -> str:
+        """The instrumental-variable check on the channels the option acts on."""
+        sr, m = self.search, self.model
+        rp, sc = sr.replay, sr.scoring
+        touched = signal >= 1.0
+        channels = np.flatnonzero(touched) if touched.any() else np.flatnonzero(signal > 0)
+        opt.iv, iv_se = iv_slope(
+            rp,
+            m.terms,
+            opt.fit.terms,
+            sc.divisor,
+            (rp.measured - m.prediction) / sc.divisor,
+            channels,
         )
-    return ""
+        if not np.isfinite(opt.iv):
+            if opt.gain < IV_UNVERIFIED_GAIN:
+                return (
+                    "the instrumental-variable check cannot vouch for its signal and the "
+                    f"held-out gain is under {IV_UNVERIFIED_GAIN:.0%}"
+                )
+        elif not (opt.iv >= IV_MIN and opt.iv - IV_Z * iv_se > 0.0):
+            return (
+                f"instrumental-variable slope {opt.iv:.2f} +- {iv_se:.2f} (feedback bias; "
+                f"needs >= {IV_MIN} and > {IV_Z:g} se above 0)"
+            )
+        return ""
 
+    def bounds_and_trade(self, opt: _Option, new) -> str:
+        rp, sc, m = self.search.replay, self.search.scoring, self.model
+        short = next((w for w in (too_short(c, opt.fit.x[j]) for j, c in new) if w), "")
+        if short:
+            return short
+        if any(fit_at_bound(rp, sc, opt.fit, j) for j, _ in new):
+            return "at a bound"
+        pushed = [c.name for j, c in enumerate(m.cands) if fit_at_bound(rp, sc, opt.fit, j)]
+        if pushed:  # the joint refit drives an accepted effect to its bound
+            return f"it pushes the accepted {pushed[0]} to a bound"
+        return "" if m.fit is None else trade_off(m.fit, [c.name for c in m.cands], opt.fit)
 
-def _bounds_and_trade(rp, sc, opt, current, new, cur_fit) -> str:
-    short = next((w for w in (too_short(c, opt.fit.x[j]) for j, c in new) if w), "")
-    if short:
-        return short
-    if any(fit_at_bound(rp, sc, opt.fit, j) for j, _ in new):
-        return "at a bound"
-    pushed = [c.name for j, c in enumerate(current) if fit_at_bound(rp, sc, opt.fit, j)]
-    if pushed:  # the joint refit drives an accepted effect to its bound
-        return f"it pushes the accepted {pushed[0]} to a bound"
-    return "" if cur_fit is None else trade_off(cur_fit, [c.name for c in current], opt.fit)
+    def folds_agree(self, opt: _Option, new) -> str:
+        rp, sc = self.search.replay, self.search.scoring
+        for j, c in new:
+            ok, detail = fold_agreement(
+                c,
+                opt.fit.x[j],
+                [fx[j] for fx in opt.cv.fold_x],
+                lambda xf, j=j: fit_bound_mask(rp, sc, opt.fit, j, xf),
+            )
+            opt.agreement[c.name] = detail
+            if not ok:
+                return f"{c.name}: the folds disagree ({detail})"
+        return ""
 
+    # outcome --------------------------------------------------------------------------
+    def record_failures(self, verdicts: dict) -> list:
+        """Write the verdict of every candidate whose option failed (singles first); return
+        the options that passed."""
+        rp, sc, n = self.search.replay, self.search.scoring, len(self.model.cands)
+        passed, single_tested = [], set()
+        for opt in sorted(self.options, key=lambda o: len(o.cands)):  # singles first
+            new = opt.cands[n:]
+            for j, c in enumerate(opt.cands):
+                if c not in new or c.name in verdicts_final(verdicts):
+                    continue
+                if opt.failed == "at a bound" and fit_at_bound(rp, sc, opt.fit, j):
+                    verdicts[c.name] = _verdict(c, "suspect", AT_BOUND, opt, j)
+                elif opt.failed and (len(new) == 1 or c.name not in single_tested):
+                    why = opt.failed
+                    if why == "at a bound":
+                        other = [o.name for o in new if o is not c]
+                        why = f"fitted with {other[0]}, which sits at a bound"
+                    elif len(new) == 2:
+                        why = f"as a pair with {[o.name for o in new if o is not c][0]}: {why}"
+                    verdicts[c.name] = _verdict(c, "rejected", why, opt, j)
+                if len(new) == 1:
+                    single_tested.add(c.name)
+            if not opt.failed:
+                passed.append(opt)
+        return passed
 
-def _folds(rp, sc, opt, new) -> str:
-    for j, c in new:
-        ok, detail = fold_agreement(
-            c,
-            opt.fit.x[j],
-            [fx[j] for fx in opt.cv.fold_x],
-            lambda xf, j=j: fit_bound_mask(rp, sc, opt.fit, j, xf),
-        )
-        opt.agreement[c.name] = detail
-        if not ok:
-            return f"{c.name}: the folds disagree ({detail})"
-    return ""
+    def best(self, passed: list) -> _Option:
+        """The option with the lowest held-out error; a pair only when it beats the best
+        single by ``min_improvement``."""
+        n, bar = len(self.model.cands), self.search.settings.min_improvement
+        one = [o for o in passed if len(o.cands) == n + 1]
+        two = [o for o in passed if len(o.cands) == n + 2]
+        best = min(one, key=lambda o: o.cv.sse) if one else None
+        if two:
+            pair = min(two, key=lambda o: o.cv.sse)
+            if best is None or np.sqrt(pair.cv.sse / best.cv.sse) <= 1.0 - bar:
+                best = pair
+        return best
 
 
 def trade_off(before: Fit, names, after: Fit) -> str:
@@ -306,6 +419,151 @@ def trade_off(before: Fit, names, after: Fit) -> str:
     return ""
 
 
+#: the reason of a suspect
+AT_BOUND = (
+    "improves the held-out fit only with a parameter at its bound: the data "
+    "asks for more than this effect allows; a missing effect is likely"
+)
+
+
+class ForwardSelection:
+    """Forward selection (module docstring) over the candidate ``library`` of one recording
+    (its ``replay``), scored with its fixed ``scoring``
+    (:class:`~quadfault.diagnosis.scores.Scoring`) under ``settings``.
+
+    ``run()`` returns the :class:`Selection`; ``progress()`` is called after each screening
+    fit."""
+
+    def __init__(
+        self,
+        replay: Replay,
+        library: list[Candidate],
+        scoring,
+        settings: SelectionSettings | None = None,
+        progress=None,
+    ):
+        self.replay, self.scoring = replay, scoring
+        self.settings = settings or SelectionSettings()
+        self.library = list(library)
+        self.progress = progress
+        self.folds = folds_of(replay.n_blocks, self.settings.folds)
+
+    def _model(self, cands, x, f, cv, bic) -> _Model:
+        return _Model(list(cands), list(x), f, cv, bic, predict(self.replay, x_terms(cands, x)))
+
+    def _screen(self, pool, model: _Model, last_x: dict, alone: dict) -> list:
+        """Each candidate of ``pool`` fitted alone on top of ``model``, best BIC first;
+        started from its last screening fit (the first round scans its start guesses)."""
+        singles = []
+        for c in pool:
+            f = fit(
+                self.replay,
+                [c],
+                self.scoring.divisor,
+                fixed=model.terms,
+                init=[last_x.get(c.name)],
+            )
+            singles.append((f.bic(), c, f))
+            last_x[c.name] = f.x[0]
+            if not model.cands:
+                alone[c.name] = f
+            if self.progress is not None:
+                self.progress()
+        singles.sort(key=lambda item: item[0])
+        return singles
+
+    def run(self) -> Selection:
+        rp, sc, s = self.replay, self.scoring, self.settings
+        baseline = cross_validate(rp, [], sc, [], self.folds)
+        n = rp.measured.size
+        bic0 = n * np.log(float(np.sum((baseline.residual / sc.divisor) ** 2)) / n)  # in-sample
+        model = self._model([], [], None, baseline, bic0)
+        steps, verdicts, alone, last_x = [], {}, {}, {}
+        screening = ()
+        lacks = None
+        testable = [c for c in self.library if c.testable(rp)]
+        while len(model.cands) < s.max_effects:
+            chosen = {c.name for c in model.cands}
+            pool = [
+                c
+                for c in testable
+                if c.name not in chosen
+                and c.name not in verdicts_final(verdicts)
+                and c.compatible(model.cands)
+            ]
+            if not pool:
+                break
+            singles = self._screen(pool, model, last_x, alone)
+            screening = tuple((c.name, b) for b, c, _ in singles)
+            for b, c, f in singles:  # this round's reading, unless an option test says more
+                verdicts[c.name] = Verdict(
+                    c, "rejected", _screen_reason(b, model.bic, s), f, f.x[0], f.sd[0]
+                )
+            rnd = _Round(self, model, singles)
+            rnd.build_options()
+            timing = TimingCheck(
+                rp,
+                sc,
+                self.folds,
+                model.terms,
+                unresolved(singles, model.bic, s.bic_margin),
+                s.min_improvement,
+            )
+            for opt in rnd.options:
+                rnd.test(opt, timing)
+            lacks = below_resolution(
+                rp, sc, rnd.options, len(model.cands), model.cv, s.min_improvement
+            )
+            passed = rnd.record_failures(verdicts)
+            if not passed:
+                break
+            best = rnd.best(passed)
+            n_cur = len(model.cands)
+            for o in passed:
+                if o is best:
+                    continue
+                for j, c in enumerate(o.cands[n_cur:], start=n_cur):
+                    if c not in best.cands:
+                        winners = " + ".join(x.name for x in best.cands[n_cur:])
+                        verdicts[c.name] = _verdict(
+                            c,
+                            "rejected",
+                            f"passed the tests, but {winners} fitted the held-out data better",
+                            o,
+                            j,
+                        )
+            for c in best.cands[n_cur:]:
+                rivals = {
+                    rc.name: rf.sse / max(best.fit.sse, 1e-300)
+                    for _, rc, rf in singles
+                    if rc is not c
+                }
+                steps.append(
+                    Step(
+                        c,
+                        best.fit,
+                        best.cv,
+                        float(best.gain),
+                        rivals,
+                        best.iv,
+                        best.agreement.get(c.name, ""),
+                    )
+                )
+                verdicts.pop(c.name, None)
+            model = self._model(best.cands, best.fit.x, best.fit, best.cv, best.bic)
+            lacks = None  # judged against the model before this round's acceptance
+        accepted = {st.candidate.name for st in steps}
+        for c in testable:  # never screened (the search stopped) or still pending
+            if c.name not in verdicts and c.name not in accepted and c.name in alone:
+                f = alone[c.name]
+                verdicts[c.name] = Verdict(
+                    c, "rejected", "not reached: the search stopped", f, f.x[0], f.sd[0]
+                )
+        return Selection(
+            baseline, tuple(steps), model.fit, model.cv, screening, alone, verdicts, lacks
+        )
+
+
 def select(
     rp: Replay,
     library: list[Candidate],
@@ -319,188 +577,11 @@ def select(
     pair_top: int = PAIR_TOP,
     progress=None,
 ) -> Selection:
-    """Forward selection (module docstring) with the fixed scoring ``sc``
-    (:class:`~quadfault.diagnosis.scores.Scoring`)."""
-    kw = {"bic_margin": bic_margin, "min_improvement": min_improvement}
-    scale = sc.divisor
-    fl = folds_of(rp.n_blocks, folds)
-    baseline = cross_validate(rp, [], sc, [], fl)
-    n = rp.measured.size
-    current: list[Candidate] = []
-    x_cur: list = []
-    cur_cv = baseline
-    cur_bic = n * np.log(float(np.sum((baseline.residual / scale) ** 2)) / n)  # in-sample
-    steps, verdicts, alone, last_x = [], {}, {}, {}
-    final = None
-    screening = ()
-    lacks = None
-    testable = [c for c in library if c.testable(rp)]
-    while len(current) < max_effects:
-        chosen = {c.name for c in current}
-        pool = [
-            c
-            for c in testable
-            if c.name not in chosen
-            and c.name not in verdicts_final(verdicts)
-            and c.compatible(current)
-        ]
-        if not pool:
-            break
-        fixed = list(zip(current, x_cur))
-        singles = []
-        for c in pool:  # screening: the new effect alone on top of the current model
-            # started from its last screening fit (the first round scans its start guesses)
-            f = fit(rp, [c], scale, fixed=fixed, init=[last_x.get(c.name)])
-            singles.append((f.bic(), c, f))
-            last_x[c.name] = f.x[0]
-            if not current:
-                alone[c.name] = f
-            if progress is not None:
-                progress()
-        singles.sort(key=lambda item: item[0])
-        screening = tuple((c.name, b) for b, c, _ in singles)
-        for b, c, f in singles:  # this round's reading, unless an option test says more
-            verdicts[c.name] = Verdict(
-                c, "rejected", _screen_reason(b, cur_bic, kw), f, f.x[0], f.sd[0]
-            )
-        cur_pred = predict(rp, x_terms(current, x_cur))
-        options = []
-        for _b, c, f in [s for s in singles if s[0] < cur_bic - bic_margin][:screen_top]:
-            if current:  # joint refit of the candidate with the accepted effects
-                f = fit(rp, current + [c], scale, init=x_cur + list(f.x))
-            options.append(_Option(current + [c], f, f.bic()))
-        if len(current) + 2 <= max_effects:
-            for (ba, a, fa), (_, b, fb) in itertools.combinations(singles[:pair_top], 2):
-                if not a.compatible([b]) or ba >= cur_bic - bic_margin:
-                    continue  # (singles are in BIC order: the better one must lower BIC)
-                f = fit(rp, current + [a, b], scale, init=x_cur + list(fa.x) + list(fb.x))
-                options.append(_Option(current + [a, b], f, f.bic()))
-        single_cv = {}
-
-        def singles_cv(c):
-            """Held-out result and fit of ``c`` alone on top of the accepted effects."""
-            for o in options:
-                if len(o.cands) == len(current) + 1 and o.cands[-1] is c:
-                    if o.cv is None:
-                        o.cv = cross_validate(rp, o.cands, sc, None, fl, full=o.fit)
-                    return o.cv, o.fit
-            if c.name not in single_cv:
-                f = next(s[2] for s in singles if s[1] is c)
-                if current:
-                    f = fit(rp, current + [c], scale, init=x_cur + list(f.x))
-                single_cv[c.name] = (cross_validate(rp, current + [c], sc, None, fl, full=f), f)
-            return single_cv[c.name]
-
-        timing = TimingCheck(
-            rp,
-            sc,
-            fl,
-            x_terms(current, x_cur),
-            unresolved(singles, cur_bic, bic_margin),
-            min_improvement,
-        )
-        for opt in options:
-            _test(
-                rp,
-                sc,
-                opt,
-                current,
-                x_cur,
-                cur_cv,
-                cur_bic,
-                cur_pred,
-                fl,
-                kw,
-                singles_cv,
-                final,
-                timing,
-            )
-        lacks = below_resolution(rp, sc, options, len(current), cur_cv, min_improvement)
-        passed = []
-        single_tested = set()
-        for opt in sorted(options, key=lambda o: len(o.cands)):  # singles first
-            new = opt.cands[len(current) :]
-            for j, c in enumerate(opt.cands):
-                if c not in new or c.name in verdicts_final(verdicts):
-                    continue
-                if opt.failed == "at a bound" and fit_at_bound(rp, sc, opt.fit, j):
-                    verdicts[c.name] = _verdict(
-                        c,
-                        "suspect",
-                        (
-                            "improves the held-out fit only with a parameter at its bound: the data "
-                            "asks for more than this effect allows; a missing effect is likely"
-                        ),
-                        opt,
-                        j,
-                    )
-                elif opt.failed and (len(new) == 1 or c.name not in single_tested):
-                    why = opt.failed
-                    if why == "at a bound":
-                        other = [o.name for o in new if o is not c]
-                        why = f"fitted with {other[0]}, which sits at a bound"
-                    elif len(new) == 2:
-                        why = f"as a pair with {[o.name for o in new if o is not c][0]}: {why}"
-                    verdicts[c.name] = _verdict(c, "rejected", why, opt, j)
-                if len(new) == 1:
-                    single_tested.add(c.name)
-            if not opt.failed:
-                passed.append(opt)
-        if not passed:
-            break
-        one = [o for o in passed if len(o.cands) == len(current) + 1]
-        two = [o for o in passed if len(o.cands) == len(current) + 2]
-        best = min(one, key=lambda o: o.cv.sse) if one else None
-        if two:
-            pair = min(two, key=lambda o: o.cv.sse)
-            if best is None or np.sqrt(pair.cv.sse / best.cv.sse) <= 1.0 - min_improvement:
-                best = pair
-        for o in passed:
-            if o is not best:
-                for j, c in enumerate(o.cands[len(current) :], start=len(current)):
-                    if c not in best.cands:
-                        verdicts[c.name] = _verdict(
-                            c,
-                            "rejected",
-                            (
-                                "passed the tests, but "
-                                + " + ".join(x.name for x in best.cands[len(current) :])
-                                + " fitted the held-out data better"
-                            ),
-                            o,
-                            j,
-                        )
-        for _j, c in enumerate(best.cands[len(current) :], start=len(current)):
-            rivals = {
-                rc.name: rf.sse / max(best.fit.sse, 1e-300) for _, rc, rf in singles if rc is not c
-            }
-            steps.append(
-                Step(
-                    c,
-                    best.fit,
-                    best.cv,
-                    float(best.gain),
-                    rivals,
-                    best.iv,
-                    best.agreement.get(c.name, ""),
-                )
-            )
-            verdicts.pop(c.name, None)
-        current = list(best.cands)
-        x_cur = list(best.fit.x)
-        cur_cv, cur_bic, final = best.cv, best.bic, best.fit
-        lacks = None  # judged against the model before this round's acceptance
-    for c in testable:  # never screened (the search stopped) or still pending
-        if (
-            c.name not in verdicts
-            and c.name not in {s.candidate.name for s in steps}
-            and c.name in alone
-        ):
-            f = alone[c.name]
-            verdicts[c.name] = Verdict(
-                c, "rejected", "not reached: the search stopped", f, f.x[0], f.sd[0]
-            )
-    return Selection(baseline, tuple(steps), final, cur_cv, screening, alone, verdicts, lacks)
+    """:class:`ForwardSelection` of ``library`` on ``rp`` with the fixed scoring ``sc``."""
+    settings = SelectionSettings(
+        folds, max_effects, min_improvement, bic_margin, screen_top, pair_top
+    )
+    return ForwardSelection(rp, library, sc, settings, progress).run()
 
 
 def verdicts_final(verdicts: dict) -> set:
@@ -524,7 +605,7 @@ def _verdict(c, status, reason, opt, j) -> Verdict:
     )
 
 
-def _screen_reason(b, cur_bic, kw) -> str:
-    if b >= cur_bic - kw["bic_margin"]:
-        return f"BIC not lower by more than {kw['bic_margin']:g} on top of the accepted effects"
+def _screen_reason(b, cur_bic, settings: SelectionSettings) -> str:
+    if b >= cur_bic - settings.bic_margin:
+        return f"BIC not lower by more than {settings.bic_margin:g} on top of the accepted effects"
     return "ranked below the candidates cross-validated on top of the accepted effects"
