@@ -12,9 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from quadfault.diagnosis.crossval import cross_validate, fit_at_bound, fit_bound_mask, folds_of
-from quadfault.diagnosis.feedback import IV_MIN, IV_UNVERIFIED_GAIN
-from quadfault.diagnosis.findings import base_explanation, finding
+from quadfault.diagnosis.crossval import folds_of
+from quadfault.diagnosis.findings import Findings
 from quadfault.diagnosis.identifiability import (
     assumptions,
     evidence,
@@ -22,18 +21,18 @@ from quadfault.diagnosis.identifiability import (
     pin_to_rotor_speeds,
     without_pose,
 )
-from quadfault.diagnosis.library import EQUIVALENT, build_library, predict, public_params
+from quadfault.diagnosis.library import build_library, predict
 from quadfault.diagnosis.locate import locate
 from quadfault.diagnosis.phases import excluded_fraction, flight_phases
 from quadfault.diagnosis.prediction import HORIZONS, open_loop_errors
 from quadfault.diagnosis.residuals import prepare
 from quadfault.diagnosis.result import DiagnosisResult
 from quadfault.diagnosis.scores import fixed_scoring
-from quadfault.diagnosis.select import select
+from quadfault.diagnosis.select import ForwardSelection, SelectionSettings
 from quadfault.errors import ConfigError, RecordingError
 from quadfault.io.recording import Recording, recording_sidecar
 from quadfault.model.effects.motor_efficiency import MotorEfficiency, healthy_pattern
-from quadfault.model.effects.registry import EFFECT_NAMES, effect_class
+from quadfault.model.effects.registry import EFFECT_NAMES
 
 #: a located interval whose nominal residual RMS reaches this many noise scales for at least
 #: ``STRONG_SECONDS`` makes the verdict ``mismatch`` even when nothing in the library explains
@@ -123,45 +122,6 @@ class DiagnosisConfig:
                 )
         if not self.horizons or not all(h > 0 for h in self.horizons):
             raise ConfigError("horizons must be positive [s]")
-
-
-def _explain(step, selected_names, params) -> str:
-    name = step.candidate.name
-    text = (
-        base_explanation(name) + f"; held-out residual RMS -{100 * step.improvement_step:.0f}% "
-        "when added."
-    )
-    text += effect_class(name).fit_note(params, selected_names)
-    kind = EQUIVALENT.get(name)
-    mates = [n for n, k in EQUIVALENT.items() if k == kind and n != name]
-    ratio = step.rivals.get(mates[0]) if len(mates) == 1 else None
-    if ratio is not None and ratio < 1.1:  # a class of two (timing): the rival's fit
-        a, b = sorted((name, mates[0]))
-        text += (
-            f" {mates[0]} fits almost as well (in-sample SSE ratio {ratio:.2f}): the data "
-            f"cannot separate {a} from {b} (one {kind} class)."
-        )
-    if step.iv is not None and np.isfinite(step.iv):
-        text += (
-            f" Instrumental-variable check (instrument: the fitted signal with each "
-            f"block's inputs frozen at its start, blind to feedback on the block's own "
-            f"noise): slope {step.iv:.2f} (1 = all real, 0 = feedback bias; accepted "
-            f"when >= {IV_MIN} and significantly above 0)."
-        )
-    elif step.iv is not None:
-        text += (
-            " The instrumental-variable check could not vouch for this signal (no "
-            "predictable part), so it was accepted only on a held-out gain of at least "
-            f"{IV_UNVERIFIED_GAIN:.0%}."
-        )
-    if step.agreement:
-        text += f" Fold agreement: {step.agreement}."
-    if step.candidate.pinned:
-        text += (
-            " Its time constant comes from command to measured rotor speed directly (the "
-            "rotor channels alone); the other channels only decided that it is there."
-        )
-    return text
 
 
 def _unexplained(rp, sc, base_res, where) -> bool:
@@ -283,34 +243,112 @@ class Diagnosis:
         t_start = time.perf_counter()
         cfg = self.config
         rec = recording.without_truth() if isinstance(recording, Recording) else recording
+        ev = evidence(rec)
+        rec, invalid = _valid_pose(rec, ev)
+        replay, mask_note = self._replay(rec, vehicle, invalid)
+        library, not_identifiable = self._library(replay, ev)
+        nominal_residual = replay.measured - predict(replay, [])
+        scoring = fixed_scoring(replay, nominal_residual, replay.scored)
+        library = pin_to_rotor_speeds(replay, library, scoring)
+        settings = SelectionSettings(
+            cfg.folds,
+            cfg.max_effects,
+            cfg.min_improvement,
+            cfg.bic_margin,
+            cfg.screen_top,
+            cfg.pair_top,
+        )
+        selection = ForwardSelection(replay, library, scoring, settings, progress).run()
+        frame = rec.frame if rec.frame in ("NED", "ENU") else "NED"
+        found = Findings(replay, scoring, selection, folds_of(replay.n_blocks, cfg.folds), frame)
+        effects, suspect, rejected = found.accepted(), found.suspects(), found.rejected()
+        alike = _indistinguishable(selection.verdicts, [e.name for e in rejected])
+        if selection.unattributed is not None:  # a time constant the log cannot resolve
+            alike += (selection.unattributed.entry(),)
+        table, model_ci = scoring.channel_table(
+            selection.baseline.residual, selection.final_cv.residual, replay.block_dur[scoring.rows]
+        )
+        model_imp = scoring.improvement(selection.baseline.residual, selection.final_cv.residual)
+        where, regimes = locate(replay, nominal_residual, scoring.noise)
+        unexplained = _unexplained(replay, scoring, nominal_residual, where)
+        verdict = "mismatch" if effects or suspect or alike or unexplained else "consistent"
+        prediction = self._prediction(rec, replay, selection)
+        series = {
+            "block_t": replay.block_t,
+            "baseline": selection.baseline.residual,
+            "model": selection.final_cv.residual,
+            "channels": replay.channels,
+            "regimes": regimes,
+            "replay": replay,
+            "prediction": prediction,
+            "scored": scoring.rows,
+            "masked": replay.masked,
+            "calibration": replay.excluded,
+        }
+        side = recording_sidecar(rec, frame=frame)
+        return DiagnosisResult(
+            verdict=verdict,
+            baseline_rmse={ch: v["rmse_before"] for ch, v in table.items()},
+            model_rmse={ch: v["rmse_after"] for ch, v in table.items()},
+            model_improvement=float(model_imp),
+            effects=tuple(effects),
+            untestable=tuple(n["name"] for n in not_identifiable),
+            not_identifiable=tuple(not_identifiable),
+            assumptions=assumptions(ev, [e.name for e in effects]),
+            evidence=ev.to_dict(),
+            where=tuple(where),
+            regimes=tuple(regimes),
+            prediction={k: v for k, v in prediction.items() if not k.startswith("_")},
+            channels=replay.channels,
+            scale=tuple(float(s) for s in scoring.noise),
+            seconds=float(time.perf_counter() - t_start),
+            scoring=_scoring_dict(replay, scoring, rec, mask_note),
+            suspect=tuple(suspect),
+            rejected=tuple(rejected),
+            indistinguishable=alike,
+            channel_scores=table,
+            model_ci95=tuple(model_ci),
+            weights=tuple(float(w) for w in scoring.weight),
+            vehicle=side["vehicle"],
+            frame=frame,
+            gravity=float(side["gravity"]),
+            series=series,
+        )
+
+    def _replay(self, rec, vehicle, invalid) -> tuple:
+        """``(replay, note)``: the recording replayed through the nominal model with what is
+        not free flight excluded (:mod:`~quadfault.diagnosis.phases`), and the note saying
+        why nothing was excluded where the mask would leave too little."""
+        cfg = self.config
         kw = dict(
             block_seconds=cfg.block_seconds,
             gap_factor=cfg.gap_factor,
             saturate=cfg.saturate,
             internal_step=cfg.internal_step,
         )
-        ev = evidence(rec)
-        rec, invalid = _valid_pose(rec, ev)
-        rp = prepare(rec, vehicle, exclude=invalid, **kw)
-        mask_note = ""
-        if cfg.mask:
-            spans = flight_phases(rp)
-            if spans:
-                try:
-                    rp = prepare(
-                        rec, vehicle, exclude=invalid + [s.as_tuple() for s in spans], **kw
-                    )
-                except RecordingError:  # too little would be left: keep everything, say so
-                    frac = excluded_fraction(
-                        [s.as_tuple() for s in spans], float(rec.t[0]), float(rec.t[-1])
-                    )
-                    why = "; ".join(sorted({s.reason for s in spans}))
-                    mask_note = (
-                        f"nothing excluded: what does not look like free flight "
-                        f"({why}; {100 * frac:.0f}% of the recording) would leave "
-                        "too few blocks"
-                    )
-        library = build_library(rp, cfg.effects)
+        replay = prepare(rec, vehicle, exclude=invalid, **kw)
+        spans = flight_phases(replay) if cfg.mask else []
+        if not spans:
+            return replay, ""
+        try:
+            return prepare(rec, vehicle, exclude=invalid + [s.as_tuple() for s in spans], **kw), ""
+        except RecordingError:  # too little would be left: keep everything, say so
+            frac = excluded_fraction(
+                [s.as_tuple() for s in spans], float(rec.t[0]), float(rec.t[-1])
+            )
+            why = "; ".join(sorted({s.reason for s in spans}))
+            return replay, (
+                f"nothing excluded: what does not look like free flight "
+                f"({why}; {100 * frac:.0f}% of the recording) would leave "
+                "too few blocks"
+            )
+
+    def _library(self, replay, ev) -> tuple:
+        """``(candidates to fit, not_identifiable)``: the library for this recording, and
+        what it cannot reveal, in the library's order, each with its reason (the gate's,
+        else what the effect itself lacks)."""
+        cfg = self.config
+        library = build_library(replay, cfg.effects)
         if cfg.baseline_eta is not None:
             eta, spread = healthy_pattern(cfg.baseline_eta)
             library = [
@@ -321,177 +359,27 @@ class Diagnosis:
                 else c
                 for c in library
             ]
-        lacks = {c.name: c.untestable_reason(rp) for c in library}
+        lacks = {c.name: c.untestable_reason(replay) for c in library}
         library, gated = gate(library, ev)
-        # one list of what this recording cannot reveal, in the library's order, each with
-        # its reason (the gate's, else what the effect itself lacks); untestable: the names
         gated = {n["name"]: n["reason"] for n in gated}
         not_identifiable = [
             {"name": n, "reason": gated.get(n) or why}
             for n, why in lacks.items()
             if n in gated or why
         ]
-        untestable = [n["name"] for n in not_identifiable]
-        base_res = rp.measured - predict(rp, [])
-        sc = fixed_scoring(rp, base_res, rp.scored)
-        library = pin_to_rotor_speeds(rp, library, sc)
-        sel = select(
-            rp,
-            library,
-            sc,
-            folds=cfg.folds,
-            max_effects=cfg.max_effects,
-            min_improvement=cfg.min_improvement,
-            bic_margin=cfg.bic_margin,
-            screen_top=cfg.screen_top,
-            pair_top=cfg.pair_top,
-            progress=progress,
-        )
-        fl = folds_of(rp.n_blocks, cfg.folds)
-        frame = rec.frame if rec.frame in ("NED", "ENU") else "NED"
-        selected = (
-            {s.candidate.name: x for s, x in zip(sel.steps, sel.final.x)} if sel.final else {}
-        )
+        return library, not_identifiable
 
-        def alone_cv(c, x=None):
-            """Held-out result of nominal + ``c`` alone: fitted alone, or from ``x`` (an
-            accepted effect's value in the final model, so the fit stays in its basin)."""
-            if x is not None:
-                return cross_validate(rp, [c], sc, [x], fl)
-            f = sel.alone.get(c.name)
-            return None if f is None else cross_validate(rp, [c], sc, None, fl, full=f)
-
-        def improvement(cv):
-            if cv is None or sel.baseline.sse <= 0:
-                return 0.0
-            return 1.0 - float(np.sqrt(cv.sse / sel.baseline.sse))
-
-        common = dict(vehicle=rp.vehicle, selected=selected, frame=frame)
-        effects = []
-        for k, step in enumerate(sel.steps):
-            c = step.candidate
-            x, sd = sel.final.x[k], sel.final.sd[k]
-            params, _ = public_params(c, x, sd, rp.vehicle, selected)
-            effects.append(
-                finding(
-                    c,
-                    x,
-                    sd,
-                    improvement=improvement(alone_cv(c, x)),
-                    explanation=_explain(step, selected, params),
-                    fold_x=[fx[k] for fx in sel.final_cv.fold_x],
-                    gain=step.improvement_step,
-                    at_bound=fit_at_bound(rp, sc, sel.final, k),
-                    bound=lambda xf, k=k: fit_bound_mask(rp, sc, sel.final, k, xf),
-                    **common,
-                )
-            )
-        effects.sort(key=lambda e: -e.improvement)
-        suspect, rejected = [], []
-        for name, v in sel.verdicts.items():
-            c = v.candidate
-            cv_alone = alone_cv(c)
-            if v.status == "suspect":
-                j = list(v.fit.candidates).index(c)
-                folds = [] if v.cv is None else [fx[j] for fx in v.cv.fold_x]
-                suspect.append(
-                    finding(
-                        c,
-                        v.x,
-                        v.sd,
-                        improvement=improvement(cv_alone),
-                        explanation=f"{base_explanation(c.name)}. {v.reason}.",
-                        fold_x=folds,
-                        status="suspect",
-                        reason=v.reason,
-                        at_bound=True,
-                        gain=v.gain,
-                        bound=lambda xf, f=v.fit, j=j: fit_bound_mask(rp, sc, f, j, xf),
-                        **common,
-                    )
-                )
-            else:
-                f = sel.alone.get(name, v.fit)
-                j = list(f.candidates).index(c)
-                rejected.append(
-                    finding(
-                        c,
-                        f.x[j],
-                        f.sd[j],
-                        improvement=improvement(cv_alone),
-                        explanation=base_explanation(c.name),
-                        status="rejected",
-                        reason=v.reason,
-                        fold_x=[] if cv_alone is None else [fx[0] for fx in cv_alone.fold_x],
-                        at_bound=fit_at_bound(rp, sc, f, j),
-                        gain=v.gain,
-                        bound=lambda xf, f=f, j=j: fit_bound_mask(rp, sc, f, j, xf),
-                        **common,
-                    )
-                )
-        suspect.sort(key=lambda e: -e.improvement)
-        rejected.sort(key=lambda e: -e.improvement)
-        alike = _indistinguishable(sel.verdicts, [e.name for e in rejected])
-        if sel.unattributed is not None:  # a time constant the log cannot resolve is missing
-            alike += (sel.unattributed.entry(),)
-        table, model_ci = sc.channel_table(
-            sel.baseline.residual, sel.final_cv.residual, rp.block_dur[sc.rows]
-        )
-        model_imp = sc.improvement(sel.baseline.residual, sel.final_cv.residual)
-        where, regimes = locate(rp, base_res, sc.noise)
-        verdict = (
-            "mismatch"
-            if effects or suspect or alike or _unexplained(rp, sc, base_res, where)
-            else "consistent"
-        )
-        fold_of_block = np.zeros(rp.n_blocks, dtype=int)
-        for i, idx in enumerate(fl):
+    def _prediction(self, rec, replay, selection) -> dict:
+        """Held-out open-loop errors: each start predicted by the final model fitted
+        without its fold (:mod:`~quadfault.diagnosis.prediction`)."""
+        folds = folds_of(replay.n_blocks, self.config.folds)
+        fold_of_block = np.zeros(replay.n_blocks, dtype=int)
+        for i, idx in enumerate(folds):
             fold_of_block[idx] = i
-        cands = [s.candidate for s in sel.steps]
+        cands = [s.candidate for s in selection.steps]
         fold_terms = (
-            [list(zip(cands, fx)) for fx in sel.final_cv.fold_x] if cands else [[] for _ in fl]
+            [list(zip(cands, fx)) for fx in selection.final_cv.fold_x]
+            if cands
+            else [[] for _ in folds]
         )
-        prediction = open_loop_errors(rec, rp, fold_terms, fold_of_block, cfg.horizons)
-        series = {
-            "block_t": rp.block_t,
-            "baseline": sel.baseline.residual,
-            "model": sel.final_cv.residual,
-            "channels": rp.channels,
-            "regimes": regimes,
-            "replay": rp,
-            "prediction": prediction,
-            "scored": sc.rows,
-            "masked": rp.masked,
-            "calibration": rp.excluded,
-        }
-        side = recording_sidecar(rec, frame=frame)
-        rmse_b = {ch: v["rmse_before"] for ch, v in table.items()}
-        rmse_a = {ch: v["rmse_after"] for ch, v in table.items()}
-        return DiagnosisResult(
-            verdict=verdict,
-            baseline_rmse=rmse_b,
-            model_rmse=rmse_a,
-            model_improvement=float(model_imp),
-            effects=tuple(effects),
-            untestable=tuple(untestable),
-            not_identifiable=tuple(not_identifiable),
-            assumptions=assumptions(ev, [e.name for e in effects]),
-            evidence=ev.to_dict(),
-            where=tuple(where),
-            regimes=tuple(regimes),
-            prediction={k: v for k, v in prediction.items() if not k.startswith("_")},
-            channels=rp.channels,
-            scale=tuple(float(s) for s in sc.noise),
-            seconds=float(time.perf_counter() - t_start),
-            scoring=_scoring_dict(rp, sc, rec, mask_note),
-            suspect=tuple(suspect),
-            rejected=tuple(rejected),
-            indistinguishable=alike,
-            channel_scores=table,
-            model_ci95=tuple(model_ci),
-            weights=tuple(float(w) for w in sc.weight),
-            vehicle=side["vehicle"],
-            frame=frame,
-            gravity=float(side["gravity"]),
-            series=series,
-        )
+        return open_loop_errors(rec, replay, fold_terms, fold_of_block, self.config.horizons)

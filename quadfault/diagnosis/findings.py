@@ -18,9 +18,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from quadfault.diagnosis.crossval import fold_agreement
-from quadfault.diagnosis.library import EXPLANATIONS, public_bounds, public_params
+from quadfault.diagnosis.crossval import (
+    cross_validate,
+    fit_at_bound,
+    fit_bound_mask,
+    fold_agreement,
+)
+from quadfault.diagnosis.feedback import IV_MIN, IV_UNVERIFIED_GAIN
+from quadfault.diagnosis.library import EQUIVALENT, EXPLANATIONS, public_bounds, public_params
 from quadfault.diagnosis.result import EffectFinding
+from quadfault.model.effects.registry import effect_class
 
 FRAME_TEXT = {
     ("world", "NED"): "world frame NED (x north, y east, z down)",
@@ -94,3 +101,158 @@ def finding(
 
 def base_explanation(name: str) -> str:
     return EXPLANATIONS.get(name, name.replace("_", " "))
+
+
+def explain_accepted(step, selected_names, params) -> str:
+    name = step.candidate.name
+    text = (
+        base_explanation(name) + f"; held-out residual RMS -{100 * step.improvement_step:.0f}% "
+        "when added."
+    )
+    text += effect_class(name).fit_note(params, selected_names)
+    kind = EQUIVALENT.get(name)
+    mates = [n for n, k in EQUIVALENT.items() if k == kind and n != name]
+    ratio = step.rivals.get(mates[0]) if len(mates) == 1 else None
+    if ratio is not None and ratio < 1.1:  # a class of two (timing): the rival's fit
+        a, b = sorted((name, mates[0]))
+        text += (
+            f" {mates[0]} fits almost as well (in-sample SSE ratio {ratio:.2f}): the data "
+            f"cannot separate {a} from {b} (one {kind} class)."
+        )
+    if step.iv is not None and np.isfinite(step.iv):
+        text += (
+            f" Instrumental-variable check (instrument: the fitted signal with each "
+            f"block's inputs frozen at its start, blind to feedback on the block's own "
+            f"noise): slope {step.iv:.2f} (1 = all real, 0 = feedback bias; accepted "
+            f"when >= {IV_MIN} and significantly above 0)."
+        )
+    elif step.iv is not None:
+        text += (
+            " The instrumental-variable check could not vouch for this signal (no "
+            "predictable part), so it was accepted only on a held-out gain of at least "
+            f"{IV_UNVERIFIED_GAIN:.0%}."
+        )
+    if step.agreement:
+        text += f" Fold agreement: {step.agreement}."
+    if step.candidate.pinned:
+        text += (
+            " Its time constant comes from command to measured rotor speed directly (the "
+            "rotor channels alone); the other channels only decided that it is there."
+        )
+    return text
+
+
+class Findings:
+    """The reported findings of a :class:`~quadfault.diagnosis.select.Selection` on one
+    recording (its ``replay``, fixed ``scoring`` and cross-validation ``folds``), parameters in the recording's
+    ``frame``: :meth:`accepted`, :meth:`suspects` and :meth:`rejected`, each most important
+    first (held-out improvement alone)."""
+
+    def __init__(self, replay, scoring, selection, folds, frame: str):
+        self.replay, self.scoring, self.selection, self.frame = replay, scoring, selection, frame
+        self.folds = folds
+        final = selection.final
+        steps = selection.steps
+        self.selected = {s.candidate.name: x for s, x in zip(steps, final.x)} if final else {}
+
+    def _common(self) -> dict:
+        return dict(vehicle=self.replay.vehicle, selected=self.selected, frame=self.frame)
+
+    def alone_cv(self, c, x=None):
+        """Held-out result of nominal + ``c`` alone: fitted alone, or from ``x`` (an
+        accepted effect's value in the final model, so the fit stays in its basin)."""
+        if x is not None:
+            return cross_validate(self.replay, [c], self.scoring, [x], self.folds)
+        f = self.selection.alone.get(c.name)
+        if f is None:
+            return None
+        return cross_validate(self.replay, [c], self.scoring, None, self.folds, full=f)
+
+    def improvement(self, cv) -> float:
+        """``1 - RMS(held out) / RMS(nominal, held out)`` of ``cv`` (0 without one)."""
+        base = self.selection.baseline.sse
+        if cv is None or base <= 0:
+            return 0.0
+        return 1.0 - float(np.sqrt(cv.sse / base))
+
+    def accepted(self) -> list:
+        rp, sc, sel = self.replay, self.scoring, self.selection
+        out = []
+        for k, step in enumerate(sel.steps):
+            c = step.candidate
+            x, sd = sel.final.x[k], sel.final.sd[k]
+            params, _ = public_params(c, x, sd, rp.vehicle, self.selected)
+            out.append(
+                finding(
+                    c,
+                    x,
+                    sd,
+                    improvement=self.improvement(self.alone_cv(c, x)),
+                    explanation=explain_accepted(step, self.selected, params),
+                    fold_x=[fx[k] for fx in sel.final_cv.fold_x],
+                    gain=step.improvement_step,
+                    at_bound=fit_at_bound(rp, sc, sel.final, k),
+                    bound=lambda xf, k=k: fit_bound_mask(rp, sc, sel.final, k, xf),
+                    **self._common(),
+                )
+            )
+        out.sort(key=lambda e: -e.improvement)
+        return out
+
+    def suspects(self) -> list:
+        rp, sc = self.replay, self.scoring
+        out = []
+        for v in self.selection.verdicts.values():
+            if v.status != "suspect":
+                continue
+            c = v.candidate
+            j = list(v.fit.candidates).index(c)
+            folds = [] if v.cv is None else [fx[j] for fx in v.cv.fold_x]
+            out.append(
+                finding(
+                    c,
+                    v.x,
+                    v.sd,
+                    improvement=self.improvement(self.alone_cv(c)),
+                    explanation=f"{base_explanation(c.name)}. {v.reason}.",
+                    fold_x=folds,
+                    status="suspect",
+                    reason=v.reason,
+                    at_bound=True,
+                    gain=v.gain,
+                    bound=lambda xf, f=v.fit, j=j: fit_bound_mask(rp, sc, f, j, xf),
+                    **self._common(),
+                )
+            )
+        out.sort(key=lambda e: -e.improvement)
+        return out
+
+    def rejected(self) -> list:
+        """Each rejected candidate as fitted alone on the nominal model (else as judged)."""
+        rp, sc = self.replay, self.scoring
+        out = []
+        for name, v in self.selection.verdicts.items():
+            if v.status == "suspect":
+                continue
+            c = v.candidate
+            cv_alone = self.alone_cv(c)
+            f = self.selection.alone.get(name, v.fit)
+            j = list(f.candidates).index(c)
+            out.append(
+                finding(
+                    c,
+                    f.x[j],
+                    f.sd[j],
+                    improvement=self.improvement(cv_alone),
+                    explanation=base_explanation(c.name),
+                    status="rejected",
+                    reason=v.reason,
+                    fold_x=[] if cv_alone is None else [fx[0] for fx in cv_alone.fold_x],
+                    at_bound=fit_at_bound(rp, sc, f, j),
+                    gain=v.gain,
+                    bound=lambda xf, f=f, j=j: fit_bound_mask(rp, sc, f, j, xf),
+                    **self._common(),
+                )
+            )
+        out.sort(key=lambda e: -e.improvement)
+        return out
