@@ -24,6 +24,26 @@ from quad_fault_env.observation import SD_MAX
 ESTIMATOR_NAMES = tuple(ESTIMATORS)
 
 
+def _registry_row(estimator):
+    """The registry's row of ``estimator`` (by its ``name``), or None for an unregistered
+    object."""
+    return ESTIMATORS.get(getattr(estimator, "name", None))
+
+
+def is_stateless(estimator) -> bool:
+    """Whether ``estimator``'s estimate depends on the newest sample only: the registry's
+    nominal belief and oracle (an estimator object that is not registered: False)."""
+    row = _registry_row(estimator)
+    return row is not None and row.role in ("nominal", "oracle")
+
+
+def reads_truth(estimator) -> bool:
+    """Whether ``estimator`` reads the episode's true efficiency schedule (the registry's
+    oracle: the env binds the schedule with ``estimator.bind``)."""
+    row = _registry_row(estimator)
+    return row is not None and "truth" in row.needs
+
+
 def estimate_sd(estimate: Estimate, n: int) -> np.ndarray | None:
     """The estimate's sd as a float array, or None when the estimator reports none."""
     if estimate.sd is None:
@@ -95,6 +115,8 @@ __all__ = [
     "NOMINAL_PRIOR_SD",
     "STATUS_OK",
     "estimate_sd",
+    "is_stateless",
+    "reads_truth",
     "diagnostics_dict",
     "diagnostics_template",
     "estimate_info",

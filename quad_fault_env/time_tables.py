@@ -14,6 +14,8 @@ once). A row whose step leaves its window, or that was reset, is refilled.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from quad_fault_env.envs.episode_start import RowTrajectories
@@ -164,7 +166,74 @@ class RowTimeTables:
         return self.eta[self._rows[:, None], j]
 
 
-__all__ = ["WINDOW", "RowTimeTables"]
+#: control steps per window of :class:`EpisodeTables` (one row: cheap to hold)
+EPISODE_WINDOW = 64
+_KEY0 = np.zeros(1, dtype=np.int64)
+
+
+class StepRows(NamedTuple):
+    """Views of one control step's rows of the time tables (read them before the next
+    step)."""
+
+    #: reference rows (position, velocity, acceleration, b1d, Omega_d, Omega_d') at the
+    #: step's start (6, 3)
+    start: np.ndarray
+    #: the same rows at the step's end (6, 3)
+    end: np.ndarray
+    #: the true efficiency at the step's substeps and at its end (S + 1, n)
+    eta: np.ndarray
+
+
+class EpisodeTables:
+    """The time tables of one episode (the single env): one row of :class:`RowTimeTables`
+    whose window follows the control steps by itself.
+
+    :meth:`at` gives a step's rows, refilling the window (from that step) when the step or its
+    end lies outside it; :meth:`attach` lets a :class:`~quadfault.model.flight.Flight` fly the
+    efficiency table, which the refills keep current.
+
+    Args:
+        scenario: the episode's :class:`~quadfault.model.scenarios.Scenario` (its trajectory
+            and efficiency schedule).
+        substeps, dt, vehicle, controller: as :class:`RowTimeTables`.
+        window: control steps per window.
+    """
+
+    def __init__(
+        self,
+        scenario,
+        substeps: int,
+        dt: float,
+        vehicle: Vehicle,
+        controller: ControllerConfig,
+        window: int = EPISODE_WINDOW,
+    ):
+        self.scenario = scenario
+        self.tables = RowTimeTables(1, substeps, dt, vehicle, controller, window)
+
+    def attach(self, flight) -> None:
+        """Fly ``flight``'s vehicle with these tables' true efficiency."""
+        flight.use_efficiency(self.tables.eta, self.tables.first)
+
+    def at(self, k: int) -> StepRows:
+        """Control step ``k``'s rows (its window refilled from ``k`` when needed)."""
+        T, W, S = self.tables, self.tables.window, self.tables.S
+        i = k - int(T.k0[0])
+        if not 0 <= i < W:
+            sc = self.scenario
+            T.ensure(
+                np.array([k], dtype=np.int64),
+                _KEY0,
+                _KEY0,
+                [sc.trajectory],
+                [sc.efficiency],
+                W - 1,
+            )
+            i = k - int(T.k0[0])
+        return StepRows(T.refs[0, i], T.refs[0, i + 1], T.eta[0, i * S : i * S + S + 1])
+
+
+__all__ = ["EPISODE_WINDOW", "WINDOW", "EpisodeTables", "RowTimeTables", "StepRows"]
 
 
 def row_groups(keys: np.ndarray):

@@ -44,6 +44,7 @@ from quad_fault_env.envs.config import (
     light_info,
     validate_action,
 )
+from quad_fault_env.envs.env_config import KEYWORDS as ENV_KEYWORDS
 from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.envs.scenario_source import GENERATORS
@@ -136,7 +137,7 @@ class QuadFaultVectorEnv(VectorEnv):
     ):
         check_keywords(
             kwargs,
-            keywords_of(QuadFaultVectorEnv.__init__) + keywords_of(QuadFaultEnv.__init__),
+            keywords_of(QuadFaultVectorEnv.__init__) + ENV_KEYWORDS,
             type(self).__name__,
         )
         if (

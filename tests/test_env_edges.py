@@ -82,3 +82,26 @@ def test_unknown_keyword_is_a_one_line_error_naming_the_closest():
         QuadFaultEnv("none", xyz=1)
     with pytest.raises(ConfigError, match="unknown keyword 'physics'"):
         QuadFaultEnv("none", physics="numpy")
+
+
+def test_a_configuration_given_whole_flies_as_its_keywords():
+    import dataclasses
+
+    from quad_fault_env.envs.env_config import KEYWORDS, EnvConfig
+
+    keywords = dict(scenario="abrupt", duration=0.2, action_mode="wrench", sensor_noise=None)
+    cfg = EnvConfig(estimator="none", **keywords)
+    assert "estimator" in KEYWORDS and "physics_draws" not in KEYWORDS
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        cfg.duration = 1.0  # type: ignore[misc]
+    assert cfg.substeps == 10 and cfg.sensor_noise == SensorNoise()
+    a, b = QuadFaultEnv(config=cfg), QuadFaultEnv("none", **keywords)
+    oa, _ = a.reset(seed=3)
+    ob, _ = b.reset(seed=3)
+    np.testing.assert_array_equal(oa, ob)
+    action = np.array([0.1, 0.0, 0.0, 0.0])
+    np.testing.assert_array_equal(a.step(action)[0], b.step(action)[0])
+    with pytest.raises(ConfigError, match="config must be an EnvConfig, given alone"):
+        QuadFaultEnv(config=cfg, duration=1.0)
+    with pytest.raises(ConfigError, match="duration must be positive"):
+        dataclasses.replace(cfg, duration=-1.0)

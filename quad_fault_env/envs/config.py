@@ -8,7 +8,6 @@ The physics parameters live in the core package (:class:`quadfault.model.vehicle
 from __future__ import annotations
 
 import difflib
-import functools
 import inspect
 import math
 from dataclasses import dataclass
@@ -92,19 +91,6 @@ def check_choice(name: str, value, valid: tuple):
     close = _closest(value, valid) if isinstance(value, str) else None
     hint = f"; did you mean {close!r}?" if close else ""
     raise ConfigError(f"{name} must be one of {', '.join(map(repr, valid))}, got {value!r}{hint}")
-
-
-def checked_keywords(init):
-    """Decorate an environment's ``__init__`` so that an unknown keyword (from ``gym.make``,
-    ``gym.make_vec`` or a direct call) is a :func:`check_keywords` error, not a ``TypeError``."""
-    valid = keywords_of(init)
-
-    @functools.wraps(init)
-    def checked(self, *args, **kwargs):
-        check_keywords(kwargs, valid, type(self).__name__)
-        return init(self, *args, **kwargs)
-
-    return checked
 
 
 def _check_nonnegative(obj, names):

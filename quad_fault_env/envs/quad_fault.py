@@ -20,62 +20,36 @@ import gymnasium as gym
 import numpy as np
 
 from estimators.base import Estimate, Sample
-from quad_fault_env.envs.config import (
-    ALLOCATIONS,
-    ESTIMATOR_RATES,
-    INFO_LEVELS,
-    OBSERVATION_KINDS,
-    RANDOM_TRAJECTORIES,
-    ActionConfig,
-    InitialStateSpread,
-    RewardConfig,
-    TerminationLimits,
-    check_choice,
-    check_random_faults,
-    checked_keywords,
-    config_of,
-    light_info,
-    number_at_least,
-    validate_action,
-)
+from quad_fault_env.envs.config import light_info, validate_action
+from quad_fault_env.envs.env_config import RENDER_MODES, EnvConfig
 from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
-from quad_fault_env.envs.scenario_source import (
-    GENERATORS,
-    check_scenario_options,
-    fault_dict,
-    make_scenario,
-)
+from quad_fault_env.envs.scenario_source import fault_dict, make_scenario
 from quad_fault_env.estimation import (
-    NOMINAL_PRIOR_SD,
-    NominalBelief,
-    TruthOracle,
     diagnostics_template,
     estimate_info,
     estimate_sd,
+    is_stateless,
     make_estimator,
+    reads_truth,
 )
 from quad_fault_env.observation import ObservationLayout
 from quad_fault_env.rendering import FlightRenderer
-from quad_fault_env.time_tables import RowTimeTables
+from quad_fault_env.time_tables import EpisodeTables
 from quadfault.errors import ConfigError
 from quadfault.model.allocation import EstimateAwareAllocator
-from quadfault.model.controller import ControllerConfig, GeometricController, GeometricGains
+from quadfault.model.controller import GeometricController
 from quadfault.model.dynamics import RigidBodyState
-from quadfault.model.effects.sampling import PhysicsDraws, describe
+from quadfault.model.effects.sampling import describe
 from quadfault.model.flight import Flight
 from quadfault.model.motors import MotorModel
 from quadfault.model.plant import Plant
-from quadfault.model.scenarios import SCENARIO_NAMES, Scenario
-from quadfault.model.sensors import SensorNoise
+from quadfault.model.scenarios import Scenario
 from quadfault.model.trajectory import FlatOutput
-from quadfault.model.vehicle import Vehicle
 
 DEFAULT_DURATION = 20.0  # [s] episode length for named and random scenarios
 #: a fault event at time t_k belongs to the step whose interval [t0, t1) holds it (same
 #: tolerance as the fault windows of quadfault.model.scenarios) [s]
 EVENT_TOL = 1e-9
-_KEY0 = np.zeros(1, dtype=np.int64)  # the single env's row of the time tables
-TABLE_WINDOW = 64  # control steps per refill of the time tables (one row: cheap to hold)
 
 
 class QuadFaultEnv(gym.Env):
@@ -174,159 +148,70 @@ class QuadFaultEnv(gym.Env):
             wrappers of :mod:`quad_fault_env.wrappers` read included). The flights are the
             same either way.
 
-    An unknown keyword raises a :class:`~quadfault.errors.ConfigError` naming the closest
-    valid one.
+    The keywords are the fields of :class:`~quad_fault_env.envs.env_config.EnvConfig`, checked
+    when it is built; ``config=EnvConfig(...)`` gives them all at once (alone). An unknown
+    keyword raises a :class:`~quadfault.errors.ConfigError` naming the closest valid one.
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
+    metadata = {"render_modes": RENDER_MODES, "render_fps": 25}
 
-    @checked_keywords
     def __init__(
         self,
         estimator="irls",
         scenario="combined",
         *,
-        estimator_kwargs=None,
-        random_trajectory: str = "random",
-        random_faults: dict | None = None,
-        scenario_options: dict | None = None,
-        duration: float | None = None,
-        thrust_noise: float | None = None,
-        sensor_noise: SensorNoise | None = None,
-        action_mode: str = "residual",
-        residual_scale: float = 1.0,
-        moment_scale: tuple = (1.0, 1.0, 0.05),
-        control_rate: float = 100.0,
-        physics_rate: float = 1000.0,
-        estimator_rate: str = "physics",
-        compensate: bool = False,
-        allocation: str = "nominal",
-        observation: str = "flat",
-        reference_acceleration: bool = True,
-        reward: RewardConfig | None = None,
-        limits: TerminationLimits | None = None,
-        initial_spread: InitialStateSpread | None = None,
-        vehicle: Vehicle | None = None,
-        controller: ControllerConfig | None = None,
-        render_mode: str | None = None,
-        effects=None,
-        model=None,
-        model_uncertainty: bool = False,
-        info: str = "light",
+        config: EnvConfig | None = None,
+        **keywords,
     ):
+        if config is None:
+            config = EnvConfig.from_keywords(
+                type(self).__name__, estimator=estimator, scenario=scenario, **keywords
+            )
+        elif not isinstance(config, EnvConfig) or keywords:
+            raise ConfigError("config must be an EnvConfig, given alone (no other keywords)")
+        #: the checked keywords (:class:`~quad_fault_env.envs.env_config.EnvConfig`)
+        self.config = c = config
         #: what ``info`` holds: ``"light"`` (the termination reason) or ``"full"``
-        self.info_level = check_choice("info", info, INFO_LEVELS)
-        self.physics_draws = PhysicsDraws.of(effects, model, model_uncertainty)
-        if self.physics_draws is not None and self.physics_draws.vehicle is not None:
-            if vehicle is not None:
-                raise ConfigError("give either vehicle or model (the model brings its vehicle)")
-            vehicle = self.physics_draws.vehicle
-        self.vehicle = vehicle or Vehicle()
-        if not isinstance(self.vehicle, Vehicle) or self.vehicle.n_rotors != 4:
-            raise ConfigError(
-                "vehicle must be a quadfault Vehicle with 4 rotors (the scenarios "
-                "and the observation have four motors)"
-            )
-        self.action_config = ActionConfig(action_mode, residual_scale, moment_scale)
-        self.reward_config = config_of(reward, RewardConfig, "reward")
-        self.limits = config_of(limits, TerminationLimits, "limits")
-        self.initial_spread = config_of(initial_spread, InitialStateSpread, "initial_spread")
-        self.sensor_noise = config_of(sensor_noise, SensorNoise, "sensor_noise")
-        if thrust_noise is not None and not number_at_least(thrust_noise, 0.0):
-            raise ConfigError(f"thrust_noise must be a number >= 0, got {thrust_noise!r}")
-        self.thrust_noise = thrust_noise
-        if not (
-            number_at_least(control_rate, 0.0)
-            and number_at_least(physics_rate, 0.0)
-            and control_rate > 0
-            and physics_rate > 0
-        ):
-            raise ConfigError(
-                f"control_rate and physics_rate must be positive [Hz], got "
-                f"{control_rate!r} and {physics_rate!r}"
-            )
-        ratio = physics_rate / control_rate
-        if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
-            raise ConfigError(
-                f"physics_rate ({physics_rate} Hz) must be a whole multiple of "
-                f"control_rate ({control_rate} Hz)"
-            )
-        self.substeps = int(round(ratio))
-        self.dt = 1.0 / physics_rate
-        self.control_period = 1.0 / control_rate
-        self.metadata = {**self.metadata, "render_fps": control_rate}  # a frame per step
-        if estimator_rate not in ESTIMATOR_RATES:
-            raise ConfigError(
-                f"estimator_rate must be one of {ESTIMATOR_RATES}, got {estimator_rate!r}"
-            )
-        self.estimator_rate = estimator_rate
+        self.info_level = c.info
+        self.physics_draws = c.physics_draws
+        self.vehicle = c.nominal_vehicle
+        self.action_config = c.action_config
+        self.reward_config, self.limits = c.reward, c.limits
+        self.initial_spread, self.sensor_noise = c.initial_spread, c.sensor_noise
+        self.thrust_noise, self.duration = c.thrust_noise, c.duration
+        self.substeps, self.dt, self.control_period = c.substeps, c.dt, c.control_period
+        self.metadata = {**self.metadata, "render_fps": c.control_rate}  # a frame per step
+        self.estimator_rate = c.estimator_rate
         #: take every ``estimator_stride``-th substep sample of ``info["samples"]``
-        self.estimator_stride = 1 if estimator_rate == "physics" else self.substeps
-        if not (isinstance(scenario, (str, Scenario))):
-            raise ConfigError(f"scenario must be a name, 'random' or a Scenario, got {scenario!r}")
-        if isinstance(scenario, str) and scenario not in SCENARIO_NAMES + GENERATORS:
-            raise ConfigError(
-                f"unknown scenario {scenario!r}; choose from "
-                f"{', '.join(SCENARIO_NAMES + GENERATORS)}"
-            )
-        self.scenario_spec = scenario
-        if random_trajectory not in RANDOM_TRAJECTORIES:
-            raise ConfigError(
-                f"random_trajectory must be one of {RANDOM_TRAJECTORIES}, got {random_trajectory!r}"
-            )
-        self.random_trajectory = random_trajectory
-        self.random_faults = check_random_faults(random_faults)
-        self.scenario_options = check_scenario_options(scenario_options, scenario)
-        if duration is not None and not (number_at_least(duration, 0.0) and duration > 0):
-            raise ConfigError(f"duration must be positive [s], got {duration!r}")
-        self.duration = duration
-        self.estimator = make_estimator(estimator, self.vehicle, **(estimator_kwargs or {}))
+        self.estimator_stride = c.estimator_stride
+        self.scenario_spec = c.scenario
+        self.random_trajectory = c.random_trajectory
+        self.random_faults, self.scenario_options = c.random_faults, c.scenario_options or {}
+        self.estimator = make_estimator(c.estimator, self.vehicle, **(c.estimator_kwargs or {}))
         self._diagnostics_template = diagnostics_template(self.estimator)
-        self.compensate = bool(compensate)
-        if allocation not in ALLOCATIONS:
-            raise ConfigError(f"allocation must be one of {ALLOCATIONS}, got {allocation!r}")
-        if allocation == "estimate-aware" and self.action_config.mode == "motor":
-            raise ConfigError(
-                "allocation='estimate-aware' allocates a wrench (the controller's "
-                "in residual mode, the agent's in wrench mode); motor mode has "
-                "none"
-            )
-        if allocation == "estimate-aware" and self.compensate:
-            raise ConfigError(
-                "choose compensate=True (the nominal split divided by eta_hat) or "
-                "allocation='estimate-aware' (which already uses eta_hat), not both"
-            )
-        self.allocation = allocation
+        #: the estimate depends only on the newest sample (the registry's nominal belief and
+        #: oracle)
+        self._stateless_estimator = is_stateless(self.estimator)
+        self.compensate, self.allocation = bool(c.compensate), c.allocation
         #: the estimate-aware allocation (None: the nominal allocation inverse)
         self.allocator = (
-            EstimateAwareAllocator(self.vehicle) if allocation == "estimate-aware" else None
+            EstimateAwareAllocator(self.vehicle) if c.allocation == "estimate-aware" else None
         )
-        # the paper's gains carried over to the vehicle's mass and inertia (any vehicle flies)
-        self.controller_config = controller or ControllerConfig(
-            gains=GeometricGains().scaled(self.vehicle)
-        )
-        if observation not in OBSERVATION_KINDS:
-            raise ConfigError(
-                f"observation must be one of {OBSERVATION_KINDS}, got {observation!r}"
-            )
-        self.observation_kind = observation
-        self.layout = ObservationLayout(reference_acceleration)
+        self.controller_config = c.controller_config
+        self.observation_kind = c.observation
+        self.layout = ObservationLayout(c.reference_acceleration)
         self.observation_space = (
-            self.layout.flat_space() if observation == "flat" else self.layout.dict_space()
+            self.layout.flat_space() if c.observation == "flat" else self.layout.dict_space()
         )
         self.action_space = gym.spaces.Box(
             -1.0, 1.0, shape=(self.vehicle.n_rotors,), dtype=np.float32
         )
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ConfigError(
-                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
-            )
-        self.render_mode = render_mode
+        self.render_mode = c.render_mode
         self._renderer = None
         self.scenario: Scenario | None = None
         self.plant: Plant | None = None
         self.flight: Flight | None = None
-        self._tables: RowTimeTables | None = None
+        self._tables: EpisodeTables | None = None
 
     # -- public helpers ----------------------------------------------------------------------
     @property
@@ -393,26 +278,22 @@ class QuadFaultEnv(gym.Env):
         self.flight = Flight(self.plant, self.sensor_noise)
         self.flight.reset(self.np_random)  # the loop draws from the env's generator
         self._views = self.flight.views(0)
-        self._tables = RowTimeTables(
-            1, self.substeps, self.dt, self.vehicle, self.controller_config, TABLE_WINDOW
+        self._tables = EpisodeTables(
+            self.scenario, self.substeps, self.dt, self.vehicle, self.controller_config
         )
-        self.flight.use_efficiency(self._tables.eta, self._tables.first)
+        self._tables.attach(self.flight)
         self.max_steps = int(round(self.scenario.duration / self.control_period))
         self._step_count = 0
         self._f_cmd = np.zeros(self.vehicle.n_rotors)
         self._terminal = False
-        if isinstance(self.estimator, TruthOracle):
+        if reads_truth(self.estimator):  # the labelled oracle
             self.estimator.bind(self.scenario.efficiency)
         self.estimator.reset()
-        #: the estimate depends only on the newest sample (the oracle, the nominal belief)
-        self._stateless_estimator = type(self.estimator) in (TruthOracle, NominalBelief)
-        n = self.vehicle.n_rotors
-        if isinstance(self.estimator, TruthOracle):
-            self._estimate = self.estimator.update(self._sample(0.0, self.plant.state))
-        elif isinstance(self.estimator, NominalBelief):
-            self._estimate = Estimate(0.0, np.ones(n), np.full(n, NOMINAL_PRIOR_SD))
-        else:
-            self._estimate = Estimate(0.0, np.ones(n), None, "warmup")
+        self._estimate = (
+            self.estimator.update(self._sample(0.0, self._state))
+            if self._stateless_estimator
+            else Estimate(0.0, np.ones(self.vehicle.n_rotors), None, "warmup")
+        )
         self.flight.sense()
         self.history = [self.plant.state.p.copy()]
         ref = self.scenario.trajectory(0.0)
@@ -455,23 +336,6 @@ class QuadFaultEnv(gym.Env):
             t, meas.p.copy(), meas.v.copy(), meas.R.copy(), meas.w.copy(), self._f_cmd.copy()
         )
 
-    def _table_row(self, k: int) -> int:
-        """Control step ``k``'s row in the time tables (filled so that it and its end are
-        there)."""
-        i = k - int(self._tables.k0[0])
-        if not 0 <= i < TABLE_WINDOW:
-            sc = self.scenario
-            self._tables.ensure(
-                np.array([k], dtype=np.int64),
-                _KEY0,
-                _KEY0,
-                [sc.trajectory],
-                [sc.efficiency],
-                TABLE_WINDOW - 1,
-            )
-            i = k - int(self._tables.k0[0])
-        return i
-
     def motor_commands(self, action: np.ndarray, t: float, meas: RigidBodyState) -> np.ndarray:
         """Rotor thrust commands [N] for a checked ``action`` (see ``ActionConfig``)."""
         cfg = self.action_config
@@ -485,7 +349,7 @@ class QuadFaultEnv(gym.Env):
         a control step's start the reference comes from the time tables."""
         k = self._step_count
         if t == k * self.substeps * self.dt:
-            refs = self._tables.refs[0, self._table_row(k)]
+            refs = self._tables.at(k).start
             return self.controller.commands(meas.p, meas.v, meas.R, meas.w, refs)
         return self.controller.motor_commands(t, meas.p, meas.v, meas.R, meas.w)[0]
 
@@ -496,7 +360,7 @@ class QuadFaultEnv(gym.Env):
         for an estimator that depends on the newest sample only), the true efficiency and
         accelerometer reading of each substep, and the efficiency at the end."""
         S = self.substeps
-        row = self._table_row(k)
+        rows = self._tables.at(k)
         out = self.flight.step(self._f_cmd, S, record=self.flight.records(S))
         done = int(self.flight.steps_run[0])
         t = ((k * S + np.arange(done)) * self.dt).tolist()
@@ -514,7 +378,7 @@ class QuadFaultEnv(gym.Env):
             fed = [samples[j] for j in fed]
         else:
             samples, fed = [], [sample(j) for j in fed]
-        eta = self._tables.eta[0, row * S : row * S + S + 1]
+        eta = rows.eta
         return samples, fed, eta[:done].copy(), out.accel[0, :done], eta[S].copy()
 
     def step(self, action):
@@ -530,7 +394,7 @@ class QuadFaultEnv(gym.Env):
         for s in fed:
             self._estimate = self.estimator.update(s)
         state = self._state
-        refs = self._tables.refs[0, self._step_count - int(self._tables.k0[0])]
+        refs = self._tables.at(k).end
         ref = FlatOutput(refs[0].copy(), refs[1].copy(), refs[2].copy(), refs[3].copy())
         reason = self.limits.reason(state.p, state.R, ref.position)
         terminated = reason is not None
