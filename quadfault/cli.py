@@ -21,7 +21,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     ),
     "simulate": ("quadfault.sim.cli", "fly the quadrotor through a scenario and write a recording"),
     "estimate": ("estimators.cli", "run a motor-efficiency estimator over a recording"),
-    "diagnose": ("quadfault.diagnosis.cli", "model-mismatch diagnosis of a recording"),
+    "diagnose": ("estimators.diagnose_cli", "model-mismatch diagnosis of a recording"),
     "import": ("quadfault.io.importers.cli", "convert a real flight log into a recording"),
     "train": ("agents.train", "train a stable-baselines3 agent (needs the rl extra)"),
     "evaluate": ("agents.evaluate", "evaluate agents over a scenario suite"),

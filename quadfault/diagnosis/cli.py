@@ -96,7 +96,9 @@ def baseline_eta(path) -> tuple:
     return eta
 
 
-def run(args) -> int:
+def run(args, efficiency_estimate=None) -> int:
+    """Run the diagnosis; ``efficiency_estimate`` (the command module above the estimators
+    passes it) gives the online estimator's efficiencies beside a weak-rotor hypothesis."""
     from quadfault.diagnosis import Diagnosis, DiagnosisConfig
     from quadfault.fileio import atomic_write_text, check_writable
     from quadfault.io.recording import read_recording, sidecar_path
@@ -134,7 +136,7 @@ def run(args) -> int:
         total=None, desc="diagnose", unit="fit", disable=None if not args.quiet else True
     )
     try:
-        res = Diagnosis(cfg).fit(rec, progress=lambda: bar.update(1))
+        res = Diagnosis(cfg, efficiency_estimate).fit(rec, progress=lambda: bar.update(1))
     finally:
         bar.close()
     atomic_write_text(out, res.to_json(), force=args.force)
@@ -143,23 +145,5 @@ def run(args) -> int:
 
         write_report(res, args.report, source=Path(args.recording).name, force=args.force)
     if not args.quiet:
-        names = ", ".join(f"{e.name} ({100 * e.improvement:.0f}%)" for e in res.effects) or "none"
-        extra = ""
-        if res.suspect:
-            extra += "; suspect (at a bound): " + ", ".join(e.name for e in res.suspect)
-        if res.indistinguishable:
-            extra += "; indistinguishable in this log: " + ", ".join(
-                " or ".join(n["names"]) for n in res.indistinguishable
-            )
-        if res.not_identifiable:
-            extra += "; not identifiable from this log: " + ", ".join(
-                n["name"] for n in res.not_identifiable
-            )
-        frac = res.scoring.get("masked_fraction", 0.0)
-        if frac:
-            extra += f"; {100 * frac:.0f}% not free flight (excluded)"
-        print(
-            f"{res.verdict}: effects {names}{extra}; held-out improvement "
-            f"{100 * res.model_improvement:.1f}%; wrote {out}"
-        )
+        print(f"{res.summary()}; wrote {out}")
     return 0

@@ -27,9 +27,10 @@ from quadfault.diagnosis.phases import excluded_fraction, flight_phases
 from quadfault.diagnosis.prediction import HORIZONS, open_loop_errors
 from quadfault.diagnosis.residuals import prepare
 from quadfault.diagnosis.result import DiagnosisResult
+from quadfault.diagnosis.rivals import Rivals
 from quadfault.diagnosis.scores import fixed_scoring
 from quadfault.diagnosis.select import ForwardSelection, SelectionSettings
-from quadfault.errors import ConfigError, RecordingError
+from quadfault.errors import ConfigError, QuadfaultError, RecordingError
 from quadfault.io.recording import Recording, recording_sidecar
 from quadfault.model.effects.motor_efficiency import MotorEfficiency, healthy_pattern
 from quadfault.model.effects.registry import EFFECT_NAMES
@@ -227,8 +228,13 @@ def _scoring_dict(rp, sc, recording, mask_note="") -> dict:
 class Diagnosis:
     """Model-mismatch diagnosis (library + optimizer + model, PySINDy-like)."""
 
-    def __init__(self, config: DiagnosisConfig | None = None):
+    def __init__(self, config: DiagnosisConfig | None = None, efficiency_estimate=None):
+        """``efficiency_estimate(recording) -> {"estimator": name, "eta": [4], ...}``: the
+        online estimator's motor efficiencies over the flight, run by a caller that may
+        import the estimators (the ``quadfault diagnose`` command); shown beside a
+        weak-rotor hypothesis (``DiagnosisResult.estimator``). None: not shown."""
         self.config = config or DiagnosisConfig()
+        self.efficiency_estimate = efficiency_estimate
 
     def fit(self, recording: Recording, vehicle=None, progress=None) -> DiagnosisResult:
         """Diagnose ``recording`` against ``vehicle`` (default: the recording's own).
@@ -259,12 +265,28 @@ class Diagnosis:
             cfg.pair_top,
         )
         selection = ForwardSelection(replay, library, scoring, settings, progress).run()
+        folds = folds_of(replay.n_blocks, cfg.folds)
+        rivals = Rivals(replay, scoring, folds, library, cfg.min_improvement)
+        selection, comparisons = rivals.compare(selection)
+        in_model = {c.name for c in selection.final.candidates} if selection.final else set()
+        ties = [
+            c
+            for c in comparisons
+            if c.outcome == "tie" and set(c.held.names + c.rival.names) & in_model
+        ]
+        contested = {n for c in ties for n in c.held.names + c.rival.names}
+        selection = rivals.supported(selection, keep=contested)
         frame = rec.frame if rec.frame in ("NED", "ENU") else "NED"
-        found = Findings(replay, scoring, selection, folds_of(replay.n_blocks, cfg.folds), frame)
-        effects, suspect, rejected = found.accepted(), found.suspects(), found.rejected()
-        alike = _indistinguishable(selection.verdicts, [e.name for e in rejected])
+        found = Findings(replay, scoring, selection, folds, frame)
+        accepted = found.accepted()
+        effects = [e for e in accepted if e.name not in contested]
+        suspect, rejected = found.suspects(), found.rejected()
+        rejected = [e for e in rejected if e.name not in contested]
+        alike = tuple(found.indistinguishable(c) for c in ties)
+        alike += _indistinguishable(selection.verdicts, [e.name for e in rejected])
         if selection.unattributed is not None:  # a time constant the log cannot resolve
             alike += (selection.unattributed.entry(),)
+        cross_check = self._estimator_check(rec, effects, alike)
         table, model_ci = scoring.channel_table(
             selection.baseline.residual, selection.final_cv.residual, replay.block_dur[scoring.rows]
         )
@@ -272,7 +294,7 @@ class Diagnosis:
         where, regimes = locate(replay, nominal_residual, scoring.noise)
         unexplained = _unexplained(replay, scoring, nominal_residual, where)
         verdict = "mismatch" if effects or suspect or alike or unexplained else "consistent"
-        prediction = self._prediction(rec, replay, selection)
+        prediction = self._prediction(rec, replay, selection, folds)
         series = {
             "block_t": replay.block_t,
             "baseline": selection.baseline.residual,
@@ -312,8 +334,38 @@ class Diagnosis:
             vehicle=side["vehicle"],
             frame=frame,
             gravity=float(side["gravity"]),
+            estimator=cross_check,
             series=series,
         )
+
+    def _estimator_check(self, rec, effects, alike) -> dict:
+        """The online estimator's efficiencies of this flight beside a weak-rotor
+        hypothesis (accepted or in an ``indistinguishable`` entry), from the callable the
+        caller passed in (``efficiency_estimate``); ``{}`` without one or without such a
+        hypothesis."""
+        hypotheses = [e.params for e in effects if e.name == MotorEfficiency.name]
+        hypotheses += [
+            e["params"]
+            for entry in alike
+            for one in entry.get("sets", ())
+            for e in one
+            if e["name"] == MotorEfficiency.name
+        ]
+        if not hypotheses or self.efficiency_estimate is None:
+            return {}
+        try:
+            out = dict(self.efficiency_estimate(rec))
+        except QuadfaultError as exc:
+            return {"error": str(exc)}
+        eta = np.asarray(out["eta"], dtype=float)
+        weakest = int(np.argmin(eta))
+        named = int(np.argmin(hypotheses[0]["eta"]))
+        out.update(
+            weakest_rotor=weakest + 1,
+            diagnosis_weakest_rotor=named + 1,
+            agrees=bool(weakest == named),
+        )
+        return out
 
     def _replay(self, rec, vehicle, invalid) -> tuple:
         """``(replay, note)``: the recording replayed through the nominal model with what is
@@ -369,14 +421,13 @@ class Diagnosis:
         ]
         return library, not_identifiable
 
-    def _prediction(self, rec, replay, selection) -> dict:
+    def _prediction(self, rec, replay, selection, folds) -> dict:
         """Held-out open-loop errors: each start predicted by the final model fitted
         without its fold (:mod:`~quadfault.diagnosis.prediction`)."""
-        folds = folds_of(replay.n_blocks, self.config.folds)
         fold_of_block = np.zeros(replay.n_blocks, dtype=int)
         for i, idx in enumerate(folds):
             fold_of_block[idx] = i
-        cands = [s.candidate for s in selection.steps]
+        cands = list(selection.final.candidates) if selection.final else []
         fold_terms = (
             [list(zip(cands, fx)) for fx in selection.final_cv.fold_x]
             if cands

@@ -25,7 +25,13 @@ from quadfault.diagnosis.crossval import (
     fold_agreement,
 )
 from quadfault.diagnosis.feedback import IV_MIN, IV_UNVERIFIED_GAIN
-from quadfault.diagnosis.library import EQUIVALENT, EXPLANATIONS, public_bounds, public_params
+from quadfault.diagnosis.library import (
+    EQUIVALENT,
+    EXPLANATIONS,
+    build_library,
+    public_bounds,
+    public_params,
+)
 from quadfault.diagnosis.result import EffectFinding
 from quadfault.model.effects.registry import effect_class
 
@@ -64,10 +70,13 @@ def finding(
     at_bound: bool = False,
     gain: float | None = None,
     bound=None,
+    free=None,
 ) -> EffectFinding:
     """One reported effect (module docstring); the fold-agreement rule
     (:func:`~quadfault.diagnosis.crossval.fold_agreement`) is read from ``fold_x``, with
-    ``bound(x)`` the parameters at a bound that matters."""
+    ``bound(x)`` the parameters at a bound that matters. A candidate held by direct evidence
+    (``pinned``: a time constant from command to measured rotor speed) reports the bounds of
+    ``free`` (the same candidate before it was pinned) and ``pinned_by``."""
     frames = dict(cand.frames)
     params, unc = public_params(
         cand, np.asarray(x, float), np.asarray(sd, float), vehicle, selected, frame=frame
@@ -82,13 +91,19 @@ def finding(
             + "."
         )
     agree, detail = fold_agreement(cand, x, fold_x, bound) if len(fold_x) else (None, "")
+    bounds = public_bounds(cand, np.asarray(x, float))
+    pinned_by = {}
+    if cand.pinned:
+        bounds = public_bounds(free if free is not None else cand)
+        pinned_by = {k: "rotor_speed" for k in bounds}
     return EffectFinding(
         cand.name,
         params,
         unc,
         float(improvement),
         explanation,
-        bounds=public_bounds(cand),
+        bounds=bounds,
+        pinned_by=pinned_by,
         folds=folds_of_params(cand, fold_x, vehicle, selected, frame),
         status=status,
         reason=reason,
@@ -152,11 +167,18 @@ class Findings:
         self.replay, self.scoring, self.selection, self.frame = replay, scoring, selection, frame
         self.folds = folds
         final = selection.final
-        steps = selection.steps
-        self.selected = {s.candidate.name: x for s, x in zip(steps, final.x)} if final else {}
+        self.selected = {c.name: x for c, x in final.terms} if final else {}
+        self._free = {}
 
-    def _common(self) -> dict:
-        return dict(vehicle=self.replay.vehicle, selected=self.selected, frame=self.frame)
+    def _common(self, c) -> dict:
+        if c.pinned and c.name not in self._free:
+            self._free[c.name] = build_library(self.replay, (c.name,))[0]
+        return dict(
+            vehicle=self.replay.vehicle,
+            selected=self.selected,
+            frame=self.frame,
+            free=self._free.get(c.name),
+        )
 
     def alone_cv(self, c, x=None):
         """Held-out result of nominal + ``c`` alone: fitted alone, or from ``x`` (an
@@ -178,8 +200,10 @@ class Findings:
     def accepted(self) -> list:
         rp, sc, sel = self.replay, self.scoring, self.selection
         out = []
-        for k, step in enumerate(sel.steps):
+        index = {c.name: k for k, c in enumerate(sel.final.candidates)} if sel.final else {}
+        for step in sel.steps:
             c = step.candidate
+            k = index[c.name]
             x, sd = sel.final.x[k], sel.final.sd[k]
             params, _ = public_params(c, x, sd, rp.vehicle, self.selected)
             out.append(
@@ -193,7 +217,7 @@ class Findings:
                     gain=step.improvement_step,
                     at_bound=fit_at_bound(rp, sc, sel.final, k),
                     bound=lambda xf, k=k: fit_bound_mask(rp, sc, sel.final, k, xf),
-                    **self._common(),
+                    **self._common(c),
                 )
             )
         out.sort(key=lambda e: -e.improvement)
@@ -221,7 +245,7 @@ class Findings:
                     at_bound=True,
                     gain=v.gain,
                     bound=lambda xf, f=v.fit, j=j: fit_bound_mask(rp, sc, f, j, xf),
-                    **self._common(),
+                    **self._common(c),
                 )
             )
         out.sort(key=lambda e: -e.improvement)
@@ -251,8 +275,91 @@ class Findings:
                     at_bound=fit_at_bound(rp, sc, f, j),
                     gain=v.gain,
                     bound=lambda xf, f=f, j=j: fit_bound_mask(rp, sc, f, j, xf),
-                    **self._common(),
+                    **self._common(c),
                 )
             )
         out.sort(key=lambda e: -e.improvement)
         return out
+
+    def alternative(self, rival_set) -> list:
+        """The effects of one explanation (a :class:`~quadfault.diagnosis.rivals.RivalSet`)
+        as reported: ``[{"name", "params", "uncertainty", "bounds"}, ...]``."""
+        f = rival_set.fit
+        selected = {c.name: x for c, x in f.terms}
+        out = []
+        for j, c in enumerate(f.candidates):
+            if c.name not in rival_set.names:
+                continue
+            params, unc = public_params(
+                c, f.x[j], f.sd[j], self.replay.vehicle, selected, frame=self.frame
+            )
+            out.append(
+                {
+                    "name": c.name,
+                    "params": params,
+                    "uncertainty": unc,
+                    "bounds": public_bounds(c, np.asarray(f.x[j], dtype=float)),
+                }
+            )
+        return out
+
+    def indistinguishable(self, comparison) -> dict:
+        """The ``indistinguishable`` entry of a tied
+        :class:`~quadfault.diagnosis.rivals.RivalComparison`."""
+        a, b = comparison.sets
+        g = comparison.gain_of(b)
+        sets = [self.alternative(a), self.alternative(b)]
+        labels = [" + ".join(short(e["name"], e["params"]) for e in one) for one in sets]
+        return {
+            "names": list(a.names) + list(b.names),
+            "sets": sets,
+            "held_out": {
+                "improvement": g.gain,
+                "best_channel": g.best,
+                "ci95_low": g.lo,
+                "of": " + ".join(b.names),
+                "over": " + ".join(a.names),
+            },
+            "summary": f"{labels[0]} or {labels[1]}",
+            "reason": (
+                f"this flight cannot tell {' + '.join(a.names)} from {' + '.join(b.names)}: "
+                f"fitted in each other's place on the same held-out folds, "
+                f"{' + '.join(b.names)} changes the held-out residual RMS by "
+                f"{_pct(-g.gain)} (95% interval of its gain from {_pct(g.lo)}), not a "
+                "significant difference either way; one of the two is likely there"
+            ),
+            "separate_by": comparison.separate_by,
+        }
+
+
+def _pct(v) -> str:
+    return f"{round(v, 3) + 0.0:+.1%}"
+
+
+def _num(v) -> str:
+    if isinstance(v, (list, tuple)):
+        return "(" + ", ".join(_num(x) for x in v) + ")"
+    return f"{v:.3g}"
+
+
+def short(name: str, params: dict) -> str:
+    """An effect and its fitted value in a few words (the one-line summary): ``weak rotor 3
+    (0.70)``, ``com_offset (13, -2) mm``, ``motor_lag 0.043 s``, ``thrust_scale 0.94``."""
+    if name == "motor_efficiency":
+        eta = np.asarray(params.get("eta", ()), dtype=float)
+        if eta.size:
+            k = int(np.argmin(eta))
+            return f"weak rotor {k + 1} ({eta[k]:.2f})"
+    if name == "com_offset" and "offset_m" in params:
+        mm = [round(1000 * v) for v in params["offset_m"]]
+        return f"com_offset ({', '.join(f'{v:g}' for v in mm)}) mm"
+    if not params:
+        return name
+    key, value = next(iter(params.items()))
+    unit = ""
+    for suffix, u in (("_s", " s"), ("_m", " m"), ("_N", " N"), ("_kg", " kg")):
+        if key.endswith(suffix):
+            unit = u
+    if isinstance(value, (int, float, list, tuple)):
+        return f"{name} {_num(value)}{unit}"
+    return name

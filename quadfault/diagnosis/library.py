@@ -189,10 +189,11 @@ def public_params(
     return frame_vectors(params, frame), frame_vectors(unc, frame, magnitude=True)
 
 
-def public_bounds(cand: Candidate) -> dict:
-    """``{"<param>": [lo, hi]}`` of the reported parameters (``lo``, ``hi`` are lists for
-    vector parameters; symmetric for direction parameters, so the same in every frame)."""
-    return cand.public_bounds()
+def public_bounds(cand: Candidate, x=None) -> dict:
+    """``{"<param>": [lo, hi]}`` of the reported parameters, in their reported units (of the
+    fit ``x``: eta relative to the median rotor); ``lo``, ``hi`` are lists for vector
+    parameters; symmetric for direction parameters, so the same in every frame."""
+    return cand.public_bounds(x)
 
 
 #: effect name -> the one line the diagnosis reports (each effect's ``explanation``)

@@ -38,6 +38,8 @@ def markdown(res: DiagnosisResult, source: str) -> str:
     L = [
         f"# Model-mismatch diagnosis of `{source}`",
         "",
+        f"Summary: {res.summary()}.",
+        "",
         f"**Verdict: {res.verdict}.** Held-out residual RMS reduced by "
         f"{100 * res.model_improvement:.1f}% (95% interval {100 * lo:.1f} to {100 * hi:.1f}%) "
         f"with the accepted effects ({res.seconds:.1f} s).",
@@ -65,7 +67,24 @@ def markdown(res: DiagnosisResult, source: str) -> str:
     )
     if res.indistinguishable:
         L += ["", "## Indistinguishable in this log", ""]
-        L += [f"- **{' or '.join(n['names'])}**: {n['reason']}" for n in res.indistinguishable]
+        for n in res.indistinguishable:
+            L.append(f"- **{n.get('summary') or ' or '.join(n['names'])}**: {n['reason']}.")
+            if n.get("separate_by"):
+                L.append(f"  What would separate them: {n['separate_by']}.")
+    if res.estimator:
+        est = res.estimator
+        if est.get("eta"):
+            L += [
+                "",
+                f"Online estimator beside the weak-rotor hypothesis ({est['estimator']}, "
+                f"the same recording, median over {est['from_s']:.1f}-{est['to_s']:.1f} s): "
+                f"eta = {_one([round(v, 3) for v in est['eta']])}; weakest rotor "
+                f"{est['weakest_rotor']}, the diagnosis names rotor "
+                f"{est['diagnosis_weakest_rotor']} "
+                f"({'agree' if est['agrees'] else 'they disagree'}).",
+            ]
+        else:
+            L += ["", f"Online estimator: not run ({est.get('error', '')})."]
     if res.suspect:
         L += ["", "## Suspect (a parameter at its bound: not identified)", ""]
         L += _effect_rows(res.suspect, reason=True)

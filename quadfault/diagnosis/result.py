@@ -31,6 +31,9 @@ class EffectFinding:
             top of) the model before it, or None.
         fold_agreement: the fold-agreement rule's reading of ``folds``, or "".
         folds_agree: whether the folds pass that rule (None without folds).
+        pinned_by: ``{key: source}`` for parameters fixed by other data (``"rotor_speed"``:
+            a time constant from command to measured rotor speed); ``bounds`` are then the
+            effect's own range, not the window that holds the value.
     """
 
     name: str
@@ -46,6 +49,7 @@ class EffectFinding:
     improvement_when_added: float | None = None
     fold_agreement: str = ""
     folds_agree: bool | None = None
+    pinned_by: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         out = {
@@ -65,6 +69,8 @@ class EffectFinding:
         if self.fold_agreement:
             out["fold_agreement"] = self.fold_agreement
             out["folds_agree"] = self.folds_agree
+        if self.pinned_by:
+            out["pinned_by"] = dict(self.pinned_by)
         return out
 
 
@@ -112,6 +118,9 @@ class DiagnosisResult:
             ``excluded_fraction``, blocks, weights, ...).
         vehicle: the sidecar's vehicle object the diagnosis started from (recording's frame);
             frame, gravity: the recording's world frame and gravity.
+        estimator: beside a weak-rotor hypothesis, the online estimator's efficiencies of
+            the same flight (``{"estimator", "eta", "weakest_rotor",
+            "diagnosis_weakest_rotor", "agrees", ...}``), ``{}`` otherwise.
         series: arrays for plots (times, residuals before/after, regime variables).
     """
 
@@ -140,6 +149,7 @@ class DiagnosisResult:
     vehicle: dict = field(default_factory=dict)
     frame: str = "NED"
     gravity: float = 9.81
+    estimator: dict = field(default_factory=dict)
     series: dict = field(default_factory=dict, repr=False, compare=False)
 
     def to_dict(self) -> dict:
@@ -176,6 +186,7 @@ class DiagnosisResult:
                 "vehicle": dict(self.vehicle),
                 "frame": self.frame,
                 "gravity": self.gravity,
+                **({"estimator": dict(self.estimator)} if self.estimator else {}),
             }
         )
 
@@ -185,6 +196,47 @@ class DiagnosisResult:
     @property
     def effect_names(self) -> list[str]:
         return [e.name for e in self.effects]
+
+    def summary(self) -> str:
+        """The one-line summary (printed by ``quadfault diagnose``, first in report.md): the
+        same figures as the JSON -- every accepted effect with its fitted value and its
+        held-out improvement alone, the rivals this flight cannot tell apart with theirs,
+        the fraction not scored, the model's held-out improvement."""
+        from quadfault.diagnosis.findings import short
+
+        names = (
+            ", ".join(
+                f"{short(e.name, e.params)} ({100 * e.improvement:.0f}%)" for e in self.effects
+            )
+            or "none"
+        )
+        parts = [f"{self.verdict}: effects {names}"]
+        for n in self.indistinguishable:
+            if "summary" in n:
+                parts.append(f"{n['summary']}: this flight cannot tell them apart")
+            else:
+                parts.append("indistinguishable in this log: " + " or ".join(n["names"]))
+        if self.estimator.get("eta"):
+            est = self.estimator
+            k = est["weakest_rotor"]
+            word = "agrees" if est["agrees"] else "disagrees"
+            parts.append(
+                f"online {est['estimator']} estimate: rotor {k} at {est['eta'][k - 1]:.2f} ({word})"
+            )
+        if self.suspect:
+            parts.append("suspect (at a bound): " + ", ".join(e.name for e in self.suspect))
+        if self.scoring.get("not_accepted"):
+            parts.append(self.scoring["not_accepted"])
+        if self.not_identifiable:
+            parts.append(
+                "not identifiable from this log: "
+                + ", ".join(n["name"] for n in self.not_identifiable)
+            )
+        frac = self.scoring.get("excluded_fraction", 0.0)
+        if frac:
+            parts.append(f"{100 * frac:.1f}% not scored (see scoring.excluded)")
+        parts.append(f"held-out improvement {100 * self.model_improvement:.1f}%")
+        return "; ".join(parts)
 
 
 def _clean(obj):

@@ -9,23 +9,17 @@ explanations give different moments only where the rotors' commands vary relativ
 other (``eta_i f_i`` against ``r x sum f``), or where measured rotor speeds separate them.
 
 So ``motor_efficiency`` (:func:`rotors_differ`) must beat, on the same held-out folds, the
-same model with
-
-1. one factor common to every rotor (``thrust_scale``), by ``min_improvement``: else it is
-   a calibration error, not per-rotor damage;
-2. the vehicle's own imbalance instead (the common factor, a centre-of-mass offset and a yaw
-   trim: ``com_offset``), by the bar every effect meets on top of a model: a held-out gain
-   over it of ``min_improvement`` overall or three times that in one channel, with its 95 %
-   interval (the segment bootstrap of ``model.ci95``, :meth:`~quadfault.diagnosis.scores.
-   Scoring.channel_table`) above 0. Else one flight cannot tell a weak rotor from the
-   vehicle's own imbalance (nor from the healthy spread of its motors), and the rejection
-   says which rotor looks weakest and by how much.
+same model with one factor common to every rotor (``thrust_scale``) by ``min_improvement``:
+else it is a calibration error, not per-rotor damage. Against the vehicle's own imbalance
+(the common factor, a centre-of-mass offset and a yaw trim) it is compared as a whole set
+after the selection (:mod:`~quadfault.diagnosis.rivals`): where one flight cannot tell them
+apart, both are reported (``indistinguishable``).
 
 With flights of the healthy vehicle (``EfficiencyCandidate.baseline``) the baseline holds
 the vehicle's own imbalance, and the imbalance test is not needed: the efficiencies relative
 to it are accepted when a rotor departs from it by more than ``BASELINE_TOLERANCE`` (5 %) and
 by more than ``BASELINE_Z`` (3) times the healthy flights' flight-to-flight spread of that
-rotor (:func:`~quadfault.model.effects.motor_efficiency.healthy_pattern`; with one healthy flight
+rotor, and the rival comparison with the imbalance is not made (:func:`~quadfault.model.effects.motor_efficiency.healthy_pattern`; with one healthy flight
 the spread is unknown and 5 % is the only test).
 """
 
@@ -33,9 +27,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from quadfault.diagnosis.crossval import gain_over, held_out
+from quadfault.diagnosis.crossval import held_out
 from quadfault.diagnosis.library import EQUIVALENT, build_library
-from quadfault.model.effects.com_offset import ComOffset
 from quadfault.model.effects.motor_efficiency import MotorEfficiency
 from quadfault.model.effects.thrust_scale import ThrustScale
 
@@ -45,12 +38,6 @@ COMMON_THRUST = tuple(
     n
     for n, k in EQUIVALENT.items()
     if k == EQUIVALENT[MotorEfficiency.name] and n != MotorEfficiency.name
-)
-#: what one flight cannot tell (the report's sentence)
-ONE_FLIGHT = (
-    "one flight cannot tell a weak rotor from the vehicle's own imbalance (a "
-    "centre-of-mass offset, a tilted motor); a flight of the healthy vehicle "
-    "(--baseline HEALTHY.json) can"
 )
 
 
@@ -86,16 +73,6 @@ def rotors_differ(rp, sc, opt, current, fl, m) -> str:
                 f"data within {m:.0%}; that is a calibration or thrust-curve error, not "
                 "per-rotor damage"
             )
-    if eff.baseline:
-        return ""
-    if not any(c.name == ComOffset.name for c, _ in others):
-        imbalance = build_library(rp, (ComOffset.name,))[0]
-        others = others + [(imbalance, np.zeros(imbalance.size))]
-    cv, f = held_out(rp, sc, others + common, fl)
-    g = gain_over(rp, sc, cv, opt.cv, m)
-    if not g.passes:
-        x_imb = f.x[[c.name for c in f.candidates].index(ComOffset.name)]
-        return imbalance_reason(eff.relative(eta), g.gain, g.best, g.lo, x_imb)
     return ""
 
 
@@ -104,16 +81,3 @@ def _percent(tol) -> str:
     if np.all(tol == tol[0]):
         return f"{tol[0]:g}%"
     return "[" + ", ".join(f"{v:g}" for v in tol) + "] %"
-
-
-def imbalance_reason(rel, gain, best, lo, x_imbalance) -> str:
-    """The rejection of a per-rotor pattern that the vehicle's imbalance explains as well."""
-    rel = np.asarray(rel, dtype=float)
-    k = int(np.argmin(rel))
-    offset = 1000 * float(np.hypot(x_imbalance[0], x_imbalance[1]))
-    return (
-        f"vehicle imbalance: rotor {k + 1} looks weakest ({rel[k]:.2f} of the median "
-        f"rotor), but a centre-of-mass offset of {offset:.1f} mm with a yaw trim explains "
-        f"the data as well (held-out gain of the per-rotor pattern over it {gain:.1%}, "
-        f"95% interval from {lo:.1%}; best channel {best:.1%}): {ONE_FLIGHT}"
-    )

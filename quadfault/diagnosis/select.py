@@ -104,6 +104,8 @@ class Verdict:
         agreement: fold-agreement detail ("" if not tested).
         like: the time constant below the log's resolution it cannot be told from
             (:class:`~quadfault.diagnosis.resolution.Unresolved`), or None.
+        trades_with: the accepted effect it trades with on this flight
+            (:func:`trade_off`), or "".
     """
 
     candidate: Candidate
@@ -117,6 +119,7 @@ class Verdict:
     iv: float | None = None
     agreement: str = ""
     like: Unresolved | None = None
+    trades_with: str = ""
 
 
 @dataclass(frozen=True, eq=False)
@@ -175,6 +178,7 @@ class _Option:
     failed: str = ""
     agreement: dict = field(default_factory=dict)
     like: Unresolved | None = None
+    trades_with: str = ""
 
 
 @dataclass(frozen=True, eq=False)
@@ -337,7 +341,14 @@ class _Round:
         pushed = [c.name for j, c in enumerate(m.cands) if fit_at_bound(rp, sc, opt.fit, j)]
         if pushed:  # the joint refit drives an accepted effect to its bound
             return f"it pushes the accepted {pushed[0]} to a bound"
-        return "" if m.fit is None else trade_off(m.fit, [c.name for c in m.cands], opt.fit)
+        if m.fit is None:
+            return ""
+        for c in m.cands:
+            why = trade_off(m.fit, [c.name], opt.fit)
+            if why:
+                opt.trades_with = c.name
+                return why
+        return ""
 
     def folds_agree(self, opt: _Option, new) -> str:
         rp, sc = self.search.replay, self.search.scoring
@@ -602,6 +613,7 @@ def _verdict(c, status, reason, opt, j) -> Verdict:
         opt.iv,
         opt.agreement.get(c.name, ""),
         opt.like,
+        opt.trades_with,
     )
 
 

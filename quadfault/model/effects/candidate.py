@@ -179,9 +179,11 @@ class Candidate:
         """``params`` and ``uncertainty`` (one sigma) as reported in the diagnosis JSON."""
         return self._split(x), self._split(self.pinned[1] if self.pinned else sd)
 
-    def public_bounds(self) -> dict:
-        """``{"<param>": [lo, hi]}`` in the reported keys; for a vector parameter ``lo`` and
-        ``hi`` are numbers when every element has the same bounds, else lists."""
+    def public_bounds(self, x=None) -> dict:
+        """``{"<param>": [lo, hi]}`` in the reported keys and units (of the fit ``x`` where a
+        reported value is relative to the fit, e.g. eta relative to the median rotor); for a
+        vector parameter ``lo`` and ``hi`` are numbers when every element has the same
+        bounds, else lists."""
         lo, hi = self._split(self.lower), self._split(self.upper)
         out = {}
         for k in lo:

@@ -119,7 +119,7 @@ class GroundEffectCandidate(Candidate):
         sr = float(sd[0] / (2 * r)) if r > 0 else float(np.sqrt(sd[0]))
         return {"rotor_radius_m": r, "ground_z_m": 0.0}, {"rotor_radius_m": sr}
 
-    def public_bounds(self):
+    def public_bounds(self, x=None):
         return {"rotor_radius_m": [float(np.sqrt(self.lower[0])), float(np.sqrt(self.upper[0]))]}
 
     def x_from_params(self, params):

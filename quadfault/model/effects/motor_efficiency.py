@@ -156,6 +156,24 @@ class EfficiencyCandidate(Candidate):
             x = x / np.asarray(self.baseline, dtype=float)
         return x / max(float(np.median(x)), 1e-9)
 
+    def public_bounds(self, x=None):
+        """The bounds of ``eta`` in its reported units: relative to the median rotor of the
+        fit ``x`` (and to the baseline), like ``eta``; ``eta_absolute`` and ``eta_flight``
+        in theirs."""
+        out = super().public_bounds()
+        if x is None:
+            return out
+        x = np.asarray(x, dtype=float)
+        lo, hi = np.asarray(self.lower, dtype=float), np.asarray(self.upper, dtype=float)
+        scale = self.relative(x) / np.maximum(x, 1e-12)  # reported eta per fitted eta
+        out["eta"] = [(lo * scale).tolist(), (hi * scale).tolist()]
+        if self.baseline:
+            flight = 1.0 / max(float(np.median(x)), 1e-9)
+            out["eta_flight"] = [float(lo[0] * flight), float(hi[0] * flight)]
+        if self.absolute:
+            out["eta_absolute"] = [float(lo[0]), float(hi[0])]
+        return out
+
     def public(self, x, sd, ctx):
         x, sd = np.asarray(x, dtype=float), np.asarray(sd, dtype=float)
         rel = self.relative(x)
