@@ -295,6 +295,246 @@ def draw_case(seed, i):
     return case
 
 
+#: what users simulate and fly (``quadfault simulate --trajectory ...``), and the effect
+#: sizes they meet: the ``users`` distribution
+USER_TRAJECTORIES = ("lissajous", "circle", "hover")
+USER_EFFECTS = ("motor_efficiency", "inertia", "com_offset", "mass")
+
+
+def draw_user_case(seed, i):
+    """A flight as a user makes it: the default vehicle and controller, a named trajectory
+    with its defaults (Lissajous, circle or hover), 10-60 s, the simulator's default sensor
+    noise; none or one effect at the sizes users meet -- a weak rotor at 0.65-0.9, inertia
+    x1.2-1.5, a CoM offset of 5-15 mm, mass +-10-20 %."""
+    rng = np.random.default_rng([seed, i, 7])
+    u = rng.random()
+    names = [] if u < 0.2 else [str(rng.choice(USER_EFFECTS))]
+    effects = []
+    truth = {}
+    for n in names:
+        if n == "motor_efficiency":
+            k = int(rng.integers(4))
+            eta = [1.0] * 4
+            eta[k] = float(rng.uniform(0.65, 0.9))
+            effects.append(fx.MotorEfficiency(tuple(eta)))
+            truth["rotor"] = k + 1
+        elif n == "inertia":
+            effects.append(fx.Inertia((float(rng.uniform(1.2, 1.5)),) * 3))
+        elif n == "com_offset":
+            r, a = float(rng.uniform(0.005, 0.015)), float(rng.uniform(0, 2 * math.pi))
+            effects.append(fx.ComOffset((r * math.cos(a), r * math.sin(a))))
+        else:
+            sign = float(rng.choice([-1.0, 1.0]))
+            effects.append(fx.Mass(1.0 + sign * float(rng.uniform(0.1, 0.2))))
+    return dict(
+        names=names,
+        effects=effects,
+        truth=truth,
+        trajectory=str(rng.choice(USER_TRAJECTORIES)),
+        duration=float(rng.uniform(10.0, 60.0)),
+        frame=str(rng.choice(["NED", "ENU"])),
+        sim_seed=int(rng.integers(1 << 30)),
+    )
+
+
+def fly_user(c, rate):
+    from quadfault.model.trajectory import Hover
+
+    dt = 1.0 / rate
+    traj = {"circle": Circle, "lissajous": Lissajous, "hover": Hover}[c["trajectory"]]()
+    sc = named_scenario("nominal", c["duration"], dt).replace(trajectory=traj)
+    return simulate(
+        sc,
+        config=SimConfig(dt=dt, sensor_noise=SensorNoise()),
+        seed=c["sim_seed"],
+        effects=tuple(c["effects"]),
+    )
+
+
+def weak_rotors(doc) -> tuple:
+    """The rotors a diagnosis JSON names weak: ``(accepted, in an indistinguishable set)``."""
+    acc = [e["params"] for e in doc["effects"] if e["name"] == "motor_efficiency"]
+    alike = [
+        e["params"]
+        for n in doc["indistinguishable"]
+        for one in n.get("sets", ())
+        for e in one
+        if e["name"] == "motor_efficiency"
+    ]
+    return (
+        [int(np.argmin(p["eta"])) + 1 for p in acc],
+        [int(np.argmin(p["eta"])) + 1 for p in alike],
+    )
+
+
+def audit(doc) -> dict:
+    """Counts the targets forbid: parameters outside their own bounds (effects, suspects,
+    rejected and indistinguishable sets), accepted effects with a held-out gain <= 0 or at
+    a bound."""
+    entries = [e for key in ("effects", "suspect", "rejected") for e in doc[key]]
+    entries += [e for n in doc["indistinguishable"] for one in n.get("sets", ()) for e in one]
+    outside = 0
+    for e in entries:
+        for key, (lo, hi) in (e.get("bounds") or {}).items():
+            if key not in e["params"]:
+                continue
+            v = np.asarray(e["params"][key], dtype=float)
+            span = np.abs(np.asarray(hi, dtype=float) - np.asarray(lo, dtype=float))
+            tol = 1e-9 * np.maximum(span, 1e-12)
+            outside += int(np.any((v < np.asarray(lo) - tol) | (v > np.asarray(hi) + tol)))
+    return {
+        "outside_bounds": outside,
+        "accepted_gain_le_0": sum(e["improvement"] <= 0 for e in doc["effects"]),
+        "accepted_at_bound": sum(bool(e["at_bound"]) for e in doc["effects"]),
+    }
+
+
+def run_user(job):
+    seed, i, rate, permute = job
+    c = draw_user_case(seed, i)
+    t0 = time.perf_counter()
+    rec = fly_user(c, rate)
+    t_sim = time.perf_counter() - t0
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "flight.csv")
+        write_recording(rec.without_truth(), path, frame=c["frame"], force=True)
+        blind = read_recording(path)
+    t1, c1 = time.perf_counter(), time.process_time()
+    res = Diagnosis().fit(blind)
+    t_diag, cpu_diag = time.perf_counter() - t1, time.process_time() - c1
+    doc = json.loads(res.to_json())
+    row = dict(
+        i=i,
+        distribution="users",
+        truth=c["names"],
+        truth_rotor=c["truth"].get("rotor"),
+        trajectory=c["trajectory"],
+        duration=c["duration"],
+        found=res.effect_names,
+        indistinguishable=[n["names"] for n in res.indistinguishable],
+        rival_sets=[n["names"] for n in res.indistinguishable if "sets" in n],
+        weak_rotor=weak_rotors(doc),
+        verdict=res.verdict,
+        improvement=res.model_improvement,
+        t_diag=t_diag,
+        cpu_diag=cpu_diag,
+        t_sim=t_sim,
+        samples=len(blind),
+        params={f.name: f.params for f in res.effects},
+        truth_params=[e.describe() for e in c["effects"]],
+        **audit(doc),
+    )
+    if permute:  # the same recording with the library in reverse order
+        import quadfault.diagnosis.diagnose as diagnose_module
+
+        build = diagnose_module.build_library
+        diagnose_module.build_library = lambda rp, names=None: build(rp, names)[::-1]
+        try:
+            other = Diagnosis().fit(blind)
+        finally:
+            diagnose_module.build_library = build
+        row["order_independent"] = order_agrees(res, other)
+    return row
+
+
+def order_agrees(a, b, rtol=0.01) -> bool:
+    """Same verdict, effects and indistinguishable sets, parameters within ``rtol``."""
+    if a.verdict != b.verdict or a.effect_names != b.effect_names:
+        return False
+    if sorted(sorted(n["names"]) for n in a.indistinguishable) != sorted(
+        sorted(n["names"]) for n in b.indistinguishable
+    ):
+        return False
+    for ea, eb in zip(a.effects, b.effects):
+        for k in ea.params:
+            x, y = np.asarray(ea.params[k], float), np.asarray(eb.params[k], float)
+            if x.shape != y.shape or not np.allclose(x, y, rtol=rtol, atol=1e-6):
+                return False
+    return True
+
+
+def user_verdict(r) -> str:
+    """``"right"`` (the concealed effect accepted and first, the right rotor for a weak one,
+    no rival named with it), ``"indistinguishable"`` (it is in a set of rivals the flight
+    cannot tell apart, the right rotor for a weak one), ``"wrong"``; for an effect-free
+    flight ``"right"`` when nothing is accepted nor named, else ``"false alarm"``."""
+    if not r["truth"]:
+        return "right" if not r["found"] and not r["rival_sets"] else "false alarm"
+    name = r["truth"][0]
+    accepted, alike = r["weak_rotor"]
+    rotor_ok = name != "motor_efficiency" or r["truth_rotor"] in accepted + alike
+    if r["found"] and r["found"][0] == name and rotor_ok:
+        return "right"
+    if any(name in n for n in r["rival_sets"]) and rotor_ok:
+        return "indistinguishable"
+    return "wrong"
+
+
+def summarise_users(rows) -> dict:
+    for r in rows:
+        r["score"] = user_verdict(r)
+    eff = [r for r in rows if r["truth"]]
+    none = [r for r in rows if not r["truth"]]
+    moving = [r for r in eff if r["trajectory"] != "hover"]
+    by = Counter((r["truth"][0], r["trajectory"], r["score"]) for r in eff)
+    weak = [r for r in eff if r["truth"][0] == "motor_efficiency" and r["trajectory"] != "hover"]
+    com = [r for r in eff if r["truth"][0] == "com_offset" and r["trajectory"] != "hover"]
+    out = {
+        "n": len(rows),
+        "n_with_effect": len(eff),
+        "n_effect_free": len(none),
+        "right": float(np.mean([r["score"] == "right" for r in eff])) if eff else None,
+        "right_moving": (
+            float(np.mean([r["score"] == "right" for r in moving])) if moving else None
+        ),
+        "right_or_indistinguishable": (
+            float(np.mean([r["score"] in ("right", "indistinguishable") for r in eff]))
+            if eff
+            else None
+        ),
+        "wrong": float(np.mean([r["score"] == "wrong" for r in eff])) if eff else None,
+        "false_alarm_rate": (
+            float(np.mean([r["score"] == "false alarm" for r in none])) if none else None
+        ),
+        "weak_rotor_named_moving": (
+            float(np.mean([r["score"] in ("right", "indistinguishable") for r in weak]))
+            if weak
+            else None
+        ),
+        "weak_rotor_com_offset_alone": sum(
+            "com_offset" in r["found"] and not r["weak_rotor"][0] and not r["weak_rotor"][1]
+            for r in weak
+        ),
+        "com_offset_weak_rotor_alone": sum(
+            bool(r["weak_rotor"][0]) and not r["rival_sets"] for r in com
+        ),
+        "outside_bounds": sum(r["outside_bounds"] for r in rows),
+        "accepted_gain_le_0": sum(r["accepted_gain_le_0"] for r in rows),
+        "accepted_at_bound": sum(r["accepted_at_bound"] for r in rows),
+        "order_independent": (
+            sum(r["order_independent"] for r in rows if "order_independent" in r),
+            sum("order_independent" in r for r in rows),
+        ),
+        "by_case": {f"{a} {b}: {c}": v for (a, b, c), v in sorted(by.items())},
+        "cpu_seconds_per_recording_median": float(np.median([r["cpu_diag"] for r in rows])),
+    }
+    return out
+
+
+def print_users(s):
+    print(
+        f"\nBlinded study, users' flights: {s['n']} recordings ({s['n_with_effect']} with an "
+        f"effect, {s['n_effect_free']} effect-free)"
+    )
+    for k, v in s.items():
+        if k in ("n", "n_with_effect", "n_effect_free", "by_case"):
+            continue
+        print(f"{k:<40} {v if not isinstance(v, float) else f'{v:.3f}'}")
+    print("by case (concealed effect, trajectory: score):")
+    for k, v in s["by_case"].items():
+        print(f"  {k} {v}")
+
+
 def param_error(true, found, veh):
     """Relative error of the effect's main magnitude (deviation from nominal); ``found``'s
     direction parameters in NED / FRD, as the truth."""
@@ -671,7 +911,23 @@ def main(argv=None):
         action="store_true",
         help="with --reuse: skip the cases not kept in --store DIR",
     )
+    ap.add_argument(
+        "--distribution",
+        choices=("random", "users"),
+        default="random",
+        help="random: random vehicles and effects at 3-10x the noise (default); users: the "
+        "flights and effect sizes users try (draw_user_case), scored right / "
+        "indistinguishable / wrong",
+    )
+    ap.add_argument(
+        "--permute",
+        action="store_true",
+        help="users: diagnose each recording again with the candidate library in reverse "
+        "order and count the answers that agree",
+    )
     args = ap.parse_args(argv)
+    if args.distribution == "users":
+        return main_users(args)
     if args.n < 1 or args.workers < 1 or args.rate <= 0 or args.duration <= 5:
         print("blinded_study: --n, --workers >= 1, --rate > 0, --duration > 5 s", file=sys.stderr)
         return 2
@@ -718,6 +974,42 @@ def main(argv=None):
     s = summarise(rows, args.rate, args.duration)
     s["wall_seconds"] = time.perf_counter() - t0
     print_summary(s, rows)
+    if args.out:
+        atomic_write_text(
+            args.out,
+            json.dumps({"summary": s, "rows": rows}, indent=1, default=float) + "\n",
+            force=True,
+        )
+    return 0
+
+
+def main_users(args) -> int:
+    jobs = [(args.seed, i, args.rate, args.permute) for i in range(args.n)]
+    rows = []
+    t0 = time.perf_counter()
+    with Pool(args.workers) as pool:
+        for k, row in enumerate(pool.imap_unordered(run_user, jobs), 1):
+            rows.append(row)
+            print(
+                f"[{k}/{args.n}] #{row['i']} {row['trajectory']} {row['duration']:.0f}s "
+                f"truth={'+'.join(row['truth']) or 'none'}"
+                + (f" (rotor {row['truth_rotor']})" if row["truth_rotor"] else "")
+                + f" found={'+'.join(row['found']) or 'none'}"
+                + "".join(
+                    f" (indistinguishable: {' or '.join(n)})" for n in row["indistinguishable"]
+                )
+                + f" weak rotor named {row['weak_rotor']} cpu={row['cpu_diag']:.1f}s"
+                + (
+                    ""
+                    if "order_independent" not in row
+                    else f" order-independent={row['order_independent']}"
+                ),
+                flush=True,
+            )
+    rows.sort(key=lambda r: r["i"])
+    s = summarise_users(rows)
+    s["wall_seconds"] = time.perf_counter() - t0
+    print_users(s)
     if args.out:
         atomic_write_text(
             args.out,

@@ -1,11 +1,20 @@
-"""``quadfault diagnose FILE.csv --json OUT.json [--report DIR] [--force]``."""
+"""``quadfault diagnose FILE.csv --json OUT.json [--report DIR] [--force]``: the arguments
+and the run; the command's module (:mod:`estimators.diagnose_cli`, above the estimators)
+hands it the online estimator for the weak-rotor cross-check."""
 
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
-from quadfault.errors import ConfigError
+from quadfault.diagnosis.diagnose import Diagnosis, DiagnosisConfig
+from quadfault.diagnosis.report import FILES, write_report
+from quadfault.errors import ConfigError, RecordingError
+from quadfault.fileio import atomic_write_text, check_writable
+from quadfault.io.recording import read_recording, sidecar_path
+from quadfault.model.effects.motor_efficiency import MotorEfficiency
+from quadfault.progress import progress_bar
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -52,10 +61,6 @@ def baseline_eta(path) -> tuple:
     """The healthy flight's relative rotor efficiencies from its diagnosis JSON (its
     ``motor_efficiency`` fit: accepted, suspect or rejected; its own ``eta_flight`` when it
     had a baseline itself)."""
-    import json
-
-    from quadfault.errors import RecordingError
-    from quadfault.model.effects.motor_efficiency import MotorEfficiency
 
     path = Path(path)
     try:
@@ -99,10 +104,6 @@ def baseline_eta(path) -> tuple:
 def run(args, efficiency_estimate=None) -> int:
     """Run the diagnosis; ``efficiency_estimate`` (the command module above the estimators
     passes it) gives the online estimator's efficiencies beside a weak-rotor hypothesis."""
-    from quadfault.diagnosis import Diagnosis, DiagnosisConfig
-    from quadfault.fileio import atomic_write_text, check_writable
-    from quadfault.io.recording import read_recording, sidecar_path
-    from quadfault.progress import progress_bar
 
     out = Path(args.json)
     if out.suffix != ".json":
@@ -114,8 +115,6 @@ def run(args, efficiency_estimate=None) -> int:
         )
     check_writable([out], force=args.force)
     if args.report is not None:
-        from quadfault.diagnosis.report import FILES
-
         rdir = Path(args.report)
         if rdir.exists():
             check_writable([rdir / f for f in FILES], force=args.force)
@@ -141,8 +140,6 @@ def run(args, efficiency_estimate=None) -> int:
         bar.close()
     atomic_write_text(out, res.to_json(), force=args.force)
     if args.report is not None:
-        from quadfault.diagnosis.report import write_report
-
         write_report(res, args.report, source=Path(args.recording).name, force=args.force)
     if not args.quiet:
         print(f"{res.summary()}; wrote {out}")

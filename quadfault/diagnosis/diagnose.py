@@ -32,8 +32,10 @@ from quadfault.diagnosis.scores import fixed_scoring
 from quadfault.diagnosis.select import ForwardSelection, SelectionSettings
 from quadfault.errors import ConfigError, QuadfaultError, RecordingError
 from quadfault.io.recording import Recording, recording_sidecar
+from quadfault.model.effects.mass import Mass
 from quadfault.model.effects.motor_efficiency import MotorEfficiency, healthy_pattern
 from quadfault.model.effects.registry import EFFECT_NAMES
+from quadfault.model.effects.thrust_scale import ThrustScale
 
 #: a located interval whose nominal residual RMS reaches this many noise scales for at least
 #: ``STRONG_SECONDS`` makes the verdict ``mismatch`` even when nothing in the library explains
@@ -183,19 +185,44 @@ def _valid_pose(rec, ev) -> tuple:
     return rec, [(a, b, why) for k in ("velocity", "position") for a, b in ev.invalid.get(k, ())]
 
 
+#: effects that measure the thrust constant's scale (a common factor): not fitted when the
+#: importer's thrust calibration is biased by time that is not free flight
+CALIBRATED = (ThrustScale.name, Mass.name)
+#: the fraction of the calibration segment that may be not free flight
+CALIBRATION_TOLERANCE = 0.05
+
+
+def _calibration_inside(rp) -> float:
+    """The fraction of the importer's calibration segment that is not free flight."""
+    if not rp.excluded or not rp.masked:
+        return 0.0
+    a, b = rp.excluded[0]
+    return excluded_fraction([s for s in rp.masked if s[1] > a and s[0] < b], a, b)
+
+
+def _calibration_bias(rp) -> str:
+    """Why ``thrust_scale`` and ``mass`` are not fitted on ``rp`` ("" when they are): the
+    importer's thrust calibration includes time that is not free flight (ground, spool-up),
+    so its thrust constant carries that bias and a common factor would only measure it."""
+    inside = _calibration_inside(rp)
+    if inside < CALIBRATION_TOLERANCE:
+        return ""
+    return (
+        f"{100 * inside:.0f}% of the importer's thrust calibration segment is not free "
+        "flight: its thrust constant is biased by it, so a common thrust factor or mass "
+        "would measure that bias (import again with --calibration T0,T1 in the air)"
+    )
+
+
 def _calibration_note(rp) -> str:
     """What of the importer's calibration segment is not free flight (its thrust constant
-    then carries ground or impact forces; ``thrust_scale`` or ``thrust_curve`` absorb it)."""
-    if not rp.excluded or not rp.masked:
-        return ""
-    a, b = rp.excluded[0]
-    inside = excluded_fraction([s for s in rp.masked if s[1] > a and s[0] < b], a, b)
-    if inside < 0.05:
+    then carries ground or impact forces; ``thrust_scale`` and ``mass`` are not fitted)."""
+    inside = _calibration_inside(rp)
+    if inside < CALIBRATION_TOLERANCE:
         return ""
     return (
         f"{100 * inside:.0f}% of the importer's calibration segment is not free flight: "
-        "its thrust constant is biased by it (a common factor that thrust_scale or "
-        "thrust_curve takes up)"
+        "its thrust constant is biased by it; thrust_scale and mass are not fitted"
     )
 
 
@@ -222,6 +249,11 @@ def _scoring_dict(rp, sc, recording, mask_note="") -> dict:
     notes = [n for n in (mask_note, rp.scoring_note, _calibration_note(rp)) if n]
     if notes:
         out["note"] = "; ".join(notes)
+    if _calibration_bias(rp):
+        out["not_accepted"] = (
+            "thrust_scale and mass not fitted: the importer's thrust calibration is "
+            f"{100 * _calibration_inside(rp):.0f}% not free flight"
+        )
     return out
 
 
@@ -412,6 +444,10 @@ class Diagnosis:
                 for c in library
             ]
         lacks = {c.name: c.untestable_reason(replay) for c in library}
+        biased = _calibration_bias(replay)
+        if biased:  # a common thrust factor would only measure the calibration's bias
+            lacks.update({n: biased for n in CALIBRATED if n in lacks})
+            library = [c for c in library if c.name not in CALIBRATED]
         library, gated = gate(library, ev)
         gated = {n["name"]: n["reason"] for n in gated}
         not_identifiable = [

@@ -32,7 +32,7 @@ from quadfault.diagnosis.library import (
     public_bounds,
     public_params,
 )
-from quadfault.diagnosis.result import EffectFinding
+from quadfault.diagnosis.result import EffectFinding, short
 from quadfault.model.effects.registry import effect_class
 
 FRAME_TEXT = {
@@ -334,32 +334,3 @@ class Findings:
 
 def _pct(v) -> str:
     return f"{round(v, 3) + 0.0:+.1%}"
-
-
-def _num(v) -> str:
-    if isinstance(v, (list, tuple)):
-        return "(" + ", ".join(_num(x) for x in v) + ")"
-    return f"{v:.3g}"
-
-
-def short(name: str, params: dict) -> str:
-    """An effect and its fitted value in a few words (the one-line summary): ``weak rotor 3
-    (0.70)``, ``com_offset (13, -2) mm``, ``motor_lag 0.043 s``, ``thrust_scale 0.94``."""
-    if name == "motor_efficiency":
-        eta = np.asarray(params.get("eta", ()), dtype=float)
-        if eta.size:
-            k = int(np.argmin(eta))
-            return f"weak rotor {k + 1} ({eta[k]:.2f})"
-    if name == "com_offset" and "offset_m" in params:
-        mm = [round(1000 * v) for v in params["offset_m"]]
-        return f"com_offset ({', '.join(f'{v:g}' for v in mm)}) mm"
-    if not params:
-        return name
-    key, value = next(iter(params.items()))
-    unit = ""
-    for suffix, u in (("_s", " s"), ("_m", " m"), ("_N", " N"), ("_kg", " kg")):
-        if key.endswith(suffix):
-            unit = u
-    if isinstance(value, (int, float, list, tuple)):
-        return f"{name} {_num(value)}{unit}"
-    return name

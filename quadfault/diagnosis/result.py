@@ -8,6 +8,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from quadfault.model.effects.com_offset import ComOffset
+from quadfault.model.effects.motor_efficiency import MotorEfficiency
+
 FORMAT = "quadfault-diagnosis/2"
 
 
@@ -202,8 +205,6 @@ class DiagnosisResult:
         same figures as the JSON -- every accepted effect with its fitted value and its
         held-out improvement alone, the rivals this flight cannot tell apart with theirs,
         the fraction not scored, the model's held-out improvement."""
-        from quadfault.diagnosis.findings import short
-
         names = (
             ", ".join(
                 f"{short(e.name, e.params)} ({100 * e.improvement:.0f}%)" for e in self.effects
@@ -255,3 +256,32 @@ def _clean(obj):
     if isinstance(obj, np.bool_):
         return bool(obj)
     return obj
+
+
+def _num(v) -> str:
+    if isinstance(v, (list, tuple)):
+        return "(" + ", ".join(_num(x) for x in v) + ")"
+    return f"{v:.3g}"
+
+
+def short(name: str, params: dict) -> str:
+    """An effect and its fitted value in a few words (the one-line summary): ``weak rotor 3
+    (0.70)``, ``com_offset (13, -2) mm``, ``motor_lag 0.043 s``, ``thrust_scale 0.94``."""
+    if name == MotorEfficiency.name:
+        eta = np.asarray(params.get("eta", ()), dtype=float)
+        if eta.size:
+            k = int(np.argmin(eta))
+            return f"weak rotor {k + 1} ({eta[k]:.2f})"
+    if name == ComOffset.name and "offset_m" in params:
+        mm = [round(1000 * v) for v in params["offset_m"]]
+        return f"com_offset ({', '.join(f'{v:g}' for v in mm)}) mm"
+    if not params:
+        return name
+    key, value = next(iter(params.items()))
+    unit = ""
+    for suffix, u in (("_s", " s"), ("_m", " m"), ("_N", " N"), ("_kg", " kg")):
+        if key.endswith(suffix):
+            unit = u
+    if isinstance(value, (int, float, list, tuple)):
+        return f"{name} {_num(value)}{unit}"
+    return name

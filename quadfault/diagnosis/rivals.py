@@ -39,28 +39,37 @@ import numpy as np
 
 from quadfault.diagnosis.crossval import CrossValidation, Gain, fit_at_bound, gain_over, held_out
 from quadfault.diagnosis.select import Selection, Step, Verdict
+from quadfault.model.effects.blade_flapping import BladeFlapping
+from quadfault.model.effects.com_offset import ComOffset
+from quadfault.model.effects.delay import Delay
+from quadfault.model.effects.drag import Drag
+from quadfault.model.effects.mass import Mass
+from quadfault.model.effects.motor_efficiency import MotorEfficiency
+from quadfault.model.effects.motor_lag import MotorLag
+from quadfault.model.effects.thrust_scale import ThrustScale
+from quadfault.model.effects.wind import Wind
 
 #: rival explanations of one signal: each row lists alternative effect sets; the first member
 #: of a set is its key (a set is in the model when its key is), and the sentence says what
 #: would separate them
 RIVALS = (
     (
-        (("motor_efficiency",), ("com_offset", "thrust_scale")),
+        ((MotorEfficiency.name,), (ComOffset.name, ThrustScale.name)),
         "measured rotor speeds, a flight of the healthy vehicle (--baseline HEALTHY.json), or "
         "manoeuvres that load the rotors unequally (roll, pitch and yaw steps at several "
         "thrust levels)",
     ),
     (
-        (("mass",), ("thrust_scale",)),
+        ((Mass.name,), (ThrustScale.name,)),
         "a weighed mass, or a flight at several thrust levels with angular manoeuvres (a "
         "thrust factor changes the moments, a mass does not)",
     ),
     (
-        (("motor_lag",), ("delay",)),
+        ((MotorLag.name,), (Delay.name,)),
         "measured rotor speeds, or sharp command steps logged fast",
     ),
     (
-        (("drag",), ("wind",), ("blade_flapping",)),
+        ((Drag.name,), (Wind.name,), (BladeFlapping.name,)),
         "legs flown at several airspeeds and headings (drag grows with airspeed, a steady "
         "wind does not; blade flapping grows with thrust)",
     ),

@@ -54,6 +54,7 @@ from quadfault.diagnosis.crossval import (
     fit_bound_mask,
     fold_agreement,
     folds_of,
+    gain_over,
 )
 from quadfault.diagnosis.feedback import IV_MIN, IV_UNVERIFIED_GAIN, IV_Z, frozen_replay, iv_slope
 from quadfault.diagnosis.fit import Fit, fit
@@ -274,19 +275,20 @@ class _Round:
         return np.sqrt(np.mean(sig**2, axis=0))
 
     def held_out(self, opt: _Option, signal) -> str:
-        sc, cur_cv, bar = self.search.scoring, self.model.cv, self.search.settings.min_improvement
-        if np.sqrt(np.sum(signal**2)) < 1.0:
-            return "negligible: its fitted signal, over all channels, is below the noise"
-        touched = signal >= 1.0  # the channels it acts on
-        gain_touched = 0.0
-        if touched.any():  # best held-out gain among the channels the option acts on
-            before = sc.channel_sse(cur_cv.residual)[touched]
-            after = sc.channel_sse(opt.cv.residual)[touched]
-            gain_touched = float(np.max(1.0 - np.sqrt(after / np.maximum(before, 1e-300))))
-        if opt.gain < bar and gain_touched < 3 * bar:
+        """Significance by held-out likelihood over the flight: the option's held-out gain
+        positive with its 95 % interval above 0; and large enough to matter: at least
+        ``min_improvement`` overall or three times that in one channel."""
+        sr, bar = self.search, self.search.settings.min_improvement
+        g = gain_over(sr.replay, sr.scoring, self.model.cv, opt.cv, bar)
+        if not (g.gain > 0.0 and g.lo > 0.0):
             return (
-                f"held-out gain {opt.gain:.1%} (best channel {gain_touched:.1%}) below "
-                f"{bar:.0%} ({3 * bar:.0%} in a channel it acts on)"
+                f"no significant held-out gain: {g.gain:.1%} (95% interval from {g.lo:.1%}; "
+                f"best channel {g.best:.1%})"
+            )
+        if opt.gain < bar and g.best < 3 * bar:
+            return (
+                f"held-out gain {opt.gain:.1%} (best channel {g.best:.1%}) below "
+                f"{bar:.0%} ({3 * bar:.0%} in one channel)"
             )
         return ""
 
