@@ -6,7 +6,8 @@ library of physically named effects (:mod:`quadfault.model.effects`) by bounded 
 squares, and keep those that improve held-out residuals (time-blocked cross-validation + BIC).
 
 Modules: ``residuals`` (replay and block-mean channels), ``library`` (candidate effects),
-``fit`` (optimizer), ``select`` (forward selection), ``locate`` (intervals and regimes),
+``fit`` (optimizer), ``select`` (forward selection), ``rivals`` (rival explanations as whole
+sets, held-out support), ``findings`` (the reported effects), ``locate`` (intervals and regimes),
 ``prediction`` (open-loop multi-step), ``result`` (record and JSON), ``report`` (markdown and
 plots), ``cli`` (``quadfault diagnose``).
 """

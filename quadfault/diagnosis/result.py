@@ -278,10 +278,7 @@ def short(name: str, params: dict) -> str:
     if not params:
         return name
     key, value = next(iter(params.items()))
-    unit = ""
-    for suffix, u in (("_s", " s"), ("_m", " m"), ("_N", " N"), ("_kg", " kg")):
-        if key.endswith(suffix):
-            unit = u
+    unit = " s" if key.endswith("_s") and not key.endswith("per_s") else ""
     if isinstance(value, (int, float, list, tuple)):
         return f"{name} {_num(value)}{unit}"
     return name

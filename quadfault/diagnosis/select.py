@@ -12,10 +12,10 @@ Each round:
    model in which neither effect alone explains the residual (a payload: mass and inertia
    change together; a single ``wind`` fits the hover part of it better than either alone).
 3. **Tests** of each option, refitted jointly with the accepted effects: BIC lower by more
-   than ``bic_margin``; a fitted signal above the noise (root-sum-square over the channels
-   of its RMS in noise units; else it is negligible); held-out RMS (5 contiguous folds, fixed weights) lower by at least
-   ``min_improvement`` relative to the current model, or by three times that in one of the
-   channels the option acts on (its fitted signal above the noise); the instrumental-variable
+   than ``bic_margin``; significance by held-out likelihood over the flight: the held-out
+   gain (5 contiguous folds, fixed weights) positive with its 95 % interval above 0; a
+   held-out RMS lower by at least ``min_improvement`` relative to the current model, or by
+   three times that in one channel; the instrumental-variable
    check against closed-loop feedback bias (:mod:`~quadfault.diagnosis.feedback`); the fold
    agreement of every new effect (:func:`~quadfault.diagnosis.crossval.fold_agreement`);
    for a pair, a held-out RMS lower by ``min_improvement`` than each of its members alone;
@@ -34,7 +34,8 @@ Each round:
    effect (or a pair member's single fit) much less certain (:func:`trade_off`) or pushes it
    to a bound fails: it would exchange, not add.
 
-The search stops when no option passes or ``max_effects`` are accepted. An effect that
+The search stops when no option passes or ``max_effects`` are accepted. Rival explanations
+of the accepted effects are then compared as whole sets (:mod:`~quadfault.diagnosis.rivals`). An effect that
 contains another (``Candidate.excludes``: ``motor_efficiency`` and ``thrust_curve`` contain
 ``thrust_scale``) is never accepted with it. Every candidate that was
 fitted and not accepted keeps the reason it last failed.
