@@ -43,6 +43,7 @@ fitted and not accepted keeps the reason it last failed.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from dataclasses import dataclass, field
 
@@ -542,7 +543,8 @@ class ForwardSelection:
                         verdicts[c.name] = _verdict(
                             c,
                             "rejected",
-                            f"passed the tests, but {winners} fitted the held-out data better",
+                            f"passed the tests, but {winners} fitted the held-out data better "
+                            "and was accepted first",
                             o,
                             j,
                         )
@@ -566,6 +568,12 @@ class ForwardSelection:
                 verdicts.pop(c.name, None)
             model = self._model(best.cands, best.fit.x, best.fit, best.cv, best.bic)
             lacks = None  # judged against the model before this round's acceptance
+        if len(model.cands) >= s.max_effects:  # not traded: the search had no room left
+            for name, v in list(verdicts.items()):
+                if v.reason.startswith("passed the tests"):
+                    verdicts[name] = dataclasses.replace(
+                        v, reason=f"{v.reason}; the search stopped at max_effects = {s.max_effects}"
+                    )
         accepted = {st.candidate.name for st in steps}
         for c in testable:  # never screened (the search stopped) or still pending
             if c.name not in verdicts and c.name not in accepted and c.name in alone:
