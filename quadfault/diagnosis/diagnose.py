@@ -299,7 +299,8 @@ class Diagnosis:
         selection = ForwardSelection(replay, library, scoring, settings, progress).run()
         folds = folds_of(replay.n_blocks, cfg.folds)
         rivals = Rivals(replay, scoring, folds, library, cfg.min_improvement)
-        selection, comparisons = rivals.compare(selection)
+        selection, comparisons = rivals.compare(rivals.within_bounds(selection))
+        selection = rivals.within_bounds(selection)
         in_model = {c.name for c in selection.final.candidates} if selection.final else set()
         ties = [
             c

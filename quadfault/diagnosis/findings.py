@@ -252,7 +252,8 @@ class Findings:
         return out
 
     def rejected(self) -> list:
-        """Each rejected candidate as fitted alone on the nominal model (else as judged)."""
+        """Each rejected candidate as fitted alone on the nominal model, or as judged where
+        that was within a set fitted after the search (a rival, the final model)."""
         rp, sc = self.replay, self.scoring
         out = []
         for name, v in self.selection.verdicts.items():
@@ -260,7 +261,7 @@ class Findings:
                 continue
             c = v.candidate
             cv_alone = self.alone_cv(c)
-            f = self.selection.alone.get(name, v.fit)
+            f = v.fit if v.in_set else self.selection.alone.get(name, v.fit)
             j = list(f.candidates).index(c)
             out.append(
                 finding(
@@ -271,7 +272,9 @@ class Findings:
                     explanation=base_explanation(c.name),
                     status="rejected",
                     reason=v.reason,
-                    fold_x=[] if cv_alone is None else [fx[0] for fx in cv_alone.fold_x],
+                    fold_x=(
+                        [] if cv_alone is None or v.in_set else [fx[0] for fx in cv_alone.fold_x]
+                    ),
                     at_bound=fit_at_bound(rp, sc, f, j),
                     gain=v.gain,
                     bound=lambda xf, f=f, j=j: fit_bound_mask(rp, sc, f, j, xf),

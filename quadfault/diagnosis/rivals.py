@@ -271,23 +271,64 @@ class Rivals:
                     break
             if not why:
                 return selection
-            rest = [(o, y) for o, y in terms if o is not c]
-            steps = [s for s in selection.steps if s.candidate is not c]
             verdicts = dict(selection.verdicts)
             j = [o for o, _ in terms].index(c)
             verdicts[c.name] = Verdict(
-                c, "rejected", why, selection.final, np.asarray(x), selection.final.sd[j]
+                c,
+                "rejected",
+                why,
+                selection.final,
+                np.asarray(x),
+                selection.final.sd[j],
+                in_set=True,
             )
-            if rest:
-                cv, f = held_out(self.replay, self.scoring, rest, self.folds)
-                order = {o.name: i for i, (o, _) in enumerate(rest)}
-                steps = sorted(steps, key=lambda s: order[s.candidate.name])
-            else:
-                cv, f = selection.baseline, None
-            selection = dataclasses.replace(
-                selection, steps=tuple(steps), final=f, final_cv=cv, verdicts=verdicts
-            )
+            selection = self._without(selection, c, verdicts)
         return selection
+
+    def within_bounds(self, selection: Selection) -> Selection:
+        """``selection`` without the accepted effects its final joint fit leaves at a bound
+        that matters (:func:`~quadfault.diagnosis.crossval.fit_at_bound`): they become
+        suspects (the data asks for more than the effect allows), and the model is
+        refitted without them."""
+        while selection.final is not None:
+            f = selection.final
+            j = next(
+                (
+                    j
+                    for j in range(len(f.candidates))
+                    if fit_at_bound(self.replay, self.scoring, f, j)
+                ),
+                None,
+            )
+            if j is None:
+                return selection
+            c = f.candidates[j]
+            verdicts = dict(selection.verdicts)
+            verdicts[c.name] = Verdict(
+                c,
+                "suspect",
+                "at a bound in the final model (refitted with the other accepted effects): "
+                "the data asks for more than this effect allows; a missing effect is likely",
+                f,
+                np.asarray(f.x[j]),
+                np.asarray(f.sd[j]),
+            )
+            selection = self._without(selection, c, verdicts)
+        return selection
+
+    def _without(self, selection: Selection, c, verdicts) -> Selection:
+        """``selection`` with ``c`` out of the model (refitted) and the ``verdicts``."""
+        rest = [(o, y) for o, y in selection.final.terms if o is not c]
+        steps = [s for s in selection.steps if s.candidate is not c]
+        if rest:
+            cv, f = held_out(self.replay, self.scoring, rest, self.folds)
+            order = {o.name: i for i, (o, _) in enumerate(rest)}
+            steps = sorted(steps, key=lambda s: order[s.candidate.name])
+        else:
+            cv, f = selection.baseline, None
+        return dataclasses.replace(
+            selection, steps=tuple(steps), final=f, final_cv=cv, verdicts=verdicts
+        )
 
     def _unsupported(self, c, x, terms, selection: Selection) -> str:
         rest = [(o, y) for o, y in terms if o is not c]
@@ -328,4 +369,5 @@ def _rival_verdict(c, comp: RivalComparison, winner: RivalSet) -> Verdict:
         f,
         np.asarray(f.x[j]),
         np.asarray(f.sd[j]),
+        in_set=True,
     )

@@ -109,6 +109,8 @@ class Verdict:
             (:class:`~quadfault.diagnosis.resolution.Unresolved`), or None.
         trades_with: the accepted effect it trades with on this flight
             (:func:`trade_off`), or "".
+        in_set: judged within a set fitted after the search (a rival explanation, the
+            final model): its ``fit`` is reported, not its fit alone.
     """
 
     candidate: Candidate
@@ -123,6 +125,7 @@ class Verdict:
     agreement: str = ""
     like: Unresolved | None = None
     trades_with: str = ""
+    in_set: bool = False
 
 
 @dataclass(frozen=True, eq=False)
