@@ -186,15 +186,14 @@ class Rivals:
     def fit_set(self, others: list, names, selection: Selection) -> RivalSet | None:
         """``names`` fitted jointly with the terms ``others`` (started from their values; the
         new effects from their fits alone), cross-validated; None when they cannot be in one
-        model, or when the fit puts a parameter of ``names`` at a bound (not an
-        alternative the data can hold)."""
+        model, or when the fit puts a parameter at a bound (not an alternative the data can
+        hold)."""
         new = [self._start(n, selection) for n in names]
         cands = [c for c, _ in others]
         if any(not c.compatible(cands + [o for o, _ in new if o is not c]) for c, _ in new):
             return None
         cv, f = held_out(self.replay, self.scoring, list(others) + new, self.folds)
-        k = len(others)
-        if any(fit_at_bound(self.replay, self.scoring, f, j) for j in range(k, k + len(new))):
+        if any(fit_at_bound(self.replay, self.scoring, f, j) for j in range(len(f.candidates))):
             return None
         return RivalSet(tuple(names), f, cv)
 
@@ -358,7 +357,7 @@ class Rivals:
 def _rival_verdict(c, comp: RivalComparison, winner: RivalSet) -> Verdict:
     f = comp.held.fit if winner is comp.rival else comp.rival.fit
     j = [o.name for o in f.candidates].index(c.name)
-    g = comp.gain
+    g = comp.gain_of(winner)
     return Verdict(
         c,
         "rejected",
