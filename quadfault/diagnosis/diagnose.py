@@ -308,7 +308,7 @@ class Diagnosis:
             if c.outcome == "tie" and set(c.held.names + c.rival.names) & in_model
         ]
         contested = {n for c in ties for n in c.held.names + c.rival.names}
-        selection = rivals.supported(selection, keep=contested)
+        selection = rivals.within_bounds(rivals.supported(selection, keep=contested))
         frame = rec.frame if rec.frame in ("NED", "ENU") else "NED"
         found = Findings(replay, scoring, selection, folds, frame)
         accepted = found.accepted()
