@@ -298,7 +298,14 @@ class Diagnosis:
         )
         selection = ForwardSelection(replay, library, scoring, settings, progress).run()
         folds = folds_of(replay.n_blocks, cfg.folds)
-        rivals = Rivals(replay, scoring, folds, library, cfg.min_improvement)
+        rivals = Rivals(
+            replay,
+            scoring,
+            folds,
+            library if cfg.effects is None else self._rival_library(replay, ev, scoring),
+            cfg.min_improvement,
+            allowed=None if cfg.effects is None else [c.name for c in library],
+        )
         selection, comparisons = rivals.compare(rivals.within_bounds(selection))
         selection = rivals.within_bounds(selection)
         in_model = {c.name for c in selection.final.candidates} if selection.final else set()
@@ -313,8 +320,21 @@ class Diagnosis:
         found = Findings(replay, scoring, selection, folds, frame)
         accepted = found.accepted()
         effects = [e for e in accepted if e.name not in contested]
-        suspect, rejected = found.suspects(), found.rejected()
-        rejected = [e for e in rejected if e.name not in contested]
+        suspect = found.suspects()
+        rejected = [e for e in found.rejected() if e.name not in contested]
+        rejected += [
+            found.tied(c, comp)
+            for comp in ties
+            for c, _ in comp.held.fit.terms
+            if c.name in comp.held.names
+        ]
+        rejected += [
+            found.tied(c, comp)
+            for comp in ties
+            for c, _ in comp.rival.fit.terms
+            if c.name in comp.rival.names
+        ]
+        rejected.sort(key=lambda e: -e.improvement)
         alike = tuple(found.indistinguishable(c) for c in ties)
         alike += _indistinguishable(selection.verdicts, [e.name for e in rejected])
         if selection.unattributed is not None:  # a time constant the log cannot resolve
@@ -370,6 +390,13 @@ class Diagnosis:
             estimator=cross_check,
             series=series,
         )
+
+    def _rival_library(self, replay, ev, scoring) -> list:
+        """The whole library for this recording (gated and pinned like the search's): the
+        rivals of an effect the user asked for may be effects the user left out."""
+        library = build_library(replay, None)
+        library, _ = gate([c for c in library if not c.untestable_reason(replay)], ev)
+        return pin_to_rotor_speeds(replay, library, scoring)
 
     def _estimator_check(self, rec, effects, alike) -> dict:
         """The online estimator's efficiencies of this flight beside a weak-rotor

@@ -33,6 +33,7 @@ from quadfault.diagnosis.library import (
     public_params,
 )
 from quadfault.diagnosis.result import EffectFinding, short
+from quadfault.diagnosis.rivals import tie_verdict
 from quadfault.model.effects.registry import effect_class
 
 FRAME_TEXT = {
@@ -283,6 +284,24 @@ class Findings:
             )
         out.sort(key=lambda e: -e.improvement)
         return out
+
+    def tied(self, c, comparison):
+        """The ``rejected`` finding of effect ``c`` of a tied rival comparison: its fit in
+        its own set, the reason naming the other set."""
+        from_set = tie_verdict(c, comparison)
+        f = from_set.fit
+        j = [o.name for o in f.candidates].index(c.name)
+        return finding(
+            c,
+            f.x[j],
+            f.sd[j],
+            improvement=self.improvement(self.alone_cv(c, f.x[j])),
+            explanation=base_explanation(c.name),
+            status="rejected",
+            reason=from_set.reason,
+            at_bound=False,
+            **self._common(c),
+        )
 
     def alternative(self, rival_set) -> list:
         """The effects of one explanation (a :class:`~quadfault.diagnosis.rivals.RivalSet`)

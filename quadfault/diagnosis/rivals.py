@@ -148,9 +148,14 @@ class Rivals:
     recording (``replay``, fixed ``scoring``, ``folds``) with its ``library`` (the candidates
     the rivals are drawn from), against the bar ``m``."""
 
-    def __init__(self, replay, scoring, folds, library, m: float):
+    def __init__(self, replay, scoring, folds, library, m: float, allowed=None):
+        """``library``: every candidate a rival may be drawn from (the whole library, also
+        when the user restricted the search); ``allowed``: the names the model may hold
+        (the user's library; None: all). A rival outside ``allowed`` that wins is not put
+        in the model: the effect it beats is rejected."""
         self.replay, self.scoring, self.folds, self.m = replay, scoring, folds, m
         self.library = {c.name: c for c in library if c.testable(replay)}
+        self.allowed = None if allowed is None else set(allowed)
 
     # rivals -----------------------------------------------------------------------------
     def rows(self, accepted: list, selection: Selection) -> list:
@@ -225,7 +230,16 @@ class Rivals:
             outcome = "rival" if significant(g) else "held" if significant(back) else "tie"
             comp = RivalComparison(held, rival, g, back, outcome, why)
             comparisons.append(comp)
-            if outcome == "rival" or (outcome == "tie" and rival.cv.sse < held.cv.sse):
+            allowed = self.allowed is None or set(rival_names) <= self.allowed
+            if outcome == "rival" and not allowed:  # the user left the winner out
+                verdicts = dict(selection.verdicts)
+                for c, _ in held.terms_of(held_names):
+                    verdicts[c.name] = _rival_verdict(c, comp, rival)
+                for c in [c for c, _ in held.terms_of(held_names)]:
+                    selection = self._drop(selection, c, verdicts)
+            elif allowed and (
+                outcome == "rival" or (outcome == "tie" and rival.cv.sse < held.cv.sse)
+            ):
                 selection = self._swap(selection, comp, rival)
                 done.add((frozenset(rival_names), frozenset(held_names)))
             if outcome == "held":
@@ -315,6 +329,11 @@ class Rivals:
             selection = self._without(selection, c, verdicts)
         return selection
 
+    def _drop(self, selection: Selection, c, verdicts) -> Selection:
+        if selection.final is None or c not in selection.final.candidates:
+            return dataclasses.replace(selection, verdicts=verdicts)
+        return self._without(selection, c, verdicts)
+
     def _without(self, selection: Selection, c, verdicts) -> Selection:
         """``selection`` with ``c`` out of the model (refitted) and the ``verdicts``."""
         rest = [(o, y) for o, y in selection.final.terms if o is not c]
@@ -361,12 +380,55 @@ def _rival_verdict(c, comp: RivalComparison, winner: RivalSet) -> Verdict:
     return Verdict(
         c,
         "rejected",
-        (
-            f"{' + '.join(winner.names)} in its place fits the held-out data significantly "
-            f"better (gain {g.gain:.1%}, 95% interval from {g.lo:.1%})"
-        ),
+        rival_reason(c, f.x[j], winner.names, g, tie=False),
         f,
         np.asarray(f.x[j]),
         np.asarray(f.sd[j]),
         in_set=True,
     )
+
+
+def tie_verdict(c, comp: RivalComparison) -> Verdict:
+    """The ``rejected`` reading of an effect of a tied comparison (neither set accepted)."""
+    own = comp.held if c.name in comp.held.names else comp.rival
+    other = comp.rival if own is comp.held else comp.held
+    j = [o.name for o in own.fit.candidates].index(c.name)
+    g = comp.gain_of(other)
+    return Verdict(
+        c,
+        "rejected",
+        rival_reason(c, own.fit.x[j], other.names, g, tie=True),
+        own.fit,
+        np.asarray(own.fit.x[j]),
+        np.asarray(own.fit.sd[j]),
+        in_set=True,
+    )
+
+
+#: what one flight cannot tell (the weak rotor's reason)
+ONE_FLIGHT = (
+    "one flight cannot tell a weak rotor from the vehicle's own imbalance (a centre-of-mass "
+    "offset, a tilted motor); a flight of the healthy vehicle (--baseline HEALTHY.json) can"
+)
+
+
+def rival_reason(c, x, other, g: Gain, tie: bool) -> str:
+    """Why ``c`` (fitted at ``x`` in its own set) is not accepted beside its rival set
+    ``other``, whose held-out gain over it is ``g``."""
+    names = " + ".join(other)
+    figure = f"held-out gain {g.gain:.1%}, 95% interval from {g.lo:.1%}"
+    if tie:
+        text = (
+            f"{names} in its place explains the held-out data as well ({figure} over it): "
+            "indistinguishable on this flight (see indistinguishable)"
+        )
+    else:
+        text = f"{names} in its place fits the held-out data significantly better ({figure})"
+    if c.name == MotorEfficiency.name and ComOffset.name in other:
+        rel = np.asarray(c.relative(np.asarray(x, dtype=float)), dtype=float)
+        k = int(np.argmin(rel))
+        return (
+            f"vehicle imbalance: rotor {k + 1} looks weakest ({rel[k]:.2f} of the median "
+            f"rotor), but {text}; {ONE_FLIGHT}"
+        )
+    return text
