@@ -274,7 +274,11 @@ class Findings:
                     status="rejected",
                     reason=v.reason,
                     fold_x=(
-                        [] if cv_alone is None or v.in_set else [fx[0] for fx in cv_alone.fold_x]
+                        [fx[j] for fx in v.cv.fold_x]
+                        if v.in_set and v.cv is not None
+                        else []
+                        if cv_alone is None
+                        else [fx[0] for fx in cv_alone.fold_x]
                     ),
                     at_bound=fit_at_bound(rp, sc, f, j),
                     gain=v.gain,
@@ -299,6 +303,7 @@ class Findings:
             explanation=base_explanation(c.name),
             status="rejected",
             reason=from_set.reason,
+            fold_x=[fx[j] for fx in from_set.cv.fold_x],
             at_bound=False,
             **self._common(c),
         )

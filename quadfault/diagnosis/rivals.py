@@ -190,17 +190,25 @@ class Rivals:
 
     def fit_set(self, others: list, names, selection: Selection) -> RivalSet | None:
         """``names`` fitted jointly with the terms ``others`` (started from their values; the
-        new effects from their fits alone), cross-validated; None when they cannot be in one
-        model, or when the fit puts a parameter at a bound (not an alternative the data can
-        hold)."""
+        new effects from their fits alone), cross-validated. Another effect the rival pushes
+        to a bound is left out of the rival's model (the rival explains that part of the
+        signal too). None when they cannot be in one model, or when the fit puts a parameter
+        of ``names`` at a bound (not an alternative the data can hold)."""
         new = [self._start(n, selection) for n in names]
         cands = [c for c, _ in others]
         if any(not c.compatible(cands + [o for o, _ in new if o is not c]) for c, _ in new):
             return None
-        cv, f = held_out(self.replay, self.scoring, list(others) + new, self.folds)
-        if any(fit_at_bound(self.replay, self.scoring, f, j) for j in range(len(f.candidates))):
-            return None
-        return RivalSet(tuple(names), f, cv)
+        others = list(others)
+        while True:
+            cv, f = held_out(self.replay, self.scoring, others + new, self.folds)
+            at = [
+                j for j in range(len(f.candidates)) if fit_at_bound(self.replay, self.scoring, f, j)
+            ]
+            if not at:
+                return RivalSet(tuple(names), f, cv)
+            if any(j >= len(others) for j in at):
+                return None
+            others = [t for j, t in enumerate(others) if j not in at]
 
     def compare(self, selection: Selection) -> tuple[Selection, list]:
         """``(selection with the winners in its model, [RivalComparison, ...])``."""
@@ -252,7 +260,28 @@ class Rivals:
     def _swap(self, selection: Selection, comp: RivalComparison, into: RivalSet) -> Selection:
         """``selection`` with the model of ``into`` (the rival set in place of the held)."""
         out_names = set(comp.held.names if into is comp.rival else comp.rival.names)
-        steps = [s for s in selection.steps if s.candidate.name not in out_names]
+        in_fit = {c.name for c in into.fit.candidates}
+        verdicts = dict(selection.verdicts)
+        for s in selection.steps:  # left out of the rival's model (at a bound)
+            name = s.candidate.name
+            if name not in out_names and name not in in_fit:
+                f = selection.final
+                j = [c.name for c in f.candidates].index(name)
+                verdicts[name] = Verdict(
+                    s.candidate,
+                    "suspect",
+                    f"at a bound beside {' + '.join(into.names)}, which explains the flight "
+                    "better or as well: the data asks for more than this effect allows",
+                    f,
+                    np.asarray(f.x[j]),
+                    np.asarray(f.sd[j]),
+                    selection.final_cv,
+                )
+        steps = [
+            s
+            for s in selection.steps
+            if s.candidate.name not in out_names and s.candidate.name in in_fit
+        ]
         kept = {s.candidate.name for s in steps}
         g = comp.gain if into is comp.rival else None
         for c, _ in into.fit.terms:
@@ -260,7 +289,7 @@ class Rivals:
                 steps.append(Step(c, into.fit, into.cv, float(g.gain if g else 0.0)))
         order = {c.name: i for i, (c, _) in enumerate(into.fit.terms)}
         steps.sort(key=lambda s: order[s.candidate.name])
-        verdicts = {k: v for k, v in selection.verdicts.items() if k not in order}
+        verdicts = {k: v for k, v in verdicts.items() if k not in order}
         if comp.outcome == "rival":
             for c, _ in comp.held.terms_of(comp.held.names):
                 verdicts[c.name] = _rival_verdict(c, comp, into)
@@ -293,6 +322,7 @@ class Rivals:
                 selection.final,
                 np.asarray(x),
                 selection.final.sd[j],
+                selection.final_cv,
                 in_set=True,
             )
             selection = self._without(selection, c, verdicts)
@@ -325,6 +355,7 @@ class Rivals:
                 f,
                 np.asarray(f.x[j]),
                 np.asarray(f.sd[j]),
+                selection.final_cv,
             )
             selection = self._without(selection, c, verdicts)
         return selection
@@ -374,7 +405,8 @@ class Rivals:
 
 
 def _rival_verdict(c, comp: RivalComparison, winner: RivalSet) -> Verdict:
-    f = comp.held.fit if winner is comp.rival else comp.rival.fit
+    loser = comp.held if winner is comp.rival else comp.rival
+    f = loser.fit
     j = [o.name for o in f.candidates].index(c.name)
     g = comp.gain_of(winner)
     return Verdict(
@@ -384,6 +416,7 @@ def _rival_verdict(c, comp: RivalComparison, winner: RivalSet) -> Verdict:
         f,
         np.asarray(f.x[j]),
         np.asarray(f.sd[j]),
+        loser.cv,
         in_set=True,
     )
 
@@ -401,6 +434,7 @@ def tie_verdict(c, comp: RivalComparison) -> Verdict:
         own.fit,
         np.asarray(own.fit.x[j]),
         np.asarray(own.fit.sd[j]),
+        own.cv,
         in_set=True,
     )
 
