@@ -646,7 +646,8 @@ def _recording_arrays(recording: Recording, vehicle: Vehicle, window: int):
     if not isinstance(recording, Recording):
         raise ConfigError(f"run() needs a Recording, got {type(recording).__name__}")
     where = recording.path or "recording"
-    if not recording.has_pose:
+    position, velocity, quaternion = recording.position, recording.velocity, recording.quaternion
+    if position is None or velocity is None or quaternion is None:  # not recording.has_pose
         raise ConfigError(
             f"{where}: the IRLS estimator needs position, velocity and attitude "
             "columns (px..pz, vx..vz, qw..qz); this recording is IMU-only"
@@ -667,9 +668,9 @@ def _recording_arrays(recording: Recording, vehicle: Vehicle, window: int):
     t = np.asarray(recording.t, dtype=float)
     cols = (
         ("t", t[:, None]),
-        ("px..pz", recording.position),
-        ("vx..vz", recording.velocity),
-        ("qw..qz", recording.quaternion),
+        ("px..pz", position),
+        ("vx..vz", velocity),
+        ("qw..qz", quaternion),
         ("wx..wz", recording.omega),
         ("f1..f4", recording.thrust_cmd),
     )

@@ -21,6 +21,7 @@ layout (pieces, dimensions, counters) and its constants.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import asdict
 
 import numpy as np
@@ -97,7 +98,7 @@ class _Kernels:
     name = ""
     config_class: type = object
     #: ``kernels()`` -> the module's (reset, update, run, update_rows, estimate)
-    kernels = None
+    kernels: Callable[[], tuple]
 
     #: the float state's declared pieces (:class:`estimators.state.Layout`)
     floats: Layout = None
@@ -111,7 +112,7 @@ class _Kernels:
     counters = None
 
     @staticmethod
-    def constants(vehicle: Vehicle, config) -> np.ndarray:  # pragma: no cover
+    def constants(vehicle: Vehicle, cfg) -> np.ndarray:  # pragma: no cover
         raise NotImplementedError
 
     #: index in ``const`` of the command's upper clip [N] (the recording may lift it)

@@ -61,7 +61,7 @@ from estimators.base import (
     STATUSES,
 )
 from estimators.ekf import IDLE_THRUST
-from estimators.recursive import BatchedRecursive, RecursiveEstimator
+from estimators.recursive import BatchedRecursive, RecursiveEstimator, _Kernels
 from estimators.residuals import (
     RESIDUAL,
     RESIDUAL_ROWS,
@@ -433,7 +433,7 @@ def _kernels():
     return rls_reset, rls_update, rls_run, rls_update_rows, rls_estimate
 
 
-class _RLS:
+class _RLS(_Kernels):
     name = "rls"
     config_class = RLSConfig
     kernels = staticmethod(_kernels)

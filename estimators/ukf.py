@@ -58,7 +58,7 @@ from estimators.base import (
 )
 from estimators.ekf import IDLE_THRUST, NOISE_REFERENCE_DT
 from estimators.linalg import cholesky_into
-from estimators.recursive import BatchedRecursive, RecursiveEstimator
+from estimators.recursive import BatchedRecursive, RecursiveEstimator, _Kernels
 from estimators.rls import check_bounds
 from estimators.state import Layout, all_finite, fields, pack, piece, piece_rows, reset_rows
 from quadfault.errors import ConfigError
@@ -512,7 +512,7 @@ def _kernels():
     return ukf_reset, ukf_update, ukf_run, ukf_update_rows, ukf_estimate
 
 
-class _UKF:
+class _UKF(_Kernels):
     name = "ukf"
     config_class = UKFConfig
     kernels = staticmethod(_kernels)

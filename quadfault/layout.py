@@ -20,6 +20,7 @@ one float buffer (:class:`FlatState`); the compiled update forms each piece as a
 from __future__ import annotations
 
 from collections import namedtuple
+from typing import Any
 
 import numpy as np
 
@@ -121,8 +122,10 @@ class Layout:
 
     def __init__(self, name: str, **shapes):
         self.declared = dict(shapes)
-        self.pieces = namedtuple(name, list(shapes))
-        self.index = self.pieces(*range(len(shapes)))
+        # named tuples made at run time: their fields are the declaration's names, which a
+        # static checker cannot see (typed Any)
+        self.pieces: Any = namedtuple(name, list(shapes))
+        self.index: Any = self.pieces(*range(len(shapes)))
 
     def shapes(self, **dims) -> tuple:
         """The pieces' shapes with the dimensions bound (``dims``: name -> int)."""
@@ -153,7 +156,7 @@ class FlatState:
             self.floats[a:b].reshape((num,) + tuple(s))
             for a, b, s in zip(self.offsets[:-1], self.offsets[1:], shapes)
         )
-        self.views = pieces(views) if pieces is tuple else pieces(*views)
+        self.views: Any = pieces(views) if pieces is tuple else pieces(*views)
 
 
 @jit(inline="always")

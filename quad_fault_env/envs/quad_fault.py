@@ -46,6 +46,8 @@ from quadfault.model.plant import Plant
 from quadfault.model.scenarios import Scenario
 from quadfault.model.trajectory import FlatOutput
 
+#: gymnasium's ``np_random`` property (its getter and setter), extended by the env's
+_NP_RANDOM = vars(gym.Env)["np_random"]
 DEFAULT_DURATION = 20.0  # [s] episode length for named and random scenarios
 #: a fault event at time t_k belongs to the step whose interval [t0, t1) holds it (same
 #: tolerance as the fault windows of quadfault.model.scenarios) [s]
@@ -208,10 +210,12 @@ class QuadFaultEnv(gym.Env):
         )
         self.render_mode = c.render_mode
         self._renderer = None
+        #: the episode's scenario and plant (None before the first reset)
         self.scenario: Scenario | None = None
         self.plant: Plant | None = None
-        self.flight: Flight | None = None
-        self._tables: EpisodeTables | None = None
+        #: the episode's flight and time tables (made by reset)
+        self.flight: Flight
+        self._tables: EpisodeTables
 
     # -- public helpers ----------------------------------------------------------------------
     @property
@@ -238,8 +242,8 @@ class QuadFaultEnv(gym.Env):
             dt=self.dt,
             vehicle=self.vehicle,
             random_trajectory=self.random_trajectory,
-            random_faults=self.random_faults,
-            scenario_options=self.scenario_options,
+            random_faults=self.random_faults or {},
+            scenario_options=self.scenario_options or {},
             thrust_noise=self.thrust_noise,
         )
 
@@ -251,11 +255,12 @@ class QuadFaultEnv(gym.Env):
             raise ConfigError(f"unknown reset option(s) {sorted(unknown)}; only 'scenario'")
         return options.get("scenario", self.scenario_spec)
 
-    def _initial_state(self) -> RigidBodyState:
-        """The episode's true initial state (``episode_start.start_states`` with N = 1)."""
+    def _initial_state(self, scenario: Scenario) -> RigidBodyState:
+        """The true initial state of an episode of ``scenario`` (``episode_start.start_states``
+        with N = 1)."""
         u = self.np_random.uniform(-1.0, 1.0, SPREAD_DRAWS)[None]
         s, _ = start_states(
-            [self.scenario.trajectory],
+            [scenario.trajectory],
             np.zeros(1, dtype=np.int64),
             self.vehicle,
             self.controller_config,
@@ -266,28 +271,26 @@ class QuadFaultEnv(gym.Env):
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
-        self.scenario = self._make_scenario(self._scenario_option(options))
-        self.controller = GeometricController(
-            self.vehicle, self.scenario.trajectory, self.controller_config
-        )
+        self.scenario = sc = self._make_scenario(self._scenario_option(options))
+        self.controller = GeometricController(self.vehicle, sc.trajectory, self.controller_config)
         self.effects = self.physics_draws.draw(self.np_random) if self.physics_draws else ()
         self.plant = Plant(
-            self.vehicle, MotorModel(self.scenario.thrust_noise), effects=self.effects, dt=self.dt
+            self.vehicle, MotorModel(sc.thrust_noise), effects=self.effects, dt=self.dt
         )
-        self.plant.reset(self._initial_state())
+        self.plant.reset(self._initial_state(sc))
         self.flight = Flight(self.plant, self.sensor_noise)
         self.flight.reset(self.np_random)  # the loop draws from the env's generator
         self._views = self.flight.views(0)
         self._tables = EpisodeTables(
-            self.scenario, self.substeps, self.dt, self.vehicle, self.controller_config
+            sc, self.substeps, self.dt, self.vehicle, self.controller_config
         )
         self._tables.attach(self.flight)
-        self.max_steps = int(round(self.scenario.duration / self.control_period))
+        self.max_steps = int(round(sc.duration / self.control_period))
         self._step_count = 0
         self._f_cmd = np.zeros(self.vehicle.n_rotors)
         self._terminal = False
         if reads_truth(self.estimator):  # the labelled oracle
-            self.estimator.bind(self.scenario.efficiency)
+            self.estimator.bind(sc.efficiency)
         self.estimator.reset()
         self._estimate = (
             self.estimator.update(self._sample(0.0, self._state))
@@ -296,7 +299,7 @@ class QuadFaultEnv(gym.Env):
         )
         self.flight.sense()
         self.history = [self.plant.state.p.copy()]
-        ref = self.scenario.trajectory(0.0)
+        ref = sc.trajectory(0.0)
         events = (
             self._fault_events(-np.inf, 0.0, ("onset",)) if self.info_level == "full" else None
         )  # the faults under way from the start
@@ -309,13 +312,14 @@ class QuadFaultEnv(gym.Env):
     @property
     def np_random(self) -> np.random.Generator:
         """The env's one generator (scenarios, initial states, and the flight's noise)."""
-        return gym.Env.np_random.fget(self)
+        return _NP_RANDOM.fget(self)
 
     @np_random.setter
     def np_random(self, value: np.random.Generator) -> None:
-        gym.Env.np_random.fset(self, value)
-        if getattr(self, "flight", None) is not None:  # the loop draws from it
-            self.flight.seed(0, [value])
+        _NP_RANDOM.fset(self, value)
+        flight = getattr(self, "flight", None)
+        if flight is not None:  # the loop draws from it
+            flight.seed(0, [value])
 
     @property
     def _state(self) -> RigidBodyState:
@@ -328,8 +332,15 @@ class QuadFaultEnv(gym.Env):
         views of the flight's arrays)."""
         return self._views[1]
 
+    @property
+    def _episode_scenario(self) -> Scenario:
+        """The episode's scenario (after a reset)."""
+        if self.scenario is None:
+            raise gym.error.ResetNeeded("call reset() first")
+        return self.scenario
+
     def _check_action(self, action) -> np.ndarray:
-        return validate_action(action, self.action_space.shape)
+        return validate_action(action, (self.vehicle.n_rotors,))
 
     def _sample(self, t: float, meas: RigidBodyState) -> Sample:
         return Sample(
@@ -360,7 +371,7 @@ class QuadFaultEnv(gym.Env):
         for an estimator that depends on the newest sample only), the true efficiency and
         accelerometer reading of each substep, and the efficiency at the end."""
         S = self.substeps
-        rows = self._tables.at(k)
+        tab = self._tables.at(k)
         out = self.flight.step(self._f_cmd, S, record=self.flight.records(S))
         done = int(self.flight.steps_run[0])
         t = ((k * S + np.arange(done)) * self.dt).tolist()
@@ -370,15 +381,15 @@ class QuadFaultEnv(gym.Env):
                 t[j], out.p[0, j], out.v[0, j], out.R[0, j], out.w[0, j], self._f_cmd.copy()
             )
 
-        fed = range(0, done, self.estimator_stride)
+        rows = range(0, done, self.estimator_stride)
         if self._stateless_estimator:  # a pure function of the sample: the last one decides
-            fed = fed[-1:]
+            rows = rows[-1:]
         if self.info_level == "full":
             samples = [sample(j) for j in range(done)]
-            fed = [samples[j] for j in fed]
+            fed = [samples[j] for j in rows]
         else:
-            samples, fed = [], [sample(j) for j in fed]
-        eta = rows.eta
+            samples, fed = [], [sample(j) for j in rows]
+        eta = tab.eta
         return samples, fed, eta[:done].copy(), out.accel[0, :done], eta[S].copy()
 
     def step(self, action):
@@ -434,7 +445,7 @@ class QuadFaultEnv(gym.Env):
         ``kinds`` (``"onset"``, ``"end"``) at a time within it."""
         return [
             dict(fault_dict(f), kind=kind, t=tk)
-            for f in self.scenario.efficiency.faults
+            for f in self._episode_scenario.efficiency.faults
             for kind, tk in (("onset", f.onset), ("end", f.end))
             if kind in kinds and t0 - EVENT_TOL <= tk < t1 - EVENT_TOL
         ]
@@ -447,7 +458,7 @@ class QuadFaultEnv(gym.Env):
         if self.info_level == "light":
             return light_info(reason)
         t = self.time
-        state = self._state
+        state, sc = self._state, self._episode_scenario
         S, n = self.substeps, self.vehicle.n_rotors
         eta_rows, sf_rows = np.full((S, n), np.nan), np.full((S, 3), np.nan)
         eta_rows[: len(samples)] = np.reshape(eta_true, (-1, n))
@@ -456,17 +467,15 @@ class QuadFaultEnv(gym.Env):
             light_info(reason)
             | {
                 "t": float(t),
-                "eta_true": (
-                    np.asarray(self.scenario.efficiency(t), dtype=float) if eta_t is None else eta_t
-                ),
+                "eta_true": (np.asarray(sc.efficiency(t), dtype=float) if eta_t is None else eta_t),
                 **estimate_info(self._estimate, self.estimator, n, self._diagnostics_template),
                 "position_error": state.p - ref.position,
                 "tracking_error": float(np.linalg.norm(state.p - ref.position)),
                 "motor_command": self._f_cmd.copy(),
                 "fault_events": events,
-                "faults": [fault_dict(f) for f in self.scenario.efficiency.faults],
-                "scenario": self.scenario.name,
-                "thrust_noise": float(self.scenario.thrust_noise),
+                "faults": [fault_dict(f) for f in sc.efficiency.faults],
+                "scenario": sc.name,
+                "thrust_noise": float(sc.thrust_noise),
                 "samples": samples,
                 "eta_true_samples": eta_rows,
                 "specific_force_samples": sf_rows,

@@ -401,7 +401,7 @@ def recording_columns(rec: Recording, frame: str = "NED") -> tuple[list[str], np
         pos, vel, quat, om, acc = enu_flu_to_ned_frd(pos, vel, quat, om, acc)
     names: list[str] = ["t"]
     blocks = [rec.t[:, None]]
-    if rec.has_pose:
+    if pos is not None and vel is not None and quat is not None:  # rec.has_pose
         names += list(POSE_COLUMNS)
         blocks += [pos, vel, quat]
     names += list(RATE_COLUMNS)
@@ -442,6 +442,8 @@ def recording_sidecar(rec: Recording, frame: str = "NED") -> dict:
     if math.isfinite(veh.rotor_max_thrust):
         vd["max_thrust"] = veh.rotor_max_thrust
     if rec.commands_u is not None:
+        if rec.thrust_curve is None:
+            raise ConfigError("a recording with u commands needs its thrust_curve (a, b, c)")
         a, b, c = rec.thrust_curve
         if a == 0 and b == 0:
             vd["thrust_coefficient"] = c

@@ -85,7 +85,7 @@ _PIN = np.eye(4) * (1.0 - _FREE)[:, None, :]
 class AllocationResult(NamedTuple):
     f: np.ndarray  # rotor thrust commands [N] (before the motors' efficiency)
     wrench: np.ndarray  # wrench the commands give if eta_hat is right [N, N m]
-    mode: str  # one of MODES
+    mode: str | np.ndarray  # one of MODES (an array of them, one per row, for rows)
 
 
 def guard_eta(eta_hat, floor: float = 0.1) -> np.ndarray:

@@ -155,7 +155,7 @@ class AbruptFault:
 class EfficiencySchedule:
     """A base profile followed by faults applied in order."""
 
-    base: object = field(default_factory=ConstantEfficiency)
+    base: EfficiencyProfile = field(default_factory=ConstantEfficiency)
     faults: tuple = ()
 
     def __call__(self, t) -> np.ndarray:
@@ -316,6 +316,7 @@ def random_scenario(
             )
         )
     voltage = None
+    base: EfficiencyProfile
     if rng.random() < degradation_prob:
         voltage = LinearVoltage(12.0, float(rng.uniform(10.5, 11.8)), duration)
         base = VoltageDegradation(voltage, xi=float(rng.uniform(*xi_range)))
@@ -323,6 +324,7 @@ def random_scenario(
         base = ConstantEfficiency()
     if trajectory == "random":
         trajectory = str(rng.choice(["circle", "hover", "lissajous"]))
+    traj: Trajectory
     if trajectory == "circle":
         traj = Circle(radius=float(rng.uniform(1.0, 3.0)), frequency=float(rng.uniform(0.05, 0.15)))
     elif trajectory == "hover":

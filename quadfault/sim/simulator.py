@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -225,7 +226,7 @@ def simulate(
     times, eta = times[:n], eta[:n]
     out = Records(1, *(np.concatenate(parts, axis=1)[:, :n] for parts in list(zip(*chunks))[1:]))
     vbat = None if scenario.voltage is None else scenario.voltage(times)
-    meta = {
+    meta: dict[str, Any] = {
         "scenario": scenario.name,
         "seed": seed,
         "integrator": cfg.integrator,
