@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 from support import oracles
 
+from quadfault import jit
 from quadfault.errors import ConfigError
-from quadfault.model import closed_loop, jit
+from quadfault.model import closed_loop
 from quadfault.model.controller import ControllerConfig, GeometricController
 from quadfault.model.dynamics import RigidBodyState
 from quadfault.model.motors import MotorModel

@@ -6,7 +6,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 from support import oracles
 
-from quadfault.model import closed_loop, controller, dynamics, jit, motors, rotation, sensors
+from quadfault import jit
+from quadfault.model import closed_loop, controller, dynamics, motors, rotation, sensors
 from quadfault.model.controller import ControllerConfig, GeometricController
 from quadfault.model.motors import MotorModel
 from quadfault.model.scenarios import named_scenario
