@@ -195,6 +195,8 @@ LAYERS = (
             "quadfault.model.allocation",
             "quadfault.model.scenarios",
             "quadfault.model.task_scenarios",
+            "quadfault.model.relaxed_hover",
+            "quadfault.model.relaxed_hover_control",
         ),
     ),
     ("io", ("quadfault.io",)),

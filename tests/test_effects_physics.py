@@ -98,6 +98,29 @@ def test_rotor_inertia_hook_gives_kappa_times_the_thrust_step_over_the_step():
     assert want < 0  # rotors 1 and 3 carry yaw sign -1 in the paper's layout
 
 
+def test_rotor_inertia_gyroscopic_moment_is_minus_w_cross_the_rotors_momentum():
+    """With ``momentum`` the spinning rotors carry ``h = -sum_i s_i momentum sqrt(f_i)``
+    along body z: nil for a healthy hover (the momenta cancel), and the moment ``-w x h``
+    at every stage -- perpendicular to w and to z, so it does no work and no yaw."""
+    veh = Vehicle()
+    e = fx.RotorInertia(0.0, momentum=0.02)
+    e.reset(4)
+    e.true_vehicle(veh)
+    w = np.array([0.7, -1.3, 9.0])
+    s = RigidBodyState.at_rest()._replace(w=w)
+    f_hover = np.full(4, veh.hover_thrust)
+    e.rotor_thrust(f_hover, 0.0, 1e-3, s)
+    np.testing.assert_allclose(e.wrench(s, f_hover, 0.0)[1], 0.0, atol=1e-15)
+    f = np.array([0.0, 3.0, 1.0, 3.0])  # rotor 1 stopped
+    e.rotor_thrust(f, 1e-3, 1e-3, s)
+    e.rotor_thrust(f, 2e-3, 1e-3, s)  # hold: no speed-change reaction
+    h = -0.02 * (np.sign(veh.allocation[3]) @ np.sqrt(f))
+    assert h == pytest.approx(float(fx.rotor_momentum(f, np.sign(veh.allocation[3]), 0.02)))
+    M = e.wrench(s, f, 2e-3)[1]
+    np.testing.assert_allclose(M, -np.cross(w, [0.0, 0.0, h]), rtol=1e-12)
+    assert M @ w == pytest.approx(0.0, abs=1e-12) and M[2] == 0.0
+
+
 def test_thrust_rate_telescopes_over_blocks():
     rng = np.random.default_rng(2)
     f, dt = rng.normal(size=(50, 4)), rng.uniform(1e-3, 3e-3, 50)

@@ -29,7 +29,13 @@ from quadfault.model.effects.motor_lag import MotorLag, lag_gain, lag_series
 from quadfault.model.effects.physics import scaled_inertia, vehicle_with
 from quadfault.model.effects.rate_damping import RateDamping, rate_damping_moment
 from quadfault.model.effects.registry import EFFECT_NAMES, EFFECTS
-from quadfault.model.effects.rotor_inertia import RotorInertia, rotor_inertia_moment, thrust_rate
+from quadfault.model.effects.rotor_inertia import (
+    RotorInertia,
+    gyroscopic_moment,
+    rotor_inertia_moment,
+    rotor_momentum,
+    thrust_rate,
+)
 from quadfault.model.effects.rows import single as _single  # noqa: F401  (one-vehicle chain)
 from quadfault.model.effects.spec import canonical_order, parse_effect
 from quadfault.model.effects.thrust_curve import (
@@ -80,6 +86,8 @@ __all__ = [
     "rate_damping_moment",
     "recurve",
     "rotor_inertia_moment",
+    "rotor_momentum",
+    "gyroscopic_moment",
     "scaled_inertia",
     "thrust_rate",
     "vehicle_with",

@@ -1,5 +1,7 @@
 """``rotor_inertia``: the rotors' reaction when they change speed, a yaw moment
-``M_z = kappa sum_i s_i df_i'/dt`` (``s_i`` the sign of rotor i's yaw torque)."""
+``M_z = kappa sum_i s_i df_i'/dt`` (``s_i`` the sign of rotor i's yaw torque), and,
+optionally, their gyroscopic moment ``-w x h`` with the spinning rotors' angular momentum
+``h = -sum_i s_i momentum sqrt(f_i) e_z`` (body frame)."""
 
 from __future__ import annotations
 
@@ -10,7 +12,7 @@ import numpy as np
 
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
-from quadfault.model.effects.base import Compiled, Identifiability, number, vector
+from quadfault.model.effects.base import Compiled, Identifiability, number, param, vector
 from quadfault.model.effects.candidate import Candidate
 from quadfault.model.effects.physics import batch_of, rows_of
 from quadfault.model.rotation import store3
@@ -22,6 +24,26 @@ def thrust_rate1(f_end, f_prev, dt):
     """Mean rate of change [N/s] of a thrust that went from ``f_prev`` to ``f_end`` over
     ``dt`` [s]."""
     return (f_end - f_prev) / dt
+
+
+@jit
+def rotor_momentum1(f, signs, momentum):
+    """The rotors' angular momentum along body ``+z`` [N m s]: rotor i spins against its
+    reaction torque's sign ``s_i`` with ``J_r Omega_i = momentum sqrt(f_i)`` (``f = k_f
+    Omega^2``, ``momentum = J_r / sqrt(k_f)`` [N m s / sqrt(N)]); a rotor producing no
+    thrust does not spin."""
+    h = 0.0
+    for r in range(f.shape[0]):
+        if f[r] > 0.0:
+            h -= signs[r] * momentum * f[r] ** 0.5
+    return h
+
+
+@jit
+def gyroscopic_moment3(w, h):
+    """Body moment [N m] ``-w x (0, 0, h)`` of rotors with angular momentum ``h`` [N m s]
+    along body ``+z`` on a body turning at ``w`` [rad/s]."""
+    return -h * w[1], h * w[0], 0.0
 
 
 @jit
@@ -58,18 +80,27 @@ def _rotor_rate(P, Q, i, a, m, f):
     return s
 
 
+@jit
+def _momentum(P, i, a, f):
+    """The rotors' angular momentum [N m s] of the step's thrusts (:func:`rotor_momentum1`
+    with the parameters' yaw signs and momentum)."""
+    n = f.shape[0]
+    return rotor_momentum1(f, P[i, a + 1 : a + 1 + n], P[i, a + 1 + n])
+
+
 @jit(inline="always")
 def wrench_term(P, Q, i, a, m, f):
-    """The step's numbers: the body moment (3) of the step's thrust rates (parameters kappa,
-    yaw signs s_1 .. s_n)."""
+    """The step's numbers: the yaw moment of the step's thrust rates and the rotors' angular
+    momentum (parameters kappa, yaw signs s_1 .. s_n, momentum)."""
     Mz = rotor_inertia_moment1(_rotor_rate(P, Q, i, a, m, f), P[i, a])
-    return 0.0, 0.0, Mz, 0.0, 0.0, 0.0
+    return 0.0, 0.0, Mz, _momentum(P, i, a, f), 0.0, 0.0
 
 
 @jit(inline="always")
 def wrench_stage(s, v, R, w):
-    """The step's body moment, the same at every stage."""
-    return (0.0, 0.0, 0.0), (s[1], s[2], s[3])
+    """The step's yaw moment plus the gyroscopic moment at the stage's body rate."""
+    g = gyroscopic_moment3(w, s[4])
+    return (0.0, 0.0, 0.0), (s[1] + g[0], s[2] + g[1], s[3])
 
 
 # over arrays -----------------------------------------------------------------------------
@@ -115,6 +146,19 @@ def rotor_inertia_moment(rate: np.ndarray, yaw_signs: np.ndarray, kappa: float) 
     return out.reshape(batch + (3,))
 
 
+def rotor_momentum(f: np.ndarray, yaw_signs, momentum: float) -> float:
+    """The rotors' angular momentum along body ``+z`` [N m s] for produced thrusts ``f``
+    [N] (:func:`rotor_momentum1`)."""
+    f = np.ascontiguousarray(f, dtype=float)
+    signs = np.ascontiguousarray(np.broadcast_to(np.asarray(yaw_signs, float), f.shape))
+    return float(rotor_momentum1(f, signs, float(momentum)))
+
+
+def gyroscopic_moment(w: np.ndarray, h: float) -> np.ndarray:
+    """Body moment [N m] ``-w x (0, 0, h)`` (:func:`gyroscopic_moment3`)."""
+    return np.array(gyroscopic_moment3(np.asarray(w, dtype=float), float(h)))
+
+
 # the effect ------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class RotorInertia(Compiled):
@@ -123,10 +167,19 @@ class RotorInertia(Compiled):
     torque: ``yaw_signs``, by default read from the flown vehicle's allocation at reset). The
     rate over a step is the step from the previous step's produced thrust
     (:func:`thrust_rate1`), so a jump in thrust gives the yaw-rate kick
-    ``kappa sum_i s_i df_i / J_z``."""
+    ``kappa sum_i s_i df_i / J_z``.
+
+    With ``momentum`` > 0 [N m s / sqrt(N)] the spinning rotors also carry angular momentum
+    ``h = -sum_i s_i momentum sqrt(f_i)`` along body z (:func:`rotor_momentum1`; a rotor
+    ``J_r`` with ``f = k_f Omega^2`` has ``momentum = J_r / sqrt(k_f)``), which turns the body
+    rate into the gyroscopic moment ``-w x h`` (:func:`gyroscopic_moment3`): nil while the
+    rotors' momenta cancel (hover of a healthy quadrotor) and large once one rotor stops
+    and the body spins. A consistent pair at hover thrust ``f_h`` has
+    ``kappa = momentum / (2 sqrt(f_h))``."""
 
     kappa: float = 0.001
     yaw_signs: tuple | None = None
+    momentum: float = 0.0
     name: ClassVar[str] = "rotor_inertia"
     order: ClassVar[int] = 10
     identifiability: ClassVar[Identifiability] = Identifiability(
@@ -135,17 +188,36 @@ class RotorInertia(Compiled):
         note="shows in the yaw rate when the rotors change speed",
     )
     explanation: ClassVar[str] = "the rotors' inertia: changing rotor speeds kick the body in yaw"
-    syntax: ClassVar[str] = "KAPPA [m s]"
+    values: ClassVar[tuple] = (1, 2)
+    syntax: ClassVar[str] = "KAPPA [m s] | KAPPA,MOMENTUM [m s, N m s/sqrt(N)]"
     example: ClassVar[str] = "rotor_inertia=0.005"
     parameter: ClassVar[tuple] = ("kappa", "kappa_m_s")
 
     def __post_init__(self):
         number(self.kappa, "rotor_inertia kappa [m s]", 0.0, 10.0)
+        number(self.momentum, "rotor_inertia momentum [N m s/sqrt(N)]", 0.0, 10.0)
         if self.yaw_signs is not None:
             signs = np.sign(
                 vector(self.yaw_signs, len(np.ravel(self.yaw_signs)), "rotor_inertia yaw_signs")
             )
             object.__setattr__(self, "yaw_signs", tuple(float(s) for s in signs))
+
+    def params(self):
+        out = {"kappa_m_s": self.kappa}
+        if self.momentum:
+            out["momentum_N_m_s_per_sqrt_N"] = self.momentum
+        return out
+
+    @classmethod
+    def from_params(cls, params):
+        return cls(
+            kappa=param(params, "kappa_m_s", cls.name),
+            momentum=params.get("momentum_N_m_s_per_sqrt_N", 0.0),
+        )
+
+    @classmethod
+    def from_values(cls, values, options):
+        return cls(*values[:1], momentum=values[1] if len(values) > 1 else 0.0, **options)
 
     def true_vehicle(self, vehicle):
         self.__dict__["_signs"] = np.sign(vehicle.allocation[3])  # the flown rotors' spins
@@ -171,7 +243,7 @@ class RotorInertia(Compiled):
             raise ConfigError(
                 f"rotor_inertia has {len(signs)} yaw signs, the vehicle {n_rotors} rotors"
             )
-        return (self.kappa, *(float(s) for s in signs)), 3 + 2 * n_rotors
+        return (self.kappa, *(float(s) for s in signs), self.momentum), 3 + 2 * n_rotors
 
     @classmethod
     def candidate(cls, ctx):
