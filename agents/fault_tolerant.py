@@ -17,12 +17,19 @@ Both wrap :class:`quadfault.model.controller.GeometricController` (paper eqs. 9-
   35 rad/s), and a 30 degree bound *raises* the circle's RMSE from 2.6 mm to 11 mm, so it is
   off by default.
 
+* :class:`RelaxedHoverFallback` -- the estimate-aware controller until the estimate isolates
+  one rotor below a threshold (:class:`~quadfault.model.relaxed_hover_control.RotorLossDetector`),
+  then the relaxed-hover controller of
+  :mod:`quadfault.model.relaxed_hover_control` on the three remaining rotors (the vehicle
+  spins about a tilted axis and holds its position; the switch latches).
+
 ``eta_hat`` always comes from an estimator (or the explicitly labelled oracle of
 :func:`agents.rollout.fly`); these classes never see the plant.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -32,6 +39,13 @@ import numpy as np
 from quadfault.errors import ConfigError
 from quadfault.model.allocation import EXACT, AllocationConfig, EstimateAwareAllocator
 from quadfault.model.controller import ControllerConfig, ControlOutput, GeometricController
+from quadfault.model.relaxed_hover import SpinPhysics
+from quadfault.model.relaxed_hover_control import (
+    RelaxedHoverController,
+    RelaxedHoverGains,
+    RotorLossDetector,
+    RotorLossSwitch,
+)
 from quadfault.model.trajectory import FlatOutput, Trajectory
 from quadfault.model.vehicle import Vehicle
 
@@ -51,10 +65,17 @@ class FaultTolerantConfig:
         allocation: the estimate-aware allocation (eta floor, priority weights).
         max_heading_error: largest heading error the controller asks to correct [rad]
             (``None``: unbounded, the plain geometric behaviour).
+        detector: when :class:`RelaxedHoverFallback` switches (the estimate isolates a rotor).
+        spin_physics: the spin physics the relaxed-hover controller is designed with (the
+            complete-loss vehicle's by default).
+        relaxed_gains: the relaxed-hover controller's gains.
     """
 
     allocation: AllocationConfig = field(default_factory=AllocationConfig)
     max_heading_error: float | None = None
+    detector: RotorLossDetector = field(default_factory=RotorLossDetector)
+    spin_physics: SpinPhysics = field(default_factory=SpinPhysics)
+    relaxed_gains: RelaxedHoverGains = field(default_factory=RelaxedHoverGains)
 
     def __post_init__(self):
         h = self.max_heading_error
@@ -172,7 +193,63 @@ class EstimateAwareController(GeometricWrenchController):
         return res.f, res.mode
 
 
-CONTROLLERS = {"geometric": GeometricBaseline, "estimate-aware": EstimateAwareController}
+@functools.lru_cache(maxsize=32)
+def relaxed_hover_controller(vehicle, lost, physics, period, gains) -> RelaxedHoverController:
+    """The relaxed-hover controller of ``vehicle`` without rotor ``lost`` (built once per
+    design: its gains come from Riccati equations)."""
+    return RelaxedHoverController(vehicle, lost, physics, period, gains)
+
+
+class RelaxedHoverFallback(EstimateAwareController):
+    """The estimate-aware controller until the estimate isolates a lost rotor, then the
+    relaxed hover on the other three (mode ``"relaxed-hover"``).
+
+    The switch (:attr:`switch`, a :class:`~quadfault.model.relaxed_hover_control.RotorLossSwitch`)
+    sees only ``eta_hat``: ``switch.first_seen`` is the time of the first estimate of the
+    run that isolated the rotor, ``switch.switched`` the time of the switch.
+
+    Args:
+        control_period: the period the commands are held [s] (the relaxed-hover gains are
+            designed for it).
+    """
+
+    name = "relaxed-hover"
+
+    def __init__(
+        self,
+        vehicle: Vehicle,
+        trajectory: Trajectory,
+        config: ControllerConfig | None = None,
+        fault_tolerant: FaultTolerantConfig | None = None,
+        control_period: float = 1e-3,
+    ):
+        super().__init__(vehicle, trajectory, config, fault_tolerant)
+        self.control_period = float(control_period)
+        self.switch = RotorLossSwitch(self.ft.detector)
+
+    def reset(self) -> None:
+        self.switch.reset()
+
+    def command(
+        self, t, p, v, R, w, eta_hat=None, reference: FlatOutput | None = None, feedforward=None
+    ) -> ControlStep:
+        step = super().command(t, p, v, R, w, eta_hat, reference, feedforward)
+        lost = -1 if eta_hat is None else self.switch.update(eta_hat, t)
+        if lost < 0:
+            return step
+        ctrl = relaxed_hover_controller(
+            self.vehicle, lost, self.ft.spin_physics, self.control_period, self.ft.relaxed_gains
+        )
+        ref = self.trajectory(t) if reference is None else reference
+        f = ctrl.command(p, v, R, w, ref.position, ref.velocity, ref.acceleration)
+        return ControlStep(f, step.out, "relaxed-hover", step.heading_clamped)
+
+
+CONTROLLERS = {
+    "geometric": GeometricBaseline,
+    "estimate-aware": EstimateAwareController,
+    "relaxed-hover": RelaxedHoverFallback,
+}
 
 
 def make_controller(
@@ -181,10 +258,14 @@ def make_controller(
     trajectory: Trajectory,
     config: ControllerConfig | None = None,
     fault_tolerant: FaultTolerantConfig | None = None,
+    control_period: float = 1e-3,
 ):
-    """``"geometric"`` or ``"estimate-aware"`` for ``trajectory``."""
+    """``"geometric"``, ``"estimate-aware"`` or ``"relaxed-hover"`` for ``trajectory``
+    (``control_period`` [s]: the period of the relaxed hover's gains)."""
     if kind == "geometric":
         return GeometricBaseline(vehicle, trajectory, config)
     if kind == "estimate-aware":
         return EstimateAwareController(vehicle, trajectory, config, fault_tolerant)
+    if kind == "relaxed-hover":
+        return RelaxedHoverFallback(vehicle, trajectory, config, fault_tolerant, control_period)
     raise ConfigError(f"unknown controller {kind!r}; choose from {', '.join(CONTROLLERS)}")

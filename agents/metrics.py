@@ -147,3 +147,21 @@ def flight_metrics(
     rec = recovery_times(t, e, onsets, recovery) if len(t) > 1 else ()
     duration = float(t[-1] - t[0] + dt) if len(t) else 0.0
     return FlightMetrics(rmse, crash_time is not None, crash_time, peak, energy, rec, duration)
+
+
+def held_after_loss(
+    t: np.ndarray,
+    pos_error: np.ndarray,
+    onset: float,
+    duration: float,
+    radius: float = 1.0,
+    settle: float = 2.0,
+) -> bool:
+    """Whether a flight held its hover point through a rotor loss: it lasted to
+    ``duration`` [s] and the position error stayed within ``radius`` [m] from ``settle``
+    [s] after the ``onset`` [s] to the end (the complete-loss task's success)."""
+    t, e = np.asarray(t, float), np.asarray(pos_error, float)
+    if t.size == 0 or t[-1] < duration - 0.05:  # crashed before the end
+        return False
+    late = e[t >= onset + settle]
+    return bool(late.size and np.all(late <= radius))

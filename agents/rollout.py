@@ -33,6 +33,7 @@ from quadfault.errors import ConfigError
 from quadfault.io.sample import Sample
 from quadfault.model import flight as loop
 from quadfault.model.controller import ControllerConfig
+from quadfault.model.effects.spec import parse_effect
 from quadfault.model.motors import MotorModel
 from quadfault.model.plant import Plant
 from quadfault.model.scenarios import Scenario
@@ -109,6 +110,9 @@ class Flight:
     eta_hat: np.ndarray
     eta_true: np.ndarray
     modes: dict = field(default_factory=dict)  # allocation mode -> number of control steps
+    #: the relaxed-hover switch: ``{"rotor", "first_seen", "switched"}`` (rotor 0-based,
+    #: times [s]; None before a switch), or None for the other controllers
+    switch: dict | None = None
 
 
 class _Tabulated:
@@ -129,6 +133,7 @@ def fly(
     seed: int = 0,
     *,
     vehicle: Vehicle | None = None,
+    effects=(),
     config: FlightConfig | None = None,
     progress_bar=None,
 ) -> Flight:
@@ -137,7 +142,9 @@ def fly(
 
     ``seed`` seeds the one generator of the plant's thrust noise and the sensor noise.
     The controller knows the nominal ``vehicle``; the plant flies the same vehicle with the
-    scenario's efficiency schedule.
+    scenario's efficiency schedule and ``effects`` (effect objects or ``--effect`` specs,
+    e.g. :data:`quadfault.model.relaxed_hover.ROTOR_LOSS_EFFECTS`). The ``"relaxed-hover"``
+    controller's switch times are in ``Flight.switch``.
     """
     cfg = config or FlightConfig()
     veh = vehicle or Vehicle()
@@ -148,14 +155,22 @@ def fly(
     if n < 2:
         raise ConfigError(f"scenario duration {scenario.duration} s is shorter than two steps")
     times = cfg.dt * np.arange(n)
-    plant = Plant(veh, MotorModel(scenario.thrust_noise, True), dt=cfg.dt)
+    fx = tuple(parse_effect(e) if isinstance(e, str) else e for e in effects or ())
+    plant = Plant(veh, MotorModel(scenario.thrust_noise, True), effects=fx, dt=cfg.dt)
     plant.reset()
     # the loop: the sensors without the accelerometer, the commands set here
     flight = loop.Flight(plant, cfg.sensor_noise, record_accel=False)
     flight.reset(rng)
     eta_table = flight.plan(n, scenario.efficiency)
     efficiency = _Tabulated(cfg.dt, eta_table)
-    ctrl = make_controller(controller, veh, scenario.trajectory, cfg.controller, cfg.fault_tolerant)
+    ctrl = make_controller(
+        controller,
+        veh,
+        scenario.trajectory,
+        cfg.controller,
+        cfg.fault_tolerant,
+        cfg.dt * cfg.control_decimation,
+    )
     est = make_estimator(estimator, veh, schedule=efficiency)  # the schedule: the oracle's
     source = estimator if isinstance(estimator, str) else getattr(est, "name", type(est).__name__)
     est.reset()
@@ -245,4 +260,12 @@ def fly(
         tr_eta_hat[:m],
         tr_eta[:m],
         modes,
+        _switch_record(ctrl),
     )
+
+
+def _switch_record(ctrl) -> dict | None:
+    sw = getattr(ctrl, "switch", None)
+    if sw is None:
+        return None
+    return {"rotor": sw.lost, "first_seen": sw.first_seen, "switched": sw.switched}

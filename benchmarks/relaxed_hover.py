@@ -74,7 +74,7 @@ def hold(seconds: float) -> None:
         flight.reset(np.random.default_rng(0))
         eta = np.ones(4)
         eta[lost] = 0.0
-        flight.plan(n, lambda t: eta)
+        flight.plan(n, lambda t, eta=eta: eta)
         rec = flight.records(n)
         flight.step(h.f, n, record=rec)
         dw = float(np.max(np.abs(rec.w[0, 1:] - h.w)))  # row 0: the measurement before reset
