@@ -29,7 +29,6 @@ Both wrap :class:`quadfault.model.controller.GeometricController` (paper eqs. 9-
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -41,10 +40,10 @@ from quadfault.model.allocation import EXACT, AllocationConfig, EstimateAwareAll
 from quadfault.model.controller import ControllerConfig, ControlOutput, GeometricController
 from quadfault.model.relaxed_hover import SpinPhysics
 from quadfault.model.relaxed_hover_control import (
-    RelaxedHoverController,
     RelaxedHoverGains,
     RotorLossDetector,
     RotorLossSwitch,
+    relaxed_hover_controller,
 )
 from quadfault.model.trajectory import FlatOutput, Trajectory
 from quadfault.model.vehicle import Vehicle
@@ -191,13 +190,6 @@ class EstimateAwareController(GeometricWrenchController):
     def _allocate(self, wrench, eta_hat):
         res = self.allocator.allocate(wrench, eta_hat)  # A diag(eta_hat) f = w (eqs. 12-13)
         return res.f, res.mode
-
-
-@functools.lru_cache(maxsize=32)
-def relaxed_hover_controller(vehicle, lost, physics, period, gains) -> RelaxedHoverController:
-    """The relaxed-hover controller of ``vehicle`` without rotor ``lost`` (built once per
-    design: its gains come from Riccati equations)."""
-    return RelaxedHoverController(vehicle, lost, physics, period, gains)
 
 
 class RelaxedHoverFallback(EstimateAwareController):

@@ -25,6 +25,8 @@ import gymnasium as gym
 
 from quad_fault_env.envs.config import InitialStateSpread, RewardConfig, TerminationLimits
 from quadfault.errors import ConfigError
+from quadfault.model.relaxed_hover import ROTOR_LOSS_EFFECTS, rotor_loss_vehicle
+from quadfault.model.vehicle import Vehicle
 
 #: the classes every id registers (``gym.make`` / ``gym.make_vec``)
 ENTRY_POINT = "quad_fault_env.envs.quad_fault:QuadFaultEnv"
@@ -66,6 +68,9 @@ class Task:
         max_episode_steps: a step limit (``TimeLimit``) registered with the id, or None
             (the episode ends at ``duration``; every ``-v1`` id).
         deprecated_by: the id that replaces this one, or None.
+        vehicle: the vehicle flown (None: the env's default, the paper's F450).
+        effects: the plant's effects (``effects`` keyword of the env), or None.
+        allocation: the base controller's allocation (None: the env's default, nominal).
     """
 
     id: str
@@ -80,6 +85,9 @@ class Task:
     limits: TerminationLimits | None = None
     max_episode_steps: int | None = None
     deprecated_by: str | None = None
+    vehicle: Vehicle | None = None
+    effects: tuple | None = None
+    allocation: str | None = None
 
     def __post_init__(self):
         if not (math.isfinite(self.duration) and self.duration > 0):
@@ -101,6 +109,9 @@ class Task:
             out["initial_spread"] = self.initial_spread
         if self.limits is not None:
             out["limits"] = self.limits
+        for key in ("vehicle", "effects", "allocation"):
+            if getattr(self, key) is not None:
+                out[key] = getattr(self, key)
         return out
 
 
@@ -123,6 +134,12 @@ _ROTOR_LOSS = (
     "0-0.5 and stays there; survive and hold the set-point; IRLS estimate in the "
     "observation"
 )
+_ROTOR_LOSS_COMPLETE = (
+    "hover for 10 s on the complete-loss vehicle (thrust-to-weight 2.75, body rate damping, "
+    "rotor inertia and gyroscopic moment); between 3 and 6 s one rotor stops (efficiency 0); "
+    "hold the set-point spinning on three rotors (success: within 1 m from 2 s after the "
+    "loss to the end); base: the relaxed-hover fallback on the IRLS estimate"
+)
 #: small initial-state spread of the new tasks
 TASK_SPREAD = InitialStateSpread(position=0.1, velocity=0.1, attitude=0.05, rate=0.1)
 
@@ -138,6 +155,17 @@ TASKS = (
     ),
     Task("QuadFaultTrack-v0", _TRACK, "track", 20.0, initial_spread=TASK_SPREAD),
     Task("QuadFaultRotorLoss-v0", _ROTOR_LOSS, "rotor_loss", 10.0, initial_spread=TASK_SPREAD),
+    Task(
+        "QuadFaultRotorLossComplete-v0",
+        _ROTOR_LOSS_COMPLETE,
+        "rotor_loss",
+        10.0,
+        scenario_options={"level": (0.0, 0.0)},
+        initial_spread=TASK_SPREAD,
+        vehicle=rotor_loss_vehicle(),
+        effects=ROTOR_LOSS_EFFECTS,
+        allocation="relaxed-hover",
+    ),
     Task(
         "QuadFault-v0",
         _CIRCLE,

@@ -227,6 +227,8 @@ class QuadFaultVectorEnv(VectorEnv):
         self._scenario_names = np.full(N, None, dtype=object)
         self.physics_draws = e0.physics_draws  # per-vehicle physics drawn at each reset
         self._effects = np.full(N, None, dtype=object)
+        #: the relaxed-hover base's per-row switches (allocation="relaxed-hover")
+        self._relaxed = None if e0.relaxed is None else e0.relaxed.batch(N)
         self._started = False
 
     # -- the vehicles' arrays (views of the flight's state) ----------------------------------
@@ -313,6 +315,8 @@ class QuadFaultVectorEnv(VectorEnv):
             ]
         )
         self.steps[rows] = 0
+        if self._relaxed is not None:
+            self._relaxed.reset(rows)
         self._tables.invalidate(rows)
         self._ensure_tables(self.steps, WINDOW - 1)  # the rows' windows from t = 0
         self.eta_hat[rows], self.eta_sd[rows], self.status[rows] = 1.0, np.nan, "warmup"
@@ -386,7 +390,18 @@ class QuadFaultVectorEnv(VectorEnv):
             f_ctrl = self._controller.commands(
                 m.p, m.v, m.R, m.w, self._tables.references(self.steps)
             )
-        return cfg.commands(a, self.vehicle, f_ctrl, self.eta_hat, e0.compensate, e0.allocator)
+        f = cfg.commands(a, self.vehicle, f_ctrl, self.eta_hat, e0.compensate, e0.allocator)
+        if self._relaxed is not None:  # rows whose estimate isolated a lost rotor
+            t = self.steps * self.substeps * self.dt
+            lost = self._relaxed.update(t, self.eta_hat)
+            if (lost >= 0).any():
+                m, refs = self.meas, self._tables.references(self.steps)
+                for i in np.flatnonzero(lost >= 0).tolist():
+                    fr = self._relaxed.commands(
+                        int(lost[i]), m.p[i], m.v[i], m.R[i], m.w[i], refs[i]
+                    )
+                    f[i] = cfg.commands(a[i], self.vehicle, fr)
+        return f
 
     def _substeps(self, commands: np.ndarray, ts: np.ndarray, active: np.ndarray) -> None:
         """The control step's physics substeps of the ``active`` rows with ``commands`` held,

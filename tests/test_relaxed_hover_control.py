@@ -28,7 +28,7 @@ VEHICLE = rotor_loss_vehicle()
 
 
 def test_detector_isolates_one_rotor_holds_and_latches():
-    sw = RotorLossSwitch(RotorLossDetector(threshold=0.15, others=0.5, hold=3))
+    sw = RotorLossSwitch(RotorLossDetector(threshold=0.15, others=0.5, hold=0.002))
     assert sw.update([1.0, 0.3, 1.0, 1.0], 0.0) == -1  # a partial loss: no switch
     assert sw.update([0.1, 0.1, 1.0, 1.0], 0.001) == -1  # two low: not isolated
     assert sw.update([1.0, 1.0, 0.05, 1.0], 0.002) == -1
@@ -74,3 +74,29 @@ def test_fallback_switches_on_the_estimate_and_survives_a_complete_loss():
     assert 2.0 <= f.switch["switched"] <= 2.01
     assert f.modes.get("relaxed-hover", 0) > 3000
     assert np.all(f.f_cmd[f.t > 2.1, 2] == 0.0)  # the lost rotor is not asked for thrust
+
+
+def test_complete_loss_task_flies_the_named_vehicle_with_the_relaxed_hover_base():
+    """The registered id: the complete-loss vehicle, level 0, the relaxed-hover base; its
+    zero-action episode with the oracle's estimate switches after the onset and survives."""
+    import gymnasium as gym
+    from gymnasium.utils.env_checker import check_env
+
+    import quad_fault_env  # noqa: F401
+
+    env = gym.make("QuadFaultRotorLossComplete-v0", estimator="truth")
+    u = env.unwrapped
+    assert u.vehicle.thrust_to_weight == 2.75 and u.allocation == "relaxed-hover"
+    check_env(u, skip_render_check=True)
+    env.reset(seed=0)
+    fault = u.scenario.efficiency.faults[0]
+    assert fault.level == 0.0 and 3.0 <= fault.onset <= 6.0
+    done = False
+    while not done:
+        _, _, term, trunc, _ = env.step(np.zeros(4))
+        done = term or trunc
+    assert not term
+    sw = u.relaxed.switches[0]
+    assert sw.lost == fault.motor - 1 and fault.onset <= sw.switched <= fault.onset + 0.03
+    with pytest.raises(ConfigError, match="residual"):
+        gym.make("QuadFaultRotorLossComplete-v0", action_mode="wrench")

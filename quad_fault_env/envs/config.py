@@ -20,7 +20,7 @@ from quadfault.jit import jit
 ACTION_MODES = ("motor", "residual", "wrench")
 #: how a wrench becomes rotor commands: the nominal allocation inverse, or the estimate-aware
 #: allocation (quadfault.model.allocation) with the observation's estimate
-ALLOCATIONS = ("nominal", "estimate-aware")
+ALLOCATIONS = ("nominal", "estimate-aware", "relaxed-hover")
 ESTIMATOR_RATES = ("physics", "control")
 OBSERVATION_KINDS = ("flat", "dict")
 TERMINATION_REASONS = ("crash", "out_of_bounds", "excessive_tilt", "non_finite")

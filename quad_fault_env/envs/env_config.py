@@ -191,16 +191,22 @@ class EnvConfig:
         allocation = self.allocation
         if allocation not in ALLOCATIONS:
             raise ConfigError(f"allocation must be one of {ALLOCATIONS}, got {allocation!r}")
-        if allocation == "estimate-aware" and self.action_config.mode == "motor":
+        aware = allocation in ("estimate-aware", "relaxed-hover")
+        if aware and self.action_config.mode == "motor":
             raise ConfigError(
-                "allocation='estimate-aware' allocates a wrench (the controller's "
+                f"allocation={allocation!r} allocates a wrench (the controller's "
                 "in residual mode, the agent's in wrench mode); motor mode has "
                 "none"
             )
-        if allocation == "estimate-aware" and self.compensate:
+        if allocation == "relaxed-hover" and self.action_config.mode != "residual":
+            raise ConfigError(
+                "allocation='relaxed-hover' replaces the base controller: it needs "
+                "action_mode='residual'"
+            )
+        if aware and self.compensate:
             raise ConfigError(
                 "choose compensate=True (the nominal split divided by eta_hat) or "
-                "allocation='estimate-aware' (which already uses eta_hat), not both"
+                f"allocation={allocation!r} (which already uses eta_hat), not both"
             )
 
     # -- derived values ----------------------------------------------------------------------

@@ -33,6 +33,7 @@ from quad_fault_env.estimation import (
     reads_truth,
 )
 from quad_fault_env.observation import ObservationLayout
+from quad_fault_env.relaxed_base import RelaxedHoverBase
 from quad_fault_env.rendering import FlightRenderer
 from quad_fault_env.time_tables import EpisodeTables
 from quadfault.errors import ConfigError
@@ -129,7 +130,11 @@ class QuadFaultEnv(gym.Env):
             mode) becomes rotor commands: ``"nominal"`` (the allocation inverse, eq. 12) or
             ``"estimate-aware"`` (:mod:`quadfault.model.allocation`: ``A diag(eta_hat) f = w``
             within the rotor limits, giving up yaw first to keep thrust, roll and pitch; fed
-            by the observation's estimate, never the truth unless ``estimator="truth"``).
+            by the observation's estimate, never the truth unless ``estimator="truth"``), or
+            ``"relaxed-hover"`` (residual mode: the estimate-aware allocation until the
+            estimate isolates a rotor below 0.15, then the relaxed-hover controller on the
+            other three, :mod:`quad_fault_env.relaxed_base`; the switch latches for the
+            episode; the complete-loss task, ``QuadFaultRotorLossComplete-v0``, flies it).
         observation: ``"flat"`` or ``"dict"``. reference_acceleration: add the ``ref_acc`` slot.
         reward, limits, initial_spread: ``RewardConfig``, ``TerminationLimits``,
             ``InitialStateSpread``.
@@ -195,9 +200,14 @@ class QuadFaultEnv(gym.Env):
         #: oracle)
         self._stateless_estimator = is_stateless(self.estimator)
         self.compensate, self.allocation = bool(c.compensate), c.allocation
+        aware = c.allocation in ("estimate-aware", "relaxed-hover")
         #: the estimate-aware allocation (None: the nominal allocation inverse)
-        self.allocator = (
-            EstimateAwareAllocator(self.vehicle) if c.allocation == "estimate-aware" else None
+        self.allocator = EstimateAwareAllocator(self.vehicle) if aware else None
+        #: the relaxed-hover base (None unless allocation="relaxed-hover")
+        self.relaxed = (
+            RelaxedHoverBase(self.vehicle, c.effects, c.control_period)
+            if c.allocation == "relaxed-hover"
+            else None
         )
         self.controller_config = c.controller_config
         self.observation_kind = c.observation
@@ -289,6 +299,8 @@ class QuadFaultEnv(gym.Env):
         self._step_count = 0
         self._f_cmd = np.zeros(self.vehicle.n_rotors)
         self._terminal = False
+        if self.relaxed is not None:
+            self.relaxed.reset()
         if reads_truth(self.estimator):  # the labelled oracle
             self.estimator.bind(sc.efficiency)
         self.estimator.reset()
@@ -350,6 +362,12 @@ class QuadFaultEnv(gym.Env):
     def motor_commands(self, action: np.ndarray, t: float, meas: RigidBodyState) -> np.ndarray:
         """Rotor thrust commands [N] for a checked ``action`` (see ``ActionConfig``)."""
         cfg = self.action_config
+        if self.relaxed is not None:
+            lost = int(self.relaxed.update(t, self._estimate.eta)[0])
+            if lost >= 0:  # the relaxed hover replaces the base controller
+                refs = self._tables.at(self._step_count).start
+                f_ctrl = self.relaxed.commands(lost, meas.p, meas.v, meas.R, meas.w, refs)
+                return cfg.commands(action, self.vehicle, f_ctrl)
         f_ctrl = self._controller_commands(t, meas) if cfg.mode == "residual" else None
         return cfg.commands(
             action, self.vehicle, f_ctrl, self._estimate.eta, self.compensate, self.allocator

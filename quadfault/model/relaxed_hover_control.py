@@ -23,6 +23,7 @@ estimate through :class:`RotorLossDetector`, never from the plant.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 
@@ -175,29 +176,42 @@ class RelaxedHoverController:
         return np.clip(f, 0.0, veh.rotor_max_thrust)
 
 
+@functools.lru_cache(maxsize=64)
+def relaxed_hover_controller(
+    vehicle: Vehicle,
+    lost: int,
+    physics: SpinPhysics | None = None,
+    period: float = 1e-3,
+    gains: RelaxedHoverGains | None = None,
+) -> RelaxedHoverController:
+    """The :class:`RelaxedHoverController` of these arguments, built once (its gains come
+    from Riccati equations; it holds no state between commands)."""
+    return RelaxedHoverController(vehicle, int(lost), physics, float(period), gains)
+
+
 @dataclass(frozen=True)
 class RotorLossDetector:
     """When the estimate says a rotor is gone: one rotor's efficiency estimate below
-    ``threshold`` while every other rotor's is at least ``others`` (isolated), for ``hold``
-    consecutive estimates. A detection latches (a lost rotor does not come back).
+    ``threshold`` while every other rotor's is at least ``others`` (isolated), in every
+    estimate for ``hold`` seconds. A detection latches (a lost rotor does not come back).
 
     Attributes:
         threshold: efficiency below which a rotor counts as lost [-].
         others: least efficiency of every other rotor [-].
-        hold: consecutive estimates that must agree.
+        hold: how long the estimates must agree [s] (0: the first isolating estimate).
     """
 
     threshold: float = 0.15
     others: float = 0.5
-    hold: int = 5
+    hold: float = 0.004
 
     def __post_init__(self):
         if not (0.0 < self.threshold < self.others <= 1.5):
             raise ConfigError(
                 f"need 0 < threshold < others <= 1.5, got {self.threshold!r}, {self.others!r}"
             )
-        if int(self.hold) < 1:
-            raise ConfigError(f"hold must be >= 1, got {self.hold!r}")
+        if not (math.isfinite(self.hold) and self.hold >= 0):
+            raise ConfigError(f"hold must be >= 0 [s], got {self.hold!r}")
 
     def candidate(self, eta_hat) -> int:
         """The rotor the estimate isolates below the threshold now, or -1."""
@@ -211,7 +225,8 @@ class RotorLossDetector:
 
 class RotorLossSwitch:
     """The detector's state over a flight: feed it each estimate (:meth:`update`); once a
-    rotor has been isolated ``hold`` times in a row, :attr:`lost` names it (latched) and
+    rotor has been isolated by every estimate for ``hold`` seconds, :attr:`lost` names it
+    (latched) and
     :attr:`first_seen` / :attr:`switched` give the times [s] of the first isolating
     estimate of that run and of the switch."""
 
@@ -220,7 +235,7 @@ class RotorLossSwitch:
         self.reset()
 
     def reset(self) -> None:
-        self.lost, self.run, self.candidate_rotor = -1, 0, -1
+        self.lost, self.candidate_rotor = -1, -1
         self.first_seen = self.switched = None
 
     def update(self, eta_hat, t: float) -> int:
@@ -228,11 +243,9 @@ class RotorLossSwitch:
         if self.lost >= 0:
             return self.lost
         k = self.detector.candidate(eta_hat)
-        if k < 0 or k != self.candidate_rotor:
-            self.run, self.candidate_rotor = (0, -1) if k < 0 else (1, k)
+        if k != self.candidate_rotor:
+            self.candidate_rotor = k
             self.first_seen = None if k < 0 else float(t)
-        else:
-            self.run += 1
-        if k >= 0 and self.run >= int(self.detector.hold):
+        if k >= 0 and float(t) - self.first_seen >= self.detector.hold - 1e-12:
             self.lost, self.switched = k, float(t)
         return self.lost
