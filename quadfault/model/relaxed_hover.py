@@ -44,6 +44,7 @@ import numpy as np
 from quadfault.errors import ConfigError
 from quadfault.model.effects.rate_damping import RateDamping, rate_damping_moment
 from quadfault.model.effects.rotor_inertia import RotorInertia, gyroscopic_moment, rotor_momentum
+from quadfault.model.effects.spec import parse_effect
 from quadfault.model.vehicle import Vehicle
 
 #: the complete-loss vehicle's thrust-to-weight ratio (the paper's F450 otherwise)
@@ -93,8 +94,6 @@ class SpinPhysics:
     def of(cls, effects) -> SpinPhysics:
         """The physics of ``effects`` (effect objects or specs): their ``rate_damping`` and
         ``rotor_inertia`` (zero when absent)."""
-        from quadfault.model.effects.spec import parse_effect
-
         linear, quadratic, momentum = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0
         for e in effects or ():
             e = parse_effect(e) if isinstance(e, str) else e
