@@ -40,6 +40,7 @@ from agents.train_eval import (
     planned_timesteps,
     steps_per_rollout,
 )
+from estimators.registry import estimator_names
 from quadfault.errors import ConfigError, QuadfaultError
 from quadfault.fileio import atomic_write_files, atomic_write_text
 
@@ -454,8 +455,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--estimator",
-        choices=("irls", "ekf", "truth", "none"),
-        help="shortcut for env_kwargs.estimator",
+        choices=estimator_names(),
+        help="shortcut for env_kwargs.estimator (every registered estimator)",
     )
     parser.add_argument(
         "--action-mode",

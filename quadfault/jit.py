@@ -96,7 +96,14 @@ def _compile_notice(stream=None) -> bool:
         return False
     _noticed = True
     cache = os.environ.get("NUMBA_CACHE_DIR")
-    print(COMPILE_NOTICE.format(where=f" in {cache}" if cache else ""), file=stream, flush=True)
+    line = COMPILE_NOTICE.format(where=f" in {cache}" if cache else "")
+    try:  # through tqdm: an active progress bar is cleared, the notice gets its own line
+        from tqdm import tqdm
+    except ImportError:  # pragma: no cover - tqdm is a dependency
+        print(line, file=stream, flush=True)
+    else:
+        tqdm.write(line, file=stream)
+        stream.flush()
     return True
 
 

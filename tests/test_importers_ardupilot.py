@@ -198,3 +198,39 @@ def test_old_text_log_says_what_is_missing(tmp_path, case):
         assert "no body rates" in res.stderr and "ATT, CURR, GPS, MOT" in res.stderr
     else:
         assert "no time stamps" in res.stderr
+
+
+# ------------------------------------------------------------------ every era's names
+_OLD = {
+    "rcou_chan": {"RCOU": ("RCOU", {f"C{k}": f"Chan{k}" for k in range(1, 9)})},
+    "rcou_ch": {"RCOU": ("RCOU", {f"C{k}": f"Ch{k}" for k in range(1, 9)})},
+    "imu_no_instance": {"IMU": ("IMU", {"I": None})},
+    "imu2_only": {"IMU": ("IMU2", {"I": None})},
+    "ahr2_attitude": {"ATT": ("AHR2", {})},
+    "nkf": {"XKF1": ("NKF1", {"C": None}), "XKF4": ("NKF4", {"C": None})},
+    "ekf_3_2": {"XKF1": ("EKF1", {"C": None}), "XKF4": ("EKF4", {"C": None})},
+}
+
+
+@pytest.mark.parametrize("family", list(_OLD))
+@pytest.mark.parametrize("text", [False, True], ids=["bin", "log"])
+def test_every_era_names_import_alike(tmp_path, family, text):
+    """Each rename family of the messages the importer reads, as older firmware wrote it,
+    imports to the same recording as the current names."""
+    ref_path, path = tmp_path / "new.bin", tmp_path / ("old.log" if text else "old.bin")
+    dataflash_flight(ref_path)
+    dataflash_flight(path, text=text, renames=_OLD[family])
+    ref, rec = _import(ref_path, mass=1.5), _import(path, mass=1.5)
+    assert len(rec) == len(ref)
+    np.testing.assert_allclose(rec.commands_u, ref.commands_u, atol=1e-6)
+    np.testing.assert_allclose(rec.accel, ref.accel, atol=1e-5)
+    np.testing.assert_allclose(rec.position, ref.position, atol=1e-5)
+    np.testing.assert_allclose(rec.quaternion, ref.quaternion, atol=1e-5)
+    assert not np.any((rec.t > 8.0) & (rec.t < 9.0))  # the EKF status still flags velocity
+
+
+def test_rcou_without_the_motor_channels_names_what_it_has(tmp_path):
+    path = tmp_path / "flight.bin"
+    dataflash_flight(path, renames={"RCOU": ("RCOU", {"C5": "Ch5"})})  # C1..C4, Ch5, C6..
+    with pytest.raises(QuadfaultError, match=r"lacks the motor channels \['C5'.*it has C1"):
+        _import(path)

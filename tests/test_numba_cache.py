@@ -191,6 +191,28 @@ def test_no_notice_when_stderr_is_not_a_terminal(monkeypatch):
     assert jit._compile_notice(quiet) is False and quiet.getvalue() == ""
 
 
+def test_notice_gets_its_own_line_under_a_progress_bar(monkeypatch):
+    import io
+
+    from tqdm.auto import tqdm
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    monkeypatch.setattr(jit, "_noticed", False)
+    term = Terminal()
+    bar = tqdm(total=10, file=term, disable=False)
+    bar.update(3)
+    assert jit._compile_notice(term) is True
+    bar.update(3)
+    bar.close()
+    lines = term.getvalue().replace("\r", "\n").split("\n")
+    notice = [ln for ln in lines if "compiling kernels" in ln]
+    assert notice and all(ln.startswith("quadfault: compiling") for ln in notice)
+    assert not any("%|" in ln for ln in notice)
+
+
 def test_jit_compiles_and_falls_back_to_python(monkeypatch):
     @jit.jit
     def add(a, b):

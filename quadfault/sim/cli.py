@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import sys
 from pathlib import Path
 
 from quadfault.errors import ConfigError
@@ -28,9 +29,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument(
         "--scenario",
-        default="combined",
+        default=None,
         choices=SCENARIO_NAMES,
-        help="efficiency schedule and trajectory (default: combined)",
+        help="efficiency schedule and trajectory (default: combined, the paper's faults and "
+        "battery sag; nominal when --effect is given)",
     )
     p.add_argument(
         "--trajectory",
@@ -155,6 +157,14 @@ def run(args) -> int:
     from quadfault.io.recording import sidecar_path
 
     check_writable([out, sidecar_path(out)], force=args.force)
+    if args.scenario is None:
+        args.scenario = "nominal" if args.effect else "combined"
+        if args.effect and not args.quiet:
+            print(
+                "note: --effect without --scenario flies the nominal scenario (no motor "
+                "faults); give --scenario combined for the paper's faults under the effect",
+                file=sys.stderr,
+            )
     scenario = named_scenario(args.scenario, args.duration, args.dt)
     if args.trajectory is not None:
         from quadfault.model.trajectory import Circle, Hover, Lissajous

@@ -297,11 +297,15 @@ def dataflash_flight(
     motor_channels=(5, 6, 7, 8),
     imu_rate: float = 400.0,
     duration: float = T_END,
+    renames: dict | None = None,
 ) -> None:
     """Write the synthetic flight as an ArduPilot DataFlash log: binary, or text with
     ``text=True``. Motors on ``motor_channels`` (``SERVOn_FUNCTION``), ESC telemetry on
     the same instances, a broken second IMU and EKF core, velocity flagged invalid on
-    ``invalid_vxy`` [s], land events."""
+    ``invalid_vxy`` [s], land events. ``renames``: ``{message: (name, {column: new name
+    or None})}`` writes a message as an older firmware named it; a column renamed to None is
+    left out, with the rows whose value in it is not 0 (an instance or core column: only
+    instance 0 is written)."""
     base = {
         "FRAME_CLASS": 1,
         "FRAME_TYPE": 1,
@@ -322,9 +326,26 @@ def dataflash_flight(
         imu_rate=imu_rate,
         duration=duration,
     )
+    defs = dict(_DF)
+    for old_name, (new_name, cols) in (renames or {}).items():
+        tid, fmt, columns = defs.pop(old_name)
+        names = columns.split(",")
+        drop = [i for i, c in enumerate(names) if cols.get(c, c) is None]
+        fmt = "".join(ch for i, ch in enumerate(fmt) if i not in drop)
+        names = [cols.get(c, c) for i, c in enumerate(names) if i not in drop]
+        defs[new_name] = (tid, fmt, ",".join(names))
+        renamed = []
+        for t, name, vals in msgs:
+            if name == old_name:
+                if any(vals[i - 1] != 0 for i in drop):
+                    continue
+                name = new_name
+                vals = tuple(v for i, v in enumerate(vals) if i + 1 not in drop)
+            renamed.append((t, name, vals))
+        msgs = renamed
     if text:
         lines = ["FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format,Columns"]
-        for name, (tid, fmt, cols) in _DF.items():
+        for name, (tid, fmt, cols) in defs.items():
             size = 3 + struct.calcsize("<" + "".join(_STRUCT[c] for c in fmt))
             lines.append(f"FMT, {tid}, {size}, {name}, {fmt}, {cols}")
         for t, name, vals in msgs:
@@ -344,10 +365,10 @@ def dataflash_flight(
         )
 
     out += fmt_msg(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns")
-    for name, (tid, fmt, cols) in _DF.items():
+    for name, (tid, fmt, cols) in defs.items():
         out += fmt_msg(tid, name, fmt, cols)
     for t, name, vals in msgs:
-        tid, fmt, _ = _DF[name]
+        tid, fmt, _ = defs[name]
         pack = "<" + "".join(_STRUCT[c] for c in fmt)
         out += b"\xa3\x95" + bytes([tid]) + struct.pack(pack, int(round(t * 1e6)), *vals)
     path.write_bytes(bytes(out))

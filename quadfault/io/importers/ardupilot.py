@@ -15,9 +15,9 @@ columns, so old and new logs alike give what they have:
   -> position, velocity; without an EKF, the GPS (``Lat``, ``Lng``, ``Alt``, ``Status``):
   position NED about the first 3D fix, velocity from ``Spd``, ``GCrs``, ``VZ`` (or the
   position's slope), invalid without a 3D fix
-- ``XKF4`` / ``NKF4`` (core 0): ``SS`` (filter status bits) -> validity: velocity needs bits 1,
+- ``XKF4`` / ``NKF4`` / ``EKF4`` (core 0): ``SS`` (filter status bits) -> validity: velocity needs bits 1,
   2; position bit 3 or 4 and bit 5; bit 7 (constant position mode) invalidates both
-- ``RCOU`` (``C1..``, or ``Chan1..``) / ``MOT``: PWM [us] -> motor commands, channels from
+- ``RCOU`` (``C1..``, ``Chan1..`` or ``Ch1..``: :data:`RCOU_PREFIXES`) / ``MOT``: PWM [us] -> motor commands, channels from
   ``SERVOn_FUNCTION`` = Motor 1..4
 - ``ESC``: ``Instance``, ``RPM`` -> measured rotor speed [rad/s]
 - ``BAT`` / ``CURR``: ``Volt``, ``Curr`` -> ``vbat``, ``current``
@@ -159,6 +159,7 @@ MESSAGES = (
     "EKF1",
     "XKF4",
     "NKF4",
+    "EKF4",
     "RCOU",
     "MOT",
     "ESC",
@@ -166,6 +167,9 @@ MESSAGES = (
     "CURR",
     "EV",
 )
+#: The names each quantity had in ArduPilot's eras, newest first; a log's own FMT columns
+#: choose one (``RCOU``: ``C1..`` from Copter 3.5, ``Chan1..`` and ``Ch1..`` before).
+RCOU_PREFIXES = ("C", "Chan", "Ch")
 #: column sets that make a message a source of its kind, whatever its name (module doc)
 GYRO, DELTA_ANGLE = ("GyrX", "GyrY", "GyrZ"), ("DelAngX", "DelAngY", "DelAngZ", "DelAT")
 ACCEL, DELTA_VEL = ("AccX", "AccY", "AccZ"), ("DelVelX", "DelVelY", "DelVelZ", "DelVT")
@@ -285,7 +289,7 @@ def read_ardupilot(path) -> FieldLog:
         status = next(
             (
                 _instance(tables[n], "C")
-                for n in ("XKF4", "NKF4")
+                for n in ("XKF4", "NKF4", "EKF4")
                 if n in tables and "SS" in tables[n]
             ),
             None,
@@ -351,8 +355,13 @@ def read_ardupilot(path) -> FieldLog:
     )
 
 
+def rcou_prefix(table: dict) -> str | None:
+    """The channel columns' prefix of an ``RCOU`` message (:data:`RCOU_PREFIXES`), or None."""
+    return next((p for p in RCOU_PREFIXES if f"{p}1" in table), None)
+
+
 def _missing_outputs(tables: dict) -> list:
-    have = ("RCOU" in tables and any(k.startswith(("C", "Chan")) for k in tables["RCOU"])) or (
+    have = ("RCOU" in tables and rcou_prefix(tables["RCOU"]) is not None) or (
         "MOT" in tables and "Mot1" in tables["MOT"]
     )
     return [] if have else ["no motor outputs (no RCOU or MOT messages)"]
@@ -362,8 +371,10 @@ def _outputs(tables: dict, params: dict, path) -> tuple:
     """``(t, u (n, 4) 0..1, channels, note)`` from RCOU (else MOT; one of them is there)."""
     lo, hi, how = _pwm_range(params)
     out = tables.get("RCOU")
+    if out is not None and rcou_prefix(out) is None:
+        out = None
     if out is not None:
-        prefix = "C" if "C1" in out else "Chan"
+        prefix = rcou_prefix(out)
         chans = [
             next(
                 (
@@ -376,7 +387,13 @@ def _outputs(tables: dict, params: dict, path) -> tuple:
             for i in range(4)
         ]
         if not all(f"{prefix}{k}" in out for k in chans):
-            raise RecordingError(path, f"RCOU lacks the motor channels {chans}", key="RCOU")
+            have = [c for c in out if c.startswith(prefix) and c[len(prefix) :].isdigit()]
+            raise RecordingError(
+                path,
+                f"RCOU lacks the motor channels {[f'{prefix}{k}' for k in chans]} "
+                f"(it has {', '.join(have)})",
+                key="RCOU",
+            )
         pwm = np.stack([out[f"{prefix}{k}"] for k in chans], axis=1)
         note = f"u = (RCOU {prefix}{chans} - {lo:g}) / ({hi:g} - {lo:g}) us ({how})"
     else:
