@@ -223,3 +223,123 @@ def test_vehicle_flags_only_where_they_apply(tmp_path):
     fixture = Path(__file__).parent / "fixtures" / "eschmann_log.csv"
     res = _cli("eschmann", fixture, "--out", tmp_path / "o.csv", "--arm", "0.1")
     assert res.returncode == 2 and "--arm" in res.stderr and res.stderr.count("\n") == 1
+
+
+# ----------------------------------------------------------------------------------------
+# frames: the lift rotors by the autopilot's own parameters, or a one-line refusal
+def _vtol_params(**extra):
+    """A standard VTOL: rotor 0 the pusher (axis +x), rotors 1-4 lift at quad X positions."""
+    p = {"CA_AIRFRAME": 2, "CA_ROTOR_COUNT": 5, "MAV_TYPE": 22}
+    p.update({"CA_ROTOR0_PX": -0.3, "CA_ROTOR0_PY": 0.0, "CA_ROTOR0_AX": 1.0})
+    p.update({"CA_ROTOR0_AZ": 0.0, "CA_ROTOR0_KM": 0.05})
+    for i, ((x, y), km) in enumerate(
+        zip(((0.2, 0.2), (-0.2, -0.2), (0.2, -0.2), (-0.2, 0.2)), (0.02, 0.02, -0.02, -0.02)),
+        start=1,
+    ):
+        p.update({f"CA_ROTOR{i}_PX": x, f"CA_ROTOR{i}_PY": y, f"CA_ROTOR{i}_KM": km})
+    p.update(extra)
+    return p
+
+
+def test_standard_vtol_imports_its_lift_rotors_from_their_assigned_outputs(tmp_path):
+    path = tmp_path / "vtol.ulg"
+    funcs = {"UAVCAN_EC_FUNC1": 101}  # the pusher (Motor 1) on output 1, surfaces on 2-4
+    funcs.update({f"UAVCAN_EC_FUNC{k}": 97 + k for k in range(5, 9)})  # Motor 2..5 on 5-8
+    px4_flight(path, motor_channels=(5, 6, 7, 8), params=_vtol_params(**funcs))
+    rec = _import(path, mass=1.5)
+    assert "outputs [5, 6, 7, 8]" in rec.meta["import"]["commands"]
+    np.testing.assert_allclose(np.median(rec.commands_u, axis=0), HOVER, atol=0.02)
+    assert any("standard VTOL" in w for w in rec.meta["import"]["warnings"])
+    np.testing.assert_allclose(rec.vehicle.allocation[1], [-0.2, 0.2, 0.2, -0.2])
+
+
+@pytest.mark.parametrize(
+    "params, says",
+    [
+        (_vtol_params(), "lift motors [2, 3, 4, 5]"),  # no output assigned to them
+        ({"CA_ROTOR_COUNT": 6, "CA_AIRFRAME": 0}, "CA_ROTOR_COUNT 6"),
+        ({"CA_AIRFRAME": 3, "MAV_TYPE": 21}, "tiltrotor VTOL"),
+        ({"CA_ROTOR_COUNT": 0, "MAV_TYPE": 13}, "CA_ROTOR_COUNT 0"),
+    ],
+    ids=["vtol_unassigned", "hexa", "tiltrotor", "no_rotors"],
+)
+def test_frames_the_model_does_not_fly_are_refused_in_one_line(tmp_path, params, says):
+    path = tmp_path / "frame.ulg"
+    px4_flight(path, motor_channels=(5, 6, 7, 8), params=params)
+    res = _cli(path, "--out", tmp_path / "o.csv")
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert says in res.stderr and "quadrotors" in res.stderr, res.stderr
+
+
+def test_frames_before_control_allocation(tmp_path):
+    """PX4 before CA_ROTOR*: MAV_TYPE names the frame; a standard VTOL's VT_MOT_ID names its
+    multicopter outputs."""
+    from quadfault.io.importers.px4_ulog import lift_rotors
+
+    assert lift_rotors({"MAV_TYPE": 2})[0] == (0, 1, 2, 3)
+    with pytest.raises(QuadfaultError, match="hexarotor.*MAV_TYPE 13"):
+        lift_rotors({"MAV_TYPE": 13})
+    with pytest.raises(QuadfaultError, match="VTOL.*SYS_AUTOSTART 13000"):
+        lift_rotors({"SYS_AUTOSTART": 13000})
+    path = tmp_path / "old_vtol.ulg"
+    no_ca = {k: None for k in ("CA_ROTOR_COUNT",) + tuple(f"CA_ROTOR{i}_PX" for i in range(4))}
+    px4_flight(
+        path, motor_channels=(5, 6, 7, 8), params={"MAV_TYPE": 22, "VT_MOT_ID": 5678, **no_ca}
+    )
+    rec = _import(path, mass=1.5)
+    assert "outputs [5, 6, 7, 8]" in rec.meta["import"]["commands"]
+    np.testing.assert_allclose(np.median(rec.commands_u, axis=0), HOVER, atol=0.02)
+    assert any("VT_MOT_ID 5678" in w for w in rec.meta["import"]["warnings"])
+
+
+# ----------------------------------------------------------------------------------------
+# cut and corrupt logs, messages
+def test_a_cut_log_imports_what_precedes_the_cut_and_says_so(tmp_path):
+    path = tmp_path / "flight.ulg"
+    px4_flight(path, outputs="motors")
+    data = path.read_bytes()
+    cut = tmp_path / "cut.ulg"
+    cut.write_bytes(data[: int(len(data) * 0.8) + 5])
+    res = _cli(cut, "--out", tmp_path / "o.csv", "--mass", "1.5")
+    assert res.returncode == 0, res.stderr
+    assert res.stderr.count("\n") == 1 and "cut" in res.stderr and "bytes skipped" in res.stderr
+    import json
+
+    side = json.loads((tmp_path / "o.json").read_text())
+    skipped = side["import"]["skipped"]
+    assert skipped["truncated"] and 0 < skipped["bytes"] < 1000
+    assert skipped["after_t"] == pytest.approx(0.8 * 19.0, abs=1.0)
+    whole = _import(path, mass=1.5)
+    assert skipped["after_t"] > 0 and whole.meta["import"].get("skipped") is None
+
+
+def test_nothing_valid_is_one_line_listing_what_the_file_has(tmp_path):
+    path = tmp_path / "flight.ulg"
+    px4_flight(path)
+    data = path.read_bytes().replace(b"vehicle_attitude", b"vehicle_attitudX")
+    path.write_bytes(data)
+    res = _cli(path, "--out", tmp_path / "o.csv")
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert "no vehicle_attitude topic" in res.stderr
+    assert "the log has" in res.stderr and "vehicle_attitudX" in res.stderr
+
+
+def test_never_armed_is_said_as_such(tmp_path):
+    path = tmp_path / "bench.ulg"
+    px4_flight(path, armed=False)
+    res = _cli(path, "--out", tmp_path / "o.csv")
+    assert res.returncode == 2 and "never armed" in res.stderr, res.stderr
+
+
+def test_implausible_battery_voltage_is_flagged(tmp_path):
+    path = tmp_path / "flight.ulg"
+    px4_flight(path, params={"BAT1_N_CELLS": 6})  # 16 V on 6 cells: 2.7 V per cell
+    rec = _import(path, mass=1.5)
+    bat = rec.meta["import"]["battery"]
+    assert bat["cells"] == 6 and bat["cells_from"] == "BAT1_N_CELLS"
+    assert bat["plausible"] is False and "battery_thrust" in bat["why"]
+    assert any("implausible battery voltage" in w for w in rec.meta["import"]["warnings"])
+    path2 = tmp_path / "flight4.ulg"
+    px4_flight(path2)  # 16 V: 4 cells inferred, 3.9-4.0 V per cell
+    bat = _import(path2, mass=1.5).meta["import"]["battery"]
+    assert bat["plausible"] is True and bat["cells"] == 4

@@ -100,6 +100,8 @@ def px4_flight(
     duration: float = T_END,
     imu_rate: float = 500.0,
     esc_motors=None,
+    motor_channels=(1, 2, 3, 4),
+    armed: bool | None = None,
 ) -> dict:
     """Write the synthetic flight as a ULog. ``outputs``: "uavcan" (actuator_outputs
     instance 1, 0-8191, instance 0 all zeros, no actuator_motors), "motors"
@@ -107,7 +109,10 @@ def px4_flight(
     ``invalid_vxy`` [s] (None: never). ``duration`` stretches the flight (phases keep their
     proportions; times in the arguments are in the unstretched flight). Returns the profile at
     the motor stamps. ``esc_motors``: the motor (0-based) each ESC reports, with its
-    ``actuator_function`` (default: ESC i is motor i, no function field)."""
+    ``actuator_function`` (default: ESC i is motor i, no function field).
+    ``motor_channels``: the UAVCAN outputs (1-based) of motors 1-4; other than 1-4, the
+    remaining outputs move like control surfaces. ``armed``: write ``actuator_armed`` (False:
+    never armed, and every output stays at zero)."""
     us = 1_000_000
     stretch = duration / T_END
     t_att = np.arange(0.0, duration, 0.004)
@@ -156,9 +161,13 @@ def px4_flight(
     if outputs == "uavcan":
         fields = [("uint64_t", "timestamp", 0), ("float", "output", 8)]
         zero = [(int(t * us), [0.0] * 8) for t in t_mot]
-        raw = [
-            (int(t * us), list(8191.0 * prof["u"][k]) + [4095.5] * 4) for k, t in enumerate(t_mot)
-        ]
+        moving = tuple(motor_channels) != (1, 2, 3, 4)
+        raw = []
+        for k, t in enumerate(t_mot):
+            out = [4095.5 + (2000.0 * np.sin(2.0 * t + j) if moving else 0.0) for j in range(8)]
+            for i, ch in enumerate(motor_channels):
+                out[ch - 1] = 0.0 if armed is False else 8191.0 * prof["u"][k, i]
+            raw.append((int(t * us), out))
         topics += [("actuator_outputs", 0, fields, zero), ("actuator_outputs", 1, fields, raw)]
     elif outputs == "motors":
         u = prof["u"].copy()
@@ -215,6 +224,15 @@ def px4_flight(
             [(int(t * us), 16.0 - 0.05 * t, 10.0) for t in t_bat],
         )
     )
+    if armed is not None:
+        topics.append(
+            (
+                "actuator_armed",
+                0,
+                [("uint64_t", "timestamp", 0), ("uint8_t", "armed", 0)],
+                [(int(t * us), int(armed and T_ARM <= t < T_DISARM)) for t in t_land],
+            )
+        )
     base = {"THR_MDL_FAC": 0.3, "CA_ROTOR_COUNT": 4}
     for i, ((x, y), km) in enumerate(
         zip(
@@ -223,6 +241,7 @@ def px4_flight(
     ):
         base.update({f"CA_ROTOR{i}_PX": x, f"CA_ROTOR{i}_PY": y, f"CA_ROTOR{i}_KM": km})
     base.update(params or {})
+    base = {k: v for k, v in base.items() if v is not None}  # None: leave the parameter out
     write_ulog(path, topics, base, nested={"esc_report": report})
     return prof
 

@@ -107,6 +107,14 @@ class FieldLog:
         missing: what the log lacks (for the summary).
         params: log parameters recorded in the sidecar (``meta.log_parameters``).
         source: free text for the sidecar.
+        warnings: what the user should know (one phrase each).
+        armed: whether the log says the vehicle was ever armed (None: it does not say);
+            ``armed_source`` names the message.
+        cells: ``(count, source)``: the battery's cell count from the log's parameters, or
+            None (inferred from the voltage at arming, :func:`battery_check`).
+        skipped: what the reader skipped of a truncated or corrupt log (``{"bytes": int,
+            "truncated": bool, "corrupt": int, "after_t": float | None, "what": str}``), or
+            None for an intact log.
     """
 
     path: Path
@@ -124,6 +132,10 @@ class FieldLog:
     params: dict = field(default_factory=dict)
     source: str = ""
     warnings: list = field(default_factory=list)
+    armed: bool | None = None
+    armed_source: str = ""
+    cells: tuple | None = None
+    skipped: dict | None = None
 
 
 # ----------------------------------------------------------------------------------------
@@ -274,6 +286,56 @@ def _measured_thrust(res: dict, vehicle: Vehicle) -> np.ndarray | None:
     return None
 
 
+#: plausible LiPo voltage per cell in flight [V] (below: empty or a wrong reading; above:
+#: more than a charged cell holds)
+CELL_MIN_V, CELL_MAX_V = 3.0, 4.35
+
+
+def battery_check(t, vbat, flying, cells=None) -> dict | None:
+    """Is the logged battery voltage plausible for the pack? ``(count, source)`` ``cells``
+    from the log's parameters, else inferred from the voltage at the first flying row (the
+    fewest cells that keep it at or below ``CELL_MAX_V`` per cell). Returns the sidecar's
+    ``meta.import.battery`` entry (``plausible`` False when the 2nd or 98th percentile of
+    the in-flight voltage per cell is below ``CELL_MIN_V`` or above ``CELL_MAX_V``), or None
+    without a voltage in flight."""
+    v = np.asarray(vbat, dtype=float)[flying]
+    v = v[np.isfinite(v)]
+    if v.size < 5:
+        return None
+    if cells is not None:
+        n, how = int(cells[0]), str(cells[1])
+    else:
+        v0 = float(v[: max(1, min(50, v.size // 20))].mean())
+        n = max(1, int(np.ceil(v0 / CELL_MAX_V - 1e-9)))
+        how = f"inferred from {v0:.2f} V at the start of the flight"
+    lo, hi = (float(x) / n for x in np.percentile(v, [2, 98]))
+    entry = {
+        "cells": n,
+        "cells_from": how,
+        "volts_per_cell": [round(lo, 3), round(hi, 3)],
+        "plausible": bool(CELL_MIN_V <= lo and hi <= CELL_MAX_V),
+    }
+    if not entry["plausible"]:
+        entry["why"] = (
+            f"{lo:.2f}-{hi:.2f} V per cell in flight on {n} cell{'s' if n > 1 else ''} "
+            f"({how}): outside {CELL_MIN_V:g}-{CELL_MAX_V:g} V, so the voltage is not "
+            "the pack's; battery_thrust is not fitted on it"
+        )
+    return entry
+
+
+def skipped_phrase(skipped: dict) -> str:
+    """The warning phrase of a reader's ``skipped`` entry (:class:`FieldLog`)."""
+    parts = [f"{skipped['what']}: {skipped['bytes']} bytes skipped"]
+    if skipped.get("after_t") is not None:
+        parts.append(f"the log ends at t = {skipped['after_t']:.2f} s")
+    if skipped.get("spans"):
+        spans = ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in skipped["spans"][:3])
+        more = len(skipped["spans"]) - 3
+        parts.append("gaps at " + spans + (f" and {more} more" if more > 0 else ""))
+    return "; ".join(parts) + "; imported what is valid"
+
+
 def build_recording(
     log: FieldLog,
     *,
@@ -291,6 +353,10 @@ def build_recording(
     streams = dict(log.streams)
     if "u" not in streams:
         raise RecordingError(path, "no motor outputs found")
+    never = (
+        f"the vehicle was never armed ({log.armed_source}): a bench or ground log has no "
+        "flight to import"
+    )
     t = np.unique(np.asarray(log.time_base, dtype=float))
     dropped = len(log.time_base) - len(t)
     res = merge_topics(t, streams)
@@ -313,10 +379,14 @@ def build_recording(
         spans, how = flight_spans(t, res["u"], None)
         how += f" (the land detector, {log.landed_source}, never reports a flight)"
     if not np.any(res["u"] > RUNNING):
+        if log.armed is False:
+            raise RecordingError(path, never)
         raise RecordingError(path, "the motors never run (no output above 1 % of its range)")
     if not spans:
         raise RecordingError(path, f"no free flight of {MIN_FLIGHT_S:g} s or more ({how})")
     notes, missing = list(log.warnings), list(log.missing)
+    if log.skipped:
+        notes.insert(0, skipped_phrase(log.skipped))
     keep = np.ones(len(t), dtype=bool) if keep_all else _span_mask(t, spans)
     if "pos" in res:
         valid = _pose_validity(log, t)
@@ -398,6 +468,11 @@ def build_recording(
         ts = np.unique(np.asarray(ts, dtype=float))
         if len(ts) > 1:
             rates[name] = float(1.0 / np.median(np.diff(ts)))
+    battery = None
+    if "vbat" in res:
+        battery = battery_check(t, res["vbat"], _span_mask(t, spans), log.cells)
+        if battery is not None and not battery["plausible"]:
+            notes.append("implausible battery voltage: " + battery["why"])
     meta = {
         "dataset": f"{log.importer}-log",
         "file": path.name,
@@ -418,6 +493,10 @@ def build_recording(
         "assumed": assumed,
         "log_parameters": log.params,
     }
+    if battery is not None:
+        meta["import"]["battery"] = battery
+    if log.skipped:
+        meta["import"]["skipped"] = dict(log.skipped)
     if meta_cal:
         meta["calibration"] = meta_cal
     rotor = res.get("rotor")
