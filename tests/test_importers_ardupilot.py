@@ -234,3 +234,57 @@ def test_rcou_without_the_motor_channels_names_what_it_has(tmp_path):
     dataflash_flight(path, renames={"RCOU": ("RCOU", {"C5": "Ch5"})})  # C1..C4, Ch5, C6..
     with pytest.raises(QuadfaultError, match=r"lacks the motor channels \['C5'.*it has C1"):
         _import(path)
+
+
+# ------------------------------------------------------------------ frames, damage, messages
+@pytest.mark.parametrize(
+    "params, says",
+    [
+        ({"FRAME_CLASS": 3}, "FRAME_CLASS is 3 (octa)"),
+        ({"FRAME_CLASS": 7}, "FRAME_CLASS is 7 (tri)"),
+        ({"SERVO9_FUNCTION": 37}, "SERVO9_FUNCTION is 37 (Motor 5)"),
+        ({"FRAME_CLASS": None, "Q_ENABLE": 1, "Q_FRAME_CLASS": 2}, "Q_FRAME_CLASS is 2 (hexa)"),
+    ],
+    ids=["octa", "tri", "fifth_motor", "quadplane_hexa"],
+)
+def test_frames_the_model_does_not_fly_are_refused(tmp_path, params, says):
+    from quadfault.io.importers.ardupilot import frame_check
+
+    given = {"FRAME_CLASS": 1, **params}
+    with pytest.raises(QuadfaultError, match=says.replace("(", r"\(").replace(")", r"\)")):
+        frame_check({k: v for k, v in given.items() if v is not None})
+    with pytest.raises(QuadfaultError, match="Frame: HEXA"):
+        frame_check({}, ["APM:Copter V3.3", "Frame: HEXA"])
+    assert frame_check({}, ["Frame: QUAD"]) is None
+    assert "QuadPlane" in frame_check({"Q_ENABLE": 1, "Q_FRAME_CLASS": 1})
+
+
+def test_a_cut_or_corrupt_binary_log_says_what_was_skipped(tmp_path):
+    path = tmp_path / "flight.bin"
+    dataflash_flight(path)
+    data = bytearray(path.read_bytes())
+    n = len(data)
+    data[n // 2 : n // 2 + 40] = b"\x00" * 40  # corrupt frames in the middle
+    path.write_bytes(bytes(data[: int(n * 0.9) + 7]))  # and cut mid-message
+    res = _cli(path, "--out", tmp_path / "o.csv", "--mass", "1.5")
+    assert res.returncode == 0, res.stderr
+    assert res.stderr.count("\n") == 1 and "bytes skipped" in res.stderr, res.stderr
+    import json
+
+    skipped = json.loads((tmp_path / "o.json").read_text())["import"]["skipped"]
+    assert skipped["truncated"] and skipped["corrupt"] >= 1 and skipped["bytes"] >= 40
+    assert len(skipped["spans"]) >= 1 and skipped["after_t"] > 10.0
+
+
+def test_never_armed_is_said_as_such(tmp_path):
+    path = tmp_path / "bench.bin"
+    dataflash_flight(path, armed=False)
+    res = _cli(path, "--out", tmp_path / "o.csv")
+    assert res.returncode == 2 and "never armed" in res.stderr, res.stderr
+
+
+def test_battery_cells_from_the_parameters(tmp_path):
+    path = tmp_path / "flight.bin"
+    dataflash_flight(path, params={"MOT_BAT_VOLT_MAX": 25.2})  # 6S, the log says 16 V
+    bat = _import(path, mass=1.5).meta["import"]["battery"]
+    assert bat["cells"] == 6 and not bat["plausible"]

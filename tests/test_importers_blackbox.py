@@ -155,3 +155,38 @@ def test_bad_input_gives_one_line(tmp_path, case):
     assert res.returncode != 0
     assert res.stderr.count("\n") == 1 and "Traceback" not in res.stderr, res.stderr
     assert "flight.bbl" in res.stderr
+
+
+def test_a_cut_log_says_what_was_skipped(tmp_path):
+    """A log cut short (no end-of-log event) and one with a corrupt frame: each imports what
+    is valid, with one warning line and the sidecar's ``import.skipped``."""
+    whole = blackbox_log(19.0)
+    log = decode_log(whole, *split_logs(whole)[0])
+    assert log.ended and log.skipped_bytes == 0 and log.tail_bytes == 0
+    cut = whole[: int(len(whole) * 0.7) + 3]
+    log = decode_log(cut, *split_logs(cut)[0])
+    assert not log.ended and 0 < log.tail_bytes < 40
+    bad = blackbox_log(19.0, corrupt_at=500)
+    log = decode_log(bad, *split_logs(bad)[0])
+    assert log.ended and log.skipped_bytes > 0
+    path = tmp_path / "cut.bbl"
+    path.write_bytes(cut)
+    res = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "quadfault.cli",
+            "import",
+            str(path),
+            "--out",
+            str(tmp_path / "o.csv"),
+        ],
+        capture_output=True,
+        text=True,
+    )
+    assert res.returncode == 0, res.stderr
+    assert res.stderr.count("\n") == 1 and "cut" in res.stderr and "bytes skipped" in res.stderr
+    import json
+
+    skipped = json.loads((tmp_path / "o.json").read_text())["import"]["skipped"]
+    assert skipped["truncated"] and 0.6 * 19.0 < skipped["after_t"] < 0.8 * 19.0

@@ -273,8 +273,11 @@ _STRUCT = {
 SS_OK = 0b111111  # attitude, velocities, positions valid
 
 
-def _df_messages(*, rcou_rate, invalid_vxy, params, motor_channels, imu_rate=400.0, duration=T_END):
-    """``[(t, name, values)]`` of the synthetic flight."""
+def _df_messages(
+    *, rcou_rate, invalid_vxy, params, motor_channels, imu_rate=400.0, duration=T_END, armed=True
+):
+    """``[(t, name, values)]`` of the synthetic flight (``armed`` False: a bench log, outputs
+    at their minimum, no ARMED event)."""
     s = duration / T_END
     msgs = [(0.0, "PARM", (k.encode(), float(v))) for k, v in params.items()]
     for t in np.arange(0.0, duration, 1.0 / imu_rate):
@@ -291,6 +294,8 @@ def _df_messages(*, rcou_rate, invalid_vxy, params, motor_channels, imu_rate=400
         msgs.append((t, "XKF4", (0, SS_OK & ~0b10 if bad else SS_OK)))
     t_mot = np.arange(0.0, duration, 1.0 / rcou_rate)
     pm = flight_profile(t_mot / s)
+    if not armed:
+        pm["u"][:] = 0.0
     for k, t in enumerate(t_mot):
         pwm = [1000] * 8
         for i, ch in enumerate(motor_channels):
@@ -301,7 +306,8 @@ def _df_messages(*, rcou_rate, invalid_vxy, params, motor_channels, imu_rate=400
             msgs.append((t, "ESC", (ch - 1, rpm)))
     for t in np.arange(0.0, duration, 0.1):
         msgs.append((t, "BAT", (0, 16.0 - 0.05 * t / s, 10.0)))
-    for t, ev in ((2.0, 10), (T_TAKEOFF + 0.5, 28), (T_LAND - 0.5, 18), (T_DISARM, 11)):
+    events = ((2.0, 10), (T_TAKEOFF + 0.5, 28), (T_LAND - 0.5, 18), (T_DISARM, 11))
+    for t, ev in events if armed else ((2.0, 18),):
         msgs.append((t * s, "EV", (ev,)))
     return sorted(msgs, key=lambda m: m[0])
 
@@ -317,6 +323,7 @@ def dataflash_flight(
     imu_rate: float = 400.0,
     duration: float = T_END,
     renames: dict | None = None,
+    armed: bool = True,
 ) -> None:
     """Write the synthetic flight as an ArduPilot DataFlash log: binary, or text with
     ``text=True``. Motors on ``motor_channels`` (``SERVOn_FUNCTION``), ESC telemetry on
@@ -344,6 +351,7 @@ def dataflash_flight(
         motor_channels=motor_channels,
         imu_rate=imu_rate,
         duration=duration,
+        armed=armed,
     )
     defs = dict(_DF)
     for old_name, (new_name, cols) in (renames or {}).items():

@@ -74,16 +74,85 @@ def _instance(table: dict, key: str) -> dict:
     return table
 
 
-def geometry(params: dict, path="log") -> Geometry:
-    """Motor order and spin directions from ``FRAME_CLASS``/``FRAME_TYPE`` (``FRAME``)."""
-    frame_class = params.get("FRAME_CLASS")
+#: ArduPilot's ``FRAME_CLASS`` (and a QuadPlane's ``Q_FRAME_CLASS``) values
+FRAME_CLASSES = {
+    0: "undefined",
+    1: "quad",
+    2: "hexa",
+    3: "octa",
+    4: "octaquad",
+    5: "Y6",
+    6: "heli",
+    7: "tri",
+    8: "single copter",
+    9: "coax copter",
+    10: "bicopter",
+    11: "heli dual",
+    12: "dodecahexa",
+    13: "heli quad",
+    14: "deca",
+    15: "scripting matrix",
+    16: "6DoF scripting",
+    17: "dynamic scripting matrix",
+}
+#: the last ``SERVOn_FUNCTION`` of a motor (Motor 1..12 are 33..44 and 82..)
+MOTOR_FUNCTIONS = set(range(33, 45)) | set(range(82, 86))
+
+
+def frame_check(params: dict, messages=(), path="log") -> str | None:
+    """A one-line error naming the frame and its parameters when the log's vehicle is not a
+    quadrotor (``FRAME_CLASS``, a QuadPlane's ``Q_FRAME_CLASS``, a fifth motor among the
+    ``SERVOn_FUNCTION``, or an old log's ``Frame:`` message); else None, or a note for a
+    QuadPlane (its four lift motors are imported)."""
+    note = None
+    key = "FRAME_CLASS"
+    if int(params.get("Q_ENABLE", 0)) == 1:
+        key = "Q_FRAME_CLASS"
+        note = (
+            "QuadPlane: its four lift motors (Motor 1-4) imported; fixed-wing flight not modelled"
+        )
+    frame_class = params.get(key)
     if frame_class is not None and int(frame_class) != 1:
+        name = FRAME_CLASSES.get(int(frame_class), "unknown")
         raise RecordingError(
             path,
-            f"FRAME_CLASS is {int(frame_class)}: quadfault imports quadrotors (FRAME_CLASS 1)",
-            key="FRAME_CLASS",
+            f"{key} is {int(frame_class)} ({name}): quadfault flies quadrotors ({key} 1)",
+            key=key,
         )
+    extra = sorted(
+        (k, int(v))
+        for k, v in params.items()
+        if k.startswith("SERVO")
+        and k.endswith("_FUNCTION")
+        and int(v) in MOTOR_FUNCTIONS
+        and int(v) > MOTOR1_FUNCTION + 3
+    )
+    if extra:
+        k, v = extra[0]
+        raise RecordingError(
+            path,
+            f"{k} is {v} (Motor {v - 32 if v < 82 else v - 73}): more than four motors, "
+            "quadfault flies quadrotors",
+            key=k,
+        )
+    for text in messages:
+        if text.startswith("Frame:"):
+            frame = text.split(":", 1)[1].strip().split()[0].upper() if text[6:].strip() else ""
+            if frame and not frame.startswith(("QUAD", "X", "+")):
+                raise RecordingError(
+                    path,
+                    f"the log's message {text!r}: quadfault flies quadrotors",
+                    key="MSG",
+                )
+    return note
+
+
+def geometry(params: dict, path="log") -> Geometry:
+    """Motor order and spin directions from ``FRAME_CLASS``/``FRAME_TYPE`` (``FRAME``)."""
+    frame_check(params, (), path)
     key = "FRAME_TYPE" if "FRAME_TYPE" in params else "FRAME"
+    if int(params.get("Q_ENABLE", 0)) == 1:
+        key = "Q_FRAME_TYPE"
     ftype = int(params.get(key, 1))
     name, rotors = QUAD_FRAMES.get(ftype, QUAD_FRAMES[1])
     note = (
@@ -166,6 +235,7 @@ MESSAGES = (
     "BAT",
     "CURR",
     "EV",
+    "MSG",
 )
 #: The names each quantity had in ArduPilot's eras, newest first; a log's own FMT columns
 #: choose one (``RCOU``: ``C1..`` from Copter 3.5, ``Chan1..`` and ``Ch1..`` before).
@@ -252,10 +322,15 @@ def _fail(path, missing: list, logged: list):
 def read_ardupilot(path) -> FieldLog:
     """The streams of an ArduPilot DataFlash log (module docstring)."""
     path = Path(path)
-    tables, params, logged = read_tables(
+    tables, params, logged, skipped = read_tables(
         path, MESSAGES, also=(GYRO, DELTA_ANGLE, EKF_STATE, FIX + ("Status",))
     )
+    texts = [str(m) for m in tables.get("MSG", {}).get("Message", [])]
+    frame_note = frame_check(params, texts, path)
+    armed = _ever_armed(tables)
     lacking = _missing_outputs(tables)
+    if lacking and armed is False:
+        lacking = ["the vehicle was never armed (no ARMED event) and the log has no motor outputs"]
     if not any(
         all(c in tb for c in GYRO) or all(c in tb for c in DELTA_ANGLE) for tb in tables.values()
     ):
@@ -268,6 +343,12 @@ def read_ardupilot(path) -> FieldLog:
     if len(imu[1]) < 2:
         raise RecordingError(path, f"fewer than two {imu[0]} messages with body rates")
     imu_name, t_imu, w, acc = imu
+    if skipped and skipped["bytes"]:
+        skipped = _skipped_times(skipped, tables[imu_name])
+    else:
+        skipped = None
+    if frame_note:
+        notes.append(frame_note)
     streams["w"] = (t_imu, w, "linear")
     if acc is not None:
         streams["acc"] = (t_imu, acc, "linear")
@@ -334,7 +415,8 @@ def read_ardupilot(path) -> FieldLog:
     recorded = {
         k: v
         for k, v in params.items()
-        if k in DEFAULTS or k.startswith(("FRAME", "MOT_PWM", "MOT_BAT", "RC3_M"))
+        if k in DEFAULTS
+        or k.startswith(("FRAME", "Q_FRAME", "Q_ENABLE", "MOT_PWM", "MOT_BAT", "RC3_M"))
     }
     return FieldLog(
         path=path,
@@ -352,7 +434,47 @@ def read_ardupilot(path) -> FieldLog:
         params=recorded,
         source=f"ArduPilot DataFlash log {path.name}, imported by quadfault",
         warnings=notes,
+        armed=armed,
+        armed_source="no ARMED event in the log",
+        cells=_cells(params),
+        skipped=skipped,
     )
+
+
+def _ever_armed(tables: dict) -> bool | None:
+    """From the ``EV`` messages (ARMED, id 10), or None when the log has no events."""
+    ev = tables.get("EV")
+    if ev is None or "Id" not in ev:
+        return None
+    return bool(np.any(ev["Id"].astype(int) == EV_ARMED))
+
+
+def _cells(params: dict) -> tuple | None:
+    """Cell count from ``MOT_BAT_VOLT_MAX`` (the voltage of a full pack, 4.2 V per cell)."""
+    vmax = float(params.get("MOT_BAT_VOLT_MAX", 0.0))
+    if vmax > 0:
+        return max(1, int(round(vmax / 4.2))), f"MOT_BAT_VOLT_MAX {vmax:g} V / 4.2 V per cell"
+    return None
+
+
+def _skipped_times(skipped: dict, imu: dict) -> dict:
+    """The reader's skipped bytes (:func:`quadfault.io.importers.dataflash.skipped_bytes`)
+    with the times around each gap (from the IMU messages' place in the log)."""
+    seq, t = imu["_seq"], imu["_t"]
+    spans = []
+    for at, _ in skipped["gaps"]:
+        i = int(np.searchsorted(seq, at))
+        if 0 < i < len(seq):
+            spans.append((float(t[i - 1]), float(t[i])))
+    what = "corrupt or cut data" if skipped["gaps"] else "the log ends mid-message (cut)"
+    return {
+        "what": what,
+        "bytes": int(skipped["bytes"]),
+        "truncated": bool(skipped["tail"]),
+        "corrupt": len(skipped["gaps"]),
+        "after_t": float(t[-1]) if skipped["tail"] else None,
+        "spans": spans,
+    }
 
 
 def rcou_prefix(table: dict) -> str | None:

@@ -76,8 +76,9 @@ def _centivolt_firmware(revision: str) -> bool:
 class _Fields:
     """Named columns with their units: a decoded log or a CSV export."""
 
-    def __init__(self, columns: dict, units: dict, header: dict, source: str):
+    def __init__(self, columns: dict, units: dict, header: dict, source: str, skipped=None):
         self.columns, self.units, self.header, self.source = columns, units, header, source
+        self.skipped = skipped  # what the decoder skipped of a cut or corrupt log, or None
 
     def get(self, *names):
         for name in names:
@@ -125,7 +126,23 @@ def _from_binary(path: Path, data: bytes, log_index: int | None) -> tuple:
     note = f"log {index} of {len(logs)}" + (
         f", {chosen.corrupt} corrupt frames dropped" if chosen.corrupt else ""
     )
-    return _Fields(cols, {}, chosen.header, note), len(logs)
+    skipped = None
+    lost = chosen.skipped_bytes + (0 if chosen.ended else chosen.tail_bytes)
+    if lost or chosen.corrupt:
+        t = chosen.field("time")
+        what = []
+        if chosen.corrupt:
+            what.append(f"{chosen.corrupt} corrupt frames")
+        if not chosen.ended:
+            what.append("the log ends without its end-of-log event (cut)")
+        skipped = {
+            "what": " and ".join(what),
+            "bytes": int(lost),
+            "truncated": not chosen.ended,
+            "corrupt": int(chosen.corrupt),
+            "after_t": None if chosen.ended or t is None else float(t[-1] * 1e-6),
+        }
+    return _Fields(cols, {}, chosen.header, note, skipped), len(logs)
 
 
 def _from_csv(path: Path, text: str) -> _Fields:
@@ -362,6 +379,7 @@ def read_blackbox(path, log: int | None = None) -> FieldLog:
         params=recorded,
         warnings=notes,
         source=f"blackbox log {path.name} ({f.source}), imported by quadfault",
+        skipped=f.skipped,
     )
 
 

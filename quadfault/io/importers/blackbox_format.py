@@ -69,6 +69,9 @@ class BlackboxLog:
         events: (k, 3) int64 rows ``(main index, event type, value)``.
         corrupt: number of frames dropped as corrupt.
         size: bytes of the log in its file.
+        skipped_bytes: bytes between whole frames that were skipped (corrupt or unknown).
+        tail_bytes: bytes after the last whole frame (a cut log's unfinished frame).
+        ended: the log has its end-of-log event (a log cut short has not).
     """
 
     header: dict
@@ -80,6 +83,9 @@ class BlackboxLog:
     events: np.ndarray
     corrupt: int
     size: int
+    skipped_bytes: int = 0
+    tail_bytes: int = 0
+    ended: bool = True
 
     def field(self, name: str) -> np.ndarray | None:
         """The main field ``name`` as float, or None."""
@@ -426,7 +432,8 @@ def decode_frames(
     ``defs_*``: (6, max fields) per frame type, rows I, P, S, G, H, (unused); ``sizes``:
     field count per row. ``intervals``: I interval, P num, P denom, index of the loop
     iteration and time fields. With ``store`` False only counts. Returns (main frames,
-    slow frames, events, corrupt frames)."""
+    slow frames, events, corrupt frames, bytes skipped between whole frames, bytes after
+    the last whole frame, 1 if the end-of-log event was reached else 0)."""
     n_main = sizes[0]
     prev = np.zeros(n_main, dtype=np.int64)
     prev2 = np.zeros(n_main, dtype=np.int64)
@@ -437,6 +444,9 @@ def decode_frames(
     has_prev = False
     last_iter = -1
     n_m = n_s = n_e = corrupt = 0
+    gap_bytes = 0
+    ended = 0
+    good_end = start
     pos = start
     cst = consts.copy()
     n = len(buf)
@@ -501,6 +511,8 @@ def decode_frames(
         else:
             kind, value, pos = _event(buf, pos)
             if pos == -2:
+                ended = 1
+                good_end = n
                 break
             if pos < 0:
                 ok = False
@@ -511,6 +523,9 @@ def decode_frames(
             has_prev = False
             pos = frame_start + 1
             continue
+        if frame_start > good_end:
+            gap_bytes += frame_start - good_end
+        good_end = pos
         if b == FRAME_I or b == FRAME_P:
             if store:
                 main[n_m, :] = cur
@@ -541,7 +556,7 @@ def decode_frames(
             n_e += 1
             if kind == EVENT_LOGGING_RESUME:
                 has_prev = False
-    return n_m, n_s, n_e, corrupt
+    return n_m, n_s, n_e, corrupt, gap_bytes, n - good_end, ended
 
 
 # ----------------------------------------------------------------------------------------
@@ -659,7 +674,7 @@ def decode_log(data: bytes, start: int, end: int) -> BlackboxLog:
         empty2,
         False,
     )
-    n_m, n_s, n_e, corrupt = (int(c) for c in counts)
+    n_m, n_s, n_e, corrupt, gap_bytes, tail, ended = (int(c) for c in counts)
     main = np.zeros((n_m, max(1, sizes[0])), dtype=np.int64)
     slow = np.zeros((n_s, max(1, sizes[2])), dtype=np.int64)
     slow_at = np.zeros(n_s, dtype=np.int64)
@@ -677,4 +692,7 @@ def decode_log(data: bytes, start: int, end: int) -> BlackboxLog:
         events=events,
         corrupt=corrupt,
         size=end - start,
+        skipped_bytes=gap_bytes,
+        tail_bytes=tail,
+        ended=bool(ended),
     )

@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import contextlib
 import io
+import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -80,11 +82,35 @@ def open_log(path: Path):
 
     chatter = io.StringIO()
     try:
-        with contextlib.redirect_stderr(chatter), contextlib.redirect_stdout(chatter):
+        with (
+            _quiet_stderr_fd(),
+            contextlib.redirect_stderr(chatter),
+            contextlib.redirect_stdout(chatter),
+        ):
             reader = Binary(str(path)) if binary else Text(str(path))
     except Exception as exc:  # DFReader raises bare Exceptions on corrupt logs
         raise RecordingError(path, f"not a readable DataFlash log: {exc}") from None
     return reader, binary
+
+
+@contextlib.contextmanager
+def _quiet_stderr_fd():
+    """Silence file descriptor 2 (pymavlink's compiled indexer prints a line per byte it
+    skips in a corrupt log; quadfault reports the skipped bytes once, in its warning)."""
+    try:
+        fd = sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):  # not a real file (captured): nothing to do
+        yield
+        return
+    sys.stderr.flush()
+    saved = os.dup(fd)
+    try:
+        with open(os.devnull, "wb") as null:
+            os.dup2(null.fileno(), fd)
+            yield
+    finally:
+        os.dup2(saved, fd)
+        os.close(saved)
 
 
 def binary_table(reader, name: str) -> dict | None:
@@ -154,11 +180,12 @@ def text_table(reader, name: str) -> dict | None:
     return out
 
 
-def read_tables(path: Path, names, also=()) -> tuple[dict, dict, list]:
-    """``({name: table}, params, logged)``: the tables of the message types ``names``, and of every
+def read_tables(path: Path, names, also=()) -> tuple[dict, dict, list, dict | None]:
+    """``({name: table}, params, logged, skipped)``: the tables of the message types ``names``, and of every
     message type whose columns include one of the column sets ``also``, that the log has,
     untimed (:func:`set_times` times them); and the log's parameters (the values at the
-    start of the log); ``logged`` names every message type with messages in the log."""
+    start of the log); ``logged`` names every message type with messages in the log;
+    ``skipped`` what a binary log's reader skipped (:func:`skipped_bytes`; None for text)."""
     reader, binary = open_log(path)
     table = binary_table if binary else text_table
     wanted = set(names) | set(gps_time_messages(reader))
@@ -181,7 +208,33 @@ def read_tables(path: Path, names, also=()) -> tuple[dict, dict, list]:
     order = np.sort(np.concatenate([np.asarray(o, dtype=float) for o in everything if o]))
     for tb in tables.values():  # file offset -> index among all messages
         tb["_seq"] = np.searchsorted(order, tb.pop("_ofs")).astype(float)
-    return tables, params, logged
+    return tables, params, logged, skipped_bytes(reader) if binary else None
+
+
+def skipped_bytes(reader) -> dict:
+    """What the binary reader skipped: ``{"bytes": total, "gaps": [(index of the next
+    message, bytes)], "tail": bytes after the last whole message}``. pymavlink steps over
+    bytes that do not start a message one at a time and stops at an unknown message type;
+    every byte not inside an indexed message was skipped."""
+    ofs, lens = [], []
+    for tid, offsets in enumerate(reader.offsets):
+        if offsets and tid in reader.formats:
+            ofs.append(np.asarray(offsets, dtype=np.int64))
+            lens.append(np.full(len(offsets), reader.formats[tid].len, dtype=np.int64))
+    size = int(reader.data_len)
+    if not ofs:
+        return {"bytes": size, "gaps": [], "tail": size}
+    ofs, lens = np.concatenate(ofs), np.concatenate(lens)
+    order = np.argsort(ofs, kind="stable")
+    ofs, ends = ofs[order], (ofs + lens)[order]
+    whole = ends <= size
+    tail = int(size - (ends[whole][-1] if whole.any() else 0))
+    gap = ofs[1:] - ends[:-1]
+    at = np.flatnonzero(gap > 0)
+    gaps = [(int(i + 1), int(gap[i])) for i in at]
+    lead = int(ofs[0])
+    total = lead + int(gap[gap > 0].sum()) + tail
+    return {"bytes": total, "gaps": ([(0, lead)] if lead else []) + gaps, "tail": tail}
 
 
 def gps_time_messages(reader) -> list:
