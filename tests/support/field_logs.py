@@ -833,3 +833,71 @@ def sim_to_blackbox(rec, path, every: int = 2) -> None:
         row = [j, int(round((rec.t[k] + 1.0) * 1e6)), *gyro, *acc, *motor]
         out += b"I" + encode_fields([int(v) for v in row], enc)
     path.write_bytes(bytes(out))
+
+
+# ----------------------------------------------------------------------------------------
+# Crazyflie uSD-deck event log (header 0xBC, version, event definitions, records, CRC32)
+def usd_log(
+    path,
+    *,
+    version: int = 2,
+    crc: bool = True,
+    mocap: bool = False,
+    gyro: bool = True,
+    vbat: float = 3.9,
+    duration: float = T_END,
+) -> None:
+    """The synthetic flight as a Crazyflie uSD event log with several event types at
+    different rates: ``fixedFrequency`` (500 Hz: gyro [deg/s], acc [g], motor.m1..m4),
+    ``estimate`` (100 Hz: stateEstimate position, velocity, quaternion; with ``mocap`` the
+    motion-capture pose ``locSrv`` instead), ``rpm`` (250 Hz, the RPM deck) and ``power``
+    (10 Hz, pm.vbat). World z up, body FLU, as the firmware logs. ``crc``: append the CRC32
+    that stopping the logging writes."""
+    import zlib
+
+    fast = ["gyro.x(f)", "gyro.y(f)", "gyro.z(f)", "acc.x(f)", "acc.y(f)", "acc.z(f)"]
+    fast += [f"motor.m{i}(H)" for i in range(1, 5)]
+    if not gyro:
+        fast = fast[3:]
+    est = [f"stateEstimate.{k}(f)" for k in ("x", "y", "z", "vx", "vy", "vz")]
+    est += [f"stateEstimate.q{k}(f)" for k in "xyzw"]
+    if mocap:
+        est = [f"locSrv.{k}(f)" for k in ("x", "y", "z", "qx", "qy", "qz", "qw")]
+    events = [
+        (1, "fixedFrequency", fast, 500.0),
+        (7, "estimate", est, 100.0),
+        (9, "rpm", [f"rpm.m{i}(H)" for i in range(1, 5)], 250.0),
+        (12, "power", ["pm.vbat(f)"], 10.0),
+    ]
+    out = bytearray(struct.pack("<BHH", 0xBC, version, len(events)))
+    for eid, name, variables, _ in events:
+        out += struct.pack("<H", eid) + name.encode() + b"\x00" + struct.pack("<H", len(variables))
+        out += b"".join(v.encode() + b"\x00" for v in variables)
+    stamp, per_s = ("<Q", 1e6) if version == 2 else ("<I", 1e3)
+    records = []
+    for eid, name, variables, rate in events:
+        fmt = "<" + "".join(v[-2] for v in variables)
+        t = np.arange(0.0, duration, 1.0 / rate) + 0.01
+        p = flight_profile(t * T_END / duration)
+        for k, tk in enumerate(t):
+            u = p["u"][k]
+            if name == "fixedFrequency":
+                vals = [0.0, 0.0, 0.0, 0.0, 0.0, 1.0] + [int(round(65535 * x)) for x in u]
+                vals = vals if gyro else vals[3:]
+            elif name == "estimate":
+                pos = [p["pos"][k, 0], -p["pos"][k, 1], -p["pos"][k, 2]]  # NED -> z up
+                vel = [p["vel"][k, 0], -p["vel"][k, 1], -p["vel"][k, 2]]
+                vals = pos + [0.0, 0.0, 0.0, 1.0] if mocap else pos + vel + [0.0, 0.0, 0.0, 1.0]
+            elif name == "rpm":
+                vals = [int(round(x * OMEGA_PER_U * 60 / (2 * np.pi))) for x in u]
+            else:
+                vals = [vbat - 0.01 * tk]
+            stamp_v = int(round(tk * per_s))
+            records.append(
+                (tk, struct.pack("<H", eid) + struct.pack(stamp, stamp_v) + struct.pack(fmt, *vals))
+            )
+    for _, blob in sorted(records, key=lambda r: r[0]):
+        out += blob
+    if crc:
+        out += struct.pack("<I", zlib.crc32(bytes(out)))
+    path.write_bytes(bytes(out))

@@ -10,6 +10,8 @@ One importer per source, each ``import_<name>(path, ...) -> Recording``:
   text ``.log``, needs ``pymavlink``)
 - :func:`quadfault.io.importers.blackbox.import_blackbox` (Betaflight / INDIflight blackbox
   ``.bfl``/``.bbl`` or its decoded CSV; quadfault's own decoder)
+- :func:`quadfault.io.importers.crazyflie_usd.import_crazyflie_usd` (Crazyflie uSD-deck
+  event logs; quadfault's own reader)
 
 The autopilot importers share :mod:`quadfault.io.importers.field_log` (flight span, validity,
 vehicle assumptions, thrust calibration); :func:`detect_format` tells their logs apart by
@@ -39,6 +41,7 @@ IMPORTERS: dict[str, tuple[str, str]] = {
     "px4": ("quadfault.io.importers.px4_ulog", "import_px4_ulog"),
     "ardupilot": ("quadfault.io.importers.ardupilot", "import_ardupilot"),
     "blackbox": ("quadfault.io.importers.blackbox", "import_blackbox"),
+    "crazyflie-usd": ("quadfault.io.importers.crazyflie_usd", "import_crazyflie_usd"),
 }
 
 
@@ -49,8 +52,8 @@ BLACKBOX_MARK = b"H Product:Blackbox flight data recorder"
 
 
 def detect_format(path) -> str:
-    """``"px4"``, ``"ardupilot"`` or ``"blackbox"`` from the file's content (magic bytes or
-    first lines), or a one-line :class:`RecordingError`."""
+    """``"px4"``, ``"ardupilot"``, ``"blackbox"`` or ``"crazyflie-usd"`` from the file's
+    content (magic bytes or first lines), or a one-line :class:`RecordingError`."""
     path = Path(path)
     if not path.exists():
         raise RecordingError(path, "file not found")
@@ -64,6 +67,10 @@ def detect_format(path) -> str:
         return "ardupilot"
     if BLACKBOX_MARK in head:
         return "blackbox"
+    from quadfault.io.importers.crazyflie_usd import is_usd_log
+
+    if is_usd_log(head):
+        return "crazyflie-usd"
     text = head.decode("latin-1")
     lines = [ln.strip() for ln in text.splitlines()[:200]]
     if any(ln.startswith("FMT,") for ln in lines):
@@ -75,8 +82,8 @@ def detect_format(path) -> str:
         return "blackbox"
     raise RecordingError(
         path,
-        "unknown log format (not a PX4 ULog, ArduPilot DataFlash or "
-        "blackbox log); give --format or a data set name",
+        "unknown log format (not a PX4 ULog, ArduPilot DataFlash, blackbox or "
+        "Crazyflie uSD log); give --format or a data set name",
     )
 
 

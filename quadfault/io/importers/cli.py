@@ -1,6 +1,7 @@
 """``quadfault import``: convert a real flight log into a recording (docs/formats.md).
 
-    quadfault import LOG --out FILE.csv [--format px4|ardupilot|blackbox] [--log N]
+    quadfault import LOG --out FILE.csv [--format px4|ardupilot|blackbox|crazyflie-usd]
+                     [--log N] [--preset NAME]
     quadfault import DATASET INPUT --out FILE.csv
                      [--force] [--keep-all] [--vehicle VEHICLE.json] [--calibration T0,T1]
                      [--mass KG] [--arm D] [--torque-coefficient C] [--inertia JXX,JYY,JZZ]
@@ -22,6 +23,8 @@ from quadfault.errors import ConfigError, RecordingError
 
 #: importers of autopilot logs (the rest are data sets with known vehicles)
 AUTOPILOTS = ("px4", "ardupilot", "blackbox")
+#: formats read from the file itself (--format)
+FORMATS = AUTOPILOTS + ("crazyflie-usd",)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -31,16 +34,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "source",
         metavar="LOG|DATASET",
         help="the log (PX4 .ulg, ArduPilot .bin/.log, Betaflight/INDIflight "
-        ".bfl/.bbl or its decoded CSV: the format is read from the file), "
+        ".bfl/.bbl or its decoded CSV, Crazyflie uSD-deck log: the format is read from "
+        "the file), "
         f"or a data set name ({', '.join(IMPORTERS)}) followed by its file",
     )
     p.add_argument("input", nargs="?", metavar="INPUT", help="the file, after a data set name")
     p.add_argument("--out", required=True, help="output recording FILE.csv (+ FILE.json)")
     p.add_argument(
         "--format",
-        choices=AUTOPILOTS,
+        choices=FORMATS,
         default=None,
         help="the log's format, instead of reading it from the file",
+    )
+    p.add_argument(
+        "--preset",
+        default=None,
+        metavar="NAME",
+        help="crazyflie-usd: the vehicle's named constants (crazyflie21, "
+        "crazyflie21-brushless; default crazyflie21, said so)",
     )
     p.add_argument(
         "--log",
@@ -212,6 +223,8 @@ def run(args) -> int:
             "data set's vehicle is known (give --vehicle VEHICLE.json to replace "
             "it)"
         )
+    if args.preset is not None and kind != "crazyflie-usd":
+        raise ConfigError("--preset applies to Crazyflie uSD logs (crazyflie-usd)")
     if args.time_base is not None and kind != "px4":
         raise ConfigError("--time-base applies to PX4 logs")
     if args.log is not None and kind != "blackbox":
@@ -237,8 +250,10 @@ def run(args) -> int:
             time_base=args.time_base,
             log=args.log,
         )
+    if kind == "crazyflie-usd":
+        kwargs.update(vehicle=vehicle, thrust_curve=curve, preset=args.preset)
     rec = importer(source, **kwargs)
-    if vehicle is not None and kind not in AUTOPILOTS:
+    if vehicle is not None and kind not in FORMATS:
         rec = with_vehicle(rec, vehicle, curve, args.vehicle)
     write_recording(rec, out, frame=args.frame, force=args.force)
     warns = (rec.meta.get("import") or {}).get("warnings")

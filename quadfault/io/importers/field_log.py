@@ -347,8 +347,10 @@ def build_recording(
     torque_coefficient=None,
     keep_all: bool = False,
     calibration=None,
+    vehicle_source: str = "the user's vehicle file",
 ) -> Recording:
-    """The recording of ``log`` (module docstring)."""
+    """The recording of ``log`` (module docstring); ``vehicle_source`` says where a given
+    ``vehicle`` comes from."""
     path = log.path
     streams = dict(log.streams)
     if "u" not in streams:
@@ -431,7 +433,7 @@ def build_recording(
             )
         if mass is not None:
             vehicle = vehicle.replace(mass=float(mass))
-        constants["vehicle"] = "from the user's vehicle file"
+        constants["vehicle"] = f"from {vehicle_source}"
     u = np.clip(res["u"], 0.0, 1.0)
     meta_cal = None
     if thrust_curve is None:
