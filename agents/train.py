@@ -361,6 +361,10 @@ def train_one(
             raise ConfigError(
                 f"algo_kwargs rejected by {config.algo.upper()}: {' '.join(str(exc).split())}"
             ) from None
+        if config.tensorboard is None:  # SB3's default logger makes an empty temp folder
+            from stable_baselines3.common.logger import Logger
+
+            model.set_logger(Logger(folder=None, output_formats=[]))
         rollout = steps_per_rollout(model)
         total = planned_timesteps(config.timesteps, rollout)
         if total != config.timesteps and not quiet:

@@ -54,11 +54,20 @@ def _tiny(algo):
 def test_smoke_training_and_round_trip(algo, tmp_path):
     pytest.importorskip("torch")
     pytest.importorskip("stable_baselines3")
+    import tempfile
+
     from stable_baselines3.common.vec_env import VecNormalize
 
     from agents.train import load_agent, train_one
 
-    model = train_one(_tiny(algo), 0, tmp_path / "run", quiet=True)
+    monkey_tmp = tmp_path / "system_tmp"  # SB3's default logger makes tempdir/SB3-* folders
+    monkey_tmp.mkdir()
+    saved, tempfile.tempdir = tempfile.tempdir, str(monkey_tmp)
+    try:
+        model = train_one(_tiny(algo), 0, tmp_path / "run", quiet=True)
+    finally:
+        tempfile.tempdir = saved
+    assert list(monkey_tmp.iterdir()) == []  # training leaves no temp folder behind
     assert model.num_timesteps == 64  # whole rollouts: exactly the budget
     for name in (
         "model.zip",

@@ -94,6 +94,7 @@ def drag_flight():
     return fly((fx.Drag(0.3),), seed=2)
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")  # numpy's warnings never reach users
 def test_an_invalid_velocity_gives_no_drag_or_wind(drag_flight):
     t0, t1 = float(drag_flight.t[0]), float(drag_flight.t[-1])
     rec = dataclasses.replace(
@@ -317,3 +318,21 @@ def test_the_report_lists_what_was_not_identifiable_and_the_assumed_constants():
         ),
         "f.csv",
     )
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+def test_the_uncertainty_of_a_parameter_without_signal_does_not_overflow():
+    """diag(pinv(H)) of the fit's normal matrix, scaled so that a parameter whose column is
+    a few subnormal numbers (no signal) gives a huge finite uncertainty, not numpy's
+    'overflow in divide'; equal to numpy's pinv elsewhere."""
+    from quadfault.diagnosis.fit import _pinv_diag_sqrt
+
+    rng = np.random.default_rng(0)
+    for k in range(50):
+        J = rng.normal(size=(30, 3)) * 10.0 ** rng.integers(-8, 8)
+        J[:, 1] *= k % 2
+        M = J.T @ J
+        ref = np.sqrt(np.maximum(np.diag(np.linalg.pinv(M)), 1e-300))
+        np.testing.assert_allclose(_pinv_diag_sqrt(M, 1e-300), ref, rtol=1e-9)
+    sd = _pinv_diag_sqrt(np.diag([1e-310, 0.0, 1.0]), 1e-300)
+    assert np.all(np.isfinite(sd)) and sd[0] > 1e150 and sd[1] == pytest.approx(1e-150)

@@ -252,6 +252,9 @@ def test_sb3_adapter_trains_ppo():
 
     env = make_sb3_vec_env(4, seed=0, estimator="none", scenario="combined", duration=0.1)
     model = sb3.PPO("MlpPolicy", env, n_steps=16, batch_size=32, n_epochs=1, seed=0, device="cpu")
+    from stable_baselines3.common.logger import Logger
+
+    model.set_logger(Logger(folder=None, output_formats=[]))  # no SB3-* temp folder
     model.learn(64)
     obs = env.reset()
     assert obs.shape == (4, env.observation_space.shape[0])

@@ -214,7 +214,7 @@ def solve_linear(
             status, message = 1, "converged (fixed point)"
             break
         # converged: the step is far below the statistical uncertainty of every parameter
-        sd = np.sqrt(np.maximum(np.diag(np.linalg.pinv(H)), 1e-300))
+        sd = _pinv_diag_sqrt(H, 1e-300)
         step = np.max(np.abs(x_new - x) / np.maximum(sd, 1e-12 * (hi - lo)))
         x = x_new
         if step < 1e-4:
@@ -226,6 +226,20 @@ def solve_linear(
     else:
         jscale = np.ones_like(r)
     return LinearSolution(x, r, -A * jscale[:, None], status, message)
+
+
+def _pinv_diag_sqrt(M: np.ndarray, floor: float = 0.0) -> np.ndarray:
+    """``sqrt(max(diag(pinv(M)), floor))`` of a normal matrix without overflow: ``pinv`` of
+    ``M / c`` (c its largest entry) is ``c pinv(M)``; a matrix of a few subnormal numbers (a
+    parameter without signal) gave ``1 / 1e-310`` inside ``pinv``. A zero matrix gives the
+    floor, as ``pinv`` does."""
+    c = float(np.max(np.abs(M))) if M.size else 0.0
+    if not np.isfinite(c):  # as pinv does (it raises on NaN)
+        return np.sqrt(np.maximum(np.diag(np.linalg.pinv(M)), floor))
+    if not c > 0:
+        return np.full(len(M), np.sqrt(floor))
+    v = np.diag(np.linalg.pinv(M / c))
+    return np.maximum(np.sqrt(np.maximum(v, 0.0)) / np.sqrt(c), np.sqrt(floor))
 
 
 def fit(
@@ -293,8 +307,7 @@ def fit(
     s2 = float(r @ r) / max(n - p, 1)
     J = res.jac
     try:
-        cov = s2 * np.linalg.pinv(J.T @ J)
-        sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        sd = np.sqrt(s2) * _pinv_diag_sqrt(J.T @ J)
     except np.linalg.LinAlgError:
         sd = np.full(p, np.nan)
     return Fit(

@@ -121,13 +121,17 @@ def is_usd_log(head: bytes) -> bool:
         return False
     try:
         parse_header(head)
-    except (ValueError, struct.error, IndexError):
-        return len(head) < 4096  # a header longer than what was read is still plausible
+    except ValueError:
+        return False
+    except (struct.error, IndexError):  # cut inside the header: the importer says so
+        return True
     return True
 
 
 def _cstring(data: bytes, pos: int) -> tuple:
-    end = data.index(b"\x00", pos)
+    end = data.find(b"\x00", pos)
+    if end < 0:
+        raise IndexError("the header ends inside a name")
     return data[pos:end].decode("ascii"), end + 1
 
 
@@ -256,11 +260,11 @@ def read_usd(path, preset: str = DEFAULT_PRESET) -> FieldLog:
     data = path.read_bytes()
     try:
         version, events, start = parse_header(data)
-    except (ValueError, struct.error, UnicodeDecodeError):
+    except ValueError:
         raise RecordingError(
             path, "not a Crazyflie uSD event log (no readable 0xBC header)"
         ) from None
-    except IndexError:
+    except (IndexError, struct.error):
         raise RecordingError(path, "the uSD log is cut inside its header: nothing valid") from None
     end, notes = len(data), []
     has_crc = end - start >= 4 and zlib.crc32(data[: end - 4]) == int.from_bytes(
