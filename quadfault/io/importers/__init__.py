@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from quadfault.errors import RecordingError
+from quadfault.io.importers.usd_format import is_usd_log
 
 #: name -> (module, function) of every importer (imported lazily).
 IMPORTERS: dict[str, tuple[str, str]] = {
@@ -67,8 +68,6 @@ def detect_format(path) -> str:
         return "ardupilot"
     if BLACKBOX_MARK in head:
         return "blackbox"
-    from quadfault.io.importers.crazyflie_usd import is_usd_log
-
     if is_usd_log(head):
         return "crazyflie-usd"
     text = head.decode("latin-1")
