@@ -334,5 +334,7 @@ def test_the_uncertainty_of_a_parameter_without_signal_does_not_overflow():
         M = J.T @ J
         ref = np.sqrt(np.maximum(np.diag(np.linalg.pinv(M)), 1e-300))
         np.testing.assert_allclose(_pinv_diag_sqrt(M, 1e-300), ref, rtol=1e-9)
-    sd = _pinv_diag_sqrt(np.diag([1e-310, 0.0, 1.0]), 1e-300)
+    sd = _pinv_diag_sqrt(np.diag([1e-310, 0.0, 0.0]), 1e-300)
     assert np.all(np.isfinite(sd)) and sd[0] > 1e150 and sd[1] == pytest.approx(1e-150)
+    sd = _pinv_diag_sqrt(np.diag([1e-310, 0.0, 1.0]), 1e-300)  # cut as pinv cuts it
+    np.testing.assert_allclose(sd, [1e-150, 1e-150, 1.0])
