@@ -169,3 +169,19 @@ def test_stop_at_loss_is_the_same_flight_cut_at_the_event():
     for name in ("t", "position", "velocity", "quaternion", "omega", "thrust_cmd", "eta_true"):
         np.testing.assert_array_equal(getattr(cut, name), getattr(full, name)[: row + 1])
     assert "end" not in simulate(scenario, seed=4, stop_at_loss=True).meta
+
+
+def test_an_effect_without_a_scenario_flies_the_nominal_scenario_and_says_so(tmp_path):
+    out = tmp_path / "drag.csv"
+    code, err = _cli(
+        ["simulate", "--effect", "drag=0.3", "--duration", "0.5", "--out", out, "--quiet"]
+    )
+    assert code == 0 and err == ""  # --quiet: no note
+    side = json.loads(out.with_suffix(".json").read_text())
+    assert side["scenario"] == "nominal" and not side.get("fault_windows")
+    code, err = _cli(
+        ["simulate", "--effect", "drag=0.3", "--duration", "0.5", "--out", out, "--force"]
+    )
+    assert code == 0 and err.count("\n") == 1 and "nominal scenario" in err, err
+    code, err = _cli(["simulate", "--duration", "0.5", "--out", out, "--force", "--quiet"])
+    assert code == 0 and json.loads(out.with_suffix(".json").read_text())["scenario"] == "combined"
