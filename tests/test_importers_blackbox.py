@@ -190,3 +190,12 @@ def test_a_cut_log_says_what_was_skipped(tmp_path):
 
     skipped = json.loads((tmp_path / "o.json").read_text())["import"]["skipped"]
     assert skipped["truncated"] and 0.6 * 19.0 < skipped["after_t"] < 0.8 * 19.0
+
+
+def test_a_cut_log_other_than_the_imported_one_is_named(tmp_path):
+    path = tmp_path / "LOG002.BBL"
+    second = blackbox_log(8.0)
+    path.write_bytes(blackbox_log(19.0) + second[: len(second) // 2])
+    rec = _import(path)
+    assert rec.meta["import"].get("skipped") is None  # log 1, the longest, is whole
+    assert any("log 2 of 2" in w and "cut short" in w for w in rec.meta["import"]["warnings"])

@@ -79,6 +79,7 @@ class _Fields:
     def __init__(self, columns: dict, units: dict, header: dict, source: str, skipped=None):
         self.columns, self.units, self.header, self.source = columns, units, header, source
         self.skipped = skipped  # what the decoder skipped of a cut or corrupt log, or None
+        self.others = None  # a note on the file's other logs (one of them cut), or None
 
     def get(self, *names):
         for name in names:
@@ -142,7 +143,19 @@ def _from_binary(path: Path, data: bytes, log_index: int | None) -> tuple:
             "corrupt": int(chosen.corrupt),
             "after_t": None if chosen.ended or t is None else float(t[-1] * 1e-6),
         }
-    return _Fields(cols, {}, chosen.header, note, skipped), len(logs)
+    fields = _Fields(cols, {}, chosen.header, note, skipped)
+    cut = [
+        k + 1
+        for k, lg in enumerate(logs)
+        if k + 1 != index and not isinstance(lg, Exception) and not lg.ended
+    ]
+    if cut:
+        fields.others = (
+            f"log{'s' if len(cut) > 1 else ''} {', '.join(map(str, cut))} of {len(logs)} in the "
+            f"file {'are' if len(cut) > 1 else 'is'} cut short (no end-of-log event); imported "
+            f"log {index} (--log N picks another)"
+        )
+    return fields, len(logs)
 
 
 def _from_csv(path: Path, text: str) -> _Fields:
@@ -261,7 +274,7 @@ def read_blackbox(path, log: int | None = None) -> FieldLog:
         f, _n_logs = _from_csv(path, text), 1
         if log not in (None, 1):
             raise RecordingError(path, f"--log {log}: a decoded CSV holds one log")
-    notes, missing = [], []
+    notes, missing = ([f.others] if f.others else []), []
     h = f.header
     firmware = str(h.get("Firmware revision", ""))
     t_raw = f.get("time")
