@@ -288,3 +288,13 @@ def test_battery_cells_from_the_parameters(tmp_path):
     dataflash_flight(path, params={"MOT_BAT_VOLT_MAX": 25.2})  # 6S, the log says 16 V
     bat = _import(path, mass=1.5).meta["import"]["battery"]
     assert bat["cells"] == 6 and not bat["plausible"]
+
+
+def test_a_quadplane_imports_its_lift_motors(tmp_path):
+    path = tmp_path / "quadplane.bin"
+    plane = {"FRAME_CLASS": None, "FRAME_TYPE": None, "Q_ENABLE": 1, "Q_FRAME_CLASS": 1}
+    dataflash_flight(path, params={**plane, "Q_FRAME_TYPE": 1, "SERVO3_FUNCTION": 70})
+    rec = _import(path, mass=1.5)
+    assert any("QuadPlane" in w for w in rec.meta["import"]["warnings"])
+    assert "RCOU C[5, 6, 7, 8]" in rec.meta["import"]["commands"]  # Motor 1-4, not throttle
+    np.testing.assert_allclose(np.median(rec.commands_u, axis=0), HOVER, atol=0.02)

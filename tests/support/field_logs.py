@@ -344,6 +344,7 @@ def dataflash_flight(
     for i, ch in enumerate(motor_channels):
         base[f"SERVO{ch}_FUNCTION"] = 33 + i
     base.update(params or {})
+    base = {k: v for k, v in base.items() if v is not None}  # None: leave the parameter out
     msgs = _df_messages(
         rcou_rate=rcou_rate,
         invalid_vxy=invalid_vxy,
