@@ -37,6 +37,7 @@ from quadfault.model.effects.spec import parse_effect
 from quadfault.model.motors import MotorModel
 from quadfault.model.plant import Plant
 from quadfault.model.scenarios import Scenario
+from quadfault.model.sensor_presets import as_sensor_noise
 from quadfault.model.vehicle import Vehicle
 from quadfault.sim.simulator import SensorNoise, initial_state
 
@@ -54,7 +55,8 @@ class FlightConfig:
         estimator_every: feed the estimator every k-th sample (1 = every sample, 1 kHz).
         controller: geometric controller options (acceleration feed-forward on by default).
         fault_tolerant: estimate-aware allocation options.
-        sensor_noise: measurement noise (zero by default, as in the paper).
+        sensor_noise: the sensors (noise-free by default, as in the paper): a
+            :class:`SensorNoise` or what ``as_sensor_noise`` takes (a preset name).
         crash: crash limits (a crash ends the flight).
         recovery: time-to-recover parameters.
         trace_every: keep every k-th step in the returned traces (plots).
@@ -71,6 +73,7 @@ class FlightConfig:
     trace_every: int = 10
 
     def __post_init__(self):
+        object.__setattr__(self, "sensor_noise", as_sensor_noise(self.sensor_noise))
         if not (math.isfinite(self.dt) and self.dt > 0):
             raise ConfigError(f"dt must be positive [s], got {self.dt!r}")
         if int(self.estimator_every) < 1 or int(self.trace_every) < 1:

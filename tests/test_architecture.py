@@ -188,6 +188,7 @@ LAYERS = (
             "quadfault.model.dynamics",
             "quadfault.model.motors",
             "quadfault.model.sensors",
+            "quadfault.model.sensor_presets",
             "quadfault.model.controller",
             "quadfault.model.closed_loop",
             "quadfault.model.plant",

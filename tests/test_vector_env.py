@@ -77,6 +77,16 @@ def test_matches_single_envs_with_noise_random_scenarios_and_autoreset():
     assert n_done >= 6  # every sub-env went through at least two episodes
 
 
+@pytest.mark.parametrize("preset", ["crazyflie", "indiflight"])
+def test_matches_single_envs_under_a_sensor_preset_through_autoresets(preset):
+    """A measured preset (rates, coloured noise, per-flight bias, latency): each row's sensors
+    start again at its reset and draw what the single env draws."""
+    n_done = _run_side_by_side(
+        2, 70, seed=3, estimator="ekf", scenario="random", duration=0.3, sensor_noise=preset
+    )
+    assert n_done >= 4
+
+
 def test_rows_sharing_a_scenario_do_not_leak_it_to_other_rows():
     """Rows that repeat a reset seed share one interned schedule; the other rows must keep
     their own (a grouping bug once gave row 1 the schedule of rows 0 and 2)."""

@@ -28,7 +28,7 @@ import json
 import math
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -37,6 +37,8 @@ from estimators.paper.pairing import pair_ratios
 from estimators.paper.report import STATIC_FIGURES, excess_ratio_text, table, write_report
 from estimators.registry import make_estimator
 from quadfault.errors import ConfigError
+from quadfault.model.sensor_presets import as_sensor_noise
+from quadfault.model.sensors import SensorNoise
 
 SCENARIOS = ("degradation", "abrupt", "combined", "clipping")
 REFERENCE_SCENARIOS = ("degradation", "abrupt", "combined")
@@ -89,6 +91,9 @@ class ReproduceConfig:
             (:func:`estimators.paper.pairing.choose_partner`).
         baselines: the estimators each IRLS variant is paired with (names of
             :data:`estimators.paper.pairing.BASELINES`; the EKF always, the paper's).
+        sensor_noise: the sensors of every flight, the calibration flight's too (a
+            :class:`~quadfault.model.sensors.SensorNoise` or what ``as_sensor_noise`` takes, a
+            preset name such as ``"px4"``; default noise-free, as in the paper).
     """
 
     duration: float = 80.0
@@ -107,6 +112,10 @@ class ReproduceConfig:
     partner_points_per_decade: float = 3.0
     partner_refine: int = 3
     baselines: tuple = ("ekf", "rls", "ukf")
+    sensor_noise: SensorNoise = field(default_factory=SensorNoise)
+
+    def __post_init__(self):
+        object.__setattr__(self, "sensor_noise", as_sensor_noise(self.sensor_noise))
 
     @classmethod
     def quick(cls, **changes) -> ReproduceConfig:
@@ -136,28 +145,33 @@ class ReproduceConfig:
         return self.seed + 1000
 
 
-def sim_config(mode: str, name: str):
+def sim_config(mode: str, name: str, sensor_noise=None):
     """Simulation settings of a scenario.
 
     ``reference``: the authors' loop (``SimConfig.reference()``). ``rk4``: our integrator with
     the paper's actuator assumption, no upper thrust limit (only ``f >= 0``), except for
     ``clipping``, whose point is saturation at f_max. With the default f_max (thrust-to-weight
     2), a motor at eta = 0.5 cannot hold hover plus the circle, and the abrupt and combined
-    flights lose control during the first fault.
+    flights lose control during the first fault. ``sensor_noise``: the sensors (None:
+    noise-free).
     """
     from quadfault.sim.simulator import SimConfig
 
+    noise = as_sensor_noise(sensor_noise)
     if mode == "reference":
-        return SimConfig.reference()
-    return SimConfig(saturate=name == "clipping")
+        return SimConfig.reference(sensor_noise=noise)
+    return SimConfig(saturate=name == "clipping", sensor_noise=noise)
 
 
-def _fly(name: str, duration: float, seed: int, mode: str, sigma: float):
+def _fly(name: str, duration: float, seed: int, mode: str, sigma: float, sensor_noise=None):
     from quadfault.model.scenarios import named_scenario
     from quadfault.sim.simulator import simulate
 
     return simulate(
-        named_scenario(name, duration), config=sim_config(mode, name), seed=seed, thrust_noise=sigma
+        named_scenario(name, duration),
+        config=sim_config(mode, name, sensor_noise),
+        seed=seed,
+        thrust_noise=sigma,
     )
 
 
@@ -194,6 +208,7 @@ def _calibration_job(mode: str, cfg: ReproduceConfig) -> dict:
         cfg.calibration_seed,
         mode,
         cfg.thrust_noise,
+        cfg.sensor_noise,
     )
     if mode == "reference":
         cal = calibrate_q_eta(
@@ -239,7 +254,7 @@ def _scenario_job(
     from estimators.metrics import fault_windows, score
     from estimators.paper.pairing import VARIANTS, run_pairs
 
-    rec = _fly(name, cfg.duration, cfg.seed, mode, cfg.thrust_noise)
+    rec = _fly(name, cfg.duration, cfg.seed, mode, cfg.thrust_noise, cfg.sensor_noise)
     out = {
         "mode": mode,
         "name": name,
@@ -345,7 +360,9 @@ def irls_history(cfg: ReproduceConfig) -> dict:
     from estimators.residuals import segment_terms
     from estimators.robust import mad_weights
 
-    rec = _fly("combined", min(cfg.duration, 12.0), cfg.seed, "rk4", cfg.thrust_noise)
+    rec = _fly(
+        "combined", min(cfg.duration, 12.0), cfg.seed, "rk4", cfg.thrust_noise, cfg.sensor_noise
+    )
     icfg = IRLSConfig(record_history=True)
     onset = rec.meta["fault_windows"][0][1]
     k_end = int(np.searchsorted(rec.t, onset + cfg.history_offset))
@@ -440,6 +457,7 @@ def metrics_document(run: dict) -> dict:
         "partner_q_range": list(cfg.partner_q_range),
         "integrator": "rk4",
         "baselines": list(cfg.baselines),
+        "sensor_noise": cfg.sensor_noise.describe() if cfg.sensor_noise.any else "none",
         "upper_thrust_limit": "only in clipping (the paper has none)",
         "align": "end",
         "ekf_q_eta": run["calibration"]["rk4"].q_eta,
@@ -501,6 +519,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="skip the IRLS variants beyond the paper (output median, "
         "IRLSConfig.improved()) and their EKF partners",
     )
+    p.add_argument(
+        "--sensor-noise",
+        default=None,
+        metavar="PRESET|POS,VEL,ATT,GYRO[,ACC]",
+        help="the sensors of every flight: a preset measured on real logs (crazyflie, px4, "
+        "...: docs/sensors.md) or white noise stds as for simulate (default: none, as in "
+        "the paper)",
+    )
 
 
 def run(args) -> int:
@@ -522,6 +548,7 @@ def run(args) -> int:
         baselines=baselines_of(getattr(args, "baselines", "ekf,rls,ukf")),
         reference_mode=not args.no_reference_mode,
         improved=not getattr(args, "no_improved", False),
+        sensor_noise=as_sensor_noise(getattr(args, "sensor_noise", None), "--sensor-noise"),
     )
     result = reproduce(cfg, progress=not args.quiet and enabled())
     out.mkdir(parents=True, exist_ok=True)
@@ -532,7 +559,8 @@ def run(args) -> int:
     write_report(out, doc, result, force=args.force)
     print(
         f"quadfault reproduce ({'quick' if args.quick else 'full'}, seed {cfg.seed}, "
-        f"integrator rk4, EKF Q_eta = {doc['config']['ekf_q_eta']:.4g})"
+        f"integrator rk4, EKF Q_eta = {doc['config']['ekf_q_eta']:.4g}"
+        + (f", sensor noise {_noise_text(cfg.sensor_noise)})" if cfg.sensor_noise.any else ")")
     )
     print(table(doc["scenarios"]))
     for b, ratios in doc["baseline_ratios"].items():
@@ -563,6 +591,10 @@ def run(args) -> int:
         f"({result['seconds']:.0f} s)"
     )
     return 0
+
+
+def _noise_text(noise) -> str:
+    return noise.name or ",".join(f"{x:g}" for x in noise.white)
 
 
 def baselines_of(text: str) -> tuple:

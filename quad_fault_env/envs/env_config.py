@@ -35,6 +35,7 @@ from quadfault.errors import ConfigError
 from quadfault.model.controller import ControllerConfig, GeometricGains
 from quadfault.model.effects.sampling import PhysicsDraws
 from quadfault.model.scenarios import SCENARIO_NAMES, Scenario
+from quadfault.model.sensor_presets import as_sensor_noise
 from quadfault.model.sensors import SensorNoise
 from quadfault.model.vehicle import Vehicle
 
@@ -61,7 +62,7 @@ class EnvConfig:
     scenario_options: dict | None = None
     duration: float | None = None
     thrust_noise: float | None = None
-    sensor_noise: SensorNoise | dict | None = None
+    sensor_noise: SensorNoise | str | dict | None = None
     action_mode: str = "residual"
     residual_scale: float = 1.0
     moment_scale: tuple = (1.0, 1.0, 0.05)
@@ -122,7 +123,7 @@ class EnvConfig:
         put("reward", config_of(self.reward, RewardConfig, "reward"))
         put("limits", config_of(self.limits, TerminationLimits, "limits"))
         put("initial_spread", config_of(self.initial_spread, InitialStateSpread, "initial_spread"))
-        put("sensor_noise", config_of(self.sensor_noise, SensorNoise, "sensor_noise"))
+        put("sensor_noise", as_sensor_noise(self.sensor_noise, "sensor_noise"))
         self._check_rates()
         self._check_scenario()
         self._check_allocation()

@@ -118,8 +118,10 @@ class QuadFaultEnv(gym.Env):
         duration: episode length [s] of named and random scenarios (default 20 s); a
             Scenario object brings its own ``duration``.
         thrust_noise: sigma_f overriding the scenario's (None keeps it).
-        sensor_noise: a :class:`~quadfault.sim.simulator.SensorNoise` or a dict of its fields
-            (``{"position": 0.01, "gyro": 0.005}``; default noise-free).
+        sensor_noise: the sensors: a preset name measured on real logs (``"crazyflie"``,
+            ``"px4"``, ...: docs/sensors.md), a :class:`~quadfault.model.sensors.SensorNoise`,
+            a dict of its fields (``{"position": 0.01, "gyro": 0.005}``, ``{"preset": "px4",
+            "gyro": 0.01}``) or ``"P,V,A,G[,ACC]"`` (white noise); default noise-free.
         action_mode, residual_scale, moment_scale: see ``ActionConfig``.
         control_rate: agent / controller rate [Hz] (100). physics_rate: plant rate [Hz] (1000).
         estimator_rate: ``"physics"`` (every substep, the default) or ``"control"`` (the

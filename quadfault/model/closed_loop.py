@@ -3,14 +3,16 @@
 Per physics step k (time ``t_k = t0 + k dt``) of one vehicle, :func:`fly_vehicle` runs::
 
     [reference integrator: the authors' Euler step, before the sensors]
-    measure      sensors (quadfault.model.sensors.measure3): noisy p, v, R, Omega
+    measure      sensors (quadfault.model.sensors: measure3, or measure_model with coloured
+                 noise, bias, rate and latency): the measured p, v, R, Omega
     control      every ``decimation`` steps: geometric controller (eqs. 9, 10) on the
                  measurement and the nominal allocation inverse (eq. 12) -> rotor commands
                  (decimation 0: the caller sets the commands between calls)
     motors       saturation, efficiency, thrust noise (eqs. 11, 13) -> produced thrusts
                  [effects: rotor_thrust]
     plant step   allocation (eq. 12), RKMK4 (eqs. 1-4) [effects: wrench at every stage]
-    accelerometer the specific force at the step's start, with its noise
+    accelerometer the specific force at the step's start, with its noise (accelerometer3 or
+                 accelerometer_model)
 
 Random numbers come from the vehicle's ``numpy.random.Generator`` in that order (sensors,
 motors, accelerometer), drawn inside the kernel; so a flight is a function of its seed only.
@@ -68,7 +70,14 @@ from quadfault.model.effects.chain import EffectRows, has_wrench, step_effects
 from quadfault.model.generator_table import generator_at, generator_at_python, generator_table
 from quadfault.model.motors import motor_thrust
 from quadfault.model.rotation import mat3, store3, store33, vec3
-from quadfault.model.sensors import accelerometer3, measure3
+from quadfault.model.sensors import (
+    ROW_WIDTH,
+    accelerometer3,
+    accelerometer_model,
+    measure3,
+    measure_model,
+    state_width,
+)
 
 
 class LoopConstants(NamedTuple):
@@ -80,7 +89,8 @@ class LoopConstants(NamedTuple):
     t0: float  # time of step 0 [s]
     reference: bool  # the authors' Euler step instead of RKMK4
     decimation: int  # controller every this many steps; 0: the caller sets the commands
-    sensors: np.ndarray  # (N, 6) SensorNoise.constants per vehicle (the last: 1.0 when any noise)
+    sensors: np.ndarray  # (N, ROW_WIDTH) SensorNoise.row per vehicle (column 5: any noise,
+    # column 6: the full model)
     record_accel: bool  # measure the accelerometer (its noise drawn only then)
     saturate: bool  # clip commands to [0, f_max] (else only at 0)
     gravity: float  # [m/s^2]
@@ -107,6 +117,7 @@ class Vehicles(NamedTuple):
     inertia: np.ndarray  # (N, 3, 3) true inertia [kg m^2]
     inertia_inverse: np.ndarray  # (N, 3, 3)
     f_max: np.ndarray  # (N,) per-rotor thrust limit [N]
+    sensor_state: np.ndarray  # (N, S) the sensors' full model (S = 0 without it)
 
     @classmethod
     def empty(cls, n_vehicles: int, n_rotors: int, vehicle=None) -> Vehicles:
@@ -130,6 +141,7 @@ class Vehicles(NamedTuple):
             eye.copy(),
             eye.copy(),
             np.full(N, np.inf),
+            np.zeros((N, 0)),
         )
         if vehicle is not None:
             out.set_body(slice(None), vehicle)
@@ -221,6 +233,21 @@ def _tuples(C, V, i):
 
 
 @jit(inline="always")
+def _measure(p, v, R, w, sensors, C, V, i, gen):
+    """Vehicle ``i``'s measurement: the full model when its row asks for it, else white."""
+    if C.sensors[i, 6] != 0.0:
+        return measure_model(p, v, R, w, C.sensors[i], V.sensor_state[i], C.dt, gen)
+    return measure3(p, v, R, w, sensors, gen)
+
+
+@jit(inline="always")
+def _accelerometer(sf, sensors, C, V, i, gen):
+    if C.sensors[i, 6] != 0.0:
+        return accelerometer_model(sf, C.sensors[i], V.sensor_state[i], C.dt, gen)
+    return accelerometer3(sf, sensors, gen)
+
+
+@jit(inline="always")
 def fly_vehicle(i, gens, k0, k1, measure_first, C, K, V, T, out, fx, memory):
     """Steps ``k0 .. k1-1`` of vehicle ``i`` (see the module docstring), drawing from its
     generator ``gens[i]`` (a :func:`generators` table); ``C`` the :class:`LoopConstants`, ``K`` the controller's
@@ -250,7 +277,7 @@ def fly_vehicle(i, gens, k0, k1, measure_first, C, K, V, T, out, fx, memory):
         if memory is not None:
             p, v, R, w = reference_euler_step(p, v, R, w, memory[i], rigid, C.dt)
         if k > k0 or measure_first:
-            mp, mv, mR, mw = measure3(p, v, R, w, sensors, gen)
+            mp, mv, mR, mw = _measure(p, v, R, w, sensors, C, V, i, gen)
         if K is not None:  # (compiled out without a controller in the loop)
             if k % C.decimation == 0:
                 gains, nominal = controller_tuples(K)
@@ -271,7 +298,7 @@ def fly_vehicle(i, gens, k0, k1, measure_first, C, K, V, T, out, fx, memory):
             p1, v1, R1, w1, a0 = rkmk4_step(p, v, R, w, thrust, M, rigid, C.dt, W)
         sf = a0
         if C.record_accel:
-            sf = accelerometer3(specific_force3(R, a0, C.gravity), sensors, gen)
+            sf = _accelerometer(specific_force3(R, a0, C.gravity), sensors, C, V, i, gen)
         j = k - k0
         if rec and j % out.stride == 0:
             r = j // out.stride
@@ -335,8 +362,8 @@ def _fly_parallel(gens, active, k0, n_steps, measure_first, C, K, V, T, out, fx,
 @jit
 def sense_vehicle(i, gen, C, V):
     """Measure vehicle ``i``'s true state into its carried measurement (the sensors' draws)."""
-    mp, mv, mR, mw = measure3(
-        vec3(V.p[i]), vec3(V.v[i]), mat3(V.R[i]), vec3(V.w[i]), _tuples(C, V, i)[1], gen
+    mp, mv, mR, mw = _measure(
+        vec3(V.p[i]), vec3(V.v[i]), mat3(V.R[i]), vec3(V.w[i]), _tuples(C, V, i)[1], C, V, i, gen
     )
     store3(V.mp[i], mp)
     store3(V.mv[i], mv)
@@ -505,6 +532,23 @@ def sense_rows(gens, rows: np.ndarray | None, C: LoopConstants, V: Vehicles) -> 
         _sense_rows(gens() if callable(gens) else gens, rows, C, V)
 
 
+def sensor_state(V: Vehicles, rows: np.ndarray, dt: float) -> Vehicles:
+    """``V`` with a sensor state wide enough for sensor ``rows`` (N, ROW_WIDTH) at physics step
+    ``dt`` [s] (its own array when it already is; zeroed: each flight starts at its first
+    measurement)."""
+    width = state_width(rows, dt)
+    if V.sensor_state.shape[1] >= width:
+        return V
+    return V._replace(sensor_state=np.zeros((len(V.p), width)))
+
+
+def restart_sensors(V: Vehicles, rows=None) -> None:
+    """The sensors of vehicles ``rows`` (None: all) start a new flight at their next
+    measurement (new biases, coloured noise from its stationary law, no history)."""
+    if V.sensor_state.shape[1]:
+        V.sensor_state[slice(None) if rows is None else rows, 0] = 0.0
+
+
 def generators(rngs):
     """The generators the loop takes: one ``numpy.random.Generator`` per vehicle, as a
     :class:`~quadfault.model.generator_table.GeneratorTable` (a kernel draws from them directly,
@@ -519,10 +563,12 @@ def constants(
     """The :class:`LoopConstants` of a flight of ``plant`` (a :class:`~quadfault.model.plant.Plant`;
     its vehicles' physical parameters are in ``plant.vehicles``) measured by ``sensors`` (a
     SensorNoise, for every vehicle), with the controller in the loop every ``decimation``
-    steps (0: the caller sets the commands)."""
+    steps (0: the caller sets the commands). The vehicles get the sensor state the full model
+    needs (:func:`sensor_state`)."""
     veh = plant.vehicle
     N = len(plant.vehicles.p)
-    sensor_rows = np.array(np.broadcast_to(np.asarray(sensors.constants, dtype=float), (N, 6)))
+    sensor_rows = np.array(np.broadcast_to(sensors.row, (N, ROW_WIDTH)))
+    plant.vehicles = sensor_state(plant.vehicles, sensor_rows, plant.dt)
     return LoopConstants(
         float(plant.dt),
         float(t0),
@@ -549,5 +595,7 @@ __all__ = [
     "sense_vehicle",
     "generators",
     "constants",
+    "restart_sensors",
+    "sensor_state",
     "PARALLEL_MIN_VEHICLES",
 ]

@@ -34,6 +34,7 @@ from quadfault.model import closed_loop
 from quadfault.model.closed_loop import Records
 from quadfault.model.dynamics import RigidBodyState
 from quadfault.model.scenarios import at_times
+from quadfault.model.sensor_presets import as_sensor_noise
 from quadfault.model.sensors import SensorNoise
 
 
@@ -57,7 +58,9 @@ class Flight:
 
     Args:
         plant: the true vehicle(s): parameters, motors, effects, state.
-        sensors: measurement noise of every vehicle (default noise-free).
+        sensors: the sensors of every vehicle (default noise-free): a
+            :class:`~quadfault.model.sensors.SensorNoise` or what ``as_sensor_noise`` takes
+            (a preset name such as ``"crazyflie"``).
         controller: a :class:`~quadfault.model.controller.GeometricController` in the loop (one
             vehicle; its references come from :meth:`plan`), or None: the caller sets the
             commands.
@@ -69,7 +72,7 @@ class Flight:
     def __init__(
         self,
         plant,
-        sensors: SensorNoise | None = None,
+        sensors: SensorNoise | str | None = None,
         *,
         controller=None,
         control_every: int = 1,
@@ -77,7 +80,7 @@ class Flight:
         t0: float = 0.0,
     ):
         self.plant = plant
-        self.sensors = sensors or SensorNoise()
+        self.sensors = as_sensor_noise(sensors, "sensors")
         self.controller = controller
         self._K = None if controller is None else controller.constants
         decimation = 0 if controller is None else int(control_every)
@@ -146,6 +149,7 @@ class Flight:
         )
         self.k[rows] = 0
         self.plant.vehicles.f_cmd[rows] = 0.0
+        closed_loop.restart_sensors(self.plant.vehicles, rows)
         if state is not None:
             self.plant.vehicles.set_state(rows, state)
             self.sense(rows)

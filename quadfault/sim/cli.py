@@ -74,9 +74,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--sensor-noise",
         default=None,
-        metavar="POS,VEL,ATT,GYRO[,ACC]",
-        help="white measurement noise std: position [m], velocity [m/s], attitude "
-        "[rad], gyro [rad/s], accelerometer [m/s^2] (default: none)",
+        metavar="PRESET|POS,VEL,ATT,GYRO[,ACC]",
+        help="the sensors: a preset measured on real logs (crazyflie, px4, ...: "
+        "docs/sensors.md; coloured noise, bias, rate and latency) or the white noise std "
+        "of position [m], velocity [m/s], attitude [rad], gyro [rad/s], accelerometer "
+        "[m/s^2] (default: none)",
     )
     p.add_argument(
         "--no-saturation",
@@ -135,8 +137,9 @@ def run(args) -> int:
     from quadfault.io.recording import write_recording
     from quadfault.model.controller import ControllerConfig, GeometricGains
     from quadfault.model.scenarios import PAPER_SCENARIOS, named_scenario
+    from quadfault.model.sensor_presets import as_sensor_noise
     from quadfault.model.vehicle import Vehicle
-    from quadfault.sim.simulator import SensorNoise, SimConfig, simulate
+    from quadfault.sim.simulator import SimConfig, simulate
 
     out = Path(args.out)
     if out.suffix != ".csv":
@@ -171,13 +174,7 @@ def run(args) -> int:
 
         traj = {"circle": Circle, "lissajous": Lissajous, "hover": Hover}[args.trajectory]()
         scenario = scenario.replace(trajectory=traj)
-    noise = SensorNoise()
-    if args.sensor_noise:
-        parts = args.sensor_noise.split(",")
-        vals = _floats(args.sensor_noise, len(parts), "--sensor-noise")
-        if len(vals) not in (4, 5) or min(vals) < 0:
-            raise ConfigError("--sensor-noise expects 4 or 5 non-negative numbers")
-        noise = SensorNoise(*vals)
+    noise = as_sensor_noise(args.sensor_noise or None, "--sensor-noise")
     model = None
     if args.model is not None:
         from quadfault.model.effects import from_diagnosis

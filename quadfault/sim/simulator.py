@@ -34,6 +34,7 @@ from quadfault.model.motors import MotorModel
 from quadfault.model.plant import INTEGRATORS, EffectsHook, Plant
 from quadfault.model.rotation import rot_to_quat
 from quadfault.model.scenarios import Scenario
+from quadfault.model.sensor_presets import as_sensor_noise
 from quadfault.model.sensors import SensorNoise
 from quadfault.model.vehicle import Vehicle
 from quadfault.progress import progress_bar
@@ -48,7 +49,8 @@ class SimConfig:
         integrator: ``"rk4"`` (RKMK4 on SO(3)) or ``"reference"`` (the authors' Euler step).
         control_period: controller period [s]; ``None`` = every physics step.
         saturate: clip rotor commands to [0, f_max] (the reference clips only at 0).
-        sensor_noise: measurement noise.
+        sensor_noise: the sensors: a :class:`SensorNoise` or what ``as_sensor_noise`` takes (a
+            preset name such as ``"px4"``; default noise-free).
         controller: geometric controller options.
         record_accel: add the accelerometer columns ``ax, ay, az``.
     """
@@ -62,6 +64,7 @@ class SimConfig:
     record_accel: bool = True
 
     def __post_init__(self):
+        object.__setattr__(self, "sensor_noise", as_sensor_noise(self.sensor_noise))
         if not (math.isfinite(self.dt) and self.dt > 0):
             raise ConfigError(f"dt must be positive [s], got {self.dt!r}")
         if self.integrator not in INTEGRATORS:
@@ -239,6 +242,8 @@ def simulate(
             [m, a, b if math.isfinite(b) else None] for m, a, b in scenario.fault_windows()
         ],
     }
+    if cfg.sensor_noise.any:
+        meta["sensor_noise"] = cfg.sensor_noise.describe()
     if effects:
         meta["effects"] = [
             e.describe() if hasattr(e, "describe") else {"name": type(e).__name__} for e in effects

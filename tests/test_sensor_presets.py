@@ -1,0 +1,84 @@
+"""Every preset's numbers are the measurement that produced them: the logs of
+``../shared/data/real`` measured again (benchmarks/sensor_noise.py, through the importers) give
+each number of each preset (skipped where the logs are absent); and the measurement finds
+the noise the simulator was given."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from quadfault.model.sensor_presets import MEASURED_ON, PRESETS
+from quadfault.model.sensors import MODEL_FIELDS, STREAMS
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+import sensor_noise  # noqa: E402
+
+REAL = Path(os.environ.get("QUADFAULT_REAL_DATA", ROOT.parent / "shared" / "data" / "real"))
+
+#: preset -> (Crazyflie data set name or None, folder, file pattern): the logs of MEASURED_ON
+SOURCES = {
+    "crazyflie": ("nanodrone", "nanodrone-cf21bl", "*.csv.gz"),
+    "indiflight": (None, "indiflight-throws-early", "*.BFL"),
+    "px4": (None, "px4-uavcan-fmuv3", "*.ulg"),
+}
+
+
+def test_every_measured_preset_names_its_logs_and_command():
+    assert set(PRESETS) == {"none", *SOURCES}
+    for name, (_, folder, _) in SOURCES.items():
+        assert folder in MEASURED_ON[name] and "benchmarks/sensor_noise.py" in MEASURED_ON[name]
+
+
+@pytest.mark.parametrize("name", sorted(SOURCES))
+def test_a_preset_is_what_its_logs_measure(name):
+    dataset, folder, pattern = SOURCES[name]
+    logs = sorted((REAL / folder).glob(pattern))
+    if not logs:
+        pytest.skip(f"real data not available ({REAL / folder} is absent)")
+    numbers = sensor_noise.preset_numbers(sensor_noise.measure_files(logs, dataset))
+    preset = PRESETS[name]
+    for s in STREAMS:
+        got = preset.stream(s)
+        for key in ("white", *MODEL_FIELDS):
+            want = numbers[s][key]
+            if key == "tau" and numbers[s]["markov"] == 0.0:
+                continue  # (no coloured noise: its time does not matter)
+            assert got[key] == pytest.approx(want, rel=0.01, abs=1e-12), (name, s, key)
+
+
+def test_the_measurement_finds_the_noise_it_was_given(tmp_path):
+    """A simulated flight (the paper's circle) with known sensors, measured like a log: the
+    rates, the white noise and the latency of velocity after the accelerometer come back."""
+    from quadfault.io.recording import write_recording
+    from quadfault.model.scenarios import named_scenario
+    from quadfault.model.sensors import SensorNoise
+    from quadfault.sim.simulator import SimConfig, simulate
+
+    noise = SensorNoise(
+        0.002,
+        0.004,
+        0.001,
+        0.01,
+        0.05,
+        rate=(100.0, 100.0, 250.0, 500.0, 500.0),
+        latency=(0.0, 0.02, 0.0, 0.0, 0.0),
+    )
+    rec = simulate(named_scenario("combined", 20.0), config=SimConfig(sensor_noise=noise), seed=2)
+    write_recording(rec, tmp_path / "sim.csv")
+    [(_, m)] = sensor_noise.measure_files([tmp_path / "sim.csv"])
+    for s, rate in zip(STREAMS, noise.rate):
+        assert m[s]["rate"] == pytest.approx(rate, rel=0.02), s
+    assert m["accel"]["white"] == pytest.approx(0.05, rel=0.15)
+    # the controller flies on the noisy gyro: the true rate takes some of its noise too
+    assert 1.0 < m["gyro"]["white"] / 0.01 < 1.35
+    assert m["position"]["white"] == pytest.approx(0.002, rel=0.15)
+    assert m["velocity"]["latency"] == pytest.approx(0.02, abs=0.004)
+    assert abs(m["attitude"]["latency"]) < 0.004
+    assert np.isfinite(m["attitude"]["markov"])
