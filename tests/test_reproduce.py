@@ -85,6 +85,10 @@ def test_bad_flags_are_one_line_errors(tmp_path):
     (tmp_path / "file").write_text("")
     r = _cli("--quick", "--out", str(tmp_path / "file"))
     assert r.returncode == 2 and "not a folder" in r.stderr
+    r = _cli("--quick", "--out", str(tmp_path / "y"), "--sensor-noise", "pixhawk")
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "--sensor-noise: unknown sensor noise preset 'pixhawk'; presets: none" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "y").exists()
 
 
 @pytest.mark.slow
