@@ -114,6 +114,8 @@ def env_kwargs(task: str, arm: str, args) -> dict:
         kw["duration"] = args.duration
     if args.allocation != "nominal":
         kw["allocation"] = args.allocation
+    if getattr(args, "sensor_noise", None) is not None:
+        kw["sensor_noise"] = args.sensor_noise
     return kw
 
 
@@ -386,6 +388,28 @@ def args_seeds(res: dict) -> list:
     return sorted({s for runs in res["arms"].values() for s in runs})
 
 
+def bases_only(tasks, args, test_seeds) -> int:
+    """The zero-residual base of each arm's estimator on the test episodes of each task."""
+    import gymnasium as gym
+
+    print(f"sensor noise: {args.sensor_noise or 'none'}; {len(test_seeds)} test episodes")
+    print("| task | base (estimator) | crashed | tracking RMSE [m] mean (max) |")
+    print("|---|---|---|---|")
+    for task in tasks:
+        for est in sorted({ARMS[a][0] for a in args.arms}):
+            arm = next(a for a in args.arms if ARMS[a][0] == est)
+            env = gym.make(TASKS[task]["env_id"], **env_kwargs(task, arm, args), info="full")
+            got = fly(None, env, test_seeds)
+            env.close()
+            rmse = np.array(got["rmse"])
+            print(
+                f"| {task} | {est} | {int(sum(got['crashed']))}/{len(test_seeds)} | "
+                f"{np.nanmean(rmse):.4f} ({np.nanmax(rmse):.4f}) |",
+                flush=True,
+            )
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument(
@@ -417,12 +441,25 @@ def main(argv=None) -> int:
         type=float,
         help="episode length [s] (default: the task's; shorter only for tests)",
     )
+    ap.add_argument(
+        "--sensor-noise",
+        default=None,
+        metavar="PRESET",
+        help="the envs' sensors: a preset measured on real logs (crazyflie, indiflight, px4: "
+        "docs/sensors.md; default none, ideal sensors); give it its own --out",
+    )
     ap.add_argument("--out", default="runs/estimate_study")
     ap.add_argument("--retrain", action="store_true")
     ap.add_argument(
         "--train-only",
         action="store_true",
         help="train the missing runs and stop (for training in parallel)",
+    )
+    ap.add_argument(
+        "--bases-only",
+        action="store_true",
+        help="fly only the zero-residual bases of the arms' estimators on the test episodes "
+        "(no training) and print their crash rate and tracking RMSE",
     )
     ap.add_argument(
         "--markdown", action="store_true", help="print the summaries as markdown tables"
@@ -433,6 +470,14 @@ def main(argv=None) -> int:
         help="only recompute the summaries and the plot of OUT/study.json",
     )
     args = ap.parse_args(argv)
+    if args.sensor_noise is not None:
+        from quadfault.errors import ConfigError
+        from quadfault.model.sensor_presets import as_sensor_noise
+
+        try:
+            as_sensor_noise(args.sensor_noise, "--sensor-noise")
+        except ConfigError as e:
+            ap.error(str(e))
     if args.replot:
         return replot(Path(args.out), args.markdown)
     cpu0 = time.process_time()
@@ -446,6 +491,8 @@ def main(argv=None) -> int:
 
     import quad_fault_env  # noqa: F401  (registers the ids)
 
+    if args.bases_only:
+        return bases_only(tasks, args, test_seeds)
     out = Path(args.out)
     seed_arg = args.seeds
     results = {
@@ -463,6 +510,7 @@ def main(argv=None) -> int:
             "allocation": args.allocation,
             "duration": args.duration,
             "estimator_rate": args.estimator_rate,
+            "sensor_noise": args.sensor_noise or "none",
             "tuning_seeds": [TUNING_SEED, TUNING_SEED + args.tuning_episodes - 1],
             "test_seeds": test_seeds,
             "crash_target": args.crash_target,
