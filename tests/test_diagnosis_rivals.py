@@ -14,7 +14,7 @@ from quadfault.diagnosis import Diagnosis
 from quadfault.diagnosis.crossval import Gain
 from quadfault.diagnosis.report_text import markdown
 from quadfault.diagnosis.result import short
-from quadfault.diagnosis.rivals import RIVALS, significant
+from quadfault.diagnosis.rivals import RIVALS, decisive, significant
 from quadfault.model import effects as fx
 from quadfault.model.effects.registry import EFFECT_NAMES
 from quadfault.model.scenarios import named_scenario
@@ -61,6 +61,8 @@ def test_significance_needs_the_interval_above_zero():
     assert significant(Gain(0.02, 0.05, 0.001, False))
     assert not significant(Gain(0.02, 0.05, -0.001, False))
     assert not significant(Gain(-0.01, 0.05, 0.001, False))
+    assert decisive(Gain(0.02, 0.05, 0.001, False))
+    assert not decisive(Gain(0.004, 0.05, 0.001, False))  # significant, too small to decide
 
 
 def test_weak_rotor_named_and_estimator_agrees(weak_rotor):

@@ -11,9 +11,9 @@ jointly, from the same starts, and cross-validated on the same folds
 (:class:`RivalComparison`):
 
 * one set wins only when its held-out advantage over the other is significant: its gain
-  positive and the lower end of its 95 % interval (the segment bootstrap of
-  :meth:`~quadfault.diagnosis.scores.Scoring.channel_table`) above 0; the model then holds
-  the winner, and the loser is rejected with the figure;
+  at least ``MIN_ADVANTAGE`` (1 %) and the lower end of its 95 % interval (the segment
+  bootstrap of :meth:`~quadfault.diagnosis.scores.Scoring.channel_table`) above 0; the model
+  then holds the winner, and the loser is rejected with the figure;
 * otherwise the flight cannot tell them apart: both sets are reported together
   (``indistinguishable``, each with its fitted parameters and the figure that could not
   separate them, and what would separate them), and neither is named alone in ``effects``;
@@ -138,9 +138,20 @@ def _rank(names) -> tuple:
     return (len(RIVALS), 0, tuple(names))
 
 
+#: the least held-out gain of one rival set over the other that can decide between them
+#: [-] (below it the segment bootstrap's interval is not to be trusted to its last digit)
+MIN_ADVANTAGE = 0.01
+
+
 def significant(g: Gain) -> bool:
     """A held-out advantage that is significant: positive with its 95 % interval above 0."""
     return g.gain > 0.0 and g.lo > 0.0
+
+
+def decisive(g: Gain) -> bool:
+    """A rival set's held-out advantage that decides: significant and at least
+    ``MIN_ADVANTAGE``."""
+    return significant(g) and g.gain >= MIN_ADVANTAGE
 
 
 class Rivals:
@@ -235,7 +246,7 @@ class Rivals:
                 continue
             g = gain_over(self.replay, self.scoring, held.cv, rival.cv, self.m)
             back = gain_over(self.replay, self.scoring, rival.cv, held.cv, self.m)
-            outcome = "rival" if significant(g) else "held" if significant(back) else "tie"
+            outcome = "rival" if decisive(g) else "held" if decisive(back) else "tie"
             comp = RivalComparison(held, rival, g, back, outcome, why)
             comparisons.append(comp)
             allowed = self.allowed is None or set(rival_names) <= self.allowed
