@@ -121,10 +121,16 @@ def base_explanation(name: str) -> str:
 
 def explain_accepted(step, selected_names, params) -> str:
     name = step.candidate.name
-    text = (
-        base_explanation(name) + f"; held-out residual RMS -{100 * step.improvement_step:.0f}% "
-        "when added."
-    )
+    if step.dropped:
+        text = (
+            base_explanation(name) + f"; held-out residual RMS {100 * step.improvement_step:.1f}% "
+            "lower with it than without it (the other accepted effects refitted)."
+        )
+    else:
+        text = (
+            base_explanation(name)
+            + f"; held-out residual RMS -{100 * step.improvement_step:.1f}% when added."
+        )
     text += effect_class(name).fit_note(params, selected_names)
     kind = EQUIVALENT.get(name)
     mates = [n for n, k in EQUIVALENT.items() if k == kind and n != name]

@@ -315,15 +315,21 @@ class Rivals:
         cannot tell apart: one of them is there)."""
         while selection.final is not None:
             terms = list(selection.final.terms)
-            why = ""
+            why, gains = "", {}
             for c, x in terms:
                 if c.name in keep:
                     continue
-                why = self._unsupported(c, x, terms, selection)
+                why, gains[c.name] = self._unsupported(c, x, terms, selection)
                 if why:
                     break
-            if not why:
-                return selection
+            if not why:  # each kept effect's step: its gain over the model without it
+                steps = tuple(
+                    dataclasses.replace(st, improvement_step=gains[st.candidate.name], dropped=True)
+                    if st.candidate.name in gains
+                    else st
+                    for st in selection.steps
+                )
+                return dataclasses.replace(selection, steps=steps)
             verdicts = dict(selection.verdicts)
             j = [o for o, _ in terms].index(c)
             verdicts[c.name] = Verdict(
@@ -390,7 +396,8 @@ class Rivals:
             selection, steps=tuple(steps), final=f, final_cv=cv, verdicts=verdicts
         )
 
-    def _unsupported(self, c, x, terms, selection: Selection) -> str:
+    def _unsupported(self, c, x, terms, selection: Selection) -> tuple[str, float]:
+        """``(why c is not supported or "", its held-out gain over the model without it)``."""
         rest = [(o, y) for o, y in terms if o is not c]
         if rest:
             cv, _ = held_out(self.replay, self.scoring, rest, self.folds)
@@ -401,7 +408,7 @@ class Rivals:
             return (
                 f"not supported held out: the model without {c.name} (refitted) is as good "
                 f"(gain of {c.name} {g.gain:.1%}, 95% interval from {g.lo:.1%})"
-            )
+            ), g.gain
         alone = [held_out(self.replay, self.scoring, [(c, x)], self.folds)[0].sse]
         f = selection.alone.get(c.name)
         if f is not None:
@@ -411,8 +418,8 @@ class Rivals:
             return (
                 f"no held-out gain on its own: {c.name} alone does not improve the nominal "
                 f"model held out (it helps only beside {names})"
-            )
-        return ""
+            ), g.gain
+        return "", g.gain
 
 
 def _rival_verdict(c, comp: RivalComparison, winner: RivalSet) -> Verdict:

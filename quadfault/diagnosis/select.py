@@ -139,6 +139,7 @@ class Step:
     rivals: dict = field(default_factory=dict)  # name -> in-sample SSE ratio to the winner
     iv: float | None = None  # instrumental-variable slope
     agreement: str = ""
+    dropped: bool = False  # improvement_step: the gain over the final model without it
 
 
 @dataclass(frozen=True, eq=False)
