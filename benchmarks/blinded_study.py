@@ -984,7 +984,13 @@ def main(argv=None):
 
 
 def main_users(args) -> int:
-    jobs = [(args.seed, i, args.rate, args.permute) for i in range(args.n)]
+    keep = range(args.n)
+    if args.only:  # the cases concealing one of these effects ('none': effect-free)
+        only = {x.strip() for x in args.only.split(",") if x.strip()}
+        names = {i: draw_user_case(args.seed, i)["names"] for i in keep}
+        keep = [i for i in keep if ("none" in only and not names[i]) or only & set(names[i])]
+    jobs = [(args.seed, i, args.rate, args.permute) for i in keep]
+    args.n = len(jobs)
     rows = []
     t0 = time.perf_counter()
     with Pool(args.workers) as pool:
