@@ -13,7 +13,7 @@ from estimators.diagnose_cli import efficiency_estimate
 from quadfault.diagnosis import Diagnosis
 from quadfault.diagnosis.crossval import Gain
 from quadfault.diagnosis.report_text import markdown
-from quadfault.diagnosis.result import short
+from quadfault.diagnosis.result import percent, short
 from quadfault.diagnosis.rivals import RIVALS, decisive, significant
 from quadfault.model import effects as fx
 from quadfault.model.effects.registry import EFFECT_NAMES
@@ -105,7 +105,7 @@ def test_summary_report_and_json_agree(weak_rotor):
         assert f"{100 * frac:.1f}% not scored" in line
         assert f"Not scored ({100 * frac:.1f}% of the recording" in markdown(res, "f.csv")
     for e in doc["effects"]:  # every accepted effect with its value and improvement
-        assert f"{short(e['name'], e['params'])} ({100 * e['improvement']:.0f}%)" in line
+        assert f"{short(e['name'], e['params'])} ({percent(e['improvement'])})" in line
     for n in doc["indistinguishable"]:
         assert n.get("summary", " or ".join(n["names"])) in line
     eta = doc["estimator"]["eta"][doc["estimator"]["weakest_rotor"] - 1]

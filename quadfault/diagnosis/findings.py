@@ -33,7 +33,7 @@ from quadfault.diagnosis.library import (
     public_params,
 )
 from quadfault.diagnosis.result import EffectFinding, short
-from quadfault.diagnosis.rivals import tie_verdict
+from quadfault.diagnosis.rivals import alone_at_folds, tie_verdict
 from quadfault.model.effects.registry import effect_class
 
 FRAME_TEXT = {
@@ -197,6 +197,19 @@ class Findings:
             return None
         return cross_validate(self.replay, [c], self.scoring, None, self.folds, full=f)
 
+    def accepted_alone(self, c, k: int, x) -> float:
+        """The held-out improvement of nominal + the accepted effect ``c`` (``k``-th of the
+        final model, at ``x``) alone: the better of its values in the final model fitted
+        without each fold (:func:`~quadfault.diagnosis.rivals.alone_at_folds`) and a fit
+        alone started from ``x``."""
+        sel, base = self.selection, self.selection.baseline.sse
+        if base <= 0:
+            return 0.0
+        fold_x = [fx[k] for fx in sel.final_cv.fold_x]
+        sse = alone_at_folds(self.replay, self.scoring, self.folds, c, fold_x)
+        sse = min(sse, self.alone_cv(c, x).sse)
+        return 1.0 - float(np.sqrt(sse / base))
+
     def improvement(self, cv) -> float:
         """``1 - RMS(held out) / RMS(nominal, held out)`` of ``cv`` (0 without one)."""
         base = self.selection.baseline.sse
@@ -218,7 +231,7 @@ class Findings:
                     c,
                     x,
                     sd,
-                    improvement=self.improvement(self.alone_cv(c, x)),
+                    improvement=self.accepted_alone(c, k, x),
                     explanation=explain_accepted(step, self.selected, params),
                     fold_x=[fx[k] for fx in sel.final_cv.fold_x],
                     gain=step.improvement_step,

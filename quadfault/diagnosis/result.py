@@ -206,9 +206,7 @@ class DiagnosisResult:
         held-out improvement alone, the rivals this flight cannot tell apart with theirs,
         the fraction not scored, the model's held-out improvement."""
         names = (
-            ", ".join(
-                f"{short(e.name, e.params)} ({100 * e.improvement:.0f}%)" for e in self.effects
-            )
+            ", ".join(f"{short(e.name, e.params)} ({percent(e.improvement)})" for e in self.effects)
             or "none"
         )
         parts = [f"{self.verdict}: effects {names}"]
@@ -256,6 +254,11 @@ def _clean(obj):
     if isinstance(obj, np.bool_):
         return bool(obj)
     return obj
+
+
+def percent(v: float) -> str:
+    """A held-out improvement on the summary line: whole percent, one decimal below 10 %."""
+    return f"{100 * v:.0f}%" if abs(v) >= 0.1 else f"{100 * v:.1f}%"
 
 
 def _num(v) -> str:

@@ -26,7 +26,8 @@ the imbalance.
 
 Then every accepted effect must earn its place held out (:func:`supported`): the model
 without it, refitted, must be worse on the same folds (gain positive, 95 % interval above 0),
-and the effect alone on the nominal model must improve the held-out fit. An effect that fails
+and the effect alone on the nominal model must improve the held-out fit -- at its values in
+the model fitted without each fold (:func:`alone_at_folds`), or refitted alone. An effect that fails
 is removed and the model refitted.
 """
 
@@ -38,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from quadfault.diagnosis.crossval import CrossValidation, Gain, fit_at_bound, gain_over, held_out
+from quadfault.diagnosis.library import predict
 from quadfault.diagnosis.select import Selection, Step, Verdict
 from quadfault.model.effects.blade_flapping import BladeFlapping
 from quadfault.model.effects.com_offset import ComOffset
@@ -409,7 +411,10 @@ class Rivals:
                 f"not supported held out: the model without {c.name} (refitted) is as good "
                 f"(gain of {c.name} {g.gain:.1%}, 95% interval from {g.lo:.1%})"
             ), g.gain
-        alone = [held_out(self.replay, self.scoring, [(c, x)], self.folds)[0].sse]
+        j = [o for o, _ in terms].index(c)
+        fold_x = [fx[j] for fx in selection.final_cv.fold_x]
+        alone = [alone_at_folds(self.replay, self.scoring, self.folds, c, fold_x)]
+        alone.append(held_out(self.replay, self.scoring, [(c, x)], self.folds)[0].sse)
         f = selection.alone.get(c.name)
         if f is not None:
             alone.append(held_out(self.replay, self.scoring, [(c, f.x[0])], self.folds)[0].sse)
@@ -420,6 +425,16 @@ class Rivals:
                 f"model held out (it helps only beside {names})"
             ), g.gain
         return "", g.gain
+
+
+def alone_at_folds(replay, scoring, folds, c, fold_x) -> float:
+    """Held-out SSE of the nominal model plus ``c`` alone at its values in a model fitted
+    without each fold (``fold_x``: per fold, its parameter vector), each fold predicted
+    with the values fitted without it."""
+    res = np.array(replay.measured, dtype=float)
+    for idx, x in zip(folds, fold_x):
+        res[idx] = replay.measured[idx] - predict(replay, [(c, x)])[idx]
+    return scoring.sse(res)
 
 
 def _rival_verdict(c, comp: RivalComparison, winner: RivalSet) -> Verdict:
