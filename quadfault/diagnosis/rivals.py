@@ -189,7 +189,8 @@ class Rivals:
             traded = getattr(v, "trades_with", "")
             if traded in accepted and name in self.library:
                 pair = ((traded,), (name,))
-                if not any(set(pair[0]) <= set(h) and set(pair[1]) <= set(r) for h, r, _ in out):
+                known = [{n for one in sets for n in one} for sets, _ in RIVALS]
+                if not any({traded, name} <= names for names in known):
                     out.append((pair[0], pair[1], TRADING))
         return out
 
