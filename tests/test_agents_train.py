@@ -67,7 +67,7 @@ def test_smoke_training_and_round_trip(algo, tmp_path):
         model = train_one(_tiny(algo), 0, tmp_path / "run", quiet=True)
     finally:
         tempfile.tempdir = saved
-    assert list(monkey_tmp.iterdir()) == []  # training leaves no temp folder behind
+    assert not list(monkey_tmp.glob("SB3-*"))  # training leaves no empty logger folder
     assert model.num_timesteps == 64  # whole rollouts: exactly the budget
     for name in (
         "model.zip",
