@@ -370,9 +370,11 @@ class QuadFaultEnv(gym.Env):
                 refs = self._tables.at(self._step_count).start
                 f_ctrl = self.relaxed.commands(lost, meas.p, meas.v, meas.R, meas.w, refs)
                 return cfg.commands(action, self.vehicle, f_ctrl)
-        f_ctrl = self._controller_commands(t, meas) if cfg.mode == "residual" else None
+        f_base: np.ndarray | None = (
+            self._controller_commands(t, meas) if cfg.mode == "residual" else None
+        )
         return cfg.commands(
-            action, self.vehicle, f_ctrl, self._estimate.eta, self.compensate, self.allocator
+            action, self.vehicle, f_base, self._estimate.eta, self.compensate, self.allocator
         )
 
     def _controller_commands(self, t: float, meas: RigidBodyState) -> np.ndarray:
