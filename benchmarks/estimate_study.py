@@ -446,7 +446,9 @@ def main(argv=None) -> int:
         default=None,
         metavar="PRESET",
         help="the envs' sensors: a preset measured on real logs (crazyflie, indiflight, px4: "
-        "docs/sensors.md; default none, ideal sensors); give it its own --out",
+        "docs/sensors.md), numbers 'P,V,A,G[,ACC]' or a JSON object of SensorNoise fields "
+        '(\'{"preset": "crazyflie", "rate": 0}\'); default none, ideal sensors; give '
+        "it its own --out",
     )
     ap.add_argument("--out", default="runs/estimate_study")
     ap.add_argument("--retrain", action="store_true")
@@ -475,9 +477,11 @@ def main(argv=None) -> int:
         from quadfault.model.sensor_presets import as_sensor_noise
 
         try:
+            if args.sensor_noise.lstrip().startswith("{"):
+                args.sensor_noise = json.loads(args.sensor_noise)
             as_sensor_noise(args.sensor_noise, "--sensor-noise")
-        except ConfigError as e:
-            ap.error(str(e))
+        except (ConfigError, json.JSONDecodeError) as e:
+            ap.error(f"--sensor-noise: {e}")
     if args.replot:
         return replot(Path(args.out), args.markdown)
     cpu0 = time.process_time()
