@@ -82,3 +82,29 @@ def test_the_measurement_finds_the_noise_it_was_given(tmp_path):
     assert m["velocity"]["latency"] == pytest.approx(0.02, abs=0.004)
     assert abs(m["attitude"]["latency"]) < 0.004
     assert np.isfinite(m["attitude"]["markov"])
+
+
+def test_an_imu_only_log_gives_its_rates_and_white_noise_and_says_what_it_cannot():
+    """A synthetic IMU-only recording: a gyro held at 250 Hz with white noise, an
+    accelerometer quantised to 0.01 m/s^2 every row; no pose, so no bias and no coloured part."""
+    from quadfault.diagnosis.sensor_noise import measure_noise
+    from quadfault.io.recording import Recording
+    from quadfault.model.vehicle import Vehicle
+
+    rng = np.random.default_rng(0)
+    t = np.arange(20_000) * 1e-3
+    motion = np.stack([np.sin(2 * np.pi * 0.5 * t + k) for k in range(3)], axis=1)
+    gyro = motion + 0.01 * rng.standard_normal((len(t), 3))
+    gyro = gyro[(np.arange(len(t)) // 4) * 4]  # held: a new sample every 4 rows
+    accel = np.round((motion + 0.05 * rng.standard_normal((len(t), 3))) / 0.01) * 0.01
+    rec = Recording(
+        t=t, omega=gyro, thrust_cmd=np.ones((len(t), 4)), vehicle=Vehicle(), accel=accel
+    )
+    m = measure_noise(rec)
+    assert set(m) == {"gyro", "accel"}
+    assert m["gyro"]["rate"] == pytest.approx(250.0, rel=0.01)
+    assert m["gyro"]["white"] == pytest.approx(0.01, rel=0.1)
+    assert m["gyro"]["white_check"] == pytest.approx(1.0, abs=0.15)
+    assert m["accel"]["rate"] == pytest.approx(1000.0, rel=0.01)
+    assert m["accel"]["white"] == pytest.approx(0.05, rel=0.1)
+    assert m["gyro"]["bias"] is None and any("bias not measured" in n for n in m["gyro"]["notes"])
