@@ -96,6 +96,11 @@ class ObservationLayout:
             dtype=np.int64,
         )
 
+    def bounds(self) -> tuple:
+        """Where each slot starts (-1: not held), the elements' bounds and NaN fills, as the
+        compiled observation (:func:`observation_row`) takes them."""
+        return self._at, self._low, self._high, self._fill
+
     @property
     def names(self) -> list[str]:
         """One name per element of the flat vector, e.g. ``"eta_hat_1"``."""
@@ -139,10 +144,7 @@ class ObservationLayout:
         _observation_rows(
             tuple(_rows(x, batch, size) for x, size in zip(values, _SIZES)),
             np.ascontiguousarray(R.reshape(shape)),
-            self._at,
-            self._low,
-            self._high,
-            self._fill,
+            self.bounds(),
             out.reshape(-1, self.size),
         )
         return out
@@ -234,24 +236,42 @@ def _rows(x, batch: tuple, size: int) -> np.ndarray:
     return np.ascontiguousarray(x.reshape(-1, size))
 
 
+@jit(inline="always")
+def _put(x, size, k0, low, high, fill, out):
+    """Slot values ``x[0 .. size-1]`` bounded (:func:`_bound`) into ``out`` from ``k0``
+    (a slot the layout does not hold, ``k0 < 0``, is skipped)."""
+    if k0 >= 0:
+        for j in range(size):
+            k = k0 + j
+            out[k] = _bound(x[j], low[k], high[k], fill[k])
+
+
+@jit(inline="always")
+def observation_row(pos_err, vel_err, R, omega, eta_hat, eta_sd, ref_acc, bounds, out):
+    """One flat observation into ``out`` (size,): the one definition of what the observation
+    holds and how it is bounded, compiled (:meth:`ObservationLayout.flat` and the vector
+    env's fused step call it). ``pos_err``, ``vel_err``, ``omega``, ``ref_acc`` three numbers
+    each (any indexable), ``R`` (3, 3) whose first two columns are ``rot6``, ``eta_hat``,
+    ``eta_sd`` (n,); ``bounds`` :meth:`ObservationLayout.bounds`."""
+    at, low, high, fill = bounds
+    _put(pos_err, 3, at[0], low, high, fill, out)
+    _put(vel_err, 3, at[1], low, high, fill, out)
+    k0 = at[2]
+    if k0 >= 0:
+        for c in range(2):
+            for j in range(3):
+                k = k0 + 3 * c + j
+                out[k] = _bound(R[j, c], low[k], high[k], fill[k])
+    _put(omega, 3, at[3], low, high, fill, out)
+    _put(eta_hat, eta_hat.shape[0], at[4], low, high, fill, out)
+    _put(eta_sd, eta_sd.shape[0], at[5], low, high, fill, out)
+    _put(ref_acc, 3, at[6], low, high, fill, out)
+
+
 @jit
-def _observation_rows(values, R, at, low, high, fill, out):
-    """The flat observations (B, size) of B rows: ``values`` the slots of :data:`_ARGS` but
-    ``rot6`` ((B, size) each), ``R`` (B, 3, 3) whose first two columns are ``rot6``; each
-    element bounded (:func:`_bound`) and written where ``at`` says (the slots' starts in
-    :data:`_ARGS` order, -1 for a slot the layout does not hold)."""
+def _observation_rows(values, R, bounds, out):
+    """The flat observations (B, size) of B rows (:func:`observation_row`): ``values`` the
+    slots of :data:`_ARGS` but ``rot6`` ((B, size) each), ``R`` (B, 3, 3)."""
+    pe, ve, w, eta, sd, acc = values
     for i in range(out.shape[0]):
-        for s in range(len(_ARGS)):
-            k0 = at[s]
-            if k0 < 0:
-                continue
-            if s == 2:
-                for c in range(2):
-                    for j in range(3):
-                        k = k0 + 3 * c + j
-                        out[i, k] = _bound(R[i, j, c], low[k], high[k], fill[k])
-                continue
-            x = values[s if s < 2 else s - 1]
-            for j in range(x.shape[1]):
-                k = k0 + j
-                out[i, k] = _bound(x[i, j], low[k], high[k], fill[k])
+        observation_row(pe[i], ve[i], R[i], w[i], eta[i], sd[i], acc[i], bounds, out[i])

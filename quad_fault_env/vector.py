@@ -34,7 +34,9 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from estimators.base import STATUSES
 from estimators.registry import estimator_names, estimator_spec, make_estimator
+from quad_fault_env import vector_step
 from quad_fault_env.envs.config import (
     INFO_LEVELS,
     REASONS,
@@ -51,8 +53,10 @@ from quad_fault_env.envs.scenario_source import GENERATORS
 from quad_fault_env.estimation import NOMINAL_PRIOR_SD
 from quad_fault_env.observation import SD_MAX
 from quad_fault_env.time_tables import WINDOW, InternTable, RowTimeTables
+from quad_fault_env.vector_step import StepConstants, StepOut, StepRows
 from quadfault import jit
 from quadfault.errors import ConfigError
+from quadfault.model.closed_loop import Records
 from quadfault.model.controller import GeometricController
 from quadfault.model.dynamics import RigidBodyState
 from quadfault.model.effects.sampling import describe
@@ -70,6 +74,10 @@ VECTOR_ESTIMATORS = (
     estimator_names(batched=True) + estimator_names(role="nominal") + estimator_names(role="oracle")
 )
 AUTORESET_MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
+#: estimator status -> its code (the env keeps codes; names only in the full ``info``)
+_STATUS = {name: k for k, name in enumerate(STATUSES)}
+#: ``max_episode_steps`` of an env without one
+_NO_LIMIT = np.iinfo(np.int64).max // 4
 
 
 def default_threads(num_envs: int) -> int | None:
@@ -215,12 +223,11 @@ class QuadFaultVectorEnv(VectorEnv):
         self.flight.use_efficiency(self._tables.eta, self._tables.first)
         n = self.vehicle.n_rotors
         self.eta_hat, self.eta_sd = np.ones((N, n)), np.full((N, n), np.nan)
-        self.status = np.full(N, "warmup", dtype=object)
+        self._status = np.full(N, _STATUS["warmup"], dtype=np.int64)
         self.steps = np.zeros(N, dtype=np.int64)
         self.max_steps = np.zeros(N, dtype=np.int64)
         self._traj_key = np.zeros(N, dtype=np.int64)
         self._sched_key = np.zeros(N, dtype=np.int64)
-        self._needs_reset = np.zeros(N, dtype=bool)
         self._rngs: list = [None] * N  # each sub-env's generator (set by its reset)
         #: each sub-env's scenario of the current episode
         self.scenarios = np.full(N, None, dtype=object)
@@ -230,6 +237,76 @@ class QuadFaultVectorEnv(VectorEnv):
         #: the relaxed-hover base's per-row switches (allocation="relaxed-hover")
         self._relaxed = None if e0.relaxed is None else e0.relaxed.batch(N)
         self._started = False
+        self._compile_step()
+
+    def _compile_step(self) -> None:
+        """The arrays and constants of the compiled step (:mod:`quad_fault_env.vector_step`):
+        what is fixed, the rows it reads and updates, the estimator's records."""
+        N, e0, S = self.num_envs, self.single_env, self.substeps
+        stride = self.estimator_stride
+        n_records = len(range(0, S, stride)) if self.estimator is not None else 0
+        #: the estimator's samples of a step (every ``estimator_stride``-th substep)
+        self._records = (
+            self.flight.records(S, stride, accel=False)
+            if n_records
+            else Records.none(N, self.vehicle.n_rotors)
+        )
+        cfg = e0.action_config
+        # the compiled step maps the actions unless an estimate-aware allocator or the
+        # relaxed-hover base (per-row state in Python) does
+        direct = (e0.allocator is None or cfg.mode == "motor") and self._relaxed is None
+        mode, compensate, residual_scale, ms = cfg.params(e0.compensate)
+        at, low, high, fill = self.layout.bounds()
+        self._step_constants = StepConstants(
+            int(S),
+            int(mode) if direct else -1,
+            bool(compensate),
+            float(residual_scale),
+            np.array(ms, dtype=float),
+            float(self.vehicle.rotor_max_thrust),
+            np.ascontiguousarray(self.vehicle.allocation_inverse, dtype=float),
+            np.array(e0.reward_config.params(), dtype=float),
+            np.array(e0.limits.params(), dtype=float),
+            at,
+            low,
+            high,
+            fill,
+            vector_step.ESTIMATE_TRUTH
+            if self.estimator_name == "truth"
+            else vector_step.ESTIMATE_KEPT,
+            int(((S - 1) // stride) * stride),
+            _NO_LIMIT if self.max_episode_steps is None else int(self.max_episode_steps),
+            int(WINDOW),
+            self.estimator is None,
+            self.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP,
+        )
+        T = self._tables
+        self._rows = StepRows(
+            np.zeros((N, 4)),
+            self.steps,
+            self.max_steps,
+            np.zeros(N, dtype=bool),
+            T.k0,
+            T.refs,
+            T.eta,
+            self.eta_hat,
+            self.eta_sd,
+            np.zeros((N, max(n_records, 1))),
+        )
+        #: the controller in the step (residual actions with the nominal allocation)
+        self._K = self._controller.constants if (self._uses_controller and direct) else None
+        self._stale = True  # some row's window needs a refill before the next step
+        self._n_ended = 0  # sub-envs that ended at the last step
+
+    @property
+    def status(self) -> np.ndarray:
+        """Each sub-env's estimator status (names, an object array)."""
+        return np.asarray(STATUSES, dtype=object)[self._status]
+
+    @property
+    def _needs_reset(self) -> np.ndarray:
+        """The sub-envs that ended at the last step (next-step autoreset: reset at the next)."""
+        return self._rows.resetting
 
     # -- the vehicles' arrays (views of the flight's state) ----------------------------------
     @property
@@ -319,15 +396,17 @@ class QuadFaultVectorEnv(VectorEnv):
             self._relaxed.reset(rows)
         self._tables.invalidate(rows)
         self._ensure_tables(self.steps, WINDOW - 1)  # the rows' windows from t = 0
-        self.eta_hat[rows], self.eta_sd[rows], self.status[rows] = 1.0, np.nan, "warmup"
+        self.eta_hat[rows], self.eta_sd[rows], self._status[rows] = 1.0, np.nan, _STATUS["warmup"]
         if self.estimator_name == "truth":
-            self.eta_hat[rows], self.eta_sd[rows], self.status[rows] = eta0[inv.ravel()], 0.0, "ok"
+            self.eta_hat[rows], self.eta_sd[rows] = eta0[inv.ravel()], 0.0
+            self._status[rows] = _STATUS["ok"]
         elif self.estimator_name == "none":
-            self.eta_sd[rows], self.status[rows] = NOMINAL_PRIOR_SD, "ok"
+            self.eta_sd[rows], self._status[rows] = NOMINAL_PRIOR_SD, _STATUS["ok"]
         if self.estimator is not None:
             mask = np.zeros(self.num_envs, dtype=bool)
             mask[rows] = True
             self.estimator.reset(mask)
+        self._stale = False  # every row's window holds its next step (_ensure_tables)
         if len(self._trajectories.items) > 8 * self.num_envs + 64:
             self._compact_tables()
         return ref0.position, ref0.velocity, ref0.acceleration
@@ -356,8 +435,11 @@ class QuadFaultVectorEnv(VectorEnv):
         with jit.threads(self.numba_threads):
             refs = self._reset_rows(np.arange(N), seeds, options)  # every row at t = 0
         self._needs_reset[:] = False
+        self._n_ended = 0
         self._started = True
-        return self._observations(refs), self._infos(refs, np.zeros(N, dtype=np.int64))
+        obs = np.empty((N, self.layout.size), dtype=np.float32)
+        vector_step.observe(self._step_constants, self._rows, self.plant.vehicles, obs, None, 1)
+        return self._observations(obs), self._infos(refs, np.zeros(N, dtype=np.int64))
 
     # -- functions of time: per-row windows (quad_fault_env.time_tables) ---------------------
     def _ensure_tables(self, k: np.ndarray, last: int) -> None:
@@ -377,11 +459,18 @@ class QuadFaultVectorEnv(VectorEnv):
         return ref[:, 0], ref[:, 1], ref[:, 2]
 
     def _check_actions(self, actions) -> np.ndarray:
-        return validate_action(actions, self.action_space.shape, "actions")
+        """The actions, checked (``validate_action``: finite, inside [-1, 1] up to 1e-6,
+        clipped), in the step's action rows."""
+        a = actions if isinstance(actions, np.ndarray) else np.asarray(actions)
+        out = self._rows.action
+        if a.shape != out.shape or a.dtype.kind != "f" or vector_step.copy_actions(a, out) >= 0:
+            out[:] = validate_action(actions, self.action_space.shape, "actions")
+        return out
 
-    def _motor_commands(self, a: np.ndarray) -> np.ndarray:
-        """``QuadFaultEnv.motor_commands`` for every row (``ActionConfig.commands``), with the
-        controller's reference rows at the step's start (``time_tables``) in residual mode."""
+    def _given_commands(self, a: np.ndarray) -> None:
+        """Rotor commands of actions the compiled step does not map (an estimate-aware
+        allocator, the relaxed-hover base: ``ActionConfig.commands`` with the controller's
+        commands at the step's start), set before the step."""
         e0 = self.single_env
         cfg = e0.action_config
         f_ctrl = None
@@ -401,31 +490,10 @@ class QuadFaultVectorEnv(VectorEnv):
                         int(lost[i]), m.p[i], m.v[i], m.R[i], m.w[i], refs[i]
                     )
                     f[i] = cfg.commands(a[i], self.vehicle, fr)
-        return f
+        self.f_cmd[:] = f
 
-    def _substeps(self, commands: np.ndarray, ts: np.ndarray, active: np.ndarray) -> None:
-        """The control step's physics substeps of the ``active`` rows with ``commands`` held,
-        in one call of the loop (:meth:`quadfault.model.flight.Flight.step`); then the batched
-        estimator's updates on the measurements it recorded every ``estimator_stride``
-        substeps (the estimate does not act on the physics within a step)."""
-        N, S, n = self.num_envs, self.substeps, self.vehicle.n_rotors
-        stride = self.estimator_stride
-        out = None
-        active = None if active.all() else active
-        if self.estimator is not None:
-            out = self.flight.records(S, stride, accel=False)
-        self.flight.step(commands, S, record=out, active=active)
-        if self.estimator is not None:
-            for r, j in enumerate(range(0, S, stride)):
-                res = self.estimator.update(
-                    ts[:, j], out.p[:, r], out.v[:, r], out.R[:, r], out.w[:, r], self.f_cmd
-                )
-                self.eta_hat, self.eta_sd = res.eta, res.sd
-                self.status = res.status_names
-        if self.estimator_name == "truth":
-            j_last = ((S - 1) // stride) * stride
-            self.eta_hat = self._tables.efficiency_at(self.steps, j_last)
-            self.eta_sd = np.zeros((N, n))
+    def _threads(self) -> int:
+        return jit.set_threads(None)
 
     # -- step --------------------------------------------------------------------------------
     def step(self, actions):
@@ -439,82 +507,81 @@ class QuadFaultVectorEnv(VectorEnv):
             return self._step(a)
 
     def _step(self, a: np.ndarray):
-        S = self.substeps
-        resetting = self._needs_reset.copy()
-        any_resetting = resetting.any()
-        self._ensure_tables(self.steps, WINDOW - 1)
-        commands = self._motor_commands(a)
-        ts = None
-        if self.estimator is not None:
-            ts = ((self.steps * S)[:, None] + np.arange(S)[None, :]) * self.dt
-        self._substeps(commands, ts, ~resetting)
-        self.steps = self.steps + 1
-        state = self.state
-        ref1 = self._tables.references(self.steps, 3)  # k - k0 <= WINDOW: in the window
-        refs = ref1[:, 0], ref1[:, 1], ref1[:, 2]
-        code = self.single_env.limits.codes(state.p, state.R, refs[0])  # 0: goes on
-        if any_resetting:
-            code[resetting] = 0
-        terminated = code != 0
-        truncated = ~terminated & (self.steps >= self.max_steps)
-        if self.max_episode_steps is not None:
-            truncated |= self.steps >= self.max_episode_steps
-        if any_resetting:
-            truncated &= ~resetting
-        # the end-of-step measurement of sub-envs that go on (after the termination check);
-        # a terminated one shows its true state
-        stopped = terminated | resetting
-        if not stopped.any():
-            self.flight.sense()
-        else:
-            on = np.flatnonzero(~stopped)
-            if len(on):
-                self.flight.sense(on)
-            if terminated.any():
-                self.flight.sense(terminated, noise=False)
-        reward = self.single_env.reward_config(
-            state.p - refs[0],
-            state.v - refs[1],
-            self.f_cmd,
-            self.vehicle.rotor_max_thrust,
-            terminated,
-            a,
-        )
-        done = terminated | truncated
-        mode = self.metadata["autoreset_mode"]
-        if any_resetting:
-            self._reset_rows(np.flatnonzero(resetting))
-            reward[resetting] = 0.0
-            refs = self._references_now()
-        obs = self._observations(refs)
-        infos = self._infos(refs, code)
-        if mode == AutoresetMode.SAME_STEP and done.any():
-            rows = np.flatnonzero(done)
-            final_obs, final_infos = obs, infos
+        """One compiled call over the sub-envs (``vector_step.step``); a second for the
+        batched estimator's update (and the observations it changes); Python only for the
+        sub-envs that reset and the windows of the functions of time that need a refill."""
+        N, S = self.num_envs, self._step_constants
+        resetting = self._rows.resetting
+        n_resetting = self._n_ended if S.next_step else 0
+        rows = np.flatnonzero(resetting) if n_resetting else None
+        if n_resetting:
             self._reset_rows(rows)
-            refs = self._references_now()
-            obs = self._observations(refs)
-            infos = self._infos(refs, np.where(done, 0, code))
+        if self._stale:
+            self._ensure_tables(self.steps, WINDOW - 1)
+        if S.mode < 0:
+            self._given_commands(a)
+        threads = self._threads()
+        out = StepOut(
+            np.empty(N, dtype=np.int64),
+            np.empty(N, dtype=bool),
+            np.empty(N, dtype=bool),
+            np.empty(N),
+            np.empty((N, self.layout.size), dtype=np.float32),
+        )
+        views = self.plant.vehicles
+        stale, ended = vector_step.step(
+            S,
+            self._rows,
+            out,
+            self._K,
+            self.flight.loop(self._records),
+            self.flight.k,
+            self.dt,
+            threads,
+        )
+        self._stale, self._n_ended = stale > 0, ended
+        if self.estimator is not None:
+            self._update_estimator(rows)
+            vector_step.observe(S, self._rows, views, out.obs, None, threads)
+        code = out.code
+        infos = self._infos(None, code)
+        obs = out.obs
+        if not S.next_step and ended:
+            done = out.terminated | out.truncated
+            ended_rows = np.flatnonzero(done)
+            final_obs, final_infos = self._observations(obs), infos
+            self._reset_rows(ended_rows)
+            if self._stale:
+                self._ensure_tables(self.steps, WINDOW - 1)
+            obs = obs.copy()
+            vector_step.observe(S, self._rows, views, obs, ended_rows, 1)
+            infos = self._infos(None, np.where(done, 0, code))
             infos["final_obs"] = final_obs
             infos["final_info"] = final_infos
             infos["_final_obs"] = infos["_final_info"] = done.copy()
-        else:
-            self._needs_reset = done
-        return obs, reward, terminated, truncated, infos
+        return self._observations(obs), out.reward, out.terminated, out.truncated, infos
+
+    def _update_estimator(self, resetting_rows) -> None:
+        """The batched estimator's updates on the step's records (every
+        ``estimator_stride``-th substep); the estimate does not act on the physics within a
+        step. Sub-envs reset at this step start their estimator afresh."""
+        rec, times = self._records, self._rows.times
+        res = None
+        for r in range(rec.p.shape[1]):
+            res = self.estimator.update(
+                times[:, r], rec.p[:, r], rec.v[:, r], rec.R[:, r], rec.w[:, r], self.f_cmd
+            )
+        self.eta_hat[:], self.eta_sd[:], self._status[:] = res.eta, res.sd, res.status
+        if resetting_rows is not None:
+            mask = np.zeros(self.num_envs, dtype=bool)
+            mask[resetting_rows] = True
+            self.estimator.reset(mask)
+            self.eta_hat[resetting_rows], self.eta_sd[resetting_rows] = 1.0, np.nan
+            self._status[resetting_rows] = _STATUS["warmup"]
 
     # -- observation and info ----------------------------------------------------------------
-    def _observations(self, refs):
-        """The sub-envs' observations (``ObservationLayout.flat`` over the batch)."""
-        m, (pos, vel, acc) = self.meas, refs
-        flat = self.layout.flat(
-            pos_err=m.p - pos,
-            vel_err=m.v - vel,
-            R=m.R,
-            omega=m.w,
-            eta_hat=self.eta_hat,
-            eta_sd=self.eta_sd,
-            ref_acc=acc,
-        )
+    def _observations(self, flat):
+        """The flat observations as the env gives them (a dict of slots for ``"dict"``)."""
         return self.layout.split(flat) if self.single_env.observation_kind == "dict" else flat
 
     def _infos(self, refs, code) -> dict:
@@ -523,13 +590,14 @@ class QuadFaultVectorEnv(VectorEnv):
         light = light_info(REASONS[code])
         if self.info_level == "light":
             return light | {"_" + key: np.ones(N, dtype=bool) for key in light}
+        refs = self._references_now() if refs is None else refs
         err = self.state.p - refs[0]
         info = light | {
             "t": self.steps * self.substeps * self.dt,
             "eta_true": self.eta_true,
             "eta_hat": self.eta_hat.copy(),
             "eta_sd": np.where(np.isnan(self.eta_sd), SD_MAX, self.eta_sd),
-            "estimator_status": np.asarray(self.status, dtype=object).copy(),
+            "estimator_status": self.status,
             "position_error": err,
             "tracking_error": np.linalg.norm(err, axis=-1),
             "motor_command": self.f_cmd.copy(),

@@ -151,28 +151,89 @@ class ActionConfig:
         (residual mode) or the agent's (wrench mode) is allocated with ``eta_hat`` instead,
         giving up yaw first when the rotors cannot realise it."""
         f_max = vehicle.rotor_max_thrust
-        if self.mode == "motor":
-            f = 0.5 * (action + 1.0) * f_max
-        elif self.mode == "wrench":
-            wrench = np.concatenate(
-                (
-                    0.5 * (action[..., :1] + 1.0) * vehicle.n_rotors * f_max,
-                    action[..., 1:] * np.asarray(self.moment_scale),
-                ),
-                axis=-1,
-            )
-            f = (
-                vehicle.rotor_thrust(wrench)
-                if allocator is None
-                else _allocated(allocator, wrench, eta_hat)
-            )
-        else:
-            if allocator is not None:  # the controller's wrench (eq. 12: w = A f_ctrl)
-                f_ctrl = _allocated(allocator, f_ctrl @ vehicle.allocation.T, eta_hat)
-            elif compensate:
-                f_ctrl = f_ctrl / np.maximum(eta_hat, 0.1)
-            f = f_ctrl + self.residual_scale * action
-        return np.minimum(np.maximum(f, 0.0), f_max)
+        if allocator is not None and self.mode != "motor":
+            if self.mode == "wrench":
+                wrench = np.concatenate(
+                    (
+                        0.5 * (action[..., :1] + 1.0) * vehicle.n_rotors * f_max,
+                        action[..., 1:] * np.asarray(self.moment_scale),
+                    ),
+                    axis=-1,
+                )
+                f = _allocated(allocator, wrench, eta_hat)
+            else:  # the controller's wrench (eq. 12: w = A f_ctrl)
+                f = _allocated(allocator, f_ctrl @ vehicle.allocation.T, eta_hat)
+                f = f + self.residual_scale * action
+            return np.minimum(np.maximum(f, 0.0), f_max)
+        a = np.ascontiguousarray(action, dtype=float)
+        n = vehicle.n_rotors
+        out = np.empty(a.shape[:-1] + (n,))
+        rows = a.reshape(-1, a.shape[-1])
+        ctrl = np.zeros((len(rows), n)) if f_ctrl is None else f_ctrl
+        ctrl = np.ascontiguousarray(np.broadcast_to(ctrl, (len(rows), n)), dtype=float)
+        eta = np.ones(n) if eta_hat is None else eta_hat
+        eta = np.ascontiguousarray(np.broadcast_to(eta, (len(rows), n)), dtype=float)
+        _action_rows(
+            rows,
+            ctrl,
+            eta,
+            self.params(bool(compensate)),
+            float(f_max),
+            np.ascontiguousarray(vehicle.allocation_inverse, dtype=float),
+            out.reshape(-1, n),
+        )
+        return out
+
+    def params(self, compensate: bool = False) -> tuple:
+        """The mapping as the compiled one (:func:`action_commands_row`) takes it: the mode's
+        index in :data:`ACTION_MODES`, whether the controller's commands are divided by the
+        estimate, the residual scale and the three moment scales."""
+        ms = self.moment_scale
+        return (
+            ACTION_MODES.index(self.mode),
+            bool(compensate),
+            float(self.residual_scale),
+            (float(ms[0]), float(ms[1]), float(ms[2])),
+        )
+
+
+@jit(inline="always")
+def action_commands_row(a, f_ctrl, eta_hat, params, f_max, allocation_inverse, out):
+    """:meth:`ActionConfig.commands` of one vehicle without an estimate-aware allocator: the
+    one definition of the action mapping, compiled (the single env and the vector env's
+    fused step call it). ``a`` the checked action (4,), ``f_ctrl`` the geometric
+    controller's commands [N] (residual mode), ``eta_hat`` the estimate (with compensation),
+    ``params`` :meth:`ActionConfig.params`; the commands [N], clipped to [0, f_max], into
+    ``out``."""
+    mode, compensate, residual_scale, ms = params
+    n = out.shape[0]
+    if mode == 0:  # motor
+        for j in range(n):
+            out[j] = 0.5 * (a[j] + 1.0) * f_max
+    elif mode == 2:  # wrench: collective thrust and moments through the nominal inverse
+        w0 = 0.5 * (a[0] + 1.0) * n * f_max
+        w1, w2, w3 = a[1] * ms[0], a[2] * ms[1], a[3] * ms[2]
+        for j in range(n):
+            B = allocation_inverse[j]
+            out[j] = w0 * B[0] + w1 * B[1] + w2 * B[2] + w3 * B[3]
+    else:  # residual on the controller's commands
+        for j in range(n):
+            f = f_ctrl[j]
+            if compensate:
+                f = f / max(eta_hat[j], 0.1)
+            out[j] = f + residual_scale * a[j]
+    for j in range(n):  # NaN stays NaN, as numpy's minimum / maximum
+        if out[j] < 0.0:
+            out[j] = 0.0
+        if out[j] > f_max:
+            out[j] = f_max
+
+
+@jit
+def _action_rows(a, f_ctrl, eta_hat, params, f_max, allocation_inverse, out):
+    """:func:`action_commands_row` per row."""
+    for i in range(out.shape[0]):
+        action_commands_row(a[i], f_ctrl[i], eta_hat[i], params, f_max, allocation_inverse, out[i])
 
 
 def _allocated(allocator, wrench: np.ndarray, eta_hat) -> np.ndarray:
@@ -235,6 +296,17 @@ class RewardConfig:
         if not (math.isfinite(self.position_scale) and self.position_scale > 0):
             raise ConfigError(f"position_scale must be positive [m], got {self.position_scale!r}")
 
+    def params(self) -> tuple:
+        """The weights as the compiled reward (:func:`reward_row`) takes them."""
+        return (
+            float(self.position_scale),
+            float(self.velocity_weight),
+            float(self.effort_weight),
+            float(self.action_weight),
+            float(self.survival_bonus),
+            float(self.termination_penalty),
+        )
+
     def __call__(self, pos_err, vel_err, f_cmd, f_max: float, terminated, action=None):
         """The reward: a float for one vehicle, an array for rows (the vector env:
         ``pos_err`` (N, 3), ``terminated`` (N,), ``action`` (N, 4)). ``action`` None counts
@@ -250,52 +322,45 @@ class RewardConfig:
             float(f_max),
             np.ascontiguousarray(terminated, dtype=np.bool_).reshape(-1),
             a.reshape(-1, a.shape[-1]),
-            float(self.position_scale),
-            float(self.velocity_weight),
-            float(self.effort_weight),
-            float(self.action_weight),
-            float(self.survival_bonus),
-            float(self.termination_penalty),
+            self.params(),
             out.reshape(-1),
         )
         return float(out) if out.ndim == 0 else out
 
 
+@jit(inline="always")
+def reward_row(pe, ve, f_cmd, f_max, terminated, action, params):
+    """:class:`RewardConfig` of one vehicle: the one definition of the reward, compiled (the
+    single env, the vector env's rows and its fused step call it). ``pe``, ``ve`` the true
+    position and velocity errors (3 numbers each, any indexable), ``f_cmd`` the rotor
+    commands held [N] and ``action`` the agent's action (arrays), ``params``
+    :meth:`RewardConfig.params`."""
+    scale, w_vel, w_effort, w_action, bonus, penalty = params
+    track = math.sqrt(pe[0] * pe[0] + pe[1] * pe[1] + pe[2] * pe[2]) + w_vel * math.sqrt(
+        ve[0] * ve[0] + ve[1] * ve[1] + ve[2] * ve[2]
+    )
+    effort = 0.0
+    for j in range(f_cmd.shape[0]):
+        u = f_cmd[j] / f_max
+        effort += u * u
+    r = math.exp(-track / scale) - w_effort * (effort / f_cmd.shape[0])
+    if w_action != 0.0:
+        act = 0.0
+        for j in range(action.shape[0]):
+            act += action[j] * action[j]
+        r -= w_action * (act / action.shape[0])
+    if not np.isfinite(r):
+        r = 0.0
+    return r - penalty if terminated else r + bonus
+
+
 @jit
-def _rewards(
-    pos_err,
-    vel_err,
-    f_cmd,
-    f_max,
-    terminated,
-    action,
-    scale,
-    w_vel,
-    w_effort,
-    w_action,
-    bonus,
-    penalty,
-    out,
-):
-    """:class:`RewardConfig` per row."""
+def _rewards(pos_err, vel_err, f_cmd, f_max, terminated, action, params, out):
+    """:func:`reward_row` per row."""
     for i in range(out.shape[0]):
-        pe, ve = pos_err[i], vel_err[i]
-        track = math.sqrt(pe[0] * pe[0] + pe[1] * pe[1] + pe[2] * pe[2]) + w_vel * math.sqrt(
-            ve[0] * ve[0] + ve[1] * ve[1] + ve[2] * ve[2]
+        out[i] = reward_row(
+            pos_err[i], vel_err[i], f_cmd[i], f_max, terminated[i], action[i], params
         )
-        effort = 0.0
-        for j in range(f_cmd.shape[1]):
-            u = f_cmd[i, j] / f_max
-            effort += u * u
-        r = math.exp(-track / scale) - w_effort * (effort / f_cmd.shape[1])
-        if w_action != 0.0:
-            act = 0.0
-            for j in range(action.shape[1]):
-                act += action[i, j] * action[i, j]
-            r -= w_action * (act / action.shape[1])
-        if not np.isfinite(r):
-            r = 0.0
-        out[i] = r - penalty if terminated[i] else r + bonus
 
 
 @dataclass(frozen=True)
@@ -324,6 +389,10 @@ class TerminationLimits:
         if not (0 < self.max_tilt <= math.pi):
             raise ConfigError(f"max_tilt must be in (0, pi] [rad], got {self.max_tilt!r}")
 
+    def params(self) -> tuple:
+        """The limits as the compiled check (:func:`termination_code`) takes them."""
+        return (float(self.ground_altitude), float(self.max_position_error), float(self.max_tilt))
+
     def reasons(self, p, R, p_ref) -> np.ndarray:
         """Termination reasons of true positions ``p`` (N, 3), attitudes ``R`` (N, 3, 3)
         against the references ``p_ref`` (N, 3): an object array of names or None."""
@@ -337,9 +406,7 @@ class TerminationLimits:
             np.ascontiguousarray(p, dtype=float),
             np.ascontiguousarray(R, dtype=float),
             np.ascontiguousarray(p_ref, dtype=float),
-            float(self.ground_altitude),
-            float(self.max_position_error),
-            float(self.max_tilt),
+            self.params(),
             codes,
         )
         return codes
@@ -353,27 +420,36 @@ class TerminationLimits:
 REASONS = np.array([None, "excessive_tilt", "out_of_bounds", "crash", "non_finite"], dtype=object)
 
 
+@jit(inline="always")
+def termination_code(p, R, p_ref, limits):
+    """:class:`TerminationLimits` of one vehicle: the one definition of termination, compiled
+    (the single env, the vector env's rows and its fused step call it). ``p`` (3,), ``R``
+    (3, 3) the true position and attitude, ``p_ref`` (3,) the reference, ``limits``
+    :meth:`TerminationLimits.params`. The code in :data:`REASONS`, by precedence:
+    non_finite (4), crash (3), out_of_bounds (2), excessive_tilt (1); 0 = none."""
+    ground, max_error, max_tilt = limits
+    finite = True
+    for k in range(3):
+        finite = finite and np.isfinite(p[k])
+        for m in range(3):
+            finite = finite and np.isfinite(R[k, m])
+    d0, d1, d2 = p[0] - p_ref[0], p[1] - p_ref[1], p[2] - p_ref[2]
+    if not finite:
+        return 4
+    if -p[2] < ground:
+        return 3
+    if math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) > max_error:
+        return 2
+    if math.acos(min(max(R[2, 2], -1.0), 1.0)) > max_tilt:
+        return 1
+    return 0
+
+
 @jit
-def _termination_codes(p, R, p_ref, ground, max_error, max_tilt, out):
-    """:class:`TerminationLimits` per row, in order of precedence: non_finite (4), crash (3),
-    out_of_bounds (2), excessive_tilt (1); 0 = none."""
+def _termination_codes(p, R, p_ref, limits, out):
+    """:func:`termination_code` per row."""
     for i in range(out.shape[0]):
-        finite = True
-        for k in range(3):
-            finite = finite and np.isfinite(p[i, k])
-            for m in range(3):
-                finite = finite and np.isfinite(R[i, k, m])
-        d0, d1, d2 = p[i, 0] - p_ref[i, 0], p[i, 1] - p_ref[i, 1], p[i, 2] - p_ref[i, 2]
-        if not finite:
-            out[i] = 4
-        elif -p[i, 2] < ground:
-            out[i] = 3
-        elif math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) > max_error:
-            out[i] = 2
-        elif math.acos(min(max(R[i, 2, 2], -1.0), 1.0)) > max_tilt:
-            out[i] = 1
-        else:
-            out[i] = 0
+        out[i] = termination_code(p[i], R[i], p_ref[i], limits)
 
 
 @dataclass(frozen=True)

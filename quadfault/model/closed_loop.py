@@ -460,6 +460,22 @@ def fly(
     return kernel(i, gens, k0, k1, measure_first, C, K, V, T, out, hook, memory)
 
 
+def check_batch(C: LoopConstants, V: Vehicles, K=None, fx=None) -> None:
+    """A one-line error when the batch's loop (:func:`fly_vehicle` over vehicles, compiled)
+    cannot fly these vehicles: the reference integrator and effects written in Python fly
+    one vehicle at a time (:func:`fly`)."""
+    if C.reference:
+        raise ConfigError("the reference integrator flies one vehicle at a time (fly)")
+    if K is not None and C.decimation < 1:
+        raise ConfigError(f"a controller in the loop needs a decimation >= 1, got {C.decimation}")
+    if fx is not None and not isinstance(fx, EffectRows):
+        raise ConfigError(
+            "effects written in Python fly one vehicle at a time (fly); a batch "
+            "flies the built-in effects of quadfault.model.effects"
+        )
+    _check_rotors(fx, V)
+
+
 def fly_batch(
     gens,
     active: np.ndarray,
@@ -479,16 +495,7 @@ def fly_batch(
     ``fx``: the vehicles' compiled effects, :attr:`quadfault.model.plant.Plant.hook`). Returns the
     steps each vehicle ran (N,). The reference integrator and effects written in Python fly
     one vehicle at a time (:func:`fly`)."""
-    if C.reference:
-        raise ConfigError("the reference integrator flies one vehicle at a time (fly)")
-    if K is not None and C.decimation < 1:
-        raise ConfigError(f"a controller in the loop needs a decimation >= 1, got {C.decimation}")
-    if fx is not None and not isinstance(fx, EffectRows):
-        raise ConfigError(
-            "effects written in Python fly one vehicle at a time (fly); a batch "
-            "flies the built-in effects of quadfault.model.effects"
-        )
-    _check_rotors(fx, V)
+    check_batch(C, V, K, fx)
     N = len(active)
     done = np.zeros(N, dtype=np.int64)
     if N >= PARALLEL_MIN_VEHICLES:
@@ -590,6 +597,7 @@ __all__ = [
     "fly_vehicle",
     "fly",
     "fly_batch",
+    "check_batch",
     "sense",
     "sense_rows",
     "sense_vehicle",

@@ -286,6 +286,17 @@ class Flight:
         self.k[active] += n
         return record
 
+    def loop(self, record: Records | None = None) -> tuple:
+        """The closed loop's arguments of this flight, for a caller whose compiled code calls
+        :func:`~quadfault.model.closed_loop.fly_vehicle` per vehicle itself (the vector env's
+        fused step): ``(generators, constants, vehicles, tables, records, effects)``, checked
+        (:func:`~quadfault.model.closed_loop.check_batch`). The caller advances :attr:`k`;
+        take them again after a :meth:`reset` or :meth:`seed` (the generators' table)."""
+        V = self.plant.vehicles
+        closed_loop.check_batch(self._C, V, None, self.plant.hook)
+        out = self._none if record is None else record
+        return self._generators(), self._C, V, self._tables, out, self.plant.hook
+
     def step_at(self, commands, t: float, dt: float) -> None:
         """One step of vehicle 0 of length ``dt`` [s] from time ``t`` [s] with ``commands``
         held (a recording's own clock; its step counter stays), measuring its start."""
