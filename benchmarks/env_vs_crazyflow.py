@@ -86,13 +86,10 @@ def _crazyflow(N: int):
     import numpy as np
 
     jax.config.update("jax_platform_name", "cpu")
+    import crazyflow  # noqa: F401  (registers its ids)
     import gymnasium as gym
 
-    import crazyflow  # noqa: F401  (registers its ids)
-
-    env = gym.make_vec(
-        "DroneReachPos-v0", num_envs=N, dynamics="first_principles", device="cpu"
-    )
+    env = gym.make_vec("DroneReachPos-v0", num_envs=N, dynamics="first_principles", device="cpu")
     env.reset(seed=0)
     u = env.unwrapped
     lo, hi = env.single_action_space.low, env.single_action_space.high

@@ -1,11 +1,11 @@
-"""Where a vector-env step's time goes at one physics step per env step: the loop kernel
+"""Where a vector-env step's time goes at one physics step per env step: the compiled step
 against the Python (and numpy) around it.
 
 ``QuadFaultVectorEnv(N, "none", "combined", control_rate=1000, action_mode="motor",
 duration=600)`` (one physics substep per env step, as in the env-against-env comparison of
-``throughput.py``; the env's default numba threads) is stepped with the zero action; the calls
-of the compiled loop (``quadfault.model.closed_loop.fly_batch``, and ``fly`` for one vehicle) are
-timed apart. Printed per N: nanoseconds per vehicle-step of the whole step and of the kernel,
+``env_vs_crazyflow.py``; the env's default numba threads) is stepped with the zero action; the
+compiled step (``quad_fault_env.vector_step.step``: action mapping, the closed loop, termination,
+reward, observation; in a checkout without it, the closed loop's calls) is timed apart. Printed per N: nanoseconds per vehicle-step of the whole step and of the kernel,
 per wall second and per CPU second of the process (all its threads), and the kernel's share.
 
 With ``--baseline PATH`` (another checkout: ``git worktree add ../qf-base <commit>``) each N
@@ -35,7 +35,6 @@ def split(N: int, seconds: float = 1.0, repeat: int = 3) -> dict:
     import numpy as np
 
     from quad_fault_env.vector import QuadFaultVectorEnv
-    from quadfault.model import closed_loop
 
     spent = {"wall": 0.0, "cpu": 0.0}
 
@@ -49,8 +48,15 @@ def split(N: int, seconds: float = 1.0, repeat: int = 3) -> dict:
 
         return call
 
-    closed_loop.fly_batch = timed(closed_loop.fly_batch)
-    closed_loop.fly = timed(closed_loop.fly)
+    try:
+        from quad_fault_env import vector_step
+    except ImportError:  # a checkout whose env calls the loop alone (a --baseline)
+        from quadfault.model import closed_loop
+
+        closed_loop.fly_batch = timed(closed_loop.fly_batch)
+        closed_loop.fly = timed(closed_loop.fly)
+    else:
+        vector_step.step = timed(vector_step.step)
     env = QuadFaultVectorEnv(
         N, "none", scenario="combined", duration=600.0, control_rate=1000.0, action_mode="motor"
     )
@@ -105,7 +111,7 @@ def main(argv=None) -> int:
     import side_by_side as sbs
 
     print(f"# ns per vehicle-step, wall / CPU (all threads); {sbs.load()} on {os.cpu_count()} cpus")
-    head = "| N | step | loop kernel | Python around it | kernel share (CPU) |"
+    head = "| N | step | compiled step | Python around it | compiled share (CPU) |"
     rule = "|---|---|---|---|---|"
     rows = {}
     for N in args.sizes:
