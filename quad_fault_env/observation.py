@@ -28,6 +28,7 @@ import numpy as np
 from gymnasium import spaces
 
 from quadfault.jit import jit
+from quadfault.model.rotation import mat3
 
 # Bounds of the Box. Values are clipped into them; with the default termination limits
 # (5 m position error) only the step that terminates can reach the position bound.
@@ -251,7 +252,8 @@ def observation_row(pos_err, vel_err, R, omega, eta_hat, eta_sd, ref_acc, bounds
     """One flat observation into ``out`` (size,): the one definition of what the observation
     holds and how it is bounded, compiled (:meth:`ObservationLayout.flat` and the vector
     env's fused step call it). ``pos_err``, ``vel_err``, ``omega``, ``ref_acc`` three numbers
-    each (any indexable), ``R`` (3, 3) whose first two columns are ``rot6``, ``eta_hat``,
+    each (any indexable), ``R`` the attitude as 9 numbers row by row (its first two columns
+    are ``rot6``), ``eta_hat``,
     ``eta_sd`` (n,); ``bounds`` :meth:`ObservationLayout.bounds`."""
     at, low, high, fill = bounds
     _put(pos_err, 3, at[0], low, high, fill, out)
@@ -261,7 +263,7 @@ def observation_row(pos_err, vel_err, R, omega, eta_hat, eta_sd, ref_acc, bounds
         for c in range(2):
             for j in range(3):
                 k = k0 + 3 * c + j
-                out[k] = _bound(R[j, c], low[k], high[k], fill[k])
+                out[k] = _bound(R[3 * j + c], low[k], high[k], fill[k])
     _put(omega, 3, at[3], low, high, fill, out)
     _put(eta_hat, eta_hat.shape[0], at[4], low, high, fill, out)
     _put(eta_sd, eta_sd.shape[0], at[5], low, high, fill, out)
@@ -274,4 +276,4 @@ def _observation_rows(values, R, bounds, out):
     slots of :data:`_ARGS` but ``rot6`` ((B, size) each), ``R`` (B, 3, 3)."""
     pe, ve, w, eta, sd, acc = values
     for i in range(out.shape[0]):
-        observation_row(pe[i], ve[i], R[i], w[i], eta[i], sd[i], acc[i], bounds, out[i])
+        observation_row(pe[i], ve[i], mat3(R[i]), w[i], eta[i], sd[i], acc[i], bounds, out[i])

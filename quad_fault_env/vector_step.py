@@ -36,7 +36,7 @@ import numpy as np
 from quad_fault_env.envs.config import action_commands_row, reward_row, termination_code
 from quad_fault_env.observation import observation_row
 from quadfault.jit import jit, prange
-from quadfault.model.closed_loop import fly_vehicle, sense_vehicle
+from quadfault.model.closed_loop import fly_vehicle, measure_vehicle
 from quadfault.model.controller import (
     controller_tuples,
     geometric_control,
@@ -105,22 +105,51 @@ class StepOut(NamedTuple):
 
 
 @jit(inline="always")
-def _diff3(a, b):
+def _row3(a, i):
+    """Row ``i`` of an (N, 3) array as 3 numbers (no view: a view takes a reference count)."""
+    return (a[i, 0], a[i, 1], a[i, 2])
+
+
+@jit(inline="always")
+def _row33(a, i):
+    """Row ``i`` of an (N, 3, 3) array as 9 numbers, row by row."""
+    return (
+        a[i, 0, 0],
+        a[i, 0, 1],
+        a[i, 0, 2],
+        a[i, 1, 0],
+        a[i, 1, 1],
+        a[i, 1, 2],
+        a[i, 2, 0],
+        a[i, 2, 1],
+        a[i, 2, 2],
+    )
+
+
+@jit(inline="always")
+def _ref3(refs, i, k, c):
+    """Reference row ``c`` (0 position, 1 velocity, 2 acceleration) of sub-env ``i`` at its
+    window's step ``k``, 3 numbers."""
+    return (refs[i, k, c, 0], refs[i, k, c, 1], refs[i, k, c, 2])
+
+
+@jit(inline="always")
+def _minus3(a, b):
     return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
 
 
 @jit(inline="always")
 def observe_vehicle(i, S, R, V, obs):
     """Sub-env ``i``'s observation at its step ``R.steps[i]`` into ``obs[i]``."""
-    ref = R.refs[i, R.steps[i] - R.table_k0[i]]
+    k = R.steps[i] - R.table_k0[i]
     observation_row(
-        _diff3(V.mp[i], ref[0]),
-        _diff3(V.mv[i], ref[1]),
-        V.mR[i],
-        V.mw[i],
+        _minus3(_row3(V.mp, i), _ref3(R.refs, i, k, 0)),
+        _minus3(_row3(V.mv, i), _ref3(R.refs, i, k, 1)),
+        _row33(V.mR, i),
+        _row3(V.mw, i),
         R.eta_hat[i],
         R.eta_sd[i],
-        ref[2],
+        _ref3(R.refs, i, k, 2),
         (S.at, S.low, S.high, S.fill),
         obs[i],
     )
@@ -141,53 +170,47 @@ def _carried_records(i, V, rec):
 
 
 @jit(inline="always")
+def _commands(i, S, R, K, V, row):
+    """Sub-env ``i``'s rotor commands from its action into ``V.f_cmd[i]`` (residual mode:
+    the geometric controller on the measurement first)."""
+    f_cmd = V.f_cmd[i]
+    if K is not None:
+        gains, nominal = controller_tuples(K)
+        u = geometric_control(
+            _row3(V.mp, i),
+            _row3(V.mv, i),
+            _row33(V.mR, i),
+            _row3(V.mw, i),
+            reference_row(R.refs[i], row),
+            gains,
+            nominal,
+        )
+        rotor_commands(u[0], u[1], K.allocation_inverse, f_cmd)
+    ms = S.moment_scale
+    action_commands_row(
+        R.action[i],
+        f_cmd,  # the controller's commands (each read before it is overwritten)
+        R.eta_hat[i],
+        (S.mode, S.compensate, S.residual_scale, (ms[0], ms[1], ms[2])),
+        S.f_max,
+        S.allocation_inverse,
+        f_cmd,
+    )
+
+
+@jit(inline="always")
 def step_vehicle(i, S, R, Out, K, gens, C, V, T, rec, fx, k_phys, dt):
     """Sub-env ``i``'s control step (see the module docstring); returns whether its next step
     leaves its time-table window, and whether its episode ended (0 or 1 each)."""
     k = R.steps[i]
+    ended = False
     if R.resetting[i]:  # reset before the call: its reset observation, nothing flown
         Out.code[i], Out.terminated[i], Out.truncated[i], Out.reward[i] = 0, False, False, 0.0
         _carried_records(i, V, rec)
     else:
         row = k - R.table_k0[i]
-        f_cmd = V.f_cmd[i]
         if S.mode >= 0:
-            if K is not None:  # residual: the controller's commands, then the action's
-                gains, nominal = controller_tuples(K)
-                u = geometric_control(
-                    (V.mp[i, 0], V.mp[i, 1], V.mp[i, 2]),
-                    (V.mv[i, 0], V.mv[i, 1], V.mv[i, 2]),
-                    (
-                        V.mR[i, 0, 0],
-                        V.mR[i, 0, 1],
-                        V.mR[i, 0, 2],
-                        V.mR[i, 1, 0],
-                        V.mR[i, 1, 1],
-                        V.mR[i, 1, 2],
-                        V.mR[i, 2, 0],
-                        V.mR[i, 2, 1],
-                        V.mR[i, 2, 2],
-                    ),
-                    (V.mw[i, 0], V.mw[i, 1], V.mw[i, 2]),
-                    reference_row(R.refs[i], row),
-                    gains,
-                    nominal,
-                )
-                rotor_commands(u[0], u[1], K.allocation_inverse, f_cmd)
-            action_commands_row(
-                R.action[i],
-                f_cmd,  # the controller's commands (read before each is overwritten)
-                R.eta_hat[i],
-                (
-                    S.mode,
-                    S.compensate,
-                    S.residual_scale,
-                    (S.moment_scale[0], S.moment_scale[1], S.moment_scale[2]),
-                ),
-                S.f_max,
-                S.allocation_inverse,
-                f_cmd,
-            )
+            _commands(i, S, R, K, V, row)
         k0 = k_phys[i]
         for r in range(R.times.shape[1]):
             R.times[i, r] = (k0 + r * rec.stride) * dt
@@ -199,29 +222,31 @@ def step_vehicle(i, S, R, Out, K, gens, C, V, T, rec, fx, k_phys, dt):
                 R.eta_sd[i, m] = 0.0
         k += 1
         R.steps[i] = k
-        ref = R.refs[i, row + 1]
-        code = termination_code(V.p[i], V.R[i], ref[0], (S.limits[0], S.limits[1], S.limits[2]))
+        p, v = _row3(V.p, i), _row3(V.v, i)
+        p_ref = _ref3(R.refs, i, row + 1, 0)
+        lim = S.limits
+        code = termination_code(p, _row33(V.R, i), p_ref, (lim[0], lim[1], lim[2]))
         terminated = code != 0
-        Out.code[i], Out.terminated[i] = code, terminated
-        Out.truncated[i] = not terminated and (k >= R.max_steps[i] or k >= S.limit_steps)
+        truncated = not terminated and (k >= R.max_steps[i] or k >= S.limit_steps)
+        ended = terminated or truncated
+        Out.code[i], Out.terminated[i], Out.truncated[i] = code, terminated, truncated
         if terminated:  # the agent sees the true state of a terminated episode
             for m in range(3):
                 V.mp[i, m], V.mv[i, m], V.mw[i, m] = V.p[i, m], V.v[i, m], V.w[i, m]
                 for c in range(3):
                     V.mR[i, m, c] = V.R[i, m, c]
         else:
-            sense_vehicle(i, generator_at(gens, i), C, V)
+            measure_vehicle(i, generator_at(gens, i), C, V)
         rw = S.reward
         Out.reward[i] = reward_row(
-            _diff3(V.p[i], ref[0]),
-            _diff3(V.v[i], ref[1]),
-            f_cmd,
+            _minus3(p, p_ref),
+            _minus3(v, _ref3(R.refs, i, row + 1, 1)),
+            V.f_cmd[i],
             S.f_max,
             terminated,
             R.action[i],
             (rw[0], rw[1], rw[2], rw[3], rw[4], rw[5]),
         )
-    ended = Out.terminated[i] or Out.truncated[i]
     if S.next_step:
         R.resetting[i] = ended
     if S.observe:
@@ -230,10 +255,13 @@ def step_vehicle(i, S, R, Out, K, gens, C, V, T, rec, fx, k_phys, dt):
     return (1 if off < 0 or off > S.window - 1 else 0), (1 if ended else 0)
 
 
-@jit
+@jit(_nrt=False)
 def _step_range(lo, hi, S, R, Out, K, gens, C, V, T, rec, fx, k_phys, dt):
     """:func:`step_vehicle` for the sub-envs ``lo .. hi-1``, in order; returns how many
-    leave their window and how many ended."""
+    leave their window and how many ended. Compiled without numba's reference counts
+    (``_nrt=False``: the step allocates nothing, and the caller holds every array): a loop
+    whose body branches would otherwise take and drop a count of every array of its tuples
+    at every vehicle (measured: 260 ns per vehicle for 24 arrays)."""
     stale, ended = 0, 0
     for i in range(lo, hi):
         s, e = step_vehicle(i, S, R, Out, K, gens, C, V, T, rec, fx, k_phys, dt)
@@ -254,7 +282,7 @@ def _step_parallel(S, R, Out, K, gens, C, V, T, rec, fx, k_phys, dt, chunk):
     return stale, ended
 
 
-@jit
+@jit(_nrt=False)
 def _observe_rows(rows, S, R, V, obs):
     for r in range(rows.shape[0]):
         observe_vehicle(rows[r], S, R, V, obs)

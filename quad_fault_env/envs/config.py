@@ -423,16 +423,15 @@ REASONS = np.array([None, "excessive_tilt", "out_of_bounds", "crash", "non_finit
 @jit(inline="always")
 def termination_code(p, R, p_ref, limits):
     """:class:`TerminationLimits` of one vehicle: the one definition of termination, compiled
-    (the single env, the vector env's rows and its fused step call it). ``p`` (3,), ``R``
-    (3, 3) the true position and attitude, ``p_ref`` (3,) the reference, ``limits``
-    :meth:`TerminationLimits.params`. The code in :data:`REASONS`, by precedence:
-    non_finite (4), crash (3), out_of_bounds (2), excessive_tilt (1); 0 = none."""
+    (the single env, the vector env's rows and its fused step call it). ``p`` the true
+    position, ``R`` the true attitude as 9 numbers row by row, ``p_ref`` the reference
+    position (3 numbers each), ``limits`` :meth:`TerminationLimits.params`. The code in
+    :data:`REASONS`, by precedence: non_finite (4), crash (3), out_of_bounds (2),
+    excessive_tilt (1); 0 = none."""
     ground, max_error, max_tilt = limits
-    finite = True
-    for k in range(3):
-        finite = finite and np.isfinite(p[k])
-        for m in range(3):
-            finite = finite and np.isfinite(R[k, m])
+    finite = np.isfinite(p[0]) and np.isfinite(p[1]) and np.isfinite(p[2])
+    for k in range(9):
+        finite = finite and np.isfinite(R[k])
     d0, d1, d2 = p[0] - p_ref[0], p[1] - p_ref[1], p[2] - p_ref[2]
     if not finite:
         return 4
@@ -440,7 +439,7 @@ def termination_code(p, R, p_ref, limits):
         return 3
     if math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) > max_error:
         return 2
-    if math.acos(min(max(R[2, 2], -1.0), 1.0)) > max_tilt:
+    if math.acos(min(max(R[8], -1.0), 1.0)) > max_tilt:
         return 1
     return 0
 
@@ -449,7 +448,22 @@ def termination_code(p, R, p_ref, limits):
 def _termination_codes(p, R, p_ref, limits, out):
     """:func:`termination_code` per row."""
     for i in range(out.shape[0]):
-        out[i] = termination_code(p[i], R[i], p_ref[i], limits)
+        out[i] = termination_code(
+            (p[i, 0], p[i, 1], p[i, 2]),
+            (
+                R[i, 0, 0],
+                R[i, 0, 1],
+                R[i, 0, 2],
+                R[i, 1, 0],
+                R[i, 1, 1],
+                R[i, 1, 2],
+                R[i, 2, 0],
+                R[i, 2, 1],
+                R[i, 2, 2],
+            ),
+            (p_ref[i, 0], p_ref[i, 1], p_ref[i, 2]),
+            limits,
+        )
 
 
 @dataclass(frozen=True)

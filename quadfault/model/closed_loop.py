@@ -325,10 +325,12 @@ def fly_vehicle(i, gens, k0, k1, measure_first, C, K, V, T, out, fx, memory):
     return done
 
 
-@jit
+@jit(_nrt=False)
 def _fly_rows(lo, hi, gens, active, k0, n_steps, measure_first, C, K, V, T, out, fx, done):
-    """:func:`fly_vehicle` for the active vehicles ``lo .. hi-1``, in order (inlined: the
-    arrays' reference counts are taken once per call, not once per vehicle)."""
+    """:func:`fly_vehicle` for the active vehicles ``lo .. hi-1``, in order, compiled without
+    numba's reference counts (``_nrt=False``: the loop allocates nothing and the caller holds
+    every array; with them, a loop whose body branches takes and drops a count of every
+    array of its tuples at every vehicle)."""
     for i in range(lo, hi):
         if active[i]:
             done[i] = fly_vehicle(
@@ -359,9 +361,11 @@ def _fly_parallel(gens, active, k0, n_steps, measure_first, C, K, V, T, out, fx,
         )
 
 
-@jit
-def sense_vehicle(i, gen, C, V):
-    """Measure vehicle ``i``'s true state into its carried measurement (the sensors' draws)."""
+@jit(inline="always")
+def measure_vehicle(i, gen, C, V):
+    """Measure vehicle ``i``'s true state into its carried measurement (the sensors' draws);
+    inlined where it is called (a kernel looping over vehicles takes the arrays' reference
+    counts once, not once per vehicle)."""
     mp, mv, mR, mw = _measure(
         vec3(V.p[i]), vec3(V.v[i]), mat3(V.R[i]), vec3(V.w[i]), _tuples(C, V, i)[1], C, V, i, gen
     )
@@ -372,9 +376,15 @@ def sense_vehicle(i, gen, C, V):
 
 
 @jit
+def sense_vehicle(i, gen, C, V):
+    """:func:`measure_vehicle`, called on its own."""
+    measure_vehicle(i, gen, C, V)
+
+
+@jit(_nrt=False)
 def _sense_rows(gens, rows, C, V):
     for r in range(rows.shape[0]):
-        sense_vehicle(rows[r], generator_at(gens, rows[r]), C, V)
+        measure_vehicle(rows[r], generator_at(gens, rows[r]), C, V)
 
 
 #: below this many vehicles the batch runs on the calling thread (a parallel launch costs
@@ -601,6 +611,7 @@ __all__ = [
     "sense",
     "sense_rows",
     "sense_vehicle",
+    "measure_vehicle",
     "generators",
     "constants",
     "restart_sensors",
