@@ -120,6 +120,14 @@ def _version(name: str) -> str:
     return version(name)
 
 
+#: what starts a line of the child's answers (a peer may print to stdout when imported)
+MARK = "@@"
+
+
+def _say(message: dict) -> None:
+    print(MARK + json.dumps(message), flush=True)
+
+
 def child(side: str, N: int) -> int:
     """Build and warm up one side, then time it whenever the parent says ``run SECONDS``."""
     try:
@@ -127,9 +135,9 @@ def child(side: str, N: int) -> int:
         for _ in range(20):  # compile / load caches, first-step allocations
             step()
     except Exception as exc:  # report why the side cannot run, in one line
-        print(json.dumps({"error": f"{type(exc).__name__}: {exc}".splitlines()[0]}), flush=True)
+        _say({"error": f"{type(exc).__name__}: {exc}".splitlines()[0]})
         return 0
-    print(json.dumps({"ready": settings}), flush=True)
+    _say({"ready": settings})
     for line in sys.stdin:
         cmd = line.split()
         if not cmd or cmd[0] != "run":
@@ -140,16 +148,13 @@ def child(side: str, N: int) -> int:
             step()
             steps += 1
         wall, cpu = time.perf_counter() - w0, time.process_time() - c0
-        print(
-            json.dumps(
-                {
-                    "wall": N * steps / wall,
-                    "cpu": N * steps / max(cpu, 1e-9),
-                    "physics": N * steps * substeps / wall,
-                    "cores": cpu / wall,
-                }
-            ),
-            flush=True,
+        _say(
+            {
+                "wall": N * steps / wall,
+                "cpu": N * steps / max(cpu, 1e-9),
+                "physics": N * steps * substeps / wall,
+                "cores": cpu / wall,
+            }
         )
     return 0
 
@@ -175,13 +180,16 @@ def _spawn(side: str, N: int, args) -> subprocess.Popen:
 
 
 def _read(proc: subprocess.Popen) -> dict:
-    line = proc.stdout.readline()
-    if not line:
-        return {"error": f"exited with {proc.wait()}"}
-    try:
-        return json.loads(line)
-    except ValueError:
-        return {"error": f"unreadable output {line[-200:]!r}"}
+    """The child's next answer (other lines it prints are skipped)."""
+    while True:
+        line = proc.stdout.readline()
+        if not line:
+            return {"error": f"exited with {proc.wait()}"}
+        if line.startswith(MARK):
+            try:
+                return json.loads(line[len(MARK) :])
+            except ValueError:
+                return {"error": f"unreadable output {line[-200:]!r}"}
 
 
 def compare(N: int, args) -> dict:
