@@ -64,15 +64,15 @@ def single(estimators=("none", "irls"), steps: int = 400, repeat: int = 3) -> di
     return out
 
 
-def vector(sizes=(1024, 4096), steps: int = 20, repeat: int = 3) -> dict:
-    """Vehicle-steps per wall / CPU second of the vector env's step."""
+def vector(sizes=(1024, 4096), steps: int = 20, repeat: int = 3, estimator: str = "none") -> dict:
+    """Vehicle-steps per wall / CPU second of the vector env's step (with ``estimator``)."""
     import numpy as np
 
     from quad_fault_env.vector import QuadFaultVectorEnv
 
     out = {}
     for n in sizes:
-        env = QuadFaultVectorEnv(n, "none", scenario="combined", duration=600.0)
+        env = QuadFaultVectorEnv(n, estimator, scenario="combined", duration=600.0)
         env.reset(seed=0)
         a = np.zeros((n, 4), dtype=np.float32)
         for _ in range(3):
@@ -132,13 +132,15 @@ def main(argv=None) -> int:
     p.add_argument("--steps", type=int, default=400, help="single-env steps per timing (400)")
     p.add_argument("--baseline", default=None, help="another checkout, measured side by side")
     p.add_argument("--rounds", type=int, default=3, help="alternated rounds (3)")
+    p.add_argument("--vector-estimator", default="none", help="the vector env's estimator (none)")
+    p.add_argument("--skip-cold", action="store_true", help="skip the empty-cache first steps")
     args = p.parse_args(argv)
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import side_by_side as sbs
 
     jobs = (
         ("single", max, {"steps": args.steps}),
-        ("vector", max, {"sizes": list(args.sizes)}),
+        ("vector", max, {"sizes": list(args.sizes), "estimator": args.vector_estimator}),
         ("resets", min, {"sizes": list(args.sizes)}),
     )
     now, base = {}, {}
@@ -151,7 +153,7 @@ def main(argv=None) -> int:
             base.update(b)
         else:
             now.update(sbs.measure(sbs.ROOT, "bench_env_step", fn, **kw))
-    for _ in range(args.rounds if args.baseline else 1):
+    for _ in range(0 if args.skip_cold else args.rounds if args.baseline else 1):
         cold_env = {"NUMBA_CACHE_DIR": tempfile.mkdtemp(prefix="qf-cold-")}
         got = sbs.measure(sbs.ROOT, "bench_env_step", "cold_start", env=cold_env)
         now.update({k: min(now.get(k, x), x) for k, x in got.items()})
@@ -164,11 +166,15 @@ def main(argv=None) -> int:
         rows.append((f"single env ({est}) steps / CPU s", f"single_{est}_cpu", "rate"))
         rows.append((f"single env ({est}) steps / wall s", f"single_{est}_wall", "rate"))
     for n in args.sizes:
-        rows.append((f"vector N = {n}: vehicle-steps / CPU s", f"vector_{n}_cpu", "rate"))
-        rows.append((f"vector N = {n}: vehicle-steps / wall s", f"vector_{n}_wall", "rate"))
+        est = args.vector_estimator
+        rows.append((f"vector N = {n} ({est}): vehicle-steps / CPU s", f"vector_{n}_cpu", "rate"))
+        rows.append((f"vector N = {n} ({est}): vehicle-steps / wall s", f"vector_{n}_wall", "rate"))
         rows.append((f"vector N = {n}: reset (random) [CPU s]", f"reset_{n}_cpu", "time"))
-    rows.append(("first env step, empty cache [CPU s]", "cold_env_cpu_s", "time"))
-    rows.append(("first vector step (N = 128), empty cache [CPU s]", "cold_vector_cpu_s", "time"))
+    if not args.skip_cold:
+        rows.append(("first env step, empty cache [CPU s]", "cold_env_cpu_s", "time"))
+        rows.append(
+            ("first vector step (N = 128), empty cache [CPU s]", "cold_vector_cpu_s", "time")
+        )
     print(f"# environments; {sbs.load()} on {os.cpu_count()} cpus")
     if args.baseline:
         print("| measure | baseline | this checkout | speed-up |\n|---|---|---|---|")

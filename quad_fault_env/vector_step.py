@@ -227,7 +227,9 @@ def step_vehicle(i, S, R, Out, K, gens, C, V, T, rec, fx, k_phys, dt):
         lim = S.limits
         code = termination_code(p, _row33(V.R, i), p_ref, (lim[0], lim[1], lim[2]))
         terminated = code != 0
-        truncated = not terminated and (k >= R.max_steps[i] or k >= S.limit_steps)
+        # the scenario's end truncates an episode that goes on; max_episode_steps any
+        # episode, as gymnasium's TimeLimit around the single env
+        truncated = (not terminated and k >= R.max_steps[i]) or k >= S.limit_steps
         ended = terminated or truncated
         Out.code[i], Out.terminated[i], Out.truncated[i] = code, terminated, truncated
         if terminated:  # the agent sees the true state of a terminated episode
