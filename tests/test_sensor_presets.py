@@ -108,3 +108,35 @@ def test_an_imu_only_log_gives_its_rates_and_white_noise_and_says_what_it_cannot
     assert m["accel"]["rate"] == pytest.approx(1000.0, rel=0.01)
     assert m["accel"]["white"] == pytest.approx(0.05, rel=0.1)
     assert m["gyro"]["bias"] is None and any("bias not measured" in n for n in m["gyro"]["notes"])
+
+
+def test_a_stream_the_importer_derived_is_not_measured():
+    """A velocity the importer differentiated from the position (its ``meta.import.missing``
+    says so) is no measurement: left out, and the position has nothing to be checked against."""
+    from dataclasses import replace
+
+    from quadfault.diagnosis.sensor_noise import measure_noise
+    from quadfault.io.recording import Recording
+    from quadfault.model.vehicle import Vehicle
+
+    rng = np.random.default_rng(1)
+    t = np.arange(5000) * 0.01
+    p = np.stack([np.sin(0.3 * t + k) for k in range(3)], axis=1)
+    p = p + 0.001 * rng.standard_normal(p.shape)
+    v = np.gradient(p, t, axis=0)
+    rec = Recording(
+        t=t,
+        omega=np.zeros((len(t), 3)),
+        thrust_cmd=np.ones((len(t), 4)),
+        vehicle=Vehicle(),
+        position=p,
+        velocity=v,
+        quaternion=np.tile([1.0, 0.0, 0.0, 0.0], (len(t), 1)),
+    )
+    logged = measure_noise(rec)
+    assert logged["velocity"]["white"] > 0 and logged["position"]["markov"] is not None
+    meta = {"import": {"missing": ["velocity (differentiated from position)"]}}
+    m = measure_noise(replace(rec, meta=meta))
+    assert m["velocity"]["white"] is None and "derived by the importer" in m["velocity"]["notes"][0]
+    assert m["position"]["white"] == pytest.approx(0.001, rel=0.15)
+    assert m["position"]["markov"] is None

@@ -33,7 +33,9 @@ For each stream of :data:`quadfault.model.sensors.STREAMS` that the recording ha
   rate the attitude implies and from the acceleration the velocity implies.
 
 Numbers a recording cannot give (a missing stream, too few samples) are None, with a
-``notes`` entry saying why.
+``notes`` entry saying why; a stream the importer computed from another (its
+``meta.import.missing`` says so, e.g. a velocity differentiated from the position) is not a
+measurement and is left out the same way.
 """
 
 from __future__ import annotations
@@ -213,6 +215,49 @@ def _rates_from_attitude(t, quat):
     return np.vstack([w, w[-1:]])
 
 
+#: the keys of a stream's measurement
+FIELDS = (
+    "rate",
+    "rate_from",
+    "samples",
+    "white",
+    "white_axes",
+    "white_check",
+    "highpass",
+    "highpass_axes",
+    "peak_hz",
+    "floor",
+    "markov",
+    "tau",
+    "latency",
+    "bias",
+    "notes",
+)
+#: how an importer's ``meta.import.missing`` names a stream it derived from another
+_DERIVED_WORDS = {
+    "position": "position",
+    "velocity": "velocity",
+    "attitude": "attitude",
+    "body rate": "gyro",
+    "gyro": "gyro",
+    "accelerometer": "accel",
+}
+_HOW = ("differentiated", "integrated", "derived", "reconstructed")
+
+
+def _derived(rec) -> dict:
+    """``{stream: the importer's words}`` of the streams the importer computed from other
+    streams (``meta.import.missing``, e.g. "velocity (differentiated from position)")."""
+    missing = ((rec.meta or {}).get("import") or {}).get("missing") or []
+    out = {}
+    for text in missing:
+        low = str(text).lower()
+        for word, stream in _DERIVED_WORDS.items():
+            if low.startswith(word) and any(h in low for h in _HOW):
+                out.setdefault(stream, str(text))
+    return out
+
+
 def measure_noise(rec) -> dict:
     """Each stream's noise in recording ``rec`` (see the module docstring): ``{stream:
     {rate, rate_from, samples, white, white_axes, white_check, highpass, highpass_axes,
@@ -220,9 +265,16 @@ def measure_noise(rec) -> dict:
     t = np.asarray(rec.t, dtype=float)
     out = {}
     on_rows = {}
+    derived = _derived(rec)
     for name in STREAMS:
         x = _series(rec, name)
         if x is None:
+            continue
+        if name in derived:
+            out[name] = {k: None for k in FIELDS}
+            out[name]["notes"] = [
+                f"derived by the importer ({derived[name]}), not logged: not measured"
+            ]
             continue
         x = np.asarray(x, dtype=float)
         rows, rate, how = _own_samples(rec, name, x)
@@ -249,7 +301,7 @@ def measure_noise(rec) -> dict:
             "notes": [],
         }
     g = float(getattr(rec.vehicle, "gravity", 9.81))
-    R = None if rec.quaternion is None else quat_to_rot(rec.quaternion)
+    R = None if rec.quaternion is None or "attitude" in derived else quat_to_rot(rec.quaternion)
     acc_world = None
     if R is not None and "accel" in on_rows:
         acc_world = np.einsum("nij,nj->ni", R, on_rows["accel"]) + np.array([0.0, 0.0, g])
@@ -259,7 +311,9 @@ def measure_noise(rec) -> dict:
         "position": on_rows.get("velocity"),
     }
     for name, rate_of in pairs.items():
-        if name not in out or rate_of is None:
+        if name not in out or out[name]["rate"] is None:
+            continue
+        if rate_of is None:
             if name in out:
                 out[name]["notes"].append(
                     "no stream to check it against (needs "
@@ -281,7 +335,7 @@ def measure_noise(rec) -> dict:
             ref = np.cumsum(rate_of * np.gradient(t)[:, None], axis=0)
             lat = _latency(t, on_rows[name], ref)
         ref_name = {"position": "velocity", "velocity": "accel", "attitude": "gyro"}[name]
-        ref_rate = out[ref_name]["rate"] if ref_name in out else 0.0
+        ref_rate = (out[ref_name]["rate"] or 0.0) if ref_name in out else 0.0
         if ref_rate < MIN_INTEGRAL_HZ:
             out[name]["notes"].append(
                 f"{ref_name} at {ref_rate:.3g} Hz (below {MIN_INTEGRAL_HZ:g} Hz) is too slow to "
@@ -299,17 +353,17 @@ def measure_noise(rec) -> dict:
             v_lat = out.get("velocity", {}).get("latency")
             lat = None if v_lat is None else lat + v_lat
         out[name]["latency"] = lat
-    if "gyro" in out and R is not None:
+    if "gyro" in on_rows and R is not None:
         d = on_rows["gyro"] - _rates_from_attitude(t, rec.quaternion)
         out["gyro"]["bias"] = float(np.median(np.abs(d.mean(axis=0))))
         out["gyro"]["bias_axes"] = d.mean(axis=0).tolist()
-    if "accel" in out and R is not None and "velocity" in on_rows:
+    if "accel" in on_rows and R is not None and "velocity" in on_rows:
         dvdt = np.gradient(on_rows["velocity"], t, axis=0)
         d = on_rows["accel"] - np.einsum("nji,nj->ni", R, dvdt - np.array([0.0, 0.0, g]))
         out["accel"]["bias"] = float(np.median(np.abs(d.mean(axis=0))))
         out["accel"]["bias_axes"] = d.mean(axis=0).tolist()
     for name in ("gyro", "accel"):
-        if name in out and out[name]["bias"] is None:
+        if name in on_rows and out[name]["bias"] is None:
             out[name]["notes"].append("bias not measured (needs attitude and velocity)")
     return out
 
