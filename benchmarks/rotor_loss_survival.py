@@ -23,7 +23,7 @@ from that range (the complete-loss target: 10 seeds x 4 rotors).
 
     python benchmarks/rotor_loss_survival.py [--levels 0 0.1 0.2 0.3 0.4 0.5] [--seeds 0 1 2]
     python benchmarks/rotor_loss_survival.py --levels 0 --seeds 0 1 2 3 4 5 6 7 8 9 \\
-        --rotors 1 2 3 4 --onset-range 3 6 --arms relaxed-hover:irls
+        --rotors 1 2 3 4 --onset-range 3 6 --arms relaxed-hover:irls [--sensor-noise px4]
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ import time
 import numpy as np
 
 from agents.metrics import held_after_loss
-from agents.rollout import fly
+from agents.rollout import FlightConfig, fly
 from quadfault.model.relaxed_hover import ROTOR_LOSS_EFFECTS, rotor_loss_vehicle
 from quadfault.model.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
 from quadfault.model.trajectory import Hover
@@ -86,6 +86,11 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=10.0)
     ap.add_argument("--vehicle", choices=("auto", "paper", "rotor-loss"), default="auto")
     ap.add_argument(
+        "--sensor-noise",
+        default=None,
+        help="a sensor-noise preset (docs/sensors.md) for every flight (default: noise-free)",
+    )
+    ap.add_argument(
         "--arms",
         nargs="+",
         default=[f"{c}:{e}" for c, e in ARMS],
@@ -95,10 +100,16 @@ def main(argv=None) -> int:
     arms = [tuple(a.split(":")) for a in args.arms]
     veh, effects = vehicle_of(args.vehicle, args.levels)
     t_on = onsets(args)
+    cfg = (
+        FlightConfig()
+        if args.sensor_noise is None
+        else FlightConfig(sensor_noise=args.sensor_noise)
+    )
     start = time.process_time()
     print(
         f"vehicle: {veh.name} (thrust-to-weight {veh.thrust_to_weight:g}), effects: "
-        f"{' '.join(effects) or 'none'}; rotors {args.rotors}\n"
+        f"{' '.join(effects) or 'none'}; rotors {args.rotors}; sensor noise "
+        f"{args.sensor_noise or 'none'}\n"
     )
     print(
         "| eta after loss | controller (estimate) | survived | crash time [s] | "
@@ -112,7 +123,7 @@ def main(argv=None) -> int:
             for rotor in args.rotors:
                 for seed, onset in zip(args.seeds, t_on):
                     sc = scenario(level, onset, args.duration, rotor)
-                    fl.append(fly(sc, ctrl, est, seed, vehicle=veh, effects=effects))
+                    fl.append(fly(sc, ctrl, est, seed, vehicle=veh, effects=effects, config=cfg))
                     on.append(onset)
             ok = sum(not f.metrics.crashed for f in fl)
             crash = [f.metrics.crash_time - o for f, o in zip(fl, on) if f.metrics.crashed]

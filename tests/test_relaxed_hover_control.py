@@ -100,3 +100,13 @@ def test_complete_loss_task_flies_the_named_vehicle_with_the_relaxed_hover_base(
     assert sw.lost == fault.motor - 1 and fault.onset <= sw.switched <= fault.onset + 0.03
     with pytest.raises(ConfigError, match="residual"):
         gym.make("QuadFaultRotorLossComplete-v0", action_mode="wrench")
+
+
+def test_held_after_loss_counts_the_late_error_and_the_flights_end():
+    from agents.metrics import held_after_loss
+
+    t = np.arange(0.0, 10.0, 0.01)
+    e = np.where(t < 4.5, 1.5, 0.3)  # 1.5 m until 1.5 s after a loss at 3 s
+    assert held_after_loss(t, e, 3.0, 10.0)
+    assert not held_after_loss(t, e, 2.0, 10.0)  # still 1.5 m at 2 s after the loss
+    assert not held_after_loss(t[:600], e[:600], 3.0, 10.0)  # ended (crashed) at 6 s

@@ -58,7 +58,7 @@ class RelaxedHoverGains:
     kd: float = 2.5
     max_horizontal: float = 4.0
     q_axis: float = 400.0
-    q_rate: float = 0.2
+    q_rate: float = 2.0
     r_thrust: float = 1.0
     rho: float = DEFAULT_RHO
 
