@@ -3,7 +3,7 @@
 The policy adds up to 2.45 N per rotor (the hover thrust of one rotor) to the geometric
 controller's commands, sees the IRLS efficiency estimate in its observation and learns on
 the hover task with one random motor fault of efficiency 0.5-0.85 (``QuadFaultHover-v1``,
-``random_faults`` as in ``benchmarks/ppo_residual_study.py``, episodes shortened to 5 s).
+``random_faults`` as in ``benchmarks/studies/ppo_residual_study.py``, episodes shortened to 5 s).
 ``--n-envs`` quadrotors are stepped as arrays in one process (``TrainConfig(vector_env=True)``,
 :class:`quad_fault_env.vector.QuadFaultVectorEnv`). With the defaults it finishes in a few
 minutes on a 2-core CPU without GPU::

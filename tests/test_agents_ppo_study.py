@@ -1,5 +1,5 @@
 """The PPO residual study's fault distribution, scores and confidence intervals
-(``benchmarks/ppo_residual_study.py``, loaded from there; no training here)."""
+(``benchmarks/studies/ppo_residual_study.py``, loaded from there; no training here)."""
 
 import argparse
 import importlib.util
@@ -13,7 +13,7 @@ from scipy import stats
 
 _SPEC = importlib.util.spec_from_file_location(
     "ppo_residual_study",
-    Path(__file__).resolve().parents[1] / "benchmarks" / "ppo_residual_study.py",
+    Path(__file__).resolve().parents[1] / "benchmarks" / "studies" / "ppo_residual_study.py",
 )
 study = importlib.util.module_from_spec(_SPEC)
 _SPEC.loader.exec_module(study)

@@ -89,3 +89,14 @@ def test_product_code_cites_the_user_docs():
         text=True,
     ).stdout
     assert "docs/formats.md" in help_text
+
+
+def test_every_benchmark_the_docs_name_exists():
+    """Every ``benchmarks/...py`` a doc names is a file (speed scripts in benchmarks/, the
+    studies behind the docs' results in benchmarks/studies/)."""
+    docs = [ROOT / "README.md", ROOT / "CONTRIBUTING.md", *sorted((ROOT / "docs").glob("*.md"))]
+    for doc in docs:
+        if not doc.is_file():
+            continue
+        for script in re.findall(r"benchmarks/[\w/]+\.py", doc.read_text(encoding="utf-8")):
+            assert (ROOT / script).is_file(), f"{doc.name}: no {script}"

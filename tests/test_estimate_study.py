@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 pytest.importorskip("stable_baselines3")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "studies"))
 
 import estimate_study  # noqa: E402
 

@@ -147,7 +147,7 @@ def _script(name, *args, tmp_path):
 
     root = Path(__file__).resolve().parents[1]
     return subprocess.run(
-        [sys.executable, str(root / "benchmarks" / name), *args],
+        [sys.executable, str(root / "benchmarks" / "studies" / name), *args],
         capture_output=True,
         text=True,
         cwd=tmp_path,

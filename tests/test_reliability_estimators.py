@@ -1,4 +1,4 @@
-"""Estimator robustness, CI subset (``benchmarks/estimator_robustness.py`` has the full run and
+"""Estimator robustness, CI subset (``benchmarks/studies/estimator_robustness.py`` has the full run and
 the measured recovery times): degenerate windows yield the status that says so with the
 previous estimate kept and never NaN; both estimators recover after a burst of corrupted
 samples within the documented bound."""
@@ -14,7 +14,7 @@ import pytest
 
 _spec = importlib.util.spec_from_file_location(
     "estimator_robustness",
-    Path(__file__).resolve().parents[1] / "benchmarks" / "estimator_robustness.py",
+    Path(__file__).resolve().parents[1] / "benchmarks" / "studies" / "estimator_robustness.py",
 )
 er = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(er)

@@ -39,8 +39,8 @@ first check of a fault distribution (the baseline must not crash, the reference 
 The documented study (>= 3 seeds per arm, each run within 30 min of CPU; docs/agents.md,
 "PPO residual studies")::
 
-    python benchmarks/ppo_residual_study.py --check-distribution --episodes 40 --out runs/ppo_s3
-    python benchmarks/ppo_residual_study.py --timesteps 1000000 --seeds 0 1 2 \\
+    python benchmarks/studies/ppo_residual_study.py --check-distribution --episodes 40 --out runs/ppo_s3
+    python benchmarks/studies/ppo_residual_study.py --timesteps 1000000 --seeds 0 1 2 \\
         --episodes 40 --out runs/ppo_s4m
 
 Variants (both arms alike) and options: ``--help``. Runs can train in separate processes

@@ -9,7 +9,7 @@ noise (0.02-0.1) and sensor noise (off or on) drawn per flight from ``--seed`` -
 how many the diagnosis calls a mismatch. With ``--reference REV`` the diagnosis package of git
 revision ``REV`` diagnoses the same recordings in the same run.
 
-    python benchmarks/false_alarms.py --n 12 --reference ec394f0
+    python benchmarks/studies/false_alarms.py --n 12 --reference ec394f0
 """
 
 from __future__ import annotations
@@ -20,7 +20,9 @@ import sys
 import time
 
 import numpy as np
-from bench_diagnosis import describe, reference_package
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # benchmarks/
+from bench_diagnosis import describe, reference_package  # noqa: E402
 
 from quadfault.model.scenarios import named_scenario
 from quadfault.model.trajectory import Circle, Hover, Lissajous

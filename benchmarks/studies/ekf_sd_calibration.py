@@ -1,8 +1,8 @@
 """Calibrated EKF uncertainty: fit ``calibrate_sd_scale`` on a calibration flight, report the
 one-sigma coverage of the raw and the scaled ``sd`` on held-out seeds and scenarios.
 
-    python benchmarks/ekf_sd_calibration.py                      # 20 s flights, Q_eta 0.5
-    python benchmarks/ekf_sd_calibration.py --q-eta 1.778 --duration 80
+    python benchmarks/studies/ekf_sd_calibration.py                      # 20 s flights, Q_eta 0.5
+    python benchmarks/studies/ekf_sd_calibration.py --q-eta 1.778 --duration 80
 """
 
 from __future__ import annotations

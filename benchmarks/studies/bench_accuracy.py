@@ -1,8 +1,8 @@
 """Accuracy, FDI and speed of the EKF baseline beside IRLS, measured side by side in one run.
 
-    python benchmarks/bench_accuracy.py                 # 80 s flights, 5 seeds (~5 min)
-    python benchmarks/bench_accuracy.py --duration 20 --seeds 2    # a quick look
-    python benchmarks/bench_accuracy.py --improved --no-speed      # + IRLSConfig.improved()
+    python benchmarks/studies/bench_accuracy.py                 # 80 s flights, 5 seeds (~5 min)
+    python benchmarks/studies/bench_accuracy.py --duration 20 --seeds 2    # a quick look
+    python benchmarks/studies/bench_accuracy.py --improved --no-speed      # + IRLSConfig.improved()
 
 Prints:
 

@@ -22,7 +22,7 @@ Nothing in the diagnosis was tuned on these recordings: this is a held-out check
 is any interpreter where ``rotorpy`` and ``quadfault`` are importable (RotorPy installed in
 its own environment).
 
-    PYTHON benchmarks/independent_sim.py [--out DIR] [--duration 15]
+    PYTHON benchmarks/studies/independent_sim.py [--out DIR] [--duration 15]
         [--rate 200] [--settle S] [--cases NAME,...] [--reuse] [--force] [--quiet]
 
 Skips with a one-line message when RotorPy is not importable.
@@ -213,7 +213,7 @@ def write_recording(run: dict, csv_path: Path, force: bool) -> None:
         },
         "source": f"RotorPy {run['vehicle']} ({run['trajectory']}, aero={run['aero']}, "
         f"tau_m={p['tau_m']} s, first {run['settle']} s dropped), exported by "
-        "benchmarks/independent_sim.py",
+        "benchmarks/studies/independent_sim.py",
         "truth": {
             "rotorpy_params": {
                 k: (v.tolist() if isinstance(v, np.ndarray) else v)

@@ -8,7 +8,7 @@ the RMSE, the spike (largest error while another motor is in its fault window) a
 fault, the detection delay: the time from the onset until the faulted motor's estimate first
 drops below 0.75 (``-`` when it never does within the window).
 
-    python benchmarks/four_estimators.py [--scenario abrupt] [--duration 40] [--seed 11]
+    python benchmarks/studies/four_estimators.py [--scenario abrupt] [--duration 40] [--seed 11]
                                          [--out DIR]
 """
 

@@ -10,8 +10,8 @@ segments the importer lists in the sidecar (``meta.author_segments``: the data s
 manoeuvres) -- whole logs also hold take-off, ground and landing rows, which the lag and the
 curve do not describe.
 
-    python benchmarks/lag_curve.py FLIGHT.csv ... [--segment T0,T1 | --author-segments]
-    python benchmarks/lag_curve.py --eschmann ../shared/data/real/eschmann-cf21-sysid
+    python benchmarks/studies/lag_curve.py FLIGHT.csv ... [--segment T0,T1 | --author-segments]
+    python benchmarks/studies/lag_curve.py --eschmann ../shared/data/real/eschmann-cf21-sysid
 
 ``--eschmann DIR`` imports log10, log15 and log16 (``quadfault import eschmann``) and uses
 their author segments.

@@ -1,7 +1,7 @@
 """Where the IRLS spike comes from, and what each option beyond the paper does about it.
 
-    python benchmarks/spike_study.py                       # seeds 5-9 (tuning seeds), 80 s
-    python benchmarks/spike_study.py --seeds 5,6 --duration 40
+    python benchmarks/studies/spike_study.py                       # seeds 5-9 (tuning seeds), 80 s
+    python benchmarks/studies/spike_study.py --seeds 5,6 --duration 40
 
 For each IRLS variant and scenario (abrupt, combined; reproduce's flight settings), mean over
 the seeds of the motor-averaged RMSE, spike, excess spike (docs/ekf.md, "Metrics") and of

@@ -18,7 +18,7 @@ flight and estimator, the count of flights where motor 3 is the lowest, and (per
 the nominal model does not fit either airframe equally on every rotor, so a gap on the normal
 flights is the airframe's, not a defect.
 
-    python benchmarks/real_estimators.py [--data DIR] [--out DIR] [--conditions normal_flight,...]
+    python benchmarks/studies/real_estimators.py [--data DIR] [--out DIR] [--conditions normal_flight,...]
                                          [--json OUT.json] [--quiet]
 
 Reads ``../shared/data/real`` (never copied into the repository) and prints one line and
@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-DEFAULT_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
+DEFAULT_DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real"
 ESTIMATORS = ("irls", "ekf", "rls", "ukf")
 CONDITIONS = (
     "normal_flight",

@@ -1,6 +1,6 @@
 """Estimator robustness: degenerate windows and recovery after a burst of corrupted samples.
 
-    python benchmarks/estimator_robustness.py [--duration 3] [--burst 0.05] [--seed 0]
+    python benchmarks/studies/estimator_robustness.py [--duration 3] [--burst 0.05] [--seed 0]
 
 Both estimators (sliding-window IRLS and the EKF) are fed one measurement row at a time
 (``update``), as the environment does, from a simulated circle flight with motor 2 at 70 %.

@@ -16,9 +16,9 @@ crashed episode's level and the step of each termination.
 ``--env QuadFaultRotorLossComplete-v0`` flies the complete-loss task (the complete-loss
 vehicle, its rate damping and rotor inertia) instead.
 
-    python benchmarks/rotor_loss_base.py                       # 10 episodes, level 0.1-0.5
-    python benchmarks/rotor_loss_base.py --episodes 20 --seed 100 --arms estimate-aware:irls
-    python benchmarks/rotor_loss_base.py --env QuadFaultRotorLossComplete-v0 --level 0 0 \
+    python benchmarks/studies/rotor_loss_base.py                       # 10 episodes, level 0.1-0.5
+    python benchmarks/studies/rotor_loss_base.py --episodes 20 --seed 100 --arms estimate-aware:irls
+    python benchmarks/studies/rotor_loss_base.py --env QuadFaultRotorLossComplete-v0 --level 0 0 \
         --arms relaxed-hover:irls
 """
 

@@ -10,13 +10,13 @@ below the survived episode by its termination penalty and more).
 Part 2 (learning): ``quadfault train`` trains PPO for ``--timesteps`` steps (one seed, the
 array-stepped vector env) on the residual hover task with one fault of eta 0.5-0.85 and a
 residual authority of 2.45 N per unit action (the PPO study's task,
-``benchmarks/ppo_residual_study.py``), on ``QuadFaultHover-v1``; then the final policy
+``benchmarks/studies/ppo_residual_study.py``), on ``QuadFaultHover-v1``; then the final policy
 (deterministic), random uniform actions and the zero action (the geometric controller alone)
 fly the same ``--episodes`` seeded evaluation episodes. Printed: mean and standard deviation of
 the return, crashes, and the same random-vs-zero gap under the ``-v0`` reward.
 
-    python benchmarks/reward_learnability.py                     # 30,000 steps, 10 episodes
-    python benchmarks/reward_learnability.py --timesteps 4096 --episodes 3   # quick look
+    python benchmarks/studies/reward_learnability.py                     # 30,000 steps, 10 episodes
+    python benchmarks/studies/reward_learnability.py --timesteps 4096 --episodes 3   # quick look
 """
 
 from __future__ import annotations
@@ -125,7 +125,7 @@ def evaluate(env_id: str, policy, seeds) -> tuple[np.ndarray, int]:
 
 
 def learning_part(args) -> None:
-    from ppo_residual_study import t_interval  # benchmarks/ (this script's folder)
+    from ppo_residual_study import t_interval  # benchmarks/studies/ (this script's folder)
 
     from agents.train import load_agent
     from agents.train import main as train_main

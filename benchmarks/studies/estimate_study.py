@@ -31,9 +31,9 @@ over the seeds; the same paired against ``mlp_none`` (per seed, same episodes); 
 reach a tuning-episode crash rate of ``--crash-target`` or lower (sample efficiency). The
 zero-residual bases of the arms' estimators fly the same test episodes as references.
 
-    python benchmarks/estimate_study.py --out runs/estimate_study          # full: about 2 CPU-h
-    python benchmarks/estimate_study.py --quick --out runs/estimate_quick  # 1 task, 3 seeds
-    python benchmarks/estimate_study.py --tasks rotor_loss --seeds 0 --timesteps 16384 \\
+    python benchmarks/studies/estimate_study.py --out runs/estimate_study          # full: about 2 CPU-h
+    python benchmarks/studies/estimate_study.py --quick --out runs/estimate_quick  # 1 task, 3 seeds
+    python benchmarks/studies/estimate_study.py --tasks rotor_loss --seeds 0 --timesteps 16384 \\
         --episodes 10 --out runs/estimate_tiny
 
 Writes ``OUT/study.json`` (design, every episode of every run, curves, summaries) and

@@ -22,7 +22,7 @@ up and then holds its estimate; the imported recording starts after that (its ta
 so over the recording the onboard estimates are constant and the comparison is of levels, not
 of tracking over time.
 
-    python benchmarks/indiflight_onboard.py [--data DIR] [--out DIR] [--plot FIG.png]
+    python benchmarks/studies/indiflight_onboard.py [--data DIR] [--out DIR] [--plot FIG.png]
                                             [--json OUT.json] [--quiet]
 
 Reads ``../shared/data/real/indiflight-throws-early`` (never copied into the repository) and
@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-DEFAULT_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
+DEFAULT_DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real"
 FOLDER = "indiflight-throws-early"
 ESTIMATORS = ("irls", "ekf", "rls", "ukf")
 #: the authors' published vehicle (the dataset's README): mass [kg], inertia [kg m^2], rotor

@@ -9,8 +9,8 @@ open loop through the simulator's plant (``quadfault.diagnosis.replay.replay_err
 vehicle and once with the calibrated model. Printed: the effects found and the RMS position,
 velocity and attitude errors at each horizon, nominal -> calibrated.
 
-    python benchmarks/calibrated_sim.py FLIGHT.csv ... [--split 0.6] [--effects a,b]
-    python benchmarks/calibrated_sim.py --nanodrone ../shared/data/real/nanodrone-cf21bl
+    python benchmarks/studies/calibrated_sim.py FLIGHT.csv ... [--split 0.6] [--effects a,b]
+    python benchmarks/studies/calibrated_sim.py --nanodrone ../shared/data/real/nanodrone-cf21bl
 
 ``--nanodrone DIR`` imports every flight of that data set first (``quadfault import
 nanodrone``). A diagnosis JSON without ``format``/``vehicle`` (older ``quadfault diagnose``)
