@@ -18,6 +18,9 @@ damping), ``rotor-loss`` (the complete-loss vehicle of
 inertia, :data:`~quadfault.model.relaxed_hover.ROTOR_LOSS_EFFECTS`), or ``auto`` (the
 default): ``rotor-loss`` when every level is 0 (a complete loss), else ``paper``.
 
+``--sensor-noise PRESET`` flies every flight with a sensor-noise preset (docs/sensors.md);
+``--detect THRESHOLD HOLD`` sets the relaxed-hover switch's threshold and hold [s].
+
 ``--rotors 1 2 3 4 --onset-range 3 6`` flies every listed rotor with the onset drawn per seed
 from that range (the complete-loss target: 10 seeds x 4 rotors).
 
@@ -34,9 +37,11 @@ import time
 
 import numpy as np
 
+from agents.fault_tolerant import FaultTolerantConfig
 from agents.metrics import held_after_loss
 from agents.rollout import FlightConfig, fly
 from quadfault.model.relaxed_hover import ROTOR_LOSS_EFFECTS, rotor_loss_vehicle
+from quadfault.model.relaxed_hover_control import RotorLossDetector
 from quadfault.model.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
 from quadfault.model.trajectory import Hover
 from quadfault.model.vehicle import Vehicle
@@ -86,6 +91,14 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=10.0)
     ap.add_argument("--vehicle", choices=("auto", "paper", "rotor-loss"), default="auto")
     ap.add_argument(
+        "--detect",
+        type=float,
+        nargs=2,
+        default=None,
+        metavar=("THRESHOLD", "HOLD"),
+        help="the relaxed-hover switch's threshold [-] and hold [s] (default 0.15 0.004)",
+    )
+    ap.add_argument(
         "--sensor-noise",
         default=None,
         help="a sensor-noise preset (docs/sensors.md) for every flight (default: noise-free)",
@@ -100,16 +113,19 @@ def main(argv=None) -> int:
     arms = [tuple(a.split(":")) for a in args.arms]
     veh, effects = vehicle_of(args.vehicle, args.levels)
     t_on = onsets(args)
-    cfg = (
-        FlightConfig()
-        if args.sensor_noise is None
-        else FlightConfig(sensor_noise=args.sensor_noise)
-    )
+    ft = FaultTolerantConfig()
+    if args.detect is not None:
+        ft = FaultTolerantConfig(
+            detector=RotorLossDetector(threshold=args.detect[0], hold=args.detect[1])
+        )
+    cfg = FlightConfig(fault_tolerant=ft)
+    if args.sensor_noise is not None:
+        cfg = FlightConfig(fault_tolerant=ft, sensor_noise=args.sensor_noise)
     start = time.process_time()
     print(
         f"vehicle: {veh.name} (thrust-to-weight {veh.thrust_to_weight:g}), effects: "
         f"{' '.join(effects) or 'none'}; rotors {args.rotors}; sensor noise "
-        f"{args.sensor_noise or 'none'}\n"
+        f"{args.sensor_noise or 'none'}; switch {ft.detector}\n"
     )
     print(
         "| eta after loss | controller (estimate) | survived | crash time [s] | "
