@@ -2,6 +2,7 @@
 
     quadfault estimate FILE.csv --estimator irls|ekf|rls|ukf --out EST.csv [--force]
                        [--improved] [--median N] [--q-eta Q] [--forgetting L]
+                       [--prefilter TAU]
 
 Writes ``EST.csv`` (``t, eta1..eta4, sd1..sd4, status``) and its sidecar ``EST.json``
 (:mod:`estimators.series_io`). Estimators are looked up in the registry
@@ -25,11 +26,16 @@ def _choices() -> tuple[str, ...]:
     return estimator_names(role="estimator")
 
 
-def check_options(name: str, improved: bool, median, q_eta, forgetting=None) -> None:
+def check_options(name: str, improved: bool, median, q_eta, forgetting=None, prefilter=None):
     """One-line errors for options that do not fit together or are out of range (which
     estimator takes which option: the registry's ``options``)."""
     options = estimator_spec(name).options
-    for key, given in (("improved", improved), ("q_eta", q_eta), ("forgetting", forgetting)):
+    for key, given in (
+        ("improved", improved),
+        ("q_eta", q_eta),
+        ("forgetting", forgetting),
+        ("prefilter", prefilter),
+    ):
         if given is not None and given is not False and key not in options:
             takers = [s.name for s in ESTIMATORS.values() if key in s.options]
             raise ConfigError(
@@ -48,6 +54,12 @@ def check_options(name: str, improved: bool, median, q_eta, forgetting=None) -> 
         or not 0 < forgetting <= 1
     ):
         raise ConfigError(f"--forgetting must be in (0, 1], got {forgetting!r}")
+    if prefilter is not None and (
+        isinstance(prefilter, bool)
+        or not isinstance(prefilter, (int, float))
+        or not (math.isfinite(prefilter) and prefilter >= 0)
+    ):
+        raise ConfigError(f"--prefilter must be a time constant >= 0 [s], got {prefilter!r}")
     if median is not None and (
         isinstance(median, bool) or not isinstance(median, int) or median < 1
     ):
@@ -62,13 +74,14 @@ def estimate_series(
     median: int | None = None,
     q_eta: float | None = None,
     forgetting: float | None = None,
+    prefilter: float | None = None,
     progress: bool = False,
 ):
     """Run estimator ``name`` over ``recording`` (never its truth) with the options of
     ``quadfault estimate``; the series' ``postprocess`` says which median it got."""
     from estimators.median import median_series
 
-    check_options(name, improved, median, q_eta, forgetting)
+    check_options(name, improved, median, q_eta, forgetting, prefilter)
     online_median = "median" in estimator_spec(name).options
     est = make_estimator(
         name,
@@ -76,6 +89,7 @@ def estimate_series(
         improved=improved,
         q_eta=q_eta,
         forgetting=forgetting,
+        prefilter=prefilter,
         median=median if online_median else None,
     )
     series = est.run(recording.without_truth(), progress=progress)
@@ -91,6 +105,7 @@ def cli_args(
     median: int | None = None,
     q_eta: float | None = None,
     forgetting: float | None = None,
+    prefilter: float | None = None,
 ) -> list[str]:
     """The ``quadfault estimate`` arguments of :func:`estimate_series`'s options (``q_eta``
     written with ``repr``, so the arguments reproduce the series exactly)."""
@@ -101,6 +116,8 @@ def cli_args(
         args += ["--q-eta", repr(float(q_eta))]
     if forgetting is not None:
         args += ["--forgetting", repr(float(forgetting))]
+    if prefilter is not None:
+        args += ["--prefilter", repr(float(prefilter))]
     if median is not None:
         args += ["--median", str(int(median))]
     return args
@@ -148,6 +165,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="L",
         help="RLS: forgetting factor per 1 ms step, in (0, 1] (default 0.99)",
     )
+    p.add_argument(
+        "--prefilter",
+        type=float,
+        default=None,
+        metavar="TAU",
+        help="IRLS, RLS: time constant [s] of the low-pass filter on both sides of the "
+        "regression, against sensor noise (0 = off; default: IRLS 0, --improved and RLS "
+        "0.01)",
+    )
 
 
 def run(args) -> int:
@@ -156,7 +182,9 @@ def run(args) -> int:
     from quadfault.io.recording import read_recording
     from quadfault.progress import enabled
 
-    check_options(args.estimator, args.improved, args.median, args.q_eta, args.forgetting)
+    check_options(
+        args.estimator, args.improved, args.median, args.q_eta, args.forgetting, args.prefilter
+    )
     out, side = estimate_paths(args.out)
     check_writable([out, side], force=args.force)
     rec = read_recording(args.recording)
@@ -172,6 +200,7 @@ def run(args) -> int:
         median=args.median,
         q_eta=args.q_eta,
         forgetting=args.forgetting,
+        prefilter=args.prefilter,
         progress=enabled(),
     )
     write_estimate_series(series, out, input_path=args.recording, force=args.force)

@@ -110,7 +110,10 @@ class EKFConfig:
             measurement-noise variances (the attitude value applies to each of its 3 rows).
         p0: initial covariance ``p0 * I``.
         eta0: initial efficiency (one value for all rotors, or one per rotor).
-        eta_bounds: clamp of the efficiency after each update, or None for no clamp.
+        eta_bounds: clamp of the efficiency after each update, or None for no clamp. The
+            default lets a rotor read up to 20 % above nominal: a clamp at 1 truncates the
+            filter's state on every healthy rotor and biases it low, the more so the noisier
+            the sensors (docs/ekf.md, "Bounds").
         clip_commands: clip the commanded thrusts to ``[0, vehicle.rotor_max_thrust]`` before
             use (as IRLS does: a saturated rotor cannot deliver its command; ``run(recording)``
             clips above only when the recording does not say its flight was unsaturated,
@@ -128,7 +131,7 @@ class EKFConfig:
     r_attitude: float = 5e-2
     p0: float = 1e-2
     eta0: float | tuple = 1.0
-    eta_bounds: tuple | None = (-0.001, 1.001)
+    eta_bounds: tuple | None = (-0.001, 1.2)
     clip_commands: bool = True
 
     def __post_init__(self):

@@ -56,8 +56,9 @@ from estimators.residuals import (
     RESIDUAL_ROWS,
     Kinematics,
     SegmentModel,
-    SegmentOut,
-    segment_terms_into,
+    energy_terms_into,
+    prefilter_into,
+    segment_model_into,
 )
 from estimators.state import FlatState, Layout, all_finite, fields, pack, piece, piece_rows
 from estimators.window import (
@@ -127,6 +128,7 @@ CONSTANTS = fields(
     "f_max",
     "clip",
     "min_thrust",
+    "prefilter",
     ("J", 9),
     ("Jinv", 9),
     ("G", RESIDUAL_ROWS),
@@ -181,6 +183,8 @@ FLOATS = Layout(
     M=(N_MATRICES, "n", "n"),  # the window solver's matrices
     r0=(RESIDUAL_ROWS,),  # a segment's residual at eta = 0 (scratch)
     J=(RESIDUAL_ROWS, "n"),  # its Jacobian (scratch)
+    r0f=(RESIDUAL_ROWS,),  # the prefilter's residual at eta = 0 (IRLSConfig.prefilter)
+    Jf=(RESIDUAL_ROWS, "n"),  # and its Jacobian
     median=(2, "L", "n"),
 )  # the output median's ring and sorted copy
 F = FLOATS.index
@@ -238,6 +242,7 @@ def irls_parameters(vehicle: Vehicle, cfg: IRLSConfig, offsets: np.ndarray):
         f_max=vehicle.rotor_max_thrust,
         clip=float(cfg.clip_commands),
         min_thrust=cfg.min_thrust,
+        prefilter=cfg.prefilter,
         J=vehicle.inertia,
         Jinv=vehicle.inertia_inverse,
         G=cfg.segment_weights,
@@ -275,6 +280,8 @@ def state_views(fs, ip, N):
         piece(fs, o, F.M, (N, N_MATRICES, n, n)),
         piece_rows(fs, o[F.r0], o[F.r0 + 1], N),
         piece(fs, o, F.J, (N, RESIDUAL_ROWS, n)),
+        piece_rows(fs, o[F.r0f], o[F.r0f + 1], N),
+        piece(fs, o, F.Jf, (N, RESIDUAL_ROWS, n)),
         piece(fs, o, F.median, (N, 2, L, n)),
     )
 
@@ -354,14 +361,22 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond, a
         if k_row[COUNTERS.has_last] == 1:  # the segment last -> this sample into the ring
             slot = k_row[COUNTERS.head]  # (eqs. 13-26)
             Jmat, Jinv, A, G = arrays
-            c[slot], thrust[slot] = segment_terms_into(
-                t - last_t[0],
+            dt = t - last_t[0]
+            r0, Jr = S.r0[i], S.J[i]
+            thrust[slot] = segment_model_into(
+                dt,
                 Kinematics(last_p, last_v, last_R, last_w),
                 Kinematics(p, v, R, w),
                 last_f,
                 SegmentModel(const[CONSTANTS.mass], const[CONSTANTS.gravity], Jmat, Jinv, A, G),
-                SegmentOut(S.r0[i], S.J[i], b[slot], H[slot]),
+                r0,
+                Jr,
             )
+            tau = const[CONSTANTS.prefilter]
+            if tau > 0.0:  # the same low-pass on both sides (beyond the paper)
+                fresh = k_row[COUNTERS.count] == 0
+                prefilter_into(r0, Jr, S.r0f[i], S.Jf[i], math.exp(-dt / tau), fresh)
+            c[slot] = energy_terms_into(r0, Jr, G, b[slot], H[slot])
             k_row[COUNTERS.head] = (slot + 1) % m
             k_row[COUNTERS.count] = min(k_row[COUNTERS.count] + 1, m)
         last_t[0] = t

@@ -25,8 +25,14 @@ determined that, after an abrupt fault, the forgotten fit over data before and a
 swings far outside both (docs/rls.md). The position and rotation rows carry the same
 noise draws as the velocity and rate rows and are left out.
 
-The reported estimate is ``theta`` projected onto ``eta_bounds`` after each update (the
-IRLS's box). The one-sigma ``sd`` is ``sqrt(diag(P) s2)``, ``s2`` the forgotten mean of the
+Against sensor noise (``RLSConfig.prefilter``, on by default, 10 ms): the segment's residual
+model is low-passed on both sides before the update (:func:`estimators.residuals.prefilter_into`;
+the weights ``g_r`` still come from the segment's own rows), and the three velocity rows
+share one weight, ``1 / sum_(rows, j) c_rj^2``, so that noise on the measured attitude, which
+is most of a horizontal row's regressor at a small tilt, does not bias the fit low.
+
+The reported estimate is ``theta`` projected onto ``eta_bounds`` after each update (as the
+EKF's clamp, ``[-0.001, 1.2]``). The one-sigma ``sd`` is ``sqrt(diag(P) s2)``, ``s2`` the forgotten mean of the
 weighted a-priori residual energy per row: the least-squares covariance with the noise scale
 estimated from the data.
 
@@ -67,8 +73,8 @@ from estimators.residuals import (
     RESIDUAL_ROWS,
     Kinematics,
     SegmentModel,
-    SegmentOut,
-    segment_terms_into,
+    prefilter_into,
+    segment_model_into,
 )
 from estimators.state import Layout, all_finite, fields, pack, piece, piece_rows
 from quadfault.errors import ConfigError
@@ -93,15 +99,25 @@ class RLSConfig:
             ``1 ms / (1 - lambda)`` (0.99: 0.1 s). The tuning knob (``--forgetting``).
         p0: initial covariance ``p0 * I`` [1].
         eta0: initial efficiency (one value, or one per rotor).
-        eta_bounds: the box the estimate is projected onto (None: no projection).
+        eta_bounds: the box the estimate is projected onto (None: no projection); up to
+            1.2 as the EKF's clamp (a projection at 1 biases the healthy rotors low).
         clip_commands: clip the commanded thrusts to ``[0, rotor_max_thrust]`` (as IRLS).
+        prefilter: the time constant [s] of the low-pass filter applied to both sides of the
+            regression, the residual ``r0`` and its rows ``J`` (as ``IRLSConfig.prefilter``,
+            :func:`estimators.residuals.prefilter_into`; 0 = off, the textbook RLS): sensor
+            noise differenced over one sample falls by about ``dt / prefilter``. With it on,
+            the three velocity rows share one weight, that of the thrust along any axis
+            (velocity noise is the same along every axis; the per-row weights would trust
+            the horizontal rows most where their regressor, the tilt, is mostly attitude
+            noise, and bias the estimate low).
     """
 
     forgetting: float = 0.99
     p0: float = 1.0
     eta0: float | tuple = 1.0
-    eta_bounds: tuple | None = (-0.001, 1.001)
+    eta_bounds: tuple | None = (-0.001, 1.2)
     clip_commands: bool = True
+    prefilter: float = 0.01
 
     def __post_init__(self):
         lam = self.forgetting
@@ -114,14 +130,27 @@ class RLSConfig:
         ):
             raise ConfigError(f"RLSConfig.p0 must be a positive number, got {self.p0!r}")
         check_bounds("RLSConfig", self.eta_bounds)
+        check_prefilter("RLSConfig", self.prefilter)
 
     @classmethod
-    def from_options(cls, forgetting: float | None = None) -> RLSConfig:
-        """The configuration of ``quadfault estimate --estimator rls [--forgetting L]``."""
-        return cls() if forgetting is None else cls(forgetting=forgetting)
+    def from_options(
+        cls, forgetting: float | None = None, prefilter: float | None = None
+    ) -> RLSConfig:
+        """The configuration of ``quadfault estimate --estimator rls [--forgetting L]
+        [--prefilter TAU]``."""
+        changes = {} if forgetting is None else {"forgetting": forgetting}
+        if prefilter is not None:
+            changes["prefilter"] = float(prefilter)
+        return cls(**changes)
 
     def replace(self, **changes) -> RLSConfig:
         return replace(self, **changes)
+
+
+def check_prefilter(owner: str, tau) -> None:
+    """``tau`` is a finite number >= 0 [s] (clean error otherwise)."""
+    if isinstance(tau, bool) or not isinstance(tau, (int, float)) or not (0.0 <= tau < math.inf):
+        raise ConfigError(f"{owner}.prefilter must be a time constant >= 0 [s], got {tau!r}")
 
 
 def check_bounds(owner: str, bounds) -> None:
@@ -147,9 +176,9 @@ SAMPLE_ROWS = fields("RLSSampleRows", "p", "v", "w", ("R", 3))
 NOISE = fields("RLSNoise", "mean", "count")
 #: the float state of one filter (dimension: rotors ``n``): the estimate ``theta`` and its
 #: covariance ``P``, the previous sample's time, its p, v, Omega, R and (clipped) command,
-#: the initial efficiency, the noise scale, then scratch of one update (the segment's
-#: residual model ``r0``, ``J``, ``b``, ``H`` of :func:`segment_terms_into`, ``P phi`` and
-#: the rows' weights ``g``)
+#: the initial efficiency, the noise scale, scratch of one update (the segment's residual
+#: model ``r0``, ``J`` of :func:`segment_model_into`), the prefilter's state ``r0f``, ``Jf``,
+#: then scratch (``P phi``, the rows' weights ``g``)
 FLOATS = Layout(
     "RLSPieces",
     theta=("n",),
@@ -161,15 +190,16 @@ FLOATS = Layout(
     noise=(NOISE.size,),
     r0=(RESIDUAL_ROWS,),
     J=(RESIDUAL_ROWS, "n"),
-    b=("n",),
-    H=("n", "n"),
+    r0f=(RESIDUAL_ROWS,),
+    Jf=(RESIDUAL_ROWS, "n"),
     Pphi=("n",),
     g=(N_ROWS,),
 )
 F = FLOATS.index
 RLSPieces = FLOATS.pieces
-#: the int state: 1 once a previous sample is held; 1 once the first update was made
-COUNTERS = fields("RLSCounters", "has_last", "updated")
+#: the int state: 1 once a previous sample is held; 1 once the first update was made; 1 once
+#: the prefilter holds a segment (0 again after a bad sample)
+COUNTERS = fields("RLSCounters", "has_last", "updated", "filtered")
 #: the constants: scalars (the box ``lo``, ``hi``; ``log_lambda``: ln(lambda) per second),
 #: the inertia and its inverse, the residual weights ``G`` (ones: :func:`segment_terms_into`'s
 #: energy is unused), last the allocation ``A`` (4, n) (:func:`rls_constants`)
@@ -183,6 +213,8 @@ CONSTANTS = fields(
     "hi",
     "p0",
     "log_lambda",
+    "prefilter",
+    "isotropic",
     ("J", 9),
     ("Jinv", 9),
     ("G", RESIDUAL_ROWS),
@@ -208,6 +240,8 @@ def rls_constants(vehicle: Vehicle, cfg: RLSConfig) -> np.ndarray:
         hi=hi,
         p0=cfg.p0,
         log_lambda=math.log(cfg.forgetting) / FORGETTING_REFERENCE_DT,
+        prefilter=cfg.prefilter,
+        isotropic=float(cfg.prefilter > 0),
         J=vehicle.inertia,
         Jinv=vehicle.inertia_inverse,
         G=np.ones(RESIDUAL_ROWS),
@@ -231,8 +265,8 @@ def state_views(fs, offsets, n, N):
         piece_rows(fs, o[F.noise], o[F.noise + 1], N),
         piece_rows(fs, o[F.r0], o[F.r0 + 1], N),
         piece(fs, o, F.J, (N, RESIDUAL_ROWS, n)),
-        piece_rows(fs, o[F.b], o[F.b + 1], N),
-        piece(fs, o, F.H, (N, n, n)),
+        piece_rows(fs, o[F.r0f], o[F.r0f + 1], N),
+        piece(fs, o, F.Jf, (N, RESIDUAL_ROWS, n)),
         piece_rows(fs, o[F.Pphi], o[F.Pphi + 1], N),
         piece_rows(fs, o[F.g], o[F.g + 1], N),
     )
@@ -270,6 +304,7 @@ def rls_step(t, p, v, R, w, f, const, S, ks, i) -> int:
         and all_finite(f)
     ) or (ks[i, COUNTERS.has_last] == 1 and not t > last_t[0]):
         ks[i, COUNTERS.has_last] = 0  # the next good sample starts afresh
+        ks[i, COUNTERS.filtered] = 0
         return BAD_SAMPLE
     code = WARMUP
     if ks[i, COUNTERS.has_last] == 1:
@@ -289,26 +324,41 @@ def rls_step(t, p, v, R, w, f, const, S, ks, i) -> int:
                 const[C.A : C.A + 4 * n].reshape((4, n)),
                 const[C.G : C.A],
             )
-            segment_terms_into(
+            segment_model_into(
                 dt,
                 Kinematics(last_p, last_v, last_R, last_w),
                 Kinematics(p, v, R, w),
                 last_f,
                 model,
-                SegmentOut(r0, Jr, S.b[i], S.H[i]),
+                r0,
+                Jr,
             )
             lam = math.exp(const[C.log_lambda] * dt)
-            g = S.g[i]  # the rows' weights
-            energy = 0.0  # the weighted a-priori residual energy, per row
+            g = S.g[i]  # the rows' weights, from the segment's own rows
             for q in range(N_ROWS):
                 r = ROWS[q]
                 c2 = 0.0
-                e = -r0[r]
                 for j in range(n):
                     c = Jr[r, j] / last_f[j]  # d r / d f_j, the row's sensitivity to rotor j
                     c2 += c * c
-                    e -= Jr[r, j] * theta[j]
                 g[q] = 1.0 / c2 if c2 > 0.0 else 0.0
+            if const[C.isotropic] != 0.0:  # one weight for the three velocity rows
+                c2 = 0.0
+                for q in range(3):
+                    c2 += 1.0 / g[q] if g[q] > 0.0 else 0.0
+                for q in range(3):
+                    g[q] = 1.0 / c2 if c2 > 0.0 else 0.0
+            tau = const[C.prefilter]
+            if tau > 0.0:  # the same low-pass on both sides of the regression
+                fresh = ks[i, COUNTERS.filtered] == 0
+                prefilter_into(r0, Jr, S.r0f[i], S.Jf[i], math.exp(-dt / tau), fresh)
+                ks[i, COUNTERS.filtered] = 1
+            energy = 0.0  # the weighted a-priori residual energy, per row
+            for q in range(N_ROWS):
+                r = ROWS[q]
+                e = -r0[r]
+                for j in range(n):
+                    e -= Jr[r, j] * theta[j]
                 energy += g[q] * e * e
             s2[NOISE.count] = lam * s2[NOISE.count] + 1.0  # the forgotten count, then the mean
             s2[NOISE.mean] += (energy / N_ROWS - s2[NOISE.mean]) / s2[NOISE.count]

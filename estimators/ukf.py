@@ -25,7 +25,7 @@ One update per sample, from row k-1 to row k over ``dt_k`` with the command of r
   so the unscented update equals the Kalman update of the predicted moments, done in the
   square-root form of the optimal gain (as the EKF's): ``S = P_zz + R = L L^T``,
   ``W = L^-1 P_zx``, ``x += W^T L^-1 (z - x_z)``, ``P -= W^T W``;
-* the efficiencies are clamped to ``eta_bounds`` (the IRLS's box).
+* the efficiencies are clamped to ``eta_bounds`` (as the EKF's, up to 1.2).
 
 Online rules, as the EKF's: a non-finite sample or a time not after the previous one is
 skipped (``bad_sample``); the first sample sets ``v`` and ``Omega`` (``warmup``); a step whose
@@ -92,7 +92,10 @@ class UKFConfig:
             secondary scaling parameters (``alpha = 1, kappa = 0``: the sigma points at
             ``+- sqrt(L)`` standard deviations, the central point's mean weight 0).
         eta0: initial efficiency (one value for all rotors, or one per rotor).
-        eta_bounds: clamp of the efficiency after each update, or None for no clamp.
+        eta_bounds: clamp of the efficiency after each update, or None for no clamp. The
+            default lets a rotor read up to 20 % above nominal: a clamp at 1 truncates the
+            filter's state on every healthy rotor and biases it low, the more so the noisier
+            the sensors (docs/ekf.md, "Bounds").
         clip_commands: clip the commanded thrusts to ``[0, rotor_max_thrust]`` (as IRLS).
     """
 
@@ -106,7 +109,7 @@ class UKFConfig:
     beta: float = 2.0
     kappa: float = 0.0
     eta0: float | tuple = 1.0
-    eta_bounds: tuple | None = (-0.001, 1.001)
+    eta_bounds: tuple | None = (-0.001, 1.2)
     clip_commands: bool = True
 
     def __post_init__(self):

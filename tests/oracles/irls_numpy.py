@@ -54,6 +54,10 @@ class SegmentModels:
         return SegmentModels(self.r0[sl], self.J[sl], self.dt[sl], self.thrust[sl])
 
 
+#: the arrays of :class:`SegmentModels`
+FIELDS = ("r0", "J", "dt", "thrust")
+
+
 def segment_models(vehicle: Vehicle, t, p, v, R, w, f) -> SegmentModels:
     """Residual models of the segments between consecutive samples (vectorised).
 
@@ -434,6 +438,27 @@ class OnlineIRLS:
         )
         self.completion.reset(self.eta)
         self.out = []
+        self.segments = []  # the window's segment models, prefiltered
+
+    def _add_segment(self, r):
+        """The segment between the two samples ``r``, low-passed on both sides with the
+        previous segment's filtered model (``cfg.prefilter``; none: as computed)."""
+        seg = segment_models(
+            self.vehicle,
+            [x.t for x in r],
+            [x.p for x in r],
+            [x.v for x in r],
+            [x.R for x in r],
+            [x.w for x in r],
+            [x.f for x in r],
+        )
+        tau = self.cfg.prefilter
+        if tau > 0 and self.segments:
+            a, prev = np.exp(-seg.dt[0] / tau), self.segments[-1]
+            seg = SegmentModels(
+                a * prev.r0 + (1 - a) * seg.r0, a * prev.J + (1 - a) * seg.J, seg.dt, seg.thrust
+            )
+        self.segments = (self.segments + [seg])[-(self.cfg.window - 1) :]
 
     def _report(self, status):
         self.out.append(self.eta.copy())
@@ -450,22 +475,16 @@ class OnlineIRLS:
             and all(np.all(np.isfinite(a)) for a in arrays)
         )
         if not ok or (self.rows and not s.t > self.rows[-1].t):
-            self.rows = []
+            self.rows, self.segments = [], []
             return self._report("bad_sample")
         self.rows = self.rows + [s._replace(f=np.clip(arrays[4], 0, veh.rotor_max_thrust))]
         self.rows = self.rows[-cfg.window :]
+        if len(self.rows) >= 2:
+            self._add_segment(self.rows[-2:])
         if len(self.rows) < cfg.window:
             return self._report("warmup")
-        r = self.rows
-        models = segment_models(
-            veh,
-            [x.t for x in r],
-            [x.p for x in r],
-            [x.v for x in r],
-            [x.R for x in r],
-            [x.w for x in r],
-            [x.f for x in r],
-        )
+        segs = self.segments
+        models = SegmentModels(*(np.concatenate([getattr(x, k) for x in segs]) for k in FIELDS))
         if models.thrust.mean() < cfg.min_thrust:
             self.completion.observe(self.eta)
             return self._report("no_excitation")

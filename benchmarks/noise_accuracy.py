@@ -1,0 +1,224 @@
+"""Every estimator's accuracy under sensor noise, against the targets an estimator must meet
+with real sensors.
+
+    python benchmarks/noise_accuracy.py [--noise none] [--noise PRESET|P,V,A,G,ACC ...]
+                                        [--seeds 0-4] [--duration 80] [--weak-duration 20]
+                                        [--json OUT.json]
+
+For each sensor noise (``--noise``, repeatable: ``none``, a preset name of
+``quadfault simulate --sensor-noise`` or the white-noise stds ``P,V,A,G,ACC``) and each seed,
+it flies the four scenarios of ``quadfault reproduce`` (degradation, abrupt, combined,
+clipping; sigma_f = 0.07, the clipping flight saturated) and runs every estimator as
+``quadfault estimate`` runs it by default (``irls``: the paper's; ``irls --improved``; ``ekf``,
+``rls``, ``ukf``). It prints, as means over the seeds:
+
+* RMSE: the motor-averaged RMSE of :func:`estimators.metrics.score` (warm-up excluded), per
+  scenario; target <= 0.04;
+* healthy bias: the mean error of the rotors outside their own fault windows (the band and
+  padding of :func:`estimators.metrics.window_masks`), over the four scenarios; target
+  within +-0.02;
+* FDI: the abrupt faults (abrupt, combined, clipping) detected and isolated by
+  :mod:`estimators.fdi` (the ``fdi`` entry of ``metrics.json``), the largest latency and the
+  false alarms; target every fault within 0.05 s, no false alarm;
+* weak rotor: flights of ``--weak-duration`` on the Lissajous curve and on the circle with one
+  rotor at 0.7, 0.8 or 0.9 (rotor and level from the seed); the rotor named weakest (lowest
+  mean estimate after 2 s) must be the weak one; target every flight.
+
+A figure that misses its target is marked with ``*``. Speed is not measured here
+(``benchmarks/bench_irls.py``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+
+import numpy as np
+
+ESTIMATORS = {
+    "irls": ("irls", {}),
+    "irls --improved": ("irls", {"improved": True}),
+    "ekf": ("ekf", {}),
+    "rls": ("rls", {}),
+    "ukf": ("ukf", {}),
+}
+SCENARIOS = ("degradation", "abrupt", "combined", "clipping")
+LEVELS = (0.7, 0.8, 0.9)
+TARGET = {"rmse": 0.04, "bias": 0.02, "latency": 0.05}
+
+
+def seeds_of(text: str) -> list[int]:
+    if "-" in text:
+        a, b = text.split("-")
+        return list(range(int(a), int(b) + 1))
+    return [int(x) for x in text.split(",")]
+
+
+def sensor_noise(text: str):
+    """``none``, a preset name or ``P,V,A,G[,ACC]``: a SensorNoise."""
+    from quadfault.model.sensors import SensorNoise
+
+    if text == "none":
+        return SensorNoise()
+    try:
+        from quadfault.model.sensor_presets import as_sensor_noise
+    except ImportError:  # white noise only
+        return SensorNoise(*(float(x) for x in text.split(",")))
+    return as_sensor_noise(text)
+
+
+def fly(scenario, noise, seed: int, saturate: bool):
+    from quadfault.sim.simulator import SimConfig, simulate
+
+    config = SimConfig(saturate=saturate, sensor_noise=noise)
+    return simulate(scenario, config=config, seed=seed, thrust_noise=0.07)
+
+
+def healthy_errors(rec, series) -> np.ndarray:
+    """The errors of every rotor outside its own fault windows (warm-up excluded)."""
+    from estimators.base import STATUS_WARMUP
+    from estimators.metrics import aligned_truth, fault_windows, window_masks
+
+    t, truth = aligned_truth(rec, series, "end", None)
+    keep = np.asarray(series.status) != STATUS_WARMUP
+    e = series.eta - truth
+    windows = fault_windows(rec)
+    own = (
+        window_masks(t, truth, windows)
+        if windows
+        else np.zeros((truth.shape[1], len(t)), dtype=bool)
+    )
+    return np.concatenate([e[keep & ~own[m], m] for m in range(truth.shape[1])])
+
+
+def scenario_runs(noise, seed: int, duration: float) -> dict:
+    """Every estimator on the four scenarios of one seed."""
+    from estimators.cli import estimate_series
+    from estimators.fdi import detect, evaluate
+    from estimators.metrics import fault_windows, score
+    from quadfault.model.scenarios import named_scenario
+
+    out = {
+        key: {"rmse": {}, "healthy": [], "latency": [], "missed": 0, "false": 0}
+        for key in ESTIMATORS
+    }
+    for name in SCENARIOS:
+        rec = fly(named_scenario(name, duration), noise, seed, saturate=name == "clipping")
+        windows = fault_windows(rec)
+        for key, (est, options) in ESTIMATORS.items():
+            series = estimate_series(rec, est, **options)
+            r = out[key]
+            r["rmse"][name] = float(np.mean(score(rec, series).rmse))
+            r["healthy"].append(healthy_errors(rec, series))
+            if windows:
+                fdi = evaluate(detect(series), windows)
+                r["latency"] += [math.inf if x is None else x for x in fdi.latencies]
+                r["missed"] += fdi.missed
+                r["false"] += fdi.false_alarms
+    for r in out.values():
+        r["healthy"] = float(np.mean(np.concatenate(r["healthy"])))
+    return out
+
+
+def weak_runs(noise, seed: int, duration: float) -> dict:
+    """Is the weak rotor named weakest, on the Lissajous curve and on the circle?"""
+    from estimators.cli import estimate_series
+    from quadfault.model.scenarios import (
+        AbruptFault,
+        ConstantEfficiency,
+        EfficiencySchedule,
+        Scenario,
+    )
+    from quadfault.model.trajectory import Circle, Lissajous
+
+    motor, level = seed % 4 + 1, LEVELS[seed % len(LEVELS)]
+    sched = EfficiencySchedule(
+        ConstantEfficiency(), (AbruptFault(motor=motor, onset=0.0, level=level),)
+    )
+    out = {key: [] for key in ESTIMATORS}
+    for traj in (Lissajous(), Circle()):
+        rec = fly(Scenario("weak", duration, sched, traj), noise, seed, saturate=False)
+        for key, (est, options) in ESTIMATORS.items():
+            s = estimate_series(rec, est, **options)
+            mean = s.eta[s.t >= 2.0].mean(axis=0)
+            out[key].append(int(np.argmin(mean)) + 1 == motor)
+    return out
+
+
+def mark(ok: bool) -> str:
+    return "" if ok else "*"
+
+
+def table(label: str, runs: list, weak: list) -> tuple[str, dict]:
+    lines = [
+        f"\nsensor noise: {label}  (means over {len(runs)} seeds; * misses its target)\n",
+        "| estimator | "
+        + " | ".join(f"RMSE {s}" for s in SCENARIOS)
+        + " | healthy bias | FDI detected | max latency [s] | false alarms | weak rotor named |",
+        "|---" * (len(SCENARIOS) + 6) + "|",
+    ]
+    summary = {}
+    for key in ESTIMATORS:
+        rmse = {s: float(np.mean([r[key]["rmse"][s] for r in runs])) for s in SCENARIOS}
+        bias = float(np.mean([r[key]["healthy"] for r in runs]))
+        lat = [x for r in runs for x in r[key]["latency"]]
+        detected = sum(math.isfinite(x) for x in lat)
+        worst = max(lat) if lat else math.nan
+        false = sum(r[key]["false"] for r in runs)
+        named = [x for w in weak for x in w[key]]
+        cells = [f"{rmse[s]:.4f}{mark(rmse[s] <= TARGET['rmse'])}" for s in SCENARIOS]
+        lines.append(
+            f"| {key} | "
+            + " | ".join(cells)
+            + f" | {bias:+.4f}{mark(abs(bias) <= TARGET['bias'])}"
+            + f" | {detected}/{len(lat)}{mark(detected == len(lat))}"
+            + f" | {worst:.3f}{mark(worst <= TARGET['latency'])}"
+            + f" | {false}{mark(false == 0)}"
+            + f" | {sum(named)}/{len(named)}{mark(all(named))} |"
+        )
+        summary[key] = {
+            "rmse": rmse,
+            "healthy_bias": bias,
+            "fdi_detected": detected,
+            "fdi_faults": len(lat),
+            "fdi_max_latency": worst,
+            "false_alarms": false,
+            "weak_named": sum(named),
+            "weak_flights": len(named),
+        }
+    return "\n".join(lines), summary
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--noise", action="append", help="none, a preset or P,V,A,G,ACC (repeatable)")
+    p.add_argument("--seeds", default="0-4")
+    p.add_argument("--duration", type=float, default=80.0, help="scenario flights [s]")
+    p.add_argument("--weak-duration", type=float, default=20.0, help="weak-rotor flights [s]")
+    p.add_argument("--json", help="write the summary here")
+    args = p.parse_args(argv)
+    seeds = seeds_of(args.seeds)
+    doc = {"seeds": seeds, "duration": args.duration, "results": {}}
+    start = time.process_time()
+    for label in args.noise or ["none"]:
+        noise = sensor_noise(label)
+        runs = [scenario_runs(noise, k, args.duration) for k in seeds]
+        weak = [weak_runs(noise, k, args.weak_duration) for k in seeds]
+        text, summary = table(label, runs, weak)
+        print(text, flush=True)
+        doc["results"][label] = summary
+    print(f"\n{time.process_time() - start:.0f} CPU-s", file=sys.stderr)
+    if args.json:
+        from pathlib import Path
+
+        from quadfault.fileio import atomic_write_text
+
+        atomic_write_text(Path(args.json), json.dumps(doc, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
