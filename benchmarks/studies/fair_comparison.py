@@ -2,6 +2,7 @@
 ``quadfault reproduce`` with means and 95 % intervals.
 
     python benchmarks/studies/fair_comparison.py --out DIR [--seeds 0-4] [--quick] [--workers 2]
+                                                 [--sensor-noise PRESET]
 
 For every seed K it runs ``quadfault reproduce --seed K --no-reference-mode --out DIR/seed-K``
 (skipped when ``DIR/seed-K/metrics.json`` exists, so an interrupted study resumes), then
@@ -10,6 +11,8 @@ spike, excess spike and RMSE: each seed's value, the mean and the 95 % Student-t
 the mean, and the motor-averaged numbers behind them. ``DIR/summary.json`` holds the same
 (``ratios``: against the EKF; ``baselines``: every baseline). Every ratio is against a partner
 given the identical post-processing and tuned on the calibration flight (docs/reproduce.md).
+With ``--sensor-noise`` every flight, the calibration flight's too, has those sensors
+(``quadfault reproduce --sensor-noise``), so each partner is tuned with the same noise.
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ def seeds_of(text: str) -> list[int]:
     return [int(x) for x in text.split(",")]
 
 
-def run_seed(out: Path, seed: int, quick: bool, workers: int) -> dict:
+def run_seed(out: Path, seed: int, quick: bool, workers: int, noise: str | None = None) -> dict:
     path = out / f"seed-{seed}"
     if not (path / "metrics.json").exists():
         cmd = [
@@ -54,6 +57,7 @@ def run_seed(out: Path, seed: int, quick: bool, workers: int) -> dict:
             "--quiet",
             "--force",
         ] + (["--quick"] if quick else [])
+        cmd += ["--sensor-noise", noise] if noise else []
         print("$ quadfault " + " ".join(cmd[3:]), flush=True)
         subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
     return json.loads((path / "metrics.json").read_text())
@@ -174,11 +178,16 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", default="0-4", help="seeds, e.g. 0-4 or 0,2,3 (default 0-4)")
     p.add_argument("--quick", action="store_true", help="reproduce --quick (12 s flights)")
     p.add_argument("--workers", type=int, default=2)
+    p.add_argument(
+        "--sensor-noise",
+        metavar="PRESET",
+        help="the sensors of every flight (a preset or P,V,A,G[,ACC]; default none)",
+    )
     args = p.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     seeds = seeds_of(args.seeds)
-    docs = {k: run_seed(out, k, args.quick, args.workers) for k in seeds}
+    docs = {k: run_seed(out, k, args.quick, args.workers, args.sensor_noise) for k in seeds}
     from estimators.paper.pairing import BASELINES
 
     first = next(iter(docs.values()))
@@ -191,6 +200,7 @@ def main(argv=None) -> int:
             {
                 "seeds": seeds,
                 "quick": args.quick,
+                "sensor_noise": args.sensor_noise or "none",
                 "ratios": summaries["ekf"],
                 "baselines": summaries,
             },
