@@ -3,7 +3,7 @@ of the IRLS's and the RLS's regression) on seeded noisy flights, the RLS's prefi
 against a numpy form, online = offline = batched with the prefilter, and clean errors.
 
 The accuracy targets over the paper's scenarios and several seeds are checked by
-``benchmarks/noise_accuracy.py``; these are small seeded cases of the same behaviour."""
+``benchmarks/studies/noise_accuracy.py``; these are small seeded cases of the same behaviour."""
 
 from __future__ import annotations
 

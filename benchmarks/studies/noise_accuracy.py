@@ -1,9 +1,9 @@
 """Every estimator's accuracy under sensor noise, against the targets an estimator must meet
 with real sensors.
 
-    python benchmarks/noise_accuracy.py [--noise none] [--noise PRESET|P,V,A,G,ACC ...]
-                                        [--seeds 0-4] [--duration 80] [--weak-duration 20]
-                                        [--json OUT.json]
+    python benchmarks/studies/noise_accuracy.py [--noise none] [--noise PRESET|P,V,A,G,ACC ...]
+                                                [--seeds 0-4] [--duration 80]
+                                                [--weak-duration 20] [--json OUT.json]
 
 For each sensor noise (``--noise``, repeatable: ``none``, a preset name of
 ``quadfault simulate --sensor-noise`` or the white-noise stds ``P,V,A,G,ACC``) and each seed,
