@@ -109,6 +109,9 @@ def table(measurements) -> str:
             if s not in m:
                 continue
             r = m[s]
+            if r["rate"] is None:  # derived by the importer: not a measurement
+                rows.append(f"| {path.name} | {s} | {unit} | {r['notes'][0]} |" + " |" * 8)
+                continue
             rows.append(
                 f"| {path.name} | {s} | {unit} | {_fmt(r['rate'])} | {_fmt(r['white'])} | "
                 f"{_fmt(r['white_check'])} | {_fmt(r['highpass'])} | {_fmt(r['peak_hz'])} | "
