@@ -370,9 +370,10 @@ class Findings:
             "reason": (
                 f"this flight cannot tell {' + '.join(a.names)} from {' + '.join(b.names)}: "
                 f"fitted in each other's place on the same held-out folds, "
-                f"{' + '.join(b.names)} changes the held-out residual RMS by "
-                f"{_pct(-g.gain)} (95% interval of its gain from {_pct(g.lo)}), not a "
-                "significant difference either way; one of the two is likely there"
+                f"{' + '.join(b.names)} has a held-out gain of {_pct(g.gain)} over "
+                f"{' + '.join(a.names)} (95% interval from {_pct(g.lo)}): too small or too "
+                "uncertain to decide either way (a set wins with 1% and its interval above "
+                "0); one of the two is likely there"
             ),
             "separate_by": comparison.separate_by,
         }
