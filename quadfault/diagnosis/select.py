@@ -15,7 +15,8 @@ Each round:
    than ``bic_margin``; significance by held-out likelihood over the flight: the held-out
    gain (5 contiguous folds, fixed weights) positive with its 95 % interval above 0; a
    held-out RMS lower by at least ``min_improvement`` relative to the current model, or by
-   three times that in one channel; the instrumental-variable
+   three times that in one channel the option acts on (its fitted signal above the noise);
+   the instrumental-variable
    check against closed-loop feedback bias (:mod:`~quadfault.diagnosis.feedback`); the fold
    agreement of every new effect (:func:`~quadfault.diagnosis.crossval.fold_agreement`);
    for a pair, a held-out RMS lower by ``min_improvement`` than each of its members alone;
@@ -283,18 +284,26 @@ class _Round:
     def held_out(self, opt: _Option, signal) -> str:
         """Significance by held-out likelihood over the flight: the option's held-out gain
         positive with its 95 % interval above 0; and large enough to matter: at least
-        ``min_improvement`` overall or three times that in one channel."""
+        ``min_improvement`` overall or three times that in one channel it acts on (its
+        fitted signal there above the noise)."""
         sr, bar = self.search, self.search.settings.min_improvement
-        g = gain_over(sr.replay, sr.scoring, self.model.cv, opt.cv, bar)
+        sc, cur_cv = sr.scoring, self.model.cv
+        g = gain_over(sr.replay, sc, cur_cv, opt.cv, bar)
         if not (g.gain > 0.0 and g.lo > 0.0):
             return (
                 f"no significant held-out gain: {g.gain:.1%} (95% interval from {g.lo:.1%}; "
                 f"best channel {g.best:.1%})"
             )
-        if opt.gain < bar and g.best < 3 * bar:
+        touched = signal >= 1.0  # the channels it acts on
+        gain_touched = 0.0
+        if touched.any():  # best held-out gain among the channels the option acts on
+            before = sc.channel_sse(cur_cv.residual)[touched]
+            after = sc.channel_sse(opt.cv.residual)[touched]
+            gain_touched = float(np.max(1.0 - np.sqrt(after / np.maximum(before, 1e-300))))
+        if opt.gain < bar and gain_touched < 3 * bar:
             return (
-                f"held-out gain {opt.gain:.1%} (best channel {g.best:.1%}) below "
-                f"{bar:.0%} ({3 * bar:.0%} in one channel)"
+                f"held-out gain {opt.gain:.1%} (best channel it acts on {gain_touched:.1%}) "
+                f"below {bar:.0%} ({3 * bar:.0%} in a channel it acts on)"
             )
         return ""
 
