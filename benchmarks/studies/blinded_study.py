@@ -454,8 +454,8 @@ def order_agrees(a, b, rtol=0.01) -> bool:
 
 
 def user_verdict(r) -> str:
-    """``"right"`` (the concealed effect accepted and first, the right rotor for a weak one,
-    no rival named with it), ``"indistinguishable"`` (it is in a set of rivals the flight
+    """``"right"`` (the concealed effect accepted and first -- or an effect of its class,
+    ``EQUIVALENT``, for all but a weak rotor, which must be named with the right rotor), ``"indistinguishable"`` (it is in a set of rivals the flight
     cannot tell apart, the right rotor for a weak one), ``"wrong"``; for an effect-free
     flight ``"right"`` when nothing is accepted nor named, else ``"false alarm"``."""
     if not r["truth"]:
@@ -463,7 +463,9 @@ def user_verdict(r) -> str:
     name = r["truth"][0]
     accepted, alike = r["weak_rotor"]
     rotor_ok = name != "motor_efficiency" or r["truth_rotor"] in accepted + alike
-    if r["found"] and r["found"][0] == name and rotor_ok:
+    top = r["found"][0] if r["found"] else None
+    same = top == name or (top and name != "motor_efficiency" and cls(top) == cls(name))
+    if same and rotor_ok:
         return "right"
     if any(name in n for n in r["rival_sets"]) and rotor_ok:
         return "indistinguishable"
@@ -484,6 +486,11 @@ def summarise_users(rows) -> dict:
         "n_with_effect": len(eff),
         "n_effect_free": len(none),
         "right": float(np.mean([r["score"] == "right" for r in eff])) if eff else None,
+        "right_exact_name": (
+            float(np.mean([bool(r["found"]) and r["found"][0] == r["truth"][0] for r in eff]))
+            if eff
+            else None
+        ),
         "right_moving": (
             float(np.mean([r["score"] == "right" for r in moving])) if moving else None
         ),
