@@ -269,15 +269,18 @@ def main(argv=None) -> int:
             rows.append(f"| {N:,} | did not run: {why} |")
             continue
         o, c = got["best"]["ours"], got["best"]["crazyflow"]
+        threads = " / ".join(
+            got["ready"][side]["ready"]["threads"] for side in ("ours", "crazyflow")
+        )
         rows.append(
             f"| {N:,} | {_k(o['wall'])} ({_k(o['cpu'])}) | {_k(c['wall'])} ({_k(c['cpu'])}) | "
             f"**{o['wall'] / c['wall']:.2f}x** ({o['cpu'] / c['cpu']:.2f}x) | "
             f"{_k(o['physics'])} / {_k(c['physics'])} | {o['cores']:.1f} / {c['cores']:.1f} | "
-            f"{got['load']:.1f} |"
+            f"{threads} | {got['load']:.1f} |"
         )
         print(rows[-1], file=sys.stderr, flush=True)  # progress
-    for side, s in settings.items():
-        print(f"# {side}: " + ", ".join(f"{k} {v}" for k, v in s.items()))
+    for side, s in settings.items():  # (threads per N in the table)
+        print(f"# {side}: " + ", ".join(f"{k} {v}" for k, v in s.items() if k != "threads"))
     if worst > QUIET_LOAD:
         print(
             f"# NOT FOR PUBLICATION: the 1-minute load reached {worst:.2f} (> {QUIET_LOAD}); "
@@ -286,9 +289,9 @@ def main(argv=None) -> int:
     print(
         "| N | ours, env steps/s wall (per CPU-s) | crazyflow, wall (per CPU-s) | ratio wall "
         "(per CPU) | physics steps/s wall, ours / crazyflow | cores used, ours / crazyflow "
-        "| load |"
+        "| threads, ours / crazyflow | load |"
     )
-    print("|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|")
     print("\n".join(rows))
     return 0
 

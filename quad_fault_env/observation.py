@@ -145,7 +145,7 @@ class ObservationLayout:
         _observation_rows(
             tuple(_rows(x, batch, size) for x, size in zip(values, _SIZES)),
             np.ascontiguousarray(R.reshape(shape)),
-            self.bounds(),
+            *self.bounds(),  # arrays, not a tuple: a tuple argument costs numba's dispatch
             out.reshape(-1, self.size),
         )
         return out
@@ -271,9 +271,10 @@ def observation_row(pos_err, vel_err, R, omega, eta_hat, eta_sd, ref_acc, bounds
 
 
 @jit
-def _observation_rows(values, R, bounds, out):
+def _observation_rows(values, R, at, low, high, fill, out):
     """The flat observations (B, size) of B rows (:func:`observation_row`): ``values`` the
     slots of :data:`_ARGS` but ``rot6`` ((B, size) each), ``R`` (B, 3, 3)."""
     pe, ve, w, eta, sd, acc = values
+    bounds = (at, low, high, fill)
     for i in range(out.shape[0]):
         observation_row(pe[i], ve[i], mat3(R[i]), w[i], eta[i], sd[i], acc[i], bounds, out[i])

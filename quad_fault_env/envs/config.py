@@ -169,18 +169,29 @@ class ActionConfig:
         n = vehicle.n_rotors
         out = np.empty(a.shape[:-1] + (n,))
         rows = a.reshape(-1, a.shape[-1])
-        ctrl = np.zeros((len(rows), n)) if f_ctrl is None else f_ctrl
-        ctrl = np.ascontiguousarray(np.broadcast_to(ctrl, (len(rows), n)), dtype=float)
-        eta = np.ones(n) if eta_hat is None else eta_hat
-        eta = np.ascontiguousarray(np.broadcast_to(eta, (len(rows), n)), dtype=float)
+        B = len(rows)
+        mode, comp, scale, ms = self.params(bool(compensate))
+        # the kernel reads the controller's commands in residual mode and the estimate only
+        # with compensation; otherwise it is given its output there (not read)
+        ctrl = out.reshape(B, n)
+        if mode == 1:
+            ctrl = np.ascontiguousarray(np.broadcast_to(f_ctrl, (B, n)), dtype=float)
+        eta = out.reshape(B, n)
+        if mode == 1 and comp:
+            eta = np.ascontiguousarray(np.broadcast_to(eta_hat, (B, n)), dtype=float)
         _action_rows(
             rows,
             ctrl,
             eta,
-            self.params(bool(compensate)),
+            mode,
+            comp,
+            scale,
+            ms[0],
+            ms[1],
+            ms[2],
             float(f_max),
-            np.ascontiguousarray(vehicle.allocation_inverse, dtype=float),
-            out.reshape(-1, n),
+            vehicle.allocation_inverse,
+            out.reshape(B, n),
         )
         return out
 
@@ -230,10 +241,11 @@ def action_commands_row(a, f_ctrl, eta_hat, params, f_max, allocation_inverse, o
 
 
 @jit
-def _action_rows(a, f_ctrl, eta_hat, params, f_max, allocation_inverse, out):
+def _action_rows(a, f_ctrl, eta_hat, mode, comp, scale, ms0, ms1, ms2, f_max, alloc_inv, out):
     """:func:`action_commands_row` per row."""
+    params = (mode, comp, scale, (ms0, ms1, ms2))
     for i in range(out.shape[0]):
-        action_commands_row(a[i], f_ctrl[i], eta_hat[i], params, f_max, allocation_inverse, out[i])
+        action_commands_row(a[i], f_ctrl[i], eta_hat[i], params, f_max, alloc_inv, out[i])
 
 
 def _allocated(allocator, wrench: np.ndarray, eta_hat) -> np.ndarray:
@@ -322,7 +334,7 @@ class RewardConfig:
             float(f_max),
             np.ascontiguousarray(terminated, dtype=np.bool_).reshape(-1),
             a.reshape(-1, a.shape[-1]),
-            self.params(),
+            *self.params(),  # numbers, not a tuple: a tuple argument costs numba's dispatch
             out.reshape(-1),
         )
         return float(out) if out.ndim == 0 else out
@@ -355,8 +367,11 @@ def reward_row(pe, ve, f_cmd, f_max, terminated, action, params):
 
 
 @jit
-def _rewards(pos_err, vel_err, f_cmd, f_max, terminated, action, params, out):
+def _rewards(
+    pos_err, vel_err, f_cmd, f_max, terminated, action, scale, w_vel, w_eff, w_act, bonus, pen, out
+):
     """:func:`reward_row` per row."""
+    params = (scale, w_vel, w_eff, w_act, bonus, pen)
     for i in range(out.shape[0]):
         out[i] = reward_row(
             pos_err[i], vel_err[i], f_cmd[i], f_max, terminated[i], action[i], params
@@ -406,7 +421,7 @@ class TerminationLimits:
             np.ascontiguousarray(p, dtype=float),
             np.ascontiguousarray(R, dtype=float),
             np.ascontiguousarray(p_ref, dtype=float),
-            self.params(),
+            *self.params(),
             codes,
         )
         return codes
@@ -445,8 +460,9 @@ def termination_code(p, R, p_ref, limits):
 
 
 @jit
-def _termination_codes(p, R, p_ref, limits, out):
+def _termination_codes(p, R, p_ref, ground, max_error, max_tilt, out):
     """:func:`termination_code` per row."""
+    limits = (ground, max_error, max_tilt)
     for i in range(out.shape[0]):
         out[i] = termination_code(
             (p[i, 0], p[i, 1], p[i, 2]),
