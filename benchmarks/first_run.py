@@ -5,6 +5,8 @@ cache (a fresh ``NUMBA_CACHE_DIR``: every kernel it needs is compiled) and then 
 cache the first run filled (the kernels load). The CPU time is the child's user + system time.
 
 * ``simulate``: ``quadfault simulate --scenario combined --duration 10``;
+* ``effects``: the same flight with drag, motor lag and a gusty wind (the compiled effect
+  chain);
 * ``env``: ``gym.make("QuadFault-v1")`` (IRLS in the observation), ``reset`` and one step;
 * ``estimate``: ``quadfault estimate`` (IRLS) of a 10 s recording (made beforehand).
 
@@ -30,14 +32,18 @@ ENV_CODE = (
     "import gymnasium as gym, numpy as np, quad_fault_env; env = gym.make('QuadFault-v1'); "
     "env.reset(seed=0); env.step(np.zeros(4, dtype=np.float32))"
 )
-CASES = ("simulate", "env", "estimate")
+CASES = ("simulate", "effects", "env", "estimate")
+#: the effects of the ``effects`` case
+EFFECTS = ("drag=0.3", "motor_lag=0.05", "wind=1,0,0,gust=0.5")
 
 
 def command(case: str, work: Path) -> list[str]:
     cli = [sys.executable, "-m", "quadfault.cli"]
-    if case == "simulate":
+    if case in ("simulate", "effects"):
+        effects = [a for spec in EFFECTS for a in ("--effect", spec)] if case == "effects" else []
         return cli + [
             "simulate",
+            *effects,
             "--scenario",
             "combined",
             "--duration",

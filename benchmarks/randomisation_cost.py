@@ -22,6 +22,11 @@ Prints vehicle-steps per wall second and per CPU second of this process, the cos
     python benchmarks/randomisation_cost.py --n 256 --rounds 5
     python benchmarks/randomisation_cost.py --skip-env --ranges thrust_scale=1   # a no-op effect
     python benchmarks/randomisation_cost.py --total-only   # only the randomised set, no breakdown
+    python benchmarks/randomisation_cost.py --baseline ../other-checkout --rounds 3
+
+With ``--baseline`` (another checkout) the nominal and randomised rates are measured in both
+checkouts, in fresh processes, alternated round by round (``benchmarks/side_by_side.py``),
+and printed with their ratios this / baseline (above 1: this checkout is faster).
 """
 
 from __future__ import annotations
@@ -164,6 +169,44 @@ def _report(name: str, best: dict, specs) -> None:
         print(f"    {spec:34s} {cells[0]:>28s} {cells[1]:>28s} {_cost(b, a):>11s}")
 
 
+def totals(n: int, horizon: int, steps: int, min_time: float, skip_env: bool) -> dict:
+    """Vehicle-steps per wall and CPU second, nominal and randomised (:data:`RANGES`), of the
+    closed loop and (unless ``skip_env``) the vector env: what ``--baseline`` compares."""
+    out = {}
+    for randomise in (False, True):
+        kind = "randomised" if randomise else "nominal"
+        fns = {"loop": (loop_batch(n, horizon, randomise), n * horizon)}
+        if not skip_env:
+            fn, substeps = env_batch(n, steps, randomise)
+            fns["env"] = (fn, n * steps * substeps)
+        for name, (fn, work) in fns.items():
+            out[f"{name}_{kind}_wall"], out[f"{name}_{kind}_cpu"] = _timed(fn, work, min_time)
+    return out
+
+
+def _side_by_side(args) -> int:
+    """``--baseline``: :func:`totals` in this checkout and the baseline, alternated."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import side_by_side as sbs
+
+    kw = dict(n=args.n, horizon=args.horizon, steps=args.steps, min_time=args.min_time)
+    now, base = sbs.compare(
+        args.baseline,
+        "randomisation_cost",
+        "totals",
+        args.rounds,
+        better=max,
+        skip_env=args.skip_env,
+        **kw,
+    )
+    print(f"N = {args.n}, {args.rounds} alternated rounds (best of each); {sbs.load()}")
+    print("| vehicle-steps per second | baseline | this checkout | this / baseline |")
+    print("|---|---|---|---|")
+    for key in now:
+        print(f"| {key} | {base[key]:.4g} | {now[key]:.4g} | {now[key] / base[key]:.3f} |")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=1024, help="vehicles (default 1024)")
@@ -184,7 +227,10 @@ def main(argv=None) -> int:
         metavar="SPEC",
         help="the randomised effects (--effect syntax with a:b ranges)",
     )
+    ap.add_argument("--baseline", default=None, help="another checkout, measured side by side")
     args = ap.parse_args(argv)
+    if args.baseline:
+        return _side_by_side(args)
 
     import numba
 

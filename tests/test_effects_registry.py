@@ -75,11 +75,12 @@ def test_every_effect_parses_packs_and_simulates(name):
         assert not isinstance(effect, Compiled)
         assert effect.true_vehicle(Vehicle()) != Vehicle()
     else:
-        code, params, memory = entry
-        assert code == registry.code(name) and len(params) > 0 and memory >= 0
+        slot_class, params, memory = entry
+        assert slot_class is cls and len(params) > 0 and memory >= 0
         built = rows.build([[entry]], 4)
         a = built.param[0, 0]
-        assert built.code[0, 0] == code and np.all(built.params[0, a : a + len(params)] == params)
+        assert built.layout.effects[built.slot[0, 0]] is cls
+        assert np.all(built.params[0, a : a + len(params)] == params)
     nominal = _fly(parse_effect("thrust_scale=1"), duration=1.0)
     rec = _fly(effect, duration=1.0)
     assert np.all(np.isfinite(rec.position)) and len(rec) == len(nominal)
@@ -102,13 +103,12 @@ def test_vehicles_flying_some_of_a_layouts_slots_fly_as_in_their_own_layout():
         (rows.build([[delay, wind], [drag, lag]], 4), 1),
         (rows.build([[lag, wind, drag]] * 2 + [[lag, drag]], 4), 2),
     ):
-        c = chain.chain_for(type(fx).layout, type(fx).n_rotors)
         f = np.array([2.0, 2.1, 2.2, 2.3])
         for k in range(3):
-            c.thrust_effects(fx, i, f, k * 1e-3, 1e-3, *state, np.random.default_rng(0))
+            chain.thrust_effects(fx, i, f, k * 1e-3, 1e-3, *state, np.random.default_rng(0))
             f = f + 0.1
-        W = c.wrench_terms(fx, i, f, 0.0)
-        out.append((f.copy(), c.effects_wrench(W, *state, f, 0.0)))
+        W = chain.wrench_terms(fx, i, f, 0.0)
+        out.append((f.copy(), chain.summed_wrench(W, *state, f, 0.0)))
     for other in out[1:]:
         np.testing.assert_array_equal(out[0][0], other[0])
         assert out[0][1] == other[1]
@@ -124,9 +124,7 @@ def test_the_chain_carries_as_many_thrusts_as_the_rows_rotors():
     fx = rows.build([[scale]], 6)
     state = ((0.0, 0.0, -1.0), (0.0, 0.0, 0.0), tuple(np.eye(3).ravel()), (0.0, 0.0, 0.0))
     f = np.arange(1.0, 7.0)
-    chain.chain_for(type(fx).layout, 6).thrust_effects(
-        fx, 0, f, 0.0, 1e-3, *state, np.random.default_rng(0)
-    )
+    chain.thrust_effects(fx, 0, f, 0.0, 1e-3, *state, np.random.default_rng(0))
     np.testing.assert_array_equal(f, 0.5 * np.arange(1.0, 7.0))
     V = closed_loop.Vehicles.empty(1, 4)
     with pytest.raises(ConfigError, match="built for 6 rotors, the vehicles have 4"):
@@ -134,34 +132,35 @@ def test_the_chain_carries_as_many_thrusts_as_the_rows_rotors():
 
 
 def test_rows_are_typed_by_their_layout_and_grow_to_new_effects():
-    """Rows carry their layout (slots of effect and parameter width) in their class: the
-    loop compiles that chain alone. A vehicle given an effect the rows lack grows them,
-    keeping the other rows' parameters and memory; a vehicle's own order is kept."""
+    """Rows carry their layout (an effect per slot) in their compiled type: the loop
+    compiles that chain alone. A vehicle given an effect the rows lack grows them, keeping
+    the other rows' parameters and memory; a vehicle's own order is kept."""
+    import numba
+
+    from quadfault.model.effects import Drag, MotorLag
+
     lag, drag = (
         rows.entry(parse_effect("motor_lag=0.05"), 4, 1e-3),
         rows.entry(parse_effect("drag=0.3"), 4, 1e-3),
     )
     wind = rows.entry(parse_effect("wind=1,2,0"), 4, 1e-3)
     fx = rows.build([[lag], []], 4)
-    assert type(fx).layout == (("motor_lag", 1),)
-    assert type(fx) is chain.rows_class([("motor_lag", 1)], 4)
+    assert fx.layout == chain.ChainLayout((MotorLag,), 4)
+    assert numba.typeof(fx) != numba.typeof(rows.build([[drag]], 4))
+    assert numba.typeof(fx) == numba.typeof(rows.build([[lag]] * 3, 4))
     fx.memory[0, :] = 7.0  # a flight under way
     assert not rows.fits(fx, [lag, drag])
     grown = rows.grown(fx, [wind, lag, drag])
-    assert type(grown).layout == (("wind", 10), ("motor_lag", 1), ("drag", 6))
+    assert grown.layout.names == ("wind", "motor_lag", "drag")
     assert np.all(grown.memory[0, : fx.memory.shape[1]] == 7.0)
-    assert grown.code[0, 0] == fx.code[0, 0] and grown.params[0, grown.param[0, 0]] == 0.05
+    assert grown.layout.effects[grown.slot[0, 0]] is MotorLag
+    assert grown.params[0, grown.param[0, 0]] == 0.05
     rows.write(grown, 1, [drag, lag])  # a wrench-only and a thrust-only entry: any order
-    assert type(grown).layout == (("wind", 10), ("motor_lag", 1), ("drag", 6))
-    assert list(grown.code[1, :2]) == [registry.code("drag"), registry.code("motor_lag")]
+    assert grown.layout.names == ("wind", "motor_lag", "drag")
+    assert [grown.layout.effects[k] for k in grown.slot[1, :2]] == [Drag, MotorLag]
     assert grown.params[1, grown.param[1, 0]] == 0.3 and grown.params[0, grown.param[0, 0]] == 0.05
     assert not rows.fits(grown, [lag, wind])  # two thrust-stage entries in another order
-    assert type(rows.grown(grown, [lag, wind])).layout == (
-        ("wind", 10),
-        ("motor_lag", 1),
-        ("drag", 6),
-        ("wind", 10),
-    )
+    assert rows.grown(grown, [lag, wind]).layout.names == ("wind", "motor_lag", "drag", "wind")
     with pytest.raises(ConfigError, match="more room"):
         rows.write(fx, 1, [drag])
 

@@ -203,7 +203,6 @@ def test_a_vehicle_flies_any_number_of_wrench_effects():
     out = []
     for effects in ([parse_effect("drag=0.1")] * 7, [parse_effect("drag=0.7")]):
         fx = rows.build([[rows.entry(e, 4, 1e-3) for e in effects]], 4)
-        c = chain.chain_for(type(fx).layout, type(fx).n_rotors)
-        out.append(c.effects_wrench(c.wrench_terms(fx, 0, f, 0.0), *state, f, 0.0)[0])
+        out.append(chain.summed_wrench(chain.wrench_terms(fx, 0, f, 0.0), *state, f, 0.0)[0])
     np.testing.assert_allclose(out[0], out[1], rtol=1e-12)
     assert np.linalg.norm(out[1]) > 0.5

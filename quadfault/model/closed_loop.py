@@ -432,9 +432,9 @@ def _interpreted():
 
 def _check_rotors(fx, V: Vehicles) -> None:
     """A one-line error when compiled effects ``fx`` were built for another rotor count."""
-    if fx is not None and type(fx).n_rotors != V.f.shape[1]:
+    if fx is not None and fx.layout.n_rotors != V.f.shape[1]:
         raise ConfigError(
-            f"the effects were built for {type(fx).n_rotors} rotors, the "
+            f"the effects were built for {fx.layout.n_rotors} rotors, the "
             f"vehicles have {V.f.shape[1]}"
         )
 

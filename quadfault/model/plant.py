@@ -10,7 +10,9 @@ says what a plant is and how effects act on it.
 
 Effects
 -------
-An effect is any object with these methods (:mod:`quadfault.model.effects` has the built-in ones)::
+An effect is any object with these methods (:class:`quadfault.model.effects.base.Effect`, the
+one effect type, gives their no-op defaults; :mod:`quadfault.model.effects` has the built-in
+effects)::
 
     reset(n_rotors) -> None                    # start of a flight
     rotor_thrust(f, t, dt, state) -> f_new     # produced rotor thrusts [N] (n,) after the
@@ -43,33 +45,18 @@ and thrust noise, e.g. drawn per episode (:mod:`quadfault.model.effects.sampling
 
 from __future__ import annotations
 
-from typing import Protocol
-
 import numpy as np
 
 from quadfault.errors import ConfigError
 from quadfault.model.closed_loop import Vehicles
 from quadfault.model.dynamics import RigidBodyState
 from quadfault.model.effects import rows as fx_rows
+from quadfault.model.effects.base import Effect
 from quadfault.model.effects.registry import EFFECTS
 from quadfault.model.motors import MotorModel
 from quadfault.model.vehicle import Vehicle
 
 INTEGRATORS = ("rk4", "reference")
-
-
-class Effect(Protocol):
-    """An unmodelled physical effect of the true plant (see the module docstring)."""
-
-    def reset(self, n_rotors: int) -> None: ...
-
-    def rotor_thrust(self, f: np.ndarray, t: float, dt: float, state: RigidBodyState) -> np.ndarray:
-        """Transform the produced rotor thrusts [N] for the step starting at ``t``."""
-
-    def wrench(
-        self, state: RigidBodyState, f: np.ndarray, t: float
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """External force (world) [N] and moment (body) [N m] at ``state``."""
 
 
 def _state(p, v, R, w) -> RigidBodyState:
@@ -211,7 +198,7 @@ class Plant:
         self.vehicle = flown_vehicle(self.nominal_vehicle, self.effects)
         self.vehicles.set_body(slice(None), self.vehicle)
         if self._rows is not None:
-            fx_rows.reset(self._rows, np.arange(len(self._rows.code)))
+            fx_rows.reset(self._rows, np.arange(len(self._rows.slot)))
 
     def assign(
         self,

@@ -36,7 +36,6 @@ from quadfault.model.effects.rotor_inertia import (
     rotor_momentum,
     thrust_rate,
 )
-from quadfault.model.effects.rows import single as _single  # noqa: F401  (one-vehicle chain)
 from quadfault.model.effects.spec import canonical_order, parse_effect
 from quadfault.model.effects.thrust_curve import (
     ThrustCurve,

@@ -8,7 +8,10 @@ from typing import ClassVar
 
 import numpy as np
 
+from quadfault import layout as named
 from quadfault.errors import ConfigError
+from quadfault.model.effects import rows
+from quadfault.model.effects.chain import kernels
 
 
 def vector(value, n, what) -> tuple:
@@ -111,8 +114,10 @@ POSE = ("position", "velocity", "attitude")
 
 
 class Effect:
-    """Default (no-op) plant hooks of an effect; subclasses are frozen dataclasses, one module
-    each (the registry, :mod:`quadfault.model.effects.registry`, lists them).
+    """An unmodelled physical effect of the true plant: the one effect type, with default
+    (no-op) plant hooks. The built-in effects are frozen dataclasses deriving it, one module
+    each (the registry, :mod:`quadfault.model.effects.registry`, lists them); an effect
+    written in Python may derive it too, or be any object with these methods.
 
     Protocol (called by :class:`quadfault.model.plant.Plant`): ``reset(n_rotors)`` at the start of a
     flight; ``rotor_thrust(f, t, dt, state)`` once per physics step (produced rotor thrusts
@@ -214,26 +219,50 @@ _STANDALONE_DT = 1e-3
 class Compiled(Effect):
     """An effect with an entry in the compiled effect chain (:mod:`quadfault.model.effects.chain`).
 
-    Its module holds the entry's kernels, which the compiled chain calls at the columns of
-    the effect's slot in the rows' layout (:mod:`quadfault.model.effects.dispatch`):
-    ``thrust_step`` (the thrust stage, once per physics step: the rotors' thrusts in, as a
-    tuple, the new tuple out; :mod:`quadfault.model.effects.kernels`) and/or ``wrench_term`` with ``wrench_stage`` (the step's numbers, then the
-    force and moment at each RK stage). :meth:`pack` lays the parameters out in the entry's
-    row. The closed loop runs that entry compiled, from the plant's rows; the protocol
-    methods here run the same entry for one vehicle from Python (its memory -- lag, delay,
-    gusts -- kept on the object from one call to the next and cleared by ``reset``).
-    ``rotor_thrust`` takes the loop's generator as ``gen`` (a wind without a seed draws its
-    gusts from it; alone, from a generator seeded 0)."""
+    Its module declares the entry's layout by name (:func:`quadfault.layout.fields`):
+    ``PARAMETERS``, the parameters the kernels read (an entry named like a field of the
+    dataclass takes that field's value; :meth:`parameters` gives the others), and
+    ``MEMORY``, the vehicle's memory the kernels keep from step to step (zeros at a flight's
+    start). Its kernels read both by name: ``thrust_step`` (the thrust stage, once per
+    physics step: the rotors' thrusts in, as a tuple, the new tuple out;
+    :mod:`quadfault.model.effects.kernels`) and/or ``wrench_term`` with ``wrench_stage``
+    (the step's numbers, then the force and moment at each RK stage). :meth:`pack` lays the
+    parameters out from the declaration. The closed loop runs that entry compiled, from the
+    plant's rows; the protocol methods here run the same entry for one vehicle from Python
+    (its memory -- lag, delay, gusts -- kept on the object from one call to the next and
+    cleared by ``reset``). ``rotor_thrust`` takes the loop's generator as ``gen`` (a wind
+    without a seed draws its gusts from it; alone, from a generator seeded 0)."""
 
-    #: ``(effect, n_rotors, dt, yaw_signs) -> runner`` of one vehicle's chain (set by
-    #: :mod:`quadfault.model.effects.rows`, which builds the chain's rows)
-    one_vehicle: ClassVar = None
+    @classmethod
+    def layouts(cls) -> tuple:
+        """``(PARAMETERS, MEMORY)``: the entry's declared layouts (its module's)."""
+        module = kernels(cls)
+        return module.PARAMETERS, getattr(module, "MEMORY", NO_MEMORY)
+
+    def parameters(self, n_rotors: int, dt: float, yaw_signs=None) -> dict:
+        """The values of the ``PARAMETERS`` entries by name on a vehicle with ``n_rotors``
+        flown at physics step ``dt`` [s] (``yaw_signs``: the flown rotors' yaw-torque
+        signs); by default each entry's dataclass field. An effect with derived entries
+        overrides this."""
+        rows, _ = self.layouts()
+        return {key: getattr(self, key) for key in rows._fields[:-1]}
+
+    def memory_rest(self, values: dict, n_rotors: int) -> int:
+        """The length of an open (``REST``) last ``MEMORY`` entry for these parameter
+        ``values`` (0: none)."""
+        return 0
 
     def pack(self, n_rotors: int, dt: float, yaw_signs=None) -> tuple[tuple, int]:
         """``(parameters, memory slots)`` of this effect's entry on a vehicle with
         ``n_rotors`` flown at physics step ``dt`` [s] (``yaw_signs``: the flown rotors'
-        yaw-torque signs)."""
-        raise NotImplementedError
+        yaw-torque signs), laid out as its module declares."""
+        rows, memory = self.layouts()
+        values = self.parameters(n_rotors, dt, yaw_signs)
+        try:
+            x = named.pack(rows, n_rotors, **values)
+        except ConfigError as e:
+            raise ConfigError(f"effect {self.name}: {e}") from None
+        return tuple(x.tolist()), named.size(memory, n_rotors, self.memory_rest(values, n_rotors))
 
     @classmethod
     def stream_seed(cls, params) -> int | None:
@@ -258,10 +287,18 @@ class Compiled(Effect):
         the first call after ``reset``."""
         single = self.__dict__.get("_single")
         if single is None:
-            single = Compiled.one_vehicle(self, n_rotors, dt, self._yaw_signs(n_rotors))
+            single = rows.single(self, n_rotors, dt, self._yaw_signs(n_rotors))
             self.__dict__["_single"] = single  # frozen dataclass: memory beside the fields
             self.__dict__["_fallback"] = np.random.default_rng(0)
         return single
+
+    def memory(self) -> dict | None:
+        """The entry's memory now, by name (:func:`quadfault.layout.unpack`; None before the
+        first step of a flight)."""
+        single = self.__dict__.get("_single")
+        if single is None:
+            return None
+        return named.unpack(self.layouts()[1], single.rows.memory[0, single.rows.mem[0, 0] :])
 
     def rotor_thrust(self, f, t, dt, state, gen=None):
         out = np.array(f, dtype=float).ravel()
@@ -286,6 +323,10 @@ class Compiled(Effect):
 
     def __getstate__(self):  # the memory stays behind (a copy starts a new flight)
         return {k: v for k, v in self.__dict__.items() if k not in ("_single", "_fallback")}
+
+
+#: the memory of an entry that keeps none
+NO_MEMORY = named.fields("NoMemory")
 
 
 def param(params: dict, key: str, name: str):

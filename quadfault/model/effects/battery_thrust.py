@@ -13,6 +13,7 @@ from typing import ClassVar
 import numpy as np
 
 from quadfault.jit import jit
+from quadfault.layout import fields
 from quadfault.model.effects.base import Compiled, Identifiability, number, param
 from quadfault.model.effects.candidate import Candidate
 from quadfault.model.effects.kernels import scaled
@@ -34,13 +35,16 @@ def battery_factor1(voltage, v_ref, exponent):
     return (max(voltage, 1e-6) / v_ref) ** exponent
 
 
+#: the chain entry's parameters
+PARAMETERS = fields("BatteryThrustParameters", "exponent", "v_start", "v_end", "duration", "v_ref")
+
+
 @jit(inline="always")
-def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
-    """The chain's entry: parameters exponent, v_start, v_end, duration, v_ref; the voltage
-    at the step's middle."""
-    volts = battery_voltage1(t + 0.5 * dt, P[i, a + 1], P[i, a + 2], P[i, a + 3])
-    k = battery_factor1(volts, P[i, a + 4], P[i, a])
-    return scaled(f, k)
+def thrust_step(x, q, f, t, dt, p, gen, streams, i):
+    """The chain's entry: the thrusts' factor at the voltage of the step's middle."""
+    X = PARAMETERS
+    volts = battery_voltage1(t + 0.5 * dt, x[X.v_start], x[X.v_end], x[X.duration])
+    return scaled(f, battery_factor1(volts, x[X.v_ref], x[X.exponent]))
 
 
 # over arrays -----------------------------------------------------------------------------
@@ -123,9 +127,6 @@ class BatteryThrust(Compiled):
     @classmethod
     def from_values(cls, values, options):
         return cls(exponent=values[0], **options)
-
-    def pack(self, n_rotors, dt, yaw_signs=None):
-        return (self.exponent, self.v_start, self.v_end, self.duration, self.v_ref), 0
 
     @classmethod
     def candidate(cls, ctx):

@@ -10,6 +10,7 @@ from typing import ClassVar
 import numpy as np
 
 from quadfault.jit import jit
+from quadfault.layout import fields
 from quadfault.model.effects.base import Compiled, Identifiability, number, param, vector
 from quadfault.model.effects.candidate import Candidate
 from quadfault.model.effects.kernels import body_velocity3, world_vector3
@@ -29,13 +30,18 @@ def blade_flapping3(R, v_air, thrust, k_force, k_moment):
     return (-F[0], -F[1], -F[2]), (km * -vb[1], km * vb[0], km * 0.0)
 
 
+#: the chain entry's parameters
+PARAMETERS = fields("BladeFlappingParameters", "k_force", "k_moment", ("air_velocity", 3))
+
+
 @jit(inline="always")
-def wrench_term(P, Q, i, a, m, f):
+def wrench_term(x, q, f):
     """The step's numbers: k_force, k_moment, the collective thrust, air velocity (3)."""
     thrust = 0.0
     for r in range(f.shape[0]):
         thrust += f[r]
-    return P[i, a], P[i, a + 1], thrust, P[i, a + 2], P[i, a + 3], P[i, a + 4]
+    air = PARAMETERS.air_velocity
+    return x[PARAMETERS.k_force], x[PARAMETERS.k_moment], thrust, x[air], x[air + 1], x[air + 2]
 
 
 @jit(inline="always")
@@ -116,9 +122,6 @@ class BladeFlapping(Compiled):
     @classmethod
     def from_values(cls, values, options):
         return cls(k_force=values[0], k_moment=values[1] if len(values) > 1 else 0.0, **options)
-
-    def pack(self, n_rotors, dt, yaw_signs=None):
-        return (self.k_force, self.k_moment, *self.air_velocity), 0
 
     @classmethod
     def candidate(cls, ctx):

@@ -16,6 +16,7 @@ import numpy as np
 
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
+from quadfault.layout import fields
 from quadfault.model.effects.base import Compiled, Identifiability, number, param, vector
 from quadfault.model.effects.candidate import Candidate
 from quadfault.model.effects.physics import batch_of, rows_of
@@ -30,14 +31,18 @@ def com_offset_moment3(thrust, rx, ry, kz=0.0):
     return (ry * thrust, -rx * thrust, kz * thrust)
 
 
+#: the chain entry's parameters: (r_x, r_y), k_z
+PARAMETERS = fields("ComOffsetParameters", ("offset", 2), "yaw_trim")
+
+
 @jit(inline="always")
-def wrench_term(P, Q, i, a, m, f):
-    """The step's numbers: the body moment (3) of the step's collective thrust (parameters
-    r_x, r_y, k_z)."""
+def wrench_term(x, q, f):
+    """The step's numbers: the body moment (3) of the step's collective thrust."""
     thrust = 0.0
     for r in range(f.shape[0]):
         thrust += f[r]
-    M = com_offset_moment3(thrust, P[i, a], P[i, a + 1], P[i, a + 2])
+    r0 = PARAMETERS.offset
+    M = com_offset_moment3(thrust, x[r0], x[r0 + 1], x[PARAMETERS.yaw_trim])
     return M[0], M[1], M[2], 0.0, 0.0, 0.0
 
 
@@ -111,9 +116,6 @@ class ComOffset(Compiled):
         return cls(
             offset=tuple(values[:2]), yaw_trim=values[2] if len(values) > 2 else 0.0, **options
         )
-
-    def pack(self, n_rotors, dt, yaw_signs=None):
-        return tuple(self.offset) + (self.yaw_trim,), 0
 
     @classmethod
     def candidate(cls, ctx):

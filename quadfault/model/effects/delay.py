@@ -11,13 +11,17 @@ from typing import ClassVar
 import numpy as np
 
 from quadfault.jit import jit
+from quadfault.layout import REST, fields
 from quadfault.model.effects.base import Compiled, Identifiability, number
 from quadfault.model.effects.candidate import Candidate
 from quadfault.model.effects.kernels import replaced
 from quadfault.model.effects.physics import batch_of, rows_of
 
-#: memory slots of a delay before its knots
-HEADER = 4
+#: the chain entry's parameters (the delay [s], the knots kept) and memory: whether a knot
+#: the mean needed was dropped (``lost``), whether any was (``dropped``), the ring of knots'
+#: first slot and count, then the knots (:func:`zoh_integral`)
+PARAMETERS = fields("DelayParameters", "delay", "capacity")
+MEMORY = fields("DelayMemory", "lost", "dropped", "head", "count", ("knots", REST))
 
 
 # kernels ---------------------------------------------------------------------------------
@@ -29,13 +33,13 @@ def zoh_next1(c, f, t_prev, t):
 
 
 @jit
-def zoh_knot(buf, row, base, cap, head, count, x):
+def zoh_knot(buf, base, cap, head, count, x):
     """Slot of the last knot at or before ``x`` (the first knot when none is) of the knots
     stored as in :func:`zoh_integral`, by bisection."""
     lo, hi = 0, count  # the number of knots at or before x
     while lo < hi:
         mid = (lo + hi) // 2
-        if buf[row, base + (head + mid) % cap] <= x:
+        if buf[base + (head + mid) % cap] <= x:
             lo = mid + 1
         else:
             hi = mid
@@ -43,65 +47,65 @@ def zoh_knot(buf, row, base, cap, head, count, x):
 
 
 @jit
-def zoh_from(buf, row, base, cap, n, s, x, col):
+def zoh_from(buf, base, cap, n, s, x, col):
     """Integral up to ``x`` of column ``col`` from knot slot ``s`` at or before it."""
     k = base + cap + s * n + col
-    return buf[row, k] + buf[row, k + cap * n] * (x - buf[row, base + s])
+    return buf[k] + buf[k + cap * n] * (x - buf[base + s])
 
 
 @jit
-def zoh_integral(buf, row, base, cap, n, head, count, x, col):
+def zoh_integral(buf, base, cap, n, head, count, x, col):
     """Integral up to ``x`` of column ``col`` of a zero-order-hold signal stored as knots in
-    row ``row`` of ``buf`` from column ``base``: times ``[0, cap)``, integrals up to each
-    knot ``[cap, cap + cap n)`` and values ``[cap + cap n, cap + 2 cap n)`` (``n`` columns
-    per knot), knot ``j`` (0 the oldest of ``count``) in slot ``(head + j) % cap``. The
-    signal holds its first value before the first knot and its last after the last."""
-    return zoh_from(buf, row, base, cap, n, zoh_knot(buf, row, base, cap, head, count, x), x, col)
+    ``buf`` from index ``base``: times ``[0, cap)``, integrals up to each knot
+    ``[cap, cap + cap n)`` and values ``[cap + cap n, cap + 2 cap n)`` (``n`` columns per
+    knot), knot ``j`` (0 the oldest of ``count``) in slot ``(head + j) % cap``. The signal
+    holds its first value before the first knot and its last after the last."""
+    return zoh_from(buf, base, cap, n, zoh_knot(buf, base, cap, head, count, x), x, col)
 
 
 @jit
-def _delay(P, Q, i, a, m, f, t, dt):
+def _delay(x, q, f, t, dt):
     """Store the step's thrusts ``f`` (a tuple) as a knot, then return the mean over the
-    step of the zero-order hold delayed by ``P[i, a]`` [s]."""
+    step of the zero-order hold delayed by ``x[PARAMETERS.delay]`` [s]."""
     n = len(f)
-    cap = int(P[i, a + 1])
-    base = m + HEADER
-    head, count = int(Q[i, m + 2]), int(Q[i, m + 3])
+    cap = int(x[PARAMETERS.capacity])
+    base = MEMORY.knots
+    head, count = int(q[MEMORY.head]), int(q[MEMORY.count])
     if count < cap:
         slot = (head + count) % cap
         count += 1
     else:  # the oldest knot gives way
         slot = head
         head = (head + 1) % cap
-        Q[i, m + 1] = 1.0
+        q[MEMORY.dropped] = 1.0
     last = (slot + cap - 1) % cap
     for r in range(n):
         c = 0.0
         if count > 1:
             c = zoh_next1(
-                Q[i, base + cap + last * n + r],
-                Q[i, base + cap + cap * n + last * n + r],
-                Q[i, base + last],
+                q[base + cap + last * n + r],
+                q[base + cap + cap * n + last * n + r],
+                q[base + last],
                 t,
             )
-        Q[i, base + cap + slot * n + r] = c
-        Q[i, base + cap + cap * n + slot * n + r] = f[r]
-    Q[i, base + slot] = t
-    Q[i, m + 2], Q[i, m + 3] = head, count
-    d = P[i, a]
+        q[base + cap + slot * n + r] = c
+        q[base + cap + cap * n + slot * n + r] = f[r]
+    q[base + slot] = t
+    q[MEMORY.head], q[MEMORY.count] = head, count
+    d = x[PARAMETERS.delay]
     if d == 0.0:
         return f
     lo, hi = t - d, t + dt - d
-    if Q[i, m + 1] != 0.0 and lo < Q[i, base + head]:
-        Q[i, m] = 1.0  # a knot the mean needs was dropped (see delay_capacity)
+    if q[MEMORY.dropped] != 0.0 and lo < q[base + head]:
+        q[MEMORY.lost] = 1.0  # a knot the mean needs was dropped (see delay_capacity)
     out = f
     for r in range(n):
         out = replaced(
             out,
             r,
             (
-                zoh_integral(Q, i, base, cap, n, head, count, hi, r)
-                - zoh_integral(Q, i, base, cap, n, head, count, lo, r)
+                zoh_integral(q, base, cap, n, head, count, hi, r)
+                - zoh_integral(q, base, cap, n, head, count, lo, r)
             )
             / (hi - lo),
         )
@@ -109,10 +113,9 @@ def _delay(P, Q, i, a, m, f, t, dt):
 
 
 @jit(inline="always")
-def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
-    """The chain's entry: parameters delay, knots kept (cap); memory: lost, dropped, head,
-    count, then the knots (times; integrals; values)."""
-    return _delay(P, Q, i, a, m, f, t, dt)
+def thrust_step(x, q, f, t, dt, p, gen, streams, i):
+    """The chain's entry: each thrust the mean over the step of the delayed commands."""
+    return _delay(x, q, f, t, dt)
 
 
 def delay_capacity(delay: float, dt: float) -> int:
@@ -144,9 +147,9 @@ def zoh_cumulative(t_knots: np.ndarray, values: np.ndarray) -> np.ndarray:
 def _knot_after(buf, cap, s, x):
     """:func:`zoh_knot` of knots in order in ``buf[0, :cap]``, walking on from slot ``s``
     (the answer for a nearby earlier ``x``); a bisection when ``x`` is before it."""
-    if buf[0, s] > x:
-        return zoh_knot(buf, 0, 0, cap, 0, cap, x)
-    while s + 1 < cap and buf[0, s + 1] <= x:
+    if buf[s] > x:
+        return zoh_knot(buf, 0, cap, 0, cap, x)
+    while s + 1 < cap and buf[s + 1] <= x:
         s += 1
     return s
 
@@ -158,8 +161,8 @@ def _zoh_mean_rows(buf, cap, n, a, b, out):
         sb = _knot_after(buf, cap, sb, b[i])
         sa = _knot_after(buf, cap, sa, a[i])
         for m in range(n):
-            hi = zoh_from(buf, 0, 0, cap, n, sb, b[i], m)
-            lo = zoh_from(buf, 0, 0, cap, n, sa, a[i], m)
+            hi = zoh_from(buf, 0, cap, n, sb, b[i], m)
+            lo = zoh_from(buf, 0, cap, n, sa, a[i], m)
             out[i, m] = (hi - lo) / (b[i] - a[i])
 
 
@@ -173,7 +176,7 @@ def zoh_mean(t_knots: np.ndarray, values: np.ndarray, cumulative: np.ndarray, a,
     t = np.asarray(t_knots, dtype=float)
     v = np.asarray(values, dtype=float).reshape(len(t), -1)
     c = np.asarray(cumulative, dtype=float).reshape(len(t), -1)
-    buf = np.concatenate((t, c.ravel(), v.ravel()))[None]
+    buf = np.concatenate((t, c.ravel(), v.ravel()))
     batch = batch_of((a, ()), (b, ()))
     ra, rb = rows_of(batch, (a, ()), (b, ()))
     out = np.empty((len(ra), v.shape[1]))
@@ -206,15 +209,18 @@ class Delay(Compiled):
     def __post_init__(self):
         number(self.delay, "delay [s]", 0.0, 2.0)
 
-    def pack(self, n_rotors, dt, yaw_signs=None):
-        cap = delay_capacity(self.delay, dt)
-        return (self.delay, float(cap)), HEADER + cap * (1 + 2 * n_rotors)
+    def parameters(self, n_rotors, dt, yaw_signs=None):
+        return {"delay": self.delay, "capacity": float(delay_capacity(self.delay, dt))}
+
+    def memory_rest(self, values, n_rotors):
+        """The knots: for each, its time and each rotor's integral and value."""
+        return int(values["capacity"]) * (1 + 2 * n_rotors)
 
     @classmethod
     def lost(cls, memory) -> bool:
         """Whether the delay needed a knot it had dropped: steps much shorter than the
         physics step the rows were built for (:func:`delay_capacity`)."""
-        return bool(memory[0] != 0.0)
+        return bool(memory[MEMORY.lost] != 0.0)
 
     @classmethod
     def candidate(cls, ctx):

@@ -10,6 +10,7 @@ import numpy as np
 
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
+from quadfault.layout import fields
 from quadfault.model.effects.base import Compiled, Identifiability, vector
 from quadfault.model.effects.candidate import Candidate
 from quadfault.model.effects.kernels import body_velocity3, world_vector3
@@ -29,10 +30,15 @@ def drag_force3(R, v_air, k):
     return (-F[0], -F[1], -F[2])
 
 
+#: the chain entry's parameters
+PARAMETERS = fields("DragParameters", ("k", 3), ("air_velocity", 3))
+
+
 @jit(inline="always")
-def wrench_term(P, Q, i, a, m, f):
-    """The step's numbers: k (3), air velocity (3) (the entry's parameters)."""
-    return P[i, a], P[i, a + 1], P[i, a + 2], P[i, a + 3], P[i, a + 4], P[i, a + 5]
+def wrench_term(x, q, f):
+    """The step's numbers: k (3), air velocity (3)."""
+    k, air = PARAMETERS.k, PARAMETERS.air_velocity
+    return x[k], x[k + 1], x[k + 2], x[air], x[air + 1], x[air + 2]
 
 
 @jit(inline="always")
@@ -88,9 +94,6 @@ class Drag(Compiled):
             raise ConfigError(f"drag coefficients must be >= 0 [N s/m], got {k}")
         object.__setattr__(self, "k", k)
         object.__setattr__(self, "air_velocity", vector(self.air_velocity, 3, "drag air_velocity"))
-
-    def pack(self, n_rotors, dt, yaw_signs=None):
-        return (*self.k, *self.air_velocity), 0
 
     @classmethod
     def candidate(cls, ctx):

@@ -10,6 +10,7 @@ from typing import ClassVar
 import numpy as np
 
 from quadfault.jit import jit
+from quadfault.layout import fields
 from quadfault.model.effects.base import Compiled, Identifiability, number, param
 from quadfault.model.effects.candidate import Candidate
 from quadfault.model.effects.kernels import scaled
@@ -24,12 +25,15 @@ def ground_effect_factor1(height, rotor_radius):
     return 1.0 / (1.0 - q * q)
 
 
+#: the chain entry's parameters
+PARAMETERS = fields("GroundEffectParameters", "rotor_radius", "ground_z")
+
+
 @jit(inline="always")
-def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
-    """The chain's entry: parameters rotor radius, ground_z; the height at the step's
-    start."""
-    k = ground_effect_factor1(P[i, a + 1] - p[2], P[i, a])
-    return scaled(f, k)
+def thrust_step(x, q, f, t, dt, p, gen, streams, i):
+    """The chain's entry: the thrusts' gain at the height at the step's start."""
+    height = x[PARAMETERS.ground_z] - p[2]
+    return scaled(f, ground_effect_factor1(height, x[PARAMETERS.rotor_radius]))
 
 
 @jit
@@ -86,9 +90,6 @@ class GroundEffect(Compiled):
     @classmethod
     def fit_note(cls, params, selected):
         return " Height above the ground is taken as -z of the recording (ground at z = 0)."
-
-    def pack(self, n_rotors, dt, yaw_signs=None):
-        return (self.rotor_radius, self.ground_z), 0
 
     @classmethod
     def candidate(cls, ctx):

@@ -9,18 +9,22 @@ import numpy as np
 
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
+from quadfault.layout import ROTORS, fields
 from quadfault.model.effects.base import Compiled, Identifiability, vector
 from quadfault.model.effects.candidate import Candidate
 from quadfault.model.effects.kernels import replaced
 from quadfault.model.effects.thrust_scale import ThrustScale
 
+#: the chain entry's parameters: one efficiency per rotor
+PARAMETERS = fields("MotorEfficiencyParameters", ("eta", ROTORS))
+
 
 @jit(inline="always")
-def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
-    """The chain's entry: parameters eta_1 .. eta_n."""
+def thrust_step(x, q, f, t, dt, p, gen, streams, i):
+    """The chain's entry: each rotor's thrust times its ``eta``."""
     out = f
     for r in range(len(f)):
-        out = replaced(out, r, f[r] * P[i, a + r])
+        out = replaced(out, r, f[r] * x[PARAMETERS.eta + r])
     return out
 
 
@@ -76,12 +80,12 @@ class MotorEfficiency(Compiled):
             text += " eta_absolute: thrust calibrated by the measured rotor speeds."
         return text
 
-    def pack(self, n_rotors, dt, yaw_signs=None):
+    def parameters(self, n_rotors, dt, yaw_signs=None):
         if len(self.eta) != n_rotors:
             raise ConfigError(
                 f"motor_efficiency has {len(self.eta)} rotors, the vehicle {n_rotors}"
             )
-        return tuple(self.eta), 0
+        return {"eta": self.eta}
 
     @classmethod
     def candidate(cls, ctx):

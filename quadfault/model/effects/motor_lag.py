@@ -11,6 +11,7 @@ from typing import ClassVar
 import numpy as np
 
 from quadfault.jit import jit
+from quadfault.layout import ROTORS, fields
 from quadfault.model.effects.base import Compiled, Identifiability, number
 from quadfault.model.effects.candidate import Candidate
 from quadfault.model.effects.kernels import replaced
@@ -31,19 +32,26 @@ def lag_step1(y, f, g):
     return g * f + (1.0 - g) * y
 
 
+#: the chain entry's parameters and memory: whether the flight started, the step length and
+#: the gain of its last step, the lagged thrust of each rotor
+PARAMETERS = fields("MotorLagParameters", "tau")
+MEMORY = fields("MotorLagMemory", "started", "dt", "gain", ("thrust", ROTORS))
+
+
 @jit(inline="always")
-def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
-    """The chain's entry: parameter tau; memory: started, dt, gain, y_1 .. y_n."""
-    if Q[i, m + 1] != dt:  # the gain of this step length (cached)
-        Q[i, m + 1], Q[i, m + 2] = dt, lag_gain1(dt, P[i, a])
-    g = Q[i, m + 2]
-    started = Q[i, m] != 0.0
+def thrust_step(x, q, f, t, dt, p, gen, streams, i):
+    """The chain's entry: each rotor's thrust through the lag (the first step starts from
+    the commanded thrust)."""
+    if q[MEMORY.dt] != dt:  # the gain of this step length (cached)
+        q[MEMORY.dt], q[MEMORY.gain] = dt, lag_gain1(dt, x[PARAMETERS.tau])
+    g = q[MEMORY.gain]
+    started = q[MEMORY.started] != 0.0
     out = f
     for r in range(len(f)):
-        y = lag_step1(Q[i, m + 3 + r] if started else f[r], f[r], g)
-        Q[i, m + 3 + r] = y
+        y = lag_step1(q[MEMORY.thrust + r] if started else f[r], f[r], g)
+        q[MEMORY.thrust + r] = y
         out = replaced(out, r, y)
-    Q[i, m] = 1.0
+    q[MEMORY.started] = 1.0
     return out
 
 
@@ -113,9 +121,6 @@ class MotorLag(Compiled):
 
     def __post_init__(self):
         number(self.tau, "motor_lag tau [s]", 0.0, 5.0, open_lo=True)
-
-    def pack(self, n_rotors, dt, yaw_signs=None):
-        return (self.tau,), 3 + n_rotors
 
     @classmethod
     def candidate(cls, ctx):

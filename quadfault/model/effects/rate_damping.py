@@ -10,6 +10,7 @@ import numpy as np
 
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
+from quadfault.layout import fields
 from quadfault.model.effects.base import Compiled, Identifiability, param, vector
 from quadfault.model.effects.candidate import Candidate
 from quadfault.model.effects.physics import batch_of, rows_of
@@ -26,10 +27,15 @@ def rate_damping3(w, linear, quadratic):
     )
 
 
+#: the chain entry's parameters
+PARAMETERS = fields("RateDampingParameters", ("linear", 3), ("quadratic", 3))
+
+
 @jit(inline="always")
-def wrench_term(P, Q, i, a, m, f):
-    """The step's numbers: D1 (3), D2 (3) (the entry's parameters)."""
-    return P[i, a], P[i, a + 1], P[i, a + 2], P[i, a + 3], P[i, a + 4], P[i, a + 5]
+def wrench_term(x, q, f):
+    """The step's numbers: D1 (3), D2 (3)."""
+    d1, d2 = PARAMETERS.linear, PARAMETERS.quadratic
+    return x[d1], x[d1 + 1], x[d1 + 2], x[d2], x[d2 + 1], x[d2 + 2]
 
 
 @jit(inline="always")
@@ -103,9 +109,6 @@ class RateDamping(Compiled):
         if len(values) == 2:
             return cls(linear=values[0], quadratic=values[1], **options)
         return cls(linear=tuple(values[:3]), quadratic=tuple(values[3:]), **options)
-
-    def pack(self, n_rotors, dt, yaw_signs=None):
-        return (*self.linear, *self.quadratic), 0
 
     @classmethod
     def candidate(cls, ctx):

@@ -12,6 +12,7 @@ import numpy as np
 
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
+from quadfault.layout import ROTORS, fields
 from quadfault.model.effects.base import Compiled, Identifiability, number, param, vector
 from quadfault.model.effects.candidate import Candidate
 from quadfault.model.effects.physics import batch_of, rows_of
@@ -53,47 +54,43 @@ def rotor_inertia_moment1(yaw_rate_sum, kappa):
     return kappa * yaw_rate_sum
 
 
+#: the chain entry's parameters and memory: a step opened by the thrust stage (``fresh``),
+#: whether a previous step was seen, the step length, the step's yaw-signed sum of thrust
+#: rates, and each rotor's thrust of the last step
+PARAMETERS = fields("RotorInertiaParameters", "kappa", "momentum", ("yaw_signs", ROTORS))
+MEMORY = fields("RotorInertiaMemory", "fresh", "seen", "dt", "rate", ("thrust", ROTORS))
+
+
 @jit(inline="always")
-def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
-    """Marks the step (memory: fresh, seen, dt, rate (n), previous thrust (n)): the next
-    wrench call opens it."""
-    Q[i, m], Q[i, m + 2] = 1.0, dt
+def thrust_step(x, q, f, t, dt, p, gen, streams, i):
+    """Marks the step: the next wrench call opens it."""
+    q[MEMORY.fresh], q[MEMORY.dt] = 1.0, dt
     return f
 
 
 @jit
-def _rotor_rate(P, Q, i, a, m, f):
+def _rotor_rate(x, q, f):
     """The yaw-signed sum of the rotors' thrust rates over the current step [N/s] (computed
     at the step's first wrench call, from the thrusts the chain produced)."""
-    n = f.shape[0]
-    if Q[i, m] != 0.0:
-        for r in range(n):
+    if q[MEMORY.fresh] != 0.0:
+        s = 0.0
+        for r in range(f.shape[0]):
             rate = 0.0
-            if Q[i, m + 1] != 0.0:
-                rate = thrust_rate1(f[r], Q[i, m + 3 + n + r], Q[i, m + 2])
-            Q[i, m + 3 + r] = rate
-            Q[i, m + 3 + n + r] = f[r]
-        Q[i, m], Q[i, m + 1] = 0.0, 1.0
-    s = 0.0
-    for r in range(n):
-        s += Q[i, m + 3 + r] * P[i, a + 1 + r]
-    return s
-
-
-@jit
-def _momentum(P, i, a, f):
-    """The rotors' angular momentum [N m s] of the step's thrusts (:func:`rotor_momentum1`
-    with the parameters' yaw signs and momentum)."""
-    n = f.shape[0]
-    return rotor_momentum1(f, P[i, a + 1 : a + 1 + n], P[i, a + 1 + n])
+            if q[MEMORY.seen] != 0.0:
+                rate = thrust_rate1(f[r], q[MEMORY.thrust + r], q[MEMORY.dt])
+            s += rate * x[PARAMETERS.yaw_signs + r]
+            q[MEMORY.thrust + r] = f[r]
+        q[MEMORY.rate], q[MEMORY.fresh], q[MEMORY.seen] = s, 0.0, 1.0
+    return q[MEMORY.rate]
 
 
 @jit(inline="always")
-def wrench_term(P, Q, i, a, m, f):
+def wrench_term(x, q, f):
     """The step's numbers: the yaw moment of the step's thrust rates and the rotors' angular
-    momentum (parameters kappa, yaw signs s_1 .. s_n, momentum)."""
-    Mz = rotor_inertia_moment1(_rotor_rate(P, Q, i, a, m, f), P[i, a])
-    return 0.0, 0.0, Mz, _momentum(P, i, a, f), 0.0, 0.0
+    momentum (:func:`rotor_momentum1`)."""
+    Mz = rotor_inertia_moment1(_rotor_rate(x, q, f), x[PARAMETERS.kappa])
+    h = rotor_momentum1(f, x[PARAMETERS.yaw_signs :], x[PARAMETERS.momentum])
+    return 0.0, 0.0, Mz, h, 0.0, 0.0
 
 
 @jit(inline="always")
@@ -235,7 +232,7 @@ class RotorInertia(Compiled):
     def _yaw_signs(self, n_rotors):
         return self.signs(n_rotors)
 
-    def pack(self, n_rotors, dt, yaw_signs=None):
+    def parameters(self, n_rotors, dt, yaw_signs=None):
         signs = self.yaw_signs if self.yaw_signs is not None else yaw_signs
         if signs is None:
             signs = np.resize([-1.0, 1.0], n_rotors)
@@ -243,7 +240,11 @@ class RotorInertia(Compiled):
             raise ConfigError(
                 f"rotor_inertia has {len(signs)} yaw signs, the vehicle {n_rotors} rotors"
             )
-        return (self.kappa, *(float(s) for s in signs), self.momentum), 3 + 2 * n_rotors
+        return {
+            "kappa": self.kappa,
+            "momentum": self.momentum,
+            "yaw_signs": [float(s) for s in signs],
+        }
 
     @classmethod
     def candidate(cls, ctx):

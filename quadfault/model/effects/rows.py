@@ -1,8 +1,9 @@
 """The compiled effect chain's numbers: each built-in effect as an entry, N vehicles as rows.
 
 :func:`entry` turns an effect (its parameters, the flown vehicle's rotors, the physics step)
-into the numbers the chain's kernels read: its code (the registry's) and what its ``pack``
-lays out (:mod:`quadfault.model.effects.chain` has the layout); :func:`build` makes the
+into the numbers the chain's kernels read: its class (the layout's slot) and what its
+``pack`` lays out by its module's declared ``PARAMETERS`` and ``MEMORY``
+(:mod:`quadfault.model.effects.chain` has the layout); :func:`build` makes the
 :class:`~quadfault.model.effects.chain.EffectRows` of N vehicles, each with its own effects;
 :func:`write` replaces one vehicle's effects (domain randomisation: new parameters per
 episode) and :func:`reset` clears vehicles' memory for a new flight.
@@ -16,12 +17,9 @@ from __future__ import annotations
 import numpy as np
 
 import quadfault.model.effects.chain as C
-import quadfault.model.effects.registry as registry
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
-from quadfault.model.effects.base import Compiled
-from quadfault.model.effects.delay import delay_capacity
-from quadfault.model.effects.dispatch import columns, has_term, has_thrust
+from quadfault.model.effects.chain import ChainLayout, has_term, has_thrust
 from quadfault.model.generator_table import generator_table
 
 #: the generator a row's stream holds when it has no seeded wind (never drawn from)
@@ -29,22 +27,20 @@ _NEVER = np.random.default_rng(0)
 
 
 def entry(effect, n_rotors: int, dt: float, yaw_signs=None):
-    """``(code, parameters, memory slots)`` of a built-in ``effect`` on a vehicle with
-    ``n_rotors`` flown at physics step ``dt`` [s] (``yaw_signs``: the flown rotors' yaw-torque
-    signs, for effects that need them); None for an effect without an entry (mass and
-    inertia set the flown vehicle)."""
-    if effect.name not in C.CODES:
-        if registry.EFFECTS.get(effect.name) is type(effect):
-            return None
-        raise ConfigError(f"effect {effect.name!r} has no compiled form")
+    """``(effect class, parameters, memory slots)`` of a built-in ``effect`` on a vehicle
+    with ``n_rotors`` flown at physics step ``dt`` [s] (``yaw_signs``: the flown rotors'
+    yaw-torque signs, for effects that need them); None for an effect without an entry
+    (mass and inertia set the flown vehicle)."""
+    cls = type(effect)
+    if not (has_thrust(cls) or has_term(cls)):
+        return None
     params, memory = effect.pack(int(n_rotors), dt, yaw_signs)
-    return C.CODES[effect.name], tuple(float(x) for x in params), int(memory)
+    return cls, tuple(float(x) for x in params), int(memory)
 
 
-def _slot(entry) -> tuple:
-    """The layout slot ``(effect name, parameter width)`` an entry flies in."""
-    code, params, _ = entry
-    return registry.TABLE[code].name, len(params)
+def _slot(entry) -> type:
+    """The layout slot (an effect class) an entry flies in."""
+    return entry[0]
 
 
 def _place(layout, entries) -> list | None:
@@ -55,7 +51,7 @@ def _place(layout, entries) -> list | None:
     thrust-only one may trade places)."""
     used, last_thrust, last_wrench, out = set(), -1, -1, []
     for entry in entries:
-        cls = registry.TABLE[entry[0]]
+        cls = entry[0]
         thrust, wrench = has_thrust(cls), has_term(cls)
         low = max(last_thrust if thrust else -1, last_wrench if wrench else -1)
         key = _slot(entry)
@@ -101,46 +97,44 @@ def _merged(layout, entries) -> tuple:
     return tuple(out)
 
 
-def _columns(layout) -> list:
-    return columns(width for _, width in layout)
-
-
 def empty(n_rows: int, n_entries: int, n_memory: int, layout=(), *, n_rotors: int) -> C.EffectRows:
     """Rows without effects, room for ``n_entries`` entries and ``n_memory`` memory slots
-    per vehicle, of ``layout`` (``(effect name, parameter width)`` per slot: the loop
-    compiles the chain of this layout) on vehicles of ``n_rotors`` rotors."""
-    N, P = int(n_rows), sum(1 + width for _, width in layout)
-    return C.rows_class(layout, n_rotors)(
+    per vehicle, of ``layout`` (effect classes, one per slot: the loop compiles the chain of
+    this layout) on vehicles of ``n_rotors`` rotors."""
+    chain = ChainLayout(tuple(layout), int(n_rotors))
+    N = int(n_rows)
+    return C.EffectRows(
         np.full((N, n_entries), -1, dtype=np.int64),
         np.zeros((N, n_entries), dtype=np.int64),
         np.zeros((N, n_entries), dtype=np.int64),
-        np.zeros((N, max(P, 1))),
+        np.zeros((N, max(chain.size, 1))),
         np.zeros((N, max(n_memory, 1))),
         generator_table([_NEVER] * N),
+        chain,
     )
 
 
 def fits(fx: C.EffectRows, entries) -> bool:
     """Whether one vehicle's ``entries`` fit the rows' room and layout."""
     return (
-        len(entries) <= fx.code.shape[1]
+        len(entries) <= fx.slot.shape[1]
         and sum(m for _, _, m in entries) <= fx.memory.shape[1]
-        and _place(type(fx).layout, entries) is not None
+        and _place(fx.layout.effects, entries) is not None
     )
 
 
 def write(fx: C.EffectRows, i: int, entries) -> None:
     """Vehicle ``i`` flies ``entries`` (a list of :func:`entry` results, in chain order)
     from a fresh start (memory cleared); they must :func:`fits`."""
-    slots = _place(type(fx).layout, entries) if fits(fx, entries) else None
+    slots = _place(fx.layout.effects, entries) if fits(fx, entries) else None
     if slots is None:
         raise ConfigError("these effects need more room than the rows were built with")
-    at = _columns(type(fx).layout)
-    fx.code[i], fx.params[i] = -1, 0.0
+    at = fx.layout.columns()
+    fx.slot[i], fx.params[i] = -1, 0.0
     m = 0
-    for e, ((code, params, memory), k) in enumerate(zip(entries, slots)):
+    for e, ((_cls, params, memory), k) in enumerate(zip(entries, slots)):
         a = at[k]
-        fx.code[i, e], fx.param[i, e], fx.mem[i, e] = code, a + 1, m
+        fx.slot[i, e], fx.param[i, e], fx.mem[i, e] = k, a + 1, m
         fx.params[i, a] = m + 1.0  # flown, its memory from column m
         fx.params[i, a + 1 : a + 1 + len(params)] = params
         m += memory
@@ -171,30 +165,34 @@ def grown(fx: C.EffectRows, entries) -> C.EffectRows:
     and generators kept)."""
     if fits(fx, entries):
         return fx
-    old = type(fx).layout
+    old = fx.layout.effects
     layout = old if _place(old, entries) is not None else _merged(old, entries)
     out = empty(
-        len(fx.code),
-        max(len(entries), fx.code.shape[1]),
+        len(fx.slot),
+        max(len(entries), fx.slot.shape[1]),
         max(sum(m for _, _, m in entries), fx.memory.shape[1]),
         layout,
-        n_rotors=type(fx).n_rotors,
+        n_rotors=fx.layout.n_rotors,
     )
-    # the old slots keep their order in the merged layout: map their columns
+    # the old slots keep their order in the merged layout: map their slots and columns
     cols, k = np.zeros(fx.params.shape[1], dtype=np.int64), 0
-    new_at = _columns(layout)
-    for (key, width), a in zip(old, _columns(old)):
-        while layout[k] != (key, width):
+    moved = np.zeros(max(len(old), 1), dtype=np.int64)
+    new_at = out.layout.columns()
+    for j, (cls, a) in enumerate(zip(old, fx.layout.columns())):
+        while layout[k] is not cls:
             k += 1
+        width = fx.layout.width(j)
         cols[a : a + 1 + width] = np.arange(new_at[k], new_at[k] + 1 + width)
+        moved[j] = k
         k += 1
     if old:
         out.params[:, cols] = fx.params[:, : len(cols)]
-    E = fx.code.shape[1]
-    out.code[:, :E], out.mem[:, :E] = fx.code, fx.mem
-    out.param[:, :E] = np.where(fx.code >= 0, cols[np.minimum(fx.param, len(cols) - 1)], 0)
+    E = fx.slot.shape[1]
+    out.mem[:, :E] = fx.mem
+    out.slot[:, :E] = np.where(fx.slot >= 0, moved[np.maximum(fx.slot, 0)], -1)
+    out.param[:, :E] = np.where(fx.slot >= 0, cols[np.minimum(fx.param, len(cols) - 1)], 0)
     out.memory[:, : fx.memory.shape[1]] = fx.memory
-    out.streams.put(np.arange(len(fx.code)), fx.streams.generators)
+    out.streams.put(np.arange(len(fx.slot)), fx.streams.generators)
     return out
 
 
@@ -204,10 +202,11 @@ def reset(fx: C.EffectRows, rows) -> None:
     for i in np.atleast_1d(np.asarray(rows, dtype=np.int64)):
         fx.memory[i] = 0.0
         stream = _NEVER
-        for e in range(fx.code.shape[1]):
-            if fx.code[i, e] < 0:
+        for e in range(fx.slot.shape[1]):
+            if fx.slot[i, e] < 0:
                 break
-            seed = registry.TABLE[fx.code[i, e]].stream_seed(fx.params[i, fx.param[i, e] :])
+            cls = fx.layout.effects[fx.slot[i, e]]
+            seed = cls.stream_seed(fx.params[i, fx.param[i, e] :])
             if seed is not None:
                 stream = np.random.default_rng(seed)
         fx.streams.put([i], [stream])
@@ -216,10 +215,11 @@ def reset(fx: C.EffectRows, rows) -> None:
 def lost(fx: C.EffectRows) -> np.ndarray:
     """Vehicles (N,) bool with an entry that lost history it needed (a delay flown at steps
     much shorter than the physics step the rows were built for,
-    :func:`~quadfault.model.effects.delay.delay_capacity`)."""
-    out = np.zeros(len(fx.code), dtype=bool)
-    for i, e in zip(*np.nonzero(fx.code >= 0)):
-        out[i] |= registry.TABLE[fx.code[i, e]].lost(fx.memory[i, fx.mem[i, e] :])
+    ``Delay.lost``)."""
+    out = np.zeros(len(fx.slot), dtype=bool)
+    for i, e in zip(*np.nonzero(fx.slot >= 0)):
+        cls = fx.layout.effects[fx.slot[i, e]]
+        out[i] |= cls.lost(fx.memory[i, fx.mem[i, e] :])
     return out
 
 
@@ -266,9 +266,6 @@ def single(effect, n_rotors: int, dt: float, yaw_signs=None) -> Single:
     return Single([entry(effect, n_rotors, dt, yaw_signs)], n_rotors)
 
 
-Compiled.one_vehicle = staticmethod(single)
-
-
 __all__ = [
     "entry",
     "empty",
@@ -280,5 +277,4 @@ __all__ = [
     "lost",
     "Single",
     "single",
-    "delay_capacity",
 ]

@@ -16,6 +16,7 @@ import numpy as np
 
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
+from quadfault.layout import fields
 from quadfault.model.effects.base import Compiled, Identifiability, param, vector
 from quadfault.model.effects.candidate import Candidate
 from quadfault.model.effects.kernels import replaced
@@ -51,11 +52,17 @@ def recurve1(f, nominal, curve):
     return max(curve_thrust1(curve[0], curve[1], curve[2], u), 0.0)
 
 
+#: the chain entry's parameters: (a, b, c) of the curve and of the nominal one
+PARAMETERS = fields("ThrustCurveParameters", ("curve", 3), ("nominal", 3))
+
+
 @jit(inline="always")
-def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
-    """The chain's entry: parameters a, b, c of the curve, then a, b, c of the nominal one."""
-    curve = (P[i, a], P[i, a + 1], P[i, a + 2])
-    nominal = (P[i, a + 3], P[i, a + 4], P[i, a + 5])
+def thrust_step(x, q, f, t, dt, p, gen, streams, i):
+    """The chain's entry: each thrust through the curve of the command the nominal curve
+    maps to it."""
+    c, n = PARAMETERS.curve, PARAMETERS.nominal
+    curve = (x[c], x[c + 1], x[c + 2])
+    nominal = (x[n], x[n + 1], x[n + 2])
     out = f
     for r in range(len(f)):
         out = replaced(out, r, recurve1(f[r], nominal, curve))
@@ -170,9 +177,6 @@ class ThrustCurve(Compiled):
     @classmethod
     def from_values(cls, values, options):
         return cls(curve=tuple(values), **options)
-
-    def pack(self, n_rotors, dt, yaw_signs=None):
-        return (*self.curve, *self.nominal), 0
 
     @classmethod
     def candidate(cls, ctx):

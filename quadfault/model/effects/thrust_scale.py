@@ -7,15 +7,19 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from quadfault.jit import jit
+from quadfault.layout import fields
 from quadfault.model.effects.base import Compiled, Identifiability, number
 from quadfault.model.effects.candidate import Candidate
 from quadfault.model.effects.kernels import scaled
 
+#: the chain entry's parameters
+PARAMETERS = fields("ThrustScaleParameters", "scale")
+
 
 @jit(inline="always")
-def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
-    """The chain's entry: parameter s."""
-    return scaled(f, P[i, a])
+def thrust_step(x, q, f, t, dt, p, gen, streams, i):
+    """The chain's entry: every thrust times ``scale``."""
+    return scaled(f, x[PARAMETERS.scale])
 
 
 @dataclass(frozen=True)
@@ -40,9 +44,6 @@ class ThrustScale(Compiled):
     @classmethod
     def fit_note(cls, params, selected):
         return " Indistinguishable from motor_efficiency with equal eta (one class)."
-
-    def pack(self, n_rotors, dt, yaw_signs=None):
-        return (self.scale,), 0
 
     @classmethod
     def candidate(cls, ctx):

@@ -12,6 +12,7 @@ import numpy as np
 
 from quadfault.errors import ConfigError
 from quadfault.jit import jit
+from quadfault.layout import fields
 from quadfault.model.effects.base import Compiled, Identifiability, param, vector
 from quadfault.model.effects.candidate import Candidate
 from quadfault.model.effects.drag import Drag, drag_force3
@@ -28,37 +29,48 @@ def gust_step3(g, a, c, gen):
     return (a * g[0] + c * z0, a * g[1] + c * z1, a * g[2] + c * z2)
 
 
+#: the chain entry's parameters (``own_stream`` 1: the gusts draw from the wind's own
+#: generator, seeded ``seed``) and memory: the gust velocity, the step length and the gust
+#: update's decay and spread for it
+PARAMETERS = fields(
+    "WindParameters", ("velocity", 3), "gust", "gust_tau", ("k", 3), "own_stream", "seed"
+)
+MEMORY = fields("WindMemory", ("gust", 3), "dt", "decay", "spread")
+
+
 @jit(inline="always")
-def thrust_step(P, Q, streams, i, a, m, f, t, dt, p, gen):
-    """The gusts advance once per step (parameters: velocity (3), gust, gust_tau, k (3), own
-    stream (0/1), seed; memory: gust (3), dt, a, c), drawing from the wind's own seeded
-    stream (row ``i`` of the generator table ``streams``) when it has one, else from the
-    vehicle's generator ``gen``."""
-    sigma = P[i, a + 3]
+def thrust_step(x, q, f, t, dt, p, gen, streams, i):
+    """The gusts advance once per step, drawing from the wind's own seeded stream (row ``i``
+    of the generator table ``streams``) when it has one, else from the vehicle's generator
+    ``gen``; the thrusts pass unchanged."""
+    sigma = x[PARAMETERS.gust]
     if sigma > 0.0:
-        if Q[i, m + 3] != dt:
-            decay = math.exp(-dt / P[i, a + 4])
-            Q[i, m + 3], Q[i, m + 4], Q[i, m + 5] = dt, decay, sigma * math.sqrt(1 - decay * decay)
+        if q[MEMORY.dt] != dt:
+            decay = math.exp(-dt / x[PARAMETERS.gust_tau])
+            q[MEMORY.dt], q[MEMORY.decay] = dt, decay
+            q[MEMORY.spread] = sigma * math.sqrt(1 - decay * decay)
+        g0 = MEMORY.gust
         g = gust_step3(
-            (Q[i, m], Q[i, m + 1], Q[i, m + 2]),
-            Q[i, m + 4],
-            Q[i, m + 5],
-            generator_at(streams, i) if P[i, a + 8] != 0.0 else gen,
+            (q[g0], q[g0 + 1], q[g0 + 2]),
+            q[MEMORY.decay],
+            q[MEMORY.spread],
+            generator_at(streams, i) if x[PARAMETERS.own_stream] != 0.0 else gen,
         )
-        Q[i, m], Q[i, m + 1], Q[i, m + 2] = g[0], g[1], g[2]
+        q[g0], q[g0 + 1], q[g0 + 2] = g[0], g[1], g[2]
     return f
 
 
 @jit(inline="always")
-def wrench_term(P, Q, i, a, m, f):
+def wrench_term(x, q, f):
     """The step's numbers: wind drag k (3), air velocity with the step's gust (3)."""
+    k, v, g = PARAMETERS.k, PARAMETERS.velocity, MEMORY.gust
     return (
-        P[i, a + 5],
-        P[i, a + 6],
-        P[i, a + 7],
-        P[i, a] + Q[i, m],
-        P[i, a + 1] + Q[i, m + 1],
-        P[i, a + 2] + Q[i, m + 2],
+        x[k],
+        x[k + 1],
+        x[k + 2],
+        x[v] + q[g],
+        x[v + 1] + q[g + 1],
+        x[v + 2] + q[g + 2],
     )
 
 
@@ -112,8 +124,8 @@ class Wind(Compiled):
     def air_velocity(self) -> np.ndarray:
         """Air velocity now [m/s] (world): the steady wind plus the gusts (the protocol's
         one-vehicle memory)."""
-        single = self.__dict__.get("_single")
-        gust = np.zeros(3) if single is None else single.rows.memory[0, :3]
+        memory = self.memory()
+        gust = np.zeros(3) if memory is None else memory["gust"]
         return np.asarray(self.velocity) + gust
 
     def steady_force(self) -> np.ndarray:
@@ -157,20 +169,22 @@ class Wind(Compiled):
             return " Air velocity = force / drag coefficient (horizontal mean of kx, ky)."
         return " Force on the vehicle; no drag identified, so no air velocity."
 
-    def pack(self, n_rotors, dt, yaw_signs=None):
+    def parameters(self, n_rotors, dt, yaw_signs=None):
         own = self.seed is not None
-        return (
-            *self.velocity,
-            self.gust,
-            self.gust_tau,
-            *self.k,
-            float(own),
-            float(self.seed if own else 0),
-        ), 6
+        return {
+            "velocity": self.velocity,
+            "gust": self.gust,
+            "gust_tau": self.gust_tau,
+            "k": self.k,
+            "own_stream": float(own),
+            "seed": float(self.seed if own else 0),
+        }
 
     @classmethod
     def stream_seed(cls, params):
-        return int(params[9]) if params[8] != 0.0 else None
+        if params[PARAMETERS.own_stream] == 0.0:
+            return None
+        return int(params[PARAMETERS.seed])
 
     @classmethod
     def candidate(cls, ctx):
