@@ -4,6 +4,7 @@ value by that name, and the simulator flies it compiled -- one vehicle, and a ba
 per-vehicle parameters -- with the physics a numpy oracle gives."""
 
 import ast
+import hashlib
 import importlib
 import sys
 import textwrap
@@ -56,17 +57,22 @@ class RotorWear(Compiled):
 '''
 
 
+#: the module's name, after its text (numba's cache keeps the loops compiled for its
+#: effect under this name: an edited module is another one)
+NAME = "newcomer_wear_" + hashlib.sha256(MODULE.encode()).hexdigest()[:12]
+
+
 @pytest.fixture
 def wear(tmp_path, monkeypatch):
     """The newcomer's module imported, and its one registry row added."""
-    (tmp_path / "newcomer_wear.py").write_text(textwrap.dedent(MODULE), encoding="utf-8")
+    (tmp_path / f"{NAME}.py").write_text(textwrap.dedent(MODULE), encoding="utf-8")
     monkeypatch.syspath_prepend(str(tmp_path))
-    module = importlib.import_module("newcomer_wear")
+    module = importlib.import_module(NAME)
     cls = module.RotorWear
     monkeypatch.setattr(registry, "TABLE", registry.TABLE + (cls,))
     monkeypatch.setitem(registry.EFFECTS, cls.name, cls)
     yield module
-    sys.modules.pop("newcomer_wear", None)
+    sys.modules.pop(NAME, None)
 
 
 def test_the_kernel_names_every_value_it_reads():

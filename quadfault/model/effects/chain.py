@@ -48,6 +48,7 @@ the loop's own) when it has a seed.
 
 from __future__ import annotations
 
+import importlib
 import sys
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -65,6 +66,19 @@ except ImportError:  # pragma: no cover - exercised only without numba
 #: numbers in a wrench term: a flown flag (>= 0 flown, -1 not) and six numbers
 TERM = 7
 NO_TERM = (-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+class Borrowed(np.ndarray):
+    """A float array of the rows that compiled code reads and writes without reference
+    counts (:class:`BorrowedType`): the rows outlive every call of the chain (the plant, or
+    the caller, holds them), and a count taken and dropped at every use -- inside the
+    branch of each slot, at every vehicle-step -- costs atomic operations that the threads
+    of a parallel loop contend for."""
+
+
+def borrowed(a) -> Borrowed:
+    """``a`` as a :class:`Borrowed` view."""
+    return np.asarray(a).view(Borrowed)
 
 
 def kernels(effect_class):
@@ -122,8 +136,8 @@ class EffectRows(NamedTuple):
     #                   -1 after the last
     param: np.ndarray  # (N, E) int64: column of each entry's first parameter
     mem: np.ndarray  # (N, E) int64: column of each entry's first memory slot
-    params: np.ndarray  # (N, P) the layout's columns: per slot a marker, then parameters
-    memory: np.ndarray  # (N, Q) memory (zeros: a flight's start)
+    params: Borrowed  # (N, P) the layout's columns: per slot a marker, then parameters
+    memory: Borrowed  # (N, Q) memory (zeros: a flight's start)
     streams: np.ndarray  # (N, 6) GeneratorTable: a seeded wind's own generator per vehicle
     #                      (quadfault.model.generator_table; else one never drawn from)
     layout: ChainLayout  # the slots (part of the compiled type: one chain per layout)
@@ -413,8 +427,48 @@ if _types is not None:
             slots = ", ".join(f"{c.__module__}.{c.__qualname__}" for c in chain.effects)
             super().__init__(f"ChainLayout(({slots}), n_rotors={chain.n_rotors})")
 
-        def __reduce__(self):  # numba's cache pickles the loop's signature
-            return (LayoutType, (self.chain,))
+        def __reduce__(self):  # numba's cache pickles the loop's signature: by names
+            names = tuple((c.__module__, c.__qualname__) for c in self.chain.effects)
+            return (_layout_type, (names, self.chain.n_rotors))
+
+    class BorrowedType(_types.Array):
+        """The numba type of a :class:`Borrowed` array: an array (every array operation
+        applies; its views are arrays) whose native form holds no reference count."""
+
+        def __init__(self, dtype, ndim, layout, readonly=False, aligned=True):
+            super().__init__(
+                dtype,
+                ndim,
+                layout,
+                readonly=readonly,
+                aligned=aligned,
+                name=f"borrowed({dtype}, {ndim}d, {layout})",
+            )
+
+        def copy(self, dtype=None, ndim=None, layout=None, readonly=None):
+            return _types.Array(
+                self.dtype if dtype is None else dtype,
+                self.ndim if ndim is None else ndim,
+                self.layout if layout is None else layout,
+                readonly=not self.mutable if readonly is None else readonly,
+                aligned=self.aligned,
+            )
+
+
+def _layout_type(names, n_rotors):
+    """The :class:`LayoutType` of effect classes named ``(module, qualname)`` (numba's cache
+    index unpickles signatures with it); a layout no rows have when a class is gone (an
+    effect module renamed or removed: that cache entry is never used)."""
+    try:
+        effects = []
+        for module, qualname in names:
+            obj = importlib.import_module(module)
+            for part in qualname.split("."):
+                obj = getattr(obj, part)
+            effects.append(obj)
+    except (ImportError, AttributeError):
+        return LayoutType(ChainLayout((), -1))
+    return LayoutType(ChainLayout(tuple(effects), n_rotors))
 
 
 def _register() -> None:
@@ -442,6 +496,22 @@ def _register() -> None:
     @box(LayoutType)
     def _box(typ, val, c):  # the layout of the type (terms returned to Python)
         return c.pyapi.unserialize(c.pyapi.serialize_object(typ.chain))
+
+    @typeof_impl.register(Borrowed)
+    def _typeof_borrowed(value, c):
+        plain = typeof_impl(value.view(np.ndarray), c)
+        return BorrowedType(plain.dtype, plain.ndim, plain.layout, not plain.mutable)
+
+    register_model(BorrowedType)(models.ArrayModel)
+
+    @unbox(BorrowedType)
+    def _unbox_borrowed(typ, obj, c):  # an array's native form, its reference released
+        plain = typ.copy()
+        native = c.unbox(plain, obj)
+        c.context.nrt.decref(c.builder, plain, native.value)
+        ary = c.context.make_array(plain)(c.context, c.builder, value=native.value)
+        ary.meminfo = cgutils.get_null_value(ary.meminfo.type)
+        return NativeValue(ary._getvalue(), is_error=native.is_error)
 
     def chain_of(typ):
         """The layout of a numba type of rows or terms (None: no effects)."""
@@ -489,6 +559,7 @@ if jit.AVAILABLE:
 __all__ = [
     "NO_TERM",
     "TERM",
+    "Borrowed",
     "ChainLayout",
     "EffectRows",
     "Terms",

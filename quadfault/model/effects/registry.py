@@ -3,8 +3,8 @@
 :data:`TABLE` lists the effect classes, one module each (``quadfault/model/effects/<name>.py``:
 the parameters, the kernels, the packing into the compiled chain, the diagnosis' candidate,
 what a recording needs). An effect's code is its row in the table, never written by hand;
-the compiled (numba) chain's dispatchers are generated from the table
-(:mod:`quadfault.model.effects.dispatch`). The order of the rows is the order of the diagnosis'
+the compiled (numba) chain reads each effect's kernels and declared layout from its module
+(:mod:`quadfault.model.effects.chain`). The order of the rows is the order of the diagnosis'
 library. Everything that needs to know the effects -- the ``--effect`` parser, the diagnosis
 JSON loader, the compiled chain, the diagnosis' library and its identifiability gate -- reads
 them from here:

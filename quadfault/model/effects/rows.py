@@ -107,8 +107,8 @@ def empty(n_rows: int, n_entries: int, n_memory: int, layout=(), *, n_rotors: in
         np.full((N, n_entries), -1, dtype=np.int64),
         np.zeros((N, n_entries), dtype=np.int64),
         np.zeros((N, n_entries), dtype=np.int64),
-        np.zeros((N, max(chain.size, 1))),
-        np.zeros((N, max(n_memory, 1))),
+        C.borrowed(np.zeros((N, max(chain.size, 1)))),
+        C.borrowed(np.zeros((N, max(n_memory, 1)))),
         generator_table([_NEVER] * N),
         chain,
     )
