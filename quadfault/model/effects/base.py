@@ -8,9 +8,9 @@ from typing import ClassVar
 
 import numpy as np
 
+import quadfault.model.effects.rows as rows
 from quadfault import layout as named
 from quadfault.errors import ConfigError
-from quadfault.model.effects import rows
 from quadfault.model.effects.chain import kernels
 
 
