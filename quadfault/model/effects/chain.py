@@ -508,7 +508,8 @@ def _register() -> None:
     def _unbox_borrowed(typ, obj, c):  # an array's native form, its reference released
         plain = typ.copy()
         native = c.unbox(plain, obj)
-        c.context.nrt.decref(c.builder, plain, native.value)
+        if c.context.enable_nrt:  # (a kernel compiled without reference counts has none)
+            c.context.nrt.decref(c.builder, plain, native.value)
         ary = c.context.make_array(plain)(c.context, c.builder, value=native.value)
         ary.meminfo = cgutils.get_null_value(ary.meminfo.type)
         return NativeValue(ary._getvalue(), is_error=native.is_error)
