@@ -49,6 +49,7 @@ def _tiny(algo):
     )
 
 
+@pytest.mark.slow
 @pytest.mark.rl
 @pytest.mark.parametrize("algo", ["ppo", "sac"])
 def test_smoke_training_and_round_trip(algo, tmp_path):

@@ -211,6 +211,7 @@ def test_best_model_comes_from_fixed_seeded_episodes(tmp_path, capsys):
     np.testing.assert_allclose(again, data["results"][best], rtol=0, atol=1e-9)
 
 
+@pytest.mark.slow
 @pytest.mark.rl
 def test_learning_curve_over_seeds_with_the_baseline(tmp_path, capsys):
     pytest.importorskip("stable_baselines3")

@@ -118,6 +118,7 @@ def test_the_import_graph_has_no_cycles():
     assert _cycles(graph) == []
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "module",
     [

@@ -44,6 +44,7 @@ def _readable(sc, cfg, seed, vehicle=None, nominal=None, thrust_noise=None):
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "case",
     [

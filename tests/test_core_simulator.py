@@ -102,6 +102,7 @@ def _quadfault(*args, cwd):
     )
 
 
+@pytest.mark.slow
 def test_cli_simulate_writes_a_valid_recording(tmp_path):
     out = tmp_path / "flight.csv"
     r = _quadfault(
@@ -129,6 +130,7 @@ def test_cli_simulate_writes_a_valid_recording(tmp_path):
     assert len(again.stderr.strip().splitlines()) == 1 and "Traceback" not in again.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "args, message",
     [

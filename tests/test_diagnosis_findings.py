@@ -74,6 +74,7 @@ def test_a_fit_beyond_the_bounds_is_suspect_never_accepted():
     assert all(set(e) >= {"params", "improvement", "reason", "bounds"} for e in doc["rejected"])
 
 
+@pytest.mark.slow
 def test_every_fitted_effect_reports_bounds_and_fold_values(lag_and_drag):
     res = Diagnosis().fit(lag_and_drag)
     assert {"motor_lag", "drag"} <= set(res.effect_names)
@@ -94,6 +95,7 @@ def test_every_fitted_effect_reports_bounds_and_fold_values(lag_and_drag):
     assert [e.name for e in only.effects + only.suspect + only.rejected] == ["wind"]
 
 
+@pytest.mark.slow
 def test_channel_weights_are_fixed_before_any_fit(lag_and_drag):
     """The noise scale comes from the data and the nominal model only: the same whatever
     library is fitted, so a selected model can never set its own score's weights."""
@@ -146,6 +148,7 @@ def test_a_strong_localised_mismatch_is_never_consistent():
     assert Diagnosis().fit(rec).verdict == "consistent"
 
 
+@pytest.mark.slow
 def test_directions_are_reported_in_the_recordings_own_frame(tmp_path):
     rec = fly((fx.Wind((2.0, -1.0, 0.0), k=0.3),), seed=7)
     for frame in ("NED", "ENU"):
@@ -175,6 +178,7 @@ def test_two_effects_can_enter_in_one_step_as_a_pair(lag_and_drag):
     assert greedy.steps[0].cv is not greedy.steps[1].cv
 
 
+@pytest.mark.slow
 def test_measured_rotor_speeds_identify_the_motor_lag():
     """Rotor speeds that follow the command through a 40 ms lag, with the sidecar's k: the
     speed sampled in row k is the rotor's at t_k, reached under the commands before it."""

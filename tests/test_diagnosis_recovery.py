@@ -65,6 +65,7 @@ def test_drag_recovered():
     assert p["model"][-1] < 0.5 * p["nominal"][-1]  # held-out open-loop prediction improves
 
 
+@pytest.mark.slow
 def test_two_effects_recovered():
     res = diagnose("eff+drag", (fx.MotorEfficiency((1.0, 0.85, 1.0, 1.0)), fx.Drag(0.3)))
     names = res.effect_names

@@ -65,6 +65,7 @@ def test_significance_needs_the_interval_above_zero():
     assert not decisive(Gain(0.004, 0.05, 0.001, False))  # significant, too small to decide
 
 
+@pytest.mark.slow
 def test_weak_rotor_named_and_estimator_agrees(weak_rotor):
     _, res = weak_rotor
     assert res.verdict == "mismatch"

@@ -74,6 +74,7 @@ def test_front_docs_name_no_machine_paths_or_commits(doc):
     )
 
 
+@pytest.mark.slow
 def test_product_code_cites_the_user_docs():
     offenders = [
         str(p.relative_to(ROOT))

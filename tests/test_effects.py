@@ -188,6 +188,7 @@ def test_com_offset_moment_is_r_cross_thrust():
     np.testing.assert_allclose(M, cross(r, np.array([0.0, 0.0, 5.0])))
 
 
+@pytest.mark.slow
 def test_wind_gusts_are_seeded_and_steady_mean():
     w = fx.Wind((2.0, 0.0, 0.0), gust=0.5, gust_tau=0.5, seed=3)
     s = RigidBodyState.at_rest()

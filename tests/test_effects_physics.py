@@ -72,6 +72,7 @@ def test_battery_factor_is_one_at_the_reference_and_a_power_law():
     assert fx.battery_factor(11.0, 12.0, 2.0) == pytest.approx((11.0 / 12.0) ** 2)
 
 
+@pytest.mark.slow
 def test_rotor_inertia_hook_gives_kappa_times_the_thrust_step_over_the_step():
     """Through the plant protocol: the yaw moment over a physics step is
     ``kappa sum_i s_i df_i / dt`` for the step of produced thrust, the same at every
@@ -149,6 +150,7 @@ ONE_MODEL = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("effect", ONE_MODEL, ids=[e.name for e in ONE_MODEL])
 def test_library_with_the_true_parameters_reproduces_the_plant(effect):
     """Noise-free flight with one effect: the diagnosis' model of that effect at its true

@@ -33,6 +33,7 @@ def _structure(info: dict) -> dict:
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("info", ["light", "full"])
 @pytest.mark.parametrize("estimator", ESTIMATORS)
 def test_single_env_info_keeps_one_structure_across_reset_step_and_termination(estimator, info):
@@ -102,6 +103,7 @@ def _episode_steps_vector(env, reset=True) -> int:
     raise AssertionError("no episode end")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "kw, steps",
     [

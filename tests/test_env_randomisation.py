@@ -25,6 +25,7 @@ def _drawn(info) -> dict:
     return {e["name"]: e["params"] for e in info["effects"]}
 
 
+@pytest.mark.slow
 def test_reset_draws_every_range_from_the_env_generator():
     env = QuadFaultEnv("none", "hover", effects=RANGES, info="full")
     seen = []
@@ -49,6 +50,7 @@ def test_reset_draws_every_range_from_the_env_generator():
     assert step_info["effects"] == again["effects"]  # every step says what the episode flies
 
 
+@pytest.mark.slow
 def test_the_drawn_physics_acts_on_the_flight():
     """A steady wind along +x (drag through the wind) pushes the hovering vehicle to +x."""
     errs = {}
@@ -67,6 +69,7 @@ def test_no_effects_keeps_the_info_and_the_physics():
     assert "effects" not in info and env.plant.hook is None
 
 
+@pytest.mark.slow
 def test_vector_env_equals_single_envs_with_the_same_draws():
     N, seed = 3, 11
     kw = dict(
@@ -164,6 +167,7 @@ def _diagnosis(tmp_path):
     return path
 
 
+@pytest.mark.slow
 def test_make_with_a_model_flies_its_vehicle_and_fitted_effects(tmp_path):
     path = _diagnosis(tmp_path)
     env = gym.make("QuadFaultHover-v0", model=str(path), estimator="none", info="full")

@@ -45,6 +45,7 @@ def test_same_seed_same_episode_other_seed_other_scenario(env_id):
     assert sc_a != sc_c
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario", ["track", "rotor_loss"])
 def test_vector_env_matches_single_envs(scenario):
     n, seed, kw = (

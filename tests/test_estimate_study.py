@@ -12,6 +12,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "stu
 import estimate_study  # noqa: E402
 
 
+@pytest.mark.slow
 def test_every_arm_trains_and_flies_the_same_episodes(tmp_path):
     out = tmp_path / "study"
     assert (

@@ -79,6 +79,7 @@ def test_batched_irls_matches_single(flights):
     assert n_ok > 100  # the windows were really solved, not held by a guard
 
 
+@pytest.mark.slow
 def test_batched_improved_irls_matches_single(flights):
     """Change completion and output median (IRLSConfig.improved()) row by row, through a
     bad sample and a reset of one row in the middle."""

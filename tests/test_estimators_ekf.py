@@ -177,6 +177,7 @@ def test_ekf_step_equals_linear_kalman_filter_at_level_attitude(vehicle):
     np.testing.assert_allclose(ekf.P, P_new, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_compiled_filter_equals_the_numpy_oracle_over_a_flight(recording):
     """The one compiled filter (square-root update, structured F P F^T) against the numpy
     oracle (dense F, Joseph form) over 400 samples, offline and online."""

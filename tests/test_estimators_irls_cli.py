@@ -44,6 +44,7 @@ def flight_csv(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_simulate_then_estimate_round_trip(flight_csv, tmp_path):
     est = tmp_path / "est.csv"
     r = _quadfault(
@@ -79,6 +80,7 @@ def test_removed_backend_option_is_a_one_line_error(flight_csv, tmp_path):
     assert not (tmp_path / "a.csv").exists()
 
 
+@pytest.mark.slow
 def test_estimate_improved_irls_records_its_options(flight_csv, tmp_path):
     est = tmp_path / "imp.csv"
     r = _quadfault("estimate", flight_csv, "--improved", "--out", est, "--quiet", cwd=tmp_path)
@@ -101,6 +103,7 @@ def test_estimate_improved_irls_records_its_options(flight_csv, tmp_path):
     assert bad.returncode == 2 and "--improved" in bad.stderr and not (tmp_path / "x.csv").exists()
 
 
+@pytest.mark.slow
 def test_estimate_ekf_through_the_registry(flight_csv, tmp_path):
     pytest.importorskip("estimators.ekf")
     est = tmp_path / "ekf.csv"
@@ -112,6 +115,7 @@ def test_estimate_ekf_through_the_registry(flight_csv, tmp_path):
     assert len(read_estimate_csv(est)["t"]) == len(read_recording(flight_csv))
 
 
+@pytest.mark.slow
 def test_estimate_error_exits(flight_csv, tmp_path):
     rec = read_recording(flight_csv)
     imu = Recording(

@@ -45,6 +45,7 @@ def _troubled_rows(rec):
     return rows
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "cfg", [IRLSConfig(), IRLSConfig.improved(prefilter=0.0), IRLSConfig.improved()]
 )
@@ -66,6 +67,7 @@ def test_online_update_follows_the_plain_rules_through_every_guard(fault_flight,
         assert est.change_events == ref.completion.events >= 1
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("improved", [False, True])
 def test_compiled_online_update_equals_run(fault_flight, improved):
     cfg = IRLSConfig.improved() if improved else IRLSConfig()

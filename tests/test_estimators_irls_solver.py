@@ -31,6 +31,7 @@ def _problem(seed, x_true):
     return H, q, A, b
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "seed,x_true",
     [
@@ -118,6 +119,7 @@ def _window(seed, m):
     return c, b, H
 
 
+@pytest.mark.slow
 def test_window_history_records_each_round():
     """The diagnostics carry the paper's KKT figure data when record_history is on."""
     m = 9

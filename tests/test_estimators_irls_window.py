@@ -81,6 +81,7 @@ def test_window_solver_agrees_with_an_exact_scipy_solve(fault_flight):
         np.testing.assert_allclose(diag.weights, w_ref, rtol=0, atol=1e-5)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scaling", ["reference", "paper"])
 def test_window_with_six_rotors_equals_the_oracle(scaling):
     """The kernels are written for any number of rotors."""

@@ -39,6 +39,7 @@ def _same_views(compiled, python):
         assert a.__array_interface__["data"][0] == b.__array_interface__["data"][0], name
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("num", [1, 3])
 @pytest.mark.parametrize("n_rotors", [4, 6])
 def test_compiled_pieces_are_the_declared_pieces(num, n_rotors):

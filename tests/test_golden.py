@@ -18,6 +18,11 @@ record = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(record)
 
 
+#: seeded flights, estimates and rollouts of 10-80 s each: the full suite runs them (CI);
+#: run this file before landing a change that must not move a number
+pytestmark = pytest.mark.slow
+
+
 @pytest.fixture(scope="module")
 def golden():
     return dict(np.load(GOLDEN))

@@ -132,6 +132,7 @@ def _cli(*args):
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "case", ["truncated", "wrong_format", "no_motors", "empty_log", "bad_log_number"]
 )

@@ -157,6 +157,7 @@ def _cli(*args):
     )
 
 
+@pytest.mark.slow
 def test_cli_detects_the_format_and_warns_on_one_line(tmp_path):
     path = tmp_path / "flight.ulg"
     px4_flight(path)
@@ -174,6 +175,7 @@ def test_cli_detects_the_format_and_warns_on_one_line(tmp_path):
     assert rec.vehicle.mass == 1.5 and rec.rotor_speed is not None
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", ["truncated", "wrong_format", "forced_format", "no_motors"])
 def test_bad_input_gives_one_line(tmp_path, case):
     path = tmp_path / "flight.ulg"
@@ -207,6 +209,7 @@ def test_commands_of_7e_10_never_run(tmp_path):
         build_recording(log)
 
 
+@pytest.mark.slow
 def test_vehicle_flags_only_where_they_apply(tmp_path):
     from tests.support.field_logs import blackbox_log
 

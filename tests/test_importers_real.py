@@ -54,6 +54,7 @@ def eschmann():
     return {n: import_eschmann(ESCHMANN / f"{n}.csv.gz") for n in ("log10", "log15", "log16")}
 
 
+@pytest.mark.slow
 def test_eschmann_at_rest_reads_minus_g_in_frd():
     _need(ESCHMANN)
     from quadfault.io.importers.eschmann import import_eschmann
@@ -65,6 +66,7 @@ def test_eschmann_at_rest_reads_minus_g_in_frd():
     assert np.abs(rec.omega[rest]).max() < 0.05  # [rad/s], a still gyro
 
 
+@pytest.mark.slow
 def test_eschmann_thrust_curve_and_rates(eschmann):
     scales = []
     for name, rec in eschmann.items():
@@ -131,6 +133,7 @@ def nanodrone():
     return {p.name.split(".")[0]: import_nanodrone(p) for p in sorted(NANODRONE.glob("*.csv.gz"))}
 
 
+@pytest.mark.slow
 def test_nanodrone_physical_sanity(nanodrone):
     assert len(nanodrone) == 9
     for name, rec in nanodrone.items():
@@ -174,6 +177,7 @@ def _m3_share(rec):
     return float(np.mean(u[:, 2]) / np.mean(u))
 
 
+@pytest.mark.slow
 def test_crazypad_motor_logs(crazypad):
     motor = {k: r for k, r in crazypad.items() if k.startswith("motor_data")}
     assert len(motor) == 18
@@ -261,6 +265,7 @@ def test_ardupilot_logs_import_or_say_what_is_missing(path):
     assert -1.3 * G < np.median(rec.accel[:, 2]) < -0.7 * G
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "path", _autopilot_logs(["*/*.bbl", "*/*.BBL", "*/*.bfl", "*/*.BFL"]), ids=lambda p: p.name
 )

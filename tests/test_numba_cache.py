@@ -103,6 +103,7 @@ def _run_on_a_terminal(code: str, env: dict) -> tuple[int, str]:
     return proc.returncode, out.decode(errors="replace")
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(os.name != "posix", reason="needs a POSIX pseudo-terminal")
 def test_read_only_install_caches_in_the_user_folder_and_notices_the_first_compile(tmp_path):
     """A read-only copy of the package (a system-wide install): the kernels are cached in the
@@ -153,6 +154,7 @@ def outer(x):
 """
 
 
+@pytest.mark.slow
 def test_an_inner_kernel_runs_from_kernels_and_from_python_and_is_cached(tmp_path):
     """``jit(inner=True)``: no CPython wrapper in the form kernels call; a call from Python
     runs a form with one; both are cached, so a second process compiles nothing."""

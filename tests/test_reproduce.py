@@ -70,6 +70,7 @@ def _check_contract(doc):
             assert all(sd <= rm * 1.001 for sd, rm in zip(s["std"], s["rmse"]))
 
 
+@pytest.mark.slow
 def test_existing_outputs_are_refused_before_any_work(tmp_path):
     (tmp_path / "metrics.json").write_text("{}")
     r = _cli("--quick", "--out", str(tmp_path))
@@ -79,6 +80,7 @@ def test_existing_outputs_are_refused_before_any_work(tmp_path):
     assert (tmp_path / "metrics.json").read_text() == "{}"
 
 
+@pytest.mark.slow
 def test_bad_flags_are_one_line_errors(tmp_path):
     r = _cli("--quick", "--out", str(tmp_path / "x"), "--workers", "0")
     assert r.returncode == 2 and "--workers" in r.stderr and "Traceback" not in r.stderr

@@ -79,6 +79,7 @@ def flight(tmp_path_factory):
     return rec, path
 
 
+@pytest.mark.slow
 def test_each_entry_cli_reproduces_its_series(flight, tmp_path):
     rec, path = flight
     variant = Variant("improved", improved=True, median=21)
@@ -199,6 +200,7 @@ def test_every_baseline_has_a_keyed_partner_with_the_same_post_processing():
         VARIANTS[0].partner_args("kalman", 0.1)
 
 
+@pytest.mark.slow
 def test_partners_are_tuned_on_the_calibration_flight_never_on_the_scored_ones(monkeypatch):
     """Every tuning search (choose_partner) sees the calibration flight only, and on the
     scored flights each partner runs once per scenario with the tuning chosen there."""

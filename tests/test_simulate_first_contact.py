@@ -33,6 +33,7 @@ def _tracking_error(rec, scenario):
     return np.linalg.norm(rec.position - scenario.trajectory(rec.t).position, axis=1)
 
 
+@pytest.mark.slow
 def test_the_readme_example_stays_physical_for_80_s(tmp_path):
     """The README's example flies the paper's combined scenario unsaturated: the rotor at
     eta = 0.5 gets more than thrust-to-weight 2 and the vehicle stays on the circle."""

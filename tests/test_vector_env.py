@@ -104,6 +104,7 @@ def test_rows_sharing_a_scenario_do_not_leak_it_to_other_rows():
             np.testing.assert_allclose(info["eta_true"][i], inf["eta_true"], atol=1e-12)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("estimator", ["ekf", "rls", "ukf", "truth", "none"])
 def test_matches_single_envs_in_motor_mode_until_crashes(estimator):
     """Full-range random motor commands crash or tilt the vehicles: termination reasons,
