@@ -138,10 +138,12 @@ class RLSConfig:
     ) -> RLSConfig:
         """The configuration of ``quadfault estimate --estimator rls [--forgetting L]
         [--prefilter TAU]``."""
-        changes = {} if forgetting is None else {"forgetting": forgetting}
-        if prefilter is not None:
-            changes["prefilter"] = float(prefilter)
-        return cls(**changes)
+        base = cls()
+        return replace(
+            base,
+            forgetting=base.forgetting if forgetting is None else forgetting,
+            prefilter=base.prefilter if prefilter is None else float(prefilter),
+        )
 
     def replace(self, **changes) -> RLSConfig:
         return replace(self, **changes)
