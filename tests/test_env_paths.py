@@ -156,6 +156,7 @@ def test_v0_ids_keep_their_step_limit_and_reward():
         "QuadFaultHover-v1",
         "QuadFaultTrack-v0",
         "QuadFaultRotorLoss-v0",
+        "QuadFaultRotorLossComplete-v0",
     }
 
 
