@@ -338,3 +338,22 @@ def test_the_uncertainty_of_a_parameter_without_signal_does_not_overflow():
     assert np.all(np.isfinite(sd)) and sd[0] > 1e150 and sd[1] == pytest.approx(1e-150)
     sd = _pinv_diag_sqrt(np.diag([1e-310, 0.0, 1.0]), 1e-300)  # cut as pinv cuts it
     np.testing.assert_allclose(sd, [1e-150, 1e-150, 1.0])
+
+
+def test_an_implausible_battery_voltage_is_not_fitted():
+    """The importer flags a voltage that is not the pack's (``meta.import.battery``): the
+    diagnosis names battery_thrust as not identifiable with that reason instead of fitting
+    the thrust to it."""
+    effect = fx.BatteryThrust(exponent=2.0, v_start=4.2, v_end=3.7)
+    rec = simulate(named_scenario("nominal", duration=4.0), seed=0, effects=(effect,))
+    rec = dataclasses.replace(rec, vbat=4.2 - 0.5 * rec.t / effect.duration)  # as simulate's CLI
+    why = "5.80-5.90 V per cell in flight on 1 cell: outside 3-4.35 V"
+    flagged = dataclasses.replace(
+        rec, meta={**rec.meta, "import": {"battery": {"plausible": False, "why": why}}}
+    )
+    config = DiagnosisConfig(effects=("battery_thrust", "thrust_scale"))
+    res = Diagnosis(config).fit(flagged)
+    skipped = {n["name"]: n["reason"] for n in res.not_identifiable}
+    assert "battery_thrust" in skipped and why in skipped["battery_thrust"]
+    assert "battery_thrust" not in res.effect_names
+    assert "battery_thrust" in {c.name for c in build_library(prepare(rec), ("battery_thrust",))}

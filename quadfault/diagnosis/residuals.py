@@ -113,7 +113,9 @@ class Replay:
         thrust_curve: the nominal ``(a, b, c)`` command-to-thrust curve of a ``u``-command
             recording (``f = a + b u + c u^2``), None for thrust commands.
         vbat: battery voltage [V] at each interval's midpoint (M,) (gaps in the stream
-            interpolated), or None when not logged.
+            interpolated), or None when not logged or not usable.
+        vbat_unusable: why a logged voltage is not used ("" when it is): the importer found
+            it implausible for the pack.
     """
 
     vehicle: Vehicle
@@ -142,6 +144,7 @@ class Replay:
     rotor_k_source: str = ""
     thrust_curve: tuple | None = None
     vbat: np.ndarray | None = None
+    vbat_unusable: str = ""
 
     @property
     def has_pose(self) -> bool:
@@ -417,6 +420,7 @@ def prepare(
         k_source,
         curve,
         vbat,
+        _voltage_unusable(recording),
     )
     later = iter(
         [rp.block_mean(x) for x in (accel, None if W is None else rotor_k * f2) if x is not None]
@@ -426,10 +430,19 @@ def prepare(
     return rp
 
 
+def _voltage_unusable(recording: Recording) -> str:
+    """Why the logged battery voltage cannot be used ("" when it can): the importer's check
+    found it implausible for the pack (``meta.import.battery.plausible``, docs/formats.md)."""
+    battery = ((recording.meta or {}).get("import") or {}).get("battery") or {}
+    if battery.get("plausible", True):
+        return ""
+    return "battery voltage implausible for the pack: " + str(battery.get("why", "see the sidecar"))
+
+
 def _interval_voltage(recording: Recording, mean) -> np.ndarray | None:
     """Battery voltage at the (merged) interval midpoints, dropouts (NaN, <= 0) interpolated;
-    None without a usable ``vbat`` column."""
-    if recording.vbat is None:
+    None without a usable ``vbat`` column (or one the importer found implausible)."""
+    if recording.vbat is None or _voltage_unusable(recording):
         return None
     t, v = recording.t, np.asarray(recording.vbat, dtype=float)
     ok = np.isfinite(v) & (v > 0)

@@ -150,6 +150,8 @@ class Candidate:
         if self.needs_pose and not rp.has_pose:
             return "no position, velocity and attitude in the log"
         missing = [need for need in self.requires if getattr(rp, need, None) is None]
+        if "vbat" in missing and getattr(rp, "vbat_unusable", ""):
+            return rp.vbat_unusable
         if missing:
             names = {"vbat": "battery voltage"}
             return "no " + ", ".join(names.get(m, m) for m in missing) + " in the log"
