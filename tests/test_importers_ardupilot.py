@@ -298,3 +298,25 @@ def test_a_quadplane_imports_its_lift_motors(tmp_path):
     assert any("QuadPlane" in w for w in rec.meta["import"]["warnings"])
     assert "RCOU C[5, 6, 7, 8]" in rec.meta["import"]["commands"]  # Motor 1-4, not throttle
     np.testing.assert_allclose(np.median(rec.commands_u, axis=0), HOVER, atol=0.02)
+
+
+def test_ground_spool_up_the_land_detector_calls_flight_is_left_out(tmp_path):
+    """A land detector that says "not landed" while the vehicle still sits on the ground
+    (here from 0.5 s after arming, 1.5 s before lift-off) does not put that ground time into
+    the flight: the span starts where the vehicle's own height leaves its resting value."""
+    from quadfault.io.importers.ardupilot import read_ardupilot
+    from quadfault.io.importers.field_log import TRANSITION_S, build_recording
+
+    path = tmp_path / "flight.bin"
+    dataflash_flight(path)
+    log = read_ardupilot(path)
+    log.landed = (np.array([1.0, 2.5, T_LAND - 0.5]), np.array([True, False, True]))
+    rec = build_recording(log)
+    lift = T_TAKEOFF + 0.5  # where the synthetic vehicle's height leaves the ground
+    assert rec.t[0] == pytest.approx(lift + TRANSITION_S, abs=0.02)
+    assert "on the ground left out" in rec.meta["import"]["flight_span_from"]
+    log.landed = (np.array([1.0, 2.5, T_LAND - 0.5]), np.array([True, False, True]))
+    log.streams = {k: v for k, v in log.streams.items() if k not in ("pos", "vel")}
+    log.invalid = {}
+    without_height = build_recording(log)  # no height: the land detector alone decides
+    assert without_height.t[0] == pytest.approx(2.5 + TRANSITION_S, abs=0.02)

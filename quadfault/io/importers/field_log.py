@@ -11,8 +11,11 @@ for all of them:
    1 %: a command of 7e-10 is not running) and the vehicle is airborne -- by the log's land
    detector where it has one, else by a collective command above idle (``IDLE_MARGIN`` of
    the way from idle to the flight's typical command; a log whose lowest running command
-   is above ``NO_IDLE_RATIO`` of the typical one has no idle, and all of it flies); spans shorter than ``MIN_FLIGHT_S``
-   are dropped and ``TRANSITION_S`` is cut from each end (take-off and landing). Armed idle,
+   is above ``NO_IDLE_RATIO`` of the typical one has no idle, and all of it flies); with a
+   land detector and a position, each airborne run starts where the vehicle leaves the
+   height it rested at while the detector said landed and ends where it is back at rest
+   (``LIFT_M``, :func:`lift_off`), so ground spool-up that the detector already calls
+   flight stays out; spans shorter than ``MIN_FLIGHT_S`` are dropped and ``TRANSITION_S`` is cut from each end (take-off and landing). Armed idle,
    ground contact and the time between flights become gaps (``keep_all`` keeps them);
 3. **invalid position or velocity** (the log's validity flags) is never written: those rows
    are dropped (gaps) when they are few, else the pose is left out and the recording is
@@ -47,6 +50,8 @@ IDLE_MARGIN = 0.4  # airborne without landed flags: this far from idle to typica
 NO_IDLE_RATIO = 0.6  # a lowest running command above this share of the typical is no idle
 MIN_FLIGHT_S = 2.0  # shorter airborne spans are not flights [s]
 TRANSITION_S = 1.0  # cut after take-off and before landing [s]
+LIFT_M = 0.15  # height change from the resting height that marks lift-off / touch-down [m]
+REST_S = 0.3  # the resting height: median over this long before / after a run [s]
 POSE_VALID_FRACTION = 0.8
 CALIBRATION_FRACTION = 0.3
 ASSUMED_MASS = 1.0  # [kg]
@@ -146,13 +151,47 @@ def _runs(flag: np.ndarray) -> list:
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
 
 
-def flight_spans(t: np.ndarray, u: np.ndarray, landed: np.ndarray | None = None) -> tuple:
+def lift_off(z: np.ndarray, ground_before: float, ground_after: float) -> tuple:
+    """``(i0, i1)``: the first and one past the last row of an airborne run ``z`` (height [m],
+    either sign convention) where the vehicle is off the ground, from its own motion: more
+    than ``LIFT_M`` from the resting height before the run (``ground_before``) and after it
+    (``ground_after``). A NaN resting height (nothing logged at rest: the log starts or ends
+    in the air) keeps that end of the run, and so does a vehicle already off the ground
+    there; a NaN height counts as unknown."""
+    n = len(z)
+    i0, i1 = 0, n
+    ok = np.isfinite(z)
+    if np.isfinite(ground_before):
+        off = ok & (np.abs(z - ground_before) > LIFT_M)
+        i0 = int(np.argmax(off)) if off.any() else 0
+    if np.isfinite(ground_after):
+        off = ok & (np.abs(z - ground_after) > LIFT_M)
+        i1 = n - int(np.argmax(off[::-1])) if off.any() else n
+    return (i0, i1) if i1 > i0 else (0, n)
+
+
+def _resting_height(t: np.ndarray, z: np.ndarray, sel: np.ndarray) -> float:
+    """Median height over the rows ``sel``, or NaN when there is no finite one or the height
+    moves there by more than half of ``LIFT_M`` (not at rest: thrown, falling, a gap)."""
+    zs = z[sel & np.isfinite(z)]
+    if zs.size == 0 or np.ptp(zs) > 0.5 * LIFT_M:
+        return float("nan")
+    return float(np.median(zs))
+
+
+def flight_spans(
+    t: np.ndarray, u: np.ndarray, landed: np.ndarray | None = None, z: np.ndarray | None = None
+) -> tuple:
     """Free-flight spans of a log: ``([(t0, t1), ...], how)``.
 
     Airborne means a motor runs and the land detector says not landed (``landed``, per row),
     or without one, the mean command is above idle by ``IDLE_MARGIN`` of the way to the
-    flight's typical (75th-percentile) command. Spans shorter than ``MIN_FLIGHT_S`` are
-    dropped; ``TRANSITION_S`` is cut from each end of the rest.
+    flight's typical (75th-percentile) command. With a land detector and the vehicle's height
+    ``z`` [m], each airborne run starts where the vehicle leaves the height it rested at
+    while the detector said landed, and ends where it is back at rest (:func:`lift_off`): a
+    detector that fires while the vehicle still spools up on the ground does not put ground
+    time into the flight. Spans shorter than
+    ``MIN_FLIGHT_S`` are dropped; ``TRANSITION_S`` is cut from each end of the rest.
     """
     running = np.any(u > RUNNING, axis=1)
     if not running.any():
@@ -177,10 +216,21 @@ def flight_spans(t: np.ndarray, u: np.ndarray, landed: np.ndarray | None = None)
                 f"{idle:.3f}, typical {typical:.3f})"
             )
     spans = []
+    trimmed = 0.0
+    logged = np.all(np.isfinite(u), axis=1)
     for i0, i1 in _runs(air):
+        if z is not None and landed is not None:  # at rest: the detector says landed
+            rest = logged & landed
+            before = rest & (t < t[i0]) & (t >= t[i0] - REST_S)
+            after = rest & (t > t[i1 - 1]) & (t <= t[i1 - 1] + REST_S)
+            j0, j1 = lift_off(z[i0:i1], _resting_height(t, z, before), _resting_height(t, z, after))
+            trimmed += float(t[i0 + j0] - t[i0]) + float(t[i1 - 1] - t[i0 + j1 - 1])
+            i0, i1 = i0 + j0, i0 + j1
         a, b = float(t[i0]) + TRANSITION_S, float(t[i1 - 1]) - TRANSITION_S
         if b - a >= MIN_FLIGHT_S - 2 * TRANSITION_S and b > a:
             spans.append((a, b))
+    if trimmed > 0.0:
+        how += f", lift-off and touch-down from the height ({trimmed:.1f} s on the ground left out)"
     return spans, how
 
 
@@ -376,9 +426,10 @@ def build_recording(
             "l"
         ]
         landed = np.nan_to_num(landed, nan=1.0) > 0.5  # before its first message: landed
-    spans, how = flight_spans(t, res["u"], landed)
+    height = res["pos"][:, 2] if "pos" in res else None
+    spans, how = flight_spans(t, res["u"], landed, height)
     if landed is not None and not spans and np.any(res["u"] > RUNNING):
-        spans, how = flight_spans(t, res["u"], None)
+        spans, how = flight_spans(t, res["u"], None, height)
         how += f" (the land detector, {log.landed_source}, never reports a flight)"
     if not np.any(res["u"] > RUNNING):
         if log.armed is False:
