@@ -14,7 +14,7 @@ arguments (seeds travel inside the task), so every backend gives the same result
 
 Sweeps on it: :func:`agents.evaluate.evaluate` (agents x scenarios x seeds;
 ``quadfault evaluate --backend ray --workers 8``) and the blinded diagnosis study
-(``python benchmarks/studies/blinded_study.py --backend ray``).
+(``python benchmarks/blinded_study.py --backend ray``).
 """
 
 from __future__ import annotations

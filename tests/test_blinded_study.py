@@ -4,7 +4,7 @@ sample periods is reported on its own line, not counted as a miss or a hit."""
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "studies"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
 import blinded_study  # noqa: E402
 

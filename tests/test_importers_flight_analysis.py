@@ -145,9 +145,10 @@ def _script(name, *args, tmp_path):
     import subprocess
     import sys
 
-    root = Path(__file__).resolve().parents[1]
+    bench = Path(__file__).resolve().parents[1] / "benchmarks"
+    script = bench / name if (bench / name).exists() else bench / "studies" / name
     return subprocess.run(
-        [sys.executable, str(root / "benchmarks" / "studies" / name), *args],
+        [sys.executable, str(script), *args],
         capture_output=True,
         text=True,
         cwd=tmp_path,

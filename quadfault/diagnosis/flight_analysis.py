@@ -1,4 +1,4 @@
-"""Per-flight analyses of imported real logs (used by ``benchmarks/studies/real_flights.py``).
+"""Per-flight analyses of imported real logs (used by ``benchmarks/real_flights.py``).
 
 * :func:`efficiency_fit` -- per-rotor efficiency of one flight: the diagnosis' own
   ``motor_efficiency`` effect (its library, replay and bounded robust least squares) fitted on

@@ -25,9 +25,9 @@ axis, on the blocks the diagnosis scored), and, on every log with measured rotor
 motor lag from command to speed (a first-order lag from the commanded thrust to ``omega^2``,
 per rotor with its own gain and offset, one time constant for all four, on the scored span).
 
-    python benchmarks/studies/real_flights.py [--data DIR] [--out DIR] [--only NAME,...]
+    python benchmarks/real_flights.py [--data DIR] [--out DIR] [--only NAME,...]
                                       [--crazypad-all] [--json OUT.json] [--force] [--quiet]
-    python benchmarks/studies/real_flights.py --from-json OUT.json     # re-print the tables
+    python benchmarks/real_flights.py --from-json OUT.json     # re-print the tables
 
 ``--data`` defaults to ``../shared/data/real`` next to the repository (never copied into
 it); without it the script prints one line and exits 0. ``--only`` keeps the folders whose
@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-DEFAULT_DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real"
+DEFAULT_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
 #: Crazyflie research data sets: folder -> ``quadfault import DATASET`` name, and the files
 DATASETS = {
     "eschmann-cf21-sysid": ("eschmann", "*.csv.gz"),

@@ -24,8 +24,8 @@ default): ``rotor-loss`` when every level is 0 (a complete loss), else ``paper``
 ``--rotors 1 2 3 4 --onset-range 3 6`` flies every listed rotor with the onset drawn per seed
 from that range (the complete-loss target: 10 seeds x 4 rotors).
 
-    python benchmarks/studies/rotor_loss_survival.py [--levels 0 0.1 0.2 0.3 0.4 0.5] [--seeds 0 1 2]
-    python benchmarks/studies/rotor_loss_survival.py --levels 0 --seeds 0 1 2 3 4 5 6 7 8 9 \\
+    python benchmarks/rotor_loss_survival.py [--levels 0 0.1 0.2 0.3 0.4 0.5] [--seeds 0 1 2]
+    python benchmarks/rotor_loss_survival.py --levels 0 --seeds 0 1 2 3 4 5 6 7 8 9 \\
         --rotors 1 2 3 4 --onset-range 3 6 --arms relaxed-hover:irls [--sensor-noise px4]
 """
 

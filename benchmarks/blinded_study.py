@@ -14,8 +14,8 @@ reported). Classes (``quadfault.diagnosis.library.EQUIVALENT``): ``thrust_scale`
 ``motor_efficiency``, ``thrust_curve`` and ``mass`` count as one ("thrust"), ``delay`` and
 ``motor_lag`` as one ("timing"). The held-out seed (default 2026) was never used for tuning.
 
-    python benchmarks/studies/blinded_study.py --n 200 --seed 2026 --workers 2
-    python benchmarks/studies/blinded_study.py --n 200 --backend ray     # on a Ray cluster
+    python benchmarks/blinded_study.py --n 200 --seed 2026 --workers 2
+    python benchmarks/blinded_study.py --n 200 --backend ray     # on a Ray cluster
 
 Flights use 250 Hz physics and recording rate and 15 s by default (``--rate``,
 ``--duration``), in parallel over ``--workers`` processes.

@@ -1,7 +1,7 @@
 """IRLS against its partners (the EKF, RLS, the UKF) over several seeds: the ratios of
 ``quadfault reproduce`` with means and 95 % intervals.
 
-    python benchmarks/studies/fair_comparison.py --out DIR [--seeds 0-4] [--quick] [--workers 2]
+    python benchmarks/fair_comparison.py --out DIR [--seeds 0-4] [--quick] [--workers 2]
                                                  [--sensor-noise PRESET]
 
 For every seed K it runs ``quadfault reproduce --seed K --no-reference-mode --out DIR/seed-K``
