@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from quadfault.errors import QuadfaultError
+from quadfault.fileio import atomic_write_text
 from quadfault.model.sensors import STREAMS, UNITS
 
 
@@ -159,7 +160,7 @@ def main(argv=None) -> int:
         out = Path(args.json)
         if out.exists():
             raise SystemExit(f"sensor_noise: {out} exists (not overwritten)")
-        out.write_text(json.dumps({str(p): m for p, m in got}, indent=1) + "\n")
+        atomic_write_text(out, json.dumps({str(p): m for p, m in got}, indent=1) + "\n")
     return 0
 
 
