@@ -175,10 +175,20 @@ def test_every_effect_is_recovered_by_the_diagnosis(name):
     effect = parse_effect(registry.effect_class(name).example)
     rec = _fly(effect).without_truth()
     res = Diagnosis(DiagnosisConfig(effects=(name,))).fit(rec)
-    assert res.effect_names == [name], (res.effect_names, res.suspect)
+    rivals = {  # the effect as one side of a pair this flight cannot tell apart (mass/thrust)
+        e["name"]: e["params"]
+        for s in res.indistinguishable
+        for side in s.get("sets", ())
+        for e in side
+    }
+    if res.effect_names == [name]:
+        params = res.effects[0].params
+    else:
+        assert not res.effect_names and name in rivals, (res.effect_names, res.suspect)
+        params = rivals[name]
     rp = prepare(rec)
     (c,) = build_library(rp, (name,))
-    want, got = c.x_from_params(effect.params()), c.x_from_params(res.effects[0].params)
+    want, got = c.x_from_params(effect.params()), c.x_from_params(params)
     span = np.asarray(c.upper) - np.asarray(c.lower)
     set_ = want != 0.0
     assert np.all(np.abs(got - want)[set_] <= (0.25 * np.abs(want) + 0.02 * span)[set_]), (
