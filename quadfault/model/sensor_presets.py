@@ -91,11 +91,11 @@ PRESETS: dict[str, SensorNoise] = {
     ),
     "px4": _preset(
         "px4",
-        position={"white": 0.00219},
-        velocity={"white": 0.00781},
-        attitude={"white": 0.000656, "markov": 0.0241, "tau": 0.224},
-        gyro={"white": 0.178, "bias": 0.00295},
-        accel={"white": 2.04, "bias": 0.233},
+        position={"white": 0.00227},
+        velocity={"white": 0.00809},
+        attitude={"white": 0.000667, "markov": 0.0245, "tau": 0.224},
+        gyro={"white": 0.183, "bias": 0.00331},
+        accel={"white": 2.11, "bias": 0.294},
     ),
 }
 
