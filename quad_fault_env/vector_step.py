@@ -33,7 +33,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from quad_fault_env.envs.config import action_commands_row, reward_row, termination_code
+from quad_fault_env.envs.config import (
+    action_commands_row,
+    reward_row,
+    row3,
+    row33,
+    termination_code,
+)
 from quad_fault_env.observation import observation_row
 from quadfault.jit import jit, prange
 from quadfault.model.closed_loop import fly_vehicle, measure_vehicle
@@ -105,28 +111,6 @@ class StepOut(NamedTuple):
 
 
 @jit(inline="always")
-def _row3(a, i):
-    """Row ``i`` of an (N, 3) array as 3 numbers (no view: a view takes a reference count)."""
-    return (a[i, 0], a[i, 1], a[i, 2])
-
-
-@jit(inline="always")
-def _row33(a, i):
-    """Row ``i`` of an (N, 3, 3) array as 9 numbers, row by row."""
-    return (
-        a[i, 0, 0],
-        a[i, 0, 1],
-        a[i, 0, 2],
-        a[i, 1, 0],
-        a[i, 1, 1],
-        a[i, 1, 2],
-        a[i, 2, 0],
-        a[i, 2, 1],
-        a[i, 2, 2],
-    )
-
-
-@jit(inline="always")
 def _ref3(refs, i, k, c):
     """Reference row ``c`` (0 position, 1 velocity, 2 acceleration) of sub-env ``i`` at its
     window's step ``k``, 3 numbers."""
@@ -143,10 +127,10 @@ def observe_vehicle(i, S, R, V, obs):
     """Sub-env ``i``'s observation at its step ``R.steps[i]`` into ``obs[i]``."""
     k = R.steps[i] - R.table_k0[i]
     observation_row(
-        _minus3(_row3(V.mp, i), _ref3(R.refs, i, k, 0)),
-        _minus3(_row3(V.mv, i), _ref3(R.refs, i, k, 1)),
-        _row33(V.mR, i),
-        _row3(V.mw, i),
+        _minus3(row3(V.mp, i), _ref3(R.refs, i, k, 0)),
+        _minus3(row3(V.mv, i), _ref3(R.refs, i, k, 1)),
+        row33(V.mR, i),
+        row3(V.mw, i),
         R.eta_hat[i],
         R.eta_sd[i],
         _ref3(R.refs, i, k, 2),
@@ -177,10 +161,10 @@ def _commands(i, S, R, K, V, row):
     if K is not None:
         gains, nominal = controller_tuples(K)
         u = geometric_control(
-            _row3(V.mp, i),
-            _row3(V.mv, i),
-            _row33(V.mR, i),
-            _row3(V.mw, i),
+            row3(V.mp, i),
+            row3(V.mv, i),
+            row33(V.mR, i),
+            row3(V.mw, i),
             reference_row(R.refs[i], row),
             gains,
             nominal,
@@ -222,10 +206,10 @@ def step_vehicle(i, S, R, Out, K, gens, C, V, T, rec, fx, k_phys, dt):
                 R.eta_sd[i, m] = 0.0
         k += 1
         R.steps[i] = k
-        p, v = _row3(V.p, i), _row3(V.v, i)
+        p, v = row3(V.p, i), row3(V.v, i)
         p_ref = _ref3(R.refs, i, row + 1, 0)
         lim = S.limits
-        code = termination_code(p, _row33(V.R, i), p_ref, (lim[0], lim[1], lim[2]))
+        code = termination_code(p, row33(V.R, i), p_ref, (lim[0], lim[1], lim[2]))
         terminated = code != 0
         # the scenario's end truncates an episode that goes on; max_episode_steps any
         # episode, as gymnasium's TimeLimit around the single env

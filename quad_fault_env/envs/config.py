@@ -459,27 +459,34 @@ def termination_code(p, R, p_ref, limits):
     return 0
 
 
+@jit(inline="always")
+def row3(a, i):
+    """Row ``i`` of an (N, 3) array as 3 numbers (no view: a view takes a reference count)."""
+    return (a[i, 0], a[i, 1], a[i, 2])
+
+
+@jit(inline="always")
+def row33(a, i):
+    """Row ``i`` of an (N, 3, 3) array as 9 numbers, row by row."""
+    return (
+        a[i, 0, 0],
+        a[i, 0, 1],
+        a[i, 0, 2],
+        a[i, 1, 0],
+        a[i, 1, 1],
+        a[i, 1, 2],
+        a[i, 2, 0],
+        a[i, 2, 1],
+        a[i, 2, 2],
+    )
+
+
 @jit
 def _termination_codes(p, R, p_ref, ground, max_error, max_tilt, out):
     """:func:`termination_code` per row."""
     limits = (ground, max_error, max_tilt)
     for i in range(out.shape[0]):
-        out[i] = termination_code(
-            (p[i, 0], p[i, 1], p[i, 2]),
-            (
-                R[i, 0, 0],
-                R[i, 0, 1],
-                R[i, 0, 2],
-                R[i, 1, 0],
-                R[i, 1, 1],
-                R[i, 1, 2],
-                R[i, 2, 0],
-                R[i, 2, 1],
-                R[i, 2, 2],
-            ),
-            (p_ref[i, 0], p_ref[i, 1], p_ref[i, 2]),
-            limits,
-        )
+        out[i] = termination_code(row3(p, i), row33(R, i), row3(p_ref, i), limits)
 
 
 @dataclass(frozen=True)
