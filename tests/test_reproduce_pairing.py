@@ -196,6 +196,24 @@ def test_every_baseline_has_a_keyed_partner_with_the_same_post_processing():
             assert args["median"] == (v.median if v.median > 1 else None)
             assert v.key(b) == (b if v.name == "paper" else f"{b}_{v.name}")
     assert VARIANTS[0].partner_args("rls", 0.01)["forgetting"] == pytest.approx(0.99)
+
+
+def test_a_partner_that_regresses_the_residual_gets_the_irls_variants_prefilter():
+    """The residual prefilter is pre-processing: RLS (the same regression) runs with the IRLS
+    variant's (none for the paper's settings and the median alone, the improved one's 10 ms);
+    the EKF and the UKF have no regression and no prefilter option."""
+    from estimators.irls_config import IRLSConfig
+    from estimators.paper.pairing import BASELINES
+
+    by_name = {v.name: v for v in VARIANTS}
+    assert by_name["paper"].prefilter == 0.0 and by_name["median"].prefilter == 0.0
+    assert by_name["improved"].prefilter == IRLSConfig.improved().prefilter > 0.0
+    for v in VARIANTS:
+        assert v.partner_args("rls", 0.01)["prefilter"] == v.prefilter
+        for b in ("ekf", "ukf"):
+            assert "prefilter" not in v.partner_args(b, 0.01)
+    assert BASELINES["rls"].options(0.01, 0.02) == {"forgetting": 0.99, "prefilter": 0.02}
+    assert BASELINES["rls"].options(0.01) == {"forgetting": 0.99}
     with pytest.raises(ConfigError, match="baseline"):
         VARIANTS[0].partner_args("kalman", 0.1)
 
@@ -240,4 +258,8 @@ def test_partners_are_tuned_on_the_calibration_flight_never_on_the_scored_ones(m
         chosen = run["calibration"][calibration_key("paper", b)]
         mine = [kw for n, kw in scored if n == b]
         assert len(mine) == 4  # once per scored scenario, never a scan
-        assert all(kw == {**chosen.option, "median": None} for kw in mine)
+        same = {"prefilter": 0.0} if b == "rls" else {}  # the paper IRLS's: none
+        assert all(kw == {**chosen.option, **same, "median": None} for kw in mine)
+    # the RLS's scan on the calibration flight runs with the paper IRLS's prefilter too
+    scans = [kw for s, n, kw in runs if s == cfg.calibration_seed and n == "rls"]
+    assert scans and all(kw["prefilter"] == 0.0 for kw in scans)

@@ -15,6 +15,12 @@ inflates its error outside the fault windows, the baseline the excess is measure
 no ``q`` reaches the IRLS's RMSE, the most accurate one is taken (and the result says so).
 The rule sees the calibration flight only; the scored flights never choose a tuning.
 
+The regression's residual prefilter (``--prefilter``) is pre-processing of the same kind: a
+baseline that regresses the same residual model (RLS) gets the IRLS variant's prefilter (none
+for the paper's settings and the median alone, the improved IRLS's 10 ms for the improved),
+in its scan on the calibration flight and on the scored flights. The EKF and the UKF have no
+regression to filter; they weigh the noise through their own measurement model.
+
 Every series of a pair comes from :func:`estimators.cli.estimate_series`, the code behind
 ``quadfault estimate``, and each ``metrics.json`` entry records the arguments
 (:func:`estimators.cli.cli_args`) that reproduce it on a recording.
@@ -28,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimators.cli import cli_args, estimate_series
+from estimators.irls_config import IRLSConfig
 from estimators.median import median_series, postprocess_label
 from estimators.metrics import mean_or_none, score
 from quadfault.errors import ConfigError
@@ -48,16 +55,28 @@ class Baseline:
         option: the :func:`estimators.cli.estimate_series` option the knob sets.
         label: the knob's name in messages.
         q_range: the scan of the speed ``q`` (:func:`choose_partner`).
+        prefilter: True when it regresses the IRLS's residual model and so takes its
+            residual prefilter (``--prefilter``).
     """
 
     name: str
     option: str
     label: str
     q_range: tuple
+    prefilter: bool = False
 
     def value(self, q: float) -> float:
         """The option's value at speed ``q`` (RLS: ``forgetting = 1 - q``)."""
         return 1.0 - float(q) if self.option == "forgetting" else float(q)
+
+    def options(self, q: float, prefilter: float | None = None) -> dict:
+        """The :func:`estimate_series` options at speed ``q`` with the residual prefilter
+        ``prefilter`` [s] (``None``: the estimator's default; ignored by a baseline without
+        a regression)."""
+        out = {self.option: self.value(q)}
+        if self.prefilter and prefilter is not None:
+            out["prefilter"] = float(prefilter)
+        return out
 
 
 #: the baselines ``reproduce`` pairs with every IRLS variant, the EKF first (the paper's)
@@ -65,7 +84,7 @@ BASELINES = {
     b.name: b
     for b in (
         Baseline("ekf", "q_eta", "Q_eta", (1e-4, 1e3)),
-        Baseline("rls", "forgetting", "1 - lambda", (1e-4, 0.5)),
+        Baseline("rls", "forgetting", "1 - lambda", (1e-4, 0.5), prefilter=True),
         Baseline("ukf", "q_eta", "Q_eta", (1e-4, 1e3)),
     )
 }
@@ -109,6 +128,12 @@ class Variant:
     def postprocess(self) -> str:
         return postprocess_label(self.median)
 
+    @property
+    def prefilter(self) -> float:
+        """The IRLS's residual prefilter [s] (0 = none), shared by a partner that regresses
+        the same residual model (:attr:`Baseline.prefilter`)."""
+        return IRLSConfig.from_options(self.improved).prefilter
+
     def irls_args(self) -> dict:
         """Options of :func:`estimate_series` for the IRLS."""
         med = None if self.improved or self.median <= 1 else self.median
@@ -122,7 +147,7 @@ class Variant:
         """Options of :func:`estimate_series` for the partner of ``baseline_name`` at speed
         ``q``."""
         b = baseline(baseline_name)
-        return {b.option: b.value(q), "median": self.median if self.median > 1 else None}
+        return {**b.options(q, self.prefilter), "median": self.median if self.median > 1 else None}
 
 
 #: The variants ``reproduce`` runs: the paper's estimator, the output median alone, and the
@@ -205,6 +230,7 @@ def choose_partner(
     refine: int = 3,
     evaluate=None,
     baseline_name: str = "ekf",
+    prefilter: float | None = None,
 ) -> PartnerResult:
     """The speed ``q`` of baseline ``baseline_name`` (the EKF's ``Q_eta`` by default) on the
     calibration ``recording`` (which holds the truth) with the smallest motor-averaged excess
@@ -212,6 +238,7 @@ def choose_partner(
     causal median) is at most ``target_rmse``: a log-spaced scan of ``q_range`` (default the
     baseline's), then ``refine`` rounds of halving the log-spacing around the best point.
 
+    ``prefilter`` the residual prefilter of a baseline that takes one (:meth:`Baseline.options`).
     ``evaluate(q) -> (rmse, excess)`` replaces the baseline's run (tests; shared scans)."""
     b = baseline(baseline_name)
     q_range = b.q_range if q_range is None else q_range
@@ -223,7 +250,7 @@ def choose_partner(
     if evaluate is None:
 
         def evaluate(q):
-            return partner_point(recording, b.name, q, median)
+            return partner_point(recording, b.name, q, median, prefilter)
 
     n = max(2, round(math.log10(hi / lo) * points_per_decade) + 1)
     points = {float(q): evaluate(float(q)) for q in np.logspace(math.log10(lo), math.log10(hi), n)}
@@ -269,12 +296,17 @@ def ekf_point(recording: Recording, q_eta: float, median: int = 1) -> tuple[floa
 
 
 def partner_point(
-    recording: Recording, baseline_name: str, q: float, median: int = 1
+    recording: Recording,
+    baseline_name: str,
+    q: float,
+    median: int = 1,
+    prefilter: float | None = None,
 ) -> tuple[float, float]:
     """``(rmse, excess_spike)``, motor averages, of the baseline at speed ``q`` with the
-    output median ``median`` on ``recording``."""
+    residual prefilter ``prefilter`` (:meth:`Baseline.options`) and the output median
+    ``median`` on ``recording``."""
     b = baseline(baseline_name)
-    s = estimate_series(recording, b.name, **{b.option: b.value(q)})
+    s = estimate_series(recording, b.name, **b.options(q, prefilter))
     return _rmse_excess(recording, median_series(s, median))
 
 
@@ -285,18 +317,22 @@ def _rmse_excess(recording, series) -> tuple[float, float]:
 
 
 def shared_scan(recording: Recording, baseline_name: str = "ekf"):
-    """``evaluate(median)``: per median, a ``q -> (rmse, excess)`` for :func:`choose_partner`
-    that runs the baseline once per ``q`` for every median (the median is post-processing)."""
+    """``evaluate(median, prefilter=None)``: per median (and residual prefilter, for a
+    baseline that takes one), a ``q -> (rmse, excess)`` for :func:`choose_partner` that runs
+    the baseline once per ``q`` and prefilter for every median (the median is
+    post-processing)."""
     b = baseline(baseline_name)
     runs: dict = {}
 
-    def run(q):
-        if q not in runs:
-            runs[q] = estimate_series(recording, b.name, **{b.option: b.value(q)})
-        return runs[q]
+    def run(q, prefilter):
+        options = b.options(q, prefilter)
+        key = tuple(sorted(options.items()))
+        if key not in runs:
+            runs[key] = estimate_series(recording, b.name, **options)
+        return runs[key]
 
-    def for_median(median):
-        return lambda q: _rmse_excess(recording, median_series(run(q), median))
+    def for_median(median, prefilter=None):
+        return lambda q: _rmse_excess(recording, median_series(run(q, prefilter), median))
 
     return for_median
 
