@@ -1,7 +1,8 @@
 """Does the efficiency estimate help a learned policy survive the complete loss of a rotor?
 
 PPO residual policies on ``QuadFaultRotorLossComplete-v0`` (hover, one rotor -- any of the
-four -- stops at an onset drawn from 3-6 s, the complete-loss vehicle; actions are residuals
+four -- stops at an onset drawn from 30-60 % of the episode (3-6 s of 10 s), the
+complete-loss vehicle; actions are residuals
 on the relaxed-hover base: the estimate-aware allocation until the IRLS estimate isolates the
 lost rotor, then the relaxed-hover controller on the other three). The arms differ ONLY in
 what the policy observes in the ``eta_hat`` / ``eta_sd`` slots
@@ -39,9 +40,9 @@ each arm's success against the ``irls`` arm's as a paired difference per seed. *
     python benchmarks/rotor_loss_agents.py --plot rotor_loss_agents.png   # full study
 
 ``--quick`` (<= 45 CPU-minutes; 5 arms x 3 seeds of 81,920 steps): a smoke-sized study whose
-numbers are what that budget gives, not what PPO can learn here. The full study (about
-3.5 CPU-hours on the documented machine: 5 arms x 3 seeds x 1,003,520 steps) is the one to
-conclude from. Each run's results go to ``OUT/runs/<arm>_seed<k>.json`` and are reused by a
+numbers are what that budget gives, not what PPO can learn here. The full study (5 arms x
+3 seeds x 1,003,520 steps; about 3 CPU-hours, estimated from the quick run's cost per step
+and per evaluated episode) is the one to conclude from. Each run's results go to ``OUT/runs/<arm>_seed<k>.json`` and are reused by a
 later call with the same settings (``--retrain`` trains again); the table is printed and
 written to ``OUT/study.md`` with ``OUT/study.json``.
 """
