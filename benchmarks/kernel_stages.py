@@ -34,14 +34,14 @@ def _loops():
     """The stage loops (compiled here, not cached: they time the kernels as they are)."""
     from numba import njit
 
-    from quadfault.model.closed_loop import _allocate, _tuples
+    from quadfault.model.closed_loop import _tuples
     from quadfault.model.controller import (
         controller_tuples,
         geometric_control,
         reference_row,
         rotor_commands,
     )
-    from quadfault.model.dynamics import rkmk4_step
+    from quadfault.model.dynamics import rkmk4_step, rotor_wrench
     from quadfault.model.motors import motor_thrust
     from quadfault.model.rotation import expm3, mat3, vec3
     from quadfault.model.sensors import measure3
@@ -61,10 +61,10 @@ def _loops():
         return acc
 
     @jit
-    def rk4(p, v, R, w, T, M, k, C, dt):
-        rigid = _tuples(C)[0]
+    def rk4(p, v, R, w, T, M, k, C, V, dt):
         acc = 0.0
         for i in range(p.shape[0]):
+            rigid = _tuples(C, V, i)[0]
             pi, vi, wi, Ri, Mi = vec3(p[i]), vec3(v[i]), vec3(w[i]), mat3(R[i]), vec3(M[i])
             for _ in range(k):
                 pi, vi, Ri, wi, _ = rkmk4_step(pi, vi, Ri, wi, T[i], Mi, rigid, dt)
@@ -72,13 +72,13 @@ def _loops():
         return acc
 
     @jit
-    def motors(f_cmd, eta, sigma, gen, k, C, f):
+    def motors(f_cmd, eta, sigma, gen, k, C, V, f):
         acc = 0.0
         for i in range(f_cmd.shape[0]):
             fi, ei, out = f_cmd[i], eta[i], f[i]
             for j in range(k):
-                motor_thrust(fi, ei, j, C.f_max, True, sigma, gen, out)
-                T, M = _allocate(C.allocation, out)
+                motor_thrust(fi, ei, j, V.f_max[i], True, sigma, gen, out)
+                T, M = rotor_wrench(C.allocation, out)
                 acc += T + M[0]
         return acc
 
@@ -97,10 +97,10 @@ def _loops():
         return acc
 
     @jit
-    def sensors(p, v, R, w, C, gen, k):
-        noise = _tuples(C)[1]
+    def sensors(p, v, R, w, C, V, gen, k):
         acc = 0.0
         for i in range(p.shape[0]):
+            noise = _tuples(C, V, i)[1]
             pi, vi, wi, Ri = vec3(p[i]), vec3(v[i]), vec3(w[i]), mat3(R[i])
             for _ in range(k):
                 mp, _, mR, _ = measure3(pi, vi, Ri, wi, noise, gen)
@@ -153,11 +153,11 @@ def stage_ns(N: int = 4096, horizon: int = 50, repeats: int = 5) -> dict[str, fl
     expm, rk4, motors, controller, sensors = _loops()
     calls = {
         "expm": lambda: expm(V.w, horizon, dt / 2),
-        "rk4": lambda: rk4(V.p, V.v, V.R, V.w, T, M, horizon, C, dt),
-        "motors": lambda: motors(V.f_cmd, eta, 0.0, gen, horizon, C, out),
-        "motors_noise": lambda: motors(V.f_cmd, eta, 0.07, gen, horizon, C, out),
+        "rk4": lambda: rk4(V.p, V.v, V.R, V.w, T, M, horizon, C, V, dt),
+        "motors": lambda: motors(V.f_cmd, eta, 0.0, gen, horizon, C, V, out),
+        "motors_noise": lambda: motors(V.f_cmd, eta, 0.07, gen, horizon, C, V, out),
         "controller": lambda: controller(V.p, V.v, V.R, V.w, refs[:, 0], K, out, horizon),
-        "sensors": lambda: sensors(V.p, V.v, V.R, V.w, C, gen, horizon),
+        "sensors": lambda: sensors(V.p, V.v, V.R, V.w, C, V, gen, horizon),
     }
     gens = closed_loop.generators([np.random.default_rng(i) for i in range(N)])
     tables = closed_loop.Tables(np.zeros(N, np.int64), eta, refs)
