@@ -1,12 +1,20 @@
 """Vector-env step cost with one numba thread vs numba's default, by batch size.
 
-Steps ``QuadFaultVectorEnv(N, estimator=E, estimator_rate="control")`` on the PPO study's
-environment (``QuadFaultHover-v1``, one fault of eta 0.5-0.85, residual actions, zero
-action) with ``numba_threads=1`` and with numba's default thread count, rounds interleaved,
-and prints wall and CPU microseconds per vehicle-step and the ratios (default / one thread:
-above 1 means the extra threads cost more than they save). The vector env's default
-(``numba_threads="auto"``, ``quad_fault_env.vector.THREADS_MIN_BATCH``) comes from these
-numbers, taken on an idle and on a loaded machine.
+Two tasks (``--task``):
+
+* ``study`` (default): ``QuadFaultVectorEnv(N, estimator=E, estimator_rate="control")`` on the
+  PPO study's environment (``QuadFaultHover-v1``, one fault of eta 0.5-0.85, residual actions,
+  zero action), for each estimator of ``--estimators``;
+* ``physics``: the env-against-env comparison's env (``QuadFault-v1``, no estimator, motor
+  actions at the hover thrust, 1 kHz control: one physics step per env step,
+  ``benchmarks/env_vs_crazyflow.py``).
+
+Each is stepped with ``numba_threads=1`` and with numba's default thread count, rounds
+interleaved, and the script prints wall and CPU microseconds per vehicle-step and the ratios
+(default / one thread: above 1 means the extra threads cost more than they save). The vector
+env's defaults (``numba_threads="auto"``: ``quad_fault_env.vector.THREADS_MIN_BATCH`` without a
+batched estimator, ``THREADS_MIN_BATCH_ESTIMATOR`` with one) come from these numbers on an idle
+machine.
 
 CPU time counts every thread of this process, so idle OpenMP workers that spin between
 parallel regions show up there even when the wall time looks fine. On a shared machine read
@@ -14,6 +22,7 @@ the CPU ratio; every line carries the 1-minute load average.
 
     python benchmarks/numba_threads.py                    # N = 8 ... 4096, IRLS and none
     python benchmarks/numba_threads.py --sizes 32 --steps 200
+    python benchmarks/numba_threads.py --task physics --sizes 1024 2048 4096 8192 16384
 """
 
 from __future__ import annotations
@@ -25,12 +34,25 @@ import time
 import numpy as np
 
 
-def _env(n: int, estimator: str):
+def _env(n: int, estimator: str, task: str = "study"):
+    """``(vector env, action)`` of ``task`` at ``n`` sub-envs, reset."""
     import gymnasium as gym
 
     import quad_fault_env  # noqa: F401
     from quad_fault_env.vector import QuadFaultVectorEnv
 
+    if task == "physics":
+        kwargs = dict(
+            gym.spec("QuadFault-v1").kwargs,
+            estimator="none",
+            action_mode="motor",
+            control_rate=1000.0,
+        )
+        venv = QuadFaultVectorEnv(n, **kwargs)
+        veh = venv.vehicle
+        hover = 2.0 * (veh.weight / veh.n_rotors) / veh.rotor_max_thrust - 1.0
+        venv.reset(seed=0)
+        return venv, np.full((n, 4), hover, dtype=np.float32)
     kwargs = dict(
         gym.spec("QuadFaultHover-v1").kwargs,
         action_mode="residual",
@@ -42,13 +64,12 @@ def _env(n: int, estimator: str):
     )
     venv = QuadFaultVectorEnv(n, **kwargs)
     venv.reset(seed=0)
-    return venv
+    return venv, np.zeros((n, 4))
 
 
-def _time(venv, steps: int, threads: int) -> tuple[float, float]:
+def _time(venv, action, steps: int, threads: int) -> tuple[float, float]:
     """Wall and CPU seconds of ``steps`` vector steps with ``threads`` numba threads."""
     venv.numba_threads = threads  # the env sets it on this thread for its own calls
-    action = np.zeros((venv.num_envs, 4))
     for _ in range(5):
         venv.step(action)
     wall, cpu = time.perf_counter(), time.process_time()
@@ -63,6 +84,7 @@ def main(argv=None) -> int:
     p.add_argument(
         "--estimators", nargs="+", default=["irls", "none"], choices=("irls", "ekf", "none")
     )
+    p.add_argument("--task", choices=("study", "physics"), default="study")
     p.add_argument("--steps", type=int, default=100, help="vector steps per round")
     p.add_argument("--rounds", type=int, default=3, help="interleaved rounds (best kept)")
     args = p.parse_args(argv)
@@ -74,22 +96,22 @@ def main(argv=None) -> int:
         print("numba has one thread on this machine: nothing to compare")
         return 0
     print(
-        f"numba threads: 1 vs {default} (default); us per vehicle-step, best of "
-        f"{args.rounds} rounds"
+        f"task {args.task}; numba threads: 1 vs {default} (default) on {os.cpu_count()} cpus; "
+        f"us per vehicle-step, best of {args.rounds} rounds"
     )
     print(
         f"{'estimator':>9} {'N':>5} {'wall 1':>8} {'wall d':>8} {'cpu 1':>8} {'cpu d':>8} "
         f"{'wall d/1':>8} {'cpu d/1':>8}  load"
     )
-    for est in args.estimators:
+    for est in ["none"] if args.task == "physics" else args.estimators:
         for n in args.sizes:
-            venv = _env(n, est)
-            steps = max(5, args.steps * 32 // max(n, 32))
+            venv, action = _env(n, est, args.task)
+            steps = max(5, args.steps * 32 // max(n, 32), 400_000 // n)  # >= 0.4 M vehicle-steps
             best = {1: [np.inf, np.inf], default: [np.inf, np.inf]}
             try:
                 for _ in range(args.rounds):
                     for threads in (1, default):
-                        wall, cpu = _time(venv, steps, threads)
+                        wall, cpu = _time(venv, action, steps, threads)
                         best[threads] = [min(best[threads][0], wall), min(best[threads][1], cpu)]
             finally:
                 venv.close()

@@ -64,10 +64,13 @@ from quadfault.model.flight import Flight
 from quadfault.model.motors import MotorModel
 from quadfault.model.plant import Plant
 
-#: batch size from which the vector env runs numba's parallel kernels on numba's threads by
-#: default; below it, on the calling thread alone (measured: ``benchmarks/numba_threads.py``,
-#: docs/throughput.md "numba threads")
-THREADS_MIN_BATCH = 16384
+#: batch size from which the vector env without a batched estimator runs its step on numba's
+#: threads by default; below it, on the calling thread alone (measured on an idle machine:
+#: ``benchmarks/numba_threads.py --task physics``, docs/throughput.md "numba threads")
+THREADS_MIN_BATCH = 4096
+#: the same with a batched estimator in the step (its parallel update pays later:
+#: ``benchmarks/numba_threads.py --task study``)
+THREADS_MIN_BATCH_ESTIMATOR = 32768
 #: the estimators the vector env takes: those with a batched form, the nominal belief and the
 #: oracle (both computed here)
 VECTOR_ESTIMATORS = (
@@ -80,13 +83,29 @@ _STATUS = {name: k for k, name in enumerate(STATUSES)}
 _NO_LIMIT = np.iinfo(np.int64).max // 4
 
 
-def default_threads(num_envs: int) -> int | None:
-    """The numba thread count a vector env of ``num_envs`` sub-envs steps with by default: 1
-    below :data:`THREADS_MIN_BATCH`, else None (numba's count); None as well when the user set
-    ``NUMBA_NUM_THREADS`` (their choice is kept)."""
-    if os.environ.get("NUMBA_NUM_THREADS") or num_envs >= THREADS_MIN_BATCH:
+def usable_cores() -> int:
+    """The CPUs this process may run on (its affinity: ``taskset``, a container's cpuset),
+    at most numba's thread count."""
+    import numba
+
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # (no affinity on this platform)
+        cpus = os.cpu_count() or 1
+    return max(1, min(cpus, numba.config.NUMBA_NUM_THREADS))
+
+
+def default_threads(num_envs: int, estimated: bool = False) -> int | None:
+    """The numba thread count a vector env of ``num_envs`` sub-envs steps with by default
+    (``estimated``: a batched estimator updates in the step): 1 below
+    :data:`THREADS_MIN_BATCH` (:data:`THREADS_MIN_BATCH_ESTIMATOR`), else the CPUs this
+    process may use (:func:`usable_cores`); None (the caller's count) when the user set
+    ``NUMBA_NUM_THREADS``: their choice is kept."""
+    if os.environ.get("NUMBA_NUM_THREADS"):
         return None
-    return 1
+    if num_envs < (THREADS_MIN_BATCH_ESTIMATOR if estimated else THREADS_MIN_BATCH):
+        return 1
+    return usable_cores()
 
 
 class QuadFaultVectorEnv(VectorEnv):
@@ -173,18 +192,18 @@ class QuadFaultVectorEnv(VectorEnv):
             raise ConfigError(
                 f"max_episode_steps must be an integer >= 1, got {max_episode_steps!r}"
             )
-        if numba_threads == "auto":
-            numba_threads = default_threads(int(num_envs))
-        elif numba_threads is not None and (
-            isinstance(numba_threads, bool)
-            or not isinstance(numba_threads, (int, np.integer))
-            or numba_threads < 1
+        if (
+            numba_threads != "auto"
+            and numba_threads is not None
+            and (
+                isinstance(numba_threads, bool)
+                or not isinstance(numba_threads, (int, np.integer))
+                or numba_threads < 1
+            )
         ):
             raise ConfigError(
                 f"numba_threads must be 'auto', None or an integer >= 1, got {numba_threads!r}"
             )
-        #: numba threads of this env's steps and resets (None: the caller's count)
-        self.numba_threads = None if numba_threads is None else int(numba_threads)
         self.num_envs = N = int(num_envs)
         self.max_episode_steps = max_episode_steps
         self.metadata = dict(self.metadata, autoreset_mode=AUTORESET_MODES[autoreset_mode])
@@ -204,6 +223,10 @@ class QuadFaultVectorEnv(VectorEnv):
             self.estimator = make_estimator(
                 estimator, self.vehicle, num=N, **(estimator_kwargs or {})
             )
+        if numba_threads == "auto":
+            numba_threads = default_threads(N, estimated=self.estimator is not None)
+        #: numba threads of this env's steps and resets (None: the caller's count)
+        self.numba_threads = None if numba_threads is None else int(numba_threads)
         # the single env's plant (MotorModel(thrust_noise): its default saturation), N of it
         self.plant = Plant(self.vehicle, MotorModel(), dt=self.dt, n_vehicles=N)
         self.flight = Flight(self.plant, e0.sensor_noise)
@@ -617,6 +640,7 @@ __all__ = [
     "AUTORESET_MODES",
     "INFO_LEVELS",
     "THREADS_MIN_BATCH",
+    "THREADS_MIN_BATCH_ESTIMATOR",
     "QuadFaultVectorEnv",
     "default_threads",
 ]

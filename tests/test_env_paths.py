@@ -4,6 +4,8 @@ rule; numba threads by batch size."""
 
 from __future__ import annotations
 
+import os
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -11,7 +13,13 @@ import pytest
 import quad_fault_env  # noqa: F401  (registers the ids)
 from quad_fault_env.envs.config import RewardConfig
 from quad_fault_env.tasks import REWARD_V0, TASKS
-from quad_fault_env.vector import THREADS_MIN_BATCH, QuadFaultVectorEnv, default_threads
+from quad_fault_env.vector import (
+    THREADS_MIN_BATCH,
+    THREADS_MIN_BATCH_ESTIMATOR,
+    QuadFaultVectorEnv,
+    default_threads,
+    usable_cores,
+)
 from quadfault import jit
 from quadfault.errors import ConfigError
 
@@ -240,12 +248,21 @@ def test_bad_reward_keywords_raise_one_clear_error(kwargs, word):
 def test_numba_threads_by_batch_size(monkeypatch):
     monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
     assert default_threads(1) == default_threads(THREADS_MIN_BATCH - 1) == 1
-    assert default_threads(THREADS_MIN_BATCH) is None
+    assert default_threads(THREADS_MIN_BATCH) == usable_cores() >= 1
+    assert default_threads(THREADS_MIN_BATCH, estimated=True) == 1  # the estimator's own limit
+    assert default_threads(THREADS_MIN_BATCH_ESTIMATOR, estimated=True) == usable_cores()
     monkeypatch.setenv("NUMBA_NUM_THREADS", "2")  # the user's choice is kept
     assert default_threads(4) is None
     monkeypatch.delenv("NUMBA_NUM_THREADS")
     venv = QuadFaultVectorEnv(4, "none", scenario="hover", duration=0.1)
     assert venv.numba_threads == 1
+    if hasattr(os, "sched_setaffinity") and len(os.sched_getaffinity(0)) > 1:
+        allowed = os.sched_getaffinity(0)
+        os.sched_setaffinity(0, {min(allowed)})  # a user's thread limit (taskset -c 0)
+        try:
+            assert usable_cores() == 1 == default_threads(THREADS_MIN_BATCH)
+        finally:
+            os.sched_setaffinity(0, allowed)
     with pytest.raises(ConfigError, match="numba_threads"):
         QuadFaultVectorEnv(4, "none", numba_threads=0)
     if jit.AVAILABLE:
