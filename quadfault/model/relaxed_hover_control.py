@@ -47,15 +47,17 @@ class RelaxedHoverGains:
     """Gains of :class:`RelaxedHoverController`.
 
     Attributes:
-        kp: position gain [1/s^2]. kd: velocity gain [1/s].
+        kp: position gain [1/s^2]. kd: velocity gain [1/s]. The defaults come from a sweep
+            on the complete-loss vehicle (``benchmarks/rotor_loss_survival.py``,
+            docs/rotor_loss.md): every neighbour of (4, 3) within 0.5 holds the hover point.
         max_horizontal: bound of the horizontal acceleration asked for [m/s^2].
         q_axis: LQR weight of the spin axis' error [-]. q_rate: of the body rate's [s^2].
         r_thrust: of the thrust changes [1/N^2].
         rho: the opposite rotor's thrust over the neighbours' at the solution flown.
     """
 
-    kp: float = 2.0
-    kd: float = 2.5
+    kp: float = 4.0
+    kd: float = 3.0
     max_horizontal: float = 4.0
     q_axis: float = 400.0
     q_rate: float = 2.0
