@@ -288,8 +288,9 @@ def summarise(results: dict, reference: dict, budget: Budget, seeds) -> str:
 
 
 def plot(results: dict, reference: dict, path, *, force: bool = False) -> None:
-    """Learning curves per arm: success and error after the loss (mean over seeds, the
-    seeds' range shaded), the reference controller as a dashed line."""
+    """Learning curves per arm: survival, success and error after the loss on the curve
+    episodes (mean over seeds, the seeds' range shaded), the reference controller alone on
+    the same episodes (``reference``) as a dashed line."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -312,7 +313,7 @@ def plot(results: dict, reference: dict, path, *, force: bool = False) -> None:
             y = np.array([[c[key] for c in r["curve"][:n]] for r in runs])
             (line,) = ax.plot(steps, y.mean(axis=0), label=arm)
             ax.fill_between(steps, y.min(axis=0), y.max(axis=0), color=line.get_color(), alpha=0.15)
-        ax.axhline(ref[key], color="k", ls="--", lw=1, label="reference alone")
+        ax.axhline(ref[key], color="k", ls="--", lw=1, label="reference controller alone")
         ax.set_xlabel("training steps")
         ax.set_ylabel(label, fontsize=8)
     axes[0].legend(fontsize=7)
@@ -371,7 +372,12 @@ def main(argv=None) -> int:
     c0 = time.process_time()
     print(f"{ENV_ID}: arms {args.arms}, seeds {args.seeds}, {budget}", flush=True)
     reference = fly("irls", None, budget, TEST_SEED, budget.episodes)
-    print(f"reference controller alone: {_rates(reference)}", flush=True)
+    reference_curve = fly("irls", None, budget, CURVE_SEED, budget.curve_episodes)
+    print(
+        f"reference controller alone: test episodes {_rates(reference)}, curve episodes "
+        f"{_rates(reference_curve)}",
+        flush=True,
+    )
     results = {}
     for arm in args.arms:
         results[arm] = []
@@ -390,12 +396,19 @@ def main(argv=None) -> int:
     atomic_write_text(out / "study.md", table, force=True)
     atomic_write_text(
         out / "study.json",
-        json.dumps({"budget": asdict(budget), "reference": reference, "runs": results}),
+        json.dumps(
+            {
+                "budget": asdict(budget),
+                "reference": reference,
+                "reference_curve": reference_curve,
+                "runs": results,
+            }
+        ),
         force=True,
     )
     print(table)
     if args.plot:
-        plot(results, reference, args.plot, force=args.force)
+        plot(results, reference_curve, args.plot, force=args.force)
         print(f"figure: {args.plot}")
     return 0
 
