@@ -391,10 +391,27 @@ class Diagnosis:
             series=series,
         )
 
+    def _with_baseline(self, library: list) -> list:
+        """``library`` with the weak rotor measured against the healthy flights
+        (``baseline_eta``), when there are some."""
+        cfg = self.config
+        if cfg.baseline_eta is None:
+            return library
+        eta, spread = healthy_pattern(cfg.baseline_eta)
+        return [
+            dataclasses.replace(
+                c, baseline=eta, spread=spread, baseline_flights=len(cfg.baseline_eta)
+            )
+            if c.name == MotorEfficiency.name
+            else c
+            for c in library
+        ]
+
     def _rival_library(self, replay, ev, scoring) -> list:
         """The whole library for this recording (gated and pinned like the search's): the
-        rivals of an effect the user asked for may be effects the user left out."""
-        library = build_library(replay, None)
+        rivals of an effect the user asked for may be effects the user left out; the weak
+        rotor is the search's (against the healthy flights when given)."""
+        library = self._with_baseline(build_library(replay, None))
         library, _ = gate([c for c in library if not c.untestable_reason(replay)], ev)
         return pin_to_rotor_speeds(replay, library, scoring)
 
@@ -460,17 +477,7 @@ class Diagnosis:
         what it cannot reveal, in the library's order, each with its reason (the gate's,
         else what the effect itself lacks)."""
         cfg = self.config
-        library = build_library(replay, cfg.effects)
-        if cfg.baseline_eta is not None:
-            eta, spread = healthy_pattern(cfg.baseline_eta)
-            library = [
-                dataclasses.replace(
-                    c, baseline=eta, spread=spread, baseline_flights=len(cfg.baseline_eta)
-                )
-                if c.name == MotorEfficiency.name
-                else c
-                for c in library
-            ]
+        library = self._with_baseline(build_library(replay, cfg.effects))
         lacks = {c.name: c.untestable_reason(replay) for c in library}
         biased = _calibration_bias(replay)
         if biased:  # a common thrust factor would only measure the calibration's bias
