@@ -64,7 +64,9 @@ class FaultTolerantConfig:
         allocation: the estimate-aware allocation (eta floor, priority weights).
         max_heading_error: largest heading error the controller asks to correct [rad]
             (``None``: unbounded, the plain geometric behaviour).
-        detector: when :class:`RelaxedHoverFallback` switches (the estimate isolates a rotor).
+        detector: when :class:`RelaxedHoverFallback` switches (the estimate isolates a rotor);
+            None: chosen for the sensors flown (``RotorLossDetector.for_sensors``; the
+            noise-free default where they are not known).
         spin_physics: the spin physics the relaxed-hover controller is designed with (the
             complete-loss vehicle's by default).
         relaxed_gains: the relaxed-hover controller's gains.
@@ -72,7 +74,7 @@ class FaultTolerantConfig:
 
     allocation: AllocationConfig = field(default_factory=AllocationConfig)
     max_heading_error: float | None = None
-    detector: RotorLossDetector = field(default_factory=RotorLossDetector)
+    detector: RotorLossDetector | None = None
     spin_physics: SpinPhysics = field(default_factory=SpinPhysics)
     relaxed_gains: RelaxedHoverGains = field(default_factory=RelaxedHoverGains)
 
@@ -217,7 +219,7 @@ class RelaxedHoverFallback(EstimateAwareController):
     ):
         super().__init__(vehicle, trajectory, config, fault_tolerant)
         self.control_period = float(control_period)
-        self.switch = RotorLossSwitch(self.ft.detector)
+        self.switch = RotorLossSwitch(self.ft.detector or RotorLossDetector())
 
     def reset(self) -> None:
         self.switch.reset()

@@ -20,6 +20,7 @@ Sources of ``eta_hat`` (the built-in ablation): every name of the estimator regi
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -36,6 +37,7 @@ from quadfault.model.controller import ControllerConfig
 from quadfault.model.effects.spec import parse_effect
 from quadfault.model.motors import MotorModel
 from quadfault.model.plant import Plant
+from quadfault.model.relaxed_hover_control import RotorLossDetector
 from quadfault.model.scenarios import Scenario
 from quadfault.model.sensor_presets import as_sensor_noise
 from quadfault.model.vehicle import Vehicle
@@ -166,12 +168,15 @@ def fly(
     flight.reset(rng)
     eta_table = flight.plan(n, scenario.efficiency)
     efficiency = _Tabulated(cfg.dt, eta_table)
+    ft = cfg.fault_tolerant
+    if ft.detector is None:  # the rotor-loss switch for the sensors flown
+        ft = dataclasses.replace(ft, detector=RotorLossDetector.for_sensors(cfg.sensor_noise))
     ctrl = make_controller(
         controller,
         veh,
         scenario.trajectory,
         cfg.controller,
-        cfg.fault_tolerant,
+        ft,
         cfg.dt * cfg.control_decimation,
     )
     est = make_estimator(estimator, veh, schedule=efficiency)  # the schedule: the oracle's

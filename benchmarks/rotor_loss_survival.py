@@ -122,10 +122,11 @@ def main(argv=None) -> int:
     if args.sensor_noise is not None:
         cfg = FlightConfig(fault_tolerant=ft, sensor_noise=args.sensor_noise)
     start = time.process_time()
+    detector = ft.detector or RotorLossDetector.for_sensors(cfg.sensor_noise)
     print(
         f"vehicle: {veh.name} (thrust-to-weight {veh.thrust_to_weight:g}), effects: "
         f"{' '.join(effects) or 'none'}; rotors {args.rotors}; sensor noise "
-        f"{args.sensor_noise or 'none'}; switch {ft.detector}\n"
+        f"{args.sensor_noise or 'none'}; switch {detector}\n"
     )
     print(
         "| eta after loss | controller (estimate) | survived | crash time [s] | "

@@ -110,3 +110,23 @@ def test_held_after_loss_counts_the_late_error_and_the_flights_end():
     assert held_after_loss(t, e, 3.0, 10.0)
     assert not held_after_loss(t, e, 2.0, 10.0)  # still 1.5 m at 2 s after the loss
     assert not held_after_loss(t[:600], e[:600], 3.0, 10.0)  # ended (crashed) at 6 s
+
+
+def test_the_switch_holds_longer_with_noisy_sensors():
+    """A noisy estimate dips below the threshold for milliseconds before any loss: the
+    default detector of noisy sensors waits NOISY_HOLD, noise-free sensors keep the fast
+    default; the env and fly() choose it from the sensors they fly."""
+    import gymnasium as gym
+
+    import quad_fault_env  # noqa: F401
+    from quadfault.model.relaxed_hover_control import NOISY_HOLD
+    from quadfault.model.sensor_presets import as_sensor_noise
+    from quadfault.model.sensors import SensorNoise
+
+    quiet = RotorLossDetector.for_sensors(SensorNoise())
+    assert quiet == RotorLossDetector() and quiet.hold < NOISY_HOLD
+    assert RotorLossDetector.for_sensors(as_sensor_noise("px4")).hold == NOISY_HOLD
+    assert RotorLossDetector.for_sensors(SensorNoise(0.01, 0, 0, 0)).hold == NOISY_HOLD
+    env = gym.make("QuadFaultRotorLossComplete-v0", sensor_noise="crazyflie")
+    assert env.unwrapped.relaxed.detector.hold == NOISY_HOLD
+    assert gym.make("QuadFaultRotorLossComplete-v0").unwrapped.relaxed.detector == quiet

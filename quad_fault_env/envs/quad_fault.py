@@ -44,6 +44,7 @@ from quadfault.model.effects.sampling import describe
 from quadfault.model.flight import Flight
 from quadfault.model.motors import MotorModel
 from quadfault.model.plant import Plant
+from quadfault.model.relaxed_hover_control import RotorLossDetector
 from quadfault.model.scenarios import Scenario
 from quadfault.model.trajectory import FlatOutput
 
@@ -207,7 +208,12 @@ class QuadFaultEnv(gym.Env):
         self.allocator = EstimateAwareAllocator(self.vehicle) if aware else None
         #: the relaxed-hover base (None unless allocation="relaxed-hover")
         self.relaxed = (
-            RelaxedHoverBase(self.vehicle, c.effects, c.control_period)
+            RelaxedHoverBase(
+                self.vehicle,
+                c.effects,
+                c.control_period,
+                detector=RotorLossDetector.for_sensors(self.sensor_noise),
+            )
             if c.allocation == "relaxed-hover"
             else None
         )

@@ -191,6 +191,12 @@ def relaxed_hover_controller(
     return RelaxedHoverController(vehicle, int(lost), physics, float(period), gains)
 
 
+#: the detector's hold with noisy sensors [s]: a noisy estimate dips below the threshold
+#: for a few milliseconds before any loss (measured: ``benchmarks/rotor_loss_survival.py
+#: --sensor-noise px4``, docs/results.md)
+NOISY_HOLD = 0.05
+
+
 @dataclass(frozen=True)
 class RotorLossDetector:
     """When the estimate says a rotor is gone: one rotor's efficiency estimate below
@@ -201,6 +207,8 @@ class RotorLossDetector:
         threshold: efficiency below which a rotor counts as lost [-].
         others: least efficiency of every other rotor [-].
         hold: how long the estimates must agree [s] (0: the first isolating estimate).
+            The default suits noise-free sensors; :meth:`for_sensors` chooses it for the
+            sensors flown.
     """
 
     threshold: float = 0.15
@@ -214,6 +222,13 @@ class RotorLossDetector:
             )
         if not (math.isfinite(self.hold) and self.hold >= 0):
             raise ConfigError(f"hold must be >= 0 [s], got {self.hold!r}")
+
+    @classmethod
+    def for_sensors(cls, sensor_noise) -> RotorLossDetector:
+        """The default detector for ``sensor_noise`` (a
+        :class:`~quadfault.model.sensors.SensorNoise`): a hold of :data:`NOISY_HOLD` when the
+        sensors have any noise, else the default's."""
+        return cls(hold=NOISY_HOLD) if sensor_noise is not None and sensor_noise.any else cls()
 
     def candidate(self, eta_hat) -> int:
         """The rotor the estimate isolates below the threshold now, or -1."""
