@@ -1,9 +1,21 @@
 """The EKF's step: one predict and one update, compiled (the model of :mod:`estimators.ekf`).
 
 State ``x = [p (3); v (3); Omega (3); vec(R) (9, column-major); eta (n)]`` and covariance
-``P``. :func:`predict_update_into` is the filter, plain Python compiled by
-:func:`quadfault.jit.jit`; it uses the structure of the ``18 + n``-state filter instead of
-dense products:
+``P``. :func:`predict_update_into` is the filter, one line per equation, each a small stage
+compiled into it (:func:`quadfault.jit.jit`, inlined) that works in a named
+:data:`WORKSPACE`::
+
+    x_pred = f(x, u)                  predict_state          (eqs. 1-4, 12)
+    F = d f / d x                     transition_blocks
+    P_pred = F P F^T + Q              predict_covariance
+    y = z - h(x_pred), H = d h / d x  innovation
+    S = H P_pred H^T + R              innovation_covariance  (R added in the factorisation)
+    K = P_pred H^T S^-1               whitened_gain
+    x = x_pred + K y                  update_state
+    P = P_pred - K S K^T              update_covariance
+    R -> SO(3), eta clamped           project_and_clamp
+
+The stages use the structure of the ``18 + n``-state filter instead of dense products:
 
 * the transition Jacobian ``F`` is never formed: it is the identity plus a few blocks (p and
   v rows: dt, the thrust direction ``R e3`` and a rank-one eta coupling; Omega rows:
@@ -13,9 +25,10 @@ dense products:
   :class:`Transition`), the second on the lower triangle only (mirrored);
 * the measurement Jacobian is ``[I_9 0]`` plus a 3 x 9 attitude block, so ``H P`` and
   ``H P H^T`` read rows of ``P``;
-* the update uses the square-root form of the optimal gain (:func:`_update`):
-  ``S = L L^T``, ``W = L^-1 H P``, ``x += W^T L^-1 y``, ``P -= W^T W``: no explicit gain,
-  symmetric by construction.
+* the gain is used in the square-root form: ``S = L L^T``, ``W = L^-1 H P``, so
+  ``K = W^T L^-1``, ``x += W^T L^-1 y``, ``P -= W^T W``: no explicit gain, symmetric by
+  construction (equal to the Joseph form for this optimal gain up to rounding). An ``S``
+  that is not positive definite takes the general solver (:func:`_update_general`).
 
 The online rules around it (first sample, bad samples, idle rotors, command clipping) are
 :func:`estimators.ekf.ekf_step`.
@@ -48,25 +61,47 @@ X = fields(
 Y = fields("EKFMeasurementRows", ("p", 3), ("v", 3), ("w", 3), ("R", 3))
 N_VEC_R = X.eta - X.Re1  # the entries of vec(R)
 assert (X.p, X.v, X.w) == (Y.p, Y.v, Y.w) and X.Re1 == Y.R  # rows that read their state
-#: slots of the workspace's (ns, ns) matrices, 3 x 3 blocks and ns-vectors
-MATS = fields("EKFMatrices", "FP", "FPT", "Pp")
-M3 = fields("EKFBlocks", "R", "Rn", "Jr", "G", "Mr", "C", "Fw", "Mw")
-VECS = fields("EKFVectors", "xp", "ze", "phi")
-#: the workspace of one filter (dimensions: rotors ``n``, states ``ns = X.size + n``)
+#: the workspace of one filter, every scratch array by name (dimensions: rotors ``n``, states
+#: ``ns = X.size + n``), in the order of the stages that write them
 WORKSPACE = Layout(
     "EKFWorkspace",
-    mats=(MATS.size, "ns", "ns"),
-    WT=("ns", Y.size),
-    s12=(2, Y.size, Y.size),
-    HP=(Y.size, "ns"),
-    M3=(M3.size, 3, 3),
-    dR=(N_VEC_R, 3),
-    Bs=(2, "n", 3),
-    HR=(Y.size - Y.R, N_VEC_R),
-    vecs=(VECS.size, "ns"),
-    Z=(3, "ns"),
-    y=(Y.size,),
+    # predict_state: the attitude before and after the predict, the predicted state
+    R=(3, 3),
+    Rn=(3, 3),
+    xp=("ns",),
+    # transition_blocks: the efficiency columns of F (thrust dT, rate (dt B)^T, attitude
+    # (dt^2 B / 2)^T), the rate block Fw = I + dt G and its attitude image Mw, the right
+    # Jacobian Jr, the attitude's derivative dR = d vec(R_pred) / d phi; G and its numerator
+    # Gn = [J w]x - [w]x J
     dT=("n",),
+    BwT=("n", 3),
+    BrT=("n", 3),
+    Gn=(3, 3),
+    G=(3, 3),
+    Fw=(3, 3),
+    Mw=(3, 3),
+    Jr=(3, 3),
+    dR=(N_VEC_R, 3),
+    # predict_covariance: F P, its transpose, the predicted covariance; scratch of
+    # _jacobian_times (ze = dT^T P[eta], Z = [Mw, Br] P[(Omega, eta)])
+    FP=("ns", "ns"),
+    FPT=("ns", "ns"),
+    Pp=("ns", "ns"),
+    ze=("ns",),
+    Z=(3, "ns"),
+    # innovation: the rotation error Rn^T R_meas, the innovation y, the attitude rows of H
+    dRz=(3, 3),
+    y=(Y.size,),
+    HR=(Y.size - Y.R, N_VEC_R),
+    # innovation_covariance, whitened_gain, update_*: H P (then W = L^-1 H P), W^T,
+    # S = H P H^T (lower triangle) and its Cholesky factor L
+    HP=(Y.size, "ns"),
+    WT=("ns", Y.size),
+    S=(Y.size, Y.size),
+    L=(Y.size, Y.size),
+    # project_and_clamp: the updated attitude and the projection's scratch (A, D, V)
+    Ru=(3, 3),
+    svd=(3, 3, 3),
 )
 Workspace = WORKSPACE.pieces
 
@@ -268,40 +303,33 @@ def _jacobian_times(Pin, out, lower, F, ze, Z):
             out[i, k] = Pin[i, k]
 
 
-@jit
-def predict_update_into(x, P, f, dt, z, model, work):
-    """One predict over ``dt`` [s] with the rotor commands ``f`` [N] held (eqs. 1-4, 12) and one
-    update with the measurement ``z`` (:class:`Measurement`); ``x`` and ``P`` are overwritten.
-    ``model``: :class:`Model` (the nominal rigid body, allocation, noise, clamp); ``work``:
-    :class:`Workspace`. The rigid body is the model's (:mod:`quadfault.model.dynamics`: the thrust
-    allocation, eqs. 2 and 4); the step discretises it as the paper's EKF does."""
-    FP, FPT, Pp = work.mats[MATS.FP], work.mats[MATS.FPT], work.mats[MATS.Pp]
-    S, L = work.s12[0], work.s12[1]
-    M3_ = work.M3
-    R, Rn, Jr, G, Mr, C = (M3_[M3.R], M3_[M3.Rn], M3_[M3.Jr], M3_[M3.G], M3_[M3.Mr], M3_[M3.C])
-    Fw, Mw = M3_[M3.Fw], M3_[M3.Mw]
-    BwT, BrT = work.Bs[0], work.Bs[1]
-    xp, ze, phi = work.vecs[VECS.xp], work.vecs[VECS.ze], work.vecs[VECS.phi, 0:3]
-    dR, HR, y, dT, HP, WT, Z = work.dR, work.HR, work.y, work.dT, work.HP, work.WT, work.Z
-    A, J, Jinv, qc, r, rigid = model.A, model.J, model.Jinv, model.qc, model.r, model.rigid
-    m = rigid[0]
-    ns = x.shape[0]
-    nr = ns - X.eta
+@jit(inline="always")
+def predict_state(x, f, dt, model, work):
+    """The state's predict over ``dt`` [s] with the rotor commands ``f`` [N] held: the rigid
+    body of :mod:`quadfault.model.dynamics` (the thrust allocation ``[T; M] = A diag(eta) f``,
+    eq. 12; the accelerations, eqs. 2 and 4) discretised as the paper's EKF does (eqs. 1-4)::
+
+        p+ = p + v dt + a dt^2 / 2,   v+ = v + a dt,   Omega+ = Omega + Omega' dt,
+        R+ = R exp([phi]x),  phi = Omega dt + Omega' dt^2 / 2,   eta+ = eta
+
+    into ``work.xp`` (``work.R``, ``work.Rn``: the attitude before and after). Returns what
+    the transition Jacobian needs: the thrust ``T``, the rate ``w``, ``J w``, ``phi`` and
+    ``E = exp([phi]x)`` (row-major 9-tuple)."""
+    R, Rn, xp, rigid = work.R, work.Rn, work.xp, model.rigid
     for j in range(3):
         for i in range(3):
             R[i, j] = x[X.Re1 + 3 * j + i]
-    # ---- predict (eqs. 1-4, 12)
-    T, mo = rotor_wrench(A, f, x[X.eta :])  # [T; M] = A diag(eta) f
+    T, mo = rotor_wrench(model.A, f, x[X.eta :])  # [T; M] = A diag(eta) f
     w = (x[X.w], x[X.w + 1], x[X.w + 2])
-    w0, w1, w2 = w
     jw = matvec3(rigid[2], w)
     wdot = angular_acceleration3(w, mo, rigid)  # eq. 4
     acc = translational_acceleration3(mat3(R), T, rigid)  # eq. 2
-    phi0 = w0 * dt + 0.5 * wdot[0] * dt * dt
-    phi1 = w1 * dt + 0.5 * wdot[1] * dt * dt
-    phi2 = w2 * dt + 0.5 * wdot[2] * dt * dt
-    phi[0], phi[1], phi[2] = phi0, phi1, phi2
-    E = expm3((phi0, phi1, phi2))  # row-major 9-tuple
+    phi = (
+        w[0] * dt + 0.5 * wdot[0] * dt * dt,
+        w[1] * dt + 0.5 * wdot[1] * dt * dt,
+        w[2] * dt + 0.5 * wdot[2] * dt * dt,
+    )
+    E = expm3(phi)  # row-major 9-tuple
     for i in range(3):
         for j in range(3):
             Rn[i, j] = R[i, 0] * E[j] + R[i, 1] * E[3 + j] + R[i, 2] * E[6 + j]
@@ -312,10 +340,23 @@ def predict_update_into(x, P, f, dt, z, model, work):
     for j in range(3):
         for i in range(3):
             xp[X.Re1 + 3 * j + i] = Rn[i, j]
-    for j in range(nr):
+    for j in range(x.shape[0] - X.eta):
         xp[X.eta + j] = x[X.eta + j]
-    # blocks of the Jacobian F = d x_pred / d x (ekf.predict); F itself is never formed
-    for j in range(nr):  # B = J^-1 A_M diag(f) = d Omega' / d eta, dT = d T / d eta
+    return T, w, jw, phi, E
+
+
+@jit(inline="always")
+def transition_blocks(f, dt, model, T, w, jw, phi, E, work):
+    """The blocks of the transition Jacobian ``F = d x_pred / d x`` of :func:`predict_state`
+    (its arguments ``T``, ``w``, ``jw``, ``phi``, ``E``), as a :class:`Transition` over arrays
+    of ``work``; ``F`` itself is never formed. The efficiency columns: ``dT = d T / d eta``
+    and ``B = J^-1 A_M diag(f) = d Omega' / d eta``; the rate block
+    ``G = J^-1 ([J w]x - [w]x J) = d Omega' / d Omega``; the attitude:
+    ``dR[:, i] = vec(R_pred [Jr[:, i]]x) = d vec(R_pred) / d phi_i``."""
+    A, J, Jinv, m = model.A, model.J, model.Jinv, model.rigid[0]
+    R, Rn, dT, BwT, BrT = work.R, work.Rn, work.dT, work.BwT, work.BrT
+    Gn, G, Fw, Mw, Jr, dR = work.Gn, work.G, work.Fw, work.Mw, work.Jr, work.dR
+    for j in range(f.shape[0]):  # dT = d T / d eta, B = d Omega' / d eta
         dT[j] = A[0, j] * f[j]
         for i in range(3):
             b = (
@@ -325,17 +366,18 @@ def predict_update_into(x, P, f, dt, z, model, work):
             )
             BwT[j, i] = dt * b
             BrT[j, i] = 0.5 * dt * dt * b
+    w0, w1, w2 = w
     hjw = ((0.0, -jw[2], jw[1]), (jw[2], 0.0, -jw[0]), (-jw[1], jw[0], 0.0))
     hw = ((0.0, -w2, w1), (w2, 0.0, -w0), (-w1, w0, 0.0))
     for k in range(3):  # G = J^-1 ([J w]x - [w]x J) = d Omega' / d Omega
         for j in range(3):
-            Mr[k, j] = hjw[k][j] - (hw[k][0] * J[0, j] + hw[k][1] * J[1, j] + hw[k][2] * J[2, j])
+            Gn[k, j] = hjw[k][j] - (hw[k][0] * J[0, j] + hw[k][1] * J[1, j] + hw[k][2] * J[2, j])
     for i in range(3):
         for j in range(3):
-            G[i, j] = Jinv[i, 0] * Mr[0, j] + Jinv[i, 1] * Mr[1, j] + Jinv[i, 2] * Mr[2, j]
+            G[i, j] = Jinv[i, 0] * Gn[0, j] + Jinv[i, 1] * Gn[1, j] + Jinv[i, 2] * Gn[2, j]
             Fw[i, j] = (1.0 if i == j else 0.0) + dt * G[i, j]
             Mw[i, j] = (dt if i == j else 0.0) + 0.5 * dt * dt * G[i, j]  # d phi / d Omega
-    _right_jacobian_into(phi0, phi1, phi2, Jr)
+    _right_jacobian_into(phi[0], phi[1], phi[2], Jr)
     for i in range(3):  # dR[:, i] = vec(Rn [Jr[:, i]]x) = d vec(R_pred) / d phi_i
         h = ((0.0, -Jr[2, i], Jr[1, i]), (Jr[2, i], 0.0, -Jr[0, i]), (-Jr[1, i], Jr[0, i], 0.0))
         for cc in range(3):
@@ -350,31 +392,47 @@ def predict_update_into(x, P, f, dt, z, model, work):
         -R[2, 2] * (0.5 * dt * dt / m),
     )  # d (p, v) / d eta = up / uv (x) dT
     uv = (-R[0, 2] * (dt / m), -R[1, 2] * (dt / m), -R[2, 2] * (dt / m))
-    # P_pred = F P F^T + Q: F P, then F (F P)^T on the lower triangle, mirrored
-    F = Transition(dt, cp, cv, up, uv, dT, Fw, BwT, E, dR, Mw, BrT)
-    _jacobian_times(P, FP, False, F, ze, Z)
+    return Transition(dt, cp, cv, up, uv, dT, Fw, BwT, E, dR, Mw, BrT)
+
+
+@jit(inline="always")
+def predict_covariance(P, F, qc, dt, work):
+    """``P_pred = F P F^T + Q`` into ``work.Pp``, with ``Q = diag(qc) dt``: ``F P`` over the
+    blocks of ``F`` (:func:`_jacobian_times`), then ``F (F P)^T`` on the lower triangle
+    only, mirrored (exactly symmetric)."""
+    FP, FPT, Pp = work.FP, work.FPT, work.Pp
+    ns = P.shape[0]
+    _jacobian_times(P, FP, False, F, work.ze, work.Z)
     for i in range(ns):
         for k in range(ns):
             FPT[k, i] = FP[i, k]
-    _jacobian_times(FPT, Pp, True, F, ze, Z)
+    _jacobian_times(FPT, Pp, True, F, work.ze, work.Z)
     for i in range(ns):
         for k in range(i):
             Pp[k, i] = Pp[i, k]
         Pp[i, i] += qc[i] * dt
-    # ---- update (p, v, Omega, attitude rotation error); H = [I_9 0; 0 HR 0]
-    zR = z.R
+
+
+@jit(inline="always")
+def innovation(z, work):
+    """The innovation ``y = z - h(x_pred)`` into ``work.y`` and the attitude rows of
+    ``H = [I_9 0; 0 HR 0]`` into ``work.HR``. Position, velocity and rate read their states;
+    the attitude's is the rotation error ``log(R_pred^T R_meas)``, whose Jacobian ``HR`` is
+    that of ``vee(skew(R_pred^T R_meas))`` (equal to first order; it does not depend on the
+    estimate)."""
+    xp, Rn, dRz, y, HR, zR = work.xp, work.Rn, work.dRz, work.y, work.HR, z.R
     for i in range(3):
         y[Y.p + i] = z.p[i] - xp[X.p + i]
         y[Y.v + i] = z.v[i] - xp[X.v + i]
         y[Y.w + i] = z.w[i] - xp[X.w + i]
-    for i in range(3):  # Mr = Rn^T zR, y[Y.R:] = log(Mr)
+    for i in range(3):  # dRz = Rn^T zR, y[Y.R:] = log(dRz)
         for j in range(3):
-            Mr[i, j] = Rn[0, i] * zR[0, j] + Rn[1, i] * zR[1, j] + Rn[2, i] * zR[2, j]
-    s0 = 0.5 * (Mr[2, 1] - Mr[1, 2])
-    s1 = 0.5 * (Mr[0, 2] - Mr[2, 0])
-    s2 = 0.5 * (Mr[1, 0] - Mr[0, 1])
+            dRz[i, j] = Rn[0, i] * zR[0, j] + Rn[1, i] * zR[1, j] + Rn[2, i] * zR[2, j]
+    s0 = 0.5 * (dRz[2, 1] - dRz[1, 2])
+    s1 = 0.5 * (dRz[0, 2] - dRz[2, 0])
+    s2 = 0.5 * (dRz[1, 0] - dRz[0, 1])
     sn = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-    cs = 0.5 * (Mr[0, 0] + Mr[1, 1] + Mr[2, 2] - 1.0)
+    cs = 0.5 * (dRz[0, 0] + dRz[1, 1] + dRz[2, 2] - 1.0)
     scale = 1.0 if sn < 1e-12 else math.atan2(sn, cs) / sn
     y[Y.R], y[Y.R + 1], y[Y.R + 2] = s0 * scale, s1 * scale, s2 * scale
     for k in range(3):
@@ -384,35 +442,18 @@ def predict_update_into(x, P, f, dt, z, model, work):
         for i in range(3):
             HR[k, 3 * ia + i] -= 0.5 * zR[i, ib]
             HR[k, 3 * ib + i] += 0.5 * zR[i, ia]
-    _update(x, P, xp, Pp, HR, y, r, HP, WT, S, L)
-    for j in range(3):  # project R back to SO(3), clamp eta
-        for i in range(3):
-            C[i, j] = x[X.Re1 + 3 * j + i]
-    _project_so3_into(C, Mr, Jr, G)
-    for j in range(3):
-        for i in range(3):
-            x[X.Re1 + 3 * j + i] = C[i, j]
-    for j in range(nr):
-        x[X.eta + j] = min(max(x[X.eta + j], model.lo), model.hi)
 
 
 @jit(inline="always")
-def _update(x, P, xp, Pp, HR, y, r, HP, WT, S, L):
-    """Measurement update of ``(xp, Pp)`` into ``(x, P)`` with ``H = [I_9 0; 0 HR 0]`` and
-    ``R = diag(r)``, in the square-root form of the optimal gain::
-
-        S = H Pp H^T + R = L L^T,   W = L^-1 H Pp,   x = xp + W^T (L^-1 y),   P = Pp - W^T W
-
-    which is ``K = Pp H^T S^-1``, ``x = xp + K y`` and ``P = (I - K H) Pp = Pp - K S K^T``:
-    equal to ``ekf.kalman_update``'s Joseph form for this (optimal) gain up to rounding,
-    symmetric by construction (lower triangle computed, mirrored) and positive
-    semi-definite up to rounding. ``HP`` (12 x ns) becomes ``W``, ``WT`` is its transpose,
-    ``y`` becomes ``L^-1 y``. If ``S`` is not positive definite (a corrupted covariance;
-    it has ``diag(r) > 0`` added) the general solver and ``P = sym(Pp - K H Pp)`` are used.
-    ``S`` is factored by :func:`estimators.linalg.cholesky_into` with ``r`` as its shift."""
+def innovation_covariance(work):
+    """``H P_pred`` into ``work.HP`` and the lower triangle of ``S = H P_pred H^T`` into
+    ``work.S`` (``R = diag(r)`` is added where ``S`` is factored, :func:`whitened_gain`).
+    ``H = [I_9 0; 0 HR 0]``: ``H P`` reads rows of ``P``, the attitude rows go through
+    ``HR``."""
+    Pp, HR, HP, S = work.Pp, work.HR, work.HP, work.S
     ns = Pp.shape[0]
     nm, nd = Y.size, Y.R  # measurement rows, those that read their state (H = I there)
-    for i in range(nd):  # H P: rows of P, and the attitude rows
+    for i in range(nd):
         for k in range(ns):
             HP[i, k] = Pp[i, k]
     for i in range(nm - nd):
@@ -423,7 +464,7 @@ def _update(x, P, xp, Pp, HR, y, r, HP, WT, S, L):
             if h != 0.0:
                 for k in range(ns):
                     HP[nd + i, k] += h * Pp[X.Re1 + j, k]
-    for i in range(nm):  # lower triangle of S = H P H^T (+ R in the factorisation)
+    for i in range(nm):
         for k in range(min(i + 1, nd)):
             S[i, k] = HP[i, k]
         for k in range(nd, i + 1):
@@ -431,12 +472,20 @@ def _update(x, P, xp, Pp, HR, y, r, HP, WT, S, L):
             for j in range(N_VEC_R):
                 acc += HP[i, X.Re1 + j] * HR[k - nd, j]
             S[i, k] = acc
-    if not cholesky_into(S, r, L, S.shape[0]):
-        for i in range(nm):
-            S[i, i] += r[i]
-        _update_general(x, P, xp, Pp, y, HP, S, WT.reshape((nm, ns)))
-        return
-    for i in range(nm):  # W = L^-1 H P (forward substitution on whole rows, in place)
+
+
+@jit(inline="always")
+def whitened_gain(r, work) -> bool:
+    """The gain ``K = P_pred H^T S^-1`` in its square-root form, with ``S + diag(r) = L L^T``
+    (:func:`estimators.linalg.cholesky_into`, ``r`` its shift): ``K = W^T L^-1`` with
+    ``W = L^-1 H P_pred`` (``work.HP`` becomes ``W``, forward substitution on whole rows)
+    and the whitened innovation ``L^-1 y`` (``work.y``). False, with nothing changed but
+    ``work.L``, when ``S`` is not positive definite (a corrupted covariance)."""
+    HP, L, y = work.HP, work.L, work.y
+    ns, nm = HP.shape[1], Y.size
+    if not cholesky_into(work.S, r, L, work.S.shape[0]):
+        return False
+    for i in range(nm):  # W = L^-1 H P
         for k in range(i):
             lik = L[i, k]
             for c in range(ns):
@@ -449,24 +498,80 @@ def _update(x, P, xp, Pp, HR, y, r, HP, WT, S, L):
         for k in range(i):
             acc -= L[i, k] * y[k]
         y[i] = acc / L[i, i]
-    for i in range(ns):
+    return True
+
+
+@jit(inline="always")
+def update_state(x, work):
+    """``x = x_pred + K y = x_pred + W^T (L^-1 y)`` (:func:`whitened_gain`); ``work.WT``
+    becomes ``W^T``."""
+    xp, W, WT, y = work.xp, work.HP, work.WT, work.y
+    for i in range(x.shape[0]):
         acc = 0.0
-        for c in range(nm):
-            WT[i, c] = HP[c, i]
-            acc += HP[c, i] * y[c]
+        for c in range(Y.size):
+            WT[i, c] = W[c, i]
+            acc += W[c, i] * y[c]
         x[i] = xp[i] + acc
-    for i in range(ns):  # P = Pp - W^T W
+
+
+@jit(inline="always")
+def update_covariance(P, work):
+    """``P = (I - K H) P_pred = P_pred - K S K^T = P_pred - W^T W`` (after
+    :func:`update_state`): the optimal gain's covariance, equal to the Joseph form
+    ``(I - K H) P (I - K H)^T + K R K^T`` for this gain up to rounding; symmetric by
+    construction (lower triangle computed, mirrored) and positive semi-definite up to
+    rounding."""
+    Pp, WT = work.Pp, work.WT
+    for i in range(P.shape[0]):
         for k in range(i + 1):
             acc = 0.0
-            for c in range(nm):
+            for c in range(Y.size):
                 acc += WT[i, c] * WT[k, c]
             P[i, k] = Pp[i, k] - acc
             P[k, i] = P[i, k]
 
 
+@jit(inline="always")
+def project_and_clamp(x, lo, hi, work):
+    """The updated attitude projected back onto SO(3) (:func:`_project_so3_into`) and the
+    efficiencies clamped to ``[lo, hi]``, in ``x``."""
+    Ru, svd = work.Ru, work.svd
+    for j in range(3):
+        for i in range(3):
+            Ru[i, j] = x[X.Re1 + 3 * j + i]
+    _project_so3_into(Ru, svd[0], svd[1], svd[2])
+    for j in range(3):
+        for i in range(3):
+            x[X.Re1 + 3 * j + i] = Ru[i, j]
+    for j in range(x.shape[0] - X.eta):
+        x[X.eta + j] = min(max(x[X.eta + j], lo), hi)
+
+
+@jit
+def predict_update_into(x, P, f, dt, z, model, work):
+    """One predict over ``dt`` [s] with the rotor commands ``f`` [N] held and one update with
+    the measurement ``z`` (:class:`Measurement`); ``x`` and ``P`` are overwritten.
+    ``model``: :class:`Model` (the nominal rigid body, allocation, noise, clamp); ``work``:
+    :class:`Workspace`. Each stage is one line of the EKF's equations."""
+    T, w, jw, phi, E = predict_state(x, f, dt, model, work)  # x_pred = f(x, u), eqs. 1-4, 12
+    F = transition_blocks(f, dt, model, T, w, jw, phi, E, work)  # F = d f / d x
+    predict_covariance(P, F, model.qc, dt, work)  # P_pred = F P F^T + Q
+    innovation(z, work)  # y = z - h(x_pred), H = d h / d x
+    innovation_covariance(work)  # S = H P_pred H^T (+ R)
+    if whitened_gain(model.r, work):  # K = P_pred H^T S^-1 = W^T L^-1
+        update_state(x, work)  # x = x_pred + K y
+        update_covariance(P, work)  # P = P_pred - K S K^T
+    else:  # S not positive definite: the general solver
+        S, nm, ns = work.S, Y.size, x.shape[0]
+        for i in range(nm):
+            S[i, i] += model.r[i]
+        _update_general(x, P, work.xp, work.Pp, work.y, work.HP, S, work.WT.reshape((nm, ns)))
+    project_and_clamp(x, model.lo, model.hi, work)
+
+
 @jit
 def _update_general(x, P, xp, Pp, y, HP, S, KT):
-    """Fallback of :func:`_update` for an ``S`` that is not positive definite: ``K^T`` by
+    """Fallback of :func:`whitened_gain` for an ``S`` that is not positive definite: ``K^T`` by
     Gauss-Jordan elimination into ``KT`` (12, ns), ``x = xp + K y``,
     ``P = sym(Pp - K H Pp)``; nothing changes if ``S`` is singular."""
     ns, m = Pp.shape[0], S.shape[0]
