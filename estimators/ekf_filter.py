@@ -61,49 +61,122 @@ X = fields(
 Y = fields("EKFMeasurementRows", ("p", 3), ("v", 3), ("w", 3), ("R", 3))
 N_VEC_R = X.eta - X.Re1  # the entries of vec(R)
 assert (X.p, X.v, X.w) == (Y.p, Y.v, Y.w) and X.Re1 == Y.R  # rows that read their state
-#: the workspace of one filter, every scratch array by name (dimensions: rotors ``n``, states
-#: ``ns = X.size + n``), in the order of the stages that write them
+#: the workspace's scratch arrays by name, in the order of the stages that write them (the
+#: fields of :class:`Scratch`); stored by shape, a few arrays in all, so that the filter's
+#: state and the workspace pass between compiled functions as a few arrays
+#: (:data:`WORKSPACE`)
+#:
+#: * ``predict_state``: the attitude before and after the predict (``R``, ``Rn``), the
+#:   predicted state ``xp``;
+#: * ``transition_blocks``: the efficiency columns of F (thrust ``dT``, rate ``(dt B)^T``
+#:   ``BwT``, attitude ``(dt^2 B / 2)^T`` ``BrT``), ``G`` and its numerator
+#:   ``Gn = [J w]x - [w]x J``, the rate block ``Fw = I + dt G`` and its attitude image
+#:   ``Mw``, the right Jacobian ``Jr``, the attitude's derivative
+#:   ``dR = d vec(R_pred) / d phi``;
+#: * ``predict_covariance``: ``FP = F P``, its transpose ``FPT``, the predicted covariance
+#:   ``Pp``; the scratch of :func:`_jacobian_times` (``ze = dT^T P[eta]``,
+#:   ``Z = [Mw, Br] P[(Omega, eta)]``);
+#: * ``innovation``: the rotation error ``dRz = Rn^T R_meas``, the innovation ``y``, the
+#:   attitude rows ``HR`` of ``H``;
+#: * ``innovation_covariance``, ``whitened_gain``, ``update_*``: ``HP = H P`` (then
+#:   ``W = L^-1 H P``), ``WT = W^T``, ``S = H P H^T`` (lower triangle) and its Cholesky
+#:   factor ``L``;
+#: * ``project_and_clamp``: the updated attitude ``Ru`` and the projection's scratch
+#:   ``svdA``, ``svdD``, ``svdV``.
+BLOCKS = fields(
+    "EKFBlocks", "R", "Rn", "Gn", "G", "Fw", "Mw", "Jr", "dRz", "Ru", "svdA", "svdD", "svdV"
+)  # 3 x 3 each
+MATS = fields("EKFMatrices", "FP", "FPT", "Pp")  # ns x ns each
+VECS = fields("EKFVectors", "xp", "ze")  # ns each
+SQUARES = fields("EKFSquares", "S", "L")  # Y.size x Y.size each
+EFFICIENCY = fields("EKFEfficiencyColumns", "BwT", "BrT")  # n x 3 each
+#: the workspace of one filter as stored (dimensions: rotors ``n``, states
+#: ``ns = X.size + n``): the arrays of one shape together, named by the fields above
 WORKSPACE = Layout(
     "EKFWorkspace",
-    # predict_state: the attitude before and after the predict, the predicted state
-    R=(3, 3),
-    Rn=(3, 3),
-    xp=("ns",),
-    # transition_blocks: the efficiency columns of F (thrust dT, rate (dt B)^T, attitude
-    # (dt^2 B / 2)^T), the rate block Fw = I + dt G and its attitude image Mw, the right
-    # Jacobian Jr, the attitude's derivative dR = d vec(R_pred) / d phi; G and its numerator
-    # Gn = [J w]x - [w]x J
+    mats=(MATS.size, "ns", "ns"),
+    blocks=(BLOCKS.size, 3, 3),
+    vecs=(VECS.size, "ns"),
+    squares=(SQUARES.size, Y.size, Y.size),
+    efficiency=(EFFICIENCY.size, "n", 3),
     dT=("n",),
-    BwT=("n", 3),
-    BrT=("n", 3),
-    Gn=(3, 3),
-    G=(3, 3),
-    Fw=(3, 3),
-    Mw=(3, 3),
-    Jr=(3, 3),
     dR=(N_VEC_R, 3),
-    # predict_covariance: F P, its transpose, the predicted covariance; scratch of
-    # _jacobian_times (ze = dT^T P[eta], Z = [Mw, Br] P[(Omega, eta)])
-    FP=("ns", "ns"),
-    FPT=("ns", "ns"),
-    Pp=("ns", "ns"),
-    ze=("ns",),
     Z=(3, "ns"),
-    # innovation: the rotation error Rn^T R_meas, the innovation y, the attitude rows of H
-    dRz=(3, 3),
     y=(Y.size,),
     HR=(Y.size - Y.R, N_VEC_R),
-    # innovation_covariance, whitened_gain, update_*: H P (then W = L^-1 H P), W^T,
-    # S = H P H^T (lower triangle) and its Cholesky factor L
     HP=(Y.size, "ns"),
     WT=("ns", Y.size),
-    S=(Y.size, Y.size),
-    L=(Y.size, Y.size),
-    # project_and_clamp: the updated attitude and the projection's scratch (A, D, V)
-    Ru=(3, 3),
-    svd=(3, 3, 3),
 )
 Workspace = WORKSPACE.pieces
+
+
+class Scratch(NamedTuple):
+    """The workspace's arrays by name (views of a :data:`WORKSPACE`, :func:`scratch`)."""
+
+    R: np.ndarray
+    Rn: np.ndarray
+    xp: np.ndarray
+    dT: np.ndarray
+    BwT: np.ndarray
+    BrT: np.ndarray
+    Gn: np.ndarray
+    G: np.ndarray
+    Fw: np.ndarray
+    Mw: np.ndarray
+    Jr: np.ndarray
+    dR: np.ndarray
+    FP: np.ndarray
+    FPT: np.ndarray
+    Pp: np.ndarray
+    ze: np.ndarray
+    Z: np.ndarray
+    dRz: np.ndarray
+    y: np.ndarray
+    HR: np.ndarray
+    HP: np.ndarray
+    WT: np.ndarray
+    S: np.ndarray
+    L: np.ndarray
+    Ru: np.ndarray
+    svdA: np.ndarray
+    svdD: np.ndarray
+    svdV: np.ndarray
+
+
+@jit(inline="always")
+def scratch(work) -> Scratch:
+    """The arrays of the workspace ``work`` (:class:`Workspace`) by name."""
+    b, m, v, q, e = work.blocks, work.mats, work.vecs, work.squares, work.efficiency
+    return Scratch(
+        R=b[BLOCKS.R],
+        Rn=b[BLOCKS.Rn],
+        xp=v[VECS.xp],
+        dT=work.dT,
+        BwT=e[EFFICIENCY.BwT],
+        BrT=e[EFFICIENCY.BrT],
+        Gn=b[BLOCKS.Gn],
+        G=b[BLOCKS.G],
+        Fw=b[BLOCKS.Fw],
+        Mw=b[BLOCKS.Mw],
+        Jr=b[BLOCKS.Jr],
+        dR=work.dR,
+        FP=m[MATS.FP],
+        FPT=m[MATS.FPT],
+        Pp=m[MATS.Pp],
+        ze=v[VECS.ze],
+        Z=work.Z,
+        dRz=b[BLOCKS.dRz],
+        y=work.y,
+        HR=work.HR,
+        HP=work.HP,
+        WT=work.WT,
+        S=q[SQUARES.S],
+        L=q[SQUARES.L],
+        Ru=b[BLOCKS.Ru],
+        svdA=b[BLOCKS.svdA],
+        svdD=b[BLOCKS.svdD],
+        svdV=b[BLOCKS.svdV],
+    )
 
 
 class Measurement(NamedTuple):
@@ -535,11 +608,11 @@ def update_covariance(P, work):
 def project_and_clamp(x, lo, hi, work):
     """The updated attitude projected back onto SO(3) (:func:`_project_so3_into`) and the
     efficiencies clamped to ``[lo, hi]``, in ``x``."""
-    Ru, svd = work.Ru, work.svd
+    Ru = work.Ru
     for j in range(3):
         for i in range(3):
             Ru[i, j] = x[X.Re1 + 3 * j + i]
-    _project_so3_into(Ru, svd[0], svd[1], svd[2])
+    _project_so3_into(Ru, work.svdA, work.svdD, work.svdV)
     for j in range(3):
         for i in range(3):
             x[X.Re1 + 3 * j + i] = Ru[i, j]
@@ -552,7 +625,9 @@ def predict_update_into(x, P, f, dt, z, model, work):
     """One predict over ``dt`` [s] with the rotor commands ``f`` [N] held and one update with
     the measurement ``z`` (:class:`Measurement`); ``x`` and ``P`` are overwritten.
     ``model``: :class:`Model` (the nominal rigid body, allocation, noise, clamp); ``work``:
-    :class:`Workspace`. Each stage is one line of the EKF's equations."""
+    :class:`Workspace`. Each stage is one line of the EKF's equations, on the workspace's
+    arrays by name (:class:`Scratch`)."""
+    work = scratch(work)
     T, w, jw, phi, E = predict_state(x, f, dt, model, work)  # x_pred = f(x, u), eqs. 1-4, 12
     F = transition_blocks(f, dt, model, T, w, jw, phi, E, work)  # F = d f / d x
     predict_covariance(P, F, model.qc, dt, work)  # P_pred = F P F^T + Q
