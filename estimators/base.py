@@ -19,6 +19,7 @@ import numpy as np
 from quadfault.errors import ConfigError
 from quadfault.io.recording import Recording
 from quadfault.io.sample import Sample, samples  # the measurement record lives in the core
+from quadfault.progress import progress_bar
 
 #: Status values an estimate may carry.
 STATUS_OK = "ok"
@@ -37,6 +38,14 @@ STATUSES = (
     STATUS_MAX_ITER,
     STATUS_BAD_SAMPLE,
 )
+#: the status codes the compiled kernels return: indices into :data:`STATUSES`
+OK = STATUSES.index(STATUS_OK)
+WARMUP = STATUSES.index(STATUS_WARMUP)
+ILL_CONDITIONED = STATUSES.index(STATUS_ILL_CONDITIONED)
+NO_EXCITATION = STATUSES.index(STATUS_NO_EXCITATION)
+REJECTED = STATUSES.index(STATUS_REJECTED)
+MAX_ITER = STATUSES.index(STATUS_MAX_ITER)
+BAD_SAMPLE = STATUSES.index(STATUS_BAD_SAMPLE)
 
 
 @dataclass(frozen=True)
@@ -190,7 +199,25 @@ class OnlineEstimator(Protocol):
     def run(self, recording: Recording, progress: bool = False) -> EstimateSeries: ...
 
 
+def run_rows(kernel, arrays, args: tuple, n: int, name: str, progress: bool, chunk: int = 50000):
+    """An estimator's compiled ``run`` kernel over the rows of a recording's ``arrays``
+    ``(t, p, v, R, w, f)``, in chunks of ``chunk`` rows with a progress bar (``name``):
+    ``kernel(t, p, v, R, w, f, *args, eta, sd, code)``. Returns ``(eta, sd, code)``: the
+    estimate and its sd (N, n) and the status code (N,) of every row."""
+    t = arrays[0]
+    N = len(t)
+    eta, sd, code = np.empty((N, n)), np.empty((N, n)), np.empty(N, dtype=np.int64)
+    bar = progress_bar(total=N, desc=name, unit="sample", disable=None if progress else True)
+    for k0 in range(0, N, chunk):
+        k = slice(k0, min(k0 + chunk, N))
+        kernel(*(a[k] for a in arrays), *args, eta[k], sd[k], code[k])
+        bar.update(k.stop - k0)
+    bar.close()
+    return eta, sd, code
+
+
 __all__ = [
+    "run_rows",
     "SATURATED_KEY",
     "STATUSES",
     "STATUS_BAD_SAMPLE",

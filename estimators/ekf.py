@@ -40,11 +40,11 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from estimators.base import (
-    STATUS_BAD_SAMPLE,
-    STATUS_NO_EXCITATION,
-    STATUS_OK,
-    STATUS_WARMUP,
+    BAD_SAMPLE,
+    NO_EXCITATION,
+    OK,
     STATUSES,
+    WARMUP,
     Estimate,
     EstimateSeries,
     Sample,
@@ -66,6 +66,8 @@ from estimators.ekf_filter import (
     Y,
     predict_update_into,
 )
+from estimators.options import check_bounds, check_positive, from_options
+from estimators.recursive import recording_arrays, run_filter
 from estimators.state import (
     FlatState,
     Layout,
@@ -81,7 +83,6 @@ from quadfault.io.recording import Recording
 from quadfault.jit import jit
 from quadfault.model.rotation import mat3
 from quadfault.model.vehicle import Vehicle
-from quadfault.progress import progress_bar
 
 #: Sample period the per-step noise values refer to [s] (the reference's 1 kHz).
 NOISE_REFERENCE_DT = 1e-3
@@ -91,11 +92,6 @@ NOISE_REFERENCE_DT = 1e-3
 #: ``no_excitation``): the kinematic states are filtered as usual, the efficiencies are held,
 #: decorrelated from the kinematic states, and their variance grows by Q_eta dt.
 IDLE_THRUST = 1e-3
-
-OK = STATUSES.index(STATUS_OK)
-WARMUP = STATUSES.index(STATUS_WARMUP)
-NO_EXCITATION = STATUSES.index(STATUS_NO_EXCITATION)
-BAD_SAMPLE = STATUSES.index(STATUS_BAD_SAMPLE)
 
 
 @dataclass(frozen=True)
@@ -137,7 +133,8 @@ class EKFConfig:
     clip_commands: bool = True
 
     def __post_init__(self):
-        for key in (
+        check_positive(
+            self,
             "q_eta",
             "q_position",
             "q_velocity",
@@ -148,27 +145,14 @@ class EKFConfig:
             "r_rate",
             "r_attitude",
             "p0",
-        ):
-            value = getattr(self, key)
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, (int, float))
-                or not (math.isfinite(value) and value > 0)
-            ):
-                raise ConfigError(f"EKFConfig.{key} must be a positive number, got {value!r}")
-        if self.eta_bounds is not None:
-            lo, hi = self.eta_bounds
-            if not (lo < hi):
-                raise ConfigError(
-                    f"EKFConfig.eta_bounds must be (low, high) with low < high, "
-                    f"got {self.eta_bounds!r}"
-                )
+        )
+        check_bounds("EKFConfig", self.eta_bounds)
 
     @classmethod
     def from_options(cls, q_eta: float | None = None) -> EKFConfig:
         """The configuration of ``quadfault estimate``'s options (the registry's
         ``from_options``): ``q_eta`` the efficiency random walk per 1 ms step."""
-        return cls() if q_eta is None else cls(q_eta=float(q_eta))
+        return from_options(cls, q_eta=q_eta)
 
     @classmethod
     def reference(cls, **changes) -> EKFConfig:
@@ -426,24 +410,9 @@ class MotorEfficiencyEKF:
         self._const = ekf_constants(vehicle, self.config)
         cfg, n = self.config, self.n_rotors
         #: process-noise variances per 1 ms step (diagonal of Q at dt = 1 ms)
-        self.q_diag = np.concatenate(
-            (
-                np.full(3, cfg.q_position),
-                np.full(3, cfg.q_velocity),
-                np.full(3, cfg.q_rate),
-                np.full(9, cfg.q_rotation),
-                np.full(n, cfg.q_eta),
-            )
-        )
+        self.q_diag = process_noise(cfg, n)
         #: measurement-noise variances (p, v, Omega, attitude rows)
-        self.r_diag = np.concatenate(
-            (
-                np.full(3, cfg.r_position),
-                np.full(3, cfg.r_velocity),
-                np.full(3, cfg.r_rate),
-                np.full(3, cfg.r_attitude),
-            )
-        )
+        self.r_diag = measurement_noise(cfg)
         self._state = EKFState(self.n_rotors)
         self.reset()
 
@@ -489,66 +458,11 @@ class MotorEfficiencyEKF:
         """Estimates at every row of ``recording`` (row 0 is the initial guess, ``warmup``);
         the filter is left at the end of the recording."""
         start = time.perf_counter()
-        if not isinstance(recording, Recording):
-            raise ConfigError(f"run() needs a Recording, got {type(recording).__name__}")
-        if not recording.has_pose:
-            raise ConfigError(
-                f"{recording.path or 'recording'}: the estimators need position, "
-                "velocity and attitude columns (px..pz, vx..vz, qw..qz); this "
-                "recording is IMU-only"
-            )
-        if recording.thrust_cmd.shape[1] != self.n_rotors:
-            raise ConfigError(
-                f"{recording.path or 'recording'}: "
-                f"{recording.thrust_cmd.shape[1]} rotor commands, the vehicle has "
-                f"{self.n_rotors} rotors"
-            )
+        arrays = recording_arrays(recording, self.n_rotors, self.name)
         const = self._const.copy()
         const[CONSTANTS.f_max] = command_limit(recording, self.vehicle)  # its saturation
         self.reset(self._state.views.eta0[0].copy())
-        t, p, v, R, w, f = (
-            np.ascontiguousarray(a, dtype=np.float64)
-            for a in (
-                recording.t,
-                recording.position,
-                recording.velocity,
-                recording.rotation,
-                recording.omega,
-                recording.thrust_cmd,
-            )
-        )
-        N, n, st = len(t), self.n_rotors, self._state
-        eta, sd, code = np.empty((N, n)), np.empty((N, n)), np.empty(N, dtype=np.int64)
-        chunk = 50000
-        bar = progress_bar(total=N, desc="ekf", unit="sample", disable=None if progress else True)
-        for k0 in range(0, N, chunk):
-            k = slice(k0, min(k0 + chunk, N))
-            ekf_run(
-                t[k],
-                p[k],
-                v[k],
-                R[k],
-                w[k],
-                f[k],
-                const,
-                st.offsets,
-                st.floats,
-                st.ints,
-                eta[k],
-                sd[k],
-                code[k],
-            )
-            bar.update(k.stop - k0)
-        bar.close()
-        return EstimateSeries(
-            t=t.copy(),
-            eta=eta,
-            sd=sd,
-            status=np.asarray(STATUSES)[code],
-            estimator=self.name,
-            config=self.describe(),
-            seconds=time.perf_counter() - start,
-        )
+        return run_filter(self, ekf_run, arrays, const, progress, start)
 
     def describe(self) -> dict:
         """JSON-ready description (for sidecars and reports)."""
@@ -566,6 +480,33 @@ def default_eta0(cfg: EKFConfig, n: int) -> np.ndarray:
         raise ConfigError(f"EKFConfig.eta0 must be one value or {n}, got {cfg.eta0!r}") from None
 
 
+def process_noise(cfg: EKFConfig, n: int) -> np.ndarray:
+    """The process-noise variances per 1 ms step of the states :data:`X` (``n`` rotors)."""
+    return pack(
+        X,
+        n,
+        p=np.full(3, cfg.q_position),
+        v=np.full(3, cfg.q_velocity),
+        w=np.full(3, cfg.q_rate),
+        Re1=np.full(3, cfg.q_rotation),
+        Re2=np.full(3, cfg.q_rotation),
+        Re3=np.full(3, cfg.q_rotation),
+        eta=np.full(n, cfg.q_eta),
+    )
+
+
+def measurement_noise(cfg: EKFConfig) -> np.ndarray:
+    """The measurement-noise variances of the rows :data:`Y` (the attitude's value on each
+    of its 3 rows)."""
+    return pack(
+        Y,
+        p=np.full(3, cfg.r_position),
+        v=np.full(3, cfg.r_velocity),
+        w=np.full(3, cfg.r_rate),
+        R=np.full(3, cfg.r_attitude),
+    )
+
+
 def ekf_constants(vehicle: Vehicle, cfg: EKFConfig) -> np.ndarray:
     """The constants of :func:`ekf_step`: mass, gravity, rotor_max_thrust, clip, the clamp,
     p0, the allocation, the inertia and its inverse, the process-noise variance rates
@@ -573,23 +514,7 @@ def ekf_constants(vehicle: Vehicle, cfg: EKFConfig) -> np.ndarray:
     n = vehicle.n_rotors
     b = cfg.eta_bounds
     lo, hi = (-np.inf, np.inf) if b is None else (float(b[0]), float(b[1]))
-    q = np.concatenate(
-        (
-            np.full(3, cfg.q_position),
-            np.full(3, cfg.q_velocity),
-            np.full(3, cfg.q_rate),
-            np.full(9, cfg.q_rotation),
-            np.full(n, cfg.q_eta),
-        )
-    )
-    r = np.concatenate(
-        (
-            np.full(3, cfg.r_position),
-            np.full(3, cfg.r_velocity),
-            np.full(3, cfg.r_rate),
-            np.full(3, cfg.r_attitude),
-        )
-    )
+    q, r = process_noise(cfg, n), measurement_noise(cfg)
     per_rotor = np.concatenate(
         (np.asarray(vehicle.allocation, dtype=float).ravel(), q / NOISE_REFERENCE_DT)
     )  # A, then qc (constant_arrays)

@@ -32,14 +32,17 @@ from dataclasses import asdict
 import numpy as np
 
 from estimators.base import (
-    STATUS_BAD_SAMPLE,
+    BAD_SAMPLE,
+    NO_EXCITATION,
     STATUS_NO_EXCITATION,
     STATUS_WARMUP,
     STATUSES,
+    WARMUP,
     Estimate,
     EstimateSeries,
     Sample,
     command_limit,
+    run_rows,
 )
 from estimators.change_completion import COUNTERS as COMPLETION_COUNTERS
 from estimators.change_completion import N_COUNTERS, complete_into, observe_into
@@ -81,7 +84,6 @@ from quadfault.errors import ConfigError
 from quadfault.io.recording import Recording
 from quadfault.jit import jit
 from quadfault.model.vehicle import Vehicle
-from quadfault.progress import progress_bar
 
 __all__ = [
     "IRLSConfig",
@@ -92,9 +94,6 @@ __all__ = [
     "solve_window",
 ]
 
-WARMUP = STATUSES.index(STATUS_WARMUP)
-NO_EXCITATION = STATUSES.index(STATUS_NO_EXCITATION)
-BAD_SAMPLE = STATUSES.index(STATUS_BAD_SAMPLE)
 #: why :func:`irls_update` refused a sample (``bad_sample``)
 WHY_NONFINITE, WHY_TIME = 1, 2
 _ROW0 = np.zeros(1, dtype=np.int64)
@@ -616,33 +615,17 @@ class SlidingWindowIRLS:
         const = self._const.copy()
         const[CONSTANTS.f_max] = command_limit(recording, self.vehicle)  # its saturation
         self.reset(self.eta)
-        st, N, n = self._state, len(t), self.vehicle.n_rotors
-        eta, sd, code = np.empty((N, n)), np.empty((N, n)), np.empty(N, dtype=np.int64)
-        chunk = 20000
-        bar = progress_bar(total=N, desc="irls", unit="sample", disable=None if progress else True)
-        for k0 in range(0, N, chunk):
-            k = slice(k0, min(k0 + chunk, N))
-            irls_run(
-                t[k],
-                p[k],
-                v[k],
-                R[k],
-                w[k],
-                f[k],
-                const,
-                self._fp,
-                self._ip,
-                st.floats,
-                st.ints,
-                self._hist,
-                self._beyond,
-                self._any_n,
-                eta[k],
-                sd[k],
-                code[k],
-            )
-            bar.update(k.stop - k0)
-        bar.close()
+        st = self._state
+        args = (const, self._fp, self._ip, st.floats, st.ints, self._hist, self._beyond)
+        eta, sd, code = run_rows(
+            irls_run,
+            (t, p, v, R, w, f),
+            args + (self._any_n,),
+            self.vehicle.n_rotors,
+            "irls",
+            progress,
+            chunk=20000,
+        )
         self.reset()
         return EstimateSeries(
             t=t.copy(),

@@ -37,13 +37,13 @@ from estimators.base import (
     check_num,
     command_limit,
     reset_rows,
+    run_rows,
     sample_arrays,
 )
 from estimators.state import FlatState, Layout
 from quadfault.errors import ConfigError
 from quadfault.io.recording import Recording
 from quadfault.model.vehicle import Vehicle
-from quadfault.progress import progress_bar
 
 _ROW0 = np.zeros(1, dtype=np.int64)
 
@@ -183,44 +183,31 @@ class RecursiveEstimator(_Kernels):
         """Estimates at every row of ``recording`` (the first row is ``warmup``), from the
         configuration's initial efficiency; the filter is left at the recording's end."""
         start = time.perf_counter()
-        t, p, v, R, w, f = recording_arrays(recording, self.n_rotors, self.name)
+        arrays = recording_arrays(recording, self.n_rotors, self.name)
         const = self._const.copy()
         const[self.fmax_index] = command_limit(recording, self.vehicle)
         self.reset()
-        N, n, st = len(t), self.n_rotors, self._state
-        eta, sd, code = np.empty((N, n)), np.empty((N, n)), np.empty(N, dtype=np.int64)
-        chunk = 50000
-        bar = progress_bar(
-            total=N, desc=self.name, unit="sample", disable=None if progress else True
-        )
-        for k0 in range(0, N, chunk):
-            k = slice(k0, min(k0 + chunk, N))
-            self._k_run(
-                t[k],
-                p[k],
-                v[k],
-                R[k],
-                w[k],
-                f[k],
-                const,
-                st.offsets,
-                st.floats,
-                st.ints,
-                eta[k],
-                sd[k],
-                code[k],
-            )
-            bar.update(k.stop - k0)
-        bar.close()
-        return EstimateSeries(
-            t=t.copy(),
-            eta=eta,
-            sd=sd,
-            status=np.asarray(STATUSES)[code],
-            estimator=self.name,
-            config=self.describe(),
-            seconds=time.perf_counter() - start,
-        )
+        return run_filter(self, self._k_run, arrays, const, progress, start)
+
+
+def run_filter(est, kernel, arrays, const, progress: bool, start: float) -> EstimateSeries:
+    """The series of a single filter ``est`` (its ``_state``, ``n_rotors``, ``name`` and
+    ``describe()``) over the recording's ``arrays`` (:func:`recording_arrays`): its ``run``
+    kernel ``kernel(t, p, v, R, w, f, const, offsets, fs, ks, eta, sd, code)`` over chunks
+    of rows (:func:`estimators.base.run_rows`); ``start`` is the ``time.perf_counter()`` of the call."""
+    st = est._state
+    eta, sd, code = run_rows(
+        kernel, arrays, (const, st.offsets, st.floats, st.ints), est.n_rotors, est.name, progress
+    )
+    return EstimateSeries(
+        t=arrays[0].copy(),
+        eta=eta,
+        sd=sd,
+        status=np.asarray(STATUSES)[code],
+        estimator=est.name,
+        config=est.describe(),
+        seconds=time.perf_counter() - start,
+    )
 
 
 class BatchedRecursive(_Kernels):
@@ -253,4 +240,10 @@ class BatchedRecursive(_Kernels):
         return BatchedEstimate(t.copy(), eta, sd, self._code.copy())
 
 
-__all__ = ["BatchedRecursive", "RecursiveEstimator", "per_rotor", "recording_arrays"]
+__all__ = [
+    "BatchedRecursive",
+    "RecursiveEstimator",
+    "per_rotor",
+    "recording_arrays",
+    "run_filter",
+]

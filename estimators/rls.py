@@ -60,13 +60,19 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from estimators.base import (
-    STATUS_BAD_SAMPLE,
-    STATUS_NO_EXCITATION,
-    STATUS_OK,
-    STATUS_WARMUP,
-    STATUSES,
+    BAD_SAMPLE,
+    NO_EXCITATION,
+    OK,
+    WARMUP,
 )
 from estimators.ekf import IDLE_THRUST
+from estimators.options import (
+    check_bounds,
+    check_fraction,
+    check_positive,
+    check_prefilter,
+    from_options,
+)
 from estimators.recursive import BatchedRecursive, RecursiveEstimator, _Kernels
 from estimators.residuals import (
     RESIDUAL,
@@ -77,17 +83,11 @@ from estimators.residuals import (
     segment_model_into,
 )
 from estimators.state import Layout, all_finite, fields, pack, piece, piece_rows
-from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange
 from quadfault.model.vehicle import Vehicle
 
 #: the sample period the forgetting factor refers to [s]
 FORGETTING_REFERENCE_DT = 1e-3
-
-OK = STATUSES.index(STATUS_OK)
-WARMUP = STATUSES.index(STATUS_WARMUP)
-NO_EXCITATION = STATUSES.index(STATUS_NO_EXCITATION)
-BAD_SAMPLE = STATUSES.index(STATUS_BAD_SAMPLE)
 
 
 @dataclass(frozen=True)
@@ -120,15 +120,8 @@ class RLSConfig:
     prefilter: float = 0.01
 
     def __post_init__(self):
-        lam = self.forgetting
-        if isinstance(lam, bool) or not isinstance(lam, (int, float)) or not (0.0 < lam <= 1.0):
-            raise ConfigError(f"RLSConfig.forgetting must be in (0, 1], got {lam!r}")
-        if (
-            isinstance(self.p0, bool)
-            or not isinstance(self.p0, (int, float))
-            or not (math.isfinite(self.p0) and self.p0 > 0)
-        ):
-            raise ConfigError(f"RLSConfig.p0 must be a positive number, got {self.p0!r}")
+        check_fraction(self, "forgetting")
+        check_positive(self, "p0")
         check_bounds("RLSConfig", self.eta_bounds)
         check_prefilter("RLSConfig", self.prefilter)
 
@@ -138,33 +131,10 @@ class RLSConfig:
     ) -> RLSConfig:
         """The configuration of ``quadfault estimate --estimator rls [--forgetting L]
         [--prefilter TAU]``."""
-        base = cls()
-        return replace(
-            base,
-            forgetting=base.forgetting if forgetting is None else forgetting,
-            prefilter=base.prefilter if prefilter is None else float(prefilter),
-        )
+        return from_options(cls, forgetting=forgetting, prefilter=prefilter)
 
     def replace(self, **changes) -> RLSConfig:
         return replace(self, **changes)
-
-
-def check_prefilter(owner: str, tau) -> None:
-    """``tau`` is a finite number >= 0 [s] (clean error otherwise)."""
-    if isinstance(tau, bool) or not isinstance(tau, (int, float)) or not (0.0 <= tau < math.inf):
-        raise ConfigError(f"{owner}.prefilter must be a time constant >= 0 [s], got {tau!r}")
-
-
-def check_bounds(owner: str, bounds) -> None:
-    """``bounds`` is None or ``(low, high)`` with ``low < high`` (clean error otherwise)."""
-    if bounds is None:
-        return
-    try:
-        lo, hi = (float(b) for b in bounds)
-    except (TypeError, ValueError):
-        lo = hi = math.nan
-    if not lo < hi:
-        raise ConfigError(f"{owner}.eta_bounds must be (low, high) with low < high, got {bounds!r}")
 
 
 #: the residual rows RLS fits (:data:`estimators.residuals.RESIDUAL`): velocity, then rate

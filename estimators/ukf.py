@@ -49,17 +49,16 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from estimators.base import (
-    STATUS_BAD_SAMPLE,
-    STATUS_ILL_CONDITIONED,
-    STATUS_NO_EXCITATION,
-    STATUS_OK,
-    STATUS_WARMUP,
-    STATUSES,
+    BAD_SAMPLE,
+    ILL_CONDITIONED,
+    NO_EXCITATION,
+    OK,
+    WARMUP,
 )
 from estimators.ekf import IDLE_THRUST, NOISE_REFERENCE_DT
 from estimators.linalg import cholesky_into
+from estimators.options import check_bounds, check_finite, check_positive, from_options
 from estimators.recursive import BatchedRecursive, RecursiveEstimator, _Kernels
-from estimators.rls import check_bounds
 from estimators.state import Layout, all_finite, fields, pack, piece, piece_rows, reset_rows
 from quadfault.errors import ConfigError
 from quadfault.jit import jit, prange
@@ -69,12 +68,6 @@ from quadfault.model.dynamics import (
     translational_acceleration3,
 )
 from quadfault.model.vehicle import Vehicle
-
-OK = STATUSES.index(STATUS_OK)
-WARMUP = STATUSES.index(STATUS_WARMUP)
-NO_EXCITATION = STATUSES.index(STATUS_NO_EXCITATION)
-BAD_SAMPLE = STATUSES.index(STATUS_BAD_SAMPLE)
-ILL_CONDITIONED = STATUSES.index(STATUS_ILL_CONDITIONED)
 
 
 @dataclass(frozen=True)
@@ -113,22 +106,8 @@ class UKFConfig:
     clip_commands: bool = True
 
     def __post_init__(self):
-        for key in ("q_eta", "q_velocity", "q_rate", "r_velocity", "r_rate", "p0", "alpha"):
-            value = getattr(self, key)
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, (int, float))
-                or not (math.isfinite(value) and value > 0)
-            ):
-                raise ConfigError(f"UKFConfig.{key} must be a positive number, got {value!r}")
-        for key in ("beta", "kappa"):
-            value = getattr(self, key)
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, (int, float))
-                or not math.isfinite(value)
-            ):
-                raise ConfigError(f"UKFConfig.{key} must be a finite number, got {value!r}")
+        check_positive(self, "q_eta", "q_velocity", "q_rate", "r_velocity", "r_rate", "p0", "alpha")
+        check_finite(self, "beta", "kappa")
         check_bounds("UKFConfig", self.eta_bounds)
 
     def weights(self, n: int) -> tuple[float, float, float, float]:
@@ -147,7 +126,7 @@ class UKFConfig:
     @classmethod
     def from_options(cls, q_eta: float | None = None) -> UKFConfig:
         """The configuration of ``quadfault estimate --estimator ukf [--q-eta Q]``."""
-        return cls() if q_eta is None else cls(q_eta=q_eta)
+        return from_options(cls, q_eta=q_eta)
 
     def replace(self, **changes) -> UKFConfig:
         return replace(self, **changes)

@@ -34,11 +34,10 @@ import math
 import numpy as np
 
 from estimators.base import (
-    STATUS_ILL_CONDITIONED,
-    STATUS_MAX_ITER,
-    STATUS_OK,
-    STATUS_REJECTED,
-    STATUSES,
+    ILL_CONDITIONED,
+    MAX_ITER,
+    OK,
+    REJECTED,
 )
 from estimators.ipm import N_SETTINGS as N_IPM_SETTINGS
 from estimators.ipm import N_WORK_ROWS, any_size, ipm_parameters, ipm_steps
@@ -51,10 +50,6 @@ from quadfault.jit import jit
 
 START_MARGIN = 1e-6  #: the interior-point start is kept this far inside the bounds
 
-OK = STATUSES.index(STATUS_OK)
-ILL_CONDITIONED = STATUSES.index(STATUS_ILL_CONDITIONED)
-REJECTED = STATUSES.index(STATUS_REJECTED)
-MAX_ITER = STATUSES.index(STATUS_MAX_ITER)
 
 #: the float settings of a window solve (``fp``), by name; ``ipm``: the interior point's
 #: (:data:`estimators.ipm.SETTINGS`)
