@@ -20,6 +20,7 @@ def _abrupt(duration=2.0, onset=0.5, level=0.5):
     return Scenario("abrupt_short", duration, sched, Circle(), thrust_noise=0.07)
 
 
+@pytest.mark.slow
 def test_estimate_aware_with_irls_beats_plain_on_abrupt_fault():
     sc = _abrupt(duration=1.5, onset=0.4)
     plain = fly(sc, "geometric", "none", seed=3)

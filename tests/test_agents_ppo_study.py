@@ -139,6 +139,7 @@ def test_summary_with_one_seed_gives_episode_intervals():
     )
 
 
+@pytest.mark.slow
 def test_check_distribution_flies_baseline_and_reference(tmp_path):
     """``--check-distribution`` trains nothing and writes the headroom table."""
     out = tmp_path / "dist"

@@ -140,6 +140,7 @@ def _fleet(N, seed=0, sigma=0.07):
     return plant, consts, tables
 
 
+@pytest.mark.slow
 def test_the_batch_is_the_single_vehicle_loop_in_any_thread_count():
     """fly_batch (parallel over vehicles, each with its generator) equals one fly per
     vehicle bit for bit, whatever the number of threads; idle rows do not move."""

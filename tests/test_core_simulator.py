@@ -156,6 +156,7 @@ def test_cli_help_is_instant_and_lists_commands(tmp_path):
     assert r.returncode == 0 and "--scenario" in r.stdout
 
 
+@pytest.mark.slow
 def test_gains_scaled_to_a_small_vehicle_fly_it_where_the_f450_gains_saturate():
     """The paper's gains carried over by mass and inertia: identical on the F450; on a 30 g
     Crazyflie with 30 ms motor lag and sensor noise they hover it within centimetres with no

@@ -70,6 +70,7 @@ def validate_contract(doc: dict) -> None:
     assert set(doc["model"]["rmse"]) == set(rm)
 
 
+@pytest.mark.slow
 def test_json_validates_and_cli_writes_report(com_recording, tmp_path):
     csv = tmp_path / "flight.csv"
     write_recording(com_recording, csv)

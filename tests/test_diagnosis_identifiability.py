@@ -340,6 +340,7 @@ def test_the_uncertainty_of_a_parameter_without_signal_does_not_overflow():
     np.testing.assert_allclose(sd, [1e-150, 1e-150, 1.0])
 
 
+@pytest.mark.slow
 def test_an_implausible_battery_voltage_is_not_fitted():
     """The importer flags a voltage that is not the pack's (``meta.import.battery``): the
     diagnosis names battery_thrust as not identifiable with that reason instead of fitting

@@ -305,6 +305,7 @@ def test_written_recording_sidecar_is_a_valid_diagnosis_vehicle(tmp_path):
     assert fx.from_diagnosis(doc).vehicle == VEHICLE
 
 
+@pytest.mark.slow
 def test_rotor_inertia_without_lag_losing_the_vehicle_says_why(tmp_path, capsys):
     out = tmp_path / "ri.csv"
     assert (

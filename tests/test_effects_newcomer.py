@@ -117,6 +117,7 @@ def test_the_python_protocol_runs_the_compiled_entry(wear):
     np.testing.assert_array_equal(effect.rotor_thrust(f, 0.0, dt, state), f)
 
 
+@pytest.mark.slow
 def test_the_simulator_flies_it_compiled_one_vehicle_and_a_batch(wear):
     """A worn vehicle sinks below the nominal one at a hover command; a batch flies each
     vehicle's own rate, and a vehicle with rate 0 flies as without the effect."""

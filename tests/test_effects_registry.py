@@ -87,6 +87,7 @@ def test_every_effect_parses_packs_and_simulates(name):
     assert np.max(np.abs(rec.position - nominal.position)) > 1e-6  # the effect acts
 
 
+@pytest.mark.slow
 def test_vehicles_flying_some_of_a_layouts_slots_fly_as_in_their_own_layout():
     """A vehicle's numbers do not depend on the other slots of its rows' layout (slots it
     does not fly are skipped), nor on a thrust-only and a wrench-only entry trading places."""

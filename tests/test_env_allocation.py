@@ -84,6 +84,7 @@ def test_allocate_rows_equals_allocate_row_by_row():
         assert rows.mode[i] == one.mode
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("estimator", ["truth", "irls"])
 def test_vector_env_equals_single_envs(estimator):
     n, steps = 3, 40

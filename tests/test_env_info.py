@@ -60,6 +60,7 @@ def test_light_and_full_fly_the_same_flight_and_agree_on_the_shared_keys(estimat
     assert light[-1][4]["termination_reason"] in ("crash", "excessive_tilt", "out_of_bounds")
 
 
+@pytest.mark.slow
 def test_full_info_of_the_single_env_equals_the_vector_env_where_both_have_a_key():
     """The vector env's full info holds, per sub-env, what the single env's reports."""
     kw = dict(FLIGHT, scenario="hover_fault", thrust_noise=0.0)

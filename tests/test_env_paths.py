@@ -58,6 +58,7 @@ def test_single_env_info_keeps_one_structure_across_reset_step_and_termination(e
     assert term and info["termination_reason"] == "crash"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["sync", "async"])
 def test_make_vec_with_staggered_episode_ends(mode):
     """Sub-env 0 falls (terminates every ~46 steps), sub-env 1 flies to its 100-step end:

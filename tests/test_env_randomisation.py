@@ -198,6 +198,7 @@ def test_model_uncertainty_draws_the_fitted_parameters_per_reset(tmp_path):
     assert _drawn(env.reset(seed=7)[1]) == draws[7]
 
 
+@pytest.mark.slow
 def test_a_vehicle_flies_any_number_of_wrench_effects():
     """Seven drags of 0.1 N s/m push as one of 0.7 (every slot of the layout is summed)."""
     from quadfault.model.effects import chain, parse_effect, rows

@@ -147,6 +147,7 @@ def test_estimator_comparison_runs_irls_and_ekf():
         assert steps[-1][1]["comparison"][name]["eta"][0] < 0.75
 
 
+@pytest.mark.slow
 def test_estimator_comparison_runs_any_set_of_registered_estimators():
     """IRLS, the EKF, RLS and the UKF side by side on one measurement stream, by name."""
     base = QuadFaultEnv("none", "hover_fault", duration=0.6, estimator_rate="control", info="full")

@@ -95,6 +95,7 @@ def test_batched_improved_irls_matches_single(flights):
     np.testing.assert_array_equal(batched.change_events, events)
 
 
+@pytest.mark.slow
 def test_batched_ekf_matches_single(flights):
     veh = flights[0].vehicle
     batched = BatchedEKF(veh, N_VEHICLES)

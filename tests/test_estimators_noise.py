@@ -64,6 +64,7 @@ ROBUST = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(ROBUST))
 def test_a_weak_rotor_is_found_under_sensor_noise(weak, name):
     est = ROBUST[name](weak.vehicle).run(weak.without_truth())
@@ -134,6 +135,7 @@ def test_rls_with_the_prefilter_equals_a_numpy_form(fault):
     np.testing.assert_allclose(got.eta, np.array(expected), rtol=0, atol=1e-10)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "single,batched,config",
     [

@@ -58,6 +58,7 @@ def abrupt(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_median_is_the_same_post_processing_for_irls_and_ekf(abrupt, tmp_path):
     for name, extra in (("irls", []), ("ekf", ["--q-eta", "1.778"])):
         plain, side0 = _estimate(abrupt, tmp_path / f"{name}.csv", "--estimator", name, *extra)
@@ -71,6 +72,7 @@ def test_median_is_the_same_post_processing_for_irls_and_ekf(abrupt, tmp_path):
     assert side["config"]["q_eta"] == 1.778  # the EKF's sidecar records its Q_eta
 
 
+@pytest.mark.slow
 def test_q_eta_changes_the_ekf_and_median_overrides_improved(abrupt, tmp_path):
     a, _ = _estimate(abrupt, tmp_path / "a.csv", "--estimator", "ekf")
     b, side = _estimate(abrupt, tmp_path / "b.csv", "--estimator", "ekf", "--q-eta", "0.01")
@@ -107,6 +109,7 @@ def _with_sidecar(src, dst, change):
     return dst
 
 
+@pytest.mark.slow
 def test_clipping_follows_the_recording(abrupt, tmp_path):
     rec = read_recording(abrupt)
     assert rec.meta["saturated"] is False and rec.vehicle.rotor_max_thrust == 3.5

@@ -53,6 +53,7 @@ def test_every_row_builds_an_estimator_with_the_interface(name, flight):
         np.testing.assert_array_equal(rows[-1].eta, _truth(0.0))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", estimator_names(batched=True))
 def test_batched_form_row_equals_the_single_estimator(name, flight):
     rec = flight.without_truth()

@@ -158,6 +158,7 @@ def test_bad_input_gives_one_line(tmp_path, case):
     assert "flight.bbl" in res.stderr
 
 
+@pytest.mark.slow
 def test_a_cut_log_says_what_was_skipped(tmp_path):
     """A log cut short (no end-of-log event) and one with a corrupt frame: each imports what
     is valid, with one warning line and the sidecar's ``import.skipped``."""

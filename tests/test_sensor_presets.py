@@ -36,6 +36,7 @@ def test_every_measured_preset_names_its_logs_and_command():
         assert folder in MEASURED_ON[name] and "benchmarks/sensor_noise.py" in MEASURED_ON[name]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(SOURCES))
 def test_a_preset_is_what_its_logs_measure(name):
     dataset, folder, pattern = SOURCES[name]
