@@ -23,8 +23,19 @@ from quadfault.model.controller import ControllerConfig, GeometricController
 from quadfault.model.scenarios import at_times
 from quadfault.model.vehicle import Vehicle
 
-#: control steps per window
+#: control steps per window (at least)
 WINDOW = 16
+#: physics steps per window (at least): at a high control rate a window of WINDOW control steps
+#: is short, and its refills' Python calls would cost more than the steps they serve
+WINDOW_PHYSICS_STEPS = 64
+
+
+def window_steps(substeps: int) -> int:
+    """Control steps per window at ``substeps`` physics steps per control step: WINDOW, or
+    more so that a window spans at least :data:`WINDOW_PHYSICS_STEPS` physics steps."""
+    return max(WINDOW, -(-WINDOW_PHYSICS_STEPS // max(int(substeps), 1)))
+
+
 _STALE = np.iinfo(np.int64).min // 2
 
 
@@ -233,7 +244,15 @@ class EpisodeTables:
         return StepRows(T.refs[0, i], T.refs[0, i + 1], T.eta[0, i * S : i * S + S + 1])
 
 
-__all__ = ["EPISODE_WINDOW", "WINDOW", "EpisodeTables", "RowTimeTables", "StepRows"]
+__all__ = [
+    "EPISODE_WINDOW",
+    "WINDOW",
+    "WINDOW_PHYSICS_STEPS",
+    "window_steps",
+    "EpisodeTables",
+    "RowTimeTables",
+    "StepRows",
+]
 
 
 def row_groups(keys: np.ndarray):

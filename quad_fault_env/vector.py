@@ -52,7 +52,7 @@ from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.envs.scenario_source import GENERATORS
 from quad_fault_env.estimation import NOMINAL_PRIOR_SD
 from quad_fault_env.observation import SD_MAX
-from quad_fault_env.time_tables import WINDOW, InternTable, RowTimeTables
+from quad_fault_env.time_tables import InternTable, RowTimeTables, window_steps
 from quad_fault_env.vector_step import StepConstants, StepOut, StepRows
 from quadfault import jit
 from quadfault.errors import ConfigError
@@ -235,6 +235,8 @@ class QuadFaultVectorEnv(VectorEnv):
         self._controller = GeometricController(self.vehicle, None, e0.controller_config)
         #: the geometric controller runs in the step (residual actions)
         self._uses_controller = e0.action_config.mode == "residual"
+        #: control steps per window of the time tables
+        self._window = window_steps(self.substeps)
         self._tables = RowTimeTables(
             N,
             self.substeps,
@@ -242,6 +244,7 @@ class QuadFaultVectorEnv(VectorEnv):
             self.vehicle,
             e0.controller_config,
             feedforward=self._uses_controller,
+            window=self._window,
         )
         self.flight.use_efficiency(self._tables.eta, self._tables.first)
         n = self.vehicle.n_rotors
@@ -299,7 +302,7 @@ class QuadFaultVectorEnv(VectorEnv):
             else vector_step.ESTIMATE_KEPT,
             int(((S - 1) // stride) * stride),
             _NO_LIMIT if self.max_episode_steps is None else int(self.max_episode_steps),
-            int(WINDOW),
+            self._window,
             self.estimator is None,
             self.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP,
         )
@@ -418,7 +421,7 @@ class QuadFaultVectorEnv(VectorEnv):
         if self._relaxed is not None:
             self._relaxed.reset(rows)
         self._tables.invalidate(rows)
-        self._ensure_tables(self.steps, WINDOW - 1)  # the rows' windows from t = 0
+        self._ensure_tables(self.steps, self._window - 1)  # the rows' windows from t = 0
         self.eta_hat[rows], self.eta_sd[rows], self._status[rows] = 1.0, np.nan, _STATUS["warmup"]
         if self.estimator_name == "truth":
             self.eta_hat[rows], self.eta_sd[rows] = eta0[inv.ravel()], 0.0
@@ -477,7 +480,7 @@ class QuadFaultVectorEnv(VectorEnv):
 
     def _references_now(self):
         """Reference position, velocity, acceleration (N, 3) at each row's current time."""
-        self._ensure_tables(self.steps, WINDOW)
+        self._ensure_tables(self.steps, self._window)
         ref = self._tables.references(self.steps, 3)
         return ref[:, 0], ref[:, 1], ref[:, 2]
 
@@ -540,7 +543,7 @@ class QuadFaultVectorEnv(VectorEnv):
         if n_resetting:
             self._reset_rows(rows)
         if self._stale:
-            self._ensure_tables(self.steps, WINDOW - 1)
+            self._ensure_tables(self.steps, self._window - 1)
         if S.mode < 0:
             self._given_commands(a)
         threads = self._threads()
@@ -575,7 +578,7 @@ class QuadFaultVectorEnv(VectorEnv):
             final_obs, final_infos = self._observations(obs), infos
             self._reset_rows(ended_rows)
             if self._stale:
-                self._ensure_tables(self.steps, WINDOW - 1)
+                self._ensure_tables(self.steps, self._window - 1)
             obs = obs.copy()
             vector_step.observe(S, self._rows, views, obs, ended_rows, 1)
             infos = self._infos(None, np.where(done, 0, code))
