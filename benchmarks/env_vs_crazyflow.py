@@ -161,8 +161,7 @@ def child(side: str, N: int) -> int:
 
 # -- the parent ------------------------------------------------------------------------------
 def _spawn(side: str, N: int, args) -> subprocess.Popen:
-    env = dict(os.environ)
-    env.setdefault("OMP_WAIT_POLICY", "passive")
+    env = dict(os.environ)  # (numba's OpenMP wait policy as a user gets it)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")]))
     env["JAX_PLATFORMS"] = "cpu"
     if args.threads == 1:
@@ -175,7 +174,12 @@ def _spawn(side: str, N: int, args) -> subprocess.Popen:
     if args.taskset:
         cmd = ["taskset", "-c", args.taskset] + cmd
     return subprocess.Popen(
-        cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True
+        cmd,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+        env=env,
     )
 
 
