@@ -310,18 +310,9 @@ def set_threads(config: TrainConfig) -> None:
     import torch
 
     if config.vector_env:
-        import gymnasium as gym
-
-        from estimators.registry import estimator_spec
         from quad_fault_env.vector import default_threads
 
-        try:
-            kwargs = {**gym.spec(config.env_id).kwargs, **config.env_kwargs}
-        except gym.error.Error:  # (an unknown id is named where the env is made)
-            kwargs = dict(config.env_kwargs)
-        name = kwargs.get("estimator", "irls")
-        estimated = isinstance(name, str) and estimator_spec(name).batched is not None
-        set_numba_threads(config.numba_threads or default_threads(config.n_envs, estimated))
+        set_numba_threads(config.numba_threads or default_threads(config.n_envs))
     torch.set_num_threads(config.torch_threads)
 
 

@@ -12,9 +12,8 @@ Two tasks (``--task``):
 Each is stepped with ``numba_threads=1`` and with numba's default thread count, rounds
 interleaved, and the script prints wall and CPU microseconds per vehicle-step and the ratios
 (default / one thread: above 1 means the extra threads cost more than they save). The vector
-env's defaults (``numba_threads="auto"``: ``quad_fault_env.vector.THREADS_MIN_BATCH`` without a
-batched estimator, ``THREADS_MIN_BATCH_ESTIMATOR`` with one) come from these numbers on an idle
-machine.
+env's default (``numba_threads="auto"``: one thread below
+``quad_fault_env.vector.THREADS_MIN_BATCH``) comes from these numbers on an idle machine.
 
 CPU time counts every thread of this process, so idle OpenMP workers that spin between
 parallel regions show up there even when the wall time looks fine. On a shared machine read

@@ -64,13 +64,11 @@ from quadfault.model.flight import Flight
 from quadfault.model.motors import MotorModel
 from quadfault.model.plant import Plant
 
-#: batch size from which the vector env without a batched estimator runs its step on numba's
-#: threads by default; below it, on the calling thread alone (measured on an idle machine:
-#: ``benchmarks/numba_threads.py --task physics``, docs/throughput.md "numba threads")
-THREADS_MIN_BATCH = 4096
-#: the same with a batched estimator in the step (its parallel update pays later:
-#: ``benchmarks/numba_threads.py --task study``)
-THREADS_MIN_BATCH_ESTIMATOR = 32768
+#: batch size from which the vector env runs its step (and its batched estimator) on numba's
+#: threads by default; below it, on the calling thread alone (measured on an idle 2-core
+#: machine: ``benchmarks/numba_threads.py --task physics`` and ``--task study``,
+#: docs/throughput.md "numba threads")
+THREADS_MIN_BATCH = 1024
 #: the estimators the vector env takes: those with a batched form, the nominal belief and the
 #: oracle (both computed here)
 VECTOR_ESTIMATORS = (
@@ -95,17 +93,14 @@ def usable_cores() -> int:
     return max(1, min(cpus, numba.config.NUMBA_NUM_THREADS))
 
 
-def default_threads(num_envs: int, estimated: bool = False) -> int | None:
-    """The numba thread count a vector env of ``num_envs`` sub-envs steps with by default
-    (``estimated``: a batched estimator updates in the step): 1 below
-    :data:`THREADS_MIN_BATCH` (:data:`THREADS_MIN_BATCH_ESTIMATOR`), else the CPUs this
-    process may use (:func:`usable_cores`); None (the caller's count) when the user set
+def default_threads(num_envs: int) -> int | None:
+    """The numba thread count a vector env of ``num_envs`` sub-envs steps with by default: 1
+    below :data:`THREADS_MIN_BATCH`, else the CPUs this process may use
+    (:func:`usable_cores`); None (the caller's count) when the user set
     ``NUMBA_NUM_THREADS``: their choice is kept."""
     if os.environ.get("NUMBA_NUM_THREADS"):
         return None
-    if num_envs < (THREADS_MIN_BATCH_ESTIMATOR if estimated else THREADS_MIN_BATCH):
-        return 1
-    return usable_cores()
+    return 1 if num_envs < THREADS_MIN_BATCH else usable_cores()
 
 
 class QuadFaultVectorEnv(VectorEnv):
@@ -224,7 +219,7 @@ class QuadFaultVectorEnv(VectorEnv):
                 estimator, self.vehicle, num=N, **(estimator_kwargs or {})
             )
         if numba_threads == "auto":
-            numba_threads = default_threads(N, estimated=self.estimator is not None)
+            numba_threads = default_threads(N)
         #: numba threads of this env's steps and resets (None: the caller's count)
         self.numba_threads = None if numba_threads is None else int(numba_threads)
         # the single env's plant (MotorModel(thrust_noise): its default saturation), N of it
@@ -643,7 +638,6 @@ __all__ = [
     "AUTORESET_MODES",
     "INFO_LEVELS",
     "THREADS_MIN_BATCH",
-    "THREADS_MIN_BATCH_ESTIMATOR",
     "QuadFaultVectorEnv",
     "default_threads",
 ]

@@ -15,7 +15,6 @@ from quad_fault_env.envs.config import RewardConfig
 from quad_fault_env.tasks import REWARD_V0, TASKS
 from quad_fault_env.vector import (
     THREADS_MIN_BATCH,
-    THREADS_MIN_BATCH_ESTIMATOR,
     QuadFaultVectorEnv,
     default_threads,
     usable_cores,
@@ -250,8 +249,6 @@ def test_numba_threads_by_batch_size(monkeypatch):
     monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
     assert default_threads(1) == default_threads(THREADS_MIN_BATCH - 1) == 1
     assert default_threads(THREADS_MIN_BATCH) == usable_cores() >= 1
-    assert default_threads(THREADS_MIN_BATCH, estimated=True) == 1  # the estimator's own limit
-    assert default_threads(THREADS_MIN_BATCH_ESTIMATOR, estimated=True) == usable_cores()
     monkeypatch.setenv("NUMBA_NUM_THREADS", "2")  # the user's choice is kept
     assert default_threads(4) is None
     monkeypatch.delenv("NUMBA_NUM_THREADS")
