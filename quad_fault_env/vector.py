@@ -118,8 +118,9 @@ class QuadFaultVectorEnv(VectorEnv):
             is returned at once; the last one is in ``info["final_obs"]``).
         numba_threads: threads of numba's parallel kernels (the physics over the vehicles,
             the batched estimator) during this env's ``reset`` and ``step``: ``"auto"``
-            (:func:`default_threads`: one below :data:`THREADS_MIN_BATCH` sub-envs, numba's
-            count from there on, numba's count whenever ``NUMBA_NUM_THREADS`` is set), an
+            (:func:`default_threads`: one below :data:`THREADS_MIN_BATCH` sub-envs, the CPUs
+            the process may use from there on, numba's count whenever ``NUMBA_NUM_THREADS``
+            is set), an
             integer, or None (the caller's count). Set on the calling thread for the call only
             (``quadfault.jit.threads``): nothing else in the process changes, and the flights
             are the same for every count.
