@@ -19,7 +19,9 @@ inertia, :data:`~quadfault.model.relaxed_hover.ROTOR_LOSS_EFFECTS`), or ``auto``
 default): ``rotor-loss`` when every level is 0 (a complete loss), else ``paper``.
 
 ``--sensor-noise PRESET`` flies every flight with a sensor-noise preset (docs/sensors.md);
-``--detect THRESHOLD HOLD`` sets the relaxed-hover switch's threshold and hold [s].
+``--detect THRESHOLD HOLD`` sets the relaxed-hover switch's threshold and hold [s];
+``--improved`` flies the IRLS arms with ``IRLSConfig.improved()`` (the residual prefilter that
+noisy sensors call for) instead of the paper's IRLS.
 
 ``--rotors 1 2 3 4 --onset-range 3 6`` flies every listed rotor with the onset drawn per seed
 from that range (the complete-loss target: 10 seeds x 4 rotors).
@@ -40,6 +42,8 @@ import numpy as np
 from agents.fault_tolerant import FaultTolerantConfig
 from agents.metrics import held_after_loss
 from agents.rollout import FlightConfig, fly
+from estimators.irls_config import IRLSConfig
+from estimators.registry import make_estimator
 from quadfault.model.relaxed_hover import ROTOR_LOSS_EFFECTS, rotor_loss_vehicle
 from quadfault.model.relaxed_hover_control import RotorLossDetector
 from quadfault.model.scenarios import AbruptFault, ConstantEfficiency, EfficiencySchedule, Scenario
@@ -96,12 +100,19 @@ def main(argv=None) -> int:
         nargs=2,
         default=None,
         metavar=("THRESHOLD", "HOLD"),
-        help="the relaxed-hover switch's threshold [-] and hold [s] (default 0.15 0.004)",
+        help="the relaxed-hover switch's threshold [-] and hold [s] (default 0.15 and 0.004, "
+        "0.05 with sensor noise)",
     )
     ap.add_argument(
         "--sensor-noise",
         default=None,
         help="a sensor-noise preset (docs/sensors.md) for every flight (default: noise-free)",
+    )
+    ap.add_argument(
+        "--improved",
+        action="store_true",
+        help="the IRLS arms fly IRLSConfig.improved() (its residual prefilter; "
+        "quadfault estimate --improved) instead of the paper's IRLS",
     )
     ap.add_argument(
         "--arms",
@@ -122,6 +133,7 @@ def main(argv=None) -> int:
     if args.sensor_noise is not None:
         cfg = FlightConfig(fault_tolerant=ft, sensor_noise=args.sensor_noise)
     start = time.process_time()
+    label = lambda e: "irls, improved" if e == "irls" and args.improved else e  # noqa: E731
     detector = ft.detector or RotorLossDetector.for_sensors(cfg.sensor_noise)
     print(
         f"vehicle: {veh.name} (thrust-to-weight {veh.thrust_to_weight:g}), effects: "
@@ -140,7 +152,10 @@ def main(argv=None) -> int:
             for rotor in args.rotors:
                 for seed, onset in zip(args.seeds, t_on):
                     sc = scenario(level, onset, args.duration, rotor)
-                    fl.append(fly(sc, ctrl, est, seed, vehicle=veh, effects=effects, config=cfg))
+                    e = est
+                    if est == "irls" and args.improved:
+                        e = make_estimator("irls", veh, IRLSConfig.improved())
+                    fl.append(fly(sc, ctrl, e, seed, vehicle=veh, effects=effects, config=cfg))
                     on.append(onset)
             ok = sum(not f.metrics.crashed for f in fl)
             crash = [f.metrics.crash_time - o for f, o in zip(fl, on) if f.metrics.crashed]
@@ -157,7 +172,7 @@ def main(argv=None) -> int:
             ]
             span = lambda xs: "-" if not xs else f"{min(xs):.0f}-{max(xs):.0f}"  # noqa: E731
             print(
-                f"| {level:g} | {ctrl} ({est}) | {ok}/{len(fl)} | {crash_s} | {peak:.3f} | "
+                f"| {level:g} | {ctrl} ({label(est)}) | {ok}/{len(fl)} | {crash_s} | {peak:.3f} | "
                 f"{final:.3f} | {rmse:.3f} | {held}/{len(fl)} | {span(to_switch)} | "
                 f"{span(confirm)} |"
             )
