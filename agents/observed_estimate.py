@@ -87,11 +87,7 @@ class ObservedEstimateVectorEnv(QuadFaultVectorEnv):
         if self.observe is None:
             return
         if self._obs_estimator is not None:
-            rec, times, res = self._records, self._rows.times, None
-            for r in range(rec.p.shape[1]):
-                res = self._obs_estimator.update(
-                    times[:, r], rec.p[:, r], rec.v[:, r], rec.R[:, r], rec.w[:, r], self.f_cmd
-                )
+            res = self._estimate_on_records(self._obs_estimator)
             self._obs_eta[:], self._obs_sd[:] = res.eta, res.sd
         elif self.observe == "truth":
             self._obs_eta[:] = self.eta_true

@@ -583,16 +583,22 @@ class QuadFaultVectorEnv(VectorEnv):
             infos["_final_obs"] = infos["_final_info"] = done.copy()
         return self._observations(obs), out.reward, out.terminated, out.truncated, infos
 
+    def _estimate_on_records(self, estimator):
+        """``estimator`` (a batched one) updated with every record of this step, in order;
+        its last result."""
+        rec, times = self._records, self._rows.times
+        res = None
+        for r in range(rec.p.shape[1]):
+            res = estimator.update(
+                times[:, r], rec.p[:, r], rec.v[:, r], rec.R[:, r], rec.w[:, r], self.f_cmd
+            )
+        return res
+
     def _update_estimator(self, resetting_rows) -> None:
         """The batched estimator's updates on the step's records (every
         ``estimator_stride``-th substep); the estimate does not act on the physics within a
         step. Sub-envs reset at this step start their estimator afresh."""
-        rec, times = self._records, self._rows.times
-        res = None
-        for r in range(rec.p.shape[1]):
-            res = self.estimator.update(
-                times[:, r], rec.p[:, r], rec.v[:, r], rec.R[:, r], rec.w[:, r], self.f_cmd
-            )
+        res = self._estimate_on_records(self.estimator)
         self.eta_hat[:], self.eta_sd[:], self._status[:] = res.eta, res.sd, res.status
         if resetting_rows is not None:
             mask = np.zeros(self.num_envs, dtype=bool)
