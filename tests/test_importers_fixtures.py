@@ -211,6 +211,34 @@ def test_motors_never_running_and_empty_files(tmp_path):
         import_crazypad(FIX / "nanodrone_flight.csv")
 
 
+def test_trim_to_flight_drops_backward_stamps_and_keeps_the_running_span():
+    from quadfault.io.importers import trim_to_flight
+
+    t = np.arange(100) * 0.01
+    t[50] = t[49]  # a repeated stamp: dropped
+    u = np.zeros((100, 4))
+    u[10:80, 2] = 0.4  # one motor running from row 10 to 79
+    arrays = {"t": t, "u": u}
+    kept, t_run, dropped = trim_to_flight("log.csv", arrays, u, keep_all=False)
+    assert dropped == 1
+    assert t_run == (0.10, 0.79)
+    assert len(kept["t"]) == 69 and np.all(np.diff(kept["t"]) > 0)
+    assert np.all(kept["u"][:, 2] == 0.4)
+    whole, _, _ = trim_to_flight("log.csv", arrays, u, keep_all=True)
+    assert len(whole["t"]) == 99
+    with pytest.raises(ConfigError, match=r"^log.csv: only 10 rows while flying$"):
+        trim_to_flight(
+            "log.csv",
+            arrays,
+            np.where(np.arange(100)[:, None] < 10, 1.0, 0.0),
+            keep_all=False,
+            threshold=0.5,
+            rows="while flying",
+        )
+    with pytest.raises(ConfigError, match="^log.csv: the motors never run$"):
+        trim_to_flight("log.csv", arrays, np.zeros((100, 4)), keep_all=False)
+
+
 # ----------------------------------------------------------------------------------------
 # CLI
 def _cli(*args):

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from quadfault.errors import RecordingError
+from quadfault.errors import ConfigError, RecordingError
 from quadfault.io.importers.usd_format import is_usd_log
 
 #: name -> (module, function) of every importer (imported lazily).
@@ -191,6 +191,37 @@ def running_span(commands: np.ndarray, threshold: float = 0.0) -> tuple[int, int
     if on.size == 0:
         return None
     return int(on[0]), int(on[-1]) + 1
+
+
+def trim_to_flight(
+    path,
+    arrays: dict,
+    commands: np.ndarray,
+    keep_all: bool,
+    *,
+    threshold: float = 0.0,
+    never: str = "the motors never run",
+    rows: str = "with the motors running",
+) -> tuple[dict, tuple, int]:
+    """The rows of a log's flight: drops the samples whose time stamp does not increase
+    (:func:`increasing_time_mask`), finds the span where any of ``commands`` (one row per
+    sample, before the drop) exceeds ``threshold`` (:func:`running_span`) and, unless
+    ``keep_all``, keeps only that span. Returns ``(arrays, (t_first, t_last), dropped)``: the
+    kept arrays, the span's first and last time stamps and the number of samples dropped.
+    Raises naming ``path`` when nothing runs (``never``) or fewer than 20 rows remain (``rows``
+    names them)."""
+    keep = increasing_time_mask(arrays["t"])
+    dropped = int(np.sum(~keep))
+    arrays = select(keep, arrays)
+    span = running_span(np.asarray(commands)[keep], threshold)
+    if span is None:
+        raise ConfigError(f"{path}: {never}")
+    t_run = (float(arrays["t"][span[0]]), float(arrays["t"][span[1] - 1]))
+    if not keep_all:
+        arrays = select(slice(*span), arrays)
+    if len(arrays["t"]) < 20:
+        raise ConfigError(f"{path}: only {len(arrays['t'])} rows {rows}")
+    return arrays, t_run, dropped
 
 
 def gap_stats(t: np.ndarray, factor: float = 2.5) -> dict:

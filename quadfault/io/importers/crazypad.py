@@ -37,12 +37,10 @@ import numpy as np
 from quadfault.errors import ConfigError, RecordingError
 from quadfault.io.importers import (
     gap_stats,
-    increasing_time_mask,
     read_raw_table,
     require_columns,
     require_finite,
-    running_span,
-    select,
+    trim_to_flight,
 )
 from quadfault.io.importers.crazyflie import (
     CF21_BRUSHED,
@@ -223,20 +221,6 @@ def _finish(path, kind, t, arrays, cal_segment, mass, measured, extra_meta, **re
     )
 
 
-def _trim(path, arrays, keep_all):
-    keep = increasing_time_mask(arrays["t"])
-    dropped = int(np.sum(~keep))
-    arrays = select(keep, arrays)
-    span = running_span(arrays["u"])
-    if span is None:
-        raise ConfigError(f"{path}: the motors never run")
-    if not keep_all:
-        arrays = select(slice(*span), arrays)
-    if len(arrays["t"]) < 20:
-        raise ConfigError(f"{path}: only {len(arrays['t'])} rows with the motors running")
-    return arrays, dropped
-
-
 def _import_motor_log(path, table, keep_all, calibration, mass):
     need = ("timestamp_ms", *MOTORS, *POS, *VEL, *ACC, "stateEstimate.roll")
     require_columns(path, table, need)
@@ -262,7 +246,7 @@ def _import_motor_log(path, table, keep_all, calibration, mass):
         calibration = _first_leg_airborne(
             arrays["t"], arrays["pos"][:, 2], arrays["u"].max(axis=1) > 0
         )
-    arrays, dropped = _trim(path, arrays, keep_all)
+    arrays, _, dropped = trim_to_flight(path, arrays, arrays["u"], keep_all)
     t = arrays["t"]
     f_world = _smooth(arrays["acc"]) + np.array([0.0, 0.0, G_CRAZYFLIE])  # specific force, z-up
     pitch, roll_check = tilt_from_specific_force(f_world, arrays["roll"], arrays["yaw"])
@@ -339,7 +323,7 @@ def _import_controller_log(path, table, keep_all, calibration, mass):
     arrays["gyro"] = arrays["gyro"] - bias
     if calibration is None:
         calibration = _first_leg_airborne(arrays["t"], arrays["pos"][:, 2], running)
-    arrays, dropped = _trim(path, arrays, keep_all)
+    arrays, _, dropped = trim_to_flight(path, arrays, arrays["u"], keep_all)
     t = arrays["t"]
     R = attitude_from_gyro(t, arrays["gyro"])
     vel_enu = np.gradient(_smooth(arrays["pos"]), t, axis=0)

@@ -18,15 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from quadfault.errors import ConfigError
 from quadfault.io.importers import (
     gap_stats,
-    increasing_time_mask,
     read_raw_table,
     require_columns,
     require_finite,
-    running_span,
-    select,
+    trim_to_flight,
 )
 from quadfault.io.importers.crazyflie import (
     CF21_BRUSHED,
@@ -71,25 +68,16 @@ def import_eschmann(
     table = read_raw_table(path)
     require_columns(path, table, (TIME, *ACC, *GYRO, *MOTORS))
     require_finite(path, table, (TIME, *ACC, *GYRO, *MOTORS))
-    t = table[TIME] / 1000.0  # ms -> s
-    keep = increasing_time_mask(t)
-    dropped = int(np.sum(~keep))
     arrays = {
-        "t": t,
+        "t": table[TIME] / 1000.0,  # ms -> s
         "acc": np.stack([table[c] for c in ACC], axis=1) * G_CRAZYFLIE,  # g -> m/s^2
         "gyro": np.radians(np.stack([table[c] for c in GYRO], axis=1)),  # deg/s -> rad/s
         "u": np.stack([table[c] for c in MOTORS], axis=1) / PWM_FULL_SCALE,
     }
-    arrays = select(keep, arrays)
-    span = running_span(arrays["u"])
-    if span is None:
-        raise ConfigError(f"{path}: the motors never run (all motor.m* are 0)")
-    t_run = (float(arrays["t"][span[0]]), float(arrays["t"][span[1] - 1]))
-    if not keep_all:
-        arrays = select(slice(*span), arrays)
+    arrays, t_run, dropped = trim_to_flight(
+        path, arrays, arrays["u"], keep_all, never="the motors never run (all motor.m* are 0)"
+    )
     t = arrays["t"]
-    if len(t) < 20:
-        raise ConfigError(f"{path}: only {len(t)} rows with the motors running")
 
     _, _, _, omega, accel = enu_flu_to_ned_frd(None, None, None, arrays["gyro"], arrays["acc"])
     if calibration is None:

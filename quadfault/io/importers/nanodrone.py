@@ -22,12 +22,10 @@ import numpy as np
 from quadfault.errors import ConfigError, RecordingError
 from quadfault.io.importers import (
     gap_stats,
-    increasing_time_mask,
     read_raw_table,
     require_columns,
     require_finite,
-    running_span,
-    select,
+    trim_to_flight,
 )
 from quadfault.io.importers.crazyflie import (
     BRUSHLESS_KF,
@@ -120,21 +118,17 @@ def import_nanodrone(
         "vbat": table.get("Vbat"),
         "flying": table.get("is_flying"),
     }
-    keep = increasing_time_mask(arrays["t"])
-    dropped = int(np.sum(~keep))
-    arrays = select(keep, arrays)
-    if arrays["flying"] is not None:
-        span = running_span(arrays["flying"][:, None], 0.5)
-    else:
-        span = running_span(arrays["u"])
-    if span is None:
-        raise ConfigError(f"{path}: no rows with the vehicle flying")
-    t_run = (float(arrays["t"][span[0]]), float(arrays["t"][span[1] - 1]))
-    if not keep_all:
-        arrays = select(slice(*span), arrays)
+    flying = arrays["flying"]
+    arrays, t_run, dropped = trim_to_flight(
+        path,
+        arrays,
+        arrays["u"] if flying is None else flying[:, None],
+        keep_all,
+        threshold=0.0 if flying is None else 0.5,
+        never="no rows with the vehicle flying",
+        rows="while flying",
+    )
     t = arrays["t"]
-    if len(t) < 20:
-        raise ConfigError(f"{path}: only {len(t)} rows while flying")
 
     # world specific force -> body FLU (R^T a), then ENU/FLU -> NED/FRD
     R = quat_to_rot(arrays["q"])
