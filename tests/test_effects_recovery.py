@@ -179,10 +179,6 @@ def _within(a: dict, b: dict, z: float = 3.0) -> list:
     return out
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="known regression of the rival explanations (CHANGELOG, Known issues): rate_damping is not accepted in the first diagnosis of the round trip",
-)
 @pytest.mark.slow
 def test_simulate_model_round_trip_finds_the_same_parameters(tmp_path):
     """simulate (known effects) -> diagnose -> simulate --model (another seed) -> diagnose:

@@ -339,6 +339,10 @@ class Diagnosis:
         alike += _indistinguishable(selection.verdicts, [e.name for e in rejected])
         if selection.unattributed is not None:  # a time constant the log cannot resolve
             alike += (selection.unattributed.entry(),)
+        reported = {n for a in alike for n in a["names"]} | {e.name for e in accepted}
+        hidden = found.closed_loop(skip=reported)
+        if hidden is not None:  # effects the closed loop inflates (partly real)
+            alike += (hidden,)
         cross_check = self._estimator_check(rec, effects, alike)
         table, model_ci = scoring.channel_table(
             selection.baseline.residual, selection.final_cv.residual, replay.block_dur[scoring.rows]

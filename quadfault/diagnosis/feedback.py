@@ -22,6 +22,20 @@ IV_Z = 2.0  # the IV slope must be this many standard errors above 0
 #: least held-out gain of an effect whose signal the instrument cannot predict at all
 IV_UNVERIFIED_GAIN = 0.5
 IV_MIN = 0.5  # least IV slope (1: the fitted signal is all real, 0: all feedback bias)
+#: An effect the check rejects whose IV slope is still this many standard errors above 0 and
+#: at least ``PARTLY_MIN`` is partly real: the closed loop inflated its fit (an inertia x1.35
+#: on a 250 Hz Lissajous flight fits at its bound 2 with slope 0.35 +- 0.03), but some of its
+#: signal is physics. On effect-free simulated flights the slopes stay within 2 se of 0.
+PARTLY_Z = 4.0
+PARTLY_MIN = 0.15
+
+
+def partly_real(iv, se) -> bool:
+    """An instrumental-variable slope below ``IV_MIN`` that still shows real signal
+    (``PARTLY_MIN`` or more, ``PARTLY_Z`` standard errors above 0)."""
+    if iv is None or se is None or not (np.isfinite(iv) and np.isfinite(se)):
+        return False
+    return PARTLY_MIN <= iv < IV_MIN and iv - PARTLY_Z * se > 0.0
 
 
 def iv_slope(rp: Replay, before, after, scale, residual, channels) -> tuple[float, float]:

@@ -24,7 +24,7 @@ from quadfault.diagnosis.crossval import (
     fit_bound_mask,
     fold_agreement,
 )
-from quadfault.diagnosis.feedback import IV_MIN, IV_UNVERIFIED_GAIN
+from quadfault.diagnosis.feedback import IV_MIN, IV_UNVERIFIED_GAIN, partly_real
 from quadfault.diagnosis.library import (
     EQUIVALENT,
     EXPLANATIONS,
@@ -197,18 +197,26 @@ class Findings:
             return None
         return cross_validate(self.replay, [c], self.scoring, None, self.folds, full=f)
 
-    def accepted_alone(self, c, k: int, x) -> float:
+    def accepted_alone(self, c, k: int, x, step=None) -> float:
         """The held-out improvement of nominal + the accepted effect ``c`` (``k``-th of the
         final model, at ``x``) alone: the better of its values in the final model fitted
         without each fold (:func:`~quadfault.diagnosis.rivals.alone_at_folds`) and a fit
-        alone started from ``x``."""
+        alone started from ``x``. When another accepted effect cancels its signal on the
+        nominal model (alone it does not improve it), its part beside the rest instead: the
+        held-out RMS the final model removes over the model without it (``step``'s gain,
+        from :meth:`~quadfault.diagnosis.rivals.Rivals.supported`), in units of the nominal
+        RMS."""
         sel, base = self.selection, self.selection.baseline.sse
         if base <= 0:
             return 0.0
         fold_x = [fx[k] for fx in sel.final_cv.fold_x]
         sse = alone_at_folds(self.replay, self.scoring, self.folds, c, fold_x)
         sse = min(sse, self.alone_cv(c, x).sse)
-        return 1.0 - float(np.sqrt(sse / base))
+        alone = 1.0 - float(np.sqrt(sse / base))
+        if alone > 0.0 or step is None or not step.dropped or step.improvement_step >= 1.0:
+            return alone
+        final = float(np.sqrt(sel.final_cv.sse / base))
+        return max(alone, final * (1.0 / (1.0 - step.improvement_step) - 1.0))
 
     def improvement(self, cv) -> float:
         """``1 - RMS(held out) / RMS(nominal, held out)`` of ``cv`` (0 without one)."""
@@ -231,7 +239,7 @@ class Findings:
                     c,
                     x,
                     sd,
-                    improvement=self.accepted_alone(c, k, x),
+                    improvement=self.accepted_alone(c, k, x, step),
                     explanation=explain_accepted(step, self.selected, params),
                     fold_x=[fx[k] for fx in sel.final_cv.fold_x],
                     gain=step.improvement_step,
@@ -376,6 +384,73 @@ class Findings:
                 "0); one of the two is likely there"
             ),
             "separate_by": comparison.separate_by,
+        }
+
+    def closed_loop(self, skip=()) -> dict | None:
+        """The ``indistinguishable`` entry of the effects the closed loop hides: each rejected
+        only by the instrumental-variable check, after a significant held-out gain over the
+        model before it, with a slope that still shows real signal
+        (:func:`~quadfault.diagnosis.feedback.partly_real`). One of them is likely there,
+        smaller than fitted (the loop inflated each fit); this flight cannot say which nor
+        how large. None when there is none. ``skip``: names reported elsewhere."""
+        hidden = [
+            v
+            for name, v in sorted(self.selection.verdicts.items())
+            if name not in skip
+            and v.status == "rejected"
+            and v.iv is not None
+            and v.iv < IV_MIN
+            and v.gain is not None
+            and v.gain > 0.0
+            and partly_real(v.iv, v.iv_se)
+        ]
+        if not hidden:
+            return None
+        hidden.sort(key=lambda v: -v.gain)
+        sets = []
+        for v in hidden:
+            c = v.candidate
+            params, unc = public_params(
+                c,
+                np.asarray(v.x, float),
+                np.asarray(v.sd, float),
+                self.replay.vehicle,
+                self.selected,
+                frame=self.frame,
+            )
+            sets.append(
+                [
+                    {
+                        "name": c.name,
+                        "params": params,
+                        "uncertainty": unc,
+                        "bounds": public_bounds(c, np.asarray(v.x, dtype=float)),
+                    }
+                ]
+            )
+        names = [v.candidate.name for v in hidden]
+        slopes = ", ".join(f"{v.candidate.name} {v.iv:.2f} +- {v.iv_se:.2f}" for v in hidden)
+        return {
+            "names": names,
+            "sets": sets,
+            "held_out": {
+                "improvement": {v.candidate.name: float(v.gain) for v in hidden},
+                "iv_slope": {v.candidate.name: float(v.iv) for v in hidden},
+                "iv_se": {v.candidate.name: float(v.iv_se) for v in hidden},
+            },
+            "summary": " or ".join(names) + " (smaller than fitted)",
+            "reason": (
+                f"the closed loop hides {' or '.join(names)}: each improves the held-out fit "
+                f"over the flight ({', '.join(_pct(v.gain) for v in hidden)}), but the "
+                "controller's reaction to its own disturbances inflates the fit, and only "
+                f"part of the fitted signal is real (instrumental-variable slope {slopes}; 1 "
+                f"when all of it is, {IV_MIN} needed to accept); one of them is likely there, "
+                "smaller than its fitted value, and this flight cannot say which"
+            ),
+            "separate_by": (
+                "open-loop excitation (steps or a chirp added to the commands), measured rotor "
+                "speeds, or faster command logging (a lag or delay against an inertia)"
+            ),
         }
 
 

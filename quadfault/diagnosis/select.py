@@ -104,7 +104,7 @@ class Verdict:
         sd: one-sigma uncertainty of ``x``.
         cv: the held-out result of that fit (None when it never got that far).
         gain: held-out RMS reduction when added to the model before it (None if not tested).
-        iv: instrumental-variable slope (None if not tested).
+        iv: instrumental-variable slope (None if not tested); iv_se: its standard error.
         agreement: fold-agreement detail ("" if not tested).
         like: the time constant below the log's resolution it cannot be told from
             (:class:`~quadfault.diagnosis.resolution.Unresolved`), or None.
@@ -127,6 +127,7 @@ class Verdict:
     like: Unresolved | None = None
     trades_with: str = ""
     in_set: bool = False
+    iv_se: float | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -183,6 +184,7 @@ class _Option:
     cv: CrossValidation | None = None
     gain: float = 0.0
     iv: float | None = None
+    iv_se: float | None = None
     failed: str = ""
     agreement: dict = field(default_factory=dict)
     like: Unresolved | None = None
@@ -327,7 +329,7 @@ class _Round:
         rp, sc = sr.replay, sr.scoring
         touched = signal >= 1.0
         channels = np.flatnonzero(touched) if touched.any() else np.flatnonzero(signal > 0)
-        opt.iv, iv_se = iv_slope(
+        opt.iv, opt.iv_se = iv_slope(
             rp,
             m.terms,
             opt.fit.terms,
@@ -335,6 +337,7 @@ class _Round:
             (rp.measured - m.prediction) / sc.divisor,
             channels,
         )
+        iv_se = opt.iv_se
         if not np.isfinite(opt.iv):
             if opt.gain < IV_UNVERIFIED_GAIN:
                 return (
@@ -638,6 +641,7 @@ def _verdict(c, status, reason, opt, j) -> Verdict:
         opt.agreement.get(c.name, ""),
         opt.like,
         opt.trades_with,
+        iv_se=opt.iv_se,
     )
 
 
