@@ -410,21 +410,21 @@ class Findings:
         sets = []
         for v in hidden:
             c = v.candidate
-            params, unc = public_params(
-                c,
-                np.asarray(v.x, float),
-                np.asarray(v.sd, float),
-                self.replay.vehicle,
-                self.selected,
-                frame=self.frame,
-            )
+            # sized by the slope: the part of the fitted departure from nominal that is real
+            x, x0 = np.asarray(v.x, float), np.asarray(c.x0, float)
+            sized = x0 + v.iv * (x - x0)
+            sd = np.hypot(v.iv * np.asarray(v.sd, float), v.iv_se * np.abs(x - x0))
+            ctx = (self.replay.vehicle, self.selected)
+            params, unc = public_params(c, sized, sd, *ctx, frame=self.frame)
+            fitted, _ = public_params(c, x, np.asarray(v.sd, float), *ctx, frame=self.frame)
             sets.append(
                 [
                     {
                         "name": c.name,
                         "params": params,
                         "uncertainty": unc,
-                        "bounds": public_bounds(c, np.asarray(v.x, dtype=float)),
+                        "bounds": public_bounds(c, sized),
+                        "as_fitted": fitted,
                     }
                 ]
             )
@@ -438,14 +438,15 @@ class Findings:
                 "iv_slope": {v.candidate.name: float(v.iv) for v in hidden},
                 "iv_se": {v.candidate.name: float(v.iv_se) for v in hidden},
             },
-            "summary": " or ".join(names) + " (smaller than fitted)",
+            "summary": " or ".join(short(one[0]["name"], one[0]["params"]) for one in sets),
             "reason": (
                 f"the closed loop hides {' or '.join(names)}: each improves the held-out fit "
                 f"over the flight ({', '.join(_pct(v.gain) for v in hidden)}), but the "
                 "controller's reaction to its own disturbances inflates the fit, and only "
                 f"part of the fitted signal is real (instrumental-variable slope {slopes}; 1 "
                 f"when all of it is, {IV_MIN} needed to accept); one of them is likely there, "
-                "smaller than its fitted value, and this flight cannot say which"
+                "smaller than as fitted (each set gives its fitted departure from nominal "
+                "scaled by its slope, and `as_fitted`), and this flight cannot say which"
             ),
             "separate_by": (
                 "open-loop excitation (steps or a chirp added to the commands), measured rotor "
