@@ -39,12 +39,12 @@ def window_steps(substeps: int) -> int:
 _STALE = np.iinfo(np.int64).min // 2
 
 
-def _combo_groups(keys: np.ndarray, k: np.ndarray):
-    """``[(key, k0, positions), ...]`` of the distinct (key, k0) pairs."""
-    combo = keys.astype(np.int64) * (1 << 32) + k.astype(np.int64)
-    order = np.argsort(combo, kind="stable")
-    cuts = np.flatnonzero(np.diff(combo[order])) + 1
-    return [(int(keys[idx[0]]), int(k[idx[0]]), idx) for idx in np.split(order, cuts)]
+def row_groups(keys: np.ndarray):
+    """``[(key, rows), ...]`` of an integer key array (rows sorted)."""
+    order = np.argsort(keys, kind="stable")
+    sk = keys[order]
+    cuts = np.flatnonzero(np.diff(sk)) + 1
+    return [(int(keys[idx[0]]), idx) for idx in np.split(order, cuts)]
 
 
 def _as_rows(x, n: int) -> np.ndarray:
@@ -102,34 +102,39 @@ class RowTimeTables:
         """Make ``k - k0`` lie in ``[0, last]`` for every row (refilling from ``k``).
 
         ``trajectories[key]`` / ``schedules[key]`` are the callables of ``traj_key`` /
-        ``sched_key`` (N,). Each distinct trajectory (schedule) is evaluated once per window
-        start and its rows copied to the rows that follow it.
+        ``sched_key`` (N,). Each distinct trajectory (schedule) is evaluated once, on the
+        windows of every step its rows refill from, and its rows copied to the rows that
+        follow it: the Python calls grow with the distinct functions of time, not with the
+        rows or their steps.
         """
         off = k - self.k0
         rows = np.flatnonzero((off < 0) | (off > last))
         if not len(rows):
             return
         S, dt, kr, W = self.S, self.dt, k[rows], self.window
-        for _, k0, idx in _combo_groups(np.zeros(len(rows), dtype=np.int64), kr):
-            r = rows[idx]
-            keys, inv = np.unique(traj_key[r], return_inverse=True)
-            block = self._reference_block(
-                [trajectories[key] for key in keys.tolist()], (np.arange(k0, k0 + W + 1) * S) * dt
-            )  # t = (k S) dt
-            c = block.shape[2]
-            if len(r) == len(self.k0) and len(keys) == 1:
+        for key, idx in row_groups(traj_key[rows]):
+            starts, inv = np.unique(kr[idx], return_inverse=True)
+            t = ((starts[:, None] + np.arange(W + 1)) * S) * dt  # t = (k S) dt
+            block = self._reference_block([trajectories[key]], t.ravel())[0]
+            block = block.reshape(len(starts), W + 1, *block.shape[1:])
+            c = block.shape[-2]
+            if len(idx) == len(self.k0) and len(starts) == 1:
                 self.refs[:, :, :c] = block[0]
-            elif len(keys) == 1:
-                self.refs[r, :, :c] = block[0]
+            elif len(starts) == 1:
+                self.refs[rows[idx], :, :c] = block[0]
             else:
-                self.refs[r, :, :c] = block[inv.ravel()]
-        for key, k0, idx in _combo_groups(sched_key[rows], kr):
-            tsub = (k0 * S + np.arange(W * S + 1)) * dt  # t = (k S + j) dt
-            eta = _as_rows(at_times(schedules[key], tsub), len(tsub))
-            if len(idx) == len(self.k0):
-                self.eta[:] = eta
+                self.refs[rows[idx], :, :c] = block[inv.ravel()]
+        for key, idx in row_groups(sched_key[rows]):
+            starts, inv = np.unique(kr[idx], return_inverse=True)
+            tsub = (starts[:, None] * S + np.arange(W * S + 1)) * dt  # t = (k S + j) dt
+            eta = _as_rows(at_times(schedules[key], tsub.ravel()), tsub.size)
+            eta = eta.reshape(len(starts), W * S + 1, -1)
+            if len(idx) == len(self.k0) and len(starts) == 1:
+                self.eta[:] = eta[0]
+            elif len(starts) == 1:
+                self.eta[rows[idx]] = eta[0]
             else:
-                self.eta[rows[idx]] = eta
+                self.eta[rows[idx]] = eta[inv.ravel()]
         self.k0[rows] = kr
         self.first[rows] = kr * S
 
@@ -253,14 +258,6 @@ __all__ = [
     "RowTimeTables",
     "StepRows",
 ]
-
-
-def row_groups(keys: np.ndarray):
-    """``[(key, rows), ...]`` of an integer key array (rows sorted)."""
-    order = np.argsort(keys, kind="stable")
-    sk = keys[order]
-    cuts = np.flatnonzero(np.diff(sk)) + 1
-    return [(int(keys[idx[0]]), idx) for idx in np.split(order, cuts)]
 
 
 class InternTable:

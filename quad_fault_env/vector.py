@@ -251,6 +251,7 @@ class QuadFaultVectorEnv(VectorEnv):
         self._traj_key = np.zeros(N, dtype=np.int64)
         self._sched_key = np.zeros(N, dtype=np.int64)
         self._rngs: list = [None] * N  # each sub-env's generator (set by its reset)
+        self._seeded = False  # every sub-env has its generator
         #: each sub-env's scenario of the current episode
         self.scenarios = np.full(N, None, dtype=object)
         self._scenario_names = np.full(N, None, dtype=object)
@@ -380,24 +381,34 @@ class QuadFaultVectorEnv(VectorEnv):
         drawn = isinstance(spec, str) and spec in GENERATORS  # a new scenario per row
         shared = None if drawn else e0._make_scenario(spec)
         u = np.empty((len(rows), SPREAD_DRAWS))
-        sigma = np.empty(len(rows))
-        for k, i in enumerate(rows.tolist()):
-            seed = None if seeds is None else seeds[k]
-            if seed is not None or self._rngs[i] is None:  # as gymnasium's Env.reset
-                self._rngs[i] = seeding.np_random(seed)[0]
-            rng = self._rngs[i]
-            sc = shared if shared is not None else e0._make_scenario(spec, rng)
-            self.scenarios[i] = sc
-            if self.physics_draws is not None:  # the single env's draw, at the same point
-                effects = self.physics_draws.draw(rng)
-                self.plant.assign(i, effects)
-                self._effects[i] = describe(effects)
-            u[k] = rng.uniform(-1.0, 1.0, SPREAD_DRAWS)
-            self._scenario_names[i] = sc.name
-            self._traj_key[i] = self._trajectories.key(sc.trajectory)
-            self._sched_key[i] = self._schedules.key(sc.efficiency)
-            sigma[k] = sc.thrust_noise
-            self.max_steps[i] = int(round(sc.duration / e0.control_period))
+        if self._seed_rows(rows, seeds):
+            self.flight.seed(rows, [self._rngs[i] for i in rows.tolist()])
+        if drawn or self.physics_draws is not None:  # draws per row, in the single env's order
+            sigma = np.empty(len(rows))
+            for k, i in enumerate(rows.tolist()):
+                rng = self._rngs[i]
+                sc = shared if shared is not None else e0._make_scenario(spec, rng)
+                self.scenarios[i] = sc
+                if self.physics_draws is not None:  # the single env's draw, at the same point
+                    effects = self.physics_draws.draw(rng)
+                    self.plant.assign(i, effects)
+                    self._effects[i] = describe(effects)
+                u[k] = rng.uniform(-1.0, 1.0, SPREAD_DRAWS)
+                self._scenario_names[i] = sc.name
+                self._traj_key[i] = self._trajectories.key(sc.trajectory)
+                self._sched_key[i] = self._schedules.key(sc.efficiency)
+                sigma[k] = sc.thrust_noise
+                self.max_steps[i] = int(round(sc.duration / e0.control_period))
+        else:  # one scenario for every row: its draws alone, compiled
+            vector_step.spread_draws(self.flight.generator_table(), rows, u)
+            box = np.empty((), dtype=object)
+            box[()] = shared  # (the scenario itself into each row, never its fields)
+            self.scenarios[rows] = box
+            self._scenario_names[rows] = shared.name
+            self._traj_key[rows] = self._trajectories.key(shared.trajectory)
+            self._sched_key[rows] = self._schedules.key(shared.efficiency)
+            sigma = shared.thrust_noise
+            self.max_steps[rows] = int(round(shared.duration / e0.control_period))
         self.flight.set_thrust_noise(rows, sigma)
         keys, inv = np.unique(self._traj_key[rows], return_inverse=True)
         items = [self._trajectories.items[int(key)] for key in keys]
@@ -405,7 +416,7 @@ class QuadFaultVectorEnv(VectorEnv):
             items, inv.ravel(), self.vehicle, e0.controller_config, e0.initial_spread, u
         )
         # the rows' flights: their generators, initial states, measurements, zero commands
-        self.flight.reset([self._rngs[i] for i in rows.tolist()], rows=rows, state=start)
+        self.flight.restart(rows, start)
         keys, inv = np.unique(self._sched_key[rows], return_inverse=True)
         eta0 = np.array(
             [
@@ -432,6 +443,20 @@ class QuadFaultVectorEnv(VectorEnv):
         if len(self._trajectories.items) > 8 * self.num_envs + 64:
             self._compact_tables()
         return ref0.position, ref0.velocity, ref0.acceleration
+
+    def _seed_rows(self, rows: np.ndarray, seeds) -> bool:
+        """New generators for the ``rows`` given a seed (``seeds``: one per row, or None) and
+        for those without one yet, as gymnasium's ``Env.reset``; whether any row got one."""
+        if seeds is None and self._seeded:
+            return False
+        seeded = False
+        for k, i in enumerate(rows.tolist()):
+            seed = None if seeds is None else seeds[k]
+            if seed is not None or self._rngs[i] is None:
+                self._rngs[i] = seeding.np_random(seed)[0]
+                seeded = True
+        self._seeded = all(g is not None for g in self._rngs)
+        return seeded
 
     def _compact_tables(self) -> None:
         """Forget trajectories / schedules no sub-env uses any more."""

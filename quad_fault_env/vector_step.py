@@ -283,6 +283,17 @@ def _observe_parallel(S, R, V, obs, chunk):
             observe_vehicle(i, S, R, V, obs)
 
 
+@jit(_nrt=False)
+def spread_draws(gens, rows, u):
+    """Row ``rows[k]``'s ``uniform(-1, 1, u.shape[1])`` from its generator into ``u[k]``: the
+    draws of an episode start (``episode_start.SPREAD_DRAWS``), the same numbers as the
+    generator's own ``uniform``."""
+    for k in range(rows.shape[0]):
+        g = generator_at(gens, rows[k])
+        for j in range(u.shape[1]):
+            u[k, j] = g.uniform(-1.0, 1.0)
+
+
 @jit
 def copy_actions(a, out):
     """The actions ``a`` (N, 4) into ``out``, clipped to [-1, 1]; returns -1, or the first
@@ -337,6 +348,7 @@ __all__ = [
     "copy_actions",
     "observe",
     "parallel",
+    "spread_draws",
     "step",
     "step_vehicle",
 ]

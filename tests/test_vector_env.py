@@ -87,6 +87,24 @@ def test_matches_single_envs_under_a_sensor_preset_through_autoresets(preset):
     assert n_done >= 4
 
 
+def test_matches_single_envs_with_one_scenario_through_scattered_autoresets():
+    """One named scenario for every row (the compiled reset: each row's spread drawn from its
+    generator in the kernel, its time tables refilled with the other rows'): motor actions
+    crash the vehicles at scattered steps, so rows restart and refill at different steps."""
+    n_done = _run_side_by_side(
+        4,
+        100,
+        seed=11,
+        estimator="ekf",
+        scenario="combined",
+        duration=0.8,
+        sensor_noise=NOISE,
+        initial_spread=InitialStateSpread(0.3, 0.2, 0.1, 0.2),
+        action_mode="motor",
+    )
+    assert n_done >= 5
+
+
 def test_rows_sharing_a_scenario_do_not_leak_it_to_other_rows():
     """Rows that repeat a reset seed share one interned schedule; the other rows must keep
     their own (a grouping bug once gave row 1 the schedule of rows 0 and 2)."""

@@ -147,6 +147,13 @@ class Flight:
             rows,
             [s if isinstance(s, np.random.Generator) else np.random.default_rng(s) for s in seeds],
         )
+        self.restart(rows, state)
+
+    def restart(self, rows, state: RigidBodyState | None = None) -> None:
+        """Start new flights of the vehicles ``rows`` (an int array) drawing on from the
+        generators they have: step 0, zero commands, new sensors, and the true ``state``
+        (arrays with a leading axis of ``len(rows)``) measured when given. Vectorised: no
+        Python per vehicle."""
         self.k[rows] = 0
         self.plant.vehicles.f_cmd[rows] = 0.0
         closed_loop.restart_sensors(self.plant.vehicles, rows)
@@ -169,6 +176,12 @@ class Flight:
     def generator(self, i: int = 0):
         """Vehicle ``i``'s generator."""
         return self._rngs[i]
+
+    def generator_table(self):
+        """The vehicles' generators as the table a compiled kernel draws from
+        (:func:`quadfault.model.generator_table.generator_at`); take it again after a
+        :meth:`reset` or :meth:`seed`."""
+        return self._generators()
 
     def _generators(self):
         if self._gens is None:
