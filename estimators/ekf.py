@@ -66,6 +66,7 @@ from estimators.ekf_filter import (
     Y,
     predict_update_into,
 )
+from estimators.freshness import SAMPLE, fresh_since, measurement_variances_into, remember_into
 from estimators.options import check_bounds, check_positive, from_options
 from estimators.recursive import recording_arrays, run_filter
 from estimators.state import (
@@ -176,6 +177,8 @@ FLOATS = Layout(
     eta0=("n",),
     eta_keep=("n",),
     P_keep=("n", "n"),
+    last_z=(SAMPLE.size, 3),  # the previous sample (estimators.freshness)
+    r_now=(Y.size,),  # the measurement variances of this update
     **WORKSPACE.declared,
 )
 F = FLOATS.index
@@ -225,6 +228,8 @@ def state_pieces(fs, offsets, n, N):
         eta0=piece_rows(fs, o[F.eta0], o[F.eta0 + 1], N),
         eta_keep=piece_rows(fs, o[F.eta_keep], o[F.eta_keep + 1], N),
         P_keep=piece(fs, o, F.P_keep, (N, n, n)),
+        last_z=piece(fs, o, F.last_z, (N, SAMPLE.size, 3)),
+        r_now=piece_rows(fs, o[F.r_now], o[F.r_now + 1], N),
         mats=piece(fs, o, F.mats, (N, MATS.size, ns, ns)),
         blocks=piece(fs, o, F.blocks, (N, BLOCKS.size, 3, 3)),
         vecs=piece(fs, o, F.vecs, (N, VECS.size, ns)),
@@ -326,7 +331,17 @@ def ekf_step(t, p, v, R, w, f, const, model, S, ks, i) -> int:
                 keep[j] = x[e + j]
                 for k in range(n):
                     P_keep[j, k] = P[e + j, e + k]
-        predict_update_into(x, P, last_f, dt, Measurement(p, v, w, R), model, workspace_row(S, i))
+        # a held stream (its sample repeated, estimators.freshness) is not measured again
+        r_now = S.r_now[i]
+        measurement_variances_into(
+            model.r, fresh_since(p, v, R, w, S.last_z[i]), Y.p, Y.v, Y.R, Y.w, r_now
+        )
+        step_model = Model(
+            model.rigid, model.J, model.Jinv, model.A, model.qc, r_now, model.lo, model.hi
+        )
+        predict_update_into(
+            x, P, last_f, dt, Measurement(p, v, w, R), step_model, workspace_row(S, i)
+        )
         code = OK
         if idle:  # the efficiencies stay, decorrelated; their variance grows by Q_eta dt
             for j in range(n):
@@ -339,6 +354,7 @@ def ekf_step(t, p, v, R, w, f, const, model, S, ks, i) -> int:
                 P[e + j, e + j] += model.qc[e + j] * dt
             code = NO_EXCITATION
     last_t[0] = t
+    remember_into(S.last_z[i], p, v, R, w)
     for j in range(n):
         last_f[j] = min(max(f[j], 0.0), f_max) if clip else f[j]
     return code

@@ -46,6 +46,14 @@ from estimators.base import (
 )
 from estimators.change_completion import COUNTERS as COMPLETION_COUNTERS
 from estimators.change_completion import N_COUNTERS, complete_into, observe_into
+from estimators.freshness import N_COUNTERS as N_FRESH_COUNTERS
+from estimators.freshness import (
+    N_TIMES,
+    fresh_rows_into,
+    fresh_streams,
+    prefilter_fresh_into,
+    restart_into,
+)
 from estimators.ipm import any_size
 from estimators.irls_config import (  # noqa: F401  (re-exported)
     SCALINGS,
@@ -60,7 +68,6 @@ from estimators.residuals import (
     Kinematics,
     SegmentModel,
     energy_terms_into,
-    prefilter_into,
     segment_model_into,
 )
 from estimators.state import FlatState, Layout, all_finite, fields, pack, piece, piece_rows
@@ -166,6 +173,8 @@ COUNTERS = fields(
     "has_sd",
     "median_k",
     "median_fresh",
+    "code",
+    ("fresh", N_FRESH_COUNTERS),
     ("completion", N_COUNTERS),
     ("iters", 0),
 )
@@ -184,8 +193,11 @@ FLOATS = Layout(
     J=(RESIDUAL_ROWS, "n"),  # its Jacobian (scratch)
     r0f=(RESIDUAL_ROWS,),  # the prefilter's residual at eta = 0 (IRLSConfig.prefilter)
     Jf=(RESIDUAL_ROWS, "n"),  # and its Jacobian
-    median=(2, "L", "n"),
-)  # the output median's ring and sorted copy
+    median=(2, "L", "n"),  # the output median's ring and sorted copy
+    acc_r0=(RESIDUAL_ROWS,),  # the pending rows of held streams (estimators.freshness)
+    acc_J=(RESIDUAL_ROWS, "n"),
+    fresh_times=(N_TIMES,),
+)
 F = FLOATS.index
 IRLSPieces = FLOATS.pieces
 
@@ -282,6 +294,9 @@ def state_views(fs, ip, N):
         piece_rows(fs, o[F.r0f], o[F.r0f + 1], N),
         piece(fs, o, F.Jf, (N, RESIDUAL_ROWS, n)),
         piece(fs, o, F.median, (N, 2, L, n)),
+        piece_rows(fs, o[F.acc_r0], o[F.acc_r0 + 1], N),
+        piece(fs, o, F.acc_J, (N, RESIDUAL_ROWS, n)),
+        piece_rows(fs, o[F.fresh_times], o[F.fresh_times + 1], N),
     )
 
 
@@ -352,18 +367,20 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond, a
         and all_finite(w)
         and all_finite(f)
     )
+    fresh_counters = k_row[COUNTERS.fresh : COUNTERS.completion]
+    pushed = False
     if not finite or (k_row[COUNTERS.has_last] == 1 and not t > last_t[0]):
         k_row[COUNTERS.count] = 0
         k_row[COUNTERS.has_last] = 0
+        restart_into(fresh_counters, S.fresh_times[i])
         code, why = BAD_SAMPLE, (WHY_TIME if finite else WHY_NONFINITE)
     else:
         if k_row[COUNTERS.has_last] == 1:  # the segment last -> this sample into the ring
             slot = k_row[COUNTERS.head]  # (eqs. 13-26)
             Jmat, Jinv, A, G = arrays
-            dt = t - last_t[0]
             r0, Jr = S.r0[i], S.J[i]
-            thrust[slot] = segment_model_into(
-                dt,
+            thrust_now = segment_model_into(
+                t - last_t[0],
                 Kinematics(last_p, last_v, last_R, last_w),
                 Kinematics(p, v, R, w),
                 last_f,
@@ -371,13 +388,29 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond, a
                 r0,
                 Jr,
             )
-            tau = const[CONSTANTS.prefilter]
-            if tau > 0.0:  # the same low-pass on both sides (beyond the paper)
-                fresh = k_row[COUNTERS.count] == 0
-                prefilter_into(r0, Jr, S.r0f[i], S.Jf[i], math.exp(-dt / tau), fresh)
-            c[slot] = energy_terms_into(r0, Jr, G, b[slot], H[slot])
-            k_row[COUNTERS.head] = (slot + 1) % m
-            k_row[COUNTERS.count] = min(k_row[COUNTERS.count] + 1, m)
+            # held streams: their rows over the interval between fresh samples
+            dt = fresh_rows_into(
+                r0,
+                Jr,
+                t - last_t[0],
+                fresh_streams(p, v, R, w, last_p, last_v, last_R, last_w),
+                fresh_counters,
+                S.acc_r0[i],
+                S.acc_J[i],
+                S.fresh_times[i],
+            )
+            if dt > 0.0:
+                pushed = True
+                thrust[slot] = thrust_now
+                tau = const[CONSTANTS.prefilter]
+                if tau > 0.0:  # the same low-pass on both sides (beyond the paper)
+                    fresh = k_row[COUNTERS.count] == 0
+                    prefilter_fresh_into(
+                        r0, Jr, S.r0f[i], S.Jf[i], dt, tau, fresh, fresh_counters, S.fresh_times[i]
+                    )
+                c[slot] = energy_terms_into(r0, Jr, G, b[slot], H[slot])
+                k_row[COUNTERS.head] = (slot + 1) % m
+                k_row[COUNTERS.count] = min(k_row[COUNTERS.count] + 1, m)
         last_t[0] = t
         for a in range(3):
             last_p[a], last_v[a], last_w[a] = p[a], v[a], w[a]
@@ -390,7 +423,9 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond, a
                 else f[j]
             )
         k_row[COUNTERS.has_last] = 1
-        if k_row[COUNTERS.count] == m:
+        if k_row[COUNTERS.count] == m and not pushed:  # no fresh rows: the window as it was
+            code = k_row[COUNTERS.code]
+        elif k_row[COUNTERS.count] == m:
             mean = 0.0
             for s in range(m):
                 mean += thrust[(k_row[COUNTERS.head] + s) % m]
@@ -439,6 +474,7 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond, a
                 k_row[COUNTERS.has_sd] = 1
             elif beyond is not None and ip[INT_SETTINGS.completion] == 1:  # a held window:
                 observe_into(eta, history_, completion)  # the completion sees the kept estimate
+            k_row[COUNTERS.code] = code
     if beyond is not None and L > 1:
         median = S.median[i]
         median_push_into(

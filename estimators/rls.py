@@ -66,6 +66,14 @@ from estimators.base import (
     WARMUP,
 )
 from estimators.ekf import IDLE_THRUST
+from estimators.freshness import N_COUNTERS as N_FRESH_COUNTERS
+from estimators.freshness import (
+    N_TIMES,
+    fresh_rows_into,
+    fresh_streams,
+    prefilter_fresh_into,
+    restart_into,
+)
 from estimators.options import (
     check_bounds,
     check_fraction,
@@ -79,7 +87,6 @@ from estimators.residuals import (
     RESIDUAL_ROWS,
     Kinematics,
     SegmentModel,
-    prefilter_into,
     segment_model_into,
 )
 from estimators.state import Layout, all_finite, fields, pack, piece, piece_rows
@@ -166,12 +173,16 @@ FLOATS = Layout(
     Jf=(RESIDUAL_ROWS, "n"),
     Pphi=("n",),
     g=(N_ROWS,),
+    acc_r0=(RESIDUAL_ROWS,),  # the pending rows of held streams (estimators.freshness)
+    acc_J=(RESIDUAL_ROWS, "n"),
+    fresh_times=(N_TIMES,),
 )
 F = FLOATS.index
 RLSPieces = FLOATS.pieces
 #: the int state: 1 once a previous sample is held; 1 once the first update was made; 1 once
-#: the prefilter holds a segment (0 again after a bad sample)
-COUNTERS = fields("RLSCounters", "has_last", "updated", "filtered")
+#: the prefilter holds a segment (0 again after a bad sample); the counters of
+#: :func:`estimators.freshness.fresh_rows_into`
+COUNTERS = fields("RLSCounters", "has_last", "updated", "filtered", ("fresh", N_FRESH_COUNTERS))
 #: the constants: scalars (the box ``lo``, ``hi``; ``log_lambda``: ln(lambda) per second),
 #: the inertia and its inverse, the residual weights ``G`` (ones: :func:`segment_terms_into`'s
 #: energy is unused), last the allocation ``A`` (4, n) (:func:`rls_constants`)
@@ -241,6 +252,9 @@ def state_views(fs, offsets, n, N):
         piece(fs, o, F.Jf, (N, RESIDUAL_ROWS, n)),
         piece_rows(fs, o[F.Pphi], o[F.Pphi + 1], N),
         piece_rows(fs, o[F.g], o[F.g + 1], N),
+        piece_rows(fs, o[F.acc_r0], o[F.acc_r0 + 1], N),
+        piece(fs, o, F.acc_J, (N, RESIDUAL_ROWS, n)),
+        piece_rows(fs, o[F.fresh_times], o[F.fresh_times + 1], N),
     )
 
 
@@ -277,6 +291,7 @@ def rls_step(t, p, v, R, w, f, const, S, ks, i) -> int:
     ) or (ks[i, COUNTERS.has_last] == 1 and not t > last_t[0]):
         ks[i, COUNTERS.has_last] = 0  # the next good sample starts afresh
         ks[i, COUNTERS.filtered] = 0
+        restart_into(ks[i, COUNTERS.fresh :], S.fresh_times[i])
         return BAD_SAMPLE
     code = WARMUP
     if ks[i, COUNTERS.has_last] == 1:
@@ -284,7 +299,8 @@ def rls_step(t, p, v, R, w, f, const, S, ks, i) -> int:
         idle = False
         for j in range(n):
             idle = idle or last_f[j] <= IDLE_THRUST
-        if idle:
+        if idle:  # (no segment spans it: the pending rows of held streams are dropped)
+            restart_into(ks[i, COUNTERS.fresh :], S.fresh_times[i])
             code = NO_EXCITATION
         else:
             r0, Jr = S.r0[i], S.J[i]
@@ -305,6 +321,20 @@ def rls_step(t, p, v, R, w, f, const, S, ks, i) -> int:
                 r0,
                 Jr,
             )
+            # held streams: their rows over the interval between fresh samples
+            dt = fresh_rows_into(
+                r0,
+                Jr,
+                dt,
+                fresh_streams(p, v, R, w, last_p, last_v, last_R, last_w),
+                ks[i, COUNTERS.fresh :],
+                S.acc_r0[i],
+                S.acc_J[i],
+                S.fresh_times[i],
+            )
+        if not idle and dt == 0.0:  # nothing fresh: the estimate as it was
+            code = OK if ks[i, COUNTERS.updated] == 1 else WARMUP
+        elif not idle:
             lam = math.exp(const[C.log_lambda] * dt)
             g = S.g[i]  # the rows' weights, from the segment's own rows
             for q in range(N_ROWS):
@@ -323,7 +353,17 @@ def rls_step(t, p, v, R, w, f, const, S, ks, i) -> int:
             tau = const[C.prefilter]
             if tau > 0.0:  # the same low-pass on both sides of the regression
                 fresh = ks[i, COUNTERS.filtered] == 0
-                prefilter_into(r0, Jr, S.r0f[i], S.Jf[i], math.exp(-dt / tau), fresh)
+                prefilter_fresh_into(
+                    r0,
+                    Jr,
+                    S.r0f[i],
+                    S.Jf[i],
+                    dt,
+                    tau,
+                    fresh,
+                    ks[i, COUNTERS.fresh :],
+                    S.fresh_times[i],
+                )
                 ks[i, COUNTERS.filtered] = 1
             energy = 0.0  # the weighted a-priori residual energy, per row
             for q in range(N_ROWS):

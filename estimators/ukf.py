@@ -56,6 +56,7 @@ from estimators.base import (
     WARMUP,
 )
 from estimators.ekf import IDLE_THRUST, NOISE_REFERENCE_DT
+from estimators.freshness import SAMPLE, fresh_since, measurement_variances_into, remember_into
 from estimators.linalg import cholesky_into
 from estimators.options import check_bounds, check_finite, check_positive, from_options
 from estimators.recursive import BatchedRecursive, RecursiveEstimator, _Kernels
@@ -161,6 +162,8 @@ FLOATS = Layout(
     W=(Y.size, "L"),
     y=(Y.size,),
     shift=("L",),
+    last_z=(SAMPLE.size, 3),  # the previous sample (estimators.freshness)
+    r_now=(Y.size,),  # the measurement variances of this update
 )
 F = FLOATS.index
 UKFPieces = FLOATS.pieces
@@ -262,6 +265,8 @@ def state_views(fs, offsets, n, N):
         piece(fs, o, F.W, (N, m, L)),
         piece_rows(fs, o[F.y], o[F.y + 1], N),
         piece_rows(fs, o[F.shift], o[F.shift + 1], N),
+        piece(fs, o, F.last_z, (N, SAMPLE.size, 3)),
+        piece_rows(fs, o[F.r_now], o[F.r_now + 1], N),
     )
 
 
@@ -324,7 +329,12 @@ def ukf_step(t, p, v, R, w, f, const, S, ks, i) -> int:
         dt = t - last_t[0]
         if not dt > 0:
             return BAD_SAMPLE
-        code = _predict_update(x, P, v, w, last_f, last_R, dt, const, S, i, n)
+        # a held stream (its sample repeated, estimators.freshness) is not measured again
+        r_now = S.r_now[i]
+        measurement_variances_into(
+            _model(const, n)[2], fresh_since(p, v, R, w, S.last_z[i]), -1, Y.v, -1, Y.w, r_now
+        )
+        code = _predict_update(x, P, v, w, last_f, last_R, dt, const, r_now, S, i, n)
         if code == OK:
             idle = False
             for j in range(n):
@@ -342,6 +352,7 @@ def ukf_step(t, p, v, R, w, f, const, S, ks, i) -> int:
                     P[e + j, e + j] += qc[e + j] * dt
                 code = NO_EXCITATION
     last_t[0] = t
+    remember_into(S.last_z[i], p, v, R, w)
     for a in range(3):
         for b in range(3):
             last_R[a, b] = R[a, b]
@@ -353,11 +364,12 @@ def ukf_step(t, p, v, R, w, f, const, S, ks, i) -> int:
 
 
 @jit(inline="always")
-def _predict_update(x, P, zv, zw, f, R, dt, const, S, i, n) -> int:
-    """The unscented predict over ``dt`` and the update with ``z = [zv, zw]``, in place;
-    ``ill_conditioned`` (nothing changed) when ``P`` or ``S`` is not positive definite."""
+def _predict_update(x, P, zv, zw, f, R, dt, const, r, S, i, n) -> int:
+    """The unscented predict over ``dt`` and the update with ``z = [zv, zw]`` of measurement
+    variances ``r`` (:data:`Y`), in place; ``ill_conditioned`` (nothing changed) when ``P``
+    or ``S`` is not positive definite."""
     L, e, m, C_ = X.eta + n, X.eta, Y.size, CONSTANTS
-    A, qc, r = _model(const, n)
+    A, qc, _r = _model(const, n)
     keep, P_keep = S.keep[i], S.P_keep[i]
     for j in range(n):  # the efficiencies before the step (an idle step restores them)
         keep[j] = x[e + j]

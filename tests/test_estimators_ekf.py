@@ -16,6 +16,7 @@ from oracles.ekf_numpy import (
 
 from estimators.base import Sample, samples
 from estimators.ekf import EKFConfig, MotorEfficiencyEKF
+from estimators.freshness import HELD_VARIANCE
 from quadfault.errors import ConfigError
 from quadfault.model.rotation import expm_so3, hat, logm_so3, vee
 from quadfault.model.scenarios import ConstantEfficiency, EfficiencySchedule, Scenario
@@ -168,6 +169,8 @@ def test_ekf_step_equals_linear_kalman_filter_at_level_attitude(vehicle):
         H[9 + k, 9 + 3 * j + i] = -0.5
         H[9 + k, 9 + 3 * i + j] = 0.5
     Rm = np.diag(ekf.r_diag)
+    # the attitude repeats bit for bit: a held stream, not measured again (estimators.freshness)
+    Rm[9:, 9:] = HELD_VARIANCE * np.eye(3)
     K = P @ H.T @ np.linalg.inv(H @ P @ H.T + Rm)
     y = np.concatenate((np.concatenate((z1.p, z1.v, z1.w)) - x_pred[:9], np.zeros(3)))
     x_new = x_pred + K @ y  # the attitude innovation is zero: R_pred = R_meas = I
