@@ -12,7 +12,7 @@ from quadfault.diagnosis import Diagnosis
 from quadfault.diagnosis.feedback import IV_MIN, PARTLY_MIN, PARTLY_Z, partly_real
 from quadfault.model import effects as fx
 from quadfault.model.scenarios import named_scenario
-from quadfault.model.trajectory import Circle, Lissajous
+from quadfault.model.trajectory import Circle, Hover, Lissajous
 from quadfault.sim.simulator import SensorNoise, SimConfig, simulate
 
 DT = 1.0 / 250.0  # what users record
@@ -64,3 +64,19 @@ def test_a_concealed_inertia_is_named_and_the_effect_free_flight_is_quiet(traj):
     quiet = Diagnosis().fit(fly(traj, (), seed=5))
     assert quiet.verdict == "consistent"
     assert not quiet.effects and not quiet.indistinguishable
+
+
+@pytest.mark.slow
+def test_no_effect_is_accepted_at_a_bound_the_whole_flight_asks_for():
+    """A hover with a 14 mm CoM offset: an inertia fit pinned at its bound (x2) changes each
+    sample by less than the noise but improves the whole flight; it is a suspect, never an
+    accepted effect."""
+    rec = fly(Hover(), (fx.ComOffset((-0.0083, 0.0110)),), seed=0, duration=20.0)
+    doc = json.loads(Diagnosis().fit(rec).to_json())
+    for e in doc["effects"]:
+        assert not e["at_bound"], e
+        for key, (lo, hi) in e["bounds"].items():
+            v = np.asarray(e["params"][key], dtype=float)
+            span = np.abs(np.asarray(hi, dtype=float) - np.asarray(lo, dtype=float))
+            assert np.all(np.minimum(np.abs(v - lo), np.abs(v - hi)) > 1e-6 * span), e
+    assert "inertia" not in [e["name"] for e in doc["effects"]]

@@ -19,8 +19,10 @@ coefficient at its lower bound 0 is "no drag on that axis", an inertia scale at 
 data asks for more than this effect allows") and, given the recording, whose part of the
 model matters: putting the parameters at a bound back to their neutral values changes the
 model's channels by more than the noise (root-sum-square over the channels of the RMS change
-in noise units at least 1, the measure of a negligible effect in the selection); then each
-of them that does so alone is at a bound that matters (all of them when only together). A
+in noise units at least 1), or makes the fit over the whole flight worse (its weighted RMS
+by ``BOUND_GAIN``, 1 %: a change below the noise in every sample that the flight as a whole
+asks for); then each of them that does so alone is at a bound that matters (all of them when
+only together). A
 parameter
 whose whole range hardly changes the model -- quadratic rate damping over a flight at low
 rates, next to the linear term that carries the signal -- ends at a bound without the data
@@ -40,6 +42,9 @@ from quadfault.diagnosis.residuals import Replay
 
 FOLD_Z = 3.0
 BOUND_MARGIN = 0.02
+#: a bound matters over the flight when the parameters at it, put back to neutral, make the
+#: fit's weighted RMS over the flight this much worse [-]
+BOUND_GAIN = 0.01
 
 
 @dataclass(frozen=True, eq=False)
@@ -160,11 +165,17 @@ def bound_mask(cand, x, rp: Replay | None = None, sc=None, others=()) -> np.ndar
     others = list(others)
     model = predict(rp, others + [(cand, x)])
 
+    fit_sse = sc.sse(rp.measured - model)
+
     def matters(idx) -> bool:
         back = x.copy()
         back[idx] = np.asarray(cand.x0, dtype=float)[idx]
-        change = (model - predict(rp, others + [(cand, back)])) / sc.noise
-        return bool(np.sqrt(np.sum(np.mean(change**2, axis=0))) >= 1.0)
+        other = predict(rp, others + [(cand, back)])
+        change = (model - other) / sc.noise
+        if np.sqrt(np.sum(np.mean(change**2, axis=0))) >= 1.0:
+            return True
+        # over the flight: a small change in every sample that the whole flight asks for
+        return 1.0 - np.sqrt(fit_sse / max(sc.sse(rp.measured - other), 1e-300)) >= BOUND_GAIN
 
     idx = np.flatnonzero(near)
     if not matters(idx):  # all of them together below the noise
