@@ -25,7 +25,6 @@ import numpy as np
 
 from estimators.baselines import NOMINAL_PRIOR_SD
 from estimators.registry import estimator_names, make_estimator
-from quad_fault_env.observation import ETA_MAX, SD_MAX
 from quad_fault_env.sb3_vec import QuadFaultSB3VecEnv
 from quad_fault_env.tasks import registered_kwargs
 from quad_fault_env.vector import QuadFaultVectorEnv
@@ -59,8 +58,6 @@ class ObservedEstimateVectorEnv(QuadFaultVectorEnv):
             self._obs_estimator = make_estimator(self.observe, self.vehicle, num=N)
         self._obs_eta, self._obs_sd = np.ones((N, n)), np.full((N, n), np.nan)
         self._final_eta, self._final_sd = self._obs_eta.copy(), self._obs_sd.copy()
-        self._eta_at = self.layout.slice("eta_hat")
-        self._sd_at = self.layout.slice("eta_sd")
 
     # -- the observed estimate, kept beside the env's -----------------------------------------
     def _start_rows(self, rows) -> None:
@@ -76,29 +73,28 @@ class ObservedEstimateVectorEnv(QuadFaultVectorEnv):
             mask[rows] = True
             self._obs_estimator.reset(mask)
 
-    def _reset_rows(self, rows, seeds=None, options=None):
-        out = super()._reset_rows(rows, seeds, options)
+    def episodes_started(self, rows) -> None:
         if self.observe is not None:
             self._start_rows(rows)
-        return out
 
-    def _update_estimator(self, resetting_rows) -> None:
-        super()._update_estimator(resetting_rows)
+    def estimate_updated(self, restarted_rows) -> None:
         if self.observe is None:
             return
         if self._obs_estimator is not None:
-            res = self._estimate_on_records(self._obs_estimator)
+            res = self.estimate_on_records(self._obs_estimator)
             self._obs_eta[:], self._obs_sd[:] = res.eta, res.sd
         elif self.observe == "truth":
             self._obs_eta[:] = self.eta_true
-        if resetting_rows is not None:
-            self._start_rows(resetting_rows)
+        if restarted_rows is not None:
+            self._start_rows(restarted_rows)
         # the values of this step, before any row's same-step reset (its final observation)
         self._final_eta[:], self._final_sd[:] = self._obs_eta, self._obs_sd
 
     def _write(self, obs, eta, sd) -> None:
-        obs[:, self._eta_at] = np.clip(eta, 0.0, ETA_MAX)
-        obs[:, self._sd_at] = np.clip(np.where(np.isnan(sd), SD_MAX, sd), 0.0, SD_MAX)
+        """The observed estimate into the flat observations ``obs`` (the layout's bounds and
+        fills: NaN sd is "none given")."""
+        self.layout.write(obs, "eta_hat", eta)
+        self.layout.write(obs, "eta_sd", sd)
 
     def reset(self, *, seed=None, options=None):
         obs, info = super().reset(seed=seed, options=options)

@@ -177,15 +177,20 @@ class ObservationLayout:
     def replace(self, obs, name: str, value):
         """A copy of ``obs`` (flat vector or dict) with slot ``name`` set to ``value``
         (filled and clipped like :meth:`flat`)."""
-        sl = self._slices[name]
-        value = self._bounded(np.asarray(value, dtype=float), sl)
         if isinstance(obs, dict):
             out = dict(obs)
-            out[name] = value
+            out[name] = self._bounded(np.asarray(value, dtype=float), self._slices[name])
             return out
         out = np.array(obs, dtype=np.float32, copy=True)
-        out[..., sl] = value
+        self.write(out, name, value)
         return out
+
+    def write(self, obs: np.ndarray, name: str, value) -> None:
+        """Slot ``name`` of the flat observations ``obs`` (float32 ``(..., size)``) set to
+        ``value`` in place, NaN filled and clipped into the slot's bounds as :meth:`flat`
+        does."""
+        sl = self._slices[name]
+        obs[..., sl] = self._bounded(np.asarray(value, dtype=float), sl)
 
     def get(self, obs, name: str) -> np.ndarray:
         """Slot ``name`` of ``obs`` (flat vector or dict)."""

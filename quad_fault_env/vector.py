@@ -442,6 +442,7 @@ class QuadFaultVectorEnv(VectorEnv):
         self._stale = False  # every row's window holds its next step (_ensure_tables)
         if len(self._trajectories.items) > 8 * self.num_envs + 64:
             self._compact_tables()
+        self.episodes_started(rows)
         return ref0.position, ref0.velocity, ref0.acceleration
 
     def _seed_rows(self, rows: np.ndarray, seeds) -> bool:
@@ -608,7 +609,19 @@ class QuadFaultVectorEnv(VectorEnv):
             infos["_final_obs"] = infos["_final_info"] = done.copy()
         return self._observations(obs), out.reward, out.terminated, out.truncated, infos
 
-    def _estimate_on_records(self, estimator):
+    # -- hooks: a subclass keeping per-row state beside the env's (an estimate it observes) --
+    def episodes_started(self, rows: np.ndarray) -> None:
+        """Called when the sub-envs ``rows`` (an int64 array) have started new episodes (their
+        state, tables and the env's estimate at t = 0 set; their observation not yet
+        written). Does nothing here."""
+
+    def estimate_updated(self, restarted_rows: np.ndarray | None) -> None:
+        """Called at each step after the batched estimator's update (``estimator`` not None),
+        with the rows whose estimator then restarted (reset at this step; None: no row).
+        Does nothing here. :meth:`estimate_on_records` feeds another batched estimator the
+        same records."""
+
+    def estimate_on_records(self, estimator):
         """``estimator`` (a batched one) updated with every record of this step, in order;
         its last result."""
         rec, times = self._records, self._rows.times
@@ -623,7 +636,7 @@ class QuadFaultVectorEnv(VectorEnv):
         """The batched estimator's updates on the step's records (every
         ``estimator_stride``-th substep); the estimate does not act on the physics within a
         step. Sub-envs reset at this step start their estimator afresh."""
-        res = self._estimate_on_records(self.estimator)
+        res = self.estimate_on_records(self.estimator)
         self.eta_hat[:], self.eta_sd[:], self._status[:] = res.eta, res.sd, res.status
         if resetting_rows is not None:
             mask = np.zeros(self.num_envs, dtype=bool)
@@ -631,6 +644,7 @@ class QuadFaultVectorEnv(VectorEnv):
             self.estimator.reset(mask)
             self.eta_hat[resetting_rows], self.eta_sd[resetting_rows] = 1.0, np.nan
             self._status[resetting_rows] = _STATUS["warmup"]
+        self.estimate_updated(resetting_rows)
 
     # -- observation and info ----------------------------------------------------------------
     def _observations(self, flat):
