@@ -10,8 +10,9 @@ per wall second and per CPU second of the process (all its threads), and the ker
 
 Episodes that end often (the autoreset of the finished rows, the refills of their time
 tables) are measured with ``--episode-steps K`` (``max_episode_steps``), ``--action noise``
-(uniform random motor actions: the vehicles crash at scattered steps) and ``--scenario
-random`` (a scenario drawn per episode); the last column is the share of rows reset per step.
+(uniform random motor actions: the vehicles crash at scattered steps), ``--scenario
+random`` (a scenario drawn per episode) and ``--action-mode residual`` (the geometric
+controller in the step); the last column is the share of rows reset per step.
 
 With ``--baseline PATH`` (another checkout: ``git worktree add ../qf-base <commit>``) each N
 runs in both checkouts in fresh processes, rounds alternated, best of each kept, so a busy
@@ -45,6 +46,7 @@ def split(
     scenario: str = "combined",
     episode_steps: int | None = None,
     action: str = "zero",
+    action_mode: str = "motor",
 ) -> dict:
     """ns per vehicle-step of the env step and of the loop kernel inside it, wall and CPU
     (best of ``repeat`` timings of at least ``seconds``), and the fraction of the rows that
@@ -81,7 +83,7 @@ def split(
         scenario=scenario,
         duration=600.0,
         control_rate=1000.0,
-        action_mode="motor",
+        action_mode=action_mode,
         max_episode_steps=episode_steps,
     )
     env.reset(seed=0)
@@ -134,6 +136,7 @@ def main(argv=None) -> int:
         "--episode-steps", type=int, default=None, help="max_episode_steps (default: none)"
     )
     p.add_argument("--action", choices=ACTIONS, default="zero")
+    p.add_argument("--action-mode", default="motor", help="the env's action_mode (default motor)")
     p.add_argument(
         "--omp-spin",
         action="store_true",
@@ -151,13 +154,19 @@ def main(argv=None) -> int:
             file=sys.stderr,
         )
         return 2
-    case = dict(scenario=args.scenario, episode_steps=args.episode_steps, action=args.action)
+    case = dict(
+        scenario=args.scenario,
+        episode_steps=args.episode_steps,
+        action=args.action,
+        action_mode=args.action_mode,
+    )
     sys.path.insert(1, os.path.dirname(os.path.abspath(__file__)))
     import side_by_side as sbs
 
     print(
         f"# ns per vehicle-step, wall / CPU (all threads); scenario {args.scenario}, "
-        f"max_episode_steps {args.episode_steps}, {args.action} actions; "
+        f"max_episode_steps {args.episode_steps}, {args.action} actions "
+        f"({args.action_mode} mode); "
         f"{sbs.load()} on {os.cpu_count()} cpus"
     )
     head = (

@@ -102,28 +102,50 @@ class RowTimeTables:
         """Make ``k - k0`` lie in ``[0, last]`` for every row (refilling from ``k``).
 
         ``trajectories[key]`` / ``schedules[key]`` are the callables of ``traj_key`` /
-        ``sched_key`` (N,). Each distinct trajectory (schedule) is evaluated once, on the
-        windows of every step its rows refill from, and its rows copied to the rows that
-        follow it: the Python calls grow with the distinct functions of time, not with the
-        rows or their steps.
+        ``sched_key`` (N,). Each distinct schedule is evaluated once, on the windows of every
+        step its rows refill from, and its rows copied to the rows that follow it; so is each
+        distinct trajectory, unless the rows refill from few steps with many trajectories (a
+        scenario drawn per row): then once per step, over its trajectories at once (one
+        feed-forward call per step). The Python calls grow with the distinct functions of
+        time, not with the rows.
         """
         off = k - self.k0
         rows = np.flatnonzero((off < 0) | (off > last))
         if not len(rows):
             return
         S, dt, kr, W = self.S, self.dt, k[rows], self.window
-        for key, idx in row_groups(traj_key[rows]):
-            starts, inv = np.unique(kr[idx], return_inverse=True)
+        keys = traj_key[rows]
+        n_keys, n_starts = len(np.unique(keys)), len(np.unique(kr))
+        n_pairs = len(np.unique(keys.astype(np.int64) * (1 << 32) + kr))
+        if 2 * n_keys <= n_pairs + n_starts:  # one call per trajectory (and feed-forward)
+            groups = [
+                (rows[idx], [trajectories[key]], np.zeros(len(idx), dtype=np.int64), kr[idx])
+                for key, idx in row_groups(keys)
+            ]
+        else:  # one call per step: its trajectories' feed-forward at once
+            groups = []
+            for k0, idx in row_groups(kr):
+                items, inv = np.unique(keys[idx], return_inverse=True)
+                groups.append(
+                    (
+                        rows[idx],
+                        [trajectories[key] for key in items.tolist()],
+                        inv.ravel(),
+                        np.full(len(idx), k0, dtype=np.int64),
+                    )
+                )
+        for r, items, item, k0s in groups:
+            starts, inv = np.unique(k0s, return_inverse=True)
             t = ((starts[:, None] + np.arange(W + 1)) * S) * dt  # t = (k S) dt
-            block = self._reference_block([trajectories[key]], t.ravel())[0]
-            block = block.reshape(len(starts), W + 1, *block.shape[1:])
+            block = self._reference_block(items, t.ravel())
+            block = block.reshape(len(items), len(starts), W + 1, *block.shape[2:])
             c = block.shape[-2]
-            if len(idx) == len(self.k0) and len(starts) == 1:
-                self.refs[:, :, :c] = block[0]
-            elif len(starts) == 1:
-                self.refs[rows[idx], :, :c] = block[0]
+            if len(r) == len(self.k0) and block.shape[:2] == (1, 1):
+                self.refs[:, :, :c] = block[0, 0]
+            elif block.shape[:2] == (1, 1):
+                self.refs[r, :, :c] = block[0, 0]
             else:
-                self.refs[rows[idx], :, :c] = block[inv.ravel()]
+                self.refs[r, :, :c] = block[item, inv.ravel()]
         for key, idx in row_groups(sched_key[rows]):
             starts, inv = np.unique(kr[idx], return_inverse=True)
             tsub = (starts[:, None] * S + np.arange(W * S + 1)) * dt  # t = (k S + j) dt

@@ -378,7 +378,8 @@ def test_time_tables_equal_the_functions_of_time(feedforward):
     trajs, scheds = [s.trajectory for s in scs], [s.efficiency for s in scs]
     vehicle, cfg, S, dt = Vehicle(), ControllerConfig(), 10, 1e-3
     tables = RowTimeTables(4, S, dt, vehicle, cfg, feedforward=feedforward)
-    for k in (np.array([0, 0, 7, 3]), np.array([5, 15, 7, 20])):
+    # (the last refills every row from one step: the trajectories grouped by step)
+    for k in (np.array([0, 0, 7, 3]), np.array([5, 15, 7, 20]), np.array([40, 40, 40, 40])):
         tables.ensure(k, traj_key, sched_key, trajs, scheds, WINDOW - 1)
         assert np.all((k - tables.k0 >= 0) & (k - tables.k0 < WINDOW))
         for step in (k, k + 1):
