@@ -376,7 +376,7 @@ class QuadFaultVectorEnv(VectorEnv):
         rows = np.asarray(rows, dtype=np.int64).reshape(-1)
         if not len(rows):
             return None
-        e0, n = self.single_env, self.vehicle.n_rotors
+        e0 = self.single_env
         spec = e0._scenario_option(options)
         drawn = isinstance(spec, str) and spec in GENERATORS  # a new scenario per row
         shared = None if drawn else e0._make_scenario(spec)
@@ -417,21 +417,14 @@ class QuadFaultVectorEnv(VectorEnv):
         )
         # the rows' flights: their generators, initial states, measurements, zero commands
         self.flight.restart(rows, start)
-        keys, inv = np.unique(self._sched_key[rows], return_inverse=True)
-        eta0 = np.array(
-            [
-                np.broadcast_to(np.asarray(self._schedules.items[key](0.0), float), (n,))
-                for key in keys.tolist()
-            ]
-        )
         self.steps[rows] = 0
         if self._relaxed is not None:
             self._relaxed.reset(rows)
         self._tables.invalidate(rows)
         self._ensure_tables(self.steps, self._window - 1)  # the rows' windows from t = 0
         self.eta_hat[rows], self.eta_sd[rows], self._status[rows] = 1.0, np.nan, _STATUS["warmup"]
-        if self.estimator_name == "truth":
-            self.eta_hat[rows], self.eta_sd[rows] = eta0[inv.ravel()], 0.0
+        if self.estimator_name == "truth":  # the efficiency at t = 0: the windows' first
+            self.eta_hat[rows], self.eta_sd[rows] = self._tables.eta[rows, 0], 0.0
             self._status[rows] = _STATUS["ok"]
         elif self.estimator_name == "none":
             self.eta_sd[rows], self._status[rows] = NOMINAL_PRIOR_SD, _STATUS["ok"]
