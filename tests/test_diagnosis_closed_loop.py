@@ -59,6 +59,9 @@ def test_a_concealed_inertia_is_named_and_the_effect_free_flight_is_quiet(traj):
                     v = np.asarray(e["params"][key], dtype=float)
                     assert np.all(v >= np.asarray(lo) - 1e-9) and np.all(v <= np.asarray(hi) + 1e-9)
         assert entry["summary"] and entry["separate_by"]
+        for e in doc["rejected"]:  # the rejected fit says where its real part went
+            if e["name"] in entry["names"]:
+                assert "see indistinguishable" in e["reason"]
     assert "cannot tell them apart" in res.summary()
 
     quiet = Diagnosis().fit(fly(traj, (), seed=5))

@@ -343,6 +343,16 @@ class Diagnosis:
         hidden = found.closed_loop(skip=reported)
         if hidden is not None:  # effects the closed loop inflates (partly real)
             alike += (hidden,)
+            rejected = [
+                dataclasses.replace(
+                    e,
+                    reason=e.reason + "; part of its signal is real, the closed loop inflates "
+                    "its fit: see indistinguishable",
+                )
+                if e.name in hidden["names"]
+                else e
+                for e in rejected
+            ]
         cross_check = self._estimator_check(rec, effects, alike)
         table, model_ci = scoring.channel_table(
             selection.baseline.residual, selection.final_cv.residual, replay.block_dur[scoring.rows]
