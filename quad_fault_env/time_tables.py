@@ -83,12 +83,14 @@ class RowTimeTables:
         #: the physics step of each row's first efficiency row (``k0 S``; what the loop reads)
         self.first = np.full(n_rows, _STALE, dtype=np.int64)
         #: rows: position, velocity, acceleration, b1d, Omega_d, Omega_d' at the boundaries
-        #: (without ``feedforward`` only the first three)
-        self.refs = np.zeros((n_rows, self.window + 1, 6 if self.feedforward else 3, 3))
+        #: (without ``feedforward`` only the first three), ``refs[row, k]``: a view of a
+        #: table stored step by step (a step's rows of every row side by side: the step reads
+        #: them in one sweep over the rows, not one window's page per row)
+        steps = np.zeros((self.window + 1, n_rows, 6 if self.feedforward else 3, 3))
+        self.refs = steps.transpose(1, 0, 2, 3)
         self.eta = np.zeros((n_rows, self.window * self.S + 1, n_rotors))
         self._rows = np.arange(n_rows)
-        # the tables with the rows' windows one after the other (views, for np.take)
-        self._refs_flat = self.refs.reshape(-1, *self.refs.shape[2:])
+        # the efficiency with the rows' windows one after the other (a view, for np.take)
         self._eta_flat = self.eta.reshape(-1, n_rotors)
 
     def invalidate(self, rows) -> None:
@@ -186,7 +188,7 @@ class RowTimeTables:
         if (off == o).all():
             ref = self.refs[:, o]
         else:
-            ref = self._refs_flat.take(self._rows * self.refs.shape[1] + off, axis=0)
+            ref = self.refs[self._rows, off]
         return ref if parts == ref.shape[1] else ref[:, :parts]
 
     def efficiency_at(self, k: np.ndarray, j: int) -> np.ndarray:
