@@ -99,9 +99,22 @@ class RowTimeTables:
         self.first[rows] = _STALE
 
     def ensure(
-        self, k: np.ndarray, traj_key, sched_key, trajectories, schedules, last: int
+        self,
+        k: np.ndarray,
+        traj_key,
+        sched_key,
+        trajectories,
+        schedules,
+        last: int,
+        idle: np.ndarray | None = None,
     ) -> None:
-        """Make ``k - k0`` lie in ``[0, last]`` for every row (refilling from ``k``).
+        """Make ``k - k0`` lie in ``[0, last]`` for every row (refilling the rows outside).
+
+        A refilled row joins the others' place in their windows (``k - k0`` of most rows;
+        ``idle`` (N,) bool: rows that do not step at the coming step, one place further), so
+        a step reads one column of the tables for every row; its window's columns before its
+        step ``k`` are never read (filled at t = 0). Rows whose windows all end refill from
+        their own step.
 
         ``trajectories[key]`` / ``schedules[key]`` are the callables of ``traj_key`` /
         ``sched_key`` (N,). Each distinct schedule is evaluated once, on the windows of every
@@ -112,10 +125,19 @@ class RowTimeTables:
         time, not with the rows.
         """
         off = k - self.k0
-        rows = np.flatnonzero((off < 0) | (off > last))
+        stale = (off < 0) | (off > last)
+        rows = np.flatnonzero(stale)
         if not len(rows):
             return
-        S, dt, kr, W = self.S, self.dt, k[rows], self.window
+        live = off[~stale]
+        place = np.zeros(len(rows), dtype=np.int64)
+        if len(live):
+            place += int(np.bincount(live).argmax())
+        if idle is not None:
+            place += idle[rows]
+        place[place > last] = 0
+        S, dt, W = self.S, self.dt, self.window
+        kr = k[rows] - place  # each refilled row's window start
         keys = traj_key[rows]
         n_keys, n_starts = len(np.unique(keys)), len(np.unique(kr))
         n_pairs = len(np.unique(keys.astype(np.int64) * (1 << 32) + kr))
@@ -138,7 +160,7 @@ class RowTimeTables:
                 )
         for r, items, item, k0s in groups:
             starts, inv = np.unique(k0s, return_inverse=True)
-            t = ((starts[:, None] + np.arange(W + 1)) * S) * dt  # t = (k S) dt
+            t = (np.maximum(starts[:, None] + np.arange(W + 1), 0) * S) * dt  # t = (k S) dt
             block = self._reference_block(items, t.ravel())
             block = block.reshape(len(items), len(starts), W + 1, *block.shape[2:])
             c = block.shape[-2]
@@ -150,7 +172,7 @@ class RowTimeTables:
                 self.refs[r, :, :c] = block[item, inv.ravel()]
         for key, idx in row_groups(sched_key[rows]):
             starts, inv = np.unique(kr[idx], return_inverse=True)
-            tsub = (starts[:, None] * S + np.arange(W * S + 1)) * dt  # t = (k S + j) dt
+            tsub = np.maximum(starts[:, None] * S + np.arange(W * S + 1), 0) * dt  # (k S + j) dt
             eta = _as_rows(at_times(schedules[key], tsub.ravel()), tsub.size)
             eta = eta.reshape(len(starts), W * S + 1, -1)
             if len(idx) == len(self.k0) and len(starts) == 1:

@@ -473,9 +473,9 @@ class QuadFaultVectorEnv(VectorEnv):
             if len(seeds) != N:
                 raise ConfigError(f"reset needs {N} seeds, got {len(seeds)}")
         self._trajectories, self._schedules = InternTable(), InternTable()
+        self._needs_reset[:] = False
         with jit.threads(self.numba_threads):
             refs = self._reset_rows(np.arange(N), seeds, options)  # every row at t = 0
-        self._needs_reset[:] = False
         self._n_ended = 0
         self._started = True
         obs = np.empty((N, self.layout.size), dtype=np.float32)
@@ -491,6 +491,8 @@ class QuadFaultVectorEnv(VectorEnv):
             self._trajectories.items,
             self._schedules.items,
             last,
+            # (rows reset for the next step stay put at it)
+            self._rows.resetting if self._step_constants.next_step else None,
         )
 
     def _references_now(self):

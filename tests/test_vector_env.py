@@ -399,6 +399,35 @@ def test_time_tables_equal_the_functions_of_time(feedforward):
     assert tables.k0[1] < 0
 
 
+def test_time_tables_refilled_rows_join_the_others_column():
+    """A row refilled mid-window (a reset) takes the column the other rows are at (one
+    further when it idles at the coming step), so a step reads one column for every row;
+    its values at its own steps are the functions of time's."""
+    from quad_fault_env.time_tables import WINDOW, RowTimeTables
+    from quadfault.model.scenarios import random_scenario
+    from quadfault.model.vehicle import Vehicle
+
+    rng = np.random.default_rng(5)
+    scs = [random_scenario(rng, 5.0, trajectory=t) for t in ("circle", "lissajous")]
+    trajs, scheds = [s.trajectory for s in scs], [s.efficiency for s in scs]
+    key = np.array([0, 0, 1, 1])
+    S, dt = 2, 1e-3
+    tables = RowTimeTables(4, S, dt, Vehicle(), ControllerConfig())
+    tables.ensure(np.full(4, 30), key, key, trajs, scheds, WINDOW - 1)
+    k = np.array([37, 0, 37, 0])  # rows 1 and 3 start new episodes; row 3 idles a step
+    tables.invalidate([1, 3])
+    tables.ensure(k, key, key, trajs, scheds, WINDOW - 1, np.array([0, 0, 0, 1], bool))
+    np.testing.assert_array_equal(k - tables.k0, [7, 7, 7, 8])
+    for step in (k, k + 1):
+        refs, eta = tables.references(step), tables.efficiency(step)
+        for i in range(4):
+            t = float(step[i] * S * dt)
+            for r, x in enumerate(tuple(trajs[key[i]](t))[:3]):
+                np.testing.assert_allclose(refs[i, r], x, rtol=0, atol=1e-12)
+            ts = (step[i] * S + np.arange(S + 1)) * dt
+            np.testing.assert_allclose(eta[i], scheds[key[i]](ts), rtol=0, atol=1e-12)
+
+
 @pytest.mark.parametrize("estimator", ["irls", "ekf"])
 def test_numba_thread_count_does_not_change_the_flight(estimator):
     """The parallel loop splits rows across threads; each row is computed alone, so
