@@ -67,7 +67,7 @@ def _same3(a, b) -> bool:
     return a[0] == b[0] and a[1] == b[1] and a[2] == b[2]
 
 
-@jit(inner=True)
+@jit(inline="always")
 def fresh_streams(p, v, R, w, last_p, last_v, last_R, last_w) -> int:
     """The mask of the streams of the sample ``(p, v, R, w)`` that are fresh (bits
     :data:`POSITION`, :data:`VELOCITY`, :data:`ATTITUDE`, :data:`RATE`): a stream is held when
@@ -85,7 +85,7 @@ def fresh_streams(p, v, R, w, last_p, last_v, last_R, last_w) -> int:
     return mask
 
 
-@jit(inner=True)
+@jit(inline="always")
 def measurement_variances_into(r, fresh, rows_p, rows_v, rows_R, rows_w, out) -> bool:
     """The measurement variances of one Kalman update into ``out``: ``r`` where the row's
     stream is fresh in the mask ``fresh``, :data:`HELD_VARIANCE` where it is held. ``rows_*``:
@@ -134,7 +134,7 @@ def _zero_rows(r0, J, start, count) -> None:
             J[r, j] = 0.0
 
 
-@jit(inner=True)
+@jit(inline="always")
 def fresh_rows_into(r0, J, dt, fresh, counters, acc_r0, acc_J, times) -> float:
     """Turn the residual model ``r(eta) = r0 + J eta`` of the segment from the previous sample
     to this one (:func:`estimators.residuals.segment_model_into`, ``dt`` [s]) into the rows of
@@ -198,7 +198,7 @@ def _filter_rows(r0, J, r0f, Jf, start, span, tau, first) -> None:
             J[r, j] = Jf[r, j]
 
 
-@jit(inner=True)
+@jit(inline="always")
 def prefilter_fresh_into(r0, J, r0f, Jf, dt, tau, first, counters, times) -> None:
     """The residual prefilter (:func:`estimators.residuals.prefilter_into`, time constant
     ``tau`` [s], ``first``: start it) on the segment :func:`fresh_rows_into` returned
@@ -225,7 +225,7 @@ def restart_into(counters, times) -> None:
 SAMPLE = fields("FreshnessSample", "p", "v", "w", ("R", 3))
 
 
-@jit(inner=True)
+@jit(inline="always")
 def fresh_since(p, v, R, w, last) -> int:
     """:func:`fresh_streams` against the previous sample ``last`` (:data:`SAMPLE` rows)."""
     return fresh_streams(
@@ -233,7 +233,7 @@ def fresh_since(p, v, R, w, last) -> int:
     )
 
 
-@jit(inner=True)
+@jit(inline="always")
 def remember_into(last, p, v, R, w) -> None:
     """Keep the sample ``(p, v, R, w)`` in ``last`` (:data:`SAMPLE` rows) for the next
     :func:`fresh_since`."""
