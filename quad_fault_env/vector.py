@@ -47,7 +47,7 @@ from quad_fault_env.envs.config import (
     validate_action,
 )
 from quad_fault_env.envs.env_config import KEYWORDS as ENV_KEYWORDS
-from quad_fault_env.envs.episode_start import SPREAD_DRAWS, start_states
+from quad_fault_env.envs.episode_start import SPREAD_DRAWS, nominal_starts, start_states
 from quad_fault_env.envs.quad_fault import QuadFaultEnv
 from quad_fault_env.envs.scenario_source import GENERATORS
 from quad_fault_env.estimation import NOMINAL_PRIOR_SD
@@ -251,6 +251,7 @@ class QuadFaultVectorEnv(VectorEnv):
         self._traj_key = np.zeros(N, dtype=np.int64)
         self._sched_key = np.zeros(N, dtype=np.int64)
         self._rngs: list = [None] * N  # each sub-env's generator (set by its reset)
+        self._nominal = (None, None)  # a shared trajectory and its nominal_starts
         self._seeded = False  # every sub-env has its generator
         #: each sub-env's scenario of the current episode
         self.scenarios = np.full(N, None, dtype=object)
@@ -412,8 +413,16 @@ class QuadFaultVectorEnv(VectorEnv):
         self.flight.set_thrust_noise(rows, sigma)
         keys, inv = np.unique(self._traj_key[rows], return_inverse=True)
         items = [self._trajectories.items[int(key)] for key in keys]
+        nominal = None
+        if not drawn:  # one trajectory: its unperturbed start kept from reset to reset
+            if self._nominal[0] is not items[0]:
+                self._nominal = (
+                    items[0],
+                    nominal_starts(items, self.vehicle, e0.controller_config),
+                )
+            nominal = self._nominal[1]
         start, ref0 = start_states(
-            items, inv.ravel(), self.vehicle, e0.controller_config, e0.initial_spread, u
+            items, inv.ravel(), self.vehicle, e0.controller_config, e0.initial_spread, u, nominal
         )
         # the rows' flights: their generators, initial states, measurements, zero commands
         self.flight.restart(rows, start)

@@ -74,8 +74,28 @@ class RowTrajectories:
         return None
 
 
+def nominal_starts(items, vehicle: Vehicle, controller: ControllerConfig):
+    """The unperturbed episode start of each trajectory of ``items``: the states
+    :func:`start_states` perturbs and the reference at t = 0, arrays with a leading axis of
+    ``len(items)`` (a caller starting many episodes on the same trajectories keeps them)."""
+    traj = RowTrajectories(items, np.arange(len(items)))
+    if controller.angular_feedforward:  # one evaluation per trajectory: the feed-forward's
+        h = controller.ff_step  # times (as feedforward_rates forms them) hold t = 0
+        traj(np.stack((0.0 - h, 0.0, 0.0 + h), axis=-1))
+    s = initial_state(
+        SimpleNamespace(trajectory=traj), 0.0, GeometricController(vehicle, traj, controller)
+    )
+    return s, traj(0.0)
+
+
 def start_states(
-    items, keys, vehicle: Vehicle, controller: ControllerConfig, spread, u: np.ndarray
+    items,
+    keys,
+    vehicle: Vehicle,
+    controller: ControllerConfig,
+    spread,
+    u: np.ndarray,
+    nominal=None,
 ) -> tuple[RigidBodyState, FlatOutput]:
     """Initial true states (N,) of N episodes.
 
@@ -85,22 +105,19 @@ def start_states(
         spread: the :class:`~quad_fault_env.envs.config.InitialStateSpread` half-widths.
         u: (N, 12) uniform draws in [-1, 1] (each row's generator: ``uniform(-1, 1, 12)``,
             the same numbers as four draws of 3).
+        nominal: :func:`nominal_starts` of ``items`` when the caller kept it (None: computed).
 
     Returns the states and the reference at t = 0 (rows (N, 3)).
     """
-    traj = RowTrajectories(items, keys)
-    if controller.angular_feedforward:  # one evaluation per trajectory: the feed-forward's
-        h = controller.ff_step  # times (as feedforward_rates forms them) hold t = 0
-        traj(np.stack((0.0 - h, 0.0, 0.0 + h), axis=-1))
-    s = initial_state(
-        SimpleNamespace(trajectory=traj), 0.0, GeometricController(vehicle, traj, controller)
-    )
+    keys = np.asarray(keys, dtype=np.int64)
+    s, ref0 = nominal_starts(items, vehicle, controller) if nominal is None else nominal
+    s = RigidBodyState(*(np.asarray(x)[keys] for x in s))
     pos, vel, att, rate = (u[:, 3 * k : 3 * k + 3] for k in range(4))
     R = s.R if spread.attitude == 0 else s.R @ expm_so3(spread.attitude * att)  # R I == R
     state = RigidBodyState(
         s.p + spread.position * pos, s.v + spread.velocity * vel, R, s.w + spread.rate * rate
     )
-    return state, traj(0.0)
+    return state, FlatOutput(*(np.asarray(x)[keys] for x in ref0))
 
 
-__all__ = ["SPREAD_DRAWS", "RowTrajectories", "start_states"]
+__all__ = ["SPREAD_DRAWS", "RowTrajectories", "nominal_starts", "start_states"]
