@@ -197,3 +197,13 @@ def test_held_streams_online_offline_and_batched_agree(held, single, batched):
     for k, s in enumerate(rows):
         out = batch.update(*(np.array([getattr(s, a)] * 2) for a in ("t", "p", "v", "R", "w", "f")))
         np.testing.assert_array_equal(out.eta[1], online[k])
+
+
+def test_a_noise_free_flight_holds_no_stream():
+    """Without sensor noise every stream moves on every row, so every segment is used as it
+    came and every estimator runs exactly as without held-stream handling (the goldens)."""
+    scenario = Scenario("clean", 2.0, EfficiencySchedule(ConstantEfficiency()), Circle())
+    rec = simulate(scenario, config=SimConfig(saturate=False), seed=3)
+    rows = list(samples(rec))
+    for a, b in zip(rows[:-1], rows[1:]):
+        assert fresh_streams(b.p, b.v, b.R, b.w, a.p, a.v, a.R, a.w) == ALL_FRESH
