@@ -86,8 +86,9 @@ class RowTimeTables:
         #: (without ``feedforward`` only the first three), ``refs[row, k]``: a view of a
         #: table stored step by step (a step's rows of every row side by side: the step reads
         #: them in one sweep over the rows, not one window's page per row)
-        steps = np.zeros((self.window + 1, n_rows, 6 if self.feedforward else 3, 3))
-        self.refs = steps.transpose(1, 0, 2, 3)
+        #: the same table step by step, ``by_step[k, row]`` (C-contiguous: what a kernel reads)
+        self.by_step = np.zeros((self.window + 1, n_rows, 6 if self.feedforward else 3, 3))
+        self.refs = self.by_step.transpose(1, 0, 2, 3)
         self.eta = np.zeros((n_rows, self.window * self.S + 1, n_rotors))
         self._rows = np.arange(n_rows)
         # the efficiency with the rows' windows one after the other (a view, for np.take)

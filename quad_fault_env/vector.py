@@ -311,7 +311,7 @@ class QuadFaultVectorEnv(VectorEnv):
             self.max_steps,
             np.zeros(N, dtype=bool),
             T.k0,
-            T.refs,
+            T.by_step,
             T.eta,
             self.eta_hat,
             self.eta_sd,

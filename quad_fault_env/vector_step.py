@@ -46,7 +46,6 @@ from quadfault.model.closed_loop import fly_vehicle, measure_vehicle
 from quadfault.model.controller import (
     controller_tuples,
     geometric_control,
-    reference_row,
     rotor_commands,
 )
 from quadfault.model.generator_table import generator_at
@@ -93,7 +92,7 @@ class StepRows(NamedTuple):
     max_steps: np.ndarray  # (N,) the scenario's duration in control steps
     resetting: np.ndarray  # (N,) bool: reset before this call (next-step autoreset)
     table_k0: np.ndarray  # (N,) the control step of each row's window start
-    refs: np.ndarray  # (N, window + 1, 3 or 6, 3) references at the steps' starts
+    refs: np.ndarray  # (window + 1, N, 3 or 6, 3) references at the steps' starts, step by step
     eta_table: np.ndarray  # (N, window S + 1, n) true efficiency at the substeps
     eta_hat: np.ndarray  # (N, n) the estimate (updated by the oracle)
     eta_sd: np.ndarray  # (N, n)
@@ -114,7 +113,21 @@ class StepOut(NamedTuple):
 def _ref3(refs, i, k, c):
     """Reference row ``c`` (0 position, 1 velocity, 2 acceleration) of sub-env ``i`` at its
     window's step ``k``, 3 numbers."""
-    return (refs[i, k, c, 0], refs[i, k, c, 1], refs[i, k, c, 2])
+    return (refs[k, i, c, 0], refs[k, i, c, 1], refs[k, i, c, 2])
+
+
+@jit(inline="always")
+def _reference_row(refs, i, k):
+    """Sub-env ``i``'s six reference rows at its window's step ``k`` as the 3-tuples of
+    ``geometric_control`` (as ``controller.reference_row`` reads a row's own table)."""
+    return (
+        _ref3(refs, i, k, 0),
+        _ref3(refs, i, k, 1),
+        _ref3(refs, i, k, 2),
+        _ref3(refs, i, k, 3),
+        _ref3(refs, i, k, 4),
+        _ref3(refs, i, k, 5),
+    )
 
 
 @jit(inline="always")
@@ -165,7 +178,7 @@ def _commands(i, S, R, K, V, row):
             row3(V.mv, i),
             row33(V.mR, i),
             row3(V.mw, i),
-            reference_row(R.refs[i], row),
+            _reference_row(R.refs, i, row),
             gains,
             nominal,
         )
