@@ -11,7 +11,10 @@ Detection needs no flag from the simulator or the importer: a stream whose sampl
 bit-identical to the previous sample's is held (:func:`fresh_streams`). Sensor noise, even
 the position's quantisation, never repeats a value to the last bit between two fresh samples
 of a moving vehicle; a noise-free recording of a moving vehicle has every stream fresh on
-every row, and every estimator then runs exactly as without this module.
+every row, and every estimator then runs exactly as without this module. A repeat that is
+what the physics says is not a hold: a velocity (rate) of exactly zero that repeats, and the
+position (attitude) beside it, are fresh -- a vehicle standing still, which is information
+(hover through the allocation), not a stream waiting for its next sample.
 
 How each estimator uses it (one implementation, these functions):
 
@@ -68,19 +71,29 @@ def _same3(a, b) -> bool:
 
 
 @jit(inline="always")
+def _zero3(a) -> bool:
+    return a[0] == 0.0 and a[1] == 0.0 and a[2] == 0.0
+
+
+@jit(inline="always")
 def fresh_streams(p, v, R, w, last_p, last_v, last_R, last_w) -> int:
     """The mask of the streams of the sample ``(p, v, R, w)`` that are fresh (bits
     :data:`POSITION`, :data:`VELOCITY`, :data:`ATTITUDE`, :data:`RATE`): a stream is held when
     its sample is bit-identical to the previous sample's ``(last_p, last_v, last_R,
-    last_w)``."""
+    last_w)``, unless the repeat is the physics of a vehicle at rest: the velocity (rate)
+    exactly zero, which keeps the velocity and the position (the rate and the attitude)
+    fresh."""
+    still, turning = _zero3(v), not _zero3(w)
     mask = 0
-    if not _same3(p, last_p):
+    if still or not _same3(p, last_p):
         mask |= POSITION
-    if not _same3(v, last_v):
+    if still or not _same3(v, last_v):
         mask |= VELOCITY
-    if not (_same3(R[0], last_R[0]) and _same3(R[1], last_R[1]) and _same3(R[2], last_R[2])):
+    if not turning or not (
+        _same3(R[0], last_R[0]) and _same3(R[1], last_R[1]) and _same3(R[2], last_R[2])
+    ):
         mask |= ATTITUDE
-    if not _same3(w, last_w):
+    if not turning or not _same3(w, last_w):
         mask |= RATE
     return mask
 

@@ -84,8 +84,19 @@ def test_a_repeated_stream_is_held_and_any_change_is_fresh():
     R2 = R.copy()
     R2[2, 1] = 1e-15
     assert fresh_streams(p, v, R2, w, p, v, R, w) == ATTITUDE
-    assert fresh_streams(p, v * 0, R, w * 0, p, v, R, w) == VELOCITY | RATE
+    assert fresh_streams(p, v * 0, R, w, p, v, R, w) == VELOCITY | POSITION
     assert fresh_streams(p * 0, v * 0, R2, w * 0, p, v, R, w) == ALL_FRESH
+
+
+def test_a_vehicle_at_rest_is_not_a_hold():
+    """A zero velocity (rate) that repeats is a vehicle standing still, not a stream waiting
+    for its next sample: it keeps the velocity and the position (the rate and the attitude)
+    fresh; the same repeat while moving or turning is held."""
+    p, R, zero = np.ones(3), np.eye(3), np.zeros(3)
+    w = np.full(3, 0.1)
+    assert fresh_streams(p, zero, R, w, p, zero, R, w) == POSITION | VELOCITY
+    assert fresh_streams(p, np.ones(3), R, zero, p, np.ones(3), R, zero) == ATTITUDE | RATE
+    assert fresh_streams(p, zero, R, zero, p, zero, R, zero) == ALL_FRESH
 
 
 def _segment(dt, s0, s1, f, vehicle):
