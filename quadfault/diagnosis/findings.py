@@ -340,22 +340,18 @@ class Findings:
         as reported: ``[{"name", "params", "uncertainty", "bounds"}, ...]``."""
         f = rival_set.fit
         selected = {c.name: x for c, x in f.terms}
-        out = []
-        for j, c in enumerate(f.candidates):
-            if c.name not in rival_set.names:
-                continue
-            params, unc = public_params(
-                c, f.x[j], f.sd[j], self.replay.vehicle, selected, frame=self.frame
-            )
-            out.append(
-                {
-                    "name": c.name,
-                    "params": params,
-                    "uncertainty": unc,
-                    "bounds": public_bounds(c, np.asarray(f.x[j], dtype=float)),
-                }
-            )
-        return out
+        return [
+            self._effect(c, f.x[j], f.sd[j], selected)
+            for j, c in enumerate(f.candidates)
+            if c.name in rival_set.names
+        ]
+
+    def _effect(self, c, x, sd, selected) -> dict:
+        """One effect of an ``indistinguishable`` set as reported: ``{"name", "params",
+        "uncertainty", "bounds"}`` at ``x`` (one-sigma ``sd``), beside ``selected``."""
+        x = np.asarray(x, dtype=float)
+        params, unc = public_params(c, x, sd, self.replay.vehicle, selected, frame=self.frame)
+        return {"name": c.name, "params": params, "uncertainty": unc, "bounds": public_bounds(c, x)}
 
     def indistinguishable(self, comparison) -> dict:
         """The ``indistinguishable`` entry of a tied
@@ -398,8 +394,6 @@ class Findings:
             for name, v in sorted(self.selection.verdicts.items())
             if name not in skip
             and v.status == "rejected"
-            and v.iv is not None
-            and v.iv < IV_MIN
             and v.gain is not None
             and v.gain > 0.0
             and partly_real(v.iv, v.iv_se)
@@ -414,20 +408,11 @@ class Findings:
             x, x0 = np.asarray(v.x, float), np.asarray(c.x0, float)
             sized = x0 + v.iv * (x - x0)
             sd = np.hypot(v.iv * np.asarray(v.sd, float), v.iv_se * np.abs(x - x0))
-            ctx = (self.replay.vehicle, self.selected)
-            params, unc = public_params(c, sized, sd, *ctx, frame=self.frame)
-            fitted, _ = public_params(c, x, np.asarray(v.sd, float), *ctx, frame=self.frame)
-            sets.append(
-                [
-                    {
-                        "name": c.name,
-                        "params": params,
-                        "uncertainty": unc,
-                        "bounds": public_bounds(c, sized),
-                        "as_fitted": fitted,
-                    }
-                ]
+            entry = self._effect(c, sized, sd, self.selected)
+            entry["as_fitted"], _ = public_params(
+                c, x, np.asarray(v.sd, float), self.replay.vehicle, self.selected, frame=self.frame
             )
+            sets.append([entry])
         names = [v.candidate.name for v in hidden]
         slopes = ", ".join(f"{v.candidate.name} {v.iv:.2f} +- {v.iv_se:.2f}" for v in hidden)
         return {
