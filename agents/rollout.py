@@ -164,7 +164,8 @@ def fly(
     plant = Plant(veh, MotorModel(scenario.thrust_noise, True), effects=fx, dt=cfg.dt)
     plant.reset()
     # the loop: the sensors without the accelerometer, the commands set here
-    flight = loop.Flight(plant, cfg.sensor_noise, record_accel=False)
+    flight = loop.Flight(plant, cfg.sensor_noise)
+    step_record = flight.records(1)  # one step's accelerometer, for the estimator
     flight.reset(rng)
     eta_table = flight.plan(n, scenario.efficiency)
     efficiency = _Tabulated(cfg.dt, eta_table)
@@ -231,11 +232,14 @@ def fly(
         if k % cfg.trace_every == 0:
             j = k // cfg.trace_every
             tr_p[j], tr_eta_hat[j], tr_wz[j] = state.p, eta_hat, state.w[2]
-        flight.step(f_cmd)
+        flight.step(f_cmd, record=step_record)
         if k % cfg.trace_every == 0:
             tr_eta[k // cfg.trace_every] = eta_table[k]
         if k % cfg.estimator_every == 0:
-            estimate = est.update(Sample(float(t), meas.p, meas.v, meas.R, meas.w, f_cmd.copy()))
+            accel = step_record.accel[0, 0].copy()
+            estimate = est.update(
+                Sample(float(t), meas.p, meas.v, meas.R, meas.w, f_cmd.copy(), accel)
+            )
             eta_hat = np.asarray(estimate.eta, float)
         if progress_bar is not None and k % 1000 == 999:
             progress_bar.update(1000)

@@ -110,7 +110,7 @@ def sample_arrays(sample: Sample, n_rotors: int, who: str) -> tuple:
     sample that is not one, or has the wrong shapes, is a one-line ``ConfigError``."""
     try:
         t = float(sample.t)
-        arrays = [np.asarray(a, dtype=np.float64) for a in sample[1:]]
+        arrays = [np.asarray(a, dtype=np.float64) for a in sample[1:6]]
     except (AttributeError, TypeError, ValueError, IndexError):
         raise ConfigError(
             f"{who}: {sample!r} is not a sample (t, p, v, R, w, f of numbers)"
@@ -122,6 +122,35 @@ def sample_arrays(sample: Sample, n_rotors: int, who: str) -> tuple:
             f"p, v, w (3,), R (3, 3), f ({n_rotors},)"
         )
     return (t, *(np.ascontiguousarray(a) for a in arrays))
+
+
+def sample_accel(sample, who: str) -> np.ndarray | None:
+    """The accelerometer reading of one online ``sample`` (its ``accel``, body FRD
+    [m/s^2]) as a contiguous float64 (3,) array, or None where the sample has none; a
+    reading of another shape is a one-line ``ConfigError`` naming estimator ``who``."""
+    accel = sample[6] if len(sample) > 6 else None
+    if accel is None:
+        return None
+    a = np.asarray(accel, dtype=np.float64)
+    if a.shape != (3,):
+        raise ConfigError(
+            f"{who}: sample at t = {sample[0]} has an accelerometer reading of shape "
+            f"{a.shape}; expected (3,) or None"
+        )
+    return np.ascontiguousarray(a)
+
+
+def batch_accel(num: int, accel) -> np.ndarray | None:
+    """The accelerometer readings of one batched sample (``accel`` (num, 3), body FRD
+    [m/s^2]) as a contiguous float64 array, or None (no accelerometer); checked for shape."""
+    if accel is None:
+        return None
+    a = np.ascontiguousarray(accel, dtype=np.float64)
+    if a.shape != (num, 3):
+        raise ConfigError(
+            f"batched accelerometer readings must have shape {(num, 3)}, got {a.shape}"
+        )
+    return a
 
 
 @dataclass(frozen=True)
@@ -231,10 +260,12 @@ __all__ = [
     "Estimate",
     "EstimateSeries",
     "OnlineEstimator",
+    "batch_accel",
     "batch_arrays",
     "batch_eta0",
     "check_num",
     "reset_rows",
+    "sample_accel",
     "sample_arrays",
     "Sample",
     "command_limit",

@@ -25,6 +25,7 @@ import numpy as np
 from estimators.base import (
     STATUSES,
     BatchedEstimate,
+    batch_accel,
     batch_arrays,
     batch_eta0,
     check_num,
@@ -150,9 +151,11 @@ class BatchedIRLS:
         eta = batch_eta0(np.ones(n) if eta0 is None else eta0, self.num, n)
         self._state.reset(rows, eta[rows])
 
-    def update(self, t, p, v, R, w, f) -> BatchedEstimate:
-        """Add one sample per vehicle; returns the estimates of the windows ending at them."""
+    def update(self, t, p, v, R, w, f, accel=None) -> BatchedEstimate:
+        """Add one sample per vehicle (``accel`` (N, 3): their accelerometer readings, body
+        FRD [m/s^2], or None); returns the estimates of the windows ending at them."""
         t, p, v, R, w, f = batch_arrays(self.num, self.vehicle.n_rotors, t, p, v, R, w, f)
+        accel = batch_accel(self.num, accel)
         st = self._state
         irls_update_rows(
             t,
@@ -218,9 +221,11 @@ class BatchedEKF:
         st = self._state
         ekf_reset(st.offsets, n, st.floats, st.ints, rows, eta)
 
-    def update(self, t, p, v, R, w, f) -> BatchedEstimate:
-        """One predict (previous sample's command held) and one update per vehicle."""
+    def update(self, t, p, v, R, w, f, accel=None) -> BatchedEstimate:
+        """One predict (previous sample's command held) and one update per vehicle
+        (``accel``: the vehicles' accelerometer readings (N, 3), or None; not used yet)."""
         t, p, v, R, w, f = batch_arrays(self.num, self.vehicle.n_rotors, t, p, v, R, w, f)
+        batch_accel(self.num, accel)
         st = self._state
         ekf_update_rows(t, p, v, R, w, f, self._const, st.offsets, st.floats, st.ints, self._code)
         init = st.ints[:, EKF_COUNTERS.initialised, None] == 1

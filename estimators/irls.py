@@ -596,7 +596,7 @@ class SlidingWindowIRLS:
         """Add one measurement row; returns the estimate of the window ending at it."""
         try:
             t = float(sample.t)
-            p, v, R, w, f = [np.ascontiguousarray(a, dtype=float) for a in sample[1:]]
+            p, v, R, w, f = [np.ascontiguousarray(a, dtype=float) for a in sample[1:6]]
             malformed = (
                 p.shape != (3,)
                 or v.shape != (3,)

@@ -32,6 +32,7 @@ from estimators.base import (
     Estimate,
     EstimateSeries,
     Sample,
+    batch_accel,
     batch_arrays,
     batch_eta0,
     check_num,
@@ -229,10 +230,12 @@ class BatchedRecursive(_Kernels):
         st = self._state
         self._k_reset(self._const, st.offsets, n, st.floats, st.ints, rows, eta)
 
-    def update(self, t, p, v, R, w, f):
-        """One sample per vehicle; the :class:`estimators.base.BatchedEstimate`."""
+    def update(self, t, p, v, R, w, f, accel=None):
+        """One sample per vehicle (``accel`` (N, 3): their accelerometer readings, or
+        None); the :class:`estimators.base.BatchedEstimate`."""
         n = self.n_rotors
         t, p, v, R, w, f = batch_arrays(self.num, n, t, p, v, R, w, f)
+        accel = batch_accel(self.num, accel)
         st = self._state
         self._k_rows(t, p, v, R, w, f, self._const, st.offsets, st.floats, st.ints, self._code)
         eta, sd = np.empty((self.num, n)), np.empty((self.num, n))

@@ -269,12 +269,12 @@ class QuadFaultVectorEnv(VectorEnv):
         N, e0, S = self.num_envs, self.single_env, self.substeps
         stride = self.estimator_stride
         n_records = len(range(0, S, stride)) if self.estimator is not None else 0
-        #: the estimator's samples of a step (every ``estimator_stride``-th substep)
+        #: the estimator's samples of a step (every ``estimator_stride``-th substep), with
+        #: the accelerometer (zeros until measured: a row that flies nothing keeps them finite)
         self._records = (
-            self.flight.records(S, stride, accel=False)
-            if n_records
-            else Records.none(N, self.vehicle.n_rotors)
+            self.flight.records(S, stride) if n_records else Records.none(N, self.vehicle.n_rotors)
         )
+        self._records.accel[:] = 0.0
         cfg = e0.action_config
         # the compiled step maps the actions unless an estimate-aware allocator or the
         # relaxed-hover base (per-row state in Python) does
@@ -632,7 +632,13 @@ class QuadFaultVectorEnv(VectorEnv):
         res = None
         for r in range(rec.p.shape[1]):
             res = estimator.update(
-                times[:, r], rec.p[:, r], rec.v[:, r], rec.R[:, r], rec.w[:, r], self.f_cmd
+                times[:, r],
+                rec.p[:, r],
+                rec.v[:, r],
+                rec.R[:, r],
+                rec.w[:, r],
+                self.f_cmd,
+                accel=rec.accel[:, r],
             )
         return res
 

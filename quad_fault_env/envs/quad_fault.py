@@ -406,7 +406,13 @@ class QuadFaultEnv(gym.Env):
 
         def sample(j: int) -> Sample:
             return Sample(
-                t[j], out.p[0, j], out.v[0, j], out.R[0, j], out.w[0, j], self._f_cmd.copy()
+                t[j],
+                out.p[0, j],
+                out.v[0, j],
+                out.R[0, j],
+                out.w[0, j],
+                self._f_cmd.copy(),
+                out.accel[0, j],
             )
 
         rows = range(0, done, self.estimator_stride)

@@ -25,6 +25,8 @@ class Sample(NamedTuple):
         R: rotation body->world (3, 3).
         w: body rate [rad/s] (3,).
         f: commanded rotor thrusts [N] (n,), held from ``t`` until the next sample.
+        accel: the accelerometer's specific force at ``t``, body FRD [m/s^2] (3,), or None
+            where the source has no accelerometer (then the estimators use the velocity).
     """
 
     t: float
@@ -33,10 +35,12 @@ class Sample(NamedTuple):
     R: np.ndarray
     w: np.ndarray
     f: np.ndarray
+    accel: np.ndarray | None = None
 
 
 def samples(recording):
-    """Iterate the measurement rows of a recording as :class:`Sample` (no truth columns)."""
+    """Iterate the measurement rows of a recording as :class:`Sample` (no truth columns);
+    ``accel`` is the accelerometer row where the recording has the columns, else None."""
     if not recording.has_pose:
         raise ConfigError(
             f"{recording.path or 'recording'}: the estimators need position, "
@@ -55,8 +59,11 @@ def samples(recording):
             recording.thrust_cmd,
         )
     )
+    acc = None if recording.accel is None else np.ascontiguousarray(recording.accel, dtype=float)
     for k in range(len(recording)):
-        yield Sample(float(recording.t[k]), p[k], v[k], R[k], w[k], f[k])
+        yield Sample(
+            float(recording.t[k]), p[k], v[k], R[k], w[k], f[k], None if acc is None else acc[k]
+        )
 
 
 __all__ = ["Sample", "samples"]

@@ -468,7 +468,7 @@ class OnlineIRLS:
 
     def update(self, s):
         cfg, veh = self.cfg, self.vehicle
-        arrays = [np.asarray(a, float) for a in s[1:]]
+        arrays = [np.asarray(a, float) for a in s[1:6]]
         ok = (
             [a.shape for a in arrays] == [(3,), (3,), (3, 3), (3,), (4,)]
             and np.isfinite(s.t)
