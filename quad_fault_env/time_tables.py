@@ -89,10 +89,12 @@ class RowTimeTables:
         #: the same table step by step, ``by_step[k, row]`` (C-contiguous: what a kernel reads)
         self.by_step = np.zeros((self.window + 1, n_rows, 6 if self.feedforward else 3, 3))
         self.refs = self.by_step.transpose(1, 0, 2, 3)
-        self.eta = np.zeros((n_rows, self.window * self.S + 1, n_rotors))
+        #: the true efficiency at the substeps, stored substep by substep like ``by_step``
+        #: (``eta_by_step[j, row]``: a step reads one contiguous column of every row, not one
+        #: cache line from each row's window); ``eta[row, j]`` is a view of it
+        self.eta_by_step = np.zeros((self.window * self.S + 1, n_rows, n_rotors))
+        self.eta = self.eta_by_step.transpose(1, 0, 2)
         self._rows = np.arange(n_rows)
-        # the efficiency with the rows' windows one after the other (a view, for np.take)
-        self._eta_flat = self.eta.reshape(-1, n_rotors)
         self._blocks: dict = {}  # (id, window start) -> (function, its window): _kept
 
     def invalidate(self, rows) -> None:
@@ -241,8 +243,8 @@ class RowTimeTables:
         col = (k - self.k0) * self.S + j
         c = int(col[0])
         if (col == c).all():
-            return self.eta[:, c].copy()
-        return self._eta_flat.take(self._rows * self.eta.shape[1] + col, axis=0)
+            return self.eta_by_step[c].copy()
+        return self.eta_by_step[col, self._rows]
 
     def efficiency(self, k: np.ndarray) -> np.ndarray:
         """(N, S + 1, n) true efficiency at step ``k``'s substeps and at its end."""

@@ -227,6 +227,22 @@ def _terminate(env, action, n=300):
     raise AssertionError("no termination")
 
 
+def test_tilt_termination_is_the_angle_against_the_limit():
+    """The tilt check skips its acos well inside the limit: the decision is still
+    ``acos(R[8]) > max_tilt`` exactly, at and around the limit and over every angle."""
+    from quad_fault_env.envs.config import termination_code
+
+    for max_tilt in (0.05, math.radians(30), math.radians(80), 2.5, 3.1, math.pi):
+        c_lim = math.cos(max_tilt)
+        cs = list(np.cos(np.linspace(0.0, math.pi, 2001))) + [1.0, -1.0, 1.0 + 1e-12]
+        cs += [float(x) for x in np.nextafter(c_lim, [-2.0, 2.0])] + [c_lim]
+        for c in cs:
+            R = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, c)
+            code = termination_code((0.0, 0.0, -1.0), R, (0.0, 0.0, -1.0), (0.0, 10.0, max_tilt))
+            want = 1 if math.acos(min(max(c, -1.0), 1.0)) > max_tilt else 0
+            assert code == want, (max_tilt, c)
+
+
 def test_termination_reasons():
     free_fall = _terminate(
         QuadFaultEnv("none", "hover", action_mode="motor", duration=3.0, info="full"),

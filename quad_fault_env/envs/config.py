@@ -454,7 +454,12 @@ def termination_code(p, R, p_ref, limits):
         return 3
     if math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) > max_error:
         return 2
-    if math.acos(min(max(R[8], -1.0), 1.0)) > max_tilt:
+    c = min(max(R[8], -1.0), 1.0)
+    # the tilt acos(c) is at most pi sqrt((1 - c) / 2), below max_tilt / sqrt(2) when
+    # (1 - c) pi^2 < max_tilt^2: no acos needed (the margin dwarfs any rounding)
+    if (1.0 - c) * (math.pi * math.pi) < max_tilt * max_tilt:
+        return 0
+    if math.acos(c) > max_tilt:
         return 1
     return 0
 
