@@ -22,6 +22,11 @@ the CPU ratio; every line carries the 1-minute load average.
     python benchmarks/numba_threads.py                    # N = 8 ... 4096, IRLS and none
     python benchmarks/numba_threads.py --sizes 32 --steps 200
     python benchmarks/numba_threads.py --task physics --sizes 1024 2048 4096 8192 16384
+    python benchmarks/numba_threads.py --task physics --sizes 4096 16384 --chunks 64 256 1024
+
+With ``--chunks`` the default thread count is timed once per task size of the parallel step
+(``quad_fault_env.vector_step.CHUNK``: vehicles per task the threads claim), rounds
+interleaved, beside one thread.
 """
 
 from __future__ import annotations
@@ -31,6 +36,8 @@ import os
 import time
 
 import numpy as np
+
+_DEFAULTS: dict = {}  # vector_step.CHUNK as the module sets it (restored between timings)
 
 
 def _env(n: int, estimator: str, task: str = "study"):
@@ -66,8 +73,13 @@ def _env(n: int, estimator: str, task: str = "study"):
     return venv, np.zeros((n, 4))
 
 
-def _time(venv, action, steps: int, threads: int) -> tuple[float, float]:
-    """Wall and CPU seconds of ``steps`` vector steps with ``threads`` numba threads."""
+def _time(venv, action, steps: int, threads: int, chunk: int | None = None):
+    """Wall and CPU seconds of ``steps`` vector steps with ``threads`` numba threads (and
+    ``chunk`` vehicles per task of the parallel step)."""
+    from quad_fault_env import vector_step
+
+    _DEFAULTS.setdefault("chunk", vector_step.CHUNK)
+    vector_step.CHUNK = chunk or _DEFAULTS["chunk"]
     venv.numba_threads = threads  # the env sets it on this thread for its own calls
     for _ in range(5):
         venv.step(action)
@@ -75,6 +87,31 @@ def _time(venv, action, steps: int, threads: int) -> tuple[float, float]:
     for _ in range(steps):
         venv.step(action)
     return time.perf_counter() - wall, time.process_time() - cpu
+
+
+def _chunks_table(args, default: int) -> None:
+    """One thread against ``default`` threads with each task size of ``--chunks``."""
+    print(f"{'N':>5} {'threads':>7} {'chunk':>6} {'wall':>8} {'cpu':>8} {'wall/1':>7}  load")
+    for n in args.sizes:
+        venv, action = _env(n, "none", args.task)
+        steps = max(5, args.steps * 32 // max(n, 32), 400_000 // n)
+        cases = [(1, None)] + [(default, c) for c in args.chunks]
+        best = {case: [np.inf, np.inf] for case in cases}
+        try:
+            for _ in range(args.rounds):
+                for case in cases:
+                    wall, cpu = _time(venv, action, steps, *case)
+                    best[case] = [min(best[case][0], wall), min(best[case][1], cpu)]
+        finally:
+            venv.close()
+        per = 1e6 / (steps * n)
+        w1 = best[(1, None)][0] * per
+        for (threads, chunk), (wall, cpu) in best.items():
+            print(
+                f"{n:>5} {threads:>7} {chunk or '-':>6} {wall * per:8.3f} {cpu * per:8.3f} "
+                f"{wall * per / w1:7.2f}  {os.getloadavg()[0]:.1f}",
+                flush=True,
+            )
 
 
 def main(argv=None) -> int:
@@ -86,6 +123,9 @@ def main(argv=None) -> int:
     p.add_argument("--task", choices=("study", "physics"), default="study")
     p.add_argument("--steps", type=int, default=100, help="vector steps per round")
     p.add_argument("--rounds", type=int, default=3, help="interleaved rounds (best kept)")
+    p.add_argument(
+        "--chunks", type=int, nargs="+", default=None, help="vehicles per task to compare"
+    )
     args = p.parse_args(argv)
 
     import numba
@@ -98,6 +138,9 @@ def main(argv=None) -> int:
         f"task {args.task}; numba threads: 1 vs {default} (default) on {os.cpu_count()} cpus; "
         f"us per vehicle-step, best of {args.rounds} rounds"
     )
+    if args.chunks:
+        _chunks_table(args, default)
+        return 0
     print(
         f"{'estimator':>9} {'N':>5} {'wall 1':>8} {'wall d':>8} {'cpu 1':>8} {'cpu d':>8} "
         f"{'wall d/1':>8} {'cpu d/1':>8}  load"

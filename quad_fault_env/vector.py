@@ -119,7 +119,8 @@ class QuadFaultVectorEnv(VectorEnv):
         numba_threads: threads of numba's parallel kernels (the physics over the vehicles,
             the batched estimator) during this env's ``reset`` and ``step``: ``"auto"``
             (:func:`default_threads`: one below :data:`THREADS_MIN_BATCH` sub-envs, the CPUs
-            the process may use from there on, numba's count whenever ``NUMBA_NUM_THREADS``
+            the process may use from there on and never more than the calling thread's
+            count, ``numba.set_num_threads``; numba's count whenever ``NUMBA_NUM_THREADS``
             is set), an
             integer, or None (the caller's count). Set on the calling thread for the call only
             (``quadfault.jit.threads``): nothing else in the process changes, and the flights
@@ -219,6 +220,9 @@ class QuadFaultVectorEnv(VectorEnv):
             self.estimator = make_estimator(
                 estimator, self.vehicle, num=N, **(estimator_kwargs or {})
             )
+        #: "auto": never more threads than the calling thread's count at the call (a user's
+        #: ``numba.set_num_threads`` limit)
+        self._auto_threads = numba_threads == "auto"
         if numba_threads == "auto":
             numba_threads = default_threads(N)
         #: numba threads of this env's steps and resets (None: the caller's count)
@@ -483,7 +487,7 @@ class QuadFaultVectorEnv(VectorEnv):
                 raise ConfigError(f"reset needs {N} seeds, got {len(seeds)}")
         self._trajectories, self._schedules = InternTable(), InternTable()
         self._needs_reset[:] = False
-        with jit.threads(self.numba_threads):
+        with jit.threads(self._call_threads()):
             refs = self._reset_rows(np.arange(N), seeds, options)  # every row at t = 0
         self._n_ended = 0
         self._started = True
@@ -544,6 +548,14 @@ class QuadFaultVectorEnv(VectorEnv):
                     f[i] = cfg.commands(a[i], self.vehicle, fr)
         self.f_cmd[:] = f
 
+    def _call_threads(self) -> int | None:
+        """The numba threads of a call: :attr:`numba_threads`; with ``"auto"`` at most the
+        calling thread's count (``numba.set_num_threads`` before the call lowers it)."""
+        n = self.numba_threads
+        if n is not None and n > 1 and self._auto_threads:
+            n = min(n, jit.set_threads(None))
+        return n
+
     def _threads(self) -> int:
         return jit.set_threads(None)
 
@@ -554,7 +566,7 @@ class QuadFaultVectorEnv(VectorEnv):
         a = self._check_actions(actions)
         with (
             np.errstate(invalid="ignore", over="ignore", divide="ignore"),
-            jit.threads(self.numba_threads),
+            jit.threads(self._call_threads()),
         ):
             return self._step(a)
 

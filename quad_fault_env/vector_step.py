@@ -19,9 +19,11 @@ time come from the env's per-row windows (:mod:`quad_fault_env.time_tables`); th
 the rows whose next step leaves its window, so the env refills tables only when some do.
 
 Threads: from :data:`PARALLEL_MIN_VEHICLES` vehicles on, and when the calling thread may use
-more than one numba thread (``quadfault.jit.threads``), the vehicles run in chunks of
-:data:`CHUNK` under ``prange``; below, on the calling thread (a parallel launch costs more than
-it saves). The flights are the same either way: each vehicle draws from its own generator.
+more than one numba thread (``quadfault.jit.threads``), the vehicles run in tasks of
+:data:`CHUNK` that the threads claim one after the other (an atomic counter: a thread slowed
+by another process on its core takes fewer); below, on the calling thread (a parallel launch
+costs more than it saves). The flights are the same either way: each vehicle draws from its
+own generator.
 
 Someone changing what the env computes changes the row functions named above, each in its
 own module; this module only strings them together.
@@ -41,7 +43,7 @@ from quad_fault_env.envs.config import (
     termination_code,
 )
 from quad_fault_env.observation import observation_row
-from quadfault.jit import jit, prange
+from quadfault.jit import _numba, jit, prange
 from quadfault.model.closed_loop import fly_vehicle, measure_vehicle
 from quadfault.model.controller import (
     controller_tuples,
@@ -50,7 +52,7 @@ from quadfault.model.controller import (
 )
 from quadfault.model.generator_table import generator_at
 
-#: vehicles per task of the parallel step
+#: vehicles per task of the parallel step (each thread claims the next task when done)
 CHUNK = 256
 #: below this many vehicles the step runs on the calling thread
 PARALLEL_MIN_VEHICLES = 512
@@ -269,15 +271,64 @@ def _step_range(lo, hi, S, R, Out, K, gens, C, V, T, rec, fx, k_phys, dt):
     return stale, ended
 
 
+def _claim_python(counter):
+    c = int(counter[0])
+    counter[0] += 1
+    return c
+
+
+def _compiled_claim():
+    nb = _numba()
+    if nb is None:
+        return _claim_python
+    from numba.core import cgutils, types
+    from numba.extending import intrinsic, register_jitable
+
+    @intrinsic
+    def _fetch_add(typingctx, counter):
+        """``counter[0]``, then ``counter[0] += 1``, atomically (an int64 array)."""
+
+        def codegen(context, builder, sig, args):
+            ary = context.make_array(sig.args[0])(context, builder, args[0])
+            one = context.get_constant(types.int64, 1)
+            return builder.atomic_rmw("add", cgutils.gep(builder, ary.data, 0), one, "monotonic")
+
+        return types.int64(counter), codegen
+
+    @register_jitable(inline="always")
+    def claim(counter):
+        return _fetch_add(counter)
+
+    return claim
+
+
+#: ``claim(counter)``: the next task's number from an int64 counter shared by the threads
+#: (an atomic fetch-and-add in a compiled kernel)
+claim = _compiled_claim()
+
+
 @jit(parallel=True)
-def _step_parallel(S, R, Out, K, gens, C, V, T, rec, fx, k_phys, dt, chunk):
+def _step_parallel(S, R, Out, K, gens, C, V, T, rec, fx, k_phys, dt, chunk, counter, workers):
+    """The step over tasks of ``chunk`` vehicles that ``workers`` threads claim one after the
+    other (``counter[0]``, 0 at the call): a thread that starts late, or runs on a core
+    another process shares, takes fewer tasks instead of holding up the step with an equal
+    share (numba's split of a ``prange`` is static)."""
     N = R.steps.shape[0]
+    n_tasks = (N + chunk - 1) // chunk
     stale, ended = 0, 0
-    for c in prange((N + chunk - 1) // chunk):
-        lo = np.int64(c) * chunk
-        s, e = _step_range(lo, min(lo + chunk, N), S, R, Out, K, gens, C, V, T, rec, fx, k_phys, dt)
-        stale += s
-        ended += e
+    for _ in prange(workers):
+        s_w, e_w = 0, 0
+        c = claim(counter)
+        while c < n_tasks:
+            lo = c * chunk
+            s, e = _step_range(
+                lo, min(lo + chunk, N), S, R, Out, K, gens, C, V, T, rec, fx, k_phys, dt
+            )
+            s_w += s
+            e_w += e
+            c = claim(counter)
+        stale += s_w
+        ended += e_w
     return stale, ended
 
 
@@ -288,12 +339,16 @@ def _observe_rows(rows, S, R, V, obs):
 
 
 @jit(parallel=True)
-def _observe_parallel(S, R, V, obs, chunk):
+def _observe_parallel(S, R, V, obs, chunk, counter, workers):
     N = obs.shape[0]
-    for c in prange((N + chunk - 1) // chunk):
-        lo = np.int64(c) * chunk
-        for i in range(lo, min(lo + chunk, N)):
-            observe_vehicle(i, S, R, V, obs)
+    n_tasks = (N + chunk - 1) // chunk
+    for _ in prange(workers):
+        c = claim(counter)
+        while c < n_tasks:
+            lo = c * chunk
+            for i in range(lo, min(lo + chunk, N)):
+                observe_vehicle(i, S, R, V, obs)
+            c = claim(counter)
 
 
 @jit(_nrt=False)
@@ -321,6 +376,11 @@ def copy_actions(a, out):
     return -1
 
 
+def _counter() -> np.ndarray:
+    """A fresh task counter of a parallel call (one per call: calls may overlap in threads)."""
+    return np.zeros(1, dtype=np.int64)
+
+
 def parallel(n_vehicles: int, threads: int) -> bool:
     """Whether a step of ``n_vehicles`` with ``threads`` numba threads runs under ``prange``."""
     return threads > 1 and n_vehicles >= PARALLEL_MIN_VEHICLES
@@ -334,7 +394,9 @@ def step(S, R, Out, K, loop, k_phys, dt, threads: int) -> tuple[int, int]:
     gens, C, V, T, rec, fx = loop
     N = R.steps.shape[0]
     if parallel(N, threads):
-        stale, ended = _step_parallel(S, R, Out, K, gens, C, V, T, rec, fx, k_phys, dt, CHUNK)
+        stale, ended = _step_parallel(
+            S, R, Out, K, gens, C, V, T, rec, fx, k_phys, dt, CHUNK, _counter(), threads
+        )
     else:
         stale, ended = _step_range(0, N, S, R, Out, K, gens, C, V, T, rec, fx, k_phys, dt)
     return int(stale), int(ended)
@@ -344,7 +406,7 @@ def observe(S, R, V, obs, rows, threads: int) -> None:
     """The observations of ``rows`` (None: every sub-env) at their current step into ``obs``."""
     if rows is None:
         if parallel(len(obs), threads):
-            _observe_parallel(S, R, V, obs, CHUNK)
+            _observe_parallel(S, R, V, obs, CHUNK, _counter(), threads)
             return
         rows = np.arange(len(obs))
     _observe_rows(np.asarray(rows, dtype=np.int64), S, R, V, obs)

@@ -270,3 +270,30 @@ def test_numba_threads_by_batch_size(monkeypatch):
         venv.reset(seed=0)
         venv.step(np.zeros((4, 4), np.float32))
         assert numba.get_num_threads() == before  # the caller's count is left alone
+
+
+def test_auto_threads_keep_the_callers_thread_limit(monkeypatch):
+    """``numba_threads="auto"`` never steps on more threads than the calling thread's
+    numba count: ``numba.set_num_threads(1)`` before a step keeps it on one thread."""
+    if not jit.AVAILABLE:
+        pytest.skip("numba is not installed")
+    import numba
+
+    from quad_fault_env import vector_step
+
+    monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
+    venv = QuadFaultVectorEnv(THREADS_MIN_BATCH, "none", scenario="hover", duration=0.1)
+    seen = []
+    real = vector_step.step
+    monkeypatch.setattr(vector_step, "step", lambda *a: (seen.append(a[-1]), real(*a))[1])
+    zeros = np.zeros((THREADS_MIN_BATCH, 4), np.float32)
+    before = numba.get_num_threads()
+    venv.reset(seed=0)
+    try:
+        numba.set_num_threads(1)
+        venv.step(zeros)
+        assert numba.get_num_threads() == 1
+    finally:
+        numba.set_num_threads(before)
+    venv.step(zeros)
+    assert seen == [1, min(usable_cores(), before)]
