@@ -19,6 +19,7 @@ from typing import NamedTuple
 import numpy as np
 
 from quad_fault_env.envs.episode_start import RowTrajectories
+from quadfault.jit import jit, prange, set_threads
 from quadfault.model.controller import ControllerConfig, GeometricController
 from quadfault.model.scenarios import at_times
 from quadfault.model.vehicle import Vehicle
@@ -37,6 +38,8 @@ def window_steps(substeps: int) -> int:
 
 
 _STALE = np.iinfo(np.int64).min // 2
+#: from this many rows a refill of every row runs on the calling thread's numba threads
+PARALLEL_MIN_ROWS = 1024
 
 
 def row_groups(keys: np.ndarray):
@@ -45,6 +48,31 @@ def row_groups(keys: np.ndarray):
     sk = keys[order]
     cuts = np.flatnonzero(np.diff(sk)) + 1
     return [(int(keys[idx[0]]), idx) for idx in np.split(order, cuts)]
+
+
+@jit(_nrt=False)
+def _fill_range(dst, src, lo, hi):
+    for k in range(lo, hi):
+        for i in range(dst.shape[1]):
+            for j in range(dst.shape[2]):
+                dst[k, i, j] = src[k, j]
+
+
+@jit(parallel=True)
+def _fill_parallel(dst, src):
+    for k in prange(dst.shape[0]):
+        _fill_range(dst, src, k, k + 1)
+
+
+def fill_rows(dst: np.ndarray, src: np.ndarray) -> None:
+    """``dst[k, i] = src[k]`` for every row ``i``: (K, N, m) C-contiguous from (K, m), on the
+    calling thread's numba threads from :data:`PARALLEL_MIN_ROWS` rows (a refill of every
+    row's window writes megabytes)."""
+    src = np.ascontiguousarray(src, dtype=dst.dtype)
+    if dst.shape[1] >= PARALLEL_MIN_ROWS and set_threads(None) > 1:
+        _fill_parallel(dst, src)
+    else:
+        _fill_range(dst, src, 0, dst.shape[0])
 
 
 def _as_rows(x, n: int) -> np.ndarray:
@@ -170,7 +198,9 @@ class RowTimeTables:
             )
             block = block.reshape(len(items), len(starts), W + 1, *block.shape[2:])
             c = block.shape[-2]
-            if len(r) == len(self.k0) and block.shape[:2] == (1, 1):
+            if len(r) == len(self.k0) and block.shape[:2] == (1, 1) and c == self.by_step.shape[2]:
+                fill_rows(self.by_step.reshape(W + 1, len(r), -1), block[0, 0].reshape(W + 1, -1))
+            elif len(r) == len(self.k0) and block.shape[:2] == (1, 1):
                 self.refs[:, :, :c] = block[0, 0]
             elif block.shape[:2] == (1, 1):
                 self.refs[r, :, :c] = block[0, 0]
@@ -186,7 +216,7 @@ class RowTimeTables:
             )
             eta = eta.reshape(len(starts), W * S + 1, -1)
             if len(idx) == len(self.k0) and len(starts) == 1:
-                self.eta[:] = eta[0]
+                fill_rows(self.eta_by_step, eta[0])
             elif len(starts) == 1:
                 self.eta[rows[idx]] = eta[0]
             else:

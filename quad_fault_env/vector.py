@@ -676,7 +676,11 @@ class QuadFaultVectorEnv(VectorEnv):
     def _infos(self, refs, code) -> dict:
         """The step's ``info``; ``code`` the rows' termination codes (``REASONS``; 0: none)."""
         N = self.num_envs
-        light = light_info(REASONS[code])
+        reasons = np.empty(N, dtype=object)  # None (an object array's fill); the ended rows'
+        ended = np.flatnonzero(code)  # names alone (REASONS[code] costs ~10 ns per row)
+        if len(ended):
+            reasons[ended] = REASONS[code[ended]]
+        light = light_info(reasons)
         if self.info_level == "light":
             return light | {"_" + key: np.ones(N, dtype=bool) for key in light}
         refs = self._references_now() if refs is None else refs
