@@ -22,6 +22,7 @@ import warnings
 
 import numpy as np
 
+from estimators.accelerometer import warn_missing
 from estimators.base import (
     STATUSES,
     BatchedEstimate,
@@ -65,7 +66,7 @@ CODE = {name: k for k, name in enumerate(STATUSES)}  # status name -> integer co
 
 
 @jit(parallel=True)
-def irls_update_rows(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, beyond, any_n, code):
+def irls_update_rows(t, p, v, R, w, f, a, const, fp, ip, fs, ks, hist, beyond, any_n, code):
     """:func:`estimators.irls.irls_step` of every row, in parallel; status codes into
     ``code``."""
     N = ks.shape[0]
@@ -79,6 +80,7 @@ def irls_update_rows(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, beyond, any_
             R[i],
             w[i],
             f[i],
+            a[i],
             const,
             arrays,
             fp,
@@ -131,6 +133,8 @@ class BatchedIRLS:
         self._hist = no_history(n)
         self._beyond, self._any_n = beyond_paper(cfg), any_size(n)
         self._code = np.zeros(self.num, dtype=np.int64)
+        self._no_accel = np.full((self.num, 3), np.nan)
+        self._said_missing = False  # the accelerometer asked for and missing: said once
         self.reset()
 
     @property
@@ -156,6 +160,11 @@ class BatchedIRLS:
         FRD [m/s^2], or None); returns the estimates of the windows ending at them."""
         t, p, v, R, w, f = batch_arrays(self.num, self.vehicle.n_rotors, t, p, v, R, w, f)
         accel = batch_accel(self.num, accel)
+        if accel is None:
+            if self.config.accelerometer == "on" and not self._said_missing:
+                self._said_missing = True
+                warn_missing("irls", "a batch of samples")
+            accel = self._no_accel
         st = self._state
         irls_update_rows(
             t,
@@ -164,6 +173,7 @@ class BatchedIRLS:
             R,
             w,
             f,
+            accel,
             self._const,
             self._fp,
             self._ip,

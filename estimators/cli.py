@@ -2,7 +2,7 @@
 
     quadfault estimate FILE.csv --estimator irls|ekf|rls|ukf --out EST.csv [--force]
                        [--improved] [--median N] [--q-eta Q] [--forgetting L]
-                       [--prefilter TAU]
+                       [--prefilter TAU] [--accelerometer off|auto|on]
 
 Writes ``EST.csv`` (``t, eta1..eta4, sd1..sd4, status``) and its sidecar ``EST.json``
 (:mod:`estimators.series_io`). Estimators are looked up in the registry
@@ -16,7 +16,9 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import warnings
 
+from estimators.accelerometer import MODES, AccelerometerMissing
 from estimators.registry import ESTIMATORS, estimator_names, estimator_spec, make_estimator
 from quadfault.errors import ConfigError
 
@@ -26,7 +28,15 @@ def _choices() -> tuple[str, ...]:
     return estimator_names(role="estimator")
 
 
-def check_options(name: str, improved: bool, median, q_eta, forgetting=None, prefilter=None):
+def check_options(
+    name: str,
+    improved: bool,
+    median,
+    q_eta,
+    forgetting=None,
+    prefilter=None,
+    accelerometer=None,
+):
     """One-line errors for options that do not fit together or are out of range (which
     estimator takes which option: the registry's ``options``)."""
     options = estimator_spec(name).options
@@ -35,6 +45,7 @@ def check_options(name: str, improved: bool, median, q_eta, forgetting=None, pre
         ("q_eta", q_eta),
         ("forgetting", forgetting),
         ("prefilter", prefilter),
+        ("accelerometer", accelerometer),
     ):
         if given is not None and given is not False and key not in options:
             takers = [s.name for s in ESTIMATORS.values() if key in s.options]
@@ -60,6 +71,10 @@ def check_options(name: str, improved: bool, median, q_eta, forgetting=None, pre
         or not (math.isfinite(prefilter) and prefilter >= 0)
     ):
         raise ConfigError(f"--prefilter must be a time constant >= 0 [s], got {prefilter!r}")
+    if accelerometer is not None and accelerometer not in MODES:
+        raise ConfigError(
+            f"--accelerometer must be one of {', '.join(MODES)}, got {accelerometer!r}"
+        )
     if median is not None and (
         isinstance(median, bool) or not isinstance(median, int) or median < 1
     ):
@@ -75,13 +90,14 @@ def estimate_series(
     q_eta: float | None = None,
     forgetting: float | None = None,
     prefilter: float | None = None,
+    accelerometer: str | None = None,
     progress: bool = False,
 ):
     """Run estimator ``name`` over ``recording`` (never its truth) with the options of
     ``quadfault estimate``; the series' ``postprocess`` says which median it got."""
     from estimators.median import median_series
 
-    check_options(name, improved, median, q_eta, forgetting, prefilter)
+    check_options(name, improved, median, q_eta, forgetting, prefilter, accelerometer)
     online_median = "median" in estimator_spec(name).options
     est = make_estimator(
         name,
@@ -90,6 +106,7 @@ def estimate_series(
         q_eta=q_eta,
         forgetting=forgetting,
         prefilter=prefilter,
+        accelerometer=accelerometer,
         median=median if online_median else None,
     )
     series = est.run(recording.without_truth(), progress=progress)
@@ -106,6 +123,7 @@ def cli_args(
     q_eta: float | None = None,
     forgetting: float | None = None,
     prefilter: float | None = None,
+    accelerometer: str | None = None,
 ) -> list[str]:
     """The ``quadfault estimate`` arguments of :func:`estimate_series`'s options (``q_eta``
     written with ``repr``, so the arguments reproduce the series exactly)."""
@@ -118,6 +136,8 @@ def cli_args(
         args += ["--forgetting", repr(float(forgetting))]
     if prefilter is not None:
         args += ["--prefilter", repr(float(prefilter))]
+    if accelerometer is not None:
+        args += ["--accelerometer", str(accelerometer)]
     if median is not None:
         args += ["--median", str(int(median))]
     return args
@@ -174,6 +194,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "regression, against sensor noise (0 = off; default: IRLS 0, --improved and RLS "
         "0.01)",
     )
+    p.add_argument(
+        "--accelerometer",
+        choices=MODES,
+        default=None,
+        help="IRLS, RLS: the thrust rows from the accelerometer's specific force (ax, ay, "
+        "az) instead of the differenced velocity: on (a recording without it falls back "
+        "to the velocity, and says so), auto (the same, silently), off (the velocity; "
+        "default: off, --improved auto)",
+    )
 
 
 def run(args) -> int:
@@ -183,7 +212,13 @@ def run(args) -> int:
     from quadfault.progress import enabled
 
     check_options(
-        args.estimator, args.improved, args.median, args.q_eta, args.forgetting, args.prefilter
+        args.estimator,
+        args.improved,
+        args.median,
+        args.q_eta,
+        args.forgetting,
+        args.prefilter,
+        args.accelerometer,
     )
     out, side = estimate_paths(args.out)
     check_writable([out, side], force=args.force)
@@ -193,16 +228,24 @@ def run(args) -> int:
             f"{args.recording}: 'estimate' needs position, velocity and attitude "
             "columns (px..pz, vx..vz, qw..qz); this recording is IMU-only"
         )
-    series = estimate_series(
-        rec,
-        args.estimator,
-        improved=args.improved,
-        median=args.median,
-        q_eta=args.q_eta,
-        forgetting=args.forgetting,
-        prefilter=args.prefilter,
-        progress=enabled(),
-    )
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", AccelerometerMissing)
+        series = estimate_series(
+            rec,
+            args.estimator,
+            improved=args.improved,
+            median=args.median,
+            q_eta=args.q_eta,
+            forgetting=args.forgetting,
+            prefilter=args.prefilter,
+            accelerometer=args.accelerometer,
+            progress=enabled(),
+        )
+    for w in caught:  # the fallback said on one line; any other warning as Python says it
+        if issubclass(w.category, AccelerometerMissing):
+            print(f"quadfault estimate: note: {w.message}", file=sys.stderr)
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
     write_estimate_series(series, out, input_path=args.recording, force=args.force)
     if not args.quiet:
         print(

@@ -31,6 +31,13 @@ from dataclasses import asdict
 
 import numpy as np
 
+from estimators.accelerometer import (
+    NO_ACCEL,
+    accelerometer_rows,
+    recording_accel,
+    repeats,
+    warn_missing,
+)
 from estimators.base import (
     BAD_SAMPLE,
     NO_EXCITATION,
@@ -135,13 +142,15 @@ CONSTANTS = fields(
     "clip",
     "min_thrust",
     "prefilter",
+    "accel",
     ("J", 9),
     ("Jinv", 9),
     ("G", RESIDUAL_ROWS),
     ("A", 0),
 )
-#: rows of the piece ``sample``: the previous sample's p, v, w and R
-SAMPLE_ROWS = fields("IRLSSampleRows", "p", "v", "w", ("R", 3))
+#: rows of the piece ``sample``: the previous sample's p, v, w, accelerometer reading (NaN:
+#: none) and R
+SAMPLE_ROWS = fields("IRLSSampleRows", "p", "v", "w", "a", ("R", 3))
 #: rows of the piece ``vn`` (n each): the previous command, the estimate, its sd, the
 #: reported estimate, the window's solution and sd, the completion's anchor, direction and
 #: scratch, then the window solver's vectors (:data:`estimators.window.VECTORS`)
@@ -174,6 +183,7 @@ COUNTERS = fields(
     "median_k",
     "median_fresh",
     "code",
+    "accel_held",
     ("fresh", N_FRESH_COUNTERS),
     ("completion", N_COUNTERS),
     ("iters", 0),
@@ -183,7 +193,7 @@ COUNTERS = fields(
 FLOATS = Layout(
     "IRLSPieces",
     t=(1,),  # the previous sample's time [s]
-    sample=(SAMPLE_ROWS.size, 3),  # its p, v, w, R (SAMPLE_ROWS)
+    sample=(SAMPLE_ROWS.size, 3),  # its p, v, w, accelerometer, R (SAMPLE_ROWS)
     vn=(VN_ROWS.size, "n"),  # n-vectors (VN_ROWS)
     vm=(VM_ROWS.size, "m"),  # m-vectors (VM_ROWS)
     bh=(BH_ROWS.size, "m", "n"),  # (BH_ROWS)
@@ -254,6 +264,7 @@ def irls_parameters(vehicle: Vehicle, cfg: IRLSConfig, offsets: np.ndarray):
         clip=float(cfg.clip_commands),
         min_thrust=cfg.min_thrust,
         prefilter=cfg.prefilter,
+        accel=float(cfg.accelerometer != "off"),
         J=vehicle.inertia,
         Jinv=vehicle.inertia_inverse,
         G=cfg.segment_weights,
@@ -328,7 +339,7 @@ def constant_arrays(const, ip):
 
 
 @jit(inline="always")
-def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond, any_n):
+def irls_step(t, p, v, R, w, f, a, const, arrays, fp, ip, S, ks, i, hist, beyond, any_n):
     """One online update of the sliding-window IRLS (module docstring) of row ``i`` of the
     state ``(S, ks)`` (:func:`state_pieces`, int state (N, K)), in place (``arrays``:
     :func:`constant_arrays` of ``const``). Returns ``(status
@@ -345,7 +356,7 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond, a
     m, n, L = ip[INT_SETTINGS.m], ip[INT_SETTINGS.n], ip[INT_SETTINGS.L]
     last_t, sample, VN, VM, BH = S.t[i], S.sample[i], S.vn[i], S.vm[i], S.bh[i]
     last_p, last_v, last_w = sample[SAMPLE_ROWS.p], sample[SAMPLE_ROWS.v], sample[SAMPLE_ROWS.w]
-    last_R = sample[SAMPLE_ROWS.R :]
+    last_a, last_R = sample[SAMPLE_ROWS.a], sample[SAMPLE_ROWS.R :]
     last_f, eta, sd, out, x, sd_x = (
         VN[VN_ROWS.last_f],
         VN[VN_ROWS.eta],
@@ -388,12 +399,25 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond, a
                 r0,
                 Jr,
             )
+            fresh = fresh_streams(p, v, R, w, last_p, last_v, last_R, last_w)
+            if const[CONSTANTS.accel] != 0.0 and all_finite(last_a):
+                # the velocity rows from the accelerometer, whose holds they follow
+                fresh = accelerometer_rows(
+                    t - last_t[0],
+                    last_R,
+                    last_a,
+                    k_row[COUNTERS.accel_held] == 1,
+                    fresh,
+                    fresh_counters,
+                    r0,
+                    Jr,
+                )
             # held streams: their rows over the interval between fresh samples
             dt = fresh_rows_into(
                 r0,
                 Jr,
                 t - last_t[0],
-                fresh_streams(p, v, R, w, last_p, last_v, last_R, last_w),
+                fresh,
                 fresh_counters,
                 S.acc_r0[i],
                 S.acc_J[i],
@@ -412,10 +436,12 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond, a
                 k_row[COUNTERS.head] = (slot + 1) % m
                 k_row[COUNTERS.count] = min(k_row[COUNTERS.count] + 1, m)
         last_t[0] = t
-        for a in range(3):
-            last_p[a], last_v[a], last_w[a] = p[a], v[a], w[a]
-            for k in range(3):
-                last_R[a, k] = R[a, k]
+        held = k_row[COUNTERS.has_last] == 1 and repeats(a, last_a)
+        k_row[COUNTERS.accel_held] = 1 if held else 0
+        for k in range(3):
+            last_p[k], last_v[k], last_w[k], last_a[k] = p[k], v[k], w[k], a[k]
+            for m_ in range(3):
+                last_R[k, m_] = R[k, m_]
         for j in range(n):
             last_f[j] = (
                 min(max(f[j], 0.0), const[CONSTANTS.f_max])
@@ -494,17 +520,18 @@ def irls_step(t, p, v, R, w, f, const, arrays, fp, ip, S, ks, i, hist, beyond, a
 
 
 @jit
-def irls_update(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, beyond, any_n):
+def irls_update(t, p, v, R, w, f, a, const, fp, ip, fs, ks, hist, beyond, any_n):
     """:func:`irls_step` of a single estimator (state of one row): the online update."""
     S = state_pieces(fs, ip, ks.shape[0])
     row = ks.shape[0] - 1  # 0, a run-time value like the batch's rows
+    arrays = constant_arrays(const, ip)
     return irls_step(
-        t, p, v, R, w, f, const, constant_arrays(const, ip), fp, ip, S, ks, row, hist, beyond, any_n
+        t, p, v, R, w, f, a, const, arrays, fp, ip, S, ks, row, hist, beyond, any_n
     )
 
 
 @jit
-def irls_run(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, beyond, any_n, eta, sd, code):
+def irls_run(t, p, v, R, w, f, a, const, fp, ip, fs, ks, hist, beyond, any_n, eta, sd, code):
     """:func:`irls_step` over the rows of a recording (a single estimator's state): the
     reported estimate, its sd (NaN until a window is solved) and the status code of every
     row."""
@@ -521,6 +548,7 @@ def irls_run(t, p, v, R, w, f, const, fp, ip, fs, ks, hist, beyond, any_n, eta, 
             R[k],
             w[k],
             f[k],
+            a[k],
             const,
             arrays,
             fp,
@@ -567,6 +595,7 @@ class SlidingWindowIRLS:
             np.full(n, np.nan),
         )
         self._shape_f = (n,)
+        self._said_missing = False  # the accelerometer asked for and missing: said once
         self._row = self._state.views.vn[0]  # the n-vectors of the state (estimate, sd, ...)
         self._weights = self._state.views.vm[0, VM_ROWS.weights]
         self.reset()
@@ -597,17 +626,24 @@ class SlidingWindowIRLS:
         try:
             t = float(sample.t)
             p, v, R, w, f = [np.ascontiguousarray(a, dtype=float) for a in sample[1:6]]
+            a = sample[6] if len(sample) > 6 else None
+            a = NO_ACCEL if a is None else np.ascontiguousarray(a, dtype=float)
             malformed = (
                 p.shape != (3,)
                 or v.shape != (3,)
                 or R.shape != (3, 3)
                 or w.shape != (3,)
                 or f.shape != self._shape_f
+                or a.shape != (3,)
             )
         except (AttributeError, TypeError, ValueError, IndexError):
             t, malformed = math.nan, True
         if malformed:
             p, v, R, w, f = self._nan_sample
+            a = NO_ACCEL
+        elif a is NO_ACCEL and self.config.accelerometer == "on" and not self._said_missing:
+            self._said_missing = True
+            warn_missing(self.name, f"the sample at t = {t}")
         st = self._state
         code, why, rounds, cond = irls_update(
             math.nan if malformed else t,
@@ -616,6 +652,7 @@ class SlidingWindowIRLS:
             R,
             w,
             f,
+            a,
             self._const,
             self._fp,
             self._ip,
@@ -648,6 +685,7 @@ class SlidingWindowIRLS:
         are ``warmup``); starts from the current estimate and leaves the estimator reset."""
         start = time.perf_counter()
         t, p, v, R, w, f = _recording_arrays(recording, self.vehicle, self.config.window)
+        a = recording_accel(recording, self.config.accelerometer, self.name)
         const = self._const.copy()
         const[CONSTANTS.f_max] = command_limit(recording, self.vehicle)  # its saturation
         self.reset(self.eta)
@@ -655,7 +693,7 @@ class SlidingWindowIRLS:
         args = (const, self._fp, self._ip, st.floats, st.ints, self._hist, self._beyond)
         eta, sd, code = run_rows(
             irls_run,
-            (t, p, v, R, w, f),
+            (t, p, v, R, w, f, a),
             args + (self._any_n,),
             self.vehicle.n_rotors,
             "irls",

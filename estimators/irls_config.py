@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from estimators.accelerometer import check_mode
 from estimators.base import STATUSES
 from estimators.ipm import IPMSettings
 from estimators.residuals import residual_weights
@@ -65,6 +66,11 @@ class IRLSConfig:
             (:func:`estimators.residuals.prefilter_into`; 0 = off, the paper). Against
             sensor noise: the noise differenced between two samples 1 ms apart falls by
             about ``dt / prefilter``, a change is delayed by about ``prefilter``.
+        accelerometer: beyond the paper: where the thrust rows come from
+            (:mod:`estimators.accelerometer`): ``"off"`` the differenced velocity (the
+            paper), ``"auto"`` the accelerometer's specific force wherever a sample has it
+            (the position rows then unused), ``"on"`` the same, and a recording or sample
+            without an accelerometer is said once. True / False mean ``"on"`` / ``"off"``.
     """
 
     window: int = 10
@@ -95,25 +101,42 @@ class IRLSConfig:
     change_hold: int = 20
     output_median: int = 1
     prefilter: float = 0.0
+    accelerometer: str = "off"
 
     @classmethod
     def improved(cls, **changes) -> IRLSConfig:
         """The reference settings plus the options beyond the paper (docs/irls.md): the
         spike guards, change completion and a 21-sample causal output median ("Spikes"),
-        and the residual prefilter of 10 ms against sensor noise ("Sensor noise")."""
-        return cls(**{"change_completion": True, "output_median": 21, "prefilter": 0.01, **changes})
+        the residual prefilter of 10 ms against sensor noise ("Sensor noise") and the
+        thrust rows from the accelerometer wherever the data has one ("Accelerometer")."""
+        return cls(
+            **{
+                "change_completion": True,
+                "output_median": 21,
+                "prefilter": 0.01,
+                "accelerometer": "auto",
+                **changes,
+            }
+        )
 
     @classmethod
     def from_options(
-        cls, improved: bool = False, median: int | None = None, prefilter: float | None = None
+        cls,
+        improved: bool = False,
+        median: int | None = None,
+        prefilter: float | None = None,
+        accelerometer: str | bool | None = None,
     ) -> IRLSConfig:
         """The configuration of ``quadfault estimate``'s options (the registry's
         ``from_options``): ``improved`` the options beyond the paper (:meth:`improved`),
         ``median`` the online output median [samples] (overrides ``improved``'s 21),
-        ``prefilter`` the residual prefilter's time constant [s] (overrides ``improved``'s)."""
+        ``prefilter`` the residual prefilter's time constant [s] (overrides ``improved``'s),
+        ``accelerometer`` where the thrust rows come from (overrides ``improved``'s)."""
         changes = {} if median is None else {"output_median": int(median)}
         if prefilter is not None:
             changes["prefilter"] = float(prefilter)
+        if accelerometer is not None:
+            changes["accelerometer"] = accelerometer
         return cls.improved(**changes) if improved else cls(**changes)
 
     def __post_init__(self):
@@ -163,6 +186,9 @@ class IRLSConfig:
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ConfigError(f"IRLS setting {key} must be an integer >= 1, got {value!r}")
+        object.__setattr__(
+            self, "accelerometer", check_mode("IRLSConfig", self.accelerometer)
+        )
         if not isinstance(self.change_completion, bool):
             raise ConfigError(
                 f"IRLS change_completion must be True or False, got {self.change_completion!r}"

@@ -26,6 +26,7 @@ from dataclasses import asdict
 
 import numpy as np
 
+from estimators.accelerometer import NO_ACCEL, recording_accel, warn_missing
 from estimators.base import (
     STATUSES,
     BatchedEstimate,
@@ -38,6 +39,7 @@ from estimators.base import (
     check_num,
     command_limit,
     reset_rows,
+    sample_accel,
     run_rows,
     sample_arrays,
 )
@@ -119,6 +121,11 @@ class _Kernels:
     #: index in ``const`` of the command's upper clip [N] (the recording may lift it)
     fmax_index: int = None
 
+    #: the kernels take the accelerometer reading after the command (``update(t, p, v, R,
+    #: w, f, a, ...)``, ``a`` NaN where a sample has none) and the configuration has an
+    #: ``accelerometer`` mode (:mod:`estimators.accelerometer`)
+    reads_accel: bool = False
+
     def _setup(self, vehicle, config, num: int) -> None:
         cls = type(self).__name__
         if not isinstance(vehicle, Vehicle):
@@ -143,6 +150,7 @@ class _Kernels:
         (self._k_reset, self._k_update, self._k_run, self._k_rows, self._k_estimate) = (
             self.kernels()
         )
+        self._said_missing = False  # the accelerometer asked for and missing: said once
 
     def describe(self) -> dict:
         """JSON-ready description of the configuration (for sidecars and reports)."""
@@ -175,7 +183,17 @@ class RecursiveEstimator(_Kernels):
         """One sample in (the command it carries is held until the next one); the estimate."""
         t, p, v, R, w, f = sample_arrays(sample, self.n_rotors, self.name)
         st = self._state
-        code = self._k_update(t, p, v, R, w, f, self._const, st.offsets, st.floats, st.ints)
+        if self.reads_accel:
+            a = sample_accel(sample, self.name)
+            if a is None:
+                a = NO_ACCEL
+                if self.config.accelerometer == "on" and not self._said_missing:
+                    self._said_missing = True
+                    warn_missing(self.name, f"the sample at t = {t}")
+            args = (t, p, v, R, w, f, a)
+        else:
+            args = (t, p, v, R, w, f)
+        code = self._k_update(*args, self._const, st.offsets, st.floats, st.ints)
         self._k_estimate(st.offsets, self.n_rotors, st.floats, st.ints, self._eta, self._sd)
         sd = None if np.isnan(self._sd[0, 0]) else self._sd[0].copy()
         return Estimate(t=t, eta=self._eta[0].copy(), sd=sd, status=STATUSES[code])
@@ -185,6 +203,8 @@ class RecursiveEstimator(_Kernels):
         configuration's initial efficiency; the filter is left at the recording's end."""
         start = time.perf_counter()
         arrays = recording_arrays(recording, self.n_rotors, self.name)
+        if self.reads_accel:
+            arrays += (recording_accel(recording, self.config.accelerometer, self.name),)
         const = self._const.copy()
         const[self.fmax_index] = command_limit(recording, self.vehicle)
         self.reset()
@@ -237,7 +257,15 @@ class BatchedRecursive(_Kernels):
         t, p, v, R, w, f = batch_arrays(self.num, n, t, p, v, R, w, f)
         accel = batch_accel(self.num, accel)
         st = self._state
-        self._k_rows(t, p, v, R, w, f, self._const, st.offsets, st.floats, st.ints, self._code)
+        args = (t, p, v, R, w, f)
+        if self.reads_accel:
+            if accel is None:
+                if self.config.accelerometer == "on" and not self._said_missing:
+                    self._said_missing = True
+                    warn_missing(self.name, "a batch of samples")
+                accel = np.full((self.num, 3), np.nan)
+            args += (accel,)
+        self._k_rows(*args, self._const, st.offsets, st.floats, st.ints, self._code)
         eta, sd = np.empty((self.num, n)), np.empty((self.num, n))
         self._k_estimate(st.offsets, n, st.floats, st.ints, eta, sd)
         return BatchedEstimate(t.copy(), eta, sd, self._code.copy())

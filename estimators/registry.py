@@ -24,7 +24,7 @@ from quadfault.errors import ConfigError
 #: (estimates nothing), or the labelled oracle (reads the true efficiency schedule)
 ROLES = ("estimator", "nominal", "oracle")
 #: the options of ``quadfault estimate`` a configuration may take (``Config.from_options``)
-OPTIONS = ("improved", "median", "q_eta", "forgetting", "prefilter")
+OPTIONS = ("improved", "median", "q_eta", "forgetting", "prefilter", "accelerometer")
 
 
 @dataclass(frozen=True)
@@ -70,7 +70,7 @@ TABLE: tuple[EstimatorSpec, ...] = (
         "the paper's sliding-window IRLS (default)",
         config="estimators.irls_config:IRLSConfig",
         batched="estimators.batched:BatchedIRLS",
-        options=("improved", "median", "prefilter"),
+        options=("improved", "median", "prefilter", "accelerometer"),
     ),
     EstimatorSpec(
         "ekf",
@@ -87,7 +87,7 @@ TABLE: tuple[EstimatorSpec, ...] = (
         "(what INDI controllers fly; baseline)",
         config="estimators.rls:RLSConfig",
         batched="estimators.rls:BatchedRLS",
-        options=("forgetting", "prefilter"),
+        options=("forgetting", "prefilter", "accelerometer"),
     ),
     EstimatorSpec(
         "ukf",

@@ -59,6 +59,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from estimators.accelerometer import accelerometer_rows, check_mode, repeats
 from estimators.base import (
     BAD_SAMPLE,
     NO_EXCITATION,
@@ -117,6 +118,10 @@ class RLSConfig:
             (velocity noise is the same along every axis; the per-row weights would trust
             the horizontal rows most where their regressor, the tilt, is mostly attitude
             noise, and bias the estimate low).
+        accelerometer: where the thrust (velocity) rows come from
+            (:mod:`estimators.accelerometer`, as ``IRLSConfig.accelerometer``): ``"off"``
+            the differenced velocity, ``"auto"`` the accelerometer's specific force wherever
+            a sample has it, ``"on"`` the same, and data without one is said once.
     """
 
     forgetting: float = 0.99
@@ -125,8 +130,10 @@ class RLSConfig:
     eta_bounds: tuple | None = (-0.001, 1.2)
     clip_commands: bool = True
     prefilter: float = 0.01
+    accelerometer: str = "off"
 
     def __post_init__(self):
+        object.__setattr__(self, "accelerometer", check_mode("RLSConfig", self.accelerometer))
         check_fraction(self, "forgetting")
         check_positive(self, "p0")
         check_bounds("RLSConfig", self.eta_bounds)
@@ -134,11 +141,16 @@ class RLSConfig:
 
     @classmethod
     def from_options(
-        cls, forgetting: float | None = None, prefilter: float | None = None
+        cls,
+        forgetting: float | None = None,
+        prefilter: float | None = None,
+        accelerometer: str | bool | None = None,
     ) -> RLSConfig:
         """The configuration of ``quadfault estimate --estimator rls [--forgetting L]
-        [--prefilter TAU]``."""
-        return from_options(cls, forgetting=forgetting, prefilter=prefilter)
+        [--prefilter TAU] [--accelerometer MODE]``."""
+        return from_options(
+            cls, forgetting=forgetting, prefilter=prefilter, accelerometer=accelerometer
+        )
 
     def replace(self, **changes) -> RLSConfig:
         return replace(self, **changes)
@@ -148,8 +160,9 @@ class RLSConfig:
 ROWS = tuple(RESIDUAL.v + a for a in range(3)) + tuple(RESIDUAL.w + a for a in range(3))
 N_ROWS = len(ROWS)
 
-#: rows of the previous sample's piece (3 columns): p, v, Omega, then R (3 rows)
-SAMPLE_ROWS = fields("RLSSampleRows", "p", "v", "w", ("R", 3))
+#: rows of the previous sample's piece (3 columns): p, v, Omega, the accelerometer reading
+#: (NaN: none), then R (3 rows)
+SAMPLE_ROWS = fields("RLSSampleRows", "p", "v", "w", "a", ("R", 3))
 #: the noise scale: the forgotten mean of the weighted residual energy per row, and the
 #: forgotten sample count it is the mean of
 NOISE = fields("RLSNoise", "mean", "count")
@@ -182,7 +195,9 @@ RLSPieces = FLOATS.pieces
 #: the int state: 1 once a previous sample is held; 1 once the first update was made; 1 once
 #: the prefilter holds a segment (0 again after a bad sample); the counters of
 #: :func:`estimators.freshness.fresh_rows_into`
-COUNTERS = fields("RLSCounters", "has_last", "updated", "filtered", ("fresh", N_FRESH_COUNTERS))
+COUNTERS = fields(
+    "RLSCounters", "has_last", "updated", "filtered", "accel_held", ("fresh", N_FRESH_COUNTERS)
+)
 #: the constants: scalars (the box ``lo``, ``hi``; ``log_lambda``: ln(lambda) per second),
 #: the inertia and its inverse, the residual weights ``G`` (ones: :func:`segment_terms_into`'s
 #: energy is unused), last the allocation ``A`` (4, n) (:func:`rls_constants`)
@@ -198,6 +213,7 @@ CONSTANTS = fields(
     "log_lambda",
     "prefilter",
     "isotropic",
+    "accel",
     ("J", 9),
     ("Jinv", 9),
     ("G", RESIDUAL_ROWS),
@@ -225,6 +241,7 @@ def rls_constants(vehicle: Vehicle, cfg: RLSConfig) -> np.ndarray:
         log_lambda=math.log(cfg.forgetting) / FORGETTING_REFERENCE_DT,
         prefilter=cfg.prefilter,
         isotropic=float(cfg.prefilter > 0),
+        accel=float(cfg.accelerometer != "off"),
         J=vehicle.inertia,
         Jinv=vehicle.inertia_inverse,
         G=np.ones(RESIDUAL_ROWS),
@@ -272,7 +289,7 @@ def state_pieces(fs, offsets, n, N):
 
 
 @jit
-def rls_step(t, p, v, R, w, f, const, S, ks, i) -> int:
+def rls_step(t, p, v, R, w, f, sf, const, S, ks, i) -> int:
     """One sample into filter ``i`` of the state ``(S, ks)`` (:func:`state_pieces`), in place;
     returns the status code (module docstring)."""
     n = f.shape[0]
@@ -280,7 +297,7 @@ def rls_step(t, p, v, R, w, f, const, S, ks, i) -> int:
     theta, P, last_t, sample = S.theta[i], S.P[i], S.last_t[i], S.sample[i]
     last_f, s2 = S.last_f[i], S.noise[i]
     last_p, last_v, last_w = sample[SAMPLE_ROWS.p], sample[SAMPLE_ROWS.v], sample[SAMPLE_ROWS.w]
-    last_R = sample[SAMPLE_ROWS.R :]
+    last_a, last_R = sample[SAMPLE_ROWS.a], sample[SAMPLE_ROWS.R :]
     if not (
         math.isfinite(t)
         and all_finite(p)
@@ -321,12 +338,25 @@ def rls_step(t, p, v, R, w, f, const, S, ks, i) -> int:
                 r0,
                 Jr,
             )
+            fresh = fresh_streams(p, v, R, w, last_p, last_v, last_R, last_w)
+            if const[C.accel] != 0.0 and all_finite(last_a):
+                # the velocity rows from the accelerometer, whose holds they follow
+                fresh = accelerometer_rows(
+                    dt,
+                    last_R,
+                    last_a,
+                    ks[i, COUNTERS.accel_held] == 1,
+                    fresh,
+                    ks[i, COUNTERS.fresh :],
+                    r0,
+                    Jr,
+                )
             # held streams: their rows over the interval between fresh samples
             dt = fresh_rows_into(
                 r0,
                 Jr,
                 dt,
-                fresh_streams(p, v, R, w, last_p, last_v, last_R, last_w),
+                fresh,
                 ks[i, COUNTERS.fresh :],
                 S.acc_r0[i],
                 S.acc_J[i],
@@ -400,10 +430,12 @@ def rls_step(t, p, v, R, w, f, const, S, ks, i) -> int:
             ks[i, COUNTERS.updated] = 1
             code = OK
     last_t[0] = t
-    for a in range(3):
-        last_p[a], last_v[a], last_w[a] = p[a], v[a], w[a]
+    held = ks[i, COUNTERS.has_last] == 1 and repeats(sf, last_a)
+    ks[i, COUNTERS.accel_held] = 1 if held else 0
+    for k in range(3):
+        last_p[k], last_v[k], last_w[k], last_a[k] = p[k], v[k], w[k], sf[k]
         for b in range(3):
-            last_R[a, b] = R[a, b]
+            last_R[k, b] = R[k, b]
     for j in range(n):
         last_f[j] = min(max(f[j], 0.0), const[C.f_max]) if const[C.clip] != 0.0 else f[j]
     ks[i, COUNTERS.has_last] = 1
@@ -452,9 +484,9 @@ def rls_reset(const, offsets, n, fs, ks, rows, eta0) -> None:
 
 
 @jit(inline="always")
-def _one(t, p, v, R, w, f, const, S, ks, i) -> int:
+def _one(t, p, v, R, w, f, a, const, S, ks, i) -> int:
     """:func:`rls_step`, then the projection of ``theta`` onto the box."""
-    code = rls_step(t, p, v, R, w, f, const, S, ks, i)
+    code = rls_step(t, p, v, R, w, f, a, const, S, ks, i)
     if code == OK:
         theta = S.theta[i]
         for j in range(f.shape[0]):
@@ -463,31 +495,31 @@ def _one(t, p, v, R, w, f, const, S, ks, i) -> int:
 
 
 @jit
-def rls_update(t, p, v, R, w, f, const, offsets, fs, ks) -> int:
+def rls_update(t, p, v, R, w, f, a, const, offsets, fs, ks) -> int:
     """One sample into the single filter (row 0)."""
     S = state_pieces(fs, offsets, f.shape[0], ks.shape[0])
-    return _one(t, p, v, R, w, f, const, S, ks, ks.shape[0] - 1)
+    return _one(t, p, v, R, w, f, a, const, S, ks, ks.shape[0] - 1)
 
 
 @jit
-def rls_run(t, p, v, R, w, f, const, offsets, fs, ks, eta, sd, code) -> None:
+def rls_run(t, p, v, R, w, f, a, const, offsets, fs, ks, eta, sd, code) -> None:
     """The single filter over the rows of a recording: estimate, sd and status of each row."""
     n = f.shape[1]
     S = state_pieces(fs, offsets, n, ks.shape[0])
     row = ks.shape[0] - 1  # 0, a run-time value like the batch's rows
     for k in range(t.shape[0]):
-        code[k] = _one(t[k], p[k], v[k], R[k], w[k], f[k], const, S, ks, row)
+        code[k] = _one(t[k], p[k], v[k], R[k], w[k], f[k], a[k], const, S, ks, row)
         _estimate_row(S, ks, row, n, eta[k], sd[k])
 
 
 @jit(parallel=True)
-def rls_update_rows(t, p, v, R, w, f, const, offsets, fs, ks, code) -> None:
+def rls_update_rows(t, p, v, R, w, f, a, const, offsets, fs, ks, code) -> None:
     """One sample into every row of a batch, in parallel; status codes into ``code``."""
     N = ks.shape[0]
     views = state_views(fs, offsets, f.shape[1], N)  # formed once; named inside the loop
     for i in prange(N):
         code[i] = _one(
-            t[i], p[i], v[i], R[i], w[i], f[i], const, named_pieces(views), ks, np.int64(i)
+            t[i], p[i], v[i], R[i], w[i], f[i], a[i], const, named_pieces(views), ks, np.int64(i)
         )
 
 
@@ -504,6 +536,7 @@ class _RLS(_Kernels):
     counters = COUNTERS
     constants = staticmethod(rls_constants)
     fmax_index = CONSTANTS.f_max
+    reads_accel = True
 
 
 class RecursiveLeastSquares(_RLS, RecursiveEstimator):

@@ -74,6 +74,7 @@ def _looks_fresh(rec):
         velocity=jitter(rec.velocity),
         quaternion=jitter(rec.quaternion),
         omega=jitter(rec.omega),
+        accel=jitter(rec.accel),
     )
 
 

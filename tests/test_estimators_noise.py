@@ -142,6 +142,7 @@ def test_rls_with_the_prefilter_equals_a_numpy_form(fault):
         (SlidingWindowIRLS, BatchedIRLS, IRLSConfig(prefilter=0.02)),
         (SlidingWindowIRLS, BatchedIRLS, IRLSConfig.improved()),
         (RecursiveLeastSquares, BatchedRLS, RLSConfig(prefilter=0.02)),
+        (RecursiveLeastSquares, BatchedRLS, RLSConfig(accelerometer="on")),
     ],
 )
 def test_prefiltered_online_offline_and_batched_agree(fault, single, batched, config):
@@ -160,7 +161,8 @@ def test_prefiltered_online_offline_and_batched_agree(fault, single, batched, co
     np.testing.assert_array_equal(offline.eta[:150], online[:150])
     batch = batched(vehicle, 2, config)
     for k, s in enumerate(rows):
-        out = batch.update(*(np.array([getattr(s, a)] * 2) for a in ("t", "p", "v", "R", "w", "f")))
+        fields = ("t", "p", "v", "R", "w", "f")
+        out = batch.update(*(np.array([getattr(s, a)] * 2) for a in fields), accel=[s.accel] * 2)
         np.testing.assert_array_equal(out.eta[1], online[k])
 
 

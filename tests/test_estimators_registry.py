@@ -69,7 +69,14 @@ def test_batched_form_row_equals_the_single_estimator(name, flight):
 def test_options_build_the_configuration(name):
     spec = ESTIMATORS[name]
     assert config_from_options(name) is None
-    values = {"improved": True, "median": 5, "q_eta": 0.25, "forgetting": 0.95, "prefilter": 0.02}
+    values = {
+        "improved": True,
+        "median": 5,
+        "q_eta": 0.25,
+        "forgetting": 0.95,
+        "prefilter": 0.02,
+        "accelerometer": "on",
+    }
     for key in spec.options:
         cfg = config_from_options(name, **{key: values[key]})
         assert isinstance(cfg, config_class(name)) and cfg != config_class(name)()

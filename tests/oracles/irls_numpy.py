@@ -452,6 +452,12 @@ class OnlineIRLS:
             [x.w for x in r],
             [x.f for x in r],
         )
+        a0 = r[0].accel if len(r[0]) > 6 else None
+        if self.cfg.accelerometer != "off" and a0 is not None:
+            # the thrust rows measured by the accelerometer; the position rows unused
+            seg.r0[0, 0:3] = r[0].R @ np.asarray(a0, float) * seg.dt[0]
+            seg.r0[0, 3:6] = 0.0
+            seg.J[0, 3:6] = 0.0
         tau = self.cfg.prefilter
         if tau > 0 and self.segments:
             a, prev = np.exp(-seg.dt[0] / tau), self.segments[-1]
