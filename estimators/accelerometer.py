@@ -55,9 +55,7 @@ def check_mode(owner: str, value) -> str:
     if value is False:
         return "off"
     if value not in MODES:
-        raise ConfigError(
-            f"{owner}.accelerometer must be one of {', '.join(MODES)}, got {value!r}"
-        )
+        raise ConfigError(f"{owner}.accelerometer must be one of {', '.join(MODES)}, got {value!r}")
     return value
 
 

@@ -525,9 +525,7 @@ def irls_update(t, p, v, R, w, f, a, const, fp, ip, fs, ks, hist, beyond, any_n)
     S = state_pieces(fs, ip, ks.shape[0])
     row = ks.shape[0] - 1  # 0, a run-time value like the batch's rows
     arrays = constant_arrays(const, ip)
-    return irls_step(
-        t, p, v, R, w, f, a, const, arrays, fp, ip, S, ks, row, hist, beyond, any_n
-    )
+    return irls_step(t, p, v, R, w, f, a, const, arrays, fp, ip, S, ks, row, hist, beyond, any_n)
 
 
 @jit

@@ -186,9 +186,7 @@ class IRLSConfig:
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ConfigError(f"IRLS setting {key} must be an integer >= 1, got {value!r}")
-        object.__setattr__(
-            self, "accelerometer", check_mode("IRLSConfig", self.accelerometer)
-        )
+        object.__setattr__(self, "accelerometer", check_mode("IRLSConfig", self.accelerometer))
         if not isinstance(self.change_completion, bool):
             raise ConfigError(
                 f"IRLS change_completion must be True or False, got {self.change_completion!r}"

@@ -39,8 +39,8 @@ from estimators.base import (
     check_num,
     command_limit,
     reset_rows,
-    sample_accel,
     run_rows,
+    sample_accel,
     sample_arrays,
 )
 from estimators.state import FlatState, Layout

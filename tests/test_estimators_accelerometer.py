@@ -63,9 +63,9 @@ def test_the_accelerometer_rows_measure_the_thrust_better_than_differenced_veloc
     model = np.einsum("kaj,kj->ka", seg.J[:, 0:3], eta)
     from_velocity = (seg.r0[:, 0:3] + model) / seg.dt[:, None]
     fresh = np.r_[True, np.any(rec.accel[1:-1] != rec.accel[:-2], axis=1)]  # no held reading
-    from_accel = np.einsum("kab,kb->ka", rec.rotation[:-1], rec.accel[:-1]) + model / seg.dt[
-        :, None
-    ]
+    from_accel = (
+        np.einsum("kab,kb->ka", rec.rotation[:-1], rec.accel[:-1]) + model / seg.dt[:, None]
+    )
     v_err = np.sqrt(np.mean(from_velocity**2))
     a_err = np.sqrt(np.mean(from_accel[fresh] ** 2))
     assert a_err < 0.1 * v_err, (a_err, v_err)

@@ -10,7 +10,9 @@ For each sensor noise (``--noise``, repeatable: ``none``, a preset name of
 it flies the four scenarios of ``quadfault reproduce`` (degradation, abrupt, combined,
 clipping; sigma_f = 0.07, the clipping flight saturated) and runs every estimator as
 ``quadfault estimate`` runs it by default (``irls``: the paper's; ``irls --improved``; ``ekf``,
-``rls``, ``ukf``). It prints, as means over the seeds:
+``rls``, ``ukf``), and the IRLS and the RLS with their thrust rows from the accelerometer
+(``--accelerometer on``; ``irls --improved`` uses it by default). It prints, as means over the
+seeds:
 
 * RMSE: the motor-averaged RMSE of :func:`estimators.metrics.score` (warm-up excluded), per
   scenario; target <= 0.04;
@@ -40,9 +42,11 @@ import numpy as np
 
 ESTIMATORS = {
     "irls": ("irls", {}),
+    "irls --accelerometer on": ("irls", {"accelerometer": "on"}),
     "irls --improved": ("irls", {"improved": True}),
     "ekf": ("ekf", {}),
     "rls": ("rls", {}),
+    "rls --accelerometer on": ("rls", {"accelerometer": "on"}),
     "ukf": ("ukf", {}),
 }
 SCENARIOS = ("degradation", "abrupt", "combined", "clipping")
