@@ -100,3 +100,23 @@ def test_the_rollout_measures_the_accelerometer_for_its_estimator():
     acc = np.array(seen)
     assert acc.shape == (len(seen), 3) and np.all(np.isfinite(acc))
     assert abs(np.median(acc[:, 2]) + Vehicle().gravity) < 1.0
+
+
+def test_the_vector_envs_improved_irls_reads_the_accelerometer_as_the_single_envs_does():
+    from estimators.irls import IRLSConfig
+
+    kw = {"config": IRLSConfig.improved()}  # accelerometer "auto"
+    vec = QuadFaultVectorEnv(2, "irls", estimator_kwargs=kw, info="full", sensor_noise=NOISE)
+    singles = [
+        QuadFaultEnv("irls", estimator_kwargs=kw, info="full", sensor_noise=NOISE) for _ in range(2)
+    ]
+    vec.reset(seed=3)
+    for i, env in enumerate(singles):
+        env.reset(seed=3 + i)
+    a = np.zeros((2, 4), dtype=np.float32)
+    for _ in range(20):
+        info = vec.step(a)[4]
+        for i, env in enumerate(singles):
+            one = env.step(a[i])[4]
+            np.testing.assert_allclose(info["eta_hat"][i], one["eta_hat"], rtol=0, atol=1e-12)
+    assert info["estimator_status"][0] == "ok"
