@@ -363,17 +363,28 @@ def spread_draws(gens, rows, u):
 
 
 @jit
-def copy_actions(a, out):
-    """The actions ``a`` (N, 4) into ``out``, clipped to [-1, 1]; returns -1, or the first
-    row that is not finite or lies outside [-1, 1] by more than 1e-6 (then
-    ``validate_action`` names the problem)."""
-    for i in range(a.shape[0]):
-        for j in range(a.shape[1]):
-            x = np.float64(a[i, j])
-            if not np.isfinite(x) or abs(x) > 1.0 + 1e-6:
-                return i
-            out[i, j] = min(max(x, -1.0), 1.0)
+def _copy_flat(a, out):
+    """``out[k] = clip(a[k], -1, 1)``; the first ``k`` that is not finite or lies outside
+    [-1, 1] by more than 1e-6, or -1. One pass without a branch (vector instructions), a
+    second only when some number is bad."""
+    bad = False
+    for k in range(a.shape[0]):
+        x = np.float64(a[k])
+        bad |= not abs(x) <= 1.0 + 1e-6  # (NaN and infinities compare False)
+        out[k] = min(max(x, -1.0), 1.0)
+    if bad:
+        for k in range(a.shape[0]):
+            if not abs(np.float64(a[k])) <= 1.0 + 1e-6:
+                return k
     return -1
+
+
+def copy_actions(a: np.ndarray, out: np.ndarray) -> int:
+    """The actions ``a`` (N, m) into ``out`` (N, m, C-contiguous), clipped to [-1, 1];
+    returns -1, or the first row that is not finite or lies outside [-1, 1] by more than
+    1e-6 (then ``validate_action`` names the problem)."""
+    k = _copy_flat(np.ascontiguousarray(a).reshape(-1), out.reshape(-1))
+    return -1 if k < 0 else k // a.shape[1]
 
 
 def _counter() -> np.ndarray:
