@@ -6,6 +6,9 @@ Workloads (each on the same cached recording, 80 s of the combined scenario by d
 * ``online`` / ``online_improved``: the single estimator's ``update()``, one sample per call (what
   the environment runs at every physics substep), reference and ``IRLSConfig.improved()``;
 * ``ekf``: ``MotorEfficiencyEKF.run()`` over the whole flight;
+* ``ekf_accel`` (only when asked, ``--only ekf_accel``: a checkout without the option cannot
+  run it): the same with ``EKFConfig(accelerometer="on")``, its CPU time per update then
+  given relative to the EKF's;
 * ``rls`` / ``ukf``: ``RecursiveLeastSquares.run()`` / ``UnscentedKalmanFilter.run()`` over
   the whole flight; the table then gives each one's CPU time per update relative to the
   EKF's, measured in the same process;
@@ -40,6 +43,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 WORKLOADS = ("run", "online", "online_improved", "ekf", "rls", "ukf", "batched", "batched_improved")
+#: workloads run only when asked (``--only``)
+ASKED = ("ekf_accel",)
 
 
 def cached_flight(
@@ -86,10 +91,10 @@ def _workload(name: str, rec, args):
     if name == "run":
         est = SlidingWindowIRLS(veh, cfg)
         return len(rec), lambda: est.run(rec)
-    if name == "ekf":
-        from estimators.ekf import MotorEfficiencyEKF
+    if name in ("ekf", "ekf_accel"):
+        from estimators.ekf import EKFConfig, MotorEfficiencyEKF
 
-        ekf = MotorEfficiencyEKF(veh)
+        ekf = MotorEfficiencyEKF(veh, EKFConfig(accelerometer="on") if name != "ekf" else None)
         return len(rec), lambda: ekf.run(rec)
     if name in ("rls", "ukf"):
         from estimators.rls import RecursiveLeastSquares
@@ -160,7 +165,9 @@ def child(args) -> None:
 
 # ------------------------------------------------------------------------------------------
 # the parent: alternate checkouts, print medians and ratios
-def _run_child(checkout: Path, args, cold: bool) -> dict:
+def _run_child(checkout: Path, args, cold: bool, asked: bool = True) -> dict:
+    """One child process on ``checkout``; ``asked``: also the workloads run only when asked
+    (:data:`ASKED`; another checkout may not have them)."""
     env = dict(os.environ, PYTHONPATH=str(checkout))
     cmd = [
         sys.executable,
@@ -178,7 +185,8 @@ def _run_child(checkout: Path, args, cold: bool) -> dict:
         str(args.inner),
     ]
     for name in args.only:
-        cmd += ["--only", name]
+        if asked or name not in ASKED:
+            cmd += ["--only", name]
     with tempfile.TemporaryDirectory() as cache:
         if cold:
             cmd.append("--cold")
@@ -204,7 +212,7 @@ def side_by_side(args) -> None:
         cold = {k: [] for k in checkouts}
         for _ in range(args.cold_repeat):
             for k, path in checkouts.items():
-                cold[k].append(_run_child(path, args, cold=True))
+                cold[k].append(_run_child(path, args, cold=True, asked=k == "this"))
         print(
             f"\ncold compile: first call on an empty numba cache [s], median of "
             f"{args.cold_repeat} ({_load()})"
@@ -213,7 +221,7 @@ def side_by_side(args) -> None:
     res = {k: [] for k in checkouts}
     for _ in range(args.repeat):
         for k, path in checkouts.items():
-            res[k].append(_run_child(path, args, cold=False))
+            res[k].append(_run_child(path, args, cold=False, asked=k == "this"))
     print(
         f"\nupdates per second (wall clock), median of {args.repeat} alternating runs ({_load()})"
     )
@@ -224,8 +232,8 @@ def side_by_side(args) -> None:
         for k, runs in res.items():
             ratios = [
                 f"{w} {np.median([r['ekf']['cpu'] / r[w]['cpu'] for r in runs]):.2f}x"
-                for w in ("rls", "ukf")
-                if w in args.only
+                for w in ("rls", "ukf", "ekf_accel")
+                if w in args.only and w in runs[0]
             ]
             if ratios:
                 print(
@@ -249,11 +257,14 @@ def _table(res: dict, value, fmt: str, lower_is_better: bool = False) -> None:
     )
     total = {n: 0.0 for n in names}
     for w in res[names[0]][0]:
-        med = {n: float(np.median([value(r[w]) for r in res[n]])) for n in names}
-        for n in names:
-            total[n] += med[n]
-        line = f"{w:18s}" + "".join(f"{fmt.format(med[n]):>12s}" for n in names)
-        if len(names) > 1:
+        have = [n for n in names if w in res[n][0]]  # (ASKED: this checkout only)
+        med = {n: float(np.median([value(r[w]) for r in res[n]])) for n in have}
+        for n in have:
+            total[n] += med[n] if len(have) == len(names) else 0.0
+        line = f"{w:18s}" + "".join(
+            f"{fmt.format(med[n]) if n in med else '-':>12s}" for n in names
+        )
+        if len(have) > 1:
             line += f"   {med['this'] / med['reference']:.2f}"
         print(line)
     if lower_is_better:
@@ -311,7 +322,7 @@ def main() -> None:
     p.add_argument("--cold-repeat", type=int, default=1)
     p.add_argument(
         "--only",
-        choices=WORKLOADS,
+        choices=WORKLOADS + ASKED,
         action="append",
         help="these workloads only (repeatable; default all)",
     )

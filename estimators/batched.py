@@ -95,12 +95,13 @@ def irls_update_rows(t, p, v, R, w, f, a, const, fp, ip, fs, ks, hist, beyond, a
 
 
 @jit(parallel=True)
-def ekf_update_rows(t, p, v, R, w, f, const, offsets, fs, ks, code):
-    """:func:`estimators.ekf.ekf_step` of every row, in parallel; status codes into
-    ``code``."""
+def ekf_update_rows(t, p, v, R, w, f, a, const, offsets, fs, ks, code):
+    """:func:`estimators.ekf.ekf_step` of every row, in parallel (``a`` (N, 3): the
+    accelerometer's readings); status codes into ``code``."""
     for i in prange(ks.shape[0]):
+        sf = (a[i, 0], a[i, 1], a[i, 2])
         code[i] = ekf_update_row(
-            t[i], p[i], v[i], R[i], w[i], f[i], const, offsets, fs, ks, np.int64(i)
+            t[i], p[i], v[i], R[i], w[i], f[i], sf, const, offsets, fs, ks, np.int64(i)
         )
 
 
@@ -213,6 +214,8 @@ class BatchedEKF:
         self._const = ekf_constants(vehicle, self.config)
         self._state = EKFState(vehicle.n_rotors, self.num)
         self._code = np.zeros(self.num, dtype=np.int64)
+        self._no_accel = np.full((self.num, 3), np.nan)  # no accelerometer readings
+        self._said_missing = False
         self.reset()
 
     @property
@@ -233,11 +236,20 @@ class BatchedEKF:
 
     def update(self, t, p, v, R, w, f, accel=None) -> BatchedEstimate:
         """One predict (previous sample's command held) and one update per vehicle
-        (``accel``: the vehicles' accelerometer readings (N, 3), or None; not used yet)."""
+        (``accel`` (N, 3): their accelerometer readings, body FRD [m/s^2], or None; needed
+        with ``EKFConfig.accelerometer``)."""
         t, p, v, R, w, f = batch_arrays(self.num, self.vehicle.n_rotors, t, p, v, R, w, f)
-        batch_accel(self.num, accel)
+        accel = batch_accel(self.num, accel)
+        a = self._no_accel
+        if accel is not None and self.config.accelerometer != "off":
+            a = accel
+        elif self.config.accelerometer == "on" and not self._said_missing:
+            warn_missing("BatchedEKF", "a batched sample")
+            self._said_missing = True
         st = self._state
-        ekf_update_rows(t, p, v, R, w, f, self._const, st.offsets, st.floats, st.ints, self._code)
+        ekf_update_rows(
+            t, p, v, R, w, f, a, self._const, st.offsets, st.floats, st.ints, self._code
+        )
         init = st.ints[:, EKF_COUNTERS.initialised, None] == 1
         eta = np.where(init, st.views.x[:, X.eta :], st.views.eta0)
         diag = np.diagonal(st.views.P, axis1=1, axis2=2)[:, X.eta :]

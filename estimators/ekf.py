@@ -39,6 +39,7 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
+from estimators.accelerometer import NO_ACCEL, check_mode, recording_accel, warn_missing
 from estimators.base import (
     BAD_SAMPLE,
     NO_EXCITATION,
@@ -49,6 +50,7 @@ from estimators.base import (
     EstimateSeries,
     Sample,
     command_limit,
+    sample_accel,
     sample_arrays,
 )
 from estimators.ekf_filter import (
@@ -66,8 +68,14 @@ from estimators.ekf_filter import (
     Y,
     predict_update_into,
 )
-from estimators.freshness import SAMPLE, fresh_since, measurement_variances_into, remember_into
-from estimators.options import check_bounds, check_positive, from_options
+from estimators.freshness import (
+    SAMPLE,
+    accel_fresh,
+    fresh_since,
+    measurement_variances_into,
+    remember_into,
+)
+from estimators.options import check_bounds, check_finite, check_positive, from_options
 from estimators.recursive import recording_arrays, run_filter
 from estimators.state import (
     FlatState,
@@ -117,6 +125,20 @@ class EKFConfig:
             use (as IRLS does: a saturated rotor cannot deliver its command; ``run(recording)``
             clips above only when the recording does not say its flight was unsaturated,
             :func:`estimators.base.command_limit`); ``False`` = the reference code.
+        accelerometer: beyond the paper: also measure the accelerometer's body-z specific
+            force, ``-T(eta) / m`` for the sample's own command (the thrust it feels), one
+            row linear in the efficiencies (docs/ekf.md, "Accelerometer";
+            :mod:`estimators.accelerometer`): ``"off"`` not (the paper), ``"auto"`` wherever
+            a sample has a reading, ``"on"`` the same, and a recording or sample without one
+            is said once. True / False mean ``"on"`` / ``"off"``.
+        r_accel: that row's measurement-noise variance [(m/s^2)^2] at zero thrust: the
+            accelerometer's noise and vibration.
+        accel_scatter: the relative scatter [1] of each rotor's thrust about what the filter
+            predicts from its command: the row's variance grows by
+            ``accel_scatter^2 sum_j (A[0, j] f_j / m)^2``. The default is larger than the
+            log-thrust noise of the simulator (0.07): the same scatter moves the velocity and
+            the rate the filter predicts, which its process noise does not carry
+            (docs/ekf.md, "Accelerometer").
     """
 
     q_eta: float = 0.5
@@ -132,8 +154,12 @@ class EKFConfig:
     eta0: float | tuple = 1.0
     eta_bounds: tuple | None = (-0.001, 1.2)
     clip_commands: bool = True
+    accelerometer: str = "off"
+    r_accel: float = 0.1
+    accel_scatter: float = 0.5
 
     def __post_init__(self):
+        object.__setattr__(self, "accelerometer", check_mode("EKFConfig", self.accelerometer))
         check_positive(
             self,
             "q_eta",
@@ -145,15 +171,22 @@ class EKFConfig:
             "r_velocity",
             "r_rate",
             "r_attitude",
+            "r_accel",
             "p0",
         )
         check_bounds("EKFConfig", self.eta_bounds)
+        check_finite(self, "accel_scatter")
+        if self.accel_scatter < 0:
+            raise ConfigError(f"EKFConfig.accel_scatter must be >= 0, got {self.accel_scatter!r}")
 
     @classmethod
-    def from_options(cls, q_eta: float | None = None) -> EKFConfig:
+    def from_options(
+        cls, q_eta: float | None = None, accelerometer: str | bool | None = None
+    ) -> EKFConfig:
         """The configuration of ``quadfault estimate``'s options (the registry's
-        ``from_options``): ``q_eta`` the efficiency random walk per 1 ms step."""
-        return from_options(cls, q_eta=q_eta)
+        ``from_options``): ``q_eta`` the efficiency random walk per 1 ms step,
+        ``accelerometer`` the accelerometer's row (:data:`estimators.accelerometer.MODES`)."""
+        return from_options(cls, q_eta=q_eta, accelerometer=accelerometer)
 
     @classmethod
     def reference(cls, **changes) -> EKFConfig:
@@ -178,6 +211,8 @@ FLOATS = Layout(
     eta_keep=("n",),
     P_keep=("n", "n"),
     last_z=(SAMPLE.size, 3),  # the previous sample (estimators.freshness)
+    last_a=(3,),  # the previous accelerometer reading
+    ha=("n",),  # the accelerometer row's Jacobian on the efficiencies
     r_now=(Y.size,),  # the measurement variances of this update
     **WORKSPACE.declared,
 )
@@ -185,9 +220,10 @@ F = FLOATS.index
 EKFPieces = FLOATS.pieces
 #: the int state: 1 once the first good sample set the kinematic states
 COUNTERS = fields("EKFCounters", "initialised")
-#: the constants: scalars, the inertia and its inverse, the measurement-noise variances
-#: ``r``; last the arrays sized by the rotors: the allocation ``A`` (4, n), then the
-#: process-noise variance rates ``qc`` (ns,) [1/s] (:func:`constant_arrays`)
+#: the constants: scalars (``accel`` 1: measure the accelerometer), the inertia and its
+#: inverse, the measurement-noise variances ``r``; last the arrays sized by the rotors: the
+#: allocation ``A`` (4, n), then the process-noise variance rates ``qc`` (ns,) [1/s]
+#: (:func:`constant_arrays`)
 CONSTANTS = fields(
     "EKFConstants",
     "mass",
@@ -197,6 +233,8 @@ CONSTANTS = fields(
     "lo",
     "hi",
     "p0",
+    "accel",
+    "scatter",
     ("J", 9),
     ("Jinv", 9),
     ("r", Y.size),
@@ -229,6 +267,8 @@ def state_pieces(fs, offsets, n, N):
         eta_keep=piece_rows(fs, o[F.eta_keep], o[F.eta_keep + 1], N),
         P_keep=piece(fs, o, F.P_keep, (N, n, n)),
         last_z=piece(fs, o, F.last_z, (N, SAMPLE.size, 3)),
+        last_a=piece_rows(fs, o[F.last_a], o[F.last_a + 1], N),
+        ha=piece_rows(fs, o[F.ha], o[F.ha + 1], N),
         r_now=piece_rows(fs, o[F.r_now], o[F.r_now + 1], N),
         mats=piece(fs, o, F.mats, (N, MATS.size, ns, ns)),
         blocks=piece(fs, o, F.blocks, (N, BLOCKS.size, 3, 3)),
@@ -239,7 +279,7 @@ def state_pieces(fs, offsets, n, N):
         dR=piece(fs, o, F.dR, (N, N_VEC_R, 3)),
         Z=piece(fs, o, F.Z, (N, 3, ns)),
         y=piece_rows(fs, o[F.y], o[F.y + 1], N),
-        HR=piece(fs, o, F.HR, (N, nm - Y.R, N_VEC_R)),
+        HR=piece(fs, o, F.HR, (N, Y.a - Y.R, N_VEC_R)),
         HP=piece(fs, o, F.HP, (N, nm, ns)),
         WT=piece(fs, o, F.WT, (N, ns, nm)),
     )
@@ -264,6 +304,11 @@ def workspace_row(S, i):
     )
 
 
+@jit(inline="always")
+def _finite3(a) -> bool:
+    return math.isfinite(a[0]) and math.isfinite(a[1]) and math.isfinite(a[2])
+
+
 @jit
 def constant_arrays(const, n):
     """The filter's :class:`~estimators.ekf_filter.Model` from the constants (views of
@@ -284,14 +329,17 @@ def constant_arrays(const, n):
 
 
 @jit
-def ekf_step(t, p, v, R, w, f, const, model, S, ks, i) -> int:
+def ekf_step(t, p, v, R, w, f, sf, const, model, S, ks, i) -> int:
     """One sample into filter ``i`` of the state ``(S, ks)`` (:func:`state_pieces`), in place;
     returns the status code. A non-finite sample or a time not after the previous one is
     skipped (``bad_sample``); the first good sample sets the kinematic states (``warmup``);
     later ones predict from the previous sample, its command held, and update
     (:func:`predict_update_into`); a step whose command had an idle rotor (``<= IDLE_THRUST``)
     keeps the efficiencies, decorrelated, their variance grown by ``Q_eta dt``
-    (``no_excitation``). ``model`` is :func:`constant_arrays` of ``const``."""
+    (``no_excitation``). ``model`` is :func:`constant_arrays` of ``const``. ``sf``: the
+    accelerometer's reading (3 floats) [m/s^2], body FRD, read only when the constants say so
+    (``accel``); a non-finite or held reading (:func:`estimators.freshness.accel_fresh`)
+    is not measured."""
     n = f.shape[0]
     ns = X.size + n
     x, P, last_t, last_f = S.x[i], S.P[i], S.last_t[i], S.last_f[i]
@@ -339,9 +387,18 @@ def ekf_step(t, p, v, R, w, f, const, model, S, ks, i) -> int:
         step_model = Model(
             model.rigid, model.J, model.Jinv, model.A, model.qc, r_now, model.lo, model.hi
         )
-        predict_update_into(
-            x, P, last_f, dt, Measurement(p, v, w, R), step_model, workspace_row(S, i)
-        )
+        # the accelerometer: the body-z specific force of this sample's command, -T(eta) / m
+        ha, rows = last_f, Y.a  # (ha unread without the accelerometer)
+        if const[CONSTANTS.accel] != 0.0 and _finite3(sf) and accel_fresh(sf, S.last_a[i], v):
+            ha, rows = S.ha[i], Y.size
+            h2 = 0.0
+            for j in range(n):
+                fj = min(max(f[j], 0.0), f_max) if clip else f[j]
+                ha[j] = -model.A[0, j] * fj / const[CONSTANTS.mass]
+                h2 += ha[j] * ha[j]
+            r_now[Y.a] += const[CONSTANTS.scatter] * const[CONSTANTS.scatter] * h2
+        z = Measurement(p, v, w, R, sf[2], ha, rows)
+        predict_update_into(x, P, last_f, dt, z, step_model, workspace_row(S, i))
         code = OK
         if idle:  # the efficiencies stay, decorrelated; their variance grows by Q_eta dt
             for j in range(n):
@@ -355,6 +412,9 @@ def ekf_step(t, p, v, R, w, f, const, model, S, ks, i) -> int:
             code = NO_EXCITATION
     last_t[0] = t
     remember_into(S.last_z[i], p, v, R, w)
+    if const[CONSTANTS.accel] != 0.0:
+        for k in range(3):
+            S.last_a[i][k] = sf[k]
     for j in range(n):
         last_f[j] = min(max(f[j], 0.0), f_max) if clip else f[j]
     return code
@@ -368,33 +428,35 @@ def ekf_reset(ip_offsets, n, fs, ks, rows, eta0) -> None:
 
 
 @jit
-def ekf_update_row(t, p, v, R, w, f, const, offsets, fs, ks, i) -> int:
+def ekf_update_row(t, p, v, R, w, f, sf, const, offsets, fs, ks, i) -> int:
     """:func:`ekf_step` of filter ``i`` of the state ``(fs, ks)``, its pieces and model formed
-    here (a batch's rows run it under ``prange``: the records are formed inside the loop)."""
+    here (a batch's rows run it under ``prange``: the records are formed inside the loop);
+    ``sf`` the accelerometer's reading (3 floats)."""
     S = state_pieces(fs, offsets, f.shape[0], ks.shape[0])
-    return ekf_step(t, p, v, R, w, f, const, constant_arrays(const, f.shape[0]), S, ks, i)
+    return ekf_step(t, p, v, R, w, f, sf, const, constant_arrays(const, f.shape[0]), S, ks, i)
 
 
 @jit
-def ekf_update(t, p, v, R, w, f, const, offsets, fs, ks) -> int:
+def ekf_update(t, p, v, R, w, f, a, const, offsets, fs, ks) -> int:
     """:func:`ekf_step` of a single filter (the online update)."""
     return ekf_update_row(
-        t, p, v, R, w, f, const, offsets, fs, ks, ks.shape[0] - 1
+        t, p, v, R, w, f, (a[0], a[1], a[2]), const, offsets, fs, ks, ks.shape[0] - 1
     )  # row 0, a run-time value like the batch's rows
 
 
 @jit
-def ekf_run(t, p, v, R, w, f, const, offsets, fs, ks, eta, sd, code) -> None:
+def ekf_run(t, p, v, R, w, f, a, const, offsets, fs, ks, eta, sd, code) -> None:
     """:func:`ekf_step` over the rows of a recording (a single filter's state): the estimate
     (the initial efficiency before the first good sample), its sd (NaN before it) and the
-    status code of every row."""
+    status code of every row. ``a``: the accelerometer's rows (len(t), 3)."""
     n = f.shape[1]
     S = state_pieces(fs, offsets, n, ks.shape[0])
     row = ks.shape[0] - 1  # 0, a run-time value like the batch's rows
     x, P, eta0 = S.x[row], S.P[row], S.eta0[row]
     model = constant_arrays(const, n)
     for k in range(t.shape[0]):
-        code[k] = ekf_step(t[k], p[k], v[k], R[k], w[k], f[k], const, model, S, ks, row)
+        sf = (a[k, 0], a[k, 1], a[k, 2])  # (scalars: no view per row)
+        code[k] = ekf_step(t[k], p[k], v[k], R[k], w[k], f[k], sf, const, model, S, ks, row)
         for j in range(n):
             if ks[row, COUNTERS.initialised] == 1:
                 eta[k, j] = x[X.eta + j]
@@ -430,6 +492,7 @@ class MotorEfficiencyEKF:
         #: measurement-noise variances (p, v, Omega, attitude rows)
         self.r_diag = measurement_noise(cfg)
         self._state = EKFState(self.n_rotors)
+        self._said_missing = False  # accelerometer "on" and a sample without one: said once
         self.reset()
 
     @property
@@ -464,10 +527,19 @@ class MotorEfficiencyEKF:
         return Estimate(t=float(t), eta=eta, sd=sd, status=STATUSES[code])
 
     def update(self, sample: Sample) -> Estimate:
-        """One predict (from the previous sample, its command held) and one update."""
+        """One predict (from the previous sample, its command held) and one update (with
+        the sample's accelerometer reading when configured so)."""
         t, p, v, R, w, f = sample_arrays(sample, self.n_rotors, "EKF")
+        a = NO_ACCEL
+        if self.config.accelerometer != "off":
+            a = sample_accel(sample, "EKF")
+            if a is None:
+                a = NO_ACCEL
+                if self.config.accelerometer == "on" and not self._said_missing:
+                    warn_missing("EKF", f"the sample at t = {t}")
+                    self._said_missing = True
         st = self._state
-        code = ekf_update(t, p, v, R, w, f, self._const, st.offsets, st.floats, st.ints)
+        code = ekf_update(t, p, v, R, w, f, a, self._const, st.offsets, st.floats, st.ints)
         return self._estimate(t, code)
 
     def run(self, recording: Recording, progress: bool = False) -> EstimateSeries:
@@ -475,6 +547,7 @@ class MotorEfficiencyEKF:
         the filter is left at the end of the recording."""
         start = time.perf_counter()
         arrays = recording_arrays(recording, self.n_rotors, self.name)
+        arrays = (*arrays, recording_accel(recording, self.config.accelerometer, self.name))
         const = self._const.copy()
         const[CONSTANTS.f_max] = command_limit(recording, self.vehicle)  # its saturation
         self.reset(self._state.views.eta0[0].copy())
@@ -513,13 +586,14 @@ def process_noise(cfg: EKFConfig, n: int) -> np.ndarray:
 
 def measurement_noise(cfg: EKFConfig) -> np.ndarray:
     """The measurement-noise variances of the rows :data:`Y` (the attitude's value on each
-    of its 3 rows)."""
+    of its 3 rows; the accelerometer's row last)."""
     return pack(
         Y,
         p=np.full(3, cfg.r_position),
         v=np.full(3, cfg.r_velocity),
         w=np.full(3, cfg.r_rate),
         R=np.full(3, cfg.r_attitude),
+        a=np.full(1, cfg.r_accel),
     )
 
 
@@ -543,6 +617,8 @@ def ekf_constants(vehicle: Vehicle, cfg: EKFConfig) -> np.ndarray:
         lo=lo,
         hi=hi,
         p0=cfg.p0,
+        accel=float(cfg.accelerometer != "off"),
+        scatter=cfg.accel_scatter,
         J=vehicle.inertia,
         Jinv=vehicle.inertia_inverse,
         r=r,

@@ -57,8 +57,9 @@ X = fields(
     "EKFStates", ("p", 3), ("v", 3), ("w", 3), ("Re1", 3), ("Re2", 3), ("Re3", 3), ("eta", 0)
 )
 #: rows of the measurement: position, velocity, rate (each reads its state: ``H = I`` there),
-#: then the attitude's rotation error
-Y = fields("EKFMeasurementRows", ("p", 3), ("v", 3), ("w", 3), ("R", 3))
+#: the attitude's rotation error, then the accelerometer's body-z specific force (used only
+#: on an update that measures it: the first :data:`Y`\ ``.a`` rows otherwise)
+Y = fields("EKFMeasurementRows", ("p", 3), ("v", 3), ("w", 3), ("R", 3), ("a", 1))
 N_VEC_R = X.eta - X.Re1  # the entries of vec(R)
 assert (X.p, X.v, X.w) == (Y.p, Y.v, Y.w) and X.Re1 == Y.R  # rows that read their state
 #: the workspace's scratch arrays by name, in the order of the stages that write them (the
@@ -103,7 +104,7 @@ WORKSPACE = Layout(
     dR=(N_VEC_R, 3),
     Z=(3, "ns"),
     y=(Y.size,),
-    HR=(Y.size - Y.R, N_VEC_R),
+    HR=(Y.a - Y.R, N_VEC_R),
     HP=(Y.size, "ns"),
     WT=("ns", Y.size),
 )
@@ -181,12 +182,19 @@ def scratch(work) -> Scratch:
 
 class Measurement(NamedTuple):
     """What the update measures: position ``p`` [m], velocity ``v`` [m/s] (world), body rate
-    ``w`` [rad/s] (3,) each, attitude ``R`` (3, 3) body -> world."""
+    ``w`` [rad/s] (3,) each, attitude ``R`` (3, 3) body -> world; with ``rows`` =
+    ``Y.size`` also the accelerometer's body-z specific force ``a`` [m/s^2], whose model is
+    linear in the efficiencies, ``a = ha . eta`` (``ha`` (n,): ``-A[0, j] f_j / m`` for the
+    command ``f`` of the sample, the thrust the accelerometer feels); ``rows`` = ``Y.a``: no
+    accelerometer (``a``, ``ha`` unused)."""
 
     p: np.ndarray
     v: np.ndarray
     w: np.ndarray
     R: np.ndarray
+    a: float = 0.0
+    ha: np.ndarray = np.zeros(0)
+    rows: int = Y.a
 
 
 class Model(NamedTuple):
@@ -487,7 +495,7 @@ def predict_covariance(P, F, qc, dt, work):
 
 
 @jit(inline="always")
-def innovation(z, work):
+def innovation(z, work, nm):
     """The innovation ``y = z - h(x_pred)`` into ``work.y`` and the attitude rows of
     ``H = [I_9 0; 0 HR 0]`` into ``work.HR``. Position, velocity and rate read their states;
     the attitude's is the rotation error ``log(R_pred^T R_meas)``, whose Jacobian ``HR`` is
@@ -508,6 +516,11 @@ def innovation(z, work):
     cs = 0.5 * (dRz[0, 0] + dRz[1, 1] + dRz[2, 2] - 1.0)
     scale = 1.0 if sn < 1e-12 else math.atan2(sn, cs) / sn
     y[Y.R], y[Y.R + 1], y[Y.R + 2] = s0 * scale, s1 * scale, s2 * scale
+    if nm > Y.a:  # the accelerometer: a = ha . eta
+        acc = z.a
+        for j in range(z.ha.shape[0]):
+            acc -= z.ha[j] * xp[X.eta + j]
+        y[Y.a] = acc
     for k in range(3):
         for i in range(N_VEC_R):
             HR[k, i] = 0.0
@@ -518,18 +531,19 @@ def innovation(z, work):
 
 
 @jit(inline="always")
-def innovation_covariance(work):
+def innovation_covariance(z, work, nm):
     """``H P_pred`` into ``work.HP`` and the lower triangle of ``S = H P_pred H^T`` into
-    ``work.S`` (``R = diag(r)`` is added where ``S`` is factored, :func:`whitened_gain`).
-    ``H = [I_9 0; 0 HR 0]``: ``H P`` reads rows of ``P``, the attitude rows go through
-    ``HR``."""
+    ``work.S`` (``R = diag(r)`` is added where ``S`` is factored, :func:`whitened_gain`), on
+    the ``nm`` rows measured. ``H = [I_9 0; 0 HR 0; 0 ha^T]``: ``H P`` reads rows of
+    ``P``, the attitude rows go through ``HR``, the accelerometer's through ``z.ha`` on the
+    efficiencies."""
     Pp, HR, HP, S = work.Pp, work.HR, work.HP, work.S
     ns = Pp.shape[0]
-    nm, nd = Y.size, Y.R  # measurement rows, those that read their state (H = I there)
+    nd = Y.R  # the rows that read their state (H = I there)
     for i in range(nd):
         for k in range(ns):
             HP[i, k] = Pp[i, k]
-    for i in range(nm - nd):
+    for i in range(Y.a - nd):
         for k in range(ns):
             HP[nd + i, k] = 0.0
         for j in range(N_VEC_R):
@@ -537,26 +551,39 @@ def innovation_covariance(work):
             if h != 0.0:
                 for k in range(ns):
                     HP[nd + i, k] += h * Pp[X.Re1 + j, k]
+    if nm > Y.a:
+        ha = z.ha
+        for k in range(ns):
+            acc = 0.0
+            for j in range(ha.shape[0]):
+                acc += ha[j] * Pp[X.eta + j, k]
+            HP[Y.a, k] = acc
     for i in range(nm):
         for k in range(min(i + 1, nd)):
             S[i, k] = HP[i, k]
-        for k in range(nd, i + 1):
+        for k in range(nd, min(i + 1, Y.a)):
             acc = 0.0
             for j in range(N_VEC_R):
                 acc += HP[i, X.Re1 + j] * HR[k - nd, j]
             S[i, k] = acc
+        if i == Y.a:
+            acc = 0.0
+            for j in range(z.ha.shape[0]):
+                acc += HP[i, X.eta + j] * z.ha[j]
+            S[i, i] = acc
 
 
 @jit(inline="always")
-def whitened_gain(r, work) -> bool:
+def whitened_gain(r, work, nm) -> bool:
     """The gain ``K = P_pred H^T S^-1`` in its square-root form, with ``S + diag(r) = L L^T``
     (:func:`estimators.linalg.cholesky_into`, ``r`` its shift): ``K = W^T L^-1`` with
     ``W = L^-1 H P_pred`` (``work.HP`` becomes ``W``, forward substitution on whole rows)
     and the whitened innovation ``L^-1 y`` (``work.y``). False, with nothing changed but
-    ``work.L``, when ``S`` is not positive definite (a corrupted covariance)."""
+    ``work.L``, when ``S`` is not positive definite (a corrupted covariance). ``nm``: the
+    rows measured."""
     HP, L, y = work.HP, work.L, work.y
-    ns, nm = HP.shape[1], Y.size
-    if not cholesky_into(work.S, r, L, work.S.shape[0]):
+    ns = HP.shape[1]
+    if not cholesky_into(work.S, r, L, nm):
         return False
     for i in range(nm):  # W = L^-1 H P
         for k in range(i):
@@ -575,20 +602,20 @@ def whitened_gain(r, work) -> bool:
 
 
 @jit(inline="always")
-def update_state(x, work):
-    """``x = x_pred + K y = x_pred + W^T (L^-1 y)`` (:func:`whitened_gain`); ``work.WT``
-    becomes ``W^T``."""
+def update_state(x, work, nm):
+    """``x = x_pred + K y = x_pred + W^T (L^-1 y)`` (:func:`whitened_gain`, ``nm`` rows);
+    ``work.WT`` becomes ``W^T``."""
     xp, W, WT, y = work.xp, work.HP, work.WT, work.y
     for i in range(x.shape[0]):
         acc = 0.0
-        for c in range(Y.size):
+        for c in range(nm):
             WT[i, c] = W[c, i]
             acc += W[c, i] * y[c]
         x[i] = xp[i] + acc
 
 
 @jit(inline="always")
-def update_covariance(P, work):
+def update_covariance(P, work, nm):
     """``P = (I - K H) P_pred = P_pred - K S K^T = P_pred - W^T W`` (after
     :func:`update_state`): the optimal gain's covariance, equal to the Joseph form
     ``(I - K H) P (I - K H)^T + K R K^T`` for this gain up to rounding; symmetric by
@@ -598,7 +625,7 @@ def update_covariance(P, work):
     for i in range(P.shape[0]):
         for k in range(i + 1):
             acc = 0.0
-            for c in range(Y.size):
+            for c in range(nm):
                 acc += WT[i, c] * WT[k, c]
             P[i, k] = Pp[i, k] - acc
             P[k, i] = P[i, k]
@@ -631,17 +658,28 @@ def predict_update_into(x, P, f, dt, z, model, work):
     T, w, jw, phi, E = predict_state(x, f, dt, model, work)  # x_pred = f(x, u), eqs. 1-4, 12
     F = transition_blocks(f, dt, model, T, w, jw, phi, E, work)  # F = d f / d x
     predict_covariance(P, F, model.qc, dt, work)  # P_pred = F P F^T + Q
-    innovation(z, work)  # y = z - h(x_pred), H = d h / d x
-    innovation_covariance(work)  # S = H P_pred H^T (+ R)
-    if whitened_gain(model.r, work):  # K = P_pred H^T S^-1 = W^T L^-1
-        update_state(x, work)  # x = x_pred + K y
-        update_covariance(P, work)  # P = P_pred - K S K^T
+    if z.rows == Y.a:  # (each with its rows' count known when compiled)
+        measurement_update(x, P, z, model, work, Y.a)
+    else:
+        measurement_update(x, P, z, model, work, Y.size)
+    project_and_clamp(x, model.lo, model.hi, work)
+
+
+@jit(inline="always")
+def measurement_update(x, P, z, model, work, nm):
+    """The update with the ``nm`` rows of ``z`` measured (:data:`Y`; ``Y.a``: without the
+    accelerometer), after the predict (:func:`predict_update_into`)."""
+    innovation(z, work, nm)  # y = z - h(x_pred), H = d h / d x
+    innovation_covariance(z, work, nm)  # S = H P_pred H^T (+ R)
+    if whitened_gain(model.r, work, nm):  # K = P_pred H^T S^-1 = W^T L^-1
+        update_state(x, work, nm)  # x = x_pred + K y
+        update_covariance(P, work, nm)  # P = P_pred - K S K^T
     else:  # S not positive definite: the general solver
-        S, nm, ns = work.S, Y.size, x.shape[0]
+        S, ns = work.S, x.shape[0]
         for i in range(nm):
             S[i, i] += model.r[i]
-        _update_general(x, P, work.xp, work.Pp, work.y, work.HP, S, work.WT.reshape((nm, ns)))
-    project_and_clamp(x, model.lo, model.hi, work)
+        KT = work.WT.ravel()[: nm * ns].reshape((nm, ns))
+        _update_general(x, P, work.xp, work.Pp, work.y[:nm], work.HP[:nm], S[:nm, :nm], KT)
 
 
 @jit

@@ -99,6 +99,14 @@ def fresh_streams(p, v, R, w, last_p, last_v, last_R, last_w) -> int:
 
 
 @jit(inline="always")
+def accel_fresh(a, last_a, v) -> bool:
+    """Whether the accelerometer's reading ``a`` is fresh: not bit-identical to the previous
+    reading ``last_a``, or the vehicle at rest (the velocity ``v`` exactly zero: a still
+    vehicle's specific force repeats)."""
+    return _zero3(v) or not _same3(a, last_a)
+
+
+@jit(inline="always")
 def measurement_variances_into(r, fresh, rows_p, rows_v, rows_R, rows_w, out) -> bool:
     """The measurement variances of one Kalman update into ``out``: ``r`` where the row's
     stream is fresh in the mask ``fresh``, :data:`HELD_VARIANCE` where it is held. ``rows_*``:

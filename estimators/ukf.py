@@ -24,7 +24,10 @@ One update per sample, from row k-1 to row k over ``dt_k`` with the command of r
 * update with the measured ``z = [v_k; Omega_k]``: the measurement is linear (``H = [I_6 0]``),
   so the unscented update equals the Kalman update of the predicted moments, done in the
   square-root form of the optimal gain (as the EKF's): ``S = P_zz + R = L L^T``,
-  ``W = L^-1 P_zx``, ``x += W^T L^-1 (z - x_z)``, ``P -= W^T W``;
+  ``W = L^-1 P_zx``, ``x += W^T L^-1 (z - x_z)``, ``P -= W^T W``; with the accelerometer
+  (``UKFConfig.accelerometer``, as the EKF's: docs/ekf.md, "Accelerometer") one more row,
+  the body-z specific force ``-T(eta) / m = h . eta`` of the sample's own command, also
+  linear;
 * the efficiencies are clamped to ``eta_bounds`` (as the EKF's, up to 1.2).
 
 Online rules, as the EKF's: a non-finite sample or a time not after the previous one is
@@ -48,6 +51,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from estimators.accelerometer import check_mode
 from estimators.base import (
     BAD_SAMPLE,
     ILL_CONDITIONED,
@@ -56,7 +60,13 @@ from estimators.base import (
     WARMUP,
 )
 from estimators.ekf import IDLE_THRUST, NOISE_REFERENCE_DT
-from estimators.freshness import SAMPLE, fresh_since, measurement_variances_into, remember_into
+from estimators.freshness import (
+    SAMPLE,
+    accel_fresh,
+    fresh_since,
+    measurement_variances_into,
+    remember_into,
+)
 from estimators.linalg import cholesky_into
 from estimators.options import check_bounds, check_finite, check_positive, from_options
 from estimators.recursive import BatchedRecursive, RecursiveEstimator, _Kernels
@@ -91,6 +101,8 @@ class UKFConfig:
             filter's state on every healthy rotor and biases it low, the more so the noisier
             the sensors (docs/ekf.md, "Bounds").
         clip_commands: clip the commanded thrusts to ``[0, rotor_max_thrust]`` (as IRLS).
+        accelerometer, r_accel, accel_scatter: the accelerometer's row, as the EKF's
+            (:class:`estimators.ekf.EKFConfig`; ``"off"``: the filter without it).
     """
 
     q_eta: float = 0.5
@@ -105,11 +117,19 @@ class UKFConfig:
     eta0: float | tuple = 1.0
     eta_bounds: tuple | None = (-0.001, 1.2)
     clip_commands: bool = True
+    accelerometer: str = "off"
+    r_accel: float = 0.1
+    accel_scatter: float = 0.5
 
     def __post_init__(self):
-        check_positive(self, "q_eta", "q_velocity", "q_rate", "r_velocity", "r_rate", "p0", "alpha")
-        check_finite(self, "beta", "kappa")
+        check_positive(
+            self, "q_eta", "q_velocity", "q_rate", "r_velocity", "r_rate", "r_accel", "p0", "alpha"
+        )
+        check_finite(self, "beta", "kappa", "accel_scatter")
         check_bounds("UKFConfig", self.eta_bounds)
+        if self.accel_scatter < 0:
+            raise ConfigError(f"UKFConfig.accel_scatter must be >= 0, got {self.accel_scatter!r}")
+        object.__setattr__(self, "accelerometer", check_mode("UKFConfig", self.accelerometer))
 
     def weights(self, n: int) -> tuple[float, float, float, float]:
         """``(scale, W_m0, W_c0, W_i)`` of ``L = 6 + n`` states: the sigma points are
@@ -125,9 +145,12 @@ class UKFConfig:
         return (math.sqrt(L + lam), wm0, wm0 + 1.0 - self.alpha**2 + self.beta, 0.5 / (L + lam))
 
     @classmethod
-    def from_options(cls, q_eta: float | None = None) -> UKFConfig:
-        """The configuration of ``quadfault estimate --estimator ukf [--q-eta Q]``."""
-        return from_options(cls, q_eta=q_eta)
+    def from_options(
+        cls, q_eta: float | None = None, accelerometer: str | bool | None = None
+    ) -> UKFConfig:
+        """The configuration of ``quadfault estimate --estimator ukf [--q-eta Q]
+        [--accelerometer MODE]``."""
+        return from_options(cls, q_eta=q_eta, accelerometer=accelerometer)
 
     def replace(self, **changes) -> UKFConfig:
         return replace(self, **changes)
@@ -135,9 +158,11 @@ class UKFConfig:
 
 #: the filter's state: velocity (world), body rate, then the n efficiencies
 X = fields("UKFStates", ("v", 3), ("w", 3), ("eta", 0))
-#: rows of the measurement: velocity and rate, each reading its state (``H = [I 0]``)
-Y = fields("UKFMeasurementRows", ("v", 3), ("w", 3))
-assert (X.v, X.w) == (Y.v, Y.w) and X.eta == Y.size  # the rows read the first states
+#: rows of the measurement: velocity and rate, each reading its state (``H = [I 0]``), then
+#: the accelerometer's body-z specific force (``h . eta``; only on an update that measures
+#: it: the first ``Y.a`` rows otherwise)
+Y = fields("UKFMeasurementRows", ("v", 3), ("w", 3), ("a", 1))
+assert (X.v, X.w) == (Y.v, Y.w) and X.eta == Y.a  # the rows read the first states
 #: the float state of one filter (dimensions: rotors ``n``, states ``L = X.eta + n``, sigma
 #: points ``sigma = 2 L + 1``): ``x`` and ``P``, the previous sample's time, (clipped)
 #: command and attitude, the initial efficiency, the efficiencies kept across an idle step,
@@ -164,6 +189,8 @@ FLOATS = Layout(
     shift=("L",),
     last_z=(SAMPLE.size, 3),  # the previous sample (estimators.freshness)
     r_now=(Y.size,),  # the measurement variances of this update
+    last_a=(3,),  # the previous accelerometer reading
+    ha=("n",),  # the accelerometer row's Jacobian on the efficiencies
 )
 F = FLOATS.index
 UKFPieces = FLOATS.pieces
@@ -182,6 +209,8 @@ CONSTANTS = fields(
     "lo",
     "hi",
     "p0",
+    "accel",
+    "scatter",
     "scale",
     "wm0",
     "wc0",
@@ -204,7 +233,7 @@ def ukf_constants(vehicle: Vehicle, cfg: UKFConfig) -> np.ndarray:
     b = cfg.eta_bounds
     lo, hi = (-np.inf, np.inf) if b is None else (float(b[0]), float(b[1]))
     q = pack(X, v=np.full(3, cfg.q_velocity), w=np.full(3, cfg.q_rate), eta=np.full(n, cfg.q_eta))
-    r = pack(Y, v=np.full(3, cfg.r_velocity), w=np.full(3, cfg.r_rate))
+    r = pack(Y, v=np.full(3, cfg.r_velocity), w=np.full(3, cfg.r_rate), a=np.full(1, cfg.r_accel))
     scale, wm0, wc0, wi = cfg.weights(n)
     per_rotor = np.concatenate(
         (np.asarray(vehicle.allocation, dtype=float).ravel(), q / NOISE_REFERENCE_DT)
@@ -218,6 +247,8 @@ def ukf_constants(vehicle: Vehicle, cfg: UKFConfig) -> np.ndarray:
         lo=lo,
         hi=hi,
         p0=cfg.p0,
+        accel=float(cfg.accelerometer != "off"),
+        scatter=cfg.accel_scatter,
         scale=scale,
         wm0=wm0,
         wc0=wc0,
@@ -267,6 +298,8 @@ def state_views(fs, offsets, n, N):
         piece_rows(fs, o[F.shift], o[F.shift + 1], N),
         piece(fs, o, F.last_z, (N, SAMPLE.size, 3)),
         piece_rows(fs, o[F.r_now], o[F.r_now + 1], N),
+        piece_rows(fs, o[F.last_a], o[F.last_a + 1], N),
+        piece_rows(fs, o[F.ha], o[F.ha + 1], N),
     )
 
 
@@ -281,6 +314,11 @@ def state_pieces(fs, offsets, n, N):
     """The pieces of the float state of ``N`` filters (:data:`FLOATS`) by name, each
     ``(N, *shape)``."""
     return named_pieces(state_views(fs, offsets, n, N))
+
+
+@jit(inline="always")
+def _finite3(a) -> bool:
+    return math.isfinite(a[0]) and math.isfinite(a[1]) and math.isfinite(a[2])
 
 
 @jit(inline="always")
@@ -299,9 +337,11 @@ def _propagate(chi, f, R9, dt, rigid, A) -> None:
 
 
 @jit
-def ukf_step(t, p, v, R, w, f, const, S, ks, i) -> int:
+def ukf_step(t, p, v, R, w, f, sf, const, S, ks, i) -> int:
     """One sample into filter ``i`` of the state ``(S, ks)`` (:func:`state_pieces`), in place;
-    returns the status code (module docstring)."""
+    returns the status code (module docstring). ``sf``: the accelerometer's reading (3 floats)
+    [m/s^2], body FRD, read only when the constants say so; a non-finite or held reading
+    is not measured."""
     n = f.shape[0]
     L = X.eta + n
     x, P, last_t, last_f, last_R = S.x[i], S.P[i], S.last_t[i], S.last_f[i], S.last_R[i]
@@ -334,7 +374,19 @@ def ukf_step(t, p, v, R, w, f, const, S, ks, i) -> int:
         measurement_variances_into(
             _model(const, n)[2], fresh_since(p, v, R, w, S.last_z[i]), -1, Y.v, -1, Y.w, r_now
         )
-        code = _predict_update(x, P, v, w, last_f, last_R, dt, const, r_now, S, i, n)
+        # the accelerometer: the body-z specific force of this sample's command, -T(eta) / m
+        ha, rows = last_f, Y.a  # (ha unread without the accelerometer)
+        if const[CONSTANTS.accel] != 0.0 and _finite3(sf) and accel_fresh(sf, S.last_a[i], v):
+            ha, rows, h2 = S.ha[i], Y.size, 0.0
+            f_max, clip = const[CONSTANTS.f_max], const[CONSTANTS.clip] != 0.0
+            for j in range(n):
+                fj = min(max(f[j], 0.0), f_max) if clip else f[j]
+                ha[j] = -_model(const, n)[0][0, j] * fj / const[CONSTANTS.mass]
+                h2 += ha[j] * ha[j]
+            r_now[Y.a] += const[CONSTANTS.scatter] * const[CONSTANTS.scatter] * h2
+        code = _predict_update(
+            x, P, v, w, sf[2], ha, rows, last_f, last_R, dt, const, r_now, S, i, n
+        )
         if code == OK:
             idle = False
             for j in range(n):
@@ -353,6 +405,9 @@ def ukf_step(t, p, v, R, w, f, const, S, ks, i) -> int:
                 code = NO_EXCITATION
     last_t[0] = t
     remember_into(S.last_z[i], p, v, R, w)
+    if const[CONSTANTS.accel] != 0.0:
+        for a in range(3):
+            S.last_a[i][a] = sf[a]
     for a in range(3):
         for b in range(3):
             last_R[a, b] = R[a, b]
@@ -364,11 +419,12 @@ def ukf_step(t, p, v, R, w, f, const, S, ks, i) -> int:
 
 
 @jit(inline="always")
-def _predict_update(x, P, zv, zw, f, R, dt, const, r, S, i, n) -> int:
-    """The unscented predict over ``dt`` and the update with ``z = [zv, zw]`` of measurement
-    variances ``r`` (:data:`Y`), in place; ``ill_conditioned`` (nothing changed) when ``P``
-    or ``S`` is not positive definite."""
-    L, e, m, C_ = X.eta + n, X.eta, Y.size, CONSTANTS
+def _predict_update(x, P, zv, zw, za, ha, rows, f, R, dt, const, r, S, i, n) -> int:
+    """The unscented predict over ``dt`` and the update with ``z = [zv, zw]`` (and, with
+    ``rows`` = ``Y.size``, the accelerometer's ``za = ha . eta``) of measurement variances
+    ``r`` (:data:`Y`), in place; ``ill_conditioned`` (nothing changed) when ``P`` or ``S``
+    is not positive definite."""
+    L, e, C_ = X.eta + n, X.eta, CONSTANTS
     A, qc, _r = _model(const, n)
     keep, P_keep = S.keep[i], S.P_keep[i]
     for j in range(n):  # the efficiencies before the step (an idle step restores them)
@@ -408,19 +464,46 @@ def _predict_update(x, P, zv, zw, f, R, dt, const, r, S, i, n) -> int:
             Pp[a, b] = acc
             Pp[b, a] = acc
         Pp[a, a] += qc[a] * dt
-    # update with z = [v, Omega] (H = [I_6 0]): S = Pp[:6, :6] + R = L L^T, W = L^-1 Pp[:6, :]
+    if rows == Y.a:  # (each with its rows' count known when compiled)
+        return _update(x, P, xp, Pp, zv, zw, za, ha, const, r, S, i, L, Y.a)
+    return _update(x, P, xp, Pp, zv, zw, za, ha, const, r, S, i, L, Y.size)
+
+
+@jit(inline="always")
+def _update(x, P, xp, Pp, zv, zw, za, ha, const, r, S, i, L, m) -> int:
+    """The update of the predicted ``xp``, ``Pp`` with the ``m`` rows measured (``Y.a``:
+    velocity and rate; ``Y.size``: and the accelerometer's ``za = ha . eta``)."""
+    e, C_, n = X.eta, CONSTANTS, L - X.eta
+    # z = [v, Omega (, a)], H = [I_6 0 (; 0 ha^T)]: S = H Pp H^T + R = L L^T, W = L^-1 H Pp
     Sm, SL, W, y = S.S[i], S.SL[i], S.W[i], S.y[i]
-    for a in range(m):
-        for b in range(m):
+    for a in range(Y.a):
+        for b in range(Y.a):
             Sm[a, b] = Pp[a, b]
+    if m > Y.a:  # the accelerometer's row of H Pp (into W's last row) and of S
+        for c in range(L):
+            acc = 0.0
+            for j in range(ha.shape[0]):
+                acc += ha[j] * Pp[e + j, c]
+            W[Y.a, c] = acc
+        for b in range(Y.a):
+            Sm[Y.a, b] = W[Y.a, b]
+        acc = 0.0
+        for j in range(ha.shape[0]):
+            acc += W[Y.a, e + j] * ha[j]
+        Sm[Y.a, Y.a] = acc
     if not cholesky_into(Sm, r, SL, m):
         return ILL_CONDITIONED
     for a in range(3):
         y[Y.v + a] = zv[a] - xp[X.v + a]
         y[Y.w + a] = zw[a] - xp[X.w + a]
+    if m > Y.a:
+        acc = za
+        for j in range(ha.shape[0]):
+            acc -= ha[j] * xp[e + j]
+        y[Y.a] = acc
     for a in range(m):  # forward substitution on W's rows and on y
         for c in range(L):
-            acc = Pp[a, c]
+            acc = Pp[a, c] if a < Y.a else W[a, c]
             for k in range(a):
                 acc -= SL[a, k] * W[k, c]
             W[a, c] = acc / SL[a, a]
@@ -474,31 +557,44 @@ def ukf_reset(const, offsets, n, fs, ks, rows, eta0) -> None:
 
 
 @jit
-def ukf_update(t, p, v, R, w, f, const, offsets, fs, ks) -> int:
-    """One sample into the single filter (row 0)."""
+def ukf_update(t, p, v, R, w, f, a, const, offsets, fs, ks) -> int:
+    """One sample into the single filter (row 0); ``a`` its accelerometer reading."""
     S = state_pieces(fs, offsets, f.shape[0], ks.shape[0])
-    return ukf_step(t, p, v, R, w, f, const, S, ks, ks.shape[0] - 1)
+    return ukf_step(t, p, v, R, w, f, (a[0], a[1], a[2]), const, S, ks, ks.shape[0] - 1)
 
 
 @jit
-def ukf_run(t, p, v, R, w, f, const, offsets, fs, ks, eta, sd, code) -> None:
-    """The single filter over the rows of a recording: estimate, sd and status of each row."""
+def ukf_run(t, p, v, R, w, f, a, const, offsets, fs, ks, eta, sd, code) -> None:
+    """The single filter over the rows of a recording (``a``: the accelerometer's rows):
+    estimate, sd and status of each row."""
     n = f.shape[1]
     S = state_pieces(fs, offsets, n, ks.shape[0])
     row = ks.shape[0] - 1  # 0, a run-time value like the batch's rows
     for k in range(t.shape[0]):
-        code[k] = ukf_step(t[k], p[k], v[k], R[k], w[k], f[k], const, S, ks, row)
+        sf = (a[k, 0], a[k, 1], a[k, 2])  # (scalars: no view per row)
+        code[k] = ukf_step(t[k], p[k], v[k], R[k], w[k], f[k], sf, const, S, ks, row)
         _estimate_row(S, ks, row, n, eta[k], sd[k])
 
 
 @jit(parallel=True)
-def ukf_update_rows(t, p, v, R, w, f, const, offsets, fs, ks, code) -> None:
-    """One sample into every row of a batch, in parallel; status codes into ``code``."""
+def ukf_update_rows(t, p, v, R, w, f, a, const, offsets, fs, ks, code) -> None:
+    """One sample into every row of a batch (``a`` (N, 3): the accelerometer's readings), in
+    parallel; status codes into ``code``."""
     N = ks.shape[0]
     views = state_views(fs, offsets, f.shape[1], N)  # formed once; named inside the loop
     for i in prange(N):
         code[i] = ukf_step(
-            t[i], p[i], v[i], R[i], w[i], f[i], const, named_pieces(views), ks, np.int64(i)
+            t[i],
+            p[i],
+            v[i],
+            R[i],
+            w[i],
+            f[i],
+            (a[i, 0], a[i, 1], a[i, 2]),
+            const,
+            named_pieces(views),
+            ks,
+            np.int64(i),
         )
 
 
@@ -515,6 +611,7 @@ class _UKF(_Kernels):
     counters = COUNTERS
     constants = staticmethod(ukf_constants)
     fmax_index = CONSTANTS.f_max
+    reads_accel = True
 
 
 class UnscentedKalmanFilter(_UKF, RecursiveEstimator):

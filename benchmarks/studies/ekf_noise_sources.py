@@ -3,6 +3,7 @@
 
     python benchmarks/studies/ekf_noise_sources.py [--preset crazyflie] [--seeds 0-2]
                                                    [--scenario abrupt] [--duration 20]
+                                                   [--accel-scatter S]
 
 For each seed it flies the scenario (sigma_f = 0.07, no thrust limit, as ``noise_accuracy.py``) with the
 preset's sensors taken apart: the whole preset; its noise at every physics step (no rate, no
@@ -10,7 +11,8 @@ latency); its rate and latency alone (no noise); its noise at its rate (no laten
 flight it runs the EKF at its default ``Q_eta`` (0.5) and at 0.03 (near what the fair
 comparison's tuning rule picks under ``crazyflie``), the EKF with ``R`` from the preset (each
 stream's per-sample variance, white + coloured + bias, the information a recording's declared
-noise gives), and the improved IRLS for reference. It prints the motor-averaged RMSE
+noise gives), the EKF with the accelerometer's row (``EKFConfig(accelerometer="on")``, its
+defaults, or ``--accel-scatter``; at both ``Q_eta``) and the improved IRLS for reference. It prints the motor-averaged RMSE
 (:func:`estimators.metrics.score`), mean over the seeds. Nothing here is tuned on the scored
 flights: every setting is fixed above.
 """
@@ -74,6 +76,9 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", default="0-2")
     p.add_argument("--scenario", default="abrupt")
     p.add_argument("--duration", type=float, default=20.0)
+    p.add_argument(
+        "--accel-scatter", type=float, help="EKFConfig.accel_scatter of the accelerometer rows"
+    )
     args = p.parse_args(argv)
 
     from estimators.ekf import EKFConfig, MotorEfficiencyEKF
@@ -84,12 +89,19 @@ def main(argv=None) -> int:
     from quadfault.sim.simulator import SimConfig, simulate
 
     r = preset_r(args.preset)
+    acc = {"accelerometer": "on"}
+    if args.accel_scatter is not None:
+        acc["accel_scatter"] = args.accel_scatter
     estimators = {
         "ekf": lambda v: MotorEfficiencyEKF(v, EKFConfig()),
         "ekf Q_eta 0.03": lambda v: MotorEfficiencyEKF(v, EKFConfig(q_eta=0.03)),
         "ekf R of the preset": lambda v: MotorEfficiencyEKF(v, EKFConfig(**r)),
         "ekf Q_eta 0.03, R of the preset": lambda v: MotorEfficiencyEKF(
             v, EKFConfig(q_eta=0.03, **r)
+        ),
+        "ekf accelerometer": lambda v: MotorEfficiencyEKF(v, EKFConfig(**acc)),
+        "ekf Q_eta 0.03, accelerometer": lambda v: MotorEfficiencyEKF(
+            v, EKFConfig(q_eta=0.03, **acc)
         ),
         "irls --improved": lambda v: SlidingWindowIRLS(v, IRLSConfig.improved()),
     }

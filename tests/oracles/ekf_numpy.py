@@ -112,8 +112,13 @@ def kalman_update(x: np.ndarray, P: np.ndarray, y: np.ndarray, H: np.ndarray, R:
     return x + K @ y, 0.5 * (P_new + P_new.T)
 
 
-def measurement_update(x: np.ndarray, P: np.ndarray, sample, r_diag: np.ndarray, bounds):
-    """Update with the measured ``p, v, Omega`` and attitude; project R, clamp eta."""
+def measurement_update(
+    x: np.ndarray, P: np.ndarray, sample, r_diag: np.ndarray, bounds, accel=None
+):
+    """Update with the measured ``p, v, Omega`` and attitude (``r_diag``: their 12 variances;
+    more entries are ignored) and, when ``accel = (a_z, h, var)`` is given, the
+    accelerometer's body-z specific force ``a_z = h . eta`` of variance ``var``; project R,
+    clamp eta."""
     n = x.shape[0]
     R_est = x[R_].reshape(3, 3, order="F")
     y = np.concatenate(
@@ -122,7 +127,15 @@ def measurement_update(x: np.ndarray, P: np.ndarray, sample, r_diag: np.ndarray,
     H = np.zeros((12, n))
     H[:9, :9] = np.eye(9)
     H[9:, R_] = attitude_jacobian(sample.R)
-    x, P = kalman_update(x, P, y, H, np.diag(r_diag))
+    r = np.asarray(r_diag, dtype=float)[:12]
+    if accel is not None:
+        a_z, h, var = accel
+        row = np.zeros((1, n))
+        row[0, ETA_:] = h
+        y = np.append(y, a_z - h @ x[ETA_:])
+        H = np.vstack((H, row))
+        r = np.append(r, var)
+    x, P = kalman_update(x, P, y, H, np.diag(r))
     x[R_] = orthonormalize(x[R_].reshape(3, 3, order="F")).reshape(9, order="F")
     if bounds is not None:
         x[ETA_:] = np.clip(x[ETA_:], bounds[0], bounds[1])
