@@ -199,9 +199,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         choices=MODES,
         default=None,
         help="IRLS, RLS: the thrust rows from the accelerometer's specific force (ax, ay, "
-        "az) instead of the differenced velocity: on (a recording without it falls back "
-        "to the velocity, and says so), auto (the same, silently), off (the velocity; "
-        "default: off, --improved auto)",
+        "az) instead of the differenced velocity; EKF, UKF: the specific force as one more "
+        "measurement: on (a recording without it falls back to the velocity, and says so), "
+        "auto (the same, silently), off (the velocity only; default: off, --improved auto)",
     )
 
 

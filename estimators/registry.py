@@ -78,7 +78,7 @@ TABLE: tuple[EstimatorSpec, ...] = (
         "extended Kalman filter over the rigid body and the efficiencies (baseline)",
         config="estimators.ekf:EKFConfig",
         batched="estimators.batched:BatchedEKF",
-        options=("q_eta",),
+        options=("q_eta", "accelerometer"),
     ),
     EstimatorSpec(
         "rls",
@@ -95,7 +95,7 @@ TABLE: tuple[EstimatorSpec, ...] = (
         "unscented Kalman filter over velocity, rate and the efficiencies (baseline)",
         config="estimators.ukf:UKFConfig",
         batched="estimators.ukf:BatchedUKF",
-        options=("q_eta",),
+        options=("q_eta", "accelerometer"),
     ),
     EstimatorSpec(
         "none",

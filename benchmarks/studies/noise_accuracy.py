@@ -10,8 +10,9 @@ For each sensor noise (``--noise``, repeatable: ``none``, a preset name of
 it flies the four scenarios of ``quadfault reproduce`` (degradation, abrupt, combined,
 clipping; sigma_f = 0.07, the clipping flight saturated) and runs every estimator as
 ``quadfault estimate`` runs it by default (``irls``: the paper's; ``irls --improved``; ``ekf``,
-``rls``, ``ukf``), and the IRLS and the RLS with their thrust rows from the accelerometer
-(``--accelerometer on``; ``irls --improved`` uses it by default). It prints, as means over the
+``rls``, ``ukf``), the IRLS and the RLS with their thrust rows from the accelerometer
+(``--accelerometer on``; ``irls --improved`` uses it by default) and the EKF and the UKF with
+its measurement row (``--accelerometer on``). It prints, as means over the
 seeds:
 
 * RMSE: the motor-averaged RMSE of :func:`estimators.metrics.score` (warm-up excluded), per
@@ -45,9 +46,11 @@ ESTIMATORS = {
     "irls --accelerometer on": ("irls", {"accelerometer": "on"}),
     "irls --improved": ("irls", {"improved": True}),
     "ekf": ("ekf", {}),
+    "ekf --accelerometer on": ("ekf", {"accelerometer": "on"}),
     "rls": ("rls", {}),
     "rls --accelerometer on": ("rls", {"accelerometer": "on"}),
     "ukf": ("ukf", {}),
+    "ukf --accelerometer on": ("ukf", {"accelerometer": "on"}),
 }
 SCENARIOS = ("degradation", "abrupt", "combined", "clipping")
 LEVELS = (0.7, 0.8, 0.9)
