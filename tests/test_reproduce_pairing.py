@@ -114,9 +114,11 @@ def test_each_entry_cli_reproduces_its_series(flight, tmp_path):
         "ekf",
         "--q-eta",
         "0.3",
+        "--accelerometer",
+        "auto",
         "--median",
         "21",
-    ]
+    ]  # the improved IRLS reads the accelerometer, so does its partner
 
 
 def test_pair_ratios():
@@ -216,6 +218,22 @@ def test_a_partner_that_regresses_the_residual_gets_the_irls_variants_prefilter(
     assert BASELINES["rls"].options(0.01) == {"forgetting": 0.99}
     with pytest.raises(ConfigError, match="baseline"):
         VARIANTS[0].partner_args("kalman", 0.1)
+
+
+def test_every_partner_reads_the_accelerometer_where_its_irls_does():
+    """The improved IRLS takes its thrust rows from the accelerometer (``auto``): its EKF, RLS
+    and UKF partners measure it too; the paper's settings and the median alone read none."""
+    from estimators.irls_config import IRLSConfig
+    from estimators.paper.pairing import BASELINES
+
+    by_name = {v.name: v for v in VARIANTS}
+    assert by_name["improved"].accelerometer == IRLSConfig.improved().accelerometer == "auto"
+    for b in BASELINES:
+        assert by_name["improved"].partner_args(b, 0.01)["accelerometer"] == "auto"
+        for v in ("paper", "median"):
+            assert by_name[v].accelerometer == "off"
+            assert "accelerometer" not in by_name[v].partner_args(b, 0.01)
+    assert BASELINES["ekf"].options(0.1, None, "auto") == {"q_eta": 0.1, "accelerometer": "auto"}
 
 
 @pytest.mark.slow

@@ -19,7 +19,10 @@ The regression's residual prefilter (``--prefilter``) is pre-processing of the s
 baseline that regresses the same residual model (RLS) gets the IRLS variant's prefilter (none
 for the paper's settings and the median alone, the improved IRLS's 10 ms for the improved),
 in its scan on the calibration flight and on the scored flights. The EKF and the UKF have no
-regression to filter; they weigh the noise through their own measurement model.
+regression to filter; they weigh the noise through their own measurement model. The data is
+shared the same way: every partner reads the accelerometer where its IRLS variant does
+(``accelerometer="auto"`` for the improved IRLS, none for the paper's settings and the median
+alone: :attr:`Variant.accelerometer`).
 
 Every series of a pair comes from :func:`estimators.cli.estimate_series`, the code behind
 ``quadfault estimate``, and each ``metrics.json`` entry records the arguments
@@ -69,13 +72,18 @@ class Baseline:
         """The option's value at speed ``q`` (RLS: ``forgetting = 1 - q``)."""
         return 1.0 - float(q) if self.option == "forgetting" else float(q)
 
-    def options(self, q: float, prefilter: float | None = None) -> dict:
+    def options(
+        self, q: float, prefilter: float | None = None, accelerometer: str | None = None
+    ) -> dict:
         """The :func:`estimate_series` options at speed ``q`` with the residual prefilter
         ``prefilter`` [s] (``None``: the estimator's default; ignored by a baseline without
-        a regression)."""
+        a regression) and the accelerometer's mode ``accelerometer`` (``None`` or
+        ``"off"``: the estimator's default, none)."""
         out = {self.option: self.value(q)}
         if self.prefilter and prefilter is not None:
             out["prefilter"] = float(prefilter)
+        if accelerometer not in (None, "off"):
+            out["accelerometer"] = accelerometer
         return out
 
 
@@ -134,6 +142,13 @@ class Variant:
         the same residual model (:attr:`Baseline.prefilter`)."""
         return IRLSConfig.from_options(self.improved).prefilter
 
+    @property
+    def accelerometer(self) -> str:
+        """The IRLS's accelerometer mode, shared by every partner: a partner reads the data
+        its IRLS reads (the improved IRLS's thrust rows come from the accelerometer; the EKF,
+        RLS and UKF partners then measure it too)."""
+        return IRLSConfig.from_options(self.improved).accelerometer
+
     def irls_args(self) -> dict:
         """Options of :func:`estimate_series` for the IRLS."""
         med = None if self.improved or self.median <= 1 else self.median
@@ -147,7 +162,8 @@ class Variant:
         """Options of :func:`estimate_series` for the partner of ``baseline_name`` at speed
         ``q``."""
         b = baseline(baseline_name)
-        return {**b.options(q, self.prefilter), "median": self.median if self.median > 1 else None}
+        options = b.options(q, self.prefilter, self.accelerometer)
+        return {**options, "median": self.median if self.median > 1 else None}
 
 
 #: The variants ``reproduce`` runs: the paper's estimator, the output median alone, and the
@@ -231,6 +247,7 @@ def choose_partner(
     evaluate=None,
     baseline_name: str = "ekf",
     prefilter: float | None = None,
+    accelerometer: str | None = None,
 ) -> PartnerResult:
     """The speed ``q`` of baseline ``baseline_name`` (the EKF's ``Q_eta`` by default) on the
     calibration ``recording`` (which holds the truth) with the smallest motor-averaged excess
@@ -238,7 +255,8 @@ def choose_partner(
     causal median) is at most ``target_rmse``: a log-spaced scan of ``q_range`` (default the
     baseline's), then ``refine`` rounds of halving the log-spacing around the best point.
 
-    ``prefilter`` the residual prefilter of a baseline that takes one (:meth:`Baseline.options`).
+    ``prefilter`` the residual prefilter of a baseline that takes one and ``accelerometer``
+    its accelerometer mode (:meth:`Baseline.options`).
     ``evaluate(q) -> (rmse, excess)`` replaces the baseline's run (tests; shared scans)."""
     b = baseline(baseline_name)
     q_range = b.q_range if q_range is None else q_range
@@ -250,7 +268,7 @@ def choose_partner(
     if evaluate is None:
 
         def evaluate(q):
-            return partner_point(recording, b.name, q, median, prefilter)
+            return partner_point(recording, b.name, q, median, prefilter, accelerometer)
 
     n = max(2, round(math.log10(hi / lo) * points_per_decade) + 1)
     points = {float(q): evaluate(float(q)) for q in np.logspace(math.log10(lo), math.log10(hi), n)}
@@ -301,12 +319,13 @@ def partner_point(
     q: float,
     median: int = 1,
     prefilter: float | None = None,
+    accelerometer: str | None = None,
 ) -> tuple[float, float]:
     """``(rmse, excess_spike)``, motor averages, of the baseline at speed ``q`` with the
-    residual prefilter ``prefilter`` (:meth:`Baseline.options`) and the output median
-    ``median`` on ``recording``."""
+    residual prefilter ``prefilter`` and the accelerometer mode ``accelerometer``
+    (:meth:`Baseline.options`) and the output median ``median`` on ``recording``."""
     b = baseline(baseline_name)
-    s = estimate_series(recording, b.name, **b.options(q, prefilter))
+    s = estimate_series(recording, b.name, **b.options(q, prefilter, accelerometer))
     return _rmse_excess(recording, median_series(s, median))
 
 
@@ -317,22 +336,24 @@ def _rmse_excess(recording, series) -> tuple[float, float]:
 
 
 def shared_scan(recording: Recording, baseline_name: str = "ekf"):
-    """``evaluate(median, prefilter=None)``: per median (and residual prefilter, for a
-    baseline that takes one), a ``q -> (rmse, excess)`` for :func:`choose_partner` that runs
-    the baseline once per ``q`` and prefilter for every median (the median is
-    post-processing)."""
+    """``evaluate(median, prefilter=None, accelerometer=None)``: per median (and residual
+    prefilter, for a baseline that takes one, and accelerometer mode), a
+    ``q -> (rmse, excess)`` for :func:`choose_partner` that runs the baseline once per ``q``,
+    prefilter and accelerometer mode for every median (the median is post-processing)."""
     b = baseline(baseline_name)
     runs: dict = {}
 
-    def run(q, prefilter):
-        options = b.options(q, prefilter)
+    def run(q, prefilter, accelerometer):
+        options = b.options(q, prefilter, accelerometer)
         key = tuple(sorted(options.items()))
         if key not in runs:
             runs[key] = estimate_series(recording, b.name, **options)
         return runs[key]
 
-    def for_median(median, prefilter=None):
-        return lambda q: _rmse_excess(recording, median_series(run(q, prefilter), median))
+    def for_median(median, prefilter=None, accelerometer=None):
+        return lambda q: _rmse_excess(
+            recording, median_series(run(q, prefilter, accelerometer), median)
+        )
 
     return for_median
 

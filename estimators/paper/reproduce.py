@@ -232,7 +232,7 @@ def _calibration_job(mode: str, cfg: ReproduceConfig) -> dict:
                 q_range=q_range,
                 points_per_decade=cfg.partner_points_per_decade,
                 refine=cfg.partner_refine,
-                evaluate=scan(v.median, v.prefilter),
+                evaluate=scan(v.median, v.prefilter, v.accelerometer),
                 baseline_name=b,
             )
     return out
