@@ -17,6 +17,7 @@ from estimators.accelerometer import AccelerometerMissing
 from estimators.base import samples
 from estimators.batched import BatchedIRLS
 from estimators.irls import IRLSConfig, SlidingWindowIRLS
+from estimators.registry import make_estimator
 from estimators.residuals import segment_terms
 from estimators.rls import BatchedRLS, RecursiveLeastSquares, RLSConfig
 from quadfault.cli import main as cli
@@ -179,6 +180,8 @@ def test_the_cli_takes_the_option_and_notes_a_missing_accelerometer(tmp_path, ca
     assert json.loads(out.with_suffix(".json").read_text())["config"]["accelerometer"] == "on"
     assert cli(args + ["--accelerometer", "auto", "--force"]) == 0
     assert capsys.readouterr().err == ""
-    bad = ["estimate", str(path), "--estimator", "ekf", "--out", str(tmp_path / "e.csv")]
-    assert cli(bad + ["--accelerometer", "on"]) == 2
-    assert "--accelerometer applies to the irls, rls estimator" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as bad:  # a mode that is none of off, auto, on
+        cli(args + ["--accelerometer", "yes", "--force"])
+    assert bad.value.code == 2 and "invalid choice: 'yes'" in capsys.readouterr().err
+    with pytest.raises(ConfigError, match="'accelerometer' applies to"):
+        make_estimator("none", crazyflie.vehicle, accelerometer="on")
