@@ -38,8 +38,17 @@ def parse_estimator(text: str) -> tuple[str, str, dict]:
     options = {}
     for item in filter(None, rest.split(",")):
         key, _, value = item.partition("=")
-        options[key] = True if value in ("1", "true") else float(value)
+        options[key] = True if value in ("1", "true") else _number_or_word(value)
     return text, name, options
+
+
+def _number_or_word(value: str):
+    """An option's value: a number where it reads as one (``q_eta=0.002``), else the word
+    (``accelerometer=auto``)."""
+    try:
+        return float(value)
+    except ValueError:
+        return value
 
 
 def main(argv=None) -> int:
