@@ -532,12 +532,12 @@ class MotorEfficiencyEKF:
         t, p, v, R, w, f = sample_arrays(sample, self.n_rotors, "EKF")
         a = NO_ACCEL
         if self.config.accelerometer != "off":
-            a = sample_accel(sample, "EKF")
-            if a is None:
-                a = NO_ACCEL
-                if self.config.accelerometer == "on" and not self._said_missing:
-                    warn_missing("EKF", f"the sample at t = {t}")
-                    self._said_missing = True
+            reading = sample_accel(sample, "EKF")
+            if reading is not None:
+                a = reading
+            elif self.config.accelerometer == "on" and not self._said_missing:
+                warn_missing("EKF", f"the sample at t = {t}")
+                self._said_missing = True
         st = self._state
         code = ekf_update(t, p, v, R, w, f, a, self._const, st.offsets, st.floats, st.ints)
         return self._estimate(t, code)
