@@ -32,6 +32,7 @@ accelerometer is said once (:func:`warn_missing`), not passed over silently.
 
 from __future__ import annotations
 
+import math
 import warnings
 
 import numpy as np
@@ -125,6 +126,12 @@ def accelerometer_rows(dt, R0, a0, a0_held, fresh, counters, r0, J) -> int:
 
 
 @jit(inline="always")
+def finite3(a) -> bool:
+    """Every entry of the reading ``a`` (3 numbers, an array or a tuple) is finite."""
+    return math.isfinite(a[0]) and math.isfinite(a[1]) and math.isfinite(a[2])
+
+
+@jit(inline="always")
 def repeats(a, last_a) -> bool:
     """The accelerometer reading ``a`` repeats ``last_a`` bit for bit (a held stream)."""
     return a[0] == last_a[0] and a[1] == last_a[1] and a[2] == last_a[2]
@@ -137,6 +144,7 @@ __all__ = [
     "accelerometer_rows",
     "accelerometer_rows_into",
     "check_mode",
+    "finite3",
     "recording_accel",
     "repeats",
     "warn_missing",

@@ -39,7 +39,13 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from estimators.accelerometer import NO_ACCEL, check_mode, recording_accel, warn_missing
+from estimators.accelerometer import (
+    NO_ACCEL,
+    check_mode,
+    finite3,
+    recording_accel,
+    warn_missing,
+)
 from estimators.base import (
     BAD_SAMPLE,
     NO_EXCITATION,
@@ -304,11 +310,6 @@ def workspace_row(S, i):
     )
 
 
-@jit(inline="always")
-def _finite3(a) -> bool:
-    return math.isfinite(a[0]) and math.isfinite(a[1]) and math.isfinite(a[2])
-
-
 @jit
 def constant_arrays(const, n):
     """The filter's :class:`~estimators.ekf_filter.Model` from the constants (views of
@@ -389,7 +390,7 @@ def ekf_step(t, p, v, R, w, f, sf, const, model, S, ks, i) -> int:
         )
         # the accelerometer: the body-z specific force of this sample's command, -T(eta) / m
         ha, rows = last_f, Y.a  # (ha unread without the accelerometer)
-        if const[CONSTANTS.accel] != 0.0 and _finite3(sf) and accel_fresh(sf, S.last_a[i], v):
+        if const[CONSTANTS.accel] != 0.0 and finite3(sf) and accel_fresh(sf, S.last_a[i], v):
             ha, rows = S.ha[i], Y.size
             h2 = 0.0
             for j in range(n):

@@ -51,7 +51,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from estimators.accelerometer import check_mode
+from estimators.accelerometer import check_mode, finite3
 from estimators.base import (
     BAD_SAMPLE,
     ILL_CONDITIONED,
@@ -317,11 +317,6 @@ def state_pieces(fs, offsets, n, N):
 
 
 @jit(inline="always")
-def _finite3(a) -> bool:
-    return math.isfinite(a[0]) and math.isfinite(a[1]) and math.isfinite(a[2])
-
-
-@jit(inline="always")
 def _propagate(chi, f, R9, dt, rigid, A) -> None:
     """One sigma point ``chi = [v, Omega, eta]`` (:data:`X`) over ``dt`` with the command
     ``f`` held and the attitude ``R9`` (row-major 9-tuple), in place: the model's allocation
@@ -376,7 +371,7 @@ def ukf_step(t, p, v, R, w, f, sf, const, S, ks, i) -> int:
         )
         # the accelerometer: the body-z specific force of this sample's command, -T(eta) / m
         ha, rows = last_f, Y.a  # (ha unread without the accelerometer)
-        if const[CONSTANTS.accel] != 0.0 and _finite3(sf) and accel_fresh(sf, S.last_a[i], v):
+        if const[CONSTANTS.accel] != 0.0 and finite3(sf) and accel_fresh(sf, S.last_a[i], v):
             ha, rows, h2 = S.ha[i], Y.size, 0.0
             f_max, clip = const[CONSTANTS.f_max], const[CONSTANTS.clip] != 0.0
             for j in range(n):
