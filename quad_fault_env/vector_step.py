@@ -184,7 +184,7 @@ def _commands(i, S, R, K, V, row):
             gains,
             nominal,
         )
-        rotor_commands(u[0], u[1], K.allocation_inverse, f_cmd)
+        rotor_commands(u[0], u[1], K.allocation_inverse, f_cmd, K.yaw_release)
     ms = S.moment_scale
     action_commands_row(
         R.action[i],

@@ -219,3 +219,28 @@ def test_per_step_cores_take_no_arrays():
             for t in (a.types if isinstance(a, numba.types.BaseTuple) else (a,))
         ]
         assert not any(isinstance(t, numba.types.Array) for t in flat), (name, calls[name])
+
+
+@pytest.mark.parametrize("kernel", ["compiled", "interpreted"])
+def test_the_mixer_gives_up_yaw_first_at_zero_thrust(kernel):
+    """A yaw demand that the plain inverse meets by driving a rotor pair below zero: the
+    mixer keeps thrust, roll and pitch exactly and scales the yaw moment down until the
+    lowest command is zero; a demand within bounds is the plain inverse's, bit for bit."""
+    veh = Vehicle()
+    Ai, B = veh.allocation_inverse, veh.allocation
+    mix = controller.rotor_commands if kernel == "compiled" else jit.python(controller.rotor_commands)
+    T, M = veh.mass * veh.gravity, (0.05, -0.03, 0.4)
+    plain, mixed = np.empty(4), np.empty(4)
+    mix(T, M, Ai, plain)
+    mix(T, M, Ai, mixed, True)
+    assert plain.min() < -1.0  # the plain inverse asks a rotor to push
+    np.testing.assert_allclose(plain, Ai @ np.array([T, *M]), rtol=0, atol=1e-12)
+    assert mixed.min() == pytest.approx(0.0, abs=1e-12)
+    wrench = B @ mixed
+    np.testing.assert_allclose(wrench[:3], [T, M[0], M[1]], rtol=0, atol=1e-9)
+    assert 0.0 < wrench[3] < M[2]  # yaw kept as far as zero thrust allows
+    small = (0.05, -0.03, 0.01)
+    a, b = np.empty(4), np.empty(4)
+    mix(T, small, Ai, a)
+    mix(T, small, Ai, b, True)
+    assert a.min() > 0 and np.array_equal(a, b)

@@ -16,7 +16,7 @@ from quadfault.model.flight import Flight
 from quadfault.model.motors import MotorModel
 from quadfault.model.plant import Plant
 from quadfault.model.sensor_presets import PRESETS, as_sensor_noise
-from quadfault.model.sensors import STREAMS, SensorNoise
+from quadfault.model.sensors import COLOURED_SHAPE, STREAMS, SensorNoise
 from quadfault.model.vehicle import Vehicle
 
 DT = 1e-3
@@ -80,8 +80,25 @@ def test_coloured_noise_has_its_variance_and_correlation_time():
     lag = 50  # tau / dt
     r = np.mean([np.corrcoef(e[:-lag, a], e[lag:, a])[0, 1] for a in range(3)])
     assert r == pytest.approx(np.exp(-1.0), abs=0.08)
+    # second order (smooth): one step's correlation is (1 + x) exp(-x), x = dt / T,
+    # T = tau / COLOURED_SHAPE, not a first-order process's exp(-dt / tau)
+    x = DT * COLOURED_SHAPE / 0.05
     r1 = np.mean([np.corrcoef(e[:-1, a], e[1:, a])[0, 1] for a in range(3)])
-    assert r1 == pytest.approx(np.exp(-DT / 0.05), abs=0.01)
+    assert r1 == pytest.approx((1 + x) * np.exp(-x), abs=2e-4)
+    assert abs(r1 - np.exp(-DT / 0.05)) > 0.01
+
+
+def test_coloured_noise_is_stepped_exactly_at_a_low_rate():
+    """At 20 Hz (a step of 0.43 time constants) the samples keep the stationary variance and
+    the second-order process's correlation between samples: the step is exact, not Euler."""
+    noise = _per_stream(stream="position", markov=0.01, tau=0.1, rate=20.0)
+    rec, _ = _fly(noise, 40_000)
+    e = rec.p[0] - np.array([0.0, 0.0, -1.0])
+    samples = e[::50]  # one per sample period
+    assert samples.std() == pytest.approx(0.01, rel=0.1)
+    x = 0.05 * COLOURED_SHAPE / 0.1
+    r = np.mean([np.corrcoef(samples[:-1, a], samples[1:, a])[0, 1] for a in range(3)])
+    assert r == pytest.approx((1 + x) * np.exp(-x), abs=0.04)
 
 
 def test_a_bias_is_constant_over_a_flight_and_drawn_per_flight():

@@ -282,7 +282,7 @@ def fly_vehicle(i, gens, k0, k1, measure_first, C, K, V, T, out, fx, memory):
             if k % C.decimation == 0:
                 gains, nominal = controller_tuples(K)
                 u = geometric_control(mp, mv, mR, mw, reference_row(refs, row), gains, nominal)
-                rotor_commands(u[0], u[1], K.allocation_inverse, f_cmd)
+                rotor_commands(u[0], u[1], K.allocation_inverse, f_cmd, K.yaw_release)
         motor_thrust(f_cmd, eta, row, f_max, C.saturate, sigma, gen, f)
         # the thrust stage, and the step's wrench terms the RK stages take (numbers; the
         # chain compiled for the rows' effects alone, nothing without effects)

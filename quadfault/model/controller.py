@@ -75,6 +75,9 @@ class ControllerConfig:
         angular_feedforward: use Omega_d and Omega_d' of the feed-forward attitude (computed by
             central differences of the trajectory's desired attitude, step ``ff_step`` [s]).
         normalize_b2d: normalise ``b2d = b3d x b1d`` (Lee et al.); the reference code does not.
+        yaw_release: the mixer gives up yaw first where the yaw moment alone would push a
+            rotor's command below zero (:func:`rotor_commands`); the reference code mixes with
+            the plain inverse.
     """
 
     gains: GeometricGains = field(default_factory=GeometricGains)
@@ -82,11 +85,17 @@ class ControllerConfig:
     angular_feedforward: bool = True
     normalize_b2d: bool = True
     ff_step: float = 1e-3
+    yaw_release: bool = True
 
     @classmethod
     def reference(cls) -> ControllerConfig:
         """The authors' MATLAB controller: a_d = 0, Omega_d = 0, b2d not normalised."""
-        return cls(acceleration_feedforward=False, angular_feedforward=False, normalize_b2d=False)
+        return cls(
+            acceleration_feedforward=False,
+            angular_feedforward=False,
+            normalize_b2d=False,
+            yaw_release=False,
+        )
 
 
 class ControllerConstants(NamedTuple):
@@ -102,6 +111,7 @@ class ControllerConstants(NamedTuple):
     inertia: np.ndarray  # (3, 3) [kg m^2]
     inertia_inverse: np.ndarray  # (3, 3)
     allocation_inverse: np.ndarray  # (n, 4)
+    yaw_release: bool  # the mixer gives up yaw first at the rotors' bounds
 
 
 class ControlOutput(NamedTuple):
@@ -259,12 +269,28 @@ def controller_tuples(K):
 
 
 @jit(inline="always")
-def rotor_commands(thrust, M, allocation_inverse, out):
+def rotor_commands(thrust, M, allocation_inverse, out, yaw_release=False):
     """Rotor thrust commands [N] realising ``(T, M)`` through the nominal allocation inverse
-    (eq. 12, least-norm) into ``out`` (n,)."""
+    (eq. 12, least-norm) into ``out`` (n,).
+
+    ``yaw_release``: the mixer gives up yaw first, as an autopilot's mixer does: where the yaw
+    moment alone pushes a rotor's command below zero (a rotor cannot push), the yaw moment is
+    scaled down, to none at most, until no command goes below zero through it; thrust, roll
+    and pitch are kept (a command they alone push below zero stays there and the motor clips
+    it; above ``f_max`` the command stands and a saturating motor clips it). A quadrotor's yaw
+    authority is the rotors' drag, a few percent of their lift's moment, so a yaw demand that
+    the plain inverse meets drives a pair of rotors to zero thrust and takes roll and pitch
+    with it. Commands that stay at or above zero are the plain inverse's, bit for bit."""
     Ai = allocation_inverse
+    s = 1.0
+    if yaw_release:
+        for i in range(out.shape[0]):
+            base = Ai[i, 0] * thrust + Ai[i, 1] * M[0] + Ai[i, 2] * M[1]
+            yaw = Ai[i, 3] * M[2]
+            if yaw < 0.0 and base + yaw < 0.0:
+                s = min(s, max(0.0, -base / yaw))
     for i in range(out.shape[0]):
-        out[i] = Ai[i, 0] * thrust + Ai[i, 1] * M[0] + Ai[i, 2] * M[1] + Ai[i, 3] * M[2]
+        out[i] = Ai[i, 0] * thrust + Ai[i, 1] * M[0] + Ai[i, 2] * M[1] + s * (Ai[i, 3] * M[2])
 
 
 @jit(inline="always")
@@ -290,7 +316,7 @@ def _control_rows(p, v, R, w, refs, K, f, T, M, ex, ev, eR, eW, Rd):
         out = geometric_control(
             vec3(p[i]), vec3(v[i]), mat3(R[i]), vec3(w[i]), reference_row(refs, i), gains, nominal
         )
-        rotor_commands(out[0], out[1], K.allocation_inverse, f[i])
+        rotor_commands(out[0], out[1], K.allocation_inverse, f[i], K.yaw_release)
         T[i] = out[0]
         store3(M[i], out[1])
         store3(ex[i], out[2])
@@ -307,7 +333,7 @@ def _command_rows(p, v, R, w, refs, K, f):
         out = geometric_control(
             vec3(p[i]), vec3(v[i]), mat3(R[i]), vec3(w[i]), reference_row(refs, i), gains, nominal
         )
-        rotor_commands(out[0], out[1], K.allocation_inverse, f[i])
+        rotor_commands(out[0], out[1], K.allocation_inverse, f[i], K.yaw_release)
 
 
 @jit
@@ -372,6 +398,7 @@ class GeometricController:
                 arr(veh.inertia),
                 arr(veh.inertia_inverse),
                 arr(veh.allocation_inverse),
+                bool(c.yaw_release),
             )
         return self._constants
 

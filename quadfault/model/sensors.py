@@ -6,9 +6,15 @@ Five streams, in this order everywhere (:data:`STREAMS`): ``position`` [m] and `
 the step's start). Each stream has, per axis:
 
 * **white** noise of standard deviation ``position`` .. ``accel`` [unit], a fresh draw per sample;
-* **coloured** noise: first-order Gauss-Markov, stationary standard deviation ``markov`` [unit]
-  and correlation time ``tau`` [s] (``x <- a x + sqrt(1 - a^2) markov z``, ``a = exp(-h/tau)``
-  per sample of period ``h``), started from its stationary distribution;
+* **coloured** noise: second-order Gauss-Markov (critically damped: a first-order
+  Gauss-Markov process passed through a first-order low-pass of the same time constant
+  ``tau / COLOURED_SHAPE``), stationary standard deviation ``markov`` [unit], its
+  autocorrelation ``(1 + s) exp(-s)`` (``s`` the lag over that time constant) falling to
+  ``1/e`` at the lag ``tau`` [s]; stepped exactly per sample (:func:`_coloured_step`) and started
+  from its stationary distribution. An onboard estimator's error is smooth (its states
+  integrate the IMU between corrections); a first-order process of the same variance and
+  ``tau`` has a rough path whose steps, seen by a controller differentiating them at the
+  physics rate, shake a simulated vehicle that flies on them;
 * a **bias**: constant over a flight, drawn at its start with standard deviation ``bias``;
 * a **rate** [Hz]: sampled every ``1/rate`` s and held in between (0: every physics step);
 * a **latency** [s]: the sample measures the truth of ``latency`` earlier (whole physics steps).
@@ -22,9 +28,9 @@ Draws (from the vehicle's generator, inside the compiled loop): with white noise
 coloured noise, bias, rate or latency) per physics step ``p`` (3), ``v`` (3), attitude (3, only
 when its std is non-zero), ``w`` (3) -- all of them whenever any std is non-zero -- and then,
 after the motors' draws, the accelerometer (3, when its std is non-zero). With the full model:
-at a flight's first measurement each stream's bias (3, when non-zero) and coloured start (3,
-when non-zero), in stream order; then at each sample of a stream its coloured step (3) and its
-white noise (3), each only when non-zero. No noise draws nothing.
+at a flight's first measurement each stream's bias (3, when non-zero) and coloured start (2 per
+axis, when non-zero), in stream order; then at each sample of a stream its coloured step (2 per
+axis) and its white noise (3), each only when non-zero. No noise draws nothing.
 
 :func:`measure3` / :func:`accelerometer3` (white noise) and :func:`measure_model` /
 :func:`accelerometer_model` (the full model, with a per-vehicle state :func:`state_width`
@@ -53,8 +59,13 @@ MODEL_FIELDS = ("markov", "tau", "bias", "rate", "latency")
 #: kernel row: 5 white stds, any noise, full model, then per stream MODEL_FIELDS
 ROW_WIDTH = 7 + 5 * len(MODEL_FIELDS)
 #: per-vehicle state: [initialised, measurements since], per stream [phase, bias 3,
-#: coloured 3, held 9], then the latency ring (rows of p 3, v 3, R 9, w 3, specific force 3)
-_HEAD, _STREAM, _RING = 2, 16, 21
+#: coloured 3, held 9, the coloured noise's driving process 3], then the latency ring (rows of
+#: p 3, v 3, R 9, w 3, specific force 3)
+_HEAD, _STREAM, _RING = 2, 19, 21
+#: the coloured noise's time constant is ``tau / COLOURED_SHAPE``: ``(1 + s) exp(-s) = 1/e`` at
+#: ``s = COLOURED_SHAPE``, so that its autocorrelation falls to ``1/e`` at ``tau`` (how
+#: :mod:`quadfault.diagnosis.sensor_noise` measures ``tau``)
+COLOURED_SHAPE = 2.146193220620583
 
 
 def _five(name: str, value, default: float) -> tuple:
@@ -85,7 +96,7 @@ class SensorNoise:
         position [m], velocity [m/s], attitude [rad], gyro [rad/s], accel [m/s^2]: standard
             deviation of each stream's white noise per sample.
         markov: per stream (:data:`STREAMS` order), the stationary standard deviation of its
-            first-order Gauss-Markov noise [unit].
+            second-order Gauss-Markov noise [unit] (the module docstring).
         tau: per stream, that noise's correlation time [s].
         bias: per stream, the standard deviation of its constant per-flight bias [unit].
         rate: per stream, its sample rate [Hz] (held in between; 0: every physics step).
@@ -270,9 +281,10 @@ def _start(row, st, dt, gen):
         if row[c + 2] > 0.0:
             for a in range(3):
                 st[b + 1 + a] = row[c + 2] * gen.standard_normal()
-        if row[c] > 0.0:
+        if row[c] > 0.0:  # stationary: cov(drive, out) = markov^2 [[2, 1], [1, 1]]
             for a in range(3):
                 st[b + 4 + a] = row[c] * gen.standard_normal()
+                st[b + 16 + a] = st[b + 4 + a] + row[c] * gen.standard_normal()
     st[0] = 1.0
     st[1] = 0.0
 
@@ -290,6 +302,29 @@ def _due(row, st, s, dt):
 
 
 @jit(inner=True)
+def _coloured_step(st, b, sm, r, gen):
+    """One exact step of stream ``b``'s coloured noise (3 axes), ``r`` the step over its time
+    constant: the driving first-order process ``d`` (``st[b+16:b+19]``) and its low-pass
+    ``x`` (``st[b+4:b+7]``, the error), ``d' = -d / T + noise``, ``x' = (d - x) / T``.
+    ``[d, x] <- exp(-r) [[1, 0], [r, 1]] [d, x] + L z`` with ``L L^T`` the exact covariance
+    of one step, ``markov^2 [[2 (1 - E), 1 - E (1 + 2r)], [., 1 - E (1 + 2r + 2r^2)]]``,
+    ``E = exp(-2r)``; the stationary covariance ``markov^2 [[2, 1], [1, 1]]`` is kept."""
+    a = math.exp(-r)
+    E = a * a
+    q11 = 2.0 * sm * sm * (1.0 - E)
+    q12 = sm * sm * (1.0 - E * (1.0 + 2.0 * r))
+    q22 = sm * sm * (-math.expm1(-2.0 * r) - E * (2.0 * r + 2.0 * r * r))
+    l11 = math.sqrt(q11)
+    l21 = q12 / l11
+    l22 = math.sqrt(max(0.0, q22 - l21 * l21))
+    for k in range(3):
+        d, x = st[b + 16 + k], st[b + 4 + k]
+        z1, z2 = gen.standard_normal(), gen.standard_normal()
+        st[b + 16 + k] = a * d + l11 * z1
+        st[b + 4 + k] = a * (r * d + x) + l21 * z1 + l22 * z2
+
+
+@jit(inner=True)
 def _error3(row, st, s, white, dt, gen):
     """A new sample's error of stream ``s``: bias + coloured (one step) + white (3 floats)."""
     b = _HEAD + _STREAM * s
@@ -297,10 +332,7 @@ def _error3(row, st, s, white, dt, gen):
     sm = row[c]
     if sm > 0.0:
         h = 1.0 / row[c + 3] if row[c + 3] > 0.0 else dt
-        a = math.exp(-h / row[c + 1])
-        q = sm * math.sqrt(max(0.0, 1.0 - a * a))
-        for k in range(3):
-            st[b + 4 + k] = a * st[b + 4 + k] + q * gen.standard_normal()
+        _coloured_step(st, b, sm, h * COLOURED_SHAPE / row[c + 1], gen)
     e0 = st[b + 1] + st[b + 4]
     e1 = st[b + 2] + st[b + 5]
     e2 = st[b + 3] + st[b + 6]
@@ -433,6 +465,7 @@ def _accelerometer_one(sf, noise, gen):
 
 
 __all__ = [
+    "COLOURED_SHAPE",
     "MODEL_FIELDS",
     "ROW_WIDTH",
     "STREAMS",
