@@ -228,7 +228,9 @@ def test_the_mixer_gives_up_yaw_first_at_zero_thrust(kernel):
     lowest command is zero; a demand within bounds is the plain inverse's, bit for bit."""
     veh = Vehicle()
     Ai, B = veh.allocation_inverse, veh.allocation
-    mix = controller.rotor_commands if kernel == "compiled" else jit.python(controller.rotor_commands)
+    mix = (
+        controller.rotor_commands if kernel == "compiled" else jit.python(controller.rotor_commands)
+    )
     T, M = veh.mass * veh.gravity, (0.05, -0.03, 0.4)
     plain, mixed = np.empty(4), np.empty(4)
     mix(T, M, Ai, plain)
