@@ -85,7 +85,8 @@ def test_controller_kernel_equals_the_readable_form(config):
         np.testing.assert_allclose(out.thrust, T, rtol=0, atol=1e-12)
         np.testing.assert_allclose(out.moment, M, rtol=0, atol=1e-12)
         np.testing.assert_allclose(out.Rd, Rd, rtol=0, atol=1e-14)
-        np.testing.assert_allclose(f, veh.allocation_inverse @ np.r_[T, M], atol=1e-12)
+        want = oracles.mix(veh.allocation_inverse, T, M, config.yaw_release)
+        np.testing.assert_allclose(f, want, atol=1e-12)
         np.testing.assert_allclose(
             ctrl.feedforward_rates(t)[0],
             oracles.feedforward_rates(traj, t, veh, config)[0],
@@ -246,3 +247,20 @@ def test_the_mixer_gives_up_yaw_first_at_zero_thrust(kernel):
     mix(T, small, Ai, a)
     mix(T, small, Ai, b, True)
     assert a.min() > 0 and np.array_equal(a, b)
+
+
+def test_the_mixer_gives_up_yaw_first_at_the_thrust_limit():
+    """A saturating flight's mixer (``f_max``): a yaw demand that pushes a rotor above the
+    limit is scaled down until the highest command is the limit; roll, pitch and thrust
+    kept."""
+    veh = Vehicle()
+    Ai, B, f_max = veh.allocation_inverse, veh.allocation, veh.rotor_max_thrust
+    T, M = 1.6 * veh.mass * veh.gravity, (0.05, -0.03, -0.1)
+    plain, mixed = np.empty(4), np.empty(4)
+    controller.rotor_commands(T, M, Ai, plain)
+    controller.rotor_commands(T, M, Ai, mixed, True, f_max)
+    assert plain.max() > f_max + 1.0 and plain.min() > 0
+    assert mixed.max() == pytest.approx(f_max, abs=1e-12)
+    wrench = B @ mixed
+    np.testing.assert_allclose(wrench[:3], [T, M[0], M[1]], rtol=0, atol=1e-9)
+    assert M[2] < wrench[3] < 0.0

@@ -43,6 +43,7 @@ of the batch -- and each vehicle's sensor noise -- in :class:`LoopConstants`.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -282,7 +283,8 @@ def fly_vehicle(i, gens, k0, k1, measure_first, C, K, V, T, out, fx, memory):
             if k % C.decimation == 0:
                 gains, nominal = controller_tuples(K)
                 u = geometric_control(mp, mv, mR, mw, reference_row(refs, row), gains, nominal)
-                rotor_commands(u[0], u[1], K.allocation_inverse, f_cmd, K.yaw_release)
+                f_hi = f_max if C.saturate else math.inf  # the mixer's upper bound
+                rotor_commands(u[0], u[1], K.allocation_inverse, f_cmd, K.yaw_release, f_hi)
         motor_thrust(f_cmd, eta, row, f_max, C.saturate, sigma, gen, f)
         # the thrust stage, and the step's wrench terms the RK stages take (numbers; the
         # chain compiled for the rows' effects alone, nothing without effects)

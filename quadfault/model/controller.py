@@ -76,8 +76,9 @@ class ControllerConfig:
             central differences of the trajectory's desired attitude, step ``ff_step`` [s]).
         normalize_b2d: normalise ``b2d = b3d x b1d`` (Lee et al.); the reference code does not.
         yaw_release: the mixer gives up yaw first where the yaw moment alone would push a
-            rotor's command below zero (:func:`rotor_commands`); the reference code mixes with
-            the plain inverse.
+            rotor's command below zero, or above the thrust limit in a flight whose motors
+            saturate (:func:`rotor_commands`); the reference code mixes with the plain
+            inverse.
     """
 
     gains: GeometricGains = field(default_factory=GeometricGains)
@@ -269,18 +270,18 @@ def controller_tuples(K):
 
 
 @jit(inline="always")
-def rotor_commands(thrust, M, allocation_inverse, out, yaw_release=False):
+def rotor_commands(thrust, M, allocation_inverse, out, yaw_release=False, f_max=math.inf):
     """Rotor thrust commands [N] realising ``(T, M)`` through the nominal allocation inverse
     (eq. 12, least-norm) into ``out`` (n,).
 
     ``yaw_release``: the mixer gives up yaw first, as an autopilot's mixer does: where the yaw
-    moment alone pushes a rotor's command below zero (a rotor cannot push), the yaw moment is
-    scaled down, to none at most, until no command goes below zero through it; thrust, roll
-    and pitch are kept (a command they alone push below zero stays there and the motor clips
-    it; above ``f_max`` the command stands and a saturating motor clips it). A quadrotor's yaw
+    moment alone pushes a rotor's command below zero (a rotor cannot push) or above ``f_max``
+    [N] (``inf``: the motors do not saturate), the yaw moment is scaled down, to none at most,
+    until no command passes a bound through it; thrust, roll and pitch are kept (a command
+    they alone push past a bound stays there and the motor clips it). A quadrotor's yaw
     authority is the rotors' drag, a few percent of their lift's moment, so a yaw demand that
-    the plain inverse meets drives a pair of rotors to zero thrust and takes roll and pitch
-    with it. Commands that stay at or above zero are the plain inverse's, bit for bit."""
+    the plain inverse meets drives a pair of rotors to their bounds and takes roll and pitch
+    with it. Commands within the bounds are the plain inverse's, bit for bit."""
     Ai = allocation_inverse
     s = 1.0
     if yaw_release:
@@ -289,6 +290,8 @@ def rotor_commands(thrust, M, allocation_inverse, out, yaw_release=False):
             yaw = Ai[i, 3] * M[2]
             if yaw < 0.0 and base + yaw < 0.0:
                 s = min(s, max(0.0, -base / yaw))
+            elif yaw > 0.0 and base + yaw > f_max:
+                s = min(s, max(0.0, (f_max - base) / yaw))
     for i in range(out.shape[0]):
         out[i] = Ai[i, 0] * thrust + Ai[i, 1] * M[0] + Ai[i, 2] * M[1] + s * (Ai[i, 3] * M[2])
 

@@ -183,16 +183,19 @@ def measure(p, v, R, w, noise, rng):
     return p, v, R, w + noise.gyro * rng.standard_normal(3)
 
 
-def mix(allocation_inverse, T, M, yaw_release):
+def mix(allocation_inverse, T, M, yaw_release, f_max=np.inf):
     """Rotor commands from ``(T, M)`` by the allocation inverse; with ``yaw_release`` the yaw
-    moment scaled down (to none at most) so that it pushes no command below zero."""
+    moment scaled down (to none at most) so that it pushes no command below zero or above
+    ``f_max``."""
     base = allocation_inverse[:, :3] @ np.array([T, M[0], M[1]])
     yaw = allocation_inverse[:, 3] * M[2]
     s = 1.0
     if yaw_release:
-        pushed = (yaw < 0) & (base + yaw < 0)
-        if pushed.any():
-            s = float(np.clip(-base[pushed] / yaw[pushed], 0.0, 1.0).min())
+        low = (yaw < 0) & (base + yaw < 0)
+        high = (yaw > 0) & (base + yaw > f_max)
+        bounds = np.concatenate((-base[low] / yaw[low], (f_max - base[high]) / yaw[high]))
+        if bounds.size:
+            s = float(np.clip(bounds, 0.0, 1.0).min())
     return base + s * yaw
 
 
@@ -220,7 +223,7 @@ def closed_loop_flight(scenario, config, seed, vehicle, nominal, thrust_noise, i
             if config.controller.angular_feedforward:
                 wd, wdd = feedforward_rates(scenario.trajectory, t, nominal, config.controller)
             T, M, _ = geometric_control(mp, mv, mR, mw, ref, wd, wdd, nominal, config.controller)
-            f_cmd = mix(nominal.allocation_inverse, T, M, config.controller.yaw_release)
+            f_cmd = mix(nominal.allocation_inverse, T, M, config.controller.yaw_release, f_max)
         eta = np.asarray(scenario.efficiency(t), dtype=float)
         z = rng.standard_normal(vehicle.n_rotors) if thrust_noise > 0 else 0.0
         f = motor_thrust(f_cmd, eta, f_max, config.saturate, thrust_noise, z)
