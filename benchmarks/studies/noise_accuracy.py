@@ -4,6 +4,7 @@ with real sensors.
     python benchmarks/studies/noise_accuracy.py [--noise none] [--noise PRESET|P,V,A,G,ACC ...]
                                                 [--seeds 0-4] [--duration 80]
                                                 [--weak-duration 20] [--json OUT.json]
+                                                [--mixer yaw-release|plain]
 
 For each sensor noise (``--noise``, repeatable: ``none``, a preset name of
 ``quadfault simulate --sensor-noise`` or the white-noise stds ``P,V,A,G,ACC``) and each seed,
@@ -81,10 +82,17 @@ def sensor_noise(text: str):
     return as_sensor_noise(text)
 
 
+#: the controller's mixer (``--mixer``): True gives up yaw first at the rotors' bounds
+YAW_RELEASE = {"yaw-release": True, "plain": False}
+MIXER = {"yaw_release": True}
+
+
 def fly(scenario, noise, seed: int, saturate: bool):
+    from quadfault.model.controller import ControllerConfig
     from quadfault.sim.simulator import SimConfig, simulate
 
-    config = SimConfig(saturate=saturate, sensor_noise=noise)
+    controller = ControllerConfig(yaw_release=MIXER["yaw_release"])
+    config = SimConfig(saturate=saturate, sensor_noise=noise, controller=controller)
     return simulate(scenario, config=config, seed=seed, thrust_noise=0.07)
 
 
@@ -242,7 +250,15 @@ def main(argv=None) -> int:
     p.add_argument("--duration", type=float, default=80.0, help="scenario flights [s]")
     p.add_argument("--weak-duration", type=float, default=20.0, help="weak-rotor flights [s]")
     p.add_argument("--json", help="write the summary here")
+    p.add_argument(
+        "--mixer",
+        choices=sorted(YAW_RELEASE),
+        default="yaw-release",
+        help="the controller's mixer: yaw given up first at the rotors' bounds (default) or "
+        "the plain allocation inverse",
+    )
     args = p.parse_args(argv)
+    MIXER["yaw_release"] = YAW_RELEASE[args.mixer]
     seeds = seeds_of(args.seeds)
     doc = {"seeds": seeds, "duration": args.duration, "results": {}}
     start = time.process_time()
