@@ -13,6 +13,7 @@ import pytest
 from quadfault.diagnosis import Diagnosis, DiagnosisConfig
 from quadfault.diagnosis.report_text import markdown
 from quadfault.model import effects as fx
+from quadfault.model.controller import ControllerConfig
 from quadfault.model.scenarios import named_scenario
 from quadfault.model.trajectory import Lissajous
 from quadfault.model.vehicle import PAPER_YAW_SIGNS, Vehicle
@@ -34,7 +35,11 @@ TRAJ = Lissajous(amplitude=(0.58, 0.39, 0.067), frequency=0.146, altitude=1.5, y
 
 def fly(effect, seed=1):
     sc = named_scenario("nominal", 12.0, DT).replace(trajectory=TRAJ)
-    cfg = SimConfig(dt=DT, sensor_noise=SensorNoise(0.005, 0.0065, 0.0012, 0.0017))
+    # the plain allocation inverse: these flights' fast yaw moments are part of the signal
+    plain = ControllerConfig(yaw_release=False)
+    cfg = SimConfig(
+        dt=DT, sensor_noise=SensorNoise(0.005, 0.0065, 0.0012, 0.0017), controller=plain
+    )
     return simulate(
         sc,
         vehicle=SMALL,

@@ -325,6 +325,8 @@ def test_rotor_inertia_without_lag_losing_the_vehicle_says_why(tmp_path, capsys)
                 "--quiet",
                 "--effect",
                 "rotor_inertia=0.001",
+                "--mixer",
+                "plain",
             ]
         )
         == 0

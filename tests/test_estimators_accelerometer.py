@@ -95,7 +95,7 @@ def test_the_accelerometer_rows_beat_the_velocity_rows_under_indiflight(indiflig
         return math.sqrt(np.mean(e**2)), abs(np.mean(e[:, [0, 1, 3]]))
 
     (rmse_off, bias_off), (rmse_on, bias_on) = errors(off), errors(on)
-    assert rmse_on < 0.8 * rmse_off, (rmse_on, rmse_off)
+    assert rmse_on < 0.9 * rmse_off, (rmse_on, rmse_off)  # (the paper's IRLS: 0.053 vs 0.063)
     assert bias_on < bias_off, (bias_on, bias_off)  # the healthy rotors' mean error
 
 

@@ -59,7 +59,8 @@ def test_the_readme_example_stays_physical_for_80_s(tmp_path):
     assert _tracking_error(rec, scenario).max() < 0.5
     assert (-rec.position[:, 2]).min() > 0.5  # the circle flies at 1 m
     assert rec.thrust_cmd.min() >= 0 and rec.thrust_cmd.max() > Vehicle().rotor_max_thrust
-    # with the limit asked for, the same flight loses the vehicle and ends at the ground
+    # with the limit asked for and the plain mixer, the same flight loses the vehicle and
+    # ends at the ground; the yaw-releasing mixer holds it
     limited = tmp_path / "limited.csv"
     code, err = _cli(
         [
@@ -72,6 +73,8 @@ def test_the_readme_example_stays_physical_for_80_s(tmp_path):
             "0",
             "--max-thrust",
             Vehicle().rotor_max_thrust,
+            "--mixer",
+            "plain",
             "--out",
             limited,
             "--quiet",
@@ -88,6 +91,11 @@ def test_the_readme_example_stays_physical_for_80_s(tmp_path):
     assert np.abs(cut.thrust_cmd).max() < 5 * Vehicle().rotor_max_thrust
     code, _ = _cli(["estimate", limited, "--out", tmp_path / "est.csv", "--quiet"])
     assert code == 0
+    held = tmp_path / "held.csv"
+    limit = ["--max-thrust", Vehicle().rotor_max_thrust, "--out", held, "--quiet"]
+    code, err = _cli(["simulate", "--scenario", "combined", "--duration", "80", *limit])
+    assert code == 0 and "warning" not in err
+    assert _tracking_error(read_recording(held), scenario).max() < 0.5
 
 
 def test_a_falling_flight_ends_at_the_ground_and_no_saturation_still_works(tmp_path):

@@ -66,6 +66,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="controller rate [Hz] (default: every physics step)",
     )
     p.add_argument(
+        "--mixer",
+        choices=("yaw-release", "plain"),
+        default="yaw-release",
+        help="the controller's mixer: yaw-release (default) gives up yaw first where it would "
+        "push a rotor's command below zero or above the thrust limit; plain: the allocation "
+        "inverse alone (eq. 12)",
+    )
+    p.add_argument(
         "--thrust-noise",
         type=float,
         default=None,
@@ -192,7 +200,11 @@ def run(args) -> int:
     else:
         # a model's vehicle flies the paper's gains carried over to its mass and inertia
         gains = GeometricGains() if model is None else GeometricGains().scaled(vehicle)
-        ctrl = ControllerConfig(gains=gains, acceleration_feedforward=not args.no_accel_feedforward)
+        ctrl = ControllerConfig(
+            gains=gains,
+            acceleration_feedforward=not args.no_accel_feedforward,
+            yaw_release=args.mixer == "yaw-release",
+        )
         period = None if args.control_rate is None else 1.0 / args.control_rate
         cfg = SimConfig(
             dt=args.dt,
