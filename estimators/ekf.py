@@ -72,6 +72,7 @@ from estimators.ekf_filter import (
     Workspace,
     X,
     Y,
+    predict_update_accel_into,
     predict_update_into,
 )
 from estimators.freshness import (
@@ -399,7 +400,10 @@ def ekf_step(t, p, v, R, w, f, sf, const, model, S, ks, i) -> int:
                 h2 += ha[j] * ha[j]
             r_now[Y.a] += const[CONSTANTS.scatter] * const[CONSTANTS.scatter] * h2
         z = Measurement(p, v, w, R, sf[2], ha, rows)
-        predict_update_into(x, P, last_f, dt, z, step_model, workspace_row(S, i))
+        if rows == Y.size:
+            predict_update_accel_into(x, P, last_f, dt, z, step_model, workspace_row(S, i))
+        else:
+            predict_update_into(x, P, last_f, dt, z, step_model, workspace_row(S, i))
         code = OK
         if idle:  # the efficiencies stay, decorrelated; their variance grows by Q_eta dt
             for j in range(n):

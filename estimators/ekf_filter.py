@@ -385,7 +385,7 @@ def _jacobian_times(Pin, out, lower, F, ze, Z):
 
 
 @jit(inline="always")
-def predict_state(x, f, dt, model, work):
+def predict_state(x, f, dt, model, R, Rn, xp):
     """The state's predict over ``dt`` [s] with the rotor commands ``f`` [N] held: the rigid
     body of :mod:`quadfault.model.dynamics` (the thrust allocation ``[T; M] = A diag(eta) f``,
     eq. 12; the accelerations, eqs. 2 and 4) discretised as the paper's EKF does (eqs. 1-4)::
@@ -393,10 +393,10 @@ def predict_state(x, f, dt, model, work):
         p+ = p + v dt + a dt^2 / 2,   v+ = v + a dt,   Omega+ = Omega + Omega' dt,
         R+ = R exp([phi]x),  phi = Omega dt + Omega' dt^2 / 2,   eta+ = eta
 
-    into ``work.xp`` (``work.R``, ``work.Rn``: the attitude before and after). Returns what
+    into ``xp`` (``R``, ``Rn``: the attitude before and after). Returns what
     the transition Jacobian needs: the thrust ``T``, the rate ``w``, ``J w``, ``phi`` and
     ``E = exp([phi]x)`` (row-major 9-tuple)."""
-    R, Rn, xp, rigid = work.R, work.Rn, work.xp, model.rigid
+    rigid = model.rigid
     for j in range(3):
         for i in range(3):
             R[i, j] = x[X.Re1 + 3 * j + i]
@@ -427,7 +427,7 @@ def predict_state(x, f, dt, model, work):
 
 
 @jit(inline="always")
-def transition_blocks(f, dt, model, T, w, jw, phi, E, work):
+def transition_blocks(f, dt, model, T, w, jw, phi, E, R, Rn, dT, BwT, BrT, Gn, G, Fw, Mw, Jr, dR):
     """The blocks of the transition Jacobian ``F = d x_pred / d x`` of :func:`predict_state`
     (its arguments ``T``, ``w``, ``jw``, ``phi``, ``E``), as a :class:`Transition` over arrays
     of ``work``; ``F`` itself is never formed. The efficiency columns: ``dT = d T / d eta``
@@ -435,8 +435,6 @@ def transition_blocks(f, dt, model, T, w, jw, phi, E, work):
     ``G = J^-1 ([J w]x - [w]x J) = d Omega' / d Omega``; the attitude:
     ``dR[:, i] = vec(R_pred [Jr[:, i]]x) = d vec(R_pred) / d phi_i``."""
     A, J, Jinv, m = model.A, model.J, model.Jinv, model.rigid[0]
-    R, Rn, dT, BwT, BrT = work.R, work.Rn, work.dT, work.BwT, work.BrT
-    Gn, G, Fw, Mw, Jr, dR = work.Gn, work.G, work.Fw, work.Mw, work.Jr, work.dR
     for j in range(f.shape[0]):  # dT = d T / d eta, B = d Omega' / d eta
         dT[j] = A[0, j] * f[j]
         for i in range(3):
@@ -477,17 +475,16 @@ def transition_blocks(f, dt, model, T, w, jw, phi, E, work):
 
 
 @jit(inline="always")
-def predict_covariance(P, F, qc, dt, work):
-    """``P_pred = F P F^T + Q`` into ``work.Pp``, with ``Q = diag(qc) dt``: ``F P`` over the
+def predict_covariance(P, F, qc, dt, FP, FPT, Pp, ze, Z):
+    """``P_pred = F P F^T + Q`` into ``Pp``, with ``Q = diag(qc) dt``: ``F P`` over the
     blocks of ``F`` (:func:`_jacobian_times`), then ``F (F P)^T`` on the lower triangle
-    only, mirrored (exactly symmetric)."""
-    FP, FPT, Pp = work.FP, work.FPT, work.Pp
+    only, mirrored (exactly symmetric). ``FP``, its transpose ``FPT``, ``ze``, ``Z``: scratch."""
     ns = P.shape[0]
-    _jacobian_times(P, FP, False, F, work.ze, work.Z)
+    _jacobian_times(P, FP, False, F, ze, Z)
     for i in range(ns):
         for k in range(ns):
             FPT[k, i] = FP[i, k]
-    _jacobian_times(FPT, Pp, True, F, work.ze, work.Z)
+    _jacobian_times(FPT, Pp, True, F, ze, Z)
     for i in range(ns):
         for k in range(i):
             Pp[k, i] = Pp[i, k]
@@ -495,13 +492,14 @@ def predict_covariance(P, F, qc, dt, work):
 
 
 @jit(inline="always")
-def innovation(z, work, nm):
-    """The innovation ``y = z - h(x_pred)`` into ``work.y`` and the attitude rows of
-    ``H = [I_9 0; 0 HR 0]`` into ``work.HR``. Position, velocity and rate read their states;
+def innovation(z, xp, Rn, dRz, y, HR, nm):
+    """The innovation ``y = z - h(x_pred)`` into ``y`` and the attitude rows of
+    ``H = [I_9 0; 0 HR 0]`` into ``HR`` (``xp``, ``Rn``: the predicted state and attitude;
+    ``dRz``: scratch). Position, velocity and rate read their states;
     the attitude's is the rotation error ``log(R_pred^T R_meas)``, whose Jacobian ``HR`` is
     that of ``vee(skew(R_pred^T R_meas))`` (equal to first order; it does not depend on the
     estimate)."""
-    xp, Rn, dRz, y, HR, zR = work.xp, work.Rn, work.dRz, work.y, work.HR, z.R
+    zR = z.R
     for i in range(3):
         y[Y.p + i] = z.p[i] - xp[X.p + i]
         y[Y.v + i] = z.v[i] - xp[X.v + i]
@@ -531,13 +529,12 @@ def innovation(z, work, nm):
 
 
 @jit(inline="always")
-def innovation_covariance(z, work, nm):
-    """``H P_pred`` into ``work.HP`` and the lower triangle of ``S = H P_pred H^T`` into
-    ``work.S`` (``R = diag(r)`` is added where ``S`` is factored, :func:`whitened_gain`), on
+def innovation_covariance(ha, Pp, HR, HP, S, nm):
+    """``H P_pred`` into ``HP`` and the lower triangle of ``S = H P_pred H^T`` into
+    ``S`` (``R = diag(r)`` is added where ``S`` is factored, :func:`whitened_gain`), on
     the ``nm`` rows measured. ``H = [I_9 0; 0 HR 0; 0 ha^T]``: ``H P`` reads rows of
-    ``P``, the attitude rows go through ``HR``, the accelerometer's through ``z.ha`` on the
+    ``P``, the attitude rows go through ``HR``, the accelerometer's through ``ha`` on the
     efficiencies."""
-    Pp, HR, HP, S = work.Pp, work.HR, work.HP, work.S
     ns = Pp.shape[0]
     nd = Y.R  # the rows that read their state (H = I there)
     for i in range(nd):
@@ -552,7 +549,6 @@ def innovation_covariance(z, work, nm):
                 for k in range(ns):
                     HP[nd + i, k] += h * Pp[X.Re1 + j, k]
     if nm > Y.a:
-        ha = z.ha
         for k in range(ns):
             acc = 0.0
             for j in range(ha.shape[0]):
@@ -568,22 +564,21 @@ def innovation_covariance(z, work, nm):
             S[i, k] = acc
         if i == Y.a:
             acc = 0.0
-            for j in range(z.ha.shape[0]):
-                acc += HP[i, X.eta + j] * z.ha[j]
+            for j in range(ha.shape[0]):
+                acc += HP[i, X.eta + j] * ha[j]
             S[i, i] = acc
 
 
 @jit(inline="always")
-def whitened_gain(r, work, nm) -> bool:
+def whitened_gain(r, S, L, HP, y, nm) -> bool:
     """The gain ``K = P_pred H^T S^-1`` in its square-root form, with ``S + diag(r) = L L^T``
     (:func:`estimators.linalg.cholesky_into`, ``r`` its shift): ``K = W^T L^-1`` with
-    ``W = L^-1 H P_pred`` (``work.HP`` becomes ``W``, forward substitution on whole rows)
-    and the whitened innovation ``L^-1 y`` (``work.y``). False, with nothing changed but
-    ``work.L``, when ``S`` is not positive definite (a corrupted covariance). ``nm``: the
+    ``W = L^-1 H P_pred`` (``HP`` becomes ``W``, forward substitution on whole rows)
+    and the whitened innovation ``L^-1 y`` (in ``y``). False, with nothing changed but
+    ``L``, when ``S`` is not positive definite (a corrupted covariance). ``nm``: the
     rows measured."""
-    HP, L, y = work.HP, work.L, work.y
     ns = HP.shape[1]
-    if not cholesky_into(work.S, r, L, nm):
+    if not cholesky_into(S, r, L, nm):
         return False
     for i in range(nm):  # W = L^-1 H P
         for k in range(i):
@@ -602,10 +597,9 @@ def whitened_gain(r, work, nm) -> bool:
 
 
 @jit(inline="always")
-def update_state(x, work, nm):
+def update_state(x, xp, W, WT, y, nm):
     """``x = x_pred + K y = x_pred + W^T (L^-1 y)`` (:func:`whitened_gain`, ``nm`` rows);
-    ``work.WT`` becomes ``W^T``."""
-    xp, W, WT, y = work.xp, work.HP, work.WT, work.y
+    ``WT`` becomes ``W^T``."""
     for i in range(x.shape[0]):
         acc = 0.0
         for c in range(nm):
@@ -615,13 +609,12 @@ def update_state(x, work, nm):
 
 
 @jit(inline="always")
-def update_covariance(P, work, nm):
+def update_covariance(P, Pp, WT, nm):
     """``P = (I - K H) P_pred = P_pred - K S K^T = P_pred - W^T W`` (after
     :func:`update_state`): the optimal gain's covariance, equal to the Joseph form
     ``(I - K H) P (I - K H)^T + K R K^T`` for this gain up to rounding; symmetric by
     construction (lower triangle computed, mirrored) and positive semi-definite up to
     rounding."""
-    Pp, WT = work.Pp, work.WT
     for i in range(P.shape[0]):
         for k in range(i + 1):
             acc = 0.0
@@ -632,14 +625,13 @@ def update_covariance(P, work, nm):
 
 
 @jit(inline="always")
-def project_and_clamp(x, lo, hi, work):
-    """The updated attitude projected back onto SO(3) (:func:`_project_so3_into`) and the
-    efficiencies clamped to ``[lo, hi]``, in ``x``."""
-    Ru = work.Ru
+def project_and_clamp(x, lo, hi, Ru, svdA, svdD, svdV):
+    """The updated attitude projected back onto SO(3) (:func:`_project_so3_into`, in ``Ru``;
+    ``svd*``: scratch) and the efficiencies clamped to ``[lo, hi]``, in ``x``."""
     for j in range(3):
         for i in range(3):
             Ru[i, j] = x[X.Re1 + 3 * j + i]
-    _project_so3_into(Ru, work.svdA, work.svdD, work.svdV)
+    _project_so3_into(Ru, svdA, svdD, svdV)
     for j in range(3):
         for i in range(3):
             x[X.Re1 + 3 * j + i] = Ru[i, j]
@@ -650,36 +642,66 @@ def project_and_clamp(x, lo, hi, work):
 @jit
 def predict_update_into(x, P, f, dt, z, model, work):
     """One predict over ``dt`` [s] with the rotor commands ``f`` [N] held and one update with
-    the measurement ``z`` (:class:`Measurement`); ``x`` and ``P`` are overwritten.
-    ``model``: :class:`Model` (the nominal rigid body, allocation, noise, clamp); ``work``:
-    :class:`Workspace`. Each stage is one line of the EKF's equations, on the workspace's
-    arrays by name (:class:`Scratch`)."""
-    work = scratch(work)
-    T, w, jw, phi, E = predict_state(x, f, dt, model, work)  # x_pred = f(x, u), eqs. 1-4, 12
-    F = transition_blocks(f, dt, model, T, w, jw, phi, E, work)  # F = d f / d x
-    predict_covariance(P, F, model.qc, dt, work)  # P_pred = F P F^T + Q
-    if z.rows == Y.a:  # (each with its rows' count known when compiled)
-        measurement_update(x, P, z, model, work, Y.a)
-    else:
-        measurement_update(x, P, z, model, work, Y.size)
-    project_and_clamp(x, model.lo, model.hi, work)
+    the measurement ``z`` (:class:`Measurement`) without its accelerometer row (the paper's
+    filter); ``x`` and ``P`` are overwritten. ``model``: :class:`Model` (the nominal rigid
+    body, allocation, noise, clamp); ``work``: :class:`Workspace`."""
+    _predict_update(x, P, f, dt, z, model, work, Y.a)
+
+
+@jit
+def predict_update_accel_into(x, P, f, dt, z, model, work):
+    """:func:`predict_update_into` with the accelerometer's row measured too."""
+    _predict_update(x, P, f, dt, z, model, work, Y.size)
 
 
 @jit(inline="always")
-def measurement_update(x, P, z, model, work, nm):
-    """The update with the ``nm`` rows of ``z`` measured (:data:`Y`; ``Y.a``: without the
-    accelerometer), after the predict (:func:`predict_update_into`)."""
-    innovation(z, work, nm)  # y = z - h(x_pred), H = d h / d x
-    innovation_covariance(z, work, nm)  # S = H P_pred H^T (+ R)
-    if whitened_gain(model.r, work, nm):  # K = P_pred H^T S^-1 = W^T L^-1
-        update_state(x, work, nm)  # x = x_pred + K y
-        update_covariance(P, work, nm)  # P = P_pred - K S K^T
+def _predict_update(x, P, f, dt, z, model, work, nm):
+    """The filter on ``nm`` rows of ``z`` (known when compiled: each kernel above holds one
+    update). Each stage is one line of the EKF's equations; each takes the workspace's
+    arrays it reads and writes by name (:class:`Scratch`)."""
+    s = scratch(work)
+    T, w, jw, phi, E = predict_state(x, f, dt, model, s.R, s.Rn, s.xp)  # x_pred = f(x, u)
+    F = transition_blocks(  # F = d f / d x
+        f,
+        dt,
+        model,
+        T,
+        w,
+        jw,
+        phi,
+        E,
+        s.R,
+        s.Rn,
+        s.dT,
+        s.BwT,
+        s.BrT,
+        s.Gn,
+        s.G,
+        s.Fw,
+        s.Mw,
+        s.Jr,
+        s.dR,
+    )
+    predict_covariance(P, F, model.qc, dt, s.FP, s.FPT, s.Pp, s.ze, s.Z)  # F P F^T + Q
+    innovation(z, s.xp, s.Rn, s.dRz, s.y, s.HR, nm)  # y = z - h(x_pred), H = d h / d x
+    innovation_covariance(z.ha, s.Pp, s.HR, s.HP, s.S, nm)  # S = H P_pred H^T (+ R)
+    if whitened_gain(model.r, s.S, s.L, s.HP, s.y, nm):  # K = P_pred H^T S^-1 = W^T L^-1
+        update_state(x, s.xp, s.HP, s.WT, s.y, nm)  # x = x_pred + K y
+        update_covariance(P, s.Pp, s.WT, nm)  # P = P_pred - K S K^T
     else:  # S not positive definite: the general solver
-        S, ns = work.S, x.shape[0]
-        for i in range(nm):
-            S[i, i] += model.r[i]
-        KT = work.WT.ravel()[: nm * ns].reshape((nm, ns))
-        _update_general(x, P, work.xp, work.Pp, work.y[:nm], work.HP[:nm], S[:nm, :nm], KT)
+        _update_general_from(x, P, model.r, s, nm)
+    project_and_clamp(x, model.lo, model.hi, s.Ru, s.svdA, s.svdD, s.svdV)
+
+
+@jit
+def _update_general_from(x, P, r, s, nm):
+    """:func:`_update_general` on the workspace's arrays (``s``: :class:`Scratch`), with
+    ``diag(r)`` added to ``S``."""
+    S, ns = s.S, x.shape[0]
+    for i in range(nm):
+        S[i, i] += r[i]
+    KT = s.WT.ravel()[: nm * ns].reshape((nm, ns))
+    _update_general(x, P, s.xp, s.Pp, s.y[:nm], s.HP[:nm], S[:nm, :nm], KT)
 
 
 @jit

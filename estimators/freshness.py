@@ -76,6 +76,32 @@ def _zero3(a) -> bool:
 
 
 @jit(inline="always")
+def _same33(R, last_R) -> bool:
+    same = True
+    for i in range(3):
+        for j in range(3):
+            same = same and R[i, j] == last_R[i, j]
+    return same
+
+
+@jit(inline="always")
+def _mask(still, turning, same_p, same_v, same_R, same_w) -> int:
+    """The mask of :func:`fresh_streams` from what it compares: the velocity exactly zero
+    (``still``), the rate not (``turning``), and whether each stream repeats its last
+    sample (``same_*``)."""
+    mask = 0
+    if still or not same_p:
+        mask |= POSITION
+    if still or not same_v:
+        mask |= VELOCITY
+    if not turning or not same_R:
+        mask |= ATTITUDE
+    if not turning or not same_w:
+        mask |= RATE
+    return mask
+
+
+@jit(inline="always")
 def fresh_streams(p, v, R, w, last_p, last_v, last_R, last_w) -> int:
     """The mask of the streams of the sample ``(p, v, R, w)`` that are fresh (bits
     :data:`POSITION`, :data:`VELOCITY`, :data:`ATTITUDE`, :data:`RATE`): a stream is held when
@@ -83,19 +109,14 @@ def fresh_streams(p, v, R, w, last_p, last_v, last_R, last_w) -> int:
     last_w)``, unless the repeat is the physics of a vehicle at rest: the velocity (rate)
     exactly zero, which keeps the velocity and the position (the rate and the attitude)
     fresh."""
-    still, turning = _zero3(v), not _zero3(w)
-    mask = 0
-    if still or not _same3(p, last_p):
-        mask |= POSITION
-    if still or not _same3(v, last_v):
-        mask |= VELOCITY
-    if not turning or not (
-        _same3(R[0], last_R[0]) and _same3(R[1], last_R[1]) and _same3(R[2], last_R[2])
-    ):
-        mask |= ATTITUDE
-    if not turning or not _same3(w, last_w):
-        mask |= RATE
-    return mask
+    return _mask(
+        _zero3(v),
+        not _zero3(w),
+        _same3(p, last_p),
+        _same3(v, last_v),
+        _same33(R, last_R),
+        _same3(w, last_w),
+    )
 
 
 @jit(inline="always")
@@ -247,10 +268,25 @@ SAMPLE = fields("FreshnessSample", "p", "v", "w", ("R", 3))
 
 
 @jit(inline="always")
+def _same_row(a, last, row) -> bool:
+    return a[0] == last[row, 0] and a[1] == last[row, 1] and a[2] == last[row, 2]
+
+
+@jit(inline="always")
 def fresh_since(p, v, R, w, last) -> int:
-    """:func:`fresh_streams` against the previous sample ``last`` (:data:`SAMPLE` rows)."""
-    return fresh_streams(
-        p, v, R, w, last[SAMPLE.p], last[SAMPLE.v], last[SAMPLE.R :], last[SAMPLE.w]
+    """:func:`fresh_streams` against the previous sample ``last`` (:data:`SAMPLE` rows), read
+    entry by entry (no views of ``last``: the Kalman filters run it on every update)."""
+    same_R = True
+    for i in range(3):
+        for j in range(3):
+            same_R = same_R and R[i, j] == last[SAMPLE.R + i, j]
+    return _mask(
+        _zero3(v),
+        not _zero3(w),
+        _same_row(p, last, SAMPLE.p),
+        _same_row(v, last, SAMPLE.v),
+        same_R,
+        _same_row(w, last, SAMPLE.w),
     )
 
 
