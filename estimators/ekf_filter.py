@@ -22,7 +22,8 @@ The stages use the structure of the ``18 + n``-state filter instead of dense pro
   ``I + dt G`` and ``dt B``; vec(R) rows: ``E^T kron I3`` and the rank-3 product
   ``dR/dphi [dphi/dOmega, dphi/deta]``; eta rows: the identity, a random walk), so
   ``F P F^T`` is two passes of :func:`_jacobian_times` over those blocks (a
-  :class:`Transition`), the second on the lower triangle only (mirrored);
+  :class:`Transition`), the second on the lower triangle only (mirrored), reading the
+  first's result by columns;
 * the measurement Jacobian is ``[I_9 0]`` plus a 3 x 9 attitude block, so ``H P`` and
   ``H P H^T`` read rows of ``P``;
 * the gain is used in the square-root form: ``S = L L^T``, ``W = L^-1 H P``, so
@@ -74,7 +75,7 @@ assert (X.p, X.v, X.w) == (Y.p, Y.v, Y.w) and X.Re1 == Y.R  # rows that read the
 #:   ``Gn = [J w]x - [w]x J``, the rate block ``Fw = I + dt G`` and its attitude image
 #:   ``Mw``, the right Jacobian ``Jr``, the attitude's derivative
 #:   ``dR = d vec(R_pred) / d phi``;
-#: * ``predict_covariance``: ``FP = F P``, its transpose ``FPT``, the predicted covariance
+#: * ``predict_covariance``: ``FP = F P``, the predicted covariance
 #:   ``Pp``; the scratch of :func:`_jacobian_times` (``ze = dT^T P[eta]``,
 #:   ``Z = [Mw, Br] P[(Omega, eta)]``);
 #: * ``innovation``: the rotation error ``dRz = Rn^T R_meas``, the innovation ``y``, the
@@ -87,7 +88,7 @@ assert (X.p, X.v, X.w) == (Y.p, Y.v, Y.w) and X.Re1 == Y.R  # rows that read the
 BLOCKS = fields(
     "EKFBlocks", "R", "Rn", "Gn", "G", "Fw", "Mw", "Jr", "dRz", "Ru", "svdA", "svdD", "svdV"
 )  # 3 x 3 each
-MATS = fields("EKFMatrices", "FP", "FPT", "Pp")  # ns x ns each
+MATS = fields("EKFMatrices", "FP", "Pp")  # ns x ns each
 VECS = fields("EKFVectors", "xp", "ze")  # ns each
 SQUARES = fields("EKFSquares", "S", "L")  # Y.size x Y.size each
 EFFICIENCY = fields("EKFEfficiencyColumns", "BwT", "BrT")  # n x 3 each
@@ -127,7 +128,6 @@ class Scratch(NamedTuple):
     Jr: np.ndarray
     dR: np.ndarray
     FP: np.ndarray
-    FPT: np.ndarray
     Pp: np.ndarray
     ze: np.ndarray
     Z: np.ndarray
@@ -162,7 +162,6 @@ def scratch(work) -> Scratch:
         Jr=b[BLOCKS.Jr],
         dR=work.dR,
         FP=m[MATS.FP],
-        FPT=m[MATS.FPT],
         Pp=m[MATS.Pp],
         ze=v[VECS.ze],
         Z=work.Z,
@@ -322,9 +321,16 @@ class Transition(NamedTuple):
 
 
 @jit(inline="always")
+def _entry(A, r, k, transposed):
+    """``A[r, k]``, or ``A[k, r]`` when ``transposed``."""
+    return A[k, r] if transposed else A[r, k]
+
+
+@jit(inline="always")
 def _jacobian_times(Pin, out, lower, F, ze, Z):
-    """``out = F Pin`` over the blocks of the transition Jacobian (:class:`Transition`), only
-    ``out[i, :i + 1]`` when ``lower``. ``ze``, ``Z`` are scratch."""
+    """``out = F Pin`` over the blocks of the transition Jacobian (:class:`Transition`); when
+    ``lower``, ``out = F Pin^T`` on ``out[i, :i + 1]`` only (``Pin`` read by columns: its
+    transpose is never copied). ``ze``, ``Z`` are scratch."""
     dt, cp, cv, up, uv, dT = F.dt, F.cp, F.cv, F.up, F.uv, F.dT
     Fw, BwT, E, dR, Mw, BrT = F.Fw, F.BwT, F.E, F.dR, F.Mw, F.BrT
     ns = Pin.shape[0]
@@ -335,34 +341,47 @@ def _jacobian_times(Pin, out, lower, F, ze, Z):
     for k in range(n6):  # ze = dT^T Pin[eta]  (the rank-one eta coupling)
         acc = 0.0
         for j in range(nr):
-            acc += dT[j] * Pin[e + j, k]
+            acc += dT[j] * _entry(Pin, e + j, k, lower)
         ze[k] = acc
     for i in range(3):  # p and v rows (R e3: the thrust direction)
         lp = X.p + i + 1 if lower else ns
         for k in range(lp):
             out[X.p + i, k] = (
-                Pin[X.p + i, k] + dt * Pin[X.v + i, k] + cp * Pin[X.Re3 + i, k] + up[i] * ze[k]
+                _entry(Pin, X.p + i, k, lower)
+                + dt * _entry(Pin, X.v + i, k, lower)
+                + cp * _entry(Pin, X.Re3 + i, k, lower)
+                + up[i] * ze[k]
             )
         lv = X.v + i + 1 if lower else ns
         for k in range(lv):
-            out[X.v + i, k] = Pin[X.v + i, k] + cv * Pin[X.Re3 + i, k] + uv[i] * ze[k]
+            out[X.v + i, k] = (
+                _entry(Pin, X.v + i, k, lower)
+                + cv * _entry(Pin, X.Re3 + i, k, lower)
+                + uv[i] * ze[k]
+            )
     for i in range(3):  # Omega rows
         lw = w + i + 1 if lower else ns
         for k in range(lw):
             out[w + i, k] = (
-                Fw[i, 0] * Pin[w, k] + Fw[i, 1] * Pin[w + 1, k] + Fw[i, 2] * Pin[w + 2, k]
+                Fw[i, 0] * _entry(Pin, w, k, lower)
+                + Fw[i, 1] * _entry(Pin, w + 1, k, lower)
+                + Fw[i, 2] * _entry(Pin, w + 2, k, lower)
             )
         for j in range(nr):
             b = BwT[j, i]
             for k in range(lw):
-                out[w + i, k] += b * Pin[e + j, k]
+                out[w + i, k] += b * _entry(Pin, e + j, k, lower)
     for a in range(3):  # Z = [Mw, Br] Pin[(Omega, eta)]
         for k in range(n18):
-            Z[a, k] = Mw[a, 0] * Pin[w, k] + Mw[a, 1] * Pin[w + 1, k] + Mw[a, 2] * Pin[w + 2, k]
+            Z[a, k] = (
+                Mw[a, 0] * _entry(Pin, w, k, lower)
+                + Mw[a, 1] * _entry(Pin, w + 1, k, lower)
+                + Mw[a, 2] * _entry(Pin, w + 2, k, lower)
+            )
         for j in range(nr):
             b = BrT[j, a]
             for k in range(n18):
-                Z[a, k] += b * Pin[e + j, k]
+                Z[a, k] += b * _entry(Pin, e + j, k, lower)
     for jb in range(3):  # vec(R) rows: vec(R E) = (E^T kron I3) vec(R), plus dR Z
         e0, e1, e2 = E[jb], E[3 + jb], E[6 + jb]  # column jb of the row-major 9-tuple
         for kk in range(3):
@@ -371,9 +390,9 @@ def _jacobian_times(Pin, out, lower, F, ze, Z):
             lr = X.Re1 + row + 1 if lower else ns
             for k in range(lr):
                 out[X.Re1 + row, k] = (
-                    e0 * Pin[X.Re1 + kk, k]
-                    + e1 * Pin[X.Re2 + kk, k]
-                    + e2 * Pin[X.Re3 + kk, k]
+                    e0 * _entry(Pin, X.Re1 + kk, k, lower)
+                    + e1 * _entry(Pin, X.Re2 + kk, k, lower)
+                    + e2 * _entry(Pin, X.Re3 + kk, k, lower)
                     + d0 * Z[0, k]
                     + d1 * Z[1, k]
                     + d2 * Z[2, k]
@@ -381,7 +400,7 @@ def _jacobian_times(Pin, out, lower, F, ze, Z):
     for i in range(e, ns):  # eta rows: random walk
         le = i + 1 if lower else ns
         for k in range(le):
-            out[i, k] = Pin[i, k]
+            out[i, k] = _entry(Pin, i, k, lower)
 
 
 @jit(inline="always")
@@ -475,16 +494,14 @@ def transition_blocks(f, dt, model, T, w, jw, phi, E, R, Rn, dT, BwT, BrT, Gn, G
 
 
 @jit(inline="always")
-def predict_covariance(P, F, qc, dt, FP, FPT, Pp, ze, Z):
+def predict_covariance(P, F, qc, dt, FP, Pp, ze, Z):
     """``P_pred = F P F^T + Q`` into ``Pp``, with ``Q = diag(qc) dt``: ``F P`` over the
     blocks of ``F`` (:func:`_jacobian_times`), then ``F (F P)^T`` on the lower triangle
-    only, mirrored (exactly symmetric). ``FP``, its transpose ``FPT``, ``ze``, ``Z``: scratch."""
+    only (reading ``F P`` by columns), mirrored (exactly symmetric). ``FP``, ``ze``, ``Z``:
+    scratch."""
     ns = P.shape[0]
     _jacobian_times(P, FP, False, F, ze, Z)
-    for i in range(ns):
-        for k in range(ns):
-            FPT[k, i] = FP[i, k]
-    _jacobian_times(FPT, Pp, True, F, ze, Z)
+    _jacobian_times(FP, Pp, True, F, ze, Z)  # F (F P)^T
     for i in range(ns):
         for k in range(i):
             Pp[k, i] = Pp[i, k]
@@ -682,7 +699,7 @@ def _predict_update(x, P, f, dt, z, model, work, nm):
         s.Jr,
         s.dR,
     )
-    predict_covariance(P, F, model.qc, dt, s.FP, s.FPT, s.Pp, s.ze, s.Z)  # F P F^T + Q
+    predict_covariance(P, F, model.qc, dt, s.FP, s.Pp, s.ze, s.Z)  # F P F^T + Q
     innovation(z, s.xp, s.Rn, s.dRz, s.y, s.HR, nm)  # y = z - h(x_pred), H = d h / d x
     innovation_covariance(z.ha, s.Pp, s.HR, s.HP, s.S, nm)  # S = H P_pred H^T (+ R)
     if whitened_gain(model.r, s.S, s.L, s.HP, s.y, nm):  # K = P_pred H^T S^-1 = W^T L^-1
