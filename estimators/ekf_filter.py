@@ -185,7 +185,9 @@ class Measurement(NamedTuple):
     ``Y.size`` also the accelerometer's body-z specific force ``a`` [m/s^2], whose model is
     linear in the efficiencies, ``a = ha . eta`` (``ha`` (n,): ``-A[0, j] f_j / m`` for the
     command ``f`` of the sample, the thrust the accelerometer feels); ``rows`` = ``Y.a``: no
-    accelerometer (``a``, ``ha`` unused)."""
+    accelerometer (``a``, ``ha`` unused). :func:`predict_update_accel_into` measures the
+    ``Y.size`` rows, :func:`predict_update_into` the first ``Y.a`` (the caller picks the
+    kernel by ``rows``)."""
 
     p: np.ndarray
     v: np.ndarray
