@@ -84,14 +84,13 @@ def sensor_noise(text: str):
 
 #: the controller's mixer (``--mixer``): True gives up yaw first at the rotors' bounds
 YAW_RELEASE = {"yaw-release": True, "plain": False}
-MIXER = {"yaw_release": True}
 
 
-def fly(scenario, noise, seed: int, saturate: bool):
+def fly(scenario, noise, seed: int, saturate: bool, yaw_release: bool = True):
     from quadfault.model.controller import ControllerConfig
     from quadfault.sim.simulator import SimConfig, simulate
 
-    controller = ControllerConfig(yaw_release=MIXER["yaw_release"])
+    controller = ControllerConfig(yaw_release=yaw_release)
     config = SimConfig(saturate=saturate, sensor_noise=noise, controller=controller)
     return simulate(scenario, config=config, seed=seed, thrust_noise=0.07)
 
@@ -113,7 +112,7 @@ def healthy_errors(rec, series) -> np.ndarray:
     return np.concatenate([e[keep & ~own[m], m] for m in range(truth.shape[1])])
 
 
-def scenario_runs(noise, seed: int, duration: float) -> dict:
+def scenario_runs(noise, seed: int, duration: float, yaw_release: bool = True) -> dict:
     """Every estimator on the four scenarios of one seed."""
     from estimators.cli import estimate_series
     from estimators.fdi import detect, evaluate
@@ -127,7 +126,8 @@ def scenario_runs(noise, seed: int, duration: float) -> dict:
     }
     lost = []
     for name in SCENARIOS:
-        rec = fly(named_scenario(name, duration), noise, seed, saturate=name == "clipping")
+        scenario = named_scenario(name, duration)
+        rec = fly(scenario, noise, seed, saturate=name == "clipping", yaw_release=yaw_release)
         if flight_check(rec)["diverged"]:
             lost.append(name)
             for r in out.values():
@@ -149,7 +149,7 @@ def scenario_runs(noise, seed: int, duration: float) -> dict:
     return {"estimators": out, "lost": lost}
 
 
-def weak_runs(noise, seed: int, duration: float) -> dict:
+def weak_runs(noise, seed: int, duration: float, yaw_release: bool = True) -> dict:
     """Is the weak rotor named weakest, on the Lissajous curve and on the circle?"""
     from estimators.cli import estimate_series
     from quadfault.model.scenarios import (
@@ -169,7 +169,8 @@ def weak_runs(noise, seed: int, duration: float) -> dict:
     out: dict = {key: [] for key in ESTIMATORS}
     lost = []
     for traj in (Lissajous(), Circle()):
-        rec = fly(Scenario("weak", duration, sched, traj), noise, seed, saturate=False)
+        scenario = Scenario("weak", duration, sched, traj)
+        rec = fly(scenario, noise, seed, saturate=False, yaw_release=yaw_release)
         if flight_check(rec)["diverged"]:
             lost.append(type(traj).__name__.lower())
             continue
@@ -258,14 +259,14 @@ def main(argv=None) -> int:
         "the plain allocation inverse",
     )
     args = p.parse_args(argv)
-    MIXER["yaw_release"] = YAW_RELEASE[args.mixer]
+    yaw_release = YAW_RELEASE[args.mixer]
     seeds = seeds_of(args.seeds)
     doc = {"seeds": seeds, "duration": args.duration, "results": {}}
     start = time.process_time()
     for label in args.noise or ["none"]:
         noise = sensor_noise(label)
-        runs = [(k, scenario_runs(noise, k, args.duration)) for k in seeds]
-        weak = [(k, weak_runs(noise, k, args.weak_duration)) for k in seeds]
+        runs = [(k, scenario_runs(noise, k, args.duration, yaw_release)) for k in seeds]
+        weak = [(k, weak_runs(noise, k, args.weak_duration, yaw_release)) for k in seeds]
         text, summary = table(label, runs, weak)
         print(text, flush=True)
         doc["results"][label] = summary
